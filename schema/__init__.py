@@ -1,0 +1,22 @@
+"""The wire contract: key expressions, message types, codec, errors. See schema/README.md."""
+
+from .errors import (
+    DronesimError, MalformedMessage, OutOfRange, RejectCounter, RemoteInputError, StaleTurn,
+    UnknownEntity, UsageError, WrongSender,
+)
+from .keys import KEY_TABLE, Keys, KeySpec
+from .messages import (
+    MESSAGE_TYPES, SCHEMA_VERSION, Ans, Ask, Cause, Cell, CellInfo, CellKind, Connect, Done,
+    DroneState, DroneStatus, EndReason, MapRequest, Message, Move, Note, Nps, Order, Over, Phase,
+    Refused, Role, Start, Status, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id, encode,
+    is_drone_id,
+)
+
+__all__ = [
+    "DronesimError", "MalformedMessage", "OutOfRange", "RejectCounter", "RemoteInputError", "StaleTurn",
+    "UnknownEntity", "UsageError", "WrongSender", "KEY_TABLE", "Keys", "KeySpec", "MESSAGE_TYPES",
+    "SCHEMA_VERSION", "Ans", "Ask", "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done",
+    "DroneState", "DroneStatus", "EndReason", "MapRequest", "Message", "Move", "Note", "Nps", "Order",
+    "Over", "Phase", "Refused", "Role", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
+    "decode", "drone_id", "encode", "is_drone_id",
+]

@@ -1,0 +1,100 @@
+"""Key expressions: the only module that builds or parses them.
+
+Keys follow the design card, ``<root>/<ENTITY>/<ACTION>``: the entity is the one the key is
+about (``sim/D01/NPS`` is D01's new position, ``sim/D01/TGT`` is D01's target, which only the
+GCS may write). `KEY_TABLE` says, for each key, its message type and which role may write it;
+the access-control rules and schema/README.md are generated from it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+from . import messages as m
+
+_ROOT = re.compile(r"[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*\Z")
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class KeySpec:
+    """One row of the key table."""
+
+    template: str  # relative to the root; ``{drone}`` / ``{entity}`` are placeholders
+    how: str  # "put", "query" (declared as a queryable by the owner), or "liveliness"
+    message: type[m.Message] | None  # payload type (queries: request type)
+    reply: type[m.Message] | tuple[type[m.Message], ...] | None
+    writer: str  # role (or SRV) allowed to put / declare it
+    readers: str
+    doc: str
+
+
+KEY_TABLE: tuple[KeySpec, ...] = (
+    KeySpec("SRV/CONNECT", "query", m.Connect, (m.Welcome, m.Refused), "SRV", "ENV, GCS, drones",
+            "admission: `X:SRV:CONNECT` -> \"You are connected as X\" or a refusal"),
+    KeySpec("SRV/TURN", "put", m.Turn, None, "SRV", "all", "a phase of turn t begins (orders, moves)"),
+    KeySpec("SRV/OVER", "put", m.Over, None, "SRV", "all", "`SRV:X:OVER`: the game has ended"),
+    KeySpec("OBS/STATUS", "put", m.Status, None, "SRV", "all", "every drone's state at the end of the turn"),
+    KeySpec("{drone}/TGT", "put", m.Target, None, "GCS", "SRV", "`GCS:D01:TGT:x:y:z`, relayed to the drone in its order"),
+    KeySpec("GCS/DONE", "put", m.Done, None, "GCS", "SRV", "`GCS:SRV:DONE`: the GCS phase is over"),
+    KeySpec("ENV/ASK", "query", m.Ask, m.Ans, "ENV", "drones", "`D01:ENV:ASK:x:y:z` -> `ENV:D01:ANS:content`"),
+    KeySpec("ENV/MAP", "query", m.MapRequest, m.WorldMap, "ENV", "GCS", "the static world, for drawing"),
+    KeySpec("{drone}/NPS", "put", m.Nps, None, "DRONE", "SRV", "`D01:ENV:NPS:x:y:z`: the drone's move"),
+    KeySpec("ENV/UPD", "put", m.Upd, None, "ENV", "SRV", "`ENV:OBS:UPD:x:y:z:content`, all changed cells at once"),
+    KeySpec("{entity}/ALIVE", "liveliness", None, None, "each entity", "SRV", "presence token of a process"),
+)
+
+
+class Keys:
+    """Concrete key expressions under one root (several simulations can share one router)."""
+
+    __slots__ = ("root",)
+
+    def __init__(self, root: str = "sim") -> None:
+        if not _ROOT.match(root):
+            raise ValueError(f"bad key root {root!r}: use letters, digits, '_', '-' and '/'")
+        self.root = root
+
+    def _k(self, *parts: str) -> str:
+        return "/".join((self.root, *parts))
+
+    # fixed keys
+    @property
+    def connect(self) -> str: return self._k("SRV", "CONNECT")
+    @property
+    def turn(self) -> str: return self._k("SRV", "TURN")
+    @property
+    def over(self) -> str: return self._k("SRV", "OVER")
+    @property
+    def status(self) -> str: return self._k("OBS", "STATUS")
+    @property
+    def gcs_done(self) -> str: return self._k("GCS", "DONE")
+    @property
+    def ask(self) -> str: return self._k("ENV", "ASK")
+    @property
+    def map(self) -> str: return self._k("ENV", "MAP")
+    @property
+    def upd(self) -> str: return self._k("ENV", "UPD")
+
+    # per-drone keys and their wildcards
+    def tgt(self, drone: str) -> str: return self._k(drone, "TGT")
+    def nps(self, drone: str) -> str: return self._k(drone, "NPS")
+    @property
+    def any_tgt(self) -> str: return self._k("*", "TGT")
+    @property
+    def any_nps(self) -> str: return self._k("*", "NPS")
+
+    # presence
+    def alive(self, entity: str) -> str: return self._k(entity, "ALIVE")
+    @property
+    def any_alive(self) -> str: return self._k("*", "ALIVE")
+
+    def entity_of(self, key: str) -> str:
+        """The ENTITY part of ``<root>/<ENTITY>/<ACTION>`` (raises ValueError if not under root)."""
+        prefix = self.root + "/"
+        if not key.startswith(prefix):
+            raise ValueError(f"{key!r} is not under {self.root!r}")
+        parts = key[len(prefix):].split("/")
+        if len(parts) != 2:
+            raise ValueError(f"{key!r} is not <root>/<ENTITY>/<ACTION>")
+        return parts[0]

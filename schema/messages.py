@@ -1,0 +1,589 @@
+"""Every message of the wire contract, defined once, with MessagePack encode/decode and validation.
+
+Messages are frozen, slotted, keyword-only dataclasses that validate on construction, so an
+instance that exists is well formed. On the wire each message is a MessagePack map::
+
+    {"v": SCHEMA_VERSION, "t": "<TRIGRAM>", "turn": int, "from": "<sender id>", ...fields}
+
+Fields are written in declaration order, so encoding is byte-for-byte deterministic
+(see ``schema/vectors.json`` for the golden bytes). Nested records (cells, orders, moves,
+drone states) travel as MessagePack arrays in their declaration order; enums as their value.
+
+World bounds are context, not syntax: a message can only check that a cell is three
+non-negative integers; receivers check it against the world (``OutOfRange``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import re
+import types
+import typing
+from dataclasses import dataclass
+from typing import ClassVar, Union
+
+import msgpack
+
+from .errors import MalformedMessage
+
+SCHEMA_VERSION = 1
+
+#: Largest coordinate or turn a message may carry (worlds are far smaller; this bounds garbage).
+MAX_COORD = 1 << 16
+MAX_TURN = 1 << 40
+#: Largest payload any receiver decodes; bigger ones are rejected before parsing.
+MAX_PAYLOAD = 1 << 22
+
+Cell = tuple[int, int, int]
+
+DRONE_ID = re.compile(r"D\d{2,4}\Z")
+HOST_ID = re.compile(r"H\d{2,4}\Z")
+FIXED_IDS = ("ENV", "GCS", "SRV", "OBS")
+
+
+def is_drone_id(value: object) -> bool:
+    return isinstance(value, str) and DRONE_ID.match(value) is not None
+
+
+def drone_id(n: int) -> str:
+    """The conventional id of the n-th drone: 1 -> 'D01', 100 -> 'D100'."""
+    if not 1 <= n <= 9999:
+        raise ValueError(f"drone number {n} out of 1..9999")
+    return f"D{n:02d}"
+
+
+class Role(enum.Enum):
+    """What an entity is; the coordinator admits at most one ENV and one GCS per game."""
+
+    ENV = "ENV"
+    GCS = "GCS"
+    DRONE = "DRONE"
+
+
+class Phase(enum.Enum):
+    """Phases of one turn, in order (the seed's GCS -> D01 -> ENV -> OBS cycle)."""
+
+    GCS = "GCS"
+    DRONES = "DRONES"
+    ENV = "ENV"
+
+
+class CellKind(enum.IntEnum):
+    EMPTY = 0
+    BUILDING = 1
+    OUTSIDE = 2
+
+
+class Note(enum.Enum):
+    """What a drone says about its own progress alongside its new position."""
+
+    NONE = "NONE"
+    REACHED = "REACHED"
+    UNREACHABLE = "UNREACHABLE"
+
+
+class DroneState(enum.Enum):
+    ALIVE = "ALIVE"
+    DEAD = "DEAD"
+    LOST = "LOST"
+
+
+class Cause(enum.Enum):
+    """Why a drone died (observer rules) or was lost."""
+
+    NONE = "NONE"
+    BUILDING = "BUILDING"
+    OUTSIDE = "OUTSIDE"
+    VERTEX = "VERTEX"  # two drones in one cell
+    SWAP = "SWAP"  # two drones swapped cells
+    LOST = "LOST"  # missed its deadlines or its process vanished
+
+
+class EndReason(enum.Enum):
+    NO_DRONE_ALIVE = "NO_DRONE_ALIVE"
+    ALL_REACHED = "ALL_REACHED"
+    TURN_LIMIT = "TURN_LIMIT"
+    ABORTED = "ABORTED"
+
+
+# --------------------------------------------------------------------------- validation helpers
+
+
+def _check(cond: bool, what: str) -> None:
+    if not cond:
+        raise MalformedMessage(what)
+
+
+def _check_int(value: object, name: str, lo: int, hi: int) -> None:
+    _check(type(value) is int and lo <= value <= hi, f"{name} must be an int in {lo}..{hi}, got {value!r}")
+
+
+def _check_cell(value: object, name: str, *, signed: bool = False) -> None:
+    _check(isinstance(value, tuple) and len(value) == 3, f"{name} must be 3 integers, got {value!r}")
+    lo = -MAX_COORD if signed else 0
+    for c in value:  # type: ignore[union-attr]
+        _check_int(c, name, lo, MAX_COORD)
+
+
+def _check_drone(value: object, name: str = "drone") -> None:
+    _check(is_drone_id(value), f"{name} must be a drone id like D01, got {value!r}")
+
+
+def _check_sender(value: object) -> None:
+    _check(
+        isinstance(value, str) and (value in FIXED_IDS or is_drone_id(value) or HOST_ID.match(value) is not None),
+        f"sender must be ENV, GCS, SRV, OBS, Dnn or Hnn, got {value!r}",
+    )
+
+
+# --------------------------------------------------------------------------- nested records
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CellInfo:
+    """What is in one cell: the seed's ``whatInside``. Outside the world, kind is OUTSIDE."""
+
+    pos: Cell
+    kind: CellKind
+    drones: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        _check_cell(self.pos, "cell", signed=True)
+        _check(isinstance(self.kind, CellKind), f"kind must be a CellKind, got {self.kind!r}")
+        _check(isinstance(self.drones, tuple), "drones must be a tuple")
+        for d in self.drones:
+            _check_drone(d)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Order:
+    """Coordinator -> drone, in the DRONES phase: where the drone is and where it must go."""
+
+    drone: str
+    pos: Cell
+    target: Cell | None = None
+
+    def __post_init__(self) -> None:
+        _check_drone(self.drone)
+        _check_cell(self.pos, "pos")
+        if self.target is not None:
+            _check_cell(self.target, "target")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Move:
+    """Coordinator -> environment, in the ENV phase: a drone's accepted move (may leave the world)."""
+
+    drone: str
+    src: Cell
+    dst: Cell
+
+    def __post_init__(self) -> None:
+        _check_drone(self.drone)
+        _check_cell(self.src, "src")
+        _check_cell(self.dst, "dst", signed=True)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DroneStatus:
+    """One drone's state at the end of a turn, as the observer sees it."""
+
+    drone: str
+    pos: Cell
+    state: DroneState
+    target: Cell | None = None
+    note: Note = Note.NONE
+    cause: Cause = Cause.NONE
+
+    def __post_init__(self) -> None:
+        _check_drone(self.drone)
+        _check_cell(self.pos, "pos", signed=True)
+        _check(isinstance(self.state, DroneState), "state must be a DroneState")
+        if self.target is not None:
+            _check_cell(self.target, "target")
+        _check(isinstance(self.note, Note), "note must be a Note")
+        _check(isinstance(self.cause, Cause), "cause must be a Cause")
+
+    @property
+    def alive(self) -> bool:
+        return self.state is DroneState.ALIVE
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Start:
+    """A drone admitted to the game and the cell it starts in."""
+
+    drone: str
+    pos: Cell
+
+    def __post_init__(self) -> None:
+        _check_drone(self.drone)
+        _check_cell(self.pos, "pos")
+
+
+# --------------------------------------------------------------------------- messages
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Message:
+    """Common header: the turn it belongs to and who says it."""
+
+    TAG: ClassVar[str] = ""
+    turn: int
+    sender: str
+
+    def __post_init__(self) -> None:
+        _check_int(self.turn, "turn", 0, MAX_TURN)
+        _check_sender(self.sender)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Connect(Message):
+    """Entity -> SRV (query on SRV/CONNECT): ``X:SRV:CONNECT``. A drone process lists the drones it hosts;
+    the environment announces its world size."""
+
+    TAG: ClassVar[str] = "CONNECT"
+    role: Role
+    drones: tuple[str, ...] = ()
+    world: Cell | None = None
+    autopilot: str = ""
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.role, Role), "role must be a Role")
+        _check(isinstance(self.drones, tuple), "drones must be a tuple")
+        for d in self.drones:
+            _check_drone(d)
+        _check(len(set(self.drones)) == len(self.drones), "drones must be distinct")
+        _check(self.role is Role.DRONE or not self.drones, "only a DRONE entity hosts drones")
+        _check(self.role is not Role.DRONE or bool(self.drones), "a DRONE entity must host at least one drone")
+        if self.world is not None:
+            _check_cell(self.world, "world")
+            _check(all(s >= 1 for s in self.world), "world sizes must be >= 1")
+        _check(self.role is not Role.ENV or self.world is not None, "the environment must announce its world size")
+        _check(isinstance(self.autopilot, str) and len(self.autopilot) <= 32, "autopilot must be a short string")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Welcome(Message):
+    """SRV -> entity (reply to CONNECT): "You are connected as ROLE", with what the entity needs."""
+
+    TAG: ClassVar[str] = "WELCOME"
+    entity: str
+    text: str
+    world: Cell | None = None
+    starts: tuple[Start, ...] = ()
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check_sender(self.entity)
+        _check(isinstance(self.text, str), "text must be a string")
+        if self.world is not None:
+            _check_cell(self.world, "world")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Refused(Message):
+    """SRV -> entity (reply to CONNECT): admission refused, with the reason."""
+
+    TAG: ClassVar[str] = "REFUSED"
+    text: str
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.text, str), "text must be a string")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Turn(Message):
+    """SRV -> all: a phase of a turn begins. DRONES carries the orders, ENV the accepted moves."""
+
+    TAG: ClassVar[str] = "TURN"
+    phase: Phase
+    orders: tuple[Order, ...] = ()
+    moves: tuple[Move, ...] = ()
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.phase, Phase), "phase must be a Phase")
+        _check(self.turn >= 1, "turns start at 1")
+        _check(self.phase is Phase.DRONES or not self.orders, "only the DRONES phase carries orders")
+        _check(self.phase is Phase.ENV or not self.moves, "only the ENV phase carries moves")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Target(Message):
+    """GCS -> drone (key ``<drone>/TGT``): ``GCS:D01:TGT:x:y:z``."""
+
+    TAG: ClassVar[str] = "TGT"
+    drone: str
+    pos: Cell
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check_drone(self.drone)
+        _check_cell(self.pos, "target")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Done(Message):
+    """Entity -> SRV: ``X:SRV:DONE``, the end of the sender's phase (the GCS's; NPS and UPD close the
+    drones' and the environment's phases themselves)."""
+
+    TAG: ClassVar[str] = "DONE"
+    phase: Phase
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.phase, Phase), "phase must be a Phase")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Ask(Message):
+    """Drone -> ENV (query on ENV/ASK): ``D01:ENV:ASK:x:y:z``, for one or several cells."""
+
+    TAG: ClassVar[str] = "ASK"
+    cells: tuple[Cell, ...]
+
+    MAX_CELLS: ClassVar[int] = 4096
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.cells, tuple) and 1 <= len(self.cells) <= self.MAX_CELLS,
+               f"an ASK carries 1..{self.MAX_CELLS} cells")
+        for c in self.cells:
+            _check_cell(c, "cell", signed=True)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Ans(Message):
+    """ENV -> drone (reply to ASK): ``ENV:D01:ANS:content``, one CellInfo per asked cell, same order."""
+
+    TAG: ClassVar[str] = "ANS"
+    cells: tuple[CellInfo, ...]
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.cells, tuple), "cells must be a tuple")
+        for c in self.cells:
+            _check(isinstance(c, CellInfo), "cells must be CellInfo records")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Nps(Message):
+    """Drone -> SRV/ENV (key ``<drone>/NPS``): ``D01:ENV:NPS:x:y:z``, the drone's move for this turn."""
+
+    TAG: ClassVar[str] = "NPS"
+    pos: Cell
+    note: Note = Note.NONE
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check_drone(self.sender, "sender")
+        _check_cell(self.pos, "pos", signed=True)
+        _check(isinstance(self.note, Note), "note must be a Note")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Upd(Message):
+    """ENV -> OBS (key ``ENV/UPD``): ``ENV:OBS:UPD:x:y:z:content`` for every changed cell, in one batch."""
+
+    TAG: ClassVar[str] = "UPD"
+    cells: tuple[CellInfo, ...]
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.cells, tuple), "cells must be a tuple")
+        for c in self.cells:
+            _check(isinstance(c, CellInfo), "cells must be CellInfo records")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Status(Message):
+    """OBS -> all (key ``OBS/STATUS``): every drone's state at the end of the turn (turn 0: the starts)."""
+
+    TAG: ClassVar[str] = "STATUS"
+    drones: tuple[DroneStatus, ...]
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.drones, tuple), "drones must be a tuple")
+        for d in self.drones:
+            _check(isinstance(d, DroneStatus), "drones must be DroneStatus records")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Over(Message):
+    """SRV -> all (key ``SRV/OVER``): ``SRV:X:OVER``, the game has ended; every process exits 0."""
+
+    TAG: ClassVar[str] = "OVER"
+    reason: EndReason
+    text: str = ""
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check(isinstance(self.reason, EndReason), "reason must be an EndReason")
+        _check(isinstance(self.text, str), "text must be a string")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MapRequest(Message):
+    """GCS -> ENV (query on ENV/MAP): the static world, for drawing."""
+
+    TAG: ClassVar[str] = "MAPREQ"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WorldMap(Message):
+    """ENV -> GCS (reply to MAPREQ): world size and the building cells as a packed bit array
+    (numpy ``packbits`` of the C-ordered boolean grid indexed [x, y, z])."""
+
+    TAG: ClassVar[str] = "MAP"
+    size: Cell
+    buildings: bytes
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check_cell(self.size, "size")
+        _check(all(s >= 1 for s in self.size), "world sizes must be >= 1")
+        _check(isinstance(self.buildings, bytes), "buildings must be bytes")
+        n = self.size[0] * self.size[1] * self.size[2]
+        _check(len(self.buildings) == (n + 7) // 8, "buildings must hold one bit per cell")
+
+
+MESSAGE_TYPES: tuple[type[Message], ...] = (
+    Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Upd, Status, Over, MapRequest, WorldMap,
+)
+_BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
+_RECORDS = (CellInfo, Order, Move, DroneStatus, Start)
+
+
+# --------------------------------------------------------------------------- codec
+#
+# Conversion is driven by each dataclass's type hints, resolved once. Supported field types:
+# int, str, bytes, Cell, Optional[Cell], enums, nested records, tuple[X, ...] of those.
+
+
+def _to_wire(value: object) -> object:
+    if isinstance(value, enum.Enum):
+        return value.value
+    if dataclasses.is_dataclass(value):
+        return [_to_wire(getattr(value, f.name)) for f in dataclasses.fields(value)]
+    if isinstance(value, tuple):
+        return [_to_wire(v) for v in value]
+    return value
+
+
+def _converter(hint: object) -> typing.Callable[[object], object]:
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if origin in (Union, types.UnionType):
+        inner = _converter(next(a for a in args if a is not type(None)))
+        return lambda v: None if v is None else inner(v)
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            item = _converter(args[0])
+            return lambda v: tuple(item(x) for x in _as_list(v))
+        return lambda v: tuple(_as_list(v))  # Cell: validated by the record itself
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        return lambda v: _enum(hint, v)
+    if hint in _RECORDS:
+        return _record_converter(hint)  # type: ignore[arg-type]
+    return lambda v: v  # int, str, bytes: checked by __post_init__
+
+
+def _as_list(v: object) -> list:
+    _check(isinstance(v, (list, tuple)), f"expected an array, got {type(v).__name__}")
+    return list(v)  # type: ignore[arg-type]
+
+
+def _enum(cls: type[enum.Enum], v: object) -> enum.Enum:
+    try:
+        return cls(v)
+    except (ValueError, TypeError):
+        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}") from None
+
+
+_FIELD_CONVERTERS: dict[type, list[tuple[str, typing.Callable[[object], object]]]] = {}
+
+
+def _fields_of(cls: type) -> list[tuple[str, typing.Callable[[object], object]]]:
+    conv = _FIELD_CONVERTERS.get(cls)
+    if conv is None:
+        hints = typing.get_type_hints(cls)
+        conv = [(f.name, _converter(hints[f.name])) for f in dataclasses.fields(cls)]
+        _FIELD_CONVERTERS[cls] = conv
+    return conv
+
+
+def _record_converter(cls: type) -> typing.Callable[[object], object]:
+    def convert(v: object) -> object:
+        items = _as_list(v)
+        fields = _fields_of(cls)
+        _check(len(items) == len(fields), f"{cls.__name__} needs {len(fields)} items, got {len(items)}")
+        return cls(**{name: c(x) for (name, c), x in zip(fields, items)})
+
+    return convert
+
+
+def encode(msg: Message) -> bytes:
+    """The MessagePack bytes of a message (deterministic: same message, same bytes)."""
+    body: dict[str, object] = {"v": SCHEMA_VERSION, "t": msg.TAG}
+    for f in dataclasses.fields(msg):
+        name = "from" if f.name == "sender" else f.name
+        body[name] = _to_wire(getattr(msg, f.name))
+    return msgpack.packb(body, use_bin_type=True)
+
+
+M = typing.TypeVar("M", bound=Message)
+
+
+@typing.overload
+def decode(data: bytes, expect: type[M]) -> M: ...
+@typing.overload
+def decode(data: bytes, expect: None = None) -> Message: ...
+
+
+def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None = None) -> Message:
+    """Decode and validate bytes; raise `MalformedMessage` with a clear reason on anything wrong.
+
+    `expect` is the type (or types) the key it arrived on carries: any other is rejected as
+    wrongly addressed.
+    """
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise MalformedMessage(f"payload must be bytes, got {type(data).__name__}")
+    if len(data) > MAX_PAYLOAD:
+        raise MalformedMessage(f"payload of {len(data)} bytes exceeds {MAX_PAYLOAD}", reason="too-large")
+    try:
+        body = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises several unrelated types
+        raise MalformedMessage(f"not MessagePack: {exc.__class__.__name__}: {exc}") from None
+    _check(isinstance(body, dict), f"payload must be a map, got {type(body).__name__}")
+    version = body.pop("v", None)
+    _check(version == SCHEMA_VERSION, f"schema version {version!r}, this build speaks {SCHEMA_VERSION}")
+    tag = body.pop("t", None)
+    cls = _BY_TAG.get(tag) if isinstance(tag, str) else None
+    _check(cls is not None, f"unknown message type {tag!r}")
+    assert cls is not None
+    if expect is not None:
+        allowed = expect if isinstance(expect, tuple) else (expect,)
+        if cls not in allowed:
+            names = "/".join(a.TAG for a in allowed)
+            raise MalformedMessage(f"a {tag} message on a key that carries {names}", reason="wrong-type")
+    if "from" in body:
+        body["sender"] = body.pop("from")
+    fields = _fields_of(cls)
+    names = {n for n, _ in fields}
+    extra = set(body) - names
+    _check(not extra, f"unknown fields {sorted(map(str, extra))} in {tag}")
+    kwargs = {}
+    try:
+        for name, conv in fields:
+            if name in body:
+                kwargs[name] = conv(body[name])
+        return cls(**kwargs)
+    except MalformedMessage:
+        raise
+    except TypeError as exc:  # missing required field, wrong arity
+        raise MalformedMessage(f"bad {tag}: {exc}") from None

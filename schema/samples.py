@@ -1,0 +1,71 @@
+"""The canonical sample of every message type, whose bytes are the golden test vectors.
+
+``python -m dronesim.schema.samples --write`` regenerates schema/vectors.json after a deliberate
+change of the contract (bump SCHEMA_VERSION when the bytes of an existing message change).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+
+from .messages import (
+    Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
+    Message, Move, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, Target, Turn, Upd, Welcome,
+    WorldMap, encode,
+)
+
+VECTORS_PATH = pathlib.Path(__file__).with_name("vectors.json")
+
+SAMPLES: dict[str, Message] = {
+    "connect_env": Connect(turn=0, sender="ENV", role=Role.ENV, world=(10, 10, 10)),
+    "connect_gcs": Connect(turn=0, sender="GCS", role=Role.GCS),
+    "connect_drone": Connect(turn=0, sender="D01", role=Role.DRONE, drones=("D01",), autopilot="seed"),
+    "connect_swarm": Connect(turn=0, sender="H01", role=Role.DRONE, drones=("D01", "D02"), autopilot="dstar"),
+    "welcome": Welcome(turn=0, sender="SRV", entity="D01", text="You are connected as D01",
+                       world=(10, 10, 10), starts=(Start(drone="D01", pos=(0, 0, 0)),)),
+    "refused": Refused(turn=0, sender="SRV", text="role GCS is already taken"),
+    "turn_gcs": Turn(turn=1, sender="SRV", phase=Phase.GCS),
+    "turn_drones": Turn(turn=1, sender="SRV", phase=Phase.DRONES,
+                        orders=(Order(drone="D01", pos=(0, 0, 0), target=(9, 9, 0)),
+                                Order(drone="D02", pos=(0, 1, 0)))),
+    "turn_env": Turn(turn=1, sender="SRV", phase=Phase.ENV,
+                     moves=(Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),
+                            Move(drone="D02", src=(0, 1, 0), dst=(-1, 1, 0)))),
+    "target": Target(turn=1, sender="GCS", drone="D01", pos=(9, 9, 0)),
+    "done_gcs": Done(turn=1, sender="GCS", phase=Phase.GCS),
+    "ask": Ask(turn=1, sender="D01", cells=((1, 0, 0), (0, 1, 0))),
+    "ans": Ans(turn=1, sender="ENV", cells=(CellInfo(pos=(1, 0, 0), kind=CellKind.EMPTY),
+                                            CellInfo(pos=(0, 1, 0), kind=CellKind.BUILDING))),
+    "nps": Nps(turn=1, sender="D01", pos=(1, 0, 0)),
+    "nps_unreachable": Nps(turn=7, sender="D01", pos=(3, 4, 0), note=Note.UNREACHABLE),
+    "upd": Upd(turn=1, sender="ENV", cells=(CellInfo(pos=(0, 0, 0), kind=CellKind.EMPTY),
+                                            CellInfo(pos=(1, 0, 0), kind=CellKind.BUILDING, drones=("D01",)))),
+    "status": Status(turn=1, sender="OBS", drones=(
+        DroneStatus(drone="D01", pos=(1, 0, 0), state=DroneState.DEAD, target=(9, 9, 0), cause=Cause.BUILDING),
+        DroneStatus(drone="D02", pos=(0, 1, 0), state=DroneState.ALIVE, note=Note.REACHED),
+    )),
+    "over": Over(turn=1, sender="SRV", reason=EndReason.NO_DRONE_ALIVE, text="D01 crashed into a building"),
+    "map_request": MapRequest(turn=0, sender="GCS"),
+    "map": WorldMap(turn=0, sender="ENV", size=(2, 2, 2), buildings=bytes([0b10000000])),
+}
+
+
+def golden() -> dict[str, str]:
+    return {name: encode(msg).hex() for name, msg in SAMPLES.items()}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--write", action="store_true", help="rewrite schema/vectors.json")
+    args = ap.parse_args()
+    text = json.dumps(golden(), indent=1, sort_keys=True) + "\n"
+    if args.write:
+        VECTORS_PATH.write_text(text)
+    else:
+        print(text, end="")
+
+
+if __name__ == "__main__":
+    main()
