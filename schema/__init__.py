@@ -8,7 +8,7 @@ from .keys import KEY_TABLE, Keys, KeySpec
 from .messages import (
     MESSAGE_TYPES, SCHEMA_VERSION, Ans, Ask, Cause, Cell, CellInfo, CellKind, Connect, Done,
     DroneState, DroneStatus, EndReason, MapRequest, Message, Move, Note, Nps, Order, Over, Phase,
-    Refused, Role, Start, Status, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id, encode,
+    Intent, Refused, Role, WorldSpec, Start, Status, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id, encode,
     is_drone_id,
 )
 
@@ -17,6 +17,6 @@ __all__ = [
     "UnknownEntity", "UsageError", "WrongSender", "KEY_TABLE", "Keys", "KeySpec", "MESSAGE_TYPES",
     "SCHEMA_VERSION", "Ans", "Ask", "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done",
     "DroneState", "DroneStatus", "EndReason", "MapRequest", "Message", "Move", "Note", "Nps", "Order",
-    "Over", "Phase", "Refused", "Role", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
+    "Over", "Phase", "Intent", "WorldSpec", "Refused", "Role", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
     "decode", "drone_id", "encode", "is_drone_id",
 ]

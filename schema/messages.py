@@ -103,8 +103,18 @@ class Cause(enum.Enum):
 class EndReason(enum.Enum):
     NO_DRONE_ALIVE = "NO_DRONE_ALIVE"
     ALL_REACHED = "ALL_REACHED"
+    SETTLED = "SETTLED"  # every drone reached its target or reported it unreachable
     TURN_LIMIT = "TURN_LIMIT"
+    GCS_QUIT = "GCS_QUIT"
     ABORTED = "ABORTED"
+
+
+class Intent(enum.Enum):
+    """What the GCS says with its DONE: more orders may come, its plan is complete, or end the game."""
+
+    CONTINUE = "CONTINUE"
+    FINAL = "FINAL"
+    QUIT = "QUIT"
 
 
 # --------------------------------------------------------------------------- validation helpers
@@ -211,6 +221,25 @@ class DroneStatus:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class WorldSpec:
+    """The world of a game, as the coordinator's scenario fixes it and the environment builds it:
+    generated from `seed` (keeping the start cells free) or, when `cells` is not empty, exactly the
+    given building cells (packed bits, as in `WorldMap`)."""
+
+    size: Cell
+    seed: int = 0
+    cells: bytes = b""
+
+    def __post_init__(self) -> None:
+        _check_cell(self.size, "size")
+        _check(all(s >= 1 for s in self.size), "world sizes must be >= 1")
+        _check_int(self.seed, "seed", 0, (1 << 63) - 1)
+        _check(isinstance(self.cells, bytes), "cells must be bytes")
+        n = self.size[0] * self.size[1] * self.size[2]
+        _check(not self.cells or len(self.cells) == (n + 7) // 8, "cells must hold one bit per cell")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Start:
     """A drone admitted to the game and the cell it starts in."""
 
@@ -240,13 +269,12 @@ class Message:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Connect(Message):
-    """Entity -> SRV (query on SRV/CONNECT): ``X:SRV:CONNECT``. A drone process lists the drones it hosts;
-    the environment announces its world size."""
+    """Entity -> SRV (query on SRV/CONNECT): ``X:SRV:CONNECT``. A drone process lists the drones it hosts
+    and the autopilot flying them."""
 
     TAG: ClassVar[str] = "CONNECT"
     role: Role
     drones: tuple[str, ...] = ()
-    world: Cell | None = None
     autopilot: str = ""
 
     def __post_init__(self) -> None:
@@ -258,10 +286,6 @@ class Connect(Message):
         _check(len(set(self.drones)) == len(self.drones), "drones must be distinct")
         _check(self.role is Role.DRONE or not self.drones, "only a DRONE entity hosts drones")
         _check(self.role is not Role.DRONE or bool(self.drones), "a DRONE entity must host at least one drone")
-        if self.world is not None:
-            _check_cell(self.world, "world")
-            _check(all(s >= 1 for s in self.world), "world sizes must be >= 1")
-        _check(self.role is not Role.ENV or self.world is not None, "the environment must announce its world size")
         _check(isinstance(self.autopilot, str) and len(self.autopilot) <= 32, "autopilot must be a short string")
 
 
@@ -272,15 +296,16 @@ class Welcome(Message):
     TAG: ClassVar[str] = "WELCOME"
     entity: str
     text: str
-    world: Cell | None = None
+    world: WorldSpec
     starts: tuple[Start, ...] = ()
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check_sender(self.entity)
         _check(isinstance(self.text, str), "text must be a string")
-        if self.world is not None:
-            _check_cell(self.world, "world")
+        _check(isinstance(self.world, WorldSpec), "world must be a WorldSpec")
+        for st in self.starts:
+            _check(isinstance(st, Start), "starts must be Start records")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -333,10 +358,12 @@ class Done(Message):
 
     TAG: ClassVar[str] = "DONE"
     phase: Phase
+    intent: Intent = Intent.CONTINUE
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check(isinstance(self.phase, Phase), "phase must be a Phase")
+        _check(isinstance(self.intent, Intent), "intent must be an Intent")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -456,7 +483,7 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Upd, Status, Over, MapRequest, WorldMap,
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
-_RECORDS = (CellInfo, Order, Move, DroneStatus, Start)
+_RECORDS = (CellInfo, Order, Move, DroneStatus, Start, WorldSpec)
 
 
 # --------------------------------------------------------------------------- codec

@@ -13,18 +13,21 @@ import pathlib
 from .messages import (
     Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
     Message, Move, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, Target, Turn, Upd, Welcome,
-    WorldMap, encode,
+    WorldMap, WorldSpec, Intent, encode,
 )
 
 VECTORS_PATH = pathlib.Path(__file__).with_name("vectors.json")
 
 SAMPLES: dict[str, Message] = {
-    "connect_env": Connect(turn=0, sender="ENV", role=Role.ENV, world=(10, 10, 10)),
+    "connect_env": Connect(turn=0, sender="ENV", role=Role.ENV),
     "connect_gcs": Connect(turn=0, sender="GCS", role=Role.GCS),
     "connect_drone": Connect(turn=0, sender="D01", role=Role.DRONE, drones=("D01",), autopilot="seed"),
     "connect_swarm": Connect(turn=0, sender="H01", role=Role.DRONE, drones=("D01", "D02"), autopilot="dstar"),
     "welcome": Welcome(turn=0, sender="SRV", entity="D01", text="You are connected as D01",
-                       world=(10, 10, 10), starts=(Start(drone="D01", pos=(0, 0, 0)),)),
+                       world=WorldSpec(size=(10, 10, 10), seed=7), starts=(Start(drone="D01", pos=(0, 0, 0)),)),
+    "welcome_file_world": Welcome(turn=0, sender="SRV", entity="ENV", text="You are connected as ENV",
+                                  world=WorldSpec(size=(2, 2, 2), cells=bytes([0b10000000])),
+                                  starts=(Start(drone="D01", pos=(0, 0, 1)),)),
     "refused": Refused(turn=0, sender="SRV", text="role GCS is already taken"),
     "turn_gcs": Turn(turn=1, sender="SRV", phase=Phase.GCS),
     "turn_drones": Turn(turn=1, sender="SRV", phase=Phase.DRONES,
@@ -35,6 +38,7 @@ SAMPLES: dict[str, Message] = {
                             Move(drone="D02", src=(0, 1, 0), dst=(-1, 1, 0)))),
     "target": Target(turn=1, sender="GCS", drone="D01", pos=(9, 9, 0)),
     "done_gcs": Done(turn=1, sender="GCS", phase=Phase.GCS),
+    "done_gcs_final": Done(turn=3, sender="GCS", phase=Phase.GCS, intent=Intent.FINAL),
     "ask": Ask(turn=1, sender="D01", cells=((1, 0, 0), (0, 1, 0))),
     "ans": Ans(turn=1, sender="ENV", cells=(CellInfo(pos=(1, 0, 0), kind=CellKind.EMPTY),
                                             CellInfo(pos=(0, 1, 0), kind=CellKind.BUILDING))),

@@ -1,0 +1,471 @@
+"""The turn engine: admission, the lockstep turn cycle and the observer, as a pure state machine.
+
+No network and no clock here. The Zenoh adapter (coordinator/node.py) feeds it validated messages,
+expired deadlines and vanished entities, one at a time from one thread, and carries out the effects
+it returns (publish, reply to a CONNECT query, append to the journal).
+
+One turn (the seed's cycle GCS -> D01 -> ENV -> OBS -> GCS):
+
+  stage    the engine publishes           it waits for                      then
+  -------  -----------------------------  --------------------------------  ----------------------
+  GCS      TURN(t, GCS)                   TGT*, DONE from the GCS           DRONES
+  DRONES   TURN(t, DRONES, orders)        one NPS per alive drone           ENV (OBSERVE if no move)
+  ENV      TURN(t, ENV, moves)            UPD from the environment          OBSERVE
+  OBSERVE  STATUS(t)                      -                                 GCS of t+1, or OVER
+
+A deadline ends a stage early: missing drones hover (and are LOST after `lost_after` misses in a row),
+targets stay as they were, a silent environment aborts the game.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import hashlib
+import logging
+from dataclasses import dataclass
+
+from dronesim.schema import (
+    Cause, Cell, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, Intent, Message, Move, Note, Nps,
+    Order, Over, Phase, Refused, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec, encode,
+)
+from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
+
+from . import observer
+
+
+class Stage(enum.Enum):
+    ADMITTING = "ADMITTING"
+    GCS = "GCS"
+    DRONES = "DRONES"
+    ENV = "ENV"
+    OVER = "OVER"
+
+
+#: The state machine in one place: stage -> (phase announced, message that closes it, next stage).
+STAGES: dict[Stage, tuple[Phase | None, type[Message] | None, Stage]] = {
+    Stage.ADMITTING: (None, Connect, Stage.GCS),
+    Stage.GCS: (Phase.GCS, Done, Stage.DRONES),
+    Stage.DRONES: (Phase.DRONES, Nps, Stage.ENV),
+    Stage.ENV: (Phase.ENV, Upd, Stage.GCS),  # through the observer
+    Stage.OVER: (None, None, Stage.OVER),
+}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DroneSpec:
+    drone: str
+    start: Cell
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GameConfig:
+    world: WorldSpec
+    drones: tuple[DroneSpec, ...]
+    max_turns: int = 1000
+    phase_deadline: float = 5.0  # seconds for the drones and the environment
+    gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
+    admit_deadline: float | None = None  # None: wait for every entity forever
+    lost_after: int = 3  # missed DRONES deadlines in a row before a drone is LOST
+
+    def __post_init__(self) -> None:
+        ids = [d.drone for d in self.drones]
+        if not ids:
+            raise UsageError("a game needs at least one drone")
+        if len(set(ids)) != len(ids):
+            raise UsageError(f"duplicate drone ids in {ids}")
+        starts = [d.start for d in self.drones]
+        if len(set(starts)) != len(starts):
+            raise UsageError("two drones cannot start in the same cell")
+        for d in self.drones:
+            if not observer.inside(d.start, self.world.size):
+                raise UsageError(f"{d.drone} starts at {d.start}, outside the world {self.world.size}")
+        if self.max_turns < 1 or self.lost_after < 1:
+            raise UsageError("max_turns and lost_after must be >= 1")
+
+
+# --------------------------------------------------------------------------- effects
+
+
+@dataclass(frozen=True, slots=True)
+class Publish:
+    msg: Message
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    token: object
+    msg: Message
+
+
+@dataclass(frozen=True, slots=True)
+class Record:
+    """One journal record (a JSON-able dict, written as one line)."""
+
+    data: dict
+
+
+Effect = Publish | Reply | Record
+
+
+@dataclass(slots=True)
+class _Drone:
+    pos: Cell
+    autopilot: str = ""
+    state: DroneState = DroneState.ALIVE
+    target: Cell | None = None
+    note: Note = Note.NONE
+    cause: Cause = Cause.NONE
+    misses: int = 0
+    host: str | None = None
+
+    def status(self, drone: str) -> DroneStatus:
+        note = Note.REACHED if self.state is DroneState.ALIVE and self.pos == self.target else self.note
+        return DroneStatus(drone=drone, pos=self.pos, state=self.state, target=self.target, note=note,
+                           cause=self.cause)
+
+
+def _cell(c: Cell | None) -> list[int] | None:
+    return None if c is None else list(c)
+
+
+class Engine:
+    """The coordinator's game: feed it events, carry out the effects it returns."""
+
+    def __init__(self, config: GameConfig, logger: logging.Logger) -> None:
+        self.config = config
+        self._log = logger
+        self.stage = Stage.ADMITTING
+        self.turn = 0
+        self.drones: dict[str, _Drone] = {d.drone: _Drone(pos=d.start) for d in sorted(config.drones, key=lambda s: s.drone)}
+        self.entities: dict[str, Role] = {}  # admitted entity id -> role
+        self.final = False  # the GCS said its plan is complete
+        self.end: Over | None = None
+        self._targets: dict[str, Cell] = {}  # received in this GCS phase
+        self._moves: dict[str, Cell] = {}  # received in this DRONES phase
+        self._notes: dict[str, Note] = {}
+        self._rejected: dict[str, str] = {}
+        self._turn_log: dict = {}
+        self._pending_moves: tuple[Move, ...] = ()
+
+    # ------------------------------------------------------------------ queries
+
+    @property
+    def size(self) -> Cell:
+        return self.config.world.size
+
+    def alive(self) -> list[str]:
+        return [d for d, r in self.drones.items() if r.state is DroneState.ALIVE]
+
+    def deadline(self) -> float | None:
+        """Seconds the current stage may last before `expire` (None: no deadline)."""
+        match self.stage:
+            case Stage.ADMITTING:
+                return self.config.admit_deadline
+            case Stage.GCS:
+                return self.config.gcs_deadline
+            case Stage.DRONES | Stage.ENV:
+                return self.config.phase_deadline
+        return None
+
+    def status(self) -> Status:
+        return Status(turn=self.turn, sender="OBS", drones=tuple(r.status(d) for d, r in self.drones.items()))
+
+    # ------------------------------------------------------------------ admission
+
+    def connect(self, msg: Connect, token: object) -> list[Effect]:
+        """Admit an entity or refuse it; start the game when everyone is there."""
+        refusal = self._refusal(msg)
+        if refusal:
+            self._log.warning("refused %s: %s", msg.sender, refusal)
+            return [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
+        self.entities[msg.sender] = msg.role
+        for d in msg.drones:
+            self.drones[d].host = msg.sender
+            self.drones[d].autopilot = msg.autopilot
+        starts = tuple(Start(drone=d, pos=r.pos) for d, r in self.drones.items()
+                       if msg.role is not Role.DRONE or d in msg.drones)
+        what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
+            f"{msg.sender} flying {', '.join(msg.drones)}"
+        self._log.info("admitted %s", what)
+        welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
+                          world=self.config.world, starts=starts)
+        effects: list[Effect] = [Reply(token, welcome)]
+        if self.stage is Stage.ADMITTING and self._everyone_here():
+            effects += self._start()
+        elif self.stage is not Stage.ADMITTING:
+            effects.append(Publish(self.status()))  # a late joiner (a new GCS) sees the state at once
+        return effects
+
+    def _refusal(self, msg: Connect) -> str:
+        if self.stage is Stage.OVER:
+            return "the game is over"
+        if msg.sender in self.entities:
+            return f"{msg.sender} is already connected"
+        match msg.role:
+            case Role.ENV | Role.GCS:
+                if msg.sender != msg.role.value:
+                    return f"the {msg.role.value} must connect as {msg.role.value}, not {msg.sender}"
+                if self.stage is not Stage.ADMITTING and msg.role is Role.ENV:
+                    return "the environment cannot join a running game"
+            case Role.DRONE:
+                if len(msg.drones) == 1 and msg.sender != msg.drones[0] and not msg.sender.startswith("H"):
+                    return f"{msg.sender} cannot connect for drone {msg.drones[0]}"
+                if msg.sender.startswith("D") and msg.drones != (msg.sender,):
+                    return f"drone {msg.sender} can only fly itself; a swarm host connects as Hnn"
+                if self.stage is not Stage.ADMITTING:
+                    return "drones cannot join a running game"
+                for d in msg.drones:
+                    if d not in self.drones:
+                        return f"unknown drone {d}: this game flies {', '.join(self.drones)}"
+                    if self.drones[d].host is not None:
+                        return f"drone {d} is already taken by {self.drones[d].host}"
+        return ""
+
+    def _everyone_here(self) -> bool:
+        roles = set(self.entities.values())
+        return Role.ENV in roles and Role.GCS in roles and all(r.host for r in self.drones.values())
+
+    def _start(self) -> list[Effect]:
+        header = {
+            "record": "header", "format": "dronesim-journal", "version": 1,
+            "world": {"size": list(self.size), "seed": self.config.world.seed,
+                      "cells": self.config.world.cells.hex()},
+            "drones": [{"drone": d, "start": list(r.pos), "autopilot": r.autopilot} for d, r in self.drones.items()],
+            "max_turns": self.config.max_turns,
+        }
+        status = self.status()
+        self._log.info("all entities connected: the game starts")
+        return [Record(header), Publish(status), *self._enter(Stage.GCS, 1)]
+
+    # ------------------------------------------------------------------ stages
+
+    def _enter(self, stage: Stage, turn: int) -> list[Effect]:
+        self.stage, self.turn = stage, turn
+        match stage:
+            case Stage.GCS:
+                self._targets.clear()
+                self._turn_log = {"record": "turn", "turn": turn}
+                if "GCS" not in self.entities:  # no ground station: the drones keep their targets
+                    return self._enter(Stage.DRONES, turn)
+                return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.GCS))]
+            case Stage.DRONES:
+                self._moves.clear()
+                self._notes.clear()
+                self._rejected.clear()
+                orders = tuple(Order(drone=d, pos=self.drones[d].pos, target=self.drones[d].target)
+                               for d in self.alive())
+                return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders))]
+            case Stage.ENV:
+                moves = tuple(Move(drone=d, src=self.drones[d].pos, dst=dst)
+                              for d, dst in sorted(self._moves.items()) if dst != self.drones[d].pos)
+                if not moves:
+                    return self._observe(Upd(turn=turn, sender="ENV", cells=()))
+                self._pending_moves = moves
+                return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves))]
+        raise AssertionError(stage)
+
+    def receive(self, msg: Message) -> list[Effect]:
+        """A message from the network, decoded and addressed correctly; raises RemoteInputError if it
+        cannot be accepted now (and changes nothing then)."""
+        if isinstance(msg, Target):
+            return self.target(msg)
+        expected = STAGES[self.stage][1]
+        if not isinstance(msg, expected or ()) or msg.turn != self.turn:
+            raise StaleTurn(f"{msg.TAG} for turn {msg.turn} from {msg.sender} while in {self.stage.value} "
+                            f"of turn {self.turn}")
+        match msg:
+            case Done():
+                return self._gcs_done(msg)
+            case Nps():
+                return self._nps(msg)
+            case Upd():
+                return self._upd(msg)
+        raise StaleTurn(f"{msg.TAG} is not expected now")
+
+    def target(self, msg: Target) -> list[Effect]:
+        """A TGT from the GCS during its phase: checked (sender, turn, drone, inside the world), kept."""
+        if msg.sender != "GCS":
+            raise WrongSender(f"target for {msg.drone} from {msg.sender}: only the GCS sets targets")
+        if self.stage is not Stage.GCS or msg.turn != self.turn:
+            raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
+        drone = self.drones.get(msg.drone)
+        if drone is None:
+            raise UnknownEntity(f"target for unknown drone {msg.drone}")
+        if drone.state is not DroneState.ALIVE:
+            raise UnknownEntity(f"target for {msg.drone}, which is {drone.state.value}")
+        if not observer.inside(msg.pos, self.size):
+            raise OutOfRange(f"target {msg.pos} for {msg.drone} is outside the world {self.size}")
+        self._targets[msg.drone] = msg.pos
+        return []
+
+    def _gcs_done(self, msg: Done) -> list[Effect]:
+        if msg.sender != "GCS" or msg.phase is not Phase.GCS:
+            raise WrongSender(f"DONE({msg.phase.value}) from {msg.sender} in the GCS phase")
+        changed = {d: p for d, p in sorted(self._targets.items()) if self.drones[d].target != p}
+        for d, p in changed.items():
+            self.drones[d].target = p
+            self.drones[d].note = Note.NONE
+        if changed:
+            self._turn_log["targets"] = {d: list(p) for d, p in changed.items()}
+        if msg.intent is Intent.QUIT:
+            return self._over(EndReason.GCS_QUIT, "the ground station ended the game")
+        self.final = msg.intent is Intent.FINAL
+        return self._enter(Stage.DRONES, self.turn)
+
+    def _nps(self, msg: Nps) -> list[Effect]:
+        d = msg.sender
+        drone = self.drones.get(d)
+        if drone is None or drone.state is not DroneState.ALIVE:
+            raise UnknownEntity(f"NPS from {d}, which is not an alive drone of this game")
+        if d in self._moves:
+            raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
+        step = sum(abs(a - b) for a, b in zip(msg.pos, drone.pos))
+        self._notes[d] = msg.note
+        if step > 1:
+            self._moves[d] = drone.pos  # it hovers; the bad move is counted and changes nothing else
+            self._rejected[d] = f"{msg.pos}"
+            raise OutOfRange(f"{d} cannot move from {drone.pos} to {msg.pos}: one cell per turn, 6-connectivity")
+        self._moves[d] = msg.pos
+        return self._drones_check()
+
+    def _drones_check(self) -> list[Effect]:
+        if all(d in self._moves for d in self.alive()):  # (also when none is left alive)
+            return self._enter(Stage.ENV, self.turn)
+        return []
+
+    def _upd(self, msg: Upd) -> list[Effect]:
+        if msg.sender != "ENV":
+            raise WrongSender(f"UPD from {msg.sender}")
+        reported = {c.pos for c in msg.cells}
+        missing = [m.dst for m in self._pending_moves if observer.inside(m.dst, self.size) and m.dst not in reported]
+        if missing:
+            raise OutOfRange(f"UPD of turn {msg.turn} does not report the cells drones moved into: {missing}")
+        return self._observe(msg)
+
+    def _observe(self, upd: Upd) -> list[Effect]:
+        alive = self.alive()
+        before = {d: self.drones[d].pos for d in alive}
+        after = {d: self._moves.get(d, before[d]) for d in alive}
+        buildings = {c.pos for c in upd.cells if c.kind is CellKind.BUILDING}
+        dead = observer.deaths(self.size, before, after, buildings)
+        hovered = sorted(d for d in alive if d not in self._moves)
+        lost: list[str] = []
+        for d in alive:
+            r = self.drones[d]
+            r.pos = after[d]
+            if d in self._notes:
+                r.note = self._notes[d]
+            if d in hovered:
+                r.misses += 1
+                if r.misses >= self.config.lost_after:
+                    lost.append(d)
+            else:
+                r.misses = 0
+            if d in dead:
+                r.state, r.cause = DroneState.DEAD, dead[d]
+                self._log.warning("turn %d: %s died (%s) at %s", self.turn, d, dead[d].value, r.pos)
+        for d in lost:
+            if d not in dead:
+                self._lose(d)
+        log = self._turn_log
+        moves = {d: list(after[d]) for d in alive if after[d] != before[d]}
+        if moves:
+            log["moves"] = moves
+        if hovered:
+            log["hovered"] = hovered
+        if self._rejected:
+            log["rejected"] = dict(sorted(self._rejected.items()))
+        if dead:
+            log["deaths"] = {d: c.value for d, c in sorted(dead.items())}
+        status = self.status()
+        log["state"] = hashlib.sha256(encode(status)).hexdigest()[:16]
+        effects: list[Effect] = [Record(log), Publish(status)]
+        end = self._end_reason()
+        if end:
+            return effects + self._over(*end)
+        return effects + self._enter(Stage.GCS, self.turn + 1)
+
+    def _lose(self, d: str) -> None:
+        r = self.drones[d]
+        r.state, r.cause = DroneState.LOST, Cause.LOST
+        self._turn_log.setdefault("lost", []).append(d)
+        self._log.warning("turn %d: %s is LOST at %s", self.turn, d, r.pos)
+
+    def _end_reason(self) -> tuple[EndReason, str] | None:
+        alive = self.alive()
+        if not alive:
+            causes = ", ".join(f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
+                               for d, r in self.drones.items())
+            return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
+        if self.final:
+            notes = [self.drones[d].status(d).note for d in alive]
+            if all(n is Note.REACHED for n in notes):
+                return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
+            if all(n in (Note.REACHED, Note.UNREACHABLE) for n in notes):
+                stuck = [d for d, n in zip(alive, notes) if n is Note.UNREACHABLE]
+                return EndReason.SETTLED, f"targets reached, except unreachable for {', '.join(stuck)}"
+        if self.turn >= self.config.max_turns:
+            return EndReason.TURN_LIMIT, f"turn limit {self.config.max_turns} reached"
+        return None
+
+    def _over(self, reason: EndReason, text: str) -> list[Effect]:
+        self.stage = Stage.OVER
+        self.end = Over(turn=self.turn, sender="SRV", reason=reason, text=text)
+        self._log.info("game over at turn %d: %s", self.turn, text)
+        return [Record({"record": "over", "turn": self.turn, "reason": reason.value, "text": text}),
+                Publish(self.end)]
+
+    # ------------------------------------------------------------------ faults
+
+    def expire(self, stage: Stage, turn: int) -> list[Effect]:
+        """The deadline of (stage, turn) passed; ignored if the game has moved on since."""
+        if stage is not self.stage or turn != self.turn:
+            return []
+        match stage:
+            case Stage.ADMITTING:
+                missing = [d for d, r in self.drones.items() if r.host is None]
+                missing += [r.value for r in (Role.ENV, Role.GCS) if r not in set(self.entities.values())]
+                return self._over(EndReason.ABORTED, f"entities never connected: {', '.join(missing)}")
+            case Stage.GCS:
+                self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
+                self._targets.clear()
+                return self._enter(Stage.DRONES, turn)
+            case Stage.DRONES:
+                late = [d for d in self.alive() if d not in self._moves]
+                self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
+                return self._enter(Stage.ENV, turn)
+            case Stage.ENV:
+                return self._over(EndReason.ABORTED, f"the environment did not answer in turn {turn}")
+        return []
+
+    def vanished(self, entity: str) -> list[Effect]:
+        """An admitted entity's presence token disappeared (its process died or was cut off)."""
+        role = self.entities.pop(entity, None)
+        if role is None or self.stage is Stage.OVER:
+            return []
+        self._log.warning("%s vanished", entity)
+        match role:
+            case Role.GCS:
+                if self.stage is Stage.GCS:
+                    self._targets.clear()
+                    return self._enter(Stage.DRONES, self.turn)
+            case Role.ENV:
+                if self.stage is not Stage.ADMITTING:
+                    return self._over(EndReason.ABORTED, "the environment vanished")
+            case Role.DRONE:
+                gone = [d for d, r in self.drones.items() if r.host == entity]
+                if self.stage is Stage.ADMITTING:
+                    for d in gone:
+                        self.drones[d].host = None
+                    return []
+                for d in gone:
+                    if self.drones[d].state is DroneState.ALIVE:
+                        self._lose(d)
+                if self.stage is Stage.DRONES:
+                    return self._drones_check()
+        return []
+
+
+def replace_config(config: GameConfig, **changes: object) -> GameConfig:
+    return dataclasses.replace(config, **changes)

@@ -1,0 +1,62 @@
+"""The append-only journal: one JSON line per record (header, one per turn, over).
+
+Lines are canonical JSON (sorted keys, no spaces, no timestamps) so two runs of the same scenario
+give byte-identical journals, whatever the process layout.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+from collections.abc import Iterator
+
+from dronesim.schema import UsageError
+
+
+def dumps(record: dict) -> str:
+    return json.dumps(record, sort_keys=True, separators=(",", ":"))
+
+
+class JournalWriter:
+    """Appends records to a file, flushed line by line (a crash loses at most the line being written)."""
+
+    def __init__(self, path: str | os.PathLike[str] | None) -> None:
+        self.path = pathlib.Path(path) if path else None
+        self._f = open(self.path, "a", encoding="utf-8") if self.path else None  # noqa: SIM115
+
+    def append(self, record: dict) -> None:
+        if self._f is not None:
+            self._f.write(dumps(record) + "\n")
+            self._f.flush()
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+    def __enter__(self) -> "JournalWriter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def read(path: str | os.PathLike[str]) -> Iterator[dict]:
+    """The records of a journal; a torn last line (a crash mid-write) is ignored, anything else bad is an error."""
+    try:
+        lines = pathlib.Path(path).read_text(encoding="utf-8").split("\n")
+    except OSError as exc:
+        raise UsageError(f"cannot read journal {path}: {exc}") from None
+    for n, line in enumerate(lines, 1):
+        if not line:
+            continue
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            if n == len(lines):  # the last line, without its newline: torn by a crash
+                return
+            raise UsageError(f"{path}:{n}: not a journal record") from None
+        if not isinstance(record, dict) or "record" not in record:
+            raise UsageError(f"{path}:{n}: not a journal record")
+        yield record

@@ -1,0 +1,180 @@
+"""The coordinator process (the seed's SRV with its observer OBS): the Zenoh adapter of `Engine`.
+
+It serves admission (queryable SRV/CONNECT), publishes TURN/STATUS/OVER, listens to TGT, DONE, NPS
+and UPD, watches liveliness tokens, enforces phase deadlines and writes the journal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+
+import zenoh
+
+from dronesim.schema import (
+    Connect, Done, Keys, Message, Nps, Over, RemoteInputError, Status, Target, Turn, Upd, UsageError, drone_id,
+    encode,
+)
+from dronesim.schema.messages import WorldSpec
+from dronesim.transport import (
+    Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, setup_logging, zenoh_config,
+)
+
+from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Reply, Stage
+from .journal import JournalWriter
+
+#: How long the coordinator waits, after OVER, for entities to leave before it closes anyway.
+LINGER_S = 5.0
+
+
+def _key_of(keys: Keys, msg: Message) -> str:
+    match msg:
+        case Turn():
+            return keys.turn
+        case Status():
+            return keys.status
+        case Over():
+            return keys.over
+    raise AssertionError(f"the coordinator does not publish {msg.TAG}")
+
+
+def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None,
+         logger: logging.Logger) -> Over:
+    """Run one game to its end; return the OVER message."""
+    engine = Engine(game, logger)
+    with zenoh.open(conf) as session, JournalWriter(journal) as writer:
+        inbox = Inbox(session, keys, logger)
+        out = Outbox(session)
+        inbox.serve(keys.connect, Connect)
+        inbox.subscribe(keys.any_tgt, Target)
+        inbox.subscribe(keys.gcs_done, Done)
+        inbox.subscribe(keys.any_nps, Nps)
+        inbox.subscribe(keys.upd, Upd)
+        inbox.watch_presence()
+        token = session.liveliness().declare_token(keys.alive("SRV"))
+        present: set[str] = set()
+        logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
+                    keys.root, ", ".join(d.drone for d in game.drones))
+
+        def run(effects: list) -> None:
+            for eff in effects:
+                match eff:
+                    case Publish(msg):
+                        out.put(_key_of(keys, msg), msg)
+                    case Reply(query, msg):
+                        query.reply(query.key_expr, encode(msg))
+                    case Record(data):
+                        writer.append(data)
+
+        phase = (engine.stage, engine.turn)
+        started = time.monotonic()
+        while engine.stage is not Stage.OVER:
+            limit = engine.deadline()
+            left = None if limit is None else max(0.0, started + limit - time.monotonic())
+            event = inbox.get(left)
+            match event:
+                case None:
+                    run(engine.expire(*phase))
+                case Asked(query, Connect() as msg):
+                    run(engine.connect(msg, query))
+                    del query  # replied: release it so the asker is not kept waiting
+                case Received(_, msg):
+                    try:
+                        run(engine.receive(msg))
+                    except RemoteInputError as err:  # counted and logged; the engine changed nothing
+                        inbox.rejects.reject(f"{msg.TAG} from {msg.sender}", err)
+                case Presence(entity, alive):
+                    if alive:
+                        present.add(entity)
+                    else:
+                        present.discard(entity)
+                        run(engine.vanished(entity))
+            if (engine.stage, engine.turn) != phase:
+                phase = (engine.stage, engine.turn)
+                started = time.monotonic()
+        # Let OVER reach everyone: wait (on events, bounded) until the admitted entities have left.
+        end = time.monotonic() + LINGER_S
+        while present - {"SRV"} and time.monotonic() < end:
+            event = inbox.get(end - time.monotonic())
+            match event:
+                case Presence(entity, False):
+                    present.discard(entity)
+                case Asked(query, Connect() as msg):
+                    run(engine.connect(msg, query))
+        token.undeclare()
+        if inbox.rejects.total:
+            logger.info("rejected inputs: %s", inbox.rejects.snapshot())
+    assert engine.end is not None
+    return engine.end
+
+
+def parse_starts(text: str, count: int) -> tuple[DroneSpec, ...]:
+    """``--starts "0,0,0;0,2,0"`` or, by default, drones in a row along y from (0,0,0), every other cell."""
+    if text:
+        cells = [tuple(int(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
+        if len(cells) != count or any(len(c) != 3 for c in cells):
+            raise UsageError(f"--starts needs {count} cells x,y,z separated by ';'")
+    else:
+        cells = [(0, 2 * i, 0) for i in range(count)]
+    return tuple(DroneSpec(drone=drone_id(i + 1), start=c) for i, c in enumerate(cells))  # type: ignore[arg-type]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dronesim coordinator", description=__doc__)
+    add_zenoh_args(p)
+    p.add_argument("--seed", type=int, default=0, help="world seed (default 0)")
+    p.add_argument("--size", default="10,10,10", help="world size nx,ny,nz (default 10,10,10)")
+    p.add_argument("--world", help="a world file (JSON) instead of a generated world")
+    p.add_argument("--drones", type=int, default=1, help="number of drones D01..Dnn (default 1)")
+    p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: a row along y)')
+    p.add_argument("--max-turns", type=int, default=1000)
+    p.add_argument("--phase-deadline", type=float, default=5.0, help="seconds for drones and ENV per phase")
+    p.add_argument("--gcs-deadline", type=float, default=0.0, help="seconds for the GCS phase (0: wait)")
+    p.add_argument("--admit-deadline", type=float, default=0.0, help="seconds to wait for entities (0: forever)")
+    p.add_argument("--lost-after", type=int, default=3, help="missed deadlines before a drone is LOST")
+    p.add_argument("--journal", help="append the game's journal to this file")
+    return p
+
+
+def parse_size(text: str) -> tuple[int, int, int]:
+    try:
+        size = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise UsageError(f"bad size {text!r}: expected nx,ny,nz") from None
+    if len(size) == 1:
+        size = size * 3
+    if len(size) != 3 or min(size) < 1:
+        raise UsageError(f"bad size {text!r}: expected three positive integers")
+    return size  # type: ignore[return-value]
+
+
+def game_config(args: argparse.Namespace) -> GameConfig:
+    from dronesim.entities.world import World
+
+    if args.world:
+        world = World.load(args.world)
+        spec = WorldSpec(size=world.size, cells=world.packed())
+    else:
+        spec = WorldSpec(size=parse_size(args.size), seed=args.seed)
+    drones = parse_starts(args.starts, args.drones)
+    if args.world:
+        for d in drones:
+            if world.is_building(d.start):
+                raise UsageError(f"{d.drone} would start inside a building at {d.start}")
+    return GameConfig(world=spec, drones=drones, max_turns=args.max_turns, phase_deadline=args.phase_deadline,
+                      gcs_deadline=args.gcs_deadline or None, admit_deadline=args.admit_deadline or None,
+                      lost_after=args.lost_after)
+
+
+def cli(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logger = setup_logging(args.log_level, "SRV")
+    try:
+        over = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal, logger=logger)
+    except UsageError as err:
+        logger.error("%s", err)
+        return 2
+    print(f"OVER at turn {over.turn}: {over.reason.value}: {over.text}", file=sys.stderr)
+    return 0

@@ -1,0 +1,179 @@
+"""The seed's smart drone (seed spec, section 4.1.2, tables 4.1-4.4 and Algorithm 1).
+
+Coordinates follow the seed's drawings: row = x, column = y, (0, 0) top-left, so
+
+    NORTH = x - 1,  SOUTH = x + 1,  EAST = y + 1,  WEST = y - 1.
+
+Each turn, from `pos` towards `target`:
+
+1. On the target: stay, ``Note.REACHED``. No target: hover.
+2. Align z first. If ``pos.z != target.z`` the drone senses the vertically adjacent cell towards
+   the target (an ASK, unless memory already knows it) and moves there if it is empty. If it is
+   blocked (a building roof below, say) the seed does not say what to do; the safe reading used
+   here is to take this turn's horizontal step instead (step 3) and try the vertical again next
+   turn.
+3. 2D on the current floor: ``directionOrder`` is the 4 horizontal directions sorted by Euclidean
+   distance from the neighbour to the target's (x, y), ties broken NORTH, SOUTH, EAST, WEST.
+   Directions leading outside the world are replaced by the best valid one (the seed's corner
+   example: SOUTH, EAST, SOUTH, SOUTH). Then SMARTMOVE (Algorithm 1) over the memory ``cases``:
+
+   * an unknown neighbour is asked about (one ASK round trip per candidate, in order, exactly
+     like the seed's iterated question/answer); the answer is appended to memory; if the cell is
+     empty the drone goes there, otherwise it tries the next direction;
+   * a known empty neighbour has priority = its index in ``cases``, a known non-empty one
+     MAX_INDEX;
+   * when no unknown empty neighbour exists, the drone goes to the known empty neighbour with the
+     smallest index (the first in ``cases``): that is how it backs out of a dead end;
+   * nothing at all (boxed in, which the seed assumes never happens): hover, ``Note.UNREACHABLE``.
+
+"Empty" means the cell is inside the world with no building (``CellKind.EMPTY``); other drones
+do not make a cell non-empty (the seed flew a single drone; this pilot does not avoid drones).
+Memory keeps every cell the drone learned about, in the order learned; the start cell (any
+position not yet known, in fact) is stored as visited and empty when the drone first stands in
+it. Buildings never move, so what is learned stays true for the whole game, targets included.
+
+Known limitation, kept on purpose (it is the seed's algorithm): backtracking to "the first cell
+of the array" is not complete. Once every neighbour of two adjacent cells is known, each cell's
+earliest-learned empty neighbour can be the other one and the drone shuttles between them for
+ever, never reaching a far unexplored gap (see `test_seed_livelock_is_faithful`). It never enters
+a building, though; the game's turn limit ends such a flight.
+
+Round trips: at most `MAX_ASKS` (4) per turn. The seed's sequential questions need up to 4 for
+the horizontal step plus 1 for the vertical probe; in that rare case (roof below and the first
+horizontal candidates unknown and blocked) the last round trip asks all the remaining unknown
+candidates at once and the answers are consumed in directionOrder, exactly as if asked one by
+one: an answer for a cell after the chosen one is discarded, so memory and decisions are
+identical to the one-by-one seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import ClassVar
+
+from dronesim.schema import Cell, CellInfo, CellKind, Note
+
+from .base import Decision, Sensing, in_bounds
+
+#: The 4 horizontal directions as (dx, dy), in the seed's tie-break order.
+DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
+    ("NORTH", (-1, 0)),
+    ("SOUTH", (1, 0)),
+    ("EAST", (0, 1)),
+    ("WEST", (0, -1)),
+)
+_OFFSET = dict(DIRECTIONS)
+
+
+def _dist2_xy(a: Cell, b: Cell) -> int:
+    """Squared Euclidean distance in the (x, y) plane (same order as the distance, exact)."""
+    return (a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2
+
+
+def _is_empty(info: CellInfo) -> bool:
+    return info.kind is CellKind.EMPTY
+
+
+class SeedPilot:
+    """The seed's `smart_drone`: z first, then greedy 2D with a memory of learned cells."""
+
+    name: ClassVar[str] = "seed"
+    #: Most ASK round trips one turn may take.
+    MAX_ASKS: ClassVar[int] = 4
+
+    def __init__(self, *, world_size: Cell) -> None:
+        self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]
+        self._cases: list[tuple[Cell, bool]] = []  # the seed's `cases` array: (cell, empty)
+        self._index: dict[Cell, int] = {}  # cell -> index in _cases
+
+    # ------------------------------------------------------------------ memory
+
+    @property
+    def memory(self) -> tuple[tuple[Cell, bool], ...]:
+        """Every learned cell with its empty flag, in the order learned (the seed's `cases`)."""
+        return tuple(self._cases)
+
+    def _learn(self, cell: Cell, empty: bool) -> None:
+        if cell not in self._index:
+            self._index[cell] = len(self._cases)
+            self._cases.append((cell, empty))
+
+    def _record(self, cell: Cell, answers: Mapping[Cell, CellInfo]) -> bool:
+        """Store the environment's answer about `cell`; True if it is empty. No answer: not
+        empty for this turn, and nothing learned."""
+        info = answers.get(cell)
+        if info is None:
+            return False
+        empty = _is_empty(info)
+        self._learn(cell, empty)
+        return empty
+
+    # ------------------------------------------------------------------ direction order
+
+    def direction_order(self, pos: Cell, target: Cell) -> tuple[str, ...]:
+        """The seed's directionOrder: 4 direction names, best first; invalid directions (leading
+        outside the world) replaced by the best valid one. Empty if no direction is valid."""
+        valid = []
+        for rank, (name, (dx, dy)) in enumerate(DIRECTIONS):
+            cell = (pos[0] + dx, pos[1] + dy, pos[2])
+            if in_bounds(cell, self.world_size):
+                valid.append((_dist2_xy(cell, target), rank, name))
+        if not valid:
+            return ()
+        valid.sort()
+        names = [name for _, _, name in valid]
+        return tuple(names + [names[0]] * (len(DIRECTIONS) - len(names)))
+
+    # ------------------------------------------------------------------ one turn
+
+    def step(self, pos: Cell, target: Cell | None) -> Sensing:
+        if target is None:
+            return Decision(pos=pos)
+        self._learn(pos, True)  # standing in it: visited and empty
+        if pos == target:
+            return Decision(pos=pos, note=Note.REACHED)
+        asks = 0
+
+        # 1. Align z with the target.
+        if pos[2] != target[2]:
+            up = (pos[0], pos[1], pos[2] + (1 if target[2] > pos[2] else -1))
+            if in_bounds(up, self.world_size):
+                idx = self._index.get(up)
+                if idx is None:
+                    answers = yield (up,)
+                    asks += 1
+                    empty = self._record(up, answers)
+                else:
+                    empty = self._cases[idx][1]
+                if empty:
+                    return Decision(pos=up)
+            # blocked (or outside): fall back to the horizontal step this turn
+
+        # 2. SMARTMOVE on the current floor.
+        order = [
+            (pos[0] + _OFFSET[name][0], pos[1] + _OFFSET[name][1], pos[2])
+            for name in self.direction_order(pos, target)
+        ]
+        closest: int | None = None  # None stands for MAX_INDEX
+        pending: Mapping[Cell, CellInfo] = {}  # answers of a batched last round trip
+        for i, cell in enumerate(order):
+            idx = self._index.get(cell)
+            if idx is None:  # EMPTYCASE == -1: never learned, ask the environment
+                if cell not in pending:
+                    if asks >= self.MAX_ASKS:
+                        continue  # cannot happen: the last round trip asks every remaining one
+                    if asks == self.MAX_ASKS - 1:
+                        batch = tuple(dict.fromkeys(c for c in order[i:] if c not in self._index))
+                    else:
+                        batch = (cell,)
+                    answers = yield batch
+                    asks += 1
+                    pending = {c: answers[c] for c in batch if c in answers}
+                if self._record(cell, pending):
+                    return Decision(pos=cell)
+                continue
+            if self._cases[idx][1] and (closest is None or idx < closest):
+                closest = idx
+        if closest is None:
+            return Decision(pos=pos, note=Note.UNREACHABLE)
+        return Decision(pos=self._cases[closest][0])

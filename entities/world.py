@@ -1,0 +1,546 @@
+"""The simulator's 3D world: a boolean numpy grid of building cells, pure and network-free.
+
+Coordinates are ``(x, y, z)``; the grid is indexed ``grid[x, y, z]`` and ``True`` means building.
+Worlds are immutable: the grid is a read-only array and every constructor validates its input, so a
+`World` that exists is well formed. Bad local input (arguments, files) raises `UsageError`.
+
+Ways to make one:
+
+* `World.generate` -- the seed's random city of non-intersecting box buildings, seeded and total
+  (it always succeeds, in bounded time, unlike the seed's segfaulting generator);
+* `World.from_buildings` -- an explicit list of `Building` boxes;
+* `World.from_grid` -- any obstacle grid (enclosures, overhangs: benchmark mazes);
+* `World.load` / `World.from_json` -- the JSON file format, see `World.to_json`;
+* `World.from_packed` -- the bit-packed grid carried by the ``MAP`` message.
+"""
+
+from __future__ import annotations
+
+import json
+import operator
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dronesim.schema import Cell, CellInfo, CellKind, UsageError
+from dronesim.schema.messages import MAX_COORD
+
+__all__ = ["Building", "World", "FORMAT", "FORMAT_VERSION"]
+
+#: The JSON file's ``format`` and ``version`` values.
+FORMAT = "dronesim-world"
+FORMAT_VERSION = 1
+
+#: Neighbour offsets in the fixed order +x, -x, +y, -y, +z, -z.
+_STEPS6: tuple[Cell, ...] = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+
+#: Default generation parameters (the seed: a size-10 cube with a handful of small buildings).
+_DEFAULT_FOOTPRINT = 3
+_DEFAULT_GROUND_COVER = 0.25  # expected fraction of ground cells under a building, before rejections
+_ATTEMPTS_PER_BUILDING = 4
+_CHUNK = 4096
+
+# Drawing labels.
+_EMPTY, _BLOCK, _TARGET, _TRAIL, _CROWD = "EPT", "BLK", "TGT", "+++", "!!!"
+_C_EMPTY, _C_BLOCK, _C_TARGET, _C_TRAIL, _C_CROWD = ".", "#", "X", "*", "!"
+_LEGEND = ("legend: EPT empty, BLK building, TGT target, +++ trail, Dnn drone, !!! several drones;"
+           " row = x, column = y, (0,0) top-left")
+_C_LEGEND = ("legend: . empty, # building, X target, * trail, digit = drone (last character of its id),"
+             " ! several drones; row = x, column = y, (0,0) top-left")
+
+
+# --------------------------------------------------------------------------- validation helpers
+
+
+def _int(value: object, what: str) -> int:
+    """`value` as a plain int (numpy integers accepted, bools and floats refused)."""
+    if isinstance(value, bool):
+        raise UsageError(f"{what} must be an integer, got {value!r}")
+    try:
+        return operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise UsageError(f"{what} must be an integer, got {value!r}") from None
+
+
+def _cell(value: object, what: str = "cell") -> Cell:
+    """`value` as a Cell of three plain ints."""
+    try:
+        items = tuple(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise UsageError(f"{what} must be 3 integers, got {value!r}") from None
+    if len(items) != 3:
+        raise UsageError(f"{what} must be 3 integers, got {value!r}")
+    return (_int(items[0], what), _int(items[1], what), _int(items[2], what))
+
+
+def _size(value: object) -> Cell:
+    size = _cell(value, "world size")
+    if not all(1 <= s <= MAX_COORD for s in size):
+        raise UsageError(f"world sizes must be in 1..{MAX_COORD}, got {size}")
+    return size
+
+
+# --------------------------------------------------------------------------- Building
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Building:
+    """The seed's box building: base corner ``(x, y)`` on the ground, `length` cells along x,
+    `width` along y, and `height` along z (it fills ``z = 0 .. height - 1``)."""
+
+    x: int
+    y: int
+    length: int
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        for name, lo in (("x", 0), ("y", 0), ("length", 1), ("width", 1), ("height", 1)):
+            value = _int(getattr(self, name), f"building {name}")
+            if not lo <= value <= MAX_COORD:
+                raise UsageError(f"building {name} must be in {lo}..{MAX_COORD}, got {value}")
+            object.__setattr__(self, name, value)
+
+    def is_inside(self, cell: Cell) -> bool:
+        """The seed's ``isInside``: whether `cell` is one of this building's cells."""
+        cx, cy, cz = cell
+        return (self.x <= cx < self.x + self.length and self.y <= cy < self.y + self.width
+                and 0 <= cz < self.height)
+
+    def intersects(self, other: Building) -> bool:
+        """The seed's ``intersect``: whether the two boxes share at least one cell (touching faces
+        do not count). Both rise from z = 0, so they intersect iff their footprints overlap."""
+        return (self.x < other.x + other.length and other.x < self.x + self.length
+                and self.y < other.y + other.width and other.y < self.y + self.width)
+
+    def fits_in(self, size: Cell) -> bool:
+        """Whether the whole box lies inside a world of `size`."""
+        return (self.x + self.length <= size[0] and self.y + self.width <= size[1]
+                and self.height <= size[2])
+
+    def as_list(self) -> list[int]:
+        """``[x, y, length, width, height]``, the JSON form."""
+        return [self.x, self.y, self.length, self.width, self.height]
+
+
+def _heightmap(size: Cell, buildings: tuple[Building, ...]) -> np.ndarray:
+    """The (nx, ny) height of the building standing on each ground cell (0: none).
+
+    Raises `UsageError` if a building leaves the world or two buildings intersect.
+    """
+    nx, ny, _ = size
+    heights = np.zeros((nx, ny), dtype=np.int64)
+    owner = np.full((nx, ny), -1, dtype=np.int64)
+    for i, b in enumerate(buildings):
+        if not isinstance(b, Building):
+            raise UsageError(f"building #{i} must be a Building, got {b!r}")
+        if not b.fits_in(size):
+            raise UsageError(f"building #{i} {b.as_list()} does not fit in a world of size {list(size)}")
+        fp = owner[b.x:b.x + b.length, b.y:b.y + b.width]
+        taken = fp[fp >= 0]
+        if taken.size:
+            j = int(taken[0])
+            raise UsageError(f"building #{i} {b.as_list()} intersects building #{j} {buildings[j].as_list()}")
+        fp[...] = i
+        heights[b.x:b.x + b.length, b.y:b.y + b.width] = b.height
+    return heights
+
+
+def _fill(heights: np.ndarray, nz: int) -> np.ndarray:
+    """The boolean grid of a heightmap: cell (x, y, z) is building iff z < heights[x, y]."""
+    return np.arange(nz)[None, None, :] < heights[:, :, None]
+
+
+def _frozen(grid: np.ndarray) -> np.ndarray:
+    grid = np.array(grid, dtype=bool, order="C", copy=True)
+    grid.flags.writeable = False
+    return grid
+
+
+# --------------------------------------------------------------------------- World
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False, repr=False)
+class World:
+    """A 3D grid world of size ``(nx, ny, nz)``; `grid[x, y, z]` is True on building cells.
+
+    `buildings` lists the boxes the world was made of, or is empty for a world made from a raw
+    grid. Prefer the class-method constructors; direct construction validates everything too.
+    Worlds compare equal when size, grid and buildings are equal.
+    """
+
+    size: Cell
+    grid: np.ndarray
+    buildings: tuple[Building, ...] = ()
+
+    def __post_init__(self) -> None:
+        size = _size(self.size)
+        object.__setattr__(self, "size", size)
+        grid = self.grid
+        if not isinstance(grid, np.ndarray) or grid.dtype != np.bool_:
+            raise UsageError("the world grid must be a boolean numpy array")
+        if grid.shape != size:
+            raise UsageError(f"the world grid has shape {grid.shape}, expected {size}")
+        buildings = tuple(self.buildings)
+        object.__setattr__(self, "buildings", buildings)
+        if buildings and not np.array_equal(_fill(_heightmap(size, buildings), size[2]), grid):
+            raise UsageError("the world grid does not match its buildings")
+        if grid.flags.writeable or not grid.flags.c_contiguous or grid.base is not None:
+            object.__setattr__(self, "grid", _frozen(grid))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, World):
+            return NotImplemented
+        return (self.size == other.size and self.buildings == other.buildings
+                and np.array_equal(self.grid, other.grid))
+
+    def __hash__(self) -> int:
+        return hash((self.size, self.buildings, self.packed()))
+
+    def __repr__(self) -> str:
+        return (f"World(size={self.size}, buildings={len(self.buildings)}, "
+                f"building_cells={int(self.grid.sum())})")
+
+    # ----------------------------------------------------------------------- constructors
+
+    @classmethod
+    def generate(
+        cls,
+        size: Cell = (10, 10, 10),
+        rng: np.random.Generator | int | None = None,
+        *,
+        count: int | None = None,
+        max_footprint: int | None = None,
+        max_height: int | None = None,
+        keep_free: Iterable[Cell] = ((0, 0, 0),),
+    ) -> World:
+        """A random city of non-intersecting box buildings; always succeeds, in bounded time.
+
+        Draws only from `rng` (a Generator, or an int seed; default ``default_rng(0)``), so equal
+        arguments and seed give the same world. Up to `count` buildings (default: about a quarter
+        of the ground covered, e.g. 6 for size 10, 256 for 64x64), each with length and width in
+        ``1..max_footprint`` (default 3) and height in ``1..max_height`` (default nz), at a uniform
+        position. A candidate that would intersect a placed building or cover a `keep_free` cell
+        (the start cells) is dropped; after ``4 * count + 32`` candidates it stops, so a crowded
+        world simply gets fewer buildings.
+        """
+        size = _size(size)
+        nx, ny, nz = size
+        if rng is None:
+            rng = np.random.default_rng(0)
+        elif not isinstance(rng, np.random.Generator):
+            rng = np.random.default_rng(_int(rng, "seed"))
+        footprint = _DEFAULT_FOOTPRINT if max_footprint is None else _int(max_footprint, "max_footprint")
+        if footprint < 1:
+            raise UsageError(f"max_footprint must be >= 1, got {footprint}")
+        top = nz if max_height is None else _int(max_height, "max_height")
+        if top < 1:
+            raise UsageError(f"max_height must be >= 1, got {top}")
+        max_len, max_wid, top = min(footprint, nx), min(footprint, ny), min(top, nz)
+        if count is None:
+            mean_area = (max_len + 1) / 2 * (max_wid + 1) / 2
+            count = max(1, round(_DEFAULT_GROUND_COVER * nx * ny / mean_area))
+        count = _int(count, "count")
+        if count < 0:
+            raise UsageError(f"count must be >= 0, got {count}")
+        count = min(count, nx * ny)  # every building needs at least one ground cell
+
+        # limit[x, y]: the tallest building allowed on that ground cell; 0 once a building stands
+        # there, and at most kz for a keep_free cell (x, y, kz), so that a building stops below it.
+        limit = np.full((nx, ny), nz, dtype=np.int64)
+        for i, kf in enumerate(keep_free):
+            kx, ky, kz = _cell(kf, f"keep_free[{i}]")
+            if not (0 <= kx < nx and 0 <= ky < ny and 0 <= kz < nz):
+                raise UsageError(f"keep_free cell {(kx, ky, kz)} is outside the world {size}")
+            limit[kx, ky] = min(limit[kx, ky], kz)
+
+        placed: list[Building] = []
+        heights = np.zeros((nx, ny), dtype=np.int64)
+        attempts = _ATTEMPTS_PER_BUILDING * count + 32 if count else 0
+        while attempts > 0 and len(placed) < count:
+            n = min(attempts, _CHUNK)
+            attempts -= n
+            lengths = rng.integers(1, max_len + 1, size=n)
+            widths = rng.integers(1, max_wid + 1, size=n)
+            tops = rng.integers(1, top + 1, size=n)
+            xs = rng.integers(0, nx - lengths + 1)
+            ys = rng.integers(0, ny - widths + 1)
+            for x, y, ln, wd, h in zip(xs.tolist(), ys.tolist(), lengths.tolist(), widths.tolist(),
+                                       tops.tolist()):
+                area = limit[x:x + ln, y:y + wd]
+                if area.min() < h:
+                    continue
+                area[...] = 0
+                heights[x:x + ln, y:y + wd] = h
+                placed.append(Building(x=x, y=y, length=ln, width=wd, height=h))
+                if len(placed) == count:
+                    break
+        return cls._trusted(size, _fill(heights, nz), tuple(placed))
+
+    @classmethod
+    def from_buildings(cls, size: Cell, buildings: Iterable[Building]) -> World:
+        """A world made of explicit buildings; `UsageError` if one leaves the world or two intersect."""
+        size = _size(size)
+        buildings = tuple(buildings)
+        return cls._trusted(size, _fill(_heightmap(size, buildings), size[2]), buildings)
+
+    @classmethod
+    def from_grid(cls, grid: np.ndarray) -> World:
+        """A world from any 3D obstacle grid (bool, or integers 0/1), indexed [x, y, z]."""
+        arr = np.asarray(grid)
+        if arr.ndim != 3:
+            raise UsageError(f"a world grid must be 3-dimensional, got shape {arr.shape}")
+        if arr.dtype != np.bool_:
+            if not np.issubdtype(arr.dtype, np.integer) or not np.isin(arr, (0, 1)).all():
+                raise UsageError(f"a world grid must be boolean or 0/1 integers, got dtype {arr.dtype}")
+        return cls(size=_size(arr.shape), grid=_frozen(arr))
+
+    @classmethod
+    def from_packed(cls, size: Cell, data: bytes) -> World:
+        """The inverse of `packed`: a raw-grid world from its size and packed bits."""
+        size = _size(size)
+        n = size[0] * size[1] * size[2]
+        if not isinstance(data, (bytes, bytearray, memoryview)) or len(data) != (n + 7) // 8:
+            raise UsageError(f"a packed world of size {size} needs {(n + 7) // 8} bytes")
+        bits = np.unpackbits(np.frombuffer(bytes(data), dtype=np.uint8), count=n)
+        return cls._trusted(size, bits.astype(bool).reshape(size), ())
+
+    @classmethod
+    def _trusted(cls, size: Cell, grid: np.ndarray, buildings: tuple[Building, ...]) -> World:
+        """Build without re-validating what the caller already guarantees."""
+        world = object.__new__(cls)
+        object.__setattr__(world, "size", size)
+        object.__setattr__(world, "grid", _frozen(grid))
+        object.__setattr__(world, "buildings", buildings)
+        return world
+
+    # ----------------------------------------------------------------------- files
+
+    def to_json(self) -> dict:
+        """The JSON form: ``{"format": "dronesim-world", "version": 1, "size": [nx, ny, nz], ...}``
+        with ``"buildings": [[x, y, length, width, height], ...]``, or, for a raw-grid world,
+        ``"cells": [[x, y, z], ...]`` listing every building cell (C order)."""
+        data: dict = {"format": FORMAT, "version": FORMAT_VERSION, "size": list(self.size)}
+        if self.buildings:
+            data["buildings"] = [b.as_list() for b in self.buildings]
+        else:
+            data["cells"] = np.argwhere(self.grid).tolist()
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict) -> World:
+        """The inverse of `to_json`; `UsageError` naming the problem on any bad input.
+        Unknown extra keys (e.g. a comment) are ignored."""
+        if not isinstance(data, dict):
+            raise UsageError(f"a world must be a JSON object, got {type(data).__name__}")
+        for key in ("format", "version", "size"):
+            if key not in data:
+                raise UsageError(f"a world needs the key {key!r}")
+        if data["format"] != FORMAT:
+            raise UsageError(f"format must be {FORMAT!r}, got {data['format']!r}")
+        if type(data["version"]) is not int or data["version"] != FORMAT_VERSION:
+            raise UsageError(f"unsupported world version {data['version']!r} (this build reads {FORMAT_VERSION})")
+        size = _size(_json_ints(data["size"], 3, "size"))
+        has_b, has_c = "buildings" in data, "cells" in data
+        if has_b == has_c:
+            raise UsageError("a world needs exactly one of the keys 'buildings' and 'cells'")
+        if has_b:
+            items = _json_list(data["buildings"], "buildings")
+            buildings = []
+            for i, item in enumerate(items):
+                x, y, ln, wd, h = _json_ints(item, 5, f"buildings[{i}]")
+                buildings.append(Building(x=x, y=y, length=ln, width=wd, height=h))
+            return cls.from_buildings(size, buildings)
+        items = _json_list(data["cells"], "cells")
+        grid = np.zeros(size, dtype=bool)
+        for i, item in enumerate(items):
+            x, y, z = _json_ints(item, 3, f"cells[{i}]")
+            if not (0 <= x < size[0] and 0 <= y < size[1] and 0 <= z < size[2]):
+                raise UsageError(f"cells[{i}] {[x, y, z]} is outside the world of size {list(size)}")
+            grid[x, y, z] = True
+        return cls._trusted(size, grid, ())
+
+    @classmethod
+    def load(cls, path: str | Path) -> World:
+        """Read a world file (see `to_json`); `UsageError` if unreadable or invalid."""
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UsageError(f"cannot read world file {str(path)!r}: {exc}") from None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise UsageError(f"world file {str(path)!r} is not valid JSON: {exc}") from None
+        try:
+            return cls.from_json(data)
+        except UsageError as exc:
+            raise UsageError(f"world file {str(path)!r}: {exc}") from None
+
+    def save(self, path: str | Path) -> None:
+        """Write the world file, one building (or cell) per line; `UsageError` if unwritable."""
+        data = self.to_json()
+        key = "buildings" if "buildings" in data else "cells"
+        head = ", ".join(f"{json.dumps(k)}: {json.dumps(v)}" for k, v in data.items() if k != key)
+        rows = ",\n".join("  " + json.dumps(item) for item in data[key])
+        text = f"{{{head}, {json.dumps(key)}: [\n{rows}\n]}}\n" if rows else f"{{{head}, {json.dumps(key)}: []}}\n"
+        try:
+            Path(path).write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise UsageError(f"cannot write world file {str(path)!r}: {exc}") from None
+
+    # ----------------------------------------------------------------------- queries
+
+    def contains(self, cell: Cell) -> bool:
+        """Whether `cell` is inside the world's bounds."""
+        x, y, z = cell
+        nx, ny, nz = self.size
+        return 0 <= x < nx and 0 <= y < ny and 0 <= z < nz
+
+    def is_building(self, cell: Cell) -> bool:
+        """Whether `cell` is a building cell (False outside the world)."""
+        return self.contains(cell) and bool(self.grid[cell[0], cell[1], cell[2]])
+
+    def what_inside(self, cell: Cell, occupants: Mapping[Cell, tuple[str, ...]] = {}) -> CellInfo:
+        """The seed's ``whatInside``: OUTSIDE beyond the bounds, else BUILDING or EMPTY, with the
+        drones `occupants` places in that cell (sorted), whatever the kind."""
+        cell = _cell(cell)
+        if not self.contains(cell):
+            kind = CellKind.OUTSIDE
+        elif self.grid[cell]:
+            kind = CellKind.BUILDING
+        else:
+            kind = CellKind.EMPTY
+        return CellInfo(pos=cell, kind=kind, drones=tuple(sorted(occupants.get(cell, ()))))
+
+    def free_neighbours(self, cell: Cell) -> tuple[Cell, ...]:
+        """The in-bounds, non-building 6-neighbours of `cell`, in the order +x, -x, +y, -y, +z, -z."""
+        x, y, z = _cell(cell)
+        out = []
+        for dx, dy, dz in _STEPS6:
+            n = (x + dx, y + dy, z + dz)
+            if self.contains(n) and not self.grid[n]:
+                out.append(n)
+        return tuple(out)
+
+    def shortest_path_length(self, start: Cell, goal: Cell) -> int | None:
+        """The number of 6-connected moves from `start` to `goal` through non-building cells,
+        knowing the whole map; None if either cell is outside the world or a building, or if
+        `goal` cannot be reached. Breadth-first, one numpy step per distance level."""
+        start, goal = _cell(start, "start"), _cell(goal, "goal")
+        if not self.contains(start) or not self.contains(goal) or self.grid[start] or self.grid[goal]:
+            return None
+        if start == goal:
+            return 0
+        nx, ny, nz = self.size
+        # Pad the free map with a blocked border, so flat-index neighbours need no bounds checks.
+        free = np.zeros((nx + 2, ny + 2, nz + 2), dtype=bool)
+        free[1:-1, 1:-1, 1:-1] = ~self.grid
+        sx, sy = (ny + 2) * (nz + 2), nz + 2
+        offsets = np.array([sx, -sx, sy, -sy, 1, -1], dtype=np.int64)
+        unseen = free.ravel()
+        s = (start[0] + 1) * sx + (start[1] + 1) * sy + start[2] + 1
+        g = (goal[0] + 1) * sx + (goal[1] + 1) * sy + goal[2] + 1
+        unseen[s] = False
+        frontier = np.array([s], dtype=np.int64)
+        distance = 0
+        while frontier.size:
+            distance += 1
+            nxt = (frontier[:, None] + offsets).ravel()
+            nxt = np.unique(nxt[unseen[nxt]])
+            unseen[nxt] = False
+            if not unseen[g]:
+                return distance
+            frontier = nxt
+        return None
+
+    def packed(self) -> bytes:
+        """The grid as packed bits, as in the MAP message: ``np.packbits(grid.ravel(order="C"))``."""
+        return np.packbits(self.grid.ravel(order="C")).tobytes()
+
+    # ----------------------------------------------------------------------- drawing
+
+    def draw(
+        self,
+        drones: Mapping[str, Cell] = {},
+        *,
+        targets: Mapping[str, Cell] = {},
+        trail: Iterable[Cell] = (),
+        floors: Iterable[int] | None = None,
+        compact: bool | None = None,
+    ) -> str:
+        """The seed's ``drawEnv``: the world floor by floor, bottom-up (``z = 0`` first), each floor
+        a block headed ``z = k`` with one row per x and one column per y, (0,0) top-left; blocks are
+        separated by a blank line and a one-line legend ends the text (no trailing newline).
+
+        Full mode (default when nx and ny are <= 16): the seed's trigrams separated by spaces,
+        ``EPT`` empty, ``BLK`` building, ``TGT`` target, ``+++`` trail, the drone's id (``D01``),
+        ``!!!`` for several drones (columns widen for ids longer than 3 characters). Compact mode
+        (default for larger worlds): one character per cell, ``.`` ``#`` ``X`` ``*``, a drone's
+        last id character, ``!`` for several drones. Drones hide targets, which hide trails,
+        which hide buildings. `floors` restricts the drawn floors; cells outside the world are
+        not drawn.
+        """
+        nx, ny, nz = self.size
+        if compact is None:
+            compact = nx > 16 or ny > 16
+        if floors is None:
+            zs = list(range(nz))
+        else:
+            zs = sorted({_int(z, "floor") for z in floors})
+            bad = [z for z in zs if not 0 <= z < nz]
+            if bad:
+                raise UsageError(f"floors {bad} are outside 0..{nz - 1}")
+
+        # marks[z][(x, y)] = label, written in increasing priority.
+        marks: dict[int, dict[tuple[int, int], str]] = {}
+
+        def mark(cells: Iterable[Cell], label: str) -> None:
+            for c in cells:
+                x, y, z = _cell(c)
+                if self.contains((x, y, z)):
+                    marks.setdefault(z, {})[(x, y)] = label
+
+        mark(trail, _C_TRAIL if compact else _TRAIL)
+        mark(targets.values(), _C_TARGET if compact else _TARGET)
+        crowd: dict[Cell, list[str]] = {}
+        for name, c in drones.items():
+            crowd.setdefault(_cell(c, f"position of {name}"), []).append(str(name))
+        for c, names in crowd.items():
+            if len(names) > 1:
+                label = _C_CROWD if compact else _CROWD
+            else:
+                label = (names[0][-1:] or "?") if compact else names[0]
+            mark((c,), label)
+
+        width = max([3, *(len(v) for m in marks.values() for v in m.values())])
+        blocks = []
+        for z in zs:
+            floor = marks.get(z, {})
+            if compact:
+                cells = np.where(self.grid[:, :, z], _C_BLOCK, _C_EMPTY).astype("<U1")
+                for (x, y), label in floor.items():
+                    cells[x, y] = label
+                text = "".join(cells.ravel().tolist())
+                rows = [text[i * ny:(i + 1) * ny] for i in range(nx)]
+            else:
+                cells = np.where(self.grid[:, :, z], _BLOCK, _EMPTY).astype(f"<U{width}")
+                for (x, y), label in floor.items():
+                    cells[x, y] = label
+                rows = [" ".join(s.ljust(width) for s in row).rstrip() for row in cells.tolist()]
+            blocks.append("\n".join([f"z = {z}", *rows]))
+        blocks.append(_C_LEGEND if compact else _LEGEND)
+        return "\n\n".join(blocks)
+
+
+def _json_list(value: object, what: str) -> list:
+    if not isinstance(value, list):
+        raise UsageError(f"{what} must be a list, got {type(value).__name__}")
+    return value
+
+
+def _json_ints(value: object, n: int, what: str) -> list[int]:
+    if not isinstance(value, list) or len(value) != n or any(type(v) is not int for v in value):
+        raise UsageError(f"{what} must be a list of {n} integers, got {value!r}")
+    return value
