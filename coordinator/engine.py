@@ -144,7 +144,6 @@ class Engine:
         self._targets: dict[str, Cell] = {}  # received in this GCS phase
         self._moves: dict[str, Cell] = {}  # received in this DRONES phase
         self._notes: dict[str, Note] = {}
-        self._rejected: dict[str, str] = {}
         self._turn_log: dict = {}
         self._pending_moves: tuple[Move, ...] = ()
 
@@ -252,7 +251,6 @@ class Engine:
             case Stage.DRONES:
                 self._moves.clear()
                 self._notes.clear()
-                self._rejected.clear()
                 orders = tuple(Order(drone=d, pos=self.drones[d].pos, target=self.drones[d].target)
                                for d in self.alive())
                 return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders))]
@@ -321,11 +319,9 @@ class Engine:
         if d in self._moves:
             raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
         step = sum(abs(a - b) for a, b in zip(msg.pos, drone.pos))
-        self._notes[d] = msg.note
-        if step > 1:
-            self._moves[d] = drone.pos  # it hovers; the bad move is counted and changes nothing else
-            self._rejected[d] = f"{msg.pos}"
+        if step > 1:  # refused: the drone may still send a valid move, or hover at the deadline
             raise OutOfRange(f"{d} cannot move from {drone.pos} to {msg.pos}: one cell per turn, 6-connectivity")
+        self._notes[d] = msg.note
         self._moves[d] = msg.pos
         return self._drones_check()
 
@@ -374,8 +370,6 @@ class Engine:
             log["moves"] = moves
         if hovered:
             log["hovered"] = hovered
-        if self._rejected:
-            log["rejected"] = dict(sorted(self._rejected.items()))
         if dead:
             log["deaths"] = {d: c.value for d, c in sorted(dead.items())}
         status = self.status()

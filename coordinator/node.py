@@ -65,6 +65,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                         out.put(_key_of(keys, msg), msg)
                     case Reply(query, msg):
                         query.reply(query.key_expr, encode(msg))
+                        query.drop()  # the final answer: the asker stops waiting now
                     case Record(data):
                         writer.append(data)
 
@@ -79,7 +80,6 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                     run(engine.expire(*phase))
                 case Asked(query, Connect() as msg):
                     run(engine.connect(msg, query))
-                    del query  # replied: release it so the asker is not kept waiting
                 case Received(_, msg):
                     try:
                         run(engine.receive(msg))

@@ -173,9 +173,11 @@ class Inbox:
             except RemoteInputError as err:
                 self.rejects.reject(key, err)
                 query.reply_err(str(err).encode())
+                query.drop()
             except Exception:
                 self.log.exception("error handling a query on %s", key)
                 query.reply_err(b"internal error")
+                query.drop()
 
         self._handles.append(self.session.declare_queryable(key, on_query, complete=True))
 
@@ -217,7 +219,9 @@ class Outbox:
 def request(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
             timeout: float) -> Message:
     """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none)."""
-    for reply in session.get(key, payload=encode(msg), timeout=timeout):
+    replies = session.get(key, payload=encode(msg), timeout=timeout,
+                          consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+    for reply in replies:
         if reply.ok is not None:
             return decode(reply.ok.payload.to_bytes(), expect)
         raise RemoteInputError(f"{key} answered an error: {reply.err.payload.to_bytes().decode(errors='replace')}",

@@ -6,7 +6,7 @@ import importlib
 
 from dronesim.schema import Cell, UsageError
 
-from .base import Autopilot, Decision, Oracle, Sensing, run_step
+from .base import Autopilot, Decision, Oracle, Sensing, fly_round, run_step
 
 #: name -> (module, class). Modules are imported on first use.
 REGISTRY: dict[str, tuple[str, str]] = {
@@ -26,4 +26,4 @@ def make_autopilot(name: str, *, world_size: Cell) -> Autopilot:
     return pilot_cls(world_size=world_size)
 
 
-__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "REGISTRY", "make_autopilot", "run_step"]
+__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "REGISTRY", "fly_round", "make_autopilot", "run_step"]

@@ -72,3 +72,32 @@ def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -
     if not isinstance(decision, Decision):
         raise TypeError(f"{type(pilot).__name__}.step returned {decision!r}, not a Decision")
     return decision, asks
+
+
+def fly_round(
+    steps: Mapping[str, Sensing],
+    ask_all: Callable[[dict[str, tuple[Cell, ...]]], Mapping[str, Answers]],
+) -> dict[str, Decision]:
+    """Drive several drones' `step` generators together: each round gathers every pending ASK and
+    answers them all at once (`ask_all`, concurrent on the network), so a turn takes as many
+    sequential ASK round trips as the most inquisitive drone, not the sum over drones."""
+    decisions: dict[str, Decision] = {}
+    pending: dict[str, tuple[Cell, ...]] = {}
+    for d, gen in steps.items():
+        try:
+            pending[d] = next(gen)
+        except StopIteration as stop:
+            decisions[d] = stop.value
+    while pending:
+        answers = ask_all(pending)
+        nxt: dict[str, tuple[Cell, ...]] = {}
+        for d, cells in pending.items():
+            try:
+                nxt[d] = steps[d].send(answers[d])
+            except StopIteration as stop:
+                decisions[d] = stop.value
+        pending = nxt
+    for d, dec in decisions.items():
+        if not isinstance(dec, Decision):
+            raise TypeError(f"the autopilot of {d} returned {dec!r}, not a Decision")
+    return decisions

@@ -1,0 +1,1 @@
+"""Benchmarks run in-process (no network): ``python -m benchmarks.autopilot --help``."""

@@ -1,0 +1,5 @@
+import sys
+
+from dronesim.cli import main
+
+sys.exit(main())

@@ -1,0 +1,35 @@
+"""The ``dronesim`` command: one subcommand per process role, plus the tools."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+#: subcommand -> (module, function taking argv), imported on use.
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "up": ("dronesim.up", "cli", "run everything on one machine (embedded router + every entity)"),
+    "coordinator": ("dronesim.coordinator.node", "cli", "the coordinator (SRV + observer)"),
+    "env": ("dronesim.entities.env_node", "cli", "the environment (ENV)"),
+    "drone": ("dronesim.entities.drone_node", "cli", "a drone, or a swarm host of several drones"),
+    "gcs": ("dronesim.entities.gcs_node", "cli", "the ground control station (GCS)"),
+    "router": ("dronesim.router", "cli", "a standalone Zenoh router (for multi-host runs without zenohd)"),
+}
+
+
+def usage() -> str:
+    lines = ["usage: dronesim COMMAND [options]   (dronesim COMMAND --help for its options)", "", "commands:"]
+    lines += [f"  {name:<12} {doc}" for name, (_, _, doc) in COMMANDS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage())
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"dronesim: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
+        return 2
+    module, func, _ = COMMANDS[name]
+    return int(getattr(importlib.import_module(module), func)(rest) or 0)

@@ -1,0 +1,43 @@
+"""``dronesim router``: a standalone Zenoh router in Python, for multi-host runs without zenohd.
+
+It listens on the given endpoints (default tcp/0.0.0.0:7447), prints where, and runs until
+SIGINT or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+
+import zenoh
+
+from dronesim.transport import add_zenoh_args, router_config, router_locators, setup_logging, zenoh_config
+
+
+def main(conf: zenoh.Config) -> int:
+    with zenoh.open(conf) as session:
+        print(f"router {session.info.zid()} listening on {', '.join(router_locators(session))}", flush=True)
+        signal.sigwait({signal.SIGINT, signal.SIGTERM})  # blocked in cli(): delivered here, not as exceptions
+    return 0
+
+
+def cli(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="dronesim router", description=__doc__)
+    add_zenoh_args(p)
+    args = p.parse_args(argv)
+    setup_logging(args.log_level, "ROUTER")
+    if args.config:
+        conf = zenoh_config(args)
+    else:
+        conf = router_config(args.listen[0] if args.listen else "tcp/0.0.0.0:7447")
+        if len(args.listen) > 1:
+            conf.insert_json5("listen/endpoints", json.dumps(args.listen))
+    conf.insert_json5("mode", '"router"')
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    return main(conf)
+
+
+if __name__ == "__main__":
+    sys.exit(cli())

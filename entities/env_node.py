@@ -1,0 +1,122 @@
+"""The environment process (the seed's ENV): the Zenoh adapter of `Environment`.
+
+It answers ASK (queryable ENV/ASK) from the world as it stands at the start of the turn, applies the
+coordinator's moves in the ENV phase and publishes the changed cells (UPD), serves the static map
+(ENV/MAP) and takes the drones' positions from each STATUS.
+
+An ASK for turn t is answered once STATUS(t-1) has been applied; one that arrives earlier (possible
+when messages take different routes) waits for it, one for a past turn gets an error reply.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+import zenoh
+
+from dronesim.entity import admit
+from dronesim.schema import (
+    Ans, Ask, Connect, Keys, MapRequest, Over, Phase, RemoteInputError, Role, Status, Turn, Upd, UsageError,
+    WorldMap, encode,
+)
+from dronesim.schema.errors import StaleTurn, WrongSender
+from dronesim.transport import Asked, Inbox, Outbox, Received, add_zenoh_args, setup_logging, zenoh_config
+
+from .environment import Environment, build_world
+
+
+def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
+         connect_timeout: float = 30.0) -> Over:
+    with zenoh.open(conf) as session:
+        token = session.liveliness().declare_token(keys.alive("ENV"))
+        inbox = Inbox(session, keys, logger)
+        inbox.subscribe(keys.turn, Turn)
+        inbox.subscribe(keys.status, Status)
+        inbox.subscribe(keys.over, Over)
+        inbox.serve(keys.ask, Ask)
+        inbox.serve(keys.map, MapRequest)
+        welcome = admit(session, keys, Connect(turn=0, sender="ENV", role=Role.ENV), logger, timeout=connect_timeout)
+        world = build_world(welcome.world, (s.pos for s in welcome.starts))
+        env = Environment(world, {s.drone: s.pos for s in welcome.starts})
+        if draw:
+            print(f"World {world.size} seed {welcome.world.seed}, {len(world.buildings)} buildings, "
+                  f"{int(world.grid.sum())} building cells:", flush=True)
+            print(world.draw(env.drones), flush=True)
+        out = Outbox(session)
+        ready = 1  # the turn whose ASKs can be answered now
+        waiting: list[tuple[zenoh.Query, Ask]] = []
+        over: Over | None = None
+
+        def answer(query: zenoh.Query, ask: Ask) -> None:
+            query.reply(query.key_expr, encode(Ans(turn=ask.turn, sender="ENV", cells=env.answer(ask.cells))))
+            query.drop()
+
+        def refuse(query: zenoh.Query, why: str) -> None:
+            query.reply_err(why.encode())
+            query.drop()
+
+        while over is None:
+            event = inbox.get()
+            try:
+                match event:
+                    case Asked(query, Ask() as ask):
+                        if not ask.sender.startswith("D"):
+                            refuse(query, "only drones ask")
+                            raise WrongSender(f"ASK from {ask.sender}")
+                        if ask.turn == ready:
+                            answer(query, ask)
+                        elif ask.turn > ready:
+                            waiting.append((query, ask))
+                        else:
+                            refuse(query, f"ASK for turn {ask.turn}, the world is at turn {ready}")
+                            raise StaleTurn(f"ASK for past turn {ask.turn} from {ask.sender}")
+                    case Asked(query, MapRequest()):
+                        query.reply(query.key_expr, encode(WorldMap(turn=ready - 1, sender="ENV", size=world.size,
+                                                                    buildings=world.packed())))
+                        query.drop()
+                    case Received(_, Turn(phase=Phase.ENV) as turn):
+                        if turn.turn != ready:
+                            raise StaleTurn(f"ENV phase of turn {turn.turn} while the world is at turn {ready}")
+                        out.put(keys.upd, Upd(turn=turn.turn, sender="ENV", cells=env.apply(turn.moves)))
+                    case Received(_, Status() as status):
+                        env.sync(status)
+                        ready = status.turn + 1
+                        still = []
+                        for query, ask in waiting:
+                            if ask.turn == ready:
+                                answer(query, ask)
+                            elif ask.turn > ready:
+                                still.append((query, ask))
+                            else:
+                                refuse(query, "stale turn")
+                        waiting = still
+                    case Received(_, Over() as over):
+                        logger.info("OVER: %s", over.text)
+            except RemoteInputError as err:
+                inbox.rejects.reject("ENV", err)
+        for query, _ in waiting:
+            refuse(query, "the game is over")
+        token.undeclare()
+        return over
+
+
+def cli(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="dronesim env", description=__doc__)
+    add_zenoh_args(p)
+    p.add_argument("--no-draw", action="store_true", help="do not print the world at start")
+    p.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the coordinator")
+    args = p.parse_args(argv)
+    logger = setup_logging(args.log_level, "ENV")
+    try:
+        main(zenoh_config(args), keys=Keys(args.root), logger=logger, draw=not args.no_draw,
+             connect_timeout=args.connect_timeout)
+    except UsageError as err:
+        logger.error("%s", err)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(cli())

@@ -1,0 +1,72 @@
+"""The environment's state (the seed's ENV): the static world plus where each drone is. Pure.
+
+`answer` is the seed's whatInside for an ASK; `apply` is moveDrone, returning the changed cells
+(the UPD); `sync` sets the drones from the observer's STATUS at the end of a turn (the dead and
+lost are removed from the grid).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Iterable
+
+import numpy as np
+
+from dronesim.schema import Cell, CellInfo, Move, Status, WorldSpec
+from dronesim.schema.errors import OutOfRange, UnknownEntity
+
+from .world import World
+
+
+def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
+    """The world a `WorldSpec` describes: the given cells, or generated from its seed keeping the starts free."""
+    if spec.cells:
+        return World.from_packed(spec.size, spec.cells)
+    return World.generate(spec.size, np.random.default_rng(spec.seed), keep_free=tuple(starts))
+
+
+class Environment:
+    def __init__(self, world: World, drones: dict[str, Cell]) -> None:
+        self.world = world
+        self.drones: dict[str, Cell] = dict(drones)  # drone -> cell (only drones inside the world)
+        self._occupants = self._index()
+
+    def _index(self) -> dict[Cell, tuple[str, ...]]:
+        cells: dict[Cell, list[str]] = defaultdict(list)
+        for d, c in sorted(self.drones.items()):
+            cells[c].append(d)
+        return {c: tuple(ds) for c, ds in cells.items()}
+
+    def what_inside(self, cell: Cell) -> CellInfo:
+        return self.world.what_inside(cell, self._occupants)
+
+    def answer(self, cells: Iterable[Cell]) -> tuple[CellInfo, ...]:
+        return tuple(self.world.what_inside(c, self._occupants) for c in cells)
+
+    def apply(self, moves: Iterable[Move]) -> tuple[CellInfo, ...]:
+        """Move the drones; return every changed cell (sources and in-world destinations), sorted.
+
+        All moves are checked before any is applied: a move whose source is not where this
+        environment has the drone is refused whole (`UnknownEntity` / `OutOfRange`).
+        """
+        moves = tuple(moves)
+        for m in moves:
+            if m.drone not in self.drones:
+                raise UnknownEntity(f"move of {m.drone}, which is not in the world")
+            if self.drones[m.drone] != m.src:
+                raise OutOfRange(f"move of {m.drone} from {m.src}, but it is at {self.drones[m.drone]}")
+        changed: set[Cell] = set()
+        for m in moves:
+            changed.add(m.src)
+            if self.world.contains(m.dst):
+                self.drones[m.drone] = m.dst
+                changed.add(m.dst)
+            else:
+                del self.drones[m.drone]  # it left the world (the observer will say it died)
+        self._occupants = self._index()
+        return tuple(self.what_inside(c) for c in sorted(changed))
+
+    def sync(self, status: Status) -> None:
+        """Take the drones' positions from the observer's STATUS: alive ones in the world, others removed."""
+        self.drones = {s.drone: s.pos for s in status.drones if s.alive and self.world.contains(s.pos)}
+        self._occupants = self._index()

@@ -1,0 +1,123 @@
+"""The ground station's pure parts: the seed's input check (correctForm), scripted plans, the display.
+
+A plan maps turns to targets: ``9,9,0`` (D01 from turn 1), ``D02=3,4,0`` (D02 from turn 1),
+``D01=5,5,0@12`` (from turn 12). A script file holds one such item per line (``#`` comments).
+"""
+
+from __future__ import annotations
+
+import pathlib
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from dronesim.schema import Cell, DroneState, DroneStatus, Note, Status, UsageError, is_drone_id
+
+_ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,4})\s*[= ]\s*)?(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")
+
+
+def correct_form(text: str, size: Cell) -> Cell:
+    """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed) must name a cell inside the world."""
+    parts = [p.strip() for p in text.replace(" ", ",").split(",") if p.strip()]
+    try:
+        cell = tuple(int(p) for p in parts)
+    except ValueError:
+        raise UsageError(f"{text!r} is not x,y,z") from None
+    if len(cell) != 3:
+        raise UsageError(f"{text!r} is not x,y,z")
+    if not all(0 <= c < s for c, s in zip(cell, size)):
+        raise UsageError(f"{cell} is outside the world: 0 <= x < {size[0]}, 0 <= y < {size[1]}, 0 <= z < {size[2]}")
+    return cell  # type: ignore[return-value]
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """Targets by turn: ``items`` holds (turn, drone, cell), sorted."""
+
+    items: tuple[tuple[int, str, Cell], ...]
+
+    @classmethod
+    def parse(cls, texts: Iterable[str], size: Cell, default_drone: str = "D01") -> "Plan":
+        items = []
+        for text in texts:
+            for chunk in text.split(";"):
+                if not chunk.strip() or chunk.strip().startswith("#"):
+                    continue
+                m = _ITEM.match(chunk)
+                if not m:
+                    raise UsageError(f"bad target {chunk.strip()!r}: expected [Dnn=]x,y,z[@turn]")
+                drone = m["drone"] or default_drone
+                turn = int(m["turn"] or 1)
+                if turn < 1:
+                    raise UsageError(f"bad target {chunk.strip()!r}: turns start at 1")
+                items.append((turn, drone, correct_form(m["cell"], size)))
+        return cls(tuple(sorted(items)))
+
+    @classmethod
+    def load(cls, path: str, size: Cell) -> "Plan":
+        try:
+            lines = pathlib.Path(path).read_text(encoding="utf-8").splitlines()
+        except OSError as exc:
+            raise UsageError(f"cannot read the target script {path}: {exc}") from None
+        return cls.parse((ln.split("#", 1)[0] for ln in lines), size)
+
+    def at(self, turn: int) -> dict[str, Cell]:
+        """Targets that take effect at `turn`."""
+        return {d: c for t, d, c in self.items if t == turn}
+
+    @property
+    def last_turn(self) -> int:
+        return self.items[-1][0] if self.items else 0
+
+    def drones(self) -> set[str]:
+        return {d for _, d, _ in self.items}
+
+
+def parse_command(line: str, size: Cell, drones: Iterable[str]) -> dict[str, Cell]:
+    """One interactive line: ``x,y,z`` (the only or first drone) or ``Dnn x,y,z``."""
+    drones = list(drones)
+    m = _ITEM.match(line)
+    if not m or m["turn"]:
+        raise UsageError(f"{line.strip()!r}: type x,y,z or Dnn x,y,z")
+    drone = m["drone"] or drones[0]
+    if not is_drone_id(drone) or drone not in drones:
+        raise UsageError(f"unknown drone {drone}: this game flies {', '.join(drones)}")
+    return {drone: correct_form(m["cell"], size)}
+
+
+def describe(s: DroneStatus) -> str:
+    """One drone's line: position, alive/dead (the seed's display), target and notes."""
+    if s.state is DroneState.ALIVE:
+        state = "reached its target" if s.note is Note.REACHED else (
+            "target UNREACHABLE, hovering" if s.note is Note.UNREACHABLE else "alive")
+    else:
+        state = f"{s.state.value} ({s.cause.value.lower()})"
+    target = "no target" if s.target is None else f"target {s.target}"
+    return f"{s.drone} at {s.pos}: {state}, {target}"
+
+
+def format_status(status: Status, limit: int = 16) -> str:
+    lines = [f"turn {status.turn}:"]
+    shown = status.drones[:limit]
+    lines += [f"  {describe(s)}" for s in shown]
+    if len(status.drones) > limit:
+        counts: dict[str, int] = {}
+        for s in status.drones:
+            counts[s.state.value] = counts.get(s.state.value, 0) + 1
+        lines.append(f"  ... {len(status.drones) - limit} more; totals: {counts}")
+    return "\n".join(lines)
+
+
+def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
+    """Each drone's path through the STATUS history, without repeats of consecutive cells."""
+    out: dict[str, list[Cell]] = {}
+    for st in history:
+        for s in st.drones:
+            path = out.setdefault(s.drone, [])
+            if not path or path[-1] != s.pos:
+                path.append(s.pos)
+    return out
+
+
+def targets_of(status: Status) -> Mapping[str, Cell]:
+    return {s.drone: s.target for s in status.drones if s.target is not None}

@@ -1,0 +1,164 @@
+"""The ground station process (the seed's GCS): the human's console, or a scripted plan.
+
+Each GCS phase it sends every drone's target (re-sending the last one, as the seed does) and DONE;
+after each turn it shows every drone's state; on OVER it draws the world with the drones' paths and
+prints a summary. Interactive mode forces a first target, then offers each turn to change it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Callable
+
+import zenoh
+
+from dronesim.entity import admit
+from dronesim.schema import (
+    Connect, Done, Intent, Keys, MapRequest, Over, Phase, Role, Status, Target, Turn, UsageError, WorldMap,
+)
+from dronesim.transport import Inbox, Outbox, Received, add_zenoh_args, request, setup_logging, zenoh_config
+
+from .gcs import Plan, format_status, parse_command, trails
+from .world import World
+
+
+class Console:
+    """The seed's interactive loop over a line reader (stdin by default)."""
+
+    def __init__(self, size: tuple[int, int, int], drones: list[str], read: Callable[[str], str] = input,
+                 write: Callable[[str], None] = print) -> None:
+        self.size, self.drones, self.read, self.write = size, drones, read, write
+
+    def ask(self, turn: int, current: dict) -> tuple[dict, Intent]:
+        """New targets for this turn. Drones without a target must get one (the seed forces the first)."""
+        new: dict = {}
+        while True:
+            missing = [d for d in self.drones if d not in current and d not in new]
+            if missing:
+                prompt = f"turn {turn}: target for {missing[0]} (x,y,z): "
+            else:
+                prompt = f"turn {turn}: new target ([Dnn] x,y,z; ...), Enter to keep, q to quit: "
+            try:
+                line = self.read(prompt).strip()
+            except EOFError:
+                return new, Intent.QUIT
+            if line.lower() in ("q", "quit", "exit"):
+                return new, Intent.QUIT
+            if not line:
+                if missing:
+                    self.write(f"a first target is required for {missing[0]}")
+                    continue
+                return new, Intent.CONTINUE
+            given: dict = {}
+            try:  # all or nothing: one bad item rejects the line
+                for part in line.split(";"):
+                    part = part.strip()
+                    if missing and not part.startswith("D"):
+                        part = f"{missing[0]} {part}"
+                    given.update(parse_command(part, self.size, self.drones))
+                    missing = [d for d in self.drones if d not in current and d not in new and d not in given]
+            except UsageError as err:
+                self.write(f"invalid: {err}")
+                continue
+            new.update(given)
+            if not missing:
+                return new, Intent.CONTINUE
+
+
+def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: list[str], script: str | None,
+         interactive: bool, quiet: bool = False, draw: bool = True, connect_timeout: float = 30.0) -> Over:
+    with zenoh.open(conf) as session:
+        token = session.liveliness().declare_token(keys.alive("GCS"))
+        inbox = Inbox(session, keys, logger)
+        inbox.subscribe(keys.turn, Turn)
+        inbox.subscribe(keys.status, Status)
+        inbox.subscribe(keys.over, Over)
+        welcome = admit(session, keys, Connect(turn=0, sender="GCS", role=Role.GCS), logger, timeout=connect_timeout)
+        size = welcome.world.size
+        drones = [s.drone for s in welcome.starts]
+        plan = Plan.load(script, size) if script else Plan.parse(plan_texts, size, default_drone=drones[0])
+        unknown = plan.drones() - set(drones)
+        if unknown:
+            raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
+        wm = request(session, keys.map, MapRequest(turn=0, sender="GCS"), WorldMap, timeout=connect_timeout)
+        world = World.from_packed(wm.size, wm.buildings)
+        if draw:
+            print(f"World {size}, {int(world.grid.sum())} building cells; the drones' floor at start:", flush=True)
+            print(world.draw({s.drone: s.pos for s in welcome.starts},
+                             floors=sorted({s.pos[2] for s in welcome.starts})), flush=True)
+        console = Console(size, drones) if interactive else None
+        out = Outbox(session)
+        current: dict = {}
+        history: list[Status] = []
+        over: Over | None = None
+        while over is None:
+            match inbox.get():
+                case Received(_, Turn(phase=Phase.GCS) as turn):
+                    if console is not None:
+                        new, intent = console.ask(turn.turn, current)
+                    else:
+                        new = plan.at(turn.turn)
+                        intent = Intent.FINAL if turn.turn >= plan.last_turn else Intent.CONTINUE
+                    current.update(new)
+                    for d, cell in sorted(current.items()):  # re-send every last target, as the seed does
+                        out.put(keys.tgt(d), Target(turn=turn.turn, sender="GCS", drone=d, pos=cell))
+                    out.put(keys.gcs_done, Done(turn=turn.turn, sender="GCS", phase=Phase.GCS, intent=intent))
+                case Received(_, Status() as status):
+                    history.append(status)
+                    for s in status.drones:  # a late joiner takes over the targets in force
+                        if s.target is not None:
+                            current.setdefault(s.drone, s.target)
+                    if not quiet:
+                        print(format_status(status), flush=True)
+                case Received(_, Over() as over):
+                    pass
+        if draw and history:
+            last = history[-1]
+            paths = trails(history)
+            print("\nFinal world with the drones' paths:")
+            trail = [c for p in paths.values() for c in p if world.contains(c)]
+            targets = {s.drone: s.target for s in last.drones if s.target is not None}
+            floors = sorted({c[2] for c in trail} | {t[2] for t in targets.values()})
+            print(world.draw({s.drone: s.pos for s in last.drones if s.alive and world.contains(s.pos)},
+                             targets=targets, trail=trail, floors=floors))
+        print(f"\nGAME OVER at turn {over.turn}: {over.reason.value} - {over.text}")
+        if history:
+            for s in history[-1].drones:
+                print(f"  {s.drone}: {len(trails(history)[s.drone]) - 1} moves, {format_status_line(s)}")
+        if inbox.rejects.total:
+            logger.info("rejected inputs: %s", inbox.rejects.snapshot())
+        token.undeclare()
+        return over
+
+
+def format_status_line(s) -> str:
+    from .gcs import describe
+
+    return describe(s).split(": ", 1)[1]
+
+
+def cli(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="dronesim gcs", description=__doc__)
+    add_zenoh_args(p)
+    p.add_argument("--targets", action="append", default=[], metavar="[Dnn=]x,y,z[@turn]",
+                   help="scripted targets (repeatable, or ';'-separated)")
+    p.add_argument("--script", help="a file of scripted targets, one [Dnn=]x,y,z[@turn] per line")
+    p.add_argument("--quiet", action="store_true", help="do not print every turn's status")
+    p.add_argument("--no-draw", action="store_true", help="do not draw the world at the end")
+    p.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the coordinator")
+    args = p.parse_args(argv)
+    logger = setup_logging(args.log_level, "GCS")
+    interactive = not args.targets and not args.script
+    try:
+        main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets, script=args.script,
+             interactive=interactive, quiet=args.quiet, draw=not args.no_draw, connect_timeout=args.connect_timeout)
+    except UsageError as err:
+        logger.error("%s", err)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(cli())
