@@ -160,14 +160,17 @@ def hard_cases(quick: bool = False) -> list[Episode]:
     if quick:
         return out
 
-    # A 64x64x16 world of long full-height walls with a few gaps.
+    # A 64x64x16 maze: full-height walls across x with one small window each, at alternating
+    # ends and heights, and partial walls across y making dead ends in between.
     g = np.zeros(BIG, dtype=bool)
-    for x in (12, 28, 44):
+    for x, (y0, z0) in zip((12, 28, 44), ((56, 12), (4, 1), (56, 6))):
         g[x, :, :] = True
-        g[x, (x * 7) % 60:(x * 7) % 60 + 3, 2:5] = False
-    for y in (20, 40):
-        g[:, y, :] = True
-        g[(y * 3) % 60:(y * 3) % 60 + 2, y, 10:12] = False
+        g[x, y0:y0 + 4, z0:z0 + 3] = False
+    g[0:12, 32, :] = True  # dead end before the first window...
+    g[0:6, 32, 0:12] = False
+    g[13:26, 32, :] = True  # ... and between the windows
+    g[29:44, 24, 0:14] = True
+    g[45:64, 40, 4:16] = True
     w = World.from_grid(g)
     out.append(_episode("hard", w, (0, 0, 0), (63, 63, 15)))
     out.append(_episode("hard", w, (63, 0, 8), (0, 63, 0)))

@@ -146,6 +146,8 @@ class Engine:
         self._notes: dict[str, Note] = {}
         self._turn_log: dict = {}
         self._pending_moves: tuple[Move, ...] = ()
+        self._tgt_seen = 0  # TGT messages of this GCS phase
+        self._done: Done | None = None  # the GCS's DONE, once it arrived
 
     # ------------------------------------------------------------------ queries
 
@@ -156,12 +158,18 @@ class Engine:
     def alive(self) -> list[str]:
         return [d for d, r in self.drones.items() if r.state is DroneState.ALIVE]
 
+    def clock(self) -> tuple[Stage, int, bool]:
+        """What the current deadline is measured from: it restarts whenever this changes."""
+        return self.stage, self.turn, self._done is not None
+
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
         match self.stage:
             case Stage.ADMITTING:
                 return self.config.admit_deadline
             case Stage.GCS:
+                if self._done is not None:  # DONE is in, some of its TGT are not: they get a drone's time
+                    return self.config.phase_deadline
                 return self.config.gcs_deadline
             case Stage.DRONES | Stage.ENV:
                 return self.config.phase_deadline
@@ -244,6 +252,7 @@ class Engine:
         match stage:
             case Stage.GCS:
                 self._targets.clear()
+                self._tgt_seen, self._done = 0, None
                 self._turn_log = {"record": "turn", "turn": turn}
                 if "GCS" not in self.entities:  # no ground station: the drones keep their targets
                     return self._enter(Stage.DRONES, turn)
@@ -287,6 +296,7 @@ class Engine:
             raise WrongSender(f"target for {msg.drone} from {msg.sender}: only the GCS sets targets")
         if self.stage is not Stage.GCS or msg.turn != self.turn:
             raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
+        self._tgt_seen += 1  # counted against the DONE's count even if refused below
         drone = self.drones.get(msg.drone)
         if drone is None:
             raise UnknownEntity(f"target for unknown drone {msg.drone}")
@@ -295,11 +305,23 @@ class Engine:
         if not observer.inside(msg.pos, self.size):
             raise OutOfRange(f"target {msg.pos} for {msg.drone} is outside the world {self.size}")
         self._targets[msg.drone] = msg.pos
-        return []
+        return self._gcs_check()
 
     def _gcs_done(self, msg: Done) -> list[Effect]:
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
             raise WrongSender(f"DONE({msg.phase.value}) from {msg.sender} in the GCS phase")
+        if self._done is not None:
+            raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
+        self._done = msg
+        return self._gcs_check()
+
+    def _gcs_check(self) -> list[Effect]:
+        """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
+        if self._done is None or self._tgt_seen < self._done.count:
+            return []
+        return self._gcs_finish(self._done)
+
+    def _gcs_finish(self, msg: Done) -> list[Effect]:
         changed = {d: p for d, p in sorted(self._targets.items()) if self.drones[d].target != p}
         for d, p in changed.items():
             self.drones[d].target = p
@@ -412,7 +434,7 @@ class Engine:
 
     # ------------------------------------------------------------------ faults
 
-    def expire(self, stage: Stage, turn: int) -> list[Effect]:
+    def expire(self, stage: Stage, turn: int, *_: object) -> list[Effect]:
         """The deadline of (stage, turn) passed; ignored if the game has moved on since."""
         if stage is not self.stage or turn != self.turn:
             return []
@@ -422,6 +444,10 @@ class Engine:
                 missing += [r.value for r in (Role.ENV, Role.GCS) if r not in set(self.entities.values())]
                 return self._over(EndReason.ABORTED, f"entities never connected: {', '.join(missing)}")
             case Stage.GCS:
+                if self._done is not None:
+                    self._log.warning("turn %d: %d of the GCS's %d targets arrived in time", turn,
+                                      self._tgt_seen, self._done.count)
+                    return self._gcs_finish(self._done)
                 self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
                 self._targets.clear()
                 return self._enter(Stage.DRONES, turn)

@@ -69,7 +69,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                     case Record(data):
                         writer.append(data)
 
-        phase = (engine.stage, engine.turn)
+        phase = engine.clock()
         started = time.monotonic()
         while engine.stage is not Stage.OVER:
             limit = engine.deadline()
@@ -91,8 +91,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                     else:
                         present.discard(entity)
                         run(engine.vanished(entity))
-            if (engine.stage, engine.turn) != phase:
-                phase = (engine.stage, engine.turn)
+            if engine.clock() != phase:
+                phase = engine.clock()
                 started = time.monotonic()
         # Let OVER reach everyone: wait (on events, bounded) until the admitted entities have left.
         end = time.monotonic() + LINGER_S

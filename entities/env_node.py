@@ -47,7 +47,14 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         out = Outbox(session)
         ready = 1  # the turn whose ASKs can be answered now
         waiting: list[tuple[zenoh.Query, Ask]] = []
+        applied = False  # the ENV phase of turn `ready` is done
+        early: Turn | None = None
         over: Over | None = None
+
+        def apply(turn: Turn) -> None:
+            nonlocal applied
+            applied = True
+            out.put(keys.upd, Upd(turn=turn.turn, sender="ENV", cells=env.apply(turn.moves)))
 
         def answer(query: zenoh.Query, ask: Ask) -> None:
             query.reply(query.key_expr, encode(Ans(turn=ask.turn, sender="ENV", cells=env.answer(ask.cells))))
@@ -77,12 +84,15 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                                                                     buildings=world.packed())))
                         query.drop()
                     case Received(_, Turn(phase=Phase.ENV) as turn):
-                        if turn.turn != ready:
+                        if turn.turn == ready and not applied:
+                            apply(turn)
+                        elif turn.turn == ready + 1 and applied:
+                            early = turn  # STATUS(t-1) travels on another key and has not arrived yet
+                        else:
                             raise StaleTurn(f"ENV phase of turn {turn.turn} while the world is at turn {ready}")
-                        out.put(keys.upd, Upd(turn=turn.turn, sender="ENV", cells=env.apply(turn.moves)))
                     case Received(_, Status() as status):
                         env.sync(status)
-                        ready = status.turn + 1
+                        ready, applied = status.turn + 1, False
                         still = []
                         for query, ask in waiting:
                             if ask.turn == ready:
@@ -92,6 +102,9 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                             else:
                                 refuse(query, "stale turn")
                         waiting = still
+                        if early is not None and early.turn == ready:
+                            apply(early)
+                        early = None
                     case Received(_, Over() as over):
                         logger.info("OVER: %s", over.text)
             except RemoteInputError as err:

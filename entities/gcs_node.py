@@ -10,18 +10,19 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import time
 from collections.abc import Callable
 
 import zenoh
 
 from dronesim.entity import admit
 from dronesim.schema import (
-    Connect, Done, Intent, Keys, MapRequest, Over, Phase, Role, Status, Target, Turn, UsageError, WorldMap,
+    Connect, Done, Intent, Keys, Over, Phase, Role, Status, Target, Turn, UsageError,
 )
-from dronesim.transport import Inbox, Outbox, Received, add_zenoh_args, request, setup_logging, zenoh_config
+from dronesim.transport import Inbox, Outbox, Received, add_zenoh_args, setup_logging, zenoh_config
 
 from .gcs import Plan, format_status, parse_command, trails
-from .world import World
+from .environment import build_world
 
 
 class Console:
@@ -82,8 +83,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         unknown = plan.drones() - set(drones)
         if unknown:
             raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
-        wm = request(session, keys.map, MapRequest(turn=0, sender="GCS"), WorldMap, timeout=connect_timeout)
-        world = World.from_packed(wm.size, wm.buildings)
+        world = build_world(welcome.world, (s.pos for s in welcome.starts))  # the environment's own recipe
         if draw:
             print(f"World {size}, {int(world.grid.sum())} building cells; the drones' floor at start:", flush=True)
             print(world.draw({s.drone: s.pos for s in welcome.starts},
@@ -104,7 +104,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                     current.update(new)
                     for d, cell in sorted(current.items()):  # re-send every last target, as the seed does
                         out.put(keys.tgt(d), Target(turn=turn.turn, sender="GCS", drone=d, pos=cell))
-                    out.put(keys.gcs_done, Done(turn=turn.turn, sender="GCS", phase=Phase.GCS, intent=intent))
+                    out.put(keys.gcs_done, Done(turn=turn.turn, sender="GCS", phase=Phase.GCS, intent=intent,
+                                                count=len(current)))
                 case Received(_, Status() as status):
                     history.append(status)
                     for s in status.drones:  # a late joiner takes over the targets in force
@@ -114,6 +115,12 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                         print(format_status(status), flush=True)
                 case Received(_, Over() as over):
                     pass
+        # STATUS(t) is published before OVER(t) but on another key: it may arrive just after.
+        end = time.monotonic() + 5.0
+        while (not history or history[-1].turn < over.turn) and time.monotonic() < end:
+            match inbox.get(end - time.monotonic()):
+                case Received(_, Status() as status):
+                    history.append(status)
         if draw and history:
             last = history[-1]
             paths = trails(history)

@@ -359,11 +359,13 @@ class Done(Message):
     TAG: ClassVar[str] = "DONE"
     phase: Phase
     intent: Intent = Intent.CONTINUE
+    count: int = 0  # how many TGT the GCS sent in this phase (messages on different keys may overtake)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check(isinstance(self.phase, Phase), "phase must be a Phase")
         _check(isinstance(self.intent, Intent), "intent must be an Intent")
+        _check_int(self.count, "count", 0, 1 << 20)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

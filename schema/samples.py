@@ -37,7 +37,7 @@ SAMPLES: dict[str, Message] = {
                      moves=(Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),
                             Move(drone="D02", src=(0, 1, 0), dst=(-1, 1, 0)))),
     "target": Target(turn=1, sender="GCS", drone="D01", pos=(9, 9, 0)),
-    "done_gcs": Done(turn=1, sender="GCS", phase=Phase.GCS),
+    "done_gcs": Done(turn=1, sender="GCS", phase=Phase.GCS, count=1),
     "done_gcs_final": Done(turn=3, sender="GCS", phase=Phase.GCS, intent=Intent.FINAL),
     "ask": Ask(turn=1, sender="D01", cells=((1, 0, 0), (0, 1, 0))),
     "ans": Ans(turn=1, sender="ENV", cells=(CellInfo(pos=(1, 0, 0), kind=CellKind.EMPTY),

@@ -43,6 +43,8 @@ from array import array
 from heapq import heapify, heappop, heappush
 from typing import ClassVar
 
+import numpy as np
+
 from dronesim.schema import Cell, CellKind, Note
 
 from .base import Decision, Sensing
@@ -57,7 +59,7 @@ class DStarPilot:
     name: ClassVar[str] = "dstar"
 
     #: Default number of path cells ahead whose unknown cells are asked each step.
-    LOOKAHEAD: ClassVar[int] = 12
+    LOOKAHEAD: ClassVar[int] = 20
     #: Turns to wait behind a drone blocking every progressing move before side-stepping.
     PATIENCE: ClassVar[int] = 2
 
@@ -74,17 +76,15 @@ class DStarPilot:
         self._sx, self._sy, self._n = sx, sy, n
         self._offs: tuple[int, ...] = (sx, -sx, sy, -sy, 1, -1)  # +x -x +y -y +z -z (base.STEPS6)
         # Known map: border and every learnt building/outside cell are BLOCKED.
-        state = bytearray([BLOCKED]) * n
-        for x in range(1, X + 1):
-            for y in range(1, Y + 1):
-                b = x * sx + y * sy + 1
-                state[b:b + Z] = bytes(Z)
-        self._state = state
+        grid = np.full((X + 2, Y + 2, Z + 2), BLOCKED, dtype=np.uint8)
+        grid[1:-1, 1:-1, 1:-1] = UNKNOWN
+        self._state = bytearray(grid.tobytes())
         # Padded coordinates (x+1, y+1, z+1) of every index, for the heuristic.
-        code = "B" if max(X, Y, Z) < 250 else "H"
-        self._xs = array(code, [i // sx for i in range(n)])
-        self._ys = array(code, [(i // sy) % (Y + 2) for i in range(n)])
-        self._zs = array(code, [i % sy for i in range(n)])
+        dtype, code = (np.uint8, "B") if max(X, Y, Z) < 250 else (np.uint32, "I")
+        flat = np.arange(n, dtype=np.int64)
+        self._xs = array(code, (flat // sx).astype(dtype).tobytes())
+        self._ys = array(code, ((flat // sy) % (Y + 2)).astype(dtype).tobytes())
+        self._zs = array(code, (flat % sy).astype(dtype).tobytes())
         self._K = X + Y + Z + 8  # > any h + 1: tb fits under one unit of k1
         # Per-target search state (reset by _reset).
         self._goal = -1
@@ -99,6 +99,15 @@ class DStarPilot:
         self._orders: dict[tuple[int, int, int, bool], tuple[int, ...]] = {}
         #: Statistics for benchmarks: cells expanded by the search, over the pilot's life.
         self.expansions = 0
+
+    @property
+    def distance(self) -> int | None:
+        """The planned number of moves from the last step's position to the target on the known map
+        (unknown cells counted free); None before any target or when it is unreachable."""
+        if self._goal < 0 or self._last < 0 or self._unreachable:
+            return None
+        g = self._g[self._last]
+        return None if g >= INF else g
 
     # ------------------------------------------------------------------ indices
 
@@ -179,19 +188,27 @@ class DStarPilot:
                     self._push(p, g[p], r, s)
         return True
 
-    def _compute(self, s: int) -> None:
-        """ComputeShortestPath: make g(s) the true distance to the goal on the known map."""
+    def _compute(self, s: int, t: int = -1) -> None:
+        """ComputeShortestPath: make g(t) (default: g(s)) the true distance to the goal on the
+        known map, with keys relative to the drone's cell s."""
         heap = self._heap
         g, rhs, state = self._g, self._rhs, self._state
         xs, ys, zs = self._xs, self._ys, self._zs
-        sx0, sy0, sz0 = xs[s], ys[s], zs[s]
+        X, Y, Z = self.size
+        # Heuristic by table look-up: h(u) = hx[xs[u]] + hy[ys[u]] + hz[zs[u]].
+        hx = [abs(c - xs[s]) for c in range(X + 2)]
+        hy = [abs(c - ys[s]) for c in range(Y + 2)]
+        hz = [abs(c - zs[s]) for c in range(Z + 2)]
         km, K, NP, goal = self._km, self._K, self._n, self._goal
         offs = self._offs
+        if t < 0:
+            t = s
+        ht = hx[xs[t]] + hy[ys[t]] + hz[zs[t]]
         expanded = 0
         while heap:
             top = heap[0]
-            gs = g[s]
-            if gs == rhs[s] and top >= ((gs + km) * K + 1) * NP:
+            gt = g[t]
+            if gt == rhs[t] and top >= ((gt + ht + km) * K + ht + 1) * NP:
                 break
             heappop(heap)
             k, u = divmod(top, NP)
@@ -199,7 +216,7 @@ class DStarPilot:
             ru = rhs[u]
             if gu == ru:
                 continue  # stale entry
-            h = abs(xs[u] - sx0) + abs(ys[u] - sy0) + abs(zs[u] - sz0)
+            h = hx[xs[u]] + hy[ys[u]] + hz[zs[u]]
             if gu > ru:
                 knew = (ru + h + km) * K + h + 1
             else:
@@ -217,7 +234,7 @@ class DStarPilot:
                         rhs[p] = nv
                         gp = g[p]
                         if gp != nv:
-                            hp = abs(xs[p] - sx0) + abs(ys[p] - sy0) + abs(zs[p] - sz0)
+                            hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
                             if gp < nv:
                                 heappush(heap, ((gp + hp + km) * K) * NP + p)
                             else:
@@ -237,7 +254,7 @@ class DStarPilot:
                     rhs[p] = r
                     gp = g[p]
                     if gp != r:
-                        hp = abs(xs[p] - sx0) + abs(ys[p] - sy0) + abs(zs[p] - sz0)
+                        hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
                         if gp < r:
                             heappush(heap, ((gp + hp + km) * K) * NP + p)
                         else:
@@ -392,7 +409,14 @@ class DStarPilot:
 
         # Move: the best neighbour sensed empty this step and free of other drones.
         avoid = {p for p in neigh if p not in sensed} | drones
-        nxt = self._best(s, avoid)
+        nxt = self._best(s)
+        if nxt in avoid:
+            # The planned move is taken: settle the other neighbours' distances (the search
+            # only guarantees the best one's), then pick among them.
+            for p in neigh:
+                if p not in avoid and state[p] != BLOCKED:
+                    self._compute(s, p)
+            nxt = self._best(s, avoid)
         if nxt >= 0 and g[nxt] < g[s]:
             self._waited = 0
             return Decision(pos=self._cell(nxt))

@@ -1,0 +1,142 @@
+"""Integration-test harness: an embedded router on a free loopback port, entity processes, and
+line-by-line waiting on their output (event-driven, no sleeps)."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import queue
+import re
+import subprocess
+import sys
+import threading
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import zenoh
+
+from dronesim.transport import router_config, router_locators
+
+TIMEOUT = 60.0
+
+
+@contextlib.contextmanager
+def embedded_router() -> Iterator[str]:
+    """A router session in this process on tcp/127.0.0.1:<free port>; yields its locator."""
+    with zenoh.open(router_config("tcp/127.0.0.1:0")) as router:
+        yield router_locators(router)[0]
+
+
+def client_config(locator: str) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([locator]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/delay", "0")
+    return conf
+
+
+def unique_root() -> str:
+    return f"t{uuid.uuid4().hex[:10]}"
+
+
+class Proc:
+    """An entity process whose stdout and stderr lines are collected by reader threads."""
+
+    def __init__(self, name: str, argv: list[str], log_dir: Path, stdin: int | None = subprocess.DEVNULL) -> None:
+        self.name = name
+        self.argv = argv
+        self.lines: queue.SimpleQueue[tuple[str, str] | None] = queue.SimpleQueue()
+        self.out: list[str] = []
+        self.err: list[str] = []
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        self.p = subprocess.Popen(argv, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                  env=env)
+        self._log = log_dir / f"{name}.log"
+        self._readers = [threading.Thread(target=self._read, args=(self.p.stdout, "out", self.out), daemon=True),
+                         threading.Thread(target=self._read, args=(self.p.stderr, "err", self.err), daemon=True)]
+        for t in self._readers:
+            t.start()
+
+    def _read(self, stream, tag: str, sink: list[str]) -> None:
+        for line in stream:
+            sink.append(line.rstrip("\n"))
+            self.lines.put((tag, line.rstrip("\n")))
+        self.lines.put(None)
+
+    def expect(self, pattern: str, timeout: float = TIMEOUT) -> str:
+        """Block until a line of output matches `pattern` (regex); AssertionError on exit or timeout."""
+        rx = re.compile(pattern)
+        for line in self.out + self.err:
+            if rx.search(line):
+                return line
+        closed = 0
+        while closed < 2:
+            try:
+                item = self.lines.get(timeout=timeout)
+            except queue.Empty:
+                raise AssertionError(f"{self.name}: no line matching {pattern!r} within {timeout}s:\n{self.text}")
+            if item is None:
+                closed += 1
+                continue
+            if rx.search(item[1]):
+                return item[1]
+        raise AssertionError(f"{self.name} ended without a line matching {pattern!r}:\n{self.text}")
+
+    def wait(self, timeout: float = TIMEOUT) -> int:
+        try:
+            code = self.p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.p.kill()
+            self.p.wait()
+            raise AssertionError(f"{self.name} did not exit within {timeout}s:\n{self.text}") from None
+        for t in self._readers:
+            t.join(timeout=10)
+        self._log.write_text(self.text)
+        return code
+
+    @property
+    def text(self) -> str:
+        return "\n".join(["--- stdout", *self.out, "--- stderr", *self.err])
+
+    def kill(self) -> None:
+        if self.p.poll() is None:
+            self.p.kill()
+        self.p.wait()
+
+
+class Cluster:
+    """Starts entity processes against one router and one key root; kills leftovers on exit."""
+
+    def __init__(self, locator: str, tmp: Path, root: str | None = None, log_level: str = "INFO") -> None:
+        self.locator = locator
+        self.tmp = tmp
+        self.root = root or unique_root()
+        self.log_level = log_level
+        self.procs: list[Proc] = []
+
+    def start(self, name: str, role: str, *args: str, stdin: int | None = subprocess.DEVNULL) -> Proc:
+        argv = [sys.executable, "-m", "dronesim", role, "--mode", "client", "--connect", self.locator,
+                "--root", self.root, "--log-level", self.log_level, *args]
+        proc = Proc(name, argv, self.tmp, stdin=stdin)
+        self.procs.append(proc)
+        return proc
+
+    def wait_all(self, timeout: float = TIMEOUT) -> dict[str, int]:
+        return {p.name: p.wait(timeout) for p in self.procs}
+
+    def close(self) -> None:
+        for p in self.procs:
+            p.kill()
+
+    def __enter__(self) -> "Cluster":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def journal_records(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line]

@@ -1,0 +1,194 @@
+"""Whole games over a real Zenoh router on loopback, every entity a separate process."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+import zenoh
+
+from dronesim.entity import Refusal, admit
+from dronesim.schema import (
+    Connect, Done, Intent, Keys, Over, Phase, Role, Target, Turn, encode,
+)
+from dronesim.transport import Inbox, Outbox, Received
+from dronesim.entities.world import Building, World
+from tests.harness import Cluster, client_config, embedded_router, journal_records
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture
+def router():
+    with embedded_router() as locator:
+        yield locator
+
+
+@pytest.fixture
+def cluster(router, tmp_path):
+    with Cluster(router, tmp_path) as c:
+        yield c
+
+
+def start_game(c: Cluster, tmp_path, *, coord_args=(), drone_args=(), gcs_args=("--targets", "9,9,0"),
+               drones=("D01",)):
+    journal = tmp_path / f"{c.root}.journal"
+    srv = c.start("SRV", "coordinator", "--journal", str(journal), "--admit-deadline", "60", *coord_args)
+    srv.expect("coordinator ready")  # the queryable is declared: entities will find it at once
+    c.start("ENV", "env")
+    for d in drones:
+        c.start(d, "drone", "--id", d, *drone_args)
+    if gcs_args is not None:
+        c.start("GCS", "gcs", *gcs_args)
+    return journal
+
+
+def test_seed_demo_reaches_target_and_everyone_exits_0(cluster, tmp_path):
+    journal = start_game(cluster, tmp_path, coord_args=("--seed", "7"), drone_args=("--autopilot", "seed"))
+    codes = cluster.wait_all()
+    assert codes == {"SRV": 0, "ENV": 0, "D01": 0, "GCS": 0}, [p.text for p in cluster.procs]
+    gcs = cluster.procs[-1]
+    assert any("ALL_REACHED" in line for line in gcs.out), gcs.text
+    records = journal_records(journal)
+    assert records[0]["record"] == "header" and records[-1]["record"] == "over"
+    assert records[-1]["reason"] == "ALL_REACHED"
+    for p in cluster.procs[:3]:  # OVER reached every entity
+        assert any("OVER" in line for line in p.err), p.text
+
+
+def test_crash_into_building_ends_the_game_with_over_everywhere(cluster, tmp_path):
+    world = tmp_path / "wall.json"
+    World.from_buildings((5, 5, 1), [Building(x=1, y=0, length=1, width=5, height=1)]).save(world)
+    journal = start_game(cluster, tmp_path, coord_args=("--world", str(world)), drone_args=("--autopilot", "v1"),
+                         gcs_args=("--targets", "4,0,0"))
+    codes = cluster.wait_all()
+    assert set(codes.values()) == {0}, [p.text for p in cluster.procs]
+    records = journal_records(journal)
+    assert records[-1]["reason"] == "NO_DRONE_ALIVE"
+    assert records[-2]["deaths"] == {"D01": "BUILDING"}
+    assert records[-2]["moves"] == {"D01": [1, 0, 0]}
+    for p in cluster.procs:
+        assert any("OVER" in line for line in p.out + p.err), p.text
+
+
+def test_duplicate_roles_are_refused_with_a_clear_message(cluster, tmp_path):
+    srv = cluster.start("SRV", "coordinator", "--admit-deadline", "60")
+    first = cluster.start("GCS", "gcs", "--targets", "9,9,0")
+    srv.expect("admitted GCS")
+    second = cluster.start("GCS2", "gcs", "--targets", "1,1,0")
+    assert second.wait() == 2
+    second.expect("connection refused: GCS is already connected")
+    cluster.start("D01", "drone", "--id", "D01")
+    srv.expect("admitted D01")
+    dup = cluster.start("D01b", "drone", "--id", "D01")
+    assert dup.wait() == 2
+    dup.expect("connection refused: D01 is already connected")
+    stranger = cluster.start("D07", "drone", "--id", "D07")
+    assert stranger.wait() == 2
+    stranger.expect("unknown drone D07")
+    cluster.start("ENV", "env")
+    assert first.wait() == 0
+    assert srv.wait() == 0
+
+
+def test_invalid_targets_and_malformed_messages_change_nothing(router, tmp_path):
+    """The test plays the GCS itself: it throws bad input at every key, then plays normally; the
+    journal must equal a clean run's, and every process must log its rejections and exit 0."""
+
+    def play(root: str, hostile: bool) -> tuple[bytes, Cluster]:
+        c = Cluster(router, tmp_path, root=root)
+        journal = start_game(c, tmp_path, coord_args=("--seed", "3", "--gcs-deadline", "30"), gcs_args=None)
+        keys = Keys(root)
+        import logging
+
+        log = logging.getLogger("test-gcs")
+        with zenoh.open(client_config(router)) as s:
+            token = s.liveliness().declare_token(keys.alive("GCS"))
+            inbox = Inbox(s, keys, log)
+            inbox.subscribe(keys.turn, Turn)
+            inbox.subscribe(keys.over, Over)
+            out = Outbox(s)
+            admit(s, keys, Connect(turn=0, sender="GCS", role=Role.GCS), log, timeout=30)
+            done = False
+            while not done:
+                ev = inbox.get(30)
+                assert ev is not None, "the game stalled"
+                match ev:
+                    case Received(_, Turn(phase=Phase.GCS) as t):
+                        sent = throw_garbage(s, keys, t.turn) if hostile and t.turn <= 2 else 0
+                        out.put(keys.tgt("D01"), Target(turn=t.turn, sender="GCS", drone="D01", pos=(9, 9, 0)))
+                        out.put(keys.gcs_done, Done(turn=t.turn, sender="GCS", phase=Phase.GCS,
+                                                    intent=Intent.FINAL, count=1 + sent))
+                    case Received(_, Over()):
+                        done = True
+            codes = c.wait_all()
+            token.undeclare()
+        assert set(codes.values()) == {0}, [p.text for p in c.procs]
+        return journal.read_bytes(), c
+
+    clean, _ = play("clean" + tmp_path.name[-6:], hostile=False)
+    attacked, c = play("hostile" + tmp_path.name[-6:], hostile=True)
+    assert attacked == clean
+    srv, env, drone = c.procs[:3]
+    for reason in ("out-of-range", "unknown-entity", "wrong-sender", "stale-turn", "malformed"):
+        assert any(reason in line for line in srv.err), f"SRV did not log {reason}:\n{srv.text}"
+    assert any("rejected" in line for line in env.err), env.text
+    assert any("rejected" in line for line in drone.err), drone.text
+
+
+def throw_garbage(s: zenoh.Session, keys: Keys, turn: int) -> int:
+    """Bad input on every key and queryable; returns how many TGT it sent as the GCS for this turn
+    (the GCS's DONE counts them)."""
+    bad_targets = [
+        Target(turn=turn, sender="GCS", drone="D01", pos=(50, 0, 0)),  # outside the world
+        Target(turn=turn, sender="GCS", drone="D09", pos=(1, 1, 1)),  # unknown drone
+        Target(turn=turn, sender="D01", drone="D01", pos=(1, 1, 1)),  # a drone giving itself a target
+        Target(turn=turn + 5, sender="GCS", drone="D01", pos=(1, 1, 1)),  # future turn
+    ]
+    for t in bad_targets:
+        s.put(keys.tgt(t.drone), encode(t))
+    s.put(keys.tgt("D02"), encode(Target(turn=turn, sender="GCS", drone="D01", pos=(1, 1, 1))))  # wrong key
+    garbage = [b"", b"\xff\x00garbage", b"\x93\x01\x02\x03", json.dumps({"v": 1}).encode(),
+               encode(Done(turn=turn, sender="GCS", phase=Phase.GCS))[:-3]]
+    for key in (keys.turn, keys.status, keys.over, keys.tgt("D01"), keys.gcs_done, keys.nps("D01"), keys.upd):
+        for g in garbage:
+            s.put(key, g)
+    for key in (keys.connect, keys.ask, keys.map):
+        for g in garbage[:3]:
+            replies = list(s.get(key, payload=g, timeout=10))
+            assert replies and all(r.err is not None for r in replies), key
+    return 2  # the target outside the world and the one for an unknown drone
+
+
+def test_scripted_gcs_refuses_a_target_outside_the_world(cluster, tmp_path):
+    start_game(cluster, tmp_path, gcs_args=("--targets", "10,0,0"))
+    gcs = cluster.procs[-1]
+    assert gcs.wait() == 2
+    gcs.expect(r"outside the world")
+    for p in cluster.procs[:-1]:
+        p.kill()
+
+
+def test_up_runs_the_demo_in_one_command(tmp_path):
+    journal = tmp_path / "up.journal"
+    p = subprocess.run([sys.executable, "-m", "dronesim", "up", "--seed", "7", "--targets", "9,9,0",
+                        "--journal", str(journal)], capture_output=True, text=True, timeout=120,
+                       stdin=subprocess.DEVNULL)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "GAME OVER" in p.stdout and "ALL_REACHED" in p.stdout
+    assert "all 4 processes exited 0" in p.stdout
+    assert "z = 0" in p.stdout and "D01" in p.stdout
+    assert journal_records(journal)[-1]["reason"] == "ALL_REACHED"
+
+
+def test_same_seed_twice_gives_identical_journals(router, tmp_path):
+    """The conformance test every entity must pass (cf. PettingZoo's seed_test)."""
+    journals = []
+    for run in range(2):
+        with Cluster(router, tmp_path) as c:
+            journals.append(start_game(c, tmp_path, coord_args=("--seed", "11", "--size", "12,12,6"),
+                                       gcs_args=("--targets", "11,11,3", "--targets", "2,9,1@9")))
+            assert set(c.wait_all().values()) == {0}
+    assert journals[0].read_bytes() == journals[1].read_bytes()

@@ -1,0 +1,569 @@
+"""The wire contract: golden bytes, strict decoding, construction validation, keys."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import msgpack
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from dronesim.schema import (
+    KEY_TABLE, MESSAGE_TYPES, SCHEMA_VERSION, Ans, Ask, CellInfo, CellKind, Connect, Done, DroneState,
+    DroneStatus, Keys, MalformedMessage, MapRequest, Message, Move, Nps, Order, Over, Phase, Refused,
+    RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldMap, WorldSpec, decode, drone_id,
+    encode, is_drone_id,
+)
+from dronesim.schema.messages import MAX_COORD, MAX_PAYLOAD, MAX_TURN
+from dronesim.schema.samples import SAMPLES, golden
+
+from .conftest import golden_vectors
+
+VECTORS = golden_vectors()
+REPLY_ONLY = {Welcome, Refused, Ans, WorldMap}
+
+
+def body_of(name: str) -> dict:
+    """The MessagePack map of a golden vector, as a mutable dict."""
+    return msgpack.unpackb(bytes.fromhex(VECTORS[name]), raw=False)
+
+
+def pack(obj: object) -> bytes:
+    return msgpack.packb(obj, use_bin_type=True)
+
+
+def rejects(data: bytes, match: str | None = None, **kw) -> MalformedMessage:
+    with pytest.raises(MalformedMessage, match=match) as info:
+        decode(data, **kw)
+    err = info.value
+    assert isinstance(err, RemoteInputError)
+    assert str(err), "a rejection must say why"
+    return err
+
+
+def mutated(name: str, **changes: object) -> bytes:
+    body = body_of(name)
+    for k, v in changes.items():
+        body[k] = v
+    return pack(body)
+
+
+def without(name: str, *keys: str) -> bytes:
+    body = body_of(name)
+    for k in keys:
+        del body[k]
+    return pack(body)
+
+
+# --------------------------------------------------------------------------- golden vectors
+
+
+def test_encode_matches_golden(sample: Message, golden: bytes) -> None:
+    assert encode(sample).hex() == golden.hex()
+
+
+def test_decode_golden_gives_sample(sample: Message, golden: bytes) -> None:
+    assert decode(golden) == sample
+    assert decode(golden, expect=type(sample)) == sample
+    assert decode(bytearray(golden)) == sample
+    assert decode(memoryview(golden)) == sample
+
+
+def test_encoding_is_deterministic(sample: Message) -> None:
+    again = decode(encode(sample))
+    assert again == sample
+    assert encode(again) == encode(sample)
+    assert encode(dataclasses.replace(sample)) == encode(sample)
+
+
+def test_wire_header(sample: Message, golden: bytes) -> None:
+    body = msgpack.unpackb(golden, raw=False)
+    keys = list(body)
+    assert keys[:4] == ["v", "t", "turn", "from"], "header first, in a fixed order"
+    assert body["v"] == SCHEMA_VERSION
+    assert body["t"] == sample.TAG
+    assert body["turn"] == sample.turn
+    assert body["from"] == sample.sender
+    assert "sender" not in body
+
+
+def test_vectors_file_matches_samples_exactly() -> None:
+    assert set(VECTORS) == set(SAMPLES), "schema/vectors.json is stale: regenerate it with samples --write"
+    assert golden() == VECTORS
+
+
+def test_every_message_type_has_a_sample() -> None:
+    sampled = {type(m) for m in SAMPLES.values()}
+    assert sampled == set(MESSAGE_TYPES)
+
+
+def test_tags_are_unique_trigram_vocabulary() -> None:
+    tags = [cls.TAG for cls in MESSAGE_TYPES]
+    assert len(set(tags)) == len(tags)
+    assert all(tags)
+    for seed_word in ("CONNECT", "DONE", "TGT", "NPS", "UPD", "ASK", "ANS", "OVER"):
+        assert seed_word in tags
+
+
+# --------------------------------------------------------------------------- decode rejects
+
+
+@pytest.mark.parametrize("data", [
+    b"",
+    b"\xc1",  # never used in MessagePack
+    b"\x85\xa1v",  # truncated map
+    bytes.fromhex(VECTORS["target"])[:-1],  # truncated golden
+    bytes.fromhex(VECTORS["target"]) + b"\x00",  # trailing garbage
+    b"\xff" * 32,
+], ids=["empty", "c1", "truncated-map", "truncated-golden", "trailing-bytes", "ff"])
+def test_rejects_garbage(data: bytes) -> None:
+    rejects(data)
+
+
+@pytest.mark.parametrize("payload", [[1, 2, 3], 3, "TGT", None, True, b"bytes", 1.5])
+def test_rejects_non_map(payload: object) -> None:
+    err = rejects(pack(payload))
+    assert err.reason == "malformed"
+
+
+def test_rejects_non_bytes_payload() -> None:
+    rejects("not bytes", match="payload must be bytes")  # type: ignore[arg-type]
+    rejects(None, match="payload must be bytes")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("version", [0, 2, SCHEMA_VERSION + 1, -1, "1", None, [1]])
+def test_rejects_wrong_version(version: object) -> None:
+    rejects(mutated("target", v=version), match="schema version")
+
+
+def test_rejects_missing_version() -> None:
+    rejects(without("target", "v"), match="schema version")
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: decode compares the version with ==, so true and 1.0 pass as 1")
+@pytest.mark.parametrize("version", [True, 1.0])
+def test_rejects_version_of_wrong_type(version: object) -> None:
+    rejects(mutated("target", v=version), match="schema version")
+
+
+@pytest.mark.parametrize("tag", ["XYZ", "tgt", "", 1, None, ["TGT"], "MESSAGE"])
+def test_rejects_unknown_type_tag(tag: object) -> None:
+    rejects(mutated("target", t=tag), match="unknown message type")
+
+
+def test_rejects_missing_type_tag() -> None:
+    rejects(without("target", "t"), match="unknown message type")
+
+
+def test_rejects_unknown_field() -> None:
+    rejects(mutated("target", extra=1), match=r"unknown fields \['extra'\] in TGT")
+    rejects(mutated("nps", TAG="NPS"), match="unknown fields")
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: decode accepts the attribute name 'sender' as an alias of the wire "
+                                        "field 'from' (and silently lets 'from' override it)")
+def test_rejects_sender_spelled_as_attribute_name() -> None:
+    body = body_of("target")
+    body["sender"] = body.pop("from")
+    rejects(pack(body), match="unknown fields")
+
+
+@pytest.mark.parametrize("name,field", [
+    ("target", "turn"), ("target", "from"), ("target", "drone"), ("target", "pos"),
+    ("nps", "pos"), ("ask", "cells"), ("turn_gcs", "phase"), ("connect_env", "role"),
+    ("welcome", "world"), ("over", "reason"), ("map", "buildings"), ("status", "drones"),
+])
+def test_rejects_missing_required_field(name: str, field: str) -> None:
+    rejects(without(name, field))
+
+
+def test_optional_fields_may_be_omitted() -> None:
+    assert decode(without("nps", "note")) == Nps(turn=1, sender="D01", pos=(1, 0, 0))
+    assert decode(without("turn_gcs", "orders", "moves")) == SAMPLES["turn_gcs"]
+    assert decode(without("connect_env", "drones", "autopilot")) == SAMPLES["connect_env"]
+
+
+@pytest.mark.parametrize("name,field,value", [
+    ("target", "turn", "1"),
+    ("target", "turn", True),
+    ("target", "turn", 1.0),
+    ("target", "turn", -1),
+    ("target", "turn", MAX_TURN + 1),
+    ("target", "turn", None),
+    ("target", "pos", ["9", 9, 0]),
+    ("target", "pos", [True, 9, 0]),
+    ("target", "pos", [9.0, 9, 0]),
+    ("target", "pos", [9, 9]),
+    ("target", "pos", [9, 9, 0, 0]),
+    ("target", "pos", "9,9,0"),
+    ("target", "pos", {"x": 9}),
+    ("target", "pos", None),
+    ("target", "pos", [9, 9, MAX_COORD + 1]),
+    ("target", "drone", 1),
+    ("target", "drone", b"D01"),
+    ("target", "from", 7),
+    ("nps", "note", "MAYBE"),
+    ("nps", "note", 0),
+    ("turn_gcs", "phase", "OBSERVE"),
+    ("turn_gcs", "phase", 1),
+    ("connect_env", "role", "SRV"),
+    ("connect_env", "autopilot", 3),
+    ("connect_env", "autopilot", "x" * 33),
+    ("connect_drone", "drones", "D01"),
+    ("connect_drone", "drones", [1]),
+    ("over", "reason", "BORED"),
+    ("over", "text", b"bytes"),
+    ("done_gcs", "intent", "MAYBE"),
+    ("map", "buildings", "80"),
+    ("map", "buildings", b""),
+    ("map", "size", [0, 2, 2]),
+    ("welcome", "world", [[10, 10, 10], 7]),
+    ("welcome", "world", [[10, 10, 10], -1, b""]),
+    ("welcome", "world", [[10, 10, 10], 7, b"\x00"]),
+    ("welcome", "world", {"size": [10, 10, 10]}),
+    ("welcome", "starts", [["D01", [0, 0]]]),
+    ("welcome", "text", None),
+    ("ask", "cells", []),
+    ("ask", "cells", [[1, 0]]),
+    ("ans", "cells", [[[1, 0, 0], 3, []]]),
+    ("ans", "cells", [[[1, 0, 0], "EMPTY", []]]),
+    ("ans", "cells", [[[1, 0, 0], 0, ["X01"]]]),
+    ("ans", "cells", [[[1, 0, 0], 0]]),
+    ("upd", "cells", "all"),
+    ("status", "drones", [["D01", [1, 0, 0], "ZOMBIE", None, "NONE", "NONE"]]),
+    ("status", "drones", [["D01", [1, 0, 0], "ALIVE", [-1, 0, 0], "NONE", "NONE"]]),
+    ("turn_drones", "orders", [["D01", [0, 0, 0]]]),
+    ("turn_drones", "orders", [["D01", [-1, 0, 0], None]]),
+    ("turn_env", "moves", [["D01", [-1, 0, 0], [0, 0, 0]]]),
+])
+def test_rejects_wrong_field_value(name: str, field: str, value: object) -> None:
+    rejects(mutated(name, **{field: value}))
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: IntEnum fields (CellKind) decode true and 1.0 as 1 (BUILDING)")
+@pytest.mark.parametrize("kind", [True, 1.0])
+def test_rejects_bool_or_float_cell_kind(kind: object) -> None:
+    rejects(mutated("ans", cells=[[[1, 0, 0], kind, []]]))
+
+
+def test_signed_cells_where_allowed() -> None:
+    """Sensed cells, cell infos, move destinations and drone statuses may lie outside the world."""
+    assert decode(mutated("ask", cells=[[-1, 0, 0]])) == Ask(turn=1, sender="D01", cells=((-1, 0, 0),))
+    assert decode(mutated("nps", pos=[-1, 0, 0])).pos == (-1, 0, 0)
+    moves = decode(mutated("turn_env", moves=[["D01", [0, 0, 0], [0, 0, -1]]])).moves
+    assert moves == (Move(drone="D01", src=(0, 0, 0), dst=(0, 0, -1)),)
+    info = decode(mutated("ans", cells=[[[-1, 0, 0], 2, []]])).cells[0]
+    assert info == CellInfo(pos=(-1, 0, 0), kind=CellKind.OUTSIDE)
+
+
+@pytest.mark.parametrize("drone", ["D1", "d01", "D01x", "D12345", "X01", "D", "", "D01\n", "H01", "ENV"])
+def test_rejects_invalid_drone_ids(drone: str) -> None:
+    rejects(mutated("target", drone=drone), match="drone id")
+
+
+@pytest.mark.parametrize("sender", ["FOO", "", "D1", "H1", "gcs", "Env"])
+def test_rejects_invalid_sender(sender: str) -> None:
+    rejects(mutated("target", **{"from": sender}), match="sender")
+
+
+def test_nps_sender_must_be_a_drone() -> None:
+    rejects(mutated("nps", **{"from": "GCS"}), match="sender")
+    rejects(mutated("nps", **{"from": "H01"}), match="sender")
+
+
+def test_rejects_huge_payload() -> None:
+    err = rejects(b"\x00" * (MAX_PAYLOAD + 1), match="exceeds")
+    assert err.reason == "too-large"
+
+
+def test_wrong_expected_type() -> None:
+    data = bytes.fromhex(VECTORS["target"])
+    err = rejects(data, match="TGT message on a key that carries NPS", expect=Nps)
+    assert err.reason == "wrong-type"
+    err = rejects(data, expect=(Welcome, Refused))
+    assert err.reason == "wrong-type"
+    assert "WELCOME/REFUSED" in str(err)
+    assert decode(data, expect=(Nps, Target)) == SAMPLES["target"]
+
+
+def test_error_classes() -> None:
+    err = MalformedMessage("x")
+    assert isinstance(err, RemoteInputError)
+    assert err.reason == "malformed"
+    assert MalformedMessage("x", reason="too-large").reason == "too-large"
+
+
+# --------------------------------------------------------------------------- properties
+
+
+def _only_malformed(data: bytes) -> Message | None:
+    try:
+        msg = decode(data)
+    except MalformedMessage:
+        return None
+    # whatever decodes is a valid message that round-trips
+    assert isinstance(msg, MESSAGE_TYPES)
+    assert decode(encode(msg)) == msg
+    return msg
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=256))
+def test_random_bytes_only_raise_malformed(data: bytes) -> None:
+    _only_malformed(data)
+
+
+_edit = st.tuples(st.sampled_from(["flip", "set", "insert", "delete", "truncate"]),
+                  st.integers(min_value=0, max_value=10_000), st.integers(min_value=0, max_value=255))
+
+
+@settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(sorted(VECTORS)), st.lists(_edit, min_size=1, max_size=6))
+def test_mutated_golden_bytes_only_raise_malformed(name: str, edits: list) -> None:
+    data = bytearray.fromhex(VECTORS[name])
+    for op, at, byte in edits:
+        if not data:
+            break
+        i = at % len(data)
+        if op == "flip":
+            data[i] ^= 1 << (byte % 8)
+        elif op == "set":
+            data[i] = byte
+        elif op == "insert":
+            data.insert(i, byte)
+        elif op == "delete":
+            del data[i]
+        else:
+            del data[i:]
+    _only_malformed(bytes(data))
+
+
+_scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(min_value=-(1 << 63), max_value=(1 << 64) - 1),
+    st.floats(allow_nan=True), st.text(max_size=8), st.binary(max_size=8),
+    st.sampled_from(["D01", "GCS", "ENV", "H01", "ALIVE", "EMPTY", "GCS", "DRONES", "TGT", "NONE"]),
+)
+_values = st.recursive(_scalars, lambda inner: st.one_of(
+    st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=4), inner, max_size=3)), max_leaves=12)
+
+
+@settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(sorted(VECTORS)), st.data())
+def test_structurally_mutated_golden_only_raise_malformed(name: str, data: st.DataObject) -> None:
+    """Replace, drop or add fields of a golden message with arbitrary MessagePack values."""
+    body = body_of(name)
+    for _ in range(data.draw(st.integers(min_value=1, max_value=3))):
+        keys = sorted(body) + ["extra"]
+        key = data.draw(st.sampled_from(keys))
+        if data.draw(st.booleans()) and key in body:
+            del body[key]
+        else:
+            body[key] = data.draw(_values)
+    _only_malformed(pack(body))
+
+
+# --------------------------------------------------------------------------- construction validation
+
+
+def test_turn_validation() -> None:
+    order = Order(drone="D01", pos=(0, 0, 0), target=(1, 1, 1))
+    move = Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0))
+    with pytest.raises(MalformedMessage, match="only the DRONES phase carries orders"):
+        Turn(turn=1, sender="SRV", phase=Phase.GCS, orders=(order,))
+    with pytest.raises(MalformedMessage, match="only the DRONES phase carries orders"):
+        Turn(turn=1, sender="SRV", phase=Phase.ENV, orders=(order,))
+    with pytest.raises(MalformedMessage, match="only the ENV phase carries moves"):
+        Turn(turn=1, sender="SRV", phase=Phase.DRONES, moves=(move,))
+    with pytest.raises(MalformedMessage, match="turns start at 1"):
+        Turn(turn=0, sender="SRV", phase=Phase.GCS)
+    with pytest.raises(MalformedMessage, match="phase"):
+        Turn(turn=1, sender="SRV", phase="GCS")  # type: ignore[arg-type]
+
+
+def test_connect_validation() -> None:
+    with pytest.raises(MalformedMessage, match="at least one drone"):
+        Connect(turn=0, sender="D01", role=Role.DRONE)
+    with pytest.raises(MalformedMessage, match="only a DRONE entity hosts drones"):
+        Connect(turn=0, sender="GCS", role=Role.GCS, drones=("D01",))
+    with pytest.raises(MalformedMessage, match="distinct"):
+        Connect(turn=0, sender="H01", role=Role.DRONE, drones=("D01", "D01"))
+    with pytest.raises(MalformedMessage, match="drone id"):
+        Connect(turn=0, sender="H01", role=Role.DRONE, drones=("D1",))
+    with pytest.raises(MalformedMessage, match="autopilot"):
+        Connect(turn=0, sender="D01", role=Role.DRONE, drones=("D01",), autopilot="a" * 33)
+    with pytest.raises(MalformedMessage, match="drones must be a tuple"):
+        Connect(turn=0, sender="H01", role=Role.DRONE, drones=["D01"])  # type: ignore[arg-type]
+
+
+def test_header_validation() -> None:
+    with pytest.raises(MalformedMessage, match="turn"):
+        MapRequest(turn=-1, sender="GCS")
+    with pytest.raises(MalformedMessage, match="turn"):
+        MapRequest(turn=True, sender="GCS")  # type: ignore[arg-type]
+    with pytest.raises(MalformedMessage, match="turn"):
+        MapRequest(turn=MAX_TURN + 1, sender="GCS")
+    with pytest.raises(MalformedMessage, match="sender"):
+        MapRequest(turn=0, sender="XYZ")
+    with pytest.raises(MalformedMessage, match="sender"):
+        Nps(turn=1, sender="GCS", pos=(0, 0, 0))
+
+
+def test_cell_validation() -> None:
+    with pytest.raises(MalformedMessage, match="target"):
+        Target(turn=1, sender="GCS", drone="D01", pos=(-1, 0, 0))
+    with pytest.raises(MalformedMessage, match="target"):
+        Target(turn=1, sender="GCS", drone="D01", pos=[1, 0, 0])  # type: ignore[arg-type]
+    with pytest.raises(MalformedMessage, match="pos"):
+        Order(drone="D01", pos=(0, -1, 0))
+    with pytest.raises(MalformedMessage, match="src"):
+        Move(drone="D01", src=(0, 0, -1), dst=(0, 0, 0))
+    with pytest.raises(MalformedMessage, match="pos"):
+        Start(drone="D01", pos=(0, 0, -1))
+    with pytest.raises(MalformedMessage, match="cell"):
+        CellInfo(pos=(0, 0, MAX_COORD + 1), kind=CellKind.EMPTY)
+    assert CellInfo(pos=(-MAX_COORD, 0, 0), kind=CellKind.OUTSIDE).pos == (-MAX_COORD, 0, 0)
+    with pytest.raises(MalformedMessage, match="cell"):
+        CellInfo(pos=(-MAX_COORD - 1, 0, 0), kind=CellKind.OUTSIDE)
+
+
+def test_ask_cell_count() -> None:
+    with pytest.raises(MalformedMessage, match="1..4096"):
+        Ask(turn=1, sender="D01", cells=())
+    Ask(turn=1, sender="D01", cells=((0, 0, 0),) * Ask.MAX_CELLS)
+    with pytest.raises(MalformedMessage, match="1..4096"):
+        Ask(turn=1, sender="D01", cells=((0, 0, 0),) * (Ask.MAX_CELLS + 1))
+
+
+def test_world_validation() -> None:
+    with pytest.raises(MalformedMessage, match="sizes"):
+        WorldSpec(size=(0, 1, 1))
+    with pytest.raises(MalformedMessage, match="one bit per cell"):
+        WorldSpec(size=(2, 2, 2), cells=b"\x00\x00")
+    assert WorldSpec(size=(3, 3, 1), cells=b"\x00\x00").cells == b"\x00\x00"  # 9 bits -> 2 bytes
+    with pytest.raises(MalformedMessage, match="seed"):
+        WorldSpec(size=(2, 2, 2), seed=-1)
+    with pytest.raises(MalformedMessage, match="one bit per cell"):
+        WorldMap(turn=0, sender="ENV", size=(2, 2, 2), buildings=b"")
+    with pytest.raises(MalformedMessage, match="bytes"):
+        WorldMap(turn=0, sender="ENV", size=(2, 2, 2), buildings="\x00")  # type: ignore[arg-type]
+
+
+def test_record_validation() -> None:
+    with pytest.raises(MalformedMessage, match="state"):
+        DroneStatus(drone="D01", pos=(0, 0, 0), state="ALIVE")  # type: ignore[arg-type]
+    with pytest.raises(MalformedMessage, match="CellInfo"):
+        Upd(turn=1, sender="ENV", cells=((0, 0, 0),))  # type: ignore[arg-type]
+    with pytest.raises(MalformedMessage, match="DroneStatus"):
+        Status(turn=1, sender="OBS", drones=("D01",))  # type: ignore[arg-type]
+    with pytest.raises(MalformedMessage, match="Start"):
+        Welcome(turn=0, sender="SRV", entity="D01", text="", world=WorldSpec(size=(1, 1, 1)), starts=("D01",))
+    with pytest.raises(MalformedMessage, match="reason"):
+        Over(turn=1, sender="SRV", reason="ALL_REACHED")  # type: ignore[arg-type]
+    with pytest.raises(MalformedMessage, match="intent"):
+        Done(turn=1, sender="GCS", phase=Phase.GCS, intent="QUIT")  # type: ignore[arg-type]
+
+
+def test_messages_are_frozen() -> None:
+    msg = SAMPLES["target"]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        msg.turn = 2  # type: ignore[misc]
+
+
+def test_drone_status_alive() -> None:
+    assert DroneStatus(drone="D01", pos=(0, 0, 0), state=DroneState.ALIVE).alive
+    assert not DroneStatus(drone="D01", pos=(0, 0, 0), state=DroneState.DEAD).alive
+    assert not DroneStatus(drone="D01", pos=(0, 0, 0), state=DroneState.LOST).alive
+
+
+def test_drone_ids() -> None:
+    assert drone_id(1) == "D01"
+    assert drone_id(42) == "D42"
+    assert drone_id(100) == "D100"
+    assert drone_id(9999) == "D9999"
+    for bad in (0, -1, 10000):
+        with pytest.raises(ValueError):
+            drone_id(bad)
+    assert is_drone_id("D01") and is_drone_id("D1234")
+    for bad in ("D1", "D12345", "d01", "H01", 1, None, "D01 "):
+        assert not is_drone_id(bad)
+
+
+# --------------------------------------------------------------------------- keys
+
+
+def test_keys_under_default_root() -> None:
+    k = Keys()
+    assert k.root == "sim"
+    assert k.connect == "sim/SRV/CONNECT"
+    assert k.turn == "sim/SRV/TURN"
+    assert k.over == "sim/SRV/OVER"
+    assert k.status == "sim/OBS/STATUS"
+    assert k.gcs_done == "sim/GCS/DONE"
+    assert k.ask == "sim/ENV/ASK"
+    assert k.map == "sim/ENV/MAP"
+    assert k.upd == "sim/ENV/UPD"
+    assert k.tgt("D01") == "sim/D01/TGT"
+    assert k.nps("D02") == "sim/D02/NPS"
+    assert k.any_tgt == "sim/*/TGT"
+    assert k.any_nps == "sim/*/NPS"
+    assert k.alive("ENV") == "sim/ENV/ALIVE"
+    assert k.any_alive == "sim/*/ALIVE"
+
+
+@pytest.mark.parametrize("root", ["sim", "game-2", "lab/room_1", "a/b/c"])
+def test_keys_under_custom_root(root: str) -> None:
+    k = Keys(root)
+    assert k.nps("D07") == f"{root}/D07/NPS"
+    assert k.connect == f"{root}/SRV/CONNECT"
+    assert k.entity_of(k.nps("D07")) == "D07"
+    assert k.entity_of(k.tgt("D100")) == "D100"
+    assert k.entity_of(k.upd) == "ENV"
+    assert k.entity_of(k.alive("H01")) == "H01"
+
+
+@pytest.mark.parametrize("root", ["", "/sim", "sim/", "sim//x", "sim/*", "sim/**", "a b", "sim$", "si?m", "é",
+                                  "sim\n"])
+def test_bad_roots_rejected(root: str) -> None:
+    with pytest.raises(ValueError, match="bad key root"):
+        Keys(root)
+
+
+@pytest.mark.parametrize("key", ["other/D01/NPS", "simx/D01/NPS", "sim", "sim/D01", "sim/D01/NPS/x", "D01/NPS"])
+def test_entity_of_rejects_foreign_keys(key: str) -> None:
+    with pytest.raises(ValueError):
+        Keys("sim").entity_of(key)
+
+
+def test_key_table_covers_every_message_type() -> None:
+    carried = {spec.message for spec in KEY_TABLE if spec.message is not None}
+    replies: set[type] = set()
+    for spec in KEY_TABLE:
+        if isinstance(spec.reply, tuple):
+            replies.update(spec.reply)
+        elif spec.reply is not None:
+            replies.add(spec.reply)
+    assert carried | replies == set(MESSAGE_TYPES)
+    assert set(MESSAGE_TYPES) - carried == REPLY_ONLY
+    assert replies == REPLY_ONLY
+
+
+def test_key_table_rows_are_consistent() -> None:
+    k = Keys("sim")
+    built = {k.connect, k.turn, k.over, k.status, k.gcs_done, k.ask, k.map, k.upd,
+             k.tgt("D01"), k.nps("D01"), k.alive("D01")}
+    templates = [spec.template for spec in KEY_TABLE]
+    assert len(set(templates)) == len(templates)
+    for spec in KEY_TABLE:
+        assert f"sim/{spec.template.format(drone='D01', entity='D01')}" in built, spec.template
+        assert spec.how in ("put", "query", "liveliness")
+        if spec.how == "query":
+            assert spec.reply is not None and spec.message is not None
+        else:
+            assert spec.reply is None
+        assert spec.doc
+    writers = {spec.message: spec.writer for spec in KEY_TABLE}
+    assert writers[Target] == "GCS", "only the ground station may write targets"
+    assert writers[Nps] == "DRONE"
+    assert writers[Upd] == "ENV"
+    assert writers[Turn] == writers[Over] == writers[Status] == "SRV"
