@@ -11,11 +11,17 @@ Sensing, each step (at most two ASK round trips):
 1. the in-world, not-known-blocked neighbours (needed anyway: another drone may be in one), the
    target if still unknown (a target inside a building is seen at once), and the still-unknown
    cells of the next ``lookahead`` cells of the planned path;
-2. only if the first answers blocked the planned path: the still-unknown cells of the repaired
-   path's next ``lookahead`` cells.
+2. only if the first answers revealed a building the search relied on: the still-unknown cells of
+   the repaired path's next ``lookahead`` cells.
 
 Sensing along the path ahead finds walls while there is still room to turn, so the drone veers
-early (often at no cost in a Manhattan world) instead of walking into dead ends.
+early (often at no cost in a Manhattan world) instead of walking into dead ends. On the benchmark
+suite (BENCHMARKS.md) this takes the mean path from 1.34x to 1.11x the optimum (p90 1.98x to
+1.28x) for about 12 cells asked per step, 6 of them the neighbours.
+
+Incremental, measured: on the benchmark's 64x64x16 cities a step takes 0.04 ms median (0.34 ms
+p90); the same code searching from scratch every step (map kept) takes 0.26 ms median (0.74 ms
+p90), so the repair is kept.
 
 Implementation notes (speed in pure Python):
 
