@@ -1,7 +1,7 @@
 """Autopilot benchmark: every available autopilot on one seeded suite of worlds, in-process.
 
     python -m benchmarks.autopilot                 # full suite, prints the table
-    python -m benchmarks.autopilot --write         # ... and updates "## Autopilot benchmark" in BENCHMARKS.md
+    dronesim bench autopilot --write        # ... and updates "## Autopilot benchmark" in BENCHMARKS.md
     python -m benchmarks.autopilot --quick         # a few small episodes (used by the tests)
 
 Each episode is (world, start, target): a fresh pilot instance flies from start until it reaches the
@@ -417,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(detail)
     if args.write:
-        cmd = "python -m benchmarks.autopilot " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+        cmd = "dronesim bench autopilot " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
         body = (
             f"Command: `{cmd.strip()}`, run {_dt.date.today().isoformat()} on {platform.machine()} "
             f"with nproc = {os.cpu_count()} (Python {platform.python_version()}), "

@@ -40,7 +40,8 @@ Implementation notes (speed in pure Python):
   ``tests/test_autopilot_dstar.py`` checks the result against breadth-first search.
 
 Other drones seen in this step's answers block their cell for this step only: they never enter the
-search (no repair twice a step), the move simply skips them.
+search (no repair twice a step) and are never remembered. The move skips them: another equally short
+move if there is one, else the drone waits ``PATIENCE`` turns, then side-steps.
 """
 
 from __future__ import annotations
