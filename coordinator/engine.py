@@ -31,7 +31,7 @@ from dronesim.schema import (
 )
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
 
-from . import observer
+from . import arbiter, observer
 
 
 class Stage(enum.Enum):
@@ -118,6 +118,7 @@ class _Drone:
     cause: Cause = Cause.NONE
     misses: int = 0
     host: str | None = None
+    cooperative: bool = False
 
     def status(self, drone: str) -> DroneStatus:
         note = Note.REACHED if self.state is DroneState.ALIVE and self.pos == self.target else self.note
@@ -146,6 +147,7 @@ class Engine:
         self._notes: dict[str, Note] = {}
         self._turn_log: dict = {}
         self._pending_moves: tuple[Move, ...] = ()
+        self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
 
@@ -190,6 +192,7 @@ class Engine:
         for d in msg.drones:
             self.drones[d].host = msg.sender
             self.drones[d].autopilot = msg.autopilot
+            self.drones[d].cooperative = msg.cooperative
         starts = tuple(Start(drone=d, pos=r.pos) for d, r in self.drones.items()
                        if msg.role is not Role.DRONE or d in msg.drones)
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
@@ -238,8 +241,9 @@ class Engine:
             "record": "header", "format": "dronesim-journal", "version": 1,
             "world": {"size": list(self.size), "seed": self.config.world.seed,
                       "cells": self.config.world.cells.hex()},
-            "drones": [{"drone": d, "start": list(r.pos), "autopilot": r.autopilot} for d, r in self.drones.items()],
-            "max_turns": self.config.max_turns,
+            "drones": [{"drone": d, "start": list(r.pos), "autopilot": r.autopilot, "cooperative": r.cooperative}
+                       for d, r in self.drones.items()],
+            "max_turns": self.config.max_turns, "lost_after": self.config.lost_after,
         }
         status = self.status()
         self._log.info("all entities connected: the game starts")
@@ -259,13 +263,22 @@ class Engine:
                 return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.GCS))]
             case Stage.DRONES:
                 self._moves.clear()
+                self._final = {}
                 self._notes.clear()
                 orders = tuple(Order(drone=d, pos=self.drones[d].pos, target=self.drones[d].target)
                                for d in self.alive())
                 return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders))]
             case Stage.ENV:
-                moves = tuple(Move(drone=d, src=self.drones[d].pos, dst=dst)
-                              for d, dst in sorted(self._moves.items()) if dst != self.drones[d].pos)
+                proposed = {d: self._moves.get(d, self.drones[d].pos) for d in self.alive()}
+                before = {d: self.drones[d].pos for d in proposed}
+                coop = {d for d in proposed if self.drones[d].cooperative}
+                final = arbiter.arbitrate(before, proposed, coop)
+                yielded = sorted(d for d in final if final[d] != proposed[d])
+                if yielded:
+                    self._turn_log["yielded"] = yielded
+                self._final = final
+                moves = tuple(Move(drone=d, src=before[d], dst=final[d]) for d in sorted(final)
+                              if final[d] != before[d])
                 if not moves:
                     return self._observe(Upd(turn=turn, sender="ENV", cells=()))
                 self._pending_moves = moves
@@ -328,6 +341,8 @@ class Engine:
             self.drones[d].note = Note.NONE
         if changed:
             self._turn_log["targets"] = {d: list(p) for d, p in changed.items()}
+        if msg.intent is not Intent.CONTINUE:
+            self._turn_log["intent"] = msg.intent.value
         if msg.intent is Intent.QUIT:
             return self._over(EndReason.GCS_QUIT, "the ground station ended the game")
         self.final = msg.intent is Intent.FINAL
@@ -364,7 +379,7 @@ class Engine:
     def _observe(self, upd: Upd) -> list[Effect]:
         alive = self.alive()
         before = {d: self.drones[d].pos for d in alive}
-        after = {d: self._moves.get(d, before[d]) for d in alive}
+        after = {d: self._final.get(d, before[d]) for d in alive}
         buildings = {c.pos for c in upd.cells if c.kind is CellKind.BUILDING}
         dead = observer.deaths(self.size, before, after, buildings)
         hovered = sorted(d for d in alive if d not in self._moves)

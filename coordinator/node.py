@@ -127,6 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="world seed (default 0)")
     p.add_argument("--size", default="10,10,10", help="world size nx,ny,nz (default 10,10,10)")
     p.add_argument("--world", help="a world file (JSON) instead of a generated world")
+    p.add_argument("--scenario", help="a scenario file (world, drones, starts, max turns): overrides those flags")
     p.add_argument("--drones", type=int, default=1, help="number of drones D01..Dnn (default 1)")
     p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: a row along y)')
     p.add_argument("--max-turns", type=int, default=1000)
@@ -153,6 +154,13 @@ def parse_size(text: str) -> tuple[int, int, int]:
 def game_config(args: argparse.Namespace) -> GameConfig:
     from dronesim.entities.world import World
 
+    deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
+                     admit_deadline=args.admit_deadline or None, lost_after=args.lost_after)
+    if args.scenario:
+        from dronesim.scenario import Scenario
+
+        return Scenario.load(args.scenario).game_config(**deadlines)
+
     if args.world:
         world = World.load(args.world)
         spec = WorldSpec(size=world.size, cells=world.packed())
@@ -163,9 +171,7 @@ def game_config(args: argparse.Namespace) -> GameConfig:
         for d in drones:
             if world.is_building(d.start):
                 raise UsageError(f"{d.drone} would start inside a building at {d.start}")
-    return GameConfig(world=spec, drones=drones, max_turns=args.max_turns, phase_deadline=args.phase_deadline,
-                      gcs_deadline=args.gcs_deadline or None, admit_deadline=args.admit_deadline or None,
-                      lost_after=args.lost_after)
+    return GameConfig(world=spec, drones=drones, max_turns=args.max_turns, **deadlines)
 
 
 def cli(argv: list[str] | None = None) -> int:

@@ -19,7 +19,7 @@ from dronesim.schema import (
 )
 from dronesim.transport import Inbox, Outbox, Received, add_zenoh_args, setup_logging, zenoh_config
 
-from .autopilots import REGISTRY, fly_round, make_autopilot
+from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
 from .autopilots.base import Answers
 
 
@@ -31,8 +31,10 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn, Turn)
         inbox.subscribe(keys.over, Over)
+        cooperative = pilot_class(autopilot).cooperative
         welcome = admit(session, keys, Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones,
-                                               autopilot=autopilot), logger, timeout=connect_timeout)
+                                               autopilot=autopilot, cooperative=cooperative),
+                        logger, timeout=connect_timeout)
         pilots = {d: make_autopilot(autopilot, world_size=welcome.world.size) for d in drones}
         out = Outbox(session)
         querier = session.declare_querier(keys.ask, timeout=ask_timeout,

@@ -91,6 +91,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         console = Console(size, drones) if interactive else None
         out = Outbox(session)
         current: dict = {}
+        gone: set[str] = set()
         history: list[Status] = []
         over: Over | None = None
         while over is None:
@@ -101,15 +102,18 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                     else:
                         new = plan.at(turn.turn)
                         intent = Intent.FINAL if turn.turn >= plan.last_turn else Intent.CONTINUE
-                    current.update(new)
+                    current.update((d, c) for d, c in new.items() if d not in gone)
                     for d, cell in sorted(current.items()):  # re-send every last target, as the seed does
                         out.put(keys.tgt(d), Target(turn=turn.turn, sender="GCS", drone=d, pos=cell))
                     out.put(keys.gcs_done, Done(turn=turn.turn, sender="GCS", phase=Phase.GCS, intent=intent,
                                                 count=len(current)))
                 case Received(_, Status() as status):
                     history.append(status)
+                    gone.update(s.drone for s in status.drones if not s.alive)
                     for s in status.drones:  # a late joiner takes over the targets in force
-                        if s.target is not None:
+                        if not s.alive:
+                            current.pop(s.drone, None)  # nothing more to say to a dead or lost drone
+                        elif s.target is not None:
                             current.setdefault(s.drone, s.target)
                     if not quiet:
                         print(format_status(status), flush=True)
@@ -152,13 +156,18 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--targets", action="append", default=[], metavar="[Dnn=]x,y,z[@turn]",
                    help="scripted targets (repeatable, or ';'-separated)")
     p.add_argument("--script", help="a file of scripted targets, one [Dnn=]x,y,z[@turn] per line")
+    p.add_argument("--scenario", help="take the scripted targets from a scenario file")
     p.add_argument("--quiet", action="store_true", help="do not print every turn's status")
     p.add_argument("--no-draw", action="store_true", help="do not draw the world at the end")
     p.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the coordinator")
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "GCS")
-    interactive = not args.targets and not args.script
+    interactive = not args.targets and not args.script and not args.scenario
     try:
+        if args.scenario:
+            from dronesim.scenario import Scenario
+
+            args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
         main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets, script=args.script,
              interactive=interactive, quiet=args.quiet, draw=not args.no_draw, connect_timeout=args.connect_timeout)
     except UsageError as err:

@@ -19,6 +19,7 @@ import zenoh
 from dronesim.schema import UsageError
 from dronesim.transport import router_config, router_locators
 
+from dronesim.scenario import Scenario
 from dronesim.schema import drone_id
 
 
@@ -27,6 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=7, help="world seed (default 7)")
     p.add_argument("--size", default="10,10,10", help="world size nx,ny,nz (default 10,10,10)")
     p.add_argument("--world", help="a world file (JSON) instead of a generated world")
+    p.add_argument("--scenario", help="a scenario file: world, drones with starts and autopilots, targets")
     p.add_argument("--drones", type=int, default=1, help="number of drones (default 1)")
     p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: a row along y)')
     p.add_argument("--autopilot", default="seed", help="v1, seed or dstar (default seed)")
@@ -55,14 +57,23 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
         coord += ["--starts", args.starts]
     if args.journal:
         coord += ["--journal", args.journal]
+    if args.scenario:
+        coord += ["--scenario", args.scenario]
     procs = [("SRV", coord), ("ENV", [*base, "env", *common, "--no-draw"])]
-    ids = [drone_id(n) for n in range(1, args.drones + 1)]
-    if args.swarm:
-        procs.append(("H01", [*base, "drone", *common, "--id", f"{ids[0]}-{ids[-1]}", "--host", "H01",
-                              "--autopilot", args.autopilot]))
+    if args.scenario:
+        pilots = Scenario.load(args.scenario).autopilots
     else:
-        procs += [(d, [*base, "drone", *common, "--id", d, "--autopilot", args.autopilot]) for d in ids]
+        pilots = {drone_id(n): args.autopilot for n in range(1, args.drones + 1)}
+    if args.swarm:  # one swarm host per autopilot
+        for n, pilot in enumerate(sorted(set(pilots.values())), 1):
+            ids = ",".join(d for d in sorted(pilots) if pilots[d] == pilot)
+            host = f"H{n:02d}"
+            procs.append((host, [*base, "drone", *common, "--id", ids, "--host", host, "--autopilot", pilot]))
+    else:
+        procs += [(d, [*base, "drone", *common, "--id", d, "--autopilot", pilots[d]]) for d in sorted(pilots)]
     gcs = [*base, "gcs", *common]
+    if args.scenario:
+        gcs += ["--scenario", args.scenario]
     for t in args.targets:
         gcs += ["--targets", t]
     if args.script:
@@ -74,11 +85,12 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
 
 
 def main(args: argparse.Namespace) -> int:
-    interactive = not args.targets and not args.script
+    interactive = not args.targets and not args.script and not args.scenario
     with zenoh.open(router_config(args.listen)) as router:
         locator = router_locators(router)[0]
-        print(f"dronesim up: router on {locator}, seed {args.seed}, {args.drones} drone(s), "
-              f"autopilot {args.autopilot}", flush=True)
+        what = f"scenario {args.scenario}" if args.scenario else \
+            f"seed {args.seed}, {args.drones} drone(s), autopilot {args.autopilot}"
+        print(f"dronesim up: router on {locator}, {what}", flush=True)
         running: list[tuple[str, subprocess.Popen]] = []
         try:
             for name, argv in commands(args, locator):

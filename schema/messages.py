@@ -276,6 +276,7 @@ class Connect(Message):
     role: Role
     drones: tuple[str, ...] = ()
     autopilot: str = ""
+    cooperative: bool = False  # its drones give way to others when moves conflict (arbitration)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
@@ -287,6 +288,7 @@ class Connect(Message):
         _check(self.role is Role.DRONE or not self.drones, "only a DRONE entity hosts drones")
         _check(self.role is not Role.DRONE or bool(self.drones), "a DRONE entity must host at least one drone")
         _check(isinstance(self.autopilot, str) and len(self.autopilot) <= 32, "autopilot must be a short string")
+        _check(type(self.cooperative) is bool, "cooperative must be a bool")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -3,41 +3,12 @@ bytes, and a quiet logger for the pure state machines."""
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import json
 import logging
-import pathlib
-import sys
-import types
 
 import pytest
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
-
-
-def _ensure_coordinator_importable() -> None:
-    """`coordinator/` has no ``__init__.py``; setuptools' editable finder cannot resolve a namespace
-    sub-package under a mapped regular package, so ``import dronesim.coordinator`` may fail in an
-    editable install. Register the folder as a namespace package then (test-side only)."""
-    try:
-        importlib.import_module("dronesim.coordinator.engine")
-        return
-    except ModuleNotFoundError:
-        pass
-    import dronesim
-
-    pkg = types.ModuleType("dronesim.coordinator")
-    pkg.__path__ = [str(ROOT / "coordinator")]  # type: ignore[attr-defined]
-    pkg.__package__ = "dronesim.coordinator"
-    sys.modules["dronesim.coordinator"] = pkg
-    dronesim.coordinator = pkg  # type: ignore[attr-defined]
-    importlib.import_module("dronesim.coordinator.engine")
-
-
-_ensure_coordinator_importable()
-
-from dronesim.schema.samples import SAMPLES, VECTORS_PATH  # noqa: E402
+from dronesim.schema.samples import SAMPLES, VECTORS_PATH
 
 SAMPLE_NAMES = sorted(SAMPLES)
 

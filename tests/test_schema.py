@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import msgpack
 import pytest
@@ -16,11 +17,9 @@ from dronesim.schema import (
     encode, is_drone_id,
 )
 from dronesim.schema.messages import MAX_COORD, MAX_PAYLOAD, MAX_TURN
-from dronesim.schema.samples import SAMPLES, golden
+from dronesim.schema.samples import SAMPLES, VECTORS_PATH, golden
 
-from .conftest import golden_vectors
-
-VECTORS = golden_vectors()
+VECTORS: dict[str, str] = json.loads(VECTORS_PATH.read_text(encoding="utf-8"))
 REPLY_ONLY = {Welcome, Refused, Ans, WorldMap}
 
 
@@ -215,6 +214,11 @@ def test_optional_fields_may_be_omitted() -> None:
     ("over", "reason", "BORED"),
     ("over", "text", b"bytes"),
     ("done_gcs", "intent", "MAYBE"),
+    ("done_gcs", "count", -1),
+    ("done_gcs", "count", True),
+    ("done_gcs", "count", "2"),
+    ("connect_swarm", "cooperative", 1),
+    ("connect_swarm", "cooperative", "yes"),
     ("map", "buildings", "80"),
     ("map", "buildings", b""),
     ("map", "size", [0, 2, 2]),
@@ -342,7 +346,7 @@ def test_mutated_golden_bytes_only_raise_malformed(name: str, edits: list) -> No
 _scalars = st.one_of(
     st.none(), st.booleans(), st.integers(min_value=-(1 << 63), max_value=(1 << 64) - 1),
     st.floats(allow_nan=True), st.text(max_size=8), st.binary(max_size=8),
-    st.sampled_from(["D01", "GCS", "ENV", "H01", "ALIVE", "EMPTY", "GCS", "DRONES", "TGT", "NONE"]),
+    st.sampled_from(["D01", "GCS", "ENV", "H01", "ALIVE", "EMPTY", "DRONES", "TGT", "NONE"]),
 )
 _values = st.recursive(_scalars, lambda inner: st.one_of(
     st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=4), inner, max_size=3)), max_leaves=12)

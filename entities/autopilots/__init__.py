@@ -16,14 +16,18 @@ REGISTRY: dict[str, tuple[str, str]] = {
 }
 
 
-def make_autopilot(name: str, *, world_size: Cell) -> Autopilot:
-    """A fresh autopilot instance (one per drone) for a world of `world_size`."""
+def pilot_class(name: str) -> type[Autopilot]:
+    """The autopilot class registered as `name` (UsageError if there is none)."""
     try:
         module, cls = REGISTRY[name]
     except KeyError:
         raise UsageError(f"unknown autopilot {name!r}; choose one of {', '.join(REGISTRY)}") from None
-    pilot_cls = getattr(importlib.import_module(f"{__name__}.{module}"), cls)
-    return pilot_cls(world_size=world_size)
+    return getattr(importlib.import_module(f"{__name__}.{module}"), cls)
 
 
-__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "REGISTRY", "fly_round", "make_autopilot", "run_step"]
+def make_autopilot(name: str, *, world_size: Cell) -> Autopilot:
+    """A fresh autopilot instance (one per drone) for a world of `world_size`."""
+    return pilot_class(name)(world_size=world_size)
+
+
+__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "REGISTRY", "fly_round", "make_autopilot", "pilot_class", "run_step"]

@@ -37,6 +37,8 @@ class Autopilot(Protocol):
     """One drone's pilot. `name` is what the command line selects (``--autopilot NAME``)."""
 
     name: ClassVar[str]
+    #: True if the drone gives way to other drones when the coordinator arbitrates moves.
+    cooperative: ClassVar[bool]
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         """Decide this turn's move from `pos` towards `target` (None: no target yet, hover)."""

@@ -64,6 +64,7 @@ class DStarPilot:
     """D* Lite autopilot (``--autopilot dstar``). One instance per drone; deterministic."""
 
     name: ClassVar[str] = "dstar"
+    cooperative: ClassVar[bool] = True  # gives way to other drones (coordinator/arbiter.py)
 
     #: Default number of path cells ahead whose unknown cells are asked each step.
     LOOKAHEAD: ClassVar[int] = 20

@@ -78,6 +78,7 @@ class SeedPilot:
     """The seed's `smart_drone`: z first, then greedy 2D with a memory of learned cells."""
 
     name: ClassVar[str] = "seed"
+    cooperative: ClassVar[bool] = False  # the seed's drone knows nothing of other drones
     #: Most ASK round trips one turn may take.
     MAX_ASKS: ClassVar[int] = 4
 

@@ -31,6 +31,7 @@ class V1Pilot:
     """Greedy, blind: one step towards the target per turn, no ASK ever."""
 
     name: ClassVar[str] = "v1"
+    cooperative: ClassVar[bool] = False
 
     def __init__(self, *, world_size: Cell) -> None:
         self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]

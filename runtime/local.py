@@ -1,0 +1,117 @@
+"""The whole game in one process, no network: the same Engine, Environment and autopilots as the
+distributed run, wired by function calls. Used to verify journals (replay --verify), by benchmarks
+(the in-process baseline) and by tests.
+
+Given the same scenario and the same inputs (GCS targets and intents per turn, drones that missed a
+deadline or vanished), it writes the same journal, byte for byte, as a run over Zenoh.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from dronesim.coordinator.engine import Engine, GameConfig, Publish, Record, Reply
+from dronesim.entities.autopilots import fly_round, make_autopilot, pilot_class
+from dronesim.entities.environment import Environment, build_world
+from dronesim.entities.gcs import Plan
+from dronesim.schema import (
+    Cell, Connect, Done, Intent, Nps, Over, Phase, Role, Status, Target, Turn, Upd, Welcome,
+)
+
+
+@dataclass(slots=True)
+class Inputs:
+    """What a run depends on besides the scenario. `targets` as a Plan; the rest by turn."""
+
+    plan: Plan
+    intents: dict[int, Intent] = field(default_factory=dict)  # turn -> intent (default: FINAL after the plan)
+    hovered: dict[int, set[str]] = field(default_factory=dict)  # turn -> drones that sent no NPS
+    vanished: dict[int, set[str]] = field(default_factory=dict)  # turn -> drones whose process vanished
+    scripted: bool = True  # intents not given: FINAL once the plan is over (a scripted GCS); else CONTINUE
+
+    def intent(self, turn: int) -> Intent:
+        if turn in self.intents:
+            return self.intents[turn]
+        if self.scripted and turn >= self.plan.last_turn:
+            return Intent.FINAL
+        return Intent.CONTINUE
+
+
+@dataclass(slots=True)
+class Result:
+    records: list[dict]
+    over: Over
+    statuses: list[Status]
+
+
+def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
+             logger: logging.Logger | None = None, *, keep_statuses: bool = False) -> Result:
+    log = logger or logging.getLogger("dronesim.local")
+    engine = Engine(config, log)
+    records: list[dict] = []
+    statuses: list[Status] = []
+    queue: deque = deque()
+    welcome: Welcome | None = None
+    for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), Connect(turn=0, sender="GCS", role=Role.GCS)):
+        queue.extend(engine.connect(hello, None))
+    for d in sorted(autopilots):
+        queue.extend(engine.connect(Connect(turn=0, sender=d, role=Role.DRONE, drones=(d,), autopilot=autopilots[d],
+                                            cooperative=pilot_class(autopilots[d]).cooperative), None))
+    env: Environment | None = None
+    pilots: dict = {}
+    current: dict[str, Cell] = {}
+    while queue:
+        effect = queue.popleft()
+        match effect:
+            case Reply(_, Welcome() as w) if welcome is None:
+                welcome = w
+                world = build_world(w.world, (s.pos for s in w.starts))
+                env = Environment(world, {s.drone: s.pos for s in w.starts})
+                pilots = {d: make_autopilot(a, world_size=world.size) for d, a in autopilots.items()}
+            case Record(data):
+                records.append(data)
+            case Publish(Turn(phase=Phase.GCS, turn=t)):
+                current.update(inputs.plan.at(t))
+                current = {d: c for d, c in current.items() if d in engine.alive()}
+                for d, cell in sorted(current.items()):
+                    queue.extend(_accept(engine, log, Target(turn=t, sender="GCS", drone=d, pos=cell)))
+                queue.extend(engine.receive(Done(turn=t, sender="GCS", phase=Phase.GCS, intent=inputs.intent(t),
+                                                 count=len(current))))
+            case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
+                assert env is not None
+                for d in sorted(inputs.vanished.get(t, ())):
+                    queue.extend(engine.vanished(d))
+                skip = inputs.hovered.get(t, set()) | inputs.vanished.get(t, set())
+                steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in turn.orders if o.drone not in skip}
+                oracle = env.answer
+                decisions = fly_round(steps, lambda pending: {d: dict(zip(c, oracle(c))) for d, c in pending.items()})
+                for d in sorted(decisions):
+                    dec = decisions[d]
+                    queue.extend(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
+                if skip:
+                    queue.extend(engine.expire(engine.stage, engine.turn))
+            case Publish(Turn(phase=Phase.ENV, turn=t) as turn):
+                assert env is not None
+                queue.extend(engine.receive(Upd(turn=t, sender="ENV", cells=env.apply(turn.moves))))
+            case Publish(Status() as status):
+                assert env is not None
+                env.sync(status)
+                if keep_statuses:
+                    statuses.append(status)
+            case Publish(Over()):
+                pass
+    assert engine.end is not None
+    return Result(records=records, over=engine.end, statuses=statuses)
+
+
+def _accept(engine: Engine, log: logging.Logger, msg) -> list:
+    from dronesim.schema import RemoteInputError
+
+    try:
+        return engine.receive(msg)
+    except RemoteInputError as err:  # e.g. a V1 drone's move refused: counted in the real run too
+        log.warning("rejected %s: %s", msg.TAG, err)
+        return []

@@ -1,0 +1,105 @@
+"""Scenario files: a run described, shared and replayed — world, drones, targets per turn, limits.
+
+```json
+{"format": "dronesim-scenario", "version": 1,
+ "world": {"size": [16, 16, 4], "seed": 5},            // or {"file": "city.json"} (relative to the scenario)
+ "drones": [{"id": "D01", "start": [0, 0, 0], "autopilot": "dstar"},
+            {"id": "D02", "start": [0, 2, 0], "autopilot": "v1"}],
+ "targets": ["D01=15,15,0", "D02=9,2,0@4"],             // [Dnn=]x,y,z[@turn], as --targets
+ "max_turns": 200}
+```
+The game ends when every drone has reached its last target (or said it is unreachable), when no drone
+is alive, or at ``max_turns``.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+from dataclasses import dataclass
+
+from dronesim.coordinator.engine import DroneSpec, GameConfig
+from dronesim.entities.autopilots import REGISTRY
+from dronesim.entities.gcs import Plan
+from dronesim.entities.world import World
+from dronesim.schema import Cell, UsageError, WorldSpec, is_drone_id
+
+FORMAT = "dronesim-scenario"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Scenario:
+    world: WorldSpec
+    drones: tuple[DroneSpec, ...]
+    autopilots: dict[str, str]  # drone -> autopilot name
+    targets: tuple[str, ...]
+    max_turns: int = 1000
+
+    def game_config(self, **deadlines: object) -> GameConfig:
+        return GameConfig(world=self.world, drones=self.drones, max_turns=self.max_turns, **deadlines)  # type: ignore[arg-type]
+
+    def plan(self) -> Plan:
+        return Plan.parse(self.targets, self.world.size, default_drone=self.drones[0].drone)
+
+    @classmethod
+    def load(cls, path: str | pathlib.Path) -> "Scenario":
+        path = pathlib.Path(path)
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UsageError(f"cannot read scenario {path}: {exc}") from None
+        try:
+            return cls.from_json(data, base=path.parent)
+        except UsageError as err:
+            raise UsageError(f"{path}: {err}") from None
+
+    @classmethod
+    def from_json(cls, data: object, base: pathlib.Path = pathlib.Path(".")) -> "Scenario":
+        if not isinstance(data, dict) or data.get("format") != FORMAT or data.get("version") != 1:
+            raise UsageError(f'not a scenario: expected "format": "{FORMAT}", "version": 1')
+        w = data.get("world")
+        if not isinstance(w, dict):
+            raise UsageError('"world" must be {"size": [...], "seed": n} or {"file": "..."}')
+        world_file: World | None = None
+        if "file" in w:
+            world_file = World.load(base / str(w["file"]))
+            spec = WorldSpec(size=world_file.size, cells=world_file.packed())
+        else:
+            spec = WorldSpec(size=_cell(w.get("size"), "world size"), seed=_int(w.get("seed", 0), "seed"))
+        drones_raw = data.get("drones")
+        if not isinstance(drones_raw, list) or not drones_raw:
+            raise UsageError('"drones" must be a non-empty list')
+        drones, autopilots = [], {}
+        for i, d in enumerate(drones_raw):
+            if not isinstance(d, dict) or not is_drone_id(d.get("id")):
+                raise UsageError(f"drone #{i + 1} needs an id like D01")
+            pilot = d.get("autopilot", "seed")
+            if pilot not in REGISTRY:
+                raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
+            start = _cell(d.get("start"), f"{d['id']} start")
+            if world_file is not None and world_file.is_building(start):
+                raise UsageError(f"{d['id']} starts inside a building at {start}")
+            drones.append(DroneSpec(drone=d["id"], start=start))
+            autopilots[d["id"]] = pilot
+        targets = data.get("targets", [])
+        if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets):
+            raise UsageError('"targets" must be a list of "[Dnn=]x,y,z[@turn]" strings')
+        scenario = cls(world=spec, drones=tuple(drones), autopilots=autopilots, targets=tuple(targets),
+                       max_turns=_int(data.get("max_turns", 1000), "max_turns"))
+        scenario.game_config()  # validates ids, starts
+        unknown = scenario.plan().drones() - set(autopilots)
+        if unknown:
+            raise UsageError(f"targets for drones not in the scenario: {', '.join(sorted(unknown))}")
+        return scenario
+
+
+def _int(v: object, what: str) -> int:
+    if type(v) is not int:
+        raise UsageError(f"{what} must be an integer, got {v!r}")
+    return v
+
+
+def _cell(v: object, what: str) -> Cell:
+    if not isinstance(v, list) or len(v) != 3 or not all(type(c) is int and c >= 0 for c in v):
+        raise UsageError(f"{what} must be [x, y, z] with non-negative integers, got {v!r}")
+    return (v[0], v[1], v[2])
