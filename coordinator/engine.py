@@ -27,8 +27,10 @@ from dataclasses import dataclass
 
 from dronesim.schema import (
     Cause, Cell, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, Intent, Message, Move, Note, Nps,
-    Order, Over, Phase, Refused, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec, encode,
+    Order, Over, Phase, Refused, RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec,
+    encode,
 )
+from dronesim.schema.messages import is_host_id
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
 
 from . import arbiter, observer
@@ -219,10 +221,9 @@ class Engine:
                 if self.stage is not Stage.ADMITTING and msg.role is Role.ENV:
                     return "the environment cannot join a running game"
             case Role.DRONE:
-                if len(msg.drones) == 1 and msg.sender != msg.drones[0] and not msg.sender.startswith("H"):
-                    return f"{msg.sender} cannot connect for drone {msg.drones[0]}"
-                if msg.sender.startswith("D") and msg.drones != (msg.sender,):
-                    return f"drone {msg.sender} can only fly itself; a swarm host connects as Hnn"
+                if not is_host_id(msg.sender) and msg.drones != (msg.sender,):
+                    return (f"{msg.sender} cannot connect for {', '.join(msg.drones)}: a drone flies itself, "
+                            "a swarm host connects as Hnn")
                 if self.stage is not Stage.ADMITTING:
                     return "drones cannot join a running game"
                 for d in msg.drones:
@@ -310,13 +311,17 @@ class Engine:
         if self.stage is not Stage.GCS or msg.turn != self.turn:
             raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
         self._tgt_seen += 1  # counted against the DONE's count even if refused below
-        drone = self.drones.get(msg.drone)
-        if drone is None:
-            raise UnknownEntity(f"target for unknown drone {msg.drone}")
-        if drone.state is not DroneState.ALIVE:
-            raise UnknownEntity(f"target for {msg.drone}, which is {drone.state.value}")
-        if not observer.inside(msg.pos, self.size):
-            raise OutOfRange(f"target {msg.pos} for {msg.drone} is outside the world {self.size}")
+        try:
+            drone = self.drones.get(msg.drone)
+            if drone is None:
+                raise UnknownEntity(f"target for unknown drone {msg.drone}")
+            if drone.state is not DroneState.ALIVE:
+                raise UnknownEntity(f"target for {msg.drone}, which is {drone.state.value}")
+            if not observer.inside(msg.pos, self.size):
+                raise OutOfRange(f"target {msg.pos} for {msg.drone} is outside the world {self.size}")
+        except RemoteInputError as err:
+            err.follow = self._gcs_check()  # the target is refused; the phase it was awaited for goes on
+            raise
         self._targets[msg.drone] = msg.pos
         return self._gcs_check()
 
@@ -344,7 +349,7 @@ class Engine:
         if msg.intent is not Intent.CONTINUE:
             self._turn_log["intent"] = msg.intent.value
         if msg.intent is Intent.QUIT:
-            return self._over(EndReason.GCS_QUIT, "the ground station ended the game")
+            return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
         self.final = msg.intent is Intent.FINAL
         return self._enter(Stage.DRONES, self.turn)
 
@@ -482,6 +487,8 @@ class Engine:
         self._log.warning("%s vanished", entity)
         match role:
             case Role.GCS:
+                if self.stage is Stage.GCS and self._done is not None:
+                    return self._gcs_finish(self._done)  # its DONE is in: what arrived of its targets holds
                 if self.stage is Stage.GCS:
                     self._targets.clear()
                     return self._enter(Stage.DRONES, self.turn)

@@ -85,6 +85,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                         run(engine.receive(msg))
                     except RemoteInputError as err:  # counted and logged; the engine changed nothing
                         inbox.rejects.reject(f"{msg.TAG} from {msg.sender}", err)
+                        run(err.follow)
                 case Presence(entity, alive):
                     if alive:
                         present.add(entity)

@@ -51,7 +51,7 @@ class Plan:
                 if turn < 1:
                     raise UsageError(f"bad target {chunk.strip()!r}: turns start at 1")
                 items.append((turn, drone, correct_form(m["cell"], size)))
-        return cls(tuple(sorted(items)))
+        return cls(tuple(sorted(items, key=lambda item: item[0])))  # stable: within a turn, the last written wins
 
     @classmethod
     def load(cls, path: str, size: Cell) -> "Plan":
@@ -76,6 +76,10 @@ class Plan:
 def parse_command(line: str, size: Cell, drones: Iterable[str]) -> dict[str, Cell]:
     """One interactive line: ``x,y,z`` (the only or first drone) or ``Dnn x,y,z``."""
     drones = list(drones)
+    head = re.match(r"\s*(D\d{2,4})(?:\s*=\s*|\s+)(.*)\Z", line)  # "D02 1 2 3", "D02=1,2,3"
+    drone_part, cell_part = (head[1], head[2]) if head else ("", line)
+    cell_part = re.sub(r"(?<=\d)[\s,]+(?=-?\d)", ",", cell_part.strip())  # "1 2 3" -> "1,2,3"
+    line = f"{drone_part}={cell_part}" if drone_part else cell_part
     m = _ITEM.match(line)
     if not m or m["turn"]:
         raise UsageError(f"{line.strip()!r}: type x,y,z or Dnn x,y,z")

@@ -114,4 +114,4 @@ def _accept(engine: Engine, log: logging.Logger, msg) -> list:
         return engine.receive(msg)
     except RemoteInputError as err:  # e.g. a V1 drone's move refused: counted in the real run too
         log.warning("rejected %s: %s", msg.TAG, err)
-        return []
+        return err.follow

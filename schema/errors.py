@@ -34,6 +34,9 @@ class RemoteInputError(DronesimError):
         super().__init__(detail)
         if reason is not None:
             self.reason = reason
+        #: Effects that still follow although this input was refused (a state machine may set it: e.g. the
+        #: refused message was the last one a phase awaited, so the phase ends). The adapter carries them out.
+        self.follow: list = []
 
 
 class MalformedMessage(RemoteInputError):

@@ -46,6 +46,11 @@ def is_drone_id(value: object) -> bool:
     return isinstance(value, str) and DRONE_ID.match(value) is not None
 
 
+def is_host_id(value: object) -> bool:
+    """A swarm host's id: H01, H02, ..."""
+    return isinstance(value, str) and HOST_ID.match(value) is not None
+
+
 def drone_id(n: int) -> str:
     """The conventional id of the n-th drone: 1 -> 'D01', 100 -> 'D100'."""
     if not 1 <= n <= 9999:
@@ -530,6 +535,8 @@ def _as_list(v: object) -> list:
 
 
 def _enum(cls: type[enum.Enum], v: object) -> enum.Enum:
+    if issubclass(cls, int) and type(v) is not int:  # IntEnum: not True, not 1.0
+        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}")
     try:
         return cls(v)
     except (ValueError, TypeError):
@@ -592,7 +599,8 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
         raise MalformedMessage(f"not MessagePack: {exc.__class__.__name__}: {exc}") from None
     _check(isinstance(body, dict), f"payload must be a map, got {type(body).__name__}")
     version = body.pop("v", None)
-    _check(version == SCHEMA_VERSION, f"schema version {version!r}, this build speaks {SCHEMA_VERSION}")
+    _check(type(version) is int and version == SCHEMA_VERSION,
+           f"schema version {version!r}, this build speaks {SCHEMA_VERSION}")
     tag = body.pop("t", None)
     cls = _BY_TAG.get(tag) if isinstance(tag, str) else None
     _check(cls is not None, f"unknown message type {tag!r}")
@@ -602,6 +610,7 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
         if cls not in allowed:
             names = "/".join(a.TAG for a in allowed)
             raise MalformedMessage(f"a {tag} message on a key that carries {names}", reason="wrong-type")
+    _check("sender" not in body, f"unknown fields ['sender'] in {tag} (the wire name is 'from')")
     if "from" in body:
         body["sender"] = body.pop("from")
     fields = _fields_of(cls)
