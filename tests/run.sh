@@ -1,8 +1,15 @@
 #!/usr/bin/env bash
-# Installs what the tests need (Python packages; Debian packages for the multi-host and browser
-# tests once they exist) and runs the whole suite. This is the README's test command and CI's.
+# Installs what the tests need, then runs the whole suite. This is the README's test command and CI's.
+#   - the Python package and its test extras;
+#   - every tests/setup.d/*.sh (system packages: iproute2 for the multi-host tests, chromium for the
+#     browser tests, zenohd, ...), each idempotent and quick when already done.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python3 -m pip install --quiet --disable-pip-version-check -e '.[test]'
-# pytest's exit 5 (no tests collected) must fail loudly, as must any other failure.
+for step in tests/setup.d/*.sh; do
+  [ -e "$step" ] || continue
+  echo "setup: $step"
+  bash "$step"
+done
+# pytest exits non-zero on any failure, and with 5 when no test ran: both fail CI.
 exec python3 -m pytest -q -p no:cacheprovider "$@"
