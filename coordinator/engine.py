@@ -38,6 +38,7 @@ from . import arbiter, observer
 
 class Stage(enum.Enum):
     ADMITTING = "ADMITTING"
+    RESUMING = "RESUMING"  # restarted from a journal: waiting for the entities to connect again
     GCS = "GCS"
     DRONES = "DRONES"
     ENV = "ENV"
@@ -47,6 +48,7 @@ class Stage(enum.Enum):
 #: The state machine in one place: stage -> (phase announced, message that closes it, next stage).
 STAGES: dict[Stage, tuple[Phase | None, type[Message] | None, Stage]] = {
     Stage.ADMITTING: (None, Connect, Stage.GCS),
+    Stage.RESUMING: (None, Connect, Stage.GCS),  # the turn after the journal's last
     Stage.GCS: (Phase.GCS, Done, Stage.DRONES),
     Stage.DRONES: (Phase.DRONES, Nps, Stage.ENV),
     Stage.ENV: (Phase.ENV, Upd, Stage.GCS),  # through the observer
@@ -69,6 +71,7 @@ class GameConfig:
     gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
     admit_deadline: float | None = None  # None: wait for every entity forever
     lost_after: int = 3  # missed DRONES deadlines in a row before a drone is LOST
+    env_grace: float = 30.0  # seconds the game waits for a vanished environment to come back
 
     def __post_init__(self) -> None:
         ids = [d.drone for d in self.drones]
@@ -142,6 +145,7 @@ class Engine:
         self.turn = 0
         self.drones: dict[str, _Drone] = {d.drone: _Drone(pos=d.start) for d in sorted(config.drones, key=lambda s: s.drone)}
         self.entities: dict[str, Role] = {}  # admitted entity id -> role
+        self.sessions: dict[str, str] = {}  # admitted entity id -> its Zenoh session id
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
         self._targets: dict[str, Cell] = {}  # received in this GCS phase
@@ -152,6 +156,9 @@ class Engine:
         self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
+        self._phase_msg: Turn | None = None  # the TURN that opened the current stage
+        self._held = False  # that TURN waits for the environment to come back
+        self._intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
 
     # ------------------------------------------------------------------ queries
 
@@ -162,14 +169,22 @@ class Engine:
     def alive(self) -> list[str]:
         return [d for d, r in self.drones.items() if r.state is DroneState.ALIVE]
 
-    def clock(self) -> tuple[Stage, int, bool]:
+    def _playing(self) -> bool:
+        return self.stage in (Stage.GCS, Stage.DRONES, Stage.ENV)
+
+    def _env_missing(self) -> bool:
+        return self._playing() and Role.ENV not in self.entities.values()
+
+    def clock(self) -> tuple[Stage, int, bool, bool]:
         """What the current deadline is measured from: it restarts whenever this changes."""
-        return self.stage, self.turn, self._done is not None
+        return self.stage, self.turn, self._done is not None, self._env_missing()
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
+        if self._env_missing():
+            return self.config.env_grace
         match self.stage:
-            case Stage.ADMITTING:
+            case Stage.ADMITTING | Stage.RESUMING:
                 return self.config.admit_deadline
             case Stage.GCS:
                 if self._done is not None:  # DONE is in, some of its TGT are not: they get a drone's time
@@ -179,8 +194,12 @@ class Engine:
                 return self.config.phase_deadline
         return None
 
-    def status(self) -> Status:
-        return Status(turn=self.turn, sender="OBS", drones=tuple(r.status(d) for d, r in self.drones.items()))
+    def status(self, turn: int | None = None) -> Status:
+        """Every drone's state at the end of `turn`; by default now, i.e. during a turn, as it stood at
+        the end of the previous one."""
+        if turn is None:
+            turn = self.turn - 1 if self._playing() else self.turn
+        return Status(turn=turn, sender="OBS", drones=tuple(r.status(d) for d, r in self.drones.items()))
 
     # ------------------------------------------------------------------ admission
 
@@ -190,7 +209,9 @@ class Engine:
         if refusal:
             self._log.warning("refused %s: %s", msg.sender, refusal)
             return [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
+        again = msg.sender in self.entities  # the same process connecting again (its session says so)
         self.entities[msg.sender] = msg.role
+        self.sessions[msg.sender] = msg.session
         for d in msg.drones:
             self.drones[d].host = msg.sender
             self.drones[d].autopilot = msg.autopilot
@@ -199,32 +220,40 @@ class Engine:
                        if msg.role is not Role.DRONE or d in msg.drones)
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
             f"{msg.sender} flying {', '.join(msg.drones)}"
-        self._log.info("admitted %s", what)
+        self._log.info("%s %s", "re-admitted" if again else "admitted", what)
         welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
                           world=self.config.world, starts=starts)
         effects: list[Effect] = [Reply(token, welcome)]
-        if self.stage is Stage.ADMITTING and self._everyone_here():
-            effects += self._start()
-        elif self.stage is not Stage.ADMITTING:
-            effects.append(Publish(self.status()))  # a late joiner (a new GCS) sees the state at once
+        if self.stage in (Stage.ADMITTING, Stage.RESUMING):
+            if self._everyone_here():
+                effects += self._start() if self.stage is Stage.ADMITTING else self._resume()
+            return effects
+        effects.append(Publish(self.status()))  # a late joiner sees the state at once
+        # A returning environment or ground station takes up the phase in progress.
+        if msg.role is Role.ENV and self._held:
+            self._held = False
+            effects.append(Publish(self._phase_msg))
+        elif self._phase_msg is not None and (msg.role, self.stage) in ((Role.ENV, Stage.ENV), (Role.GCS, Stage.GCS)):
+            effects.append(Publish(self._phase_msg))
         return effects
 
     def _refusal(self, msg: Connect) -> str:
         if self.stage is Stage.OVER:
             return "the game is over"
         if msg.sender in self.entities:
+            if msg.session and self.sessions.get(msg.sender) == msg.session and \
+                    self.entities[msg.sender] is msg.role:
+                return ""  # the same process again (e.g. after a cut link): welcome it back
             return f"{msg.sender} is already connected"
         match msg.role:
             case Role.ENV | Role.GCS:
                 if msg.sender != msg.role.value:
                     return f"the {msg.role.value} must connect as {msg.role.value}, not {msg.sender}"
-                if self.stage is not Stage.ADMITTING and msg.role is Role.ENV:
-                    return "the environment cannot join a running game"
             case Role.DRONE:
                 if not is_host_id(msg.sender) and msg.drones != (msg.sender,):
                     return (f"{msg.sender} cannot connect for {', '.join(msg.drones)}: a drone flies itself, "
                             "a swarm host connects as Hnn")
-                if self.stage is not Stage.ADMITTING:
+                if self.stage not in (Stage.ADMITTING, Stage.RESUMING):
                     return "drones cannot join a running game"
                 for d in msg.drones:
                     if d not in self.drones:
@@ -235,10 +264,12 @@ class Engine:
 
     def _everyone_here(self) -> bool:
         roles = set(self.entities.values())
+        if self.stage is Stage.RESUMING:  # the alive drones and the environment; a GCS may join any time
+            return Role.ENV in roles and all(self.drones[d].host for d in self.alive())
         return Role.ENV in roles and Role.GCS in roles and all(r.host for r in self.drones.values())
 
-    def _start(self) -> list[Effect]:
-        header = {
+    def header(self) -> dict:
+        return {
             "record": "header", "format": "dronesim-journal", "version": 1,
             "world": {"size": list(self.size), "seed": self.config.world.seed,
                       "cells": self.config.world.cells.hex()},
@@ -246,9 +277,61 @@ class Engine:
                        for d, r in self.drones.items()],
             "max_turns": self.config.max_turns, "lost_after": self.config.lost_after,
         }
-        status = self.status()
+
+    def _start(self) -> list[Effect]:
         self._log.info("all entities connected: the game starts")
-        return [Record(header), Publish(status), *self._enter(Stage.GCS, 1)]
+        return [Record(self.header()), Publish(self.status()), *self._enter(Stage.GCS, 1)]
+
+    def _resume(self) -> list[Effect]:
+        self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
+        return [Publish(self.status()), *self._enter(Stage.GCS, self.turn + 1)]
+
+    @classmethod
+    def resume(cls, config: GameConfig, records: list[dict], logger: logging.Logger) -> "Engine":
+        """An engine restored from a journal, waiting (RESUMING) for the entities to connect again;
+        it then plays the turn after the journal's last. UsageError if the journal is not this game's."""
+        engine = cls(config, logger)
+        if not records or records[0].get("record") != "header":
+            raise UsageError("the journal has no header: nothing to resume")
+        theirs = dict(records[0])
+        for d in theirs.get("drones", []):  # autopilots are learnt at admission, not configured
+            engine.drones[d["drone"]].autopilot = d.get("autopilot", "")
+            engine.drones[d["drone"]].cooperative = d.get("cooperative", False)
+        if engine.header() != theirs:
+            raise UsageError("the journal is of another game (world, drones or limits differ)")
+        for r in records[1:]:
+            match r.get("record"):
+                case "turn":
+                    engine._restore_turn(r)
+                case "over":
+                    raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
+        engine.stage = Stage.RESUMING
+        logger.info("restored turn %d from the journal", engine.turn)
+        return engine
+
+    def _restore_turn(self, r: dict) -> None:
+        """Apply one journaled turn to the state, as `_observe` did when it was played."""
+        alive = self.alive()
+        for d, p in r.get("targets", {}).items():
+            self.drones[d].target, self.drones[d].note = tuple(p), Note.NONE
+        if "intent" in r:
+            self._intent = Intent(r["intent"])
+            self.final = self._intent is Intent.FINAL
+        for d, p in r.get("moves", {}).items():
+            self.drones[d].pos = tuple(p)
+        for d, n in r.get("notes", {}).items():
+            self.drones[d].note = Note(n)
+        hovered = set(r.get("hovered", ()))
+        for d in alive:
+            self.drones[d].misses = self.drones[d].misses + 1 if d in hovered else 0
+        for d, cause in r.get("deaths", {}).items():
+            self.drones[d].state, self.drones[d].cause = DroneState.DEAD, Cause(cause)
+        for d in r.get("lost", ()):
+            self.drones[d].state, self.drones[d].cause = DroneState.LOST, Cause.LOST
+        self.turn = r["turn"]
+        state = hashlib.sha256(encode(self.status())).hexdigest()[:16]
+        if state != r.get("state"):
+            raise UsageError(f"the journal's turn {self.turn} does not replay to its recorded state")
 
     # ------------------------------------------------------------------ stages
 
@@ -261,14 +344,20 @@ class Engine:
                 self._turn_log = {"record": "turn", "turn": turn}
                 if "GCS" not in self.entities:  # no ground station: the drones keep their targets
                     return self._enter(Stage.DRONES, turn)
-                return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.GCS))]
+                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS)
+                return [Publish(self._phase_msg)]
             case Stage.DRONES:
                 self._moves.clear()
                 self._final = {}
                 self._notes.clear()
                 orders = tuple(Order(drone=d, pos=self.drones[d].pos, target=self.drones[d].target)
                                for d in self.alive())
-                return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders))]
+                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders)
+                if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
+                    self._held = True
+                    self._log.warning("turn %d waits for the environment to come back", turn)
+                    return []
+                return [Publish(self._phase_msg)]
             case Stage.ENV:
                 proposed = {d: self._moves.get(d, self.drones[d].pos) for d in self.alive()}
                 before = {d: self.drones[d].pos for d in proposed}
@@ -283,7 +372,8 @@ class Engine:
                 if not moves:
                     return self._observe(Upd(turn=turn, sender="ENV", cells=()))
                 self._pending_moves = moves
-                return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves))]
+                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)
+                return [Publish(self._phase_msg)]
         raise AssertionError(stage)
 
     def receive(self, msg: Message) -> list[Effect]:
@@ -346,8 +436,9 @@ class Engine:
             self.drones[d].note = Note.NONE
         if changed:
             self._turn_log["targets"] = {d: list(p) for d, p in changed.items()}
-        if msg.intent is not Intent.CONTINUE:
+        if msg.intent is not self._intent:
             self._turn_log["intent"] = msg.intent.value
+            self._intent = msg.intent
         if msg.intent is Intent.QUIT:
             return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
         self.final = msg.intent is Intent.FINAL
@@ -389,11 +480,13 @@ class Engine:
         dead = observer.deaths(self.size, before, after, buildings)
         hovered = sorted(d for d in alive if d not in self._moves)
         lost: list[str] = []
+        notes: dict[str, str] = {}
         for d in alive:
             r = self.drones[d]
             r.pos = after[d]
-            if d in self._notes:
+            if d in self._notes and self._notes[d] is not r.note:
                 r.note = self._notes[d]
+                notes[d] = r.note.value
             if d in hovered:
                 r.misses += 1
                 if r.misses >= self.config.lost_after:
@@ -410,11 +503,13 @@ class Engine:
         moves = {d: list(after[d]) for d in alive if after[d] != before[d]}
         if moves:
             log["moves"] = moves
+        if notes:
+            log["notes"] = notes
         if hovered:
             log["hovered"] = hovered
         if dead:
             log["deaths"] = {d: c.value for d, c in sorted(dead.items())}
-        status = self.status()
+        status = self.status(self.turn)
         log["state"] = hashlib.sha256(encode(status)).hexdigest()[:16]
         effects: list[Effect] = [Record(log), Publish(status)]
         end = self._end_reason()
@@ -458,8 +553,11 @@ class Engine:
         """The deadline of (stage, turn) passed; ignored if the game has moved on since."""
         if stage is not self.stage or turn != self.turn:
             return []
+        if self._env_missing():
+            return self._over(EndReason.ABORTED,
+                              f"the environment vanished and did not come back within {self.config.env_grace:g} s")
         match stage:
-            case Stage.ADMITTING:
+            case Stage.ADMITTING | Stage.RESUMING:
                 missing = [d for d, r in self.drones.items() if r.host is None]
                 missing += [r.value for r in (Role.ENV, Role.GCS) if r not in set(self.entities.values())]
                 return self._over(EndReason.ABORTED, f"entities never connected: {', '.join(missing)}")
@@ -479,10 +577,15 @@ class Engine:
                 return self._over(EndReason.ABORTED, f"the environment did not answer in turn {turn}")
         return []
 
-    def vanished(self, entity: str) -> list[Effect]:
-        """An admitted entity's presence token disappeared (its process died or was cut off)."""
-        role = self.entities.pop(entity, None)
-        if role is None or self.stage is Stage.OVER:
+    def vanished(self, entity: str, session: str = "") -> list[Effect]:
+        """An admitted entity's presence token disappeared (its process died or was cut off).
+
+        Only the admitted process's own token counts: another process's (a refused impostor's) does not."""
+        if entity not in self.entities or (session and self.sessions.get(entity) not in ("", session)):
+            return []
+        role = self.entities.pop(entity)
+        self.sessions.pop(entity, None)
+        if self.stage is Stage.OVER:
             return []
         self._log.warning("%s vanished", entity)
         match role:
@@ -493,11 +596,10 @@ class Engine:
                     self._targets.clear()
                     return self._enter(Stage.DRONES, self.turn)
             case Role.ENV:
-                if self.stage is not Stage.ADMITTING:
-                    return self._over(EndReason.ABORTED, "the environment vanished")
+                pass  # the game waits for it (deadline: env_grace); a returning one resyncs from STATUS
             case Role.DRONE:
                 gone = [d for d, r in self.drones.items() if r.host == entity]
-                if self.stage is Stage.ADMITTING:
+                if self.stage in (Stage.ADMITTING, Stage.RESUMING):
                     for d in gone:
                         self.drones[d].host = None
                     return []

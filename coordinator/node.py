@@ -19,7 +19,7 @@ from dronesim.schema import (
 )
 from dronesim.schema.messages import WorldSpec
 from dronesim.transport import (
-    Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, setup_logging, zenoh_config,
+    Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
 )
 
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Reply, Stage
@@ -53,8 +53,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         inbox.subscribe(keys.any_nps, Nps)
         inbox.subscribe(keys.upd, Upd)
         inbox.watch_presence()
-        token = session.liveliness().declare_token(keys.alive("SRV"))
-        present: set[str] = set()
+        token = session.liveliness().declare_token(keys.alive("SRV", session_id(session)))
+        present: set[tuple[str, str]] = set()  # (entity, session) of every presence token
         logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                     keys.root, ", ".join(d.drone for d in game.drones))
 
@@ -86,22 +86,22 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                     except RemoteInputError as err:  # counted and logged; the engine changed nothing
                         inbox.rejects.reject(f"{msg.TAG} from {msg.sender}", err)
                         run(err.follow)
-                case Presence(entity, alive):
+                case Presence(entity, sid, alive):
                     if alive:
-                        present.add(entity)
+                        present.add((entity, sid))
                     else:
-                        present.discard(entity)
-                        run(engine.vanished(entity))
+                        present.discard((entity, sid))
+                        run(engine.vanished(entity, sid))
             if engine.clock() != phase:
                 phase = engine.clock()
                 started = time.monotonic()
         # Let OVER reach everyone: wait (on events, bounded) until the admitted entities have left.
         end = time.monotonic() + LINGER_S
-        while present - {"SRV"} and time.monotonic() < end:
+        while {e for e, _ in present} - {"SRV"} and time.monotonic() < end:
             event = inbox.get(end - time.monotonic())
             match event:
-                case Presence(entity, False):
-                    present.discard(entity)
+                case Presence(entity, sid, False):
+                    present.discard((entity, sid))
                 case Asked(query, Connect() as msg):
                     run(engine.connect(msg, query))
         token.undeclare()

@@ -9,70 +9,114 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import time
 
 import zenoh
 
-from dronesim.entity import admit
+from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
     Ans, Ask, Connect, Keys, Nps, Over, Phase, RemoteInputError, Role, Turn, UsageError, decode, drone_id, encode,
     is_drone_id,
 )
-from dronesim.transport import Inbox, Outbox, Received, add_zenoh_args, setup_logging, zenoh_config
+from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
 from .autopilots.base import Answers
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
-         host: str | None = None, connect_timeout: float = 30.0, ask_timeout: float = 5.0) -> Over:
+         host: str | None = None, connect_timeout: float = 30.0, grace: float = 30.0,
+         ask_timeout: float = 5.0) -> Over:
     sender = host or drones[0]
     with zenoh.open(conf) as session:
-        token = session.liveliness().declare_token(keys.alive(sender))
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn, Turn)
         inbox.subscribe(keys.over, Over)
-        cooperative = pilot_class(autopilot).cooperative
-        welcome = admit(session, keys, Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones,
-                                               autopilot=autopilot, cooperative=cooperative),
-                        logger, timeout=connect_timeout)
-        pilots = {d: make_autopilot(autopilot, world_size=welcome.world.size) for d in drones}
+        hello = Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones, autopilot=autopilot,
+                        cooperative=pilot_class(autopilot).cooperative, session=session_id(session))
+        member = Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
+        pilots = {d: make_autopilot(autopilot, world_size=member.welcome.world.size) for d in drones}
         out = Outbox(session)
-        querier = session.declare_querier(keys.ask, timeout=ask_timeout,
-                                          consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+        asker = Asker(session, keys, inbox, logger, timeout=ask_timeout, patience=grace)
         mine = set(drones)
-
-        def ask_all(turn: int, pending: dict[str, tuple]) -> dict[str, Answers]:
-            handlers = {d: querier.get(payload=encode(Ask(turn=turn, sender=d, cells=cells)))
-                        for d, cells in pending.items()}
-            answers: dict[str, Answers] = {}
-            for d, handler in handlers.items():
-                answers[d] = {}
-                for reply in handler:
-                    if reply.ok is None:
-                        logger.warning("%s: ASK refused: %s", d, reply.err.payload.to_bytes().decode(errors="replace"))
-                        continue
-                    try:
-                        ans = decode(reply.ok.payload.to_bytes(), Ans)
-                    except RemoteInputError as err:
-                        inbox.rejects.reject(f"ANS for {d}", err)
-                        continue
-                    answers[d] = {c.pos: c for c in ans.cells}
-            return answers
-
+        done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
         while over is None:
-            match inbox.get():
+            match inbox.get(member.timeout()):
+                case None:
+                    member.check()
+                case Presence() as presence:
+                    member.on_presence(presence)
                 case Received(_, Turn(phase=Phase.DRONES) as turn):
-                    orders = [o for o in turn.orders if o.drone in mine]
-                    steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
-                    decisions = fly_round(steps, lambda pending: ask_all(turn.turn, pending))
-                    for d, dec in decisions.items():
+                    orders = tuple(o for o in turn.orders if o.drone in mine)
+                    if done is None or done[0] != (turn.turn, orders):
+                        steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
+                        decisions = fly_round(steps, lambda pending: asker.ask_all(turn.turn, pending))
+                        done = ((turn.turn, orders), decisions)
+                    for d, dec in done[1].items():
                         out.put(keys.nps(d), Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note))
                 case Received(_, Over() as over):
                     logger.info("OVER: %s", over.text)
-        querier.undeclare()
-        token.undeclare()
+        asker.close()
+        member.close()
         return over
+
+
+class Asker:
+    """Concurrent ASK queries to the environment. A query nobody answered (the environment is
+    restarting) is asked again once the environment is back, so the decision does not change."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, inbox: Inbox, logger: logging.Logger, *,
+                 timeout: float, patience: float) -> None:
+        self.session, self.keys, self.inbox, self.log = session, keys, inbox, logger
+        self.patience = patience
+        self.querier = session.declare_querier(keys.ask, timeout=timeout,
+                                               consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+
+    def ask_all(self, turn: int, pending: dict[str, tuple]) -> dict[str, Answers]:
+        answers: dict[str, Answers] = {}
+        end = time.monotonic() + self.patience
+        while pending:
+            handlers = {d: self.querier.get(payload=encode(Ask(turn=turn, sender=d, cells=cells)))
+                        for d, cells in pending.items()}
+            unanswered: dict[str, tuple] = {}
+            for d, handler in handlers.items():
+                got = self._collect(d, handler)
+                if got is None:
+                    unanswered[d] = pending[d]
+                else:
+                    answers[d] = got
+            if unanswered and time.monotonic() < end:
+                self.log.warning("no environment answered %s: waiting for it", ", ".join(unanswered))
+                await_presence(self.session, self.keys.alive_of("ENV"), end - time.monotonic())
+            elif unanswered:
+                self.log.error("no environment answered %s within %g s", ", ".join(unanswered), self.patience)
+                answers.update({d: {} for d in unanswered})
+                unanswered = {}
+            pending = unanswered
+        return answers
+
+    def _collect(self, d: str, handler) -> Answers | None:
+        """The answer to one ASK; None if nobody answered (no queryable, or zenoh's own timeout)."""
+        result: Answers | None = None
+        for reply in handler:
+            if reply.ok is None:
+                why = reply.err.payload.to_bytes().decode(errors="replace")
+                if why != "Timeout":
+                    self.log.warning("%s: ASK refused: %s", d, why)
+                    result = result or {}
+                continue
+            try:
+                ans = decode(reply.ok.payload.to_bytes(), Ans)
+            except RemoteInputError as err:
+                self.inbox.rejects.reject(f"ANS for {d}", err)
+                result = result or {}
+                continue
+            result = {c.pos: c for c in ans.cells}
+        return result
+
+    def close(self) -> None:
+        self.querier.undeclare()
 
 
 def parse_drones(text: str) -> tuple[str, ...]:
@@ -96,7 +140,7 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--id", default="D01", help="drone id(s): D01, or D01-D08 for a swarm host (default D01)")
     p.add_argument("--host", help="swarm host id Hnn (required when flying several drones)")
     p.add_argument("--autopilot", default="seed", choices=sorted(REGISTRY), help="default: seed")
-    p.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the coordinator")
+    add_entity_args(p)
     args = p.parse_args(argv)
     try:
         drones = parse_drones(args.id)
@@ -104,7 +148,7 @@ def cli(argv: list[str] | None = None) -> int:
             raise UsageError("several drones in one process need --host Hnn")
         logger = setup_logging(args.log_level, args.host or drones[0])
         main(zenoh_config(args), drones=drones, autopilot=args.autopilot, keys=Keys(args.root), logger=logger,
-             host=args.host, connect_timeout=args.connect_timeout)
+             host=args.host, connect_timeout=args.connect_timeout, grace=args.grace)
     except UsageError as err:
         print(f"dronesim drone: {err}", file=sys.stderr)
         return 2

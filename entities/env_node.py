@@ -16,28 +16,31 @@ import sys
 
 import zenoh
 
-from dronesim.entity import admit
+from dronesim.entity import Membership, add_entity_args
 from dronesim.schema import (
     Ans, Ask, Connect, Keys, MapRequest, Over, Phase, RemoteInputError, Role, Status, Turn, Upd, UsageError,
     WorldMap, encode,
 )
 from dronesim.schema.errors import StaleTurn, WrongSender
-from dronesim.transport import Asked, Inbox, Outbox, Received, add_zenoh_args, setup_logging, zenoh_config
+from dronesim.transport import (
+    Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
+)
 
 from .environment import Environment, build_world
 
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
-         connect_timeout: float = 30.0) -> Over:
+         connect_timeout: float = 30.0, grace: float = 30.0) -> Over:
     with zenoh.open(conf) as session:
-        token = session.liveliness().declare_token(keys.alive("ENV"))
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn, Turn)
         inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
         inbox.serve(keys.ask, Ask)
         inbox.serve(keys.map, MapRequest)
-        welcome = admit(session, keys, Connect(turn=0, sender="ENV", role=Role.ENV), logger, timeout=connect_timeout)
+        member = Membership(session, inbox, Connect(turn=0, sender="ENV", role=Role.ENV, session=session_id(session)),
+                            logger, connect_timeout=connect_timeout, grace=grace)
+        welcome = member.welcome
         world = build_world(welcome.world, (s.pos for s in welcome.starts))
         env = Environment(world, {s.drone: s.pos for s in welcome.starts})
         if draw:
@@ -65,9 +68,13 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
             query.drop()
 
         while over is None:
-            event = inbox.get()
+            event = inbox.get(member.timeout())
             try:
                 match event:
+                    case None:
+                        member.check()
+                    case Presence() as presence:
+                        member.on_presence(presence)  # the world stays; the next STATUS resyncs the drones
                     case Asked(query, Ask() as ask):
                         if not ask.sender.startswith("D"):
                             refuse(query, "only drones ask")
@@ -111,7 +118,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                 inbox.rejects.reject("ENV", err)
         for query, _ in waiting:
             refuse(query, "the game is over")
-        token.undeclare()
+        member.close()
         return over
 
 
@@ -119,12 +126,12 @@ def cli(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="dronesim env", description=__doc__)
     add_zenoh_args(p)
     p.add_argument("--no-draw", action="store_true", help="do not print the world at start")
-    p.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the coordinator")
+    add_entity_args(p)
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "ENV")
     try:
         main(zenoh_config(args), keys=Keys(args.root), logger=logger, draw=not args.no_draw,
-             connect_timeout=args.connect_timeout)
+             connect_timeout=args.connect_timeout, grace=args.grace)
     except UsageError as err:
         logger.error("%s", err)
         return 2

@@ -15,14 +15,15 @@ from collections.abc import Callable
 
 import zenoh
 
-from dronesim.entity import admit
+from dronesim.entity import Membership, add_entity_args
 from dronesim.schema import (
     Connect, Done, Intent, Keys, Over, Phase, Role, Status, Target, Turn, UsageError,
 )
-from dronesim.transport import Inbox, Outbox, Received, add_zenoh_args, setup_logging, zenoh_config
+from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .gcs import Plan, format_status, parse_command, trails
 from .environment import build_world
+from .web.node import add_web_args, run_web, wants_web
 
 
 class Console:
@@ -69,14 +70,16 @@ class Console:
 
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: list[str], script: str | None,
-         interactive: bool, quiet: bool = False, draw: bool = True, connect_timeout: float = 30.0) -> Over:
+         interactive: bool, quiet: bool = False, draw: bool = True, connect_timeout: float = 30.0,
+         grace: float = 30.0) -> Over:
     with zenoh.open(conf) as session:
-        token = session.liveliness().declare_token(keys.alive("GCS"))
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn, Turn)
         inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
-        welcome = admit(session, keys, Connect(turn=0, sender="GCS", role=Role.GCS), logger, timeout=connect_timeout)
+        member = Membership(session, inbox, Connect(turn=0, sender="GCS", role=Role.GCS, session=session_id(session)),
+                            logger, connect_timeout=connect_timeout, grace=grace)
+        welcome = member.welcome
         size = welcome.world.size
         drones = [s.drone for s in welcome.starts]
         plan = Plan.load(script, size) if script else Plan.parse(plan_texts, size, default_drone=drones[0])
@@ -95,7 +98,11 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         history: list[Status] = []
         over: Over | None = None
         while over is None:
-            match inbox.get():
+            match inbox.get(member.timeout()):
+                case None:
+                    member.check()
+                case Presence() as presence:
+                    member.on_presence(presence)  # admitted again: the coordinator sends the STATUS at once
                 case Received(_, Turn(phase=Phase.GCS) as turn):
                     if console is not None:
                         new, intent = console.ask(turn.turn, current)
@@ -140,7 +147,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                 print(f"  {s.drone}: {len(trails(history)[s.drone]) - 1} moves, {format_status_line(s)}")
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.snapshot())
-        token.undeclare()
+        member.close()
         return over
 
 
@@ -159,9 +166,12 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--scenario", help="take the scripted targets from a scenario file")
     p.add_argument("--quiet", action="store_true", help="do not print every turn's status")
     p.add_argument("--no-draw", action="store_true", help="do not draw the world at the end")
-    p.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the coordinator")
+    add_entity_args(p)
+    add_web_args(p)
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "GCS")
+    if wants_web(args):  # the browser ground station (entities/web/, docs/web-gcs.md)
+        return run_web(args, logger)
     interactive = not args.targets and not args.script and not args.scenario
     try:
         if args.scenario:
@@ -169,7 +179,8 @@ def cli(argv: list[str] | None = None) -> int:
 
             args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
         main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets, script=args.script,
-             interactive=interactive, quiet=args.quiet, draw=not args.no_draw, connect_timeout=args.connect_timeout)
+             interactive=interactive, quiet=args.quiet, draw=not args.no_draw, connect_timeout=args.connect_timeout,
+             grace=args.grace)
     except UsageError as err:
         logger.error("%s", err)
         return 2

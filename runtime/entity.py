@@ -1,25 +1,30 @@
-"""What every entity process does the same way: connect (admission), watch for OVER, and decide
-how a run ends. The role-specific loops live in entities/*_node.py."""
+"""What every entity process does the same way: connect (admission), stay admitted when the coordinator
+restarts or a link is cut, and wait for another entity's presence. The role-specific loops live in
+entities/*_node.py."""
 
 from __future__ import annotations
 
 import logging
+import threading
+import time
 
 import zenoh
 
 from dronesim.schema import Connect, Keys, Refused, RemoteInputError, UsageError, Welcome
-from dronesim.transport import request
+from dronesim.transport import Inbox, Presence, request
 
 
 class Refusal(UsageError):
     """The coordinator refused this entity (e.g. its role is already taken)."""
 
 
+class CoordinatorLost(UsageError):
+    """The coordinator vanished and did not come back in time."""
+
+
 def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Logger, *,
           timeout: float) -> Welcome:
-    """Send CONNECT, wait for the coordinator's answer (retrying until `timeout` if it is not up yet)."""
-    import time
-
+    """Send CONNECT, wait for the coordinator's answer (waiting for it to appear, until `timeout`)."""
     end = time.monotonic() + timeout
     while True:
         try:
@@ -29,7 +34,7 @@ def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Lo
             if time.monotonic() >= end:
                 raise UsageError(f"no coordinator answered on {keys.connect}: {err}") from None
             # No queryable yet: wait for the coordinator's presence token instead of polling blindly.
-            _await_token(session, keys.alive("SRV"), end - time.monotonic())
+            await_presence(session, keys.alive_of("SRV"), end - time.monotonic())
     match reply:
         case Refused(text=text):
             raise Refusal(f"connection refused: {text}")
@@ -39,12 +44,74 @@ def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Lo
     raise AssertionError(reply)
 
 
-def _await_token(session: zenoh.Session, key: str, timeout: float) -> None:
-    import threading
-
+def await_presence(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Block until a liveliness token matching `key` exists (True) or `timeout` passes (False)."""
     seen = threading.Event()
     sub = session.liveliness().declare_subscriber(key, lambda s: seen.set(), history=True)
     try:
-        seen.wait(max(0.0, timeout))
+        return seen.wait(max(0.0, timeout))
     finally:
         sub.undeclare()
+
+
+class Membership:
+    """An entity's admission, kept through a coordinator restart or a cut link.
+
+    It declares the entity's presence token, connects, and watches the coordinator's token: when every
+    coordinator session has gone, it waits up to `grace` seconds for one to come back and then connects
+    again (the coordinator re-admits the same process, or resumes a game from its journal). Feed it every
+    `Presence` event of the inbox; use `timeout()` for the inbox wait and `check()` when it times out.
+    """
+
+    def __init__(self, session: zenoh.Session, inbox: Inbox, hello: Connect, logger: logging.Logger, *,
+                 connect_timeout: float, grace: float) -> None:
+        self.session, self.keys, self.log = session, inbox.keys, logger
+        self.hello = hello
+        self.grace = grace
+        self.connect_timeout = connect_timeout
+        self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
+        inbox.watch_presence("SRV")
+        self.welcome = admit(session, self.keys, hello, logger, timeout=connect_timeout)
+        self._srv: set[str] = set()
+        self._lost_since: float | None = None
+
+    def on_presence(self, event: Presence) -> Welcome | None:
+        """Track the coordinator; returns the new Welcome when this entity was admitted again."""
+        if event.entity != "SRV":
+            return None
+        if event.alive:
+            self._srv.add(event.session)
+            if self._lost_since is not None:
+                self._lost_since = None
+                self.log.warning("the coordinator is back: connecting again")
+                self.welcome = admit(self.session, self.keys, self.hello, self.log, timeout=self.connect_timeout)
+                return self.welcome
+        else:
+            self._srv.discard(event.session)
+            if not self._srv and self._lost_since is None:
+                self._lost_since = time.monotonic()
+                self.log.warning("the coordinator vanished: waiting up to %g s for it to come back", self.grace)
+        return None
+
+    def timeout(self) -> float | None:
+        """How long the inbox may wait for the next event (None: no limit while the coordinator is there)."""
+        if self._lost_since is None:
+            return None
+        return max(0.0, self._lost_since + self.grace - time.monotonic())
+
+    def check(self) -> None:
+        """Raise CoordinatorLost once the grace period is over."""
+        if self._lost_since is not None and time.monotonic() >= self._lost_since + self.grace:
+            raise CoordinatorLost(f"the coordinator vanished and did not come back within {self.grace:g} s")
+
+    def close(self) -> None:
+        self.token.undeclare()
+
+
+def add_entity_args(parser) -> None:
+    """Flags every entity process shares."""
+    g = parser.add_argument_group("membership")
+    g.add_argument("--connect-timeout", type=float, default=30.0,
+                   help="seconds to wait for the coordinator to admit this entity (default 30)")
+    g.add_argument("--grace", type=float, default=30.0,
+                   help="seconds to wait for a vanished coordinator to come back (default 30)")

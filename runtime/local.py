@@ -27,17 +27,16 @@ class Inputs:
     """What a run depends on besides the scenario. `targets` as a Plan; the rest by turn."""
 
     plan: Plan
-    intents: dict[int, Intent] = field(default_factory=dict)  # turn -> intent (default: FINAL after the plan)
+    intents: dict[int, Intent] = field(default_factory=dict)  # turn -> intent from then on (as journaled: changes)
     hovered: dict[int, set[str]] = field(default_factory=dict)  # turn -> drones that sent no NPS
     vanished: dict[int, set[str]] = field(default_factory=dict)  # turn -> drones whose process vanished
-    scripted: bool = True  # intents not given: FINAL once the plan is over (a scripted GCS); else CONTINUE
+    scripted: bool = True  # no intents given: FINAL once the plan is over, as a scripted GCS says
 
     def intent(self, turn: int) -> Intent:
-        if turn in self.intents:
-            return self.intents[turn]
-        if self.scripted and turn >= self.plan.last_turn:
-            return Intent.FINAL
-        return Intent.CONTINUE
+        if self.scripted and not self.intents:
+            return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
+        said = [t for t in self.intents if t <= turn]
+        return self.intents[max(said)] if said else Intent.CONTINUE
 
 
 @dataclass(slots=True)

@@ -105,13 +105,18 @@ class Asked:
 
 @dataclass(frozen=True, slots=True)
 class Presence:
-    """An entity's liveliness token appeared (`alive`) or disappeared."""
+    """A process's liveliness token appeared (`alive`) or disappeared."""
 
     entity: str
+    session: str
     alive: bool
 
 
 Event = Received | Asked | Presence
+
+
+def session_id(session: zenoh.Session) -> str:
+    return str(session.info.zid())
 
 
 def check_addressed(keys: Keys, key: str, msg: Message) -> None:
@@ -181,16 +186,18 @@ class Inbox:
 
         self._handles.append(self.session.declare_queryable(key, on_query, complete=True))
 
-    def watch_presence(self) -> None:
+    def watch_presence(self, entity: str | None = None) -> None:
+        """Presence events for every process (or only `entity`'s), starting with those already there."""
+
         def on_token(sample: zenoh.Sample) -> None:
             def handle() -> None:
-                entity = self.keys.entity_of(str(sample.key_expr))
-                self._q.put(Presence(entity, sample.kind == zenoh.SampleKind.PUT))
+                who, session = self.keys.presence_of(str(sample.key_expr))
+                self._q.put(Presence(who, session, sample.kind == zenoh.SampleKind.PUT))
 
             self._guard(str(sample.key_expr), handle)
 
-        self._handles.append(
-            self.session.liveliness().declare_subscriber(self.keys.any_alive, on_token, history=True))
+        key = self.keys.any_alive if entity is None else self.keys.alive_of(entity)
+        self._handles.append(self.session.liveliness().declare_subscriber(key, on_token, history=True))
 
     def get(self, timeout: float | None = None) -> Event | None:
         """The next event, or None when `timeout` seconds pass first."""

@@ -41,7 +41,8 @@ KEY_TABLE: tuple[KeySpec, ...] = (
     KeySpec("ENV/MAP", "query", m.MapRequest, m.WorldMap, "ENV", "GCS", "the static world, for drawing"),
     KeySpec("{drone}/NPS", "put", m.Nps, None, "DRONE", "SRV", "`D01:ENV:NPS:x:y:z`: the drone's move"),
     KeySpec("ENV/UPD", "put", m.Upd, None, "ENV", "SRV", "`ENV:OBS:UPD:x:y:z:content`, all changed cells at once"),
-    KeySpec("{entity}/ALIVE", "liveliness", None, None, "each entity", "SRV", "presence token of a process"),
+    KeySpec("{entity}/ALIVE/{session}", "liveliness", None, None, "each entity", "SRV, entities",
+            "presence token of a process (one per Zenoh session, so an impostor cannot mask a death)"),
 )
 
 
@@ -84,10 +85,19 @@ class Keys:
     @property
     def any_nps(self) -> str: return self._k("*", "NPS")
 
-    # presence
-    def alive(self, entity: str) -> str: return self._k(entity, "ALIVE")
+    # presence: one liveliness token per process, <root>/<ENTITY>/ALIVE/<session id>
+    def alive(self, entity: str, session: str) -> str: return self._k(entity, "ALIVE", session)
     @property
-    def any_alive(self) -> str: return self._k("*", "ALIVE")
+    def any_alive(self) -> str: return self._k("*", "ALIVE", "*")
+    def alive_of(self, entity: str) -> str: return self._k(entity, "ALIVE", "*")
+
+    def presence_of(self, key: str) -> tuple[str, str]:
+        """(entity, session) of a presence token's key."""
+        prefix = self.root + "/"
+        parts = key[len(prefix):].split("/") if key.startswith(prefix) else []
+        if len(parts) != 3 or parts[1] != "ALIVE":
+            raise ValueError(f"{key!r} is not <root>/<ENTITY>/ALIVE/<session>")
+        return parts[0], parts[2]
 
     def entity_of(self, key: str) -> str:
         """The ENTITY part of ``<root>/<ENTITY>/<ACTION>`` (raises ValueError if not under root)."""

@@ -282,6 +282,7 @@ class Connect(Message):
     drones: tuple[str, ...] = ()
     autopilot: str = ""
     cooperative: bool = False  # its drones give way to others when moves conflict (arbitration)
+    session: str = ""  # the sender's Zenoh session id: tells a reconnection from an impostor
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
@@ -294,6 +295,8 @@ class Connect(Message):
         _check(self.role is not Role.DRONE or bool(self.drones), "a DRONE entity must host at least one drone")
         _check(isinstance(self.autopilot, str) and len(self.autopilot) <= 32, "autopilot must be a short string")
         _check(type(self.cooperative) is bool, "cooperative must be a bool")
+        _check(isinstance(self.session, str) and len(self.session) <= 64 and self.session.isalnum() or self.session == "",
+               "session must be a Zenoh id (up to 64 alphanumerics)")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -21,7 +21,8 @@ VECTORS_PATH = pathlib.Path(__file__).with_name("vectors.json")
 SAMPLES: dict[str, Message] = {
     "connect_env": Connect(turn=0, sender="ENV", role=Role.ENV),
     "connect_gcs": Connect(turn=0, sender="GCS", role=Role.GCS),
-    "connect_drone": Connect(turn=0, sender="D01", role=Role.DRONE, drones=("D01",), autopilot="seed"),
+    "connect_drone": Connect(turn=0, sender="D01", role=Role.DRONE, drones=("D01",), autopilot="seed",
+                             session="7f3a9c2e41b05d68"),
     "connect_swarm": Connect(turn=0, sender="H01", role=Role.DRONE, drones=("D01", "D02"), autopilot="dstar",
                              cooperative=True),
     "welcome": Welcome(turn=0, sender="SRV", entity="D01", text="You are connected as D01",

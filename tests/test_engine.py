@@ -292,16 +292,27 @@ def test_no_joining_a_running_or_finished_game() -> None:
     r = reply(g.engine.connect(connect("D02", Role.DRONE, ("D02",)), 1))
     assert isinstance(r, Refused)
     g.feed(g.engine.vanished("ENV"))
-    assert g.stage is Stage.OVER
+    assert g.stage is Stage.GCS, "the game waits for the environment to come back"
+    assert g.engine.deadline() == g.engine.config.env_grace
+    g.feed(g.engine.expire(*g.engine.clock()))
+    assert g.stage is Stage.OVER and g.engine.end.reason is EndReason.ABORTED
     r = reply(g.engine.connect(connect("ENV", Role.ENV), 2))
     assert isinstance(r, Refused) and r.text == "the game is over"
     g3 = Game()
-    g3.engine.entities.pop("ENV")  # as if ENV's token went away unnoticed
-    r = reply(g3.engine.connect(connect("ENV", Role.ENV), 3))
-    assert isinstance(r, Refused) and r.text == "the environment cannot join a running game"
     g3.engine.entities.pop("D01")
     r = reply(g3.engine.connect(connect("D01", Role.DRONE, ("D01",)), 4))
     assert isinstance(r, Refused) and r.text == "drones cannot join a running game"
+
+
+def test_a_restarted_environment_rejoins_and_takes_up_the_phase() -> None:
+    g = Game()
+    g.gcs({"D01": (2, 0, 0)})
+    assert g.stage is Stage.DRONES
+    g.feed(g.engine.vanished("ENV"))
+    effects = g.engine.connect(connect("ENV", Role.ENV), 3)
+    assert isinstance(reply(effects), Welcome)
+    assert pubs(effects) == [g.engine.status()], "it resyncs from the last STATUS; the DRONES turn is already out"
+    assert g.engine.status().turn == g.turn - 1
 
 
 def test_drone_host_vanishing_during_admission_frees_its_drones() -> None:
@@ -809,13 +820,31 @@ def test_vanished_gcs_outside_its_phase() -> None:
     assert g.snapshot() == before
 
 
-def test_vanished_env_aborts_and_unknown_or_late_vanish_ignored() -> None:
+def test_vanished_env_aborts_after_its_grace_and_unknown_or_late_vanish_ignored() -> None:
     g = Game()
     assert g.engine.vanished("H77") == []
-    effects = g.feed(g.engine.vanished("ENV"))
+    assert g.feed(g.engine.vanished("ENV")) == []
+    effects = g.feed(g.engine.expire(*g.engine.clock()))
     assert pubs(effects, Over)[0].reason is EndReason.ABORTED
     assert g.engine.vanished("D01") == []
     assert g.engine.vanished("GCS") == []
+
+
+def test_only_the_admitted_session_can_vanish() -> None:
+    e = Engine(config(("D01", (0, 0, 0)),), LOG)
+    e.connect(Connect(turn=0, sender="GCS", role=Role.GCS, session="aa"), 1)
+    assert "GCS" in e.entities
+    assert e.vanished("GCS", "bb") == [] and "GCS" in e.entities, "an impostor's token going away changes nothing"
+    e.vanished("GCS", "aa")
+    assert "GCS" not in e.entities
+
+
+def test_the_same_process_may_connect_again_an_impostor_may_not() -> None:
+    e = Engine(config(("D01", (0, 0, 0)),), LOG)
+    assert isinstance(reply(e.connect(Connect(turn=0, sender="GCS", role=Role.GCS, session="aa"), 1)), Welcome)
+    assert isinstance(reply(e.connect(Connect(turn=0, sender="GCS", role=Role.GCS, session="aa"), 2)), Welcome)
+    r = reply(e.connect(Connect(turn=0, sender="GCS", role=Role.GCS, session="bb"), 3))
+    assert isinstance(r, Refused) and "already connected" in r.text
 
 
 # --------------------------------------------------------------------------- journal and determinism

@@ -9,11 +9,11 @@ import sys
 import pytest
 import zenoh
 
-from dronesim.entity import Refusal, admit
+from dronesim.entity import Membership
 from dronesim.schema import (
     Connect, Done, Intent, Keys, Over, Phase, Role, Target, Turn, encode,
 )
-from dronesim.transport import Inbox, Outbox, Received
+from dronesim.transport import Inbox, Outbox, Received, session_id
 from dronesim.entities.world import Building, World
 from tests.harness import Cluster, client_config, embedded_router, journal_records
 
@@ -105,12 +105,12 @@ def test_invalid_targets_and_malformed_messages_change_nothing(router, tmp_path)
 
         log = logging.getLogger("test-gcs")
         with zenoh.open(client_config(router)) as s:
-            token = s.liveliness().declare_token(keys.alive("GCS"))
             inbox = Inbox(s, keys, log)
             inbox.subscribe(keys.turn, Turn)
             inbox.subscribe(keys.over, Over)
             out = Outbox(s)
-            admit(s, keys, Connect(turn=0, sender="GCS", role=Role.GCS), log, timeout=30)
+            member = Membership(s, inbox, Connect(turn=0, sender="GCS", role=Role.GCS, session=session_id(s)), log,
+                                connect_timeout=30, grace=30)
             done = False
             while not done:
                 ev = inbox.get(30)
@@ -124,7 +124,7 @@ def test_invalid_targets_and_malformed_messages_change_nothing(router, tmp_path)
                     case Received(_, Over()):
                         done = True
             codes = c.wait_all()
-            token.undeclare()
+            member.close()
         assert set(codes.values()) == {0}, [p.text for p in c.procs]
         return journal.read_bytes(), c
 

@@ -507,8 +507,12 @@ def test_keys_under_default_root() -> None:
     assert k.nps("D02") == "sim/D02/NPS"
     assert k.any_tgt == "sim/*/TGT"
     assert k.any_nps == "sim/*/NPS"
-    assert k.alive("ENV") == "sim/ENV/ALIVE"
-    assert k.any_alive == "sim/*/ALIVE"
+    assert k.alive("ENV", "a1b2") == "sim/ENV/ALIVE/a1b2"
+    assert k.any_alive == "sim/*/ALIVE/*"
+    assert k.alive_of("SRV") == "sim/SRV/ALIVE/*"
+    assert k.presence_of("sim/H01/ALIVE/a1b2") == ("H01", "a1b2")
+    with pytest.raises(ValueError):
+        k.presence_of("sim/H01/ALIVE")
 
 
 @pytest.mark.parametrize("root", ["sim", "game-2", "lab/room_1", "a/b/c"])
@@ -519,7 +523,7 @@ def test_keys_under_custom_root(root: str) -> None:
     assert k.entity_of(k.nps("D07")) == "D07"
     assert k.entity_of(k.tgt("D100")) == "D100"
     assert k.entity_of(k.upd) == "ENV"
-    assert k.entity_of(k.alive("H01")) == "H01"
+    assert k.presence_of(k.alive("H01", "ff00"))[0] == "H01"
 
 
 @pytest.mark.parametrize("root", ["", "/sim", "sim/", "sim//x", "sim/*", "sim/**", "a b", "sim$", "si?m", "é",
@@ -551,11 +555,11 @@ def test_key_table_covers_every_message_type() -> None:
 def test_key_table_rows_are_consistent() -> None:
     k = Keys("sim")
     built = {k.connect, k.turn, k.over, k.status, k.gcs_done, k.ask, k.map, k.upd,
-             k.tgt("D01"), k.nps("D01"), k.alive("D01")}
+             k.tgt("D01"), k.nps("D01"), k.alive("D01", "0a1b")}
     templates = [spec.template for spec in KEY_TABLE]
     assert len(set(templates)) == len(templates)
     for spec in KEY_TABLE:
-        assert f"sim/{spec.template.format(drone='D01', entity='D01')}" in built, spec.template
+        assert f"sim/{spec.template.format(drone='D01', entity='D01', session='0a1b')}" in built, spec.template
         assert spec.how in ("put", "query", "liveliness")
         if spec.how == "query":
             assert spec.reply is not None and spec.message is not None

@@ -1,0 +1,367 @@
+"""What the browser ground station knows and shows, and what it decides. Pure: no network, no clock.
+
+`GroundState` is owned by one thread (the Zenoh main loop). It is fed the coordinator's TURN, STATUS
+and OVER, and the human's commands (set a target, pause, resume, step, pace, quit), and it says when
+the ground station answers its GCS phase and with what: every alive drone's last target (re-sent each
+turn, as the seed does), then DONE with their count. `snapshot()` is the JSON the page renders.
+
+Pacing: a human cannot click between turns that take milliseconds, so the GCS phase is answered at most
+every `pace` seconds, and is *held* (not answered) while there is nothing to do -- no alive drone has a
+target it has not reached or found unreachable -- or while the human pauses. Holding is the seed's rule
+(the ground station forces a first target) extended to every turn: the game never burns its turns while
+the human thinks. `step` answers one phase now, `quit` ends the game.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import deque
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+from dronesim.schema import (
+    Cause, Cell, DroneState, DroneStatus, Intent, Note, Over, Status, Turn, UsageError, is_drone_id,
+)
+
+from ..world import World
+
+#: How the page names a drone's state.
+ALIVE, REACHED, UNREACHABLE, DEAD, LOST = "alive", "reached", "unreachable", "dead", "lost"
+
+CAUSE_TEXT = {
+    Cause.BUILDING: "crashed into a building",
+    Cause.OUTSIDE: "left the world",
+    Cause.VERTEX: "collided with another drone (same cell)",
+    Cause.SWAP: "collided with another drone (swapped cells)",
+    Cause.LOST: "missed its deadlines or its process vanished",
+}
+
+#: Bounds on what a snapshot carries (a long game must not make every update huge).
+LOG_LIMIT = 300
+TRAIL_LIMIT = 2000
+PACE_RANGE = (0.0, 10.0)
+#: Seconds a GCS phase waits for the STATUS of the turn before it (they travel on different keys).
+STATUS_GRACE = 2.0
+
+
+class Rejected(Exception):
+    """The human's command cannot be carried out; `status` is the HTTP status that says why."""
+
+    def __init__(self, text: str, status: int = 422) -> None:
+        super().__init__(text)
+        self.text = text
+        self.status = status
+
+
+def view_of(s: DroneStatus) -> str:
+    """alive / reached / unreachable / dead / lost."""
+    if s.state is DroneState.DEAD:
+        return DEAD
+    if s.state is DroneState.LOST:
+        return LOST
+    return {Note.REACHED: REACHED, Note.UNREACHABLE: UNREACHABLE}.get(s.note, ALIVE)
+
+
+def fmt(cell: Iterable[int] | None) -> str:
+    return "none" if cell is None else "(" + ", ".join(str(c) for c in cell) + ")"
+
+
+_CELL_TEXT = re.compile(r"\s*\(?\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*\)?\s*\Z")
+
+
+def parse_cell(value: object) -> Cell:
+    """A cell given as ``[x, y, z]`` (three integers) or ``"x,y,z"`` / ``"x y z"``; `Rejected` (400) if
+    it is neither. Bounds are checked against the world by `GroundState.check_target`."""
+    if isinstance(value, str):
+        m = _CELL_TEXT.match(value)
+        if not m:
+            raise Rejected(f"{value!r} is not x,y,z (three integers)", 400)
+        return (int(m[1]), int(m[2]), int(m[3]))
+    if isinstance(value, (list, tuple)) and len(value) == 3 and all(type(v) is int for v in value):
+        return (value[0], value[1], value[2])
+    raise Rejected(f"a cell must be [x, y, z] (three integers) or \"x,y,z\", got {value!r}", 400)
+
+
+def world_json(world: World, *, mode: str, title: str = "") -> dict:
+    """The static world for the page: size and, per floor z, one string per row x ('#' building, '.' empty)."""
+    nx, ny, nz = world.size
+    floors = []
+    for z in range(nz):
+        layer = world.grid[:, :, z]
+        floors.append(["".join("#" if b else "." for b in row) for row in layer.tolist()])
+    return {"mode": mode, "title": title, "size": list(world.size), "floors": floors,
+            "building_cells": int(world.grid.sum())}
+
+
+@dataclass(slots=True)
+class DroneView:
+    pos: Cell
+    status: str = ALIVE
+    cause: Cause = Cause.NONE
+    target: Cell | None = None  # in force (the coordinator's, from STATUS)
+    trail: list[Cell] = field(default_factory=list)
+
+    @property
+    def alive(self) -> bool:
+        return self.status not in (DEAD, LOST)
+
+
+class GroundState:
+    """The live ground station's state (see the module doc). Times are seconds of any monotonic clock."""
+
+    def __init__(self, world: World, starts: Mapping[str, Cell], *, pace: float = 0.5, title: str = "") -> None:
+        self.world = world
+        self.title = title
+        self.drones: dict[str, DroneView] = {d: DroneView(pos=tuple(c), trail=[tuple(c)])
+                                             for d, c in sorted(starts.items())}
+        self.wanted: dict[str, Cell] = {}  # the targets this GCS sends (re-sent every turn)
+        self.turn = 0  # the turn in progress (the latest TURN seen)
+        self.phase: str | None = None
+        self.status_turn = -1  # the turn of the latest STATUS
+        self.pending: int | None = None  # a GCS phase not answered yet
+        self.pending_since = 0.0
+        self.last_answer: float | None = None
+        self.paused = False
+        self.pace = self._check_pace(pace)
+        self.step_requested = False
+        self.quit_requested = False
+        self.quit_sent = False
+        self.scheduled_until = 0  # the last turn of a scripted plan (--targets): turns must reach it
+        self.over: Over | None = None
+        self.log: deque[dict] = deque(maxlen=LOG_LIMIT)
+        self.seq = 0  # bumped on every change the page should see
+
+    # ------------------------------------------------------------------ helpers
+
+    def _event(self, kind: str, text: str, turn: int | None = None) -> None:
+        self.log.append({"turn": self.turn if turn is None else turn, "kind": kind, "text": text})
+
+    def _changed(self) -> None:
+        self.seq += 1
+
+    @staticmethod
+    def _check_pace(value: object) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not PACE_RANGE[0] <= float(value) <= PACE_RANGE[1]:
+            raise Rejected(f"pace must be a number of seconds in {PACE_RANGE[0]:g}..{PACE_RANGE[1]:g}, got {value!r}",
+                           400)
+        return float(value)
+
+    def note(self, kind: str, text: str) -> None:
+        """An event from outside the game's messages (connection, refusals by the coordinator...)."""
+        self._event(kind, text)
+        self._changed()
+
+    # ------------------------------------------------------------------ from the coordinator
+
+    def on_turn(self, msg: Turn, now: float) -> None:
+        if msg.turn < self.turn:
+            return  # an old phase overtaken by a newer one
+        self.turn, self.phase = msg.turn, msg.phase.value
+        if msg.phase.value == "GCS":
+            if self.pending != msg.turn:
+                self.pending, self.pending_since = msg.turn, now
+        elif self.pending is not None and self.pending <= msg.turn:
+            self.pending = None  # the coordinator moved on without us (its GCS deadline passed)
+        self._changed()
+
+    def on_status(self, msg: Status) -> None:
+        if msg.turn < self.status_turn:
+            return
+        self.status_turn = msg.turn
+        for s in msg.drones:
+            view = self.drones.get(s.drone)
+            if view is None:  # not in our Welcome (cannot happen with a correct coordinator): show it anyway
+                view = self.drones[s.drone] = DroneView(pos=s.pos, trail=[s.pos])
+            was = view.status
+            view.status, view.cause, view.target = view_of(s), s.cause, s.target
+            if view.pos != s.pos:
+                view.pos = s.pos
+                if not view.trail or view.trail[-1] != s.pos:
+                    view.trail.append(s.pos)
+                    del view.trail[:-TRAIL_LIMIT]
+            if view.status != was:
+                self._transition(s.drone, view, msg.turn)
+            if not s.alive:
+                self.wanted.pop(s.drone, None)  # nothing more to say to a dead or lost drone
+            elif s.target is not None:
+                self.wanted.setdefault(s.drone, s.target)  # a GCS joining late takes over the targets in force
+        self._changed()
+
+    def _transition(self, drone: str, view: DroneView, turn: int) -> None:
+        where = fmt(view.pos)
+        match view.status:
+            case "dead":
+                self._event("death", f"{drone} died at {where}: {CAUSE_TEXT.get(view.cause, view.cause.value)}", turn)
+            case "lost":
+                self._event("lost", f"{drone} is LOST at {where}: {CAUSE_TEXT[Cause.LOST]}", turn)
+            case "reached":
+                self._event("reached", f"{drone} reached its target {where}", turn)
+            case "unreachable":
+                self._event("unreachable", f"{drone} reports its target {fmt(view.target)} unreachable; "
+                                           f"hovering at {where}", turn)
+
+    def on_over(self, msg: Over) -> None:
+        if self.over is not None:
+            return
+        self.over = msg
+        self.pending = None
+        self._event("over", f"GAME OVER at turn {msg.turn}: {msg.reason.value}"
+                            + (f" - {msg.text}" if msg.text else ""), msg.turn)
+        self._changed()
+
+    def schedule(self, turn: int, targets: Mapping[str, Cell], last_turn: int) -> None:
+        """Scripted targets (--targets / --script) taking effect at `turn`; `last_turn` ends the script."""
+        self.scheduled_until = last_turn
+        for d, c in sorted(targets.items()):
+            if d in self.drones and self.drones[d].alive and self.wanted.get(d) != c:
+                self.wanted[d] = c
+                self._event("target", f"scripted target of {d}: {fmt(c)}", turn)
+        self._changed()
+
+    # ------------------------------------------------------------------ from the human
+
+    def check_target(self, drone: object, cell: Cell) -> str:
+        """The seed's correctForm and more: a known, alive drone and a cell inside the world."""
+        if self.over is not None:
+            raise Rejected("the game is over: no more targets", 409)
+        if not isinstance(drone, str) or not is_drone_id(drone):
+            raise Rejected(f"{drone!r} is not a drone id (like D01)", 400)
+        view = self.drones.get(drone)
+        if view is None:
+            raise Rejected(f"unknown drone {drone}: this game flies {', '.join(self.drones)}")
+        if not view.alive:
+            raise Rejected(f"{drone} is {view.status}: it takes no more targets")
+        nx, ny, nz = self.world.size
+        if not self.world.contains(cell):
+            raise Rejected(f"{fmt(cell)} is outside the world: 0 <= x < {nx}, 0 <= y < {ny}, 0 <= z < {nz}")
+        return drone
+
+    def set_target(self, drone: object, cell: Cell) -> dict:
+        d = self.check_target(drone, cell)
+        self.wanted[d] = cell
+        self.step_requested = False
+        extra = " (a building cell: the drone will not get in)" if self.world.is_building(cell) else ""
+        self._event("target", f"target of {d} set to {fmt(cell)}{extra}")
+        self._changed()
+        return {"ok": True, "text": f"target of {d} set to {fmt(cell)}{extra}; sent at the next GCS phase"}
+
+    def control(self, action: object, value: object = None) -> dict:
+        """pause, resume, step, quit, or pace (with `value` seconds)."""
+        if self.over is not None:
+            raise Rejected("the game is over", 409)
+        match action:
+            case "pause":
+                self.paused = True
+                text = "paused: the ground station holds its phase"
+            case "resume":
+                self.paused = False
+                text = "resumed"
+            case "step":
+                self.step_requested = True
+                text = "one turn"
+            case "pace":
+                self.pace = self._check_pace(value)
+                text = f"one turn every {self.pace:g} s at most"
+            case "quit":
+                self.quit_requested = True
+                text = "ending the game"
+            case _:
+                raise Rejected(f"unknown action {action!r}: use pause, resume, step, pace or quit", 400)
+        self._event("control", text)
+        self._changed()
+        return {"ok": True, "text": text}
+
+    # ------------------------------------------------------------------ the GCS phase
+
+    def busy(self) -> bool:
+        """Whether turns must go on by themselves: a drone has a target it has not reached (or found
+        unreachable), or a scripted target is still to come."""
+        if self.pending is not None and self.scheduled_until > self.pending - 1:
+            return True
+        for d, cell in self.wanted.items():
+            view = self.drones.get(d)
+            if view is None or not view.alive:
+                continue
+            if view.target != cell or view.status == ALIVE:
+                return True
+        return False
+
+    def waiting(self) -> tuple[str, str]:
+        """(code, text) of what the game is waiting for, for the page."""
+        if self.over is not None:
+            return "over", f"game over: {self.over.reason.value}"
+        if self.quit_requested:
+            return "quitting", "ending the game at the next GCS phase"
+        if self.turn == 0:
+            return "starting", "waiting for every entity to connect"
+        if self.paused:
+            return "paused", "paused: press Resume or Step"
+        if not any(v.alive for v in self.drones.values()):
+            return "idle", "no drone alive"
+        if self.pending is not None and not self.busy():
+            if not any(d in self.wanted for d, v in self.drones.items() if v.alive):
+                return "target", "waiting for a first target: pick a drone, then click a cell"
+            return "idle", "every drone is at its target (or reports it unreachable): set a new target or quit"
+        return "running", f"running, one turn every {self.pace:g} s at most"
+
+    def due(self, now: float) -> float | None:
+        """Seconds until the pending GCS phase should be answered (0: now), or None: held, no timer."""
+        if self.pending is None or self.over is not None or self.quit_sent:
+            return None
+        if self.quit_requested or self.step_requested:
+            return 0.0
+        if self.paused or not self.busy():
+            return None
+        wait = 0.0
+        if self.last_answer is not None:
+            wait = self.last_answer + self.pace - now
+        if self.status_turn < self.pending - 1:  # its STATUS is on the way (another key): decide on it
+            wait = max(wait, self.pending_since + STATUS_GRACE - now)
+        return max(0.0, wait)
+
+    def answer(self, now: float) -> tuple[int, dict[str, Cell], Intent]:
+        """Answer the pending phase: (turn, targets to send, intent); call when `due` says 0."""
+        assert self.pending is not None
+        turn = self.pending
+        targets = {d: c for d, c in sorted(self.wanted.items()) if d in self.drones and self.drones[d].alive}
+        intent = Intent.QUIT if self.quit_requested else Intent.CONTINUE
+        self.pending = None
+        self.last_answer = now
+        self.step_requested = False
+        if intent is Intent.QUIT:
+            self.quit_sent = True
+        self._changed()
+        return turn, targets, intent
+
+    # ------------------------------------------------------------------ for the page
+
+    def snapshot(self) -> dict:
+        code, text = self.waiting()
+        drones = []
+        for d, v in self.drones.items():
+            wanted = self.wanted.get(d)
+            drones.append({
+                "id": d, "pos": list(v.pos), "status": v.status,
+                "cause": None if v.cause is Cause.NONE else v.cause.value.lower(),
+                "cause_text": CAUSE_TEXT.get(v.cause, "") if v.cause is not Cause.NONE else "",
+                "target": None if v.target is None else list(v.target),
+                "wanted": None if wanted is None else list(wanted),
+                "trail": [list(c) for c in v.trail],
+            })
+        over = None if self.over is None else {"turn": self.over.turn, "reason": self.over.reason.value,
+                                               "text": self.over.text}
+        return {
+            "mode": "live", "seq": self.seq, "turn": self.turn, "phase": self.phase,
+            "status_turn": max(self.status_turn, 0), "drones": drones, "log": list(self.log), "over": over,
+            "control": {"paused": self.paused, "pace": self.pace, "waiting": code, "text": text,
+                        "pending": self.pending},
+        }
+
+
+def check_pace_arg(value: float) -> float:
+    """The --pace flag (a UsageError, not an HTTP refusal)."""
+    try:
+        return GroundState._check_pace(value)
+    except Rejected as err:
+        raise UsageError(err.text) from None

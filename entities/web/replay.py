@@ -1,0 +1,109 @@
+"""A journal as frames the page plays (``dronesim gcs --web PORT --replay JOURNAL``). Pure, no network.
+
+The world comes from the journal's header through `build_world` (the environment's own recipe), each
+drone's state after each turn from `dronesim.replay.tracks`. Frame 0 is the start; frame k the state
+after the k-th turn record. A frame lists every drone's cell, state, cause and target; trails are the
+page's to accumulate (so the data grows with turns x drones, not with its square). The journal does not
+record the drones' notes, so a replayed drone is "reached" when it stands on its target, and never
+"unreachable".
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+from dronesim.coordinator.journal import read
+from dronesim.replay import header_config, tracks
+from dronesim.schema import UsageError
+
+from ..environment import build_world
+from ..world import World
+from .model import ALIVE, CAUSE_TEXT, DEAD, LOST, REACHED, fmt, world_json
+from dronesim.schema import Cause
+
+
+def _status(track) -> str:
+    if track.state == "DEAD":
+        return DEAD
+    if track.state == "LOST":
+        return LOST
+    return REACHED if track.target is not None and tuple(track.pos) == tuple(track.target) else ALIVE
+
+
+def _cause(text: str) -> Cause:
+    try:
+        return Cause(text)
+    except ValueError:
+        return Cause.NONE
+
+
+class Replay:
+    """A loaded journal: its world and its frames (see the module doc)."""
+
+    def __init__(self, path: str | pathlib.Path) -> None:
+        self.path = pathlib.Path(path)
+        records = list(read(self.path))
+        if not records:
+            raise UsageError(f"{self.path} is empty: not a journal")
+        self.config, self.autopilots = header_config(records[0])
+        self.world: World = build_world(self.config.world, (d.start for d in self.config.drones))
+        self.over = next(({"turn": r["turn"], "reason": r["reason"], "text": r.get("text", "")}
+                          for r in records if r.get("record") == "over"), None)
+        self.frames = self._frames(records)
+
+    def _frames(self, records: list[dict]) -> list[dict]:
+        turns = [r for r in records if r.get("record") == "turn"]
+        try:
+            frames = []
+            before: dict[str, tuple[str, object]] = {}
+            for k, until in enumerate([0, *(r["turn"] for r in turns)]):
+                tr, _ = tracks(self.config, records, until=until)
+                events = []
+                record = turns[k - 1] if k else None
+                if record is not None:
+                    for d, p in sorted(record.get("targets", {}).items()):
+                        events.append({"turn": until, "kind": "target", "text": f"target of {d} set to {fmt(p)}"})
+                    if record.get("hovered"):
+                        events.append({"turn": until, "kind": "info",
+                                       "text": f"no move in time from {', '.join(record['hovered'])}: hovering"})
+                drones = []
+                for d, t in tr.items():
+                    status = _status(t)
+                    cause = _cause(t.cause) if status in (DEAD, LOST) else Cause.NONE
+                    if k and before.get(d, (ALIVE, None))[0] != status:
+                        events.append(self._event(d, status, cause, t, until))
+                    before[d] = (status, t.target)
+                    drones.append({"id": d, "pos": list(t.pos), "status": status,
+                                   "cause": None if cause is Cause.NONE else cause.value.lower(),
+                                   "cause_text": CAUSE_TEXT.get(cause, ""),
+                                   "target": None if t.target is None else list(t.target),
+                                   "autopilot": self.autopilots.get(d, "")})
+                if record is not None and record.get("intent") == "QUIT":
+                    events.append({"turn": until, "kind": "control", "text": "the ground station ended the game"})
+                frames.append({"turn": until, "drones": drones, "events": events})
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise UsageError(f"{self.path}: bad journal record: {exc!r}") from None
+        if self.over is not None:
+            text = f"GAME OVER at turn {self.over['turn']}: {self.over['reason']}"
+            if self.over["text"]:
+                text += f" - {self.over['text']}"
+            frames[-1]["events"].append({"turn": self.over["turn"], "kind": "over", "text": text})
+        return frames
+
+    @staticmethod
+    def _event(d: str, status: str, cause: Cause, t, turn: int) -> dict:
+        where = fmt(t.pos)
+        if status == DEAD:
+            return {"turn": turn, "kind": "death", "text": f"{d} died at {where}: {CAUSE_TEXT.get(cause, cause.value)}"}
+        if status == LOST:
+            return {"turn": turn, "kind": "lost", "text": f"{d} is LOST at {where}: {CAUSE_TEXT[Cause.LOST]}"}
+        if status == REACHED:
+            return {"turn": turn, "kind": "reached", "text": f"{d} reached its target {where}"}
+        return {"turn": turn, "kind": "info", "text": f"{d} is on its way again from {where}"}
+
+    def world_json(self) -> dict:
+        return world_json(self.world, mode="replay", title=self.path.name)
+
+    def replay_json(self) -> dict:
+        return {"journal": self.path.name, "starts": {d.drone: list(d.start) for d in self.config.drones},
+                "frames": self.frames, "over": self.over}

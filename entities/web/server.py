@@ -1,0 +1,348 @@
+"""The web ground station's HTTP side: standard library only (ThreadingHTTPServer), no Zenoh here.
+
+Routes (every error is a JSON ``{"error": "..."}`` with a 4xx/5xx status, never a crash):
+
+  GET  /                 the page (static/index.html); /app.js, /style.css: its assets
+  GET  /api/world        the static world: size, floors ('#' building, '.' empty), mode
+  GET  /api/state        the latest full state (live mode)
+  GET  /api/events       Server-Sent Events: the full state at once, then every new state (``event: state``)
+  GET  /api/replay       the journal's frames (replay mode)
+  POST /api/target       {"drone": "D01", "cell": [x, y, z] | "x,y,z"}
+  POST /api/control      {"action": "pause" | "resume" | "step" | "quit" | "pace", "value": seconds}
+
+A `Backend` does the work: in live mode it hands each command to the Zenoh main thread through a queue
+and waits for its answer (web/node.py); the HTTP threads never touch the game state. The `Hub` keeps the
+latest state and feeds every SSE client; a reconnecting page gets the full state at once.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+from http import HTTPStatus
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from typing import Protocol
+from urllib.parse import urlsplit
+
+from dronesim.schema import UsageError
+
+from .model import Rejected, parse_cell
+
+MAX_BODY = 16 * 1024
+KEEPALIVE = 15.0  # seconds between SSE comments, so a vanished page is noticed
+STATIC = {  # the only files served: name -> content type
+    "index.html": "text/html; charset=utf-8",
+    "app.js": "text/javascript; charset=utf-8",
+    "style.css": "text/css; charset=utf-8",
+}
+_END = object()
+
+
+class Backend(Protocol):
+    mode: str
+
+    def world(self) -> dict: ...
+
+    def replay(self) -> dict: ...
+
+    def command(self, action: str, args: dict) -> dict:
+        """Carry out a command ("target" with drone and cell, or a control action); raise `Rejected`."""
+        ...
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """``PORT``, ``HOST:PORT`` or ``[V6]:PORT`` -> (host, port); the host defaults to 127.0.0.1."""
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        host, port = "127.0.0.1", text
+    host = host.strip("[]") or "127.0.0.1"
+    try:
+        number = int(port)
+    except ValueError:
+        raise UsageError(f"bad --web address {text!r}: expected [HOST:]PORT") from None
+    if not 0 <= number <= 65535:
+        raise UsageError(f"bad --web port {number}: expected 0..65535 (0: any free port)")
+    return host, number
+
+
+class Hub:
+    """The latest state (JSON text) and the SSE subscribers; thread-safe."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._subs: set[queue.SimpleQueue] = set()
+        self._latest: str | None = None
+        self._closed = False
+
+    def publish(self, state: dict) -> None:
+        data = json.dumps(state, separators=(",", ":"))
+        with self._cond:
+            self._latest = data
+            for q in self._subs:
+                q.put(data)
+
+    def latest(self) -> str | None:
+        with self._cond:
+            return self._latest
+
+    def subscribe(self) -> queue.SimpleQueue:
+        q: queue.SimpleQueue = queue.SimpleQueue()
+        with self._cond:
+            if self._latest is not None:
+                q.put(self._latest)
+            if self._closed:
+                q.put(_END)
+            self._subs.add(q)
+        return q
+
+    def unsubscribe(self, q: queue.SimpleQueue) -> None:
+        with self._cond:
+            self._subs.discard(q)
+            self._cond.notify_all()
+
+    @property
+    def subscribers(self) -> int:
+        with self._cond:
+            return len(self._subs)
+
+    def close(self, timeout: float = 5.0) -> bool:
+        """End every stream after what it has queued (the final state); wait until they are written."""
+        with self._cond:
+            self._closed = True
+            for q in self._subs:
+                q.put(_END)
+            return self._cond.wait_for(lambda: not self._subs, timeout)
+
+
+class _Handler(BaseHTTPRequestHandler):
+    server_version = "dronesim-web"
+    protocol_version = "HTTP/1.0"  # one request per connection: simple, and an SSE stream ends with it
+    server: "WebServer"
+
+    # ------------------------------------------------------------------ plumbing
+
+    def log_message(self, format: str, *args: object) -> None:  # noqa: A002 (the base class's name)
+        self.server.log.debug("%s %s", self.address_string(), format % args)
+
+    def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
+        """Every error as JSON, including those the base class raises (bad request line, 501...)."""
+        try:
+            text = message or HTTPStatus(code).phrase
+        except ValueError:
+            text = message or "error"
+        self._json(code, {"error": text})
+
+    def _json(self, code: int, body: dict | str) -> None:
+        data = (body if isinstance(body, str) else json.dumps(body)).encode()
+        self._send(code, data, "application/json")
+
+    def _send(self, code: int, data: bytes, ctype: str) -> None:
+        self.send_response(code)
+        self.send_header("Content-Type", ctype)
+        self.send_header("Content-Length", str(len(data)))
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("X-Content-Type-Options", "nosniff")
+        self.end_headers()
+        self.wfile.write(data)
+
+    def _route(self) -> str:
+        return urlsplit(self.path).path
+
+    # ------------------------------------------------------------------ methods
+
+    def do_GET(self) -> None:  # noqa: N802
+        self._dispatch("GET")
+
+    def do_POST(self) -> None:  # noqa: N802
+        self._dispatch("POST")
+
+    def do_PUT(self) -> None:  # noqa: N802
+        self._dispatch("PUT")
+
+    def do_DELETE(self) -> None:  # noqa: N802
+        self._dispatch("DELETE")
+
+    def do_PATCH(self) -> None:  # noqa: N802
+        self._dispatch("PATCH")
+
+    ROUTES = {
+        "/": ("GET", "_index"), "/index.html": ("GET", "_index"),
+        "/app.js": ("GET", "_static"), "/style.css": ("GET", "_static"),
+        "/api/world": ("GET", "_world"), "/api/state": ("GET", "_state"), "/api/events": ("GET", "_events"),
+        "/api/replay": ("GET", "_replay"),
+        "/api/target": ("POST", "_target"), "/api/control": ("POST", "_control"),
+    }
+
+    def _dispatch(self, method: str) -> None:
+        route = self.ROUTES.get(self._route())
+        try:
+            if route is None:
+                raise Rejected(f"no such resource: {self._route()}", 404)
+            if route[0] != method:
+                self.close_connection = True
+                raise Rejected(f"{method} is not allowed on {self._route()}: use {route[0]}", 405)
+            getattr(self, route[1])()
+        except Rejected as err:
+            self._json(err.status, {"error": err.text})
+        except (BrokenPipeError, ConnectionResetError):
+            pass
+        except Exception:  # a bug: answer 500, keep serving
+            self.server.log.exception("error serving %s %s", method, self.path)
+            try:
+                self._json(500, {"error": "internal error (see the ground station's log)"})
+            except OSError:
+                pass
+
+    # ------------------------------------------------------------------ resources
+
+    def _index(self) -> None:
+        self._file("index.html")
+
+    def _static(self) -> None:
+        self._file(self._route().lstrip("/"))
+
+    def _file(self, name: str) -> None:
+        data = resources.files(__package__).joinpath("static", name).read_bytes()
+        self._send(200, data, STATIC[name])
+
+    def _world(self) -> None:
+        self._json(200, self.server.backend.world())
+
+    def _replay(self) -> None:
+        self._json(200, self.server.backend.replay())
+
+    def _state(self) -> None:
+        latest = self.server.hub.latest()
+        if latest is None:
+            raise Rejected("no state yet: the ground station is still connecting", 503)
+        self._json(200, latest)
+
+    def _events(self) -> None:
+        hub = self.server.hub
+        self.send_response(200)
+        self.send_header("Content-Type", "text/event-stream; charset=utf-8")
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("X-Accel-Buffering", "no")
+        self.end_headers()
+        self.wfile.write(b"retry: 1000\n\n")
+        self.wfile.flush()
+        q = hub.subscribe()
+        try:
+            while True:
+                try:
+                    item = q.get(timeout=KEEPALIVE)
+                except queue.Empty:
+                    self.wfile.write(b": keepalive\n\n")
+                    self.wfile.flush()
+                    continue
+                end = item is _END
+                while not end:  # only the newest state matters: skip those a slow page had no time for
+                    try:
+                        newer = q.get_nowait()
+                    except queue.Empty:
+                        break
+                    if newer is _END:
+                        end = True
+                    else:
+                        item = newer
+                if item is not _END:
+                    self.wfile.write(b"event: state\ndata: " + item.encode() + b"\n\n")
+                if end:
+                    self.wfile.write(b"event: end\ndata: {}\n\n")
+                self.wfile.flush()
+                if end:
+                    return
+        finally:
+            hub.unsubscribe(q)
+
+    # ------------------------------------------------------------------ commands
+
+    def _body(self) -> dict:
+        ctype = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
+        if ctype != "application/json":
+            raise Rejected("send JSON (Content-Type: application/json)", 415)
+        origin = self.headers.get("Origin")
+        if origin and urlsplit(origin).netloc != self.headers.get("Host"):
+            raise Rejected(f"cross-origin request from {origin} refused", 403)
+        length = self.headers.get("Content-Length")
+        if length is None:
+            raise Rejected("a Content-Length is required", 411)
+        try:
+            n = int(length)
+        except ValueError:
+            raise Rejected(f"bad Content-Length {length!r}", 400) from None
+        if n < 0:
+            raise Rejected(f"bad Content-Length {length!r}", 400)
+        if n > MAX_BODY:
+            self.close_connection = True
+            raise Rejected(f"body of {n} bytes is larger than {MAX_BODY}", 413)
+        raw = self.rfile.read(n)
+        try:
+            body = json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise Rejected(f"the body is not JSON: {exc}", 400) from None
+        if not isinstance(body, dict):
+            raise Rejected("the body must be a JSON object", 400)
+        return body
+
+    def _target(self) -> None:
+        body = self._body()
+        unknown = set(body) - {"drone", "cell"}
+        if unknown:
+            raise Rejected(f"unknown fields {sorted(unknown)}: send drone and cell", 400)
+        if "drone" not in body or "cell" not in body:
+            raise Rejected('send {"drone": "D01", "cell": [x, y, z]}', 400)
+        if not isinstance(body["drone"], str):
+            raise Rejected(f"drone must be a string like D01, got {body['drone']!r}", 400)
+        cell = parse_cell(body["cell"])
+        self._json(200, self.server.backend.command("target", {"drone": body["drone"], "cell": cell}))
+
+    def _control(self) -> None:
+        body = self._body()
+        unknown = set(body) - {"action", "value"}
+        if unknown:
+            raise Rejected(f"unknown fields {sorted(unknown)}: send action (and value for pace)", 400)
+        action = body.get("action")
+        if action not in ("pause", "resume", "step", "quit", "pace"):
+            raise Rejected(f"unknown action {action!r}: use pause, resume, step, pace or quit", 400)
+        self._json(200, self.server.backend.command(action, {"value": body.get("value")}))
+
+
+class WebServer(ThreadingHTTPServer):
+    """Binds at construction (so a taken port fails before anything else starts); `start` serves."""
+
+    daemon_threads = True
+    block_on_close = False
+
+    def __init__(self, address: tuple[str, int], backend: Backend, hub: Hub, logger: logging.Logger) -> None:
+        self.backend, self.hub, self.log = backend, hub, logger
+        if ":" in address[0]:
+            import socket
+
+            self.address_family = socket.AF_INET6
+        try:
+            super().__init__(address, _Handler)
+        except OSError as exc:
+            raise UsageError(f"cannot serve the web ground station on {address[0]}:{address[1]}: {exc}") from None
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        host, port = self.server_address[:2]
+        shown = {"0.0.0.0": "127.0.0.1", "::": "[::1]"}.get(host, f"[{host}]" if ":" in host else host)
+        return f"http://{shown}:{port}/"
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self.serve_forever, name="web-gcs-http", daemon=True)
+        self._thread.start()
+
+    def stop(self, drain: float = 5.0) -> None:
+        """Let every SSE stream write what it has (the final state), then stop serving."""
+        self.hub.close(drain)
+        if self._thread is not None:
+            self.shutdown()
+            self._thread.join()
+        self.server_close()
