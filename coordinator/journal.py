@@ -42,6 +42,18 @@ class JournalWriter:
         self.close()
 
 
+def repair_tail(path: str | os.PathLike[str]) -> None:
+    """Cut a torn last line (a crash mid-write) so that appending goes on from a whole record."""
+    p = pathlib.Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise UsageError(f"cannot read journal {path}: {exc}") from None
+    if data and not data.endswith(b"\n"):
+        with open(p, "r+b") as f:
+            f.truncate(data.rfind(b"\n") + 1)
+
+
 def read(path: str | os.PathLike[str]) -> Iterator[dict]:
     """The records of a journal; a torn last line (a crash mid-write) is ignored, anything else bad is an error."""
     try:

@@ -23,7 +23,7 @@ from dronesim.transport import (
 )
 
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Reply, Stage
-from .journal import JournalWriter
+from .journal import JournalWriter, read, repair_tail
 
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway.
 LINGER_S = 5.0
@@ -41,9 +41,15 @@ def _key_of(keys: Keys, msg: Message) -> str:
 
 
 def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None,
-         logger: logging.Logger) -> Over:
-    """Run one game to its end; return the OVER message."""
-    engine = Engine(game, logger)
+         logger: logging.Logger, resume: bool = False) -> Over:
+    """Run one game to its end (or, with `resume`, the rest of the journal's game); return the OVER message."""
+    if resume:
+        if not journal:
+            raise UsageError("--resume needs --journal")
+        repair_tail(journal)
+        engine = Engine.resume(game, list(read(journal)), logger)
+    else:
+        engine = Engine(game, logger)
     with zenoh.open(conf) as session, JournalWriter(journal) as writer:
         inbox = Inbox(session, keys, logger)
         out = Outbox(session)
@@ -137,6 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--admit-deadline", type=float, default=0.0, help="seconds to wait for entities (0: forever)")
     p.add_argument("--lost-after", type=int, default=3, help="missed deadlines before a drone is LOST")
     p.add_argument("--journal", help="append the game's journal to this file")
+    p.add_argument("--resume", action="store_true",
+                   help="restart a game from its --journal: the entities connect again and it plays on")
     return p
 
 
@@ -179,7 +187,8 @@ def cli(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logger = setup_logging(args.log_level, "SRV")
     try:
-        over = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal, logger=logger)
+        over = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal, logger=logger,
+                    resume=args.resume)
     except UsageError as err:
         logger.error("%s", err)
         return 2

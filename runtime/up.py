@@ -41,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--root", default="sim", help="key root (default sim)")
     p.add_argument("--listen", default="tcp/127.0.0.1:0", help="the embedded router's endpoint (default: a free port)")
     p.add_argument("--quiet", action="store_true", help="do not print every turn")
+    p.add_argument("--web", metavar="[HOST:]PORT",
+                   help="the ground station is a web page on this address (see docs/web-gcs.md)")
     p.add_argument("--log-level", default="WARNING", help="log level of the entity processes (default WARNING)")
     return p
 
@@ -80,12 +82,14 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
         gcs += ["--script", args.script]
     if args.quiet:
         gcs.append("--quiet")
+    if args.web:
+        gcs += ["--web", args.web]
     procs.append(("GCS", gcs))
     return procs
 
 
 def main(args: argparse.Namespace) -> int:
-    interactive = not args.targets and not args.script and not args.scenario
+    interactive = not args.targets and not args.script and not args.scenario and not args.web
     with zenoh.open(router_config(args.listen)) as router:
         locator = router_locators(router)[0]
         what = f"scenario {args.scenario}" if args.scenario else \

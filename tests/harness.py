@@ -140,3 +140,86 @@ class Cluster:
 
 def journal_records(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line]
+
+
+class ScriptedGCS:
+    """The test itself as the ground station: it answers each GCS phase only when told to, so a test can
+    act at an exact point of the game (kill a process between two turns) without racing it."""
+
+    def __init__(self, locator: str, root: str, targets: dict[str, tuple[int, int, int]], *,
+                 intent: str = "FINAL") -> None:
+        import logging
+
+        from dronesim.entity import Membership
+        from dronesim.schema import Connect, Intent, Keys, Over, Role, Status, Turn
+        from dronesim.transport import Inbox, Outbox, session_id
+
+        self.keys = Keys(root)
+        self.targets = dict(targets)
+        self.intent = Intent(intent)
+        self.log = logging.getLogger("dronesim.tests.gcs")
+        self._cm = zenoh.open(client_config(locator))
+        self.session = self._cm.__enter__()
+        self.inbox = Inbox(self.session, self.keys, self.log)
+        for key, typ in ((self.keys.turn, Turn), (self.keys.status, Status), (self.keys.over, Over)):
+            self.inbox.subscribe(key, typ)
+        self.out = Outbox(self.session)
+        self.member = Membership(self.session, self.inbox, Connect(turn=0, sender="GCS", role=Role.GCS,
+                                                                   session=session_id(self.session)),
+                                 self.log, connect_timeout=TIMEOUT, grace=TIMEOUT)
+        self.statuses: list = []
+        self.over = None
+
+    def next_event(self, timeout: float = TIMEOUT):
+        from dronesim.transport import Presence, Received
+        from dronesim.schema import Over, Status
+
+        ev = self.inbox.get(timeout)
+        if ev is None:
+            raise AssertionError("the game stalled: no event")
+        match ev:
+            case Presence() as p:
+                self.member.on_presence(p)
+            case Received(_, Status() as st):
+                self.statuses.append(st)
+            case Received(_, Over() as over):
+                self.over = over
+        return ev
+
+    def wait_phase(self, phase: str, turn: int | None = None, timeout: float = TIMEOUT):
+        """Block until TURN(turn, phase) arrives (any turn if None); returns it (None if the game ended)."""
+        from dronesim.transport import Received
+        from dronesim.schema import Turn
+
+        while self.over is None:
+            ev = self.next_event(timeout)
+            if isinstance(ev, Received) and isinstance(ev.msg, Turn) and ev.msg.phase.value == phase:
+                if turn is None or ev.msg.turn == turn:
+                    return ev.msg
+        return None
+
+    def answer(self, turn: int) -> None:
+        from dronesim.schema import Done, Phase, Target
+
+        alive = {s.drone for s in self.statuses[-1].drones if s.alive} if self.statuses else set(self.targets)
+        sent = 0
+        for d, cell in sorted(self.targets.items()):
+            if d in alive:
+                self.out.put(self.keys.tgt(d), Target(turn=turn, sender="GCS", drone=d, pos=cell))
+                sent += 1
+        self.out.put(self.keys.gcs_done, Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=self.intent,
+                                              count=sent))
+
+    def play_until(self, turn: int | None = None) -> None:
+        """Answer every GCS phase up to and including `turn` (None: to the end of the game)."""
+        while self.over is None:
+            t = self.wait_phase("GCS")
+            if t is None:
+                return
+            self.answer(t.turn)
+            if turn is not None and t.turn >= turn:
+                return
+
+    def close(self) -> None:
+        self.member.close()
+        self._cm.__exit__(None, None, None)

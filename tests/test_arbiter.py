@@ -234,7 +234,7 @@ def _swaps(before: dict, final: dict, d: str, e: str) -> bool:
     return final[d] != before[d] and final[e] != before[e] and final[d] == before[e] and final[e] == before[d]
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(scenes())
 def test_property_arbitration_guarantees(scene) -> None:
     before, proposed, coop = scene
@@ -259,7 +259,7 @@ def test_property_arbitration_guarantees(scene) -> None:
                 assert not _swaps(before, final, d, e), f"cooperative {d} and {e} swap"
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(scenes(), st.randoms(use_true_random=False))
 def test_property_insertion_order_does_not_matter(scene, rnd) -> None:
     before, proposed, coop = scene
@@ -273,7 +273,7 @@ def test_property_insertion_order_does_not_matter(scene, rnd) -> None:
     assert arbitrate({k: before[k] for k in keys}, {k: proposed[k] for k in reversed(keys)}, coop) == ref
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(scenes())
 def test_property_cooperative_drones_never_kill_each_other(scene) -> None:
     before, proposed, coop = scene

@@ -16,7 +16,7 @@ from dronesim.coordinator import journal
 from dronesim.coordinator.journal import dumps
 from dronesim.local import Inputs, Result, simulate
 from dronesim.scenario import Scenario
-from dronesim.schema import DroneState, EndReason, Intent, UsageError
+from dronesim.schema import DroneState, EndReason, Intent, RemoteInputError, UsageError
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SWARM16 = ROOT / "scenarios" / "swarm16.json"
@@ -232,7 +232,8 @@ def test_main_binary_file(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture)
 
 @pytest.mark.xfail(strict=True, reason="BUG: replay.py header_config catches KeyError/TypeError/ValueError, but "
                                        "WorldSpec/GameConfig raise MalformedMessage / IndexError on a bad size or "
-                                       "start: a traceback instead of exit 2")
+                                       "start: a traceback instead of exit 2",
+                   raises=(RemoteInputError, IndexError))
 @pytest.mark.parametrize("field", ["size", "start"])
 def test_main_bad_header_values(tmp_path: pathlib.Path, swarm_run: Result, capsys: pytest.CaptureFixture,
                                 field: str) -> None:
@@ -314,7 +315,11 @@ def test_main_turns_prints_one_line_per_turn(swarm_journal: pathlib.Path, swarm_
     turns = [ln for ln in out if ln.startswith("turn ")]
     assert [ln.split(":")[0] for ln in turns] == [f"turn {t}" for t in range(1, swarm_run.over.turn + 1)]
     assert all(ln.count("D") >= 16 for ln in turns)
-    assert "D14 (14, 10, 0) DEAD" in turns[0]
+    first = swarm_run.records[1]
+    for d, cause in first.get("deaths", {}).items():
+        assert f"{d} {tuple(first['moves'][d])} DEAD" in turns[0]
+    for d, p in first.get("moves", {}).items():
+        assert f"{d} {tuple(p)} " in turns[0]
 
 
 # --------------------------------------------------------------------------- missed deadlines, vanished drones
@@ -368,7 +373,8 @@ def test_vanished_drone_alongside_a_hovering_one(tmp_path: pathlib.Path, swarm: 
 @pytest.mark.xfail(strict=True, reason="BUG: local.py simulate calls engine.expire(engine.stage, engine.turn) "
                                        "after the NPS; when only vanished drones are skipped, the last NPS has "
                                        "already moved the engine to ENV, so the forced expiry aborts the game "
-                                       "('environment did not answer') and the UPD then raises StaleTurn")
+                                       "('environment did not answer') and the UPD then raises StaleTurn",
+                   raises=RemoteInputError)
 def test_vanished_drone_is_lost_and_the_journal_verifies(tmp_path: pathlib.Path, swarm: Scenario) -> None:
     result = run(swarm, Inputs(plan=swarm.plan(), vanished={3: {"D01"}}))
     turn3 = next(r for r in result.records if r.get("turn") == 3 and r["record"] == "turn")

@@ -214,13 +214,19 @@ class _Handler(BaseHTTPRequestHandler):
     def _replay(self) -> None:
         self._json(200, self.server.backend.replay())
 
+    def _live_only(self) -> None:
+        if self.server.backend.mode != "live":
+            raise Rejected("a replay has no live state: GET /api/replay", 404)
+
     def _state(self) -> None:
+        self._live_only()
         latest = self.server.hub.latest()
         if latest is None:
             raise Rejected("no state yet: the ground station is still connecting", 503)
         self._json(200, latest)
 
     def _events(self) -> None:
+        self._live_only()
         hub = self.server.hub
         self.send_response(200)
         self.send_header("Content-Type", "text/event-stream; charset=utf-8")
