@@ -33,15 +33,14 @@ def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperat
         claims: dict[Cell, list[str]] = defaultdict(list)
         for d, cell in final.items():
             claims[cell].append(d)
-        arriving = {final[d]: d for d in final if final[d] != before[d]}
         for d in coop:
             src, dst = before[d], final[d]
             if dst == src:
                 continue
             blocked = any(e != d and (e not in cooperative or final[e] == before[e] or e < d) for e in claims[dst])
-            swapper = arriving.get(src)
-            if swapper is not None and swapper != d and before[swapper] == dst:
-                blocked = blocked or swapper not in cooperative or swapper < d
+            # a swap: a drone entering our cell from the one we enter (there may be several entering it)
+            blocked = blocked or any(e != d and before[e] == dst and (e not in cooperative or e < d)
+                                     for e in claims[src])
             if blocked:
                 final[d] = src
                 claims[dst].remove(d)

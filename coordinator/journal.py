@@ -58,7 +58,7 @@ def read(path: str | os.PathLike[str]) -> Iterator[dict]:
     """The records of a journal; a torn last line (a crash mid-write) is ignored, anything else bad is an error."""
     try:
         lines = pathlib.Path(path).read_text(encoding="utf-8").split("\n")
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
         raise UsageError(f"cannot read journal {path}: {exc}") from None
     for n, line in enumerate(lines, 1):
         if not line:

@@ -13,7 +13,7 @@ from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from dronesim.coordinator.engine import Engine, GameConfig, Publish, Record, Reply
+from dronesim.coordinator.engine import Engine, GameConfig, Publish, Record, Reply, Stage
 from dronesim.entities.autopilots import fly_round, make_autopilot, pilot_class
 from dronesim.entities.environment import Environment, build_world
 from dronesim.entities.gcs import Plan
@@ -91,7 +91,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                     dec = decisions[d]
                     queue.extend(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
                 if skip:
-                    queue.extend(engine.expire(engine.stage, engine.turn))
+                    queue.extend(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):
                 assert env is not None
                 queue.extend(engine.receive(Upd(turn=t, sender="ENV", cells=env.apply(turn.moves))))

@@ -19,7 +19,7 @@ from dronesim.coordinator.journal import dumps, read
 from dronesim.entities.environment import build_world
 from dronesim.entities.gcs import Plan
 from dronesim.entities.world import World
-from dronesim.schema import Cell, Intent, UsageError, WorldSpec
+from dronesim.schema import Cell, Intent, RemoteInputError, UsageError, WorldSpec
 
 from .local import Inputs, simulate
 
@@ -43,7 +43,7 @@ def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
         autopilots = {d["drone"]: d["autopilot"] for d in header["drones"]}
         config = GameConfig(world=spec, drones=drones, max_turns=header["max_turns"],
                             lost_after=header.get("lost_after", 3))
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, RemoteInputError) as exc:
         raise UsageError(f"bad journal header: {exc}") from None
     return config, autopilots
 
@@ -148,5 +148,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"verified: a fresh re-simulation writes this journal byte for byte ({len(records)} records)")
     except UsageError as err:
         print(f"dronesim replay: {err}", file=sys.stderr)
+        return 2
+    except (KeyError, TypeError, ValueError, IndexError) as err:  # a turn record not of the journal format
+        print(f"dronesim replay: {args.journal}: bad journal record: {err!r}", file=sys.stderr)
         return 2
     return 0

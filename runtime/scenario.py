@@ -22,7 +22,7 @@ from dronesim.coordinator.engine import DroneSpec, GameConfig
 from dronesim.entities.autopilots import REGISTRY
 from dronesim.entities.gcs import Plan
 from dronesim.entities.world import World
-from dronesim.schema import Cell, UsageError, WorldSpec, is_drone_id
+from dronesim.schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
 
 FORMAT = "dronesim-scenario"
 
@@ -46,7 +46,7 @@ class Scenario:
         path = pathlib.Path(path)
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise UsageError(f"cannot read scenario {path}: {exc}") from None
         try:
             return cls.from_json(data, base=path.parent)
@@ -61,11 +61,14 @@ class Scenario:
         if not isinstance(w, dict):
             raise UsageError('"world" must be {"size": [...], "seed": n} or {"file": "..."}')
         world_file: World | None = None
-        if "file" in w:
-            world_file = World.load(base / str(w["file"]))
-            spec = WorldSpec(size=world_file.size, cells=world_file.packed())
-        else:
-            spec = WorldSpec(size=_cell(w.get("size"), "world size"), seed=_int(w.get("seed", 0), "seed"))
+        try:
+            if "file" in w:
+                world_file = World.load(base / str(w["file"]))
+                spec = WorldSpec(size=world_file.size, cells=world_file.packed())
+            else:
+                spec = WorldSpec(size=_cell(w.get("size"), "world size"), seed=_int(w.get("seed", 0), "seed"))
+        except RemoteInputError as err:  # WorldSpec's own checks: sizes 1..65536, seed >= 0
+            raise UsageError(f"bad world: {err}") from None
         drones_raw = data.get("drones")
         if not isinstance(drones_raw, list) or not drones_raw:
             raise UsageError('"drones" must be a non-empty list')
@@ -74,7 +77,7 @@ class Scenario:
             if not isinstance(d, dict) or not is_drone_id(d.get("id")):
                 raise UsageError(f"drone #{i + 1} needs an id like D01")
             pilot = d.get("autopilot", "seed")
-            if pilot not in REGISTRY:
+            if not isinstance(pilot, str) or pilot not in REGISTRY:
                 raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
             start = _cell(d.get("start"), f"{d['id']} start")
             if world_file is not None and world_file.is_building(start):

@@ -192,16 +192,11 @@ _BUG_BEFORE = {"D01": B, "D02": A, "D03": (0, 1, 0)}
 _BUG_PROPOSED = {"D01": A, "D02": B, "D03": A}
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: arbiter.py `arriving` keeps one drone per cell (the last in dict "
-                                       "order), so a cooperative drone's swap with a non-cooperative one is "
-                                       "missed when a third drone enters the same cell", raises=AssertionError)
 def test_swap_with_non_cooperative_is_seen_when_two_drones_enter_the_cell() -> None:
     final = arbitrate(_BUG_BEFORE, _BUG_PROPOSED, {"D02"})
     assert final["D02"] == A  # the documented rule: it would swap with a drone that does not give way
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: arbiter.py result depends on dict insertion order when two "
-                                       "drones enter the cell a cooperative drone leaves", raises=AssertionError)
 def test_insertion_order_with_two_drones_entering_a_cell() -> None:
     forward = arbitrate(_BUG_BEFORE, _BUG_PROPOSED, {"D02"})
     backward = arbitrate(dict(reversed(_BUG_BEFORE.items())), dict(reversed(_BUG_PROPOSED.items())), {"D02"})
@@ -263,10 +258,6 @@ def test_property_arbitration_guarantees(scene) -> None:
 @given(scenes(), st.randoms(use_true_random=False))
 def test_property_insertion_order_does_not_matter(scene, rnd) -> None:
     before, proposed, coop = scene
-    # Two non-cooperative drones entering one cell is the case of the bug above (xfail): left out here.
-    entering = Counter(proposed[d] for d in proposed if d not in coop and proposed[d] != before[d])
-    if any(n > 1 for n in entering.values()):
-        return
     ref = arbitrate(before, proposed, coop)
     keys = list(before)
     rnd.shuffle(keys)

@@ -14,7 +14,7 @@ from dronesim.entities.gcs import Plan
 from dronesim.entities.world import Building, World
 from dronesim.local import Inputs, simulate
 from dronesim.scenario import FORMAT, Scenario
-from dronesim.schema import RemoteInputError, UsageError, WorldSpec
+from dronesim.schema import UsageError, WorldSpec
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SWARM16 = ROOT / "scenarios" / "swarm16.json"
@@ -212,26 +212,18 @@ def test_load_unreadable_or_not_json(tmp_path: pathlib.Path) -> None:
         Scenario.load(tmp_path / "bad.json")
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: scenario.py Scenario.load catches OSError and JSONDecodeError but "
-                                       "not UnicodeDecodeError: a binary file escapes as a traceback",
-                   raises=UnicodeDecodeError)
 def test_load_binary_file_is_a_usage_error(tmp_path: pathlib.Path) -> None:
     (tmp_path / "bin.json").write_bytes(b"\xff\xfe\x00\x81garbage")
     with pytest.raises(UsageError, match="cannot read scenario"):
         Scenario.load(tmp_path / "bin.json")
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: scenario.py from_json passes an unhashable autopilot value to "
-                                       "`pilot not in REGISTRY`: TypeError instead of UsageError", raises=TypeError)
 @pytest.mark.parametrize("pilot", [["dstar"], {"name": "dstar"}])
 def test_non_string_autopilot_is_a_usage_error(pilot: object) -> None:
     with pytest.raises(UsageError, match="unknown autopilot"):
         Scenario.from_json(mutate(lambda d: d["drones"][0].update(autopilot=pilot)))
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: scenario.py builds WorldSpec unguarded: a zero/too large world "
-                                       "size or a negative seed raises MalformedMessage (a RemoteInputError), "
-                                       "not UsageError", raises=RemoteInputError)
 @pytest.mark.parametrize("world", [{"size": [0, 8, 3]}, {"size": [8, 8, 3], "seed": -1},
                                    {"size": [100000, 8, 3]}], ids=["size0", "seed-1", "huge"])
 def test_world_spec_errors_are_usage_errors(world: dict) -> None:
