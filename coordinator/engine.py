@@ -511,6 +511,7 @@ class Engine:
             log["deaths"] = {d: c.value for d, c in sorted(dead.items())}
         status = self.status(self.turn)
         log["state"] = hashlib.sha256(encode(status)).hexdigest()[:16]
+        self._log.debug("turn %d observed: %s", self.turn, log)
         effects: list[Effect] = [Record(log), Publish(status)]
         end = self._end_reason()
         if end:

@@ -40,8 +40,53 @@ def _key_of(keys: Keys, msg: Message) -> str:
     raise AssertionError(f"the coordinator does not publish {msg.TAG}")
 
 
+class Executor:
+    """Carries out the engine's effects in order; with `pace`, a new turn starts at most every `pace`
+    seconds (the effects from its TURN on are held until then: a watchable speed, not a synchronisation)."""
+
+    def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, pace: float = 0.0) -> None:
+        self.keys, self.out, self.writer, self.pace = keys, out, writer, pace
+        self._held: list = []
+        self._due = 0.0
+        self._turn = 0  # the last turn whose first TURN went out
+        self._last = float("-inf")  # when it went out
+
+    def run(self, effects: list) -> None:
+        for eff in effects:
+            if self._held:
+                self._held.append(eff)
+                continue
+            match eff:
+                case Publish(Turn() as turn) if self.pace and turn.turn > self._turn:
+                    self._turn = turn.turn
+                    due = self._last + self.pace
+                    if time.monotonic() < due:
+                        self._held, self._due = [eff], due
+                        continue
+                    self._last = time.monotonic()
+                    self.out.put(self.keys.turn, turn)
+                case Publish(msg):
+                    self.out.put(_key_of(self.keys, msg), msg)
+                case Reply(query, msg):
+                    query.reply(query.key_expr, encode(msg))
+                    query.drop()  # the final answer: the asker stops waiting now
+                case Record(data):
+                    self.writer.append(data)
+
+    def due_in(self) -> float | None:
+        """Seconds until held effects are due (None: nothing held)."""
+        return max(0.0, self._due - time.monotonic()) if self._held else None
+
+    def release(self) -> None:
+        held, self._held = self._held, []
+        self._last = time.monotonic()
+        first, rest = held[0], held[1:]
+        self.out.put(self.keys.turn, first.msg)
+        self.run(rest)
+
+
 def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None,
-         logger: logging.Logger, resume: bool = False) -> Over:
+         logger: logging.Logger, resume: bool = False, pace: float = 0.0) -> Over:
     """Run one game to its end (or, with `resume`, the rest of the journal's game); return the OVER message."""
     if resume:
         if not journal:
@@ -64,24 +109,18 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                     keys.root, ", ".join(d.drone for d in game.drones))
 
-        def run(effects: list) -> None:
-            for eff in effects:
-                match eff:
-                    case Publish(msg):
-                        out.put(_key_of(keys, msg), msg)
-                    case Reply(query, msg):
-                        query.reply(query.key_expr, encode(msg))
-                        query.drop()  # the final answer: the asker stops waiting now
-                    case Record(data):
-                        writer.append(data)
-
+        effects = Executor(keys, out, writer, pace)
+        run = effects.run
         phase = engine.clock()
         started = time.monotonic()
         while engine.stage is not Stage.OVER:
             limit = engine.deadline()
             left = None if limit is None else max(0.0, started + limit - time.monotonic())
-            event = inbox.get(left)
+            held = effects.due_in()
+            event = inbox.get(left if held is None else held if left is None else min(left, held))
             match event:
+                case None if effects.due_in() == 0:
+                    effects.release()
                 case None:
                     run(engine.expire(*phase))
                 case Asked(query, Connect() as msg):
@@ -143,6 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--admit-deadline", type=float, default=0.0, help="seconds to wait for entities (0: forever)")
     p.add_argument("--lost-after", type=int, default=3, help="missed deadlines before a drone is LOST")
     p.add_argument("--journal", help="append the game's journal to this file")
+    p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
+                   help="start a turn at most every SECONDS (default 0: as fast as the entities answer)")
     p.add_argument("--resume", action="store_true",
                    help="restart a game from its --journal: the entities connect again and it plays on")
     return p
@@ -188,7 +229,7 @@ def cli(argv: list[str] | None = None) -> int:
     logger = setup_logging(args.log_level, "SRV")
     try:
         over = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal, logger=logger,
-                    resume=args.resume)
+                    resume=args.resume, pace=args.pace)
     except UsageError as err:
         logger.error("%s", err)
         return 2

@@ -32,6 +32,9 @@ def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("-l", "--listen", action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to listen on (repeatable)")
     g.add_argument("-c", "--config", metavar="FILE", help="a zenoh JSON5 configuration file")
+    g.add_argument("--lease", type=float, metavar="SECONDS",
+                   help="link lease (transport/link/tx/lease): a hung or cut-off process is declared gone after "
+                        "about 0.75 x this (zenoh's default: 10)")
     g.add_argument("--root", default="sim", help="key expression root of this simulation (default: sim)")
     g.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ERROR (default: INFO)")
 
@@ -54,6 +57,11 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
         conf.insert_json5("connect/endpoints", json.dumps(args.connect))
     if args.listen:
         conf.insert_json5("listen/endpoints", json.dumps(args.listen))
+    if getattr(args, "lease", None):
+        if args.lease <= 0:
+            raise UsageError("--lease must be positive")
+        conf.insert_json5("transport/link/tx/lease", str(int(args.lease * 1000)))
+        conf.insert_json5("transport/link/tx/keep_alive", "4")  # keep-alives per lease, zenoh's default
     return conf
 
 

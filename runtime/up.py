@@ -37,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scripted targets; without --targets or --script the ground station is interactive")
     p.add_argument("--script", help="a file of scripted targets")
     p.add_argument("--max-turns", type=int, default=200)
+    p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
+                   help="start a turn at most every SECONDS, to watch the game (default: full speed)")
     p.add_argument("--journal", help="write the journal to this file")
     p.add_argument("--root", default="sim", help="key root (default sim)")
     p.add_argument("--listen", default="tcp/127.0.0.1:0", help="the embedded router's endpoint (default: a free port)")
@@ -52,7 +54,8 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
     base = [sys.executable, "-m", "dronesim"]
     common = ["--mode", "client", "--connect", locator, "--root", args.root, "--log-level", args.log_level]
     coord = [*base, "coordinator", *common, "--seed", str(args.seed), "--size", args.size,
-             "--drones", str(args.drones), "--max-turns", str(args.max_turns), "--admit-deadline", "60"]
+             "--drones", str(args.drones), "--max-turns", str(args.max_turns), "--admit-deadline", "60",
+             "--pace", str(args.pace)]
     if args.world:
         coord += ["--world", args.world]
     if args.starts:

@@ -66,10 +66,11 @@ class Proc:
             self.lines.put((tag, line.rstrip("\n")))
         self.lines.put(None)
 
-    def expect(self, pattern: str, timeout: float = TIMEOUT) -> str:
-        """Block until a line of output matches `pattern` (regex); AssertionError on exit or timeout."""
+    def expect(self, pattern: str, timeout: float = TIMEOUT, *, fresh: bool = False) -> str:
+        """Block until a line of output matches `pattern` (regex); AssertionError on exit or timeout.
+        `fresh`: only lines not yet looked at by an earlier `expect`."""
         rx = re.compile(pattern)
-        for line in self.out + self.err:
+        for line in () if fresh else self.out + self.err:
             if rx.search(line):
                 return line
         closed = 0
@@ -117,9 +118,12 @@ class Cluster:
         self.log_level = log_level
         self.procs: list[Proc] = []
 
-    def start(self, name: str, role: str, *args: str, stdin: int | None = subprocess.DEVNULL) -> Proc:
-        argv = [sys.executable, "-m", "dronesim", role, "--mode", "client", "--connect", self.locator,
-                "--root", self.root, "--log-level", self.log_level, *args]
+    def start(self, name: str, role: str, *args: str, stdin: int | None = subprocess.DEVNULL,
+              netns: str | None = None, connect: str | None = None) -> Proc:
+        """Start `dronesim ROLE` as a client of the router (in network namespace `netns` if given)."""
+        prefix = ["ip", "netns", "exec", netns] if netns else []
+        argv = [*prefix, sys.executable, "-m", "dronesim", role, "--mode", "client",
+                "--connect", connect or self.locator, "--root", self.root, "--log-level", self.log_level, *args]
         proc = Proc(name, argv, self.tmp, stdin=stdin)
         self.procs.append(proc)
         return proc
@@ -136,6 +140,58 @@ class Cluster:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class Hosts:
+    """Test hosts as network namespaces: a router host joined by veth links to each other host.
+
+    Host `name` gets the link 10.231.<i>.2/24 and the router host 10.231.<i>.1/24 on its side: every
+    address belongs to these namespaces, nothing leaves the machine. `cut(name)`/`restore(name)` take a
+    host's link down and up."""
+
+    def __init__(self, *hosts: str) -> None:
+        self.tag = uuid.uuid4().hex[:6]
+        self.router = f"dsr{self.tag}"
+        self.hosts = {h: f"ds{h.lower()}{self.tag}" for h in hosts}
+        self.addr: dict[str, str] = {}
+
+    def _ip(self, *args: str) -> None:
+        subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
+
+    def __enter__(self) -> "Hosts":
+        try:
+            self._ip("netns", "add", self.router)
+            self._ip("-n", self.router, "link", "set", "lo", "up")
+            for i, (host, ns) in enumerate(self.hosts.items(), 1):
+                self._ip("netns", "add", ns)
+                self._ip("-n", ns, "link", "set", "lo", "up")
+                a, b = f"vr{i}{self.tag}", f"vh{i}{self.tag}"
+                self._ip("link", "add", a, "netns", self.router, "type", "veth", "peer", "name", b, "netns", ns)
+                self._ip("-n", self.router, "addr", "add", f"10.231.{i}.1/24", "dev", a)
+                self._ip("-n", ns, "addr", "add", f"10.231.{i}.2/24", "dev", b)
+                self._ip("-n", self.router, "link", "set", a, "up")
+                self._ip("-n", ns, "link", "set", b, "up")
+                self.addr[host] = f"10.231.{i}.1"  # where that host reaches the router
+        except BaseException:
+            self.__exit__()
+            raise
+        return self
+
+    def ns(self, host: str) -> str:
+        return self.hosts[host]
+
+    def _link(self, host: str) -> str:
+        return f"vh{list(self.hosts).index(host) + 1}{self.tag}"
+
+    def cut(self, host: str) -> None:
+        self._ip("-n", self.hosts[host], "link", "set", self._link(host), "down")
+
+    def restore(self, host: str) -> None:
+        self._ip("-n", self.hosts[host], "link", "set", self._link(host), "up")
+
+    def __exit__(self, *exc: object) -> None:
+        for ns in [*self.hosts.values(), self.router]:
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
 
 
 def journal_records(path: Path) -> list[dict]:
