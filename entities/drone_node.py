@@ -42,21 +42,33 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
         while over is None:
-            match inbox.get(member.timeout()):
-                case None:
-                    member.check()
-                case Presence() as presence:
-                    member.on_presence(presence)
-                case Received(_, Turn(phase=Phase.DRONES) as turn):
-                    orders = tuple(o for o in turn.orders if o.drone in mine)
-                    if done is None or done[0] != (turn.turn, orders):
-                        steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
-                        decisions = fly_round(steps, lambda pending: asker.ask_all(turn.turn, pending))
-                        done = ((turn.turn, orders), decisions)
-                    for d, dec in done[1].items():
-                        out.put(keys.nps(d), Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note))
-                case Received(_, Over() as over):
-                    logger.info("OVER: %s", over.text)
+            first = inbox.get(member.timeout())
+            if first is None:
+                member.check()
+                continue
+            # Work through everything already queued, acting only on the latest DRONES phase: a process
+            # that was frozen or slow catches up instead of planning turns that are long gone.
+            latest: Turn | None = None
+            for event in (first, *inbox.drain()):
+                if not member.clock.screen(event, inbox.rejects):
+                    continue
+                match event:
+                    case Presence() as presence:
+                        member.on_presence(presence)
+                    case Received(_, Turn(phase=Phase.DRONES) as turn):
+                        latest = turn
+                    case Received(_, Over() as end):
+                        over = end
+            if over is not None:
+                logger.info("OVER: %s", over.text)
+            elif latest is not None and latest.turn == member.clock.turn:
+                orders = tuple(o for o in latest.orders if o.drone in mine)
+                if done is None or done[0] != (latest.turn, orders):
+                    steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
+                    decisions = fly_round(steps, lambda pending: asker.ask_all(latest.turn, pending))
+                    done = ((latest.turn, orders), decisions)
+                for d, dec in done[1].items():
+                    out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
         asker.close()
         member.close()
         return over

@@ -69,6 +69,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
 
         while over is None:
             event = inbox.get(member.timeout())
+            if not member.clock.screen(event, inbox.rejects):
+                continue
             try:
                 match event:
                     case None:

@@ -98,7 +98,10 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         history: list[Status] = []
         over: Over | None = None
         while over is None:
-            match inbox.get(member.timeout()):
+            event = inbox.get(member.timeout())
+            if not member.clock.screen(event, inbox.rejects):
+                continue
+            match event:
                 case None:
                     member.check()
                 case Presence() as presence:

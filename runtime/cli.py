@@ -13,6 +13,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "drone": ("dronesim.entities.drone_node", "cli", "a drone, or a swarm host of several drones"),
     "gcs": ("dronesim.entities.gcs_node", "cli", "the ground control station (GCS)"),
     "router": ("dronesim.router", "cli", "a standalone Zenoh router (for multi-host runs without zenohd)"),
+    "certs": ("dronesim.certs", "cli", "a development CA and per-role TLS certificates/passwords (docs/security.md)"),
     "replay": ("dronesim.replay", "main", "re-render a run from its journal; --verify re-simulates it"),
     "bench": ("dronesim.benchmarks", "cli", "benchmarks: `dronesim bench autopilot` (see BENCHMARKS.md)"),
 }

@@ -10,8 +10,11 @@ import time
 
 import zenoh
 
-from dronesim.schema import Connect, Keys, Refused, RemoteInputError, UsageError, Welcome
-from dronesim.transport import Inbox, Presence, request
+from dronesim.schema import (
+    Connect, Keys, Message, Over, Refused, RejectCounter, RemoteInputError, Status, Turn, UsageError, Welcome,
+)
+from dronesim.schema.errors import StaleTurn
+from dronesim.transport import Inbox, Presence, Received, request
 
 
 class Refusal(UsageError):
@@ -72,6 +75,7 @@ class Membership:
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
         inbox.watch_presence("SRV")
         self.welcome = admit(session, self.keys, hello, logger, timeout=connect_timeout)
+        self.clock = TurnClock()  # the coordinator's messages pass through it (see `TurnClock.screen`)
         self._srv: set[str] = set()
         self._lost_since: float | None = None
 
@@ -85,6 +89,7 @@ class Membership:
                 self._lost_since = None
                 self.log.warning("the coordinator is back: connecting again")
                 self.welcome = admit(self.session, self.keys, self.hello, self.log, timeout=self.connect_timeout)
+                self.clock = TurnClock(self.welcome.turn)  # turns went by while it was away
                 return self.welcome
         else:
             self._srv.discard(event.session)
@@ -115,3 +120,46 @@ def add_entity_args(parser) -> None:
                    help="seconds to wait for the coordinator to admit this entity (default 30)")
     g.add_argument("--grace", type=float, default=30.0,
                    help="seconds to wait for a vanished coordinator to come back (default 30)")
+
+
+class TurnClock:
+    """The turn an entity believes the game is at, learnt from the coordinator's TURN, STATUS and OVER.
+
+    Once it has seen one, it refuses those messages when they cannot be current: a TURN for a past turn
+    or one more than a turn ahead, a STATUS for other than the turn just played (or a repeat of the one
+    before), an OVER far from now, or a repeat (same message, phase and turn) that differs from what
+    was received first. TURN(t) and STATUS(t - 1) are current while turn t is played; so is OVER(t - 1)
+    after STATUS(t - 1), and OVER of any later turn (a process that was frozen learns the end late). A replayed or garbled TURN must not make a drone plan, nor a STATUS move the world;
+    a repeat re-sent to a process that connected again is identical and passes. (A forged message for the
+    right turn is spoofing: the router's access control stops it.)"""
+
+    def __init__(self, turn: int | None = None) -> None:
+        self.turn: int | None = turn or None  # the turn being played (after STATUS(t): t + 1, the next)
+        self._seen: dict[tuple[str, object, int], Message] = {}
+
+    def admit(self, msg: Turn | Status | Over) -> None:
+        """Check `msg` against the clock (StaleTurn if it cannot be current) and advance the clock."""
+        now = msg.turn + 1 if isinstance(msg, Status) else msg.turn
+        if self.turn is not None:
+            lo = self.turn - 1 if isinstance(msg, Over) else self.turn  # STATUS(t) makes t + 1 "now"
+            hi = None if isinstance(msg, Over) else self.turn + 1  # the end may come at any turn
+            if now < lo or (hi is not None and now > hi):
+                raise StaleTurn(f"{msg.TAG} for turn {msg.turn} while the game is at turn {self.turn}")
+        key = (msg.TAG, getattr(msg, "phase", None), msg.turn)
+        first = self._seen.get(key)
+        if first is not None and first != msg:
+            raise StaleTurn(f"a {msg.TAG} for turn {msg.turn} that contradicts the one received before",
+                            reason="contradiction")
+        self._seen = {k: m for k, m in self._seen.items() if k[2] >= now - 1}  # keep this turn and the last
+        self._seen[key] = msg
+        self.turn = now if self.turn is None else max(self.turn, now)
+
+    def screen(self, event: object, rejects: RejectCounter) -> bool:
+        """False (the rejection counted and logged) for a coordinator message that fails `admit`."""
+        if isinstance(event, Received) and isinstance(event.msg, (Turn, Status, Over)):
+            try:
+                self.admit(event.msg)
+            except RemoteInputError as err:
+                rejects.reject(event.key, err)
+                return False
+        return True

@@ -37,6 +37,20 @@ def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
                         "about 0.75 x this (zenoh's default: 10)")
     g.add_argument("--root", default="sim", help="key expression root of this simulation (default: sim)")
     g.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ERROR (default: INFO)")
+    s = parser.add_argument_group("zenoh security (docs/security.md)")
+    s.add_argument("--tls-ca", metavar="FILE", help="CA certificate that signed the router's (and peers') TLS "
+                   "certificates, for tls/HOST:PORT endpoints")
+    s.add_argument("--tls-cert", metavar="FILE", help="this process's TLS certificate (mutual TLS; with --tls-key)")
+    s.add_argument("--tls-key", metavar="FILE", help="the private key of --tls-cert")
+    s.add_argument("--tls-mtls", action="store_true",
+                   help="a router: require every client to present a certificate signed by --tls-ca")
+    s.add_argument("--user", metavar="NAME", help="user name for the router's user/password authentication")
+    s.add_argument("--password-file", metavar="FILE",
+                   help=f"file whose first line is the password of --user (or set {PASSWORD_ENV}); never a flag")
+    s.add_argument("--users-file", metavar="FILE",
+                   help="a router: the user:password dictionary it authenticates clients against")
+    s.add_argument("--acl", metavar="FILE", help="a router: a JSON5 file with an access_control block "
+                   "(python -m dronesim.schema.acl)")
 
 
 def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
@@ -62,7 +76,74 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
             raise UsageError("--lease must be positive")
         conf.insert_json5("transport/link/tx/lease", str(int(args.lease * 1000)))
         conf.insert_json5("transport/link/tx/keep_alive", "4")  # keep-alives per lease, zenoh's default
+    apply_security(conf, args)
     return conf
+
+
+#: The environment variable holding the password of --user when no --password-file is given.
+PASSWORD_ENV = "DRONESIM_PASSWORD"
+
+
+def _existing(path: str, flag: str) -> str:
+    import os
+
+    if not os.path.isfile(path):
+        if flag == "--password-file":  # never echo it: it may be a password typed as `--password SECRET`
+            raise UsageError("--password-file: no such file (it takes the path of a file holding the password)")
+        raise UsageError(f"{flag} {path}: no such file")
+    return os.path.abspath(path)
+
+
+def apply_security(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | None = None) -> None:
+    """The security flags (TLS, mutual TLS, user/password, a router's dictionary and ACL) into `conf`.
+
+    A client's --tls-cert/--tls-key are presented to the router (mutual TLS); a router's are its server
+    certificate, and --tls-mtls makes it require clients' ones. `router` defaults to the config's mode."""
+    get = lambda name: getattr(args, name, None)  # noqa: E731 -- parsers without these flags
+    tls = "transport/link/tls/"
+    if router is None:
+        mode = get("mode") or json.loads(conf.get_json("mode") or "null")
+        router = mode == "router"
+    if get("tls_ca"):
+        conf.insert_json5(tls + "root_ca_certificate", json.dumps(_existing(args.tls_ca, "--tls-ca")))
+    if bool(get("tls_cert")) != bool(get("tls_key")):
+        raise UsageError("--tls-cert and --tls-key go together")
+    if get("tls_cert"):
+        cert, key = _existing(args.tls_cert, "--tls-cert"), _existing(args.tls_key, "--tls-key")
+        for side in ("listen", "connect"):
+            conf.insert_json5(f"{tls}{side}_certificate", json.dumps(cert))
+            conf.insert_json5(f"{tls}{side}_private_key", json.dumps(key))
+        if not router:
+            conf.insert_json5(tls + "enable_mtls", "true")  # a client presents its certificate only then
+    if get("tls_mtls"):
+        conf.insert_json5(tls + "enable_mtls", "true")
+    password = None
+    if get("password_file"):
+        with open(_existing(args.password_file, "--password-file"), encoding="utf-8") as f:
+            password = f.readline().rstrip("\r\n")
+        if not password:
+            raise UsageError(f"--password-file {args.password_file}: its first line is empty")
+    elif get("user"):
+        import os
+
+        password = os.environ.get(PASSWORD_ENV) or None
+    if get("user"):
+        if password is None:
+            raise UsageError(f"--user {args.user} needs --password-file FILE or the {PASSWORD_ENV} environment variable")
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(args.user))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+    elif get("password_file"):
+        raise UsageError("--password-file needs --user NAME")
+    if get("users_file"):
+        conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(_existing(args.users_file, "--users-file")))
+    if get("acl"):
+        try:
+            block = zenoh.Config.from_file(_existing(args.acl, "--acl")).get_json("access_control")
+        except Exception as exc:
+            raise UsageError(f"cannot load --acl {args.acl}: {exc}") from None
+        if not json.loads(block).get("enabled"):
+            raise UsageError(f"--acl {args.acl}: its access_control block is missing or not enabled")
+        conf.insert_json5("access_control", block)
 
 
 def setup_logging(level: str, name: str) -> logging.Logger:
@@ -206,6 +287,19 @@ class Inbox:
 
         key = self.keys.any_alive if entity is None else self.keys.alive_of(entity)
         self._handles.append(self.session.liveliness().declare_subscriber(key, on_token, history=True))
+
+    def post(self, event: object) -> None:
+        """Queue an event from another thread of this process (e.g. a web request for the main loop)."""
+        self._q.put(event)  # type: ignore[arg-type]
+
+    def drain(self) -> list[Event]:
+        """Every event already queued, without waiting."""
+        out: list[Event] = []
+        while True:
+            try:
+                out.append(self._q.get_nowait())
+            except queue.Empty:
+                return out
 
     def get(self, timeout: float | None = None) -> Event | None:
         """The next event, or None when `timeout` seconds pass first."""

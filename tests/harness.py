@@ -106,6 +106,9 @@ class Proc:
         if self.p.poll() is None:
             self.p.kill()
         self.p.wait()
+        for t in self._readers:
+            t.join(timeout=10)
+        self._log.write_text(self.text)  # kept for a post-mortem of a failed test
 
 
 class Cluster:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import zenoh
 
 from dronesim.entity import Membership
-from dronesim.schema import Connect, Done, EndReason, Intent, Keys, Over, Phase, Role, Status, Target, Turn, UsageError
+from dronesim.schema import Connect, Done, EndReason, Keys, Over, Phase, Role, Status, Target, Turn, UsageError
 from dronesim.transport import Inbox, Outbox, Presence, Received, session_id, zenoh_config
 
 from ..environment import build_world
@@ -66,13 +66,6 @@ class Command:
     action: str
     args: dict
     reply: queue.SimpleQueue
-
-
-class CommandInbox(Inbox):
-    """The Zenoh inbox, also carrying the HTTP threads' commands: the main thread waits on one queue."""
-
-    def post(self, command: Command) -> None:
-        self._q.put(command)  # type: ignore[arg-type]
 
 
 class LiveBackend:
@@ -140,7 +133,7 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
              connect_timeout: float, grace: float) -> Over:
     hub = Hub()
     with zenoh.open(conf) as session:
-        inbox = CommandInbox(session, keys, logger)
+        inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn, Turn)
         inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
@@ -168,7 +161,9 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
             print(f"web ground station: {server.url} (world {'x'.join(map(str, size))}, "
                   f"drones {', '.join(drones)})", flush=True)
             over = _play(state, inbox, Outbox(session), member, keys, plan, hub, logger)
-            _finish(state, inbox, backend, hub, over)
+            _finish(state, inbox, member, backend, hub, over)
+            if inbox.rejects.total:
+                logger.info("rejected inputs: %s", inbox.rejects.snapshot())
             member.close()
         except BaseException:
             backend.close()
@@ -188,12 +183,14 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
     return over
 
 
-def _play(state: GroundState, inbox: CommandInbox, out: Outbox, member: Membership, keys: Keys, plan: Plan,
-          hub: Hub, logger: logging.Logger) -> Over:
+def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, keys: Keys,
+          plan: Plan, hub: Hub, logger: logging.Logger) -> Over:
     published = state.seq
     while state.over is None:
         waits = [w for w in (state.due(time.monotonic()), member.timeout()) if w is not None]
         event = inbox.get(min(waits) if waits else None)
+        if not member.clock.screen(event, inbox.rejects):
+            continue
         now = time.monotonic()
         match event:
             case None:
@@ -225,12 +222,16 @@ def _play(state: GroundState, inbox: CommandInbox, out: Outbox, member: Membersh
     return state.over
 
 
-def _finish(state: GroundState, inbox: CommandInbox, backend: LiveBackend, hub: Hub, over: Over) -> None:
+def _finish(state: GroundState, inbox: Inbox, member: Membership, backend: LiveBackend, hub: Hub,
+            over: Over) -> None:
     """After OVER: take the last STATUS if it is still on its way, refuse the commands left, publish."""
     if over.reason in _OBSERVED_ENDS:
         end = time.monotonic() + FINAL_STATUS_WAIT
         while state.status_turn < over.turn and time.monotonic() < end:
-            match inbox.get(end - time.monotonic()):
+            event = inbox.get(end - time.monotonic())
+            if not member.clock.screen(event, inbox.rejects):
+                continue
+            match event:
                 case Received(_, Status() as status):
                     state.on_status(status)
                 case Command() as cmd:

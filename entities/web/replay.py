@@ -14,12 +14,11 @@ import pathlib
 
 from dronesim.coordinator.journal import read
 from dronesim.replay import header_config, tracks
-from dronesim.schema import UsageError
+from dronesim.schema import Cause, UsageError
 
 from ..environment import build_world
 from ..world import World
 from .model import ALIVE, CAUSE_TEXT, DEAD, LOST, REACHED, fmt, world_json
-from dronesim.schema import Cause
 
 
 def _status(track) -> str:

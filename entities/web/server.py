@@ -129,6 +129,8 @@ class _Handler(BaseHTTPRequestHandler):
 
     def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
         """Every error as JSON, including those the base class raises (bad request line, 501...)."""
+        self.request_version = "HTTP/1.0"  # a garbled request line leaves it at HTTP/0.9: no status line
+        self.close_connection = True
         try:
             text = message or HTTPStatus(code).phrase
         except ValueError:

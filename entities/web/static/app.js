@@ -225,8 +225,16 @@ function renderFloor(view) {
 function renderIso(view) {
   const cv = $("#iso");
   const dpr = window.devicePixelRatio || 1;
-  const W = cv.clientWidth, H = cv.clientHeight;
-  if (!W || !H) return;
+  const [nx, ny, nz] = S.world.size;
+  const R = S.rotation;
+  const U = R % 2 === 0 ? nx : ny, V = R % 2 === 0 ? ny : nx;
+  const k = 0.85, m = 26;
+  const W = cv.clientWidth;
+  if (!W) return;
+  // as tall as the world needs at this width (a flat world gets a short canvas)
+  const byWidth = (W - 2 * m) / (U + V);
+  const H = Math.round(Math.min(640, Math.max(300, byWidth * ((U + V) / 2 + nz * k) + 2 * m + 14)));
+  if (cv.style.height !== `${H}px`) cv.style.height = `${H}px`;
   if (cv.width !== Math.round(W * dpr) || cv.height !== Math.round(H * dpr)) {
     cv.width = Math.round(W * dpr);
     cv.height = Math.round(H * dpr);
@@ -234,12 +242,8 @@ function renderIso(view) {
   const ctx = cv.getContext("2d");
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.clearRect(0, 0, W, H);
-  const [nx, ny, nz] = S.world.size;
-  const R = S.rotation;
-  const U = R % 2 === 0 ? nx : ny, V = R % 2 === 0 ? ny : nx;
   const toUV = (x, y) => [[x, y], [y, nx - 1 - x], [nx - 1 - x, ny - 1 - y], [ny - 1 - y, x]][R];
   const fromUV = (u, v) => [[u, v], [nx - 1 - v, u], [nx - 1 - u, ny - 1 - v], [v, ny - 1 - u]][R];
-  const k = 0.85, m = 26;
   const hw = Math.max(2, Math.min((W - 2 * m) / (U + V), (H - 2 * m - 14) / ((U + V) / 2 + nz * k)));
   const hh = hw / 2, hz = hw * k;
   const ox = (W - (U + V) * hw) / 2 + U * hw;
@@ -428,7 +432,7 @@ function renderLog(view) {
 
 function renderHeader(view) {
   $("#turn").textContent = String(view.turn);
-  $("#phase").textContent = view.phase ? `${view.phase} phase` : "";
+  $("#phase").textContent = view.phase && !view.over ? `${view.phase} phase` : "";
   $("#gamestate").textContent = view.control ? view.control.text : "";
   const over = $("#over");
   if (view.over) {

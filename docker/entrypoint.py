@@ -1,0 +1,178 @@
+#!/usr/bin/env python3
+"""The dronesim image's entrypoint (installed as /usr/local/bin/dronesim-entrypoint).
+
+    dronesim-entrypoint dronesim coordinator --connect tcp/router:7447 ...     # run as given (exec)
+    dronesim-entrypoint dronesim drone --id auto --connect tcp/router:7447 ... # claim the first free Dnn
+    dronesim-entrypoint bash                                                  # anything else: exec'd
+
+For an entity role (coordinator, env, drone, gcs) and for `dronesim router`, it first writes which
+entity this container runs, and with which Zenoh flags, to $DRONESIM_STATE (a small JSON file), for the
+health check (docker/healthcheck.py).
+
+``--id auto`` is how `docker compose up --scale drone=N` gives every replica its own drone id. The
+replica tries D01, D02, ... in turn, running `dronesim drone --id Dnn` for each: the coordinator admits
+one process per drone id and refuses a taken one with a clear message ("D01 is already connected",
+"drone D01 is already taken by H01"), so the first id it admits is this replica's. Replicas racing for
+one id are serialized by the coordinator: one wins, the others move on. It stops at "unknown drone Dnn":
+every drone of the game already flies, so this replica is one too many (exit 2, with that message).
+A refused attempt leaves no trace: presence tokens are per Zenoh session.
+
+``{id}`` in any argument becomes the entity id (SRV, ENV, GCS, the claimed Dnn, or Hnn), so one
+command line fits every replica: ``--tls-cert /certs/{id}.pem --tls-key /certs/{id}.key`` gives each
+claimed drone the certificate whose name the router's access control grants that drone's keys.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+#: dronesim subcommand -> the entity id it runs as (None: read from --id/--host, or a router).
+ROLES = {"coordinator": "SRV", "env": "ENV", "gcs": "GCS", "drone": None, "router": None}
+#: refusals that mean "this id is someone else's: try the next one".
+TAKEN = re.compile(r"connection refused: .*(is already connected|is already taken)")
+#: the refusal that means "there is no such drone in this game": every id is taken.
+UNKNOWN = re.compile(r"connection refused: (unknown drone .*)")
+MAX_ID = 9999
+
+
+def state_path() -> Path:
+    return Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
+
+
+def flags(argv: list[str]) -> argparse.Namespace:
+    """The few flags the entrypoint and the health check need; the rest is dronesim's business."""
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--id")
+    p.add_argument("--host")
+    p.add_argument("--root", default="sim")
+    return p.parse_known_args(argv)[0]
+
+
+def drone_entity(args: argparse.Namespace) -> str | None:
+    """The entity a `dronesim drone` process connects as: its swarm host, or its one drone."""
+    if args.host:
+        return args.host
+    ident = args.id or "D01"
+    if ident.isdigit():
+        return f"D{int(ident):02d}"
+    return ident if re.fullmatch(r"D\d{2,4}", ident) else None
+
+
+def write_state(role: str, entity: str | None, argv: list[str], pid: int) -> None:
+    path = state_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"role": role, "entity": entity, "argv": argv, "pid": pid}))
+    tmp.replace(path)
+
+
+def with_id(argv: list[str], ident: str) -> list[str]:
+    """`argv` with its --id value replaced."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--id" and i + 1 < len(argv):
+            out += ["--id", ident]
+            i += 2
+            continue
+        out.append(f"--id={ident}" if argv[i].startswith("--id=") else argv[i])
+        i += 1
+    return out
+
+
+def fill(argv: list[str], entity: str | None) -> list[str]:
+    """`{id}` in any argument becomes the entity id (e.g. --tls-cert /certs/{id}.pem)."""
+    return [a.replace("{id}", entity) for a in argv] if entity else list(argv)
+
+
+def dronesim(*args: str) -> list[str]:
+    return [sys.executable, "-m", "dronesim", *args]
+
+
+class Attempt:
+    """One `dronesim drone --id Dnn` run; its stderr is passed through and scanned for a refusal."""
+
+    def __init__(self, argv: list[str]) -> None:
+        self.refusal: str | None = None
+        self.proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True, bufsize=1)
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            sys.stderr.write(line)
+            sys.stderr.flush()
+            if "connection refused:" in line and self.refusal is None:
+                self.refusal = line.strip()
+
+    def wait(self) -> int:
+        code = self.proc.wait()
+        self._reader.join()
+        return code
+
+
+def claim(argv: list[str], first: int = 1) -> int:
+    """Fly the first drone id the coordinator admits (see the module's doc); the drone's exit code."""
+    current: list[Attempt] = []
+    stopping = threading.Event()
+
+    def forward(signum: int, _frame: object) -> None:  # docker stop: pass it on, try no further id
+        stopping.set()
+        for attempt in current:
+            if attempt.proc.poll() is None:
+                attempt.proc.send_signal(signum)
+
+    for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
+        signal.signal(sig, forward)
+    for n in range(first, MAX_ID + 1):
+        ident = f"D{n:02d}"
+        args = fill(with_id(argv, ident), ident)
+        write_state("drone", ident, args, os.getpid())
+        attempt = Attempt(dronesim("drone", *args))
+        current[:] = [attempt]
+        code = attempt.wait()
+        refusal = attempt.refusal or ""
+        if code == 0 or stopping.is_set() or not refusal:
+            return code
+        if TAKEN.search(refusal):
+            print(f"dronesim-entrypoint: {ident} is taken, trying the next id", file=sys.stderr, flush=True)
+            continue
+        unknown = UNKNOWN.search(refusal)
+        if unknown:
+            print(f"dronesim-entrypoint: no free drone id ({unknown.group(1)}): this replica is one too many; "
+                  "start as many drone replicas as the coordinator's --drones (DRONES)", file=sys.stderr, flush=True)
+        return code
+    return 2
+
+
+def main(argv: list[str]) -> int:
+    if not argv:
+        argv = ["dronesim", "--help"]
+    if argv[0] != "dronesim":
+        os.execvp(argv[0], argv)
+    if len(argv) < 2 or argv[1] not in ROLES:  # --help, replay, bench, up: no entity to watch
+        os.execv(sys.executable, dronesim(*argv[1:]))
+    role, rest = argv[1], argv[2:]
+    args = flags(rest)
+    if role == "drone" and args.id == "auto":
+        if args.host:
+            print("dronesim-entrypoint: --id auto flies one drone: it takes no --host", file=sys.stderr)
+            return 2
+        return claim(rest)
+    entity = ROLES[role] or (drone_entity(args) if role == "drone" else None)
+    rest = fill(rest, entity)
+    write_state(role, entity, rest, os.getpid())
+    os.execv(sys.executable, dronesim(role, *rest))  # this process becomes the entity: same pid
+    return 127  # not reached
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

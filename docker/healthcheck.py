@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""The dronesim image's HEALTHCHECK (installed as /usr/local/bin/dronesim-health).
+
+"The process is alive" is what Docker already knows. What matters for a cluster of Zenoh clients is
+whether this container's entity is *present on the network*: every entity process holds a liveliness
+token ``<root>/<ENTITY>/ALIVE/<session>`` for as long as its Zenoh session is up, and the coordinator
+watches these tokens to notice a dead or cut-off process. So the check opens a short-lived client
+session with the entity's own Zenoh flags (same --connect endpoints, same --config: TLS and credentials
+included) and asks the router for that token. Healthy means, at once: the process runs, its session
+reached the router, and the coordinator can see it. A hung start, a lost router or a dead session all
+show as unhealthy; the line printed says which.
+
+For `dronesim router` (a Python router in this image), healthy means the router accepts a Zenoh session
+on its listen endpoint. A container running anything else (replay, bench, a shell) has nothing to check
+and is reported healthy.
+
+The entrypoint (docker/entrypoint.py) records which entity the container runs in $DRONESIM_STATE.
+Exit status 0: healthy, 1: unhealthy (Docker's convention).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+TIMEOUT_S = float(os.environ.get("DRONESIM_HEALTH_TIMEOUT", "5"))
+
+
+def state_path() -> Path:
+    return Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
+
+
+def zenoh_args(argv: list[str]) -> argparse.Namespace:
+    """The entity's Zenoh flags, parsed by dronesim's own flag definitions."""
+    from dronesim.transport import add_zenoh_args
+
+    p = argparse.ArgumentParser(add_help=False)
+    add_zenoh_args(p)
+    return p.parse_known_args(argv)[0]
+
+
+def probe_config(args: argparse.Namespace, connect: list[str]):
+    """A client config reaching `connect`, with the entity's config file (TLS, credentials) if any."""
+    import zenoh
+
+    from dronesim.transport import zenoh_config
+
+    args = argparse.Namespace(**vars(args))
+    args.mode, args.connect, args.listen = "client", connect, []
+    conf: zenoh.Config = zenoh_config(args)
+    conf.insert_json5("listen/endpoints", "[]")  # never take the entity's port
+    return conf
+
+
+def connect_endpoints(conf) -> list[str]:
+    value = json.loads(conf.get_json("connect/endpoints"))
+    if isinstance(value, dict):  # per-mode endpoints
+        value = value.get("client", [])
+    return [str(e) for e in value or []]
+
+
+def local(endpoint: str) -> str:
+    """A listen endpoint as seen from inside the container (tcp/0.0.0.0:7447 -> tcp/127.0.0.1:7447)."""
+    return endpoint.replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
+
+
+def check(state: dict) -> tuple[bool, str]:
+    import zenoh
+
+    pid = state.get("pid")
+    if pid and Path("/proc").is_dir() and not Path(f"/proc/{pid}").exists():
+        return False, f"process {pid} is gone"
+    args = zenoh_args(list(state.get("argv", [])))
+    role, entity = state.get("role"), state.get("entity")
+    if role == "router":
+        endpoints = [local(e) for e in args.listen] or ["tcp/127.0.0.1:7447"]
+        try:
+            with zenoh.open(probe_config(args, endpoints)):
+                return True, f"router accepts sessions on {', '.join(endpoints)}"
+        except Exception as exc:  # zenoh raises a bare ZError
+            return False, f"router does not accept sessions on {', '.join(endpoints)}: {exc}"
+    if not entity:
+        return False, f"cannot tell which entity this {role} runs as (see its --id/--host)"
+    from dronesim.schema import Keys
+
+    conf = probe_config(args, list(args.connect))
+    endpoints = connect_endpoints(conf)  # --connect, or the entity's config file
+    if not endpoints:
+        return True, f"{entity}: no connect endpoint, nothing to check through"
+    key = Keys(args.root).alive_of(entity)
+    try:
+        with zenoh.open(conf) as session:
+            replies = list(session.liveliness().get(key, timeout=TIMEOUT_S))
+    except Exception as exc:
+        return False, f"{entity}: cannot reach the router at {', '.join(endpoints)}: {exc}"
+    tokens = [str(r.ok.key_expr) for r in replies if r.ok is not None]
+    if not tokens:
+        return False, f"{entity}: no presence token {key} within {TIMEOUT_S:g} s (its session is down or not routed)"
+    return True, f"{entity} present: {', '.join(tokens)}"
+
+
+def main() -> int:
+    path = state_path()
+    try:
+        state = json.loads(path.read_text())
+    except FileNotFoundError:
+        print(f"healthy: no dronesim entity in this container ({path} absent)")
+        return 0
+    except (OSError, ValueError) as exc:
+        print(f"unhealthy: unreadable {path}: {exc}")
+        return 1
+    ok, why = check(state)
+    print(f"{'healthy' if ok else 'unhealthy'}: {why}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

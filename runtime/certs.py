@@ -1,0 +1,223 @@
+"""``dronesim certs``: a development certificate authority and the credentials of every process.
+
+    dronesim certs certs/ --drones 4 --router-host sim.example.org --passwords
+
+writes into ``certs/``:
+
+* ``ca.pem`` / ``ca.key`` -- a self-signed CA ("dronesim development CA"); every process trusts
+  ``ca.pem`` (``--tls-ca``); ``ca.key`` signs, keep it off the other hosts;
+* ``router.pem`` / ``router.key`` -- the router's server certificate, CN ``router``, with subject
+  alternative names ``localhost``, ``127.0.0.1``, ``::1`` and each ``--router-host`` (a DNS name or an
+  IP address), so that a client connecting to ``tls/NAME:7447`` can verify it;
+* ``SRV``, ``ENV``, ``GCS``, ``D01``..``Dnn`` and each swarm host ``Hnn`` (``--host H01``) ``.pem`` /
+  ``.key`` -- client certificates whose common name is the entity id: with mutual TLS the router
+  knows who is connecting, and the access-control rules (``python -m dronesim.schema.acl --identity
+  cert``) grant each name its keys;
+* with ``--passwords``: ``<ID>.password`` (a random password per entity) and ``users.txt``, the
+  router's ``user:password`` dictionary (``--users-file``) for ``--identity usrpwd``.
+
+It runs the ``openssl`` command line tool (no Python dependency). Private keys and passwords are
+written with mode 0600. Running it again keeps what exists (the CA, the
+certificates, the passwords) and adds what is missing -- a new ``--router-host`` re-issues the router
+certificate with its old names and the new one (delete ``router.pem`` to drop names); ``--force``
+re-issues everything but the CA (``--force-ca`` too). This is a development kit: for a real deployment, use your own CA.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import os
+import re
+import secrets
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from dronesim.schema import UsageError, drone_id
+from dronesim.schema.messages import is_drone_id, is_host_id
+
+CA_NAME = "dronesim development CA"
+ROUTER = "router"
+FIXED = ("SRV", "ENV", "GCS")
+LOCAL_NAMES = ("localhost", "127.0.0.1", "::1")
+#: Elliptic-curve keys (P-256): small, fast, and accepted by Zenoh's TLS (rustls).
+NEW_KEY = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
+
+
+def openssl(*args: str, cwd: Path) -> None:
+    """Run the openssl command line tool (its output only shows when it fails). Files it creates are
+    private to the user (umask 077); certificates are made world-readable afterwards."""
+    exe = shutil.which("openssl")
+    if exe is None:
+        raise UsageError("dronesim certs needs the openssl command (Debian/Ubuntu: apt-get install openssl)")
+    done = subprocess.run([exe, *args], cwd=cwd, capture_output=True, text=True, preexec_fn=lambda: os.umask(0o077))
+    if done.returncode != 0:
+        raise UsageError(f"openssl {args[0]} failed: {done.stderr.strip() or done.stdout.strip()}")
+
+
+def _san(name: str) -> str:
+    try:
+        return f"IP:{ipaddress.ip_address(name)}"
+    except ValueError:
+        if not re.fullmatch(r"[A-Za-z0-9*]([A-Za-z0-9.\-]*[A-Za-z0-9])?", name):
+            raise UsageError(f"bad host name {name!r} for a certificate") from None
+        return f"DNS:{name}"
+
+
+class Kit:
+    """The certificate folder: loads or creates the CA, then issues certificates signed by it."""
+
+    def __init__(self, folder: str | Path, *, days: int = 825, force_ca: bool = False) -> None:
+        self.dir = Path(folder).resolve()
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.days = days
+        self.written: list[Path] = []
+        self.new_ca = False
+        if (self.dir / "ca.pem").exists() and (self.dir / "ca.key").exists() and not force_ca:
+            return
+        openssl("req", "-x509", "-new", *NEW_KEY, "-keyout", "ca.key", "-out", "ca.pem",
+                "-days", str(max(days, 3650)), "-sha256", "-subj", f"/CN={CA_NAME}",
+                "-addext", "basicConstraints=critical,CA:TRUE,pathlen:0",
+                "-addext", "keyUsage=critical,keyCertSign,cRLSign,digitalSignature",
+                "-addext", "subjectKeyIdentifier=hash", cwd=self.dir)
+        (self.dir / "ca.pem").chmod(0o644)
+        self.written += [self.dir / "ca.pem", self.dir / "ca.key"]
+        self.new_ca = True  # what an earlier CA signed is re-issued
+
+    def issue(self, common_name: str, *, names: Sequence[str] = (), server: bool = False, force: bool = False) -> Path:
+        """``<common_name>.pem`` / ``.key`` signed by the CA (kept if it exists, unless `force`)."""
+        if not re.fullmatch(r"[A-Za-z0-9_\-]+", common_name):
+            raise UsageError(f"bad common name {common_name!r}")
+        pem, key = self.dir / f"{common_name}.pem", self.dir / f"{common_name}.key"
+        wanted = [_san(n) for n in dict.fromkeys(names or [common_name.lower()])]
+        if pem.exists() and key.exists():
+            had = self.names_of(pem)
+            if not force and set(wanted) <= had:
+                return pem
+            wanted += sorted(had - set(wanted))  # a re-issued certificate keeps the names it had
+        sans = ",".join(wanted)
+        ext = "\n".join([
+            "basicConstraints=critical,CA:FALSE",
+            "keyUsage=critical,digitalSignature,keyAgreement",
+            f"extendedKeyUsage={'serverAuth,clientAuth' if server else 'clientAuth'}",
+            f"subjectAltName={sans}",
+            "subjectKeyIdentifier=hash",
+            "authorityKeyIdentifier=keyid",
+        ]) + "\n"
+        with tempfile.TemporaryDirectory(dir=self.dir) as tmp:
+            (Path(tmp) / "ext.cnf").write_text(ext)
+            openssl("req", "-new", *NEW_KEY, "-keyout", key.name, "-out", f"{tmp}/{common_name}.csr",
+                    "-subj", f"/CN={common_name}", cwd=self.dir)
+            openssl("x509", "-req", "-in", f"{tmp}/{common_name}.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+                    "-set_serial", f"0x{secrets.token_hex(16)}", "-days", str(self.days), "-sha256",
+                    "-extfile", f"{tmp}/ext.cnf", "-out", pem.name, cwd=self.dir)
+        pem.chmod(0o644)
+        self.written += [pem, key]
+        return pem
+
+    def names_of(self, pem: Path) -> set[str]:
+        """The subject alternative names of a certificate, as ``DNS:x`` / ``IP:y`` (normalised)."""
+        exe = shutil.which("openssl")
+        if exe is None:
+            raise UsageError("dronesim certs needs the openssl command (Debian/Ubuntu: apt-get install openssl)")
+        text = subprocess.run([exe, "x509", "-in", str(pem), "-noout", "-ext", "subjectAltName"],
+                              capture_output=True, text=True).stdout
+        out: set[str] = set()
+        for item in re.findall(r"(DNS:[^,\s]+|IP Address:[^,\s]+)", text):
+            kind, _, value = item.partition(":")
+            out.add(_san(value) if kind == "IP Address" else f"DNS:{value}")
+        return out
+
+    def password(self, entity: str, *, force: bool = False) -> Path:
+        """``<entity>.password``: a random password (kept if it exists, unless `force`)."""
+        path = self.dir / f"{entity}.password"
+        if not path.exists() or force:
+            _write_private(path, secrets.token_urlsafe(24) + "\n")
+            self.written.append(path)
+        return path
+
+    def users(self) -> Path:
+        """``users.txt``: the router's ``user:password`` dictionary, from every ``<ID>.password`` here."""
+        lines = [f"{p.name[:-len('.password')]}:{p.read_text().splitlines()[0]}"
+                 for p in sorted(self.dir.glob("*.password"))]
+        path = self.dir / "users.txt"
+        _write_private(path, "\n".join(lines) + "\n")
+        self.written.append(path)
+        return path
+
+
+def _write_private(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
+def entities(drones: Iterable[str] = (), hosts: Iterable[str] = ()) -> list[str]:
+    """SRV, ENV, GCS, the drones and the swarm hosts, checked."""
+    out = list(FIXED)
+    for d in drones:
+        if not is_drone_id(d):
+            raise UsageError(f"bad drone id {d!r}")
+        out.append(d)
+    for h in hosts:
+        if not is_host_id(h):
+            raise UsageError(f"bad swarm host id {h!r}: expected H01, H02...")
+        out.append(h)
+    return list(dict.fromkeys(out))
+
+
+def make(folder: str | Path, *, drones: Iterable[str] = (), hosts: Iterable[str] = (),
+         router_hosts: Iterable[str] = (), passwords: bool = False, days: int = 825, force: bool = False,
+         force_ca: bool = False) -> Kit:
+    """The whole kit: CA, router certificate, one client certificate (and password) per entity."""
+    kit = Kit(folder, days=days, force_ca=force_ca)
+    force = force or kit.new_ca
+    kit.issue(ROUTER, names=[*LOCAL_NAMES, *router_hosts], server=True, force=force)
+    for e in entities(drones, hosts):
+        kit.issue(e, force=force)
+        if passwords:
+            kit.password(e, force=force)
+    if passwords:
+        kit.users()
+    return kit
+
+
+def cli(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="dronesim certs", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("folder", help="where to write the kit (created if missing), e.g. certs/")
+    p.add_argument("--drones", type=int, default=1, help="certificates for D01..Dnn (default 1)")
+    p.add_argument("--host", action="append", default=[], metavar="Hnn", help="a swarm host's certificate (repeatable)")
+    p.add_argument("--router-host", action="append", default=[], metavar="NAME",
+                   help="a DNS name or IP address the router is reached at, besides localhost (repeatable)")
+    p.add_argument("--passwords", action="store_true",
+                   help="also a random password per entity and the router's users.txt dictionary")
+    p.add_argument("--days", type=int, default=825, help="validity of the certificates (default 825 days)")
+    p.add_argument("--force", action="store_true", help="re-issue the certificates and passwords that exist")
+    p.add_argument("--force-ca", action="store_true", help="also a new CA (every process must then get it)")
+    args = p.parse_args(argv)
+    try:
+        if args.drones < 0 or args.days < 1:
+            raise UsageError("--drones must be >= 0 and --days >= 1")
+        kit = make(args.folder, drones=[drone_id(n) for n in range(1, args.drones + 1)], hosts=args.host,
+                   router_hosts=args.router_host, passwords=args.passwords, days=args.days, force=args.force,
+                   force_ca=args.force_ca)
+    except UsageError as err:
+        print(f"dronesim certs: {err}", file=sys.stderr)
+        return 2
+    for path in kit.written:
+        print(f"wrote {path}")
+    if not kit.written:
+        print(f"{kit.dir}: everything already there (--force to re-issue)")
+    print(f"CA: {kit.dir / 'ca.pem'} (give it to every process: --tls-ca); keep {kit.dir / 'ca.key'} here")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(cli())

@@ -1,0 +1,374 @@
+"""Zenoh access-control rules for a router, generated from the key table (`KEY_TABLE`), the one source.
+
+Every key has exactly one writer role (``KeySpec.writer``) and a list of reader roles
+(``KeySpec.readers``); this module turns that into a Zenoh ``access_control`` block with
+``default_permission: "deny"``, one subject per *principal* (an authenticated process: SRV, ENV,
+GCS, each drone Dnn, each swarm host Hnn) and one policy per principal:
+
+* the writer side (``ingress``: what the router accepts from it) -- ``put`` on the keys it writes
+  (a drone: only ``<root>/<itself>/NPS``; a swarm host: the NPS of each drone it flies; the GCS:
+  ``<root>/*/TGT`` and ``<root>/GCS/DONE``), ``declare_queryable`` and ``reply`` on the queryables it
+  owns (ENV: ENV/ASK, ENV/MAP; SRV: SRV/CONNECT);
+* the reader side -- ``declare_subscriber`` (ingress) and ``put`` (egress) on the keys it reads,
+  ``query`` (ingress) and ``reply`` (egress) on the queryables it asks, ``query`` (egress) on those
+  it owns;
+* presence -- a principal declares liveliness tokens only under its own ``<root>/<id>/ALIVE/*``, and
+  the readers of that row watch ``<root>/*/ALIVE/*``;
+* discovery, which carries no payload -- the router may tell everyone about subscribers and
+  queryables under the root (a publisher learns that someone listens).
+
+Anything else is denied: a key outside the table, a ``delete``, a second writer. A principal is
+matched by its user name (``--identity usrpwd``: the router's user/password dictionary), by its TLS
+client certificate's common name (``--identity cert``: mutual TLS) or by both (``both``); the name
+is the entity id (``D01``, ``H01``, ``GCS``...). Subjects never overlap (each has one distinct name):
+with Zenoh, rules of overlapping subjects were seen not to hold.
+
+    python -m dronesim.schema.acl --drones 16 --root sim --identity usrpwd > config/router-acl.json5
+    python -m dronesim.schema.acl --drones 16 --host H01=D01-D08 --identity cert
+    python -m dronesim.schema.acl --write-examples config/    # regenerate the examples in config/
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import pathlib
+import re
+import sys
+from collections.abc import Iterable, Sequence
+
+from .keys import KEY_TABLE, Keys, KeySpec
+from .messages import drone_id, is_drone_id, is_host_id
+
+#: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
+ROLES = ("SRV", "ENV", "GCS", "DRONE")
+_PLACEHOLDER = re.compile(r"\{[a-z_]+\}")
+IDENTITIES = ("usrpwd", "cert", "both")
+#: Zenoh's ACL message kinds (zenoh 1.x ``AclMessage``).
+MESSAGES = ("put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+            "liveliness_token", "liveliness_query", "declare_liveliness_subscriber")
+#: Declarations the router may announce to anyone (no payload: who listens where).
+ANNOUNCEMENTS = ("declare_subscriber", "declare_queryable", "declare_liveliness_subscriber")
+#: The shared example in config/: the drones it grants (D01..D16) and its key root.
+EXAMPLE_DRONES = 16
+EXAMPLE_ROOT = "sim"
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Principal:
+    """An authenticated process: its entity id (user name / certificate CN), role, drones it flies."""
+
+    name: str
+    role: str
+    drones: tuple[str, ...] = ()
+
+
+def principals(drones: Iterable[str], hosts: dict[str, Sequence[str]] | None = None) -> list[Principal]:
+    """SRV, ENV, GCS, every drone not flown by a host, and every host with its drones."""
+    hosts = dict(hosts or {})
+    hosted: dict[str, str] = {}
+    for host, flown in hosts.items():
+        if not is_host_id(host):
+            raise ValueError(f"bad swarm host id {host!r}: expected H01, H02...")
+        for d in flown:
+            if not is_drone_id(d):
+                raise ValueError(f"bad drone id {d!r} for host {host}")
+            if d in hosted:
+                raise ValueError(f"{d} is flown by both {hosted[d]} and {host}")
+            hosted[d] = host
+    drones = list(dict.fromkeys(drones))
+    for d in drones:
+        if not is_drone_id(d):
+            raise ValueError(f"bad drone id {d!r}")
+    out = [Principal("SRV", "SRV"), Principal("ENV", "ENV"), Principal("GCS", "GCS")]
+    out += [Principal(d, "DRONE", (d,)) for d in drones if d not in hosted]
+    out += [Principal(h, "DRONE", tuple(flown)) for h, flown in sorted(hosts.items())]
+    return out
+
+
+def readers_of(spec: KeySpec) -> set[str]:
+    """The roles that read a key, from its ``readers`` column ("all", "drones", "ENV, GCS"...)."""
+    out: set[str] = set()
+    for word in (w.strip() for w in spec.readers.split(",")):
+        if word in ("all", "entities"):
+            out.update(ROLES)
+        elif word == "drones":
+            out.add("DRONE")
+        elif word in ROLES:
+            out.add(word)
+        else:
+            raise ValueError(f"unknown reader {word!r} in the key table row {spec.template}")
+    return out
+
+
+def _writes(spec: KeySpec, p: Principal) -> bool:
+    return spec.writer == p.role or (spec.writer == "each entity" and "{entity}" in spec.template)
+
+
+def _expand(template: str, p: Principal, *, own: bool) -> list[str]:
+    """Concrete templates (relative to the root) for a principal: `own` keys name the principal
+    (``{entity}``) or its drones (``{drone}``); the others, and any other placeholder (``{session}``),
+    are wildcards."""
+    if "{entity}" in template:
+        out = [template.replace("{entity}", p.name if own else "*")]
+    elif "{drone}" in template and own and p.role == "DRONE":
+        out = [template.replace("{drone}", d) for d in p.drones]
+    else:
+        out = [template.replace("{drone}", "*")]
+    return [_PLACEHOLDER.sub("*", t) for t in out]
+
+
+def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str]]:
+    """(flow, message) -> key expressions this principal is allowed, derived from KEY_TABLE."""
+    g: dict[tuple[str, str], list[str]] = {}
+
+    def add(flow: str, messages: Iterable[str], templates: Iterable[str]) -> None:
+        for msg in messages:
+            keys = g.setdefault((flow, msg), [])
+            for t in templates:
+                for root in roots:
+                    k = f"{root}/{t}"
+                    if k not in keys:
+                        keys.append(k)
+
+    for spec in KEY_TABLE:
+        mine = _writes(spec, p)
+        reads = p.role in readers_of(spec)
+        match spec.how:
+            case "put":
+                if mine:
+                    add("ingress", ["put"], _expand(spec.template, p, own=True))
+                if reads:
+                    add("ingress", ["declare_subscriber"], _expand(spec.template, p, own=False))
+                    add("egress", ["put"], _expand(spec.template, p, own=False))
+            case "query":
+                if mine:
+                    add("ingress", ["declare_queryable", "reply"], _expand(spec.template, p, own=True))
+                    add("egress", ["query"], _expand(spec.template, p, own=True))
+                if reads:  # the asker queries on its own behalf: {entity}/{drone} name itself
+                    add("ingress", ["query"], _expand(spec.template, p, own=True))
+                    add("egress", ["reply"], _expand(spec.template, p, own=True))
+            case "liveliness":
+                if mine:
+                    add("ingress", ["liveliness_token"], _expand(spec.template, p, own=True))
+                if reads:
+                    add("ingress", ["declare_liveliness_subscriber", "liveliness_query"],
+                        _expand(spec.template, p, own=False))
+                    add("egress", ["liveliness_token"], _expand(spec.template, p, own=False))
+            case other:
+                raise ValueError(f"unknown key kind {other!r} in the key table row {spec.template}")
+    add("egress", ANNOUNCEMENTS, ["**"])
+    return g
+
+
+def _subject(p: Principal, identity: str) -> dict:
+    s: dict = {"id": p.name}
+    if identity in ("usrpwd", "both"):
+        s["usernames"] = [p.name]
+    if identity in ("cert", "both"):
+        s["cert_common_names"] = [p.name]
+    return s
+
+
+def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), identity: str = "usrpwd",
+                   hosts: dict[str, Sequence[str]] | None = None) -> dict:
+    """The ``access_control`` block (a plain dict, JSON-able) for a router."""
+    if identity not in IDENTITIES:
+        raise ValueError(f"identity must be one of {', '.join(IDENTITIES)}, not {identity!r}")
+    roots = [Keys(r).root for r in roots]  # validates each root
+    if not roots:
+        raise ValueError("at least one key root is needed")
+    rules: list[dict] = []
+    subjects: list[dict] = []
+    policies: list[dict] = []
+    for p in principals(drones, hosts):
+        ids = []
+        for (flow, msg), keys in grants(p, roots).items():
+            rid = f"{p.name} {flow} {msg}"
+            rules.append({"id": rid, "permission": "allow", "flows": [flow], "messages": [msg], "key_exprs": keys})
+            ids.append(rid)
+        subjects.append(_subject(p, identity))
+        policies.append({"id": f"{p.name} policy", "rules": ids, "subjects": [p.name]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+def _includes(outer: str, inner: str) -> bool:
+    import zenoh
+
+    return zenoh.KeyExpr(outer).includes(zenoh.KeyExpr(inner))
+
+
+def allowed(acl: dict, subject: str, flow: str, message: str, key: str) -> bool:
+    """What the router decides for `subject` (a subject id) -- Zenoh's rule: a message is allowed
+    when an allow rule of one of the subject's policies has a key expression that includes its key
+    (and no deny rule does; this generator writes none), else ``default_permission`` applies."""
+    by_id = {r["id"]: r for r in acl["rules"]}
+    verdict = acl["default_permission"] == "allow"
+    for pol in acl["policies"]:
+        if subject not in pol["subjects"]:
+            continue
+        for rid in pol["rules"]:
+            r = by_id[rid]
+            if flow in r.get("flows", ["ingress", "egress"]) and message in r["messages"] and \
+                    any(_includes(k, key) for k in r["key_exprs"]):
+                if r["permission"] == "deny":
+                    return False
+                verdict = True
+    return verdict
+
+
+# --------------------------------------------------------------------------- configs
+
+
+def parse_hosts(items: Iterable[str]) -> dict[str, tuple[str, ...]]:
+    """``H01=D01-D08`` / ``H02=D09,D10`` -> {"H01": ("D01", ..., "D08"), ...}."""
+    hosts: dict[str, tuple[str, ...]] = {}
+    for item in items:
+        host, _, spec = item.partition("=")
+        if not spec:
+            raise ValueError(f"bad --host {item!r}: expected Hnn=Dnn-Dmm or Hnn=Dnn,Dmm")
+        hosts[host.strip()] = parse_drone_list(spec)
+    return hosts
+
+
+def parse_drone_list(text: str) -> tuple[str, ...]:
+    ids: list[str] = []
+    for part in (p.strip() for p in text.split(",")):
+        m = re.fullmatch(r"D?(\d+)\s*-\s*D?(\d+)", part)
+        if m:
+            ids += [drone_id(n) for n in range(int(m[1]), int(m[2]) + 1)]
+        elif part:
+            ids.append(part if is_drone_id(part) else drone_id(int(part.lstrip("D"))))
+    return tuple(ids)
+
+
+def render(block: dict, header: str = "") -> str:
+    """A JSON5 document holding the block (itself a valid partial zenoh config)."""
+    lines = [f"// {line}".rstrip() for line in header.strip().splitlines()] if header else []
+    return "\n".join([*lines, json.dumps({"access_control": block}, indent=2), ""])
+
+
+def router_config(block: dict, *, listen: str = "tls/0.0.0.0:7447", certs: str = "certs", mtls: bool = False,
+                  users: str | None = None) -> dict:
+    """A whole router config: TLS listener, optional mutual TLS and user/password dictionary, ACL."""
+    tls: dict = {"root_ca_certificate": f"{certs}/ca.pem", "listen_certificate": f"{certs}/router.pem",
+                 "listen_private_key": f"{certs}/router.key", "enable_mtls": mtls}
+    transport: dict = {"link": {"tls": tls}}
+    if users:
+        transport["auth"] = {"usrpwd": {"dictionary_file": users}}
+    # The admin space is read by the router's own process (`dronesim router` prints its locators from
+    # it); the ACL keeps every remote session out of it (nothing outside the roots is granted).
+    return {"mode": "router", "listen": {"endpoints": [listen]}, "scouting": {"multicast": {"enabled": False}},
+            "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}},
+            "transport": transport, "access_control": block}
+
+
+def client_config(entity: str, *, connect: str = "tls/ROUTER_HOST:7447", certs: str = "certs",
+                  mtls: bool = False) -> dict:
+    """A client's config: TLS towards the router, and with `mtls` this entity's certificate."""
+    tls: dict = {"root_ca_certificate": f"{certs}/ca.pem"}
+    if mtls:
+        tls.update(connect_certificate=f"{certs}/{entity}.pem", connect_private_key=f"{certs}/{entity}.key",
+                   enable_mtls=True)
+    # No user/password here: zenoh refuses a user without its password, and a password never goes in a
+    # file meant to be shared -- they come from --user and --password-file (or DRONESIM_PASSWORD).
+    return {"mode": "client", "connect": {"endpoints": [connect]}, "scouting": {"multicast": {"enabled": False}},
+            "transport": {"link": {"tls": tls}}}
+
+
+def examples() -> dict[str, str]:
+    """The files of config/ (regenerated by ``--write-examples``; a test checks they are current)."""
+    drones = [drone_id(n) for n in range(1, EXAMPLE_DRONES + 1)]
+    cmd = "python -m dronesim.schema.acl --write-examples config/"
+    gen = f"Generated from schema/keys.py KEY_TABLE by `{cmd}`: do not edit by hand."
+    usrpwd = access_control(drones, roots=[EXAMPLE_ROOT], identity="usrpwd")
+    cert = access_control(drones, roots=[EXAMPLE_ROOT], identity="cert")
+    files = {
+        "router-acl-usrpwd.json5": render(usrpwd, f"""
+{gen}
+Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by user (user/password auth).
+Use: dronesim router --config config/router-tls-usrpwd.json5, or add it to a router's config with --acl.
+Other games: python -m dronesim.schema.acl --drones N --root ROOT [--host H01=D01-D08] --identity usrpwd"""),
+        "router-acl-cert.json5": render(cert, f"""
+{gen}
+Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by their TLS client certificate's CN.
+Other games: python -m dronesim.schema.acl --drones N --root ROOT [--host H01=D01-D08] --identity cert"""),
+        "router-tls-usrpwd.json5": _json5(router_config(usrpwd, users="certs/users.txt"), f"""
+{gen}
+A router: TLS on port 7447 (server certificate certs/router.pem), every process authenticated by
+user/password (certs/users.txt, from `dronesim certs certs --passwords`), and the ACL of
+router-acl-usrpwd.json5. Paths are relative to the router's working directory.
+Run: dronesim router --config config/router-tls-usrpwd.json5   (or: zenohd -c config/router-tls-usrpwd.json5)"""),
+        "router-mtls.json5": _json5(router_config(cert, mtls=True), f"""
+{gen}
+A router: mutual TLS on port 7447 -- every process presents a certificate signed by certs/ca.pem,
+and its common name (SRV, ENV, GCS, D01...) is its identity for the ACL of router-acl-cert.json5.
+Run: dronesim router --config config/router-mtls.json5   (or: zenohd -c config/router-mtls.json5)"""),
+        "gcs-remote-tls.json5": _json5(client_config("GCS"), """
+A remote ground station joining over TLS with user/password (the router runs router-tls-usrpwd.json5).
+Replace ROUTER_HOST (it must be a name in the router certificate: dronesim certs --router-host NAME).
+Run: dronesim gcs --config config/gcs-remote-tls.json5 --user GCS --password-file certs/GCS.password
+(the password comes from the file or DRONESIM_PASSWORD, never from this config nor a flag).
+Same without a config file: dronesim gcs -m client -e tls/ROUTER_HOST:7447 --tls-ca certs/ca.pem --user GCS
+     --password-file certs/GCS.password"""),
+        "gcs-remote-mtls.json5": _json5(client_config("GCS", mtls=True), """
+A remote ground station joining over mutual TLS (the router runs router-mtls.json5); its identity is
+its certificate (CN=GCS). Replace ROUTER_HOST.
+Run: dronesim gcs --config config/gcs-remote-mtls.json5
+Same without a config file: dronesim gcs -m client -e tls/ROUTER_HOST:7447 --tls-ca certs/ca.pem
+     --tls-cert certs/GCS.pem --tls-key certs/GCS.key"""),
+    }
+    return files
+
+
+def _json5(conf: dict, header: str) -> str:
+    lines = [f"// {line}".rstrip() for line in header.strip().splitlines()]
+    return "\n".join([*lines, json.dumps(conf, indent=2), ""])
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m dronesim.schema.acl",
+                                description="Zenoh access_control rules generated from the key table.")
+    p.add_argument("--drones", type=int, default=1, help="grant drones D01..Dnn (default 1)")
+    p.add_argument("--root", action="append", default=[], help="key root (repeatable; default sim)")
+    p.add_argument("--identity", choices=IDENTITIES, default="usrpwd",
+                   help="match principals by user name, TLS certificate CN, or both (default usrpwd)")
+    p.add_argument("--host", action="append", default=[], metavar="Hnn=Dnn-Dmm",
+                   help="a swarm host flying these drones (they are granted to it, not to themselves)")
+    p.add_argument("--router-config", action="store_true",
+                   help="print a whole router config (TLS listener, auth, ACL) instead of the ACL alone")
+    p.add_argument("--listen", default="tls/0.0.0.0:7447", help="with --router-config: the listener")
+    p.add_argument("--certs", default="certs", help="with --router-config: the folder of `dronesim certs`")
+    p.add_argument("--write-examples", metavar="DIR", help="regenerate the example configs into DIR and exit")
+    args = p.parse_args(argv)
+    if args.write_examples:
+        out = pathlib.Path(args.write_examples)
+        out.mkdir(parents=True, exist_ok=True)
+        for name, text in examples().items():
+            (out / name).write_text(text)
+            print(f"wrote {out / name}")
+        return 0
+    try:
+        hosts = parse_hosts(args.host)
+        block = access_control([drone_id(n) for n in range(1, args.drones + 1)], roots=args.root or ["sim"],
+                               identity=args.identity, hosts=hosts)
+    except ValueError as err:
+        print(f"acl: {err}", file=sys.stderr)
+        return 2
+    if args.router_config:
+        users = f"{args.certs}/users.txt" if args.identity in ("usrpwd", "both") else None
+        conf = router_config(block, listen=args.listen, certs=args.certs,
+                             mtls=args.identity in ("cert", "both"), users=users)
+        sys.stdout.write(_json5(conf, "Generated by: python -m dronesim.schema.acl " + " ".join(argv or sys.argv[1:])))
+    else:
+        sys.stdout.write(render(block, "Generated by: python -m dronesim.schema.acl " + " ".join(argv or sys.argv[1:])))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
