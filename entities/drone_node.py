@@ -37,7 +37,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         member = Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
         pilots = {d: make_autopilot(autopilot, world_size=member.welcome.world.size) for d in drones}
         out = Outbox(session)
-        asker = Asker(session, keys, inbox, logger, timeout=ask_timeout, patience=grace)
+        asker = Asker(session, keys, inbox, logger, sender=sender, timeout=ask_timeout, patience=grace)
         mine = set(drones)
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
@@ -75,29 +75,46 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
 
 
 class Asker:
-    """Concurrent ASK queries to the environment. A query nobody answered (the environment is
-    restarting) is asked again once the environment is back, so the decision does not change."""
+    """ASK queries to the environment for every drone of this process: all the cells the drones of one
+    round want go out together (one query per Ask.MAX_CELLS cells, concurrently), and each drone gets
+    the answers for its own cells. A query nobody answered (the environment is restarting) is asked
+    again once the environment is back, so the decision does not change."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, inbox: Inbox, logger: logging.Logger, *,
-                 timeout: float, patience: float) -> None:
+                 sender: str, timeout: float, patience: float) -> None:
         self.session, self.keys, self.inbox, self.log = session, keys, inbox, logger
+        self.sender = sender
         self.patience = patience
         self.querier = session.declare_querier(keys.ask, timeout=timeout,
                                                consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+
+    def _batches(self, pending: dict[str, tuple]) -> list[list[str]]:
+        batches: list[list[str]] = [[]]
+        size = 0
+        for d, cells in pending.items():
+            if size + len(cells) > Ask.MAX_CELLS and batches[-1]:
+                batches.append([])
+                size = 0
+            batches[-1].append(d)
+            size += len(cells)
+        return batches
 
     def ask_all(self, turn: int, pending: dict[str, tuple]) -> dict[str, Answers]:
         answers: dict[str, Answers] = {}
         end = time.monotonic() + self.patience
         while pending:
-            handlers = {d: self.querier.get(payload=encode(Ask(turn=turn, sender=d, cells=cells)))
-                        for d, cells in pending.items()}
+            batches = self._batches(pending)
+            handlers = [self.querier.get(payload=encode(Ask(turn=turn, sender=self.sender,
+                                                            cells=tuple(c for d in b for c in pending[d]))))
+                        for b in batches]
             unanswered: dict[str, tuple] = {}
-            for d, handler in handlers.items():
-                got = self._collect(d, handler)
-                if got is None:
-                    unanswered[d] = pending[d]
-                else:
-                    answers[d] = got
+            for batch, handler in zip(batches, handlers):
+                got = self._collect(batch, handler)
+                for d in batch:
+                    if got is None:
+                        unanswered[d] = pending[d]
+                    else:
+                        answers[d] = {c: got[c] for c in pending[d] if c in got}
             if unanswered and time.monotonic() < end:
                 self.log.warning("no environment answered %s: waiting for it", ", ".join(unanswered))
                 await_presence(self.session, self.keys.alive_of("ENV"), end - time.monotonic())
@@ -108,20 +125,20 @@ class Asker:
             pending = unanswered
         return answers
 
-    def _collect(self, d: str, handler) -> Answers | None:
+    def _collect(self, batch: list[str], handler) -> Answers | None:
         """The answer to one ASK; None if nobody answered (no queryable, or zenoh's own timeout)."""
         result: Answers | None = None
         for reply in handler:
             if reply.ok is None:
                 why = reply.err.payload.to_bytes().decode(errors="replace")
                 if why != "Timeout":
-                    self.log.warning("%s: ASK refused: %s", d, why)
+                    self.log.warning("%s: ASK refused: %s", ", ".join(batch), why)
                     result = result or {}
                 continue
             try:
                 ans = decode(reply.ok.payload.to_bytes(), Ans)
             except RemoteInputError as err:
-                self.inbox.rejects.reject(f"ANS for {d}", err)
+                self.inbox.rejects.reject(f"ANS for {', '.join(batch)}", err)
                 result = result or {}
                 continue
             result = {c.pos: c for c in ans.cells}

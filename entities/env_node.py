@@ -19,8 +19,9 @@ import zenoh
 from dronesim.entity import Membership, add_entity_args
 from dronesim.schema import (
     Ans, Ask, Connect, Keys, MapRequest, Over, Phase, RemoteInputError, Role, Status, Turn, Upd, UsageError,
-    WorldMap, encode,
+    WorldMap, encode, is_drone_id,
 )
+from dronesim.schema.messages import is_host_id
 from dronesim.schema.errors import StaleTurn, WrongSender
 from dronesim.transport import (
     Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
@@ -78,7 +79,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                     case Presence() as presence:
                         member.on_presence(presence)  # the world stays; the next STATUS resyncs the drones
                     case Asked(query, Ask() as ask):
-                        if not ask.sender.startswith("D"):
+                        if not (is_drone_id(ask.sender) or is_host_id(ask.sender)):
                             refuse(query, "only drones ask")
                             raise WrongSender(f"ASK from {ask.sender}")
                         if ask.turn == ready:

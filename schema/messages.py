@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
+import operator
 import re
 import types
 import typing
@@ -43,12 +45,17 @@ FIXED_IDS = ("ENV", "GCS", "SRV", "OBS")
 
 
 def is_drone_id(value: object) -> bool:
-    return isinstance(value, str) and DRONE_ID.match(value) is not None
+    return isinstance(value, str) and _matches(DRONE_ID, value)
 
 
 def is_host_id(value: object) -> bool:
     """A swarm host's id: H01, H02, ..."""
-    return isinstance(value, str) and HOST_ID.match(value) is not None
+    return isinstance(value, str) and _matches(HOST_ID, value)
+
+
+@functools.lru_cache(maxsize=4096)
+def _matches(pattern: re.Pattern[str], value: str) -> bool:  # ids recur in every message: cache the verdict
+    return pattern.match(value) is not None
 
 
 def drone_id(n: int) -> str:
@@ -130,26 +137,34 @@ def _check(cond: bool, what: str) -> None:
         raise MalformedMessage(what)
 
 
+# The checks run on every decoded record: they test first and build their message only on failure.
+
+
 def _check_int(value: object, name: str, lo: int, hi: int) -> None:
-    _check(type(value) is int and lo <= value <= hi, f"{name} must be an int in {lo}..{hi}, got {value!r}")
+    if not (type(value) is int and lo <= value <= hi):
+        raise MalformedMessage(f"{name} must be an int in {lo}..{hi}, got {value!r}")
 
 
 def _check_cell(value: object, name: str, *, signed: bool = False) -> None:
-    _check(isinstance(value, tuple) and len(value) == 3, f"{name} must be 3 integers, got {value!r}")
     lo = -MAX_COORD if signed else 0
+    if type(value) is tuple and len(value) == 3:
+        x, y, z = value
+        if (type(x) is int and type(y) is int and type(z) is int
+                and lo <= x <= MAX_COORD and lo <= y <= MAX_COORD and lo <= z <= MAX_COORD):
+            return
+    _check(isinstance(value, tuple) and len(value) == 3, f"{name} must be 3 integers, got {value!r}")
     for c in value:  # type: ignore[union-attr]
         _check_int(c, name, lo, MAX_COORD)
 
 
 def _check_drone(value: object, name: str = "drone") -> None:
-    _check(is_drone_id(value), f"{name} must be a drone id like D01, got {value!r}")
+    if not is_drone_id(value):
+        raise MalformedMessage(f"{name} must be a drone id like D01, got {value!r}")
 
 
 def _check_sender(value: object) -> None:
-    _check(
-        isinstance(value, str) and (value in FIXED_IDS or is_drone_id(value) or HOST_ID.match(value) is not None),
-        f"sender must be ENV, GCS, SRV, OBS, Dnn or Hnn, got {value!r}",
-    )
+    if not (isinstance(value, str) and (value in FIXED_IDS or is_drone_id(value) or is_host_id(value))):
+        raise MalformedMessage(f"sender must be ENV, GCS, SRV, OBS, Dnn or Hnn, got {value!r}")
 
 
 # --------------------------------------------------------------------------- nested records
@@ -504,14 +519,45 @@ _RECORDS = (CellInfo, Order, Move, DroneStatus, Start, WorldSpec)
 # int, str, bytes, Cell, Optional[Cell], enums, nested records, tuple[X, ...] of those.
 
 
-def _to_wire(value: object) -> object:
-    if isinstance(value, enum.Enum):
-        return value.value
-    if dataclasses.is_dataclass(value):
-        return [_to_wire(getattr(value, f.name)) for f in dataclasses.fields(value)]
-    if isinstance(value, tuple):
-        return [_to_wire(v) for v in value]
-    return value
+def _identity(v: object) -> object:
+    return v
+
+
+def _wire_encoder(hint: object) -> typing.Callable[[object], object]:
+    """How a field of type `hint` goes on the wire; msgpack packs ints, strings, bytes and tuples itself."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (Union, types.UnionType):
+        inner = _wire_encoder(next(a for a in args if a is not type(None)))
+        return _identity if inner is _identity else (lambda v: None if v is None else inner(v))
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        item = _wire_encoder(args[0])
+        return _identity if item is _identity else (lambda v: [item(x) for x in v])
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        return operator.attrgetter("value")
+    if hint in _RECORDS:
+        return _record_encoder(hint)  # type: ignore[arg-type]
+    return _identity
+
+
+_ENCODERS: dict[type, list[tuple[str, str, typing.Callable[[object], object]]]] = {}
+
+
+def _encoders_of(cls: type) -> list[tuple[str, str, typing.Callable[[object], object]]]:
+    """(attribute, wire name, encoder) of each field of `cls`, in order; computed once per class."""
+    enc = _ENCODERS.get(cls)
+    if enc is None:
+        hints = typing.get_type_hints(cls)
+        enc = [(f.name, "from" if f.name == "sender" else f.name, _wire_encoder(hints[f.name]))
+               for f in dataclasses.fields(cls)]
+        _ENCODERS[cls] = enc
+    return enc
+
+
+def _record_encoder(cls: type) -> typing.Callable[[object], object]:
+    def encode_record(v: object) -> object:
+        return [e(getattr(v, name)) for name, _, e in _encoders_of(cls)]
+
+    return encode_record
 
 
 def _converter(hint: object) -> typing.Callable[[object], object]:
@@ -523,18 +569,22 @@ def _converter(hint: object) -> typing.Callable[[object], object]:
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
             item = _converter(args[0])
-            return lambda v: tuple(item(x) for x in _as_list(v))
-        return lambda v: tuple(_as_list(v))  # Cell: validated by the record itself
+            if item is _as_seq:
+                return _as_seq
+            return lambda v: tuple(map(item, _as_seq(v)))
+        return _as_seq  # Cell: validated by the record itself
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
         return lambda v: _enum(hint, v)
     if hint in _RECORDS:
         return _record_converter(hint)  # type: ignore[arg-type]
-    return lambda v: v  # int, str, bytes: checked by __post_init__
+    return _identity  # int, str, bytes: checked by __post_init__
 
 
-def _as_list(v: object) -> list:
-    _check(isinstance(v, (list, tuple)), f"expected an array, got {type(v).__name__}")
-    return list(v)  # type: ignore[arg-type]
+def _as_seq(v: object) -> tuple:
+    """A MessagePack array (decoded as a tuple)."""
+    if type(v) is not tuple:
+        raise MalformedMessage(f"expected an array, got {type(v).__name__}")
+    return v
 
 
 def _enum(cls: type[enum.Enum], v: object) -> enum.Enum:
@@ -559,10 +609,14 @@ def _fields_of(cls: type) -> list[tuple[str, typing.Callable[[object], object]]]
 
 
 def _record_converter(cls: type) -> typing.Callable[[object], object]:
+    fields: list = []
+
     def convert(v: object) -> object:
-        items = _as_list(v)
-        fields = _fields_of(cls)
-        _check(len(items) == len(fields), f"{cls.__name__} needs {len(fields)} items, got {len(items)}")
+        if not fields:
+            fields.extend(_fields_of(cls))
+        items = _as_seq(v)
+        if len(items) != len(fields):
+            raise MalformedMessage(f"{cls.__name__} needs {len(fields)} items, got {len(items)}")
         return cls(**{name: c(x) for (name, c), x in zip(fields, items)})
 
     return convert
@@ -571,9 +625,8 @@ def _record_converter(cls: type) -> typing.Callable[[object], object]:
 def encode(msg: Message) -> bytes:
     """The MessagePack bytes of a message (deterministic: same message, same bytes)."""
     body: dict[str, object] = {"v": SCHEMA_VERSION, "t": msg.TAG}
-    for f in dataclasses.fields(msg):
-        name = "from" if f.name == "sender" else f.name
-        body[name] = _to_wire(getattr(msg, f.name))
+    for name, wire, enc in _encoders_of(type(msg)):
+        body[wire] = enc(getattr(msg, name))
     return msgpack.packb(body, use_bin_type=True)
 
 
@@ -597,7 +650,7 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
     if len(data) > MAX_PAYLOAD:
         raise MalformedMessage(f"payload of {len(data)} bytes exceeds {MAX_PAYLOAD}", reason="too-large")
     try:
-        body = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
+        body = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True, use_list=False)
     except Exception as exc:  # msgpack raises several unrelated types
         raise MalformedMessage(f"not MessagePack: {exc.__class__.__name__}: {exc}") from None
     _check(isinstance(body, dict), f"payload must be a map, got {type(body).__name__}")
