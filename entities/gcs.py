@@ -11,7 +11,10 @@ import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from dronesim.schema import Cell, DroneState, DroneStatus, Note, Status, UsageError, is_drone_id
+from dronesim.schema import Cell, DroneState, DroneStatus, Note, Status, UsageError, Welcome, is_drone_id
+
+from .environment import build_world
+from .world import World
 
 _ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,4})\s*[= ]\s*)?(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")
 
@@ -125,3 +128,23 @@ def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
 
 def targets_of(status: Status) -> Mapping[str, Cell]:
     return {s.drone: s.target for s in status.drones if s.target is not None}
+
+
+@dataclass(frozen=True, slots=True)
+class Ground:
+    """What a ground station knows once admitted: the world (rebuilt with the environment's own recipe),
+    the drones of the game, and its plan of targets checked against both."""
+
+    world: World
+    drones: list[str]
+    plan: Plan
+
+    @classmethod
+    def from_welcome(cls, welcome: Welcome, plan_texts: Iterable[str], script: str | None) -> "Ground":
+        size = welcome.world.size
+        drones = [s.drone for s in welcome.starts]
+        plan = Plan.load(script, size) if script else Plan.parse(plan_texts, size, default_drone=drones[0])
+        unknown = plan.drones() - set(drones)
+        if unknown:
+            raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
+        return cls(build_world(welcome.world, (s.pos for s in welcome.starts)), drones, plan)

@@ -21,8 +21,7 @@ from dronesim.schema import (
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .gcs import Plan, format_status, parse_command, trails
-from .environment import build_world
+from .gcs import Ground, format_status, parse_command, trails
 from .web.node import add_web_args, run_web, wants_web
 
 
@@ -80,13 +79,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         member = Membership(session, inbox, Connect(turn=0, sender="GCS", role=Role.GCS, session=session_id(session)),
                             logger, connect_timeout=connect_timeout, grace=grace)
         welcome = member.welcome
-        size = welcome.world.size
-        drones = [s.drone for s in welcome.starts]
-        plan = Plan.load(script, size) if script else Plan.parse(plan_texts, size, default_drone=drones[0])
-        unknown = plan.drones() - set(drones)
-        if unknown:
-            raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
-        world = build_world(welcome.world, (s.pos for s in welcome.starts))  # the environment's own recipe
+        ground = Ground.from_welcome(welcome, plan_texts, script)
+        world, drones, plan, size = ground.world, ground.drones, ground.plan, welcome.world.size
         if draw:
             print(f"World {size}, {int(world.grid.sum())} building cells; the drones' floor at start:", flush=True)
             print(world.draw({s.drone: s.pos for s in welcome.starts},

@@ -167,6 +167,11 @@ def _check_sender(value: object) -> None:
         raise MalformedMessage(f"sender must be ENV, GCS, SRV, OBS, Dnn or Hnn, got {value!r}")
 
 
+def _check_records(value: object, cls: type, name: str) -> None:
+    if not (isinstance(value, tuple) and all(type(v) is cls for v in value)):
+        raise MalformedMessage(f"{name} must be a tuple of {cls.__name__} records")
+
+
 # --------------------------------------------------------------------------- nested records
 
 
@@ -419,9 +424,7 @@ class Ans(Message):
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check(isinstance(self.cells, tuple), "cells must be a tuple")
-        for c in self.cells:
-            _check(isinstance(c, CellInfo), "cells must be CellInfo records")
+        _check_records(self.cells, CellInfo, "cells")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -448,9 +451,7 @@ class Upd(Message):
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check(isinstance(self.cells, tuple), "cells must be a tuple")
-        for c in self.cells:
-            _check(isinstance(c, CellInfo), "cells must be CellInfo records")
+        _check_records(self.cells, CellInfo, "cells")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -462,9 +463,7 @@ class Status(Message):
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check(isinstance(self.drones, tuple), "drones must be a tuple")
-        for d in self.drones:
-            _check(isinstance(d, DroneStatus), "drones must be DroneStatus records")
+        _check_records(self.drones, DroneStatus, "drones")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -26,8 +26,7 @@ from dronesim.entity import Membership
 from dronesim.schema import Connect, Done, EndReason, Keys, Over, Phase, Role, Status, Target, Turn, UsageError
 from dronesim.transport import Inbox, Outbox, Presence, Received, session_id, zenoh_config
 
-from ..environment import build_world
-from ..gcs import Plan
+from ..gcs import Ground, Plan
 from .model import GroundState, Rejected, check_pace_arg, world_json
 from .server import Hub, WebServer, parse_address
 
@@ -37,7 +36,6 @@ COMMAND_TIMEOUT = 10.0
 FINAL_STATUS_WAIT = 5.0
 #: End reasons whose last turn produced a STATUS (GCS_QUIT and ABORTED end a turn before its STATUS).
 _OBSERVED_ENDS = {EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndReason.SETTLED, EndReason.TURN_LIMIT}
-
 
 def add_web_args(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("web ground station (docs/web-gcs.md)")
@@ -51,13 +49,10 @@ def add_web_args(parser: argparse.ArgumentParser) -> None:
                    help="with --web: keep serving the final state this many seconds after OVER (default 0); "
                         "with --replay: serve this long (default: until interrupted)")
 
-
 def wants_web(args: argparse.Namespace) -> bool:
     return getattr(args, "web", None) is not None or getattr(args, "replay", None) is not None
 
-
 # --------------------------------------------------------------------------- live mode: the bridge
-
 
 @dataclass(frozen=True, slots=True)
 class Command:
@@ -66,7 +61,6 @@ class Command:
     action: str
     args: dict
     reply: queue.SimpleQueue
-
 
 class LiveBackend:
     """The HTTP threads' side of the bridge: commands go to the main thread and wait for its answer."""
@@ -109,7 +103,6 @@ class LiveBackend:
         with self._lock:
             self._closed = True
 
-
 def carry_out(state: GroundState, cmd: Command) -> None:
     try:
         if cmd.action == "target":
@@ -124,9 +117,7 @@ def carry_out(state: GroundState, cmd: Command) -> None:
     else:
         cmd.reply.put(result)
 
-
 # --------------------------------------------------------------------------- live mode: the loop
-
 
 def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address: tuple[str, int],
              plan_texts: list[str], script: str | None, pace: float, linger: float,
@@ -144,13 +135,8 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
                                                         session=session_id(session)),
                                 logger, connect_timeout=connect_timeout, grace=grace)
             welcome = member.welcome
-            size = welcome.world.size
-            drones = [s.drone for s in welcome.starts]
-            plan = Plan.load(script, size) if script else Plan.parse(plan_texts, size, default_drone=drones[0])
-            unknown = plan.drones() - set(drones)
-            if unknown:
-                raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
-            world = build_world(welcome.world, (s.pos for s in welcome.starts))
+            ground = Ground.from_welcome(welcome, plan_texts, script)
+            world, drones, plan, size = ground.world, ground.drones, ground.plan, welcome.world.size
             title = f"root {keys.root}"
             state = GroundState(world, {s.drone: s.pos for s in welcome.starts}, pace=pace, title=title)
             state.note("info", f"{welcome.text}; world {'x'.join(map(str, size))} with "
@@ -181,7 +167,6 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
     finally:
         server.stop()
     return over
-
 
 def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, keys: Keys,
           plan: Plan, hub: Hub, logger: logging.Logger) -> Over:
@@ -221,7 +206,6 @@ def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, key
     assert state.over is not None
     return state.over
 
-
 def _finish(state: GroundState, inbox: Inbox, member: Membership, backend: LiveBackend, hub: Hub,
             over: Over) -> None:
     """After OVER: take the last STATUS if it is still on its way, refuse the commands left, publish."""
@@ -242,9 +226,7 @@ def _finish(state: GroundState, inbox: Inbox, member: Membership, backend: LiveB
             carry_out(state, event)
     hub.publish(state.snapshot())
 
-
 # --------------------------------------------------------------------------- replay mode
-
 
 class ReplayBackend:
     mode = "replay"
@@ -262,7 +244,6 @@ class ReplayBackend:
     def command(self, action: str, args: dict) -> dict:
         raise Rejected("this is a replay: it takes no targets nor commands", 409)
 
-
 def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: logging.Logger) -> None:
     from .replay import Replay
 
@@ -277,13 +258,10 @@ def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: lo
     finally:
         server.stop(drain=1.0)
 
-
 # --------------------------------------------------------------------------- command line
-
 
 def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
-
 
 def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
     """`dronesim gcs --web ...`: 0 after OVER (or at the end of a replay), 2 on a usage error."""
@@ -314,7 +292,6 @@ def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
         logger.warning("interrupted")
         return 130
     return 0
-
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit("run it as: dronesim gcs --web [HOST:]PORT")
