@@ -143,10 +143,12 @@ def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str
                     add("ingress", ["declare_subscriber"], _expand(spec.template, p, own=False))
                     add("egress", ["put"], _expand(spec.template, p, own=False))
             case "query":
+                # A placeholder in a queryable's key names the *asker* (e.g. a per-entity admission key
+                # SRV/CONNECT/{entity}): the owner serves them all, each asker may ask only as itself.
                 if mine:
-                    add("ingress", ["declare_queryable", "reply"], _expand(spec.template, p, own=True))
-                    add("egress", ["query"], _expand(spec.template, p, own=True))
-                if reads:  # the asker queries on its own behalf: {entity}/{drone} name itself
+                    add("ingress", ["declare_queryable", "reply"], _expand(spec.template, p, own=False))
+                    add("egress", ["query"], _expand(spec.template, p, own=False))
+                if reads:
                     add("ingress", ["query"], _expand(spec.template, p, own=True))
                     add("egress", ["reply"], _expand(spec.template, p, own=True))
             case "liveliness":

@@ -28,7 +28,9 @@ A message that does not arrive leaves no event to wait for, so each negative che
   same session, with the same priority (data), reliability and congestion control. Zenoh keeps the order
   of one session's messages of one priority: they leave on one link, in order; the router handles one
   link's input in order, and forwards what it accepts to the receiver's single link, in order; the
-  receiver's callbacks run in that order on its link's thread. So once the receiver holds the marker,
+  receiver's callbacks run in that order on its link's thread -- *direct* callbacks, that is: by
+  default zenoh-python runs each Python callback on a thread of its own, and two subscriptions'
+  callbacks may then run out of arrival order (`direct()` below). So once the receiver holds the marker,
   a forbidden put that the router had let through would already be in the receiver's list. A positive
   control (the legitimate writer puts on each of the same keys, then its own marker) proves the
   receiver's subscriptions do deliver those keys.
@@ -174,6 +176,19 @@ def test_acl_swarm_hosts_fly_their_drones_only():
     with pytest.raises(ValueError, match="flown by both"):
         acl.access_control(["D01"], hosts={"H01": ("D01",), "H02": ("D01",)})
     assert acl.parse_hosts(["H01=D01-D03", "H02=D05,D07"]) == {"H01": ("D01", "D02", "D03"), "H02": ("D05", "D07")}
+
+
+def test_acl_binds_a_per_entity_query_key_to_its_asker(monkeypatch):
+    """Were admission keyed by entity (SRV/CONNECT/{entity}, see docs/security.md), the generated ACL
+    would let each principal ask only as itself, and the coordinator serve them all."""
+    row = KeySpec("SRV/CONNECT/{entity}", "query", None, None, "SRV", "ENV, GCS, drones", "admission")
+    monkeypatch.setattr(acl, "KEY_TABLE", (row,))
+    block = acl.access_control(["D01", "D02"])
+    assert acl.allowed(block, "SRV", "ingress", "declare_queryable", "sim/SRV/CONNECT/*")
+    assert acl.allowed(block, "D01", "ingress", "query", "sim/SRV/CONNECT/D01")
+    assert not acl.allowed(block, "D01", "ingress", "query", "sim/SRV/CONNECT/D02")
+    assert not acl.allowed(block, "D01", "ingress", "query", "sim/SRV/CONNECT/GCS")
+    assert acl.allowed(block, "GCS", "ingress", "query", "sim/SRV/CONNECT/GCS")
 
 
 def test_acl_identities_name_principals_by_user_certificate_or_both():
@@ -473,7 +488,7 @@ def test_a_principal_in_no_acl_subject_can_neither_put_nor_get(secured, kit):
     keys = Keys("sim")
     with sessions(locator, kit, identity, "SRV", "D01", STRANGER) as (srv, d01, evil):
         got: list[bytes] = []
-        handles = [d01.declare_subscriber(keys.over, lambda s: got.append(s.payload.to_bytes())),
+        handles = [d01.declare_subscriber(keys.over, direct(lambda s: got.append(s.payload.to_bytes()))),
                    d01.liveliness().declare_token(keys.alive("D01", "barrier")),
                    srv.declare_queryable(keys.connect, lambda q: (q.reply(q.key_expr, b"welcome"), q.drop())),
                    srv.liveliness().declare_token(keys.alive("SRV", "barrier"))]
@@ -490,6 +505,13 @@ def test_a_principal_in_no_acl_subject_can_neither_put_nor_get(secured, kit):
         assert got == [b"real OVER"], got
         for h in reversed(handles):
             h.undeclare()
+
+
+def direct(callback) -> zenoh.handlers.Callback:
+    """A callback zenoh runs on the link's own thread, in arrival order. (By default zenoh-python runs
+    each Python callback on a thread of its own: two subscribers' callbacks, or a callback and a query's
+    replies, could then be seen out of the order the messages came in.)"""
+    return zenoh.handlers.Callback(callback, indirect=False)
 
 
 def await_token(session: zenoh.Session, key: str, *, present: bool = True) -> None:
@@ -548,7 +570,8 @@ def test_the_router_drops_every_forbidden_put(secured, kit):
         s = dict(zip(names, opened))
         received: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
         log: list[tuple[str, bytes]] = []
-        subs = [s["SRV"].declare_subscriber(k, lambda smp: received.put((str(smp.key_expr), smp.payload.to_bytes())))
+        subs = [s["SRV"].declare_subscriber(k, direct(lambda smp: received.put((str(smp.key_expr),
+                                                                                smp.payload.to_bytes()))))
                 for k in RECEIVER_KEYS]
 
         def await_markers(markers: set[bytes]) -> None:

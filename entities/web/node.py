@@ -37,6 +37,7 @@ FINAL_STATUS_WAIT = 5.0
 #: End reasons whose last turn produced a STATUS (GCS_QUIT and ABORTED end a turn before its STATUS).
 _OBSERVED_ENDS = {EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndReason.SETTLED, EndReason.TURN_LIMIT}
 
+
 def add_web_args(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("web ground station (docs/web-gcs.md)")
     g.add_argument("--web", metavar="[HOST:]PORT",
@@ -49,10 +50,13 @@ def add_web_args(parser: argparse.ArgumentParser) -> None:
                    help="with --web: keep serving the final state this many seconds after OVER (default 0); "
                         "with --replay: serve this long (default: until interrupted)")
 
+
 def wants_web(args: argparse.Namespace) -> bool:
     return getattr(args, "web", None) is not None or getattr(args, "replay", None) is not None
 
+
 # --------------------------------------------------------------------------- live mode: the bridge
+
 
 @dataclass(frozen=True, slots=True)
 class Command:
@@ -61,6 +65,7 @@ class Command:
     action: str
     args: dict
     reply: queue.SimpleQueue
+
 
 class LiveBackend:
     """The HTTP threads' side of the bridge: commands go to the main thread and wait for its answer."""
@@ -103,6 +108,7 @@ class LiveBackend:
         with self._lock:
             self._closed = True
 
+
 def carry_out(state: GroundState, cmd: Command) -> None:
     try:
         if cmd.action == "target":
@@ -117,7 +123,9 @@ def carry_out(state: GroundState, cmd: Command) -> None:
     else:
         cmd.reply.put(result)
 
+
 # --------------------------------------------------------------------------- live mode: the loop
+
 
 def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address: tuple[str, int],
              plan_texts: list[str], script: str | None, pace: float, linger: float,
@@ -168,6 +176,7 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
         server.stop()
     return over
 
+
 def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, keys: Keys,
           plan: Plan, hub: Hub, logger: logging.Logger) -> Over:
     published = state.seq
@@ -206,6 +215,7 @@ def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, key
     assert state.over is not None
     return state.over
 
+
 def _finish(state: GroundState, inbox: Inbox, member: Membership, backend: LiveBackend, hub: Hub,
             over: Over) -> None:
     """After OVER: take the last STATUS if it is still on its way, refuse the commands left, publish."""
@@ -226,7 +236,9 @@ def _finish(state: GroundState, inbox: Inbox, member: Membership, backend: LiveB
             carry_out(state, event)
     hub.publish(state.snapshot())
 
+
 # --------------------------------------------------------------------------- replay mode
+
 
 class ReplayBackend:
     mode = "replay"
@@ -244,6 +256,7 @@ class ReplayBackend:
     def command(self, action: str, args: dict) -> dict:
         raise Rejected("this is a replay: it takes no targets nor commands", 409)
 
+
 def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: logging.Logger) -> None:
     from .replay import Replay
 
@@ -258,10 +271,13 @@ def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: lo
     finally:
         server.stop(drain=1.0)
 
+
 # --------------------------------------------------------------------------- command line
+
 
 def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
+
 
 def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
     """`dronesim gcs --web ...`: 0 after OVER (or at the end of a replay), 2 on a usage error."""
@@ -292,6 +308,7 @@ def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
         logger.warning("interrupted")
         return 130
     return 0
+
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit("run it as: dronesim gcs --web [HOST:]PORT")
