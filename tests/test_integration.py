@@ -192,3 +192,21 @@ def test_same_seed_twice_gives_identical_journals(router, tmp_path):
                                        gcs_args=("--targets", "11,11,3", "--targets", "2,9,1@9")))
             assert set(c.wait_all().values()) == {0}
     assert journals[0].read_bytes() == journals[1].read_bytes()
+
+
+def test_unreachable_target_is_reported_to_the_gcs_and_the_game_settles(cluster, tmp_path):
+    """The D* drone says its target is unreachable (a walled-in cell) instead of looping; the GCS shows it."""
+    world = tmp_path / "walled.json"
+    # a 7x7x1 floor with a closed ring of buildings around (5, 5, 0)
+    ring = [Building(x=x, y=y, length=1, width=1, height=1)
+            for x in range(4, 7) for y in range(4, 7) if (x, y) != (5, 5)]
+    World.from_buildings((7, 7, 1), ring).save(world)
+    journal = start_game(cluster, tmp_path, coord_args=("--world", str(world)), drone_args=("--autopilot", "dstar"),
+                         gcs_args=("--targets", "5,5,0"))
+    codes = cluster.wait_all()
+    assert set(codes.values()) == {0}, [p.text for p in cluster.procs]
+    gcs = cluster.procs[-1]
+    assert any("target UNREACHABLE, hovering" in line for line in gcs.out), gcs.text
+    records = journal_records(journal)
+    assert records[-1]["reason"] == "SETTLED"
+    assert not any(r.get("deaths") for r in records)
