@@ -13,7 +13,9 @@ import sys
 
 import zenoh
 
-from dronesim.transport import add_zenoh_args, router_config, router_locators, setup_logging, zenoh_config
+from dronesim.transport import (
+    add_zenoh_args, apply_lease, apply_security, router_config, router_locators, setup_logging, zenoh_config,
+)
 
 
 def main(conf: zenoh.Config) -> int:
@@ -34,6 +36,8 @@ def cli(argv: list[str] | None = None) -> int:
         conf = router_config(args.listen[0] if args.listen else "tcp/0.0.0.0:7447")
         if len(args.listen) > 1:
             conf.insert_json5("listen/endpoints", json.dumps(args.listen))
+        apply_lease(conf, args)
+        apply_security(conf, args, router=True)
     conf.insert_json5("mode", '"router"')
     signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     return main(conf)

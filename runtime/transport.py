@@ -71,13 +71,18 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
         conf.insert_json5("connect/endpoints", json.dumps(args.connect))
     if args.listen:
         conf.insert_json5("listen/endpoints", json.dumps(args.listen))
-    if getattr(args, "lease", None):
+    apply_lease(conf, args)
+    apply_security(conf, args)
+    return conf
+
+
+def apply_lease(conf: zenoh.Config, args: argparse.Namespace) -> None:
+    """--lease into `conf` (transport/link/tx/lease, in milliseconds)."""
+    if getattr(args, "lease", None) is not None:
         if args.lease <= 0:
             raise UsageError("--lease must be positive")
         conf.insert_json5("transport/link/tx/lease", str(int(args.lease * 1000)))
         conf.insert_json5("transport/link/tx/keep_alive", "4")  # keep-alives per lease, zenoh's default
-    apply_security(conf, args)
-    return conf
 
 
 #: The environment variable holding the password of --user when no --password-file is given.
@@ -216,6 +221,13 @@ def check_addressed(keys: Keys, key: str, msg: Message) -> None:
         raise WrongSender(f"a {msg.TAG} about {subject} on {entity}'s key {key}")
 
 
+def _direct(callback: Callable[[object], None]) -> zenoh.handlers.Callback:
+    """Run `callback` on Zenoh's receiving thread itself. By default zenoh-python hands each Python
+    callback to a thread of its own, and then messages on different keys overtake each other on their
+    way into the inbox; our callbacks only decode and enqueue, so they can run in place, in order."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
 class Inbox:
     """Decoded events from Zenoh callbacks, for one consuming thread; rejections are counted."""
 
@@ -247,7 +259,7 @@ class Inbox:
 
             self._guard(k, handle)
 
-        self._handles.append(self.session.declare_subscriber(key, on_sample))
+        self._handles.append(self.session.declare_subscriber(key, _direct(on_sample)))
 
     def serve(self, key: str, expect: type[Message], *, inline: Callable[[zenoh.Query, Message], bool] | None = None) -> None:
         """Declare a queryable; valid queries become `Asked` events (or are answered by `inline`
@@ -273,7 +285,7 @@ class Inbox:
                 query.reply_err(b"internal error")
                 query.drop()
 
-        self._handles.append(self.session.declare_queryable(key, on_query, complete=True))
+        self._handles.append(self.session.declare_queryable(key, _direct(on_query), complete=True))
 
     def watch_presence(self, entity: str | None = None) -> None:
         """Presence events for every process (or only `entity`'s), starting with those already there."""
@@ -286,7 +298,7 @@ class Inbox:
             self._guard(str(sample.key_expr), handle)
 
         key = self.keys.any_alive if entity is None else self.keys.alive_of(entity)
-        self._handles.append(self.session.liveliness().declare_subscriber(key, on_token, history=True))
+        self._handles.append(self.session.liveliness().declare_subscriber(key, _direct(on_token), history=True))
 
     def post(self, event: object) -> None:
         """Queue an event from another thread of this process (e.g. a web request for the main loop)."""

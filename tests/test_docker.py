@@ -666,7 +666,7 @@ def zenohd_router(conf: Path, locator: str, tmp_path: Path):
         pytest.skip(f"{binary} is {version.strip()!r}, not {zenoh_pin()}: run bash tests/setup.d/zenohd.sh")
     proc = Proc("zenohd", ["env", "RUST_LOG=info", str(binary), "-c", str(conf)], tmp_path)
     try:
-        proc.expect(re.escape(locator), timeout=60)
+        proc.expect(rf"can be reached at: {re.escape(locator)}", timeout=60)  # listening, not just configured
         yield locator
     finally:
         proc.p.terminate()
