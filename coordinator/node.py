@@ -14,9 +14,10 @@ import time
 import zenoh
 
 from dronesim.schema import (
-    Connect, Done, Keys, Message, Nps, Over, RemoteInputError, Status, Target, Turn, Upd, UsageError, drone_id,
-    encode,
+    Connect, Done, Keys, Message, Nps, Over, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
+    drone_id, encode,
 )
+from dronesim.schema.errors import WrongSender
 from dronesim.schema.messages import WorldSpec
 from dronesim.transport import (
     Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
@@ -38,6 +39,53 @@ def _key_of(keys: Keys, msg: Message) -> str:
         case Over():
             return keys.over
     raise AssertionError(f"the coordinator does not publish {msg.TAG}")
+
+
+#: Seconds a CONNECT may wait for its sender's presence token to be seen.
+PRESENCE_WAIT_S = 5.0
+
+
+class Admissions:
+    """Presence tokens, and the CONNECTs waiting for theirs.
+
+    A CONNECT names its sender and session; it is admitted only once the presence token of that same
+    (sender, session) is seen. Under the router's access control only the real principal may declare
+    that token, so a process cannot take another's seat by writing its name in a CONNECT (defence in
+    depth: the coordinator cannot see who sent a query). The token may arrive just after the query
+    (another path), hence the short wait; a CONNECT without one is refused."""
+
+    def __init__(self) -> None:
+        self.present: set[tuple[str, str]] = set()
+        self._waiting: list[tuple[float, zenoh.Query, Connect]] = []
+
+    def connect(self, query: zenoh.Query, msg: Connect) -> list[tuple[zenoh.Query, Connect]]:
+        if (msg.sender, msg.session) in self.present:
+            return [(query, msg)]
+        self._waiting.append((time.monotonic() + PRESENCE_WAIT_S, query, msg))
+        return []
+
+    def presence(self, entity: str, session: str, alive: bool) -> list[tuple[zenoh.Query, Connect]]:
+        if not alive:
+            self.present.discard((entity, session))
+            return []
+        self.present.add((entity, session))
+        ready = [(q, m) for _, q, m in self._waiting if (m.sender, m.session) == (entity, session)]
+        self._waiting = [w for w in self._waiting if (w[2].sender, w[2].session) != (entity, session)]
+        return ready
+
+    def due_in(self) -> float | None:
+        return max(0.0, min(w[0] for w in self._waiting) - time.monotonic()) if self._waiting else None
+
+    def expired(self) -> list[tuple[zenoh.Query, Connect]]:
+        now = time.monotonic()
+        gone = [(q, m) for due, q, m in self._waiting if due <= now]
+        self._waiting = [w for w in self._waiting if w[0] > now]
+        return gone
+
+
+def _soonest(*delays: float | None) -> float | None:
+    known = [d for d in delays if d is not None]
+    return min(known) if known else None
 
 
 class Executor:
@@ -105,7 +153,13 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         inbox.subscribe(keys.upd, Upd)
         inbox.watch_presence()
         token = session.liveliness().declare_token(keys.alive("SRV", session_id(session)))
-        present: set[tuple[str, str]] = set()  # (entity, session) of every presence token
+        admissions = Admissions()
+        present = admissions.present  # (entity, session) of every presence token
+
+        def refuse(query: zenoh.Query, msg: Connect, why: str) -> None:
+            inbox.rejects.reject(f"CONNECT from {msg.sender}", WrongSender(why))
+            query.reply(query.key_expr, encode(Refused(turn=engine.turn, sender="SRV", text=why)))
+            query.drop()
         logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                     keys.root, ", ".join(d.drone for d in game.drones))
 
@@ -116,15 +170,19 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         while engine.stage is not Stage.OVER:
             limit = engine.deadline()
             left = None if limit is None else max(0.0, started + limit - time.monotonic())
-            held = effects.due_in()
-            event = inbox.get(left if held is None else held if left is None else min(left, held))
+            event = inbox.get(_soonest(left, effects.due_in(), admissions.due_in()))
             match event:
                 case None if effects.due_in() == 0:
                     effects.release()
+                case None if admissions.due_in() == 0:
+                    for query, msg in admissions.expired():
+                        refuse(query, msg, f"no presence token of {msg.sender} (session {msg.session or '?'}): "
+                                           "a process connects under its own name only")
                 case None:
                     run(engine.expire(*phase))
                 case Asked(query, Connect() as msg):
-                    run(engine.connect(msg, query))
+                    for query, msg in admissions.connect(query, msg):
+                        run(engine.connect(msg, query))
                 case Received(_, msg):
                     try:
                         run(engine.receive(msg))
@@ -132,10 +190,9 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                         inbox.rejects.reject(f"{msg.TAG} from {msg.sender}", err)
                         run(err.follow)
                 case Presence(entity, sid, alive):
-                    if alive:
-                        present.add((entity, sid))
-                    else:
-                        present.discard((entity, sid))
+                    for query, msg in admissions.presence(entity, sid, alive):
+                        run(engine.connect(msg, query))
+                    if not alive:
                         run(engine.vanished(entity, sid))
             if engine.clock() != phase:
                 phase = engine.clock()

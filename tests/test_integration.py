@@ -210,3 +210,24 @@ def test_unreachable_target_is_reported_to_the_gcs_and_the_game_settles(cluster,
     records = journal_records(journal)
     assert records[-1]["reason"] == "SETTLED"
     assert not any(r.get("deaths") for r in records)
+
+
+def test_a_connect_without_its_presence_token_is_refused(cluster, tmp_path):
+    """A process cannot take another's seat by writing its name in a CONNECT: the coordinator admits a
+    CONNECT only once the presence token of that (sender, session) is seen."""
+    from dronesim.schema import Refused, Welcome, decode
+
+    srv = cluster.start("SRV", "coordinator", "--admit-deadline", "60")
+    srv.expect("coordinator ready")
+    keys = Keys(cluster.root)
+    with zenoh.open(client_config(cluster.locator)) as s:
+        hello = Connect(turn=0, sender="GCS", role=Role.GCS, session="0badc0ffee")  # no such token
+        replies = [r for r in s.get(keys.connect, payload=encode(hello), timeout=30) if r.ok is not None]
+        assert len(replies) == 1
+        refused = decode(replies[0].ok.payload.to_bytes(), (Welcome, Refused))
+        assert isinstance(refused, Refused) and "no presence token of GCS" in refused.text
+    gcs = cluster.start("GCS", "gcs", "--targets", "9,9,0")  # the real one still gets its seat
+    cluster.start("ENV", "env")
+    cluster.start("D01", "drone", "--id", "D01")
+    assert gcs.wait() == 0
+    assert srv.wait() == 0
