@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import time
 
@@ -136,12 +137,14 @@ class Executor:
 def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None,
          logger: logging.Logger, resume: bool = False, pace: float = 0.0) -> Over:
     """Run one game to its end (or, with `resume`, the rest of the journal's game); return the OVER message."""
-    if resume:
-        if not journal:
-            raise UsageError("--resume needs --journal")
+    if resume and not journal:
+        raise UsageError("--resume needs --journal")
+    if resume and os.path.exists(journal) and os.path.getsize(journal) > 0:
         repair_tail(journal)
         engine = Engine.resume(game, list(read(journal)), logger)
     else:
+        if resume:  # e.g. a container restarted before the game began: nothing to resume yet
+            logger.info("no journal at %s yet: starting a new game", journal)
         engine = Engine(game, logger)
     with zenoh.open(conf) as session, JournalWriter(journal) as writer:
         inbox = Inbox(session, keys, logger)
@@ -242,7 +245,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS (default 0: as fast as the entities answer)")
     p.add_argument("--resume", action="store_true",
-                   help="restart a game from its --journal: the entities connect again and it plays on")
+                   help="restart a game from its --journal: the entities connect again and it plays on "
+                        "(a missing or empty journal starts a new game)")
     return p
 
 
