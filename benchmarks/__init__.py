@@ -6,7 +6,7 @@ import importlib
 import sys
 
 #: benchmark name -> module (each has ``main(argv) -> int``).
-BENCHMARKS = {"autopilot": "autopilot"}
+BENCHMARKS = {"autopilot": "autopilot", "perf": "perf"}
 
 
 def cli(argv: list[str] | None = None) -> int:

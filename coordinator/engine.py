@@ -154,6 +154,7 @@ class Engine:
         self._turn_log: dict = {}
         self._pending_moves: tuple[Move, ...] = ()
         self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
+        self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
@@ -348,6 +349,7 @@ class Engine:
                 return [Publish(self._phase_msg)]
             case Stage.DRONES:
                 self._moves.clear()
+                self._awaiting = set(self.alive())
                 self._final = {}
                 self._notes.clear()
                 orders = tuple(Order(drone=d, pos=self.drones[d].pos, target=self.drones[d].target)
@@ -456,10 +458,11 @@ class Engine:
             raise OutOfRange(f"{d} cannot move from {drone.pos} to {msg.pos}: one cell per turn, 6-connectivity")
         self._notes[d] = msg.note
         self._moves[d] = msg.pos
+        self._awaiting.discard(d)
         return self._drones_check()
 
     def _drones_check(self) -> list[Effect]:
-        if all(d in self._moves for d in self.alive()):  # (also when none is left alive)
+        if not self._awaiting:  # every alive drone has moved (also when none is left alive)
             return self._enter(Stage.ENV, self.turn)
         return []
 
@@ -521,6 +524,7 @@ class Engine:
     def _lose(self, d: str) -> None:
         r = self.drones[d]
         r.state, r.cause = DroneState.LOST, Cause.LOST
+        self._awaiting.discard(d)
         self._turn_log.setdefault("lost", []).append(d)
         self._log.warning("turn %d: %s is LOST at %s", self.turn, d, r.pos)
 

@@ -74,7 +74,8 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 records.append(data)
             case Publish(Turn(phase=Phase.GCS, turn=t)):
                 current.update(inputs.plan.at(t))
-                current = {d: c for d, c in current.items() if d in engine.alive()}
+                alive = set(engine.alive())
+                current = {d: c for d, c in current.items() if d in alive}
                 for d, cell in sorted(current.items()):
                     queue.extend(_accept(engine, log, Target(turn=t, sender="GCS", drone=d, pos=cell)))
                 queue.extend(engine.receive(Done(turn=t, sender="GCS", phase=Phase.GCS, intent=inputs.intent(t),

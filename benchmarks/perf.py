@@ -1,0 +1,926 @@
+"""Performance benchmark: turn latency against the Zenoh floor, turns per second up to 1000 drones.
+
+    dronesim bench perf                    # everything, prints one table (a few minutes)
+    dronesim bench perf --write            # ... and updates "## Performance" in BENCHMARKS.md
+    dronesim bench perf --quick            # a tiny subset (used by the tests), under a minute
+    dronesim bench perf --only '128|floor' # only the rows whose name matches the regex
+    dronesim bench perf --profile DIR      # also py-spy (if installed) every process, raw stacks in DIR
+
+In one run, on one loopback router embedded in this process (tcp/127.0.0.1, a free port):
+
+1. The floor: a pub/sub ping-pong and a query round trip between this process and a helper process
+   (`dronesim.benchmarks.pingpong`), small payloads, BLOCK congestion control, after a warm-up.
+2. Whole games: the coordinator, the environment and one swarm host flying every drone with the
+   seed's smart autopilot, each a separate process (`dronesim coordinator|env|drone`), and this
+   process as the ground station. It answers every GCS phase at once (every alive drone's current
+   target, then DONE CONTINUE counting them, as the real GCS does) and timestamps each TURN(GCS, t):
+   turn latency = time between consecutive GCS phases, turns/s = 1 / mean. After the warm-up turns
+   and the measured ones it samples the processes' peak memory (VmHWM) and answers DONE QUIT; every
+   process must then exit 0.
+3. The same scenarios in-process (`dronesim.local.simulate`, no network): same game, same timing
+   point (the GCS phase), so in-process / distributed is the distribution overhead.
+4. World generation time for 512x512x64 (`World.generate`, seeded), in-process.
+
+Scenarios (one JSON file per case, runtime/scenario.py format): starts on an even grid over the near
+half of the ground floor (x < nx/2, lanes every other y), kept free by the world generation and checked with
+`build_world`; each drone climbs to its own altitude (1 + its rank in its lane modulo nz - 1) and flies
+to the far half (x + nx/2), then back one floor higher, and so on, a leg every nx/2 + 3 turns (the
+first: nx/2 + nz + 1), so drones keep flying over cells they do not know yet (a seed drone over known
+cells wanders sideways: it prefers unknown ones) and neighbouring lanes are a floor apart. A late drone
+turns back before it arrives; after nz - 1 legs (only in 10x10x10) several drones stay at their last
+target (a lone drone goes on). Seed drones do not avoid each other: the
+few that collide die, and the table says how many are alive at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime as _dt
+import importlib.metadata
+import json
+import math
+import os
+import platform
+import queue
+import re
+import shlex
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+SECTION = "## Performance"
+WORLDS: tuple[tuple[int, int, int], ...] = ((10, 10, 10), (64, 64, 16), (256, 256, 32))
+DRONES: tuple[int, ...] = (1, 16, 128, 1000)
+WORLD_SEED = 3
+GEN_SIZE = (512, 512, 64)
+PHASE_DEADLINE = 60.0  # seconds: a benchmark measures, it does not test deadlines
+EVENT_TIMEOUT = 180.0  # seconds without any event from the game before the run is declared stalled
+TARGETS = {"latency": 3.0, "tps128": 200.0, "tps1000": 20.0}
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _pct(values: Sequence[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+def _mib(kib: int | None) -> str:
+    return "-" if kib is None else f"{kib / 1024:.0f}"
+
+
+def _size_text(size: Sequence[int]) -> str:
+    return "x".join(map(str, size))
+
+
+def _bytes_text(n: int) -> str:
+    if n < 1024 * 1024:
+        return f"{n / 1024:.1f} KiB"
+    return f"{n / 1024 / 1024:.1f} MiB"
+
+
+def proc_status(pid: int) -> dict[str, int]:
+    """VmHWM, VmRSS... of a process, in KiB (empty if it is gone)."""
+    out: dict[str, int] = {}
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Vm") and line.rstrip().endswith("kB"):
+                    name, value = line.split(":", 1)
+                    out[name] = int(value.split()[0])
+    except OSError:
+        pass
+    return out
+
+
+def cpu_seconds(pid: int | str = "self") -> float:
+    """User + system CPU time of a process (all its threads) so far, in seconds (nan if it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+
+
+def busy_seconds() -> tuple[float, float]:
+    """(CPU seconds every process of the machine used so far, this process and its waited-for children's)."""
+    fields = [int(v) for v in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+    mine = os.times()
+    total = (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")  # user..steal; guest time is inside user
+    return total, mine.user + mine.system + mine.children_user + mine.children_system
+
+
+def machine() -> dict[str, str]:
+    cpu = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    try:
+        zv = importlib.metadata.version("eclipse-zenoh")
+    except importlib.metadata.PackageNotFoundError:
+        zv = "?"
+    return {"nproc": str(os.cpu_count()), "cpu": cpu, "python": platform.python_version(), "zenoh": zv,
+            "arch": platform.machine()}
+
+
+def client_config(locator: str) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([locator]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/delay", "0")
+    return conf
+
+
+@contextlib.contextmanager
+def loopback_router() -> Iterator[str]:
+    """A Zenoh router in this process on tcp/127.0.0.1:<free port> (loopback only); yields its locator."""
+    from dronesim.transport import router_config, router_locators
+
+    with zenoh.open(router_config("tcp/127.0.0.1:0")) as router:
+        loc = router_locators(router)[0]
+        if not loc.startswith("tcp/127.0.0.1:"):
+            raise RuntimeError(f"the router listens on {loc}, not on loopback")
+        yield loc
+
+
+class Procs:
+    """Child processes with their output in log files (no reader threads in this process)."""
+
+    def __init__(self, logs: Path) -> None:
+        self.logs = logs
+        self.procs: dict[str, subprocess.Popen] = {}
+        self._files: list = []
+
+    def start(self, name: str, argv: list[str]) -> subprocess.Popen:
+        log = open(self.logs / f"{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
+        self._files.append(log)
+        p = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        self.procs[name] = p
+        return p
+
+    def dead(self) -> list[str]:
+        return [f"{n} exited {p.returncode}" for n, p in self.procs.items() if p.poll() is not None]
+
+    def wait(self, timeout: float) -> dict[str, int | None]:
+        end = time.monotonic() + timeout
+        codes: dict[str, int | None] = {}
+        for name, p in self.procs.items():
+            try:
+                codes[name] = p.wait(max(0.1, end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                codes[name] = None
+        return codes
+
+    def tail(self, name: str, lines: int = 15) -> str:
+        with contextlib.suppress(OSError):
+            return "\n".join((self.logs / f"{name}.log").read_text(errors="replace").splitlines()[-lines:])
+        return ""
+
+    def close(self) -> None:
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        for f in self._files:
+            f.close()
+
+
+# --------------------------------------------------------------------------- 1. the floor
+
+
+@dataclass(slots=True)
+class Floor:
+    name: str
+    rtts: list[float]  # seconds
+    cpu: tuple[float, float] = (float("nan"), float("nan"))  # CPU seconds per round trip: helper, this process
+    exit_code: int | None = None
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.rtts) if self.rtts else float("nan")
+
+
+def _cpu_per_round(cpu0: tuple[float, float] | None, pid: int, rounds: int) -> tuple[float, float]:
+    if cpu0 is None or not rounds:
+        return (float("nan"), float("nan"))
+    return ((cpu_seconds(pid) - cpu0[0]) / rounds, (cpu_seconds() - cpu0[1]) / rounds)
+
+
+def measure_floor(rounds: int, warmup: int, logs: Path) -> list[Floor]:
+    """Pub/sub and query round trips between this process and a pingpong helper process."""
+    from dronesim.entity import await_presence
+
+    root = f"perf{uuid.uuid4().hex[:8]}"
+    procs = Procs(logs)
+    results: list[Floor] = []
+    payload_len = 16
+    try:
+        with loopback_router() as loc, zenoh.open(client_config(loc)) as session:
+            helper = procs.start("pingpong", [sys.executable, "-m", "dronesim.benchmarks.pingpong", "--connect", loc,
+                                     "--root", root])
+            if not await_presence(session, f"{root}/ready", 60.0):
+                raise RuntimeError(f"the pingpong helper did not start:\n{procs.tail('pingpong')}")
+            for mode in ("cb", "th"):
+                got: queue.SimpleQueue[bytes] = queue.SimpleQueue()
+                sub = session.declare_subscriber(f"{root}/{mode}/pong", lambda s: got.put(s.payload.to_bytes()))
+                pub = session.declare_publisher(f"{root}/{mode}/ping",
+                                                congestion_control=zenoh.CongestionControl.BLOCK,
+                                                reliability=zenoh.Reliability.RELIABLE)
+                rtts: list[float] = []
+                i = 0
+                cpu0 = None
+                while len(rtts) < rounds:
+                    i += 1
+                    if i == warmup + 1:
+                        cpu0 = (cpu_seconds(helper.pid), cpu_seconds())
+                    msg = i.to_bytes(payload_len, "big")
+                    t0 = time.perf_counter()
+                    pub.put(msg)
+                    try:
+                        back = got.get(timeout=5.0)
+                    except queue.Empty:  # routes not yet established during the warm-up: ping again
+                        if i > warmup:
+                            raise RuntimeError("pub/sub ping lost after the warm-up") from None
+                        continue
+                    dt = time.perf_counter() - t0
+                    while back != msg:  # a late pong of a timed-out warm-up ping
+                        back = got.get(timeout=5.0)
+                        dt = time.perf_counter() - t0
+                    if i > warmup:
+                        rtts.append(dt)
+                cpu = _cpu_per_round(cpu0, helper.pid, len(rtts))
+                sub.undeclare()
+                pub.undeclare()
+                results.append(Floor(f"floor: pub/sub round trip ({'callback' if mode == 'cb' else 'main thread'} replies)",
+                                     rtts, cpu))
+            for mode in ("cb", "th"):
+                querier = session.declare_querier(f"{root}/{mode}/query", timeout=5.0,
+                                                  consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+                rtts = []
+                i = 0
+                cpu0 = None
+                while len(rtts) < rounds:
+                    i += 1
+                    if i == warmup + 1:
+                        cpu0 = (cpu_seconds(helper.pid), cpu_seconds())
+                    msg = i.to_bytes(payload_len, "big")
+                    t0 = time.perf_counter()
+                    ok = False
+                    for reply in querier.get(payload=msg):
+                        ok = ok or (reply.ok is not None and reply.ok.payload.to_bytes() == msg)
+                    dt = time.perf_counter() - t0
+                    if not ok:
+                        if i > warmup:
+                            raise RuntimeError("query without an answer after the warm-up")
+                        continue
+                    if i > warmup:
+                        rtts.append(dt)
+                cpu = _cpu_per_round(cpu0, helper.pid, len(rtts))
+                querier.undeclare()
+                results.append(Floor(f"floor: query round trip ({'callback' if mode == 'cb' else 'main thread'} replies)",
+                                     rtts, cpu))
+            session.put(f"{root}/quit", b"")
+            code = procs.wait(30.0)["pingpong"]
+    finally:
+        procs.close()
+    for r in results:
+        r.exit_code = code
+    return results
+
+
+# --------------------------------------------------------------------------- 2. scenarios
+
+
+@dataclass(slots=True)
+class Case:
+    drones: int
+    size: tuple[int, int, int]
+    warmup: int
+    turns: int  # measured
+
+    @property
+    def name(self) -> str:
+        return f"{self.drones} drone{'s' if self.drones > 1 else ''} @ {_size_text(self.size)}"
+
+    @property
+    def end_turn(self) -> int:
+        """The GCS phase at which the ground station quits (turns 1..end_turn - 1 are played)."""
+        return self.warmup + self.turns + 1
+
+
+def start_cells(size: Sequence[int]) -> list[tuple[int, int, int]]:
+    """Candidate starts: the near half of the ground floor (x < nx/2), every other y."""
+    nx, ny, _ = size
+    return [(x, y, 0) for x in range(max(1, nx // 2)) for y in range(0, ny, 2)]
+
+
+def spread(size: Sequence[int], n: int) -> list[tuple[int, int, int]]:
+    """`n` start cells on an even grid over the candidates (lanes every other y, x < nx/2)."""
+    lanes = list(range(0, size[1], 2))
+    xs = list(range(max(1, size[0] // 2)))
+    a = min(len(lanes), max(1, math.ceil(math.sqrt(n * len(lanes) / len(xs)))))  # lanes used
+    b = math.ceil(n / a)  # drones per lane
+    if b > len(xs):
+        b = len(xs)
+        a = math.ceil(n / b)
+    pick_lanes = [lanes[i] for i in np.linspace(0, len(lanes) - 1, a).round().astype(int)] if a > 1 else [0]
+    pick_xs = [xs[i] for i in np.linspace(0, len(xs) - 1, b).round().astype(int)] if b > 1 else [0]
+    return [(x, y, 0) for y in pick_lanes for x in pick_xs][:n]
+
+
+def _free_near(world, cell: tuple[int, int, int], used: set) -> tuple[int, int, int]:
+    """The first free, unused cell at or above `cell`, else in the columns further along x, then back."""
+    nx, _, nz = world.size
+    x0, y, z0 = cell
+    for fx in [*range(x0, nx), *range(x0 - 1, -1, -1)]:
+        for fz in range(z0, nz):
+            c = (fx, y, fz)
+            if not world.is_building(c) and c not in used:
+                return c
+    raise AssertionError(f"no free target near {cell}")
+
+
+def make_scenario(case: Case, seed: int = WORLD_SEED) -> dict | None:
+    """The scenario file's JSON for `case`, or None if the drones do not fit (see module docstring)."""
+    from dronesim.entities.environment import build_world
+    from dronesim.schema import WorldSpec, drone_id
+
+    nx, ny, nz = case.size
+    n = case.drones
+    if n > len(start_cells(case.size)):
+        return None
+    starts = spread(case.size, n)
+    world = build_world(WorldSpec(size=case.size, seed=seed), starts)
+    for s in starts:
+        if world.is_building(s):
+            raise AssertionError(f"start {s} is inside a building")
+    half = max(1, nx // 2)
+    # Leg k flies at the lane's altitude 1 + (lane + k) mod (nz - 1): a seed drone flying over cells it
+    # already knows wanders off sideways (it prefers unknown cells), so each leg goes through new cells;
+    # neighbouring lanes are always a floor apart. Even legs end in the far half, odd ones back home.
+    # After nz - 1 legs (small worlds only) several drones stay at their last target; a lone one goes on.
+    switches = [1]
+    t = 1 + (nz - 1) + half + 2  # the first leg includes the climb from the ground
+    while t <= case.end_turn and (n == 1 or len(switches) < max(1, nz - 1)):  # then every floor is flown: stay
+        switches.append(t)
+        t += half + 3  # one floor up, then across
+    targets = []
+    for k, t0 in enumerate(switches):
+        used: set[tuple[int, int, int]] = set()
+        for i, (x, y, _) in enumerate(starts):
+            z = 1 + (y // 2 + k) % (nz - 1) if nz > 1 else 0
+            if k % 2:  # home: above a free ground cell, so free (buildings rise from the ground)
+                cell = (x, y, z)
+            else:
+                cell = _free_near(world, (min(x + half, nx - 1), y, z), used)
+            used.add(cell)
+            targets.append(f"{drone_id(i + 1)}={cell[0]},{cell[1]},{cell[2]}@{t0}")
+    return {"format": "dronesim-scenario", "version": 1,
+            "world": {"size": list(case.size), "seed": seed},
+            "drones": [{"id": drone_id(i + 1), "start": list(s), "autopilot": "seed"} for i, s in enumerate(starts)],
+            "targets": targets, "max_turns": case.end_turn + 10}
+
+
+# --------------------------------------------------------------------------- distributed game
+
+
+@dataclass(slots=True)
+class Game:
+    latencies: list[float] = field(default_factory=list)  # seconds, consecutive GCS phases
+    phases: dict[str, list[float]] = field(default_factory=dict)  # phase -> seconds, measured turns
+    memory: dict[str, dict[str, int]] = field(default_factory=dict)  # process -> /proc status (KiB)
+    codes: dict[str, int | None] = field(default_factory=dict)
+    cpu: dict[str, float] = field(default_factory=dict)  # process -> CPU seconds per measured turn
+    alive: int = 0
+    last_status: object = None
+    statuses: dict = field(default_factory=dict)  # turn -> STATUS
+    error: str = ""
+    over: str = ""
+
+
+ROLES = ("coordinator", "env", "swarm")
+
+
+def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path | None = None) -> Game:
+    """One game over a loopback router with this process as the ground station; see the module docstring."""
+    from dronesim.entity import Membership
+    from dronesim.scenario import Scenario
+    from dronesim.schema import Connect, Done, Intent, Keys, Over, Phase, Role, Status, Target, Turn, drone_id
+    from dronesim.transport import Inbox, Outbox, Presence, Received, session_id
+
+    import logging
+
+    scenario = Scenario.load(scenario_file)
+    plan = scenario.plan()
+    root = f"perf{uuid.uuid4().hex[:8]}"
+    keys = Keys(root)
+    log = logging.getLogger("dronesim.bench.gcs")
+    game = Game()
+    procs = Procs(logs)
+    spies: list[subprocess.Popen] = []
+    last_drone = drone_id(case.drones)
+    ids = "D01" if case.drones == 1 else f"D01-{last_drone}"
+    try:
+        with loopback_router() as loc:
+            base = [sys.executable, "-m", "dronesim"]
+            common = ["--mode", "client", "--connect", loc, "--root", root]
+            procs.start("coordinator", [*base, "coordinator", *common, "--scenario", str(scenario_file),
+                                        "--phase-deadline", str(PHASE_DEADLINE)])
+            procs.start("env", [*base, "env", *common, "--no-draw", "--connect-timeout", "120"])
+            procs.start("swarm", [*base, "drone", *common, "--id", ids, "--host", "H01", "--autopilot", "seed",
+                                  "--connect-timeout", "120"])
+            with zenoh.open(client_config(loc)) as session:
+                inbox = Inbox(session, keys, log)
+                for key, typ in ((keys.turn, Turn), (keys.status, Status), (keys.over, Over)):
+                    inbox.subscribe(key, typ)
+                out = Outbox(session)
+                member = Membership(session, inbox, Connect(turn=0, sender="GCS", role=Role.GCS,
+                                                            session=session_id(session)),
+                                    log, connect_timeout=120.0, grace=30.0)
+                if profile is not None:
+                    spies = _spy(procs, profile, case)
+                stamps: dict[tuple[str, int], float] = {}
+                current: dict = {}
+                alive: set[str] | None = None
+                over = None
+                idle_since = time.monotonic()
+                while over is None:
+                    event = inbox.get(1.0)
+                    now = time.perf_counter()
+                    if event is None:
+                        if procs.dead():
+                            raise RuntimeError("a process ended during the game: " + ", ".join(procs.dead()))
+                        if time.monotonic() - idle_since > EVENT_TIMEOUT:
+                            raise RuntimeError(f"the game stalled: no event for {EVENT_TIMEOUT:g} s")
+                        continue
+                    idle_since = time.monotonic()
+                    match event:
+                        case Presence() as p:
+                            member.on_presence(p)
+                        case Received(_, Status() as st):
+                            stamps[("STATUS", st.turn)] = now
+                            alive = {s.drone for s in st.drones if s.alive}
+                            game.last_status = st
+                            game.statuses[st.turn] = st
+                        case Received(_, Over() as o):
+                            over = o
+                        case Received(_, Turn() as turn):
+                            stamps[(turn.phase.value, turn.turn)] = now
+                            if turn.phase is not Phase.GCS:
+                                continue
+                            t = turn.turn
+                            if t in (case.warmup + 1, case.end_turn):  # CPU time over the measured turns
+                                pids = {n: procs.procs[n].pid for n in ROLES} | {"bench": "self"}
+                                for n, pid in pids.items():
+                                    game.cpu[n] = cpu_seconds(pid) - game.cpu.get(n, 0.0)
+                            if t >= case.end_turn:
+                                for name in ROLES:
+                                    game.memory[name] = proc_status(procs.procs[name].pid)
+                                out.put(keys.gcs_done, Done(turn=t, sender="GCS", phase=Phase.GCS,
+                                                            intent=Intent.QUIT, count=0))
+                                continue
+                            current.update(plan.at(t))
+                            if alive is not None:
+                                current = {d: c for d, c in current.items() if d in alive}
+                            for d, cell in sorted(current.items()):
+                                out.put(keys.tgt(d), Target(turn=t, sender="GCS", drone=d, pos=cell))
+                            out.put(keys.gcs_done, Done(turn=t, sender="GCS", phase=Phase.GCS,
+                                                        intent=Intent.CONTINUE, count=len(current)))
+                game.over = f"{over.reason.value} at turn {over.turn}"
+                member.close()
+            game.codes = procs.wait(60.0)
+    except Exception as exc:  # noqa: BLE001 - reported in the table, the run goes on
+        game.error = f"{type(exc).__name__}: {exc}"
+        game.codes = {n: p.poll() for n, p in procs.procs.items()}
+    finally:
+        procs.close()
+        if spies:
+            spies[-1].send_signal(signal.SIGINT)  # this process's py-spy: it writes its output on SIGINT
+        for spy in spies:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                spy.wait(30)
+            if spy.poll() is None:
+                spy.kill()
+    if game.error:
+        for n in ROLES:
+            game.error += f"\n--- {n} ({logs / (n + '.log')}):\n{procs.tail(n)}"
+        return game
+    first, last = case.warmup + 1, case.end_turn
+    gcs = [stamps.get(("GCS", t)) for t in range(first, last + 1)]
+    if None in gcs:
+        game.error = "missing GCS phases"
+        return game
+    game.latencies = [b - a for a, b in zip(gcs, gcs[1:])]  # type: ignore[operator]
+    split: dict[str, list[float]] = {"GCS": [], "DRONES": [], "ENV": []}
+    for t in range(first, last):
+        g, d, e, s = (stamps.get((k, t)) for k in ("GCS", "DRONES", "ENV", "STATUS"))
+        if None in (g, d, s):
+            continue
+        split["GCS"].append(d - g)  # type: ignore[operator]
+        split["DRONES"].append((e if e is not None else s) - d)  # type: ignore[operator]
+        split["ENV"].append(s - e if e is not None else 0.0)  # type: ignore[operator]
+    game.phases = split
+    game.cpu = {n: v / case.turns for n, v in game.cpu.items()}
+    game.alive = len({s.drone for s in game.last_status.drones if s.alive}) if game.last_status else 0  # type: ignore[attr-defined]
+    return game
+
+
+def _spy(procs: Procs, out: Path, case: Case) -> list[subprocess.Popen]:
+    """py-spy record on each entity process until it exits, and on this one until the game is over (raw
+    collapsed stacks, one file each)."""
+    exe = shutil.which("py-spy")
+    if exe is None:
+        print("note: --profile needs py-spy (pip install py-spy); not profiling", file=sys.stderr)
+        return []
+    out.mkdir(parents=True, exist_ok=True)
+    tag = f"{case.drones}-{_size_text(case.size)}"
+    pids = {n: procs.procs[n].pid for n in ROLES} | {"bench": os.getpid()}
+    return [subprocess.Popen([exe, "record", "--pid", str(pid), "--rate", "250", "--format", "raw",
+                              "--output", str(out / f"{tag}-{n}.txt"), "--nonblocking"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for n, pid in pids.items()]
+
+
+# --------------------------------------------------------------------------- 3. in-process
+
+
+@dataclass(slots=True)
+class Local:
+    latencies: list[float]
+    statuses: dict  # turn -> STATUS
+    moving: float  # drones that moved, per measured turn
+
+
+def play_local(case: Case, scenario_file: Path) -> Local:
+    """The same game in-process (`dronesim.local.simulate`), timed at each GCS phase as the distributed one."""
+    import logging
+
+    from dronesim.local import Inputs, simulate
+    from dronesim.scenario import Scenario
+    from dronesim.schema import Intent
+
+    class TimedInputs(Inputs):
+        """Timestamps the GCS phase: simulate asks for the intent once per turn, in that phase."""
+
+        def intent(self, turn: int) -> Intent:
+            self.stamps[turn] = time.perf_counter()  # type: ignore[attr-defined]
+            return super().intent(turn)
+
+    sc = Scenario.load(scenario_file)
+    inputs = TimedInputs(plan=sc.plan(), intents={1: Intent.CONTINUE, case.end_turn: Intent.QUIT}, scripted=False)
+    inputs.stamps = {}  # type: ignore[attr-defined]
+    quiet = logging.getLogger("dronesim.bench.local")
+    quiet.setLevel(logging.ERROR)
+    res = simulate(sc.game_config(phase_deadline=PHASE_DEADLINE), sc.autopilots, inputs, quiet, keep_statuses=True)
+    st = inputs.stamps  # type: ignore[attr-defined]
+    ts = [st[t] for t in range(case.warmup + 1, case.end_turn + 1)]
+    measured = [r for r in res.records
+                if r.get("record") == "turn" and case.warmup < r.get("turn", 0) < case.end_turn]
+    moving = statistics.fmean(len(r.get("moves", {})) for r in measured) if measured else 0.0
+    return Local([b - a for a, b in zip(ts, ts[1:])], {st.turn: st for st in res.statuses}, moving)
+
+
+# --------------------------------------------------------------------------- 4. memory baseline, world gen
+
+
+def python_baseline_kib() -> int:
+    """VmHWM of an idle Python process that imported the coordinator, environment and drone modules."""
+    code = ("import dronesim.coordinator.node, dronesim.entities.env_node, dronesim.entities.drone_node, os;"
+            "print(open(f'/proc/{os.getpid()}/status').read())")
+    text = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    m = re.search(r"VmHWM:\s+(\d+) kB", text)
+    return int(m.group(1)) if m else 0
+
+
+def world_generation(size: tuple[int, int, int], repeat: int = 3) -> list[float]:
+    from dronesim.entities.world import World
+
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        World.generate(size, np.random.default_rng(WORLD_SEED))
+        times.append(time.perf_counter() - t0)
+    return times
+
+
+# --------------------------------------------------------------------------- the table
+
+
+@dataclass(slots=True)
+class Row:
+    name: str
+    cells: dict[str, str] = field(default_factory=dict)
+    ok: bool = True  # every process exited 0 (or nothing to check)
+
+
+COLUMNS = (
+    ("name", "row"),
+    ("array", "world array"),
+    ("turns", "turns (warm-up + measured)"),
+    ("tps", "turns/s"),
+    ("lat", "turn (or round trip) ms median / p99"),
+    ("split", "phases ms GCS / DRONES / ENV+OBS (median)"),
+    ("cpu", "CPU ms per turn coordinator / env / swarm / this process"),
+    ("ltps", "in-process turns/s"),
+    ("lratio", "in-process ÷ distributed"),
+    ("floor", "turn ÷ pub/sub RTT"),
+    ("growth", "per-turn cost growth 128→1000 ÷ N growth"),
+    ("srv", "coordinator MiB (÷ model)"),
+    ("env", "environment MiB (÷ model)"),
+    ("swarm", "swarm host MiB"),
+    ("alive", "alive at end, moving per turn, same game in-process"),
+    ("codes", "exit codes"),
+    ("target", "target"),
+)
+
+
+def render(rows: list[Row]) -> str:
+    lines = ["| " + " | ".join(h for _, h in COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    for r in rows:
+        vals = [r.name] + [r.cells.get(k, "") for k, _ in COLUMNS[1:]]
+        lines.append("| " + " | ".join(v.replace("|", "/") if v else "—" for v in vals) + " |")
+    return "\n".join(lines)
+
+
+def _verdict(value: float, target: float, at_most: bool, what: str) -> str:
+    if value != value:  # nan
+        return f"{what}: not measured"
+    met = value <= target if at_most else value >= target
+    return f"{what}: {'met' if met else 'UNMET'}"
+
+
+# --------------------------------------------------------------------------- main
+
+
+def cases(quick: bool, turns: int) -> list[Case]:
+    if quick:
+        return [Case(n, (10, 10, 10), 3, min(turns, 20)) for n in (1, 16, 128)]
+    out = []
+    for size in WORLDS:
+        for n in DRONES:
+            if n >= 1000:
+                out.append(Case(n, size, 5, max(10, turns // 4)))
+            else:
+                out.append(Case(n, size, 10, turns))
+    return out
+
+
+def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
+    """Everything selected by `args`; returns the table rows and facts for the legend."""
+    only = re.compile(args.only) if args.only else None
+    selected = lambda name: only is None or only.search(name) is not None  # noqa: E731
+    logs = Path(tempfile.mkdtemp(prefix="dronesim-perf-"))
+    facts: dict = {"logs": str(logs), "load_before": os.getloadavg(), "busy_before": busy_seconds()}
+    rows: list[Row] = []
+    t_start = time.perf_counter()
+
+    # 1. the floor: half the round trips now, half at the end of the run (pooled: the machine drifts)
+    want_floor = selected("floor: pub/sub round trip") or selected("floor: query round trip")
+    rounds, warm = (150, 100) if args.quick else (max(1, args.rounds // 2), 300)
+    floor_runs: list[list[Floor]] = []
+
+    def floor_now() -> None:
+        try:
+            floor_runs.append(measure_floor(rounds, warm, logs))
+        except Exception as exc:  # noqa: BLE001 - reported in the table
+            rows.append(Row("floor", {"target": f"FAILED: {exc}"}, ok=False))
+
+    if want_floor:
+        floor_now()
+    ratio_cells: list[tuple[Row, float, int]] = []  # (row, median turn, drones): "turn ÷ RTT" filled at the end
+
+    # 2-3. games
+    baseline = python_baseline_kib()
+    facts["baseline_kib"] = baseline
+    per_turn: dict[tuple[int, tuple[int, int, int]], float] = {}
+    lper_turn: dict[tuple[int, tuple[int, int, int]], float] = {}
+    for case in cases(args.quick, args.turns):
+        if not selected(case.name):
+            continue
+        scen = make_scenario(case)
+        if scen is None:
+            rows.append(Row(case.name, {"array": _bytes_text(int(np.prod(case.size))),
+                                        "target": f"skipped: {case.drones} drones do not fit "
+                                                  f"({len(start_cells(case.size))} start cells)"}))
+            continue
+        path = logs / f"scenario-{case.drones}-{_size_text(case.size)}.json"
+        path.write_text(json.dumps(scen), encoding="utf-8")
+        case_logs = logs / f"{case.drones}-{_size_text(case.size)}"
+        case_logs.mkdir()
+        print(f"  {case.name}: distributed ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        game = play_distributed(case, path, case_logs, Path(args.profile) if args.profile else None)
+        t1 = time.perf_counter()
+        print(f"  {case.name}: distributed {t1 - t0:.0f} s; in-process ...", file=sys.stderr, flush=True)
+        local = play_local(case, path)
+        print(f"  {case.name}: in-process {time.perf_counter() - t1:.0f} s", file=sys.stderr, flush=True)
+        array = int(np.prod(case.size))
+        cells: dict[str, str] = {"array": _bytes_text(array), "turns": f"{case.warmup} + {case.turns}"}
+        codes = "/".join("?" if game.codes.get(n) is None else str(game.codes[n]) for n in ROLES)
+        cells["codes"] = codes
+        ok = not game.error and all(game.codes.get(n) == 0 for n in ROLES)
+        lmean = statistics.fmean(local.latencies) if local.latencies else float("nan")
+        lper_turn[(case.drones, case.size)] = lmean
+        cells["ltps"] = f"{1 / lmean:.1f}"
+        verdicts = []
+        if game.error:
+            cells["target"] = "FAILED: " + game.error.splitlines()[0]
+            facts.setdefault("errors", []).append(f"{case.name}: {game.error}")
+        else:
+            mean = statistics.fmean(game.latencies)
+            per_turn[(case.drones, case.size)] = mean
+            med = statistics.median(game.latencies)
+            cells["tps"] = f"{1 / mean:.1f}"
+            cells["lat"] = f"{med * 1e3:.2f} / {_pct(game.latencies, 99) * 1e3:.2f}"
+            ph = game.phases
+            cells["split"] = " / ".join(f"{statistics.median(ph[k]) * 1e3:.2f}" if ph.get(k) else "-"
+                                        for k in ("GCS", "DRONES", "ENV"))
+            cells["cpu"] = " / ".join(f"{game.cpu.get(n, float('nan')) * 1e3:.1f}" for n in (*ROLES, "bench"))
+            cells["lratio"] = f"{mean / lmean:.1f}x" if lmean == lmean else "-"
+            model = 2 * array + 1024 * case.drones + baseline * 1024
+            for key, name in (("srv", "coordinator"), ("env", "env")):
+                hwm = game.memory.get(name, {}).get("VmHWM")
+                cells[key] = "-" if hwm is None else f"{hwm / 1024:.0f} ({hwm * 1024 / model:.2f})"
+            cells["swarm"] = _mib(game.memory.get("swarm", {}).get("VmHWM"))
+            differ = sorted(t for t in set(game.statuses) | set(local.statuses)
+                            if game.statuses.get(t) != local.statuses.get(t))
+            same = "yes" if not differ else f"NO (from turn {differ[0]})"
+            if differ:
+                t = differ[0]
+                a, b = game.statuses.get(t), local.statuses.get(t)
+                diff = [f"{x} != {y}" for x, y in zip(getattr(a, "drones", ()), getattr(b, "drones", ())) if x != y]
+                facts.setdefault("errors", []).append(f"{case.name}: STATUS({t}) differs from the in-process run: "
+                                                      + "; ".join(diff[:5]))
+            cells["alive"] = f"{game.alive}/{case.drones}, {local.moving:.1f} moving per turn, {same}"
+            if case.drones == 128:
+                verdicts.append(_verdict(1 / mean, TARGETS["tps128"], False, f"≥ {TARGETS['tps128']:g} turns/s"))
+            if case.drones == 1000:
+                verdicts.append(_verdict(1 / mean, TARGETS["tps1000"], False, f"≥ {TARGETS['tps1000']:g} turns/s"))
+                small = per_turn.get((128, case.size))
+                lsmall = lper_turn.get((128, case.size))
+                growth = []
+                if small:
+                    growth.append(f"{(mean / small) / (1000 / 128):.2f}")
+                if lsmall:
+                    growth.append(f"in-process {(lmean / lsmall) / (1000 / 128):.2f}")
+                cells["growth"] = ", ".join(growth) or "-"
+            cells["target"] = "; ".join(verdicts) if verdicts else "—"
+        rows.append(Row(case.name, cells, ok=ok))
+        if not game.error:
+            ratio_cells.append((rows[-1], statistics.median(game.latencies), case.drones))
+
+    # 5. world generation
+    gen_size = (64, 64, 16) if args.quick else GEN_SIZE
+    name = f"world generation {_size_text(gen_size)}"
+    if selected(name):
+        times = world_generation(gen_size, 2 if args.quick else 3)
+        rows.append(Row(name, {"array": _bytes_text(int(np.prod(gen_size))),
+                               "turns": f"{len(times)} runs", "lat": f"{statistics.median(times) * 1e3:.0f} / {max(times) * 1e3:.0f}",
+                               "target": "in-process, seed 3"}))
+    # 1 (end). the second half of the floor, the floor rows first in the table, the ratios to it
+    if want_floor and floor_runs:
+        floor_now()
+    floors = [Floor(f.name, [r for run_ in floor_runs for r in run_[i].rtts],
+                    tuple(statistics.fmean(run_[i].cpu[k] for run_ in floor_runs) for k in (0, 1)),  # type: ignore[arg-type]
+                    max((run_[i].exit_code or 0 for run_ in floor_runs), default=None))
+              for i, f in enumerate(floor_runs[0])] if floor_runs else []
+    floor_rows = []
+    for i, f in enumerate(floors):
+        if not selected(f.name):
+            continue
+        halves = ", ".join(f"{statistics.median(run_[i].rtts) * 1e3:.3f}" for run_ in floor_runs)
+        floor_rows.append(Row(f.name, {
+            "turns": f"{len(f.rtts)} round trips (median of each half: {halves})",
+            "tps": f"{1 / statistics.fmean(f.rtts):.0f}/s",
+            "lat": f"{f.median * 1e3:.3f} / {_pct(f.rtts, 99) * 1e3:.3f}",
+            "cpu": f"helper {f.cpu[0] * 1e3:.3f} / this process {f.cpu[1] * 1e3:.3f}",
+            "codes": f"helper {f.exit_code}",
+        }, ok=f.exit_code == 0))
+    rows[:0] = floor_rows
+    pubsub = floors[0].median if floors else float("nan")
+    facts["pubsub"] = pubsub
+    for row, med, drones in ratio_cells:
+        ratio = med / pubsub
+        row.cells["floor"] = f"{ratio:.1f}" if ratio == ratio else "-"
+        if drones == 1:
+            verdict = _verdict(ratio, TARGETS["latency"], True, f"≤ {TARGETS['latency']:g}x RTT")
+            row.cells["target"] = verdict if row.cells.get("target", "—") == "—" else f"{verdict}; {row.cells['target']}"
+    facts["seconds"] = time.perf_counter() - t_start
+    facts["load_after"] = os.getloadavg()
+    (t0, m0), (t1, m1) = facts["busy_before"], busy_seconds()
+    facts["others"] = max(0.0, (t1 - t0) - (m1 - m0)) / max(facts["seconds"], 1e-9)  # cores used by other work
+    return rows, facts
+
+
+def legend(facts: dict) -> str:
+    base = facts.get("baseline_kib", 0) / 1024
+    return (
+        "Legend. Floor rows: round trips between this process and a helper process through the router, 16-byte "
+        "payloads, BLOCK congestion control, after a warm-up, half of them at the start of the run and half at "
+        "the end (\"callback replies\": the helper answers from "
+        "Zenoh's callback thread; \"main thread replies\": it hands each message to its main thread first, as "
+        "every dronesim entity does); their ms column is the round trip, their CPU column the CPU time per round trip of the helper and of this process (which also runs the router). Game rows: coordinator, environment and "
+        "one swarm host (seed autopilot, every drone) are separate processes (coordinator with --phase-deadline "
+        f"{PHASE_DEADLINE:g}), this process is the ground "
+        "station (every alive drone's target re-sent each turn, as the real GCS); a turn is the time between "
+        "two consecutive TURN(GCS) arrivals, turns/s = 1 / mean, p99 over the measured turns. Phases: "
+        "TURN(GCS) → TURN(DRONES) → TURN(ENV) → STATUS as seen by the ground station (ENV+OBS is 0 when no "
+        "drone moved). CPU: user + system time of each process (all threads) over the measured turns ÷ turns; \"this "
+        "process\" is the router and the ground station. In-process: `dronesim.local.simulate` on the same scenario, timed at the same point; "
+        "\"in-process ÷ distributed\" = distributed mean turn ÷ in-process mean turn. \"turn ÷ pub/sub RTT\" = "
+        "median turn ÷ median pub/sub round trip (callback replies). Growth (1000-drone rows) = (mean turn at "
+        "1000 ÷ mean turn at 128, same world) ÷ (1000 ÷ 128): 1.00 is linear in N, above is worse than "
+        "linear. Memory: VmHWM sampled just before the ground station quits; ratio = VmHWM ÷ (2 × world "
+        f"array bytes (nx·ny·nz, one bool per cell) + 1 KiB × N + {base:.0f} MiB), the last being the VmHWM "
+        "of an idle Python process that only imported the coordinator, environment and drone modules (no "
+        "Zenoh session). Alive at end: drones alive in the last STATUS (seed drones do not avoid each other); "
+        "moving per turn: drones that moved, mean over the measured turns (in-process journal); \"same game\": "
+        "every STATUS equals the in-process one. Exit codes: coordinator/environment/swarm "
+        "host (floor rows: the helper)."
+    )
+
+
+def write_section(path: Path, body: str) -> None:
+    """Replace (or append) the "## Performance" section of `path`, leaving other sections alone."""
+    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
+    section = f"{SECTION}\n\n{body.strip()}\n"
+    pattern = re.compile(rf"^{re.escape(SECTION)}[ \t]*\n.*?(?=^## |\Z)", re.S | re.M)
+    if pattern.search(text):
+        text = pattern.sub(lambda _: section + "\n", text, count=1).rstrip("\n") + "\n"
+    else:
+        text = text.rstrip("\n") + "\n\n" + section
+    path.write_text(text, encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="dronesim bench perf", description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a tiny subset (for tests): 10x10x10, 20 turns")
+    parser.add_argument("--turns", type=int, default=200,
+                        help="measured turns per case (default 200; 1000-drone cases: a quarter, at least 10)")
+    parser.add_argument("--rounds", type=int, default=2000, help="round trips per floor measurement (default 2000)")
+    parser.add_argument("--only", metavar="PATTERN", help="only rows whose name matches this regex, e.g. '128|floor'")
+    parser.add_argument("--profile", metavar="DIR", help="py-spy record every entity process into DIR (raw stacks)")
+    parser.add_argument("--keep-logs", action="store_true",
+                        help="keep the processes' logs and the scenario files (kept anyway when something failed)")
+    parser.add_argument("--write", action="store_true", help="update the section in BENCHMARKS.md")
+    parser.add_argument("--output", type=Path, default=Path(__file__).resolve().parent.parent / "BENCHMARKS.md",
+                        help="file --write updates (default: the repository's BENCHMARKS.md)")
+    args = parser.parse_args(argv)
+    if args.turns < 1 or args.rounds < 1:
+        parser.error("--turns and --rounds must be >= 1")
+
+    mach = machine()
+    rows, facts = run(args)
+    table = render(rows)
+    print()
+    print(table)
+    print()
+    print(legend(facts))
+    for err in facts.get("errors", []):
+        print(f"\n{err}", file=sys.stderr)
+    ok = all(r.ok for r in rows)
+    if ok and not args.keep_logs:
+        shutil.rmtree(facts["logs"], ignore_errors=True)
+        where = "removed (--keep-logs keeps them)"
+    else:
+        where = facts["logs"]
+    print(f"\nlogs and scenarios: {where}; {facts['seconds']:.0f} s; other processes used "
+          f"{facts['others']:.2f} cores on average during the run", file=sys.stderr)
+    if args.write:
+        cmd = "dronesim bench perf " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+        lb, others = facts["load_before"], facts["others"]
+        body = (
+            f"Command: `{cmd.strip()}`, run {_dt.date.today().isoformat()} on {mach['cpu']} ({mach['arch']}, "
+            f"nproc = {mach['nproc']}), Python {mach['python']}, eclipse-zenoh {mach['zenoh']}, "
+            f"{facts['seconds']:.0f} s in all. Load average (1 min) before the run {lb[0]:.2f}; other processes "
+            f"used {others:.2f} cores on average during the run"
+            + (" (other work ran alongside: absolute numbers are pessimistic)." if others > 0.2 else ".")
+            + "\n\nTargets (issue \"Performance: turn latency near the Zenoh floor, scale to 1000 drones\"): "
+            "1-drone turn ≤ 3 × pub/sub round trip (checked on every 1-drone row), ≥ 200 turns/s at 128 drones, "
+            "≥ 20 turns/s at 1000 drones. Where the time goes: `dronesim bench perf --only '128 drones @ 64' "
+            "--profile DIR` writes py-spy stacks of every process; the CPU column splits a turn by process.\n\n"
+            f"{table}\n\n{legend(facts)}\n"
+        )
+        write_section(args.output, body)
+        print(f"\nwrote {SECTION!r} in {args.output}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

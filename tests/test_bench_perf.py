@@ -1,0 +1,77 @@
+"""`dronesim bench perf --quick`: the table has its rows and every process of every game exited 0.
+
+Behaviour only: no wall-clock assertion (the machine may be busy)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from dronesim.benchmarks import BENCHMARKS, perf
+
+pytestmark = pytest.mark.integration
+
+
+def _rows(table: str) -> dict[str, dict[str, str]]:
+    lines = [ln for ln in table.splitlines() if ln.startswith("| ")]
+    head = [c.strip() for c in lines[0].strip("|").split("|")]
+    rows = {}
+    for ln in lines[1:]:
+        cells = [c.strip() for c in ln.strip("|").split("|")]
+        rows[cells[0]] = dict(zip(head, cells))
+    return rows
+
+
+def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
+    assert BENCHMARKS["perf"] == "perf"
+    out_file = tmp_path / "BENCHMARKS.md"
+    out_file.write_text("# Benchmarks\n\n## Autopilot benchmark\n\nkept\n", encoding="utf-8")
+    code = perf.main(["--quick", "--write", "--output", str(out_file)])
+    out = capsys.readouterr().out
+    rows = _rows(out)
+    assert code == 0, out
+    for name in ("floor: pub/sub round trip (callback replies)", "floor: pub/sub round trip (main thread replies)",
+                 "floor: query round trip (callback replies)", "floor: query round trip (main thread replies)"):
+        assert rows[name]["exit codes"] == "helper 0"
+        median, p99 = (float(v) for v in rows[name]["turn (or round trip) ms median / p99"].split(" / "))
+        assert 0 < median <= p99
+    for name in ("1 drone @ 10x10x10", "16 drones @ 10x10x10"):
+        row = rows[name]
+        assert row["exit codes"] == "0/0/0", row
+        assert not row["target"].startswith("FAILED"), row
+        assert float(row["turns/s"]) > 0 and float(row["in-process turns/s"]) > 0
+        assert row["alive at end, moving per turn, same game in-process"].endswith("yes"), row
+        cpu = [float(v) for v in row["CPU ms per turn coordinator / env / swarm / this process"].split(" / ")]
+        assert len(cpu) == 4 and all(v >= 0 for v in cpu)
+        for col in ("coordinator MiB (÷ model)", "environment MiB (÷ model)"):
+            mib, ratio = row[col].replace("(", "").replace(")", "").split()
+            assert float(mib) > 0 and float(ratio) > 0
+    assert rows["1 drone @ 10x10x10"]["target"].startswith("≤ 3x RTT: ")  # met or UNMET, measured either way
+    assert rows["128 drones @ 10x10x10"]["target"].startswith("skipped: 128 drones do not fit")
+    assert "world generation 64x64x16" in rows
+    # --write replaced only its own section
+    text = out_file.read_text(encoding="utf-8")
+    assert "## Autopilot benchmark\n\nkept\n" in text
+    assert text.count("## Performance") == 1 and "`dronesim bench perf --quick --write --output" in text
+    assert "1 drone @ 10x10x10" in text.split("## Performance", 1)[1]
+
+
+def test_scenarios_fit_start_free_and_are_valid(tmp_path):
+    from dronesim.entities.environment import build_world
+    from dronesim.scenario import Scenario
+
+    assert perf.make_scenario(perf.Case(1000, (10, 10, 10), 5, 10)) is None
+    for case in (perf.Case(16, (10, 10, 10), 3, 20), perf.Case(128, (64, 64, 16), 10, 30)):
+        data = perf.make_scenario(case)
+        path = tmp_path / "s.json"
+        path.write_text(json.dumps(data), encoding="utf-8")
+        sc = Scenario.load(path)
+        assert len(sc.drones) == case.drones and set(sc.autopilots.values()) == {"seed"}
+        world = build_world(sc.world, [d.start for d in sc.drones])
+        assert not any(world.is_building(d.start) for d in sc.drones)
+        plan = sc.plan()
+        cells = {c for _, _, c in plan.items}
+        assert not any(world.is_building(c) for c in cells)
+        assert plan.drones() == set(sc.autopilots)
+        assert sc.max_turns > case.end_turn
