@@ -10,6 +10,7 @@ import argparse
 import logging
 import sys
 import time
+from collections.abc import Callable
 
 import zenoh
 
@@ -41,15 +42,25 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         mine = set(drones)
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
+        backlog: list = []  # events taken from the inbox while waiting for the environment
+
+        def superseded(turn: int) -> bool:
+            """Has the game moved past `turn` (a later TURN, or OVER, is queued)? Then stop planning it."""
+            backlog.extend(inbox.drain())
+            return any(isinstance(e, Received) and (isinstance(e.msg, Over) or
+                                                    (isinstance(e.msg, Turn) and e.msg.turn > turn))
+                       for e in backlog)
+
         while over is None:
-            first = inbox.get(member.timeout())
+            first = backlog.pop(0) if backlog else inbox.get(member.timeout())
             if first is None:
                 member.check()
                 continue
             # Work through everything already queued, acting only on the latest DRONES phase: a process
             # that was frozen or slow catches up instead of planning turns that are long gone.
             latest: Turn | None = None
-            for event in (first, *inbox.drain()):
+            queued, backlog[:] = [*backlog, *inbox.drain()], []
+            for event in (first, *queued):
                 if not member.clock.screen(event, inbox.rejects):
                     continue
                 match event:
@@ -65,7 +76,10 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                 orders = tuple(o for o in latest.orders if o.drone in mine)
                 if done is None or done[0] != (latest.turn, orders):
                     steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
-                    decisions = fly_round(steps, lambda pending: asker.ask_all(latest.turn, pending))
+                    decisions = fly_round(steps, lambda pending: asker.ask_all(
+                        latest.turn, pending, give_up=lambda: superseded(latest.turn)))
+                    if superseded(latest.turn):
+                        continue  # too late: the game has moved on (the queued events come next)
                     done = ((latest.turn, orders), decisions)
                 for d, dec in done[1].items():
                     out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
@@ -99,7 +113,10 @@ class Asker:
             size += len(cells)
         return batches
 
-    def ask_all(self, turn: int, pending: dict[str, tuple]) -> dict[str, Answers]:
+    def ask_all(self, turn: int, pending: dict[str, tuple], *,
+                give_up: Callable[[], bool] = lambda: False) -> dict[str, Answers]:
+        """Answers for every drone's cells. While the environment is away it waits for it (up to
+        `patience`), checking `give_up` at least every second (the game may have ended meanwhile)."""
         answers: dict[str, Answers] = {}
         end = time.monotonic() + self.patience
         while pending:
@@ -115,9 +132,15 @@ class Asker:
                         unanswered[d] = pending[d]
                     else:
                         answers[d] = {c: got[c] for c in pending[d] if c in got}
-            if unanswered and time.monotonic() < end:
+            if unanswered and give_up():
+                answers.update({d: {} for d in unanswered})
+                unanswered = {}
+            elif unanswered and time.monotonic() < end:
                 self.log.warning("no environment answered %s: waiting for it", ", ".join(unanswered))
-                await_presence(self.session, self.keys.alive_of("ENV"), end - time.monotonic())
+                while not await_presence(self.session, self.keys.alive_of("ENV"),
+                                         min(1.0, end - time.monotonic())):
+                    if give_up() or time.monotonic() >= end:
+                        break
             elif unanswered:
                 self.log.error("no environment answered %s within %g s", ", ".join(unanswered), self.patience)
                 answers.update({d: {} for d in unanswered})

@@ -115,15 +115,28 @@ def format_status(status: Status, limit: int = 16) -> str:
     return "\n".join(lines)
 
 
-def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
-    """Each drone's path through the STATUS history, without repeats of consecutive cells."""
-    out: dict[str, list[Cell]] = {}
-    for st in history:
-        for s in st.drones:
-            path = out.setdefault(s.drone, [])
+class Tracks:
+    """The last STATUS and each drone's path so far, kept as the game goes (memory grows with the moves
+    made, not with the turns played: a long game of hovering drones costs nothing)."""
+
+    def __init__(self) -> None:
+        self.last: Status | None = None
+        self.paths: dict[str, list[Cell]] = {}
+
+    def add(self, status: Status) -> None:
+        self.last = status
+        for s in status.drones:
+            path = self.paths.setdefault(s.drone, [])
             if not path or path[-1] != s.pos:
                 path.append(s.pos)
-    return out
+
+
+def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
+    """Each drone's path through the STATUS history, without repeats of consecutive cells."""
+    tracks = Tracks()
+    for st in history:
+        tracks.add(st)
+    return tracks.paths
 
 
 def targets_of(status: Status) -> Mapping[str, Cell]:

@@ -21,7 +21,7 @@ from dronesim.schema import (
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .gcs import Ground, format_status, parse_command, trails
+from .gcs import Ground, Tracks, format_status, parse_command
 from .web.node import add_web_args, run_web, wants_web
 
 
@@ -89,7 +89,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         out = Outbox(session)
         current: dict = {}
         gone: set[str] = set()
-        history: list[Status] = []
+        tracks = Tracks()
         over: Over | None = None
         while over is None:
             event = inbox.get(member.timeout())
@@ -112,7 +112,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                     out.put(keys.gcs_done, Done(turn=turn.turn, sender="GCS", phase=Phase.GCS, intent=intent,
                                                 count=len(current)))
                 case Received(_, Status() as status):
-                    history.append(status)
+                    tracks.add(status)
                     gone.update(s.drone for s in status.drones if not s.alive)
                     for s in status.drones:  # a late joiner takes over the targets in force
                         if not s.alive:
@@ -125,13 +125,13 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                     pass
         # STATUS(t) is published before OVER(t) but on another key: it may arrive just after.
         end = time.monotonic() + 5.0
-        while (not history or history[-1].turn < over.turn) and time.monotonic() < end:
+        while (tracks.last is None or tracks.last.turn < over.turn) and time.monotonic() < end:
             match inbox.get(end - time.monotonic()):
                 case Received(_, Status() as status):
-                    history.append(status)
-        if draw and history:
-            last = history[-1]
-            paths = trails(history)
+                    tracks.add(status)
+        if draw and tracks.last is not None:
+            last = tracks.last
+            paths = tracks.paths
             print("\nFinal world with the drones' paths:")
             trail = [c for p in paths.values() for c in p if world.contains(c)]
             targets = {s.drone: s.target for s in last.drones if s.target is not None}
@@ -139,9 +139,9 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
             print(world.draw({s.drone: s.pos for s in last.drones if s.alive and world.contains(s.pos)},
                              targets=targets, trail=trail, floors=floors))
         print(f"\nGAME OVER at turn {over.turn}: {over.reason.value} - {over.text}")
-        if history:
-            for s in history[-1].drones:
-                print(f"  {s.drone}: {len(trails(history)[s.drone]) - 1} moves, {format_status_line(s)}")
+        if tracks.last is not None:
+            for s in tracks.last.drones:
+                print(f"  {s.drone}: {len(tracks.paths[s.drone]) - 1} moves, {format_status_line(s)}")
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.snapshot())
         member.close()
