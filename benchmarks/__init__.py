@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import importlib
+import re
 import sys
+from pathlib import Path
 
 #: benchmark name -> module (each has ``main(argv) -> int``).
 BENCHMARKS = {"autopilot": "autopilot", "perf": "perf"}
@@ -15,3 +17,15 @@ def cli(argv: list[str] | None = None) -> int:
         print(f"usage: dronesim bench {{{','.join(BENCHMARKS)}}} [options]", file=sys.stderr)
         return 2
     return int(importlib.import_module(f"{__name__}.{BENCHMARKS[argv[0]]}").main(argv[1:]) or 0)
+
+
+def replace_section(path: Path, title: str, body: str) -> None:
+    """Replace (or append) the section `title` ("## ...") of a Markdown file, leaving the others alone."""
+    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
+    section = f"{title}\n\n{body.strip()}\n"
+    pattern = re.compile(rf"^{re.escape(title)}[ \t]*\n.*?(?=^## |\Z)", re.S | re.M)
+    if pattern.search(text):
+        text = pattern.sub(lambda _: section + "\n", text, count=1).rstrip("\n") + "\n"
+    else:
+        text = text.rstrip("\n") + "\n\n" + section
+    path.write_text(text, encoding="utf-8")

@@ -26,7 +26,6 @@ import argparse
 import datetime as _dt
 import os
 import platform
-import re
 import shlex
 import statistics
 import sys
@@ -40,6 +39,7 @@ import numpy as np
 from dronesim.entities.autopilots import REGISTRY, make_autopilot
 from dronesim.entities.world import World
 from dronesim.schema import Cell, Note
+from dronesim.benchmarks import replace_section
 
 SECTION = "## Autopilot benchmark"
 BIG = (64, 64, 16)
@@ -365,15 +365,8 @@ def _factory(name: str) -> Callable[[Cell], object] | None:
 
 
 def write_section(path: Path, body: str) -> None:
-    """Replace (or append) the "## Autopilot benchmark" section of `path`, leaving others alone."""
-    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    section = f"{SECTION}\n\n{body.strip()}\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}[ \t]*\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(text):
-        text = pattern.sub(lambda _: section + "\n", text, count=1).rstrip("\n") + "\n"
-    else:
-        text = text.rstrip("\n") + "\n\n" + section
-    path.write_text(text, encoding="utf-8")
+    """Replace (or append) this benchmark's section of `path`, leaving the others alone."""
+    replace_section(path, SECTION, body)
 
 
 def main(argv: list[str] | None = None) -> int:

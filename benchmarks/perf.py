@@ -60,6 +60,9 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
+from dronesim.benchmarks import replace_section
+from dronesim.transport import client_config
+
 SECTION = "## Performance"
 WORLDS: tuple[tuple[int, int, int], ...] = ((10, 10, 10), (64, 64, 16), (256, 256, 32))
 DRONES: tuple[int, ...] = (1, 16, 128, 1000)
@@ -138,13 +141,6 @@ def machine() -> dict[str, str]:
             "arch": platform.machine()}
 
 
-def client_config(locator: str) -> zenoh.Config:
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([locator]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("scouting/delay", "0")
-    return conf
 
 
 @contextlib.contextmanager
@@ -857,15 +853,8 @@ def legend(facts: dict) -> str:
 
 
 def write_section(path: Path, body: str) -> None:
-    """Replace (or append) the "## Performance" section of `path`, leaving other sections alone."""
-    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    section = f"{SECTION}\n\n{body.strip()}\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}[ \t]*\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(text):
-        text = pattern.sub(lambda _: section + "\n", text, count=1).rstrip("\n") + "\n"
-    else:
-        text = text.rstrip("\n") + "\n\n" + section
-    path.write_text(text, encoding="utf-8")
+    """Replace (or append) this benchmark's section of `path`, leaving the others alone."""
+    replace_section(path, SECTION, body)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -169,6 +169,16 @@ def router_config(listen: str = "tcp/127.0.0.1:0") -> zenoh.Config:
     return conf
 
 
+def client_config(locator: str) -> zenoh.Config:
+    """A client session's config for one router endpoint: no multicast, fast start."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([locator]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/delay", "0")
+    return conf
+
+
 def router_locators(session: zenoh.Session) -> list[str]:
     """The endpoints a router session really listens on (with the port chosen for `:0`)."""
     zid = str(session.info.zid())

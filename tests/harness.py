@@ -17,7 +17,7 @@ from pathlib import Path
 
 import zenoh
 
-from dronesim.transport import router_config, router_locators
+from dronesim.transport import client_config, router_config, router_locators
 
 TIMEOUT = 60.0
 
@@ -29,13 +29,6 @@ def embedded_router() -> Iterator[str]:
         yield router_locators(router)[0]
 
 
-def client_config(locator: str) -> zenoh.Config:
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([locator]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("scouting/delay", "0")
-    return conf
 
 
 def unique_root() -> str:
