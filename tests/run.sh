@@ -12,4 +12,4 @@ for step in tests/setup.d/*.sh; do
   bash "$step"
 done
 # pytest exits non-zero on any failure, and with 5 when no test ran: both fail CI.
-exec python3 -m pytest -q -p no:cacheprovider "$@"
+exec python3 -m pytest -q -rs -p no:cacheprovider "$@"  # -rs: every skip says why
