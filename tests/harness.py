@@ -190,6 +190,17 @@ class Hosts:
             subprocess.run(["ip", "netns", "del", ns], capture_output=True)
 
 
+def play_to_the_end(cluster: Cluster, targets: dict[str, tuple[int, int, int]]) -> None:
+    """The test plays the ground station of `cluster`'s game to OVER; every process must exit 0."""
+    gcs = ScriptedGCS(cluster.locator, cluster.root, targets)
+    try:
+        gcs.play_until()
+    finally:
+        gcs.close()
+    codes = cluster.wait_all()
+    assert set(codes.values()) == {0}, [p.text for p in cluster.procs]
+
+
 def journal_records(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line]
 

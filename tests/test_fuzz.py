@@ -27,7 +27,7 @@ from dronesim.schema import (
     EndReason, Phase, Status, Target, Turn, Upd, decode, encode,
 )
 from dronesim.schema.samples import SAMPLES
-from tests.harness import Cluster, ScriptedGCS, embedded_router
+from tests.harness import Cluster, ScriptedGCS, embedded_router, play_to_the_end
 
 pytestmark = pytest.mark.integration
 
@@ -104,12 +104,7 @@ def spoofs_the_current_gcs_phase(data: bytes) -> bool:
 def reference(router, tmp_path) -> bytes:
     with Cluster(router, tmp_path) as c:
         journal = start(c, tmp_path)
-        gcs = ScriptedGCS(router, c.root, TARGETS)
-        try:
-            gcs.play_until()
-        finally:
-            gcs.close()
-        assert set(c.wait_all().values()) == {0}
+        play_to_the_end(c, TARGETS)
     return journal.read_bytes()
 
 

@@ -12,7 +12,7 @@ import signal
 
 import pytest
 
-from tests.harness import Cluster, ScriptedGCS, embedded_router, journal_records
+from tests.harness import Cluster, ScriptedGCS, embedded_router, journal_records, play_to_the_end
 
 pytestmark = pytest.mark.integration
 
@@ -47,13 +47,17 @@ def reference_journal(router, tmp_path) -> bytes:
     with Cluster(router, tmp_path) as c:
         srv, journal = start(c, tmp_path)
         entities(c)
-        gcs = ScriptedGCS(router, c.root, TARGETS)
-        try:
-            gcs.play_until()
-        finally:
-            gcs.close()
-        assert set(c.wait_all().values()) == {0}
+        play_to_the_end(c, TARGETS)
     return journal.read_bytes()
+
+
+def hold_in_drones_phase(gcs: ScriptedGCS, drone, turn: int) -> None:
+    """Play to `turn`, then stop `drone` (SIGSTOP) so that turn stays in its DRONES phase."""
+    gcs.play_until(turn - 1)
+    gcs.wait_phase("GCS", turn)
+    drone.p.send_signal(signal.SIGSTOP)
+    gcs.answer(turn)
+    gcs.wait_phase("DRONES", turn)
 
 
 def test_environment_killed_mid_turn_and_restarted_gives_the_same_journal(router, tmp_path):
@@ -63,11 +67,7 @@ def test_environment_killed_mid_turn_and_restarted_gives_the_same_journal(router
         env, d1, d2 = entities(c)
         gcs = ScriptedGCS(router, c.root, TARGETS)
         try:
-            gcs.play_until(4)
-            gcs.wait_phase("GCS", 5)
-            d1.p.send_signal(signal.SIGSTOP)  # hold turn 5 in its DRONES phase
-            gcs.answer(5)
-            gcs.wait_phase("DRONES", 5)
+            hold_in_drones_phase(gcs, d1, 5)
             env.p.kill()  # the environment dies while D01 has not asked yet
             assert env.wait() == -signal.SIGKILL
             d1.p.send_signal(signal.SIGCONT)  # D01 asks nobody, waits for an environment
@@ -89,11 +89,7 @@ def test_coordinator_killed_mid_turn_and_resumed_gives_the_same_journal(router, 
         env, d1, d2 = entities(c)
         gcs = ScriptedGCS(router, c.root, TARGETS)
         try:
-            gcs.play_until(4)
-            gcs.wait_phase("GCS", 5)
-            d1.p.send_signal(signal.SIGSTOP)
-            gcs.answer(5)
-            gcs.wait_phase("DRONES", 5)
+            hold_in_drones_phase(gcs, d1, 5)
             srv.p.kill()  # the coordinator dies in the middle of turn 5
             assert srv.wait() == -signal.SIGKILL
             d1.p.send_signal(signal.SIGCONT)  # D01 decides turn 5 for nobody; it will say it again
