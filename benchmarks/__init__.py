@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import re
 import sys
@@ -29,3 +30,10 @@ def replace_section(path: Path, title: str, body: str) -> None:
     else:
         text = text.rstrip("\n") + "\n\n" + section
     path.write_text(text, encoding="utf-8")
+
+
+def add_write_args(parser: argparse.ArgumentParser) -> None:
+    """--write / --output: record a benchmark's table in its section of BENCHMARKS.md."""
+    parser.add_argument("--write", action="store_true", help="update the section in BENCHMARKS.md")
+    parser.add_argument("--output", type=Path, default=Path(__file__).resolve().parent.parent / "BENCHMARKS.md",
+                        help="file --write updates (default: the repository's BENCHMARKS.md)")

@@ -39,7 +39,7 @@ import numpy as np
 from dronesim.entities.autopilots import REGISTRY, make_autopilot
 from dronesim.entities.world import World
 from dronesim.schema import Cell, Note
-from dronesim.benchmarks import replace_section
+from dronesim.benchmarks import add_write_args, replace_section
 
 SECTION = "## Autopilot benchmark"
 BIG = (64, 64, 16)
@@ -370,16 +370,14 @@ def write_section(path: Path, body: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.autopilot", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="dronesim bench autopilot", description=__doc__.split("\n")[0])
     parser.add_argument("--seed", type=int, default=1, help="suite seed (default 1)")
     parser.add_argument("--quick", action="store_true", help="a few small episodes (for tests)")
     parser.add_argument("--autopilots", default=",".join(REGISTRY),
                         help="comma-separated names (default: all registered); dstar:la=N,rounds=R for ablations")
     parser.add_argument("--ablation", action="store_true",
                         help="also run dstar without look-ahead (la=0) and with one ASK round (rounds=1)")
-    parser.add_argument("--write", action="store_true", help="update the section in BENCHMARKS.md")
-    parser.add_argument("--output", type=Path, default=Path(__file__).resolve().parent.parent / "BENCHMARKS.md",
-                        help="file --write updates (default: the repository's BENCHMARKS.md)")
+    add_write_args(parser)
     args = parser.parse_args(argv)
 
     names = [n.strip() for n in args.autopilots.split(",") if n.strip()]

@@ -60,7 +60,7 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from dronesim.benchmarks import replace_section
+from dronesim.benchmarks import add_write_args, replace_section
 from dronesim.transport import client_config
 
 SECTION = "## Performance"
@@ -867,9 +867,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--profile", metavar="DIR", help="py-spy record every entity process into DIR (raw stacks)")
     parser.add_argument("--keep-logs", action="store_true",
                         help="keep the processes' logs and the scenario files (kept anyway when something failed)")
-    parser.add_argument("--write", action="store_true", help="update the section in BENCHMARKS.md")
-    parser.add_argument("--output", type=Path, default=Path(__file__).resolve().parent.parent / "BENCHMARKS.md",
-                        help="file --write updates (default: the repository's BENCHMARKS.md)")
+    add_write_args(parser)
     args = parser.parse_args(argv)
     if args.turns < 1 or args.rounds < 1:
         parser.error("--turns and --rounds must be >= 1")
