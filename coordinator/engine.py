@@ -9,12 +9,18 @@ One turn (the seed's cycle GCS -> D01 -> ENV -> OBS -> GCS):
   stage    the engine publishes           it waits for                      then
   -------  -----------------------------  --------------------------------  ----------------------
   GCS      TURN(t, GCS)                   TGT*, DONE from the GCS           DRONES
-  DRONES   TURN(t, DRONES, orders)        one NPS per alive drone           ENV (OBSERVE if no move)
-  ENV      TURN(t, ENV, moves)            UPD from the environment          OBSERVE
-  OBSERVE  STATUS(t)                      -                                 GCS of t+1, or OVER
+  DRONES   TURN(t, DRONES, orders)        one NPS per alive drone           the ENV phase
+  (ENV)    TURN(t, ENV, moves)            - (its UPD is checked on arrival)  the observer
+  (OBS)    STATUS(t)                      -                                 GCS of t+1, or OVER
+
+The ENV phase is pipelined: the buildings are static and the engine holds the same world as the
+environment (both build it from the game's WorldSpec), so the observer judges the moves at once
+instead of waiting a round trip for the environment's UPD. The environment still applies every move
+(its ASK answers for turn t+1 need them; it also takes them from STATUS(t)) and reports the changed
+cells; a UPD that disagrees with the engine's world is rejected and counted.
 
 A deadline ends a stage early: missing drones hover (and are LOST after `lost_after` misses in a row),
-targets stay as they were, a silent environment aborts the game.
+targets stay as they were; a vanished environment holds the drones' phase for `env_grace` seconds.
 """
 
 from __future__ import annotations
@@ -30,6 +36,8 @@ from dronesim.schema import (
     Order, Over, Phase, Refused, RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec,
     encode,
 )
+from dronesim.entities.environment import build_world
+from dronesim.entities.world import World
 from dronesim.schema.messages import is_host_id
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
 
@@ -41,7 +49,6 @@ class Stage(enum.Enum):
     RESUMING = "RESUMING"  # restarted from a journal: waiting for the entities to connect again
     GCS = "GCS"
     DRONES = "DRONES"
-    ENV = "ENV"
     OVER = "OVER"
 
 
@@ -50,8 +57,7 @@ STAGES: dict[Stage, tuple[Phase | None, type[Message] | None, Stage]] = {
     Stage.ADMITTING: (None, Connect, Stage.GCS),
     Stage.RESUMING: (None, Connect, Stage.GCS),  # the turn after the journal's last
     Stage.GCS: (Phase.GCS, Done, Stage.DRONES),
-    Stage.DRONES: (Phase.DRONES, Nps, Stage.ENV),
-    Stage.ENV: (Phase.ENV, Upd, Stage.GCS),  # through the observer
+    Stage.DRONES: (Phase.DRONES, Nps, Stage.GCS),  # through the (pipelined) ENV phase and the observer
     Stage.OVER: (None, None, Stage.OVER),
 }
 
@@ -138,9 +144,13 @@ def _cell(c: Cell | None) -> list[int] | None:
 class Engine:
     """The coordinator's game: feed it events, carry out the effects it returns."""
 
-    def __init__(self, config: GameConfig, logger: logging.Logger) -> None:
+    def __init__(self, config: GameConfig, logger: logging.Logger, world: World | None = None) -> None:
+        """`world` is the game's world if the caller has already built it (else built here from the spec)."""
         self.config = config
         self._log = logger
+        self.world = world if world is not None else build_world(config.world, (d.start for d in config.drones))
+        if self.world.size != config.world.size:
+            raise UsageError(f"the world is {self.world.size}, the game's is {config.world.size}")
         self.stage = Stage.ADMITTING
         self.turn = 0
         self.drones: dict[str, _Drone] = {d.drone: _Drone(pos=d.start) for d in sorted(config.drones, key=lambda s: s.drone)}
@@ -152,7 +162,7 @@ class Engine:
         self._moves: dict[str, Cell] = {}  # received in this DRONES phase
         self._notes: dict[str, Note] = {}
         self._turn_log: dict = {}
-        self._pending_moves: tuple[Move, ...] = ()
+        self._upd_due: tuple[int, dict[Cell, CellKind]] | None = None  # the last ENV phase's turn and cells
         self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
         self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
         self._tgt_seen = 0  # TGT messages of this GCS phase
@@ -171,7 +181,7 @@ class Engine:
         return [d for d, r in self.drones.items() if r.state is DroneState.ALIVE]
 
     def _playing(self) -> bool:
-        return self.stage in (Stage.GCS, Stage.DRONES, Stage.ENV)
+        return self.stage in (Stage.GCS, Stage.DRONES)
 
     def _env_missing(self) -> bool:
         return self._playing() and Role.ENV not in self.entities.values()
@@ -191,7 +201,7 @@ class Engine:
                 if self._done is not None:  # DONE is in, some of its TGT are not: they get a drone's time
                     return self.config.phase_deadline
                 return self.config.gcs_deadline
-            case Stage.DRONES | Stage.ENV:
+            case Stage.DRONES:
                 return self.config.phase_deadline
         return None
 
@@ -234,7 +244,7 @@ class Engine:
         if msg.role is Role.ENV and self._held:
             self._held = False
             effects.append(Publish(self._phase_msg))
-        elif self._phase_msg is not None and (msg.role, self.stage) in ((Role.ENV, Stage.ENV), (Role.GCS, Stage.GCS)):
+        elif self._phase_msg is not None and (msg.role, self.stage) == (Role.GCS, Stage.GCS):
             effects.append(Publish(self._phase_msg))
         return effects
 
@@ -360,29 +370,38 @@ class Engine:
                     self._log.warning("turn %d waits for the environment to come back", turn)
                     return []
                 return [Publish(self._phase_msg)]
-            case Stage.ENV:
-                proposed = {d: self._moves.get(d, self.drones[d].pos) for d in self.alive()}
-                before = {d: self.drones[d].pos for d in proposed}
-                coop = {d for d in proposed if self.drones[d].cooperative}
-                final = arbiter.arbitrate(before, proposed, coop)
-                yielded = sorted(d for d in final if final[d] != proposed[d])
-                if yielded:
-                    self._turn_log["yielded"] = yielded
-                self._final = final
-                moves = tuple(Move(drone=d, src=before[d], dst=final[d]) for d in sorted(final)
-                              if final[d] != before[d])
-                if not moves:
-                    return self._observe(Upd(turn=turn, sender="ENV", cells=()))
-                self._pending_moves = moves
-                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)
-                return [Publish(self._phase_msg)]
         raise AssertionError(stage)
+
+    def _drones_finish(self) -> list[Effect]:
+        """The drones' phase is over: arbitrate, announce the ENV phase (the accepted moves), observe."""
+        turn = self.turn
+        proposed = {d: self._moves.get(d, self.drones[d].pos) for d in self.alive()}
+        before = {d: self.drones[d].pos for d in proposed}
+        coop = {d for d in proposed if self.drones[d].cooperative}
+        final = arbiter.arbitrate(before, proposed, coop)
+        yielded = sorted(d for d in final if final[d] != proposed[d])
+        if yielded:
+            self._turn_log["yielded"] = yielded
+        self._final = final
+        moves = tuple(Move(drone=d, src=before[d], dst=final[d]) for d in sorted(final) if final[d] != before[d])
+        if not moves:
+            return self._observe()
+        changed = {c for m in moves for c in (m.src, m.dst) if self.world.contains(c)}
+        self._upd_due = (turn, {c: self._kind(c) for c in changed})
+        return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()]
+
+    def _kind(self, cell: Cell) -> CellKind:
+        if not self.world.contains(cell):
+            return CellKind.OUTSIDE
+        return CellKind.BUILDING if self.world.is_building(cell) else CellKind.EMPTY
 
     def receive(self, msg: Message) -> list[Effect]:
         """A message from the network, decoded and addressed correctly; raises RemoteInputError if it
         cannot be accepted now (and changes nothing then)."""
         if isinstance(msg, Target):
             return self.target(msg)
+        if isinstance(msg, Upd):
+            return self._upd(msg)
         expected = STAGES[self.stage][1]
         if not isinstance(msg, expected or ()) or msg.turn != self.turn:
             raise StaleTurn(f"{msg.TAG} for turn {msg.turn} from {msg.sender} while in {self.stage.value} "
@@ -392,8 +411,6 @@ class Engine:
                 return self._gcs_done(msg)
             case Nps():
                 return self._nps(msg)
-            case Upd():
-                return self._upd(msg)
         raise StaleTurn(f"{msg.TAG} is not expected now")
 
     def target(self, msg: Target) -> list[Effect]:
@@ -463,23 +480,30 @@ class Engine:
 
     def _drones_check(self) -> list[Effect]:
         if not self._awaiting:  # every alive drone has moved (also when none is left alive)
-            return self._enter(Stage.ENV, self.turn)
+            return self._drones_finish()
         return []
 
     def _upd(self, msg: Upd) -> list[Effect]:
+        """The environment's report of the last ENV phase: checked against the engine's world; it
+        changes nothing (the observer has already judged the turn)."""
         if msg.sender != "ENV":
             raise WrongSender(f"UPD from {msg.sender}")
-        reported = {c.pos for c in msg.cells}
-        missing = [m.dst for m in self._pending_moves if observer.inside(m.dst, self.size) and m.dst not in reported]
-        if missing:
-            raise OutOfRange(f"UPD of turn {msg.turn} does not report the cells drones moved into: {missing}")
-        return self._observe(msg)
+        if self._upd_due is None or msg.turn != self._upd_due[0]:
+            raise StaleTurn(f"UPD for turn {msg.turn}, which had no ENV phase awaiting its report")
+        turn, expected = self._upd_due
+        reported = {c.pos: c.kind for c in msg.cells}
+        if reported != expected:
+            wrong = sorted(c for c in expected.keys() | reported.keys() if reported.get(c) != expected.get(c))
+            raise OutOfRange(f"UPD of turn {turn} disagrees with the world at {wrong[:5]}: the environment's "
+                             "world or drones differ from the coordinator's")
+        self._upd_due = None
+        return []
 
-    def _observe(self, upd: Upd) -> list[Effect]:
+    def _observe(self) -> list[Effect]:
         alive = self.alive()
         before = {d: self.drones[d].pos for d in alive}
         after = {d: self._final.get(d, before[d]) for d in alive}
-        buildings = {c.pos for c in upd.cells if c.kind is CellKind.BUILDING}
+        buildings = {c for d, c in after.items() if c != before[d] and self.world.is_building(c)}
         dead = observer.deaths(self.size, before, after, buildings)
         hovered = sorted(d for d in alive if d not in self._moves)
         lost: list[str] = []
@@ -577,9 +601,7 @@ class Engine:
             case Stage.DRONES:
                 late = [d for d in self.alive() if d not in self._moves]
                 self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
-                return self._enter(Stage.ENV, turn)
-            case Stage.ENV:
-                return self._over(EndReason.ABORTED, f"the environment did not answer in turn {turn}")
+                return self._drones_finish()
         return []
 
     def vanished(self, entity: str, session: str = "") -> list[Effect]:

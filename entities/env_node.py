@@ -1,8 +1,9 @@
 """The environment process (the seed's ENV): the Zenoh adapter of `Environment`.
 
 It answers ASK (queryable ENV/ASK) from the world as it stands at the start of the turn, applies the
-coordinator's moves in the ENV phase and publishes the changed cells (UPD), serves the static map
-(ENV/MAP) and takes the drones' positions from each STATUS.
+coordinator's moves in the ENV phase and publishes the changed cells (UPD, which the coordinator checks
+against its own copy of the world without waiting for it), serves the static map (ENV/MAP) and takes
+the drones' positions from each STATUS.
 
 An ASK for turn t is answered once STATUS(t-1) has been applied; one that arrives earlier (possible
 when messages take different routes) waits for it, one for a past turn gets an error reply.
@@ -98,6 +99,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                             apply(turn)
                         elif turn.turn == ready + 1 and applied:
                             early = turn  # STATUS(t-1) travels on another key and has not arrived yet
+                        elif turn.turn == ready - 1:  # after its own STATUS: the drones are already there
+                            logger.debug("ENV phase of turn %d after its STATUS: nothing to apply", turn.turn)
                         else:
                             raise StaleTurn(f"ENV phase of turn {turn.turn} while the world is at turn {ready}")
                     case Received(_, Status() as status):

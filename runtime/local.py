@@ -49,7 +49,8 @@ class Result:
 def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
              logger: logging.Logger | None = None, *, keep_statuses: bool = False) -> Result:
     log = logger or logging.getLogger("dronesim.local")
-    engine = Engine(config, log)
+    world = build_world(config.world, (d.start for d in config.drones))
+    engine = Engine(config, log, world)
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()
@@ -67,7 +68,6 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
         match effect:
             case Reply(_, Welcome() as w) if welcome is None:
                 welcome = w
-                world = build_world(w.world, (s.pos for s in w.starts))
                 env = Environment(world, {s.drone: s.pos for s in w.starts})
                 pilots = {d: make_autopilot(a, world_size=world.size) for d, a in autopilots.items()}
             case Record(data):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 
+import numpy as np
 import pytest
 
 from dronesim.coordinator import journal
@@ -21,10 +22,17 @@ SIZE = (5, 5, 5)
 LOG = logging.getLogger("dronesim.tests.engine")
 
 
-def config(*drones: tuple[str, tuple[int, int, int]], **kw) -> GameConfig:
+def world(buildings=()) -> WorldSpec:
+    """A SIZE world with exactly these building cells."""
+    grid = np.zeros(SIZE, dtype=bool)
+    for c in buildings:
+        grid[c] = True
+    return WorldSpec(size=SIZE, cells=np.packbits(grid.ravel()).tobytes())
+
+
+def config(*drones: tuple[str, tuple[int, int, int]], buildings=(), **kw) -> GameConfig:
     drones = drones or (("D01", (0, 0, 0)),)
-    return GameConfig(world=WorldSpec(size=SIZE, seed=3), drones=tuple(DroneSpec(drone=d, start=s) for d, s in drones),
-                      **kw)
+    return GameConfig(world=world(buildings), drones=tuple(DroneSpec(drone=d, start=s) for d, s in drones), **kw)
 
 
 class Token:
@@ -100,20 +108,26 @@ class Game:
         return self.feed(self.engine.receive(Nps(turn=t, sender=drone, pos=pos, note=note)))
 
     def env_turn(self) -> Turn:
-        turns = pubs(self.last, Turn)
-        assert turns and turns[-1].phase is Phase.ENV, self.last
+        turns = [t for t in pubs(self.effects, Turn) if t.phase is Phase.ENV]
+        assert turns, self.effects
         return turns[-1]
 
-    def upd(self, buildings=frozenset(), *, skip: frozenset = frozenset(), sender: str = "ENV") -> list:
-        """The environment's answer to the last TURN(ENV): every source and in-world destination."""
+    def upd(self, *, skip: frozenset = frozenset(), wrong: frozenset = frozenset(), sender: str = "ENV") -> list:
+        """The environment's report of the last TURN(ENV) (every source and in-world destination, kinds
+        from the world, except `wrong` ones), checked by the engine; returns the effects that ended the
+        turn (the report itself changes nothing)."""
+        env = self.env_turn()
         cells = set()
-        for m in self.env_turn().moves:
+        for m in env.moves:
             cells.add(m.src)
             if all(0 <= c < s for c, s in zip(m.dst, SIZE)) and m.dst not in skip:
                 cells.add(m.dst)
-        upd = Upd(turn=self.turn, sender=sender, cells=tuple(
-            CellInfo(pos=c, kind=CellKind.BUILDING if c in buildings else CellKind.EMPTY) for c in sorted(cells)))
-        return self.feed(self.engine.receive(upd))
+        kinds = {c: self.engine._kind(c) for c in cells}
+        for c in wrong:
+            kinds[c] = CellKind.EMPTY if kinds.get(c) is CellKind.BUILDING else CellKind.BUILDING
+        upd = Upd(turn=env.turn, sender=sender, cells=tuple(CellInfo(pos=c, kind=kinds[c]) for c in sorted(kinds)))
+        assert self.engine.receive(upd) == []
+        return self.last
 
     def status(self, drone: str):
         return next(s for s in self.engine.status().drones if s.drone == drone)
@@ -124,14 +138,11 @@ class Game:
                 {d: (r.pos, r.state, r.target, r.note, r.misses) for d, r in e.drones.items()})
 
 
-def play_turn(g: Game, moves: dict, targets: dict | None = None, intent: Intent = Intent.CONTINUE,
-              buildings=frozenset()) -> list:
+def play_turn(g: Game, moves: dict, targets: dict | None = None, intent: Intent = Intent.CONTINUE) -> list:
     g.gcs(targets, intent)
     start = len(g.effects)
     for d, p in moves.items():
         g.nps(d, p)
-    if g.stage is Stage.ENV:
-        g.upd(buildings)
     return g.effects[start:]
 
 
@@ -163,7 +174,7 @@ def test_welcome_texts_and_starts() -> None:
     assert isinstance(w, Welcome)
     assert w.text == "You are connected as ENV"
     assert w.entity == "ENV" and w.sender == "SRV" and w.turn == 0
-    assert w.world == WorldSpec(size=SIZE, seed=3)
+    assert w.world == world()
     assert [s.drone for s in w.starts] == ["D01", "D02"]
     w = reply(e.connect(connect("GCS", Role.GCS), Token("b")))
     assert w.text == "You are connected as GCS"
@@ -196,7 +207,7 @@ def test_game_starts_when_everyone_is_there() -> None:
     drones = data.pop("drones")
     expected = {
         "record": "header", "format": "dronesim-journal", "version": 1,
-        "world": {"size": [5, 5, 5], "seed": 3, "cells": ""},
+        "world": {"size": [5, 5, 5], "seed": 0, "cells": world().cells.hex()},
         "max_turns": 1000,
     }
     assert {k: data.get(k) for k in expected} == expected  # (the header may carry more settings)
@@ -347,11 +358,10 @@ def test_full_turn_cycle() -> None:
                                     orders=(Order(drone="D01", pos=(0, 0, 0), target=(2, 0, 0)),)))]
     assert g.stage is Stage.DRONES
     effects = g.nps("D01", (1, 0, 0))
-    assert effects == [Publish(Turn(turn=1, sender="SRV", phase=Phase.ENV,
-                                    moves=(Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),)))]
-    assert g.stage is Stage.ENV
-    effects = g.upd()
-    rec, status, turn = effects
+    env, rec, status, turn = effects
+    assert env == Publish(Turn(turn=1, sender="SRV", phase=Phase.ENV,
+                               moves=(Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),)))
+    assert g.upd() is effects, "the environment's report is checked; the turn did not wait for it"
     assert isinstance(rec, Record)
     assert rec.data["record"] == "turn" and rec.data["turn"] == 1
     assert rec.data["targets"] == {"D01": [2, 0, 0]}
@@ -477,8 +487,8 @@ def test_target_outside_the_gcs_phase_is_stale() -> None:
 
 
 def test_target_for_a_dead_drone_refused() -> None:
-    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))))
-    play_turn(g, {"D01": (1, 0, 0), "D02": (4, 4, 4)}, buildings={(1, 0, 0)})
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), buildings={(1, 0, 0)}))
+    play_turn(g, {"D01": (1, 0, 0), "D02": (4, 4, 4)})
     assert g.status("D01").state is DroneState.DEAD
     with pytest.raises(UnknownEntity, match="DEAD"):
         g.tgt("D01", (2, 2, 2))
@@ -493,7 +503,7 @@ def test_nps_jump_refused_and_changes_nothing(pos) -> None:
         g.nps("D01", pos)
     assert g.snapshot() == before
     g.nps("D01", (1, 0, 0))  # the drone may still send a valid move
-    assert g.stage is Stage.ENV
+    assert g.stage is Stage.GCS and g.turn == 2
 
 
 def test_duplicate_nps_refused() -> None:
@@ -537,6 +547,9 @@ def test_misplaced_messages_refused() -> None:
     with pytest.raises(StaleTurn):
         g.engine.receive(Upd(turn=2, sender="ENV", cells=()))
     assert g.snapshot() == snap
+    g.upd()
+    with pytest.raises(StaleTurn, match="no ENV phase"):
+        g.upd()  # a second report of the same ENV phase
 
 
 def test_no_move_turn_skips_the_env_phase() -> None:
@@ -551,22 +564,24 @@ def test_no_move_turn_skips_the_env_phase() -> None:
     assert g.status("D01").note is Note.REACHED
 
 
-def test_upd_missing_a_destination_refused() -> None:
+def test_upd_disagreeing_with_the_world_refused() -> None:
     g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))))
     g.gcs()
     g.nps("D01", (1, 0, 0))
     g.nps("D02", (4, 4, 3))
+    assert g.stage is Stage.GCS and g.turn == 2, "the turn did not wait for the environment"
     before = g.snapshot()
     with pytest.raises(OutOfRange, match=r"\(4, 4, 3\)"):
         g.upd(skip=frozenset({(4, 4, 3)}))
+    with pytest.raises(OutOfRange, match=r"\(1, 0, 0\)"):
+        g.upd(wrong=frozenset({(1, 0, 0)}))
     assert g.snapshot() == before
     g.upd()
-    assert g.stage is Stage.GCS and g.turn == 2
 
 
 def test_death_by_building_ends_a_single_drone_game() -> None:
-    g = Game()
-    effects = play_turn(g, {"D01": (1, 0, 0)}, {"D01": (2, 0, 0)}, buildings={(1, 0, 0)})
+    g = Game(config(buildings={(1, 0, 0)}))
+    effects = play_turn(g, {"D01": (1, 0, 0)}, {"D01": (2, 0, 0)})
     s = g.status("D01")
     assert (s.state, s.cause, s.pos) == (DroneState.DEAD, Cause.BUILDING, (1, 0, 0))
     over = pubs(effects, Over)
@@ -689,7 +704,7 @@ def test_deadlines_per_stage() -> None:
     g.done()
     assert g.engine.deadline() == 2.0
     g.nps("D01", (1, 0, 0))
-    assert g.engine.deadline() == 2.0
+    assert g.engine.deadline() == 9.0, "the turn is over: the GCS phase of the next"
     assert Game().engine.deadline() is None  # by default the GCS paces the game
 
 
@@ -742,7 +757,7 @@ def test_lone_drone_lost_ends_the_game() -> None:
 
 
 @pytest.mark.parametrize("stage,turn", [
-    (Stage.DRONES, 1), (Stage.GCS, 0), (Stage.GCS, 2), (Stage.ENV, 1), (Stage.ADMITTING, 0), (Stage.OVER, 1),
+    (Stage.DRONES, 1), (Stage.GCS, 0), (Stage.GCS, 2), (Stage.ADMITTING, 0), (Stage.OVER, 1),
 ])
 def test_stale_expire_is_ignored(stage: Stage, turn: int) -> None:
     g = Game()
@@ -760,24 +775,14 @@ def test_expire_gcs_keeps_targets() -> None:
     assert pubs(g.last, Turn)[0].orders == (Order(drone="D01", pos=(1, 0, 0), target=(3, 0, 0)),)
 
 
-def test_expire_env_aborts() -> None:
-    g = Game()
-    g.gcs()
-    g.nps("D01", (1, 0, 0))
-    effects = g.feed(g.engine.expire(Stage.ENV, 1))
-    assert pubs(effects, Over)[0].reason is EndReason.ABORTED
-    assert g.stage is Stage.OVER
-
-
 def test_vanished_drone_is_lost() -> None:
     g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))))
     g.gcs()
     g.nps("D01", (1, 0, 0))
     effects = g.feed(g.engine.vanished("D02"))
     assert g.status("D02").state is DroneState.LOST and g.status("D02").cause is Cause.LOST
-    assert g.stage is Stage.ENV, "the last missing drone left: the phase goes on"
-    assert pubs(effects, Turn)[0].moves == (Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),)
-    effects = g.upd()
+    assert pubs(effects, Turn)[0].moves == (Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),), \
+        "the last missing drone left: the phase goes on"
     assert records(effects)[0]["lost"] == ["D02"]
     assert g.stage is Stage.GCS
 
@@ -852,7 +857,7 @@ def test_the_same_process_may_connect_again_an_impostor_may_not() -> None:
 
 def scenario(order: int) -> list:
     """The same game fed with arrivals in a different order (connections, targets, NPS)."""
-    cfg = config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), ("D03", (2, 2, 2)), max_turns=4)
+    cfg = config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), ("D03", (2, 2, 2)), buildings={(2, 1, 1)}, max_turns=4)
     e = Engine(cfg, LOG)
     out: list = []
     conns = [connect("ENV", Role.ENV), connect("GCS", Role.GCS), connect("H01", Role.DRONE, ("D01", "D02"), "seed"),
@@ -875,11 +880,6 @@ def scenario(order: int) -> list:
             out += e.receive(Nps(turn=turn, sender=d, pos=p))
         if e.stage is Stage.DRONES:
             out += e.expire(Stage.DRONES, turn)
-        if e.stage is Stage.ENV:
-            env = [m for m in pubs(out, Turn) if m.phase is Phase.ENV][-1]
-            cells = sorted({c for m in env.moves for c in (m.src, m.dst)})
-            out += e.receive(Upd(turn=turn, sender="ENV", cells=tuple(
-                CellInfo(pos=c, kind=CellKind.BUILDING if c == (2, 1, 1) else CellKind.EMPTY) for c in cells)))
     assert e.stage is Stage.OVER
     return out
 
