@@ -418,7 +418,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     """One game over a loopback router with this process as the ground station; see the module docstring."""
     from dronesim.entity import Membership
     from dronesim.scenario import Scenario
-    from dronesim.schema import Connect, Done, Intent, Keys, Over, Phase, Role, Status, Target, Turn, drone_id
+    from dronesim.entities.gcs import gcs_done
+    from dronesim.schema import Connect, Done, Intent, Keys, Over, Phase, Role, Status, Turn, drone_id
     from dronesim.transport import Inbox, Outbox, Presence, Received, session_id
 
     import logging
@@ -495,10 +496,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             current.update(plan.at(t))
                             if alive is not None:
                                 current = {d: c for d, c in current.items() if d in alive}
-                            for d, cell in sorted(current.items()):
-                                out.put(keys.tgt(d), Target(turn=t, sender="GCS", drone=d, pos=cell))
-                            out.put(keys.gcs_done, Done(turn=t, sender="GCS", phase=Phase.GCS,
-                                                        intent=Intent.CONTINUE, count=len(current)))
+                            out.put(keys.gcs_done, gcs_done(t, current, Intent.CONTINUE))
                 game.over = f"{over.reason.value} at turn {over.turn}"
                 member.close()
             game.codes = procs.wait(60.0)

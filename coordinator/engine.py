@@ -32,13 +32,13 @@ import logging
 from dataclasses import dataclass
 
 from dronesim.schema import (
-    Cause, Cell, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, Intent, Message, Move, Note, Nps,
+    Cause, Cell, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, Intent, Message, Move, Moves, Note, Nps,
     Order, Over, Phase, Refused, RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec,
     encode,
 )
 from dronesim.entities.environment import build_world
 from dronesim.entities.world import World
-from dronesim.schema.messages import is_host_id
+from dronesim.schema.messages import Step, is_host_id
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
 
 from . import arbiter, observer
@@ -53,11 +53,11 @@ class Stage(enum.Enum):
 
 
 #: The state machine in one place: stage -> (phase announced, message that closes it, next stage).
-STAGES: dict[Stage, tuple[Phase | None, type[Message] | None, Stage]] = {
+STAGES: dict[Stage, tuple[Phase | None, type[Message] | tuple[type[Message], ...] | None, Stage]] = {
     Stage.ADMITTING: (None, Connect, Stage.GCS),
     Stage.RESUMING: (None, Connect, Stage.GCS),  # the turn after the journal's last
     Stage.GCS: (Phase.GCS, Done, Stage.DRONES),
-    Stage.DRONES: (Phase.DRONES, Nps, Stage.GCS),  # through the (pipelined) ENV phase and the observer
+    Stage.DRONES: (Phase.DRONES, (Nps, Moves), Stage.GCS),  # through the (pipelined) ENV phase and the observer
     Stage.OVER: (None, None, Stage.OVER),
 }
 
@@ -411,6 +411,8 @@ class Engine:
                 return self._gcs_done(msg)
             case Nps():
                 return self._nps(msg)
+            case Moves():
+                return self._moves_of_host(msg)
         raise StaleTurn(f"{msg.TAG} is not expected now")
 
     def target(self, msg: Target) -> list[Effect]:
@@ -421,18 +423,22 @@ class Engine:
             raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
         self._tgt_seen += 1  # counted against the DONE's count even if refused below
         try:
-            drone = self.drones.get(msg.drone)
-            if drone is None:
-                raise UnknownEntity(f"target for unknown drone {msg.drone}")
-            if drone.state is not DroneState.ALIVE:
-                raise UnknownEntity(f"target for {msg.drone}, which is {drone.state.value}")
-            if not observer.inside(msg.pos, self.size):
-                raise OutOfRange(f"target {msg.pos} for {msg.drone} is outside the world {self.size}")
+            self._aim(msg.drone, msg.pos)
         except RemoteInputError as err:
             err.follow = self._gcs_check()  # the target is refused; the phase it was awaited for goes on
             raise
-        self._targets[msg.drone] = msg.pos
         return self._gcs_check()
+
+    def _aim(self, d: str, pos: Cell) -> None:
+        """Keep a target for this GCS phase, or raise (and keep nothing)."""
+        drone = self.drones.get(d)
+        if drone is None:
+            raise UnknownEntity(f"target for unknown drone {d}")
+        if drone.state is not DroneState.ALIVE:
+            raise UnknownEntity(f"target for {d}, which is {drone.state.value}")
+        if not observer.inside(pos, self.size):
+            raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
+        self._targets[d] = pos
 
     def _gcs_done(self, msg: Done) -> list[Effect]:
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
@@ -440,7 +446,8 @@ class Engine:
         if self._done is not None:
             raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
         self._done = msg
-        return self._gcs_check()
+        refused = _each(msg.targets, lambda a: self._aim(a.drone, a.pos))
+        return _with_refusals(refused, self._gcs_check())
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
@@ -464,19 +471,33 @@ class Engine:
         return self._enter(Stage.DRONES, self.turn)
 
     def _nps(self, msg: Nps) -> list[Effect]:
-        d = msg.sender
+        self._move(msg.sender, msg.pos, msg.note)
+        return self._drones_check()
+
+    def _moves_of_host(self, msg: Moves) -> list[Effect]:
+        """A swarm host's moves: each is taken or refused on its own, as if sent as an NPS."""
+        def move(step: Step) -> None:
+            host = self.drones[step.drone].host if step.drone in self.drones else None
+            if host != msg.sender:
+                raise WrongSender(f"MOVES from {msg.sender} for {step.drone}, which {host or 'nobody'} flies")
+            self._move(step.drone, step.pos, step.note)
+
+        return _with_refusals(_each(msg.moves, move), self._drones_check())
+
+    def _move(self, d: str, pos: Cell, note: Note) -> None:
+        """Take a drone's move for this phase, or raise (and take nothing)."""
         drone = self.drones.get(d)
         if drone is None or drone.state is not DroneState.ALIVE:
             raise UnknownEntity(f"NPS from {d}, which is not an alive drone of this game")
         if d in self._moves:
             raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
-        step = sum(abs(a - b) for a, b in zip(msg.pos, drone.pos))
-        if step > 1:  # refused: the drone may still send a valid move, or hover at the deadline
-            raise OutOfRange(f"{d} cannot move from {drone.pos} to {msg.pos}: one cell per turn, 6-connectivity")
-        self._notes[d] = msg.note
-        self._moves[d] = msg.pos
+        x, y, z = drone.pos
+        if abs(pos[0] - x) + abs(pos[1] - y) + abs(pos[2] - z) > 1:
+            # refused: the drone may still send a valid move, or hover at the deadline
+            raise OutOfRange(f"{d} cannot move from {drone.pos} to {pos}: one cell per turn, 6-connectivity")
+        self._notes[d] = note
+        self._moves[d] = pos
         self._awaiting.discard(d)
-        return self._drones_check()
 
     def _drones_check(self) -> list[Effect]:
         if not self._awaiting:  # every alive drone has moved (also when none is left alive)
@@ -636,6 +657,28 @@ class Engine:
                 if self.stage is Stage.DRONES:
                     return self._drones_check()
         return []
+
+
+def _each(items, take) -> list[RemoteInputError]:
+    """`take` each item of a batch; the refusals (each changed nothing), in order."""
+    refused = []
+    for item in items:
+        try:
+            take(item)
+        except RemoteInputError as err:
+            refused.append(err)
+    return refused
+
+
+def _with_refusals(refused: list[RemoteInputError], effects: list[Effect]) -> list[Effect]:
+    """The effects of a batch; if some of it was refused, raised as one error that carries them."""
+    if not refused:
+        return effects
+    first = refused[0]
+    more = f" (and {len(refused) - 1} more: {'; '.join(map(str, refused[1:4]))})" if len(refused) > 1 else ""
+    err = type(first)(f"{first}{more}")
+    err.follow = effects
+    raise err
 
 
 def replace_config(config: GameConfig, **changes: object) -> GameConfig:

@@ -1,7 +1,7 @@
 """The coordinator process (the seed's SRV with its observer OBS): the Zenoh adapter of `Engine`.
 
-It serves admission (queryable SRV/CONNECT), publishes TURN/STATUS/OVER, listens to TGT, DONE, NPS
-and UPD, watches liveliness tokens, enforces phase deadlines and writes the journal.
+It serves admission (queryable SRV/CONNECT), publishes TURN/STATUS/OVER, listens to TGT, DONE, NPS,
+MOVES and UPD, watches liveliness tokens, enforces phase deadlines and writes the journal.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import time
 import zenoh
 
 from dronesim.schema import (
-    Connect, Done, Keys, Message, Nps, Over, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
+    Connect, Done, Keys, Message, Moves, Nps, Over, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
     drone_id, encode,
 )
 from dronesim.schema.errors import WrongSender
@@ -153,6 +153,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         inbox.subscribe(keys.any_tgt, Target)
         inbox.subscribe(keys.gcs_done, Done)
         inbox.subscribe(keys.any_nps, Nps)
+        inbox.subscribe(keys.any_moves, Moves)
         inbox.subscribe(keys.upd, Upd)
         inbox.watch_presence()
         token = session.liveliness().declare_token(keys.alive("SRV", session_id(session)))

@@ -1,7 +1,8 @@
 """A drone process (the seed's D01), or a swarm host flying several drones in one process.
 
 Each DRONES phase it runs every hosted drone's autopilot together (`fly_round`): all pending ASKs of
-a round go out as concurrent queries to ENV/ASK, then each drone publishes its NPS. It exits on OVER.
+a round go out as concurrent queries to ENV/ASK, then a lone drone publishes its NPS, a swarm host the
+MOVES of all its drones in one message. It exits on OVER.
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
-    Ans, Ask, Connect, Keys, Nps, Over, Phase, RemoteInputError, Role, Turn, UsageError, decode, drone_id, encode,
-    is_drone_id,
+    Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, RemoteInputError, Role, Turn, UsageError, decode, drone_id, encode,
+    Step, is_drone_id,
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
@@ -81,8 +82,12 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                     if superseded(latest.turn):
                         continue  # too late: the game has moved on (the queued events come next)
                     done = ((latest.turn, orders), decisions)
-                for d, dec in done[1].items():
-                    out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
+                if host and done[1]:  # a swarm host: one message for all its drones
+                    out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=tuple(
+                        Step(drone=d, pos=dec.pos, note=dec.note) for d, dec in sorted(done[1].items()))))
+                elif not host:
+                    for d, dec in done[1].items():
+                        out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
         asker.close()
         member.close()
         return over

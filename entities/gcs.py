@@ -11,7 +11,9 @@ import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from dronesim.schema import Cell, DroneState, DroneStatus, Note, Status, UsageError, Welcome, is_drone_id
+from dronesim.schema import (
+    Aim, Cell, Done, DroneState, DroneStatus, Intent, Note, Phase, Status, UsageError, Welcome, is_drone_id,
+)
 
 from .environment import build_world
 from .world import World
@@ -31,6 +33,13 @@ def correct_form(text: str, size: Cell) -> Cell:
     if not all(0 <= c < s for c, s in zip(cell, size)):
         raise UsageError(f"{cell} is outside the world: 0 <= x < {size[0]}, 0 <= y < {size[1]}, 0 <= z < {size[2]}")
     return cell  # type: ignore[return-value]
+
+
+def gcs_done(turn: int, targets: Mapping[str, Cell], intent: Intent) -> Done:
+    """The ground station's answer in the GCS phase of `turn`: every last target again, as the seed
+    re-sends them each turn (``GCS:D01:TGT:x:y:z``), carried by its DONE in one message."""
+    return Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=intent,
+                targets=tuple(Aim(drone=d, pos=c) for d, c in sorted(targets.items())))
 
 
 @dataclass(frozen=True, slots=True)

@@ -17,11 +17,11 @@ import zenoh
 
 from dronesim.entity import Membership, add_entity_args
 from dronesim.schema import (
-    Connect, Done, Intent, Keys, Over, Phase, Role, Status, Target, Turn, UsageError,
+    Connect, Intent, Keys, Over, Phase, Role, Status, Turn, UsageError,
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .gcs import Ground, Tracks, format_status, parse_command
+from .gcs import Ground, Tracks, format_status, gcs_done, parse_command
 from .web.node import add_web_args, run_web, wants_web
 
 
@@ -107,10 +107,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                         new = plan.at(turn.turn)
                         intent = Intent.FINAL if turn.turn >= plan.last_turn else Intent.CONTINUE
                     current.update((d, c) for d, c in new.items() if d not in gone)
-                    for d, cell in sorted(current.items()):  # re-send every last target, as the seed does
-                        out.put(keys.tgt(d), Target(turn=turn.turn, sender="GCS", drone=d, pos=cell))
-                    out.put(keys.gcs_done, Done(turn=turn.turn, sender="GCS", phase=Phase.GCS, intent=intent,
-                                                count=len(current)))
+                    out.put(keys.gcs_done, gcs_done(turn.turn, current, intent))
                 case Received(_, Status() as status):
                     tracks.add(status)
                     gone.update(s.drone for s in status.drones if not s.alive)

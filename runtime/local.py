@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from dronesim.coordinator.engine import Engine, GameConfig, Publish, Record, Reply, Stage
 from dronesim.entities.autopilots import fly_round, make_autopilot, pilot_class
 from dronesim.entities.environment import Environment, build_world
-from dronesim.entities.gcs import Plan
+from dronesim.entities.gcs import Plan, gcs_done
 from dronesim.schema import (
-    Cell, Connect, Done, Intent, Nps, Over, Phase, Role, Status, Target, Turn, Upd, Welcome,
+    Cell, Connect, Intent, Nps, Over, Phase, Role, Status, Turn, Upd, Welcome,
 )
 
 
@@ -76,10 +76,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 current.update(inputs.plan.at(t))
                 alive = set(engine.alive())
                 current = {d: c for d, c in current.items() if d in alive}
-                for d, cell in sorted(current.items()):
-                    queue.extend(_accept(engine, log, Target(turn=t, sender="GCS", drone=d, pos=cell)))
-                queue.extend(engine.receive(Done(turn=t, sender="GCS", phase=Phase.GCS, intent=inputs.intent(t),
-                                                 count=len(current))))
+                queue.extend(_accept(engine, log, gcs_done(t, current, inputs.intent(t))))
             case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
                 assert env is not None
                 for d in sorted(inputs.vanished.get(t, ())):

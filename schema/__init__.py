@@ -6,9 +6,9 @@ from .errors import (
 )
 from .keys import KEY_TABLE, Keys, KeySpec
 from .messages import (
-    MESSAGE_TYPES, SCHEMA_VERSION, Ans, Ask, Cause, Cell, CellInfo, CellKind, Connect, Done,
-    DroneState, DroneStatus, EndReason, MapRequest, Message, Move, Note, Nps, Order, Over, Phase,
-    Intent, Refused, Role, WorldSpec, Start, Status, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id, encode,
+    MESSAGE_TYPES, SCHEMA_VERSION, Aim, Ans, Ask, Cause, Cell, CellInfo, CellKind, Connect, Done,
+    DroneState, DroneStatus, EndReason, MapRequest, Message, Move, Moves, Note, Nps, Order, Over, Phase,
+    Intent, Refused, Role, WorldSpec, Start, Status, Step, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id, encode,
     is_drone_id,
 )
 
@@ -16,7 +16,7 @@ __all__ = [
     "DronesimError", "MalformedMessage", "OutOfRange", "RejectCounter", "RemoteInputError", "StaleTurn",
     "UnknownEntity", "UsageError", "WrongSender", "KEY_TABLE", "Keys", "KeySpec", "MESSAGE_TYPES",
     "SCHEMA_VERSION", "Ans", "Ask", "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done",
-    "DroneState", "DroneStatus", "EndReason", "MapRequest", "Message", "Move", "Note", "Nps", "Order",
-    "Over", "Phase", "Intent", "WorldSpec", "Refused", "Role", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
+    "DroneState", "DroneStatus", "EndReason", "MapRequest", "Message", "Move", "Moves", "Note", "Nps", "Order",
+    "Over", "Phase", "Intent", "WorldSpec", "Refused", "Role", "Aim", "Step", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
     "decode", "drone_id", "encode", "is_drone_id",
 ]

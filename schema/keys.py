@@ -40,6 +40,8 @@ KEY_TABLE: tuple[KeySpec, ...] = (
     KeySpec("ENV/ASK", "query", m.Ask, m.Ans, "ENV", "drones", "`D01:ENV:ASK:x:y:z` -> `ENV:D01:ANS:content`"),
     KeySpec("ENV/MAP", "query", m.MapRequest, m.WorldMap, "ENV", "GCS", "the static world, for drawing"),
     KeySpec("{drone}/NPS", "put", m.Nps, None, "DRONE", "SRV", "`D01:ENV:NPS:x:y:z`: the drone's move"),
+    KeySpec("{entity}/MOVES", "put", m.Moves, None, "DRONE", "SRV",
+            "a swarm host's NPS for all its drones at once (the entity is the host)"),
     KeySpec("ENV/UPD", "put", m.Upd, None, "ENV", "SRV", "`ENV:OBS:UPD:x:y:z:content`, all changed cells at once"),
     KeySpec("{entity}/ALIVE/{session}", "liveliness", None, None, "each entity", "SRV, entities",
             "presence token of a process (one per Zenoh session, so an impostor cannot mask a death)"),
@@ -80,6 +82,9 @@ class Keys:
     # per-drone keys and their wildcards
     def tgt(self, drone: str) -> str: return self._k(drone, "TGT")
     def nps(self, drone: str) -> str: return self._k(drone, "NPS")
+    def moves(self, host: str) -> str: return self._k(host, "MOVES")
+    @property
+    def any_moves(self) -> str: return self._k("*", "MOVES")
     @property
     def any_tgt(self) -> str: return self._k("*", "TGT")
     @property

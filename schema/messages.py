@@ -221,6 +221,32 @@ class Move:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class Aim:
+    """GCS -> SRV, inside its DONE: one drone's target (the seed's ``GCS:D01:TGT:x:y:z``, batched)."""
+
+    drone: str
+    pos: Cell
+
+    def __post_init__(self) -> None:
+        _check_drone(self.drone)
+        _check_cell(self.pos, "target")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Step:
+    """Swarm host -> SRV, inside its MOVES: one hosted drone's move (the seed's NPS, batched)."""
+
+    drone: str
+    pos: Cell
+    note: Note = Note.NONE
+
+    def __post_init__(self) -> None:
+        _check_drone(self.drone)
+        _check_cell(self.pos, "pos", signed=True)
+        _check(isinstance(self.note, Note), "note must be a Note")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class DroneStatus:
     """One drone's state at the end of a turn, as the observer sees it."""
 
@@ -383,19 +409,23 @@ class Target(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Done(Message):
-    """Entity -> SRV: ``X:SRV:DONE``, the end of the sender's phase (the GCS's; NPS and UPD close the
-    drones' and the environment's phases themselves)."""
+    """Entity -> SRV: ``X:SRV:DONE``, the end of the sender's phase (the GCS's; NPS/MOVES close the
+    drones' phase themselves). The GCS's DONE may carry its targets (one message for a whole swarm);
+    `count` says how many separate TGT messages it also sent."""
 
     TAG: ClassVar[str] = "DONE"
     phase: Phase
     intent: Intent = Intent.CONTINUE
     count: int = 0  # how many TGT the GCS sent in this phase (messages on different keys may overtake)
+    targets: tuple[Aim, ...] = ()
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check(isinstance(self.phase, Phase), "phase must be a Phase")
         _check(isinstance(self.intent, Intent), "intent must be an Intent")
         _check_int(self.count, "count", 0, 1 << 20)
+        _check_records(self.targets, Aim, "targets")
+        _check(len({a.drone for a in self.targets}) == len(self.targets), "one target per drone")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -440,6 +470,20 @@ class Nps(Message):
         _check_drone(self.sender, "sender")
         _check_cell(self.pos, "pos", signed=True)
         _check(isinstance(self.note, Note), "note must be a Note")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Moves(Message):
+    """Swarm host -> SRV (key ``<host>/MOVES``): the NPS of every drone it flies, in one message."""
+
+    TAG: ClassVar[str] = "MOVES"
+    moves: tuple[Step, ...]
+
+    def __post_init__(self) -> None:
+        Message.__post_init__(self)
+        _check_records(self.moves, Step, "moves")
+        _check(len(self.moves) >= 1, "MOVES carries at least one move")
+        _check(len({m.drone for m in self.moves}) == len(self.moves), "one move per drone")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -506,10 +550,10 @@ class WorldMap(Message):
 
 
 MESSAGE_TYPES: tuple[type[Message], ...] = (
-    Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Upd, Status, Over, MapRequest, WorldMap,
+    Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Moves, Upd, Status, Over, MapRequest, WorldMap,
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
-_RECORDS = (CellInfo, Order, Move, DroneStatus, Start, WorldSpec)
+_RECORDS = (CellInfo, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)
 
 
 # --------------------------------------------------------------------------- codec

@@ -11,8 +11,8 @@ import json
 import pathlib
 
 from .messages import (
-    Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
-    Message, Move, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, Target, Turn, Upd, Welcome,
+    Aim, Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
+    Message, Move, Moves, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, Step, Target, Turn, Upd, Welcome,
     WorldMap, WorldSpec, Intent, encode,
 )
 
@@ -41,11 +41,15 @@ SAMPLES: dict[str, Message] = {
     "target": Target(turn=1, sender="GCS", drone="D01", pos=(9, 9, 0)),
     "done_gcs": Done(turn=1, sender="GCS", phase=Phase.GCS, count=1),
     "done_gcs_final": Done(turn=3, sender="GCS", phase=Phase.GCS, intent=Intent.FINAL),
+    "done_gcs_targets": Done(turn=2, sender="GCS", phase=Phase.GCS,
+                             targets=(Aim(drone="D01", pos=(9, 9, 0)), Aim(drone="D02", pos=(0, 9, 3)))),
     "ask": Ask(turn=1, sender="D01", cells=((1, 0, 0), (0, 1, 0))),
     "ans": Ans(turn=1, sender="ENV", cells=(CellInfo(pos=(1, 0, 0), kind=CellKind.EMPTY),
                                             CellInfo(pos=(0, 1, 0), kind=CellKind.BUILDING))),
     "nps": Nps(turn=1, sender="D01", pos=(1, 0, 0)),
     "nps_unreachable": Nps(turn=7, sender="D01", pos=(3, 4, 0), note=Note.UNREACHABLE),
+    "moves": Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(1, 0, 0)),
+                                                Step(drone="D02", pos=(0, 1, 0), note=Note.UNREACHABLE))),
     "upd": Upd(turn=1, sender="ENV", cells=(CellInfo(pos=(0, 0, 0), kind=CellKind.EMPTY),
                                             CellInfo(pos=(1, 0, 0), kind=CellKind.BUILDING, drones=("D01",)))),
     "status": Status(turn=1, sender="OBS", drones=(

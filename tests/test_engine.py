@@ -13,8 +13,8 @@ from dronesim.coordinator.engine import (
     DroneSpec, Engine, GameConfig, Publish, Record, Reply, Stage, replace_config,
 )
 from dronesim.schema import (
-    Cause, CellInfo, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Move, Note, Nps, Order,
-    OutOfRange, Over, Phase, Refused, Role, StaleTurn, Status, Target, Turn, UnknownEntity, Upd, UsageError,
+    Aim, Cause, CellInfo, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Move, Note, Nps, Order,
+    Moves, OutOfRange, Over, Phase, Refused, Role, StaleTurn, Status, Step, Target, Turn, UnknownEntity, Upd, UsageError,
     Welcome, WorldSpec, WrongSender, encode,
 )
 
@@ -912,3 +912,57 @@ def test_journal_round_trip(tmp_path) -> None:
         for r in recs:
             w.append(r)
     assert list(journal.read(path)) == recs
+
+
+# --------------------------------------------------------------------------- batches (a swarm's messages)
+
+
+def test_done_carries_the_targets_and_refuses_bad_ones_one_by_one() -> None:
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), ("D03", (2, 2, 2))))
+    done = Done(turn=1, sender="GCS", phase=Phase.GCS, targets=(
+        Aim(drone="D01", pos=(3, 0, 0)), Aim(drone="D02", pos=(9, 9, 9)), Aim(drone="D09", pos=(1, 1, 1)),
+        Aim(drone="D03", pos=(2, 2, 0))))
+    with pytest.raises(OutOfRange, match=r"outside the world.*and 1 more: target for unknown drone D09") as err:
+        g.engine.receive(done)
+    g.feed(err.value.follow)
+    assert g.stage is Stage.DRONES, "the refused entries changed nothing; the phase went on"
+    assert pubs(g.last, Turn)[0].orders == (Order(drone="D01", pos=(0, 0, 0), target=(3, 0, 0)),
+                                            Order(drone="D02", pos=(4, 4, 4), target=None),
+                                            Order(drone="D03", pos=(2, 2, 2), target=(2, 2, 0)))
+
+
+def test_moves_of_a_swarm_host_taken_one_by_one() -> None:
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), ("D03", (2, 2, 2))),
+             hosts={"H01": ("D01", "D02"), "D03": ("D03",)})
+    g.gcs()
+    with pytest.raises(WrongSender, match="D03, which D03 flies"):
+        g.engine.receive(Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(1, 0, 0)),
+                                                           Step(drone="D03", pos=(2, 2, 1)))))
+    assert g.engine._moves == {"D01": (1, 0, 0)}, "the host's own drone moved, the other's spoofed move did not"
+    with pytest.raises(StaleTurn, match="second NPS from D01"):
+        g.engine.receive(Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(0, 1, 0)),)))
+    with pytest.raises(OutOfRange, match="one cell per turn"):
+        g.engine.receive(Moves(turn=1, sender="H01", moves=(Step(drone="D02", pos=(4, 4, 2)),)))
+    assert g.stage is Stage.DRONES
+    g.feed(g.engine.receive(Moves(turn=1, sender="H01", moves=(Step(drone="D02", pos=(4, 4, 3), note=Note.NONE),))))
+    g.nps("D03", (2, 2, 1))
+    assert g.stage is Stage.GCS and g.turn == 2
+    assert records(g.last)[0]["moves"] == {"D01": [1, 0, 0], "D02": [4, 4, 3], "D03": [2, 2, 1]}
+
+
+def test_batches_give_the_same_journal_as_single_messages() -> None:
+    def play(batched: bool) -> list:
+        g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))), hosts={"H01": ("D01", "D02")})
+        for turn, (targets, moves) in enumerate([({"D01": (3, 0, 0), "D02": (4, 4, 0)},
+                                                  {"D01": (1, 0, 0), "D02": (4, 4, 3)}),
+                                                 ({}, {"D01": (2, 0, 0), "D02": (4, 4, 2)})], 1):
+            if batched:
+                g.feed(g.engine.receive(Done(turn=turn, sender="GCS", phase=Phase.GCS, targets=tuple(
+                    Aim(drone=d, pos=p) for d, p in targets.items()))))
+                g.feed(g.engine.receive(Moves(turn=turn, sender="H01", moves=tuple(
+                    Step(drone=d, pos=p) for d, p in moves.items()))))
+            else:
+                play_turn(g, moves, targets)
+        return records(g.effects)
+
+    assert play(True) == play(False)

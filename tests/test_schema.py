@@ -555,7 +555,7 @@ def test_key_table_covers_every_message_type() -> None:
 def test_key_table_rows_are_consistent() -> None:
     k = Keys("sim")
     built = {k.connect, k.turn, k.over, k.status, k.gcs_done, k.ask, k.map, k.upd,
-             k.tgt("D01"), k.nps("D01"), k.alive("D01", "0a1b")}
+             k.tgt("D01"), k.nps("D01"), k.moves("D01"), k.alive("D01", "0a1b")}
     templates = [spec.template for spec in KEY_TABLE]
     assert len(set(templates)) == len(templates)
     for spec in KEY_TABLE:

@@ -113,6 +113,8 @@ def writer_of(spec, key: str, root: str, principals: list[acl.Principal]) -> set
     entity = key[len(root) + 1:].split("/")[0]
     if spec.writer == "each entity":
         return {entity}
+    if spec.writer == "DRONE" and "{entity}" in spec.template:  # a drone process's own key (a host's MOVES)
+        return {p.name for p in principals if p.role == "DRONE" and p.name == entity}
     if spec.writer == "DRONE":
         return {p.name for p in principals if entity in p.drones}
     return {p.name for p in principals if p.role == spec.writer}

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 import zenoh
 
 from dronesim.entity import Membership
-from dronesim.schema import Connect, Done, EndReason, Keys, Over, Phase, Role, Status, Target, Turn, UsageError
+from dronesim.schema import Connect, EndReason, Keys, Over, Phase, Role, Status, Turn, UsageError
 from dronesim.transport import Inbox, Outbox, Presence, Received, session_id, zenoh_config
 
-from ..gcs import Ground, Plan
+from ..gcs import Ground, Plan, gcs_done
 from .model import GroundState, Rejected, check_pace_arg, world_json
 from .server import Hub, WebServer, parse_address
 
@@ -204,10 +204,7 @@ def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, key
                 state.on_over(over)
         if state.due(now) == 0.0:
             turn_no, targets, intent = state.answer(now)
-            for d, cell in targets.items():  # every last target again, as the seed does
-                out.put(keys.tgt(d), Target(turn=turn_no, sender="GCS", drone=d, pos=cell))
-            out.put(keys.gcs_done, Done(turn=turn_no, sender="GCS", phase=Phase.GCS, intent=intent,
-                                        count=len(targets)))
+            out.put(keys.gcs_done, gcs_done(turn_no, targets, intent))
             logger.debug("turn %d: sent %d targets, %s", turn_no, len(targets), intent.value)
         if state.seq != published:
             hub.publish(state.snapshot())
