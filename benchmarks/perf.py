@@ -400,7 +400,7 @@ def make_scenario(case: Case, seed: int = WORLD_SEED) -> dict | None:
 @dataclass(slots=True)
 class Game:
     latencies: list[float] = field(default_factory=list)  # seconds, consecutive GCS phases
-    phases: dict[str, list[float]] = field(default_factory=dict)  # phase -> seconds, measured turns
+    answers: list[float] = field(default_factory=list)  # seconds from TURN(GCS) to the DONE sent, measured turns
     memory: dict[str, dict[str, int]] = field(default_factory=dict)  # process -> /proc status (KiB)
     codes: dict[str, int | None] = field(default_factory=dict)
     cpu: dict[str, float] = field(default_factory=dict)  # process -> CPU seconds per measured turn
@@ -445,7 +445,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                                   "--connect-timeout", "120"])
             with zenoh.open(client_config(loc)) as session:
                 inbox = Inbox(session, keys, log)
-                for key, typ in ((keys.turn, Turn), (keys.status, Status), (keys.over, Over)):
+                for key, typ in ((keys.turn_of(Phase.GCS), Turn), (keys.status, Status), (keys.over, Over)):
                     inbox.subscribe(key, typ)
                 out = Outbox(session)
                 member = Membership(session, inbox, Connect(turn=0, sender="GCS", role=Role.GCS,
@@ -479,9 +479,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                         case Received(_, Over() as o):
                             over = o
                         case Received(_, Turn() as turn):
-                            stamps[(turn.phase.value, turn.turn)] = now
-                            if turn.phase is not Phase.GCS:
-                                continue
+                            stamps[("GCS", turn.turn)] = now
                             t = turn.turn
                             if t in (case.warmup + 1, case.end_turn):  # CPU time over the measured turns
                                 pids = {n: procs.procs[n].pid for n in ROLES} | {"bench": "self"}
@@ -497,6 +495,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             if alive is not None:
                                 current = {d: c for d, c in current.items() if d in alive}
                             out.put(keys.gcs_done, gcs_done(t, current, Intent.CONTINUE))
+                            stamps[("DONE", t)] = time.perf_counter()
                 game.over = f"{over.reason.value} at turn {over.turn}"
                 member.close()
             game.codes = procs.wait(60.0)
@@ -522,15 +521,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
         game.error = "missing GCS phases"
         return game
     game.latencies = [b - a for a, b in zip(gcs, gcs[1:])]  # type: ignore[operator]
-    split: dict[str, list[float]] = {"GCS": [], "DRONES": [], "ENV": []}
-    for t in range(first, last):
-        g, d, e, s = (stamps.get((k, t)) for k in ("GCS", "DRONES", "ENV", "STATUS"))
-        if None in (g, d, s):
-            continue
-        split["GCS"].append(d - g)  # type: ignore[operator]
-        split["DRONES"].append((e if e is not None else s) - d)  # type: ignore[operator]
-        split["ENV"].append(s - e if e is not None else 0.0)  # type: ignore[operator]
-    game.phases = split
+    game.answers = [stamps[("DONE", t)] - stamps[("GCS", t)] for t in range(first, last) if ("DONE", t) in stamps]
     game.cpu = {n: v / case.turns for n, v in game.cpu.items()}
     game.alive = len({s.drone for s in game.last_status.drones if s.alive}) if game.last_status else 0  # type: ignore[attr-defined]
     return game
@@ -629,7 +620,7 @@ COLUMNS = (
     ("turns", "turns (warm-up + measured)"),
     ("tps", "turns/s"),
     ("lat", "turn (or round trip) ms median / p99"),
-    ("split", "phases ms GCS / DRONES / ENV+OBS (median)"),
+    ("split", "ground station's answer ms (median)"),
     ("cpu", "CPU ms per turn coordinator / env / swarm / this process"),
     ("ltps", "in-process turns/s"),
     ("lratio", "in-process ÷ distributed"),
@@ -742,9 +733,7 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
             med = statistics.median(game.latencies)
             cells["tps"] = f"{1 / mean:.1f}"
             cells["lat"] = f"{med * 1e3:.2f} / {_pct(game.latencies, 99) * 1e3:.2f}"
-            ph = game.phases
-            cells["split"] = " / ".join(f"{statistics.median(ph[k]) * 1e3:.2f}" if ph.get(k) else "-"
-                                        for k in ("GCS", "DRONES", "ENV"))
+            cells["split"] = f"{statistics.median(game.answers) * 1e3:.2f}" if game.answers else "-"
             cells["cpu"] = " / ".join(f"{game.cpu.get(n, float('nan')) * 1e3:.1f}" for n in (*ROLES, "bench"))
             cells["lratio"] = f"{mean / lmean:.1f}x" if lmean == lmean else "-"
             model = 2 * array + 1024 * case.drones + baseline * 1024
@@ -833,9 +822,8 @@ def legend(facts: dict) -> str:
         "one swarm host (seed autopilot, every drone) are separate processes (coordinator with --phase-deadline "
         f"{PHASE_DEADLINE:g}), this process is the ground "
         "station (every alive drone's target re-sent each turn, as the real GCS); a turn is the time between "
-        "two consecutive TURN(GCS) arrivals, turns/s = 1 / mean, p99 over the measured turns. Phases: "
-        "TURN(GCS) → TURN(DRONES) → TURN(ENV) → STATUS as seen by the ground station (ENV+OBS is 0 when no "
-        "drone moved). CPU: user + system time of each process (all threads) over the measured turns ÷ turns; \"this "
+        "two consecutive TURN(GCS) arrivals, turns/s = 1 / mean, p99 over the measured turns. The ground "
+        "station's answer: from TURN(GCS) arriving to its DONE sent (the rest of a turn is the system's). CPU: user + system time of each process (all threads) over the measured turns ÷ turns; \"this "
         "process\" is the router and the ground station. In-process: `dronesim.local.simulate` on the same scenario, timed at the same point; "
         "\"in-process ÷ distributed\" = distributed mean turn ÷ in-process mean turn. \"turn ÷ pub/sub RTT\" = "
         "median turn ÷ median pub/sub round trip (callback replies). Growth (1000-drone rows) = (mean turn at "

@@ -34,7 +34,7 @@ LINGER_S = 5.0
 def _key_of(keys: Keys, msg: Message) -> str:
     match msg:
         case Turn():
-            return keys.turn
+            return keys.turn_of(msg.phase)
         case Status():
             return keys.status
         case Over():
@@ -113,7 +113,7 @@ class Executor:
                         self._held, self._due = [eff], due
                         continue
                     self._last = time.monotonic()
-                    self.out.put(self.keys.turn, turn)
+                    self.out.put(self.keys.turn_of(turn.phase), turn)
                 case Publish(msg):
                     self.out.put(_key_of(self.keys, msg), msg)
                 case Reply(query, msg):
@@ -130,7 +130,7 @@ class Executor:
         held, self._held = self._held, []
         self._last = time.monotonic()
         first, rest = held[0], held[1:]
-        self.out.put(self.keys.turn, first.msg)
+        self.out.put(self.keys.turn_of(first.msg.phase), first.msg)
         self.run(rest)
 
 

@@ -3,6 +3,13 @@
 Each DRONES phase it runs every hosted drone's autopilot together (`fly_round`): all pending ASKs of
 a round go out as concurrent queries to ENV/ASK, then a lone drone publishes its NPS, a swarm host the
 MOVES of all its drones in one message. It exits on OVER.
+
+Sensing ahead: when turn t - 1 ends (STATUS(t - 1), sent with TURN(t, GCS)), a host of up to
+`PREFETCH_MAX` drones already asks the environment for the neighbours of each of its drones, while the
+ground station decides. The environment answers an ASK for turn t from the world at the
+start of turn t whenever it arrives, so these answers are exactly what the autopilots would get by
+asking later: an autopilot asking only for prefetched cells is answered without a round trip, any
+other cell is asked as usual. Decisions, and so journals, do not change; the turn loses one round trip.
 """
 
 from __future__ import annotations
@@ -17,13 +24,17 @@ import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
-    Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, RemoteInputError, Role, Turn, UsageError, decode, drone_id, encode,
-    Step, is_drone_id,
+    Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, RemoteInputError, Role, Status, Turn, UsageError, decode,
+    drone_id, encode, Step, is_drone_id,
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
-from .autopilots.base import Answers
+from .autopilots.base import Answers, in_bounds, neighbours6
+
+#: Hosts of up to this many drones sense ahead (6 cells per drone per turn): it saves a round trip per
+#: turn, which matters when a turn is short; a big swarm is bound by CPU, and its drones ask far fewer.
+PREFETCH_MAX = 16
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
@@ -32,8 +43,10 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
     sender = host or drones[0]
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
-        inbox.subscribe(keys.turn, Turn)
+        inbox.subscribe(keys.turn_of(Phase.DRONES), Turn)
         inbox.subscribe(keys.over, Over)
+        if len(drones) <= PREFETCH_MAX:  # where its drones are when a turn begins: to sense ahead
+            inbox.subscribe(keys.status, Status)
         hello = Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones, autopilot=autopilot,
                         cooperative=pilot_class(autopilot).cooperative, session=session_id(session))
         member = Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
@@ -41,6 +54,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         out = Outbox(session)
         asker = Asker(session, keys, inbox, logger, sender=sender, timeout=ask_timeout, patience=grace)
         mine = set(drones)
+        size = member.welcome.world.size
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
         backlog: list = []  # events taken from the inbox while waiting for the environment
@@ -60,6 +74,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
             # Work through everything already queued, acting only on the latest DRONES phase: a process
             # that was frozen or slow catches up instead of planning turns that are long gone.
             latest: Turn | None = None
+            fresh: Status | None = None  # a STATUS just arrived: the next turn is about to begin
             queued, backlog[:] = [*backlog, *inbox.drain()], []
             for event in (first, *queued):
                 if not member.clock.screen(event, inbox.rejects):
@@ -69,10 +84,17 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                         member.on_presence(presence)
                     case Received(_, Turn(phase=Phase.DRONES) as turn):
                         latest = turn
+                    case Received(_, Status() as st):
+                        fresh = st
                     case Received(_, Over() as end):
                         over = end
             if over is not None:
                 logger.info("OVER: %s", over.text)
+            elif latest is None and fresh is not None and fresh.turn + 1 == member.clock.turn:
+                flying = [s.pos for s in fresh.drones if s.drone in mine and s.alive]
+                if flying:
+                    asker.prefetch(fresh.turn + 1, tuple(dict.fromkeys(
+                        n for pos in flying for n in neighbours6(pos) if in_bounds(n, size))))
             elif latest is not None and latest.turn == member.clock.turn:
                 orders = tuple(o for o in latest.orders if o.drone in mine)
                 if done is None or done[0] != (latest.turn, orders):
@@ -106,6 +128,23 @@ class Asker:
         self.patience = patience
         self.querier = session.declare_querier(keys.ask, timeout=timeout,
                                                consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+        self._ahead: tuple[int, tuple, object] | None = None  # (turn, cells, reply handler) asked ahead
+        self._known: tuple[int, Answers] = (0, {})  # answers for one turn, from asking ahead
+
+    def prefetch(self, turn: int, cells: tuple) -> None:
+        """Ask now for cells the drones will likely want in `turn` (answered from that turn's world)."""
+        if cells and len(cells) <= Ask.MAX_CELLS:
+            self._ahead = (turn, cells, self.querier.get(payload=encode(Ask(turn=turn, sender=self.sender,
+                                                                                cells=cells))))
+
+    def _ahead_for(self, turn: int) -> Answers:
+        """The answers asked ahead for `turn` (waiting for them if they are still on their way)."""
+        if self._ahead is not None:
+            t, cells, handler = self._ahead
+            self._ahead = None
+            if t == turn:
+                self._known = (turn, self._collect(["(ahead)"], handler) or {})
+        return self._known[1] if self._known[0] == turn else {}
 
     def _batches(self, pending: dict[str, tuple]) -> list[list[str]]:
         batches: list[list[str]] = [[]]
@@ -123,6 +162,11 @@ class Asker:
         """Answers for every drone's cells. While the environment is away it waits for it (up to
         `patience`), checking `give_up` at least every second (the game may have ended meanwhile)."""
         answers: dict[str, Answers] = {}
+        pending = dict(pending)
+        known = self._ahead_for(turn)
+        if known:
+            for d in [d for d, cells in pending.items() if all(c in known for c in cells)]:
+                answers[d] = {c: known[c] for c in pending.pop(d)}
         end = time.monotonic() + self.patience
         while pending:
             batches = self._batches(pending)

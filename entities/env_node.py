@@ -35,7 +35,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
          connect_timeout: float = 30.0, grace: float = 30.0) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
-        inbox.subscribe(keys.turn, Turn)
+        inbox.subscribe(keys.turn_of(Phase.ENV), Turn)
         inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
         inbox.serve(keys.ask, Ask)

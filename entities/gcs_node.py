@@ -73,7 +73,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
          grace: float = 30.0) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
-        inbox.subscribe(keys.turn, Turn)
+        inbox.subscribe(keys.turn_of(Phase.GCS), Turn)
         inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
         member = Membership(session, inbox, Connect(turn=0, sender="GCS", role=Role.GCS, session=session_id(session)),

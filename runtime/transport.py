@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from dronesim.schema import Keys, Message, RejectCounter, RemoteInputError, Target, UsageError, decode, encode
+from dronesim.schema import Keys, Message, RejectCounter, RemoteInputError, Target, Turn, UsageError, decode, encode
 from dronesim.schema.errors import WrongSender
 
 # --------------------------------------------------------------------------- flags and config
@@ -226,9 +226,12 @@ def session_id(session: zenoh.Session) -> str:
 def check_addressed(keys: Keys, key: str, msg: Message) -> None:
     """The entity part of a key must be the message's subject: its drone for TGT, else its sender."""
     subject = msg.drone if isinstance(msg, Target) else msg.sender
-    entity = keys.entity_of(key)
-    if entity != subject:
-        raise WrongSender(f"a {msg.TAG} about {subject} on {entity}'s key {key}")
+    parts = keys.parts_of(key)
+    if parts[0] != subject:
+        raise WrongSender(f"a {msg.TAG} about {subject} on {parts[0]}'s key {key}")
+    phase = msg.phase.value if isinstance(msg, Turn) else None
+    if parts[2:] != ([phase] if phase else []):
+        raise WrongSender(f"a {msg.TAG}{'(' + phase + ')' if phase else ''} on key {key}")
 
 
 def _direct(callback: Callable[[object], None]) -> zenoh.handlers.Callback:

@@ -32,7 +32,8 @@ class KeySpec:
 KEY_TABLE: tuple[KeySpec, ...] = (
     KeySpec("SRV/CONNECT", "query", m.Connect, (m.Welcome, m.Refused), "SRV", "ENV, GCS, drones",
             "admission: `X:SRV:CONNECT` -> \"You are connected as X\" or a refusal"),
-    KeySpec("SRV/TURN", "put", m.Turn, None, "SRV", "all", "a phase of turn t begins (orders, moves)"),
+    KeySpec("SRV/TURN/{phase}", "put", m.Turn, None, "SRV", "GCS, drones, ENV",
+            "phase GCS, DRONES (orders) or ENV (moves) of turn t begins; each entity hears only its own"),
     KeySpec("SRV/OVER", "put", m.Over, None, "SRV", "all", "`SRV:X:OVER`: the game has ended"),
     KeySpec("OBS/STATUS", "put", m.Status, None, "SRV", "all", "every drone's state at the end of the turn"),
     KeySpec("{drone}/TGT", "put", m.Target, None, "GCS", "SRV", "`GCS:D01:TGT:x:y:z`, relayed to the drone in its order"),
@@ -65,7 +66,8 @@ class Keys:
     @property
     def connect(self) -> str: return self._k("SRV", "CONNECT")
     @property
-    def turn(self) -> str: return self._k("SRV", "TURN")
+    def turn(self) -> str: return self._k("SRV", "TURN", "*")  # every phase (viewers)
+    def turn_of(self, phase: m.Phase) -> str: return self._k("SRV", "TURN", phase.value)
     @property
     def over(self) -> str: return self._k("SRV", "OVER")
     @property
@@ -105,11 +107,15 @@ class Keys:
         return parts[0], parts[2]
 
     def entity_of(self, key: str) -> str:
-        """The ENTITY part of ``<root>/<ENTITY>/<ACTION>`` (raises ValueError if not under root)."""
+        """The ENTITY part of ``<root>/<ENTITY>/<ACTION>[/<PHASE>]`` (ValueError if not under root)."""
+        return self.parts_of(key)[0]
+
+    def parts_of(self, key: str) -> list[str]:
+        """``[ENTITY, ACTION]`` or ``[ENTITY, ACTION, PHASE]`` of a key (ValueError if not one of ours)."""
         prefix = self.root + "/"
         if not key.startswith(prefix):
             raise ValueError(f"{key!r} is not under {self.root!r}")
         parts = key[len(prefix):].split("/")
-        if len(parts) != 2:
-            raise ValueError(f"{key!r} is not <root>/<ENTITY>/<ACTION>")
-        return parts[0]
+        if not (len(parts) == 2 or (len(parts) == 3 and parts[1] == "TURN")):
+            raise ValueError(f"{key!r} is not <root>/<ENTITY>/<ACTION> (or <root>/SRV/TURN/<PHASE>)")
+        return parts

@@ -496,7 +496,8 @@ def test_keys_under_default_root() -> None:
     k = Keys()
     assert k.root == "sim"
     assert k.connect == "sim/SRV/CONNECT"
-    assert k.turn == "sim/SRV/TURN"
+    assert k.turn == "sim/SRV/TURN/*"
+    assert k.turn_of(Phase.DRONES) == "sim/SRV/TURN/DRONES"
     assert k.over == "sim/SRV/OVER"
     assert k.status == "sim/OBS/STATUS"
     assert k.gcs_done == "sim/GCS/DONE"
@@ -554,12 +555,12 @@ def test_key_table_covers_every_message_type() -> None:
 
 def test_key_table_rows_are_consistent() -> None:
     k = Keys("sim")
-    built = {k.connect, k.turn, k.over, k.status, k.gcs_done, k.ask, k.map, k.upd,
+    built = {k.connect, k.turn_of(Phase.GCS), k.over, k.status, k.gcs_done, k.ask, k.map, k.upd,
              k.tgt("D01"), k.nps("D01"), k.moves("D01"), k.alive("D01", "0a1b")}
     templates = [spec.template for spec in KEY_TABLE]
     assert len(set(templates)) == len(templates)
     for spec in KEY_TABLE:
-        assert f"sim/{spec.template.format(drone='D01', entity='D01', session='0a1b')}" in built, spec.template
+        assert f"sim/{spec.template.format(drone='D01', entity='D01', session='0a1b', phase='GCS')}" in built, spec.template
         assert spec.how in ("put", "query", "liveliness")
         if spec.how == "query":
             assert spec.reply is not None and spec.message is not None

@@ -97,7 +97,8 @@ CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "drones
 def concrete_keys(spec: KeySpec, root: str, names: list[str], drones: list[str]) -> list[str]:
     """Every concrete key a key-table row stands for, in a deployment of these principals and drones."""
     keys = [spec.template]
-    for placeholder, values in (("{drone}", drones), ("{entity}", names), ("{session}", ["a1b2c3"])):
+    for placeholder, values in (("{drone}", drones), ("{entity}", names), ("{session}", ["a1b2c3"]),
+                                ("{phase}", ["GCS", "DRONES", "ENV"])):
         keys = [k.replace(placeholder, v) for k in keys for v in values] if any(placeholder in k for k in keys) \
             else keys
     return [f"{root}/{k}" for k in keys]
