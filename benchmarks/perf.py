@@ -418,7 +418,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     """One game over a loopback router with this process as the ground station; see the module docstring."""
     from dronesim.entity import Membership
     from dronesim.scenario import Scenario
-    from dronesim.entities.gcs import gcs_done
+    from dronesim.entities.gcs import gcs_done, targets_of
     from dronesim.schema import Connect, Done, Intent, Keys, Over, Phase, Role, Status, Turn, drone_id
     from dronesim.transport import Inbox, Outbox, Presence, Received, session_id
 
@@ -494,7 +494,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             current.update(plan.at(t))
                             if alive is not None:
                                 current = {d: c for d, c in current.items() if d in alive}
-                            out.put(keys.gcs_done, gcs_done(t, current, Intent.CONTINUE))
+                            in_force = targets_of(game.last_status) if game.last_status is not None else None
+                            out.put(keys.gcs_done, gcs_done(t, current, Intent.CONTINUE, in_force))
                             stamps[("DONE", t)] = time.perf_counter()
                 game.over = f"{over.reason.value} at turn {over.turn}"
                 member.close()
@@ -572,7 +573,8 @@ def play_local(case: Case, scenario_file: Path) -> Local:
     inputs.stamps = {}  # type: ignore[attr-defined]
     quiet = logging.getLogger("dronesim.bench.local")
     quiet.setLevel(logging.ERROR)
-    res = simulate(sc.game_config(phase_deadline=PHASE_DEADLINE), sc.autopilots, inputs, quiet, keep_statuses=True)
+    res = simulate(sc.game_config(phase_deadline=PHASE_DEADLINE), sc.autopilots, inputs, quiet, keep_statuses=True,
+                   verify_env=False)  # as the distributed game: the coordinator does not check UPD by default
     st = inputs.stamps  # type: ignore[attr-defined]
     ts = [st[t] for t in range(case.warmup + 1, case.end_turn + 1)]
     measured = [r for r in res.records

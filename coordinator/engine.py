@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+from dataclasses import field
 import hashlib
 import logging
 from dataclasses import dataclass
@@ -101,6 +102,7 @@ class GameConfig:
 @dataclass(frozen=True, slots=True)
 class Publish:
     msg: Message
+    data: bytes | None = field(default=None, compare=False)  # its encoding, when the engine has it already
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,7 +164,7 @@ class Engine:
         self._moves: dict[str, Cell] = {}  # received in this DRONES phase
         self._notes: dict[str, Note] = {}
         self._turn_log: dict = {}
-        self._upd_due: tuple[int, dict[Cell, CellKind]] | None = None  # the last ENV phase's turn and cells
+        self._upd_due: tuple[int, tuple[Move, ...]] | None = None  # the last ENV phase's turn and moves
         self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
         self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
         self._tgt_seen = 0  # TGT messages of this GCS phase
@@ -386,8 +388,7 @@ class Engine:
         moves = tuple(Move(drone=d, src=before[d], dst=final[d]) for d in sorted(final) if final[d] != before[d])
         if not moves:
             return self._observe()
-        changed = {c for m in moves for c in (m.src, m.dst) if self.world.contains(c)}
-        self._upd_due = (turn, {c: self._kind(c) for c in changed})
+        self._upd_due = (turn, moves)
         return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()]
 
     def _kind(self, cell: Cell) -> CellKind:
@@ -511,7 +512,8 @@ class Engine:
             raise WrongSender(f"UPD from {msg.sender}")
         if self._upd_due is None or msg.turn != self._upd_due[0]:
             raise StaleTurn(f"UPD for turn {msg.turn}, which had no ENV phase awaiting its report")
-        turn, expected = self._upd_due
+        turn, moves = self._upd_due
+        expected = {c: self._kind(c) for m in moves for c in (m.src, m.dst) if self.world.contains(c)}
         reported = {c.pos: c.kind for c in msg.cells}
         if reported != expected:
             wrong = sorted(c for c in expected.keys() | reported.keys() if reported.get(c) != expected.get(c))
@@ -558,9 +560,10 @@ class Engine:
         if dead:
             log["deaths"] = {d: c.value for d, c in sorted(dead.items())}
         status = self.status(self.turn)
-        log["state"] = hashlib.sha256(encode(status)).hexdigest()[:16]
+        data = encode(status)
+        log["state"] = hashlib.sha256(data).hexdigest()[:16]
         self._log.debug("turn %d observed: %s", self.turn, log)
-        effects: list[Effect] = [Record(log), Publish(status)]
+        effects: list[Effect] = [Record(log), Publish(status, data)]
         end = self._end_reason()
         if end:
             return effects + self._over(*end)

@@ -114,8 +114,8 @@ class Executor:
                         continue
                     self._last = time.monotonic()
                     self.out.put(self.keys.turn_of(turn.phase), turn)
-                case Publish(msg):
-                    self.out.put(_key_of(self.keys, msg), msg)
+                case Publish(msg, data):
+                    self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):
                     query.reply(query.key_expr, encode(msg))
                     query.drop()  # the final answer: the asker stops waiting now
@@ -135,7 +135,7 @@ class Executor:
 
 
 def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None,
-         logger: logging.Logger, resume: bool = False, pace: float = 0.0) -> Over:
+         logger: logging.Logger, resume: bool = False, pace: float = 0.0, verify_env: bool = False) -> Over:
     """Run one game to its end (or, with `resume`, the rest of the journal's game); return the OVER message."""
     if resume and not journal:
         raise UsageError("--resume needs --journal")
@@ -154,7 +154,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         inbox.subscribe(keys.gcs_done, Done)
         inbox.subscribe(keys.any_nps, Nps)
         inbox.subscribe(keys.any_moves, Moves)
-        inbox.subscribe(keys.upd, Upd)
+        if verify_env:  # the environment's report of each ENV phase, checked against the engine's world
+            inbox.subscribe(keys.upd, Upd)
         inbox.watch_presence()
         token = session.liveliness().declare_token(keys.alive("SRV", session_id(session)))
         admissions = Admissions()
@@ -245,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--journal", help="append the game's journal to this file")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS (default 0: as fast as the entities answer)")
+    p.add_argument("--verify-env", action="store_true",
+                   help="check the environment's UPD of every ENV phase against the coordinator's world "
+                        "(a mismatch is logged and counted as a rejected input)")
     p.add_argument("--resume", action="store_true",
                    help="restart a game from its --journal: the entities connect again and it plays on "
                         "(a missing or empty journal starts a new game)")
@@ -291,7 +295,7 @@ def cli(argv: list[str] | None = None) -> int:
     logger = setup_logging(args.log_level, "SRV")
     try:
         over = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal, logger=logger,
-                    resume=args.resume, pace=args.pace)
+                    resume=args.resume, pace=args.pace, verify_env=args.verify_env)
     except UsageError as err:
         logger.error("%s", err)
         return 2

@@ -4,12 +4,13 @@ Each DRONES phase it runs every hosted drone's autopilot together (`fly_round`):
 a round go out as concurrent queries to ENV/ASK, then a lone drone publishes its NPS, a swarm host the
 MOVES of all its drones in one message. It exits on OVER.
 
-Sensing ahead: when turn t - 1 ends (STATUS(t - 1), sent with TURN(t, GCS)), a host of up to
-`PREFETCH_MAX` drones already asks the environment for the neighbours of each of its drones, while the
-ground station decides. The environment answers an ASK for turn t from the world at the
-start of turn t whenever it arrives, so these answers are exactly what the autopilots would get by
-asking later: an autopilot asking only for prefetched cells is answered without a round trip, any
-other cell is asked as usual. Decisions, and so journals, do not change; the turn loses one round trip.
+Sensing ahead: once it has sent its moves for turn t, the process asks the environment, in one ASK,
+for the neighbours of the cells its drones moved to (its `around` cells), for turn t + 1. The
+environment answers an ASK for turn t + 1 from the world at the start of that turn (it holds the ASK
+until STATUS(t) has come), so these answers are exactly what the autopilots would get by asking then:
+an autopilot asking only for cells around its drone is answered without a round trip, any other cell
+(a farther look-ahead, or a drone that did not end where it meant to) is asked as usual. Decisions,
+and so journals, do not change; a turn loses the sensing round trips of most autopilots.
 """
 
 from __future__ import annotations
@@ -18,23 +19,19 @@ import argparse
 import logging
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
-    Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, RemoteInputError, Role, Status, Turn, UsageError, decode,
-    drone_id, encode, Step, is_drone_id,
+    Ans, Ask, CellInfo, CellKind, Connect, Keys, MalformedMessage, Moves, Nps, Over, Phase, RemoteInputError, Role,
+    Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
-from .autopilots.base import Answers, in_bounds, neighbours6
-
-#: Hosts of up to this many drones sense ahead (6 cells per drone per turn): it saves a round trip per
-#: turn, which matters when a turn is short; a big swarm is bound by CPU, and its drones ask far fewer.
-PREFETCH_MAX = 16
+from .autopilots.base import Answers, in_bounds
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
@@ -45,8 +42,6 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn_of(Phase.DRONES), Turn)
         inbox.subscribe(keys.over, Over)
-        if len(drones) <= PREFETCH_MAX:  # where its drones are when a turn begins: to sense ahead
-            inbox.subscribe(keys.status, Status)
         hello = Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones, autopilot=autopilot,
                         cooperative=pilot_class(autopilot).cooperative, session=session_id(session))
         member = Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
@@ -55,6 +50,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         asker = Asker(session, keys, inbox, logger, sender=sender, timeout=ask_timeout, patience=grace)
         mine = set(drones)
         size = member.welcome.world.size
+        senses = pilot_class(autopilot).senses
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
         backlog: list = []  # events taken from the inbox while waiting for the environment
@@ -74,7 +70,6 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
             # Work through everything already queued, acting only on the latest DRONES phase: a process
             # that was frozen or slow catches up instead of planning turns that are long gone.
             latest: Turn | None = None
-            fresh: Status | None = None  # a STATUS just arrived: the next turn is about to begin
             queued, backlog[:] = [*backlog, *inbox.drain()], []
             for event in (first, *queued):
                 if not member.clock.screen(event, inbox.rejects):
@@ -84,19 +79,13 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                         member.on_presence(presence)
                     case Received(_, Turn(phase=Phase.DRONES) as turn):
                         latest = turn
-                    case Received(_, Status() as st):
-                        fresh = st
                     case Received(_, Over() as end):
                         over = end
             if over is not None:
                 logger.info("OVER: %s", over.text)
-            elif latest is None and fresh is not None and fresh.turn + 1 == member.clock.turn:
-                flying = [s.pos for s in fresh.drones if s.drone in mine and s.alive]
-                if flying:
-                    asker.prefetch(fresh.turn + 1, tuple(dict.fromkeys(
-                        n for pos in flying for n in neighbours6(pos) if in_bounds(n, size))))
             elif latest is not None and latest.turn == member.clock.turn:
                 orders = tuple(o for o in latest.orders if o.drone in mine)
+                fresh = False
                 if done is None or done[0] != (latest.turn, orders):
                     steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
                     decisions = fly_round(steps, lambda pending: asker.ask_all(
@@ -104,12 +93,16 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                     if superseded(latest.turn):
                         continue  # too late: the game has moved on (the queued events come next)
                     done = ((latest.turn, orders), decisions)
+                    fresh = True
                 if host and done[1]:  # a swarm host: one message for all its drones
                     out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=tuple(
                         Step(drone=d, pos=dec.pos, note=dec.note) for d, dec in sorted(done[1].items()))))
                 elif not host:
                     for d, dec in done[1].items():
                         out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
+                if fresh and senses:  # where its drones mean to be: their next sensing, asked ahead
+                    asker.prefetch(latest.turn + 1, tuple(sorted({d.pos for d in done[1].values()
+                                                                  if in_bounds(d.pos, size)})))
         asker.close()
         member.close()
         return over
@@ -128,22 +121,22 @@ class Asker:
         self.patience = patience
         self.querier = session.declare_querier(keys.ask, timeout=timeout,
                                                consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
-        self._ahead: tuple[int, tuple, object] | None = None  # (turn, cells, reply handler) asked ahead
+        self._ahead: tuple[Ask, object] | None = None  # an ASK sent ahead, and its reply handler
         self._known: tuple[int, Answers] = (0, {})  # answers for one turn, from asking ahead
 
-    def prefetch(self, turn: int, cells: tuple) -> None:
-        """Ask now for cells the drones will likely want in `turn` (answered from that turn's world)."""
-        if cells and len(cells) <= Ask.MAX_CELLS:
-            self._ahead = (turn, cells, self.querier.get(payload=encode(Ask(turn=turn, sender=self.sender,
-                                                                                cells=cells))))
+    def prefetch(self, turn: int, around: tuple) -> None:
+        """Ask now for the neighbours of `around` in `turn` (answered from that turn's world)."""
+        if around and 6 * len(around) <= Ask.MAX_CELLS:
+            ask = Ask(turn=turn, sender=self.sender, around=around)
+            self._ahead = (ask, self.querier.get(payload=encode(ask)))
 
     def _ahead_for(self, turn: int) -> Answers:
         """The answers asked ahead for `turn` (waiting for them if they are still on their way)."""
         if self._ahead is not None:
-            t, cells, handler = self._ahead
+            ask, handler = self._ahead
             self._ahead = None
-            if t == turn:
-                self._known = (turn, self._collect(["(ahead)"], handler) or {})
+            if ask.turn == turn:
+                self._known = (turn, self._collect(["(ahead)"], handler, ask.asked()) or {})
         return self._known[1] if self._known[0] == turn else {}
 
     def _batches(self, pending: dict[str, tuple]) -> list[list[str]]:
@@ -170,12 +163,12 @@ class Asker:
         end = time.monotonic() + self.patience
         while pending:
             batches = self._batches(pending)
-            handlers = [self.querier.get(payload=encode(Ask(turn=turn, sender=self.sender,
-                                                            cells=tuple(c for d in b for c in pending[d]))))
-                        for b in batches]
+            asks = [tuple(c for d in b for c in pending[d]) for b in batches]
+            handlers = [self.querier.get(payload=encode(Ask(turn=turn, sender=self.sender, cells=cells)))
+                        for cells in asks]
             unanswered: dict[str, tuple] = {}
-            for batch, handler in zip(batches, handlers):
-                got = self._collect(batch, handler)
+            for batch, handler, cells in zip(batches, handlers, asks):
+                got = self._collect(batch, handler, cells)
                 for d in batch:
                     if got is None:
                         unanswered[d] = pending[d]
@@ -197,8 +190,9 @@ class Asker:
             pending = unanswered
         return answers
 
-    def _collect(self, batch: list[str], handler) -> Answers | None:
-        """The answer to one ASK; None if nobody answered (no queryable, or zenoh's own timeout)."""
+    def _collect(self, batch: list[str], handler, asked: tuple) -> Answers | None:
+        """The answer to one ASK of the `asked` cells; None if nobody answered (no queryable, or zenoh's
+        own timeout)."""
         result: Answers | None = None
         for reply in handler:
             if reply.ok is None:
@@ -209,15 +203,36 @@ class Asker:
                 continue
             try:
                 ans = decode(reply.ok.payload.to_bytes(), Ans)
+                result = Survey(ans, asked)
             except RemoteInputError as err:
                 self.inbox.rejects.reject(f"ANS for {', '.join(batch)}", err)
                 result = result or {}
-                continue
-            result = {c.pos: c for c in ans.cells}
         return result
 
     def close(self) -> None:
         self.querier.undeclare()
+
+
+class Survey(Mapping):
+    """An ANS as a read-only {cell: CellInfo}, each CellInfo made when an autopilot looks at it (an
+    answer ahead covers a whole swarm's neighbourhood, of which the autopilots read a few cells)."""
+
+    def __init__(self, ans: Ans, asked: tuple) -> None:
+        if len(asked) != len(ans.kinds):
+            raise MalformedMessage(f"{len(ans.kinds)} answers for {len(asked)} asked cells")
+        self._at = dict(zip(asked, range(len(asked))))
+        self._ans = ans
+        self._drones = {o.index: o.drones for o in ans.occupied}
+
+    def __getitem__(self, cell) -> CellInfo:
+        i = self._at[cell]
+        return CellInfo(pos=cell, kind=CellKind(self._ans.kinds[i]), drones=self._drones.get(i, ()))
+
+    def __iter__(self):
+        return iter(self._at)
+
+    def __len__(self) -> int:
+        return len(self._at)
 
 
 def parse_drones(text: str) -> tuple[str, ...]:

@@ -59,10 +59,13 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         def apply(turn: Turn) -> None:
             nonlocal applied
             applied = True
-            out.put(keys.upd, Upd(turn=turn.turn, sender="ENV", cells=env.apply(turn.moves)))
+            changed = env.move(turn.moves)
+            if out.matching(keys.upd):  # the report costs a record per cell: only for someone listening
+                out.put(keys.upd, Upd(turn=turn.turn, sender="ENV", cells=env.answer(changed)))
 
         def answer(query: zenoh.Query, ask: Ask) -> None:
-            query.reply(query.key_expr, encode(Ans(turn=ask.turn, sender="ENV", cells=env.answer(ask.cells))))
+            kinds, occupied = env.survey(ask.asked())
+            query.reply(query.key_expr, encode(Ans(turn=ask.turn, sender="ENV", kinds=kinds, occupied=occupied)))
             query.drop()
 
         def refuse(query: zenoh.Query, why: str) -> None:

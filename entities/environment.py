@@ -8,11 +8,12 @@ lost are removed from the grid).
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from dronesim.schema import Cell, CellInfo, Move, Status, WorldSpec
+from dronesim.schema import Cell, CellInfo, CellKind, Move, Status, WorldSpec
+from dronesim.schema.messages import Occupied
 from dronesim.schema.errors import OutOfRange, UnknownEntity
 
 from .world import World
@@ -43,7 +44,25 @@ class Environment:
     def answer(self, cells: Iterable[Cell]) -> tuple[CellInfo, ...]:
         return tuple(self.world.what_inside(c, self._occupants) for c in cells)
 
+    def survey(self, cells: Sequence[Cell]) -> tuple[bytes, tuple[Occupied, ...]]:
+        """`answer` for many cells at once, as an ANS carries it: one CellKind byte per cell (numpy over
+        the grid) and the occupied cells' drones."""
+        if not cells:
+            return b"", ()
+        a = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
+        inside = ((a >= 0) & (a < np.asarray(self.world.size))).all(axis=1)
+        kinds = np.full(len(a), CellKind.OUTSIDE, dtype=np.uint8)
+        i = a[inside]
+        kinds[inside] = np.where(self.world.grid[i[:, 0], i[:, 1], i[:, 2]], CellKind.BUILDING, CellKind.EMPTY)
+        occupants = self._occupants
+        occupied = tuple(Occupied(index=n, drones=occupants[c]) for n, c in enumerate(cells) if c in occupants)
+        return kinds.tobytes(), occupied
+
     def apply(self, moves: Iterable[Move]) -> tuple[CellInfo, ...]:
+        """Move the drones; return what is now in every changed cell (the UPD): see `move`."""
+        return self.answer(self.move(moves))
+
+    def move(self, moves: Iterable[Move]) -> list[Cell]:
         """Move the drones; return every changed cell (sources and in-world destinations), sorted.
 
         All moves are checked before any is applied: a move whose source is not where this
@@ -64,7 +83,7 @@ class Environment:
             else:
                 del self.drones[m.drone]  # it left the world (the observer will say it died)
         self._occupants = self._index()
-        return tuple(self.what_inside(c) for c in sorted(changed))
+        return sorted(changed)
 
     def sync(self, status: Status) -> None:
         """Take the drones' positions from the observer's STATUS: alive ones in the world, others removed."""

@@ -35,11 +35,15 @@ def correct_form(text: str, size: Cell) -> Cell:
     return cell  # type: ignore[return-value]
 
 
-def gcs_done(turn: int, targets: Mapping[str, Cell], intent: Intent) -> Done:
-    """The ground station's answer in the GCS phase of `turn`: every last target again, as the seed
-    re-sends them each turn (``GCS:D01:TGT:x:y:z``), carried by its DONE in one message."""
+def gcs_done(turn: int, targets: Mapping[str, Cell], intent: Intent,
+             in_force: Mapping[str, Cell] | None = None) -> Done:
+    """The ground station's answer in the GCS phase of `turn`: its DONE, carrying the targets
+    (``GCS:D01:TGT:x:y:z``) in one message. The seed re-sent every target every turn; the coordinator
+    keeps them, so only those that differ from `in_force` (the targets of the last STATUS) are sent: a
+    swarm's GCS phase costs what changes, not what is."""
+    keep = in_force or {}
     return Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=intent,
-                targets=tuple(Aim(drone=d, pos=c) for d, c in sorted(targets.items())))
+                targets=tuple(Aim(drone=d, pos=c) for d, c in sorted(targets.items()) if keep.get(d) != c))
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,7 +21,7 @@ from dronesim.schema import (
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .gcs import Ground, Tracks, format_status, gcs_done, parse_command
+from .gcs import Ground, Tracks, format_status, gcs_done, parse_command, targets_of
 from .web.node import add_web_args, run_web, wants_web
 
 
@@ -107,7 +107,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                         new = plan.at(turn.turn)
                         intent = Intent.FINAL if turn.turn >= plan.last_turn else Intent.CONTINUE
                     current.update((d, c) for d, c in new.items() if d not in gone)
-                    out.put(keys.gcs_done, gcs_done(turn.turn, current, intent))
+                    in_force = targets_of(tracks.last) if tracks.last is not None else None
+                    out.put(keys.gcs_done, gcs_done(turn.turn, current, intent, in_force))
                 case Received(_, Status() as status):
                     tracks.add(status)
                     gone.update(s.drone for s in status.drones if not s.alive)

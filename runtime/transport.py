@@ -341,13 +341,21 @@ class Outbox:
         self.session = session
         self._pubs: dict[str, zenoh.Publisher] = {}
 
-    def put(self, key: str, msg: Message) -> None:
+    def _pub(self, key: str) -> zenoh.Publisher:
         pub = self._pubs.get(key)
         if pub is None:
             pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
                                                  reliability=zenoh.Reliability.RELIABLE)
             self._pubs[key] = pub
-        pub.put(encode(msg))
+        return pub
+
+    def put(self, key: str, msg: Message, data: bytes | None = None) -> None:
+        """Publish `msg` (`data`: its encoding, if the caller already has it)."""
+        self._pub(key).put(encode(msg) if data is None else data)
+
+    def matching(self, key: str) -> bool:
+        """Does anyone subscribe to `key` now?"""
+        return self._pub(key).matching_status.matching
 
 
 def request(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],

@@ -145,6 +145,15 @@ def _check_int(value: object, name: str, lo: int, hi: int) -> None:
         raise MalformedMessage(f"{name} must be an int in {lo}..{hi}, got {value!r}")
 
 
+def _cell_ok(value: object, lo: int) -> bool:
+    """Is `value` a cell of 3 ints in lo..MAX_COORD (the fast check; `_check_cell` says what is wrong)?"""
+    if type(value) is tuple and len(value) == 3:
+        x, y, z = value
+        return (type(x) is int and type(y) is int and type(z) is int
+                and lo <= x <= MAX_COORD and lo <= y <= MAX_COORD and lo <= z <= MAX_COORD)
+    return False
+
+
 def _check_cell(value: object, name: str, *, signed: bool = False) -> None:
     lo = -MAX_COORD if signed else 0
     if type(value) is tuple and len(value) == 3:
@@ -189,6 +198,26 @@ class CellInfo:
         _check(isinstance(self.drones, tuple), "drones must be a tuple")
         for d in self.drones:
             _check_drone(d)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Occupied:
+    """Inside an ANS: the drones in the asked cell number `index` (the other cells hold none)."""
+
+    index: int
+    drones: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        _check_int(self.index, "index", 0, MAX_ASKED)
+        _check(isinstance(self.drones, tuple) and len(self.drones) >= 1, "an occupied cell holds drones")
+        for d in self.drones:
+            _check_drone(d)
+
+
+#: The 6-neighbourhood, in the order an ASK's `around` cells are expanded: +x, -x, +y, -y, +z, -z.
+AROUND: tuple[Cell, ...] = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+#: Most cells one ASK may ask (its cells plus 6 per `around` cell).
+MAX_ASKED = 1 << 15
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -258,6 +287,10 @@ class DroneStatus:
     cause: Cause = Cause.NONE
 
     def __post_init__(self) -> None:
+        if (type(self.drone) is str and _matches(DRONE_ID, self.drone) and _cell_ok(self.pos, -MAX_COORD)
+                and (self.target is None or _cell_ok(self.target, 0)) and type(self.state) is DroneState
+                and type(self.note) is Note and type(self.cause) is Cause):
+            return  # the common case, in one expression (a swarm's STATUS holds thousands of these)
         _check_drone(self.drone)
         _check_cell(self.pos, "pos", signed=True)
         _check(isinstance(self.state, DroneState), "state must be a DroneState")
@@ -430,31 +463,56 @@ class Done(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Ask(Message):
-    """Drone -> ENV (query on ENV/ASK): ``D01:ENV:ASK:x:y:z``, for one or several cells."""
+    """Drone -> ENV (query on ENV/ASK): ``D01:ENV:ASK:x:y:z``, for one or several cells, and for the
+    6 neighbours (in `AROUND` order) of each `around` cell: a swarm's whole neighbourhood in one ASK."""
 
     TAG: ClassVar[str] = "ASK"
-    cells: tuple[Cell, ...]
+    cells: tuple[Cell, ...] = ()
+    around: tuple[Cell, ...] = ()
 
-    MAX_CELLS: ClassVar[int] = 4096
+    MAX_CELLS: ClassVar[int] = MAX_ASKED
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check(isinstance(self.cells, tuple) and 1 <= len(self.cells) <= self.MAX_CELLS,
-               f"an ASK carries 1..{self.MAX_CELLS} cells")
+        _check(isinstance(self.cells, tuple) and isinstance(self.around, tuple), "cells and around are arrays")
+        _check(1 <= len(self.cells) + 6 * len(self.around) <= self.MAX_CELLS,
+               f"an ASK asks for 1..{self.MAX_CELLS} cells")
         for c in self.cells:
-            _check_cell(c, "cell", signed=True)
+            if not _cell_ok(c, -MAX_COORD):
+                _check_cell(c, "cell", signed=True)
+        for c in self.around:
+            if not _cell_ok(c, -MAX_COORD + 1) or max(c) >= MAX_COORD:
+                _check(False, f"around cells must be 3 integers with neighbours in range, got {c!r}")
+
+    def asked(self) -> tuple[Cell, ...]:
+        """Every asked cell, in answer order: `cells`, then the neighbours of each `around` cell."""
+        return self.cells + tuple((x + dx, y + dy, z + dz) for x, y, z in self.around for dx, dy, dz in AROUND)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Ans(Message):
-    """ENV -> drone (reply to ASK): ``ENV:D01:ANS:content``, one CellInfo per asked cell, same order."""
+    """ENV -> drone (reply to ASK): ``ENV:D01:ANS:content`` for every asked cell (`Ask.asked` order):
+    its CellKind, one byte each, and the drones in the occupied ones."""
 
     TAG: ClassVar[str] = "ANS"
-    cells: tuple[CellInfo, ...]
+    kinds: bytes
+    occupied: tuple[Occupied, ...] = ()
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check_records(self.cells, CellInfo, "cells")
+        _check(isinstance(self.kinds, bytes) and len(self.kinds) <= MAX_ASKED, "kinds must be bytes")
+        _check(max(self.kinds, default=0) <= max(CellKind), "kinds must be CellKind values")
+        _check_records(self.occupied, Occupied, "occupied")
+        at = [o.index for o in self.occupied]
+        _check(at == sorted(set(at)) and (not at or at[-1] < len(self.kinds)),
+               "occupied indices must increase and name asked cells")
+
+    def infos(self, cells: tuple[Cell, ...]) -> tuple[CellInfo, ...]:
+        """One CellInfo per asked cell; MalformedMessage if the answer does not fit the question."""
+        _check(len(cells) == len(self.kinds), f"{len(self.kinds)} answers for {len(cells)} asked cells")
+        drones = {o.index: o.drones for o in self.occupied}
+        return tuple(CellInfo(pos=c, kind=_KINDS[k], drones=drones.get(i, ())) for i, (c, k) in
+                     enumerate(zip(cells, self.kinds)))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -549,11 +607,14 @@ class WorldMap(Message):
         _check(len(self.buildings) == (n + 7) // 8, "buildings must hold one bit per cell")
 
 
+_KINDS = tuple(CellKind)
+
+
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Moves, Upd, Status, Over, MapRequest, WorldMap,
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
-_RECORDS = (CellInfo, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)
+_RECORDS = (CellInfo, Occupied, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)
 
 
 # --------------------------------------------------------------------------- codec
@@ -594,13 +655,6 @@ def _encoders_of(cls: type) -> list[tuple[str, str, typing.Callable[[object], ob
                for f in dataclasses.fields(cls)]
         _ENCODERS[cls] = enc
     return enc
-
-
-def _record_encoder(cls: type) -> typing.Callable[[object], object]:
-    def encode_record(v: object) -> object:
-        return [e(getattr(v, name)) for name, _, e in _encoders_of(cls)]
-
-    return encode_record
 
 
 def _converter(hint: object) -> typing.Callable[[object], object]:
@@ -651,18 +705,85 @@ def _fields_of(cls: type) -> list[tuple[str, typing.Callable[[object], object]]]
     return conv
 
 
+def _enum_table(hint: type[enum.Enum]) -> dict:
+    return {m.value: m for m in hint}
+
+
 def _record_converter(cls: type) -> typing.Callable[[object], object]:
-    fields: list = []
+    """A decoder for one record type, generated once from its type hints: one function with the field
+    conversions inlined (records come by the thousand in a swarm's STATUS). The record's own
+    `__post_init__` still validates every field."""
+    hints = typing.get_type_hints(cls)
+    fields = dataclasses.fields(cls)
+    env: dict[str, object] = {"cls": cls, "MalformedMessage": MalformedMessage, "_as_seq": _as_seq}
+    names = [f"a{i}" for i in range(len(fields))]
+    body = [
+        "def convert(v):",
+        f"    if type(v) is not tuple or len(v) != {len(fields)}:",
+        f"        raise MalformedMessage(f'{cls.__name__} needs {len(fields)} items, got {{v!r:.80}}')",
+        f"    {', '.join(names)}, = v",
+    ]
+    for i, f in enumerate(fields):
+        a, hint = names[i], hints[f.name]
+        origin, args = typing.get_origin(hint), typing.get_args(hint)
+        optional = origin in (Union, types.UnionType)
+        if optional:
+            hint = next(x for x in args if x is not type(None))
+            origin, args = typing.get_origin(hint), typing.get_args(hint)
+        guard = f"if {a} is not None: " if optional else ""
+        if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+            item = _converter(args[0])
+            if item is _as_seq:
+                body.append(f"    {guard}_as_seq({a})")
+            else:
+                env[f"c{i}"] = item
+                body.append(f"    {guard}{a} = tuple(map(c{i}, _as_seq({a})))")
+        elif origin is tuple:  # a Cell: its length and ints are the record's to check
+            body.append(f"    {guard}_as_seq({a})")
+        elif isinstance(hint, type) and issubclass(hint, enum.Enum):
+            env[f"e{i}"], env[f"E{i}"] = _enum_table(hint), hint
+            body.append(f"    {guard}{a} = _member(e{i}, E{i}, {a})")
+        elif hint in _RECORDS:
+            env[f"c{i}"] = _record_converter(hint)
+            body.append(f"    {guard}{a} = c{i}({a})")
+    env["_member"] = _member
+    body.append(f"    return cls({', '.join(f'{f.name}={names[i]}' for i, f in enumerate(fields))})")
+    exec("\n".join(body), env)  # noqa: S102 - code generated from our own type hints only
+    return env["convert"]  # type: ignore[return-value]
 
-    def convert(v: object) -> object:
-        if not fields:
-            fields.extend(_fields_of(cls))
-        items = _as_seq(v)
-        if len(items) != len(fields):
-            raise MalformedMessage(f"{cls.__name__} needs {len(fields)} items, got {len(items)}")
-        return cls(**{name: c(x) for (name, c), x in zip(fields, items)})
 
-    return convert
+def _member(table: dict, cls: type[enum.Enum], v: object) -> enum.Enum:
+    try:
+        m = table[v]
+    except (KeyError, TypeError):
+        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}") from None
+    if type(v) is not type(m.value):  # an IntEnum is given an int, not True or 1.0
+        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}")
+    return m
+
+
+def _record_encoder(cls: type) -> typing.Callable[[object], object]:
+    """An encoder for one record type, generated once from its type hints (see `_record_converter`)."""
+    hints = typing.get_type_hints(cls)
+    env: dict[str, object] = {}
+    parts = []
+    for i, f in enumerate(dataclasses.fields(cls)):
+        hint, v = hints[f.name], f"v.{f.name}"
+        origin, args = typing.get_origin(hint), typing.get_args(hint)
+        optional = origin in (Union, types.UnionType)
+        if optional:
+            hint = next(x for x in args if x is not type(None))
+        enc = _wire_encoder(hint)
+        if enc is _identity:
+            expr = v
+        elif isinstance(hint, type) and issubclass(hint, enum.Enum):
+            expr = f"{v}._value_"
+        else:
+            env[f"c{i}"] = enc
+            expr = f"c{i}({v})"
+        parts.append(f"(None if {v} is None else {expr})" if optional and expr != v else expr)
+    exec(f"def encode_record(v):\n    return [{', '.join(parts)}]", env)  # noqa: S102 - from our type hints
+    return env["encode_record"]  # type: ignore[return-value]
 
 
 def encode(msg: Message) -> bytes:

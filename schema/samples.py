@@ -11,7 +11,7 @@ import json
 import pathlib
 
 from .messages import (
-    Aim, Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
+    Aim, Ans, Ask, Occupied, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
     Message, Move, Moves, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, Step, Target, Turn, Upd, Welcome,
     WorldMap, WorldSpec, Intent, encode,
 )
@@ -44,8 +44,10 @@ SAMPLES: dict[str, Message] = {
     "done_gcs_targets": Done(turn=2, sender="GCS", phase=Phase.GCS,
                              targets=(Aim(drone="D01", pos=(9, 9, 0)), Aim(drone="D02", pos=(0, 9, 3)))),
     "ask": Ask(turn=1, sender="D01", cells=((1, 0, 0), (0, 1, 0))),
-    "ans": Ans(turn=1, sender="ENV", cells=(CellInfo(pos=(1, 0, 0), kind=CellKind.EMPTY),
-                                            CellInfo(pos=(0, 1, 0), kind=CellKind.BUILDING))),
+    "ans": Ans(turn=1, sender="ENV", kinds=bytes([CellKind.EMPTY, CellKind.BUILDING])),
+    "ask_around": Ask(turn=2, sender="H01", cells=((5, 5, 5),), around=((1, 0, 0), (0, 3, 2))),
+    "ans_around": Ans(turn=2, sender="ENV", kinds=bytes([0, 0, 1, 0, 0, 2, 0, 0, 0, 0, 1, 0, 0]),
+                      occupied=(Occupied(index=0, drones=("D07",)), Occupied(index=8, drones=("D02", "D05")))),
     "nps": Nps(turn=1, sender="D01", pos=(1, 0, 0)),
     "nps_unreachable": Nps(turn=7, sender="D01", pos=(3, 4, 0), note=Note.UNREACHABLE),
     "moves": Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(1, 0, 0)),

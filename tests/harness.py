@@ -118,6 +118,8 @@ class Cluster:
               netns: str | None = None, connect: str | None = None) -> Proc:
         """Start `dronesim ROLE` as a client of the router (in network namespace `netns` if given)."""
         prefix = ["ip", "netns", "exec", netns] if netns else []
+        if role == "coordinator":  # every test game also checks the environment's UPD against the world
+            args = ("--verify-env", *args)
         argv = [*prefix, sys.executable, "-m", "dronesim", role, "--mode", "client",
                 "--connect", connect or self.locator, "--root", self.root, "--log-level", self.log_level, *args]
         proc = Proc(name, argv, self.tmp, stdin=stdin)

@@ -39,6 +39,8 @@ def run_layout(locator: str, tmp: pathlib.Path, layout: str) -> pathlib.Path:
         c.start("GCS", "gcs", "--scenario", str(SCENARIO), "--quiet")
         codes = c.wait_all(timeout=240)
         assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
+        # the coordinator checked every UPD (--verify-env, see the harness) and none disagreed with its world
+        assert "UPD" not in "\n".join(line for line in srv.err if "rejected" in line), srv.text[-3000:]
     return journal
 
 

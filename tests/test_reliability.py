@@ -68,10 +68,14 @@ def test_environment_killed_mid_turn_and_restarted_gives_the_same_journal(router
         gcs = ScriptedGCS(router, c.root, TARGETS)
         try:
             hold_in_drones_phase(gcs, d1, 5)
-            env.p.kill()  # the environment dies while D01 has not asked yet
+            env.p.kill()  # the environment dies while D01 has not moved yet
             assert env.wait() == -signal.SIGKILL
-            d1.p.send_signal(signal.SIGCONT)  # D01 asks nobody, waits for an environment
-            d1.expect("no environment answered D01: waiting for it")
+            # D01 senses from the answers it asked ahead (at the end of turn 4): turn 5 ends without an
+            # environment, and the drones' phase of turn 6 waits for one to come back
+            d1.p.send_signal(signal.SIGCONT)
+            gcs.wait_phase("GCS", 6)
+            gcs.answer(6)
+            srv.expect("turn 6 waits for the environment to come back")
             env2 = c.start("ENV2", "env", "--no-draw")
             env2.expect("You are connected as ENV")
             gcs.play_until()

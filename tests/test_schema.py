@@ -244,7 +244,7 @@ def test_rejects_wrong_field_value(name: str, field: str, value: object) -> None
 
 @pytest.mark.parametrize("kind", [True, 1.0])
 def test_rejects_bool_or_float_cell_kind(kind: object) -> None:
-    rejects(mutated("ans", cells=[[[1, 0, 0], kind, []]]))
+    rejects(mutated("upd", cells=[[[1, 0, 0], kind, []]]))
 
 
 def test_signed_cells_where_allowed() -> None:
@@ -253,8 +253,9 @@ def test_signed_cells_where_allowed() -> None:
     assert decode(mutated("nps", pos=[-1, 0, 0])).pos == (-1, 0, 0)
     moves = decode(mutated("turn_env", moves=[["D01", [0, 0, 0], [0, 0, -1]]])).moves
     assert moves == (Move(drone="D01", src=(0, 0, 0), dst=(0, 0, -1)),)
-    info = decode(mutated("ans", cells=[[[-1, 0, 0], 2, []]])).cells[0]
+    info = decode(mutated("upd", cells=[[[-1, 0, 0], 2, []]])).cells[0]
     assert info == CellInfo(pos=(-1, 0, 0), kind=CellKind.OUTSIDE)
+    assert decode(mutated("ask_around", cells=[], around=[[0, 0, 0]])).asked()[1] == (-1, 0, 0)
 
 
 @pytest.mark.parametrize("drone", ["D1", "d01", "D01x", "D12345", "X01", "D", "", "D01\n", "H01", "ENV"])
@@ -428,11 +429,44 @@ def test_cell_validation() -> None:
 
 
 def test_ask_cell_count() -> None:
-    with pytest.raises(MalformedMessage, match="1..4096"):
+    count = f"1..{Ask.MAX_CELLS}"
+    with pytest.raises(MalformedMessage, match=count):
         Ask(turn=1, sender="D01", cells=())
     Ask(turn=1, sender="D01", cells=((0, 0, 0),) * Ask.MAX_CELLS)
-    with pytest.raises(MalformedMessage, match="1..4096"):
+    with pytest.raises(MalformedMessage, match=count):
         Ask(turn=1, sender="D01", cells=((0, 0, 0),) * (Ask.MAX_CELLS + 1))
+    with pytest.raises(MalformedMessage, match=count):
+        Ask(turn=1, sender="H01", cells=((0, 0, 0),), around=((1, 1, 1),) * (Ask.MAX_CELLS // 6 + 1))
+    with pytest.raises(MalformedMessage, match="neighbours in range"):
+        Ask(turn=1, sender="H01", around=((MAX_COORD, 0, 0),))
+
+
+def test_ask_around_expands_to_the_six_neighbours_in_order() -> None:
+    ask = Ask(turn=1, sender="H01", cells=((9, 9, 9),), around=((1, 1, 1), (5, 0, 0)))
+    assert ask.asked() == ((9, 9, 9), (2, 1, 1), (0, 1, 1), (1, 2, 1), (1, 0, 1), (1, 1, 2), (1, 1, 0),
+                           (6, 0, 0), (4, 0, 0), (5, 1, 0), (5, -1, 0), (5, 0, 1), (5, 0, -1))
+
+
+@pytest.mark.parametrize("change,why", [
+    (dict(kinds=b"\x00\x03"), "CellKind"),
+    (dict(occupied=[[2, ["D01"]]]), "occupied indices"),
+    (dict(occupied=[[1, ["D01"]], [0, ["D02"]]]), "occupied indices"),
+    (dict(occupied=[[0, []]]), "holds drones"),
+    (dict(occupied=[[0, ["X1"]]]), "drone id"),
+])
+def test_ans_checks_kinds_and_occupants(change: dict, why: str) -> None:
+    rejects(mutated("ans", **change), match=why)
+
+
+def test_ans_answers_the_asked_cells_in_order() -> None:
+    ans = SAMPLES["ans_around"]
+    infos = ans.infos(SAMPLES["ask_around"].asked())
+    assert infos[0] == CellInfo(pos=(5, 5, 5), kind=CellKind.EMPTY, drones=("D07",))
+    assert infos[2] == CellInfo(pos=(0, 0, 0), kind=CellKind.BUILDING)
+    assert infos[5] == CellInfo(pos=(1, 0, 1), kind=CellKind.OUTSIDE)
+    assert infos[8].drones == ("D02", "D05")
+    with pytest.raises(MalformedMessage, match="13 answers for 2 asked cells"):
+        ans.infos(((0, 0, 0), (1, 1, 1)))
 
 
 def test_world_validation() -> None:

@@ -73,7 +73,7 @@ import zenoh
 
 from dronesim import certs
 from dronesim.schema import (
-    KEY_TABLE, CellInfo, KeySpec, CellKind, Done, DroneState, DroneStatus, EndReason, Intent, Keys, Nps, Over, Phase,
+    KEY_TABLE, KeySpec, CellKind, Done, DroneState, DroneStatus, EndReason, Intent, Keys, Nps, Over, Phase,
     Refused, Status, Target, Turn, Upd, UsageError, decode, encode,
 )
 from dronesim.schema import acl
@@ -712,8 +712,8 @@ class Attacker:
             from dronesim.schema import Ans, Ask
 
             ask = decode(q.payload.to_bytes(), Ask)
-            cells = tuple(CellInfo(pos=c, kind=CellKind.BUILDING) for c in ask.cells)
-            self._reply(q, what, encode(Ans(turn=ask.turn, sender="ENV", cells=cells)))
+            kinds = bytes([CellKind.BUILDING] * len(ask.asked()))
+            self._reply(q, what, encode(Ans(turn=ask.turn, sender="ENV", kinds=kinds)))
         return on_query
 
     def _put(self, session: zenoh.Session, key: str, msg) -> None:

@@ -16,13 +16,14 @@ from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
 from dronesim.schema import Cell, CellInfo, Note
+from dronesim.schema.messages import AROUND
 
 Answers = Mapping[Cell, CellInfo]
 Sensing = Generator[tuple[Cell, ...], Answers, "Decision"]
 Oracle = Callable[[tuple[Cell, ...]], Answers]
 
 #: The 6-connectivity moves, in a fixed order (+x, -x, +y, -y, +z, -z).
-STEPS6: tuple[Cell, ...] = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+STEPS6: tuple[Cell, ...] = AROUND  # +x, -x, +y, -y, +z, -z
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -39,6 +40,8 @@ class Autopilot(Protocol):
     name: ClassVar[str]
     #: True if the drone gives way to other drones when the coordinator arbitrates moves.
     cooperative: ClassVar[bool]
+    #: True if it senses by ASK (its process then asks ahead for its drones' neighbourhoods).
+    senses: ClassVar[bool]
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         """Decide this turn's move from `pos` towards `target` (None: no target yet, hover)."""

@@ -65,6 +65,7 @@ class DStarPilot:
 
     name: ClassVar[str] = "dstar"
     cooperative: ClassVar[bool] = True  # gives way to other drones (coordinator/arbiter.py)
+    senses: ClassVar[bool] = True
 
     #: Default number of path cells ahead whose unknown cells are asked each step.
     LOOKAHEAD: ClassVar[int] = 20

@@ -79,6 +79,7 @@ class SeedPilot:
 
     name: ClassVar[str] = "seed"
     cooperative: ClassVar[bool] = False  # the seed's drone knows nothing of other drones
+    senses: ClassVar[bool] = True
     #: Most ASK round trips one turn may take.
     MAX_ASKS: ClassVar[int] = 4
 

@@ -32,6 +32,7 @@ class V1Pilot:
 
     name: ClassVar[str] = "v1"
     cooperative: ClassVar[bool] = False
+    senses: ClassVar[bool] = False  # it flies blind
 
     def __init__(self, *, world_size: Cell) -> None:
         self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]

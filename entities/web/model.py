@@ -320,6 +320,10 @@ class GroundState:
             wait = max(wait, self.pending_since + STATUS_GRACE - now)
         return max(0.0, wait)
 
+    def in_force(self) -> dict[str, Cell]:
+        """The targets of the last STATUS."""
+        return {d: v.target for d, v in self.drones.items() if v.target is not None}
+
     def answer(self, now: float) -> tuple[int, dict[str, Cell], Intent]:
         """Answer the pending phase: (turn, targets to send, intent); call when `due` says 0."""
         assert self.pending is not None

@@ -204,7 +204,7 @@ def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, key
                 state.on_over(over)
         if state.due(now) == 0.0:
             turn_no, targets, intent = state.answer(now)
-            out.put(keys.gcs_done, gcs_done(turn_no, targets, intent))
+            out.put(keys.gcs_done, gcs_done(turn_no, targets, intent, state.in_force()))
             logger.debug("turn %d: sent %d targets, %s", turn_no, len(targets), intent.value)
         if state.seq != published:
             hub.publish(state.snapshot())
