@@ -27,7 +27,7 @@ def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperat
     """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers."""
     final = dict(proposed)
     coop = sorted(d for d in cooperative if d in final)
-    changed = True
+    changed = bool(coop)  # nobody gives way: nothing to do
     while changed:
         changed = False
         claims: dict[Cell, list[str]] = defaultdict(list)

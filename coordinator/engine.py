@@ -132,11 +132,15 @@ class _Drone:
     misses: int = 0
     host: str | None = None
     cooperative: bool = False
+    _last: tuple = field(default=(), repr=False, compare=False)  # (what the last status said, that status)
 
     def status(self, drone: str) -> DroneStatus:
         note = Note.REACHED if self.state is DroneState.ALIVE and self.pos == self.target else self.note
-        return DroneStatus(drone=drone, pos=self.pos, state=self.state, target=self.target, note=note,
-                           cause=self.cause)
+        said = (self.pos, self.state, self.target, note, self.cause)
+        if not self._last or self._last[0] != said:  # most drones of a swarm change every turn, some do not
+            self._last = (said, DroneStatus(drone=drone, pos=self.pos, state=self.state, target=self.target,
+                                            note=note, cause=self.cause))
+        return self._last[1]
 
 
 def _cell(c: Cell | None) -> list[int] | None:
@@ -361,11 +365,12 @@ class Engine:
                 return [Publish(self._phase_msg)]
             case Stage.DRONES:
                 self._moves.clear()
-                self._awaiting = set(self.alive())
+                alive = self.alive()
+                self._awaiting = set(alive)
                 self._final = {}
                 self._notes.clear()
-                orders = tuple(Order(drone=d, pos=self.drones[d].pos, target=self.drones[d].target)
-                               for d in self.alive())
+                drones = self.drones
+                orders = tuple(Order(drone=d, pos=drones[d].pos, target=drones[d].target) for d in alive)
                 self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders)
                 if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
                     self._held = True
@@ -529,6 +534,7 @@ class Engine:
         buildings = {c for d, c in after.items() if c != before[d] and self.world.is_building(c)}
         dead = observer.deaths(self.size, before, after, buildings)
         hovered = sorted(d for d in alive if d not in self._moves)
+        hovering = set(hovered)
         lost: list[str] = []
         notes: dict[str, str] = {}
         for d in alive:
@@ -537,7 +543,7 @@ class Engine:
             if d in self._notes and self._notes[d] is not r.note:
                 r.note = self._notes[d]
                 notes[d] = r.note.value
-            if d in hovered:
+            if d in hovering:
                 r.misses += 1
                 if r.misses >= self.config.lost_after:
                     lost.append(d)

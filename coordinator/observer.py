@@ -30,22 +30,22 @@ def deaths(
     (the environment reports them in its UPD).
     """
     dead: dict[str, Cause] = {}
-    for d in sorted(after):
+    order = sorted(after)
+    by_cell: dict[Cell, list[str]] = defaultdict(list)
+    for d in order:
         cell = after[d]
         if not inside(cell, size):
             dead[d] = Cause.OUTSIDE
         elif cell in buildings:
             dead[d] = Cause.BUILDING
-    by_cell: dict[Cell, list[str]] = defaultdict(list)
-    for d in sorted(after):
-        if d not in dead:
-            by_cell[after[d]].append(d)
+        else:
+            by_cell[cell].append(d)
     for ds in by_cell.values():
         if len(ds) > 1:
             for d in ds:
                 dead[d] = Cause.VERTEX
-    arriving = {after[d]: d for d in sorted(after) if after[d] != before[d]}
-    for d in sorted(after):
+    arriving = {after[d]: d for d in order if after[d] != before[d]}
+    for d in order:
         src, dst = before[d], after[d]
         other = arriving.get(src)
         if src != dst and other is not None and other != d and before[other] == dst:

@@ -213,6 +213,9 @@ class Asker:
         self.querier.undeclare()
 
 
+_KINDS = tuple(CellKind)  # a kind byte -> its CellKind
+
+
 class Survey(Mapping):
     """An ANS as a read-only {cell: CellInfo}, each CellInfo made when an autopilot looks at it (an
     answer ahead covers a whole swarm's neighbourhood, of which the autopilots read a few cells)."""
@@ -222,11 +225,14 @@ class Survey(Mapping):
             raise MalformedMessage(f"{len(ans.kinds)} answers for {len(asked)} asked cells")
         self._at = dict(zip(asked, range(len(asked))))
         self._ans = ans
-        self._drones = {o.index: o.drones for o in ans.occupied}
+        self._drones = ans.occupants()
 
     def __getitem__(self, cell) -> CellInfo:
         i = self._at[cell]
-        return CellInfo(pos=cell, kind=CellKind(self._ans.kinds[i]), drones=self._drones.get(i, ()))
+        return CellInfo(pos=cell, kind=_KINDS[self._ans.kinds[i]], drones=self._drones.get(i, ()))
+
+    def __contains__(self, cell: object) -> bool:
+        return cell in self._at
 
     def __iter__(self):
         return iter(self._at)

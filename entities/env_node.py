@@ -64,8 +64,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                 out.put(keys.upd, Upd(turn=turn.turn, sender="ENV", cells=env.answer(changed)))
 
         def answer(query: zenoh.Query, ask: Ask) -> None:
-            kinds, occupied = env.survey(ask.asked())
-            query.reply(query.key_expr, encode(Ans(turn=ask.turn, sender="ENV", kinds=kinds, occupied=occupied)))
+            kinds, drones = env.survey(ask.cells, ask.around)
+            query.reply(query.key_expr, encode(Ans(turn=ask.turn, sender="ENV", kinds=kinds, drones=drones)))
             query.drop()
 
         def refuse(query: zenoh.Query, why: str) -> None:

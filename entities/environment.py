@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from dronesim.schema import Cell, CellInfo, CellKind, Move, Status, WorldSpec
-from dronesim.schema.messages import Occupied
+from dronesim.schema.messages import AROUND
 from dronesim.schema.errors import OutOfRange, UnknownEntity
 
 from .world import World
@@ -36,6 +36,8 @@ class Environment:
         cells: dict[Cell, list[str]] = defaultdict(list)
         for d, c in sorted(self.drones.items()):
             cells[c].append(d)
+        _, ny, nz = self.world.size
+        self._occupied_linear = np.asarray([(x * ny + y) * nz + z for x, y, z in cells], dtype=np.int64)
         return {c: tuple(ds) for c, ds in cells.items()}
 
     def what_inside(self, cell: Cell) -> CellInfo:
@@ -44,19 +46,27 @@ class Environment:
     def answer(self, cells: Iterable[Cell]) -> tuple[CellInfo, ...]:
         return tuple(self.world.what_inside(c, self._occupants) for c in cells)
 
-    def survey(self, cells: Sequence[Cell]) -> tuple[bytes, tuple[Occupied, ...]]:
-        """`answer` for many cells at once, as an ANS carries it: one CellKind byte per cell (numpy over
-        the grid) and the occupied cells' drones."""
-        if not cells:
-            return b"", ()
+    def survey(self, cells: Sequence[Cell], around: Sequence[Cell] = ()) -> tuple[bytes, tuple[tuple[int, str], ...]]:
+        """`answer` for many cells at once, as an ANS carries it (see `Ask.asked`: `cells`, then the six
+        neighbours of each `around` cell): one CellKind byte per cell and (index, drone) for every drone
+        in an asked cell, all in numpy over the grid."""
         a = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
-        inside = ((a >= 0) & (a < np.asarray(self.world.size))).all(axis=1)
+        if len(around):
+            ring = np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + np.asarray(AROUND, dtype=np.int64)
+            a = np.concatenate([a, ring.reshape(-1, 3)])
+        size = np.asarray(self.world.size, dtype=np.int64)
+        inside = ((a >= 0) & (a < size)).all(axis=1)
         kinds = np.full(len(a), CellKind.OUTSIDE, dtype=np.uint8)
         i = a[inside]
         kinds[inside] = np.where(self.world.grid[i[:, 0], i[:, 1], i[:, 2]], CellKind.BUILDING, CellKind.EMPTY)
-        occupants = self._occupants
-        occupied = tuple(Occupied(index=n, drones=occupants[c]) for n, c in enumerate(cells) if c in occupants)
-        return kinds.tobytes(), occupied
+        if not self._occupants:
+            return kinds.tobytes(), ()
+        linear = np.where(inside, (a[:, 0] * size[1] + a[:, 1]) * size[2] + a[:, 2], -1)
+        occupied = self._occupied_linear
+        hits = np.flatnonzero(np.isin(linear, occupied)).tolist()
+        at = a[hits].tolist()
+        pairs = tuple((n, d) for n, c in zip(hits, at) for d in self._occupants[tuple(c)])
+        return kinds.tobytes(), pairs
 
     def apply(self, moves: Iterable[Move]) -> tuple[CellInfo, ...]:
         """Move the drones; return what is now in every changed cell (the UPD): see `move`."""

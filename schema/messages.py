@@ -200,20 +200,6 @@ class CellInfo:
             _check_drone(d)
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Occupied:
-    """Inside an ANS: the drones in the asked cell number `index` (the other cells hold none)."""
-
-    index: int
-    drones: tuple[str, ...]
-
-    def __post_init__(self) -> None:
-        _check_int(self.index, "index", 0, MAX_ASKED)
-        _check(isinstance(self.drones, tuple) and len(self.drones) >= 1, "an occupied cell holds drones")
-        for d in self.drones:
-            _check_drone(d)
-
-
 #: The 6-neighbourhood, in the order an ASK's `around` cells are expanded: +x, -x, +y, -y, +z, -z.
 AROUND: tuple[Cell, ...] = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
 #: Most cells one ASK may ask (its cells plus 6 per `around` cell).
@@ -486,31 +472,45 @@ class Ask(Message):
 
     def asked(self) -> tuple[Cell, ...]:
         """Every asked cell, in answer order: `cells`, then the neighbours of each `around` cell."""
-        return self.cells + tuple((x + dx, y + dy, z + dz) for x, y, z in self.around for dx, dy, dz in AROUND)
+        out = list(self.cells)
+        for x, y, z in self.around:  # AROUND, unrolled: a swarm's prefetch has thousands of these
+            out += ((x + 1, y, z), (x - 1, y, z), (x, y + 1, z), (x, y - 1, z), (x, y, z + 1), (x, y, z - 1))
+        return tuple(out)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Ans(Message):
     """ENV -> drone (reply to ASK): ``ENV:D01:ANS:content`` for every asked cell (`Ask.asked` order):
-    its CellKind, one byte each, and the drones in the occupied ones."""
+    its CellKind, one byte each, and (index, drone) for each drone in an asked cell, in that order."""
 
     TAG: ClassVar[str] = "ANS"
     kinds: bytes
-    occupied: tuple[Occupied, ...] = ()
+    drones: tuple[tuple[int, str], ...] = ()
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check(isinstance(self.kinds, bytes) and len(self.kinds) <= MAX_ASKED, "kinds must be bytes")
         _check(max(self.kinds, default=0) <= max(CellKind), "kinds must be CellKind values")
-        _check_records(self.occupied, Occupied, "occupied")
-        at = [o.index for o in self.occupied]
-        _check(at == sorted(set(at)) and (not at or at[-1] < len(self.kinds)),
-               "occupied indices must increase and name asked cells")
+        _check(type(self.drones) is tuple, "drones must be an array")
+        n, last = len(self.kinds), (-1, "")
+        for p in self.drones:
+            if not (type(p) is tuple and len(p) == 2 and type(p[0]) is int and 0 <= p[0] < n
+                    and is_drone_id(p[1]) and p > last):
+                raise MalformedMessage(f"drones must be (index of an asked cell, drone id) pairs in increasing "
+                                       f"order, got {p!r:.60} after {last!r}")
+            last = p
+
+    def occupants(self) -> dict[int, tuple[str, ...]]:
+        """Asked cell index -> the drones in it (only the occupied ones)."""
+        out: dict[int, tuple[str, ...]] = {}
+        for i, d in self.drones:
+            out[i] = out.get(i, ()) + (d,)
+        return out
 
     def infos(self, cells: tuple[Cell, ...]) -> tuple[CellInfo, ...]:
         """One CellInfo per asked cell; MalformedMessage if the answer does not fit the question."""
         _check(len(cells) == len(self.kinds), f"{len(self.kinds)} answers for {len(cells)} asked cells")
-        drones = {o.index: o.drones for o in self.occupied}
+        drones = self.occupants()
         return tuple(CellInfo(pos=c, kind=_KINDS[k], drones=drones.get(i, ())) for i, (c, k) in
                      enumerate(zip(cells, self.kinds)))
 
@@ -614,7 +614,7 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Moves, Upd, Status, Over, MapRequest, WorldMap,
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
-_RECORDS = (CellInfo, Occupied, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)
+_RECORDS = (CellInfo, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)
 
 
 # --------------------------------------------------------------------------- codec

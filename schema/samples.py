@@ -11,7 +11,7 @@ import json
 import pathlib
 
 from .messages import (
-    Aim, Ans, Ask, Occupied, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
+    Aim, Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
     Message, Move, Moves, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, Step, Target, Turn, Upd, Welcome,
     WorldMap, WorldSpec, Intent, encode,
 )
@@ -47,7 +47,7 @@ SAMPLES: dict[str, Message] = {
     "ans": Ans(turn=1, sender="ENV", kinds=bytes([CellKind.EMPTY, CellKind.BUILDING])),
     "ask_around": Ask(turn=2, sender="H01", cells=((5, 5, 5),), around=((1, 0, 0), (0, 3, 2))),
     "ans_around": Ans(turn=2, sender="ENV", kinds=bytes([0, 0, 1, 0, 0, 2, 0, 0, 0, 0, 1, 0, 0]),
-                      occupied=(Occupied(index=0, drones=("D07",)), Occupied(index=8, drones=("D02", "D05")))),
+                      drones=((0, "D07"), (8, "D02"), (8, "D05"))),
     "nps": Nps(turn=1, sender="D01", pos=(1, 0, 0)),
     "nps_unreachable": Nps(turn=7, sender="D01", pos=(3, 4, 0), note=Note.UNREACHABLE),
     "moves": Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(1, 0, 0)),

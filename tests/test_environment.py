@@ -197,11 +197,14 @@ def test_cells_spec_round_trips_a_generated_world() -> None:
 
 def test_survey_answers_as_answer_does() -> None:
     """The ANS form (kind bytes and occupied cells) says what `answer` says, cell by cell."""
-    from dronesim.schema import Ans
+    from dronesim.schema import Ans, Ask
 
     e = Environment(World.generate((6, 6, 4), np.random.default_rng(5)), {"D01": (0, 0, 0), "D02": (2, 3, 1)})
     cells = tuple((x, y, z) for x in range(-1, 7) for y in (0, 3, 6) for z in (-1, 0, 1, 4))
-    kinds, occupied = e.survey(cells)
-    assert Ans(turn=1, sender="ENV", kinds=kinds, occupied=occupied).infos(cells) == e.answer(cells)
-    assert [o.index for o in occupied] == [cells.index((0, 0, 0)), cells.index((2, 3, 1))]
+    kinds, drones = e.survey(cells)
+    assert Ans(turn=1, sender="ENV", kinds=kinds, drones=drones).infos(cells) == e.answer(cells)
+    assert drones == ((cells.index((0, 0, 0)), "D01"), (cells.index((2, 3, 1)), "D02"))
     assert e.survey(()) == (b"", ())
+    ask = Ask(turn=1, sender="H01", cells=cells[:5], around=((1, 0, 0), (2, 3, 0), (5, 5, 3)))
+    kinds, drones = e.survey(ask.cells, ask.around)
+    assert Ans(turn=1, sender="ENV", kinds=kinds, drones=drones).infos(ask.asked()) == e.answer(ask.asked())

@@ -449,10 +449,13 @@ def test_ask_around_expands_to_the_six_neighbours_in_order() -> None:
 
 @pytest.mark.parametrize("change,why", [
     (dict(kinds=b"\x00\x03"), "CellKind"),
-    (dict(occupied=[[2, ["D01"]]]), "occupied indices"),
-    (dict(occupied=[[1, ["D01"]], [0, ["D02"]]]), "occupied indices"),
-    (dict(occupied=[[0, []]]), "holds drones"),
-    (dict(occupied=[[0, ["X1"]]]), "drone id"),
+    (dict(drones=[[2, "D01"]]), "index of an asked cell"),
+    (dict(drones=[[1, "D01"], [0, "D02"]]), "increasing order"),
+    (dict(drones=[[0, "D02"], [0, "D01"]]), "increasing order"),
+    (dict(drones=[[0, "D01"], [0, "D01"]]), "increasing order"),
+    (dict(drones=[[0, "X1"]]), "drone id"),
+    (dict(drones=[[True, "D01"]]), "pairs"),
+    (dict(drones=[0, "D01"]), "pairs"),
 ])
 def test_ans_checks_kinds_and_occupants(change: dict, why: str) -> None:
     rejects(mutated("ans", **change), match=why)

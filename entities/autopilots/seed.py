@@ -62,12 +62,8 @@ DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
     ("EAST", (0, 1)),
     ("WEST", (0, -1)),
 )
-_OFFSET = dict(DIRECTIONS)
+_RANKED = tuple((rank, dx, dy) for rank, (_, (dx, dy)) in enumerate(DIRECTIONS))
 
-
-def _dist2_xy(a: Cell, b: Cell) -> int:
-    """Squared Euclidean distance in the (x, y) plane (same order as the distance, exact)."""
-    return (a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2
 
 
 def _is_empty(info: CellInfo) -> bool:
@@ -115,16 +111,24 @@ class SeedPilot:
     def direction_order(self, pos: Cell, target: Cell) -> tuple[str, ...]:
         """The seed's directionOrder: 4 direction names, best first; invalid directions (leading
         outside the world) replaced by the best valid one. Empty if no direction is valid."""
+        return tuple(DIRECTIONS[rank][0] for rank in self._ranks(pos, target))
+
+    def _ranks(self, pos: Cell, target: Cell) -> list[int]:
+        """`direction_order` as indices into DIRECTIONS (the hot path of a swarm: plain arithmetic)."""
+        x, y, z = pos
+        nx, ny, nz = self.world_size
+        tx, ty = target[0], target[1]
         valid = []
-        for rank, (name, (dx, dy)) in enumerate(DIRECTIONS):
-            cell = (pos[0] + dx, pos[1] + dy, pos[2])
-            if in_bounds(cell, self.world_size):
-                valid.append((_dist2_xy(cell, target), rank, name))
+        if 0 <= z < nz:
+            for rank, dx, dy in _RANKED:
+                cx, cy = x + dx, y + dy
+                if 0 <= cx < nx and 0 <= cy < ny:
+                    valid.append(((cx - tx) ** 2 + (cy - ty) ** 2, rank))
         if not valid:
-            return ()
+            return []
         valid.sort()
-        names = [name for _, _, name in valid]
-        return tuple(names + [names[0]] * (len(DIRECTIONS) - len(names)))
+        ranks = [rank for _, rank in valid]
+        return ranks + [ranks[0]] * (len(DIRECTIONS) - len(ranks))
 
     # ------------------------------------------------------------------ one turn
 
@@ -152,10 +156,7 @@ class SeedPilot:
             # blocked (or outside): fall back to the horizontal step this turn
 
         # 2. SMARTMOVE on the current floor.
-        order = [
-            (pos[0] + _OFFSET[name][0], pos[1] + _OFFSET[name][1], pos[2])
-            for name in self.direction_order(pos, target)
-        ]
+        order = [(pos[0] + _RANKED[r][1], pos[1] + _RANKED[r][2], pos[2]) for r in self._ranks(pos, target)]
         closest: int | None = None  # None stands for MAX_INDEX
         pending: Mapping[Cell, CellInfo] = {}  # answers of a batched last round trip
         for i, cell in enumerate(order):
