@@ -39,7 +39,7 @@ from dronesim.schema import (
 )
 from dronesim.entities.environment import build_world
 from dronesim.entities.world import World
-from dronesim.schema.messages import Step, is_host_id
+from dronesim.schema.messages import Step, is_host_id, unchecked
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
 
 from . import arbiter, observer
@@ -138,9 +138,12 @@ class _Drone:
         note = Note.REACHED if self.state is DroneState.ALIVE and self.pos == self.target else self.note
         said = (self.pos, self.state, self.target, note, self.cause)
         if not self._last or self._last[0] != said:  # most drones of a swarm change every turn, some do not
-            self._last = (said, DroneStatus(drone=drone, pos=self.pos, state=self.state, target=self.target,
-                                            note=note, cause=self.cause))
+            self._last = (said, _drone_status(drone, self.pos, self.state, self.target, note, self.cause))
         return self._last[1]
+
+
+# Records built from the engine's own state, which it checked when it took it in (receivers check again).
+_drone_status, _order, _move = unchecked(DroneStatus), unchecked(Order), unchecked(Move)
 
 
 def _cell(c: Cell | None) -> list[int] | None:
@@ -370,7 +373,7 @@ class Engine:
                 self._final = {}
                 self._notes.clear()
                 drones = self.drones
-                orders = tuple(Order(drone=d, pos=drones[d].pos, target=drones[d].target) for d in alive)
+                orders = tuple(_order(d, drones[d].pos, drones[d].target) for d in alive)
                 self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders)
                 if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
                     self._held = True
@@ -390,7 +393,7 @@ class Engine:
         if yielded:
             self._turn_log["yielded"] = yielded
         self._final = final
-        moves = tuple(Move(drone=d, src=before[d], dst=final[d]) for d in sorted(final) if final[d] != before[d])
+        moves = tuple(_move(d, before[d], final[d]) for d in sorted(final) if final[d] != before[d])
         if not moves:
             return self._observe()
         self._upd_due = (turn, moves)

@@ -28,6 +28,7 @@ from dronesim.schema import (
     Ans, Ask, CellInfo, CellKind, Connect, Keys, MalformedMessage, Moves, Nps, Over, Phase, RemoteInputError, Role,
     Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
 )
+from dronesim.schema.messages import unchecked
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
@@ -214,6 +215,7 @@ class Asker:
 
 
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
+_cell_info = unchecked(CellInfo)
 
 
 class Survey(Mapping):
@@ -229,7 +231,7 @@ class Survey(Mapping):
 
     def __getitem__(self, cell) -> CellInfo:
         i = self._at[cell]
-        return CellInfo(pos=cell, kind=_KINDS[self._ans.kinds[i]], drones=self._drones.get(i, ()))
+        return _cell_info(cell, _KINDS[self._ans.kinds[i]], self._drones.get(i, ()))  # the ANS was checked whole
 
     def __contains__(self, cell: object) -> bool:
         return cell in self._at

@@ -35,7 +35,10 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
          connect_timeout: float = 30.0, grace: float = 30.0) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
-        inbox.subscribe(keys.turn_of(Phase.ENV), Turn)
+        out = Outbox(session)
+        # The ENV phase's moves make the UPD report; nobody listening, the drones' cells come from STATUS
+        # alone (the same cells), and the moves, thousands in a swarm, are not even decoded.
+        inbox.subscribe(keys.turn_of(Phase.ENV), Turn, only_if=lambda: out.matching(keys.upd))
         inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
         inbox.serve(keys.ask, Ask)
@@ -49,7 +52,6 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
             print(f"World {world.size} seed {welcome.world.seed}, {len(world.buildings)} buildings, "
                   f"{int(world.grid.sum())} building cells:", flush=True)
             print(world.draw(env.drones), flush=True)
-        out = Outbox(session)
         ready = 1  # the turn whose ASKs can be answered now
         waiting: list[tuple[zenoh.Query, Ask]] = []
         applied = False  # the ENV phase of turn `ready` is done

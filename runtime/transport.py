@@ -54,8 +54,10 @@ def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
 
 
 def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
-    """A zenoh.Config from the conventional flags. Multicast scouting is off unless a config file
-    turns it on: endpoints are explicit, so parallel runs never cross-talk."""
+    """A zenoh.Config from the conventional flags. Multicast scouting and shared memory are off unless
+    a config file turns them on: endpoints are explicit, so parallel runs never cross-talk; and Zenoh's
+    shared-memory transport maps a pool of tens of MiB into every process that receives a message of
+    a few KiB from a peer on the same host (a swarm's STATUS), for no measurable gain at these sizes."""
     if args.config:
         try:
             conf = zenoh.Config.from_file(args.config)
@@ -64,6 +66,7 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
     else:
         conf = zenoh.Config()
         conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("transport/shared_memory/enabled", "false")
     conf.insert_json5("scouting/delay", "0")
     if args.mode:
         conf.insert_json5("mode", json.dumps(args.mode))
@@ -165,6 +168,7 @@ def router_config(listen: str = "tcp/127.0.0.1:0") -> zenoh.Config:
     conf.insert_json5("listen/endpoints", json.dumps([listen]))
     conf.insert_json5("scouting/delay", "0")
     conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("transport/shared_memory/enabled", "false")  # see zenoh_config
     conf.insert_json5("adminspace", '{"enabled": true, "permissions": {"read": true, "write": false}}')
     return conf
 
@@ -176,6 +180,7 @@ def client_config(locator: str) -> zenoh.Config:
     conf.insert_json5("connect/endpoints", json.dumps([locator]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/delay", "0")
+    conf.insert_json5("transport/shared_memory/enabled", "false")  # see zenoh_config
     return conf
 
 
@@ -261,8 +266,13 @@ class Inbox:
         except Exception:  # a bug: log it, never let Zenoh swallow it silently
             self.log.exception("error handling %s", where)
 
-    def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...]) -> None:
+    def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
+                  only_if: Callable[[], bool] | None = None) -> None:
+        """Decoded messages on `key` become `Received` events; with `only_if`, a sample that arrives
+        while it says False is dropped undecoded (the process has no use for it then)."""
         def on_sample(sample: zenoh.Sample) -> None:
+            if only_if is not None and not only_if():
+                return
             k = str(sample.key_expr)
 
             def handle() -> None:

@@ -193,6 +193,8 @@ class CellInfo:
     drones: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        if _cell_ok(self.pos, -MAX_COORD) and type(self.kind) is CellKind and self.drones == ():
+            return  # the common case: an empty or building cell
         _check_cell(self.pos, "cell", signed=True)
         _check(isinstance(self.kind, CellKind), f"kind must be a CellKind, got {self.kind!r}")
         _check(isinstance(self.drones, tuple), "drones must be a tuple")
@@ -615,6 +617,26 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
 _RECORDS = (CellInfo, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)
+
+
+def unchecked(cls: type[R]) -> typing.Callable[..., R]:
+    """A positional constructor of record type `cls` (fields in declaration order) that skips the
+    validation: only for values this process has already checked, i.e. its own state or pieces of a
+    message that was validated whole. A swarm builds thousands of records a turn; this one is about
+    three times cheaper than the checked constructor."""
+    make = _UNCHECKED.get(cls)
+    if make is None:
+        names = [f.name for f in dataclasses.fields(cls)]
+        env = {"new": object.__new__, "cls": cls} | {f"set_{n}": getattr(cls, n).__set__ for n in names}
+        args = ", ".join(names)
+        body = "".join(f"    set_{n}(o, {n})\n" for n in names)
+        exec(f"def make({args}):\n    o = new(cls)\n{body}    return o\n", env)  # noqa: S102 - our own fields
+        make = _UNCHECKED[cls] = env["make"]
+    return make  # type: ignore[return-value]
+
+
+R = typing.TypeVar("R")
+_UNCHECKED: dict[type, typing.Callable[..., object]] = {}
 
 
 # --------------------------------------------------------------------------- codec

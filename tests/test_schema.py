@@ -609,3 +609,17 @@ def test_key_table_rows_are_consistent() -> None:
     assert writers[Nps] == "DRONE"
     assert writers[Upd] == "ENV"
     assert writers[Turn] == writers[Over] == writers[Status] == "SRV"
+
+
+def test_unchecked_builds_the_same_record_without_checking() -> None:
+    from dronesim.schema import Cause, Note
+    from dronesim.schema.messages import unchecked
+
+    make = unchecked(DroneStatus)
+    s = make("D01", (1, 2, 3), DroneState.ALIVE, (4, 5, 6), Note.NONE, Cause.NONE)
+    assert s == DroneStatus(drone="D01", pos=(1, 2, 3), state=DroneState.ALIVE, target=(4, 5, 6))
+    assert encode(Status(turn=1, sender="OBS", drones=(s,))) == encode(Status(turn=1, sender="OBS", drones=(
+        DroneStatus(drone="D01", pos=(1, 2, 3), state=DroneState.ALIVE, target=(4, 5, 6)),)))
+    assert unchecked(DroneStatus) is make
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.pos = (0, 0, 0)  # type: ignore[misc]

@@ -65,7 +65,6 @@ DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
 _RANKED = tuple((rank, dx, dy) for rank, (_, (dx, dy)) in enumerate(DIRECTIONS))
 
 
-
 def _is_empty(info: CellInfo) -> bool:
     return info.kind is CellKind.EMPTY
 
