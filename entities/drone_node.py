@@ -21,6 +21,7 @@ import sys
 import time
 from collections.abc import Callable, Mapping
 
+import numpy as np
 import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
@@ -28,7 +29,7 @@ from dronesim.schema import (
     Ans, Ask, CellInfo, CellKind, Connect, Keys, MalformedMessage, Moves, Nps, Over, Phase, RemoteInputError, Role,
     Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
 )
-from dronesim.schema.messages import unchecked
+from dronesim.schema.messages import AROUND, unchecked
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
@@ -97,7 +98,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                     fresh = True
                 if host and done[1]:  # a swarm host: one message for all its drones
                     out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=tuple(
-                        Step(drone=d, pos=dec.pos, note=dec.note) for d, dec in sorted(done[1].items()))))
+                        _step(d, dec.pos, dec.note) for d, dec in sorted(done[1].items()))))
                 elif not host:
                     for d, dec in done[1].items():
                         out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
@@ -137,7 +138,7 @@ class Asker:
             ask, handler = self._ahead
             self._ahead = None
             if ask.turn == turn:
-                self._known = (turn, self._collect(["(ahead)"], handler, ask.asked()) or {})
+                self._known = (turn, self._collect(["(ahead)"], handler, ask) or {})
         return self._known[1] if self._known[0] == turn else {}
 
     def _batches(self, pending: dict[str, tuple]) -> list[list[str]]:
@@ -164,12 +165,11 @@ class Asker:
         end = time.monotonic() + self.patience
         while pending:
             batches = self._batches(pending)
-            asks = [tuple(c for d in b for c in pending[d]) for b in batches]
-            handlers = [self.querier.get(payload=encode(Ask(turn=turn, sender=self.sender, cells=cells)))
-                        for cells in asks]
+            asks = [Ask(turn=turn, sender=self.sender, cells=tuple(c for d in b for c in pending[d])) for b in batches]
+            handlers = [self.querier.get(payload=encode(ask)) for ask in asks]
             unanswered: dict[str, tuple] = {}
-            for batch, handler, cells in zip(batches, handlers, asks):
-                got = self._collect(batch, handler, cells)
+            for batch, handler, ask in zip(batches, handlers, asks):
+                got = self._collect(batch, handler, ask)
                 for d in batch:
                     if got is None:
                         unanswered[d] = pending[d]
@@ -191,9 +191,8 @@ class Asker:
             pending = unanswered
         return answers
 
-    def _collect(self, batch: list[str], handler, asked: tuple) -> Answers | None:
-        """The answer to one ASK of the `asked` cells; None if nobody answered (no queryable, or zenoh's
-        own timeout)."""
+    def _collect(self, batch: list[str], handler, ask: Ask) -> Answers | None:
+        """The answer to `ask`; None if nobody answered (no queryable, or zenoh's own timeout)."""
         result: Answers | None = None
         for reply in handler:
             if reply.ok is None:
@@ -204,7 +203,7 @@ class Asker:
                 continue
             try:
                 ans = decode(reply.ok.payload.to_bytes(), Ans)
-                result = Survey(ans, asked)
+                result = Survey(ans, ask)
             except RemoteInputError as err:
                 self.inbox.rejects.reject(f"ANS for {', '.join(batch)}", err)
                 result = result or {}
@@ -216,31 +215,59 @@ class Asker:
 
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
 _cell_info = unchecked(CellInfo)
+_step = unchecked(Step)  # the coordinator checks every move it is sent
 
 
 class Survey(Mapping):
     """An ANS as a read-only {cell: CellInfo}, each CellInfo made when an autopilot looks at it (an
     answer ahead covers a whole swarm's neighbourhood, of which the autopilots read a few cells)."""
 
-    def __init__(self, ans: Ans, asked: tuple) -> None:
-        if len(asked) != len(ans.kinds):
-            raise MalformedMessage(f"{len(ans.kinds)} answers for {len(asked)} asked cells")
-        self._at = dict(zip(asked, range(len(asked))))
-        self._ans = ans
-        self._drones = ans.occupants()
+    def __init__(self, ans: Ans, ask: Ask) -> None:
+        first, total = len(ask.cells), len(ask.cells) + 6 * len(ask.around)
+        if total != len(ans.kinds):
+            raise MalformedMessage(f"{len(ans.kinds)} answers for {total} asked cells")
+        self._ask, self._ans, self._drones = ask, ans, ans.occupants()
+        self._cells = dict(zip(ask.cells, range(first)))
+        self._ring: dict[int, int] = {}  # code of a neighbour of an `around` cell -> its answer's index
+        if ask.around:
+            ring = np.asarray(ask.around, dtype=np.int64).reshape(-1, 1, 3) + _AROUND
+            self._ring = dict(zip(_codes(ring.reshape(-1, 3)).tolist(), range(first, total)))
+
+    def _index(self, cell) -> int | None:
+        i = self._cells.get(cell)
+        if i is None and self._ring and type(cell) is tuple and len(cell) == 3:
+            x, y, z = cell
+            i = self._ring.get(((x + _BIAS) << 36) | ((y + _BIAS) << 18) | (z + _BIAS))
+        return i
 
     def __getitem__(self, cell) -> CellInfo:
-        i = self._at[cell]
+        i = self._index(cell)
+        if i is None:
+            raise KeyError(cell)
         return _cell_info(cell, _KINDS[self._ans.kinds[i]], self._drones.get(i, ()))  # the ANS was checked whole
 
     def __contains__(self, cell: object) -> bool:
-        return cell in self._at
+        return self._index(cell) is not None
 
     def __iter__(self):
-        return iter(self._at)
+        return iter(dict.fromkeys(self._ask.asked()))
 
-    def __len__(self) -> int:
-        return len(self._at)
+    def __len__(self) -> int:  # seldom needed (the autopilots look cells up): computed on demand
+        return len(dict.fromkeys(self._ask.asked()))
+
+    def __bool__(self) -> bool:
+        return bool(self._ans.kinds)
+
+
+#: Cells as one int for the lookups above: 18 bits a coordinate, biased (a neighbour of a cell within
+#: +-MAX_COORD is within +-(MAX_COORD + 1)).
+_BIAS = 1 << 17
+_AROUND = np.asarray(AROUND, dtype=np.int64)
+
+
+def _codes(cells: np.ndarray) -> np.ndarray:
+    b = cells + _BIAS
+    return (b[:, 0] << 36) | (b[:, 1] << 18) | b[:, 2]
 
 
 def parse_drones(text: str) -> tuple[str, ...]:

@@ -769,7 +769,11 @@ def _record_converter(cls: type) -> typing.Callable[[object], object]:
             env[f"c{i}"] = _record_converter(hint)
             body.append(f"    {guard}{a} = c{i}({a})")
     env["_member"] = _member
-    body.append(f"    return cls({', '.join(f'{f.name}={names[i]}' for i, f in enumerate(fields))})")
+    env["make"] = unchecked(cls)  # every field set, then checked by the record's own __post_init__
+    body.append(f"    o = make({', '.join(names)})")
+    if hasattr(cls, "__post_init__"):
+        body.append("    o.__post_init__()")
+    body.append("    return o")
     exec("\n".join(body), env)  # noqa: S102 - code generated from our own type hints only
     return env["convert"]  # type: ignore[return-value]
 

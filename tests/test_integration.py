@@ -231,3 +231,4 @@ def test_a_connect_without_its_presence_token_is_refused(cluster, tmp_path):
     cluster.start("D01", "drone", "--id", "D01")
     assert gcs.wait() == 0
     assert srv.wait() == 0
+
