@@ -6,14 +6,16 @@
     dronesim bench perf --only '128|floor' # only the rows whose name matches the regex
     dronesim bench perf --profile DIR      # also py-spy (if installed) every process, raw stacks in DIR
 
-In one run, on one loopback router embedded in this process (tcp/127.0.0.1, a free port):
+In one run, through a loopback router process (`dronesim router`, tcp/127.0.0.1, a free port):
 
 1. The floor: a pub/sub ping-pong and a query round trip between this process and a helper process
    (`dronesim.benchmarks.pingpong`), small payloads, BLOCK congestion control, after a warm-up.
 2. Whole games: the coordinator, the environment and one swarm host flying every drone with the
    seed's smart autopilot, each a separate process (`dronesim coordinator|env|drone`), and this
-   process as the ground station. It answers every GCS phase at once (every alive drone's current
-   target, then DONE CONTINUE counting them, as the real GCS does) and timestamps each TURN(GCS, t):
+   process as the ground station. It answers as the scripted GCS (`dronesim gcs --scenario`) does: a
+   DONE carrying the targets that change, and, when its plan has nothing new for the next turn, that
+   turn's DONE at once, ahead (the coordinator then opens and closes that GCS phase without a round
+   trip). It timestamps each TURN(GCS, t):
    turn latency = time between consecutive GCS phases, turns/s = 1 / mean. After the warm-up turns
    and the measured ones it samples the processes' peak memory (VmHWM) and answers DONE QUIT; every
    process must then exit 0.
@@ -143,16 +145,32 @@ def machine() -> dict[str, str]:
 
 
 
-@contextlib.contextmanager
-def loopback_router() -> Iterator[str]:
-    """A Zenoh router in this process on tcp/127.0.0.1:<free port> (loopback only); yields its locator."""
-    from dronesim.transport import router_config, router_locators
+@dataclass(frozen=True, slots=True)
+class Router:
+    locator: str
+    pid: int
 
-    with zenoh.open(router_config("tcp/127.0.0.1:0")) as router:
-        loc = router_locators(router)[0]
-        if not loc.startswith("tcp/127.0.0.1:"):
-            raise RuntimeError(f"the router listens on {loc}, not on loopback")
-        yield loc
+
+@contextlib.contextmanager
+def loopback_router() -> Iterator[Router]:
+    """A Zenoh router process (`dronesim router`) on tcp/127.0.0.1:<free port>, loopback only, as in a
+    deployment: no entity shares its process (an entity's Python callbacks run on Zenoh's threads and
+    would hold up a router living in the same process)."""
+    p = subprocess.Popen([sys.executable, "-m", "dronesim", "router", "--listen", "tcp/127.0.0.1:0",
+                          "--log-level", "WARNING"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        line = p.stdout.readline() if p.stdout else ""
+        found = re.search(r"listening on (tcp/127\.0\.0\.1:\d+)", line)
+        if not found:
+            raise RuntimeError(f"the router did not start on loopback: {line!r}")
+        yield Router(found.group(1), p.pid)
+    finally:
+        p.terminate()
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 class Procs:
@@ -228,7 +246,8 @@ def measure_floor(rounds: int, warmup: int, logs: Path) -> list[Floor]:
     results: list[Floor] = []
     payload_len = 16
     try:
-        with loopback_router() as loc, zenoh.open(client_config(loc)) as session:
+        with loopback_router() as router, zenoh.open(client_config(router.locator)) as session:
+            loc = router.locator
             helper = procs.start("pingpong", [sys.executable, "-m", "dronesim.benchmarks.pingpong", "--connect", loc,
                                      "--root", root])
             if not await_presence(session, f"{root}/ready", 60.0):
@@ -435,7 +454,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     last_drone = drone_id(case.drones)
     ids = "D01" if case.drones == 1 else f"D01-{last_drone}"
     try:
-        with loopback_router() as loc:
+        with loopback_router() as router:
+            loc = router.locator
             base = [sys.executable, "-m", "dronesim"]
             common = ["--mode", "client", "--connect", loc, "--root", root]
             procs.start("coordinator", [*base, "coordinator", *common, "--scenario", str(scenario_file),
@@ -455,6 +475,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                     spies = _spy(procs, profile, case)
                 stamps: dict[tuple[str, int], float] = {}
                 current: dict = {}
+                ahead: int | None = None  # the turn already answered ahead
                 alive: set[str] | None = None
                 over = None
                 idle_since = time.monotonic()
@@ -481,8 +502,10 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                         case Received(_, Turn() as turn):
                             stamps[("GCS", turn.turn)] = now
                             t = turn.turn
+                            early, ahead = ahead == t, None
                             if t in (case.warmup + 1, case.end_turn):  # CPU time over the measured turns
-                                pids = {n: procs.procs[n].pid for n in ROLES} | {"bench": "self"}
+                                pids = {n: procs.procs[n].pid for n in ROLES} | {"router": router.pid,
+                                                                                  "bench": "self"}
                                 for n, pid in pids.items():
                                     game.cpu[n] = cpu_seconds(pid) - game.cpu.get(n, 0.0)
                             if t >= case.end_turn:
@@ -494,9 +517,13 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             current.update(plan.at(t))
                             if alive is not None:
                                 current = {d: c for d, c in current.items() if d in alive}
-                            in_force = targets_of(game.last_status) if game.last_status is not None else None
-                            out.put(keys.gcs_done, gcs_done(t, current, Intent.CONTINUE, in_force))
-                            stamps[("DONE", t)] = time.perf_counter()
+                            if not early:
+                                in_force = targets_of(game.last_status) if game.last_status is not None else None
+                                out.put(keys.gcs_done, gcs_done(t, current, Intent.CONTINUE, in_force))
+                                stamps[("DONE", t)] = time.perf_counter()
+                            if t + 1 < case.end_turn and not plan.at(t + 1):  # as the scripted GCS: nothing new
+                                ahead = t + 1  # next turn, so it answers that phase now
+                                out.put(keys.gcs_done, gcs_done(ahead, {}, Intent.CONTINUE))
                 game.over = f"{over.reason.value} at turn {over.turn}"
                 member.close()
             game.codes = procs.wait(60.0)
@@ -623,7 +650,7 @@ COLUMNS = (
     ("tps", "turns/s"),
     ("lat", "turn (or round trip) ms median / p99"),
     ("split", "ground station's answer ms (median)"),
-    ("cpu", "CPU ms per turn coordinator / env / swarm / this process"),
+    ("cpu", "CPU ms per turn coordinator / env / swarm / router / ground station"),
     ("ltps", "in-process turns/s"),
     ("lratio", "in-process ÷ distributed"),
     ("floor", "turn ÷ pub/sub RTT"),
@@ -736,7 +763,8 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
             cells["tps"] = f"{1 / mean:.1f}"
             cells["lat"] = f"{med * 1e3:.2f} / {_pct(game.latencies, 99) * 1e3:.2f}"
             cells["split"] = f"{statistics.median(game.answers) * 1e3:.2f}" if game.answers else "-"
-            cells["cpu"] = " / ".join(f"{game.cpu.get(n, float('nan')) * 1e3:.1f}" for n in (*ROLES, "bench"))
+            cells["cpu"] = " / ".join(f"{game.cpu.get(n, float('nan')) * 1e3:.1f}"
+                                      for n in (*ROLES, "router", "bench"))
             cells["lratio"] = f"{mean / lmean:.1f}x" if lmean == lmean else "-"
             model = 2 * array + 1024 * case.drones + baseline * 1024
             for key, name in (("srv", "coordinator"), ("env", "env")):
@@ -820,13 +848,13 @@ def legend(facts: dict) -> str:
         "payloads, BLOCK congestion control, after a warm-up, half of them at the start of the run and half at "
         "the end (\"callback replies\": the helper answers from "
         "Zenoh's callback thread; \"main thread replies\": it hands each message to its main thread first, as "
-        "every dronesim entity does); their ms column is the round trip, their CPU column the CPU time per round trip of the helper and of this process (which also runs the router). Game rows: coordinator, environment and "
+        "every dronesim entity does); their ms column is the round trip, their CPU column the CPU time per round trip of the helper and of this process (the router is a process of its own). Game rows: coordinator, environment and "
         "one swarm host (seed autopilot, every drone) are separate processes (coordinator with --phase-deadline "
         f"{PHASE_DEADLINE:g}), this process is the ground "
-        "station (every alive drone's target re-sent each turn, as the real GCS); a turn is the time between "
+        "station (as the scripted GCS: the targets that change, and the next turn's DONE ahead when its plan "
+        "has nothing new for it); a turn is the time between "
         "two consecutive TURN(GCS) arrivals, turns/s = 1 / mean, p99 over the measured turns. The ground "
-        "station's answer: from TURN(GCS) arriving to its DONE sent (the rest of a turn is the system's). CPU: user + system time of each process (all threads) over the measured turns ÷ turns; \"this "
-        "process\" is the router and the ground station. In-process: `dronesim.local.simulate` on the same scenario, timed at the same point; "
+        "station's answer: from TURN(GCS) arriving to its DONE sent, when not answered ahead. CPU: user + system time of each process (all threads) over the measured turns ÷ turns. In-process: `dronesim.local.simulate` on the same scenario, timed at the same point; "
         "\"in-process ÷ distributed\" = distributed mean turn ÷ in-process mean turn. \"turn ÷ pub/sub RTT\" = "
         "median turn ÷ median pub/sub round trip (callback replies). Growth (1000-drone rows) = (mean turn at "
         "1000 ÷ mean turn at 128, same world) ÷ (1000 ÷ 128): 1.00 is linear in N, above is worse than "

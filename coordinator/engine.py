@@ -118,7 +118,16 @@ class Record:
     data: dict
 
 
-Effect = Publish | Reply | Record
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    """Remote input the engine refused on its own (not in answer to the message being received): the
+    adapter counts and logs it like any rejected input."""
+
+    what: str
+    err: RemoteInputError
+
+
+Effect = Publish | Reply | Record | Refusal
 
 
 @dataclass(slots=True)
@@ -176,6 +185,7 @@ class Engine:
         self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
+        self._early: Done | None = None  # the GCS's DONE for the next turn, sent ahead
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self._intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
@@ -362,10 +372,16 @@ class Engine:
                 self._targets.clear()
                 self._tgt_seen, self._done = 0, None
                 self._turn_log = {"record": "turn", "turn": turn}
+                early, self._early = self._early, None
                 if "GCS" not in self.entities:  # no ground station: the drones keep their targets
                     return self._enter(Stage.DRONES, turn)
                 self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS)
-                return [Publish(self._phase_msg)]
+                if early is None or early.turn != turn:
+                    return [Publish(self._phase_msg)]
+                try:  # the ground station answered this phase ahead: it opens and closes at once
+                    return [Publish(self._phase_msg), *self._gcs_done(early)]
+                except RemoteInputError as err:
+                    return [Publish(self._phase_msg), Refusal(f"DONE ahead for turn {turn}", err), *err.follow]
             case Stage.DRONES:
                 self._moves.clear()
                 alive = self.alive()
@@ -411,6 +427,8 @@ class Engine:
             return self.target(msg)
         if isinstance(msg, Upd):
             return self._upd(msg)
+        if isinstance(msg, Done) and msg.turn == self.turn + 1 and self.stage in (Stage.GCS, Stage.DRONES):
+            return self._hold(msg)
         expected = STAGES[self.stage][1]
         if not isinstance(msg, expected or ()) or msg.turn != self.turn:
             raise StaleTurn(f"{msg.TAG} for turn {msg.turn} from {msg.sender} while in {self.stage.value} "
@@ -448,6 +466,18 @@ class Engine:
         if not observer.inside(pos, self.size):
             raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
         self._targets[d] = pos
+
+    def _hold(self, msg: Done) -> list[Effect]:
+        """The GCS's answer to the next GCS phase, sent ahead (it had nothing new to say): kept, and taken
+        as that phase opens, checked then like any DONE (no round trip to the ground station)."""
+        if msg.sender != "GCS" or msg.phase is not Phase.GCS:
+            raise WrongSender(f"DONE({msg.phase.value}) ahead from {msg.sender}")
+        if msg.count:
+            raise StaleTurn(f"a DONE ahead for turn {msg.turn} carries its targets itself, it cannot count TGTs")
+        if self._early is not None:
+            raise StaleTurn(f"second DONE ahead for turn {msg.turn}")
+        self._early = msg
+        return []
 
     def _gcs_done(self, msg: Done) -> list[Effect]:
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
@@ -650,6 +680,7 @@ class Engine:
         self._log.warning("%s vanished", entity)
         match role:
             case Role.GCS:
+                self._early = None  # what it said ahead goes with it
                 if self.stage is Stage.GCS and self._done is not None:
                     return self._gcs_finish(self._done)  # its DONE is in: what arrived of its targets holds
                 if self.stage is Stage.GCS:

@@ -15,7 +15,7 @@ import time
 import zenoh
 
 from dronesim.schema import (
-    Connect, Done, Keys, Message, Moves, Nps, Over, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
+    Connect, Done, Keys, Message, Moves, Nps, RejectCounter, Over, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
     drone_id, encode,
 )
 from dronesim.schema.errors import WrongSender
@@ -24,7 +24,7 @@ from dronesim.transport import (
     Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
 )
 
-from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Reply, Stage
+from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
 from .journal import JournalWriter, read, repair_tail
 
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway.
@@ -93,8 +93,9 @@ class Executor:
     """Carries out the engine's effects in order; with `pace`, a new turn starts at most every `pace`
     seconds (the effects from its TURN on are held until then: a watchable speed, not a synchronisation)."""
 
-    def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, pace: float = 0.0) -> None:
-        self.keys, self.out, self.writer, self.pace = keys, out, writer, pace
+    def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, rejects: RejectCounter,
+                 pace: float = 0.0) -> None:
+        self.keys, self.out, self.writer, self.rejects, self.pace = keys, out, writer, rejects, pace
         self._held: list = []
         self._due = 0.0
         self._turn = 0  # the last turn whose first TURN went out
@@ -121,6 +122,8 @@ class Executor:
                     query.drop()  # the final answer: the asker stops waiting now
                 case Record(data):
                     self.writer.append(data)
+                case Refusal(what, err):
+                    self.rejects.reject(what, err)
 
     def due_in(self) -> float | None:
         """Seconds until held effects are due (None: nothing held)."""
@@ -168,7 +171,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                     keys.root, ", ".join(d.drone for d in game.drones))
 
-        effects = Executor(keys, out, writer, pace)
+        effects = Executor(keys, out, writer, inbox.rejects, pace)
         run = effects.run
         phase = engine.clock()
         started = time.monotonic()

@@ -88,7 +88,12 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         console = Console(size, drones) if interactive else None
         out = Outbox(session)
         current: dict = {}
+        ahead: int | None = None  # the turn whose GCS phase this station has already answered
         gone: set[str] = set()
+
+        def plan_intent(turn: int) -> Intent:
+            return Intent.FINAL if turn >= plan.last_turn else Intent.CONTINUE
+
         tracks = Tracks()
         over: Over | None = None
         while over is None:
@@ -99,16 +104,22 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                 case None:
                     member.check()
                 case Presence() as presence:
-                    member.on_presence(presence)  # admitted again: the coordinator sends the STATUS at once
+                    if member.on_presence(presence) is not None:  # admitted again: the coordinator sends
+                        ahead = None  # the STATUS at once, and it does not know what we said ahead
                 case Received(_, Turn(phase=Phase.GCS) as turn):
-                    if console is not None:
-                        new, intent = console.ask(turn.turn, current)
-                    else:
-                        new = plan.at(turn.turn)
-                        intent = Intent.FINAL if turn.turn >= plan.last_turn else Intent.CONTINUE
-                    current.update((d, c) for d, c in new.items() if d not in gone)
-                    in_force = targets_of(tracks.last) if tracks.last is not None else None
-                    out.put(keys.gcs_done, gcs_done(turn.turn, current, intent, in_force))
+                    if ahead != turn.turn:
+                        if console is not None:
+                            new, intent = console.ask(turn.turn, current)
+                        else:
+                            new = plan.at(turn.turn)
+                            intent = plan_intent(turn.turn)
+                        current.update((d, c) for d, c in new.items() if d not in gone)
+                        in_force = targets_of(tracks.last) if tracks.last is not None else None
+                        out.put(keys.gcs_done, gcs_done(turn.turn, current, intent, in_force))
+                    ahead = None
+                    if console is None and not plan.at(turn.turn + 1):  # a script with nothing new next turn
+                        ahead = turn.turn + 1  # answers it now: the coordinator starts it without asking
+                        out.put(keys.gcs_done, gcs_done(ahead, {}, plan_intent(ahead)))
                 case Received(_, Status() as status):
                     tracks.add(status)
                     gone.update(s.drone for s in status.drones if not s.alive)

@@ -13,7 +13,7 @@ from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from dronesim.coordinator.engine import Engine, GameConfig, Publish, Record, Reply, Stage
+from dronesim.coordinator.engine import Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
 from dronesim.entities.autopilots import fly_round, make_autopilot, pilot_class
 from dronesim.entities.environment import Environment, build_world
 from dronesim.entities.gcs import Plan, gcs_done
@@ -104,6 +104,8 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                     statuses.append(status)
             case Publish(Over()):
                 pass
+            case Refusal(what, err):
+                log.warning("rejected %s: %s", what, err)
     assert engine.end is not None
     return Result(records=records, over=engine.end, statuses=statuses)
 

@@ -42,8 +42,8 @@ def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
         assert not row["target"].startswith("FAILED"), row
         assert float(row["turns/s"]) > 0 and float(row["in-process turns/s"]) > 0
         assert row["alive at end, moving per turn, same game in-process"].endswith("yes"), row
-        cpu = [float(v) for v in row["CPU ms per turn coordinator / env / swarm / this process"].split(" / ")]
-        assert len(cpu) == 4 and all(v >= 0 for v in cpu)
+        cpu = [float(v) for v in row["CPU ms per turn coordinator / env / swarm / router / ground station"].split(" / ")]
+        assert len(cpu) == 5 and all(v >= 0 for v in cpu)
         for col in ("coordinator MiB (÷ model)", "environment MiB (÷ model)"):
             mib, ratio = row[col].replace("(", "").replace(")", "").split()
             assert float(mib) > 0 and float(ratio) > 0

@@ -10,7 +10,7 @@ import pytest
 
 from dronesim.coordinator import journal
 from dronesim.coordinator.engine import (
-    DroneSpec, Engine, GameConfig, Publish, Record, Reply, Stage, replace_config,
+    DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, replace_config,
 )
 from dronesim.schema import (
     Aim, Cause, CellInfo, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Move, Note, Nps, Order,
@@ -527,7 +527,7 @@ def test_misplaced_messages_refused() -> None:
     with pytest.raises(WrongSender):
         g.done(phase=Phase.DRONES)
     with pytest.raises(StaleTurn):
-        g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS))
+        g.engine.receive(Done(turn=3, sender="GCS", phase=Phase.GCS))
     assert g.snapshot() == snap
     g.done()
     snap = g.snapshot()
@@ -963,6 +963,69 @@ def test_batches_give_the_same_journal_as_single_messages() -> None:
                     Step(drone=d, pos=p) for d, p in moves.items()))))
             else:
                 play_turn(g, moves, targets)
+        return records(g.effects)
+
+    assert play(True) == play(False)
+
+
+# --------------------------------------------------------------------------- answers ahead
+
+
+def test_done_ahead_closes_the_next_gcs_phase_as_it_opens() -> None:
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))))
+    g.gcs({"D01": (3, 0, 0), "D02": (4, 4, 0)})
+    assert g.feed(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS))) == [], "held"
+    g.nps("D01", (1, 0, 0))
+    effects = g.nps("D02", (4, 4, 3))
+    turns = pubs(effects, Turn)
+    assert [(t.turn, t.phase) for t in turns] == [(1, Phase.ENV), (2, Phase.GCS), (2, Phase.DRONES)]
+    assert g.stage is Stage.DRONES and g.turn == 2
+    assert turns[-1].orders == (Order(drone="D01", pos=(1, 0, 0), target=(3, 0, 0)),
+                                Order(drone="D02", pos=(4, 4, 3), target=(4, 4, 0)))
+
+
+def test_done_ahead_is_checked_when_its_phase_opens() -> None:
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), buildings={(1, 0, 0)}))
+    g.gcs({"D01": (3, 0, 0)})
+    g.feed(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, targets=(
+        Aim(drone="D01", pos=(2, 2, 2)), Aim(drone="D02", pos=(0, 4, 4))))))
+    g.nps("D01", (1, 0, 0))  # into a building: D01 is dead when turn 2 opens
+    effects = g.nps("D02", (4, 4, 4))
+    refusals = [e for e in effects if isinstance(e, Refusal)]
+    assert len(refusals) == 1 and "D01, which is DEAD" in str(refusals[0].err)
+    assert pubs(effects, Turn)[-1].orders == (Order(drone="D02", pos=(4, 4, 4), target=(0, 4, 4)),)
+
+
+def test_done_ahead_misuse_is_refused_and_changes_nothing() -> None:
+    g = Game()
+    g.gcs()
+    snap = g.snapshot()
+    with pytest.raises(StaleTurn, match="cannot count"):
+        g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, count=1))
+    with pytest.raises(WrongSender):
+        g.engine.receive(Done(turn=2, sender="D01", phase=Phase.GCS))
+    with pytest.raises(StaleTurn):
+        g.engine.receive(Done(turn=3, sender="GCS", phase=Phase.GCS))  # two turns ahead
+    assert g.snapshot() == snap and g.engine._early is None
+    g.feed(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS)))
+    with pytest.raises(StaleTurn, match="second DONE ahead"):
+        g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))
+    g.feed(g.engine.vanished("GCS"))
+    assert g.engine._early is None, "what a ground station said ahead leaves with it"
+
+
+def test_answers_ahead_give_the_same_journal() -> None:
+    def play(ahead: bool) -> list:
+        g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))))
+        g.gcs({"D01": (3, 0, 0), "D02": (4, 4, 0)})
+        for turn, moves in enumerate([{"D01": (1, 0, 0), "D02": (4, 4, 3)}, {"D01": (2, 0, 0), "D02": (4, 4, 2)},
+                                      {"D01": (3, 0, 0), "D02": (4, 4, 1)}], 1):
+            if ahead:
+                g.feed(g.engine.receive(Done(turn=turn + 1, sender="GCS", phase=Phase.GCS)))
+            for d, p in moves.items():
+                g.nps(d, p)
+            if not ahead:
+                g.done()
         return records(g.effects)
 
     assert play(True) == play(False)
