@@ -45,6 +45,10 @@ from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageEr
 from . import arbiter, observer
 
 
+#: How many turns an ENV phase's report (UPD) may lag behind and still be checked.
+UPD_WINDOW = 16
+
+
 class Stage(enum.Enum):
     ADMITTING = "ADMITTING"
     RESUMING = "RESUMING"  # restarted from a journal: waiting for the entities to connect again
@@ -180,7 +184,7 @@ class Engine:
         self._moves: dict[str, Cell] = {}  # received in this DRONES phase
         self._notes: dict[str, Note] = {}
         self._turn_log: dict = {}
-        self._upd_due: tuple[int, tuple[Move, ...]] | None = None  # the last ENV phase's turn and moves
+        self._upd_due: dict[int, tuple[Move, ...]] = {}  # ENV phases whose report is awaited: turn -> moves
         self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
         self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
         self._tgt_seen = 0  # TGT messages of this GCS phase
@@ -412,7 +416,9 @@ class Engine:
         moves = tuple(_move(d, before[d], final[d]) for d in sorted(final) if final[d] != before[d])
         if not moves:
             return self._observe()
-        self._upd_due = (turn, moves)
+        self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
+        for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
+            del self._upd_due[old]
         return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()]
 
     def _kind(self, cell: Cell) -> CellKind:
@@ -544,20 +550,20 @@ class Engine:
         return []
 
     def _upd(self, msg: Upd) -> list[Effect]:
-        """The environment's report of the last ENV phase: checked against the engine's world; it
+        """The environment's report of a recent ENV phase: checked against the engine's world; it
         changes nothing (the observer has already judged the turn)."""
         if msg.sender != "ENV":
             raise WrongSender(f"UPD from {msg.sender}")
-        if self._upd_due is None or msg.turn != self._upd_due[0]:
+        turn, moves = msg.turn, self._upd_due.get(msg.turn)
+        if moves is None:
             raise StaleTurn(f"UPD for turn {msg.turn}, which had no ENV phase awaiting its report")
-        turn, moves = self._upd_due
         expected = {c: self._kind(c) for m in moves for c in (m.src, m.dst) if self.world.contains(c)}
         reported = {c.pos: c.kind for c in msg.cells}
         if reported != expected:
             wrong = sorted(c for c in expected.keys() | reported.keys() if reported.get(c) != expected.get(c))
             raise OutOfRange(f"UPD of turn {turn} disagrees with the world at {wrong[:5]}: the environment's "
                              "world or drones differ from the coordinator's")
-        self._upd_due = None
+        del self._upd_due[turn]
         return []
 
     def _observe(self) -> list[Effect]:

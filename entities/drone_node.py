@@ -16,24 +16,24 @@ and so journals, do not change; a turn loses the sensing round trips of most aut
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
-import numpy as np
 import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
-    Ans, Ask, CellInfo, CellKind, Connect, Keys, MalformedMessage, Moves, Nps, Over, Phase, RemoteInputError, Role,
+    Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, Moves, Nps, Order, Over, Phase, RemoteInputError, Role,
     Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
 )
 from dronesim.schema.messages import AROUND, unchecked
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
-from .autopilots.base import Answers, in_bounds
+from .autopilots.base import Answers
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
@@ -49,9 +49,9 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         member = Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
         pilots = {d: make_autopilot(autopilot, world_size=member.welcome.world.size) for d in drones}
         out = Outbox(session)
-        asker = Asker(session, keys, inbox, logger, sender=sender, timeout=ask_timeout, patience=grace)
+        asker = Asker(session, keys, inbox, logger, sender=sender, timeout=ask_timeout, patience=grace,
+                      size=member.welcome.world.size)
         mine = set(drones)
-        size = member.welcome.world.size
         senses = pilot_class(autopilot).senses
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
@@ -90,8 +90,9 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                 fresh = False
                 if done is None or done[0] != (latest.turn, orders):
                     steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
+                    occupancy = functools.cache(lambda turn=latest: occupancy_of(turn.orders))
                     decisions = fly_round(steps, lambda pending: asker.ask_all(
-                        latest.turn, pending, give_up=lambda: superseded(latest.turn)))
+                        latest.turn, pending, occupancy, give_up=lambda: superseded(latest.turn)))
                     if superseded(latest.turn):
                         continue  # too late: the game has moved on (the queued events come next)
                     done = ((latest.turn, orders), decisions)
@@ -102,9 +103,8 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                 elif not host:
                     for d, dec in done[1].items():
                         out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
-                if fresh and senses:  # where its drones mean to be: their next sensing, asked ahead
-                    asker.prefetch(latest.turn + 1, tuple(sorted({d.pos for d in done[1].values()
-                                                                  if in_bounds(d.pos, size)})))
+                if fresh and senses:  # around where its drones mean to be: their next sensing, asked ahead
+                    asker.prefetch(sorted({d.pos for d in done[1].values()}))
         asker.close()
         member.close()
         return over
@@ -117,29 +117,28 @@ class Asker:
     again once the environment is back, so the decision does not change."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, inbox: Inbox, logger: logging.Logger, *,
-                 sender: str, timeout: float, patience: float) -> None:
+                 sender: str, timeout: float, patience: float, size: Cell) -> None:
         self.session, self.keys, self.inbox, self.log = session, keys, inbox, logger
         self.sender = sender
         self.patience = patience
         self.querier = session.declare_querier(keys.ask, timeout=timeout,
                                                consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
-        self._ahead: tuple[Ask, object] | None = None  # an ASK sent ahead, and its reply handler
-        self._known: tuple[int, Answers] = (0, {})  # answers for one turn, from asking ahead
+        self.chart = Chart(size)
+        self._ahead: list[tuple[Ask, object]] = []  # static ASKs (turn 0) sent ahead, and their reply handlers
 
-    def prefetch(self, turn: int, around: tuple) -> None:
-        """Ask now for the neighbours of `around` in `turn` (answered from that turn's world)."""
-        if around and 6 * len(around) <= Ask.MAX_CELLS:
-            ask = Ask(turn=turn, sender=self.sender, around=around)
-            self._ahead = (ask, self.querier.get(payload=encode(ask)))
+    def prefetch(self, around: Iterable[Cell]) -> None:
+        """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
+        `around` that this process has not been told yet."""
+        cells = self.chart.unknown(around)
+        for i in range(0, len(cells), Ask.MAX_CELLS):
+            ask = Ask(turn=0, sender=self.sender, cells=cells[i:i + Ask.MAX_CELLS])
+            self._ahead.append((ask, self.querier.get(payload=encode(ask))))
 
-    def _ahead_for(self, turn: int) -> Answers:
-        """The answers asked ahead for `turn` (waiting for them if they are still on their way)."""
-        if self._ahead is not None:
-            ask, handler = self._ahead
-            self._ahead = None
-            if ask.turn == turn:
-                self._known = (turn, self._collect(["(ahead)"], handler, ask) or {})
-        return self._known[1] if self._known[0] == turn else {}
+    def _absorb(self) -> None:
+        """Learn the kinds asked ahead (waiting for answers still on their way, which is rare)."""
+        for ask, handler in self._ahead:
+            self._collect(["(ahead)"], handler, ask)
+        self._ahead.clear()
 
     def _batches(self, pending: dict[str, tuple]) -> list[list[str]]:
         batches: list[list[str]] = [[]]
@@ -152,16 +151,24 @@ class Asker:
             size += len(cells)
         return batches
 
-    def ask_all(self, turn: int, pending: dict[str, tuple], *,
+    def ask_all(self, turn: int, pending: dict[str, tuple], occupancy: Callable[[], Mapping[Cell, tuple]], *,
                 give_up: Callable[[], bool] = lambda: False) -> dict[str, Answers]:
-        """Answers for every drone's cells. While the environment is away it waits for it (up to
-        `patience`), checking `give_up` at least every second (the game may have ended meanwhile)."""
+        """Answers for every drone's cells, as the environment would give them at the start of `turn`:
+        for a cell whose kind this process was told (buildings never move), the kind and the drones in
+        it (`occupancy`: every alive drone's cell, from the turn's orders), without a round trip; for
+        the others, an ASK. While the environment is away it waits for it (up to `patience`), checking
+        `give_up` at least every second (the game may have ended meanwhile)."""
+        self._absorb()
         answers: dict[str, Answers] = {}
-        pending = dict(pending)
-        known = self._ahead_for(turn)
-        if known:
-            for d in [d for d, cells in pending.items() if all(c in known for c in cells)]:
-                answers[d] = {c: known[c] for c in pending.pop(d)}
+        kind, missing = self.chart.kind, {}
+        for d, cells in pending.items():
+            kinds = [kind(c) for c in cells]
+            if None in kinds:
+                missing[d] = cells
+            else:
+                occupied = occupancy()
+                answers[d] = {c: _cell_info(c, k, occupied.get(c, ())) for c, k in zip(cells, kinds)}
+        pending = missing
         end = time.monotonic() + self.patience
         while pending:
             batches = self._batches(pending)
@@ -203,7 +210,10 @@ class Asker:
                 continue
             try:
                 ans = decode(reply.ok.payload.to_bytes(), Ans)
-                result = Survey(ans, ask)
+                asked = ask.asked()
+                infos = ans.infos(asked)
+                self.chart.learn(asked, ans.kinds)
+                result = dict(zip(asked, infos))
             except RemoteInputError as err:
                 self.inbox.rejects.reject(f"ANS for {', '.join(batch)}", err)
                 result = result or {}
@@ -218,56 +228,55 @@ _cell_info = unchecked(CellInfo)
 _step = unchecked(Step)  # the coordinator checks every move it is sent
 
 
-class Survey(Mapping):
-    """An ANS as a read-only {cell: CellInfo}, each CellInfo made when an autopilot looks at it (an
-    answer ahead covers a whole swarm's neighbourhood, of which the autopilots read a few cells)."""
+def occupancy_of(orders: Iterable[Order]) -> dict[Cell, tuple[str, ...]]:
+    """Which drones are in which cell at the start of a turn: the orders list every alive drone."""
+    cells: dict[Cell, list[str]] = {}
+    for o in orders:
+        cells.setdefault(o.pos, []).append(o.drone)
+    return {c: tuple(sorted(ds)) for c, ds in cells.items()}
 
-    def __init__(self, ans: Ans, ask: Ask) -> None:
-        first, total = len(ask.cells), len(ask.cells) + 6 * len(ask.around)
-        if total != len(ans.kinds):
-            raise MalformedMessage(f"{len(ans.kinds)} answers for {total} asked cells")
-        self._ask, self._ans, self._drones = ask, ans, ans.occupants()
-        self._cells = dict(zip(ask.cells, range(first)))
-        self._ring: dict[int, int] = {}  # code of a neighbour of an `around` cell -> its answer's index
-        if ask.around:
-            ring = np.asarray(ask.around, dtype=np.int64).reshape(-1, 1, 3) + _AROUND
-            self._ring = dict(zip(_codes(ring.reshape(-1, 3)).tolist(), range(first, total)))
 
-    def _index(self, cell) -> int | None:
-        i = self._cells.get(cell)
-        if i is None and self._ring and type(cell) is tuple and len(cell) == 3:
-            x, y, z = cell
-            i = self._ring.get(((x + _BIAS) << 36) | ((y + _BIAS) << 18) | (z + _BIAS))
-        return i
+class Chart:
+    """The kinds of the cells this process has been told by the environment (buildings never move,
+    so what it is told once holds for the whole game): one byte per cell of the world, 255 until told.
+    Cells outside the world are OUTSIDE (their kind follows from the world's size)."""
 
-    def __getitem__(self, cell) -> CellInfo:
-        i = self._index(cell)
+    UNKNOWN = 255
+
+    def __init__(self, size: Cell) -> None:
+        self.size = size
+        self._kinds = bytearray([self.UNKNOWN]) * (size[0] * size[1] * size[2])
+
+    def _at(self, cell: Cell) -> int | None:
+        x, y, z = cell
+        nx, ny, nz = self.size
+        return (x * ny + y) * nz + z if 0 <= x < nx and 0 <= y < ny and 0 <= z < nz else None
+
+    def kind(self, cell: Cell) -> CellKind | None:
+        """The cell's kind, None if never told."""
+        i = self._at(cell)
         if i is None:
-            raise KeyError(cell)
-        return _cell_info(cell, _KINDS[self._ans.kinds[i]], self._drones.get(i, ()))  # the ANS was checked whole
+            return CellKind.OUTSIDE
+        k = self._kinds[i]
+        return None if k == self.UNKNOWN else _KINDS[k]
 
-    def __contains__(self, cell: object) -> bool:
-        return self._index(cell) is not None
+    def learn(self, cells: Iterable[Cell], kinds: bytes) -> None:
+        for cell, k in zip(cells, kinds):
+            i = self._at(cell)
+            if i is not None:
+                self._kinds[i] = k
 
-    def __iter__(self):
-        return iter(dict.fromkeys(self._ask.asked()))
-
-    def __len__(self) -> int:  # seldom needed (the autopilots look cells up): computed on demand
-        return len(dict.fromkeys(self._ask.asked()))
-
-    def __bool__(self) -> bool:
-        return bool(self._ans.kinds)
-
-
-#: Cells as one int for the lookups above: 18 bits a coordinate, biased (a neighbour of a cell within
-#: +-MAX_COORD is within +-(MAX_COORD + 1)).
-_BIAS = 1 << 17
-_AROUND = np.asarray(AROUND, dtype=np.int64)
-
-
-def _codes(cells: np.ndarray) -> np.ndarray:
-    b = cells + _BIAS
-    return (b[:, 0] << 36) | (b[:, 1] << 18) | b[:, 2]
+    def unknown(self, around: Iterable[Cell]) -> tuple[Cell, ...]:
+        """The neighbours of the `around` cells whose kind was never told, once each, in order."""
+        kinds = self._kinds
+        out: dict[Cell, None] = {}
+        for x, y, z in around:
+            for dx, dy, dz in AROUND:
+                c = (x + dx, y + dy, z + dz)
+                i = self._at(c)
+                if i is not None and kinds[i] == self.UNKNOWN:
+                    out[c] = None
+        return tuple(out)
 
 
 def parse_drones(text: str) -> tuple[str, ...]:

@@ -6,7 +6,8 @@ against its own copy of the world without waiting for it), serves the static map
 the drones' positions from each STATUS.
 
 An ASK for turn t is answered once STATUS(t-1) has been applied; one that arrives earlier (possible
-when messages take different routes) waits for it, one for a past turn gets an error reply.
+when messages take different routes) waits for it, one for a past turn gets an error reply. An ASK for
+turn 0 asks the static world: the kinds of the cells (buildings never move), no drones, answered at once.
 """
 
 from __future__ import annotations
@@ -68,7 +69,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                 out.put(keys.upd, Upd(turn=turn.turn, sender="ENV", cells=env.answer(changed)))
 
         def answer(query: zenoh.Query, ask: Ask) -> None:
-            kinds, drones = env.survey(ask.cells, ask.around)  # built right: not checked again (the asker does)
+            # built right: not checked again (the asker does); turn 0 asks the static world (kinds only)
+            kinds, drones = env.survey(ask.cells, ask.around, drones=ask.turn != 0)
             query.reply(query.key_expr, encode(_ans(ask.turn, "ENV", kinds, drones)))
             query.drop()
 
@@ -90,7 +92,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                         if not (is_drone_id(ask.sender) or is_host_id(ask.sender)):
                             refuse(query, "only drones ask")
                             raise WrongSender(f"ASK from {ask.sender}")
-                        if ask.turn == ready:
+                        if ask.turn == ready or ask.turn == 0:
                             answer(query, ask)
                         elif ask.turn > ready:
                             waiting.append((query, ask))

@@ -46,10 +46,11 @@ class Environment:
     def answer(self, cells: Iterable[Cell]) -> tuple[CellInfo, ...]:
         return tuple(self.world.what_inside(c, self._occupants) for c in cells)
 
-    def survey(self, cells: Sequence[Cell], around: Sequence[Cell] = ()) -> tuple[bytes, tuple[tuple[int, str], ...]]:
+    def survey(self, cells: Sequence[Cell], around: Sequence[Cell] = (), *,
+               drones: bool = True) -> tuple[bytes, tuple[tuple[int, str], ...]]:
         """`answer` for many cells at once, as an ANS carries it (see `Ask.asked`: `cells`, then the six
         neighbours of each `around` cell): one CellKind byte per cell and (index, drone) for every drone
-        in an asked cell, all in numpy over the grid."""
+        in an asked cell (none with `drones` False: the static world), all in numpy over the grid."""
         a = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
         if len(around):
             ring = np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + np.asarray(AROUND, dtype=np.int64)
@@ -59,7 +60,7 @@ class Environment:
         kinds = np.full(len(a), CellKind.OUTSIDE, dtype=np.uint8)
         i = a[inside]
         kinds[inside] = np.where(self.world.grid[i[:, 0], i[:, 1], i[:, 2]], CellKind.BUILDING, CellKind.EMPTY)
-        if not self._occupants:
+        if not drones or not self._occupants:
             return kinds.tobytes(), ()
         linear = np.where(inside, (a[:, 0] * size[1] + a[:, 1]) * size[2] + a[:, 2], -1)
         occupied = self._occupied_linear

@@ -1029,3 +1029,16 @@ def test_answers_ahead_give_the_same_journal() -> None:
         return records(g.effects)
 
     assert play(True) == play(False)
+
+
+def test_a_late_upd_is_still_checked() -> None:
+    """Nothing waits for the environment's report, so it may come a turn or more later."""
+    g = Game()
+    play_turn(g, {"D01": (1, 0, 0)}, {"D01": (4, 0, 0)})
+    first = g.env_turn()
+    play_turn(g, {"D01": (2, 0, 0)})
+    assert g.engine.receive(Upd(turn=1, sender="ENV", cells=(CellInfo(pos=(0, 0, 0), kind=CellKind.EMPTY),
+                                                              CellInfo(pos=(1, 0, 0), kind=CellKind.EMPTY)))) == []
+    assert first.turn == 1
+    with pytest.raises(StaleTurn):
+        g.engine.receive(Upd(turn=1, sender="ENV", cells=()))  # checked once
