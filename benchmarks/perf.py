@@ -437,7 +437,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     """One game over a loopback router with this process as the ground station; see the module docstring."""
     from dronesim.entity import Membership
     from dronesim.scenario import Scenario
-    from dronesim.entities.gcs import gcs_done, targets_of
+    from dronesim.entities.gcs import gcs_done, targets_of, turns_to_answer_ahead
     from dronesim.schema import Connect, Done, Intent, Keys, Over, Phase, Role, Status, Turn, drone_id
     from dronesim.transport import Inbox, Outbox, Presence, Received, session_id
 
@@ -475,7 +475,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                     spies = _spy(procs, profile, case)
                 stamps: dict[tuple[str, int], float] = {}
                 current: dict = {}
-                ahead: int | None = None  # the turn already answered ahead
+                answered = 0  # the last turn answered (maybe ahead)
                 alive: set[str] | None = None
                 over = None
                 idle_since = time.monotonic()
@@ -502,7 +502,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                         case Received(_, Turn() as turn):
                             stamps[("GCS", turn.turn)] = now
                             t = turn.turn
-                            early, ahead = ahead == t, None
+                            early = t <= answered
+                            answered = max(answered, t)
                             if t in (case.warmup + 1, case.end_turn):  # CPU time over the measured turns
                                 pids = {n: procs.procs[n].pid for n in ROLES} | {"router": router.pid,
                                                                                   "bench": "self"}
@@ -521,9 +522,9 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                                 in_force = targets_of(game.last_status) if game.last_status is not None else None
                                 out.put(keys.gcs_done, gcs_done(t, current, Intent.CONTINUE, in_force))
                                 stamps[("DONE", t)] = time.perf_counter()
-                            if t + 1 < case.end_turn and not plan.at(t + 1):  # as the scripted GCS: nothing new
-                                ahead = t + 1  # next turn, so it answers that phase now
-                                out.put(keys.gcs_done, gcs_done(ahead, {}, Intent.CONTINUE))
+                            for ahead in turns_to_answer_ahead(plan, t, answered, last=case.end_turn):
+                                out.put(keys.gcs_done, gcs_done(ahead, {}, Intent.CONTINUE))  # as the scripted GCS
+                                answered = ahead
                 game.over = f"{over.reason.value} at turn {over.turn}"
                 member.close()
             game.codes = procs.wait(60.0)

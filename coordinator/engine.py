@@ -45,6 +45,8 @@ from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageEr
 from . import arbiter, observer
 
 
+#: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
+AHEAD_MAX = 8
 #: How many turns an ENV phase's report (UPD) may lag behind and still be checked.
 UPD_WINDOW = 16
 
@@ -189,7 +191,7 @@ class Engine:
         self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
-        self._early: Done | None = None  # the GCS's DONE for the next turn, sent ahead
+        self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self._intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
@@ -376,11 +378,12 @@ class Engine:
                 self._targets.clear()
                 self._tgt_seen, self._done = 0, None
                 self._turn_log = {"record": "turn", "turn": turn}
-                early, self._early = self._early, None
+                early = self._early.pop(turn, None)
+                self._early = {t: d for t, d in self._early.items() if t > turn}
                 if "GCS" not in self.entities:  # no ground station: the drones keep their targets
                     return self._enter(Stage.DRONES, turn)
                 self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS)
-                if early is None or early.turn != turn:
+                if early is None:
                     return [Publish(self._phase_msg)]
                 try:  # the ground station answered this phase ahead: it opens and closes at once
                     return [Publish(self._phase_msg), *self._gcs_done(early)]
@@ -415,11 +418,11 @@ class Engine:
         self._final = final
         moves = tuple(_move(d, before[d], final[d]) for d in sorted(final) if final[d] != before[d])
         if not moves:
-            return self._observe()
+            return _drones_first(self._observe())
         self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
         for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
             del self._upd_due[old]
-        return [Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()]
+        return _drones_first([Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()])
 
     def _kind(self, cell: Cell) -> CellKind:
         if not self.world.contains(cell):
@@ -433,7 +436,8 @@ class Engine:
             return self.target(msg)
         if isinstance(msg, Upd):
             return self._upd(msg)
-        if isinstance(msg, Done) and msg.turn == self.turn + 1 and self.stage in (Stage.GCS, Stage.DRONES):
+        if (isinstance(msg, Done) and self.turn < msg.turn <= self.turn + AHEAD_MAX
+                and self.stage in (Stage.GCS, Stage.DRONES)):
             return self._hold(msg)
         expected = STAGES[self.stage][1]
         if not isinstance(msg, expected or ()) or msg.turn != self.turn:
@@ -474,15 +478,16 @@ class Engine:
         self._targets[d] = pos
 
     def _hold(self, msg: Done) -> list[Effect]:
-        """The GCS's answer to the next GCS phase, sent ahead (it had nothing new to say): kept, and taken
-        as that phase opens, checked then like any DONE (no round trip to the ground station)."""
+        """The GCS's answer to a coming GCS phase (up to AHEAD_MAX turns on), sent ahead because it had
+        nothing new to say: kept, and taken as that phase opens, checked then like any DONE (no round
+        trip to the ground station)."""
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
             raise WrongSender(f"DONE({msg.phase.value}) ahead from {msg.sender}")
         if msg.count:
             raise StaleTurn(f"a DONE ahead for turn {msg.turn} carries its targets itself, it cannot count TGTs")
-        if self._early is not None:
+        if msg.turn in self._early:
             raise StaleTurn(f"second DONE ahead for turn {msg.turn}")
-        self._early = msg
+        self._early[msg.turn] = msg
         return []
 
     def _gcs_done(self, msg: Done) -> list[Effect]:
@@ -686,7 +691,7 @@ class Engine:
         self._log.warning("%s vanished", entity)
         match role:
             case Role.GCS:
-                self._early = None  # what it said ahead goes with it
+                self._early.clear()  # what it said ahead goes with it
                 if self.stage is Stage.GCS and self._done is not None:
                     return self._gcs_finish(self._done)  # its DONE is in: what arrived of its targets holds
                 if self.stage is Stage.GCS:
@@ -706,6 +711,14 @@ class Engine:
                 if self.stage is Stage.DRONES:
                     return self._drones_check()
         return []
+
+
+def _drones_first(effects: list[Effect]) -> list[Effect]:
+    """The next turn's drones' phase first, when a turn ends and the next one's GCS phase was answered
+    ahead: it is what the next turn waits for. The rest keeps its order (STATUS before the GCS phase
+    it informs; the ENV phase before its STATUS)."""
+    urgent = [e for e in effects if isinstance(e, Publish) and isinstance(e.msg, Turn) and e.msg.phase is Phase.DRONES]
+    return urgent + [e for e in effects if e not in urgent] if urgent else effects
 
 
 def _each(items, take) -> list[RemoteInputError]:

@@ -46,6 +46,25 @@ def gcs_done(turn: int, targets: Mapping[str, Cell], intent: Intent,
                 targets=tuple(Aim(drone=d, pos=c) for d, c in sorted(targets.items()) if keep.get(d) != c))
 
 
+#: How many GCS phases a scripted ground station answers ahead, when its plan has nothing new for
+#: them (the coordinator holds up to coordinator.engine.AHEAD_MAX): two keeps the ground station off
+#: the turn's critical path even when its answer takes as long as the drones' phase.
+ANSWER_AHEAD = 2
+
+
+def turns_to_answer_ahead(plan: "Plan", turn: int, answered: int, *, last: int | None = None,
+                          horizon: int = ANSWER_AHEAD) -> list[int]:
+    """The turns after `turn` a scripted station can answer now: up to `horizon` of them, before the
+    plan's next change (and before `last`), except those already answered (up to `answered`)."""
+    out = []
+    for u in range(turn + 1, turn + horizon + 1):
+        if plan.at(u) or (last is not None and u >= last):
+            break
+        if u > answered:
+            out.append(u)
+    return out
+
+
 @dataclass(frozen=True, slots=True)
 class Plan:
     """Targets by turn: ``items`` holds (turn, drone, cell), sorted."""

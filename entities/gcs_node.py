@@ -21,7 +21,7 @@ from dronesim.schema import (
 )
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .gcs import Ground, Tracks, format_status, gcs_done, parse_command, targets_of
+from .gcs import Ground, Tracks, format_status, gcs_done, parse_command, targets_of, turns_to_answer_ahead
 from .web.node import add_web_args, run_web, wants_web
 
 
@@ -88,7 +88,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         console = Console(size, drones) if interactive else None
         out = Outbox(session)
         current: dict = {}
-        ahead: int | None = None  # the turn whose GCS phase this station has already answered
+        answered = 0  # the last turn whose GCS phase this station has answered (maybe ahead)
         gone: set[str] = set()
 
         def plan_intent(turn: int) -> Intent:
@@ -105,9 +105,9 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                     member.check()
                 case Presence() as presence:
                     if member.on_presence(presence) is not None:  # admitted again: the coordinator sends
-                        ahead = None  # the STATUS at once, and it does not know what we said ahead
+                        answered = 0  # the STATUS at once, and it does not know what we said ahead
                 case Received(_, Turn(phase=Phase.GCS) as turn):
-                    if ahead != turn.turn:
+                    if turn.turn > answered:
                         if console is not None:
                             new, intent = console.ask(turn.turn, current)
                         else:
@@ -116,10 +116,11 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                         current.update((d, c) for d, c in new.items() if d not in gone)
                         in_force = targets_of(tracks.last) if tracks.last is not None else None
                         out.put(keys.gcs_done, gcs_done(turn.turn, current, intent, in_force))
-                    ahead = None
-                    if console is None and not plan.at(turn.turn + 1):  # a script with nothing new next turn
-                        ahead = turn.turn + 1  # answers it now: the coordinator starts it without asking
-                        out.put(keys.gcs_done, gcs_done(ahead, {}, plan_intent(ahead)))
+                    answered = max(answered, turn.turn)
+                    if console is None:  # a script with nothing new in the next turns answers them now:
+                        for ahead in turns_to_answer_ahead(plan, turn.turn, answered):  # the coordinator
+                            out.put(keys.gcs_done, gcs_done(ahead, {}, plan_intent(ahead)))  # starts them
+                            answered = ahead  # without asking
                 case Received(_, Status() as status):
                     tracks.add(status)
                     gone.update(s.drone for s in status.drones if not s.alive)

@@ -54,11 +54,20 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()
+
+    def push(effects: list) -> None:
+        """Queue a batch of effects, a drones' phase after the rest: the coordinator sends it first (the
+        next turn waits for it), but here the environment must see the turn's ENV phase and STATUS
+        before the drones sense, as it does over the network (it answers an ASK for turn t only once
+        STATUS(t - 1) is in)."""
+        first = [e for e in effects if not (isinstance(e, Publish) and isinstance(e.msg, Turn)
+                                            and e.msg.phase is Phase.DRONES)]
+        queue.extend(first + [e for e in effects if e not in first])
     welcome: Welcome | None = None
     for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), Connect(turn=0, sender="GCS", role=Role.GCS)):
-        queue.extend(engine.connect(hello, None))
+        push(engine.connect(hello, None))
     for d in sorted(autopilots):
-        queue.extend(engine.connect(Connect(turn=0, sender=d, role=Role.DRONE, drones=(d,), autopilot=autopilots[d],
+        push(engine.connect(Connect(turn=0, sender=d, role=Role.DRONE, drones=(d,), autopilot=autopilots[d],
                                             cooperative=pilot_class(autopilots[d]).cooperative), None))
     env: Environment | None = None
     pilots: dict = {}
@@ -77,24 +86,24 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 alive = set(engine.alive())
                 current = {d: c for d, c in current.items() if d in alive}
                 in_force = {d: r.target for d, r in engine.drones.items() if r.target is not None}
-                queue.extend(_accept(engine, log, gcs_done(t, current, inputs.intent(t), in_force)))
+                push(_accept(engine, log, gcs_done(t, current, inputs.intent(t), in_force)))
             case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
                 assert env is not None
                 for d in sorted(inputs.vanished.get(t, ())):
-                    queue.extend(engine.vanished(d))
+                    push(engine.vanished(d))
                 skip = inputs.hovered.get(t, set()) | inputs.vanished.get(t, set())
                 steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in turn.orders if o.drone not in skip}
                 oracle = env.answer
                 decisions = fly_round(steps, lambda pending: {d: dict(zip(c, oracle(c))) for d, c in pending.items()})
                 for d in sorted(decisions):
                     dec = decisions[d]
-                    queue.extend(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
+                    push(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
                 if skip:
-                    queue.extend(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
+                    push(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):
                 assert env is not None
                 if verify_env:
-                    queue.extend(engine.receive(Upd(turn=t, sender="ENV", cells=env.apply(turn.moves))))
+                    push(engine.receive(Upd(turn=t, sender="ENV", cells=env.apply(turn.moves))))
                 else:
                     env.move(turn.moves)
             case Publish(Status() as status):

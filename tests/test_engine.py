@@ -10,7 +10,7 @@ import pytest
 
 from dronesim.coordinator import journal
 from dronesim.coordinator.engine import (
-    DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, replace_config,
+    AHEAD_MAX, DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, replace_config,
 )
 from dronesim.schema import (
     Aim, Cause, CellInfo, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Move, Note, Nps, Order,
@@ -527,7 +527,7 @@ def test_misplaced_messages_refused() -> None:
     with pytest.raises(WrongSender):
         g.done(phase=Phase.DRONES)
     with pytest.raises(StaleTurn):
-        g.engine.receive(Done(turn=3, sender="GCS", phase=Phase.GCS))
+        g.engine.receive(Done(turn=2 + AHEAD_MAX, sender="GCS", phase=Phase.GCS))
     assert g.snapshot() == snap
     g.done()
     snap = g.snapshot()
@@ -689,7 +689,7 @@ def test_game_without_a_gcs_phase_when_no_gcs() -> None:
     g.nps("D01", (0, 0, 1))
     g.upd()
     turns = pubs(g.last, Turn)
-    assert turns[-1].phase is Phase.DRONES and turns[-1].turn == 2, "no GCS: straight to the drones"
+    assert turns[0].phase is Phase.DRONES and turns[0].turn == 2, "no GCS: straight to the drones"
 
 
 # --------------------------------------------------------------------------- deadlines and faults
@@ -978,9 +978,10 @@ def test_done_ahead_closes_the_next_gcs_phase_as_it_opens() -> None:
     g.nps("D01", (1, 0, 0))
     effects = g.nps("D02", (4, 4, 3))
     turns = pubs(effects, Turn)
-    assert [(t.turn, t.phase) for t in turns] == [(1, Phase.ENV), (2, Phase.GCS), (2, Phase.DRONES)]
+    assert [(t.turn, t.phase) for t in turns] == [(2, Phase.DRONES), (1, Phase.ENV), (2, Phase.GCS)], \
+        "what the next turn waits for goes out first"
     assert g.stage is Stage.DRONES and g.turn == 2
-    assert turns[-1].orders == (Order(drone="D01", pos=(1, 0, 0), target=(3, 0, 0)),
+    assert turns[0].orders == (Order(drone="D01", pos=(1, 0, 0), target=(3, 0, 0)),
                                 Order(drone="D02", pos=(4, 4, 3), target=(4, 4, 0)))
 
 
@@ -993,7 +994,7 @@ def test_done_ahead_is_checked_when_its_phase_opens() -> None:
     effects = g.nps("D02", (4, 4, 4))
     refusals = [e for e in effects if isinstance(e, Refusal)]
     assert len(refusals) == 1 and "D01, which is DEAD" in str(refusals[0].err)
-    assert pubs(effects, Turn)[-1].orders == (Order(drone="D02", pos=(4, 4, 4), target=(0, 4, 4)),)
+    assert pubs(effects, Turn)[0].orders == (Order(drone="D02", pos=(4, 4, 4), target=(0, 4, 4)),)
 
 
 def test_done_ahead_misuse_is_refused_and_changes_nothing() -> None:
@@ -1005,13 +1006,13 @@ def test_done_ahead_misuse_is_refused_and_changes_nothing() -> None:
     with pytest.raises(WrongSender):
         g.engine.receive(Done(turn=2, sender="D01", phase=Phase.GCS))
     with pytest.raises(StaleTurn):
-        g.engine.receive(Done(turn=3, sender="GCS", phase=Phase.GCS))  # two turns ahead
-    assert g.snapshot() == snap and g.engine._early is None
+        g.engine.receive(Done(turn=2 + AHEAD_MAX, sender="GCS", phase=Phase.GCS))  # too far ahead
+    assert g.snapshot() == snap and not g.engine._early
     g.feed(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS)))
     with pytest.raises(StaleTurn, match="second DONE ahead"):
         g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))
     g.feed(g.engine.vanished("GCS"))
-    assert g.engine._early is None, "what a ground station said ahead leaves with it"
+    assert not g.engine._early, "what a ground station said ahead leaves with it"
 
 
 def test_answers_ahead_give_the_same_journal() -> None:
@@ -1020,8 +1021,9 @@ def test_answers_ahead_give_the_same_journal() -> None:
         g.gcs({"D01": (3, 0, 0), "D02": (4, 4, 0)})
         for turn, moves in enumerate([{"D01": (1, 0, 0), "D02": (4, 4, 3)}, {"D01": (2, 0, 0), "D02": (4, 4, 2)},
                                       {"D01": (3, 0, 0), "D02": (4, 4, 1)}], 1):
-            if ahead:
-                g.feed(g.engine.receive(Done(turn=turn + 1, sender="GCS", phase=Phase.GCS)))
+            if ahead and turn == 1:  # answers two turns at once, as far as its plan allows
+                for t in (2, 3):
+                    g.feed(g.engine.receive(Done(turn=t, sender="GCS", phase=Phase.GCS)))
             for d, p in moves.items():
                 g.nps(d, p)
             if not ahead:

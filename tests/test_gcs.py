@@ -322,3 +322,14 @@ def test_console_several_changes_on_one_line(gcs_node) -> None:
     current = {"D01": (1, 1, 1), "D02": (2, 2, 2)}
     s = Script("D02 3,3,3; D01 4,4,4")
     assert console(gcs_node, s, DRONES).ask(4, current) == ({"D01": (4, 4, 4), "D02": (3, 3, 3)}, Intent.CONTINUE)
+
+
+def test_a_script_answers_ahead_up_to_its_next_change() -> None:
+    from dronesim.entities.gcs import Plan, turns_to_answer_ahead
+
+    plan = Plan.parse(["D01=1,1,1@1", "D01=2,2,2@5"], (9, 9, 9))
+    assert turns_to_answer_ahead(plan, 1, 1) == [2, 3]
+    assert turns_to_answer_ahead(plan, 2, 3) == [4], "3 was answered already; 5 brings a change"
+    assert turns_to_answer_ahead(plan, 3, 4) == []
+    assert turns_to_answer_ahead(plan, 5, 5, last=7) == [6]
+    assert turns_to_answer_ahead(plan, 5, 5, horizon=4) == [6, 7, 8, 9]
