@@ -20,14 +20,15 @@ import functools
 import logging
 import sys
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
+import numpy as np
 import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
     Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, Moves, Nps, Order, Over, Phase, RemoteInputError, Role,
-    Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
+    MalformedMessage, Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
 )
 from dronesim.schema.messages import AROUND, unchecked
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
@@ -137,7 +138,7 @@ class Asker:
     def _absorb(self) -> None:
         """Learn the kinds asked ahead (waiting for answers still on their way, which is rare)."""
         for ask, handler in self._ahead:
-            self._collect(["(ahead)"], handler, ask)
+            self._collect(["(ahead)"], handler, ask, infos=False)
         self._ahead.clear()
 
     def _batches(self, pending: dict[str, tuple]) -> list[list[str]]:
@@ -198,8 +199,9 @@ class Asker:
             pending = unanswered
         return answers
 
-    def _collect(self, batch: list[str], handler, ask: Ask) -> Answers | None:
-        """The answer to `ask`; None if nobody answered (no queryable, or zenoh's own timeout)."""
+    def _collect(self, batch: list[str], handler, ask: Ask, *, infos: bool = True) -> Answers | None:
+        """The answer to `ask` (its kinds learnt by the chart; with `infos`, as {cell: CellInfo}); None if
+        nobody answered (no queryable, or zenoh's own timeout)."""
         result: Answers | None = None
         for reply in handler:
             if reply.ok is None:
@@ -211,9 +213,10 @@ class Asker:
             try:
                 ans = decode(reply.ok.payload.to_bytes(), Ans)
                 asked = ask.asked()
-                infos = ans.infos(asked)
+                if len(asked) != len(ans.kinds):
+                    raise MalformedMessage(f"{len(ans.kinds)} answers for {len(asked)} asked cells")
                 self.chart.learn(asked, ans.kinds)
-                result = dict(zip(asked, infos))
+                result = dict(zip(asked, ans.infos(asked))) if infos else {}
             except RemoteInputError as err:
                 self.inbox.rejects.reject(f"ANS for {', '.join(batch)}", err)
                 result = result or {}
@@ -224,6 +227,7 @@ class Asker:
 
 
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
+_AROUND = np.asarray(AROUND, dtype=np.int64)
 _cell_info = unchecked(CellInfo)
 _step = unchecked(Step)  # the coordinator checks every move it is sent
 
@@ -260,23 +264,27 @@ class Chart:
         k = self._kinds[i]
         return None if k == self.UNKNOWN else _KINDS[k]
 
-    def learn(self, cells: Iterable[Cell], kinds: bytes) -> None:
-        for cell, k in zip(cells, kinds):
-            i = self._at(cell)
-            if i is not None:
-                self._kinds[i] = k
+    def _linear(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(inside mask, linear index of each inside cell) of an (n, 3) array of cells."""
+        size = np.asarray(self.size, dtype=np.int64)
+        inside = ((cells >= 0) & (cells < size)).all(axis=1)
+        c = cells[inside]
+        return inside, (c[:, 0] * size[1] + c[:, 1]) * size[2] + c[:, 2]
 
-    def unknown(self, around: Iterable[Cell]) -> tuple[Cell, ...]:
+    def learn(self, cells: Sequence[Cell], kinds: bytes) -> None:
+        if not cells:
+            return
+        inside, at = self._linear(np.asarray(cells, dtype=np.int64).reshape(-1, 3))
+        np.frombuffer(self._kinds, dtype=np.uint8)[at] = np.frombuffer(kinds, dtype=np.uint8)[inside]
+
+    def unknown(self, around: Sequence[Cell]) -> tuple[Cell, ...]:
         """The neighbours of the `around` cells whose kind was never told, once each, in order."""
-        kinds = self._kinds
-        out: dict[Cell, None] = {}
-        for x, y, z in around:
-            for dx, dy, dz in AROUND:
-                c = (x + dx, y + dy, z + dz)
-                i = self._at(c)
-                if i is not None and kinds[i] == self.UNKNOWN:
-                    out[c] = None
-        return tuple(out)
+        if not around:
+            return ()
+        ring = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _AROUND).reshape(-1, 3)
+        inside, at = self._linear(ring)
+        fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN
+        return tuple(dict.fromkeys(map(tuple, ring[inside][fresh].tolist())))
 
 
 def parse_drones(text: str) -> tuple[str, ...]:
