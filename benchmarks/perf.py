@@ -615,10 +615,15 @@ def play_local(case: Case, scenario_file: Path) -> Local:
 
 
 def python_baseline_kib() -> int:
-    """VmHWM of an idle Python process that imported the coordinator, environment and drone modules."""
-    code = ("import dronesim.coordinator.node, dronesim.entities.env_node, dronesim.entities.drone_node, os;"
-            "print(open(f'/proc/{os.getpid()}/status').read())")
-    text = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    """VmHWM of an idle entity process: Python with the coordinator, environment and drone modules
+    imported and a Zenoh client session open on the loopback router (the fixed cost of any process,
+    whatever its world and drones)."""
+    code = ("import os, sys, zenoh, dronesim.coordinator.node, dronesim.entities.env_node, "
+            "dronesim.entities.drone_node; from dronesim.transport import client_config; "
+            "s = zenoh.open(client_config(sys.argv[1])); print(open(f'/proc/{os.getpid()}/status').read()); s.close()")
+    with loopback_router() as router:
+        text = subprocess.run([sys.executable, "-c", code, router.locator], capture_output=True, text=True,
+                              check=True, timeout=60).stdout
     m = re.search(r"VmHWM:\s+(\d+) kB", text)
     return int(m.group(1)) if m else 0
 
@@ -768,9 +773,13 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
                                       for n in (*ROLES, "router", "bench"))
             cells["lratio"] = f"{mean / lmean:.1f}x" if lmean == lmean else "-"
             model = 2 * array + 1024 * case.drones + baseline * 1024
+            ratios = []
             for key, name in (("srv", "coordinator"), ("env", "env")):
                 hwm = game.memory.get(name, {}).get("VmHWM")
                 cells[key] = "-" if hwm is None else f"{hwm / 1024:.0f} ({hwm * 1024 / model:.2f})"
+                ratios += [] if hwm is None else [hwm * 1024 / model]
+            if ratios:
+                verdicts.append(_verdict(max(ratios), 1.0, True, "memory ≤ model"))
             cells["swarm"] = _mib(game.memory.get("swarm", {}).get("VmHWM"))
             differ = sorted(t for t in set(game.statuses) | set(local.statuses)
                             if game.statuses.get(t) != local.statuses.get(t))
@@ -861,8 +870,8 @@ def legend(facts: dict) -> str:
         "1000 ÷ mean turn at 128, same world) ÷ (1000 ÷ 128): 1.00 is linear in N, above is worse than "
         "linear. Memory: VmHWM sampled just before the ground station quits; ratio = VmHWM ÷ (2 × world "
         f"array bytes (nx·ny·nz, one bool per cell) + 1 KiB × N + {base:.0f} MiB), the last being the VmHWM "
-        "of an idle Python process that only imported the coordinator, environment and drone modules (no "
-        "Zenoh session). Alive at end: drones alive in the last STATUS (seed drones do not avoid each other); "
+        "of an idle entity process (the coordinator, environment and drone modules imported, a Zenoh client "
+        "session open on the router): what any process costs whatever its world and drones. Alive at end: drones alive in the last STATUS (seed drones do not avoid each other); "
         "moving per turn: drones that moved, mean over the measured turns (in-process journal); \"same game\": "
         "every STATUS equals the in-process one. Exit codes: coordinator/environment/swarm "
         "host (floor rows: the helper)."
@@ -917,7 +926,8 @@ def main(argv: list[str] | None = None) -> int:
             + (" (other work ran alongside: absolute numbers are pessimistic)." if others > 0.2 else ".")
             + "\n\nTargets (issue \"Performance: turn latency near the Zenoh floor, scale to 1000 drones\"): "
             "1-drone turn ≤ 3 × pub/sub round trip (checked on every 1-drone row), ≥ 200 turns/s at 128 drones, "
-            "≥ 20 turns/s at 1000 drones. Where the time goes: `dronesim bench perf --only '128 drones @ 64' "
+            "≥ 20 turns/s at 1000 drones, coordinator and environment memory ≤ 2 × the world array + 1 KiB per "
+            "drone (above an idle entity process: the model below; checked on every game row). Where the time goes: `dronesim bench perf --only '128 drones @ 64' "
             "--profile DIR` writes py-spy stacks of every process; the CPU column splits a turn by process.\n\n"
             f"{table}\n\n{legend(facts)}\n"
         )
