@@ -616,11 +616,15 @@ def play_local(case: Case, scenario_file: Path) -> Local:
 
 def python_baseline_kib() -> int:
     """VmHWM of an idle entity process: Python with the coordinator, environment and drone modules
-    imported and a Zenoh client session open on the loopback router (the fixed cost of any process,
-    whatever its world and drones)."""
-    code = ("import os, sys, zenoh, dronesim.coordinator.node, dronesim.entities.env_node, "
-            "dronesim.entities.drone_node; from dronesim.transport import client_config; "
-            "s = zenoh.open(client_config(sys.argv[1])); print(open(f'/proc/{os.getpid()}/status').read()); s.close()")
+    imported and a Zenoh client session on the loopback router that has sent and received 500 small
+    messages (the fixed cost of any running process, whatever its world and drones)."""
+    code = ("import os, sys, queue, zenoh, dronesim.coordinator.node, dronesim.entities.env_node, "
+            "dronesim.entities.drone_node; from dronesim.transport import client_config\n"
+            "s = zenoh.open(client_config(sys.argv[1])); got = queue.SimpleQueue()\n"
+            "sub = s.declare_subscriber('baseline/echo', lambda m: got.put(m.payload.to_bytes()))\n"
+            "pub = s.declare_publisher('baseline/echo', congestion_control=zenoh.CongestionControl.BLOCK)\n"
+            "for i in range(500):\n    pub.put(bytes(200)); got.get(timeout=10)\n"  # warm, as a running entity
+            "print(open(f'/proc/{os.getpid()}/status').read()); s.close()")
     with loopback_router() as router:
         text = subprocess.run([sys.executable, "-c", code, router.locator], capture_output=True, text=True,
                               check=True, timeout=60).stdout
@@ -871,7 +875,8 @@ def legend(facts: dict) -> str:
         "linear. Memory: VmHWM sampled just before the ground station quits; ratio = VmHWM ÷ (2 × world "
         f"array bytes (nx·ny·nz, one bool per cell) + 1 KiB × N + {base:.0f} MiB), the last being the VmHWM "
         "of an idle entity process (the coordinator, environment and drone modules imported, a Zenoh client "
-        "session open on the router): what any process costs whatever its world and drones. Alive at end: drones alive in the last STATUS (seed drones do not avoid each other); "
+        "session on the router that has sent and received 500 small messages): what any running process "
+        "costs whatever its world and drones. Alive at end: drones alive in the last STATUS (seed drones do not avoid each other); "
         "moving per turn: drones that moved, mean over the measured turns (in-process journal); \"same game\": "
         "every STATUS equals the in-process one. Exit codes: coordinator/environment/swarm "
         "host (floor rows: the helper)."

@@ -48,7 +48,7 @@ from . import arbiter, observer
 #: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
 AHEAD_MAX = 8
 #: How many turns an ENV phase's report (UPD) may lag behind and still be checked.
-UPD_WINDOW = 16
+UPD_WINDOW = 8
 
 
 class Stage(enum.Enum):
