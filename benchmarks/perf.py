@@ -891,8 +891,8 @@ def write_section(path: Path, body: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="dronesim bench perf", description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="a tiny subset (for tests): 10x10x10, 20 turns")
-    parser.add_argument("--turns", type=int, default=200,
-                        help="measured turns per case (default 200; 1000-drone cases: a quarter, at least 10)")
+    parser.add_argument("--turns", type=int, default=600,
+                        help="measured turns per case (default 600; 1000-drone cases: a quarter, at least 10)")
     parser.add_argument("--rounds", type=int, default=2000, help="round trips per floor measurement (default 2000)")
     parser.add_argument("--only", metavar="PATTERN", help="only rows whose name matches this regex, e.g. '128|floor'")
     parser.add_argument("--profile", metavar="DIR", help="py-spy record every entity process into DIR (raw stacks)")

@@ -228,6 +228,7 @@ class Asker:
 
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
 _AROUND = np.asarray(AROUND, dtype=np.int64)
+SMALL = 48  # up to this many cells, the chart works cell by cell rather than with numpy
 _cell_info = unchecked(CellInfo)
 _step = unchecked(Step)  # the coordinator checks every move it is sent
 
@@ -272,15 +273,26 @@ class Chart:
         return inside, (c[:, 0] * size[1] + c[:, 1]) * size[2] + c[:, 2]
 
     def learn(self, cells: Sequence[Cell], kinds: bytes) -> None:
-        if not cells:
+        if len(cells) <= SMALL:  # a few: cell by cell (numpy's fixed cost dominates)
+            for cell, k in zip(cells, kinds):
+                i = self._at(cell)
+                if i is not None:
+                    self._kinds[i] = k
             return
         inside, at = self._linear(np.asarray(cells, dtype=np.int64).reshape(-1, 3))
         np.frombuffer(self._kinds, dtype=np.uint8)[at] = np.frombuffer(kinds, dtype=np.uint8)[inside]
 
     def unknown(self, around: Sequence[Cell]) -> tuple[Cell, ...]:
         """The neighbours of the `around` cells whose kind was never told, once each, in order."""
-        if not around:
-            return ()
+        if len(around) * 6 <= SMALL:  # a few: cell by cell
+            out: dict[Cell, None] = {}
+            for x, y, z in around:
+                for dx, dy, dz in AROUND:
+                    c = (x + dx, y + dy, z + dz)
+                    i = self._at(c)
+                    if i is not None and self._kinds[i] == self.UNKNOWN:
+                        out[c] = None
+            return tuple(out)
         ring = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _AROUND).reshape(-1, 3)
         inside, at = self._linear(ring)
         fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN

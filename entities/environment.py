@@ -26,6 +26,10 @@ def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
     return World.generate(spec.size, np.random.default_rng(spec.seed), keep_free=tuple(starts))
 
 
+#: Up to this many cells, `survey` answers cell by cell rather than with numpy (whose fixed cost dominates).
+SMALL = 48
+
+
 class Environment:
     def __init__(self, world: World, drones: dict[str, Cell]) -> None:
         self.world = world
@@ -50,7 +54,13 @@ class Environment:
                drones: bool = True) -> tuple[bytes, tuple[tuple[int, str], ...]]:
         """`answer` for many cells at once, as an ANS carries it (see `Ask.asked`: `cells`, then the six
         neighbours of each `around` cell): one CellKind byte per cell and (index, drone) for every drone
-        in an asked cell (none with `drones` False: the static world), all in numpy over the grid."""
+        in an asked cell (none with `drones` False: the static world), in numpy over the grid (a few
+        cells: in plain Python, cheaper then)."""
+        if len(cells) + 6 * len(around) <= SMALL:
+            asked = list(cells) + [(x + dx, y + dy, z + dz) for x, y, z in around for dx, dy, dz in AROUND]
+            infos = self.answer(asked)
+            pairs = tuple((n, d) for n, info in enumerate(infos) for d in info.drones) if drones else ()
+            return bytes(info.kind for info in infos), pairs
         a = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
         if len(around):
             ring = np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + np.asarray(AROUND, dtype=np.int64)

@@ -41,3 +41,21 @@ def test_answers_from_the_chart_are_what_the_environment_says() -> None:
     expected = Ans(turn=1, sender="ENV", kinds=kinds, drones=drones).infos(cells)
     assert tuple(CellInfo(pos=c, kind=chart.kind(c), drones=occupied.get(c, ())) for c in cells) == expected
     assert occupied[(2, 1, 1)] == ("D02", "D03")
+
+
+def test_chart_gives_the_same_in_numpy_for_many_cells() -> None:
+    """Past a few cells the chart works in numpy: same answers as cell by cell."""
+    from dronesim.entities.drone_node import SMALL, Chart
+    from dronesim.schema import CellKind
+
+    around = [(x, y, 1) for x in range(0, 8, 2) for y in range(0, 8, 3)]
+    assert len(around) * 6 > SMALL
+    one_by_one = Chart((8, 8, 3))
+    expected = tuple(dict.fromkeys(c for p in around for c in one_by_one.unknown([p])))
+    assert Chart((8, 8, 3)).unknown(around) == expected
+    kinds = bytes([CellKind.BUILDING if sum(c) % 3 == 0 else CellKind.EMPTY for c in expected])
+    bulk = Chart((8, 8, 3))
+    bulk.learn(expected, kinds)
+    for c, k in zip(expected, kinds):
+        one_by_one.learn([c], bytes([k]))
+    assert bulk._kinds == one_by_one._kinds and bulk.unknown(around) == ()
