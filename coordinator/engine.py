@@ -187,6 +187,8 @@ class Engine:
         self._notes: dict[str, Note] = {}
         self._turn_log: dict = {}
         self._upd_due: dict[int, tuple[Move, ...]] = {}  # ENV phases whose report is awaited: turn -> moves
+        #: Whether the environment's UPD reports are checked (kept for a few turns): the adapter says.
+        self.verify_env = True
         self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
         self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
         self._tgt_seen = 0  # TGT messages of this GCS phase
@@ -419,9 +421,10 @@ class Engine:
         moves = tuple(_move(d, before[d], final[d]) for d in sorted(final) if final[d] != before[d])
         if not moves:
             return _drones_first(self._observe())
-        self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
-        for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
-            del self._upd_due[old]
+        if self.verify_env:
+            self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
+            for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
+                del self._upd_due[old]
         return _drones_first([Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()])
 
     def _kind(self, cell: Cell) -> CellKind:

@@ -149,6 +149,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         if resume:  # e.g. a container restarted before the game began: nothing to resume yet
             logger.info("no journal at %s yet: starting a new game", journal)
         engine = Engine(game, logger)
+    engine.verify_env = verify_env
     with zenoh.open(conf) as session, JournalWriter(journal) as writer:
         inbox = Inbox(session, keys, logger)
         out = Outbox(session)

@@ -51,6 +51,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     log = logger or logging.getLogger("dronesim.local")
     world = build_world(config.world, (d.start for d in config.drones))
     engine = Engine(config, log, world)
+    engine.verify_env = verify_env
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()
