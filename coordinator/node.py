@@ -15,7 +15,7 @@ import time
 import zenoh
 
 from dronesim.schema import (
-    Connect, Done, Keys, Message, Moves, Nps, RejectCounter, Over, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
+    Connect, Done, Keys, Message, Moves, Nps, Over, Phase, RejectCounter, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
     drone_id, encode,
 )
 from dronesim.schema.errors import WrongSender
@@ -115,6 +115,8 @@ class Executor:
                         continue
                     self._last = time.monotonic()
                     self.out.put(self.keys.turn_of(turn.phase), turn)
+                case Publish(Turn(phase=Phase.ENV)) if not self.out.matching(self.keys.turn_of(Phase.ENV)):
+                    pass  # nobody follows the ENV phase (the environment does when someone wants its UPD)
                 case Publish(msg, data):
                     self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):

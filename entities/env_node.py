@@ -39,9 +39,6 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
         out = Outbox(session)
-        # The ENV phase's moves make the UPD report; nobody listening, the drones' cells come from STATUS
-        # alone (the same cells), and the moves, thousands in a swarm, are not even decoded.
-        inbox.subscribe(keys.turn_of(Phase.ENV), Turn, only_if=lambda: out.matching(keys.upd))
         inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
         inbox.serve(keys.ask, Ask)
@@ -60,6 +57,22 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         applied = False  # the ENV phase of turn `ready` is done
         early: Turn | None = None
         over: Over | None = None
+
+        env_phase = None  # the subscription to the ENV phase, held while someone listens to the UPD
+
+        def follow_listeners() -> None:
+            """The ENV phase's moves make the UPD report. Nobody listening, the environment does not even
+            subscribe to them (the coordinator then sends none): the drones' cells come from STATUS alone
+            (the same cells), and thousands of moves a turn in a swarm go nowhere."""
+            nonlocal env_phase
+            wanted = out.matching(keys.upd)
+            if wanted and env_phase is None:
+                env_phase = inbox.subscribe(keys.turn_of(Phase.ENV), Turn)
+            elif not wanted and env_phase is not None:
+                inbox.unsubscribe(env_phase)
+                env_phase = None
+
+        follow_listeners()
 
         def apply(turn: Turn) -> None:
             nonlocal applied
@@ -113,6 +126,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                         else:
                             raise StaleTurn(f"ENV phase of turn {turn.turn} while the world is at turn {ready}")
                     case Received(_, Status() as status):
+                        follow_listeners()
                         env.sync(status)
                         ready, applied = status.turn + 1, False
                         still = []

@@ -266,13 +266,9 @@ class Inbox:
         except Exception:  # a bug: log it, never let Zenoh swallow it silently
             self.log.exception("error handling %s", where)
 
-    def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
-                  only_if: Callable[[], bool] | None = None) -> None:
-        """Decoded messages on `key` become `Received` events; with `only_if`, a sample that arrives
-        while it says False is dropped undecoded (the process has no use for it then)."""
+    def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...]) -> zenoh.Subscriber:
+        """Decoded messages on `key` become `Received` events (until `unsubscribe`)."""
         def on_sample(sample: zenoh.Sample) -> None:
-            if only_if is not None and not only_if():
-                return
             k = str(sample.key_expr)
 
             def handle() -> None:
@@ -282,7 +278,13 @@ class Inbox:
 
             self._guard(k, handle)
 
-        self._handles.append(self.session.declare_subscriber(key, _direct(on_sample)))
+        sub = self.session.declare_subscriber(key, _direct(on_sample))
+        self._handles.append(sub)
+        return sub
+
+    def unsubscribe(self, sub: zenoh.Subscriber) -> None:
+        sub.undeclare()
+        self._handles.remove(sub)
 
     def serve(self, key: str, expect: type[Message], *, inline: Callable[[zenoh.Query, Message], bool] | None = None) -> None:
         """Declare a queryable; valid queries become `Asked` events (or are answered by `inline`
