@@ -130,7 +130,10 @@ class Asker:
     def prefetch(self, around: Iterable[Cell]) -> None:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
         `around` that this process has not been told yet."""
+        around = list(around)
         cells = self.chart.unknown(around)
+        if cells and len(around) <= FAR_MAX:  # a few drones: ask farther at once, and again only every
+            cells = self.chart.unknown(around, reach=FAR)  # few turns (a swarm asks its next ring each turn)
         for i in range(0, len(cells), Ask.MAX_CELLS):
             ask = Ask(turn=0, sender=self.sender, cells=cells[i:i + Ask.MAX_CELLS])
             self._ahead.append((ask, self.querier.get(payload=encode(ask))))
@@ -229,6 +232,15 @@ class Asker:
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
 _AROUND = np.asarray(AROUND, dtype=np.int64)
 SMALL = 48  # up to this many cells, the chart works cell by cell rather than with numpy
+FAR, FAR_MAX = 3, 32  # up to FAR_MAX drones, a process asks ahead for every cell within FAR steps
+
+
+@functools.cache
+def _ball(reach: int) -> np.ndarray:
+    """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first."""
+    r = range(-reach, reach + 1)
+    offs = [(dx, dy, dz) for dx in r for dy in r for dz in r if 0 < abs(dx) + abs(dy) + abs(dz) <= reach]
+    return np.asarray(sorted(offs, key=lambda o: abs(o[0]) + abs(o[1]) + abs(o[2])), dtype=np.int64)
 _cell_info = unchecked(CellInfo)
 _step = unchecked(Step)  # the coordinator checks every move it is sent
 
@@ -282,8 +294,14 @@ class Chart:
         inside, at = self._linear(np.asarray(cells, dtype=np.int64).reshape(-1, 3))
         np.frombuffer(self._kinds, dtype=np.uint8)[at] = np.frombuffer(kinds, dtype=np.uint8)[inside]
 
-    def unknown(self, around: Sequence[Cell]) -> tuple[Cell, ...]:
-        """The neighbours of the `around` cells whose kind was never told, once each, in order."""
+    def unknown(self, around: Sequence[Cell], reach: int = 1) -> tuple[Cell, ...]:
+        """The cells within `reach` steps (6-connectivity) of the `around` cells whose kind was never
+        told, once each, in order (by default their neighbours, in AROUND order)."""
+        if reach > 1:
+            ball = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _ball(reach)).reshape(-1, 3)
+            inside, at = self._linear(ball)
+            fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN
+            return tuple(dict.fromkeys(map(tuple, ball[inside][fresh].tolist())))
         if len(around) * 6 <= SMALL:  # a few: cell by cell
             out: dict[Cell, None] = {}
             for x, y, z in around:

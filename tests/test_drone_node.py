@@ -59,3 +59,13 @@ def test_chart_gives_the_same_in_numpy_for_many_cells() -> None:
     for c, k in zip(expected, kinds):
         one_by_one.learn([c], bytes([k]))
     assert bulk._kinds == one_by_one._kinds and bulk.unknown(around) == ()
+
+
+def test_chart_reaches_farther_when_asked() -> None:
+    from dronesim.entities.drone_node import Chart
+
+    chart = Chart((9, 9, 9))
+    far = chart.unknown([(4, 4, 4)], reach=3)
+    assert len(far) == 62 and set(far[:6]) == set(chart.unknown([(4, 4, 4)]))  # 6 + 18 + 38 cells, nearest first
+    assert all(0 < sum(abs(a - 4) for a in c) <= 3 for c in far)
+    assert len(Chart((2, 2, 1)).unknown([(0, 0, 0)], reach=3)) == 3  # only cells in the world
