@@ -13,10 +13,10 @@ In one run, through a loopback router process (`dronesim router`, tcp/127.0.0.1,
 2. Whole games: the coordinator, the environment and one swarm host flying every drone with the
    seed's smart autopilot, each a separate process (`dronesim coordinator|env|drone`), and this
    process as the ground station. It answers as the scripted GCS (`dronesim gcs --scenario`) does: a
-   DONE carrying the targets that change, and, when its plan has nothing new for the next turn, that
-   turn's DONE at once, ahead (the coordinator then opens and closes that GCS phase without a round
-   trip). It timestamps each TURN(GCS, t):
-   turn latency = time between consecutive GCS phases, turns/s = 1 / mean. After the warm-up turns
+   DONE carrying the targets that change, and, when its plan has nothing new for the next turns, their
+   DONEs at once, ahead (the coordinator then opens and closes those GCS phases without a round trip,
+   and without announcing them). It timestamps each STATUS(t - 1), which begins turn t:
+   turn latency = time between consecutive STATUS, turns/s = 1 / mean. After the warm-up turns
    and the measured ones it samples the processes' peak memory (VmHWM) and answers DONE QUIT; every
    process must then exit 0.
 3. The same scenarios in-process (`dronesim.local.simulate`, no network): same game, same timing
@@ -474,6 +474,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                 if profile is not None:
                     spies = _spy(procs, profile, case)
                 stamps: dict[tuple[str, int], float] = {}
+                pids = {n: procs.procs[n].pid for n in ROLES} | {"router": router.pid, "bench": "self"}
                 current: dict = {}
                 answered = 0  # the last turn answered (maybe ahead)
                 alive: set[str] | None = None
@@ -493,10 +494,17 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                         case Presence() as p:
                             member.on_presence(p)
                         case Received(_, Status() as st):
-                            stamps[("STATUS", st.turn)] = now
+                            stamps[("STATUS", st.turn)] = now  # turn st.turn + 1 begins
                             alive = {s.drone for s in st.drones if s.alive}
                             game.last_status = st
                             game.statuses[st.turn] = st
+                            if st.turn == case.warmup:  # CPU time over the measured turns: from here...
+                                game.cpu = {n: cpu_seconds(pid) for n, pid in pids.items()}
+                            if st.turn + 1 <= answered:  # answered ahead (no TURN(GCS) comes): as the
+                                for ahead in turns_to_answer_ahead(plan, st.turn + 1, answered,  # scripted
+                                                                   last=case.end_turn):  # GCS, further
+                                    out.put(keys.gcs_done, gcs_done(ahead, {}, Intent.CONTINUE))
+                                    answered = ahead
                         case Received(_, Over() as o):
                             over = o
                         case Received(_, Turn() as turn):
@@ -504,12 +512,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             t = turn.turn
                             early = t <= answered
                             answered = max(answered, t)
-                            if t in (case.warmup + 1, case.end_turn):  # CPU time over the measured turns
-                                pids = {n: procs.procs[n].pid for n in ROLES} | {"router": router.pid,
-                                                                                  "bench": "self"}
-                                for n, pid in pids.items():
-                                    game.cpu[n] = cpu_seconds(pid) - game.cpu.get(n, 0.0)
-                            if t >= case.end_turn:
+                            if t >= case.end_turn:  # ... to here
+                                game.cpu = {n: cpu_seconds(pid) - game.cpu.get(n, 0.0) for n, pid in pids.items()}
                                 for name in ROLES:
                                     game.memory[name] = proc_status(procs.procs[name].pid)
                                 out.put(keys.gcs_done, Done(turn=t, sender="GCS", phase=Phase.GCS,
@@ -545,11 +549,11 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
             game.error += f"\n--- {n} ({logs / (n + '.log')}):\n{procs.tail(n)}"
         return game
     first, last = case.warmup + 1, case.end_turn
-    gcs = [stamps.get(("GCS", t)) for t in range(first, last + 1)]
-    if None in gcs:
-        game.error = "missing GCS phases"
+    begins = [stamps.get(("STATUS", t - 1)) for t in range(first, last + 1)]  # STATUS(t - 1): turn t begins
+    if None in begins:
+        game.error = "missing STATUS"
         return game
-    game.latencies = [b - a for a, b in zip(gcs, gcs[1:])]  # type: ignore[operator]
+    game.latencies = [b - a for a, b in zip(begins, begins[1:])]  # type: ignore[operator]
     game.answers = [stamps[("DONE", t)] - stamps[("GCS", t)] for t in range(first, last) if ("DONE", t) in stamps]
     game.cpu = {n: v / case.turns for n, v in game.cpu.items()}
     game.alive = len({s.drone for s in game.last_status.drones if s.alive}) if game.last_status else 0  # type: ignore[attr-defined]
@@ -867,7 +871,8 @@ def legend(facts: dict) -> str:
         f"{PHASE_DEADLINE:g}), this process is the ground "
         "station (as the scripted GCS: the targets that change, and the next turn's DONE ahead when its plan "
         "has nothing new for it); a turn is the time between "
-        "two consecutive TURN(GCS) arrivals, turns/s = 1 / mean, p99 over the measured turns. The ground "
+        "two consecutive STATUS arrivals (STATUS(t - 1) begins turn t), turns/s = 1 / mean, p99 over the "
+        "measured turns. The ground "
         "station's answer: from TURN(GCS) arriving to its DONE sent, when not answered ahead. CPU: user + system time of each process (all threads) over the measured turns ÷ turns. In-process: `dronesim.local.simulate` on the same scenario, timed at the same point; "
         "\"in-process ÷ distributed\" = distributed mean turn ÷ in-process mean turn. \"turn ÷ pub/sub RTT\" = "
         "median turn ÷ median pub/sub round trip (callback replies). Growth (1000-drone rows) = (mean turn at "

@@ -387,10 +387,10 @@ class Engine:
                 self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS)
                 if early is None:
                     return [Publish(self._phase_msg)]
-                try:  # the ground station answered this phase ahead: it opens and closes at once
-                    return [Publish(self._phase_msg), *self._gcs_done(early)]
+                try:  # the ground station answered this phase ahead: it opens and closes at once, unannounced
+                    return self._gcs_done(early)  # (the station goes by STATUS: it knows the turn began)
                 except RemoteInputError as err:
-                    return [Publish(self._phase_msg), Refusal(f"DONE ahead for turn {turn}", err), *err.follow]
+                    return [Refusal(f"DONE ahead for turn {turn}", err), *err.follow]
             case Stage.DRONES:
                 self._moves.clear()
                 alive = self.alive()

@@ -4,13 +4,14 @@ Each DRONES phase it runs every hosted drone's autopilot together (`fly_round`):
 a round go out as concurrent queries to ENV/ASK, then a lone drone publishes its NPS, a swarm host the
 MOVES of all its drones in one message. It exits on OVER.
 
-Sensing ahead: once it has sent its moves for turn t, the process asks the environment, in one ASK,
-for the neighbours of the cells its drones moved to (its `around` cells), for turn t + 1. The
-environment answers an ASK for turn t + 1 from the world at the start of that turn (it holds the ASK
-until STATUS(t) has come), so these answers are exactly what the autopilots would get by asking then:
-an autopilot asking only for cells around its drone is answered without a round trip, any other cell
-(a farther look-ahead, or a drone that did not end where it meant to) is asked as usual. Decisions,
-and so journals, do not change; a turn loses the sensing round trips of most autopilots.
+Sensing without a round trip: the process keeps a chart of the kinds the environment told it (buildings
+never move, so a cell's kind holds for the whole game). Once it has sent its moves, it asks the
+environment, for the static world (an ASK for turn 0, answered at once), the never-told cells around
+where its drones are going (within three steps for a few drones, so that it asks only every few turns;
+the next ring for a swarm). When an autopilot asks, each cell whose kind is charted is answered from the
+chart plus the drones in it, which the turn's orders list (every alive drone's cell at the start of the
+turn): exactly the CellInfo the environment would give for that turn. Other cells are asked as usual.
+The autopilots see only the cells they ask for, so decisions, and journals, do not change.
 """
 
 from __future__ import annotations

@@ -94,6 +94,15 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         def plan_intent(turn: int) -> Intent:
             return Intent.FINAL if turn >= plan.last_turn else Intent.CONTINUE
 
+        def answer_ahead(turn: int, answered: int) -> int:
+            """A script with nothing new in the turns after `turn` answers them now (the coordinator then
+            starts them without asking, and without announcing their GCS phase); the last turn answered."""
+            if console is None:
+                for ahead in turns_to_answer_ahead(plan, turn, answered):
+                    out.put(keys.gcs_done, gcs_done(ahead, {}, plan_intent(ahead)))
+                    answered = ahead
+            return answered
+
         tracks = Tracks()
         over: Over | None = None
         while over is None:
@@ -117,11 +126,10 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                         in_force = targets_of(tracks.last) if tracks.last is not None else None
                         out.put(keys.gcs_done, gcs_done(turn.turn, current, intent, in_force))
                     answered = max(answered, turn.turn)
-                    if console is None:  # a script with nothing new in the next turns answers them now:
-                        for ahead in turns_to_answer_ahead(plan, turn.turn, answered):  # the coordinator
-                            out.put(keys.gcs_done, gcs_done(ahead, {}, plan_intent(ahead)))  # starts them
-                            answered = ahead  # without asking
+                    answered = answer_ahead(turn.turn, answered)
                 case Received(_, Status() as status):
+                    if status.turn + 1 <= answered:  # the coming turn was answered ahead: no TURN(GCS) for it
+                        answered = answer_ahead(status.turn + 1, answered)
                     tracks.add(status)
                     gone.update(s.drone for s in status.drones if not s.alive)
                     for s in status.drones:  # a late joiner takes over the targets in force
