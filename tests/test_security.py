@@ -733,15 +733,19 @@ class Attacker:
                     self._put(self.d02, k.tgt("D01"), Target(turn=t, sender="GCS", drone="D01", pos=(0, 9, 0)))
                     self._put(self.d02, k.gcs_done, Done(turn=t, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT,
                                                          count=1))
-                    if t == 2:  # an OVER now ends the game for whoever gets it; TURN and STATUS are
-                        # for turns no process could mistake for real ones (FORGED_TURNS), so a leak shows
-                        self._put(self.h01, k.over, Over(turn=t, sender="SRV", reason=EndReason.GCS_QUIT, text="fake"))
-                        self._put(self.h01, k.turn, Turn(turn=FORGED_TURNS[0] + t, sender="SRV", phase=Phase.DRONES))
-                        self._put(self.h01, k.status, Status(turn=FORGED_TURNS[1] + t, sender="OBS", drones=(
-                            DroneStatus(drone="D01", pos=(0, 0, 0), state=DroneState.DEAD),)))
                 case Phase.DRONES:
                     for order in turn.orders:
                         self._put(self.h01, k.nps(order.drone), Nps(turn=t, sender=order.drone, pos=order.pos))
+                    # the next GCS phases, "answered ahead" (the scripted GCS does, so most are not announced)
+                    self._put(self.d02, k.gcs_done, Done(turn=t + 1, sender="GCS", phase=Phase.GCS,
+                                                         intent=Intent.QUIT))
+                    if t == 2:  # an OVER now ends the game for whoever gets it; TURN and STATUS are
+                        # for turns no process could mistake for real ones (FORGED_TURNS), so a leak shows
+                        self._put(self.h01, k.over, Over(turn=t, sender="SRV", reason=EndReason.GCS_QUIT, text="fake"))
+                        self._put(self.h01, k.turn_of(Phase.DRONES),
+                                  Turn(turn=FORGED_TURNS[0] + t, sender="SRV", phase=Phase.DRONES))
+                        self._put(self.h01, k.status, Status(turn=FORGED_TURNS[1] + t, sender="OBS", drones=(
+                            DroneStatus(drone="D01", pos=(0, 0, 0), state=DroneState.DEAD),)))
                 case Phase.ENV:
                     self._put(self.d02, k.upd, Upd(turn=t, sender="ENV", cells=()))
         except BaseException as exc:  # a bug in the test: reported by the test
