@@ -100,6 +100,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
             if console is None:
                 for ahead in turns_to_answer_ahead(plan, turn, answered):
                     out.put(keys.gcs_done, gcs_done(ahead, {}, plan_intent(ahead)))
+                    logger.debug("answered turn %d ahead", ahead)
                     answered = ahead
             return answered
 

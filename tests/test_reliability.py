@@ -175,3 +175,38 @@ def test_ground_station_leaves_and_a_new_one_sees_the_state_at_once(router, tmp_
             gcs2.close()
         assert set(c.wait_all().values()) == {0}
     assert journal.read_bytes() == expected
+
+
+def scripted_gcs_game(c: Cluster, tmp_path, *, kill_coordinator: bool) -> bytes:
+    """A game with the real scripted ground station (`dronesim gcs --targets`), which answers GCS
+    phases ahead; with `kill_coordinator`, the coordinator dies in turn 1 while holding those answers."""
+    srv, journal = start(c, tmp_path, "--phase-deadline", "60")
+    env, d1, d2 = entities(c)
+    targets = [item for d, (x, y, z) in TARGETS.items() for item in ("--targets", f"{d}={x},{y},{z}")]
+    if kill_coordinator:
+        d1.expect("You are connected as D01")
+        d1.p.send_signal(signal.SIGSTOP)  # turn 1 will wait for D01 in its drones' phase
+    gcs = c.start("GCS", "gcs", *targets, "--quiet", "--log-level", "DEBUG")
+    if kill_coordinator:
+        gcs.expect("answered turn 3 ahead")
+        srv.p.kill()  # it held the GCS's answers for turns 2 and 3: they die with it
+        assert srv.wait() == -signal.SIGKILL
+        c.procs.remove(srv)
+        for p in (env, d2):  # the game resumes once the environment and the drones are back: the ground
+            p.p.send_signal(signal.SIGSTOP)  # station first (one returning later finds the turn begun)
+        srv2, _ = start(c, tmp_path, "--phase-deadline", "60", name="SRV2", resume=True)
+        srv2.expect("admitted GCS")
+        for p in (env, d1, d2):
+            p.p.send_signal(signal.SIGCONT)
+    assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    return journal.read_bytes()
+
+
+def test_a_ground_station_that_answered_ahead_answers_a_resumed_coordinator_again(router, tmp_path):
+    for run in ("clean", "killed"):
+        (tmp_path / run).mkdir()
+    with Cluster(router, tmp_path / "clean") as c:
+        expected = scripted_gcs_game(c, tmp_path / "clean", kill_coordinator=False)
+    with Cluster(router, tmp_path / "killed") as c:
+        got = scripted_gcs_game(c, tmp_path / "killed", kill_coordinator=True)
+    assert got == expected
