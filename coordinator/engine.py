@@ -85,6 +85,7 @@ class GameConfig:
     admit_deadline: float | None = None  # None: wait for every entity forever
     lost_after: int = 3  # missed DRONES deadlines in a row before a drone is LOST
     env_grace: float = 30.0  # seconds the game waits for a vanished environment to come back
+    gcs_grace: float = 30.0  # seconds a resumed game waits for its ground station once the others are back
 
     def __post_init__(self) -> None:
         ids = [d.drone for d in self.drones]
@@ -213,14 +214,22 @@ class Engine:
     def _env_missing(self) -> bool:
         return self._playing() and Role.ENV not in self.entities.values()
 
-    def clock(self) -> tuple[Stage, int, bool, bool]:
+    def clock(self) -> tuple[Stage, int, bool, bool, bool]:
         """What the current deadline is measured from: it restarts whenever this changes."""
-        return self.stage, self.turn, self._done is not None, self._env_missing()
+        return self.stage, self.turn, self._done is not None, self._env_missing(), self._back_but_gcs()
+
+    def _back_but_gcs(self) -> bool:
+        """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
+        roles = set(self.entities.values())
+        return (self.stage is Stage.RESUMING and Role.ENV in roles and Role.GCS not in roles
+                and all(self.drones[d].host for d in self.alive()))
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
         if self._env_missing():
             return self.config.env_grace
+        if self._back_but_gcs():
+            return self.config.gcs_grace
         match self.stage:
             case Stage.ADMITTING | Stage.RESUMING:
                 return self.config.admit_deadline
@@ -302,8 +311,9 @@ class Engine:
 
     def _everyone_here(self) -> bool:
         roles = set(self.entities.values())
-        if self.stage is Stage.RESUMING:  # the alive drones and the environment; a GCS may join any time
-            return Role.ENV in roles and all(self.drones[d].host for d in self.alive())
+        if self.stage is Stage.RESUMING:  # the alive drones, the environment and the ground station (which
+            # gets `gcs_grace` seconds once the others are back: it may have left the game for good)
+            return Role.ENV in roles and Role.GCS in roles and all(self.drones[d].host for d in self.alive())
         return Role.ENV in roles and Role.GCS in roles and all(r.host for r in self.drones.values())
 
     def header(self) -> dict:
@@ -663,6 +673,10 @@ class Engine:
             return self._over(EndReason.ABORTED,
                               f"the environment vanished and did not come back within {self.config.env_grace:g} s")
         match stage:
+            case Stage.RESUMING if self._back_but_gcs():
+                self._log.warning("the ground station did not come back within %g s: the game resumes without it",
+                                  self.config.gcs_grace)
+                return self._resume()
             case Stage.ADMITTING | Stage.RESUMING:
                 missing = [d for d, r in self.drones.items() if r.host is None]
                 missing += [r.value for r in (Role.ENV, Role.GCS) if r not in set(self.entities.values())]

@@ -249,6 +249,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gcs-deadline", type=float, default=0.0, help="seconds for the GCS phase (0: wait)")
     p.add_argument("--admit-deadline", type=float, default=0.0, help="seconds to wait for entities (0: forever)")
     p.add_argument("--lost-after", type=int, default=3, help="missed deadlines before a drone is LOST")
+    p.add_argument("--gcs-grace", type=float, default=30.0, metavar="SECONDS",
+                   help="with --resume: how long the game waits for its ground station once the environment "
+                        "and the drones are back (default 30)")
     p.add_argument("--journal", help="append the game's journal to this file")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS (default 0: as fast as the entities answer)")
@@ -277,7 +280,7 @@ def game_config(args: argparse.Namespace) -> GameConfig:
     from dronesim.entities.world import World
 
     deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
-                     admit_deadline=args.admit_deadline or None, lost_after=args.lost_after)
+                     admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace)
     if args.scenario:
         from dronesim.scenario import Scenario
 

@@ -1044,3 +1044,32 @@ def test_a_late_upd_is_still_checked() -> None:
     assert first.turn == 1
     with pytest.raises(StaleTurn):
         g.engine.receive(Upd(turn=1, sender="ENV", cells=()))  # checked once
+
+
+# --------------------------------------------------------------------------- resuming
+
+
+def resumed(**kw) -> tuple[Engine, list]:
+    """An engine restored from a two-turn journal, with the environment and the drone back."""
+    g = Game(config(**kw))
+    play_turn(g, {"D01": (1, 0, 0)}, {"D01": (4, 0, 0)})
+    play_turn(g, {"D01": (2, 0, 0)})
+    e = Engine.resume(g.engine.config, records(g.effects), LOG)
+    out = e.connect(connect("ENV", Role.ENV), Token("ENV"))
+    out += e.connect(connect("D01", Role.DRONE, ("D01",), "seed"), Token("D01"))
+    return e, out
+
+
+def test_a_resumed_game_waits_for_its_ground_station_a_grace_period() -> None:
+    e, out = resumed(gcs_grace=7.0)
+    assert e.stage is Stage.RESUMING and not pubs(out, Turn), "the ground station is not back yet"
+    assert e.deadline() == 7.0
+    effects = e.connect(connect("GCS", Role.GCS), Token("GCS"))
+    assert [(t.turn, t.phase) for t in pubs(effects, Turn)] == [(3, Phase.GCS)]
+
+
+def test_a_resumed_game_goes_on_without_a_ground_station_that_does_not_come_back() -> None:
+    e, _ = resumed()
+    effects = e.expire(*e.clock())
+    assert [(t.turn, t.phase) for t in pubs(effects, Turn)] == [(3, Phase.DRONES)]
+    assert pubs(effects, Turn)[0].orders == (Order(drone="D01", pos=(2, 0, 0), target=(4, 0, 0)),)
