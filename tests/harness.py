@@ -4,8 +4,10 @@ line-by-line waiting on their output (event-driven, no sleeps)."""
 from __future__ import annotations
 
 import contextlib
+import importlib.metadata
 import json
 import os
+import shutil
 import queue
 import re
 import subprocess
@@ -20,6 +22,8 @@ import zenoh
 from dronesim.transport import client_config, router_config, router_locators
 
 TIMEOUT = 60.0
+#: What tests/setup.d/ scripts leave behind (downloads, the zenohd install status).
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dronesim"
 
 
 @contextlib.contextmanager
@@ -288,3 +292,42 @@ class ScriptedGCS:
     def close(self) -> None:
         self.member.close()
         self._cm.__exit__(None, None, None)
+
+
+def zenohd_binary() -> Path | None:
+    """zenohd on PATH, or where tests/setup.d/zenohd.sh installs it (cargo's bin); None if neither."""
+    found = shutil.which("zenohd")
+    candidates = [Path(found)] if found else []
+    candidates.append(Path(os.environ.get("CARGO_HOME", Path.home() / ".cargo")) / "bin" / "zenohd")
+    return next((c for c in candidates if c.exists()), None)
+
+
+@contextlib.contextmanager
+def zenohd(conf: Path, locator: str, tmp: Path, name: str = "zenohd") -> Iterator[str]:
+    """zenohd, of the installed eclipse-zenoh's version, running `conf`, which listens on `locator`;
+    yields the locator once zenohd says it can be reached there. Skips, saying why, where zenohd is
+    missing or another version."""
+    import pytest
+
+    binary = zenohd_binary()
+    if binary is None:
+        status = CACHE / "zenohd-install.txt"
+        why = status.read_text().strip() if status.exists() else "tests/setup.d/zenohd.sh has not run"
+        print(f"zenohd is not on PATH ({why}): skipping the zenohd router")
+        pytest.skip(f"zenohd is not installed ({why})")
+    pin = importlib.metadata.version("eclipse-zenoh")
+    version = subprocess.run([str(binary), "--version"], capture_output=True, text=True, timeout=30).stdout
+    if f"v{pin} " not in version:
+        print(f"{binary} is {version.strip()!r}, not {pin}: skipping the zenohd router")
+        pytest.skip(f"{binary} is {version.strip()!r}, not {pin}: run bash tests/setup.d/zenohd.sh")
+    proc = Proc(name, ["env", "RUST_LOG=info", str(binary), "-c", str(conf)], tmp)
+    try:
+        # not just configured: zenohd logs its whole config (listen endpoint included) before it listens
+        proc.expect(rf"can be reached at: {re.escape(locator)}", timeout=60)
+        yield locator
+    finally:
+        proc.p.terminate()
+        try:
+            proc.p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()

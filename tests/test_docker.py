@@ -32,7 +32,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.harness import Proc, journal_records
+from tests.harness import CACHE, Proc, journal_records, zenohd
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCKER = ROOT / "docker"
@@ -43,7 +43,6 @@ DOCKERIGNORE = DOCKER / "Dockerfile.dockerignore"
 ZENOHD_CONF = DOCKER / "zenohd.json5"
 ENTRYPOINT = DOCKER / "entrypoint.py"
 HEALTH = DOCKER / "healthcheck.py"
-CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dronesim"
 #: what the docker-compose 1.29.2 wheel (PyPI) ships: the Compose specification's JSON schema.
 COMPOSE_SCHEMA_SOURCE = ("docker-compose==1.29.2", "compose/config/compose_spec.json")
 #: the dronesim subcommands that are entities or a router, and the module holding each one's `cli`.
@@ -643,39 +642,6 @@ def embedded_router_from_config():
         yield router_locators(router)[0]
 
 
-def zenohd_binary() -> Path | None:
-    found = shutil.which("zenohd")
-    candidates = [Path(found)] if found else []
-    candidates.append(Path(os.environ.get("CARGO_HOME", Path.home() / ".cargo")) / "bin" / "zenohd")
-    for c in candidates:
-        if c.exists():
-            return c
-    return None
-
-
-@contextlib.contextmanager
-def zenohd_router(conf: Path, locator: str, tmp_path: Path):
-    """zenohd running `conf`, which listens on `locator`; skips (saying why) where zenohd is missing."""
-    binary = zenohd_binary()
-    if binary is None:
-        status = CACHE / "zenohd-install.txt"
-        why = status.read_text().strip() if status.exists() else "tests/setup.d/zenohd.sh has not run"
-        pytest.skip(f"zenohd is not installed ({why})")
-    version = subprocess.run([str(binary), "--version"], capture_output=True, text=True, timeout=30).stdout
-    if f"v{zenoh_pin()} " not in version:
-        pytest.skip(f"{binary} is {version.strip()!r}, not {zenoh_pin()}: run bash tests/setup.d/zenohd.sh")
-    proc = Proc("zenohd", ["env", "RUST_LOG=info", str(binary), "-c", str(conf)], tmp_path)
-    try:
-        proc.expect(rf"can be reached at: {re.escape(locator)}", timeout=60)  # listening, not just configured
-        yield locator
-    finally:
-        proc.p.terminate()
-        try:
-            proc.p.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-
-
 def health(state: Path) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, str(HEALTH)], capture_output=True, text=True, timeout=60,
                           env=dict(os.environ, DRONESIM_STATE=str(state)))
@@ -812,7 +778,7 @@ def test_compose_game_through_zenohd(tmp_path):
     assert '"tcp/0.0.0.0:7447"' in text
     conf = tmp_path / "zenohd.json5"
     conf.write_text(text.replace('"tcp/0.0.0.0:7447"', f'"tcp/127.0.0.1:{port}"'))
-    with zenohd_router(conf, f"tcp/127.0.0.1:{port}", tmp_path) as locator:
+    with zenohd(conf, f"tcp/127.0.0.1:{port}", tmp_path) as locator:
         assert subprocess.run(["sh", "-c", router_health_probe(port)]).returncode == 0, \
             "the router's health check misses zenohd's listening socket"
         procs, journal = play_compose_game(load_cluster(COMPOSE, **GAME_ENV), {ROUTER_ENDPOINT: locator}, tmp_path)
@@ -842,7 +808,7 @@ def test_tls_compose_game_through_zenohd_with_access_control(tmp_path):
     conf.write_text(text.replace('"tls/0.0.0.0:7447"', f'"tls/127.0.0.1:{port}"').replace('"certs/', f'"{certs}/'))
     endpoint = next(e for e in flag_values(cluster["services"]["coordinator"]["command"], "--connect"))
     assert endpoint == "tls/router:7447"
-    with zenohd_router(conf, f"tls/127.0.0.1:{port}", tmp_path) as locator:
+    with zenohd(conf, f"tls/127.0.0.1:{port}", tmp_path) as locator:
         procs, journal = play_compose_game(cluster, {endpoint: locator, "/certs/": f"{certs}/"}, tmp_path)
     check_game(procs, journal)
 

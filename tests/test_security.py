@@ -58,10 +58,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import os
 import queue
 import re
-import shutil
 import socket
 import stat
 import subprocess
@@ -78,7 +76,7 @@ from dronesim.schema import (
 )
 from dronesim.schema import acl
 from dronesim.transport import add_zenoh_args, router_locators, zenoh_config
-from tests.harness import Cluster, Proc
+from tests.harness import Cluster, zenohd
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config"
@@ -88,7 +86,6 @@ STRANGER = "EVIL"  # authenticated (a CA-signed certificate, a password in the d
 IDENTITIES = ("usrpwd", "cert")
 TIMEOUT = 30.0
 BLOCK = zenoh.CongestionControl.BLOCK
-CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dronesim"
 
 
 # --------------------------------------------------------------------------- unit: the ACL
@@ -353,20 +350,6 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def zenohd_binary() -> str | None:
-    found = shutil.which("zenohd")
-    if found:
-        return found
-    cargo = Path(os.environ.get("CARGO_HOME", Path.home() / ".cargo")) / "bin" / "zenohd"
-    return str(cargo) if cargo.exists() else None
-
-
-def zenoh_version() -> str:
-    import importlib.metadata
-
-    return importlib.metadata.version("eclipse-zenoh")
-
-
 def acl_block(identity: str) -> dict:
     return acl.access_control(ACL_DRONES, roots=["sim"], identity=identity, hosts=HOSTS)
 
@@ -388,34 +371,14 @@ def embedded_router(kit: Path, identity: str, tmp: Path):
 @contextlib.contextmanager
 def zenohd_router(kit: Path, identity: str, tmp: Path):
     """zenohd with the whole router config the generator writes; yields its TLS locator."""
-    binary = zenohd_binary()
-    if binary is None:
-        status = CACHE / "zenohd-install.txt"
-        why = status.read_text().strip() if status.exists() else "tests/setup.d/zenohd.sh has not run"
-        print(f"zenohd is not on PATH ({why}): skipping the zenohd router")
-        pytest.skip(f"zenohd is not installed ({why})")
-    version = subprocess.run([binary, "--version"], capture_output=True, text=True, timeout=30).stdout
-    if f"v{zenoh_version()}" not in version:
-        print(f"{binary} is {version.strip()!r}, not {zenoh_version()}: skipping the zenohd router")
-        pytest.skip(f"{binary} is not zenohd {zenoh_version()}")
     port = free_port()
     conf = acl.router_config(acl_block(identity), listen=f"tls/127.0.0.1:{port}", certs=str(kit),
                              mtls=identity == "cert", users=str(kit / "users.txt") if identity == "usrpwd" else None)
     conf["plugins_loading"] = {"enabled": False}
     path = tmp / f"zenohd-{identity}.json5"
     path.write_text(json.dumps(conf, indent=2))
-    proc = Proc(f"zenohd-{identity}", ["env", "RUST_LOG=info", binary, "-c", str(path)], tmp)
-    try:
-        # not just the port: zenohd logs its whole config (listen endpoint included) before it listens
-        proc.expect(rf"can be reached at: tls/127\.0\.0\.1:{port}", timeout=60)
-        yield f"tls/127.0.0.1:{port}"
-    finally:
-        proc.p.terminate()
-        try:
-            proc.p.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-
+    with zenohd(path, f"tls/127.0.0.1:{port}", tmp, name=f"zenohd-{identity}") as locator:
+        yield locator
 
 ROUTERS = {"embedded": embedded_router, "zenohd": zenohd_router}
 
