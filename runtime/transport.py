@@ -64,9 +64,7 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
         except Exception as exc:
             raise UsageError(f"cannot load zenoh config {args.config}: {exc}") from None
     else:
-        conf = zenoh.Config()
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        conf.insert_json5("transport/shared_memory/enabled", "false")
+        conf = _local_defaults()
     conf.insert_json5("scouting/delay", "0")
     if args.mode:
         conf.insert_json5("mode", json.dumps(args.mode))
@@ -161,26 +159,30 @@ def setup_logging(level: str, name: str) -> logging.Logger:
     return logging.getLogger(f"dronesim.{name}")
 
 
+def _local_defaults() -> zenoh.Config:
+    """A config with this project's defaults (see `zenoh_config`): no multicast scouting, no shared memory."""
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    return conf
+
+
 def router_config(listen: str = "tcp/127.0.0.1:0") -> zenoh.Config:
     """An embedded router's config: fast start, no multicast, admin space readable (for its port)."""
-    conf = zenoh.Config()
+    conf = _local_defaults()
     conf.insert_json5("mode", '"router"')
     conf.insert_json5("listen/endpoints", json.dumps([listen]))
     conf.insert_json5("scouting/delay", "0")
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/shared_memory/enabled", "false")  # see zenoh_config
     conf.insert_json5("adminspace", '{"enabled": true, "permissions": {"read": true, "write": false}}')
     return conf
 
 
 def client_config(locator: str) -> zenoh.Config:
     """A client session's config for one router endpoint: no multicast, fast start."""
-    conf = zenoh.Config()
+    conf = _local_defaults()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([locator]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/delay", "0")
-    conf.insert_json5("transport/shared_memory/enabled", "false")  # see zenoh_config
     return conf
 
 
