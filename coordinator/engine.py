@@ -730,12 +730,15 @@ class Engine:
         return []
 
 
+def opens_drones_phase(effect: Effect) -> bool:
+    return isinstance(effect, Publish) and isinstance(effect.msg, Turn) and effect.msg.phase is Phase.DRONES
+
+
 def _drones_first(effects: list[Effect]) -> list[Effect]:
     """The next turn's drones' phase first, when a turn ends and the next one's GCS phase was answered
     ahead: it is what the next turn waits for. The rest keeps its order (STATUS before the GCS phase
     it informs; the ENV phase before its STATUS)."""
-    urgent = [e for e in effects if isinstance(e, Publish) and isinstance(e.msg, Turn) and e.msg.phase is Phase.DRONES]
-    return urgent + [e for e in effects if e not in urgent] if urgent else effects
+    return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves
 
 
 def _each(items, take) -> list[RemoteInputError]:

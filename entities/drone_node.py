@@ -29,7 +29,7 @@ import zenoh
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
     Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, Moves, Nps, Order, Over, Phase, RemoteInputError, Role,
-    MalformedMessage, Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
+    Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
 )
 from dronesim.schema.messages import AROUND, unchecked
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
@@ -217,8 +217,7 @@ class Asker:
             try:
                 ans = decode(reply.ok.payload.to_bytes(), Ans)
                 asked = ask.asked()
-                if len(asked) != len(ans.kinds):
-                    raise MalformedMessage(f"{len(ans.kinds)} answers for {len(asked)} asked cells")
+                ans.check_fits(asked)
                 self.chart.learn(asked, ans.kinds)
                 result = dict(zip(asked, ans.infos(asked))) if infos else {}
             except RemoteInputError as err:
@@ -231,17 +230,20 @@ class Asker:
 
 
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
-_AROUND = np.asarray(AROUND, dtype=np.int64)
 SMALL = 48  # up to this many cells, the chart works cell by cell rather than with numpy
 FAR, FAR_MAX = 3, 32  # up to FAR_MAX drones, a process asks ahead for every cell within FAR steps
 
 
 @functools.cache
 def _ball(reach: int) -> np.ndarray:
-    """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first."""
+    """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first (the
+    neighbours in AROUND order)."""
     r = range(-reach, reach + 1)
-    offs = [(dx, dy, dz) for dx in r for dy in r for dz in r if 0 < abs(dx) + abs(dy) + abs(dz) <= reach]
-    return np.asarray(sorted(offs, key=lambda o: abs(o[0]) + abs(o[1]) + abs(o[2])), dtype=np.int64)
+    farther = [(dx, dy, dz) for dx in r for dy in r for dz in r if 1 < abs(dx) + abs(dy) + abs(dz) <= reach]
+    return np.asarray([*AROUND, *sorted(farther, key=lambda o: abs(o[0]) + abs(o[1]) + abs(o[2]))],
+                      dtype=np.int64)
+
+
 _cell_info = unchecked(CellInfo)
 _step = unchecked(Step)  # the coordinator checks every move it is sent
 
@@ -298,12 +300,7 @@ class Chart:
     def unknown(self, around: Sequence[Cell], reach: int = 1) -> tuple[Cell, ...]:
         """The cells within `reach` steps (6-connectivity) of the `around` cells whose kind was never
         told, once each, in order (by default their neighbours, in AROUND order)."""
-        if reach > 1:
-            ball = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _ball(reach)).reshape(-1, 3)
-            inside, at = self._linear(ball)
-            fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN
-            return tuple(dict.fromkeys(map(tuple, ball[inside][fresh].tolist())))
-        if len(around) * 6 <= SMALL:  # a few: cell by cell
+        if reach == 1 and len(around) * 6 <= SMALL:  # a few: cell by cell
             out: dict[Cell, None] = {}
             for x, y, z in around:
                 for dx, dy, dz in AROUND:
@@ -312,10 +309,10 @@ class Chart:
                     if i is not None and self._kinds[i] == self.UNKNOWN:
                         out[c] = None
             return tuple(out)
-        ring = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _AROUND).reshape(-1, 3)
-        inside, at = self._linear(ring)
+        ball = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _ball(reach)).reshape(-1, 3)
+        inside, at = self._linear(ball)
         fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN
-        return tuple(dict.fromkeys(map(tuple, ring[inside][fresh].tolist())))
+        return tuple(dict.fromkeys(map(tuple, ball[inside][fresh].tolist())))
 
 
 def parse_drones(text: str) -> tuple[str, ...]:

@@ -13,7 +13,9 @@ from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from dronesim.coordinator.engine import Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
+from dronesim.coordinator.engine import (
+    Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase,
+)
 from dronesim.entities.autopilots import fly_round, make_autopilot, pilot_class
 from dronesim.entities.environment import Environment, build_world
 from dronesim.entities.gcs import Plan, gcs_done
@@ -61,9 +63,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
         next turn waits for it), but here the environment must see the turn's ENV phase and STATUS
         before the drones sense, as it does over the network (it answers an ASK for turn t only once
         STATUS(t - 1) is in)."""
-        first = [e for e in effects if not (isinstance(e, Publish) and isinstance(e.msg, Turn)
-                                            and e.msg.phase is Phase.DRONES)]
-        queue.extend(first + [e for e in effects if e not in first])
+        queue.extend(sorted(effects, key=opens_drones_phase))  # stable: only the drones' phase moves
     welcome: Welcome | None = None
     for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), Connect(turn=0, sender="GCS", role=Role.GCS)):
         push(engine.connect(hello, None))

@@ -509,9 +509,13 @@ class Ans(Message):
             out[i] = out.get(i, ()) + (d,)
         return out
 
+    def check_fits(self, cells: tuple[Cell, ...]) -> None:
+        """MalformedMessage if this is not an answer to a question about `cells` (one kind each)."""
+        _check(len(cells) == len(self.kinds), f"{len(self.kinds)} answers for {len(cells)} asked cells")
+
     def infos(self, cells: tuple[Cell, ...]) -> tuple[CellInfo, ...]:
         """One CellInfo per asked cell; MalformedMessage if the answer does not fit the question."""
-        _check(len(cells) == len(self.kinds), f"{len(self.kinds)} answers for {len(cells)} asked cells")
+        self.check_fits(cells)
         drones = self.occupants()
         return tuple(CellInfo(pos=c, kind=_KINDS[k], drones=drones.get(i, ())) for i, (c, k) in
                      enumerate(zip(cells, self.kinds)))
