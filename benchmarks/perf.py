@@ -620,10 +620,13 @@ def play_local(case: Case, scenario_file: Path) -> Local:
 
 def python_baseline_kib() -> int:
     """VmHWM of an idle entity process: Python with the coordinator, environment and drone modules
-    imported and a Zenoh client session on the loopback router that has sent and received 500 small
-    messages (the fixed cost of any running process, whatever its world and drones)."""
-    code = ("import os, sys, queue, zenoh, dronesim.coordinator.node, dronesim.entities.env_node, "
+    imported, numpy's random generators loaded (the coordinator and the environment build their world
+    with one, whatever its size; numpy loads that module on first use) and a Zenoh client session on
+    the loopback router that has sent and received 500 small messages: the fixed cost of any running
+    process, whatever its world and drones."""
+    code = ("import os, sys, queue, zenoh, numpy, dronesim.coordinator.node, dronesim.entities.env_node, "
             "dronesim.entities.drone_node; from dronesim.transport import client_config\n"
+            "numpy.random.default_rng(0)\n"
             "s = zenoh.open(client_config(sys.argv[1])); got = queue.SimpleQueue()\n"
             "sub = s.declare_subscriber('baseline/echo', lambda m: got.put(m.payload.to_bytes()))\n"
             "pub = s.declare_publisher('baseline/echo', congestion_control=zenoh.CongestionControl.BLOCK)\n"
@@ -879,8 +882,9 @@ def legend(facts: dict) -> str:
         "1000 ÷ mean turn at 128, same world) ÷ (1000 ÷ 128): 1.00 is linear in N, above is worse than "
         "linear. Memory: VmHWM sampled just before the ground station quits; ratio = VmHWM ÷ (2 × world "
         f"array bytes (nx·ny·nz, one bool per cell) + 1 KiB × N + {base:.0f} MiB), the last being the VmHWM "
-        "of an idle entity process (the coordinator, environment and drone modules imported, a Zenoh client "
-        "session on the router that has sent and received 500 small messages): what any running process "
+        "of an idle entity process (the coordinator, environment and drone modules imported, numpy's random "
+        "generators loaded as every world build loads them, a Zenoh client session on the router that has sent "
+        "and received 500 small messages): what any running process "
         "costs whatever its world and drones. Alive at end: drones alive in the last STATUS (seed drones do not avoid each other); "
         "moving per turn: drones that moved, mean over the measured turns (in-process journal); \"same game\": "
         "every STATUS equals the in-process one. Exit codes: coordinator/environment/swarm "
