@@ -55,6 +55,8 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                       size=member.welcome.world.size)
         mine = set(drones)
         senses = pilot_class(autopilot).senses
+        if senses:  # the static world around the starts, asked now: the first turn's sensing needs no ASK
+            asker.prefetch(sorted({s.pos for s in member.welcome.starts if s.drone in mine}))
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
         backlog: list = []  # events taken from the inbox while waiting for the environment
