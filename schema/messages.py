@@ -669,16 +669,23 @@ def _wire_encoder(hint: object) -> typing.Callable[[object], object]:
     return _identity
 
 
-_ENCODERS: dict[type, list[tuple[str, str, typing.Callable[[object], object]]]] = {}
+_FieldEncoder = tuple[str, str, typing.Callable[[object], object], typing.Callable[[object], object] | None]
+_ENCODERS: dict[type, list[_FieldEncoder]] = {}
 
 
-def _encoders_of(cls: type) -> list[tuple[str, str, typing.Callable[[object], object]]]:
-    """(attribute, wire name, encoder) of each field of `cls`, in order; computed once per class."""
+def _encoders_of(cls: type) -> list[_FieldEncoder]:
+    """(attribute, wire name, encoder, record encoder) of each field of `cls`, in order; computed once
+    per class. The record encoder is set for a tuple of records, which `encode` packs one by one."""
     enc = _ENCODERS.get(cls)
     if enc is None:
         hints = typing.get_type_hints(cls)
-        enc = [(f.name, "from" if f.name == "sender" else f.name, _wire_encoder(hints[f.name]))
-               for f in dataclasses.fields(cls)]
+        enc = []
+        for f in dataclasses.fields(cls):
+            hint = hints[f.name]
+            args = typing.get_args(hint)
+            records = typing.get_origin(hint) is tuple and len(args) == 2 and args[0] in _RECORDS
+            enc.append((f.name, "from" if f.name == "sender" else f.name, _wire_encoder(hint),
+                        _record_encoder(args[0]) if records else None))
         _ENCODERS[cls] = enc
     return enc
 
@@ -816,12 +823,29 @@ def _record_encoder(cls: type) -> typing.Callable[[object], object]:
     return env["encode_record"]  # type: ignore[return-value]
 
 
+#: The packer's first buffer (msgpack's default, 256 KiB, is allocated for every message packed).
+_PACK_BUFFER = 1024
+
+
 def encode(msg: Message) -> bytes:
-    """The MessagePack bytes of a message (deterministic: same message, same bytes)."""
-    body: dict[str, object] = {"v": SCHEMA_VERSION, "t": msg.TAG}
-    for name, wire, enc in _encoders_of(type(msg)):
-        body[wire] = enc(getattr(msg, name))
-    return msgpack.packb(body, use_bin_type=True)
+    """The MessagePack bytes of a message (deterministic: same message, same bytes): a map of the
+    header ("v", "t") and the fields, in order. A tuple of records is packed record by record, so a
+    swarm's STATUS never exists as a second, list-of-lists copy of itself."""
+    fields = _encoders_of(type(msg))
+    packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=_PACK_BUFFER)  # it grows as needed
+    pack = packer.pack
+    packer.pack_map_header(2 + len(fields))
+    pack("v"), pack(SCHEMA_VERSION), pack("t"), pack(msg.TAG)
+    for name, wire, enc, record in fields:
+        pack(wire)
+        value = getattr(msg, name)
+        if record is None:
+            pack(enc(value))
+        else:
+            packer.pack_array_header(len(value))
+            for r in value:
+                pack(record(r))
+    return packer.bytes()
 
 
 M = typing.TypeVar("M", bound=Message)
