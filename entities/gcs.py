@@ -65,6 +65,21 @@ def turns_to_answer_ahead(plan: "Plan", turn: int, answered: int, *, last: int |
     return out
 
 
+def _plan_items(texts: Iterable[str], size: Cell, default_drone: str) -> Iterable[tuple[int, str, Cell]]:
+    """(turn, drone, cell) of each target item in `texts`, in the order written; UsageError on a bad one."""
+    for text in texts:
+        for chunk in text.split(";"):
+            if not chunk.strip() or chunk.strip().startswith("#"):
+                continue
+            m = _ITEM.match(chunk)
+            if not m:
+                raise UsageError(f"bad target {chunk.strip()!r}: expected [Dnn=]x,y,z[@turn]")
+            turn = int(m["turn"] or 1)
+            if turn < 1:
+                raise UsageError(f"bad target {chunk.strip()!r}: turns start at 1")
+            yield turn, m["drone"] or default_drone, correct_form(m["cell"], size)
+
+
 @dataclass(frozen=True, slots=True)
 class Plan:
     """Targets by turn: ``items`` holds (turn, drone, cell), sorted."""
@@ -73,20 +88,14 @@ class Plan:
 
     @classmethod
     def parse(cls, texts: Iterable[str], size: Cell, default_drone: str = "D01") -> "Plan":
-        items = []
-        for text in texts:
-            for chunk in text.split(";"):
-                if not chunk.strip() or chunk.strip().startswith("#"):
-                    continue
-                m = _ITEM.match(chunk)
-                if not m:
-                    raise UsageError(f"bad target {chunk.strip()!r}: expected [Dnn=]x,y,z[@turn]")
-                drone = m["drone"] or default_drone
-                turn = int(m["turn"] or 1)
-                if turn < 1:
-                    raise UsageError(f"bad target {chunk.strip()!r}: turns start at 1")
-                items.append((turn, drone, correct_form(m["cell"], size)))
-        return cls(tuple(sorted(items, key=lambda item: item[0])))  # stable: within a turn, the last written wins
+        items = sorted(_plan_items(texts, size, default_drone), key=lambda item: item[0])
+        return cls(tuple(items))  # a stable sort: within a turn, the last written wins
+
+    @staticmethod
+    def drones_of(texts: Iterable[str], size: Cell, default_drone: str = "D01") -> set[str]:
+        """The drones the plan `texts` gives targets to, every item checked as `parse` checks it,
+        none kept (a process that needs no plan checks a swarm's thousands of targets for free)."""
+        return {drone for _, drone, _ in _plan_items(texts, size, default_drone)}
 
     @classmethod
     def load(cls, path: str, size: Cell) -> "Plan":

@@ -90,7 +90,7 @@ class Scenario:
         scenario = cls(world=spec, drones=tuple(drones), autopilots=autopilots, targets=tuple(targets),
                        max_turns=_int(data.get("max_turns", 1000), "max_turns"))
         scenario.game_config()  # validates ids, starts
-        unknown = scenario.plan().drones() - set(autopilots)
+        unknown = Plan.drones_of(scenario.targets, spec.size, default_drone=scenario.drones[0].drone) - set(autopilots)
         if unknown:
             raise UsageError(f"targets for drones not in the scenario: {', '.join(sorted(unknown))}")
         return scenario
