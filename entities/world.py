@@ -153,8 +153,11 @@ def _fill(heights: np.ndarray, nz: int) -> np.ndarray:
     return np.arange(nz)[None, None, :] < heights[:, :, None]
 
 
-def _frozen(grid: np.ndarray) -> np.ndarray:
-    grid = np.array(grid, dtype=bool, order="C", copy=True)
+def _frozen(grid: np.ndarray, *, fresh: bool = False) -> np.ndarray:
+    """A read-only C-ordered boolean copy of `grid`; with `fresh` (an array nobody else holds), `grid`
+    itself when it is one already: a world's array exists once, even while it is being built."""
+    if not (fresh and grid.dtype == bool and grid.flags.c_contiguous):
+        grid = np.array(grid, dtype=bool, order="C", copy=True)
     grid.flags.writeable = False
     return grid
 
@@ -249,7 +252,7 @@ class World:
 
         # limit[x, y]: the tallest building allowed on that ground cell; 0 once a building stands
         # there, and at most kz for a keep_free cell (x, y, kz), so that a building stops below it.
-        limit = np.full((nx, ny), nz, dtype=np.int64)
+        limit = np.full((nx, ny), nz, dtype=np.int32)  # sizes are at most 65536
         for i, kf in enumerate(keep_free):
             kx, ky, kz = _cell(kf, f"keep_free[{i}]")
             if not (0 <= kx < nx and 0 <= ky < ny and 0 <= kz < nz):
@@ -257,7 +260,7 @@ class World:
             limit[kx, ky] = min(limit[kx, ky], kz)
 
         placed: list[Building] = []
-        heights = np.zeros((nx, ny), dtype=np.int64)
+        heights = np.zeros((nx, ny), dtype=np.int32)
         attempts = _ATTEMPTS_PER_BUILDING * count + 32 if count else 0
         while attempts > 0 and len(placed) < count:
             n = min(attempts, _CHUNK)
@@ -305,14 +308,14 @@ class World:
         if not isinstance(data, (bytes, bytearray, memoryview)) or len(data) != (n + 7) // 8:
             raise UsageError(f"a packed world of size {size} needs {(n + 7) // 8} bytes")
         bits = np.unpackbits(np.frombuffer(bytes(data), dtype=np.uint8), count=n)
-        return cls._trusted(size, bits.astype(bool).reshape(size), ())
+        return cls._trusted(size, bits.view(bool).reshape(size), ())  # 0/1 bytes: already booleans
 
     @classmethod
     def _trusted(cls, size: Cell, grid: np.ndarray, buildings: tuple[Building, ...]) -> World:
         """Build without re-validating what the caller already guarantees."""
         world = object.__new__(cls)
         object.__setattr__(world, "size", size)
-        object.__setattr__(world, "grid", _frozen(grid))
+        object.__setattr__(world, "grid", _frozen(grid, fresh=True))
         object.__setattr__(world, "buildings", buildings)
         return world
 
