@@ -148,14 +148,15 @@ class _Drone:
     misses: int = 0
     host: str | None = None
     cooperative: bool = False
-    _last: tuple = field(default=(), repr=False, compare=False)  # (what the last status said, that status)
+    _last: DroneStatus | None = field(default=None, repr=False, compare=False)  # the last status built
 
     def status(self, drone: str) -> DroneStatus:
         note = Note.REACHED if self.state is DroneState.ALIVE and self.pos == self.target else self.note
-        said = (self.pos, self.state, self.target, note, self.cause)
-        if not self._last or self._last[0] != said:  # most drones of a swarm change every turn, some do not
-            self._last = (said, _drone_status(drone, self.pos, self.state, self.target, note, self.cause))
-        return self._last[1]
+        last = self._last
+        if (last is None or last.pos != self.pos or last.state is not self.state or last.target != self.target
+                or last.note is not note or last.cause is not self.cause):  # in a swarm, some drones stay put
+            self._last = last = _drone_status(drone, self.pos, self.state, self.target, note, self.cause)
+        return last
 
 
 # Records built from the engine's own state, which it checked when it took it in (receivers check again).

@@ -17,9 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import functools
 import operator
-import re
 import types
 import typing
 from dataclasses import dataclass
@@ -39,23 +37,23 @@ MAX_PAYLOAD = 1 << 22
 
 Cell = tuple[int, int, int]
 
-DRONE_ID = re.compile(r"D\d{2,4}\Z")
-HOST_ID = re.compile(r"H\d{2,4}\Z")
 FIXED_IDS = ("ENV", "GCS", "SRV", "OBS")
 
 
+def _numbered(value: object, letter: str) -> bool:
+    """`letter` then 2 to 4 ASCII digits (D01, H12, D1000)."""
+    return (type(value) is str and 3 <= len(value) <= 5 and value[0] == letter and value.isascii()
+            and value[1:].isdigit())
+
+
 def is_drone_id(value: object) -> bool:
-    return isinstance(value, str) and _matches(DRONE_ID, value)
+    """A drone's id: D01, D02, ... D9999."""
+    return _numbered(value, "D")
 
 
 def is_host_id(value: object) -> bool:
     """A swarm host's id: H01, H02, ..."""
-    return isinstance(value, str) and _matches(HOST_ID, value)
-
-
-@functools.lru_cache(maxsize=4096)
-def _matches(pattern: re.Pattern[str], value: str) -> bool:  # ids recur in every message: cache the verdict
-    return pattern.match(value) is not None
+    return _numbered(value, "H")
 
 
 def drone_id(n: int) -> str:
@@ -275,7 +273,7 @@ class DroneStatus:
     cause: Cause = Cause.NONE
 
     def __post_init__(self) -> None:
-        if (type(self.drone) is str and _matches(DRONE_ID, self.drone) and _cell_ok(self.pos, -MAX_COORD)
+        if (_numbered(self.drone, "D") and _cell_ok(self.pos, -MAX_COORD)
                 and (self.target is None or _cell_ok(self.target, 0)) and type(self.state) is DroneState
                 and type(self.note) is Note and type(self.cause) is Cause):
             return  # the common case, in one expression (a swarm's STATUS holds thousands of these)
