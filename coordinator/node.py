@@ -208,6 +208,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
             if engine.clock() != phase:
                 phase = engine.clock()
                 started = time.monotonic()
+            event = msg = None  # not kept while waiting: a swarm's MOVES is thousands of records
         # Let OVER reach everyone: wait (on events, bounded) until the admitted entities have left.
         end = time.monotonic() + LINGER_S
         while {e for e, _ in present} - {"SRV"} and time.monotonic() < end:
