@@ -137,8 +137,8 @@ class Asker:
         cells = self.chart.unknown(around)
         if cells and len(around) <= FAR_MAX:  # a few drones: ask farther at once, and again only every
             cells = self.chart.unknown(around, reach=FAR)  # few turns (a swarm asks its next ring each turn)
-        for i in range(0, len(cells), Ask.MAX_CELLS):
-            ask = Ask(turn=0, sender=self.sender, cells=cells[i:i + Ask.MAX_CELLS])
+        for i in range(0, len(cells), PREFETCH_CHUNK):
+            ask = Ask(turn=0, sender=self.sender, cells=cells[i:i + PREFETCH_CHUNK])
             self._ahead.append((ask, self.querier.get(payload=encode(ask))))
 
     def _absorb(self) -> None:
@@ -234,6 +234,9 @@ class Asker:
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
 SMALL = 48  # up to this many cells, the chart works cell by cell rather than with numpy
 FAR, FAR_MAX = 3, 32  # up to FAR_MAX drones, a process asks ahead for every cell within FAR steps
+#: Cells per ASK sent ahead: nothing waits for these answers, so a swarm's thousands of cells go in
+#: several concurrent queries and the environment never holds one huge request (or answer) at once.
+PREFETCH_CHUNK = 512
 
 
 @functools.cache
