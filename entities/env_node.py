@@ -5,10 +5,10 @@ coordinator's moves in the ENV phase and publishes the changed cells (UPD, which
 against its own copy of the world without waiting for it), serves the static map (ENV/MAP) and takes
 the drones' positions from each STATUS.
 
-A STATUS is opened (decoded whole) only when the environment needs the drones' positions: for an
-ASK of the turn, or to apply the ENV phase's moves. A swarm's drone hosts compose most answers
-themselves (see entities/drone_node.py), so most turns need only the STATUS's turn, read from its
-header: a 1000-drone STATUS is then never turned into 1000 records here.
+A STATUS is checked whole on arrival (a malformed one is refused and changes nothing), but its drones
+are put on the map only when the environment needs their positions: for an ASK of the turn, or to apply
+the ENV phase's moves. A swarm's drone hosts compose most answers themselves (see
+entities/drone_node.py), so most turns skip that work.
 
 An ASK for turn t is answered once STATUS(t-1) has been applied; one that arrives earlier (possible
 when messages take different routes) waits for it, one for a past turn gets an error reply. An ASK for
@@ -25,8 +25,8 @@ import zenoh
 
 from dronesim.entity import Membership, add_entity_args
 from dronesim.schema import (
-    Ans, Ask, Connect, Keys, MapRequest, Over, Phase, RemoteInputError, Role, Sealed, Status, Turn, Upd,
-    UsageError, WorldMap, encode, is_drone_id,
+    Ans, Ask, Connect, Keys, MapRequest, Over, Phase, RemoteInputError, Role, Status, Turn, Upd, UsageError,
+    WorldMap, encode, is_drone_id,
 )
 from dronesim.schema.messages import is_host_id, unchecked
 from dronesim.schema.errors import StaleTurn, WrongSender
@@ -44,7 +44,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
         out = Outbox(session)
-        inbox.subscribe(keys.status, Status, sealed=True)
+        inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
         inbox.serve(keys.ask, Ask)
         inbox.serve(keys.map, MapRequest)
@@ -62,20 +62,14 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         applied = False  # the ENV phase of turn `ready` is done
         early: Turn | None = None
         over: Over | None = None
-        unopened: Sealed | None = None  # the last STATUS, until the drones' positions are needed
+        unsynced: Status | None = None  # the last STATUS, until the drones' positions are needed
 
-        def sync() -> bool:
-            """The drones where the last STATUS has them. False for a STATUS whose body is malformed:
-            counted, and it changes nothing (the drones stay where the one before had them)."""
-            nonlocal unopened
-            if unopened is not None:
-                status, unopened = unopened, None
-                try:
-                    env.sync(status.open())
-                except RemoteInputError as err:
-                    inbox.rejects.reject(keys.status, err)
-                    return False
-            return True
+        def sync() -> None:
+            """The drones where the last STATUS has them."""
+            nonlocal unsynced
+            if unsynced is not None:
+                env.sync(unsynced)
+                unsynced = None
 
         env_phase = None  # the subscription to the ENV phase, held while someone listens to the UPD
 
@@ -103,8 +97,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
 
         def answer(query: zenoh.Query, ask: Ask) -> None:
             # built right: not checked again (the asker does); turn 0 asks the static world (kinds only)
-            if ask.turn != 0 and not sync():
-                return refuse(query, f"the STATUS of turn {ask.turn - 1} was malformed: no drones to tell")
+            if ask.turn != 0:
+                sync()
             kinds, drones = env.survey(ask.cells, ask.around, drones=ask.turn != 0)
             query.reply(query.key_expr, encode(_ans(ask.turn, "ENV", kinds, drones)))
             query.drop()
@@ -147,9 +141,9 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                             logger.debug("ENV phase of turn %d after its STATUS: nothing to apply", turn.turn)
                         else:
                             raise StaleTurn(f"ENV phase of turn {turn.turn} while the world is at turn {ready}")
-                    case Received(_, Sealed() as status) if status.cls is Status:
+                    case Received(_, Status() as status):
                         follow_listeners()
-                        unopened = status
+                        unsynced = status
                         ready, applied = status.turn + 1, False
                         still = []
                         for query, ask in waiting:

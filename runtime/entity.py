@@ -11,7 +11,7 @@ import time
 import zenoh
 
 from dronesim.schema import (
-    Connect, Keys, Message, Over, Refused, RejectCounter, RemoteInputError, Sealed, Status, Turn, UsageError, Welcome,
+    Connect, Keys, Message, Over, Refused, RejectCounter, RemoteInputError, Status, Turn, UsageError, Welcome,
 )
 from dronesim.schema.errors import StaleTurn
 from dronesim.transport import Inbox, Presence, Received, request
@@ -137,13 +137,12 @@ class TurnClock:
         self.turn: int | None = turn or None  # the turn being played (after STATUS(t): t + 1, the next)
         self._seen: dict[tuple[str, object, int], Message] = {}
 
-    def admit(self, msg: Turn | Status | Over | Sealed) -> None:
+    def admit(self, msg: Turn | Status | Over) -> None:
         """Check `msg` against the clock (StaleTurn if it cannot be current) and advance the clock."""
-        kind = _kind(msg)
-        now = msg.turn + 1 if kind is Status else msg.turn
+        now = msg.turn + 1 if isinstance(msg, Status) else msg.turn
         if self.turn is not None:
-            lo = self.turn - 1 if kind is Over else self.turn  # STATUS(t) makes t + 1 "now"
-            hi = None if kind is Over else self.turn + 1  # the end may come at any turn
+            lo = self.turn - 1 if isinstance(msg, Over) else self.turn  # STATUS(t) makes t + 1 "now"
+            hi = None if isinstance(msg, Over) else self.turn + 1  # the end may come at any turn
             if now < lo or (hi is not None and now > hi):
                 raise StaleTurn(f"{msg.TAG} for turn {msg.turn} while the game is at turn {self.turn}")
         key = (msg.TAG, getattr(msg, "phase", None), msg.turn)
@@ -157,16 +156,10 @@ class TurnClock:
 
     def screen(self, event: object, rejects: RejectCounter) -> bool:
         """False (the rejection counted and logged) for a coordinator message that fails `admit`."""
-        msg = event.msg if isinstance(event, Received) else None
-        if _kind(msg) in (Turn, Status, Over):
+        if isinstance(event, Received) and isinstance(event.msg, (Turn, Status, Over)):
             try:
-                self.admit(msg)
+                self.admit(event.msg)
             except RemoteInputError as err:
                 rejects.reject(event.key, err)
                 return False
         return True
-
-
-def _kind(msg: object) -> type:
-    """The message type of `msg`, sealed or not."""
-    return msg.cls if isinstance(msg, Sealed) else type(msg)

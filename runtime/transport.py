@@ -17,9 +17,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from dronesim.schema import (
-    Keys, Message, RejectCounter, RemoteInputError, Sealed, Target, Turn, UsageError, decode, encode, peek,
-)
+from dronesim.schema import Keys, Message, RejectCounter, RemoteInputError, Target, Turn, UsageError, decode, encode
 from dronesim.schema.errors import WrongSender
 
 # --------------------------------------------------------------------------- flags and config
@@ -202,10 +200,10 @@ def router_locators(session: zenoh.Session) -> list[str]:
 
 @dataclass(frozen=True, slots=True)
 class Received:
-    """A valid message that arrived on `key` (its header only, when subscribed `sealed`)."""
+    """A valid message that arrived on `key`."""
 
     key: str
-    msg: Message | Sealed
+    msg: Message
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,7 +230,7 @@ def session_id(session: zenoh.Session) -> str:
     return str(session.info.zid())
 
 
-def check_addressed(keys: Keys, key: str, msg: Message | Sealed) -> None:
+def check_addressed(keys: Keys, key: str, msg: Message) -> None:
     """The entity part of a key must be the message's subject: its drone for TGT, else its sender."""
     subject = msg.drone if isinstance(msg, Target) else msg.sender
     parts = keys.parts_of(key)
@@ -270,19 +268,13 @@ class Inbox:
         except Exception:  # a bug: log it, never let Zenoh swallow it silently
             self.log.exception("error handling %s", where)
 
-    def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
-                  sealed: bool = False) -> zenoh.Subscriber:
-        """Decoded messages on `key` become `Received` events (until `unsubscribe`). With `sealed`,
-        only their header is read and checked: the event holds a `Sealed` message, opened when needed."""
-        if sealed and not (isinstance(expect, type) and expect not in (Turn, Target)):
-            raise UsageError("sealed subscriptions take one message type, addressed by its sender")
-        read = peek if sealed else decode
-
+    def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...]) -> zenoh.Subscriber:
+        """Decoded messages on `key` become `Received` events (until `unsubscribe`)."""
         def on_sample(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
 
             def handle() -> None:
-                msg = read(sample.payload.to_bytes(), expect)
+                msg = decode(sample.payload.to_bytes(), expect)
                 check_addressed(self.keys, k, msg)
                 self._q.put(Received(k, msg))
 

@@ -8,8 +8,8 @@ from .keys import KEY_TABLE, Keys, KeySpec
 from .messages import (
     MESSAGE_TYPES, SCHEMA_VERSION, Aim, Ans, Ask, Cause, Cell, CellInfo, CellKind, Connect, Done,
     DroneState, DroneStatus, EndReason, MapRequest, Message, Move, Moves, Note, Nps, Order, Over, Phase,
-    Intent, Refused, Role, Sealed, WorldSpec, Start, Status, Step, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id,
-    encode, is_drone_id, peek,
+    Intent, Refused, Role, WorldSpec, Start, Status, Step, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id,
+    encode, is_drone_id,
 )
 
 __all__ = [
@@ -17,6 +17,6 @@ __all__ = [
     "UnknownEntity", "UsageError", "WrongSender", "KEY_TABLE", "Keys", "KeySpec", "MESSAGE_TYPES",
     "SCHEMA_VERSION", "Ans", "Ask", "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done",
     "DroneState", "DroneStatus", "EndReason", "MapRequest", "Message", "Move", "Moves", "Note", "Nps", "Order",
-    "Over", "Phase", "Intent", "WorldSpec", "Refused", "Role", "Sealed", "Aim", "Step", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
-    "decode", "drone_id", "encode", "is_drone_id", "peek",
+    "Over", "Phase", "Intent", "WorldSpec", "Refused", "Role", "Aim", "Step", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
+    "decode", "drone_id", "encode", "is_drone_id",
 ]

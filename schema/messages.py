@@ -849,58 +849,6 @@ def encode(msg: Message) -> bytes:
 M = typing.TypeVar("M", bound=Message)
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Sealed(typing.Generic[M]):
-    """A message whose header (type, turn, sender) `peek` has read and checked, its body still
-    undecoded: for a receiver that needs most of what arrives only by its turn (the environment and
-    its swarm-sized STATUS). `open` decodes and validates the whole, as `decode` does."""
-
-    cls: type[M]
-    turn: int
-    sender: str
-    data: bytes
-
-    @property
-    def TAG(self) -> str:  # noqa: N802 - as a Message's
-        return self.cls.TAG
-
-    def open(self) -> M:
-        return decode(self.data, self.cls)
-
-
-def peek(data: bytes, expect: type[M]) -> Sealed[M]:
-    """The header of a message of type `expect`, checked as `decode` checks it (size, version, type,
-    turn, sender), without decoding its body; MalformedMessage on anything wrong there."""
-    if not isinstance(data, bytes):
-        raise MalformedMessage(f"payload must be bytes, got {type(data).__name__}")
-    if len(data) > MAX_PAYLOAD:
-        raise MalformedMessage(f"payload of {len(data)} bytes exceeds {MAX_PAYLOAD}", reason="too-large")
-    head: dict[str, object] = {}
-    try:
-        reader = msgpack.Unpacker(None, raw=False, strict_map_key=True, use_list=False, max_buffer_size=MAX_PAYLOAD)
-        reader.feed(data)
-        for _ in range(reader.read_map_header()):
-            key = reader.unpack()
-            if key in ("v", "t", "turn", "from") and key not in head:
-                head[key] = reader.unpack()
-                if len(head) == 4:
-                    break
-            else:
-                reader.skip()
-    except Exception as exc:  # msgpack raises several unrelated types
-        raise MalformedMessage(f"not a MessagePack map: {exc.__class__.__name__}: {exc}") from None
-    version, tag = head.get("v"), head.get("t")
-    _check(type(version) is int and version == SCHEMA_VERSION,
-           f"schema version {version!r}, this build speaks {SCHEMA_VERSION}")
-    if tag != expect.TAG:
-        _check(isinstance(tag, str) and tag in _BY_TAG, f"unknown message type {tag!r}")
-        raise MalformedMessage(f"a {tag} message on a key that carries {expect.TAG}", reason="wrong-type")
-    turn, sender = head.get("turn"), head.get("from")
-    _check_int(turn, "turn", 0, MAX_TURN)
-    _check_sender(sender)
-    return Sealed(cls=expect, turn=turn, sender=sender, data=data)  # type: ignore[arg-type]
-
-
 @typing.overload
 def decode(data: bytes, expect: type[M]) -> M: ...
 @typing.overload

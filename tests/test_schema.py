@@ -14,7 +14,7 @@ from dronesim.schema import (
     KEY_TABLE, MESSAGE_TYPES, SCHEMA_VERSION, Ans, Ask, CellInfo, CellKind, Connect, Done, DroneState,
     DroneStatus, Keys, MalformedMessage, MapRequest, Message, Move, Nps, Order, Over, Phase, Refused,
     RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldMap, WorldSpec, decode, drone_id,
-    encode, is_drone_id, peek,
+    encode, is_drone_id,
 )
 from dronesim.schema.messages import MAX_COORD, MAX_PAYLOAD, MAX_TURN
 from dronesim.schema.samples import SAMPLES, VECTORS_PATH, golden
@@ -624,58 +624,3 @@ def test_unchecked_builds_the_same_record_without_checking() -> None:
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.pos = (0, 0, 0)  # type: ignore[misc]
 
-
-# --------------------------------------------------------------------------- peek: the header only
-
-
-def test_peek_reads_the_header_and_opens_to_the_sample(sample: Message, golden: bytes) -> None:
-    sealed = peek(golden, type(sample))
-    assert (sealed.cls, sealed.turn, sealed.sender, sealed.TAG) == (type(sample), sample.turn, sample.sender, sample.TAG)
-    assert sealed.open() == sample
-    assert peek(golden, type(sample)) == sealed  # a repeat is equal: same bytes
-
-
-def test_peek_refuses_what_decode_refuses_in_the_header() -> None:
-    status = SAMPLES["status"]
-    cases = {
-        "wrong type": (encode(SAMPLES["over"]), "wrong-type"),
-        "unknown type": (mutated("status", t="NOPE"), "malformed"),
-        "version": (mutated("status", v=SCHEMA_VERSION + 1), "malformed"),
-        "turn": (mutated("status", turn=-1), "malformed"),
-        "turn type": (mutated("status", turn="3"), "malformed"),
-        "sender": (mutated("status", **{"from": "nobody"}), "malformed"),
-        "no sender": (without("status", "from"), "malformed"),
-        "not a map": (msgpack.packb([1, 2]), "malformed"),
-        "truncated": (encode(status)[:5], "malformed"),
-        "garbage": (b"\xc1\xc1", "malformed"),
-        "too large": (bytes(MAX_PAYLOAD + 1), "too-large"),
-    }
-    for what, (data, reason) in cases.items():
-        with pytest.raises(MalformedMessage) as info:
-            peek(data, Status)
-        assert info.value.reason == reason, what
-        assert str(info.value), what
-
-
-def test_a_sealed_message_with_a_bad_body_fails_when_opened() -> None:
-    sealed = peek(mutated("status", drones=[["D01", [0, 0], "ALIVE", None, "NONE", "NONE"]]), Status)
-    assert sealed.turn == SAMPLES["status"].turn
-    with pytest.raises(MalformedMessage):
-        sealed.open()
-
-
-def test_peek_takes_the_header_in_any_order() -> None:
-    body = body_of("status")
-    reordered = {k: body[k] for k in reversed(list(body))}
-    sealed = peek(pack(reordered), Status)
-    assert sealed.open() == SAMPLES["status"]
-
-
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.binary(max_size=256))
-def test_peek_of_random_bytes_only_raises_malformed(data: bytes) -> None:
-    try:
-        sealed = peek(data, Status)
-    except MalformedMessage:
-        return
-    assert sealed.cls is Status
