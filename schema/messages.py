@@ -769,17 +769,25 @@ def _record_converter(cls: type) -> typing.Callable[[object], object]:
             else:
                 env[f"c{i}"] = item
                 body.append(f"    {guard}{a} = tuple(map(c{i}, _as_seq({a})))")
-        elif origin is tuple:  # a Cell: its length and ints are the record's to check
-            body.append(f"    {guard}_as_seq({a})")
+        elif origin is tuple:  # a Cell: its type, length and ints are the record's to check
+            pass
         elif isinstance(hint, type) and issubclass(hint, enum.Enum):
-            env[f"e{i}"], env[f"E{i}"] = _enum_table(hint), hint
-            body.append(f"    {guard}{a} = _member(e{i}, E{i}, {a})")
+            value_types = {type(m.value) for m in hint}
+            assert len(value_types) == 1, f"{hint.__name__}: members' values of one type"
+            env[f"e{i}"], env[f"E{i}"], env[f"T{i}"] = _enum_table(hint), hint, value_types.pop()
+            # a value of the members' type (an IntEnum takes an int, not True or 1.0), then a member
+            body.append(f"    {guard}m{i} = e{i}.get({a}) if type({a}) is T{i} else None")
+            body.append(f"    {guard}{a} = m{i} if m{i} is not None else _member(e{i}, E{i}, {a})")
         elif hint in _RECORDS:
             env[f"c{i}"] = _record_converter(hint)
             body.append(f"    {guard}{a} = c{i}({a})")
-    env["_member"] = _member
-    env["make"] = unchecked(cls)  # every field set, then checked by the record's own __post_init__
-    body.append(f"    o = make({', '.join(names)})")
+    env["_member"] = _member  # raises with the reason
+    # every field set as `unchecked` does, then checked by the record's own __post_init__
+    env["new"] = object.__new__
+    body.append("    o = new(cls)")
+    for i, f in enumerate(fields):
+        env[f"set{i}"] = getattr(cls, f.name).__set__
+        body.append(f"    set{i}(o, {names[i]})")
     if hasattr(cls, "__post_init__"):
         body.append("    o.__post_init__()")
     body.append("    return o")
