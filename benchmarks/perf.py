@@ -22,6 +22,8 @@ In one run, through a loopback router process (`dronesim router`, tcp/127.0.0.1,
 3. The same scenarios in-process (`dronesim.local.simulate`, no network): same game, same timing
    point (the GCS phase), so in-process / distributed is the distribution overhead.
 4. World generation time for 512x512x64 (`World.generate`, seeded), in-process.
+5. The anchor: POGEMA, in-process, with as many agents as each game has drones (`benchmarks/pogema.py`;
+   installed once into a cached virtual environment of its own; `--no-pogema` skips it).
 
 Scenarios (one JSON file per case, runtime/scenario.py format): starts on an even grid over the near
 half of the ground floor (x < nx/2, lanes every other y), kept free by the world generation and checked with
@@ -62,7 +64,7 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from dronesim.benchmarks import add_write_args, replace_section
+from dronesim.benchmarks import add_write_args, pogema, replace_section
 from dronesim.transport import client_config
 
 SECTION = "## Performance"
@@ -72,7 +74,8 @@ WORLD_SEED = 3
 GEN_SIZE = (512, 512, 64)
 PHASE_DEADLINE = 60.0  # seconds: a benchmark measures, it does not test deadlines
 EVENT_TIMEOUT = 180.0  # seconds without any event from the game before the run is declared stalled
-TARGETS = {"latency": 3.0, "tps128": 200.0, "tps1000": 20.0, "kib_per_drone": 1.0, "per_world_byte": 2.0}
+TARGETS = {"latency": 3.0, "tps128": 200.0, "pogema128": 0.25, "tps1000": 20.0, "kib_per_drone": 1.0,
+           "per_world_byte": 2.0}
 
 # --------------------------------------------------------------------------- helpers
 
@@ -671,6 +674,7 @@ COLUMNS = (
     ("ltps", "in-process turns/s"),
     ("lratio", "in-process ÷ distributed"),
     ("floor", "turn ÷ pub/sub RTT"),
+    ("pogema", "turns/s ÷ POGEMA's steps/s (same N)"),
     ("growth", "per-turn cost growth 128→1000 ÷ N growth"),
     ("srv", "coordinator MiB (÷ model)"),
     ("env", "environment MiB (÷ model)"),
@@ -710,6 +714,17 @@ def memory_growth(peaks: dict[tuple[str, int, tuple[int, int, int]], int]) -> li
                                    f"≤ {TARGETS['per_world_byte']:g} × the world array")
         rows.append(Row(f"memory per world byte (1 drone, {_size_text(small)} → {_size_text(large)})", cells))
     return rows
+
+
+def versus_pogema(rate: float, anchor: float | None, drones: int) -> tuple[str, list[str]]:
+    """A game row's turns/s against POGEMA's steps/s with as many agents: the cell, and the verdict
+    where the issue sets a target (128 drones: at least 25 %)."""
+    if not anchor:
+        return "-", []
+    ratio = rate / anchor
+    verdicts = [_verdict(ratio, TARGETS["pogema128"], False, f"≥ {TARGETS['pogema128']:.0%} of POGEMA's "
+                                                            f"{anchor:.0f} steps/s")] if drones == 128 else []
+    return f"{ratio:.0%}", verdicts
 
 
 def render(rows: list[Row]) -> str:
@@ -766,6 +781,20 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     if want_floor:
         floor_now()
     ratio_cells: list[tuple[Row, float, int]] = []  # (row, median turn, drones): "turn ÷ RTT" filled at the end
+
+    # the anchor: POGEMA in-process, same machine, same run
+    pogema_rates: dict[int, float] = {}
+    agents = sorted({c.drones for c in cases(args.quick, args.turns) if selected(c.name)}
+                    | (set(DRONES) if selected("POGEMA in-process") else set()))
+    if args.pogema and not args.quick and agents:
+        try:
+            pogema_rates = pogema.steps_per_second(agents)
+        except pogema.Unavailable as exc:
+            rows.append(Row("POGEMA", {"target": f"not measured: {exc}"}))
+        for n, rate in pogema_rates.items():
+            rows.append(Row(f"POGEMA in-process, {n} agent{'s' if n > 1 else ''} @ 64x64", {
+                "array": _bytes_text(pogema.SIZE * pogema.SIZE), "tps": f"{rate:.1f}",
+                "lat": f"{1e3 / rate:.3f} / -", "target": "anchor (random actions)"}))
 
     # 2-3. games
     baseline = python_baseline_kib()
@@ -832,8 +861,10 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
                 facts.setdefault("errors", []).append(f"{case.name}: STATUS({t}) differs from the in-process run: "
                                                       + "; ".join(diff[:5]))
             cells["alive"] = f"{game.alive}/{case.drones}, {local.moving:.1f} moving per turn, {same}"
+            cells["pogema"], against = versus_pogema(1 / mean, pogema_rates.get(case.drones), case.drones)
             if case.drones == 128:
                 verdicts.append(_verdict(1 / mean, TARGETS["tps128"], False, f"≥ {TARGETS['tps128']:g} turns/s"))
+            verdicts += against
             if case.drones == 1000:
                 verdicts.append(_verdict(1 / mean, TARGETS["tps1000"], False, f"≥ {TARGETS['tps1000']:g} turns/s"))
                 small = per_turn.get((128, case.size))
@@ -912,7 +943,12 @@ def legend(facts: dict) -> str:
         "\"in-process ÷ distributed\" = distributed mean turn ÷ in-process mean turn. \"turn ÷ pub/sub RTT\" = "
         "median turn ÷ median pub/sub round trip (callback replies). Growth (1000-drone rows) = (mean turn at "
         "1000 ÷ mean turn at 128, same world) ÷ (1000 ÷ 128): 1.00 is linear in N, above is worse than "
-        "linear. Memory: VmHWM (peak resident set) sampled just before the ground station quits. The target is "
+        "linear. POGEMA rows: the anchor of the issue, POGEMA "
+        f"{pogema.VERSION} in its own virtual environment on this machine in this run: a {pogema.SIZE}x{pogema.SIZE} "
+        f"grid, obstacle density {pogema.DENSITY:g}, observation radius {pogema.OBS_RADIUS}, every agent a random "
+        "action every step, agents staying on the grid at their targets, 2 s per agent count after 20 warm-up "
+        "steps; \"turns/s ÷ POGEMA's\" compares a game row with POGEMA at the same number of agents (POGEMA in "
+        "one process, ours across processes and a router). Memory: VmHWM (peak resident set) sampled just before the ground station quits. The target is "
         "checked as growth, by the \"memory per\" rows: per drone = (VmHWM with 1000 drones − VmHWM with 1, same "
         "world) ÷ 999; per world byte = (VmHWM on the largest world − on the smallest, 1 drone) ÷ the difference "
         "of their arrays (nx·ny·nz, one bool per cell). A game row's ratio = VmHWM ÷ (2 × world array bytes + "
@@ -940,6 +976,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=2000, help="round trips per floor measurement (default 2000)")
     parser.add_argument("--only", metavar="PATTERN", help="only rows whose name matches this regex, e.g. '128|floor'")
     parser.add_argument("--profile", metavar="DIR", help="py-spy record every entity process into DIR (raw stacks)")
+    parser.add_argument("--no-pogema", dest="pogema", action="store_false",
+                        help="do not measure the POGEMA anchor (it installs POGEMA into a cached virtual "
+                             "environment the first time; --quick never measures it)")
     parser.add_argument("--keep-logs", action="store_true",
                         help="keep the processes' logs and the scenario files (kept anyway when something failed)")
     add_write_args(parser)
@@ -974,7 +1013,8 @@ def main(argv: list[str] | None = None) -> int:
             f"used {others:.2f} cores on average during the run"
             + (" (other work ran alongside: absolute numbers are pessimistic)." if others > 0.2 else ".")
             + "\n\nTargets (issue \"Performance: turn latency near the Zenoh floor, scale to 1000 drones\"): "
-            "1-drone turn ≤ 3 × pub/sub round trip (checked on every 1-drone row), ≥ 200 turns/s at 128 drones, "
+            "1-drone turn ≤ 3 × pub/sub round trip (checked on every 1-drone row), ≥ 200 turns/s at 128 drones "
+            "and ≥ 25 % of POGEMA's in-process speed at 128 agents (measured in the same run), "
             "≥ 20 turns/s at 1000 drones, coordinator and environment memory ≤ 2 × the world array + 1 KiB per "
             "drone above what the process costs anyway (checked as growth: the two \"memory per\" rows). Where the time goes: `dronesim bench perf --only '128 drones @ 64' "
             "--profile DIR` writes py-spy stacks of every process; the CPU column splits a turn by process.\n\n"

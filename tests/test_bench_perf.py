@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from dronesim.benchmarks import BENCHMARKS, perf
+from dronesim.benchmarks import BENCHMARKS, perf, pogema
 
 pytestmark = pytest.mark.integration
 
@@ -98,3 +98,19 @@ def test_memory_growth_is_judged_per_drone_and_per_world_byte():
     assert per_byte.cells["target"] == f"≤ 2 × the world array: {expect}"
     assert len(rows) == 2  # no 1000-drone game on the other worlds: no row for them
     assert perf.memory_growth({}) == []
+
+
+def test_game_rows_are_set_against_pogema_with_as_many_agents():
+    assert perf.versus_pogema(200.0, None, 128) == ("-", [])  # not measured: no cell, no verdict
+    assert perf.versus_pogema(200.0, 1000.0, 128) == ("20%", ["≥ 25% of POGEMA's 1000 steps/s: UNMET"])
+    assert perf.versus_pogema(300.0, 1000.0, 128) == ("30%", ["≥ 25% of POGEMA's 1000 steps/s: met"])
+    assert perf.versus_pogema(30.0, 100.0, 1000) == ("30%", [])  # the issue sets no POGEMA target there
+
+
+@pytest.mark.slow
+def test_pogema_anchor_installs_and_measures_steps_per_second():
+    """The anchor as the benchmark runs it: POGEMA installed into its own cached environment (PyPI, the
+    first time), a short measurement for two agent counts."""
+    rates = pogema.steps_per_second([1, 16], seconds=0.2)
+    assert set(rates) == {1, 16}
+    assert all(r > 0 for r in rates.values())

@@ -1,0 +1,90 @@
+"""POGEMA, the anchor of issue "Performance": an in-process grid multi-agent simulator, measured on this
+machine in the same run as our games.
+
+POGEMA (``pip install pogema``) pins numpy < 2 and pydantic 1, so it runs in a virtual environment of its
+own, made once under the user's cache directory (``$XDG_CACHE_HOME/dronesim/pogema-<version>``, about 110 MB;
+PyPI must be reachable the first time). Its scenario is the one the issue quotes: a 64x64 grid, obstacle
+density 0.3, observation radius 5, every agent taking a uniformly random action every step; agents stay on
+the grid when they reach their target (``on_target="nothing"``), so every step moves all of them, as every
+turn of our 1000-drone games moves most drones.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+VERSION = "1.4.0"
+SIZE = 64
+DENSITY = 0.3
+OBS_RADIUS = 5
+
+#: Run inside POGEMA's environment: steps per second for each agent count, as one JSON object.
+_SCRIPT = """
+import json, sys, time
+import numpy as np
+from pogema import GridConfig, pogema_v0
+
+agents, seconds, size, density, radius = json.loads(sys.argv[1])
+rng = np.random.default_rng(0)
+out = {}
+for n in agents:
+    env = pogema_v0(grid_config=GridConfig(size=size, num_agents=n, density=density, obs_radius=radius,
+                                           seed=1, max_episode_steps=10**9, on_target="nothing"))
+    env.reset(seed=1)
+    for _ in range(20):  # warm-up
+        env.step(rng.integers(0, 5, size=n).tolist())
+    steps, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        env.step(rng.integers(0, 5, size=n).tolist())
+        steps += 1
+    out[n] = steps / (time.perf_counter() - t0)
+print(json.dumps(out))
+"""
+
+
+class Unavailable(RuntimeError):
+    """POGEMA could not be installed or run here (the reason says why)."""
+
+
+def venv_dir() -> Path:
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "dronesim" / f"pogema-{VERSION}"
+
+
+def python() -> Path:
+    """The interpreter of POGEMA's environment, made (and POGEMA installed) on first use."""
+    venv = venv_dir()
+    exe = venv / "bin" / "python"
+    if exe.exists() and subprocess.run([str(exe), "-c", "import pogema"], capture_output=True).returncode == 0:
+        return exe
+    print(f"  POGEMA {VERSION}: installing into {venv} (once) ...", file=sys.stderr, flush=True)
+    steps = ([sys.executable, "-m", "venv", "--clear", str(venv)],
+             [str(exe), "-m", "pip", "install", "--quiet", "--disable-pip-version-check", f"pogema=={VERSION}"])
+    for cmd in steps:
+        try:
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=900, stdin=subprocess.DEVNULL)
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise Unavailable(f"{cmd[2]} failed: {exc}") from None
+        if done.returncode != 0:
+            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
+            raise Unavailable(f"`{' '.join(cmd[-3:])}` exited {done.returncode}: {tail[0]}")
+    return exe
+
+
+def steps_per_second(agents: list[int], seconds: float = 2.0) -> dict[int, float]:
+    """POGEMA's steps per second with each number of `agents` (random actions, 64x64, in-process)."""
+    exe = python()
+    args = json.dumps([agents, seconds, SIZE, DENSITY, OBS_RADIUS])
+    try:
+        done = subprocess.run([str(exe), "-c", _SCRIPT, args], capture_output=True, text=True,
+                              timeout=60 + 4 * seconds * len(agents), stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        raise Unavailable("POGEMA did not finish in time") from None
+    if done.returncode != 0:
+        tail = done.stderr.strip().splitlines()[-1:] or ["no output"]
+        raise Unavailable(f"POGEMA exited {done.returncode}: {tail[0]}")
+    return {int(n): float(v) for n, v in json.loads(done.stdout.strip().splitlines()[-1]).items()}
