@@ -5,13 +5,15 @@ a round go out as concurrent queries to ENV/ASK, then a lone drone publishes its
 MOVES of all its drones in one message. It exits on OVER.
 
 Sensing without a round trip: the process keeps a chart of the kinds the environment told it (buildings
-never move, so a cell's kind holds for the whole game). Once it has sent its moves, it asks the
-environment, for the static world (an ASK for turn 0, answered at once), the never-told cells around
-where its drones are going (within three steps for a few drones, so that it asks only every few turns;
-the next ring for a swarm). When an autopilot asks, each cell whose kind is charted is answered from the
-chart plus the drones in it, which the turn's orders list (every alive drone's cell at the start of the
-turn): exactly the CellInfo the environment would give for that turn. Other cells are asked as usual.
-The autopilots see only the cells they ask for, so decisions, and journals, do not change.
+never move, so a cell's kind holds for the whole game). As soon as it is admitted it asks the environment
+for its static map (ENV/MAP, the query a ground station draws with; asked again each turn until a reply
+comes, as the environment may still be building its world); until then, once it has sent its moves, it
+asks, for the static world (an ASK for turn 0, answered at once), the never-told cells around where its
+drones are going (within three steps for a few drones, so that it asks only every few turns; the next ring
+for a swarm). When an autopilot asks, each cell whose kind is charted is answered from the chart plus the
+drones in it, which the turn's orders list (every alive drone's cell at the start of the turn): exactly
+the CellInfo the environment would give for that turn. Other cells are asked as usual. The autopilots
+see only the cells they ask for, so decisions, and journals, do not change.
 """
 
 from __future__ import annotations
@@ -28,9 +30,10 @@ import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
-    Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, Moves, Nps, Order, Over, Phase, RemoteInputError, Role,
-    Turn, UsageError, decode, drone_id, encode, Step, is_drone_id,
+    Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, MapRequest, Moves, Nps, Order, Over, Phase,
+    RemoteInputError, Role, Turn, UsageError, WorldMap, decode, drone_id, encode, Step, is_drone_id,
 )
+from dronesim.schema.errors import OutOfRange
 from dronesim.schema.messages import AROUND, unchecked
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
@@ -129,10 +132,40 @@ class Asker:
                                                consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
         self.chart = Chart(size)
         self._ahead: list[tuple[Ask, object]] = []  # static ASKs (turn 0) sent ahead, and their reply handlers
+        self._map_tries = 0
+        self._map = self._ask_map()  # the reply handler of the MAP query on its way (None: no more)
+
+    def _ask_map(self):
+        self._map_tries += 1
+        return self.session.get(self.keys.map, payload=encode(MapRequest(turn=0, sender=self.sender)),
+                                timeout=self.patience)
+
+    def _poll_map(self) -> None:
+        """Chart the whole static world if the environment's map has come (never waiting for it)."""
+        if self._map is None:
+            return
+        try:
+            reply = self._map.try_recv()
+        except zenoh.ZError:  # finished without a reply: nobody served the map yet (ask again, a few times)
+            self._map = self._ask_map() if self._map_tries < MAP_TRIES else None
+            return
+        if reply is None:
+            return  # on its way
+        self._map = None
+        try:
+            if reply.ok is None:
+                raise RemoteInputError(f"MAP refused: {reply.err.payload.to_bytes().decode(errors='replace')}",
+                                       reason="error-reply")
+            self.chart.learn_map(decode(reply.ok.payload.to_bytes(), WorldMap))
+        except RemoteInputError as err:
+            self.inbox.rejects.reject("MAP", err)
 
     def prefetch(self, around: Iterable[Cell]) -> None:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
-        `around` that this process has not been told yet."""
+        `around` that this process has not been told yet (nothing once the whole map is charted)."""
+        self._poll_map()
+        if self.chart.complete:
+            return
         around = list(around)
         cells = self.chart.unknown(around)
         if cells and len(around) <= FAR_MAX:  # a few drones: ask farther at once, and again only every
@@ -166,6 +199,7 @@ class Asker:
         the others, an ASK. While the environment is away it waits for it (up to `patience`), checking
         `give_up` at least every second (the game may have ended meanwhile)."""
         self._absorb()
+        self._poll_map()
         answers: dict[str, Answers] = {}
         kind, missing = self.chart.kind, {}
         for d, cells in pending.items():
@@ -229,11 +263,14 @@ class Asker:
 
     def close(self) -> None:
         self.querier.undeclare()
+        self._map = None
 
 
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
 SMALL = 48  # up to this many cells, the chart works cell by cell rather than with numpy
 FAR, FAR_MAX = 3, 32  # up to FAR_MAX drones, a process asks ahead for every cell within FAR steps
+#: MAP queries a drone process sends (one per turn while none is answered) before it gives up on the map.
+MAP_TRIES = 10
 #: Cells per ASK sent ahead: nothing waits for these answers, so a swarm's thousands of cells go in
 #: several concurrent queries and the environment never holds one huge request (or answer) at once.
 PREFETCH_CHUNK = 512
@@ -271,6 +308,16 @@ class Chart:
     def __init__(self, size: Cell) -> None:
         self.size = size
         self._kinds = bytearray([self.UNKNOWN]) * (size[0] * size[1] * size[2])
+        self.complete = False  # every cell's kind is known (the environment's map was charted)
+
+    def learn_map(self, world_map: WorldMap) -> None:
+        """Every cell's kind, from the environment's static map (RemoteInputError if it is another world's)."""
+        if world_map.size != self.size:
+            raise OutOfRange(f"a MAP of a {world_map.size} world, this game's is {self.size}")
+        bits = np.unpackbits(np.frombuffer(world_map.buildings, dtype=np.uint8), count=len(self._kinds))
+        kinds = np.where(bits.view(bool), np.uint8(CellKind.BUILDING), np.uint8(CellKind.EMPTY))
+        np.frombuffer(self._kinds, dtype=np.uint8)[:] = kinds
+        self.complete = True
 
     def _at(self, cell: Cell) -> int | None:
         x, y, z = cell

@@ -588,14 +588,15 @@ class Over(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class MapRequest(Message):
-    """GCS -> ENV (query on ENV/MAP): the static world, for drawing."""
+    """GCS or drone process -> ENV (query on ENV/MAP): the static world, for drawing or for a drone
+    process's chart."""
 
     TAG: ClassVar[str] = "MAPREQ"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class WorldMap(Message):
-    """ENV -> GCS (reply to MAPREQ): world size and the building cells as a packed bit array
+    """ENV -> GCS or drone process (reply to MAPREQ): world size and the building cells as a packed bit array
     (numpy ``packbits`` of the C-ordered boolean grid indexed [x, y, z])."""
 
     TAG: ClassVar[str] = "MAP"

@@ -69,3 +69,29 @@ def test_chart_reaches_farther_when_asked() -> None:
     assert len(far) == 62 and set(far[:6]) == set(chart.unknown([(4, 4, 4)]))  # 6 + 18 + 38 cells, nearest first
     assert all(0 < sum(abs(a - 4) for a in c) <= 3 for c in far)
     assert len(Chart((2, 2, 1)).unknown([(0, 0, 0)], reach=3)) == 3  # only cells in the world
+
+
+def test_chart_from_the_environments_map_answers_every_cell_as_the_environment_does() -> None:
+    """The static map (ENV/MAP, as the environment serves it) charts every cell: the answers are the
+    environment's, and nothing is left to ask."""
+    import numpy as np
+    import pytest
+
+    from dronesim.entities.drone_node import Chart
+    from dronesim.entities.environment import Environment
+    from dronesim.entities.world import World
+    from dronesim.schema import CellKind, OutOfRange, WorldMap
+
+    world = World.generate((7, 5, 3), np.random.default_rng(4))
+    env = Environment(world, {})
+    chart = Chart(world.size)
+    assert not chart.complete
+    chart.learn_map(WorldMap(turn=0, sender="ENV", size=world.size, buildings=world.packed()))
+    assert chart.complete
+    cells = tuple((x, y, z) for x in range(-1, 8) for y in range(-1, 6) for z in range(-1, 4))
+    kinds, _ = env.survey(cells, drones=False)
+    assert tuple(chart.kind(c) for c in cells) == tuple(CellKind(k) for k in kinds)
+    assert chart.unknown([(x, y, z) for x in range(7) for y in range(5) for z in range(3)], reach=2) == ()
+    other = World.generate((5, 7, 3), np.random.default_rng(4))
+    with pytest.raises(OutOfRange):  # another world's map changes nothing
+        Chart(world.size).learn_map(WorldMap(turn=0, sender="ENV", size=other.size, buildings=other.packed()))
