@@ -59,7 +59,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         mine = set(drones)
         senses = pilot_class(autopilot).senses
         if senses:  # the static world around the starts, asked now: the first turn's sensing needs no ASK
-            asker.prefetch(sorted({s.pos for s in member.welcome.starts if s.drone in mine}))
+            asker.prefetch(0, sorted({s.pos for s in member.welcome.starts if s.drone in mine}))
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
         backlog: list = []  # events taken from the inbox while waiting for the environment
@@ -111,7 +111,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                     for d, dec in done[1].items():
                         out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
                 if fresh and senses:  # around where its drones mean to be: their next sensing, asked ahead
-                    asker.prefetch(sorted({d.pos for d in done[1].values()}))
+                    asker.prefetch(latest.turn, sorted({d.pos for d in done[1].values()}))
         asker.close()
         member.close()
         return over
@@ -132,22 +132,27 @@ class Asker:
                                                consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
         self.chart = Chart(size)
         self._ahead: list[tuple[Ask, object]] = []  # static ASKs (turn 0) sent ahead, and their reply handlers
-        self._map_tries = 0
-        self._map = self._ask_map()  # the reply handler of the MAP query on its way (None: no more)
+        self._map_asked: list[int] = []  # the turns in which the map was asked
+        self._map = None  # the reply handler of the MAP query on its way
 
-    def _ask_map(self):
-        self._map_tries += 1
+    def _ask_map(self, turn: int):
+        self._map_asked.append(turn)
         return self.session.get(self.keys.map, payload=encode(MapRequest(turn=0, sender=self.sender)),
                                 timeout=self.patience)
 
-    def _poll_map(self) -> None:
-        """Chart the whole static world if the environment's map has come (never waiting for it)."""
+    def _poll_map(self, turn: int) -> None:
+        """Chart the whole static world if the environment's map has come (never waiting for it); the
+        first call asks for it."""
+        if not self._map_asked:
+            self._map = self._ask_map(turn)
         if self._map is None:
             return
         try:
             reply = self._map.try_recv()
-        except zenoh.ZError:  # finished without a reply: nobody served the map yet (ask again, a few times)
-            self._map = self._ask_map() if self._map_tries < MAP_TRIES else None
+        except zenoh.ZError:  # finished without a reply: nobody served the map yet (the environment may
+            # still be starting): ask again in a later turn, a few times
+            if turn > self._map_asked[-1]:
+                self._map = self._ask_map(turn) if len(self._map_asked) < MAP_TRIES else None
             return
         if reply is None:
             return  # on its way
@@ -157,13 +162,15 @@ class Asker:
                 raise RemoteInputError(f"MAP refused: {reply.err.payload.to_bytes().decode(errors='replace')}",
                                        reason="error-reply")
             self.chart.learn_map(decode(reply.ok.payload.to_bytes(), WorldMap))
+            self.log.info("charted the environment's map: %d cells", len(self.chart))
         except RemoteInputError as err:
             self.inbox.rejects.reject("MAP", err)
 
-    def prefetch(self, around: Iterable[Cell]) -> None:
+    def prefetch(self, turn: int, around: Iterable[Cell]) -> None:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
-        `around` that this process has not been told yet (nothing once the whole map is charted)."""
-        self._poll_map()
+        `around` that this process has not been told yet (nothing once the whole map is charted);
+        `turn`: the turn being played (0 before the game)."""
+        self._poll_map(turn)
         if self.chart.complete:
             return
         around = list(around)
@@ -199,7 +206,7 @@ class Asker:
         the others, an ASK. While the environment is away it waits for it (up to `patience`), checking
         `give_up` at least every second (the game may have ended meanwhile)."""
         self._absorb()
-        self._poll_map()
+        self._poll_map(turn)
         answers: dict[str, Answers] = {}
         kind, missing = self.chart.kind, {}
         for d, cells in pending.items():
@@ -269,7 +276,7 @@ class Asker:
 _KINDS = tuple(CellKind)  # a kind byte -> its CellKind
 SMALL = 48  # up to this many cells, the chart works cell by cell rather than with numpy
 FAR, FAR_MAX = 3, 32  # up to FAR_MAX drones, a process asks ahead for every cell within FAR steps
-#: MAP queries a drone process sends (one per turn while none is answered) before it gives up on the map.
+#: MAP queries a drone process sends (at most one per turn while none is answered) before it gives up on the map.
 MAP_TRIES = 10
 #: Cells per ASK sent ahead: nothing waits for these answers, so a swarm's thousands of cells go in
 #: several concurrent queries and the environment never holds one huge request (or answer) at once.
@@ -309,6 +316,9 @@ class Chart:
         self.size = size
         self._kinds = bytearray([self.UNKNOWN]) * (size[0] * size[1] * size[2])
         self.complete = False  # every cell's kind is known (the environment's map was charted)
+
+    def __len__(self) -> int:
+        return len(self._kinds)
 
     def learn_map(self, world_map: WorldMap) -> None:
         """Every cell's kind, from the environment's static map (RemoteInputError if it is another world's)."""

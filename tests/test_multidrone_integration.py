@@ -35,12 +35,17 @@ def run_layout(locator: str, tmp: pathlib.Path, layout: str) -> pathlib.Path:
             for d, pilot in sorted(scenario.autopilots.items()):
                 by_pilot.setdefault(pilot, []).append(d)
             for n, (pilot, ids) in enumerate(sorted(by_pilot.items()), 1):
-                c.start(f"H{n:02d}", "drone", "--id", ",".join(ids), "--host", f"H{n:02d}", "--autopilot", pilot)
+                c.start(f"H{n:02d}", "drone", "--id", ",".join(ids), "--host", f"H{n:02d}", "--autopilot", pilot,
+                        "--log-level", "INFO")
         c.start("GCS", "gcs", "--scenario", str(SCENARIO), "--quiet")
         codes = c.wait_all(timeout=240)
         assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
         # the coordinator checked every UPD (--verify-env, see the harness) and none disagreed with its world
         assert "UPD" not in "\n".join(line for line in srv.err if "rejected" in line), srv.text[-3000:]
+        if layout == "swarm":  # the hosts whose autopilot senses charted the environment's whole map
+            for host in (p for p in c.procs if p.name.startswith("H")):
+                charted = "charted the environment's map: 1024 cells" in host.text
+                assert charted == ("--autopilot v1" not in " ".join(host.argv)), host.text[-2000:]
     return journal
 
 
