@@ -1016,7 +1016,7 @@ def main(argv: list[str] | None = None) -> int:
             "1-drone turn ≤ 3 × pub/sub round trip (checked on every 1-drone row), ≥ 200 turns/s at 128 drones "
             "and ≥ 25 % of POGEMA's in-process speed at 128 agents (measured in the same run), "
             "≥ 20 turns/s at 1000 drones, coordinator and environment memory ≤ 2 × the world array + 1 KiB per "
-            "drone above what the process costs anyway (checked as growth: the two \"memory per\" rows). Where the time goes: `dronesim bench perf --only '128 drones @ 64' "
+            "drone above what the process costs anyway (checked as growth: the \"memory per\" rows). Where the time goes: `dronesim bench perf --only '128 drones @ 64' "
             "--profile DIR` writes py-spy stacks of every process; the CPU column splits a turn by process.\n\n"
             f"{table}\n\n{legend(facts)}\n"
         )
