@@ -630,12 +630,22 @@ def unchecked(cls: type[R]) -> typing.Callable[..., R]:
     make = _UNCHECKED.get(cls)
     if make is None:
         names = [f.name for f in dataclasses.fields(cls)]
-        env = {"new": object.__new__, "cls": cls} | {f"set_{n}": getattr(cls, n).__set__ for n in names}
-        args = ", ".join(names)
-        body = "".join(f"    set_{n}(o, {n})\n" for n in names)
-        exec(f"def make({args}):\n    o = new(cls)\n{body}    return o\n", env)  # noqa: S102 - our own fields
+        env: dict[str, object] = {}
+        body = "\n".join(_building(cls, names, env))
+        exec(f"def make({', '.join(names)}):\n{body}\n    return o\n", env)  # noqa: S102 - our own fields
         make = _UNCHECKED[cls] = env["make"]
     return make  # type: ignore[return-value]
+
+
+def _building(cls: type, values: list[str], env: dict[str, object]) -> list[str]:
+    """Generated lines that make `o`, a `cls` record whose fields (in declaration order) are set to the
+    variables `values` without any check (`env` receives what the lines use)."""
+    env["new"], env["cls"] = object.__new__, cls
+    lines = ["    o = new(cls)"]
+    for i, (f, v) in enumerate(zip(dataclasses.fields(cls), values)):
+        env[f"set{i}"] = getattr(cls, f.name).__set__
+        lines.append(f"    set{i}(o, {v})")
+    return lines
 
 
 R = typing.TypeVar("R")
@@ -783,12 +793,7 @@ def _record_converter(cls: type) -> typing.Callable[[object], object]:
             env[f"c{i}"] = _record_converter(hint)
             body.append(f"    {guard}{a} = c{i}({a})")
     env["_member"] = _member  # raises with the reason
-    # every field set as `unchecked` does, then checked by the record's own __post_init__
-    env["new"] = object.__new__
-    body.append("    o = new(cls)")
-    for i, f in enumerate(fields):
-        env[f"set{i}"] = getattr(cls, f.name).__set__
-        body.append(f"    set{i}(o, {names[i]})")
+    body += _building(cls, names, env)  # every field set as `unchecked` does, then checked by the record
     if hasattr(cls, "__post_init__"):
         body.append("    o.__post_init__()")
     body.append("    return o")
