@@ -34,11 +34,12 @@ from dronesim.schema import (
     RemoteInputError, Role, Turn, UsageError, WorldMap, decode, drone_id, encode, Step, is_drone_id,
 )
 from dronesim.schema.errors import OutOfRange
-from dronesim.schema.messages import AROUND, unchecked
+from dronesim.schema.messages import _KINDS, AROUND, unchecked
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
 from .autopilots.base import Answers
+from .world import World
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
@@ -273,7 +274,6 @@ class Asker:
         self._map = None
 
 
-_KINDS = tuple(CellKind)  # a kind byte -> its CellKind
 SMALL = 48  # up to this many cells, the chart works cell by cell rather than with numpy
 FAR, FAR_MAX = 3, 32  # up to FAR_MAX drones, a process asks ahead for every cell within FAR steps
 #: MAP queries a drone process sends (at most one per turn while none is answered) before it gives up on the map.
@@ -324,8 +324,8 @@ class Chart:
         """Every cell's kind, from the environment's static map (RemoteInputError if it is another world's)."""
         if world_map.size != self.size:
             raise OutOfRange(f"a MAP of a {world_map.size} world, this game's is {self.size}")
-        bits = np.unpackbits(np.frombuffer(world_map.buildings, dtype=np.uint8), count=len(self._kinds))
-        kinds = np.where(bits.view(bool), np.uint8(CellKind.BUILDING), np.uint8(CellKind.EMPTY))
+        grid = World.from_packed(world_map.size, world_map.buildings).grid  # the format's one reader
+        kinds = np.where(grid.ravel(), np.uint8(CellKind.BUILDING), np.uint8(CellKind.EMPTY))
         np.frombuffer(self._kinds, dtype=np.uint8)[:] = kinds
         self.complete = True
 
