@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from dronesim.schema import Cell, CellInfo, CellKind, Move, Status, WorldSpec
-from dronesim.schema.messages import AROUND
+from dronesim.schema.messages import AROUND, asked_cells
 from dronesim.schema.errors import OutOfRange, UnknownEntity
 
 from .world import World
@@ -57,8 +57,7 @@ class Environment:
         in an asked cell (none with `drones` False: the static world), in numpy over the grid (a few
         cells: in plain Python, cheaper then)."""
         if len(cells) + 6 * len(around) <= SMALL:
-            asked = list(cells) + [(x + dx, y + dy, z + dz) for x, y, z in around for dx, dy, dz in AROUND]
-            infos = self.answer(asked)
+            infos = self.answer(asked_cells(cells, around))
             pairs = tuple((n, d) for n, info in enumerate(infos) for d in info.drones) if drones else ()
             return bytes(info.kind for info in infos), pairs
         a = np.asarray(cells, dtype=np.int64).reshape(-1, 3)

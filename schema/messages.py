@@ -472,10 +472,15 @@ class Ask(Message):
 
     def asked(self) -> tuple[Cell, ...]:
         """Every asked cell, in answer order: `cells`, then the neighbours of each `around` cell."""
-        out = list(self.cells)
-        for x, y, z in self.around:  # AROUND, unrolled: a swarm's prefetch has thousands of these
-            out += ((x + 1, y, z), (x - 1, y, z), (x, y + 1, z), (x, y - 1, z), (x, y, z + 1), (x, y, z - 1))
-        return tuple(out)
+        return asked_cells(self.cells, self.around)
+
+
+def asked_cells(cells: typing.Iterable[Cell], around: typing.Iterable[Cell]) -> tuple[Cell, ...]:
+    """`cells`, then the 6 neighbours of each `around` cell in `AROUND` order: what an ASK asks."""
+    out = list(cells)
+    for x, y, z in around:  # AROUND, unrolled: a swarm's prefetch has thousands of these
+        out += ((x + 1, y, z), (x - 1, y, z), (x, y + 1, z), (x, y - 1, z), (x, y, z + 1), (x, y, z - 1))
+    return tuple(out)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
