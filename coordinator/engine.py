@@ -27,10 +27,9 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-from dataclasses import field
 import hashlib
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from dronesim.schema import (
     Cause, Cell, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, Intent, Message, Move, Moves, Note, Nps,

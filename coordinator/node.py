@@ -15,8 +15,8 @@ import time
 import zenoh
 
 from dronesim.schema import (
-    Connect, Done, Keys, Message, Moves, Nps, Over, Phase, RejectCounter, Refused, RemoteInputError, Status, Target, Turn, Upd, UsageError,
-    drone_id, encode,
+    Connect, Done, Keys, Message, Moves, Nps, Over, Phase, RejectCounter, Refused, RemoteInputError, Status, Target,
+    Turn, Upd, UsageError, drone_id, encode,
 )
 from dronesim.schema.errors import WrongSender
 from dronesim.schema.messages import WorldSpec
