@@ -693,27 +693,39 @@ def memory_growth(peaks: dict[tuple[str, int, tuple[int, int, int]], int]) -> li
     process's peak (a few hundred KiB: code pages first touched, allocator arenas) does not decide;
     each game row's ratio to the idle-process model is shown as well."""
     rows = []
-    roles = (("srv", "coordinator"), ("env", "env"))
     for size in WORLDS:
-        name = f"memory per drone (1 → 1000 drones @ {_size_text(size)})"
-        slopes = {key: (peaks[(role, 1000, size)] - peaks[(role, 1, size)]) / 999 for key, role in roles
-                  if (role, 1000, size) in peaks and (role, 1, size) in peaks}
+        slopes = _slopes(peaks, (1, size), (1000, size), 999)  # KiB per drone
         if slopes:
-            cells = {key: f"{v:.2f} KiB/drone" for key, v in slopes.items()}
-            cells["target"] = _verdict(max(slopes.values()), TARGETS["kib_per_drone"], True,
-                                       f"≤ {TARGETS['kib_per_drone']:g} KiB per drone")
-            rows.append(Row(name, cells))
+            rows.append(_slope_row(f"memory per drone (1 → 1000 drones @ {_size_text(size)})", slopes, "KiB/drone",
+                                   TARGETS["kib_per_drone"], f"≤ {TARGETS['kib_per_drone']:g} KiB per drone"))
     small, large = WORLDS[0], WORLDS[-1]
     grown = int(np.prod(large)) - int(np.prod(small))
-    slopes = {key: (peaks[(role, 1, large)] - peaks[(role, 1, small)]) * 1024 / grown for key, role in roles
-              if (role, 1, large) in peaks and (role, 1, small) in peaks}
+    slopes = _slopes(peaks, (1, small), (1, large), grown / 1024)  # bytes per world byte
     if slopes:
-        cells = {key: f"{v:.2f} bytes/byte" for key, v in slopes.items()}
-        cells["array"] = f"+{_bytes_text(grown)}"
-        cells["target"] = _verdict(max(slopes.values()), TARGETS["per_world_byte"], True,
-                                   f"≤ {TARGETS['per_world_byte']:g} × the world array")
-        rows.append(Row(f"memory per world byte (1 drone, {_size_text(small)} → {_size_text(large)})", cells))
+        row = _slope_row(f"memory per world byte (1 drone, {_size_text(small)} → {_size_text(large)})", slopes,
+                         "bytes/byte", TARGETS["per_world_byte"], f"≤ {TARGETS['per_world_byte']:g} × the world array")
+        row.cells["array"] = f"+{_bytes_text(grown)}"
+        rows.append(row)
     return rows
+
+
+def _slopes(peaks: dict[tuple[str, int, tuple[int, int, int]], int], low: tuple, high: tuple,
+            per: float) -> dict[str, float]:
+    """For each role measured in both games (drones, world) `low` and `high`: its peak's growth (KiB)
+    from one to the other, divided by `per`; keyed by the role's column."""
+    return {key: (peaks[(role, *high)] - peaks[(role, *low)]) / per for key, role in _MEMORY_ROLES
+            if (role, *high) in peaks and (role, *low) in peaks}
+
+
+#: The processes the memory target is about: (table column, process name).
+_MEMORY_ROLES = (("srv", "coordinator"), ("env", "env"))
+
+
+def _slope_row(name: str, slopes: dict[str, float], unit: str, target: float, what: str) -> Row:
+    """A memory row: each role's slope, and the verdict on the worse one."""
+    cells = {key: f"{v:.2f} {unit}" for key, v in slopes.items()}
+    cells["target"] = _verdict(max(slopes.values()), target, True, what)
+    return Row(name, cells)
 
 
 def versus_pogema(rate: float, anchor: float | None, drones: int) -> tuple[str, list[str]]:
@@ -845,7 +857,7 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
                                       for n in (*ROLES, "router", "bench"))
             cells["lratio"] = f"{mean / lmean:.1f}x" if lmean == lmean else "-"
             model = 2 * array + 1024 * case.drones + baseline * 1024
-            for key, name in (("srv", "coordinator"), ("env", "env")):
+            for key, name in _MEMORY_ROLES:
                 hwm = game.memory.get(name, {}).get("VmHWM")
                 cells[key] = "-" if hwm is None else f"{hwm / 1024:.1f} ({hwm * 1024 / model:.2f})"
                 if hwm is not None:
