@@ -498,7 +498,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             member.on_presence(p)
                         case Received(_, Status() as st):
                             stamps[("STATUS", st.turn)] = now  # turn st.turn + 1 begins
-                            alive = {s.drone for s in st.drones if s.alive}
+                            alive = set(st.drones.alive())
                             game.last_status = st
                             game.statuses[st.turn] = st
                             if st.turn == case.warmup:  # CPU time over the measured turns: from here...
@@ -559,7 +559,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     game.latencies = [b - a for a, b in zip(begins, begins[1:])]  # type: ignore[operator]
     game.answers = [stamps[("DONE", t)] - stamps[("GCS", t)] for t in range(first, last) if ("DONE", t) in stamps]
     game.cpu = {n: v / case.turns for n, v in game.cpu.items()}
-    game.alive = len({s.drone for s in game.last_status.drones if s.alive}) if game.last_status else 0  # type: ignore[attr-defined]
+    game.alive = len(game.last_status.drones.alive()) if game.last_status else 0  # type: ignore[attr-defined]
     return game
 
 

@@ -31,17 +31,20 @@ import hashlib
 import logging
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from dronesim.schema import (
-    Cause, Cell, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, Intent, Message, Move, Moves, Note, Nps,
-    Order, Over, Phase, Refused, RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec,
-    encode,
+    Cause, Cell, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Moves, MoveTable, Note, Nps,
+    Over, Phase, Refused, RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec, encode,
 )
 from dronesim.entities.environment import build_world
 from dronesim.entities.world import World
-from dronesim.schema.messages import Step, is_host_id, unchecked
+from dronesim.schema.messages import is_drone_id, is_host_id
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
+from dronesim.schema.tables import code_of, drone_name
 
 from . import arbiter, observer
+from .fleet import ALIVE, CAUSES, NOTES, REACHED, Drones, Fleet, cell_of
 
 
 #: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
@@ -90,6 +93,9 @@ class GameConfig:
         ids = [d.drone for d in self.drones]
         if not ids:
             raise UsageError("a game needs at least one drone")
+        for d in ids:
+            if not is_drone_id(d):
+                raise UsageError(f"{d!r} is not a drone id (D01 ... D9999)")
         if len(set(ids)) != len(ids):
             raise UsageError(f"duplicate drone ids in {ids}")
         starts = [d.start for d in self.drones]
@@ -136,34 +142,7 @@ class Refusal:
 Effect = Publish | Reply | Record | Refusal
 
 
-@dataclass(slots=True)
-class _Drone:
-    pos: Cell
-    autopilot: str = ""
-    state: DroneState = DroneState.ALIVE
-    target: Cell | None = None
-    note: Note = Note.NONE
-    cause: Cause = Cause.NONE
-    misses: int = 0
-    host: str | None = None
-    cooperative: bool = False
-    _last: DroneStatus | None = field(default=None, repr=False, compare=False)  # the last status built
-
-    def status(self, drone: str) -> DroneStatus:
-        note = Note.REACHED if self.state is DroneState.ALIVE and self.pos == self.target else self.note
-        last = self._last
-        if (last is None or last.pos != self.pos or last.state is not self.state or last.target != self.target
-                or last.note is not note or last.cause is not self.cause):  # in a swarm, some drones stay put
-            self._last = last = _drone_status(drone, self.pos, self.state, self.target, note, self.cause)
-        return last
-
-
-# Records built from the engine's own state, which it checked when it took it in (receivers check again).
-_drone_status, _order, _move = unchecked(DroneStatus), unchecked(Order), unchecked(Move)
-
-
-def _cell(c: Cell | None) -> list[int] | None:
-    return None if c is None else list(c)
+_UNREACHABLE = code_of(Note.UNREACHABLE)
 
 
 class Engine:
@@ -178,20 +157,23 @@ class Engine:
             raise UsageError(f"the world is {self.world.size}, the game's is {config.world.size}")
         self.stage = Stage.ADMITTING
         self.turn = 0
-        self.drones: dict[str, _Drone] = {d.drone: _Drone(pos=d.start) for d in sorted(config.drones, key=lambda s: s.drone)}
+        self.fleet = Fleet((d.drone, d.start) for d in config.drones)
+        #: The drones one by one (a read-only view of the fleet).
+        self.drones = Drones(self.fleet)
         self.entities: dict[str, Role] = {}  # admitted entity id -> role
         self.sessions: dict[str, str] = {}  # admitted entity id -> its Zenoh session id
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
         self._targets: dict[str, Cell] = {}  # received in this GCS phase
-        self._moves: dict[str, Cell] = {}  # received in this DRONES phase
-        self._notes: dict[str, Note] = {}
+        n = len(self.fleet)
+        self._moved = np.zeros(n, bool)  # whose move this DRONES phase took
+        self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
+        self._said = np.zeros(n, np.uint8)  # the notes that came with them
         self._turn_log: dict = {}
-        self._upd_due: dict[int, tuple[Move, ...]] = {}  # ENV phases whose report is awaited: turn -> moves
+        self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
         #: Whether the environment's UPD reports are checked (kept for a few turns): the adapter says.
         self.verify_env = True
-        self._final: dict[str, Cell] = {}  # this turn's moves after arbitration
-        self._awaiting: set[str] = set()  # alive drones whose move this DRONES phase still awaits
+        self._final = np.zeros((0, 3), np.int32)  # this turn's moves after arbitration (the alive rows)
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
@@ -206,7 +188,16 @@ class Engine:
         return self.config.world.size
 
     def alive(self) -> list[str]:
-        return [d for d, r in self.drones.items() if r.state is DroneState.ALIVE]
+        return self.fleet.alive()
+
+    def moves_taken(self) -> dict[str, Cell]:
+        """The moves this DRONES phase has taken so far."""
+        return {self.fleet.ids[i]: cell_of(self._proposed[i]) for i in np.flatnonzero(self._moved).tolist()}
+
+    def _hosted(self, rows: np.ndarray) -> bool:
+        """Whether every drone of `rows` has a process flying it."""
+        host = self.fleet.host
+        return all(host[i] for i in rows.tolist())
 
     def _playing(self) -> bool:
         return self.stage in (Stage.GCS, Stage.DRONES)
@@ -222,7 +213,7 @@ class Engine:
         """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
         roles = set(self.entities.values())
         return (self.stage is Stage.RESUMING and Role.ENV in roles and Role.GCS not in roles
-                and all(self.drones[d].host for d in self.alive()))
+                and self._hosted(self.fleet.alive_rows()))
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
@@ -246,7 +237,7 @@ class Engine:
         the end of the previous one."""
         if turn is None:
             turn = self.turn - 1 if self._playing() else self.turn
-        return Status(turn=turn, sender="OBS", drones=tuple(r.status(d) for d, r in self.drones.items()))
+        return Status(turn=turn, sender="OBS", drones=self.fleet.status())
 
     # ------------------------------------------------------------------ admission
 
@@ -259,12 +250,11 @@ class Engine:
         again = msg.sender in self.entities  # the same process connecting again (its session says so)
         self.entities[msg.sender] = msg.role
         self.sessions[msg.sender] = msg.session
+        fleet = self.fleet
         for d in msg.drones:
-            self.drones[d].host = msg.sender
-            self.drones[d].autopilot = msg.autopilot
-            self.drones[d].cooperative = msg.cooperative
-        starts = tuple(Start(drone=d, pos=r.pos) for d, r in self.drones.items()
-                       if msg.role is not Role.DRONE or d in msg.drones)
+            fleet.fly(fleet.index[d], msg.sender, msg.autopilot, msg.cooperative)
+        rows = range(len(fleet)) if msg.role is not Role.DRONE else [fleet.index[d] for d in msg.drones]
+        starts = tuple(Start(drone=fleet.ids[i], pos=cell_of(fleet.pos[i])) for i in sorted(rows))
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
             f"{msg.sender} flying {', '.join(msg.drones)}"
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
@@ -303,26 +293,28 @@ class Engine:
                 if self.stage not in (Stage.ADMITTING, Stage.RESUMING):
                     return "drones cannot join a running game"
                 for d in msg.drones:
-                    if d not in self.drones:
-                        return f"unknown drone {d}: this game flies {', '.join(self.drones)}"
-                    if self.drones[d].host is not None:
-                        return f"drone {d} is already taken by {self.drones[d].host}"
+                    if d not in self.fleet.index:
+                        return f"unknown drone {d}: this game flies {', '.join(self.fleet.ids)}"
+                    host = self.fleet.host[self.fleet.index[d]]
+                    if host is not None:
+                        return f"drone {d} is already taken by {host}"
         return ""
 
     def _everyone_here(self) -> bool:
         roles = set(self.entities.values())
         if self.stage is Stage.RESUMING:  # the alive drones, the environment and the ground station (which
             # gets `gcs_grace` seconds once the others are back: it may have left the game for good)
-            return Role.ENV in roles and Role.GCS in roles and all(self.drones[d].host for d in self.alive())
-        return Role.ENV in roles and Role.GCS in roles and all(r.host for r in self.drones.values())
+            return Role.ENV in roles and Role.GCS in roles and self._hosted(self.fleet.alive_rows())
+        return Role.ENV in roles and Role.GCS in roles and all(self.fleet.host)
 
     def header(self) -> dict:
         return {
             "record": "header", "format": "dronesim-journal", "version": 1,
             "world": {"size": list(self.size), "seed": self.config.world.seed,
                       "cells": self.config.world.cells.hex()},
-            "drones": [{"drone": d, "start": list(r.pos), "autopilot": r.autopilot, "cooperative": r.cooperative}
-                       for d, r in self.drones.items()],
+            "drones": [{"drone": d, "start": start, "autopilot": autopilot, "cooperative": cooperative}
+                       for d, start, autopilot, cooperative in zip(self.fleet.ids, self.fleet.pos.tolist(),
+                                                                   self.fleet.autopilot, self.fleet.cooperative.tolist())],
             "max_turns": self.config.max_turns, "lost_after": self.config.lost_after,
         }
 
@@ -342,9 +334,12 @@ class Engine:
         if not records or records[0].get("record") != "header":
             raise UsageError("the journal has no header: nothing to resume")
         theirs = dict(records[0])
+        fleet = engine.fleet
         for d in theirs.get("drones", []):  # autopilots are learnt at admission, not configured
-            engine.drones[d["drone"]].autopilot = d.get("autopilot", "")
-            engine.drones[d["drone"]].cooperative = d.get("cooperative", False)
+            i = fleet.index.get(d.get("drone"))
+            if i is not None:
+                fleet.autopilot[i] = d.get("autopilot", "")
+                fleet.cooperative[i] = d.get("cooperative", False)
         if engine.header() != theirs:
             raise UsageError("the journal is of another game (world, drones or limits differ)")
         for r in records[1:]:
@@ -359,23 +354,24 @@ class Engine:
 
     def _restore_turn(self, r: dict) -> None:
         """Apply one journaled turn to the state, as `_observe` did when it was played."""
-        alive = self.alive()
+        fleet, row = self.fleet, self.fleet.index
+        alive = fleet.alive_rows()
         for d, p in r.get("targets", {}).items():
-            self.drones[d].target, self.drones[d].note = tuple(p), Note.NONE
+            fleet.aim(row[d], tuple(p))
         if "intent" in r:
             self._intent = Intent(r["intent"])
             self.final = self._intent is Intent.FINAL
         for d, p in r.get("moves", {}).items():
-            self.drones[d].pos = tuple(p)
+            fleet.pos[row[d]] = p
         for d, n in r.get("notes", {}).items():
-            self.drones[d].note = Note(n)
-        hovered = set(r.get("hovered", ()))
-        for d in alive:
-            self.drones[d].misses = self.drones[d].misses + 1 if d in hovered else 0
+            fleet.note[row[d]] = code_of(Note(n))
+        hovered = np.zeros(len(fleet), bool)
+        hovered[[row[d] for d in r.get("hovered", ())]] = True
+        fleet.misses[alive] = np.where(hovered[alive], fleet.misses[alive] + 1, 0)
         for d, cause in r.get("deaths", {}).items():
-            self.drones[d].state, self.drones[d].cause = DroneState.DEAD, Cause(cause)
+            fleet.end(row[d], DroneState.DEAD, Cause(cause))
         for d in r.get("lost", ()):
-            self.drones[d].state, self.drones[d].cause = DroneState.LOST, Cause.LOST
+            fleet.end(row[d], DroneState.LOST, Cause.LOST)
         self.turn = r["turn"]
         state = hashlib.sha256(encode(self.status())).hexdigest()[:16]
         if state != r.get("state"):
@@ -402,13 +398,8 @@ class Engine:
                 except RemoteInputError as err:
                     return [Refusal(f"DONE ahead for turn {turn}", err), *err.follow]
             case Stage.DRONES:
-                self._moves.clear()
-                alive = self.alive()
-                self._awaiting = set(alive)
-                self._final = {}
-                self._notes.clear()
-                drones = self.drones
-                orders = tuple(_order(d, drones[d].pos, drones[d].target) for d in alive)
+                self._moved[:] = False
+                orders = self.fleet.orders(self.fleet.alive_rows())
                 self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders)
                 if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
                     self._held = True
@@ -419,23 +410,37 @@ class Engine:
 
     def _drones_finish(self) -> list[Effect]:
         """The drones' phase is over: arbitrate, announce the ENV phase (the accepted moves), observe."""
-        turn = self.turn
-        proposed = {d: self._moves.get(d, self.drones[d].pos) for d in self.alive()}
-        before = {d: self.drones[d].pos for d in proposed}
-        coop = {d for d in proposed if self.drones[d].cooperative}
-        final = arbiter.arbitrate(before, proposed, coop)
-        yielded = sorted(d for d in final if final[d] != proposed[d])
-        if yielded:
-            self._turn_log["yielded"] = yielded
+        turn, fleet = self.turn, self.fleet
+        alive = fleet.alive_rows()
+        before = fleet.pos[alive]
+        proposed = np.where(self._moved[alive, None], self._proposed[alive], before)
+        final = proposed
+        if fleet.cooperative[alive].any():
+            final = self._arbitrate(alive, before, proposed)
         self._final = final
-        moves = tuple(_move(d, before[d], final[d]) for d in sorted(final) if final[d] != before[d])
-        if not moves:
+        moving = (final != before).any(axis=1)
+        if not moving.any():
             return _drones_first(self._observe())
+        rows = MoveTable.empty(int(moving.sum()))
+        rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
+        moves = MoveTable(rows)
         if self.verify_env:
             self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
             for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
                 del self._upd_due[old]
         return _drones_first([Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()])
+
+    def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
+        """`proposed` after the cooperative drones gave way (see arbiter.py); the yielded are journaled."""
+        ids = [self.fleet.ids[i] for i in alive.tolist()]
+        was = dict(zip(ids, map(tuple, before.tolist())))
+        wants = dict(zip(ids, map(tuple, proposed.tolist())))
+        coop = {d for d, c in zip(ids, self.fleet.cooperative[alive].tolist()) if c}
+        final = arbiter.arbitrate(was, wants, coop)
+        yielded = sorted(d for d in final if final[d] != wants[d])
+        if yielded:
+            self._turn_log["yielded"] = yielded
+        return np.array([final[d] for d in ids], np.int32).reshape(len(ids), 3)
 
     def _kind(self, cell: Cell) -> CellKind:
         if not self.world.contains(cell):
@@ -481,11 +486,11 @@ class Engine:
 
     def _aim(self, d: str, pos: Cell) -> None:
         """Keep a target for this GCS phase, or raise (and keep nothing)."""
-        drone = self.drones.get(d)
-        if drone is None:
+        i = self.fleet.index.get(d)
+        if i is None:
             raise UnknownEntity(f"target for unknown drone {d}")
-        if drone.state is not DroneState.ALIVE:
-            raise UnknownEntity(f"target for {d}, which is {drone.state.value}")
+        if self.fleet.state[i] != ALIVE:
+            raise UnknownEntity(f"target for {d}, which is {self.fleet.view(i).state.value}")
         if not observer.inside(pos, self.size):
             raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
         self._targets[d] = pos
@@ -519,10 +524,10 @@ class Engine:
         return self._gcs_finish(self._done)
 
     def _gcs_finish(self, msg: Done) -> list[Effect]:
-        changed = {d: p for d, p in sorted(self._targets.items()) if self.drones[d].target != p}
+        fleet = self.fleet
+        changed = {d: p for d, p in sorted(self._targets.items()) if fleet.target_of(fleet.index[d]) != p}
         for d, p in changed.items():
-            self.drones[d].target = p
-            self.drones[d].note = Note.NONE
+            fleet.aim(fleet.index[d], p)
         if changed:
             self._turn_log["targets"] = {d: list(p) for d, p in changed.items()}
         if msg.intent is not self._intent:
@@ -538,32 +543,44 @@ class Engine:
         return self._drones_check()
 
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves: each is taken or refused on its own, as if sent as an NPS."""
-        def move(step: Step) -> None:
-            host = self.drones[step.drone].host if step.drone in self.drones else None
-            if host != msg.sender:
-                raise WrongSender(f"MOVES from {msg.sender} for {step.drone}, which {host or 'nobody'} flies")
-            self._move(step.drone, step.pos, step.note)
+        """A swarm host's moves: each is taken or refused on its own, as if sent as an NPS (the checks of
+        `_move`, for the whole batch at once; the refused ones then go through `_move` to say why)."""
+        fleet, steps = self.fleet, msg.moves
+        rows = fleet.row_of_number[steps.numbers]
+        known = rows >= 0
+        rows = np.where(known, rows, 0)
+        pos = steps.cells("pos")
+        ok = (known & (fleet.host_code[rows] == fleet.hosts.get(msg.sender, -2)) & (fleet.state[rows] == ALIVE)
+              & ~self._moved[rows] & (np.abs(pos - fleet.pos[rows]).sum(axis=1) <= 1))
+        take = rows[ok]
+        self._proposed[take], self._moved[take], self._said[take] = pos[ok], True, steps.codes("note")[ok]
 
-        return _with_refusals(_each(msg.moves, move), self._drones_check())
+        def refuse(j: int) -> None:
+            d = drone_name(int(steps.numbers[j]))
+            host = fleet.host[fleet.index[d]] if d in fleet.index else None
+            if host != msg.sender:
+                raise WrongSender(f"MOVES from {msg.sender} for {d}, which {host or 'nobody'} flies")
+            self._move(d, cell_of(pos[j]), NOTES[steps.codes("note")[j]])
+            raise AssertionError(f"{d}'s move was refused in the batch and taken alone")
+
+        return _with_refusals(_each(np.flatnonzero(~ok).tolist(), refuse), self._drones_check())
 
     def _move(self, d: str, pos: Cell, note: Note) -> None:
         """Take a drone's move for this phase, or raise (and take nothing)."""
-        drone = self.drones.get(d)
-        if drone is None or drone.state is not DroneState.ALIVE:
+        fleet = self.fleet
+        i = fleet.index.get(d)
+        if i is None or fleet.state[i] != ALIVE:
             raise UnknownEntity(f"NPS from {d}, which is not an alive drone of this game")
-        if d in self._moves:
+        if self._moved[i]:
             raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
-        x, y, z = drone.pos
+        x, y, z = here = cell_of(fleet.pos[i])
         if abs(pos[0] - x) + abs(pos[1] - y) + abs(pos[2] - z) > 1:
             # refused: the drone may still send a valid move, or hover at the deadline
-            raise OutOfRange(f"{d} cannot move from {drone.pos} to {pos}: one cell per turn, 6-connectivity")
-        self._notes[d] = note
-        self._moves[d] = pos
-        self._awaiting.discard(d)
+            raise OutOfRange(f"{d} cannot move from {here} to {pos}: one cell per turn, 6-connectivity")
+        self._proposed[i], self._moved[i], self._said[i] = pos, True, code_of(note)
 
     def _drones_check(self) -> list[Effect]:
-        if not self._awaiting:  # every alive drone has moved (also when none is left alive)
+        if (self._moved | (self.fleet.state != ALIVE)).all():  # every alive drone has moved (or none is left)
             return self._drones_finish()
         return []
 
@@ -585,43 +602,39 @@ class Engine:
         return []
 
     def _observe(self) -> list[Effect]:
-        alive = self.alive()
-        before = {d: self.drones[d].pos for d in alive}
-        after = {d: self._final.get(d, before[d]) for d in alive}
-        buildings = {c for d, c in after.items() if c != before[d] and self.world.is_building(c)}
-        dead = observer.deaths(self.size, before, after, buildings)
-        hovered = sorted(d for d in alive if d not in self._moves)
-        hovering = set(hovered)
-        lost: list[str] = []
-        notes: dict[str, str] = {}
-        for d in alive:
-            r = self.drones[d]
-            r.pos = after[d]
-            if d in self._notes and self._notes[d] is not r.note:
-                r.note = self._notes[d]
-                notes[d] = r.note.value
-            if d in hovering:
-                r.misses += 1
-                if r.misses >= self.config.lost_after:
-                    lost.append(d)
-            else:
-                r.misses = 0
-            if d in dead:
-                r.state, r.cause = DroneState.DEAD, dead[d]
-                self._log.warning("turn %d: %s died (%s) at %s", self.turn, d, dead[d].value, r.pos)
-        for d in lost:
-            if d not in dead:
-                self._lose(d)
+        fleet, ids = self.fleet, self.fleet.ids
+        alive = fleet.alive_rows()
+        before, after = fleet.pos[alive], self._final
+        moved = (after != before).any(axis=1)
+        building = np.zeros(len(alive), bool)
+        enter = moved & observer.inside_rows(after, self.size)
+        building[enter] = self.world.grid[tuple(after[enter].T)]
+        cause = observer.judge(self.size, before, after, building)
+        took = self._moved[alive]
+        fleet.pos[alive] = after
+        said = alive[took & (self._said[alive] != fleet.note[alive])]
+        fleet.note[said] = self._said[said]
+        hovered = alive[~took]
+        fleet.misses[alive[took]] = 0
+        fleet.misses[hovered] += 1
+        lost = hovered[fleet.misses[hovered] >= self.config.lost_after]
+        dead = alive[cause != 0]
+        fleet.state[dead], fleet.cause[dead] = code_of(DroneState.DEAD), cause[cause != 0]
+        for i in dead.tolist():
+            self._log.warning("turn %d: %s died (%s) at %s", self.turn, ids[i], CAUSES[fleet.cause[i]].value,
+                              cell_of(fleet.pos[i]))
+        for i in lost.tolist():
+            if fleet.state[i] == ALIVE:
+                self._lose(ids[i])
         log = self._turn_log
-        moves = {d: list(after[d]) for d in alive if after[d] != before[d]}
-        if moves:
-            log["moves"] = moves
-        if notes:
-            log["notes"] = notes
-        if hovered:
-            log["hovered"] = hovered
-        if dead:
-            log["deaths"] = {d: c.value for d, c in sorted(dead.items())}
+        if moved.any():
+            log["moves"] = dict(zip([ids[i] for i in alive[moved].tolist()], after[moved].tolist()))
+        if len(said):
+            log["notes"] = {ids[i]: NOTES[c].value for i, c in zip(said.tolist(), fleet.note[said].tolist())}
+        if len(hovered):
+            log["hovered"] = [ids[i] for i in hovered.tolist()]
+        if len(dead):
+            log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
         status = self.status(self.turn)
         data = encode(status)
         log["state"] = hashlib.sha256(data).hexdigest()[:16]
@@ -633,24 +646,24 @@ class Engine:
         return effects + self._enter(Stage.GCS, self.turn + 1)
 
     def _lose(self, d: str) -> None:
-        r = self.drones[d]
-        r.state, r.cause = DroneState.LOST, Cause.LOST
-        self._awaiting.discard(d)
+        i = self.fleet.index[d]
+        self.fleet.end(i, DroneState.LOST, Cause.LOST)
         self._turn_log.setdefault("lost", []).append(d)
-        self._log.warning("turn %d: %s is LOST at %s", self.turn, d, r.pos)
+        self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
 
     def _end_reason(self) -> tuple[EndReason, str] | None:
-        alive = self.alive()
-        if not alive:
+        fleet = self.fleet
+        alive = fleet.alive_rows()
+        if not len(alive):
             causes = ", ".join(f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
                                for d, r in self.drones.items())
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
         if self.final:
-            notes = [self.drones[d].status(d).note for d in alive]
-            if all(n is Note.REACHED for n in notes):
+            notes = fleet.notes()[alive]
+            if (notes == REACHED).all():
                 return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
-            if all(n in (Note.REACHED, Note.UNREACHABLE) for n in notes):
-                stuck = [d for d, n in zip(alive, notes) if n is Note.UNREACHABLE]
+            if ((notes == REACHED) | (notes == _UNREACHABLE)).all():
+                stuck = [fleet.ids[i] for i in alive[notes == _UNREACHABLE].tolist()]
                 return EndReason.SETTLED, f"targets reached, except unreachable for {', '.join(stuck)}"
         if self.turn >= self.config.max_turns:
             return EndReason.TURN_LIMIT, f"turn limit {self.config.max_turns} reached"
@@ -678,7 +691,7 @@ class Engine:
                                   self.config.gcs_grace)
                 return self._resume()
             case Stage.ADMITTING | Stage.RESUMING:
-                missing = [d for d, r in self.drones.items() if r.host is None]
+                missing = [d for d, host in zip(self.fleet.ids, self.fleet.host) if host is None]
                 missing += [r.value for r in (Role.ENV, Role.GCS) if r not in set(self.entities.values())]
                 return self._over(EndReason.ABORTED, f"entities never connected: {', '.join(missing)}")
             case Stage.GCS:
@@ -690,7 +703,7 @@ class Engine:
                 self._targets.clear()
                 return self._enter(Stage.DRONES, turn)
             case Stage.DRONES:
-                late = [d for d in self.alive() if d not in self._moves]
+                late = [d for d in self.alive() if not self._moved[self.fleet.index[d]]]
                 self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
                 return self._drones_finish()
         return []
@@ -717,14 +730,15 @@ class Engine:
             case Role.ENV:
                 pass  # the game waits for it (deadline: env_grace); a returning one resyncs from STATUS
             case Role.DRONE:
-                gone = [d for d, r in self.drones.items() if r.host == entity]
+                fleet = self.fleet
+                gone = [i for i, host in enumerate(fleet.host) if host == entity]
                 if self.stage in (Stage.ADMITTING, Stage.RESUMING):
-                    for d in gone:
-                        self.drones[d].host = None
+                    for i in gone:
+                        fleet.unhost(i)
                     return []
-                for d in gone:
-                    if self.drones[d].state is DroneState.ALIVE:
-                        self._lose(d)
+                for i in gone:
+                    if fleet.state[i] == ALIVE:
+                        self._lose(fleet.ids[i])
                 if self.stage is Stage.DRONES:
                     return self._drones_check()
         return []

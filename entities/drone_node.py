@@ -23,22 +23,23 @@ import functools
 import logging
 import sys
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Container, Iterable, Mapping, Sequence
 
 import numpy as np
 import zenoh
 
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
-    Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, MapRequest, Moves, Nps, Order, Over, Phase,
-    RemoteInputError, Role, Turn, UsageError, WorldMap, decode, drone_id, encode, Step, is_drone_id,
+    Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, MapRequest, Moves, Nps, OrderTable, Over, Phase,
+    RemoteInputError, Role, StepTable, Turn, UsageError, WorldMap, decode, drone_id, encode, is_drone_id,
 )
 from dronesim.schema.errors import OutOfRange
 from dronesim.schema.messages import _KINDS, AROUND, unchecked
+from dronesim.schema.tables import code_of, drone_number
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
-from .autopilots.base import Answers
+from .autopilots.base import Answers, Decision
 from .world import World
 
 
@@ -94,10 +95,10 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
             if over is not None:
                 logger.info("OVER: %s", over.text)
             elif latest is not None and latest.turn == member.clock.turn:
-                orders = tuple(o for o in latest.orders if o.drone in mine)
+                orders = orders_of(latest.orders, mine)
                 fresh = False
                 if done is None or done[0] != (latest.turn, orders):
-                    steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in orders}
+                    steps = {d: pilots[d].step(pos, target) for d, pos, target in orders}
                     occupancy = functools.cache(lambda turn=latest: occupancy_of(turn.orders))
                     decisions = fly_round(steps, lambda pending: asker.ask_all(
                         latest.turn, pending, occupancy, give_up=lambda: superseded(latest.turn)))
@@ -106,8 +107,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                     done = ((latest.turn, orders), decisions)
                     fresh = True
                 if host and done[1]:  # a swarm host: one message for all its drones
-                    out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=tuple(
-                        _step(d, dec.pos, dec.note) for d, dec in sorted(done[1].items()))))
+                    out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=steps_of(done[1])))
                 elif not host:
                     for d, dec in done[1].items():
                         out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
@@ -294,14 +294,27 @@ def _ball(reach: int) -> np.ndarray:
 
 
 _cell_info = unchecked(CellInfo)
-_step = unchecked(Step)  # the coordinator checks every move it is sent
 
 
-def occupancy_of(orders: Iterable[Order]) -> dict[Cell, tuple[str, ...]]:
+def orders_of(orders: OrderTable, mine: Container[str]) -> tuple[tuple[str, Cell, Cell | None], ...]:
+    """(drone, where it is, its target) for each of `mine` in a TURN's orders, read from the columns."""
+    targets = orders.cells("target").tolist()
+    return tuple((d, (x, y, z), None if t[0] < 0 else (t[0], t[1], t[2]))
+                 for d, (x, y, z), t in zip(orders.ids(), orders.cells("pos").tolist(), targets) if d in mine)
+
+
+def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
+    """A MOVES's steps: each decision's cell and note, in drone order."""
+    ids = sorted(decisions)
+    return StepTable.build(drone=[drone_number(d) for d in ids], pos=[decisions[d].pos for d in ids],
+                           note=[code_of(decisions[d].note) for d in ids])
+
+
+def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
     """Which drones are in which cell at the start of a turn: the orders list every alive drone."""
     cells: dict[Cell, list[str]] = {}
-    for o in orders:
-        cells.setdefault(o.pos, []).append(o.drone)
+    for d, (x, y, z) in zip(orders.ids(), orders.cells("pos").tolist()):
+        cells.setdefault((x, y, z), []).append(d)
     return {c: tuple(sorted(ds)) for c, ds in cells.items()}
 
 

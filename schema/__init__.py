@@ -9,8 +9,9 @@ from .messages import (
     MESSAGE_TYPES, SCHEMA_VERSION, Aim, Ans, Ask, Cause, Cell, CellInfo, CellKind, Connect, Done,
     DroneState, DroneStatus, EndReason, MapRequest, Message, Move, Moves, Note, Nps, Order, Over, Phase,
     Intent, Refused, Role, WorldSpec, Start, Status, Step, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id,
-    encode, is_drone_id,
+    encode, is_drone_id, MoveTable, OrderTable, StatusTable, StepTable, TABLES,
 )
+from .tables import Col, Table
 
 __all__ = [
     "DronesimError", "MalformedMessage", "OutOfRange", "RejectCounter", "RemoteInputError", "StaleTurn",
@@ -18,5 +19,6 @@ __all__ = [
     "SCHEMA_VERSION", "Ans", "Ask", "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done",
     "DroneState", "DroneStatus", "EndReason", "MapRequest", "Message", "Move", "Moves", "Note", "Nps", "Order",
     "Over", "Phase", "Intent", "WorldSpec", "Refused", "Role", "Aim", "Step", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
-    "decode", "drone_id", "encode", "is_drone_id",
+    "decode", "drone_id", "encode", "is_drone_id", "MoveTable", "OrderTable", "StatusTable", "StepTable", "TABLES",
+    "Col", "Table",
 ]

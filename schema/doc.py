@@ -11,7 +11,8 @@ import pathlib
 import typing
 
 from .keys import KEY_TABLE
-from .messages import MESSAGE_TYPES, SCHEMA_VERSION
+from .messages import MESSAGE_TYPES, SCHEMA_VERSION, TABLES
+from .tables import Col
 from .samples import SAMPLES, golden
 
 README = pathlib.Path(__file__).with_name("README.md")
@@ -25,8 +26,9 @@ Every key is `<root>/<ENTITY>/<ACTION>` (root `sim` by default, `--root` to chan
 the key is about, and each key has exactly one writer role, so a Zenoh access-control rule can grant it
 (`sim/D01/NPS` is written by D01 only, `sim/D01/TGT` by the GCS only). Every payload is a MessagePack map
 `{{"v": {SCHEMA_VERSION}, "t": TRIGRAM, "turn": int, "from": sender, ...fields}}`, fields in the order below;
-records inside (cells, orders, moves, drone states) are MessagePack arrays of their fields in order, enums are
-their value. A receiver rejects (logs with a reason, counts, and otherwise ignores) anything that does not
+records inside (cells, targets, starts, cell infos) are MessagePack arrays of their fields in order, enums are
+their value; the swarm-sized fields (a STATUS's drones, a TURN's orders and moves, a MOVES's steps) are tables:
+one MessagePack `bin` of fixed-size little-endian rows (see Tables below). A receiver rejects (logs with a reason, counts, and otherwise ignores) anything that does not
 decode, has another version or type than the key carries, names another entity than the key, or is for
 another turn or phase.
 """
@@ -51,6 +53,21 @@ def render() -> str:
         desc = ", ".join(f"`{f.name}`: {_type_name(hints[f.name])}" for f in fields) or "-"
         doc = " ".join((cls.__doc__ or "").split())
         out.append(f"| {cls.TAG} | `{cls.__name__}` | {desc} | {doc} |")
+    out += ["", "## Tables\n",
+            "A table is one MessagePack `bin`: its rows back to back, no padding, little-endian. A drone is its number",
+            "(`u16`: D01 is 1, D1000 is 1000; drone ids are canonical, so the number names one drone), a cell is three",
+            "`i32` (x, y, z), an enum is the `u8` index of its member in the order listed. A receiver rejects a table",
+            "whose length is not a whole number of rows, with a drone number outside 1..9999 or twice, a cell out of",
+            "range or an enum index past its members.\n",
+            "| table | carried in | row bytes | columns, in order |", "|---|---|---|---|"]
+    carried = {hint: f"{cls.TAG}.{name}" for cls in MESSAGE_TYPES
+               for name, hint in typing.get_type_hints(cls).items() if hint in TABLES}
+    for table in TABLES:
+        cols = []
+        for name, kind in table.LAYOUT:
+            what = kind.value if isinstance(kind, Col) else "u8: " + ", ".join(f"{i} {m.name}" for i, m in enumerate(kind))
+            cols.append(f"`{name}` ({what})")
+        out.append(f"| `{table.__name__}` | {carried[table]} | {table.DTYPE.itemsize} | {'; '.join(cols)} |")
     out += ["", "## Test vectors\n",
             "The canonical sample of each message and its bytes (hex), also in `vectors.json`. A client in any",
             "language must decode each to the same fields and encode the same fields to the same bytes.\n",

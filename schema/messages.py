@@ -24,10 +24,12 @@ from dataclasses import dataclass
 from typing import ClassVar, Union
 
 import msgpack
+import numpy as np
 
 from .errors import MalformedMessage
+from .tables import Col, Table
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: swarm-sized record tuples travel as tables (tables.py)
 
 #: Largest coordinate or turn a message may carry (worlds are far smaller; this bounds garbage).
 MAX_COORD = 1 << 16
@@ -47,8 +49,12 @@ def _numbered(value: object, letter: str) -> bool:
 
 
 def is_drone_id(value: object) -> bool:
-    """A drone's id: D01, D02, ... D9999."""
-    return _numbered(value, "D")
+    """A drone's id: D01, D02, ... D9999, canonical (`drone_id(n)`: no D00, D001 or D0100), so that it is
+    one number in a table's drone column."""
+    return _numbered(value, "D") and value[1] != "0" or value in _TWO_DIGITS  # type: ignore[index]
+
+
+_TWO_DIGITS = frozenset(f"D0{n}" for n in range(1, 10))
 
 
 def is_host_id(value: object) -> bool:
@@ -321,6 +327,61 @@ class Start:
         _check_cell(self.pos, "pos")
 
 
+# --------------------------------------------------------------------------- tables (see tables.py)
+
+
+_ALIVE_CODE = tuple(DroneState).index(DroneState.ALIVE)
+
+
+class OrderTable(Table):
+    """A TURN(DRONES)'s orders, one row per alive drone."""
+
+    __slots__ = ()
+    RECORD = Order
+    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL), ("target", Col.OPTIONAL))
+
+
+class MoveTable(Table):
+    """A TURN(ENV)'s accepted moves, one row per moving drone."""
+
+    __slots__ = ()
+    RECORD = Move
+    LAYOUT = (("drone", Col.DRONE), ("src", Col.CELL), ("dst", Col.SIGNED))
+
+
+class StepTable(Table):
+    """A MOVES's steps, one row per hosted drone."""
+
+    __slots__ = ()
+    RECORD = Step
+    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note))
+
+
+class StatusTable(Table):
+    """A STATUS's drone states, one row per drone."""
+
+    __slots__ = ()
+    RECORD = DroneStatus
+    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("state", DroneState), ("target", Col.OPTIONAL),
+              ("note", Note), ("cause", Cause))
+
+    def alive(self) -> list[str]:
+        """The ids of the alive drones, in row order."""
+        ids = self.ids()
+        return [ids[i] for i in np.flatnonzero(self.rows["state"] == _ALIVE_CODE).tolist()]
+
+
+TABLES: tuple[type[Table], ...] = (OrderTable, MoveTable, StepTable, StatusTable)
+
+
+def _as_table(msg: "Message", name: str, cls: type[Table]) -> None:
+    """A message's table field given as a tuple of records becomes the table (messages hold tables)."""
+    value = getattr(msg, name)
+    if type(value) is not cls:
+        _check(isinstance(value, tuple), f"{name} must be a {cls.__name__} or a tuple of {cls.RECORD.__name__}")
+        object.__setattr__(msg, name, cls.of(value))
+
+
 # --------------------------------------------------------------------------- messages
 
 
@@ -401,11 +462,13 @@ class Turn(Message):
 
     TAG: ClassVar[str] = "TURN"
     phase: Phase
-    orders: tuple[Order, ...] = ()
-    moves: tuple[Move, ...] = ()
+    orders: OrderTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table
+    moves: MoveTable = ()  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
+        _as_table(self, "orders", OrderTable)
+        _as_table(self, "moves", MoveTable)
         _check(isinstance(self.phase, Phase), "phase must be a Phase")
         _check(self.turn >= 1, "turns start at 1")
         _check(self.phase is Phase.DRONES or not self.orders, "only the DRONES phase carries orders")
@@ -544,13 +607,12 @@ class Moves(Message):
     """Swarm host -> SRV (key ``<host>/MOVES``): the NPS of every drone it flies, in one message."""
 
     TAG: ClassVar[str] = "MOVES"
-    moves: tuple[Step, ...]
+    moves: StepTable  # a tuple of records becomes the table (which holds one row per drone)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check_records(self.moves, Step, "moves")
+        _as_table(self, "moves", StepTable)
         _check(len(self.moves) >= 1, "MOVES carries at least one move")
-        _check(len({m.drone for m in self.moves}) == len(self.moves), "one move per drone")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -570,11 +632,11 @@ class Status(Message):
     """OBS -> all (key ``OBS/STATUS``): every drone's state at the end of the turn (turn 0: the starts)."""
 
     TAG: ClassVar[str] = "STATUS"
-    drones: tuple[DroneStatus, ...]
+    drones: StatusTable  # a tuple of records becomes the table (which holds one row per drone)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check_records(self.drones, DroneStatus, "drones")
+        _as_table(self, "drones", StatusTable)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -680,6 +742,8 @@ def _wire_encoder(hint: object) -> typing.Callable[[object], object]:
         return operator.attrgetter("value")
     if hint in _RECORDS:
         return _record_encoder(hint)  # type: ignore[arg-type]
+    if hint in TABLES:
+        return Table.to_wire  # type: ignore[return-value]
     return _identity
 
 
@@ -721,6 +785,8 @@ def _converter(hint: object) -> typing.Callable[[object], object]:
         return lambda v: _enum(hint, v)
     if hint in _RECORDS:
         return _record_converter(hint)  # type: ignore[arg-type]
+    if hint in TABLES:
+        return hint.from_wire  # type: ignore[union-attr]
     return _identity  # int, str, bytes: checked by __post_init__
 
 

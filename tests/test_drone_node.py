@@ -27,7 +27,7 @@ def test_answers_from_the_chart_are_what_the_environment_says() -> None:
     from dronesim.entities.drone_node import Chart, occupancy_of
     from dronesim.entities.environment import Environment
     from dronesim.entities.world import World
-    from dronesim.schema import Ans, Order
+    from dronesim.schema import Ans, Order, OrderTable
 
     starts = {"D01": (1, 1, 1), "D02": (2, 1, 1), "D03": (2, 1, 1)}
     e = Environment(World.generate((6, 6, 4), np.random.default_rng(2)), starts)
@@ -36,7 +36,7 @@ def test_answers_from_the_chart_are_what_the_environment_says() -> None:
     assert none == ()
     chart = Chart((6, 6, 4))
     chart.learn(cells, kinds)
-    occupied = occupancy_of([Order(drone=d, pos=p) for d, p in sorted(starts.items(), reverse=True)])
+    occupied = occupancy_of(OrderTable.of(Order(drone=d, pos=p) for d, p in sorted(starts.items(), reverse=True)))
     kinds, drones = e.survey(cells)
     expected = Ans(turn=1, sender="ENV", kinds=kinds, drones=drones).infos(cells)
     assert tuple(CellInfo(pos=c, kind=chart.kind(c), drones=occupied.get(c, ())) for c in cells) == expected

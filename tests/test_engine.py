@@ -134,7 +134,7 @@ class Game:
 
     def snapshot(self) -> tuple:
         e = self.engine
-        return (e.stage, e.turn, e.final, dict(e._targets), dict(e._moves),
+        return (e.stage, e.turn, e.final, dict(e._targets), e.moves_taken(),
                 {d: (r.pos, r.state, r.target, r.note, r.misses) for d, r in e.drones.items()})
 
 
@@ -514,7 +514,7 @@ def test_duplicate_nps_refused() -> None:
     with pytest.raises(StaleTurn, match="second NPS"):
         g.nps("D01", (0, 1, 0))
     assert g.snapshot() == before
-    assert g.engine._moves == {"D01": (1, 0, 0)}
+    assert g.engine.moves_taken() == {"D01": (1, 0, 0)}
 
 
 def test_misplaced_messages_refused() -> None:
@@ -938,7 +938,7 @@ def test_moves_of_a_swarm_host_taken_one_by_one() -> None:
     with pytest.raises(WrongSender, match="D03, which D03 flies"):
         g.engine.receive(Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(1, 0, 0)),
                                                            Step(drone="D03", pos=(2, 2, 1)))))
-    assert g.engine._moves == {"D01": (1, 0, 0)}, "the host's own drone moved, the other's spoofed move did not"
+    assert g.engine.moves_taken() == {"D01": (1, 0, 0)}, "the host's own drone moved, the other's spoofed move did not"
     with pytest.raises(StaleTurn, match="second NPS from D01"):
         g.engine.receive(Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(0, 1, 0)),)))
     with pytest.raises(OutOfRange, match="one cell per turn"):

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from dronesim.schema import (
     Ask, Cause, CellInfo, CellKind, Done, DroneState, DroneStatus, Keys, MalformedMessage, Move, Nps, Order, Over,
-    EndReason, Phase, Status, Target, Turn, Upd, decode, encode,
+    EndReason, Phase, SCHEMA_VERSION, Status, Target, Turn, Upd, decode, encode,
 )
 from dronesim.schema.samples import SAMPLES
 from tests.harness import Cluster, ScriptedGCS, embedded_router, play_to_the_end
@@ -145,7 +145,7 @@ def test_fuzz_every_key_changes_nothing(tmp_path):
                 # to; once every process has logged it, it has worked through the whole burst.
                 marker = f"MARKER{uuid.uuid4().hex[:8]}"
                 for key in (keys.turn, keys.gcs_done):
-                    s.put(key, msgpack.packb({"v": 1, "t": marker}))
+                    s.put(key, msgpack.packb({"v": SCHEMA_VERSION, "t": marker}))
                 for p in c.procs:
                     p.expect(f"unknown message type '{marker}'", timeout=300)
                     assert p.p.poll() is None, f"{p.name} died under fuzzing:\n{p.text}"

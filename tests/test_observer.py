@@ -5,6 +5,8 @@ from __future__ import annotations
 import itertools
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from dronesim.coordinator.observer import deaths, inside
 from dronesim.schema import Cause
@@ -160,3 +162,48 @@ def test_result_is_independent_of_mapping_order() -> None:
     assert expected == {"D01": Cause.SWAP, "D02": Cause.SWAP}
     for perm in itertools.permutations(before):
         assert die({d: before[d] for d in perm}, {d: after[d] for d in reversed(perm)}) == expected
+
+
+def _reference(size, before: dict, after: dict, buildings: set) -> dict:
+    """The rules written drone by drone (the first implementation): the oracle for the columnar one."""
+    from collections import defaultdict
+    dead: dict = {}
+    order = sorted(after)
+    by_cell = defaultdict(list)
+    for d in order:
+        cell = after[d]
+        if not inside(cell, size):
+            dead[d] = Cause.OUTSIDE
+        elif cell in buildings:
+            dead[d] = Cause.BUILDING
+        else:
+            by_cell[cell].append(d)
+    for ds in by_cell.values():
+        if len(ds) > 1:
+            for d in ds:
+                dead[d] = Cause.VERTEX
+    arriving = {after[d]: d for d in order if after[d] != before[d]}
+    for d in order:
+        src, dst = before[d], after[d]
+        other = arriving.get(src)
+        if src != dst and other is not None and other != d and before[other] == dst:
+            for x in (d, other):
+                dead.setdefault(x, Cause.SWAP)
+    return dead
+
+
+STEPS = [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
+
+
+@settings(max_examples=600, deadline=None)
+@given(st.data())
+def test_the_columnar_rules_agree_with_the_rules_drone_by_drone(data) -> None:
+    size = (3, 3, 2)
+    cells = list(itertools.product(range(3), range(3), range(2)))
+    n = data.draw(st.integers(1, 8))
+    starts = data.draw(st.lists(st.sampled_from(cells), min_size=n, max_size=n, unique=True))
+    ids = data.draw(st.lists(st.integers(1, 1200), min_size=n, max_size=n, unique=True))
+    before = {f"D{i:02d}": c for i, c in zip(ids, starts)}
+    after = {d: tuple(a + b for a, b in zip(c, data.draw(st.sampled_from(STEPS)))) for d, c in before.items()}
+    buildings = {c for c in after.values() if data.draw(st.booleans())}
+    assert deaths(size, before, after, buildings) == _reference(size, before, after, buildings)

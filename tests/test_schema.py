@@ -6,15 +6,16 @@ import dataclasses
 import json
 
 import msgpack
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dronesim.schema import (
     KEY_TABLE, MESSAGE_TYPES, SCHEMA_VERSION, Ans, Ask, CellInfo, CellKind, Connect, Done, DroneState,
-    DroneStatus, Keys, MalformedMessage, MapRequest, Message, Move, Nps, Order, Over, Phase, Refused,
+    Cause, DroneStatus, Keys, MalformedMessage, Note, MapRequest, Message, Move, Nps, Order, Over, Phase, Refused,
     RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldMap, WorldSpec, decode, drone_id,
-    encode, is_drone_id,
+    encode, is_drone_id, MoveTable, OrderTable, StatusTable, StepTable, Table,
 )
 from dronesim.schema.messages import MAX_COORD, MAX_PAYLOAD, MAX_TURN
 from dronesim.schema.samples import SAMPLES, VECTORS_PATH, golden
@@ -30,6 +31,14 @@ def body_of(name: str) -> dict:
 
 def pack(obj: object) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
+
+
+NO_CELL = (-1, -1, -1)
+
+
+def rows(table: type[Table], *values: tuple) -> bytes:
+    """A table's wire bytes, rows given as tuples of raw column values (not checked: for rejections)."""
+    return np.array(list(values), table.DTYPE).tobytes()
 
 
 def rejects(data: bytes, match: str | None = None, **kw) -> MalformedMessage:
@@ -131,7 +140,7 @@ def test_rejects_non_bytes_payload() -> None:
     rejects(None, match="payload must be bytes")  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("version", [0, 2, SCHEMA_VERSION + 1, -1, "1", None, [1]])
+@pytest.mark.parametrize("version", [0, SCHEMA_VERSION - 1, SCHEMA_VERSION + 1, -1, str(SCHEMA_VERSION), None, [SCHEMA_VERSION]])
 def test_rejects_wrong_version(version: object) -> None:
     rejects(mutated("target", v=version), match="schema version")
 
@@ -232,11 +241,24 @@ def test_optional_fields_may_be_omitted() -> None:
     ("ans", "cells", [[[1, 0, 0], 0, ["X01"]]]),
     ("ans", "cells", [[[1, 0, 0], 0]]),
     ("upd", "cells", "all"),
-    ("status", "drones", [["D01", [1, 0, 0], "ZOMBIE", None, "NONE", "NONE"]]),
-    ("status", "drones", [["D01", [1, 0, 0], "ALIVE", [-1, 0, 0], "NONE", "NONE"]]),
-    ("turn_drones", "orders", [["D01", [0, 0, 0]]]),
-    ("turn_drones", "orders", [["D01", [-1, 0, 0], None]]),
-    ("turn_env", "moves", [["D01", [-1, 0, 0], [0, 0, 0]]]),
+    ("status", "drones", [["D01", [1, 0, 0], "ALIVE", None, "NONE", "NONE"]]),  # records, not a table
+    ("status", "drones", "D01"),
+    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 3, NO_CELL, 0, 0))),  # no 4th DroneState
+    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, (-1, 0, 0), 0, 0))),  # a target outside
+    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 3, 0))),  # no 4th Note
+    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 6))),  # no 7th Cause
+    ("status", "drones", rows(StatusTable, (0, (1, 0, 0), 0, NO_CELL, 0, 0))),  # no drone 0
+    ("status", "drones", rows(StatusTable, (10000, (1, 0, 0), 0, NO_CELL, 0, 0))),
+    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 0), (1, (2, 0, 0), 0, NO_CELL, 0, 0))),
+    ("status", "drones", rows(StatusTable, (1, (MAX_COORD + 1, 0, 0), 0, NO_CELL, 0, 0))),
+    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 0))[:-1]),  # not whole rows
+    ("turn_drones", "orders", [["D01", [0, 0, 0], None]]),
+    ("turn_drones", "orders", rows(OrderTable, (1, (-1, 0, 0), NO_CELL))),
+    ("turn_drones", "orders", rows(OrderTable, (1, (0, 0, 0), (-1, -1, 0)))),
+    ("turn_env", "moves", rows(MoveTable, (1, (-1, 0, 0), (0, 0, 0)))),
+    ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 0), (1, (0, 1, 0), 0))),  # one move per drone
+    ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 3))),
+    ("moves", "moves", b""),  # at least one move
 ])
 def test_rejects_wrong_field_value(name: str, field: str, value: object) -> None:
     rejects(mutated(name, **{field: value}))
@@ -251,7 +273,7 @@ def test_signed_cells_where_allowed() -> None:
     """Sensed cells, cell infos, move destinations and drone statuses may lie outside the world."""
     assert decode(mutated("ask", cells=[[-1, 0, 0]])) == Ask(turn=1, sender="D01", cells=((-1, 0, 0),))
     assert decode(mutated("nps", pos=[-1, 0, 0])).pos == (-1, 0, 0)
-    moves = decode(mutated("turn_env", moves=[["D01", [0, 0, 0], [0, 0, -1]]])).moves
+    moves = decode(mutated("turn_env", moves=rows(MoveTable, (1, (0, 0, 0), (0, 0, -1))))).moves
     assert moves == (Move(drone="D01", src=(0, 0, 0), dst=(0, 0, -1)),)
     info = decode(mutated("upd", cells=[[[-1, 0, 0], 2, []]])).cells[0]
     assert info == CellInfo(pos=(-1, 0, 0), kind=CellKind.OUTSIDE)
@@ -624,3 +646,35 @@ def test_unchecked_builds_the_same_record_without_checking() -> None:
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.pos = (0, 0, 0)  # type: ignore[misc]
 
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def test_tables_hold_the_records_they_were_given_and_travel_as_their_rows() -> None:
+    states = (DroneStatus(drone="D1000", pos=(-1, 0, 3), state=DroneState.DEAD, cause=Cause.OUTSIDE),
+              DroneStatus(drone="D07", pos=(1, 2, 3), state=DroneState.ALIVE, target=(4, 5, 6), note=Note.REACHED))
+    msg = Status(turn=3, sender="OBS", drones=states)
+    assert type(msg.drones) is StatusTable and len(msg.drones) == 2
+    assert msg.drones == states and tuple(msg.drones) == states and msg.drones[1] == states[1]
+    assert msg.drones.ids() == ["D1000", "D07"] and msg.drones.numbers.tolist() == [1000, 7]
+    assert msg.drones.cells("target").tolist() == [[-1, -1, -1], [4, 5, 6]]
+    again = decode(encode(msg))
+    assert again == msg and hash(again) == hash(msg)
+    assert msgpack.unpackb(encode(msg))["drones"] == msg.drones.rows.tobytes()
+    assert StatusTable.DTYPE.itemsize == 2 + 12 + 1 + 12 + 1 + 1
+
+
+def test_a_table_is_immutable() -> None:
+    table = SAMPLES["status"].drones
+    with pytest.raises(AttributeError):
+        table.rows = None  # type: ignore[misc]
+    with pytest.raises(ValueError):
+        table.rows["pos"][0] = (5, 5, 5)
+
+
+@pytest.mark.parametrize("drone", ["D00", "D001", "D0100", "D01000"])
+def test_drone_ids_are_canonical(drone: str) -> None:
+    """One drone, one id: a table's drone column holds numbers, so D001 cannot be another drone than D01."""
+    assert not is_drone_id(drone)
+    rejects(mutated("target", drone=drone), match="drone id")

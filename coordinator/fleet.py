@@ -1,0 +1,148 @@
+"""The drones of a game as columns: the turn engine's state, one row per drone, rows in id order.
+
+A swarm's turn touches every drone a few times (its move is checked, arbitrated, judged by the observer,
+written into the orders and the STATUS). Held as numpy columns this is a handful of array operations per
+turn and a few dozen bytes per drone, where a record per drone cost microseconds and hundreds of bytes
+each. The row order is the drones' id order, which is also their priority order (arbitration, observer).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from dronesim.schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable, UsageError, is_drone_id
+from dronesim.schema.tables import MAX_DRONE, code_of, drone_number
+
+ALIVE, DEAD, LOST = (code_of(s) for s in (DroneState.ALIVE, DroneState.DEAD, DroneState.LOST))
+REACHED = code_of(Note.REACHED)
+STATES, NOTES, CAUSES = tuple(DroneState), tuple(Note), tuple(Cause)
+NO_CELL = (-1, -1, -1)
+
+
+def cell_of(row: np.ndarray) -> Cell:
+    x, y, z = row.tolist()
+    return (x, y, z)
+
+
+@dataclass(frozen=True, slots=True)
+class DroneView:
+    """One drone's state as the fleet holds it (a snapshot)."""
+
+    pos: Cell
+    state: DroneState
+    target: Cell | None
+    note: Note
+    cause: Cause
+    misses: int
+    host: str | None
+    autopilot: str
+    cooperative: bool
+
+    @property
+    def alive(self) -> bool:
+        return self.state is DroneState.ALIVE
+
+
+class Fleet:
+    """Every drone of a game: where it is, its state, target, note and cause (as in a STATUS), how many
+    DRONES deadlines in a row it missed, and who flies it with which autopilot."""
+
+    def __init__(self, starts: Iterable[tuple[str, Cell]]) -> None:
+        pairs = sorted(starts)
+        for d, _ in pairs:
+            if not is_drone_id(d):
+                raise UsageError(f"{d!r} is not a drone id (D01 ... D9999)")
+        self.ids: tuple[str, ...] = tuple(d for d, _ in pairs)
+        self.index: dict[str, int] = {d: i for i, d in enumerate(self.ids)}
+        if len(self.index) != len(self.ids):
+            raise UsageError(f"duplicate drone ids in {list(self.ids)}")
+        n = len(self.ids)
+        self.numbers = np.array([drone_number(d) for d in self.ids], np.uint16)
+        self.row_of_number = np.full(MAX_DRONE + 1, -1, np.int32)  # drone number -> row
+        self.row_of_number[self.numbers] = np.arange(n, dtype=np.int32)
+        self.pos = np.array([c for _, c in pairs], np.int32).reshape(n, 3)
+        self.state = np.full(n, ALIVE, np.uint8)
+        self.target = np.full((n, 3), -1, np.int32)
+        self.note = np.zeros(n, np.uint8)
+        self.cause = np.zeros(n, np.uint8)
+        self.misses = np.zeros(n, np.int32)
+        self.host: list[str | None] = [None] * n
+        self.host_code = np.full(n, -1, np.int16)  # index of its host in `hosts`, -1: none
+        self.hosts: dict[str, int] = {}
+        self.autopilot: list[str] = [""] * n
+        self.cooperative = np.zeros(n, bool)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    # ------------------------------------------------------------------ reading
+
+    def alive_rows(self) -> np.ndarray:
+        return np.flatnonzero(self.state == ALIVE)
+
+    def alive(self) -> list[str]:
+        ids = self.ids
+        return [ids[i] for i in self.alive_rows().tolist()]
+
+    def target_of(self, i: int) -> Cell | None:
+        return None if self.target[i, 0] < 0 else cell_of(self.target[i])
+
+    def view(self, i: int) -> DroneView:
+        return DroneView(pos=cell_of(self.pos[i]), state=STATES[self.state[i]], target=self.target_of(i),
+                         note=NOTES[self.note[i]], cause=CAUSES[self.cause[i]], misses=int(self.misses[i]),
+                         host=self.host[i], autopilot=self.autopilot[i], cooperative=bool(self.cooperative[i]))
+
+    def notes(self) -> np.ndarray:
+        """Each drone's note as the STATUS says it: REACHED whenever an alive drone is on its target."""
+        on = (self.state == ALIVE) & (self.pos == self.target).all(axis=1)
+        return np.where(on, REACHED, self.note).astype(np.uint8)
+
+    def status(self) -> StatusTable:
+        rows = StatusTable.empty(len(self))
+        rows["drone"], rows["pos"], rows["state"] = self.numbers, self.pos, self.state
+        rows["target"], rows["note"], rows["cause"] = self.target, self.notes(), self.cause
+        return StatusTable(rows)
+
+    def orders(self, rows: np.ndarray) -> OrderTable:
+        """The orders of the drones in `rows`: where each is and where it must go."""
+        table = OrderTable.empty(len(rows))
+        table["drone"], table["pos"], table["target"] = self.numbers[rows], self.pos[rows], self.target[rows]
+        return OrderTable(table)
+
+    # ------------------------------------------------------------------ writing
+
+    def fly(self, i: int, host: str, autopilot: str, cooperative: bool) -> None:
+        self.host[i] = host
+        self.host_code[i] = self.hosts.setdefault(host, len(self.hosts))
+        self.autopilot[i] = autopilot
+        self.cooperative[i] = cooperative
+
+    def unhost(self, i: int) -> None:
+        self.host[i] = None
+        self.host_code[i] = -1
+
+    def aim(self, i: int, target: Cell) -> None:
+        self.target[i] = target
+        self.note[i] = 0  # Note.NONE: a new target, nothing said of it yet
+
+    def end(self, i: int, state: DroneState, cause: Cause) -> None:
+        self.state[i], self.cause[i] = code_of(state), code_of(cause)
+
+
+class Drones(Mapping[str, DroneView]):
+    """The fleet read drone by drone: id -> `DroneView` (for callers that look at a few drones)."""
+
+    def __init__(self, fleet: Fleet) -> None:
+        self._fleet = fleet
+
+    def __getitem__(self, d: str) -> DroneView:
+        return self._fleet.view(self._fleet.index[d])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._fleet.ids)
+
+    def __len__(self) -> int:
+        return len(self._fleet)
