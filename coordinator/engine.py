@@ -49,6 +49,8 @@ from .fleet import ALIVE, CAUSES, NOTES, REACHED, Drones, Fleet, cell_of
 
 #: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
 AHEAD_MAX = 8
+#: Up to this many moves in a MOVES are taken one by one (array operations cost more than they save).
+FEW = 8
 #: How many turns an ENV phase's report (UPD) may lag behind and still be checked.
 UPD_WINDOW = 8
 
@@ -169,11 +171,11 @@ class Engine:
         self._moved = np.zeros(n, bool)  # whose move this DRONES phase took
         self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
+        self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log: dict = {}
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
         #: Whether the environment's UPD reports are checked (kept for a few turns): the adapter says.
         self.verify_env = True
-        self._final = np.zeros((0, 3), np.int32)  # this turn's moves after arbitration (the alive rows)
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
@@ -189,6 +191,11 @@ class Engine:
 
     def alive(self) -> list[str]:
         return self.fleet.alive()
+
+    def targets(self) -> dict[str, Cell]:
+        """The targets in force, of every drone that has one."""
+        fleet = self.fleet
+        return {fleet.ids[i]: cell_of(fleet.target[i]) for i in np.flatnonzero(fleet.target[:, 0] >= 0).tolist()}
 
     def moves_taken(self) -> dict[str, Cell]:
         """The moves this DRONES phase has taken so far."""
@@ -399,7 +406,9 @@ class Engine:
                     return [Refusal(f"DONE ahead for turn {turn}", err), *err.follow]
             case Stage.DRONES:
                 self._moved[:] = False
-                orders = self.fleet.orders(self.fleet.alive_rows())
+                alive = self.fleet.alive_rows()
+                self._awaiting = len(alive)
+                orders = self.fleet.orders(alive)
                 self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders)
                 if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
                     self._held = True
@@ -415,20 +424,20 @@ class Engine:
         before = fleet.pos[alive]
         proposed = np.where(self._moved[alive, None], self._proposed[alive], before)
         final = proposed
-        if fleet.cooperative[alive].any():
+        if np.count_nonzero(fleet.cooperative[alive]):
             final = self._arbitrate(alive, before, proposed)
-        self._final = final
         moving = (final != before).any(axis=1)
-        if not moving.any():
-            return _drones_first(self._observe())
-        rows = MoveTable.empty(int(moving.sum()))
+        if not np.count_nonzero(moving):
+            return _drones_first(self._observe(alive, before, final, moving))
+        rows = MoveTable.empty(np.count_nonzero(moving))
         rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
-        moves = MoveTable(rows)
+        moves = MoveTable.trusted(rows)
         if self.verify_env:
             self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
             for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
                 del self._upd_due[old]
-        return _drones_first([Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)), *self._observe()])
+        return _drones_first([Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)),
+                              *self._observe(alive, before, final, moving)])
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """`proposed` after the cooperative drones gave way (see arbiter.py); the yielded are journaled."""
@@ -543,27 +552,34 @@ class Engine:
         return self._drones_check()
 
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves: each is taken or refused on its own, as if sent as an NPS (the checks of
-        `_move`, for the whole batch at once; the refused ones then go through `_move` to say why)."""
+        """A swarm host's moves: each is taken or refused on its own, as if sent as an NPS. A big batch is
+        checked as a whole first (the checks of `_move`, in array operations); what that refuses, and a
+        batch of a few moves, goes through `_host_move` row by row, which says why."""
         fleet, steps = self.fleet, msg.moves
-        rows = fleet.row_of_number[steps.numbers]
-        known = rows >= 0
-        rows = np.where(known, rows, 0)
-        pos = steps.cells("pos")
-        ok = (known & (fleet.host_code[rows] == fleet.hosts.get(msg.sender, -2)) & (fleet.state[rows] == ALIVE)
-              & ~self._moved[rows] & (np.abs(pos - fleet.pos[rows]).sum(axis=1) <= 1))
-        take = rows[ok]
-        self._proposed[take], self._moved[take], self._said[take] = pos[ok], True, steps.codes("note")[ok]
+        pos, notes = steps.cells("pos"), steps.codes("note")
+        if len(steps) <= FEW:
+            todo = range(len(steps))
+        else:
+            rows = fleet.row_of_number[steps.numbers]
+            known = rows >= 0
+            rows = np.where(known, rows, 0)
+            ok = (known & (fleet.host_code[rows] == fleet.hosts.get(msg.sender, -2)) & (fleet.state[rows] == ALIVE)
+                  & ~self._moved[rows] & (np.abs(pos - fleet.pos[rows]).sum(axis=1) <= 1))
+            take = rows[ok]
+            self._proposed[take], self._moved[take], self._said[take] = pos[ok], True, notes[ok]
+            self._awaiting -= len(take)
+            todo = (~ok).nonzero()[0].tolist()
+        refused = _each(todo, lambda j: self._host_move(msg.sender, drone_name(int(steps.numbers[j])),
+                                                        cell_of(pos[j]), NOTES[notes[j]]))
+        return _with_refusals(refused, self._drones_check())
 
-        def refuse(j: int) -> None:
-            d = drone_name(int(steps.numbers[j]))
-            host = fleet.host[fleet.index[d]] if d in fleet.index else None
-            if host != msg.sender:
-                raise WrongSender(f"MOVES from {msg.sender} for {d}, which {host or 'nobody'} flies")
-            self._move(d, cell_of(pos[j]), NOTES[steps.codes("note")[j]])
-            raise AssertionError(f"{d}'s move was refused in the batch and taken alone")
-
-        return _with_refusals(_each(np.flatnonzero(~ok).tolist(), refuse), self._drones_check())
+    def _host_move(self, sender: str, d: str, pos: Cell, note: Note) -> None:
+        """Take a move a swarm host sent for one of its drones, or raise (and take nothing)."""
+        i = self.fleet.index.get(d)
+        host = None if i is None else self.fleet.host[i]
+        if host != sender:
+            raise WrongSender(f"MOVES from {sender} for {d}, which {host or 'nobody'} flies")
+        self._move(d, pos, note)
 
     def _move(self, d: str, pos: Cell, note: Note) -> None:
         """Take a drone's move for this phase, or raise (and take nothing)."""
@@ -578,9 +594,10 @@ class Engine:
             # refused: the drone may still send a valid move, or hover at the deadline
             raise OutOfRange(f"{d} cannot move from {here} to {pos}: one cell per turn, 6-connectivity")
         self._proposed[i], self._moved[i], self._said[i] = pos, True, code_of(note)
+        self._awaiting -= 1
 
     def _drones_check(self) -> list[Effect]:
-        if (self._moved | (self.fleet.state != ALIVE)).all():  # every alive drone has moved (or none is left)
+        if self._awaiting <= 0:  # every alive drone has moved (also when none is left alive)
             return self._drones_finish()
         return []
 
@@ -601,15 +618,16 @@ class Engine:
         del self._upd_due[turn]
         return []
 
-    def _observe(self) -> list[Effect]:
+    def _observe(self, alive: np.ndarray, before: np.ndarray, after: np.ndarray, moved: np.ndarray) -> list[Effect]:
+        """The observer's turn: `alive` drones went from `before` to `after` (`moved`: the rows that differ)."""
         fleet, ids = self.fleet, self.fleet.ids
-        alive = fleet.alive_rows()
-        before, after = fleet.pos[alive], self._final
-        moved = (after != before).any(axis=1)
-        building = np.zeros(len(alive), bool)
-        enter = moved & observer.inside_rows(after, self.size)
-        building[enter] = self.world.grid[tuple(after[enter].T)]
-        cause = observer.judge(self.size, before, after, building)
+        if np.count_nonzero(moved):
+            building = np.zeros(len(alive), bool)
+            enter = moved & observer.inside_rows(after, self.size)
+            building[enter] = self.world.grid[tuple(after[enter].T)]
+            cause = observer.judge(self.size, before, after, building)
+        else:  # where the drones were, alive and apart, they still are
+            cause = np.zeros(len(alive), np.uint8)
         took = self._moved[alive]
         fleet.pos[alive] = after
         said = alive[took & (self._said[alive] != fleet.note[alive])]
@@ -627,7 +645,7 @@ class Engine:
             if fleet.state[i] == ALIVE:
                 self._lose(ids[i])
         log = self._turn_log
-        if moved.any():
+        if np.count_nonzero(moved):
             log["moves"] = dict(zip([ids[i] for i in alive[moved].tolist()], after[moved].tolist()))
         if len(said):
             log["notes"] = {ids[i]: NOTES[c].value for i, c in zip(said.tolist(), fleet.note[said].tolist())}
@@ -648,6 +666,8 @@ class Engine:
     def _lose(self, d: str) -> None:
         i = self.fleet.index[d]
         self.fleet.end(i, DroneState.LOST, Cause.LOST)
+        if self.stage is Stage.DRONES and not self._moved[i]:
+            self._awaiting -= 1
         self._turn_log.setdefault("lost", []).append(d)
         self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
 
@@ -660,9 +680,9 @@ class Engine:
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
         if self.final:
             notes = fleet.notes()[alive]
-            if (notes == REACHED).all():
+            if np.count_nonzero(notes == REACHED) == len(notes):
                 return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
-            if ((notes == REACHED) | (notes == _UNREACHABLE)).all():
+            if np.count_nonzero((notes == REACHED) | (notes == _UNREACHABLE)) == len(notes):
                 stuck = [fleet.ids[i] for i in alive[notes == _UNREACHABLE].tolist()]
                 return EndReason.SETTLED, f"targets reached, except unreachable for {', '.join(stuck)}"
         if self.turn >= self.config.max_turns:

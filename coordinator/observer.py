@@ -26,47 +26,53 @@ def inside(cell: Cell, size: Cell) -> bool:
 
 
 def inside_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
-    """Which rows of an (n, 3) array of cells are inside the world."""
-    return ((cells >= 0) & (cells < np.asarray(size))).all(axis=1)
+    """Which rows of an (n, 3) integer array of cells are inside the world (negative coordinates, seen
+    unsigned, are huge: one comparison checks both bounds)."""
+    unsigned = cells.view(np.dtype(f"u{cells.itemsize}"))
+    return (unsigned < np.array(size, unsigned.dtype)).all(axis=1)
 
 
 def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray) -> np.ndarray:
     """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE).
 
-    `before` and `after`: each alive drone's cell at the start and end of the turn, (n, 3), rows in id
-    order (the priority order: when several drones enter one cell, the last in id order is the one
-    remembered as entering it, for the swap rule); `building`: whether its `after` cell is a building.
+    `before` and `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered
+    integers, rows in id order (the priority order: when several drones enter one cell, the last in id
+    order is the one remembered as entering it, for the swap rule); `building`: whether its `after` cell is
+    a building.
     """
     n = len(after)
     cause = np.zeros(n, np.uint8)
-    if not n:
-        return cause
     out = ~inside_rows(after, size)
     cause[out] = _OUTSIDE
     hit = building & ~out
     cause[hit] = _BUILDING
-    free = ~(out | hit)
-    nx, ny, nz = size
-    # cells as one integer each (outside cells get a number of their own that no inside cell has)
-    key = np.where(out, -1 - np.arange(n), (after[:, 0] * ny + after[:, 1]) * nz + after[:, 2]).astype(np.int64)
-    src = ((before[:, 0] * ny + before[:, 1]) * nz + before[:, 2]).astype(np.int64)
-    cells, inverse, counts = np.unique(np.where(free, key, -1 - n - np.arange(n)), return_inverse=True,
-                                       return_counts=True)
-    cause[free & (counts[inverse] > 1)] = _VERTEX
-    moved = np.flatnonzero((after != before).any(axis=1))
-    if len(moved):
-        # the drone remembered as entering each cell: the last mover (in id order) whose `after` it is
-        rev = moved[::-1]
-        entered, first = np.unique(key[rev], return_index=True)
-        enterer = rev[first]
-        at = np.searchsorted(entered, src[moved])
-        at[at == len(entered)] = 0
-        other = np.where(entered[at] == src[moved], enterer[at], -1)
-        swap = (other >= 0) & (other != moved)
-        swap[swap] = (before[other[swap]] == after[moved[swap]]).all(axis=1)
+    if n < 2:
+        return cause  # no one to meet
+    _, ny, nz = size
+    # each cell as one integer; a drone outside or in a building gets a number no other drone has
+    key = (after[:, 0].astype(np.int64) * ny + after[:, 1]) * nz + after[:, 2]
+    alone = np.where(out | hit, -1 - np.arange(n), key)
+    order = np.argsort(alone, kind="stable")
+    same = alone[order[1:]] == alone[order[:-1]]
+    if np.count_nonzero(same):
+        cause[order[1:][same]] = _VERTEX
+        cause[order[:-1][same]] = _VERTEX
+    moved = (after != before).any(axis=1).nonzero()[0]
+    if len(moved) < 2:
+        return cause  # a swap takes two movers
+    src = (before[moved, 0].astype(np.int64) * ny + before[moved, 1]) * nz + before[moved, 2]
+    entering = np.where(out[moved], -1 - moved, key[moved])  # outside: a cell no drone comes from
+    # the drone remembered as entering each cell: the last mover (in id order) whose `after` it is
+    rev = moved[::-1]
+    entered, first = np.unique(entering[::-1], return_index=True)
+    enterer = rev[first]
+    at = np.minimum(np.searchsorted(entered, src), len(entered) - 1)
+    other = np.where(entered[at] == src, enterer[at], -1)
+    swap = (other >= 0) & (other != moved)
+    swap[swap] = (before[other[swap]] == after[moved[swap]]).all(axis=1)
+    if np.count_nonzero(swap):
         pair = np.concatenate([moved[swap], other[swap]])
-        pair = pair[cause[pair] == 0]
-        cause[pair] = _SWAP
+        cause[pair[cause[pair] == 0]] = _SWAP
     return cause
 
 

@@ -23,7 +23,7 @@ import functools
 import logging
 import sys
 import time
-from collections.abc import Callable, Container, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 import zenoh
@@ -95,7 +95,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
             if over is not None:
                 logger.info("OVER: %s", over.text)
             elif latest is not None and latest.turn == member.clock.turn:
-                orders = orders_of(latest.orders, mine)
+                orders = latest.orders.orders(mine)
                 fresh = False
                 if done is None or done[0] != (latest.turn, orders):
                     steps = {d: pilots[d].step(pos, target) for d, pos, target in orders}
@@ -294,13 +294,6 @@ def _ball(reach: int) -> np.ndarray:
 
 
 _cell_info = unchecked(CellInfo)
-
-
-def orders_of(orders: OrderTable, mine: Container[str]) -> tuple[tuple[str, Cell, Cell | None], ...]:
-    """(drone, where it is, its target) for each of `mine` in a TURN's orders, read from the columns."""
-    targets = orders.cells("target").tolist()
-    return tuple((d, (x, y, z), None if t[0] < 0 else (t[0], t[1], t[2]))
-                 for d, (x, y, z), t in zip(orders.ids(), orders.cells("pos").tolist(), targets) if d in mine)
 
 
 def steps_of(decisions: Mapping[str, Decision]) -> StepTable:

@@ -86,14 +86,14 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 current.update(inputs.plan.at(t))
                 alive = set(engine.alive())
                 current = {d: c for d, c in current.items() if d in alive}
-                in_force = {d: r.target for d, r in engine.drones.items() if r.target is not None}
+                in_force = engine.targets()
                 push(_accept(engine, log, gcs_done(t, current, inputs.intent(t), in_force)))
             case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
                 assert env is not None
                 for d in sorted(inputs.vanished.get(t, ())):
                     push(engine.vanished(d))
                 skip = inputs.hovered.get(t, set()) | inputs.vanished.get(t, set())
-                steps = {o.drone: pilots[o.drone].step(o.pos, o.target) for o in turn.orders if o.drone not in skip}
+                steps = {d: pilots[d].step(pos, target) for d, pos, target in turn.orders.orders() if d not in skip}
                 oracle = env.answer
                 decisions = fly_round(steps, lambda pending: {d: dict(zip(c, oracle(c))) for d, c in pending.items()})
                 for d in sorted(decisions):

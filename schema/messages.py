@@ -340,6 +340,13 @@ class OrderTable(Table):
     RECORD = Order
     LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL), ("target", Col.OPTIONAL))
 
+    def orders(self, mine: typing.Container[str] | None = None) -> tuple[tuple[str, Cell, Cell | None], ...]:
+        """(drone, where it is, its target) of each row (of the drones in `mine`), read from the columns."""
+        targets = self.rows["target"].tolist()
+        return tuple((d, (x, y, z), None if t[0] < 0 else (t[0], t[1], t[2]))
+                     for d, (x, y, z), t in zip(self.ids(), self.rows["pos"].tolist(), targets)
+                     if mine is None or d in mine)
+
 
 class MoveTable(Table):
     """A TURN(ENV)'s accepted moves, one row per moving drone."""
@@ -372,6 +379,7 @@ class StatusTable(Table):
 
 
 TABLES: tuple[type[Table], ...] = (OrderTable, MoveTable, StepTable, StatusTable)
+_EMPTY: dict[type[Table], Table] = {cls: cls(cls.empty(0)) for cls in TABLES}  # immutable: one of each is enough
 
 
 def _as_table(msg: "Message", name: str, cls: type[Table]) -> None:
@@ -379,7 +387,7 @@ def _as_table(msg: "Message", name: str, cls: type[Table]) -> None:
     value = getattr(msg, name)
     if type(value) is not cls:
         _check(isinstance(value, tuple), f"{name} must be a {cls.__name__} or a tuple of {cls.RECORD.__name__}")
-        object.__setattr__(msg, name, cls.of(value))
+        object.__setattr__(msg, name, _EMPTY[cls] if not value else cls.of(value))
 
 
 # --------------------------------------------------------------------------- messages

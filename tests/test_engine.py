@@ -10,11 +10,11 @@ import pytest
 
 from dronesim.coordinator import journal
 from dronesim.coordinator.engine import (
-    AHEAD_MAX, DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, replace_config,
+    AHEAD_MAX, FEW, DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, replace_config,
 )
 from dronesim.schema import (
     Aim, Cause, CellInfo, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Move, Note, Nps, Order,
-    Moves, OutOfRange, Over, Phase, Refused, Role, StaleTurn, Status, Step, Target, Turn, UnknownEntity, Upd, UsageError,
+    Moves, OutOfRange, Over, Phase, Refused, RemoteInputError, Role, StaleTurn, Status, Step, Target, Turn, UnknownEntity, Upd, UsageError,
     Welcome, WorldSpec, WrongSender, encode,
 )
 
@@ -948,6 +948,37 @@ def test_moves_of_a_swarm_host_taken_one_by_one() -> None:
     g.nps("D03", (2, 2, 1))
     assert g.stage is Stage.GCS and g.turn == 2
     assert records(g.last)[0]["moves"] == {"D01": [1, 0, 0], "D02": [4, 4, 3], "D03": [2, 2, 1]}
+
+
+@pytest.mark.parametrize("size", [FEW, FEW + 1, 40])
+def test_a_big_batch_takes_and_refuses_what_moves_one_by_one_would(size: int) -> None:
+    """A MOVES above FEW moves is checked in array operations: it takes and refuses (with the same
+    errors, in the same order) what the same moves sent one MOVES each take and refuse."""
+    starts = [(f"D{i:02d}", (i % 5, i // 5 % 5, i // 25)) for i in range(1, size + 3)]
+    hosted = tuple(d for d, _ in starts[:size])
+
+    def play(batched: bool) -> tuple:
+        g = Game(config(*starts), hosts={"H01": hosted, "H02": tuple(d for d, _ in starts[size:])})
+        g.gcs()
+        steps = []
+        for n, (d, (x, y, z)) in enumerate(starts[:size]):
+            jump = n % 7 == 3  # two cells: refused
+            steps.append(Step(drone=d, pos=(x, y, z + (2 if jump else 1)), note=Note.REACHED if n % 2 else Note.NONE))
+        steps.append(Step(drone=starts[size][0], pos=(0, 0, 4)))  # H02's drone: spoofed
+        steps.append(Step(drone="D99", pos=(0, 0, 4)))  # not in this game
+        errors = []
+        for batch in [steps] if batched else [[st] for st in steps]:
+            try:
+                g.feed(g.engine.receive(Moves(turn=1, sender="H01", moves=tuple(batch))))
+            except RemoteInputError as err:
+                errors.append(str(err))
+        return g.engine.moves_taken(), errors
+
+    taken, errors = play(batched=True)
+    one_by_one, each = play(batched=False)
+    assert taken == one_by_one and len(taken) == size - len(range(3, size, 7))
+    assert errors[0].startswith(each[0]) and f"and {len(each) - 1} more" in errors[0]
+    assert "D99, which nobody flies" in each[-1] and f"{starts[size][0]}, which H02 flies" in each[-2]
 
 
 def test_batches_give_the_same_journal_as_single_messages() -> None:

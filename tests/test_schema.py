@@ -18,7 +18,9 @@ from dronesim.schema import (
     encode, is_drone_id, MoveTable, OrderTable, StatusTable, StepTable, Table,
 )
 from dronesim.schema.messages import MAX_COORD, MAX_PAYLOAD, MAX_TURN
+from dronesim.schema import tables
 from dronesim.schema.samples import SAMPLES, VECTORS_PATH, golden
+from dronesim.schema.tables import Col
 
 VECTORS: dict[str, str] = json.loads(VECTORS_PATH.read_text(encoding="utf-8"))
 REPLY_ONLY = {Welcome, Refused, Ans, WorldMap}
@@ -678,3 +680,14 @@ def test_drone_ids_are_canonical(drone: str) -> None:
     """One drone, one id: a table's drone column holds numbers, so D001 cannot be another drone than D01."""
     assert not is_drone_id(drone)
     rejects(mutated("target", drone=drone), match="drone id")
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from([Col.CELL, Col.SIGNED, Col.OPTIONAL]),
+       st.lists(st.one_of(st.just((-1, -1, -1)), st.tuples(*[st.sampled_from(
+           [0, 1, 7, MAX_COORD, MAX_COORD + 1, -1, -2, -MAX_COORD, -MAX_COORD - 1, 2**31 - 1, -2**31])] * 3)),
+           min_size=1, max_size=12))
+def test_a_cell_column_is_judged_alike_on_lists_and_on_arrays(kind: Col, cells: list) -> None:
+    """Tables of a few rows are checked on Python lists, bigger ones with numpy: the same rule."""
+    col = np.array(cells, np.int32).reshape(-1, 3)
+    assert tables._cells_ok(col, kind) == tables._cells_ok_few(col, kind)
