@@ -299,8 +299,11 @@ _cell_info = unchecked(CellInfo)
 def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
     """A MOVES's steps: each decision's cell and note, in drone order."""
     ids = sorted(decisions)
-    return StepTable.build(drone=[drone_number(d) for d in ids], pos=[decisions[d].pos for d in ids],
-                           note=[code_of(decisions[d].note) for d in ids])
+    decided = [decisions[d] for d in ids]
+    n = len(ids)
+    return StepTable.build(drone=np.fromiter(map(drone_number, ids), np.uint16, n),
+                           pos=np.array([d.pos for d in decided], np.int32).reshape(n, 3),
+                           note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n))
 
 
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:

@@ -44,10 +44,23 @@ class Scenario:
     @classmethod
     def load(cls, path: str | pathlib.Path) -> "Scenario":
         path = pathlib.Path(path)
+        entries = 0
+
+        def drone_entry(obj: dict) -> object:
+            """A drone's entry (the dicts with an "id"), checked and made compact as soon as it is parsed:
+            a swarm's file is thousands of them, which as dicts and lists fragmented the process's memory."""
+            nonlocal entries
+            if "id" not in obj:
+                return obj
+            entries += 1
+            return _entry(obj, entries)
+
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
+            data = json.loads(path.read_text(encoding="utf-8"), object_hook=drone_entry)
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise UsageError(f"cannot read scenario {path}: {exc}") from None
+        except UsageError as err:
+            raise UsageError(f"{path}: {err}") from None
         try:
             return cls.from_json(data, base=path.parent)
         except UsageError as err:
@@ -74,16 +87,11 @@ class Scenario:
             raise UsageError('"drones" must be a non-empty list')
         drones, autopilots = [], {}
         for i, d in enumerate(drones_raw):
-            if not isinstance(d, dict) or not is_drone_id(d.get("id")):
-                raise UsageError(f"drone #{i + 1} needs an id like D01")
-            pilot = d.get("autopilot", "seed")
-            if not isinstance(pilot, str) or pilot not in REGISTRY:
-                raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
-            start = _cell(d.get("start"), f"{d['id']} start")
-            if world_file is not None and world_file.is_building(start):
-                raise UsageError(f"{d['id']} starts inside a building at {start}")
-            drones.append(DroneSpec(drone=d["id"], start=start))
-            autopilots[d["id"]] = pilot
+            drone, pilot = d if isinstance(d, _Entry) else _entry(d, i + 1)
+            if world_file is not None and world_file.is_building(drone.start):
+                raise UsageError(f"{drone.drone} starts inside a building at {drone.start}")
+            drones.append(drone)
+            autopilots[drone.drone] = pilot
         targets = data.get("targets", [])
         if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets):
             raise UsageError('"targets" must be a list of "[Dnn=]x,y,z[@turn]" strings')
@@ -94,6 +102,22 @@ class Scenario:
         if unknown:
             raise UsageError(f"targets for drones not in the scenario: {', '.join(sorted(unknown))}")
         return scenario
+
+
+class _Entry(tuple):
+    """A checked drone entry of a scenario: (DroneSpec, autopilot name)."""
+
+    __slots__ = ()
+
+
+def _entry(d: object, n: int) -> _Entry:
+    """The n-th drone entry of a scenario, checked: its id, autopilot and start."""
+    if not isinstance(d, dict) or not is_drone_id(d.get("id")):
+        raise UsageError(f"drone #{n} needs an id like D01")
+    pilot = d.get("autopilot", "seed")
+    if not isinstance(pilot, str) or pilot not in REGISTRY:
+        raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
+    return _Entry((DroneSpec(drone=d["id"], start=_cell(d.get("start"), f"{d['id']} start")), pilot))
 
 
 def _int(v: object, what: str) -> int:
