@@ -556,7 +556,7 @@ class Engine:
         checked as a whole first (the checks of `_move`, in array operations); what that refuses, and a
         batch of a few moves, goes through `_host_move` row by row, which says why."""
         fleet, steps = self.fleet, msg.moves
-        pos, notes = steps.cells("pos"), steps.codes("note")
+        pos, notes = steps.column("pos"), steps.column("note")
         if len(steps) <= FEW:
             todo = range(len(steps))
         else:

@@ -309,7 +309,7 @@ def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
     """Which drones are in which cell at the start of a turn: the orders list every alive drone."""
     cells: dict[Cell, list[str]] = {}
-    for d, (x, y, z) in zip(orders.ids(), orders.cells("pos").tolist()):
+    for d, (x, y, z) in zip(orders.ids(), orders.column("pos").tolist()):
         cells.setdefault((x, y, z), []).append(d)
     return {c: tuple(sorted(ds)) for c, ds in cells.items()}
 

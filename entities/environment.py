@@ -12,10 +12,9 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from dronesim.schema import Cell, CellInfo, CellKind, DroneState, Move, Status, WorldSpec
+from dronesim.schema import Cell, CellInfo, CellKind, Move, Status, WorldSpec
 from dronesim.schema.messages import AROUND, asked_cells
 from dronesim.schema.errors import OutOfRange, UnknownEntity
-from dronesim.schema.tables import code_of
 
 from .world import World
 
@@ -26,8 +25,6 @@ def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
         return World.from_packed(spec.size, spec.cells)
     return World.generate(spec.size, np.random.default_rng(spec.seed), keep_free=tuple(starts))
 
-
-_ALIVE = code_of(DroneState.ALIVE)
 
 #: Up to this many cells, `survey` answers cell by cell rather than with numpy (whose fixed cost dominates).
 SMALL = 48
@@ -111,8 +108,8 @@ class Environment:
     def sync(self, status: Status) -> None:
         """Take the drones' positions from the observer's STATUS: alive ones in the world, others removed."""
         table = status.drones
-        pos = table.cells("pos")
-        there = (table.codes("state") == _ALIVE) & ((pos >= 0) & (pos < np.asarray(self.world.size))).all(axis=1)
+        pos = table.column("pos")
+        there = table.alive_mask() & ((pos >= 0) & (pos < np.asarray(self.world.size))).all(axis=1)
         ids = table.ids()
         self.drones = {ids[i]: (x, y, z) for i, (x, y, z) in zip(np.flatnonzero(there).tolist(), pos[there].tolist())}
         self._occupants = self._index()

@@ -27,12 +27,11 @@ import msgpack
 import numpy as np
 
 from .errors import MalformedMessage
-from .tables import Col, Table
+from .tables import MAX_COORD, Col, Table, code_of, drone_name, optional_cell
 
 SCHEMA_VERSION = 2  # 2: swarm-sized record tuples travel as tables (tables.py)
 
-#: Largest coordinate or turn a message may carry (worlds are far smaller; this bounds garbage).
-MAX_COORD = 1 << 16
+#: Largest turn a message may carry (MAX_COORD, the largest coordinate, is in tables.py).
 MAX_TURN = 1 << 40
 #: Largest payload any receiver decodes; bigger ones are rejected before parsing.
 MAX_PAYLOAD = 1 << 22
@@ -66,7 +65,7 @@ def drone_id(n: int) -> str:
     """The conventional id of the n-th drone: 1 -> 'D01', 100 -> 'D100'."""
     if not 1 <= n <= 9999:
         raise ValueError(f"drone number {n} out of 1..9999")
-    return f"D{n:02d}"
+    return drone_name(n)
 
 
 class Role(enum.Enum):
@@ -279,7 +278,7 @@ class DroneStatus:
     cause: Cause = Cause.NONE
 
     def __post_init__(self) -> None:
-        if (_numbered(self.drone, "D") and _cell_ok(self.pos, -MAX_COORD)
+        if (is_drone_id(self.drone) and _cell_ok(self.pos, -MAX_COORD)
                 and (self.target is None or _cell_ok(self.target, 0)) and type(self.state) is DroneState
                 and type(self.note) is Note and type(self.cause) is Cause):
             return  # the common case, in one expression (a swarm's STATUS holds thousands of these)
@@ -330,7 +329,7 @@ class Start:
 # --------------------------------------------------------------------------- tables (see tables.py)
 
 
-_ALIVE_CODE = tuple(DroneState).index(DroneState.ALIVE)
+_ALIVE_CODE = code_of(DroneState.ALIVE)
 
 
 class OrderTable(Table):
@@ -343,7 +342,7 @@ class OrderTable(Table):
     def orders(self, mine: typing.Container[str] | None = None) -> tuple[tuple[str, Cell, Cell | None], ...]:
         """(drone, where it is, its target) of each row (of the drones in `mine`), read from the columns."""
         targets = self.rows["target"].tolist()
-        return tuple((d, (x, y, z), None if t[0] < 0 else (t[0], t[1], t[2]))
+        return tuple((d, (x, y, z), optional_cell(t))
                      for d, (x, y, z), t in zip(self.ids(), self.rows["pos"].tolist(), targets)
                      if mine is None or d in mine)
 
@@ -372,10 +371,14 @@ class StatusTable(Table):
     LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("state", DroneState), ("target", Col.OPTIONAL),
               ("note", Note), ("cause", Cause))
 
+    def alive_mask(self) -> np.ndarray:
+        """Which rows are alive drones."""
+        return self.rows["state"] == _ALIVE_CODE
+
     def alive(self) -> list[str]:
         """The ids of the alive drones, in row order."""
         ids = self.ids()
-        return [ids[i] for i in np.flatnonzero(self.rows["state"] == _ALIVE_CODE).tolist()]
+        return [ids[i] for i in self.alive_mask().nonzero()[0].tolist()]
 
 
 TABLES: tuple[type[Table], ...] = (OrderTable, MoveTable, StepTable, StatusTable)

@@ -13,7 +13,7 @@ fixed little-endian layout its class declares (``LAYOUT``, documented in schema/
 
 A table is immutable and validates on construction, like a message: an instance that exists is well
 formed. Iterating it yields the records (``DroneStatus``, ``Order``, ...), so code that reads records keeps
-working; code on a hot path reads the columns (``numbers``, ``cells(name)``, ``codes(name)``).
+working; code on a hot path reads the columns (``numbers``, ``column(name)``).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from .errors import MalformedMessage
 if typing.TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
 
-#: Largest coordinate a cell may have (the messages' bound, repeated here to keep this module standalone).
+#: Largest coordinate a cell may have, in a table or any message (worlds are far smaller; this bounds garbage).
 MAX_COORD = 1 << 16
 #: Largest drone number (D9999).
 MAX_DRONE = 9999
@@ -55,8 +55,13 @@ def drone_number(drone: str) -> int:
 
 
 def drone_name(n: int) -> str:
-    """The canonical id of drone number n: 1 -> 'D01'."""
+    """The canonical id of drone number n: 1 -> 'D01' (unchecked: `messages.drone_id` checks n)."""
     return f"D{n:02d}"
+
+
+def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
+    """An optional cell as a table holds it ((-1, -1, -1): none), read as a Python list."""
+    return None if c[0] == -1 else (c[0], c[1], c[2])
 
 
 class Table:
@@ -188,12 +193,9 @@ class Table:
     def ids(self) -> list[str]:
         return [drone_name(n) for n in self.rows["drone"].tolist()]
 
-    def cells(self, name: str) -> np.ndarray:
-        """A cell column, (n, 3) int32 (an absent optional cell is (-1, -1, -1))."""
-        return self.rows[name]
-
-    def codes(self, name: str) -> np.ndarray:
-        """An enum column: each member's index in its enum's declaration order."""
+    def column(self, name: str) -> np.ndarray:
+        """A column: a cell column is (n, 3) int32 (an absent optional cell is (-1, -1, -1)), an enum
+        column each member's index in its enum's declaration order."""
         return self.rows[name]
 
     def records(self) -> tuple:
@@ -204,7 +206,7 @@ class Table:
             if kind is Col.DRONE:
                 columns.append([drone_name(n) for n in values])
             elif kind is Col.OPTIONAL:
-                columns.append([None if c[0] == -1 else tuple(c) for c in values])
+                columns.append([optional_cell(c) for c in values])
             elif isinstance(kind, Col):
                 columns.append([tuple(c) for c in values])
             else:
@@ -217,7 +219,10 @@ class Table:
         return iter(self.records())
 
     def __getitem__(self, i: int | slice):
-        return self.records()[i]
+        """A row's record (a slice: a tuple of them), built from that row alone."""
+        if isinstance(i, slice):
+            return type(self).trusted(self.rows[i]).records()
+        return type(self).trusted(self.rows[[i]]).records()[0]
 
     def __bool__(self) -> bool:
         return len(self.rows) > 0

@@ -659,8 +659,9 @@ def test_tables_hold_the_records_they_were_given_and_travel_as_their_rows() -> N
     msg = Status(turn=3, sender="OBS", drones=states)
     assert type(msg.drones) is StatusTable and len(msg.drones) == 2
     assert msg.drones == states and tuple(msg.drones) == states and msg.drones[1] == states[1]
+    assert msg.drones[-1] == states[-1] and msg.drones[:1] == states[:1] and msg.drones[5:] == ()
     assert msg.drones.ids() == ["D1000", "D07"] and msg.drones.numbers.tolist() == [1000, 7]
-    assert msg.drones.cells("target").tolist() == [[-1, -1, -1], [4, 5, 6]]
+    assert msg.drones.column("target").tolist() == [[-1, -1, -1], [4, 5, 6]]
     again = decode(encode(msg))
     assert again == msg and hash(again) == hash(msg)
     assert msgpack.unpackb(encode(msg))["drones"] == msg.drones.rows.tobytes()
@@ -680,6 +681,8 @@ def test_drone_ids_are_canonical(drone: str) -> None:
     """One drone, one id: a table's drone column holds numbers, so D001 cannot be another drone than D01."""
     assert not is_drone_id(drone)
     rejects(mutated("target", drone=drone), match="drone id")
+    with pytest.raises(MalformedMessage, match="drone id"):
+        DroneStatus(drone=drone, pos=(1, 0, 0), state=DroneState.ALIVE)
 
 
 @settings(max_examples=300, deadline=None)
