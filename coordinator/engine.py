@@ -35,16 +35,16 @@ import numpy as np
 
 from dronesim.schema import (
     Cause, Cell, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Moves, MoveTable, Note, Nps,
-    Over, Phase, Refused, RemoteInputError, Role, Start, Status, Target, Turn, Upd, Welcome, WorldSpec, encode,
+    Over, Phase, Refused, RemoteInputError, Role, Start, Status, StatusTable, Target, Turn, Upd, Welcome, WorldSpec, encode,
 )
 from dronesim.entities.environment import build_world
-from dronesim.entities.world import World
+from dronesim.entities.world import World, inside_rows
 from dronesim.schema.messages import is_drone_id, is_host_id
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
 from dronesim.schema.tables import code_of, drone_name
 
 from . import arbiter, observer
-from .fleet import ALIVE, CAUSES, NOTES, REACHED, Drones, Fleet, cell_of
+from .fleet import ALIVE, CAUSES, NOTES, REACHED, UNREACHABLE, Drones, Fleet, cell_of
 
 
 #: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
@@ -142,9 +142,6 @@ class Refusal:
 
 
 Effect = Publish | Reply | Record | Refusal
-
-
-_UNREACHABLE = code_of(Note.UNREACHABLE)
 
 
 class Engine:
@@ -621,9 +618,10 @@ class Engine:
     def _observe(self, alive: np.ndarray, before: np.ndarray, after: np.ndarray, moved: np.ndarray) -> list[Effect]:
         """The observer's turn: `alive` drones went from `before` to `after` (`moved`: the rows that differ)."""
         fleet, ids = self.fleet, self.fleet.ids
-        if np.count_nonzero(moved):
+        any_moved = np.count_nonzero(moved) > 0
+        if any_moved:
             building = np.zeros(len(alive), bool)
-            enter = moved & observer.inside_rows(after, self.size)
+            enter = moved & inside_rows(after, self.size)
             building[enter] = self.world.grid[tuple(after[enter].T)]
             cause = observer.judge(self.size, before, after, building)
         else:  # where the drones were, alive and apart, they still are
@@ -645,7 +643,7 @@ class Engine:
             if fleet.state[i] == ALIVE:
                 self._lose(ids[i])
         log = self._turn_log
-        if np.count_nonzero(moved):
+        if any_moved:
             log["moves"] = dict(zip([ids[i] for i in alive[moved].tolist()], after[moved].tolist()))
         if len(said):
             log["notes"] = {ids[i]: NOTES[c].value for i, c in zip(said.tolist(), fleet.note[said].tolist())}
@@ -658,7 +656,7 @@ class Engine:
         log["state"] = hashlib.sha256(data).hexdigest()[:16]
         self._log.debug("turn %d observed: %s", self.turn, log)
         effects: list[Effect] = [Record(log), Publish(status, data)]
-        end = self._end_reason()
+        end = self._end_reason(status.drones)
         if end:
             return effects + self._over(*end)
         return effects + self._enter(Stage.GCS, self.turn + 1)
@@ -671,19 +669,20 @@ class Engine:
         self._turn_log.setdefault("lost", []).append(d)
         self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
 
-    def _end_reason(self) -> tuple[EndReason, str] | None:
-        fleet = self.fleet
-        alive = fleet.alive_rows()
-        if not len(alive):
+    def _end_reason(self, status: StatusTable) -> tuple[EndReason, str] | None:
+        """Whether the game ends with the turn whose STATUS is `status`, and why."""
+        alive = status.alive_mask()
+        if not np.count_nonzero(alive):
             causes = ", ".join(f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
                                for d, r in self.drones.items())
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
         if self.final:
-            notes = fleet.notes()[alive]
+            notes = status.column("note")[alive]
             if np.count_nonzero(notes == REACHED) == len(notes):
                 return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
-            if np.count_nonzero((notes == REACHED) | (notes == _UNREACHABLE)) == len(notes):
-                stuck = [fleet.ids[i] for i in alive[notes == _UNREACHABLE].tolist()]
+            if np.count_nonzero((notes == REACHED) | (notes == UNREACHABLE)) == len(notes):
+                ids = status.ids()
+                stuck = [ids[i] for i in alive.nonzero()[0][notes == UNREACHABLE].tolist()]
                 return EndReason.SETTLED, f"targets reached, except unreachable for {', '.join(stuck)}"
         if self.turn >= self.config.max_turns:
             return EndReason.TURN_LIMIT, f"turn limit {self.config.max_turns} reached"
@@ -723,7 +722,8 @@ class Engine:
                 self._targets.clear()
                 return self._enter(Stage.DRONES, turn)
             case Stage.DRONES:
-                late = [d for d in self.alive() if not self._moved[self.fleet.index[d]]]
+                alive = self.fleet.alive_rows()
+                late = [self.fleet.ids[i] for i in alive[~self._moved[alive]].tolist()]
                 self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
                 return self._drones_finish()
         return []

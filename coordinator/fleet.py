@@ -17,9 +17,8 @@ from dronesim.schema import Cause, Cell, DroneState, Note, OrderTable, StatusTab
 from dronesim.schema.tables import MAX_DRONE, code_of, drone_number
 
 ALIVE, DEAD, LOST = (code_of(s) for s in (DroneState.ALIVE, DroneState.DEAD, DroneState.LOST))
-REACHED = code_of(Note.REACHED)
+REACHED, UNREACHABLE = code_of(Note.REACHED), code_of(Note.UNREACHABLE)
 STATES, NOTES, CAUSES = tuple(DroneState), tuple(Note), tuple(Cause)
-NO_CELL = (-1, -1, -1)
 
 
 def cell_of(row: np.ndarray) -> Cell:
@@ -40,10 +39,6 @@ class DroneView:
     host: str | None
     autopilot: str
     cooperative: bool
-
-    @property
-    def alive(self) -> bool:
-        return self.state is DroneState.ALIVE
 
 
 class Fleet:

@@ -14,22 +14,17 @@ from collections.abc import Mapping, Set
 
 import numpy as np
 
+from dronesim.entities.world import inside_rows, linear_rows
 from dronesim.schema import Cause, Cell
 from dronesim.schema.tables import code_of
 
+from .fleet import CAUSES
+
 _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause.BUILDING, Cause.VERTEX, Cause.SWAP))
-_CAUSES = tuple(Cause)
 
 
 def inside(cell: Cell, size: Cell) -> bool:
     return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
-
-
-def inside_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
-    """Which rows of an (n, 3) integer array of cells are inside the world (negative coordinates, seen
-    unsigned, are huge: one comparison checks both bounds)."""
-    unsigned = cells.view(np.dtype(f"u{cells.itemsize}"))
-    return (unsigned < np.array(size, unsigned.dtype)).all(axis=1)
 
 
 def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray) -> np.ndarray:
@@ -48,9 +43,8 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     cause[hit] = _BUILDING
     if n < 2:
         return cause  # no one to meet
-    _, ny, nz = size
     # each cell as one integer; a drone outside or in a building gets a number no other drone has
-    key = (after[:, 0].astype(np.int64) * ny + after[:, 1]) * nz + after[:, 2]
+    key = linear_rows(after, size)
     alone = np.where(out | hit, -1 - np.arange(n), key)
     order = np.argsort(alone, kind="stable")
     same = alone[order[1:]] == alone[order[:-1]]
@@ -60,7 +54,7 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     moved = (after != before).any(axis=1).nonzero()[0]
     if len(moved) < 2:
         return cause  # a swap takes two movers
-    src = (before[moved, 0].astype(np.int64) * ny + before[moved, 1]) * nz + before[moved, 2]
+    src = linear_rows(before[moved], size)
     entering = np.where(out[moved], -1 - moved, key[moved])  # outside: a cell no drone comes from
     # the drone remembered as entering each cell: the last mover (in id order) whose `after` it is
     rev = moved[::-1]
@@ -94,4 +88,4 @@ def deaths(
     b = np.array([before[d] for d in order], np.int64)
     a = np.array([after[d] for d in order], np.int64)
     cause = judge(size, b, a, np.array([after[d] in buildings for d in order], bool))
-    return {order[i]: _CAUSES[c] for i, c in enumerate(cause.tolist()) if c}
+    return {order[i]: CAUSES[c] for i, c in enumerate(cause.tolist()) if c}

@@ -40,7 +40,7 @@ from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args
 
 from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
 from .autopilots.base import Answers, Decision
-from .world import World
+from .world import World, inside_rows, linear_rows
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
@@ -353,10 +353,8 @@ class Chart:
 
     def _linear(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(inside mask, linear index of each inside cell) of an (n, 3) array of cells."""
-        size = np.asarray(self.size, dtype=np.int64)
-        inside = ((cells >= 0) & (cells < size)).all(axis=1)
-        c = cells[inside]
-        return inside, (c[:, 0] * size[1] + c[:, 1]) * size[2] + c[:, 2]
+        inside = inside_rows(cells, self.size)
+        return inside, linear_rows(cells[inside], self.size)
 
     def learn(self, cells: Sequence[Cell], kinds: bytes) -> None:
         if len(cells) <= SMALL:  # a few: cell by cell (numpy's fixed cost dominates)

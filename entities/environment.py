@@ -16,7 +16,7 @@ from dronesim.schema import Cell, CellInfo, CellKind, Move, Status, WorldSpec
 from dronesim.schema.messages import AROUND, asked_cells
 from dronesim.schema.errors import OutOfRange, UnknownEntity
 
-from .world import World
+from .world import World, inside_rows, linear_rows
 
 
 def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
@@ -40,8 +40,7 @@ class Environment:
         cells: dict[Cell, list[str]] = defaultdict(list)
         for d, c in sorted(self.drones.items()):
             cells[c].append(d)
-        _, ny, nz = self.world.size
-        self._occupied_linear = np.asarray([(x * ny + y) * nz + z for x, y, z in cells], dtype=np.int64)
+        self._occupied_linear = linear_rows(np.array(list(cells), np.int64).reshape(-1, 3), self.world.size)
         return {c: tuple(ds) for c, ds in cells.items()}
 
     def what_inside(self, cell: Cell) -> CellInfo:
@@ -64,14 +63,13 @@ class Environment:
         if len(around):
             ring = np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + np.asarray(AROUND, dtype=np.int64)
             a = np.concatenate([a, ring.reshape(-1, 3)])
-        size = np.asarray(self.world.size, dtype=np.int64)
-        inside = ((a >= 0) & (a < size)).all(axis=1)
+        inside = inside_rows(a, self.world.size)
         kinds = np.full(len(a), CellKind.OUTSIDE, dtype=np.uint8)
         i = a[inside]
         kinds[inside] = np.where(self.world.grid[i[:, 0], i[:, 1], i[:, 2]], CellKind.BUILDING, CellKind.EMPTY)
         if not drones or not self._occupants:
             return kinds.tobytes(), ()
-        linear = np.where(inside, (a[:, 0] * size[1] + a[:, 1]) * size[2] + a[:, 2], -1)
+        linear = np.where(inside, linear_rows(a, self.world.size), -1)
         occupied = self._occupied_linear
         hits = np.flatnonzero(np.isin(linear, occupied)).tolist()
         at = a[hits].tolist()
@@ -109,7 +107,7 @@ class Environment:
         """Take the drones' positions from the observer's STATUS: alive ones in the world, others removed."""
         table = status.drones
         pos = table.column("pos")
-        there = table.alive_mask() & ((pos >= 0) & (pos < np.asarray(self.world.size))).all(axis=1)
+        there = table.alive_mask() & inside_rows(pos, self.world.size)
         ids = table.ids()
         self.drones = {ids[i]: (x, y, z) for i, (x, y, z) in zip(np.flatnonzero(there).tolist(), pos[there].tolist())}
         self._occupants = self._index()

@@ -54,6 +54,19 @@ _C_LEGEND = ("legend: . empty, # building, X target, * trail, digit = drone (las
 # --------------------------------------------------------------------------- validation helpers
 
 
+def inside_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
+    """Which rows of an (n, 3) integer array of cells are inside a world of `size` (negative coordinates,
+    seen unsigned, are huge: one comparison checks both bounds)."""
+    unsigned = cells.view(np.dtype(f"u{cells.itemsize}"))
+    return (unsigned < np.array(size, unsigned.dtype)).all(axis=1)
+
+
+def linear_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
+    """The index in the C-ordered grid of each row's cell, as int64 (meaningful for inside cells)."""
+    _, ny, nz = size
+    return (cells[:, 0].astype(np.int64) * ny + cells[:, 1]) * nz + cells[:, 2]
+
+
 def _int(value: object, what: str) -> int:
     """`value` as a plain int (numpy integers accepted, bools and floats refused)."""
     if isinstance(value, bool):
