@@ -44,23 +44,10 @@ class Scenario:
     @classmethod
     def load(cls, path: str | pathlib.Path) -> "Scenario":
         path = pathlib.Path(path)
-        entries = 0
-
-        def drone_entry(obj: dict) -> object:
-            """A drone's entry (the dicts with an "id"), checked and made compact as soon as it is parsed:
-            a swarm's file is thousands of them, which as dicts and lists fragmented the process's memory."""
-            nonlocal entries
-            if "id" not in obj:
-                return obj
-            entries += 1
-            return _entry(obj, entries)
-
         try:
-            data = json.loads(path.read_text(encoding="utf-8"), object_hook=drone_entry)
+            data = json.loads(path.read_text(encoding="utf-8"), object_hook=_compact)
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise UsageError(f"cannot read scenario {path}: {exc}") from None
-        except UsageError as err:
-            raise UsageError(f"{path}: {err}") from None
         try:
             return cls.from_json(data, base=path.parent)
         except UsageError as err:
@@ -104,13 +91,25 @@ class Scenario:
         return scenario
 
 
+def _compact(obj: dict) -> object:
+    """json.loads' object_hook: a valid drone entry (a dict with an "id") becomes its `_Entry` as soon as it
+    is parsed (a swarm's file is thousands of them, which as dicts and lists fragmented the process's
+    memory); anything else stays as it is, for `Scenario.from_json` to check in its place."""
+    if "id" in obj:
+        try:
+            return _entry(obj)
+        except UsageError:
+            pass
+    return obj
+
+
 class _Entry(tuple):
     """A checked drone entry of a scenario: (DroneSpec, autopilot name)."""
 
     __slots__ = ()
 
 
-def _entry(d: object, n: int) -> _Entry:
+def _entry(d: object, n: int = 0) -> _Entry:
     """The n-th drone entry of a scenario, checked: its id, autopilot and start."""
     if not isinstance(d, dict) or not is_drone_id(d.get("id")):
         raise UsageError(f"drone #{n} needs an id like D01")

@@ -197,6 +197,16 @@ def test_errors_are_usage_errors(name: str) -> None:
         Scenario.from_json(copy.deepcopy(data))
 
 
+@pytest.mark.parametrize("name", sorted(BAD))
+def test_a_file_gives_the_errors_its_json_gives(name: str, tmp_path: pathlib.Path) -> None:
+    """Loading compacts drone entries while parsing: the errors, and their order, stay from_json's."""
+    data, message = BAD[name]
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(UsageError, match=message):
+        Scenario.load(path)
+
+
 def test_load_prefixes_errors_with_the_path(tmp_path: pathlib.Path) -> None:
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(mutate(lambda d: d["drones"][1].update(autopilot="astar"))), encoding="utf-8")
