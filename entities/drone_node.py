@@ -38,8 +38,9 @@ from dronesim.schema.messages import _KINDS, AROUND, unchecked
 from dronesim.schema.tables import code_of, drone_number
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .autopilots import REGISTRY, fly_round, make_autopilot, pilot_class
+from .autopilots import REGISTRY, fly_round, make_autopilot, make_swarm, pilot_class
 from .autopilots.base import Answers, Decision
+from .autopilots.seed import NO_ANSWER
 from .world import World, inside_rows, linear_rows
 
 
@@ -54,10 +55,14 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         hello = Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones, autopilot=autopilot,
                         cooperative=pilot_class(autopilot).cooperative, session=session_id(session))
         member = Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
-        pilots = {d: make_autopilot(autopilot, world_size=member.welcome.world.size) for d in drones}
+        size = member.welcome.world.size
+        # A swarm host flies its drones with one pilot over arrays when the autopilot has that form.
+        swarm = make_swarm(autopilot, world_size=size, drones=[drone_number(d) for d in drones]) if host else None
+        pilots = {} if swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
+        numbers = np.array(sorted(drone_number(d) for d in drones))
         out = Outbox(session)
         asker = Asker(session, keys, inbox, logger, sender=sender, timeout=ask_timeout, patience=grace,
-                      size=member.welcome.world.size)
+                      size=size)
         mine = set(drones)
         senses = pilot_class(autopilot).senses
         if senses:  # the static world around the starts, asked now: the first turn's sensing needs no ASK
@@ -94,6 +99,20 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                         over = end
             if over is not None:
                 logger.info("OVER: %s", over.text)
+            elif latest is not None and latest.turn == member.clock.turn and swarm:
+                rows = latest.orders.rows
+                rows = rows[np.isin(rows["drone"], numbers)]
+                fresh = done is None or done[0] != (latest.turn, rows.tobytes())
+                if fresh:
+                    moves = fly_swarm(swarm, rows, lambda cells: asker.kinds(
+                        latest.turn, cells, give_up=lambda: superseded(latest.turn)))
+                    if superseded(latest.turn):
+                        continue
+                    done = ((latest.turn, rows.tobytes()), moves)
+                if done[1]:
+                    out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=done[1]))
+                if fresh and not asker.chart.complete:
+                    asker.prefetch(latest.turn, sorted(set(map(tuple, done[1].column("pos").tolist()))))
             elif latest is not None and latest.turn == member.clock.turn:
                 orders = latest.orders.orders(mine)
                 fresh = False
@@ -247,6 +266,21 @@ class Asker:
             pending = unanswered
         return answers
 
+    def kinds(self, turn: int, cells: np.ndarray, *, give_up: Callable[[], bool] = lambda: False) -> np.ndarray:
+        """The kind of each cell of an (n, 3) array, as the environment would give it for `turn` (uint8,
+        `NO_ANSWER` for a cell it did not answer): from the chart, and by ASK for the cells never told."""
+        self._absorb()
+        self._poll_map(turn)
+        kinds = self.chart.kinds(cells)
+        missing = np.flatnonzero(kinds == Chart.UNKNOWN)
+        if len(missing):
+            asked = list(dict.fromkeys(map(tuple, cells[missing].tolist())))
+            chunks = {f"{self.sender}#{i}": tuple(asked[i:i + Ask.MAX_CELLS]) for i in range(0, len(asked), Ask.MAX_CELLS)}
+            answers = self.ask_all(turn, chunks, dict, give_up=give_up)
+            told = {c: info.kind for got in answers.values() for c, info in got.items()}
+            kinds[missing] = [told.get(c, NO_ANSWER) for c in map(tuple, cells[missing].tolist())]
+        return kinds
+
     def _collect(self, batch: list[str], handler, ask: Ask, *, infos: bool = True) -> Answers | None:
         """The answer to `ask` (its kinds learnt by the chart; with `infos`, as {cell: CellInfo}); None if
         nobody answered (no queryable, or zenoh's own timeout)."""
@@ -306,6 +340,12 @@ def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
                            note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n))
 
 
+def fly_swarm(swarm, rows: np.ndarray, kinds: Callable[[np.ndarray], np.ndarray]) -> StepTable:
+    """A swarm pilot's moves for the orders `rows` (an OrderTable's), the cells it asks about answered by `kinds`."""
+    pos, note = swarm.step(rows["drone"], rows["pos"], rows["target"], kinds)
+    return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note)
+
+
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
     """Which drones are in which cell at the start of a turn: the orders list every alive drone."""
     cells: dict[Cell, list[str]] = {}
@@ -355,6 +395,13 @@ class Chart:
         """(inside mask, linear index of each inside cell) of an (n, 3) array of cells."""
         inside = inside_rows(cells, self.size)
         return inside, linear_rows(cells[inside], self.size)
+
+    def kinds(self, cells: np.ndarray) -> np.ndarray:
+        """The kind of each cell of an (n, 3) integer array (uint8; UNKNOWN if never told)."""
+        inside, at = self._linear(cells)
+        kinds = np.full(len(cells), CellKind.OUTSIDE, dtype=np.uint8)
+        kinds[inside] = np.frombuffer(self._kinds, dtype=np.uint8)[at]
+        return kinds
 
     def learn(self, cells: Sequence[Cell], kinds: bytes) -> None:
         if len(cells) <= SMALL:  # a few: cell by cell (numpy's fixed cost dominates)

@@ -305,3 +305,82 @@ def test_ask_round_trips_per_step():
         assert all(grid.kind(c) is CellKind.EMPTY for c in seed.path)
         v1 = fly(V1Pilot(world_size=grid.size), Grid(grid.size, grid.blocked), start, target, turns=200)
         assert set(v1.asks) == {0}
+
+
+# --------------------------------------------------------------------------- SeedSwarm: SeedPilot over arrays
+
+
+def _swarm_game(seed: int, size: Cell, n: int, turns: int, drop: float) -> None:
+    """Fly n drones with one SeedSwarm and with one SeedPilot each over a random city, every turn the
+    same positions and targets for both (random targets that change, some absent, some drones skipping
+    turns as dead ones do), and a share `drop` of the answers missing: same moves, notes and memories."""
+    import numpy as np
+
+    from dronesim.entities.autopilots.seed import NO_ANSWER, SeedSwarm
+    from dronesim.schema.tables import code_of
+
+    rng = np.random.default_rng(seed)
+    nx, ny, nz = size
+    cells = [(x, y, z) for x in range(nx) for y in range(ny) for z in range(nz)]
+    blocked = {cells[i] for i in rng.choice(len(cells), len(cells) // 4, replace=False)}
+    grid = Grid(size, frozenset(blocked))
+    free = [c for c in cells if c not in blocked]
+    n = min(n, len(free))
+    numbers = sorted(rng.choice(np.arange(1, 200), n, replace=False).tolist())
+    pos = {d: free[i] for d, i in zip(numbers, rng.choice(len(free), n, replace=False))}
+    target: dict[int, Cell | None] = {d: None for d in numbers}
+    swarm = SeedSwarm(world_size=size, drones=numbers)
+    pilots = {d: SeedPilot(world_size=size) for d in numbers}
+    notes = {Note.NONE: code_of(Note.NONE), Note.REACHED: code_of(Note.REACHED), Note.UNREACHABLE: code_of(Note.UNREACHABLE)}
+    for turn in range(turns):
+        for d in numbers:
+            if rng.random() < 0.1:  # a new target, now and then none, now and then in a building
+                target[d] = None if rng.random() < 0.1 else cells[int(rng.integers(len(cells)))]
+        flying = [d for d in numbers if rng.random() > 0.1]
+        lost = {c for c in cells if rng.random() < drop}  # the cells nobody answers about this turn
+        calls = []
+
+        def kinds(asked):
+            calls.append(asked)
+            return np.array([NO_ANSWER if c in lost else grid.kind(c) for c in map(tuple, asked.tolist())], np.uint8)
+
+        new, note = swarm.step(np.array(flying), np.array([pos[d] for d in flying]).reshape(-1, 3),
+                               np.array([target[d] or (-1, -1, -1) for d in flying]).reshape(-1, 3), kinds)
+        assert len(calls) <= 1, "SeedSwarm asks at most once a turn"
+
+        def oracle(cs):
+            return {c: CellInfo(pos=c, kind=grid.kind(c)) for c in cs if c not in lost}
+
+        for i, d in enumerate(flying):
+            decision, _ = run_step(pilots[d], pos[d], target[d], oracle)
+            assert (tuple(new[i].tolist()), int(note[i])) == (decision.pos, notes[decision.note]), (seed, turn, d)
+            if grid.kind(decision.pos) is CellKind.EMPTY:
+                pos[d] = decision.pos
+        for d in numbers:
+            assert swarm.memory(d) == pilots[d].memory, (seed, turn, d)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_seed_swarm_is_seed_pilot_for_each_drone(seed):
+    sizes = [(6, 6, 3), (9, 5, 4), (1, 1, 4), (1, 7, 2), (12, 12, 2)]
+    _swarm_game(seed, sizes[seed % len(sizes)], n=1 + seed % 9 * 3, turns=40, drop=0.0 if seed % 2 else 0.05)
+
+
+def test_seed_swarm_refuses_strangers_and_asks_nothing_it_knows():
+    import numpy as np
+
+    from dronesim.entities.autopilots.seed import SeedSwarm
+    from dronesim.schema import UsageError
+
+    swarm = SeedSwarm(world_size=(4, 4, 1), drones=[3, 5])
+    def kinds(cells):
+        raise AssertionError(f"asked {cells}")
+
+    with pytest.raises(UsageError, match=r"\[4\]"):
+        swarm.step(np.array([4]), np.zeros((1, 3)), np.full((1, 3), -1), kinds)
+    with pytest.raises(UsageError):
+        SeedSwarm(world_size=(4, 4, 1), drones=[3, 3])
+    # No targets: nothing asked, nothing learned, everybody hovers.
+    new, note = swarm.step(np.array([3, 5]), np.array([[0, 0, 0], [1, 1, 0]]), np.full((2, 3), -1), kinds)
+    assert new.tolist() == [[0, 0, 0], [1, 1, 0]] and note.tolist() == [0, 0]
+    assert swarm.memory(3) == () and swarm.memory(5) == ()

@@ -95,3 +95,53 @@ def test_chart_from_the_environments_map_answers_every_cell_as_the_environment_d
     other = World.generate((5, 7, 3), np.random.default_rng(4))
     with pytest.raises(OutOfRange):  # another world's map changes nothing
         Chart(world.size).learn_map(WorldMap(turn=0, sender="ENV", size=other.size, buildings=other.packed()))
+
+
+def test_a_swarm_host_without_the_map_asks_the_cells_it_was_never_told(monkeypatch) -> None:
+    """`Asker.kinds` over the network, with an environment that serves ASK but no map: cells outside the
+    world need no question, the others go in ASKs of at most Ask.MAX_CELLS cells, and are charted."""
+    import logging
+
+    import numpy as np
+    import zenoh
+
+    from dronesim.entities.drone_node import Asker, Chart
+    from dronesim.entities.environment import Environment
+    from dronesim.entities.world import World
+    from dronesim.schema import Ans, Ask, CellKind, Keys, decode, encode
+    from dronesim.transport import Inbox, client_config
+
+    from .harness import embedded_router, unique_root
+
+    monkeypatch.setattr(Ask, "MAX_CELLS", 7)
+    keys = Keys(unique_root())
+    world = World.generate((5, 5, 3), np.random.default_rng(4))
+    env = Environment(world, {})
+    asks: list[int] = []
+
+    def answer(query: zenoh.Query) -> None:
+        ask = decode(query.payload.to_bytes(), Ask)
+        asks.append(len(ask.asked()))
+        kinds, drones = env.survey(ask.cells, ask.around)
+        query.reply(query.key_expr, encode(Ans(turn=ask.turn, sender="ENV", kinds=kinds, drones=drones)))
+
+    cells = np.array([(x, y, z) for x in (-1, 0, 2, 4, 5) for y in (0, 3) for z in (0, 2, 3)])
+    cells = np.concatenate([cells, cells[10:14]])  # a cell wanted twice is asked once
+    expected = np.array([CellKind.OUTSIDE if not (0 <= x < 5 and z < 3) else
+                         CellKind.BUILDING if world.grid[x, y, z] else CellKind.EMPTY for x, y, z in cells.tolist()])
+    with embedded_router() as locator, zenoh.open(client_config(locator)) as served, \
+            zenoh.open(client_config(locator)) as session:
+        queryable = served.declare_queryable(keys.ask, answer, complete=True)
+        log = logging.getLogger("test")
+        asker = Asker(session, keys, Inbox(session, keys, log), log, sender="H01", timeout=5.0, patience=5.0,
+                      size=world.size)
+        try:
+            assert asker.kinds(1, cells).tolist() == expected.tolist()
+            inside = len({c for c, k in zip(map(tuple, cells.tolist()), expected) if k != CellKind.OUTSIDE})
+            assert sorted(asks) == sorted([7] * (inside // 7) + ([inside % 7] if inside % 7 else []))
+            assert not asker.chart.complete and (asker.chart.kinds(cells) != Chart.UNKNOWN).all()
+            asks.clear()
+            assert asker.kinds(2, cells[::-1]).tolist() == expected[::-1].tolist() and asks == []  # all charted
+        finally:
+            asker.close()
+            queryable.undeclare()

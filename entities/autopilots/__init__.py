@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+from collections.abc import Sequence
 
 from dronesim.schema import Cell, UsageError
 
@@ -14,15 +15,24 @@ REGISTRY: dict[str, tuple[str, str]] = {
     "seed": ("seed", "SeedPilot"),
     "dstar": ("dstar", "DStarPilot"),
 }
+#: name -> (module, class) of the autopilots that also come as one pilot for a whole swarm, over arrays
+#: (same decisions as one instance per drone; a swarm host flies its drones with it).
+SWARMS: dict[str, tuple[str, str]] = {
+    "seed": ("seed", "SeedSwarm"),
+}
+
+
+def _load(entry: tuple[str, str]) -> type:
+    module, cls = entry
+    return getattr(importlib.import_module(f"{__name__}.{module}"), cls)
 
 
 def pilot_class(name: str) -> type[Autopilot]:
     """The autopilot class registered as `name` (UsageError if there is none)."""
     try:
-        module, cls = REGISTRY[name]
+        return _load(REGISTRY[name])
     except KeyError:
         raise UsageError(f"unknown autopilot {name!r}; choose one of {', '.join(REGISTRY)}") from None
-    return getattr(importlib.import_module(f"{__name__}.{module}"), cls)
 
 
 def make_autopilot(name: str, *, world_size: Cell) -> Autopilot:
@@ -30,4 +40,10 @@ def make_autopilot(name: str, *, world_size: Cell) -> Autopilot:
     return pilot_class(name)(world_size=world_size)
 
 
-__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "REGISTRY", "fly_round", "make_autopilot", "pilot_class", "run_step"]
+def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int]):
+    """One pilot for the drones numbered `drones` (a swarm's), or None if autopilot `name` has no swarm form."""
+    pilot_class(name)  # UsageError if there is no such autopilot
+    return _load(SWARMS[name])(world_size=world_size, drones=drones) if name in SWARMS else None
+
+
+__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "REGISTRY", "fly_round", "make_autopilot", "make_swarm", "pilot_class", "run_step"]

@@ -48,10 +48,15 @@ identical to the one-by-one seed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
+from itertools import repeat
 from typing import ClassVar
 
-from dronesim.schema import Cell, CellInfo, CellKind, Note
+import numpy as np
+
+from dronesim.entities.world import linear_rows
+from dronesim.schema import Cell, CellInfo, CellKind, Note, UsageError
+from dronesim.schema.tables import code_of
 
 from .base import Decision, Sensing, in_bounds
 
@@ -179,3 +184,136 @@ class SeedPilot:
         if closest is None:
             return Decision(pos=pos, note=Note.UNREACHABLE)
         return Decision(pos=self._cases[closest][0])
+
+
+#: A swarm's answer for a cell nobody answered (not empty this turn, nothing learned: `SeedPilot._record`).
+NO_ANSWER = 255
+_DXY = np.array([(dx, dy) for _, (dx, dy) in DIRECTIONS], dtype=np.int64)
+_NONE, _REACHED, _UNREACHABLE = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE))
+_FAR = np.iinfo(np.int64).max
+_RANK = np.arange(4)
+_COLUMNS = np.arange(6)
+
+
+class SeedSwarm:
+    """`SeedPilot` for many drones at once (a swarm host's), over arrays: the same decisions and the same
+    memory, in the same order, as one `SeedPilot` per drone (a property test holds the two to it).
+
+    Memory is one dict for the whole swarm: (drone's row × world cells + the cell's grid index) -> the
+    cell's index in that drone's ``cases`` × 2 + 1 if empty. A turn looks at six cells per drone at once:
+    where it stands, its vertical cell and the 4 of its directionOrder, and takes `SeedPilot.step`'s rules
+    over them as array operations:
+
+    - the vertical cell if it is empty (known so, or told so now);
+    - else the first candidate of directionOrder that was unknown and is told empty;
+    - else the known empty candidate learned earliest (backing out), else hover, UNREACHABLE.
+
+    A drone learns, in that order, where it stands and the cells it was told up to the one it takes. A
+    directionOrder repeats its best cell where a direction leads outside the world; the repeats change
+    nothing (the cell is known by then, or was never answered) and are skipped.
+
+    Sensing: `kinds` is asked once per turn, for every candidate some drone does not know: all a turn may
+    need. A drone learns only the cells it gets to, so asking more changes nothing but the number of
+    round trips: one per turn at most, where the seed's sequential questions take up to 4.
+    """
+
+    def __init__(self, *, world_size: Cell, drones: Sequence[int]) -> None:
+        """`drones`: the numbers of the drones flown (D01 is 1)."""
+        self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]
+        self._drones = np.array(sorted(drones), dtype=np.int64)
+        if len(np.unique(self._drones)) != len(self._drones):
+            raise UsageError("a swarm flies each drone once")
+        nx, ny, nz = self.world_size
+        self._cells = nx * ny * nz
+        self._memory: dict[int, int] = {}
+        self._count = np.zeros(len(self._drones), dtype=np.int64)  # cells learned, per drone
+
+    # ------------------------------------------------------------------ memory
+
+    def memory(self, drone: int) -> tuple[tuple[Cell, bool], ...]:
+        """Drone number `drone`'s learned cells with their empty flag, in the order learned (as `SeedPilot.memory`)."""
+        row = int(self._rows([drone])[0])
+        nx, ny, nz = self.world_size
+        mine = sorted((v >> 1, k - row * self._cells, bool(v & 1)) for k, v in self._memory.items()
+                      if k // self._cells == row)
+        return tuple(((i // (ny * nz), i // nz % ny, i % nz), empty) for _, i, empty in mine)
+
+    def _rows(self, drones: Sequence[int] | np.ndarray) -> np.ndarray:
+        drones = np.asarray(drones, dtype=np.int64)
+        rows = np.searchsorted(self._drones, drones)
+        if len(drones) and (rows.max() >= len(self._drones) or (self._drones[rows] != drones).any()):
+            raise UsageError(f"drones {sorted(set(drones.tolist()) - set(self._drones.tolist()))} are not in this swarm")
+        return rows
+
+    # ------------------------------------------------------------------ one turn
+
+    def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray,
+             kinds: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """This turn's moves of the drones numbered `drones` (distinct), standing at `pos` ((n, 3)) with
+        `target` ((n, 3), (-1, -1, -1) for none). `kinds` answers an (m, 3) array of cells with their
+        CellKind codes ((m,) uint8, `NO_ANSWER` for a cell not answered); it is called at most once.
+        Returns (new cells (n, 3) int64, note codes (n,) uint8 as in a StepTable)."""
+        nx, ny, nz = size = self.world_size
+        n = len(drones)
+        rows = self._rows(drones)
+        pos = np.asarray(pos, dtype=np.int64).reshape(n, 3)
+        target = np.asarray(target, dtype=np.int64).reshape(n, 3)
+        new = pos.copy()
+        note = np.full(n, _NONE, dtype=np.uint8)
+        has = target[:, 0] >= 0
+        here = has & (pos == target).all(axis=1)
+        note[here] = _REACHED
+        go = np.flatnonzero(has)  # the drones with a target (only they learn where they stand)
+        if not len(go):
+            return new, note
+        p, t, moving, k = pos[go], target[go], ~here[go], len(go)
+
+        # Six candidates a drone: where it stands (0), its vertical cell (1), its directionOrder (2-5).
+        cand = np.empty((k, 6, 3), dtype=np.int64)
+        cand[:, 0] = cand[:, 1] = p
+        cand[:, 1, 2] += np.sign(t[:, 2] - p[:, 2])
+        around = p[:, None, :2] + _DXY  # (k, 4, 2), in DIRECTIONS order
+        inside = ((around >= 0) & (around < (nx, ny))).all(axis=2)
+        distance = ((around - t[:, None, :2]) ** 2).sum(axis=2) * 4 + _RANK  # ties: the seed's order
+        order = np.argsort(np.where(inside, distance, _FAR), axis=1)
+        valid = inside.sum(axis=1)
+        cand[:, 2:, :2] = p[:, None, :2] + _DXY[order]
+        cand[:, 2:, 2:] = p[:, None, 2:]
+        usable = np.zeros((k, 6), dtype=bool)
+        usable[:, 0] = True
+        usable[:, 1] = moving & (t[:, 2] != p[:, 2]) & (cand[:, 1, 2] >= 0) & (cand[:, 1, 2] < nz)
+        usable[:, 2:] = moving[:, None] & (_RANK < valid[:, None])  # the valid directions, no repeats
+        keys = (rows[go] * self._cells)[:, None] + linear_rows(cand.reshape(-1, 3), size).reshape(k, 6)
+
+        get = self._memory.get
+        entry = np.full((k, 6), -1, dtype=np.int64)
+        entry[usable] = np.fromiter(map(get, keys[usable].tolist(), repeat(-1)), dtype=np.int64,
+                                    count=int(usable.sum()))
+        unknown = usable & (entry < 0)
+        told = np.full((k, 6), NO_ANSWER, dtype=np.uint8)
+        told[:, 0] = CellKind.EMPTY  # standing in it: visited and empty, nothing asked
+        ask = unknown.copy()
+        ask[:, 0] = False
+        if ask.any():
+            told[ask] = kinds(cand[ask])
+        fresh_empty = unknown & (told == CellKind.EMPTY)
+        known_empty = usable & (entry >= 0) & (entry & 1 == 1)
+
+        up = known_empty[:, 1] | fresh_empty[:, 1]
+        ahead = fresh_empty[:, 2:] & ~up[:, None]
+        chosen = np.where(up, 1, np.where(ahead.any(axis=1), ahead.argmax(axis=1) + 2, 6))  # 6: none
+        earliest = np.where(known_empty[:, 2:], entry[:, 2:] >> 1, _FAR)
+        back = earliest.argmin(axis=1) + 2
+        stuck = (chosen == 6) & (earliest.min(axis=1) == _FAR)
+        dest = np.where(chosen < 6, chosen, np.where(stuck, 0, back))
+        new[go[moving]] = cand[moving, dest[moving]]
+        note[go[moving & stuck]] = _UNREACHABLE
+
+        # Learn, in order: where it stands, then every cell told up to the one taken.
+        learn = unknown & (told != NO_ANSWER) & (_COLUMNS <= chosen[:, None])
+        learn[:, 0] = unknown[:, 0]
+        index = self._count[rows[go]][:, None] + learn.cumsum(axis=1) - 1
+        self._count[rows[go]] += learn.sum(axis=1)
+        value = index * 2 + (told == CellKind.EMPTY)
+        self._memory.update(zip(keys[learn].tolist(), value[learn].tolist()))
+        return new, note
