@@ -609,7 +609,8 @@ def play_local(case: Case, scenario_file: Path) -> Local:
     quiet = logging.getLogger("dronesim.bench.local")
     quiet.setLevel(logging.ERROR)
     res = simulate(sc.game_config(phase_deadline=PHASE_DEADLINE), sc.autopilots, inputs, quiet, keep_statuses=True,
-                   verify_env=False)  # as the distributed game: the coordinator does not check UPD by default
+                   verify_env=False,  # as the distributed game: the coordinator does not check UPD by default
+                   swarm=True)  # and its drones flown by one swarm host
     st = inputs.stamps  # type: ignore[attr-defined]
     ts = [st[t] for t in range(case.warmup + 1, case.end_turn + 1)]
     measured = [r for r in res.records
@@ -951,7 +952,7 @@ def legend(facts: dict) -> str:
         "has nothing new for it); a turn is the time between "
         "two consecutive STATUS arrivals (STATUS(t - 1) begins turn t), turns/s = 1 / mean, p99 over the "
         "measured turns. The ground "
-        "station's answer: from TURN(GCS) arriving to its DONE sent, when not answered ahead. CPU: user + system time of each process (all threads) over the measured turns ÷ turns. In-process: `dronesim.local.simulate` on the same scenario, timed at the same point; "
+        "station's answer: from TURN(GCS) arriving to its DONE sent, when not answered ahead. CPU: user + system time of each process (all threads) over the measured turns ÷ turns. In-process: `dronesim.local.simulate` on the same scenario and layout (one swarm host, one MOVES a turn), timed at the same point; "
         "\"in-process ÷ distributed\" = distributed mean turn ÷ in-process mean turn. \"turn ÷ pub/sub RTT\" = "
         "median turn ÷ median pub/sub round trip (callback replies). Growth (1000-drone rows) = (mean turn at "
         "1000 ÷ mean turn at 128, same world) ÷ (1000 ÷ 128): 1.00 is linear in N, above is worse than "

@@ -31,22 +31,21 @@ import zenoh
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
     Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, MapRequest, Moves, Nps, OrderTable, Over, Phase,
-    RemoteInputError, Role, StepTable, Turn, UsageError, WorldMap, decode, drone_id, encode, is_drone_id,
+    RemoteInputError, Role, Turn, UsageError, WorldMap, decode, drone_id, encode, is_drone_id,
 )
 from dronesim.schema.errors import OutOfRange
 from dronesim.schema.messages import _KINDS, AROUND, unchecked
-from dronesim.schema.tables import code_of, drone_number
+from dronesim.schema.tables import drone_number
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .autopilots import REGISTRY, fly_round, make_autopilot, make_swarm, pilot_class
-from .autopilots.base import Answers, Decision
-from .autopilots.seed import NO_ANSWER
+from .autopilots import REGISTRY, SWARM_MIN, fly_round, make_autopilot, make_swarm, pilot_class
+from .autopilots.base import NO_ANSWER, Answers, fly_swarm, steps_of
 from .world import World, inside_rows, linear_rows
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
          host: str | None = None, connect_timeout: float = 30.0, grace: float = 30.0,
-         ask_timeout: float = 5.0) -> Over:
+         ask_timeout: float = 5.0, swarm_min: int = SWARM_MIN) -> Over:
     sender = host or drones[0]
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
@@ -57,8 +56,11 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         member = Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
         size = member.welcome.world.size
         # A swarm host flies its drones with one pilot over arrays when the autopilot has that form.
-        swarm = make_swarm(autopilot, world_size=size, drones=[drone_number(d) for d in drones]) if host else None
+        swarm = make_swarm(autopilot, world_size=size, drones=[drone_number(d) for d in drones],
+                           least=swarm_min) if host else None
         pilots = {} if swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
+        if swarm:
+            logger.info("flying %d drones with the %s autopilot's swarm form", len(drones), autopilot)
         numbers = np.array(sorted(drone_number(d) for d in drones))
         out = Outbox(session)
         asker = Asker(session, keys, inbox, logger, sender=sender, timeout=ask_timeout, patience=grace,
@@ -330,22 +332,6 @@ def _ball(reach: int) -> np.ndarray:
 _cell_info = unchecked(CellInfo)
 
 
-def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
-    """A MOVES's steps: each decision's cell and note, in drone order."""
-    ids = sorted(decisions)
-    decided = [decisions[d] for d in ids]
-    n = len(ids)
-    return StepTable.build(drone=np.fromiter(map(drone_number, ids), np.uint16, n),
-                           pos=np.array([d.pos for d in decided], np.int32).reshape(n, 3),
-                           note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n))
-
-
-def fly_swarm(swarm, rows: np.ndarray, kinds: Callable[[np.ndarray], np.ndarray]) -> StepTable:
-    """A swarm pilot's moves for the orders `rows` (an OrderTable's), the cells it asks about answered by `kinds`."""
-    pos, note = swarm.step(rows["drone"], rows["pos"], rows["target"], kinds)
-    return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note)
-
-
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
     """Which drones are in which cell at the start of a turn: the orders list every alive drone."""
     cells: dict[Cell, list[str]] = {}
@@ -452,6 +438,9 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--id", default="D01", help="drone id(s): D01, or D01-D08 for a swarm host (default D01)")
     p.add_argument("--host", help="swarm host id Hnn (required when flying several drones)")
     p.add_argument("--autopilot", default="seed", choices=sorted(REGISTRY), help="default: seed")
+    p.add_argument("--swarm-pilot-min", type=int, default=SWARM_MIN, metavar="N",
+                   help="a swarm host flies its drones with the autopilot's swarm form (one pilot over arrays, same "
+                        f"decisions) when it has one and flies at least N drones (default {SWARM_MIN})")
     add_entity_args(p)
     args = p.parse_args(argv)
     try:
@@ -460,7 +449,7 @@ def cli(argv: list[str] | None = None) -> int:
             raise UsageError("several drones in one process need --host Hnn")
         logger = setup_logging(args.log_level, args.host or drones[0])
         main(zenoh_config(args), drones=drones, autopilot=args.autopilot, keys=Keys(args.root), logger=logger,
-             host=args.host, connect_timeout=args.connect_timeout, grace=args.grace)
+             host=args.host, connect_timeout=args.connect_timeout, grace=args.grace, swarm_min=args.swarm_pilot_min)
     except UsageError as err:
         print(f"dronesim drone: {err}", file=sys.stderr)
         return 2

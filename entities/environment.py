@@ -49,6 +49,15 @@ class Environment:
     def answer(self, cells: Iterable[Cell]) -> tuple[CellInfo, ...]:
         return tuple(self.world.what_inside(c, self._occupants) for c in cells)
 
+    def kinds(self, cells: np.ndarray, inside: np.ndarray | None = None) -> np.ndarray:
+        """The CellKind code of each cell of an (n, 3) integer array (uint8): the static world, no drones
+        (`inside`: `inside_rows` of the cells, when the caller has it)."""
+        inside = inside_rows(cells, self.world.size) if inside is None else inside
+        kinds = np.full(len(cells), CellKind.OUTSIDE, dtype=np.uint8)
+        i = cells[inside]
+        kinds[inside] = np.where(self.world.grid[i[:, 0], i[:, 1], i[:, 2]], CellKind.BUILDING, CellKind.EMPTY)
+        return kinds
+
     def survey(self, cells: Sequence[Cell], around: Sequence[Cell] = (), *,
                drones: bool = True) -> tuple[bytes, tuple[tuple[int, str], ...]]:
         """`answer` for many cells at once, as an ANS carries it (see `Ask.asked`: `cells`, then the six
@@ -64,9 +73,7 @@ class Environment:
             ring = np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + np.asarray(AROUND, dtype=np.int64)
             a = np.concatenate([a, ring.reshape(-1, 3)])
         inside = inside_rows(a, self.world.size)
-        kinds = np.full(len(a), CellKind.OUTSIDE, dtype=np.uint8)
-        i = a[inside]
-        kinds[inside] = np.where(self.world.grid[i[:, 0], i[:, 1], i[:, 2]], CellKind.BUILDING, CellKind.EMPTY)
+        kinds = self.kinds(a, inside)
         if not drones or not self._occupants:
             return kinds.tobytes(), ()
         linear = np.where(inside, linear_rows(a, self.world.size), -1)

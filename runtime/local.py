@@ -10,18 +10,23 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+
+import numpy as np
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from dronesim.coordinator.engine import (
     Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase,
 )
-from dronesim.entities.autopilots import fly_round, make_autopilot, pilot_class
+from dronesim.entities.autopilots import SWARM_MIN, fly_round, make_autopilot, make_swarm, pilot_class
+from dronesim.entities.autopilots.base import fly_swarm, steps_of
 from dronesim.entities.environment import Environment, build_world
 from dronesim.entities.gcs import Plan, gcs_done
+from dronesim.scenario import swarm_hosts
 from dronesim.schema import (
-    Cell, Connect, Intent, Nps, Over, Phase, Role, Status, Turn, Upd, Welcome,
+    Cell, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, Turn, UsageError, Upd, Welcome,
 )
+from dronesim.schema.tables import drone_number
 
 
 @dataclass(slots=True)
@@ -49,8 +54,14 @@ class Result:
 
 
 def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
-             logger: logging.Logger | None = None, *, keep_statuses: bool = False, verify_env: bool = True) -> Result:
+             logger: logging.Logger | None = None, *, keep_statuses: bool = False, verify_env: bool = True,
+             swarm: bool = False, swarm_min: int = SWARM_MIN) -> Result:
+    """Play the game. `swarm`: the drones flown as `dronesim up --swarm` flies them, one host per
+    autopilot sending one MOVES a turn, with the autopilot's swarm form from `swarm_min` drones on (the
+    journal is the same; drones that miss or vanish need the layout of a process per drone)."""
     log = logger or logging.getLogger("dronesim.local")
+    if swarm and (inputs.hovered or inputs.vanished):
+        raise UsageError("drones that miss a turn or vanish are played with one process per drone, not swarm hosts")
     world = build_world(config.world, (d.start for d in config.drones))
     engine = Engine(config, log, world)
     engine.verify_env = verify_env
@@ -67,11 +78,14 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     welcome: Welcome | None = None
     for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), Connect(turn=0, sender="GCS", role=Role.GCS)):
         push(engine.connect(hello, None))
-    for d in sorted(autopilots):
-        push(engine.connect(Connect(turn=0, sender=d, role=Role.DRONE, drones=(d,), autopilot=autopilots[d],
-                                            cooperative=pilot_class(autopilots[d]).cooperative), None))
+    # sender -> (autopilot, its drones): a host per autopilot, or a process per drone
+    flyers = swarm_hosts(dict(autopilots)) if swarm else {d: (autopilots[d], (d,)) for d in sorted(autopilots)}
+    for sender, (pilot, drones) in flyers.items():
+        push(engine.connect(Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones, autopilot=pilot,
+                                    cooperative=pilot_class(pilot).cooperative), None))
     env: Environment | None = None
     pilots: dict = {}
+    swarms: dict = {}  # host -> its swarm pilot, for the autopilots that have one
     current: dict[str, Cell] = {}
     while queue:
         effect = queue.popleft()
@@ -79,7 +93,12 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
             case Reply(_, Welcome() as w) if welcome is None:
                 welcome = w
                 env = Environment(world, {s.drone: s.pos for s in w.starts})
-                pilots = {d: make_autopilot(a, world_size=world.size) for d, a in autopilots.items()}
+                if swarm:
+                    swarms = {h: make_swarm(a, world_size=world.size, drones=[drone_number(d) for d in ds],
+                                            least=swarm_min) for h, (a, ds) in flyers.items()}
+                host_of = {d: sender for sender, (_, drones) in flyers.items() for d in drones}
+                pilots = {d: make_autopilot(a, world_size=world.size) for d, a in autopilots.items()
+                          if swarms.get(host_of[d]) is None}
             case Record(data):
                 records.append(data)
             case Publish(Turn(phase=Phase.GCS, turn=t)):
@@ -93,12 +112,23 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 for d in sorted(inputs.vanished.get(t, ())):
                     push(engine.vanished(d))
                 skip = inputs.hovered.get(t, set()) | inputs.vanished.get(t, set())
-                steps = {d: pilots[d].step(pos, target) for d, pos, target in turn.orders.orders() if d not in skip}
+                steps = {d: pilots[d].step(pos, target) for d, pos, target in turn.orders.orders(pilots)
+                         if d not in skip}
                 oracle = env.answer
                 decisions = fly_round(steps, lambda pending: {d: dict(zip(c, oracle(c))) for d, c in pending.items()})
-                for d in sorted(decisions):
-                    dec = decisions[d]
-                    push(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
+                if not swarm:
+                    for d in sorted(decisions):
+                        dec = decisions[d]
+                        push(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
+                for host, (_, drones) in flyers.items() if swarm else ():
+                    if swarms[host] is not None:
+                        rows = turn.orders.rows
+                        moves = fly_swarm(swarms[host], rows[np.isin(rows["drone"], [drone_number(d) for d in drones])],
+                                          env.kinds)
+                    else:
+                        moves = steps_of({d: decisions[d] for d in drones if d in decisions})
+                    if moves:
+                        push(_accept(engine, log, Moves(turn=t, sender=host, moves=moves)))
                 if skip:
                     push(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):

@@ -27,6 +27,14 @@ from dronesim.schema import Cell, RemoteInputError, UsageError, WorldSpec, is_dr
 FORMAT = "dronesim-scenario"
 
 
+
+def swarm_hosts(autopilots: dict[str, str]) -> dict[str, tuple[str, tuple[str, ...]]]:
+    """The swarm layout: one host per autopilot (H01, H02, ... in the autopilots' name order) ->
+    (autopilot, its drones in id order)."""
+    return {f"H{n:02d}": (pilot, tuple(d for d in sorted(autopilots) if autopilots[d] == pilot))
+            for n, pilot in enumerate(sorted(set(autopilots.values())), 1)}
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Scenario:
     world: WorldSpec

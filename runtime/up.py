@@ -19,7 +19,7 @@ import zenoh
 from dronesim.schema import UsageError
 from dronesim.transport import router_config, router_locators
 
-from dronesim.scenario import Scenario
+from dronesim.scenario import Scenario, swarm_hosts
 from dronesim.schema import drone_id
 
 
@@ -70,10 +70,8 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
     else:
         pilots = {drone_id(n): args.autopilot for n in range(1, args.drones + 1)}
     if args.swarm:  # one swarm host per autopilot
-        for n, pilot in enumerate(sorted(set(pilots.values())), 1):
-            ids = ",".join(d for d in sorted(pilots) if pilots[d] == pilot)
-            host = f"H{n:02d}"
-            procs.append((host, [*base, "drone", *common, "--id", ids, "--host", host, "--autopilot", pilot]))
+        for host, (pilot, ids) in swarm_hosts(pilots).items():
+            procs.append((host, [*base, "drone", *common, "--id", ",".join(ids), "--host", host, "--autopilot", pilot]))
     else:
         procs += [(d, [*base, "drone", *common, "--id", d, "--autopilot", pilots[d]]) for d in sorted(pilots)]
     gcs = [*base, "gcs", *common]

@@ -316,7 +316,8 @@ def _swarm_game(seed: int, size: Cell, n: int, turns: int, drop: float) -> None:
     turns as dead ones do), and a share `drop` of the answers missing: same moves, notes and memories."""
     import numpy as np
 
-    from dronesim.entities.autopilots.seed import NO_ANSWER, SeedSwarm
+    from dronesim.entities.autopilots.base import NO_ANSWER
+    from dronesim.entities.autopilots.seed import SeedSwarm
     from dronesim.schema.tables import code_of
 
     rng = np.random.default_rng(seed)

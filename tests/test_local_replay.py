@@ -100,6 +100,18 @@ def test_swarm16_is_deterministic(swarm: Scenario, swarm_run: Result) -> None:
     assert again.over == swarm_run.over
 
 
+def test_swarm_hosts_play_the_same_game(swarm: Scenario, swarm_run: Result) -> None:
+    """One host per autopilot (the seed's drones flown by SeedSwarm, one MOVES a host) writes the journal
+    of a process per drone, STATUS for STATUS; missed turns need the per-drone layout."""
+    for least in (1, 100):  # SeedSwarm for the 4 seed drones; one SeedPilot each
+        hosted = simulate(swarm.game_config(), swarm.autopilots, Inputs(plan=swarm.plan()), QUIET,
+                          keep_statuses=True, swarm=True, swarm_min=least)
+        assert hosted.records == swarm_run.records and hosted.statuses == swarm_run.statuses
+    with pytest.raises(UsageError, match="one process per drone"):
+        simulate(swarm.game_config(), swarm.autopilots, Inputs(plan=swarm.plan(), hovered={3: {"D07"}}), QUIET,
+                 swarm=True)
+
+
 def test_statuses_are_kept_only_on_request(swarm: Scenario) -> None:
     s = Scenario.from_json({"format": "dronesim-scenario", "version": 1, "world": {"size": [6, 6, 2], "seed": 1},
                             "drones": [{"id": "D01", "start": [0, 0, 0], "autopilot": "dstar"}],

@@ -11,7 +11,7 @@ import pytest
 
 from dronesim import replay
 from dronesim.coordinator.journal import read
-from dronesim.scenario import Scenario
+from dronesim.scenario import Scenario, swarm_hosts
 from tests.harness import Cluster, embedded_router, journal_records
 
 pytestmark = pytest.mark.integration
@@ -31,12 +31,9 @@ def run_layout(locator: str, tmp: pathlib.Path, layout: str) -> pathlib.Path:
             for d, pilot in sorted(scenario.autopilots.items()):
                 c.start(d, "drone", "--id", d, "--autopilot", pilot)
         else:  # one swarm host per autopilot
-            by_pilot: dict[str, list[str]] = {}
-            for d, pilot in sorted(scenario.autopilots.items()):
-                by_pilot.setdefault(pilot, []).append(d)
-            for n, (pilot, ids) in enumerate(sorted(by_pilot.items()), 1):
-                c.start(f"H{n:02d}", "drone", "--id", ",".join(ids), "--host", f"H{n:02d}", "--autopilot", pilot,
-                        "--log-level", "INFO")
+            for host, (pilot, ids) in swarm_hosts(scenario.autopilots).items():
+                c.start(host, "drone", "--id", ",".join(ids), "--host", host, "--autopilot", pilot,
+                        "--log-level", "INFO", "--swarm-pilot-min", "1")  # the seed's drones flown by SeedSwarm
         c.start("GCS", "gcs", "--scenario", str(SCENARIO), "--quiet")
         codes = c.wait_all(timeout=240)
         assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
@@ -46,6 +43,8 @@ def run_layout(locator: str, tmp: pathlib.Path, layout: str) -> pathlib.Path:
             for host in (p for p in c.procs if p.name.startswith("H")):
                 charted = "charted the environment's map: 1024 cells" in host.text
                 assert charted == ("--autopilot v1" not in " ".join(host.argv)), host.text[-2000:]
+                vectorised = "drones with the seed autopilot's swarm form" in host.text
+                assert vectorised == ("--autopilot seed" in " ".join(host.argv)), host.text[-2000:]
     return journal
 
 

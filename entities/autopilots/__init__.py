@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 from dronesim.schema import Cell, UsageError
 
-from .base import Autopilot, Decision, Oracle, Sensing, fly_round, run_step
+from .base import Autopilot, Decision, Oracle, Sensing, SwarmPilot, fly_round, run_step
 
 #: name -> (module, class). Modules are imported on first use.
 REGISTRY: dict[str, tuple[str, str]] = {
@@ -20,6 +20,9 @@ REGISTRY: dict[str, tuple[str, str]] = {
 SWARMS: dict[str, tuple[str, str]] = {
     "seed": ("seed", "SeedSwarm"),
 }
+#: From this many drones on, a host flies them with the swarm form (below, numpy's fixed cost per
+#: operation makes one instance per drone faster: `dronesim bench` shows both).
+SWARM_MIN = 32
 
 
 def _load(entry: tuple[str, str]) -> type:
@@ -40,10 +43,13 @@ def make_autopilot(name: str, *, world_size: Cell) -> Autopilot:
     return pilot_class(name)(world_size=world_size)
 
 
-def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int]):
-    """One pilot for the drones numbered `drones` (a swarm's), or None if autopilot `name` has no swarm form."""
+def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int], least: int = SWARM_MIN) -> SwarmPilot | None:
+    """One pilot for the drones numbered `drones` (a swarm's), or None if autopilot `name` has no swarm
+    form or they are fewer than `least`."""
     pilot_class(name)  # UsageError if there is no such autopilot
-    return _load(SWARMS[name])(world_size=world_size, drones=drones) if name in SWARMS else None
+    if name not in SWARMS or len(drones) < least:
+        return None
+    return _load(SWARMS[name])(world_size=world_size, drones=drones)
 
 
-__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "REGISTRY", "fly_round", "make_autopilot", "make_swarm", "pilot_class", "run_step"]
+__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "SwarmPilot", "REGISTRY", "SWARMS", "SWARM_MIN", "fly_round", "make_autopilot", "make_swarm", "pilot_class", "run_step"]

@@ -15,10 +15,15 @@ from collections.abc import Callable, Generator, Mapping
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from dronesim.schema import Cell, CellInfo, Note
+import numpy as np
+
+from dronesim.schema import Cell, CellInfo, Note, StepTable
+from dronesim.schema.tables import code_of, drone_number
 from dronesim.schema.messages import AROUND
 
 Answers = Mapping[Cell, CellInfo]
+#: The kind a swarm pilot is given for a cell nobody answered (see `fly_swarm`).
+NO_ANSWER = 255
 Sensing = Generator[tuple[Cell, ...], Answers, "Decision"]
 Oracle = Callable[[tuple[Cell, ...]], Answers]
 
@@ -45,6 +50,18 @@ class Autopilot(Protocol):
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         """Decide this turn's move from `pos` towards `target` (None: no target yet, hover)."""
+        ...
+
+
+class SwarmPilot(Protocol):
+    """One pilot for all the drones of a swarm host, over arrays (`autopilots.SWARMS`): the same
+    decisions as one autopilot per drone."""
+
+    def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray,
+             kinds: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """The moves of the drones numbered `drones`, standing at `pos` ((n, 3)) with `target` ((n, 3),
+        (-1, -1, -1) for none): (new cells (n, 3), note codes (n,) as in a StepTable). `kinds` answers
+        an (m, 3) array of cells with their CellKind codes (`NO_ANSWER` for a cell not answered)."""
         ...
 
 
@@ -106,3 +123,19 @@ def fly_round(
         if not isinstance(dec, Decision):
             raise TypeError(f"the autopilot of {d} returned {dec!r}, not a Decision")
     return decisions
+
+
+def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
+    """A MOVES's steps: each decision's cell and note, in drone order."""
+    ids = sorted(decisions)
+    decided = [decisions[d] for d in ids]
+    n = len(ids)
+    return StepTable.build(drone=np.fromiter(map(drone_number, ids), np.uint16, n),
+                           pos=np.array([d.pos for d in decided], np.int32).reshape(n, 3),
+                           note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n))
+
+
+def fly_swarm(swarm: SwarmPilot, rows: np.ndarray, kinds: Callable[[np.ndarray], np.ndarray]) -> StepTable:
+    """A swarm pilot's moves for the orders `rows` (an OrderTable's), the cells it asks about answered by `kinds`."""
+    pos, note = swarm.step(rows["drone"], rows["pos"], rows["target"], kinds)
+    return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note)

@@ -58,7 +58,7 @@ from dronesim.entities.world import linear_rows
 from dronesim.schema import Cell, CellInfo, CellKind, Note, UsageError
 from dronesim.schema.tables import code_of
 
-from .base import Decision, Sensing, in_bounds
+from .base import NO_ANSWER, Decision, Sensing, in_bounds
 
 #: The 4 horizontal directions as (dx, dy), in the seed's tie-break order.
 DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
@@ -186,8 +186,6 @@ class SeedPilot:
         return Decision(pos=self._cases[closest][0])
 
 
-#: A swarm's answer for a cell nobody answered (not empty this turn, nothing learned: `SeedPilot._record`).
-NO_ANSWER = 255
 _DXY = np.array([(dx, dy) for _, (dx, dy) in DIRECTIONS], dtype=np.int64)
 _NONE, _REACHED, _UNREACHABLE = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE))
 _FAR = np.iinfo(np.int64).max
