@@ -173,6 +173,9 @@ class Engine:
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
         #: Whether the environment's UPD reports are checked (kept for a few turns): the adapter says.
         self.verify_env = True
+        #: Whether the turn records say what each drone did (moves, notes, hovers, deaths) and the state's
+        #: hash: the adapter turns it off when it keeps no journal (the records are then dropped).
+        self.journaled = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
@@ -643,17 +646,19 @@ class Engine:
             if fleet.state[i] == ALIVE:
                 self._lose(ids[i])
         log = self._turn_log
-        if any_moved:
-            log["moves"] = dict(zip([ids[i] for i in alive[moved].tolist()], after[moved].tolist()))
-        if len(said):
-            log["notes"] = {ids[i]: NOTES[c].value for i, c in zip(said.tolist(), fleet.note[said].tolist())}
-        if len(hovered):
-            log["hovered"] = [ids[i] for i in hovered.tolist()]
-        if len(dead):
-            log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
+        if self.journaled:  # what the turn did, drone by drone
+            if any_moved:
+                log["moves"] = dict(zip([ids[i] for i in alive[moved].tolist()], after[moved].tolist()))
+            if len(said):
+                log["notes"] = {ids[i]: NOTES[c].value for i, c in zip(said.tolist(), fleet.note[said].tolist())}
+            if len(hovered):
+                log["hovered"] = [ids[i] for i in hovered.tolist()]
+            if len(dead):
+                log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
         status = self.status(self.turn)
         data = encode(status)
-        log["state"] = hashlib.sha256(data).hexdigest()[:16]
+        if self.journaled:
+            log["state"] = hashlib.sha256(data).hexdigest()[:16]
         self._log.debug("turn %d observed: %s", self.turn, log)
         effects: list[Effect] = [Record(log), Publish(status, data)]
         end = self._end_reason(status.drones)

@@ -152,6 +152,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
             logger.info("no journal at %s yet: starting a new game", journal)
         engine = Engine(game, logger)
     engine.verify_env = verify_env
+    engine.journaled = journal is not None
     with zenoh.open(conf) as session, JournalWriter(journal) as writer:
         inbox = Inbox(session, keys, logger)
         out = Outbox(session)

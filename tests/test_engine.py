@@ -377,6 +377,23 @@ def test_full_turn_cycle() -> None:
     assert pubs(effects, Turn)[0].orders == (Order(drone="D01", pos=(1, 0, 0), target=(2, 0, 0)),)
 
 
+def test_without_a_journal_the_records_skip_what_each_drone_did() -> None:
+    """`journaled` off (no journal to write): the same game and STATUS, and turn records without the
+    per-drone moves, notes, hovers, deaths or state hash (which would only be dropped)."""
+    records = {}
+    for journaled in (True, False):
+        g = Game()
+        g.engine.journaled = journaled
+        g.tgt("D01", (2, 0, 0))
+        g.done()
+        env, rec, status, _ = g.nps("D01", (1, 0, 0))
+        records[journaled] = (rec.data, status.msg)
+    full, bare = records[True][0], records[False][0]
+    assert records[True][1] == records[False][1]
+    assert {"moves", "state"} <= set(full) and not {"moves", "notes", "hovered", "deaths", "state"} & set(bare)
+    assert {k: v for k, v in full.items() if k not in ("moves", "state")} == bare
+
+
 def test_drones_phase_waits_for_every_alive_drone() -> None:
     g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))))
     g.gcs({"D01": (4, 0, 0)})
