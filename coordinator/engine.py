@@ -34,12 +34,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dronesim.schema import (
-    Cause, Cell, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Moves, MoveTable, Note, Nps,
+    Cause, Cell, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Moves, MoveTable, Note, Nps, OrderTable,
     Over, Phase, Refused, RemoteInputError, Role, Start, Status, StatusTable, Target, Turn, Upd, Welcome, WorldSpec, encode,
 )
 from dronesim.entities.environment import build_world
 from dronesim.entities.world import World, inside_rows
-from dronesim.schema.messages import is_drone_id, is_host_id
+from dronesim.schema.messages import is_drone_id, is_host_id, unchecked
 from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
 from dronesim.schema.tables import code_of, drone_name
 
@@ -47,6 +47,10 @@ from . import arbiter, observer
 from .fleet import ALIVE, CAUSES, NOTES, REACHED, UNREACHABLE, Drones, Fleet, cell_of
 
 
+#: The engine's own TURN and STATUS messages, built from its state (checked when it changed) without
+#: checking again, as records are (`messages.unchecked`): positional, every field given.
+_turn, _status = unchecked(Turn), unchecked(Status)
+NO_ORDERS, NO_MOVES = OrderTable.trusted(OrderTable.empty(0)), MoveTable.trusted(MoveTable.empty(0))
 #: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
 AHEAD_MAX = 8
 #: Up to this many moves in a MOVES are taken one by one (array operations cost more than they save).
@@ -244,7 +248,7 @@ class Engine:
         the end of the previous one."""
         if turn is None:
             turn = self.turn - 1 if self._playing() else self.turn
-        return Status(turn=turn, sender="OBS", drones=self.fleet.status())
+        return _status(turn, "OBS", self.fleet.status())
 
     # ------------------------------------------------------------------ admission
 
@@ -397,7 +401,7 @@ class Engine:
                 self._early = {t: d for t, d in self._early.items() if t > turn}
                 if "GCS" not in self.entities:  # no ground station: the drones keep their targets
                     return self._enter(Stage.DRONES, turn)
-                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS)
+                self._phase_msg = _turn(turn, "SRV", Phase.GCS, NO_ORDERS, NO_MOVES)
                 if early is None:
                     return [Publish(self._phase_msg)]
                 try:  # the ground station answered this phase ahead: it opens and closes at once, unannounced
@@ -409,7 +413,7 @@ class Engine:
                 alive = self.fleet.alive_rows()
                 self._awaiting = len(alive)
                 orders = self.fleet.orders(alive)
-                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders)
+                self._phase_msg = _turn(turn, "SRV", Phase.DRONES, orders, NO_MOVES)
                 if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
                     self._held = True
                     self._log.warning("turn %d waits for the environment to come back", turn)
@@ -436,7 +440,7 @@ class Engine:
             self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
             for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
                 del self._upd_due[old]
-        return _drones_first([Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves)),
+        return _drones_first([Publish(_turn(turn, "SRV", Phase.ENV, NO_ORDERS, moves)),
                               *self._observe(alive, before, final, moving)])
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
