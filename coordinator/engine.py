@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dronesim.schema import (
-    Cause, Cell, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Moves, MoveTable, Note, Nps, OrderTable,
-    Over, Phase, Refused, RemoteInputError, Role, Start, Status, StatusTable, Target, Turn, Upd, Welcome, WorldSpec, encode,
+    AimTable, Cause, Cell, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Moves, MoveTable, Note, Nps,
+    OrderTable, Over, Phase, Refused, RemoteInputError, Role, StartTable, Status, StatusTable, Target, Turn, Upd, Welcome, WorldSpec, encode,
 )
 from dronesim.entities.environment import build_world
 from dronesim.entities.world import World, inside_rows
@@ -167,8 +167,9 @@ class Engine:
         self.sessions: dict[str, str] = {}  # admitted entity id -> its Zenoh session id
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
-        self._targets: dict[str, Cell] = {}  # received in this GCS phase
         n = len(self.fleet)
+        self._aimed = np.zeros(n, bool)  # whose target this GCS phase received
+        self._aims = np.zeros((n, 3), np.int32)  # those targets (rows where _aimed)
         self._moved = np.zeros(n, bool)  # whose move this DRONES phase took
         self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
@@ -177,8 +178,9 @@ class Engine:
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
         #: Whether the environment's UPD reports are checked (kept for a few turns): the adapter says.
         self.verify_env = True
-        #: Whether the turn records say what each drone did (moves, notes, hovers, deaths) and the state's
-        #: hash: the adapter turns it off when it keeps no journal (the records are then dropped).
+        #: Whether the turn records say what each drone was told and did (targets, moves, notes, hovers,
+        #: deaths) and the state's hash: the adapter turns it off when it keeps no journal (the records are
+        #: then dropped).
         self.journaled = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
@@ -200,6 +202,10 @@ class Engine:
         """The targets in force, of every drone that has one."""
         fleet = self.fleet
         return {fleet.ids[i]: cell_of(fleet.target[i]) for i in np.flatnonzero(fleet.target[:, 0] >= 0).tolist()}
+
+    def aims(self) -> dict[str, Cell]:
+        """The targets this GCS phase has received so far (in force once the phase ends)."""
+        return {self.fleet.ids[i]: cell_of(self._aims[i]) for i in np.flatnonzero(self._aimed).tolist()}
 
     def moves_taken(self) -> dict[str, Cell]:
         """The moves this DRONES phase has taken so far."""
@@ -265,12 +271,13 @@ class Engine:
         for d in msg.drones:
             fleet.fly(fleet.index[d], msg.sender, msg.autopilot, msg.cooperative)
         rows = range(len(fleet)) if msg.role is not Role.DRONE else [fleet.index[d] for d in msg.drones]
-        starts = tuple(Start(drone=fleet.ids[i], pos=cell_of(fleet.pos[i])) for i in sorted(rows))
+        starts = StartTable.empty(len(rows))
+        starts["drone"], starts["pos"] = fleet.numbers[sorted(rows)], fleet.pos[sorted(rows)]
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
             f"{msg.sender} flying {', '.join(msg.drones)}"
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
         welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
-                          world=self.config.world, starts=starts)
+                          world=self.config.world, starts=StartTable.trusted(starts))
         effects: list[Effect] = [Reply(token, welcome)]
         if self.stage in (Stage.ADMITTING, Stage.RESUMING):
             if self._everyone_here():
@@ -394,7 +401,7 @@ class Engine:
         self.stage, self.turn = stage, turn
         match stage:
             case Stage.GCS:
-                self._targets.clear()
+                self._aimed[:] = False
                 self._tgt_seen, self._done = 0, None
                 self._turn_log = {"record": "turn", "turn": turn}
                 early = self._early.pop(turn, None)
@@ -506,7 +513,8 @@ class Engine:
             raise UnknownEntity(f"target for {d}, which is {self.fleet.view(i).state.value}")
         if not observer.inside(pos, self.size):
             raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
-        self._targets[d] = pos
+        self._aimed[i] = True
+        self._aims[i] = pos
 
     def _hold(self, msg: Done) -> list[Effect]:
         """The GCS's answer to a coming GCS phase (up to AHEAD_MAX turns on), sent ahead because it had
@@ -527,8 +535,22 @@ class Engine:
         if self._done is not None:
             raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
         self._done = msg
-        refused = _each(msg.targets, lambda a: self._aim(a.drone, a.pos))
-        return _with_refusals(refused, self._gcs_check())
+        return _with_refusals(self._take_aims(msg.targets), self._gcs_check())
+
+    def _take_aims(self, aims: AimTable) -> list[RemoteInputError]:
+        """Keep a DONE's targets: each is kept or refused on its own, as if sent as a TGT. A big batch is
+        checked as a whole first (the checks of `_aim`, in array operations); what that refuses, and a
+        batch of a few, goes through `_aim` row by row, which says why."""
+        if len(aims) <= FEW:
+            return _each(aims, lambda a: self._aim(a.drone, a.pos))
+        fleet, pos = self.fleet, aims.column("pos")
+        rows = fleet.row_of_number[aims.numbers]
+        ok = (rows >= 0) & inside_rows(pos, self.size)
+        ok[ok] = fleet.state[rows[ok]] == ALIVE
+        self._aimed[rows[ok]] = True
+        self._aims[rows[ok]] = pos[ok]
+        return _each(np.flatnonzero(~ok).tolist(),
+                     lambda j: self._aim(drone_name(int(aims.numbers[j])), cell_of(pos[j])))
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
@@ -538,11 +560,12 @@ class Engine:
 
     def _gcs_finish(self, msg: Done) -> list[Effect]:
         fleet = self.fleet
-        changed = {d: p for d, p in sorted(self._targets.items()) if fleet.target_of(fleet.index[d]) != p}
-        for d, p in changed.items():
-            fleet.aim(fleet.index[d], p)
-        if changed:
-            self._turn_log["targets"] = {d: list(p) for d, p in changed.items()}
+        changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
+        fleet.target[changed] = self._aims[changed]
+        fleet.note[changed] = 0  # Note.NONE: a new target, nothing said of it yet
+        if len(changed) and self.journaled:
+            self._turn_log["targets"] = dict(zip([fleet.ids[i] for i in changed.tolist()],
+                                                 self._aims[changed].tolist()))
         if msg.intent is not self._intent:
             self._turn_log["intent"] = msg.intent.value
             self._intent = msg.intent
@@ -728,7 +751,7 @@ class Engine:
                                       self._tgt_seen, self._done.count)
                     return self._gcs_finish(self._done)
                 self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
-                self._targets.clear()
+                self._aimed[:] = False
                 return self._enter(Stage.DRONES, turn)
             case Stage.DRONES:
                 alive = self.fleet.alive_rows()
@@ -754,7 +777,7 @@ class Engine:
                 if self.stage is Stage.GCS and self._done is not None:
                     return self._gcs_finish(self._done)  # its DONE is in: what arrived of its targets holds
                 if self.stage is Stage.GCS:
-                    self._targets.clear()
+                    self._aimed[:] = False
                     return self._enter(Stage.DRONES, self.turn)
             case Role.ENV:
                 pass  # the game waits for it (deadline: env_grace); a returning one resyncs from STATUS

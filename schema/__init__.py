@@ -9,7 +9,7 @@ from .messages import (
     MESSAGE_TYPES, SCHEMA_VERSION, Aim, Ans, Ask, Cause, Cell, CellInfo, CellKind, Connect, Done,
     DroneState, DroneStatus, EndReason, MapRequest, Message, Move, Moves, Note, Nps, Order, Over, Phase,
     Intent, Refused, Role, WorldSpec, Start, Status, Step, Target, Turn, Upd, Welcome, WorldMap, decode, drone_id,
-    encode, is_drone_id, MoveTable, OrderTable, StatusTable, StepTable, TABLES,
+    encode, is_drone_id, AimTable, MoveTable, OrderTable, StartTable, StatusTable, StepTable, TABLES,
 )
 from .tables import Col, Table
 
@@ -19,6 +19,6 @@ __all__ = [
     "SCHEMA_VERSION", "Ans", "Ask", "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done",
     "DroneState", "DroneStatus", "EndReason", "MapRequest", "Message", "Move", "Moves", "Note", "Nps", "Order",
     "Over", "Phase", "Intent", "WorldSpec", "Refused", "Role", "Aim", "Step", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
-    "decode", "drone_id", "encode", "is_drone_id", "MoveTable", "OrderTable", "StatusTable", "StepTable", "TABLES",
+    "decode", "drone_id", "encode", "is_drone_id", "AimTable", "MoveTable", "OrderTable", "StartTable", "StatusTable", "StepTable", "TABLES",
     "Col", "Table",
 ]

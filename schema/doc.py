@@ -26,8 +26,9 @@ Every key is `<root>/<ENTITY>/<ACTION>` (root `sim` by default, `--root` to chan
 the key is about, and each key has exactly one writer role, so a Zenoh access-control rule can grant it
 (`sim/D01/NPS` is written by D01 only, `sim/D01/TGT` by the GCS only). Every payload is a MessagePack map
 `{{"v": {SCHEMA_VERSION}, "t": TRIGRAM, "turn": int, "from": sender, ...fields}}`, fields in the order below;
-records inside (cells, targets, starts, cell infos) are MessagePack arrays of their fields in order, enums are
-their value; the swarm-sized fields (a STATUS's drones, a TURN's orders and moves, a MOVES's steps) are tables:
+records inside (cells, cell infos, the world spec) are MessagePack arrays of their fields in order, enums are
+their value; the swarm-sized fields (a STATUS's drones, a TURN's orders and moves, a MOVES's steps, a WELCOME's
+starts, a DONE's targets) are tables:
 one MessagePack `bin` of fixed-size little-endian rows (see Tables below). A receiver rejects (logs with a reason, counts, and otherwise ignores) anything that does not
 decode, has another version or type than the key carries, names another entity than the key, or is for
 another turn or phase.

@@ -29,7 +29,7 @@ import numpy as np
 from .errors import MalformedMessage
 from .tables import MAX_COORD, Col, Table, code_of, drone_name, optional_cell
 
-SCHEMA_VERSION = 2  # 2: swarm-sized record tuples travel as tables (tables.py)
+SCHEMA_VERSION = 3  # 2: swarm-sized record tuples travel as tables (tables.py); 3: also WELCOME's starts, DONE's targets
 
 #: Largest turn a message may carry (MAX_COORD, the largest coordinate, is in tables.py).
 MAX_TURN = 1 << 40
@@ -332,6 +332,22 @@ class Start:
 _ALIVE_CODE = code_of(DroneState.ALIVE)
 
 
+class StartTable(Table):
+    """A WELCOME's starts, one row per drone admitted."""
+
+    __slots__ = ()
+    RECORD = Start
+    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL))
+
+
+class AimTable(Table):
+    """A ground station's DONE's targets, one row per drone."""
+
+    __slots__ = ()
+    RECORD = Aim
+    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL))
+
+
 class OrderTable(Table):
     """A TURN(DRONES)'s orders, one row per alive drone."""
 
@@ -381,7 +397,7 @@ class StatusTable(Table):
         return [ids[i] for i in self.alive_mask().nonzero()[0].tolist()]
 
 
-TABLES: tuple[type[Table], ...] = (OrderTable, MoveTable, StepTable, StatusTable)
+TABLES: tuple[type[Table], ...] = (StartTable, AimTable, OrderTable, MoveTable, StepTable, StatusTable)
 _EMPTY: dict[type[Table], Table] = {cls: cls(cls.empty(0)) for cls in TABLES}  # immutable: one of each is enough
 
 
@@ -444,15 +460,14 @@ class Welcome(Message):
     entity: str
     text: str
     world: WorldSpec
-    starts: tuple[Start, ...] = ()
+    starts: StartTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check_sender(self.entity)
         _check(isinstance(self.text, str), "text must be a string")
         _check(isinstance(self.world, WorldSpec), "world must be a WorldSpec")
-        for st in self.starts:
-            _check(isinstance(st, Start), "starts must be Start records")
+        _as_table(self, "starts", StartTable)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -510,15 +525,14 @@ class Done(Message):
     phase: Phase
     intent: Intent = Intent.CONTINUE
     count: int = 0  # how many TGT the GCS sent in this phase (messages on different keys may overtake)
-    targets: tuple[Aim, ...] = ()
+    targets: AimTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table (one row per drone)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check(isinstance(self.phase, Phase), "phase must be a Phase")
         _check(isinstance(self.intent, Intent), "intent must be an Intent")
         _check_int(self.count, "count", 0, 1 << 20)
-        _check_records(self.targets, Aim, "targets")
-        _check(len({a.drone for a in self.targets}) == len(self.targets), "one target per drone")
+        _as_table(self, "targets", AimTable)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -1,7 +1,8 @@
 """Columns for the swarm-sized parts of messages: a STATUS's drone states, a TURN's orders and moves, a
-MOVES's steps.
+MOVES's steps, a WELCOME's starts and a ground station's DONE's targets.
 
-A swarm of 1000 drones puts 1000 records in each of these every turn. As Python records they cost every
+A swarm of 1000 drones puts 1000 records in each of the first four every turn (and in the last, every turn
+its targets change). As Python records they cost every
 process that reads or writes them about a microsecond and a few hundred bytes per drone; as columns they
 cost a few bytes per drone and are checked, read and written by numpy at once. On the wire a table is one
 MessagePack ``bin``: its rows back to back, each row the fields of the record in declaration order, in the

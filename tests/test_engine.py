@@ -134,7 +134,7 @@ class Game:
 
     def snapshot(self) -> tuple:
         e = self.engine
-        return (e.stage, e.turn, e.final, dict(e._targets), e.moves_taken(),
+        return (e.stage, e.turn, e.final, e.aims(), e.moves_taken(),
                 {d: (r.pos, r.state, r.target, r.note, r.misses) for d, r in e.drones.items()})
 
 
@@ -379,7 +379,7 @@ def test_full_turn_cycle() -> None:
 
 def test_without_a_journal_the_records_skip_what_each_drone_did() -> None:
     """`journaled` off (no journal to write): the same game and STATUS, and turn records without the
-    per-drone moves, notes, hovers, deaths or state hash (which would only be dropped)."""
+    per-drone targets, moves, notes, hovers, deaths or state hash (which would only be dropped)."""
     records = {}
     for journaled in (True, False):
         g = Game()
@@ -390,8 +390,9 @@ def test_without_a_journal_the_records_skip_what_each_drone_did() -> None:
         records[journaled] = (rec.data, status.msg)
     full, bare = records[True][0], records[False][0]
     assert records[True][1] == records[False][1]
-    assert {"moves", "state"} <= set(full) and not {"moves", "notes", "hovered", "deaths", "state"} & set(bare)
-    assert {k: v for k, v in full.items() if k not in ("moves", "state")} == bare
+    assert {"targets", "moves", "state"} <= set(full)
+    assert not {"targets", "moves", "notes", "hovered", "deaths", "state"} & set(bare)
+    assert {k: v for k, v in full.items() if k not in ("targets", "moves", "state")} == bare
 
 
 def test_drones_phase_waits_for_every_alive_drone() -> None:
@@ -946,6 +947,46 @@ def test_done_carries_the_targets_and_refuses_bad_ones_one_by_one() -> None:
     assert pubs(g.last, Turn)[0].orders == (Order(drone="D01", pos=(0, 0, 0), target=(3, 0, 0)),
                                             Order(drone="D02", pos=(4, 4, 4), target=None),
                                             Order(drone="D03", pos=(2, 2, 2), target=(2, 2, 0)))
+
+
+@pytest.mark.parametrize("n", [8, 9, 40])
+def test_a_big_done_takes_its_targets_as_if_sent_one_by_one(n: int) -> None:
+    """A DONE of more than FEW targets is checked in array operations, a few row by row: the same targets
+    kept, the same refusals (a dead drone, outside the world, an unknown drone) in the same order."""
+    starts = [(f"D{i:02d}", (i % 5, i // 5 % 5, i // 25)) for i in range(1, n + 1)]  # in the 5x5x5 world
+    rng = np.random.default_rng(n)
+    aims = {d: tuple(int(v) for v in rng.integers(0, 5, 3)) for d, _ in starts}
+    aims["D02"] = (5, 0, 0)  # outside the world
+    aims["D99"] = (1, 1, 1)  # nobody
+
+    def play(batched: bool) -> tuple:
+        g = Game(config(*starts))
+        g.gcs()
+        for d, p in starts:  # turn 1: D04 flies out of the world and dies, the others hover
+            g.nps(d, (5, 0, 0) if d == "D04" else p)
+        assert g.stage is Stage.GCS and g.engine.drones["D04"].state is DroneState.DEAD
+        try:
+            if batched:
+                g.feed(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, count=0,
+                                             targets=tuple(Aim(drone=d, pos=p) for d, p in sorted(aims.items())))))
+                return g.engine.targets(), []
+            refusals = []
+            for d, p in sorted(aims.items()):
+                try:
+                    g.tgt(d, p)
+                except RemoteInputError as err:
+                    refusals.append(str(err))
+            g.done()
+            return g.engine.targets(), refusals
+        except RemoteInputError as err:
+            g.feed(err.follow)
+            return g.engine.targets(), [str(err)]
+
+    (kept, [batched]), (single, refusals) = play(True), play(False)
+    assert kept == single == {d: p for d, p in aims.items() if d not in ("D02", "D04", "D99")}
+    assert [r.split(":")[0] for r in refusals] == ["target (5, 0, 0) for D02 is outside the world (5, 5, 5)",
+                                                   "target for D04, which is DEAD", "target for unknown drone D99"]
+    assert batched == f"{refusals[0]} (and 2 more: {refusals[1]}; {refusals[2]})"
 
 
 def test_moves_of_a_swarm_host_taken_one_by_one() -> None:
