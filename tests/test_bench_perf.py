@@ -81,22 +81,26 @@ def test_scenarios_fit_start_free_and_are_valid(tmp_path):
 def test_memory_growth_is_judged_per_drone_and_per_world_byte():
     small, mid, large = perf.WORLDS
     peaks = {  # KiB
-        ("coordinator", 1, mid): 50_000, ("coordinator", 1000, mid): 52_000,  # 2.00 KiB per drone: UNMET
-        ("env", 1, mid): 50_000, ("env", 1000, mid): 50_999,  # 1.00 KiB per drone: met
+        ("coordinator", 1, mid): 49_000, ("coordinator", 128, mid): 50_256,
+        ("coordinator", 1000, mid): 52_000,  # 2.00 KiB per drone from 128 to 1000: UNMET
+        ("env", 1, mid): 49_000, ("env", 128, mid): 50_000, ("env", 1000, mid): 50_872,  # 1.00: met
         ("coordinator", 1, small): 50_000, ("coordinator", 1, large): 52_000,
         ("env", 1, small): 50_000, ("env", 1, large): 60_000,
     }
     rows = {r.name: r for r in perf.memory_growth(peaks)}
-    per_drone = rows[f"memory per drone (1 → 1000 drones @ {perf._size_text(mid)})"]
+    per_drone = rows[f"memory per drone (128 → 1000 drones @ {perf._size_text(mid)})"]
     assert per_drone.cells["srv"] == "2.00 KiB/drone" and per_drone.cells["env"] == "1.00 KiB/drone"
     assert per_drone.cells["target"] == "≤ 1 KiB per drone: UNMET"  # the worse of the two decides
+    from_one = rows[f"memory per drone from 1 drone (1 → 1000 drones @ {perf._size_text(mid)})"]
+    assert from_one.cells["srv"] == f"{3_000 / 999:.2f} KiB/drone" and from_one.cells["env"] == f"{1_872 / 999:.2f} KiB/drone"
+    assert from_one.cells["target"].startswith("—")  # shown, not judged
     grown = int(np.prod(large)) - int(np.prod(small))
     per_byte = rows[f"memory per world byte (1 drone, {perf._size_text(small)} → {perf._size_text(large)})"]
     assert per_byte.cells["srv"] == f"{2_000 * 1024 / grown:.2f} bytes/byte"
     assert per_byte.cells["env"] == f"{10_000 * 1024 / grown:.2f} bytes/byte"
     expect = "met" if 10_000 * 1024 / grown <= 2 else "UNMET"
     assert per_byte.cells["target"] == f"≤ 2 × the world array: {expect}"
-    assert len(rows) == 2  # no 1000-drone game on the other worlds: no row for them
+    assert len(rows) == 3  # no 1000-drone game on the other worlds: no row for them
     assert perf.memory_growth({}) == []
 
 
