@@ -779,6 +779,40 @@ def cases(quick: bool, turns: int) -> list[Case]:
     return out
 
 
+#: Seconds POGEMA runs just before and just after each game (its anchor for that game's ratio).
+ADJACENT_POGEMA_SECONDS = 1.0
+#: Round trips (and warm-up) of the pub/sub floor measured just before and after each one-drone game.
+ADJACENT_FLOOR = (300, 100)
+
+
+@dataclass(slots=True)
+class Adjacent:
+    """The anchors measured just before and just after one game, so that its ratios compare measurements
+    made within seconds of each other: the machine's speed drifts by up to 2x over a run, and a ratio
+    to an anchor measured a minute earlier would measure the drift."""
+
+    pogema: list[float] = field(default_factory=list)  # steps/s, with as many agents as the game has drones
+    floor: list[float] = field(default_factory=list)  # pub/sub round trips (callback replies), seconds
+
+    def measure(self, drones: int, *, with_pogema: bool, with_floor: bool, logs: Path) -> None:
+        if with_pogema:
+            try:
+                self.pogema.append(pogema.steps_per_second([drones], ADJACENT_POGEMA_SECONDS)[drones])
+            except pogema.Unavailable:
+                pass
+        if with_floor:
+            with contextlib.suppress(Exception):  # the pooled floor rows stand in
+                self.floor += measure_floor(*ADJACENT_FLOOR, logs)[0].rtts
+
+    @property
+    def pogema_rate(self) -> float | None:
+        return statistics.fmean(self.pogema) if self.pogema else None
+
+    @property
+    def floor_median(self) -> float | None:
+        return statistics.median(self.floor) if self.floor else None
+
+
 def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     """Everything selected by `args`; returns the table rows and facts for the legend."""
     only = re.compile(args.only) if args.only else None
@@ -801,7 +835,8 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
 
     if want_floor:
         floor_now()
-    ratio_cells: list[tuple[Row, float, int]] = []  # (row, median turn, drones): "turn ÷ RTT" filled at the end
+    # (row, median turn, drones, the pub/sub RTT measured around it): "turn ÷ RTT" filled at the end
+    ratio_cells: list[tuple[Row, float, int, float | None]] = []
 
     # the anchor: POGEMA in-process, same machine, same run
     pogema_rates: dict[int, float] = {}
@@ -837,9 +872,14 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
         case_logs = logs / f"{case.drones}-{_size_text(case.size)}"
         case_logs.mkdir()
         print(f"  {case.name}: distributed ...", file=sys.stderr, flush=True)
+        adjacent = Adjacent()
+        around = dict(drones=case.drones, with_pogema=bool(pogema_rates), logs=case_logs,
+                      with_floor=want_floor and case.drones == 1)
+        adjacent.measure(**around)
         t0 = time.perf_counter()
         game = play_distributed(case, path, case_logs, Path(args.profile) if args.profile else None)
         t1 = time.perf_counter()
+        adjacent.measure(**around)
         print(f"  {case.name}: distributed {t1 - t0:.0f} s; in-process ...", file=sys.stderr, flush=True)
         local = play_local(case, path)
         print(f"  {case.name}: in-process {time.perf_counter() - t1:.0f} s", file=sys.stderr, flush=True)
@@ -882,7 +922,8 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
                 facts.setdefault("errors", []).append(f"{case.name}: STATUS({t}) differs from the in-process run: "
                                                       + "; ".join(diff[:5]))
             cells["alive"] = f"{game.alive}/{case.drones}, {local.moving:.1f} moving per turn, {same}"
-            cells["pogema"], against = versus_pogema(1 / mean, pogema_rates.get(case.drones), case.drones)
+            cells["pogema"], against = versus_pogema(1 / mean, adjacent.pogema_rate or pogema_rates.get(case.drones),
+                                                     case.drones)
             if case.drones == 128:
                 verdicts.append(_verdict(1 / mean, TARGETS["tps128"], False, f"≥ {TARGETS['tps128']:g} turns/s"))
             verdicts += against
@@ -899,7 +940,7 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
             cells["target"] = "; ".join(verdicts) if verdicts else "—"
         rows.append(Row(case.name, cells, ok=ok))
         if not game.error:
-            ratio_cells.append((rows[-1], statistics.median(game.latencies), case.drones))
+            ratio_cells.append((rows[-1], statistics.median(game.latencies), case.drones, adjacent.floor_median))
 
     rows += memory_growth(peaks)
 
@@ -933,8 +974,8 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     rows[:0] = floor_rows
     pubsub = floors[0].median if floors else float("nan")
     facts["pubsub"] = pubsub
-    for row, med, drones in ratio_cells:
-        ratio = med / pubsub
+    for row, med, drones, near in ratio_cells:
+        ratio = med / (near or pubsub)
         row.cells["floor"] = f"{ratio:.1f}" if ratio == ratio else "-"
         if drones == 1:
             verdict = _verdict(ratio, TARGETS["latency"], True, f"≤ {TARGETS['latency']:g}x RTT")
@@ -962,14 +1003,18 @@ def legend(facts: dict) -> str:
         "measured turns. The ground "
         "station's answer: from TURN(GCS) arriving to its DONE sent, when not answered ahead. CPU: user + system time of each process (all threads) over the measured turns ÷ turns. In-process: `dronesim.local.simulate` on the same scenario and layout (one swarm host, one MOVES a turn), timed at the same point; "
         "\"in-process ÷ distributed\" = distributed mean turn ÷ in-process mean turn. \"turn ÷ pub/sub RTT\" = "
-        "median turn ÷ median pub/sub round trip (callback replies). Growth (1000-drone rows) = (mean turn at "
+        "median turn ÷ median pub/sub round trip (callback replies), the round trips measured just before and just "
+        f"after that game ({ADJACENT_FLOOR[0]} each, for the one-drone games; the pooled floor rows for the others): the "
+        "machine's speed drifts by up to 2x over a run, and both sides of a ratio are measured within seconds of "
+        "each other. Growth (1000-drone rows) = (mean turn at "
         "1000 ÷ mean turn at 128, same world) ÷ (1000 ÷ 128): 1.00 is linear in N, above is worse than "
         "linear. POGEMA rows: the anchor of the issue, POGEMA "
         f"{pogema.VERSION} in its own virtual environment on this machine in this run: a {pogema.SIZE}x{pogema.SIZE} "
         f"grid, obstacle density {pogema.DENSITY:g}, observation radius {pogema.OBS_RADIUS}, every agent a random "
         "action every step, agents staying on the grid at their targets, 2 s per agent count after 20 warm-up "
         "steps; \"turns/s ÷ POGEMA's\" compares a game row with POGEMA at the same number of agents (POGEMA in "
-        "one process, ours across processes and a router). Memory: VmHWM (peak resident set) sampled just before the ground station quits. The target is "
+        f"one process, ours across processes and a router), POGEMA run for {ADJACENT_POGEMA_SECONDS:g} s just before "
+        "and just after that game (the mean of the two; the POGEMA rows, measured at the start, when that fails). Memory: VmHWM (peak resident set) sampled just before the ground station quits. The target is "
         "checked as growth, by the \"memory per\" rows: per drone = (VmHWM with 1000 drones − VmHWM with 128, same "
         "world) ÷ 872, two swarms running the same code (a game of a few drones takes the small-size paths and "
         "never touches the array code a swarm runs, so the first swarm costs a process a few hundred KiB once, "

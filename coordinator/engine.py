@@ -560,12 +560,13 @@ class Engine:
 
     def _gcs_finish(self, msg: Done) -> list[Effect]:
         fleet = self.fleet
-        changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
-        fleet.target[changed] = self._aims[changed]
-        fleet.note[changed] = 0  # Note.NONE: a new target, nothing said of it yet
-        if len(changed) and self.journaled:
-            self._turn_log["targets"] = dict(zip([fleet.ids[i] for i in changed.tolist()],
-                                                 self._aims[changed].tolist()))
+        if self._aimed.any():  # (most GCS phases bring no target)
+            changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
+            fleet.target[changed] = self._aims[changed]
+            fleet.note[changed] = 0  # Note.NONE: a new target, nothing said of it yet
+            if len(changed) and self.journaled:
+                self._turn_log["targets"] = dict(zip([fleet.ids[i] for i in changed.tolist()],
+                                                     self._aims[changed].tolist()))
         if msg.intent is not self._intent:
             self._turn_log["intent"] = msg.intent.value
             self._intent = msg.intent
