@@ -68,7 +68,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         mine = set(drones)
         senses = pilot_class(autopilot).senses
         if senses:  # the static world around the starts, asked now: the first turn's sensing needs no ASK
-            asker.prefetch(0, sorted({s.pos for s in member.welcome.starts if s.drone in mine}))
+            asker.prefetch(0, sorted({c for d, c in member.welcome.starts.cells().items() if d in mine}))
         done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
         over: Over | None = None
         backlog: list = []  # events taken from the inbox while waiting for the environment

@@ -51,8 +51,9 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         member = Membership(session, inbox, Connect(turn=0, sender="ENV", role=Role.ENV, session=session_id(session)),
                             logger, connect_timeout=connect_timeout, grace=grace)
         welcome = member.welcome
-        world = build_world(welcome.world, (s.pos for s in welcome.starts))
-        env = Environment(world, {s.drone: s.pos for s in welcome.starts})
+        starts = welcome.starts.cells()
+        world = build_world(welcome.world, starts.values())
+        env = Environment(world, starts)
         if draw:
             print(f"World {world.size} seed {welcome.world.seed}, {len(world.buildings)} buildings, "
                   f"{int(world.grid.sum())} building cells:", flush=True)

@@ -196,9 +196,10 @@ class Ground:
     @classmethod
     def from_welcome(cls, welcome: Welcome, plan_texts: Iterable[str], script: str | None) -> "Ground":
         size = welcome.world.size
-        drones = [s.drone for s in welcome.starts]
+        starts = welcome.starts.cells()
+        drones = list(starts)
         plan = Plan.load(script, size) if script else Plan.parse(plan_texts, size, default_drone=drones[0])
         unknown = plan.drones() - set(drones)
         if unknown:
             raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
-        return cls(build_world(welcome.world, (s.pos for s in welcome.starts)), drones, plan)
+        return cls(build_world(welcome.world, starts.values()), drones, plan)

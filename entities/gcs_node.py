@@ -83,8 +83,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         world, drones, plan, size = ground.world, ground.drones, ground.plan, welcome.world.size
         if draw:
             print(f"World {size}, {int(world.grid.sum())} building cells; the drones' floor at start:", flush=True)
-            print(world.draw({s.drone: s.pos for s in welcome.starts},
-                             floors=sorted({s.pos[2] for s in welcome.starts})), flush=True)
+            starts = welcome.starts.cells()
+            print(world.draw(starts, floors=sorted({c[2] for c in starts.values()})), flush=True)
         console = Console(size, drones) if interactive else None
         out = Outbox(session)
         current: dict = {}

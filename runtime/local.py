@@ -92,7 +92,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
         match effect:
             case Reply(_, Welcome() as w) if welcome is None:
                 welcome = w
-                env = Environment(world, {s.drone: s.pos for s in w.starts})
+                env = Environment(world, w.starts.cells())
                 if swarm:
                     swarms = {h: make_swarm(a, world_size=world.size, drones=[drone_number(d) for d in ds],
                                             least=swarm_min) for h, (a, ds) in flyers.items()}

@@ -339,6 +339,10 @@ class StartTable(Table):
     RECORD = Start
     LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL))
 
+    def cells(self) -> dict[str, Cell]:
+        """Each drone's start cell, read from the columns."""
+        return dict(zip(self.ids(), map(tuple, self.rows["pos"].tolist())))
+
 
 class AimTable(Table):
     """A ground station's DONE's targets, one row per drone."""

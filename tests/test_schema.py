@@ -668,6 +668,16 @@ def test_tables_hold_the_records_they_were_given_and_travel_as_their_rows() -> N
     assert StatusTable.DTYPE.itemsize == 2 + 12 + 1 + 12 + 1 + 1
 
 
+def test_a_welcome_gives_each_drone_its_start_cell() -> None:
+    from dronesim.schema import Start, StartTable, Welcome, WorldSpec
+
+    starts = (Start(drone="D03", pos=(1, 2, 3)), Start(drone="D10", pos=(0, 0, 9)))
+    welcome = decode(encode(Welcome(turn=0, sender="SRV", entity="H01", text="hi", world=WorldSpec(size=(9, 9, 9)),
+                                    starts=starts)))
+    assert type(welcome.starts) is StartTable and tuple(welcome.starts) == starts
+    assert welcome.starts.cells() == {"D03": (1, 2, 3), "D10": (0, 0, 9)}
+
+
 def test_a_table_is_immutable() -> None:
     table = SAMPLES["status"].drones
     with pytest.raises(AttributeError):

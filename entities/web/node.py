@@ -146,7 +146,7 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
             ground = Ground.from_welcome(welcome, plan_texts, script)
             world, drones, plan, size = ground.world, ground.drones, ground.plan, welcome.world.size
             title = f"root {keys.root}"
-            state = GroundState(world, {s.drone: s.pos for s in welcome.starts}, pace=pace, title=title)
+            state = GroundState(world, welcome.starts.cells(), pace=pace, title=title)
             state.note("info", f"{welcome.text}; world {'x'.join(map(str, size))} with "
                                f"{int(world.grid.sum())} building cells; drones {', '.join(drones)}")
             backend.set_world(world_json(world, mode="live", title=title))
