@@ -6,6 +6,7 @@ A plan maps turns to targets: ``9,9,0`` (D01 from turn 1), ``D02=3,4,0`` (D02 fr
 
 from __future__ import annotations
 
+import bisect
 import pathlib
 import re
 from collections.abc import Iterable, Mapping
@@ -106,8 +107,10 @@ class Plan:
         return cls.parse((ln.split("#", 1)[0] for ln in lines), size)
 
     def at(self, turn: int) -> dict[str, Cell]:
-        """Targets that take effect at `turn`."""
-        return {d: c for t, d, c in self.items if t == turn}
+        """Targets that take effect at `turn` (found by bisection: `items` are sorted by turn)."""
+        lo = bisect.bisect_left(self.items, (turn,))
+        hi = bisect.bisect_left(self.items, (turn + 1,), lo)
+        return {d: c for _, d, c in self.items[lo:hi]}
 
     @property
     def last_turn(self) -> int:

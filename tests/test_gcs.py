@@ -85,6 +85,23 @@ def test_plan_several_drones_same_turn() -> None:
     assert plan.at(1) == {"D01": (1, 1, 1), "D02": (2, 2, 2), "D10": (3, 3, 3)}
 
 
+def test_plan_at_is_each_turns_items_with_the_last_written_winning() -> None:
+    """`Plan.at` finds a turn's items by bisection: the same as reading every item, on random plans."""
+    import random
+
+    rng = random.Random(5)
+    for _ in range(50):
+        texts = [f"D{rng.randint(1, 4):02d}={rng.randint(0, 9)},{rng.randint(0, 9)},0@{rng.randint(1, 12)}"
+                 for _ in range(rng.randint(0, 30))]
+        plan = Plan.parse(texts, (10, 10, 10))
+        for turn in range(0, 15):
+            expected = {}
+            for t, d, c in plan.items:
+                if t == turn:
+                    expected[d] = c
+            assert plan.at(turn) == expected
+
+
 def test_empty_plan() -> None:
     plan = Plan.parse([], SIZE)
     assert plan.items == ()
