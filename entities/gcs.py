@@ -12,6 +12,8 @@ import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+import numpy as np
+
 from dronesim.schema import (
     Aim, Cell, Done, DroneState, DroneStatus, Intent, Note, Phase, Status, UsageError, Welcome, is_drone_id,
 )
@@ -168,11 +170,19 @@ class Tracks:
         self.paths: dict[str, list[Cell]] = {}
 
     def add(self, status: Status) -> None:
-        self.last = status
-        for s in status.drones:
-            path = self.paths.setdefault(s.drone, [])
-            if not path or path[-1] != s.pos:
-                path.append(s.pos)
+        """Extend the paths with `status` (read from its columns: after the first STATUS, only the drones
+        that moved since the last one are looked at)."""
+        last, self.last = self.last, status
+        table = status.drones
+        pos = table.column("pos")
+        rows = np.arange(len(table))
+        if last is not None and np.array_equal(last.drones.numbers, table.numbers):
+            rows = np.flatnonzero((pos != last.drones.column("pos")).any(axis=1))
+        ids = table.ids()
+        for i, (x, y, z) in zip(rows.tolist(), pos[rows].tolist()):
+            path = self.paths.setdefault(ids[i], [])
+            if not path or path[-1] != (x, y, z):
+                path.append((x, y, z))
 
 
 def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
@@ -184,7 +194,12 @@ def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
 
 
 def targets_of(status: Status) -> Mapping[str, Cell]:
-    return {s.drone: s.target for s in status.drones if s.target is not None}
+    """Each drone's target in force, of those that have one (read from the STATUS's columns)."""
+    table = status.drones
+    targets = table.column("target")
+    ids = table.ids()
+    has = np.flatnonzero(targets[:, 0] >= 0)
+    return {ids[i]: (x, y, z) for i, (x, y, z) in zip(has.tolist(), targets[has].tolist())}
 
 
 @dataclass(frozen=True, slots=True)

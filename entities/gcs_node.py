@@ -132,12 +132,14 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                     if status.turn + 1 <= answered:  # the coming turn was answered ahead: no TURN(GCS) for it
                         answered = answer_ahead(status.turn + 1, answered)
                     tracks.add(status)
-                    gone.update(s.drone for s in status.drones if not s.alive)
-                    for s in status.drones:  # a late joiner takes over the targets in force
-                        if not s.alive:
-                            current.pop(s.drone, None)  # nothing more to say to a dead or lost drone
-                        elif s.target is not None:
-                            current.setdefault(s.drone, s.target)
+                    alive = set(status.drones.alive())
+                    ended = set(status.drones.ids()) - alive
+                    gone.update(ended)
+                    for d in ended & current.keys():
+                        del current[d]  # nothing more to say to a dead or lost drone
+                    for d, c in targets_of(status).items():  # a late joiner takes over the targets in force
+                        if d in alive:
+                            current.setdefault(d, c)
                     if not quiet:
                         print(format_status(status), flush=True)
                 case Received(_, Over() as over):
