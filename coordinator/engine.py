@@ -270,9 +270,9 @@ class Engine:
         fleet = self.fleet
         for d in msg.drones:
             fleet.fly(fleet.index[d], msg.sender, msg.autopilot, msg.cooperative)
-        rows = range(len(fleet)) if msg.role is not Role.DRONE else [fleet.index[d] for d in msg.drones]
+        rows = sorted(range(len(fleet)) if msg.role is not Role.DRONE else [fleet.index[d] for d in msg.drones])
         starts = StartTable.empty(len(rows))
-        starts["drone"], starts["pos"] = fleet.numbers[sorted(rows)], fleet.pos[sorted(rows)]
+        starts["drone"], starts["pos"] = fleet.numbers[rows], fleet.pos[rows]
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
             f"{msg.sender} flying {', '.join(msg.drones)}"
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
@@ -562,8 +562,7 @@ class Engine:
         fleet = self.fleet
         if self._aimed.any():  # (most GCS phases bring no target)
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
-            fleet.target[changed] = self._aims[changed]
-            fleet.note[changed] = 0  # Note.NONE: a new target, nothing said of it yet
+            fleet.aim(changed, self._aims[changed])
             if len(changed) and self.journaled:
                 self._turn_log["targets"] = dict(zip([fleet.ids[i] for i in changed.tolist()],
                                                      self._aims[changed].tolist()))

@@ -119,9 +119,10 @@ class Fleet:
         self.host[i] = None
         self.host_code[i] = -1
 
-    def aim(self, i: int, target: Cell) -> None:
-        self.target[i] = target
-        self.note[i] = 0  # Note.NONE: a new target, nothing said of it yet
+    def aim(self, rows: int | np.ndarray, targets: Cell | np.ndarray) -> None:
+        """New targets for a drone (a row and a cell) or several (rows and an (n, 3) array of cells)."""
+        self.target[rows] = targets
+        self.note[rows] = 0  # Note.NONE: a new target, nothing said of it yet
 
     def end(self, i: int, state: DroneState, cause: Cause) -> None:
         self.state[i], self.cause[i] = code_of(state), code_of(cause)

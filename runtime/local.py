@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-
-import numpy as np
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from dronesim.coordinator.engine import (
     Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase,
