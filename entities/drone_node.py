@@ -1,8 +1,9 @@
 """A drone process (the seed's D01), or a swarm host flying several drones in one process.
 
-Each DRONES phase it runs every hosted drone's autopilot together (`fly_round`): all pending ASKs of
+Each DRONES phase it runs every hosted drone's autopilot together (`fly_pilots`): all pending ASKs of
 a round go out as concurrent queries to ENV/ASK, then a lone drone publishes its NPS, a swarm host the
-MOVES of all its drones in one message. It exits on OVER.
+MOVES of all its drones in one message. A swarm host of an autopilot that has a swarm form flies its
+drones with that one pilot over arrays instead (`fly_swarm`). It exits on OVER.
 
 Sensing without a round trip: the process keeps a chart of the kinds the environment told it (buildings
 never move, so a cell's kind holds for the whole game). As soon as it is admitted it asks the environment
@@ -31,7 +32,7 @@ import zenoh
 from dronesim.entity import Membership, add_entity_args, await_presence
 from dronesim.schema import (
     Ans, Ask, Cell, CellInfo, CellKind, Connect, Keys, MapRequest, Moves, Nps, OrderTable, Over, Phase,
-    RemoteInputError, Role, Turn, UsageError, WorldMap, decode, drone_id, encode, is_drone_id,
+    RemoteInputError, Role, StepTable, Turn, UsageError, WorldMap, decode, drone_id, encode, is_drone_id,
 )
 from dronesim.schema.errors import OutOfRange
 from dronesim.schema.messages import _KINDS, AROUND, unchecked
@@ -39,7 +40,7 @@ from dronesim.schema.tables import drone_number
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
 from .autopilots import REGISTRY, SWARM_MIN, fly_round, make_autopilot, make_swarm, pilot_class
-from .autopilots.base import NO_ANSWER, Answers, fly_swarm, steps_of
+from .autopilots.base import NO_ANSWER, Answers, Decision, fly_swarm, steps_of
 from .world import World, inside_rows, linear_rows
 
 
@@ -69,7 +70,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
         senses = pilot_class(autopilot).senses
         if senses:  # the static world around the starts, asked now: the first turn's sensing needs no ASK
             asker.prefetch(0, sorted({c for d, c in member.welcome.starts.cells().items() if d in mine}))
-        done: tuple[tuple, dict] | None = None  # the last turn's orders and decisions (a repeated TURN gets them again)
+        done: tuple[tuple, StepTable | dict] | None = None  # the last turn's orders and moves (a repeated TURN gets them again)
         over: Over | None = None
         backlog: list = []  # events taken from the inbox while waiting for the environment
 
@@ -101,39 +102,37 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                         over = end
             if over is not None:
                 logger.info("OVER: %s", over.text)
-            elif latest is not None and latest.turn == member.clock.turn and swarm:
-                rows = latest.orders.rows
-                rows = rows[np.isin(rows["drone"], numbers)]
-                fresh = done is None or done[0] != (latest.turn, rows.tobytes())
-                if fresh:
-                    moves = fly_swarm(swarm, rows, lambda cells: asker.kinds(
-                        latest.turn, cells, give_up=lambda: superseded(latest.turn)))
-                    if superseded(latest.turn):
-                        continue
-                    done = ((latest.turn, rows.tobytes()), moves)
-                if done[1]:
-                    out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=done[1]))
-                if fresh and not asker.chart.complete:
-                    asker.prefetch(latest.turn, sorted(set(map(tuple, done[1].column("pos").tolist()))))
             elif latest is not None and latest.turn == member.clock.turn:
-                orders = latest.orders.orders(mine)
-                fresh = False
-                if done is None or done[0] != (latest.turn, orders):
-                    steps = {d: pilots[d].step(pos, target) for d, pos, target in orders}
-                    occupancy = functools.cache(lambda turn=latest: occupancy_of(turn.orders))
-                    decisions = fly_round(steps, lambda pending: asker.ask_all(
-                        latest.turn, pending, occupancy, give_up=lambda: superseded(latest.turn)))
-                    if superseded(latest.turn):
+                turn = latest
+                give_up = functools.partial(superseded, turn.turn)
+                if swarm:  # one pilot over arrays, reading its drones' rows of the orders
+                    rows = turn.orders.rows[np.isin(turn.orders.numbers, numbers)]
+                    key: tuple = (turn.turn, rows.tobytes())
+                    decide = functools.partial(fly_swarm, swarm, rows, lambda cells: asker.kinds(
+                        turn.turn, cells, give_up=give_up))
+                else:
+                    orders = turn.orders.orders(mine)
+                    key = (turn.turn, orders)
+                    decide = functools.partial(fly_pilots, pilots, orders, lambda pending: asker.ask_all(
+                        turn.turn, pending, functools.cache(lambda: occupancy_of(turn.orders)), give_up=give_up),
+                        host=host)
+                fresh = done is None or done[0] != key  # a repeated TURN gets the same moves again
+                if fresh:
+                    decided = decide()
+                    if superseded(turn.turn):
                         continue  # too late: the game has moved on (the queued events come next)
-                    done = ((latest.turn, orders), decisions)
-                    fresh = True
-                if host and done[1]:  # a swarm host: one message for all its drones
-                    out.put(keys.moves(host), Moves(turn=latest.turn, sender=host, moves=steps_of(done[1])))
-                elif not host:
-                    for d, dec in done[1].items():
-                        out.put(keys.nps(d), Nps(turn=latest.turn, sender=d, pos=dec.pos, note=dec.note))
-                if fresh and senses:  # around where its drones mean to be: their next sensing, asked ahead
-                    asker.prefetch(latest.turn, sorted({d.pos for d in done[1].values()}))
+                    done = (key, decided)
+                moves = done[1]
+                if isinstance(moves, StepTable):  # a swarm host: one message for all its drones
+                    if moves:
+                        out.put(keys.moves(host), Moves(turn=turn.turn, sender=host, moves=moves))
+                    cells = map(tuple, moves.column("pos").tolist())
+                else:
+                    for d, dec in moves.items():
+                        out.put(keys.nps(d), Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note))
+                    cells = (dec.pos for dec in moves.values())
+                if fresh and senses and not asker.chart.complete:  # around where its drones mean to be:
+                    asker.prefetch(turn.turn, sorted(set(cells)))  # their next sensing, asked ahead
         asker.close()
         member.close()
         return over
@@ -330,6 +329,15 @@ def _ball(reach: int) -> np.ndarray:
 
 
 _cell_info = unchecked(CellInfo)
+
+
+def fly_pilots(pilots: Mapping[str, object], orders: Iterable[tuple[str, Cell, Cell | None]],
+               ask_all: Callable[[dict[str, tuple[Cell, ...]]], Mapping[str, Answers]], *,
+               host: str | None) -> StepTable | dict[str, Decision]:
+    """One autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell, target) orders:
+    a swarm host's MOVES steps, or a lone drone's decision."""
+    decisions = fly_round({d: pilots[d].step(pos, target) for d, pos, target in orders}, ask_all)
+    return steps_of(decisions) if host else decisions
 
 
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
