@@ -39,8 +39,8 @@ from dronesim.schema.messages import _KINDS, AROUND, unchecked
 from dronesim.schema.tables import drone_number
 from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
 
-from .autopilots import REGISTRY, SWARM_MIN, fly_round, make_autopilot, make_swarm, pilot_class
-from .autopilots.base import NO_ANSWER, Answers, Decision, fly_swarm, steps_of
+from .autopilots import REGISTRY, SWARM_MIN, make_autopilot, make_swarm, pilot_class
+from .autopilots.base import NO_ANSWER, Answers, fly_pilots, fly_swarm
 from .world import World, inside_rows, linear_rows
 
 
@@ -329,15 +329,6 @@ def _ball(reach: int) -> np.ndarray:
 
 
 _cell_info = unchecked(CellInfo)
-
-
-def fly_pilots(pilots: Mapping[str, object], orders: Iterable[tuple[str, Cell, Cell | None]],
-               ask_all: Callable[[dict[str, tuple[Cell, ...]]], Mapping[str, Answers]], *,
-               host: str | None) -> StepTable | dict[str, Decision]:
-    """One autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell, target) orders:
-    a swarm host's MOVES steps, or a lone drone's decision."""
-    decisions = fly_round({d: pilots[d].step(pos, target) for d, pos, target in orders}, ask_all)
-    return steps_of(decisions) if host else decisions
 
 
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:

@@ -18,13 +18,13 @@ import numpy as np
 from dronesim.coordinator.engine import (
     Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase,
 )
-from dronesim.entities.autopilots import SWARM_MIN, fly_round, make_autopilot, make_swarm, pilot_class
-from dronesim.entities.autopilots.base import fly_swarm, steps_of
+from dronesim.entities.autopilots import SWARM_MIN, make_autopilot, make_swarm, pilot_class
+from dronesim.entities.autopilots.base import fly_pilots, fly_swarm
 from dronesim.entities.environment import Environment, build_world
 from dronesim.entities.gcs import Plan, gcs_done
 from dronesim.scenario import swarm_hosts
 from dronesim.schema import (
-    Cell, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, Turn, UsageError, Upd, Welcome,
+    Cell, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, UsageError, Upd, Welcome,
 )
 from dronesim.schema.tables import drone_number
 
@@ -97,6 +97,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                     swarms = {h: make_swarm(a, world_size=world.size, drones=[drone_number(d) for d in ds],
                                             least=swarm_min) for h, (a, ds) in flyers.items()}
                 host_of = {d: sender for sender, (_, drones) in flyers.items() for d in drones}
+                numbers = {sender: [drone_number(d) for d in drones] for sender, (_, drones) in flyers.items()}
                 pilots = {d: make_autopilot(a, world_size=world.size) for d, a in autopilots.items()
                           if swarms.get(host_of[d]) is None}
             case Record(data):
@@ -112,23 +113,26 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 for d in sorted(inputs.vanished.get(t, ())):
                     push(engine.vanished(d))
                 skip = inputs.hovered.get(t, set()) | inputs.vanished.get(t, set())
-                steps = {d: pilots[d].step(pos, target) for d, pos, target in turn.orders.orders(pilots)
-                         if d not in skip}
+                flown: dict[str, list] = {}  # sender -> the orders of its drones flown one pilot each
+                for order in turn.orders.orders(pilots):
+                    if order[0] not in skip:
+                        flown.setdefault(host_of[order[0]], []).append(order)
                 oracle = env.answer
-                decisions = fly_round(steps, lambda pending: {d: dict(zip(c, oracle(c))) for d, c in pending.items()})
-                if not swarm:
-                    for d in sorted(decisions):
-                        dec = decisions[d]
-                        push(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
-                for host, (_, drones) in flyers.items() if swarm else ():
-                    if swarms[host] is not None:
+                ask = lambda pending: {d: dict(zip(c, oracle(c))) for d, c in pending.items()}  # noqa: E731
+                for sender in flyers:  # each as its process would: a swarm host's MOVES, a drone's NPS
+                    if swarms.get(sender) is not None:
                         rows = turn.orders.rows
-                        moves = fly_swarm(swarms[host], rows[np.isin(rows["drone"], [drone_number(d) for d in drones])],
-                                          env.kinds)
+                        moves = fly_swarm(swarms[sender], rows[np.isin(rows["drone"], numbers[sender])], env.kinds)
+                    elif sender in flown:
+                        moves = fly_pilots(pilots, flown[sender], ask, host=sender if swarm else None)
                     else:
-                        moves = steps_of({d: decisions[d] for d in drones if d in decisions})
-                    if moves:
-                        push(_accept(engine, log, Moves(turn=t, sender=host, moves=moves)))
+                        continue
+                    if isinstance(moves, StepTable):
+                        if moves:
+                            push(_accept(engine, log, Moves(turn=t, sender=sender, moves=moves)))
+                    else:
+                        for d, dec in sorted(moves.items()):
+                            push(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
                 if skip:
                     push(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):

@@ -11,7 +11,7 @@ Autopilots keep their memory in the instance: one instance per drone, for the wh
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
@@ -133,6 +133,15 @@ def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
     return StepTable.build(drone=np.fromiter(map(drone_number, ids), np.uint16, n),
                            pos=np.array([d.pos for d in decided], np.int32).reshape(n, 3),
                            note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n))
+
+
+def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell, Cell | None]],
+               ask_all: Callable[[dict[str, tuple[Cell, ...]]], Mapping[str, Answers]], *,
+               host: str | None) -> StepTable | dict[str, Decision]:
+    """One autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell, target) orders:
+    a swarm host's MOVES steps, or a lone drone's decision."""
+    decisions = fly_round({d: pilots[d].step(pos, target) for d, pos, target in orders}, ask_all)
+    return steps_of(decisions) if host else decisions
 
 
 def fly_swarm(swarm: SwarmPilot, rows: np.ndarray, kinds: Callable[[np.ndarray], np.ndarray]) -> StepTable:
