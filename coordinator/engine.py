@@ -29,6 +29,7 @@ import dataclasses
 import enum
 import hashlib
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,7 +54,8 @@ _turn, _status = unchecked(Turn), unchecked(Status)
 NO_ORDERS, NO_MOVES = OrderTable.trusted(OrderTable.empty(0)), MoveTable.trusted(MoveTable.empty(0))
 #: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
 AHEAD_MAX = 8
-#: Up to this many moves in a MOVES are taken one by one (array operations cost more than they save).
+#: Up to this many moves in a MOVES, or targets in a DONE, are taken one by one (array operations cost
+#: more than they save).
 FEW = 8
 #: How many turns an ENV phase's report (UPD) may lag behind and still be checked.
 UPD_WINDOW = 8
@@ -200,16 +202,20 @@ class Engine:
 
     def targets(self) -> dict[str, Cell]:
         """The targets in force, of every drone that has one."""
-        fleet = self.fleet
-        return {fleet.ids[i]: cell_of(fleet.target[i]) for i in np.flatnonzero(fleet.target[:, 0] >= 0).tolist()}
+        return self._by_id(self.fleet.target[:, 0] >= 0, self.fleet.target)
 
     def aims(self) -> dict[str, Cell]:
         """The targets this GCS phase has received so far (in force once the phase ends)."""
-        return {self.fleet.ids[i]: cell_of(self._aims[i]) for i in np.flatnonzero(self._aimed).tolist()}
+        return self._by_id(self._aimed, self._aims)
 
     def moves_taken(self) -> dict[str, Cell]:
         """The moves this DRONES phase has taken so far."""
-        return {self.fleet.ids[i]: cell_of(self._proposed[i]) for i in np.flatnonzero(self._moved).tolist()}
+        return self._by_id(self._moved, self._proposed)
+
+    def _by_id(self, rows: np.ndarray, cells: np.ndarray) -> dict[str, Cell]:
+        """The `cells` of the drones where `rows` holds, by id."""
+        ids = self.fleet.ids
+        return {ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
 
     def _hosted(self, rows: np.ndarray) -> bool:
         """Whether every drone of `rows` has a process flying it."""
@@ -541,16 +547,17 @@ class Engine:
         """Keep a DONE's targets: each is kept or refused on its own, as if sent as a TGT. A big batch is
         checked as a whole first (the checks of `_aim`, in array operations); what that refuses, and a
         batch of a few, goes through `_aim` row by row, which says why."""
-        if len(aims) <= FEW:
-            return _each(aims, lambda a: self._aim(a.drone, a.pos))
-        fleet, pos = self.fleet, aims.column("pos")
-        rows = fleet.row_of_number[aims.numbers]
-        ok = (rows >= 0) & inside_rows(pos, self.size)
-        ok[ok] = fleet.state[rows[ok]] == ALIVE
-        self._aimed[rows[ok]] = True
-        self._aims[rows[ok]] = pos[ok]
-        return _each(np.flatnonzero(~ok).tolist(),
-                     lambda j: self._aim(drone_name(int(aims.numbers[j])), cell_of(pos[j])))
+        fleet, numbers, pos = self.fleet, aims.numbers, aims.column("pos")
+
+        def whole() -> np.ndarray:
+            rows = fleet.row_of_number[numbers]
+            ok = (rows >= 0) & inside_rows(pos, self.size)
+            ok[ok] = fleet.state[rows[ok]] == ALIVE
+            self._aimed[rows[ok]] = True
+            self._aims[rows[ok]] = pos[ok]
+            return ok
+
+        return _in_batch(len(aims), whole, lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
@@ -583,11 +590,10 @@ class Engine:
         checked as a whole first (the checks of `_move`, in array operations); what that refuses, and a
         batch of a few moves, goes through `_host_move` row by row, which says why."""
         fleet, steps = self.fleet, msg.moves
-        pos, notes = steps.column("pos"), steps.column("note")
-        if len(steps) <= FEW:
-            todo = range(len(steps))
-        else:
-            rows = fleet.row_of_number[steps.numbers]
+        numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
+
+        def whole() -> np.ndarray:
+            rows = fleet.row_of_number[numbers]
             known = rows >= 0
             rows = np.where(known, rows, 0)
             ok = (known & (fleet.host_code[rows] == fleet.hosts.get(msg.sender, -2)) & (fleet.state[rows] == ALIVE)
@@ -595,9 +601,10 @@ class Engine:
             take = rows[ok]
             self._proposed[take], self._moved[take], self._said[take] = pos[ok], True, notes[ok]
             self._awaiting -= len(take)
-            todo = (~ok).nonzero()[0].tolist()
-        refused = _each(todo, lambda j: self._host_move(msg.sender, drone_name(int(steps.numbers[j])),
-                                                        cell_of(pos[j]), NOTES[notes[j]]))
+            return ok
+
+        refused = _in_batch(len(steps), whole, lambda j: self._host_move(
+            msg.sender, drone_name(int(numbers[j])), cell_of(pos[j]), NOTES[notes[j]]))
         return _with_refusals(refused, self._drones_check())
 
     def _host_move(self, sender: str, d: str, pos: Cell, note: Note) -> None:
@@ -805,6 +812,14 @@ def _drones_first(effects: list[Effect]) -> list[Effect]:
     ahead: it is what the next turn waits for. The rest keeps its order (STATUS before the GCS phase
     it informs; the ENV phase before its STATUS)."""
     return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves
+
+
+def _in_batch(n: int, whole: Callable[[], np.ndarray], one: Callable[[int], None]) -> list[RemoteInputError]:
+    """Take a batch of `n` items (a MOVES's moves, a DONE's targets), each on its own: `one(j)` takes item j
+    or raises why not. Up to FEW items go one by one; a bigger batch is taken as a whole first (`whole()`
+    takes, in array operations, every item `one` would take, and says which), then the others one by one,
+    which gives the reason of each refusal. The refusals, in order."""
+    return _each(range(n) if n <= FEW else np.flatnonzero(~whole()).tolist(), one)
 
 
 def _each(items, take) -> list[RemoteInputError]:

@@ -1024,19 +1024,22 @@ def test_a_big_batch_takes_and_refuses_what_moves_one_by_one_would(size: int) ->
             steps.append(Step(drone=d, pos=(x, y, z + (2 if jump else 1)), note=Note.REACHED if n % 2 else Note.NONE))
         steps.append(Step(drone=starts[size][0], pos=(0, 0, 4)))  # H02's drone: spoofed
         steps.append(Step(drone="D99", pos=(0, 0, 4)))  # not in this game
-        errors = []
-        for batch in [steps] if batched else [[st] for st in steps]:
-            try:
-                g.feed(g.engine.receive(Moves(turn=1, sender="H01", moves=tuple(batch))))
-            except RemoteInputError as err:
-                errors.append(str(err))
+        errors: list[list[str]] = [[], []]
+        for again in (0, 1):  # the same moves sent twice: the second time, the moves taken are refused
+            for batch in [steps] if batched else [[st] for st in steps]:
+                try:
+                    g.feed(g.engine.receive(Moves(turn=1, sender="H01", moves=tuple(batch))))
+                except RemoteInputError as err:
+                    errors[again].append(str(err))
         return g.engine.moves_taken(), errors
 
-    taken, errors = play(batched=True)
-    one_by_one, each = play(batched=False)
+    taken, (errors, errors_again) = play(batched=True)
+    one_by_one, (each, each_again) = play(batched=False)
     assert taken == one_by_one and len(taken) == size - len(range(3, size, 7))
     assert errors[0].startswith(each[0]) and f"and {len(each) - 1} more" in errors[0]
     assert "D99, which nobody flies" in each[-1] and f"{starts[size][0]}, which H02 flies" in each[-2]
+    assert len(each_again) == size + 2 and sum("second NPS" in e for e in each_again) == len(taken)
+    assert errors_again[0].startswith(each_again[0]) and f"and {len(each_again) - 1} more" in errors_again[0]
 
 
 def test_batches_give_the_same_journal_as_single_messages() -> None:
