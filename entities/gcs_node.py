@@ -132,13 +132,13 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                     if status.turn + 1 <= answered:  # the coming turn was answered ahead: no TURN(GCS) for it
                         answered = answer_ahead(status.turn + 1, answered)
                     tracks.add(status)
-                    alive = set(status.drones.alive())
-                    ended = set(status.drones.ids()) - alive
+                    table = status.drones
+                    ended = {d for d, alive in zip(table.ids(), table.alive_mask().tolist()) if not alive}
                     gone.update(ended)
                     for d in ended & current.keys():
                         del current[d]  # nothing more to say to a dead or lost drone
                     for d, c in targets_of(status).items():  # a late joiner takes over the targets in force
-                        if d in alive:
+                        if d not in ended:
                             current.setdefault(d, c)
                     if not quiet:
                         print(format_status(status), flush=True)
