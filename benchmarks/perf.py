@@ -706,9 +706,8 @@ def memory_growth(peaks: dict[tuple[str, int, tuple[int, int, int]], int]) -> li
                                    "KiB/drone", TARGETS["kib_per_drone"], f"≤ {TARGETS['kib_per_drone']:g} KiB per drone"))
         slopes = _slopes(peaks, (1, size), (1000, size), 999)
         if slopes:
-            rows.append(Row(f"memory per drone from 1 drone (1 → 1000 drones @ {_size_text(size)})",
-                            {key: f"{v:.2f} KiB/drone" for key, v in slopes.items()} |
-                            {"target": "— (includes the first swarm's one-time cost: see the legend)"}))
+            rows.append(_slope_row(f"memory per drone from 1 drone (1 → 1000 drones @ {_size_text(size)})", slopes,
+                                   "KiB/drone", None, "— (includes the first swarm's one-time cost: see the legend)"))
     small, large = WORLDS[0], WORLDS[-1]
     grown = int(np.prod(large)) - int(np.prod(small))
     slopes = _slopes(peaks, (1, small), (1, large), grown / 1024)  # bytes per world byte
@@ -732,10 +731,10 @@ def _slopes(peaks: dict[tuple[str, int, tuple[int, int, int]], int], low: tuple,
 _MEMORY_ROLES = (("srv", "coordinator"), ("env", "env"))
 
 
-def _slope_row(name: str, slopes: dict[str, float], unit: str, target: float, what: str) -> Row:
-    """A memory row: each role's slope, and the verdict on the worse one."""
+def _slope_row(name: str, slopes: dict[str, float], unit: str, target: float | None, what: str) -> Row:
+    """A memory row: each role's slope, and the verdict on the worse one (no target: `what` alone)."""
     cells = {key: f"{v:.2f} {unit}" for key, v in slopes.items()}
-    cells["target"] = _verdict(max(slopes.values()), target, True, what)
+    cells["target"] = what if target is None else _verdict(max(slopes.values()), target, True, what)
     return Row(name, cells)
 
 

@@ -27,7 +27,6 @@ from dronesim.schema import Cell, RemoteInputError, UsageError, WorldSpec, is_dr
 FORMAT = "dronesim-scenario"
 
 
-
 def swarm_hosts(autopilots: dict[str, str]) -> dict[str, tuple[str, tuple[str, ...]]]:
     """The swarm layout: one host per autopilot (H01, H02, ... in the autopilots' name order) ->
     (autopilot, its drones in id order)."""
