@@ -15,8 +15,8 @@ import time
 import zenoh
 
 from dronesim.schema import (
-    Connect, Done, Keys, Message, Moves, Nps, Over, Phase, RejectCounter, Refused, RemoteInputError, Status, Target,
-    Turn, Upd, UsageError, drone_id, encode,
+    Connect, Done, Keys, Message, Moves, Nps, Over, Phase, RejectCounter, Refused, RemoteInputError, Status,
+    StatusRequest, Target, Turn, Upd, UsageError, drone_id, encode,
 )
 from dronesim.schema.errors import WrongSender
 from dronesim.schema.messages import WorldSpec
@@ -93,13 +93,16 @@ class Executor:
     """Carries out the engine's effects in order; with `pace`, a new turn starts at most every `pace`
     seconds (the effects from its TURN on are held until then: a watchable speed, not a synchronisation)."""
 
-    def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, rejects: RejectCounter,
+    def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, rejects: RejectCounter, status: bytes,
                  pace: float = 0.0) -> None:
         self.keys, self.out, self.writer, self.rejects, self.pace = keys, out, writer, rejects, pace
         self._held: list = []
         self._due = 0.0
         self._turn = 0  # the last turn whose first TURN went out
         self._last = float("-inf")  # when it went out
+        # the last STATUS that went out, encoded (served on OBS/LAST); before the first, the state the game
+        # starts (or resumes) from, which that first STATUS will say
+        self.last_status = status
 
     def run(self, effects: list) -> None:
         for eff in effects:
@@ -118,6 +121,9 @@ class Executor:
                 case Publish(Turn(phase=Phase.ENV)) if not self.out.matching(self.keys.turn_of(Phase.ENV)):
                     pass  # nobody follows the ENV phase (the environment does when someone wants its UPD)
                 case Publish(msg, data):
+                    data = encode(msg) if data is None else data
+                    if isinstance(msg, Status):
+                        self.last_status = data
                     self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):
                     query.reply(query.key_expr, encode(msg))
@@ -175,8 +181,16 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                     keys.root, ", ".join(d.drone for d in game.drones))
 
-        effects = Executor(keys, out, writer, inbox.rejects, pace)
+        effects = Executor(keys, out, writer, inbox.rejects, encode(engine.status()), pace)
         run = effects.run
+
+        def last_status(query: zenoh.Query, _msg: StatusRequest) -> bool:
+            """OBS/LAST, answered on Zenoh's thread (it reads one reference): the last STATUS published."""
+            query.reply(query.key_expr, effects.last_status)
+            query.drop()
+            return True
+
+        inbox.serve(keys.last_status, StatusRequest, inline=last_status)
         phase = engine.clock()
         started = time.monotonic()
         while engine.stage is not Stage.OVER:

@@ -3,12 +3,16 @@
 It answers ASK (queryable ENV/ASK) from the world as it stands at the start of the turn, applies the
 coordinator's moves in the ENV phase and publishes the changed cells (UPD, which the coordinator checks
 against its own copy of the world without waiting for it), serves the static map (ENV/MAP) and takes
-the drones' positions from each STATUS.
+the drones' positions from STATUS.
+
+It follows STATUS only while it needs the drones' positions (see `Following`): drone processes chart the
+static map and compose their answers themselves, so in most games nobody asks the environment about the
+drones, and it spends nothing per turn. An ASK about the drones makes it follow again: it subscribes to
+STATUS and asks the coordinator for the last one (OBS/LAST), which the ASK waits for.
 
 A STATUS is checked whole on arrival (a malformed one is refused and changes nothing), but its drones
 are put on the map only when the environment needs their positions: for an ASK of the turn, or to apply
-the ENV phase's moves. A swarm's drone hosts compose most answers themselves (see
-entities/drone_node.py), so most turns skip that work.
+the ENV phase's moves.
 
 An ASK for turn t is answered once STATUS(t-1) has been applied; one that arrives earlier (possible
 when messages take different routes) waits for it, one for a past turn gets an error reply. An ASK for
@@ -25,26 +29,25 @@ import zenoh
 
 from dronesim.entity import Membership, add_entity_args
 from dronesim.schema import (
-    Ans, Ask, Connect, Keys, MapRequest, Over, Phase, RemoteInputError, Role, Status, Turn, Upd, UsageError,
-    WorldMap, encode, is_drone_id,
+    Ans, Ask, Connect, Keys, MapRequest, Over, Phase, RemoteInputError, Role, Status, StatusRequest, Turn, Upd,
+    UsageError, WorldMap, encode, is_drone_id,
 )
 from dronesim.schema.messages import is_host_id, unchecked
 from dronesim.schema.errors import StaleTurn, WrongSender
 from dronesim.transport import (
-    Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
+    Asked, Inbox, Matching, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
 )
 
-from .environment import Environment, build_world
+from .environment import FOLLOW_TURNS, Environment, Following, build_world
 
 _ans = unchecked(Ans)
 
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
-         connect_timeout: float = 30.0, grace: float = 30.0) -> Over:
+         connect_timeout: float = 30.0, grace: float = 30.0, follow_turns: int = FOLLOW_TURNS) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
         out = Outbox(session)
-        inbox.subscribe(keys.status, Status)
         inbox.subscribe(keys.over, Over)
         inbox.serve(keys.ask, Ask)
         inbox.serve(keys.map, MapRequest)
@@ -58,12 +61,16 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
             print(f"World {world.size} seed {welcome.world.seed}, {len(world.buildings)} buildings, "
                   f"{int(world.grid.sum())} building cells:", flush=True)
             print(world.draw(env.drones), flush=True)
-        ready = 1  # the turn whose ASKs can be answered now
+        ready = 1  # the turn whose ASKs can be answered now (STATUS(ready - 1) is the last one taken)
         waiting: list[tuple[zenoh.Query, Ask]] = []
         applied = False  # the ENV phase of turn `ready` is done
         early: Turn | None = None
         over: Over | None = None
         unsynced: Status | None = None  # the last STATUS, until the drones' positions are needed
+        taken: int | None = None  # the turn of the last STATUS taken
+        following = Following(follow_turns)
+        statuses = None  # the subscription to STATUS, held while `following` wants it
+        env_phase = None  # the subscription to the ENV phase, held while someone listens to the UPD
 
         def sync() -> None:
             """The drones where the last STATUS has them."""
@@ -72,21 +79,37 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                 env.sync(unsynced)
                 unsynced = None
 
-        env_phase = None  # the subscription to the ENV phase, held while someone listens to the UPD
+        def follow() -> None:
+            """Subscribe to STATUS, or stop, as `following` says. Starting again after turns unseen, the
+            environment also asks the coordinator for the last STATUS (OBS/LAST): the turn an ASK waits for
+            may have ended before the subscription began."""
+            nonlocal statuses
+            wanted = following.wanted(bool(waiting))
+            if wanted and statuses is None:
+                logger.info("following STATUS: the drones' positions are needed (turn %d)", ready)
+                member.clock.lose_track()
+                statuses = inbox.subscribe(keys.status, Status)
+                inbox.fetch(keys.last_status, StatusRequest(turn=0, sender="ENV"), Status, timeout=grace)
+            elif not wanted and statuses is not None:
+                logger.info("no longer following STATUS: nobody asked about the drones for %d turns", following.turns)
+                inbox.unsubscribe(statuses)
+                statuses = None
 
-        def follow_listeners() -> None:
+        def listened(matching: bool) -> None:
             """The ENV phase's moves make the UPD report. Nobody listening, the environment does not even
             subscribe to them (the coordinator then sends none): the drones' cells come from STATUS alone
             (the same cells), and thousands of moves a turn in a swarm go nowhere."""
             nonlocal env_phase
-            wanted = out.matching(keys.upd)
-            if wanted and env_phase is None:
+            following.listened = matching
+            if matching and env_phase is None:
                 env_phase = inbox.subscribe(keys.turn_of(Phase.ENV), Turn)
-            elif not wanted and env_phase is not None:
+            elif not matching and env_phase is not None:
                 inbox.unsubscribe(env_phase)
                 env_phase = None
+            follow()
 
-        follow_listeners()
+        out.watch(keys.upd, inbox)
+        listened(out.matching(keys.upd))
 
         def apply(turn: Turn) -> None:
             nonlocal applied
@@ -118,10 +141,14 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                         member.check()
                     case Presence() as presence:
                         member.on_presence(presence)  # the world stays; the next STATUS resyncs the drones
+                    case Matching(matching=matching):
+                        listened(matching)
                     case Asked(query, Ask() as ask):
                         if not (is_drone_id(ask.sender) or is_host_id(ask.sender)):
                             refuse(query, "only drones ask")
                             raise WrongSender(f"ASK from {ask.sender}")
+                        if ask.turn != 0:
+                            following.asked()
                         if ask.turn == ready or ask.turn == 0:
                             answer(query, ask)
                         elif ask.turn > ready:
@@ -129,6 +156,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                         else:
                             refuse(query, f"ASK for turn {ask.turn}, the world is at turn {ready}")
                             raise StaleTurn(f"ASK for past turn {ask.turn} from {ask.sender}")
+                        follow()
                     case Asked(query, MapRequest()):
                         query.reply(query.key_expr, encode(WorldMap(turn=ready - 1, sender="ENV", size=world.size,
                                                                     buildings=world.packed())))
@@ -142,9 +170,11 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                             logger.debug("ENV phase of turn %d after its STATUS: nothing to apply", turn.turn)
                         else:
                             raise StaleTurn(f"ENV phase of turn {turn.turn} while the world is at turn {ready}")
+                    case Received(_, Status() as status) if status.turn == taken:
+                        pass  # the same STATUS again (from OBS/LAST and from the subscription)
                     case Received(_, Status() as status):
-                        follow_listeners()
-                        unsynced = status
+                        following.status()
+                        unsynced, taken = status, status.turn
                         ready, applied = status.turn + 1, False
                         still = []
                         for query, ask in waiting:
@@ -158,6 +188,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                         if early is not None and early.turn == ready:
                             apply(early)
                         early = None
+                        follow()
                     case Received(_, Over() as over):
                         logger.info("OVER: %s", over.text)
             except RemoteInputError as err:

@@ -26,6 +26,35 @@ def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
     return World.generate(spec.size, np.random.default_rng(spec.seed), keep_free=tuple(starts))
 
 
+#: Turns the environment keeps following STATUS after the last question about the drones.
+FOLLOW_TURNS = 8
+
+
+class Following:
+    """Whether the environment needs the drones' positions turn by turn, i.e. follows STATUS: while someone
+    listens to its UPD reports (made from the ENV phase's moves), while an ASK about the drones waits for
+    its turn's STATUS, and for `turns` STATUS after the last ASK about the drones (one for turn 0 asks the
+    static world). Otherwise nobody needs them: drone processes chart the static map and compose their
+    answers themselves, so in most games the environment is asked nothing once the game runs, and a
+    STATUS a turn would cost it (and the router) a message a turn for nothing."""
+
+    def __init__(self, turns: int = FOLLOW_TURNS) -> None:
+        self.turns = turns
+        self.listened = False  # someone subscribes to UPD
+        self._quiet: int | None = None  # STATUS since the last ASK about the drones (None: none yet)
+
+    def asked(self) -> None:
+        self._quiet = 0
+
+    def status(self) -> None:
+        if self._quiet is not None:
+            self._quiet += 1
+
+    def wanted(self, waiting: bool) -> bool:
+        """`waiting`: an ASK waits for a STATUS."""
+        return self.listened or waiting or (self._quiet is not None and self._quiet <= self.turns)
+
+
 #: Up to this many cells, `survey` answers cell by cell rather than with numpy (whose fixed cost dominates).
 SMALL = 48
 

@@ -154,6 +154,11 @@ class TurnClock:
         self._seen[key] = msg
         self.turn = now if self.turn is None else max(self.turn, now)
 
+    def lose_track(self) -> None:
+        """This entity stopped following the game for a while (the environment, when nobody asks it about
+        the drones): the next TURN, STATUS or OVER sets the clock again, as at the start."""
+        self.turn, self._seen = None, {}
+
     def screen(self, event: object, rejects: RejectCounter) -> bool:
         """False (the rejection counted and logged) for a coordinator message that fails `admit`."""
         if isinstance(event, Received) and isinstance(event.msg, (Turn, Status, Over)):

@@ -223,7 +223,15 @@ class Presence:
     alive: bool
 
 
-Event = Received | Asked | Presence
+@dataclass(frozen=True, slots=True)
+class Matching:
+    """Whether anyone subscribes to `key`, this process's publication, has changed (see `Outbox.watch`)."""
+
+    key: str
+    matching: bool
+
+
+Event = Received | Asked | Presence | Matching
 
 
 def session_id(session: zenoh.Session) -> str:
@@ -314,6 +322,25 @@ class Inbox:
 
         self._handles.append(self.session.declare_queryable(key, _direct(on_query), complete=True))
 
+    def fetch(self, key: str, msg: Message, expect: type[Message], *, timeout: float) -> None:
+        """One query, not waited for: its valid reply becomes a `Received` event (on `key`); an error
+        reply or a malformed one is counted as a rejection, and no reply is no event."""
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            def handle() -> None:
+                if reply.ok is None:
+                    raise RemoteInputError(f"{key} answered an error: "
+                                           f"{reply.err.payload.to_bytes().decode(errors='replace')}",
+                                           reason="error-reply")
+                got = decode(reply.ok.payload.to_bytes(), expect)
+                check_addressed(self.keys, key, got)
+                self._q.put(Received(key, got))
+
+            self._guard(key, handle)
+
+        self.session.get(key, _direct(on_reply), payload=encode(msg), timeout=timeout,
+                         consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+
     def watch_presence(self, entity: str | None = None) -> None:
         """Presence events for every process (or only `entity`'s), starting with those already there."""
 
@@ -354,6 +381,7 @@ class Outbox:
     def __init__(self, session: zenoh.Session) -> None:
         self.session = session
         self._pubs: dict[str, zenoh.Publisher] = {}
+        self._listeners: list[zenoh.MatchingListener] = []
 
     def _pub(self, key: str) -> zenoh.Publisher:
         pub = self._pubs.get(key)
@@ -370,6 +398,14 @@ class Outbox:
     def matching(self, key: str) -> bool:
         """Does anyone subscribe to `key` now?"""
         return self._pub(key).matching_status.matching
+
+    def watch(self, key: str, inbox: Inbox) -> None:
+        """A `Matching` event in `inbox` each time someone starts or stops subscribing to `key` (the
+        first, at once, if someone already does)."""
+        def on_status(status: zenoh.MatchingStatus) -> None:
+            inbox.post(Matching(key, status.matching))
+
+        self._listeners.append(self._pub(key).declare_matching_listener(_direct(on_status)))
 
 
 def request(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],

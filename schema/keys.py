@@ -36,6 +36,8 @@ KEY_TABLE: tuple[KeySpec, ...] = (
             "phase GCS, DRONES (orders) or ENV (moves) of turn t begins; each entity hears only its own"),
     KeySpec("SRV/OVER", "put", m.Over, None, "SRV", "all", "`SRV:X:OVER`: the game has ended"),
     KeySpec("OBS/STATUS", "put", m.Status, None, "SRV", "all", "every drone's state at the end of the turn"),
+    KeySpec("OBS/LAST", "query", m.StatusRequest, m.Status, "SRV", "ENV, GCS",
+            "the last STATUS, for a process that does not follow every turn or has just joined"),
     KeySpec("{drone}/TGT", "put", m.Target, None, "GCS", "SRV", "`GCS:D01:TGT:x:y:z`, relayed to the drone in its order"),
     KeySpec("GCS/DONE", "put", m.Done, None, "GCS", "SRV", "`GCS:SRV:DONE`: the GCS phase is over"),
     KeySpec("ENV/ASK", "query", m.Ask, m.Ans, "ENV", "drones", "`D01:ENV:ASK:x:y:z` -> `ENV:D01:ANS:content`"),
@@ -73,6 +75,8 @@ class Keys:
     def over(self) -> str: return self._k("SRV", "OVER")
     @property
     def status(self) -> str: return self._k("OBS", "STATUS")
+    @property
+    def last_status(self) -> str: return self._k("OBS", "LAST")
     @property
     def gcs_done(self) -> str: return self._k("GCS", "DONE")
     @property

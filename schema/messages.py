@@ -691,6 +691,15 @@ class MapRequest(Message):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class StatusRequest(Message):
+    """ENV or GCS -> SRV (query on OBS/LAST): the last STATUS the coordinator published, for a process
+    that does not follow every turn (the environment, asked about the drones after turns without a
+    question) or that has just joined."""
+
+    TAG: ClassVar[str] = "STATUSREQ"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class WorldMap(Message):
     """ENV -> GCS or drone process (reply to MAPREQ): world size and the building cells as a packed bit array
     (numpy ``packbits`` of the C-ordered boolean grid indexed [x, y, z])."""
@@ -713,6 +722,7 @@ _KINDS = tuple(CellKind)
 
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Moves, Upd, Status, Over, MapRequest, WorldMap,
+    StatusRequest,
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
 _RECORDS = (CellInfo, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)

@@ -12,7 +12,7 @@ import pathlib
 
 from .messages import (
     Aim, Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
-    Message, Move, Moves, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, Step, Target, Turn, Upd, Welcome,
+    Message, Move, Moves, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, StatusRequest, Step, Target, Turn, Upd, Welcome,
     WorldMap, WorldSpec, Intent, encode,
 )
 
@@ -60,6 +60,7 @@ SAMPLES: dict[str, Message] = {
     )),
     "over": Over(turn=1, sender="SRV", reason=EndReason.NO_DRONE_ALIVE, text="D01 crashed into a building"),
     "map_request": MapRequest(turn=0, sender="GCS"),
+    "status_request": StatusRequest(turn=0, sender="ENV"),
     "map": WorldMap(turn=0, sender="ENV", size=(2, 2, 2), buildings=bytes([0b10000000])),
 }
 

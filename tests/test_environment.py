@@ -208,3 +208,22 @@ def test_survey_answers_as_answer_does() -> None:
     ask = Ask(turn=1, sender="H01", cells=cells[:5], around=((1, 0, 0), (2, 3, 0), (5, 5, 3)))
     kinds, drones = e.survey(ask.cells, ask.around)
     assert Ans(turn=1, sender="ENV", kinds=kinds, drones=drones).infos(ask.asked()) == e.answer(ask.asked())
+
+
+def test_following_status_only_while_someone_needs_the_drones() -> None:
+    from dronesim.entities.environment import Following
+
+    f = Following(turns=2)
+    assert not f.wanted(waiting=False), "nobody asked: the environment does not follow STATUS"
+    assert f.wanted(waiting=True), "an ASK waits for its turn's STATUS"
+    f.asked()
+    assert f.wanted(waiting=False)
+    f.status(), f.status()
+    assert f.wanted(waiting=False), "for `turns` STATUS after the last question"
+    f.status()
+    assert not f.wanted(waiting=False)
+    f.listened = True
+    assert f.wanted(waiting=False), "someone listens to the UPD reports, made from every turn"
+    f.listened = False
+    f.asked()
+    assert f.wanted(waiting=False)

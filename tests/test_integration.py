@@ -11,7 +11,7 @@ import zenoh
 
 from dronesim.entity import Membership
 from dronesim.schema import (
-    Connect, Done, Intent, Keys, Over, Phase, Role, Target, Turn, encode,
+    Ans, Ask, Connect, Done, Intent, Keys, Over, Phase, Role, Status, Target, Turn, decode, encode,
 )
 from dronesim.transport import Inbox, Outbox, Received, session_id
 from dronesim.entities.world import Building, World
@@ -33,9 +33,10 @@ def cluster(router, tmp_path):
 
 
 def start_game(c: Cluster, tmp_path, *, coord_args=(), drone_args=(), gcs_args=("--targets", "9,9,0"),
-               drones=("D01",)):
+               drones=("D01",), verify_env=True):
     journal = tmp_path / f"{c.root}.journal"
-    srv = c.start("SRV", "coordinator", "--journal", str(journal), "--admit-deadline", "60", *coord_args)
+    srv = c.start("SRV", "coordinator", "--journal", str(journal), "--admit-deadline", "60", *coord_args,
+                  verify_env=verify_env)
     srv.expect("coordinator ready")  # the queryable is declared: entities will find it at once
     c.start("ENV", "env")
     for d in drones:
@@ -232,3 +233,46 @@ def test_a_connect_without_its_presence_token_is_refused(cluster, tmp_path):
     assert gcs.wait() == 0
     assert srv.wait() == 0
 
+
+
+def test_environment_follows_status_only_when_asked_about_the_drones(cluster, tmp_path):
+    """Drone processes chart the map and soon stop asking the environment about the drones (if they
+    ever do), and nobody listens to its UPD (no --verify-env), so it does not follow STATUS. Asked
+    mid-game about a drone's cell, it fetches the last STATUS (OBS/LAST), answers with the drone where
+    that STATUS has it, follows a few turns and stops again."""
+    start_game(cluster, tmp_path, coord_args=("--pace", "0.1"), gcs_args=("--targets", "9,9,9"), verify_env=False)
+    env = cluster.procs[1]
+    keys = Keys(cluster.root)
+
+    def follows() -> list[str]:
+        return [line for line in env.err if "following STATUS" in line]
+
+    def stopped() -> int:
+        return sum("no longer following STATUS: nobody asked about the drones for 8 turns" in line for line in follows())
+
+    import logging
+
+    with zenoh.open(client_config(cluster.locator)) as s:
+        inbox = Inbox(s, keys, logging.getLogger("test-asker"))
+        inbox.subscribe(keys.status, Status)
+        inbox.subscribe(keys.over, Over)
+        asked = None
+        while asked is None or stopped() == asked[1]:
+            ev = inbox.get(30)
+            assert ev is not None, "the game stalled"
+            match ev:
+                case Received(_, Over()):
+                    pytest.fail(f"the game ended too soon:\n{env.text}")
+                case Received(_, Status() as st) if asked is None and st.turn >= 3 and (
+                        not follows() or "no longer" in follows()[-1]):
+                    (d01,) = [r for r in st.drones.records() if r.drone == "D01"]
+                    ask = Ask(turn=st.turn + 1, sender="D01", cells=(d01.pos,))  # (paced: turn + 1 is still on)
+                    asked = len(follows()), stopped()
+                    replies = list(s.get(keys.ask, payload=encode(ask), timeout=10))
+                    assert len(replies) == 1 and replies[0].ok is not None, replies[0].err.payload.to_bytes()
+                    ans = decode(replies[0].ok.payload.to_bytes(), Ans)
+                    assert ans.turn == st.turn + 1 and ans.drones == ((0, "D01"),)
+    since = follows()[asked[0]:]  # the question made it follow, then it stopped
+    assert "following STATUS: the drones' positions are needed" in since[0] and "no longer" in since[1], env.text
+    assert set(cluster.wait_all().values()) == {0}
+    assert not any("rejected" in line for line in env.err), env.text
