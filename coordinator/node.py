@@ -21,7 +21,7 @@ from dronesim.schema import (
 from dronesim.schema.errors import WrongSender
 from dronesim.schema.messages import WorldSpec
 from dronesim.transport import (
-    Asked, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
+    Asked, Event, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
 )
 
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
@@ -193,10 +193,14 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         inbox.serve(keys.last_status, StatusRequest, inline=last_status)
         phase = engine.clock()
         started = time.monotonic()
-        while engine.stage is not Stage.OVER:
+
+        def timeout() -> float | None:
             limit = engine.deadline()
             left = None if limit is None else max(0.0, started + limit - time.monotonic())
-            event = inbox.get(_soonest(left, effects.due_in(), admissions.due_in()))
+            return _soonest(left, effects.due_in(), admissions.due_in())
+
+        def handle(event: Event | None) -> None:
+            nonlocal phase, started
             match event:
                 case None if effects.due_in() == 0:
                     effects.release()
@@ -223,7 +227,9 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
             if engine.clock() != phase:
                 phase = engine.clock()
                 started = time.monotonic()
-            event = msg = None  # not kept while waiting: a swarm's MOVES is thousands of records
+
+        # The turn's messages are handled on Zenoh's thread when nothing else is under way (see Inbox.run).
+        inbox.run(handle, timeout=timeout, until=lambda: engine.stage is Stage.OVER)
         # Let OVER reach everyone: wait (on events, bounded) until the admitted entities have left.
         end = time.monotonic() + LINGER_S
         while {e for e, _ in present} - {"SRV"} and time.monotonic() < end:

@@ -11,6 +11,7 @@ import argparse
 import json
 import logging
 import queue
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -256,8 +257,20 @@ def _direct(callback: Callable[[object], None]) -> zenoh.handlers.Callback:
     return zenoh.handlers.Callback(callback, indirect=False)
 
 
+def _due(left: float | None) -> bool:
+    return left is not None and left <= 0.0
+
+
+_WAKE = object()  # not an event: makes `Inbox.run`'s thread look at its deadline and its end again
+
+
 class Inbox:
-    """Decoded events from Zenoh callbacks, for one consuming thread; rejections are counted."""
+    """Decoded events from Zenoh callbacks, for one consuming thread; rejections are counted.
+
+    The events are taken one at a time, in order of arrival, by `get` or by `run`'s handler. With `run`,
+    an event that finds nothing queued and nobody handling one is handled at once on the Zenoh thread
+    that brought it: a turn's hot message then costs no handoff to the main thread (two thread wake-ups).
+    """
 
     def __init__(self, session: zenoh.Session, keys: Keys, logger: logging.Logger) -> None:
         self.session = session
@@ -266,6 +279,81 @@ class Inbox:
         self.rejects = RejectCounter(logger)
         self._q: queue.SimpleQueue[Event] = queue.SimpleQueue()
         self._handles: list[object] = []
+        self._handling = threading.Lock()  # held by whichever thread handles an event in `run`
+        self._queueing = threading.Lock()  # an event is queued and counted together
+        self._pending = 0  # events queued and not yet handled
+        self._handler: Callable[[Event], None] | None = None  # `run`'s handler, for events handled in place
+        self._resume_by = float("inf")  # when `run`'s thread wakes up at the latest (monotonic)
+        self._next: Callable[[], float | None] = lambda: None
+        self._until: Callable[[], bool] = lambda: False
+        self._failure: BaseException | None = None
+        self._back: list[Event] = []  # the one event `run` took after its end, for `get`
+
+    def _deliver(self, event: Event) -> None:
+        """A new event: handled here and now (see the class), or queued."""
+        handler = self._handler
+        if handler is not None and not self._pending and self._handling.acquire(blocking=False):
+            try:
+                if not self._pending and self._handler is not None and not self._until():
+                    self._handle_here(handler, event)
+                    return
+            finally:
+                self._handling.release()
+        with self._queueing:
+            self._pending += 1
+            self._q.put(event)
+
+    def _handle_here(self, handler: Callable[[Event], None], event: Event) -> None:
+        try:
+            handler(event)
+        except BaseException as exc:  # `run` raises it on its own thread, as if it had handled the event
+            self._failure, self._handler = exc, None
+            self._q.put(_WAKE)  # type: ignore[arg-type]
+            return
+        due = self._next()
+        if self._until() or (due is not None and time.monotonic() + due < self._resume_by):
+            self._q.put(_WAKE)  # type: ignore[arg-type]
+
+    def run(self, handler: Callable[[Event | None], None], *, timeout: Callable[[], float | None],
+            until: Callable[[], bool]) -> None:
+        """Hand every event to `handler` (None when `timeout()` seconds pass without one) until `until()`;
+        events are handled one at a time, in order of arrival, on this thread or on Zenoh's (see the
+        class): `handler` must not wait for another message (no blocking query), and an exception it
+        raises on Zenoh's thread is raised here."""
+        self._next, self._until = timeout, until
+        self._handler = handler
+        try:
+            while True:
+                with self._handling:  # (an event handled meanwhile on Zenoh's thread sees when this one wakes)
+                    if self._failure is not None:
+                        raise self._failure
+                    if until():
+                        break
+                    wait = timeout()
+                    self._resume_by = float("inf") if wait is None else time.monotonic() + wait
+                try:
+                    event = self._q.get(timeout=wait)
+                except queue.Empty:
+                    event = None
+                if event is _WAKE:
+                    continue
+                with self._handling:
+                    if self._failure is not None:
+                        raise self._failure
+                    if until():  # it came after the end: for the next `get`
+                        if event is not None:
+                            self._back.append(event)
+                        break
+                    if event is None and not _due(timeout()):  # events handled on Zenoh's thread while
+                        continue  # this one waited have moved its deadline on (or away)
+                    handler(event)
+                    if event is not None:
+                        with self._queueing:
+                            self._pending -= 1
+                event = None  # not kept while waiting: a swarm's MOVES is thousands of records
+        finally:
+            self._handler = None
+            self._resume_by = float("inf")
 
     # callbacks (Zenoh threads): decode, validate, enqueue; never raise
     def _guard(self, where: str, fn: Callable[[], None]) -> None:
@@ -284,7 +372,7 @@ class Inbox:
             def handle() -> None:
                 msg = decode(sample.payload.to_bytes(), expect)
                 check_addressed(self.keys, k, msg)
-                self._q.put(Received(k, msg))
+                self._deliver(Received(k, msg))
 
             self._guard(k, handle)
 
@@ -307,7 +395,7 @@ class Inbox:
                     raise RemoteInputError(f"query on {key} without payload", reason="malformed")
                 msg = decode(payload.to_bytes(), expect)
                 if inline is None or not inline(query, msg):
-                    self._q.put(Asked(query, msg))
+                    self._deliver(Asked(query, msg))
 
             try:
                 handle()
@@ -334,7 +422,7 @@ class Inbox:
                                            reason="error-reply")
                 got = decode(reply.ok.payload.to_bytes(), expect)
                 check_addressed(self.keys, key, got)
-                self._q.put(Received(key, got))
+                self._deliver(Received(key, got))
 
             self._guard(key, handle)
 
@@ -347,7 +435,7 @@ class Inbox:
         def on_token(sample: zenoh.Sample) -> None:
             def handle() -> None:
                 who, session = self.keys.presence_of(str(sample.key_expr))
-                self._q.put(Presence(who, session, sample.kind == zenoh.SampleKind.PUT))
+                self._deliver(Presence(who, session, sample.kind == zenoh.SampleKind.PUT))
 
             self._guard(str(sample.key_expr), handle)
 
@@ -356,23 +444,35 @@ class Inbox:
 
     def post(self, event: object) -> None:
         """Queue an event from another thread of this process (e.g. a web request for the main loop)."""
-        self._q.put(event)  # type: ignore[arg-type]
+        self._deliver(event)  # type: ignore[arg-type]
 
     def drain(self) -> list[Event]:
         """Every event already queued, without waiting."""
-        out: list[Event] = []
+        out: list[Event] = [self._taken(self._back.pop())] if self._back else []
         while True:
             try:
-                out.append(self._q.get_nowait())
+                out.append(self._taken(self._q.get_nowait()))
             except queue.Empty:
-                return out
+                return [e for e in out if e is not _WAKE]
 
     def get(self, timeout: float | None = None) -> Event | None:
         """The next event, or None when `timeout` seconds pass first."""
-        try:
-            return self._q.get(timeout=timeout)
-        except queue.Empty:
-            return None
+        if self._back:
+            return self._taken(self._back.pop())
+        end = None if timeout is None else time.monotonic() + timeout
+        while True:
+            try:
+                event = self._q.get(timeout=None if end is None else max(0.0, end - time.monotonic()))
+            except queue.Empty:
+                return None
+            if event is not _WAKE:
+                return self._taken(event)
+
+    def _taken(self, event: Event) -> Event:
+        if event is not _WAKE:
+            with self._queueing:
+                self._pending -= 1
+        return event
 
 
 class Outbox:
