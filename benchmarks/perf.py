@@ -444,7 +444,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     from dronesim.scenario import Scenario
     from dronesim.entities.gcs import gcs_done, targets_of, turns_to_answer_ahead
     from dronesim.schema import Connect, Done, Intent, Keys, Over, Phase, Role, Status, Turn, drone_id
-    from dronesim.transport import Inbox, Outbox, Presence, Received, session_id
+    from dronesim.transport import Event, Inbox, Outbox, Presence, Received, session_id
 
     import logging
 
@@ -484,16 +484,18 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                 answered = 0  # the last turn answered (maybe ahead)
                 alive: set[str] | None = None
                 over = None
-                idle_since = time.monotonic()
-                while over is None:
-                    event = inbox.get(1.0)
+                idle_since = look = time.monotonic()  # the last event; when to look at the processes
+
+                def handle(event: Event | None) -> None:
+                    nonlocal answered, alive, over, current, idle_since, look
                     now = time.perf_counter()
+                    look = time.monotonic() + 1.0
                     if event is None:
                         if procs.dead():
                             raise RuntimeError("a process ended during the game: " + ", ".join(procs.dead()))
                         if time.monotonic() - idle_since > EVENT_TIMEOUT:
                             raise RuntimeError(f"the game stalled: no event for {EVENT_TIMEOUT:g} s")
-                        continue
+                        return
                     idle_since = time.monotonic()
                     match event:
                         case Presence() as p:
@@ -523,7 +525,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                                     game.memory[name] = proc_status(procs.procs[name].pid)
                                 out.put(keys.gcs_done, Done(turn=t, sender="GCS", phase=Phase.GCS,
                                                             intent=Intent.QUIT, count=0))
-                                continue
+                                return
                             current.update(plan.at(t))
                             if alive is not None:
                                 current = {d: c for d, c in current.items() if d in alive}
@@ -534,6 +536,10 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             for ahead in turns_to_answer_ahead(plan, t, answered, last=case.end_turn):
                                 out.put(keys.gcs_done, gcs_done(ahead, {}, Intent.CONTINUE))  # as the scripted GCS
                                 answered = ahead
+
+                # as the scripted ground station: its answers are given on Zenoh's thread (see Inbox.run)
+                inbox.run(handle, timeout=lambda: max(0.0, look - time.monotonic()),
+                          until=lambda: over is not None, inline=lambda event: isinstance(event, Received))
                 game.over = f"{over.reason.value} at turn {over.turn}"
                 member.close()
             game.codes = procs.wait(60.0)

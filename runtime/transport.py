@@ -286,6 +286,7 @@ class Inbox:
         self._resume_by = float("inf")  # when `run`'s thread wakes up at the latest (monotonic)
         self._next: Callable[[], float | None] = lambda: None
         self._until: Callable[[], bool] = lambda: False
+        self._inline: Callable[[Event], bool] = lambda event: True
         self._failure: BaseException | None = None
         self._back: list[Event] = []  # the one event `run` took after its end, for `get`
 
@@ -294,7 +295,7 @@ class Inbox:
         handler = self._handler
         if handler is not None and not self._pending and self._handling.acquire(blocking=False):
             try:
-                if not self._pending and self._handler is not None and not self._until():
+                if not self._pending and self._handler is not None and self._inline(event) and not self._until():
                     self._handle_here(handler, event)
                     return
             finally:
@@ -315,12 +316,13 @@ class Inbox:
             self._q.put(_WAKE)  # type: ignore[arg-type]
 
     def run(self, handler: Callable[[Event | None], None], *, timeout: Callable[[], float | None],
-            until: Callable[[], bool]) -> None:
+            until: Callable[[], bool], inline: Callable[[Event], bool] = lambda event: True) -> None:
         """Hand every event to `handler` (None when `timeout()` seconds pass without one) until `until()`;
-        events are handled one at a time, in order of arrival, on this thread or on Zenoh's (see the
-        class): `handler` must not wait for another message (no blocking query), and an exception it
-        raises on Zenoh's thread is raised here."""
-        self._next, self._until = timeout, until
+        events are handled one at a time, in order of arrival, on this thread or, for those `inline`
+        allows, on Zenoh's (see the class). There `handler` must not wait for another message (no
+        blocking query: Zenoh's thread would not bring its answer); an exception it raises there is
+        raised here."""
+        self._next, self._until, self._inline = timeout, until, inline
         self._handler = handler
         try:
             while True:
