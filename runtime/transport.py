@@ -253,7 +253,8 @@ def check_addressed(keys: Keys, key: str, msg: Message) -> None:
 def _direct(callback: Callable[[object], None]) -> zenoh.handlers.Callback:
     """Run `callback` on Zenoh's receiving thread itself. By default zenoh-python hands each Python
     callback to a thread of its own, and then messages on different keys overtake each other on their
-    way into the inbox; our callbacks only decode and enqueue, so they can run in place, in order."""
+    way into the inbox; our callbacks decode and enqueue (or, under `Inbox.run`, handle the event), so they
+    run in place, in order."""
     return zenoh.handlers.Callback(callback, indirect=False)
 
 
