@@ -444,7 +444,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     from dronesim.scenario import Scenario
     from dronesim.entities.gcs import gcs_done, targets_of, turns_to_answer_ahead
     from dronesim.schema import Connect, Done, Intent, Keys, Over, Phase, Role, Status, Turn, drone_id
-    from dronesim.transport import Event, Inbox, Outbox, Presence, Received, session_id
+    from dronesim.transport import Event, Inbox, Outbox, Presence, Received, inline_for, session_id
 
     import logging
 
@@ -537,9 +537,9 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                                 out.put(keys.gcs_done, gcs_done(ahead, {}, Intent.CONTINUE))  # as the scripted GCS
                                 answered = ahead
 
-                # as the scripted ground station: its answers are given on Zenoh's thread (see Inbox.run)
+                # as the scripted ground station: in a small game, its answers are given on Zenoh's thread
                 inbox.run(handle, timeout=lambda: max(0.0, look - time.monotonic()),
-                          until=lambda: over is not None, inline=lambda event: isinstance(event, Received))
+                          until=lambda: over is not None, inline=inline_for(case.drones))
                 game.over = f"{over.reason.value} at turn {over.turn}"
                 member.close()
             game.codes = procs.wait(60.0)

@@ -21,7 +21,8 @@ from dronesim.schema import (
 from dronesim.schema.errors import WrongSender
 from dronesim.schema.messages import WorldSpec
 from dronesim.transport import (
-    Asked, Event, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
+    Asked, Event, Inbox, Outbox, Presence, Received, add_zenoh_args, inline_for, session_id, setup_logging,
+    zenoh_config,
 )
 
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
@@ -228,8 +229,9 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                 phase = engine.clock()
                 started = time.monotonic()
 
-        # The turn's messages are handled on Zenoh's thread when nothing else is under way (see Inbox.run).
-        inbox.run(handle, timeout=timeout, until=lambda: engine.stage is Stage.OVER)
+        # A small game's messages are handled on Zenoh's thread when nothing else is under way (see Inbox.run).
+        inbox.run(handle, timeout=timeout, until=lambda: engine.stage is Stage.OVER,
+                  inline=inline_for(len(game.drones)))
         # Let OVER reach everyone: wait (on events, bounded) until the admitted entities have left.
         end = time.monotonic() + LINGER_S
         while {e for e, _ in present} - {"SRV"} and time.monotonic() < end:

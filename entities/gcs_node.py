@@ -19,7 +19,9 @@ from dronesim.entity import Membership, add_entity_args
 from dronesim.schema import (
     Connect, Intent, Keys, Over, Phase, Role, Status, Turn, UsageError,
 )
-from dronesim.transport import Event, Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
+from dronesim.transport import (
+    Event, Inbox, Outbox, Presence, Received, add_zenoh_args, inline_for, session_id, setup_logging, zenoh_config,
+)
 
 from .gcs import Ground, Tracks, format_status, gcs_done, parse_command, targets_of, turns_to_answer_ahead
 from .web.node import add_web_args, run_web, wants_web
@@ -146,9 +148,11 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
                 case Received(_, Over() as end):
                     over = end
 
-        # A script's answers are given on Zenoh's thread (see Inbox.run); a console's wait for the user.
+        # A script's answers in a small game are given on Zenoh's thread (see Inbox.run); a console's wait
+        # for the user.
+        small = inline_for(len(drones))
         inbox.run(handle, timeout=member.timeout, until=lambda: over is not None,
-                  inline=lambda event: console is None and isinstance(event, Received))
+                  inline=lambda event: console is None and small(event))
         # STATUS(t) is published before OVER(t) but on another key: it may arrive just after.
         end = time.monotonic() + 5.0
         while (tracks.last is None or tracks.last.turn < over.turn) and time.monotonic() < end:
