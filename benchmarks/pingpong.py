@@ -5,9 +5,9 @@
 As a Zenoh client of the router it answers, on keys under ROOT:
 
 * ``cb/ping`` -> ``cb/pong``: republishes each sample from Zenoh's callback thread (the bare floor; what
-  the coordinator and a scripted ground station do when nothing else is under way, see transport.Inbox.run);
-* ``th/ping`` -> ``th/pong``: hands each sample to the main thread, which republishes it (what a drone
-  process does: its callbacks only enqueue, the main thread acts);
+  the processes of a game of at most 32 drones do when nothing else is under way, see transport.Inbox.run);
+* ``th/ping`` -> ``th/pong``: hands each sample to the main thread, which republishes it (what those of a
+  bigger game do: their callbacks only enqueue, the main thread acts);
 * ``cb/query`` and ``th/query``: queryables replying with the query's payload, from the callback or
   from the main thread.
 

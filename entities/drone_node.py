@@ -37,7 +37,9 @@ from dronesim.schema import (
 from dronesim.schema.errors import OutOfRange
 from dronesim.schema.messages import _KINDS, AROUND, unchecked
 from dronesim.schema.tables import drone_number
-from dronesim.transport import Inbox, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config
+from dronesim.transport import (
+    Event, Inbox, Outbox, Presence, Received, add_zenoh_args, inline_for, session_id, setup_logging, zenoh_config,
+)
 
 from .autopilots import REGISTRY, SWARM_MIN, make_autopilot, make_swarm, pilot_class
 from .autopilots.base import NO_ANSWER, Answers, fly_pilots, fly_swarm
@@ -81,58 +83,72 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                                                     (isinstance(e.msg, Turn) and e.msg.turn > turn))
                        for e in backlog)
 
-        while over is None:
-            first = backlog.pop(0) if backlog else inbox.get(member.timeout())
-            if first is None:
+        def act(turn: Turn) -> None:
+            """The DRONES phase of `turn`: decide (unless it is a repeat) and send the moves."""
+            nonlocal done
+            give_up = functools.partial(superseded, turn.turn)
+            if swarm:  # one pilot over arrays, reading its drones' rows of the orders
+                rows = turn.orders.rows[np.isin(turn.orders.numbers, numbers)]
+                key: tuple = (turn.turn, rows.tobytes())
+                decide = functools.partial(fly_swarm, swarm, rows, lambda cells: asker.kinds(
+                    turn.turn, cells, give_up=give_up))
+            else:
+                orders = turn.orders.orders(mine)
+                key = (turn.turn, orders)
+                decide = functools.partial(fly_pilots, pilots, orders, lambda pending: asker.ask_all(
+                    turn.turn, pending, functools.cache(lambda: occupancy_of(turn.orders)), give_up=give_up),
+                    host=host)
+            fresh = done is None or done[0] != key  # a repeated TURN gets the same moves again
+            if fresh:
+                decided = decide()
+                if superseded(turn.turn):
+                    return  # too late: the game has moved on (the queued events come next)
+                done = (key, decided)
+            moves = done[1]
+            if isinstance(moves, StepTable):  # a swarm host: one message for all its drones
+                if moves:
+                    out.put(keys.moves(host), Moves(turn=turn.turn, sender=host, moves=moves))
+                cells = map(tuple, moves.column("pos").tolist())
+            else:
+                for d, dec in moves.items():
+                    out.put(keys.nps(d), Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note))
+                cells = (dec.pos for dec in moves.values())
+            if fresh and senses and not asker.chart.complete:  # around where its drones mean to be:
+                asker.prefetch(turn.turn, sorted(set(cells)))  # their next sensing, asked ahead
+
+        def handle(event: Event | None) -> None:
+            """Work through everything already queued, acting only on the latest DRONES phase: a process
+            that was frozen or slow catches up instead of planning turns that are long gone."""
+            nonlocal over
+            if event is None:
                 member.check()
-                continue
-            # Work through everything already queued, acting only on the latest DRONES phase: a process
-            # that was frozen or slow catches up instead of planning turns that are long gone.
-            latest: Turn | None = None
-            queued, backlog[:] = [*backlog, *inbox.drain()], []
-            for event in (first, *queued):
-                if not member.clock.screen(event, inbox.rejects):
-                    continue
-                match event:
-                    case Presence() as presence:
-                        member.on_presence(presence)
-                    case Received(_, Turn(phase=Phase.DRONES) as turn):
-                        latest = turn
-                    case Received(_, Over() as end):
-                        over = end
-            if over is not None:
-                logger.info("OVER: %s", over.text)
-            elif latest is not None and latest.turn == member.clock.turn:
-                turn = latest
-                give_up = functools.partial(superseded, turn.turn)
-                if swarm:  # one pilot over arrays, reading its drones' rows of the orders
-                    rows = turn.orders.rows[np.isin(turn.orders.numbers, numbers)]
-                    key: tuple = (turn.turn, rows.tobytes())
-                    decide = functools.partial(fly_swarm, swarm, rows, lambda cells: asker.kinds(
-                        turn.turn, cells, give_up=give_up))
-                else:
-                    orders = turn.orders.orders(mine)
-                    key = (turn.turn, orders)
-                    decide = functools.partial(fly_pilots, pilots, orders, lambda pending: asker.ask_all(
-                        turn.turn, pending, functools.cache(lambda: occupancy_of(turn.orders)), give_up=give_up),
-                        host=host)
-                fresh = done is None or done[0] != key  # a repeated TURN gets the same moves again
-                if fresh:
-                    decided = decide()
-                    if superseded(turn.turn):
-                        continue  # too late: the game has moved on (the queued events come next)
-                    done = (key, decided)
-                moves = done[1]
-                if isinstance(moves, StepTable):  # a swarm host: one message for all its drones
-                    if moves:
-                        out.put(keys.moves(host), Moves(turn=turn.turn, sender=host, moves=moves))
-                    cells = map(tuple, moves.column("pos").tolist())
-                else:
-                    for d, dec in moves.items():
-                        out.put(keys.nps(d), Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note))
-                    cells = (dec.pos for dec in moves.values())
-                if fresh and senses and not asker.chart.complete:  # around where its drones mean to be:
-                    asker.prefetch(turn.turn, sorted(set(cells)))  # their next sensing, asked ahead
+                return
+            events = [event, *inbox.drain()]
+            while events:
+                backlog.clear()
+                latest: Turn | None = None
+                for ev in events:
+                    if not member.clock.screen(ev, inbox.rejects):
+                        continue
+                    match ev:
+                        case Presence() as presence:
+                            member.on_presence(presence)
+                        case Received(_, Turn(phase=Phase.DRONES) as turn):
+                            latest = turn
+                        case Received(_, Over() as end):
+                            over = end
+                if over is not None:
+                    logger.info("OVER: %s", over.text)
+                    return
+                if latest is not None and latest.turn == member.clock.turn:
+                    act(latest)
+                events = [*backlog, *inbox.drain()]  # what came while it decided
+
+        # In a small game, a TURN is handled on Zenoh's thread when the drones can decide without asking the
+        # environment (see Inbox.run): every answer then comes from the chart, and nothing waits for a reply.
+        small = inline_for(len(drones))
+        inbox.run(handle, timeout=member.timeout, until=lambda: over is not None,
+                  inline=lambda event: small(event) and asker.offline)
         asker.close()
         member.close()
         return over
@@ -155,6 +171,11 @@ class Asker:
         self._ahead: list[tuple[Ask, object]] = []  # static ASKs (turn 0) sent ahead, and their reply handlers
         self._map_asked: list[int] = []  # the turns in which the map was asked
         self._map = None  # the reply handler of the MAP query on its way
+
+    @property
+    def offline(self) -> bool:
+        """Does it answer everything from its chart, with no reply to wait for (the whole map charted)?"""
+        return self.chart.complete and not self._ahead
 
     def _ask_map(self, turn: int):
         self._map_asked.append(turn)
