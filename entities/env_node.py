@@ -38,13 +38,13 @@ from dronesim.transport import (
     Asked, Inbox, Matching, Outbox, Presence, Received, add_zenoh_args, session_id, setup_logging, zenoh_config,
 )
 
-from .environment import FOLLOW_TURNS, Environment, Following, build_world
+from .environment import Environment, Following, build_world
 
 _ans = unchecked(Ans)
 
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
-         connect_timeout: float = 30.0, grace: float = 30.0, follow_turns: int = FOLLOW_TURNS) -> Over:
+         connect_timeout: float = 30.0, grace: float = 30.0) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
         out = Outbox(session)
@@ -68,7 +68,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         over: Over | None = None
         unsynced: Status | None = None  # the last STATUS, until the drones' positions are needed
         taken: int | None = None  # the turn of the last STATUS taken
-        following = Following(follow_turns)
+        following = Following()
         statuses = None  # the subscription to STATUS, held while `following` wants it
         env_phase = None  # the subscription to the ENV phase, held while someone listens to the UPD
 
@@ -108,8 +108,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                 env_phase = None
             follow()
 
-        out.watch(keys.upd, inbox)
-        listened(out.matching(keys.upd))
+        out.watch(keys.upd, inbox)  # (a first Matching event at once if someone already listens)
 
         def apply(turn: Turn) -> None:
             nonlocal applied

@@ -258,6 +258,17 @@ def _direct(callback: Callable[[object], None]) -> zenoh.handlers.Callback:
     return zenoh.handlers.Callback(callback, indirect=False)
 
 
+_EVERY_REPLY = zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE)
+
+
+def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Message], ...]) -> Message:
+    """A query's reply, decoded (RemoteInputError on an error reply or a malformed one)."""
+    if reply.ok is None:
+        raise RemoteInputError(f"{key} answered an error: {reply.err.payload.to_bytes().decode(errors='replace')}",
+                               reason="error-reply")
+    return decode(reply.ok.payload.to_bytes(), expect)
+
+
 #: Games of at most this many drones have their turn's messages handled on Zenoh's thread (`Inbox.run`'s
 #: `inline`): a small game's turn is mostly handoffs between threads. A big game's messages, and the work
 #: they cause, are big: done on Zenoh's threads (which come and go, each with its own allocator arena) they
@@ -432,18 +443,13 @@ class Inbox:
 
         def on_reply(reply: zenoh.Reply) -> None:
             def handle() -> None:
-                if reply.ok is None:
-                    raise RemoteInputError(f"{key} answered an error: "
-                                           f"{reply.err.payload.to_bytes().decode(errors='replace')}",
-                                           reason="error-reply")
-                got = decode(reply.ok.payload.to_bytes(), expect)
+                got = _answer(key, reply, expect)
                 check_addressed(self.keys, key, got)
                 self._deliver(Received(key, got))
 
             self._guard(key, handle)
 
-        self.session.get(key, _direct(on_reply), payload=encode(msg), timeout=timeout,
-                         consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+        self.session.get(key, _direct(on_reply), payload=encode(msg), timeout=timeout, consolidation=_EVERY_REPLY)
 
     def watch_presence(self, entity: str | None = None) -> None:
         """Presence events for every process (or only `entity`'s), starting with those already there."""
@@ -527,13 +533,8 @@ class Outbox:
 def request(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
             timeout: float) -> Message:
     """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none)."""
-    replies = session.get(key, payload=encode(msg), timeout=timeout,
-                          consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
-    for reply in replies:
-        if reply.ok is not None:
-            return decode(reply.ok.payload.to_bytes(), expect)
-        raise RemoteInputError(f"{key} answered an error: {reply.err.payload.to_bytes().decode(errors='replace')}",
-                               reason="error-reply")
+    for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=_EVERY_REPLY):
+        return _answer(key, reply, expect)
     raise TimeoutError(f"no answer on {key} within {timeout:.1f} s")
 
 
