@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import datetime
 import importlib
+import os
+import platform
 import re
+import shlex
 import sys
 from pathlib import Path
 
 #: benchmark name -> module (each has ``main(argv) -> int``).
-BENCHMARKS = {"autopilot": "autopilot", "perf": "perf"}
+BENCHMARKS = {"autopilot": "autopilot", "flood": "flood", "perf": "perf", "rl": "rl", "swarm": "swarm"}
 
 
 def cli(argv: list[str] | None = None) -> int:
@@ -37,3 +41,13 @@ def add_write_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--write", action="store_true", help="update the section in BENCHMARKS.md")
     parser.add_argument("--output", type=Path, default=Path(__file__).resolve().parent.parent / "BENCHMARKS.md",
                         help="file --write updates (default: the repository's BENCHMARKS.md)")
+
+
+def command_line(name: str, argv: list[str] | None, seconds: float) -> str:
+    """The first line of a recorded table: the command that made it (`argv`, default the process's), when, on
+    what, and how long it took."""
+    args = " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+    command = f"dronesim bench {name} {args}".strip()
+    return (f"Command: `{command}`, run "
+            f"{datetime.date.today().isoformat()} on {platform.machine()} with nproc = {os.cpu_count()} "
+            f"(Python {platform.python_version()}), {seconds:.0f} s in all.")

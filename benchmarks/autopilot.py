@@ -23,10 +23,6 @@ excluded), per step, on the 64x64x16 episodes.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import os
-import platform
-import shlex
 import statistics
 import sys
 import time
@@ -36,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dronesim.entities.autopilots import REGISTRY, make_autopilot
-from dronesim.entities.world import World
-from dronesim.schema import Cell, Note
-from dronesim.benchmarks import add_write_args, replace_section
+from benchmarks import add_write_args, command_line, replace_section
+from entities.autopilots import REGISTRY, make_autopilot
+from entities.world import World
+from schema import Cell, Note
 
 SECTION = "## Autopilot benchmark"
 BIG = (64, 64, 16)
@@ -212,7 +208,10 @@ class Result:
 def run_episode(pilot: object, ep: Episode) -> Result:
     world = ep.world
     res = Result(ep)
-    oracle: Callable[[tuple[Cell, ...]], dict] = lambda cells: {c: world.what_inside(c) for c in cells}
+
+    def oracle(cells: tuple[Cell, ...]) -> dict:
+        return {c: world.what_inside(c) for c in cells}
+
     pos = ep.start
     hover_left = -1
     clock = time.perf_counter
@@ -356,7 +355,7 @@ def _factory(name: str) -> Callable[[Cell], object] | None:
     if not variant:
         return lambda size: make_autopilot(base, world_size=size)
     # Ablations of dstar: "dstar:la=0,rounds=1".
-    from dronesim.entities.autopilots.dstar import DStarPilot
+    from entities.autopilots.dstar import DStarPilot
 
     opts = dict(kv.split("=") for kv in variant.split(","))
     la = int(opts.get("la", DStarPilot.LOOKAHEAD))
@@ -385,7 +384,8 @@ def main(argv: list[str] | None = None) -> int:
         names += ["dstar:la=0,rounds=1", "dstar:rounds=1"]
     episodes = suite(args.seed, quick=args.quick)
     reachable = sum(e.optimal is not None for e in episodes)
-    print(f"{len(episodes)} episodes ({reachable} reachable, {len(episodes) - reachable} unreachable), seed {args.seed}")
+    print(f"{len(episodes)} episodes ({reachable} reachable, {len(episodes) - reachable} unreachable), "
+          f"seed {args.seed}")
 
     summaries: list[Summary] = []
     results: dict[str, list[Result]] = {}
@@ -408,11 +408,8 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(detail)
     if args.write:
-        cmd = "dronesim bench autopilot " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
         body = (
-            f"Command: `{cmd.strip()}`, run {_dt.date.today().isoformat()} on {platform.machine()} "
-            f"with nproc = {os.cpu_count()} (Python {platform.python_version()}), "
-            f"{time.perf_counter() - t_start:.0f} s in all.\n\n"
+            f"{command_line('autopilot', argv, time.perf_counter() - t_start)}\n\n"
             f"{len(episodes)} episodes, {reachable} reachable: random dense cities of 10x10x10, 32x32x8 and "
             "64x64x16 (random start and target, plus one target inside a building per world) and hand-made hard "
             "cases (U-shaped walls, a dead-end pocket, a serpentine, enclosed targets, a sealed start, targets "

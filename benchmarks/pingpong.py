@@ -1,13 +1,12 @@
 """The far end of the Zenoh floor measurement in `dronesim bench perf` (a separate process).
 
-    python -m dronesim.benchmarks.pingpong --connect tcp/127.0.0.1:PORT --root ROOT
+    python -m benchmarks.pingpong --connect tcp/127.0.0.1:PORT --root ROOT
 
 As a Zenoh client of the router it answers, on keys under ROOT:
 
-* ``cb/ping`` -> ``cb/pong``: republishes each sample from Zenoh's callback thread (the bare floor; what
-  the processes of a game of at most 32 drones do when nothing else is under way, see transport.Inbox.run);
-* ``th/ping`` -> ``th/pong``: hands each sample to the main thread, which republishes it (what those of a
-  bigger game do: their callbacks only enqueue, the main thread acts);
+* ``cb/ping`` -> ``cb/pong``: republishes each sample from Zenoh's callback thread (the bare floor);
+* ``th/ping`` -> ``th/pong``: hands each sample to the main thread, which republishes it (what every
+  process of a game does: its callbacks only enqueue, the main thread acts, see dronesim/transport.py);
 * ``cb/query`` and ``th/query``: queryables replying with the query's payload, from the callback or
   from the main thread.
 
@@ -26,7 +25,7 @@ import zenoh
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m dronesim.benchmarks.pingpong", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.pingpong", description=__doc__.split("\n")[0])
     p.add_argument("--connect", required=True, help="the router's endpoint, e.g. tcp/127.0.0.1:7447")
     p.add_argument("--root", required=True, help="key root of this measurement")
     args = p.parse_args(argv)
@@ -49,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
             query.reply(query.key_expr, query.payload.to_bytes() if query.payload is not None else b"")
             query.drop()
 
-        handles = [
+        handles: list[zenoh.Subscriber | zenoh.Queryable] = [
             session.declare_subscriber(f"{r}/cb/ping", lambda s: pub_cb.put(s.payload.to_bytes())),
             session.declare_subscriber(f"{r}/th/ping", lambda s: jobs.put(("pub", s.payload.to_bytes()))),
             session.declare_queryable(f"{r}/cb/query", on_query_cb, complete=True),

@@ -75,12 +75,50 @@ def python() -> Path:
     return exe
 
 
+#: Run inside POGEMA's environment: steps per second of its PettingZoo integration (`parallel_env`, a dict of
+#: actions per step) for each agent count, timing the step calls alone (the random actions are drawn before).
+_PARALLEL_SCRIPT = """
+import json, sys, time
+import numpy as np
+from pogema import GridConfig
+from pogema.integrations.pettingzoo import parallel_env
+
+agents, seconds, size, density, radius = json.loads(sys.argv[1])
+rng = np.random.default_rng(0)
+out = {}
+for n in agents:
+    env = parallel_env(GridConfig(size=size, num_agents=n, density=density, obs_radius=radius, seed=1,
+                                  max_episode_steps=10**9, on_target="nothing"))
+    env.reset(seed=1)
+    steps, spent = 0, 0.0
+    while spent < seconds:
+        actions = dict(zip(env.agents, rng.integers(0, 5, size=len(env.agents)).tolist()))
+        t0 = time.perf_counter()
+        env.step(actions)
+        if steps >= 20:  # after a warm-up
+            spent += time.perf_counter() - t0
+        steps += 1
+    out[n] = (steps - 20) / spent
+print(json.dumps(out))
+"""
+
+
 def steps_per_second(agents: list[int], seconds: float = 2.0) -> dict[int, float]:
     """POGEMA's steps per second with each number of `agents` (random actions, 64x64, in-process)."""
+    return _run(_SCRIPT, agents, seconds)
+
+
+def parallel_steps_per_second(agents: list[int], seconds: float = 2.0) -> dict[int, float]:
+    """The steps per second of POGEMA's PettingZoo integration with each number of `agents` (the same
+    scenario as `steps_per_second`; step calls alone)."""
+    return _run(_PARALLEL_SCRIPT, agents, seconds)
+
+
+def _run(script: str, agents: list[int], seconds: float) -> dict[int, float]:
     exe = python()
     args = json.dumps([agents, seconds, SIZE, DENSITY, OBS_RADIUS])
     try:
-        done = subprocess.run([str(exe), "-c", _SCRIPT, args], capture_output=True, text=True,
+        done = subprocess.run([str(exe), "-c", script, args], capture_output=True, text=True,
                               timeout=60 + 4 * seconds * len(agents), stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
         raise Unavailable("POGEMA did not finish in time") from None

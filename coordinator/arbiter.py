@@ -1,26 +1,56 @@
-"""Move arbitration for drones that avoid each other: propose, then resolve by a fixed priority.
+"""Move arbitration for drones that avoid each other: cooperative drones never collide with each other.
 
-Every drone proposes its move in the DRONES phase (all in parallel, one round trip). Before the moves
-are applied, cooperative drones (those whose autopilot asked for arbitration) give way, so that no two
-of them ever share a cell or swap cells:
+Every drone proposes its move in the DRONES phase (all in parallel, one round trip); the coordinator, where
+every proposal meets, settles the cooperative drones' moves alone before applying them (no extra round trip).
+
+The arbitration in force is `cooperate`, PIBT (Okumura et al., "Priority Inheritance with Backtracking for
+Iterative Multi-agent Path Finding", IJCAI 2019 / AIJ 2022) over the cells each drone offers
+(docs/cooperation.md has the design and what it guarantees):
+
+- each cooperative drone offers a ranked list of candidate cells (its NPS's `ranked`: steps from its cell,
+  best first, staying among them), from its own planner's distances; one that offers none offers its move;
+- non-cooperative drones (the seed's V1 and smart drones) move as they said, and may still collide: their
+  destinations are taken first, and no cooperative drone enters one or swaps cells with them;
+- cooperative drones then choose in priority order (the engine's: higher first, ties by id): each takes its
+  best candidate that no one has taken and that is no swap; if another cooperative drone that has not chosen
+  yet stands there, that drone inherits the priority and must move to one of ITS candidates first (not back
+  into the cell of the one that pushes it, and, if it can, not straight on ahead of it: out of its way);
+  if it cannot, the request fails and the pusher tries its next candidate (backtracking);
+- a drone whose every candidate fails stays where it is. Staying is always allowed: PIBT only takes a
+  drone's cell once that drone has been moved out of it (only a non-cooperative drone's move can force
+  one out, and then it may die with it).
+
+So a cooperative drone only ever moves to a cell it offered (or stays), no two cooperative drones share a
+cell or swap cells, and the result is a function of the inputs (a total order on ties), whatever the order
+in which proposals arrived.
+
+`arbitrate` is the former rule, kept for the benchmark (`dronesim bench swarm` compares them): a fixed
+priority (the id) over one proposed move per drone.
 
 - a cooperative drone whose destination is claimed by a drone that does not give way (a non-cooperative
   drone, a hovering drone, or a cooperative one with a smaller id) hovers instead;
 - so does one whose move would swap cells with such a drone;
 - hovering can in turn block a drone that was following it, so the rule is applied until nothing changes
   (moves only ever turn into hovers, so this ends after at most N passes).
-
-Non-cooperative drones (the seed's V1 and smart drones) move as they said, and may still collide: the
-observer judges them. Priority is the drone id: a total order, so the result never depends on the order
-in which proposals arrived. No extra network round trip: the coordinator resolves it alone.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Mapping, Set
+from collections.abc import Callable, Mapping, Set
+from typing import Any
 
-from dronesim.schema import Cell
+import numpy as np
+
+from schema import Cell
+from schema.tables import RANK_STEPS, RANKED_LIMIT
+
+#: Most candidates a drone may offer (its 6 neighbours and its own cell).
+MOST = len(RANK_STEPS)
+#: An arbitration as the engine calls it: (world size, before, proposed, ranked, cooperative, priority,
+#: targets, open cells) -> (final cells, yielded, gave way); `cooperate` documents the arguments.
+Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, "OpenCells | None"],
+                   tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperative: Set[str]) -> dict[str, Cell]:
@@ -47,3 +77,339 @@ def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperat
                 claims[src].append(d)
                 changed = True
     return final
+
+
+def flat_cells(cells: np.ndarray, size: Cell) -> np.ndarray:
+    """Cells ((n, 3), each coordinate in -1..size: one step off the world at most) as one integer each, on
+    the world padded by one cell each side, so that a step is an addition (`steps_flat`)."""
+    _, Y, Z = size
+    c = cells.astype(np.int64) + 1
+    return (c[:, 0] * (Y + 2) + c[:, 1]) * (Z + 2) + c[:, 2]
+
+
+class OpenCells:
+    """The world's open cells (not a building) as the arbiter reads them: `open[u]` is 1 where the cell of flat
+    number u (`flat_cells`: the world padded by one blocked cell each side) is open, else 0. One bit a cell, an
+    eighth of the world's own array, made a slab at a time (never a padded copy of the world, even for a moment:
+    the coordinator's peak memory counts it). The buildings are static: the engine makes it once."""
+
+    __slots__ = ("_bits",)
+
+    SLAB = 8 * 512  # cells made at a time (a multiple of 8: whole bytes; its index arrays: a few 32 KiB)
+
+    def __init__(self, grid: np.ndarray) -> None:
+        X, Y, Z = grid.shape
+        solid = np.ascontiguousarray(grid, bool).reshape(-1)
+        total = -(-(X + 2) * (Y + 2) * (Z + 2) // 8) * 8
+        bits = bytearray(total // 8)
+        for start in range(0, total, self.SLAB):
+            u = np.arange(start, min(start + self.SLAB, total))
+            z, rest = u % (Z + 2) - 1, u // (Z + 2)
+            y, x = rest % (Y + 2) - 1, rest // (Y + 2) - 1
+            inside = (x >= 0) & (x < X) & (y >= 0) & (y < Y) & (z >= 0) & (z < Z)
+            free = np.zeros(len(u), bool)
+            free[inside] = ~solid[((x * Y + y) * Z + z)[inside]]
+            bits[start // 8:(start + len(u)) // 8] = np.packbits(free, bitorder="little").tobytes()
+        self._bits = bytes(bits)
+
+    def __getitem__(self, u: int) -> int:
+        return self._bits[u >> 3] >> (u & 7) & 1
+
+
+def open_cells(grid: np.ndarray) -> OpenCells:
+    """The world's open cells as the arbiter reads them (`OpenCells`)."""
+    return OpenCells(grid)
+
+
+def cells_of(flat: np.ndarray, size: Cell) -> np.ndarray:
+    """`flat_cells` undone: (n, 3) int32."""
+    _, Y, Z = size
+    xy, z = np.divmod(flat, Z + 2)
+    x, y = np.divmod(xy, Y + 2)
+    return (np.stack([x, y, z], axis=1) - 1).astype(np.int32)
+
+
+def steps_flat(size: Cell) -> np.ndarray:
+    """The flat offset of each rank code (0: none, -1 here; k + 1: RANK_STEPS[k])."""
+    _, Y, Z = size
+    return np.array([0] + [(dx * (Y + 2) + dy) * (Z + 2) + dz for dx, dy, dz in RANK_STEPS], np.int64)
+
+
+def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell,
+               targets: np.ndarray | None = None) -> np.ndarray:
+    """Each drone's candidate cells, flat, in the order the arbiter tries them ((n, MOST), -1 after the last):
+    its ranked steps from `here` (flat), or, where it ranked none, its `proposed` cell (flat) alone.
+
+    A drone that ranks its own cell says which cells are as good as each other: on a grid every neighbour is
+    one step closer to the target or one step farther, so the cells it ranks before staying are equally good,
+    and so are those after. Within each of those two groups the arbiter tries first the cells where no drone
+    stands (going round a drone beats pushing it when both are as short: a drone parked on its target is left
+    alone when a way round is as good), then those that are no other drone's target (`targets`, flat, -1 for
+    none: a drone pushed aside steps off the way of one going home rather than onto its home), then in the
+    drone's order."""
+    n = len(here)
+    codes = (ranked.astype(np.int64)[:, None] >> (3 * np.arange(MOST))) & 7
+    cand = np.where(codes > 0, here[:, None] + steps_flat(size)[codes], -1)
+    none = ranked == 0
+    cand[none, 0] = proposed[none]
+    col = np.arange(MOST)
+    stay = cand == here[:, None]
+    ranks_stay = stay.any(axis=1)
+    where = np.where(ranks_stay, stay.argmax(axis=1), MOST)[:, None]
+    occupied = np.isin(cand, here) & ~stay
+    theirs = np.zeros_like(occupied) if targets is None else \
+        np.isin(cand, targets[targets >= 0]) & (cand != targets[:, None])
+    key = np.where(ranks_stay[:, None], (col > where) * 32 + (col == where) * 16 + occupied * 8 + theirs * 4, 0) + col
+    key = np.where(cand < 0, 64 + col, key)
+    return np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1) if n else cand
+
+
+def wants_first(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell) -> np.ndarray:
+    """Each drone's first choice, flat: its first ranked step's cell, or its proposed cell."""
+    first = (ranked.astype(np.int64) & 7)
+    return np.where(first > 0, here + steps_flat(size)[first], proposed)
+
+
+def pibt(here: list[int], cand: list[list[int]], order: list[int], taken: list[int],
+         world: tuple[OpenCells, list[int], list[int]] | None = None) -> tuple[list[int], list[int]]:
+    """PIBT over flat cells: the next cell of each drone, and the drones that gave way.
+
+    `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them);
+    `order`: the drones that choose (cooperative), highest priority first; `taken[i]`: the next cell of a
+    drone that does not choose (non-cooperative: fixed in advance), -1 for those that choose; `world`: the
+    world's open cells (`open_cells`), the flat steps to a neighbour and each drone's target (flat, -1 for
+    none), for the swap (None: no swap).
+
+    A drone gives way when, choosing first in its push chain, it could not have its first candidate
+    although no drone outside the chain took a cell the chain needed: the drones it tried to push had
+    nowhere to go (a dead end, a drone at rest in a pocket). The engine then puts it behind them for the
+    next turn (its priority goes back to zero), so that they push it back instead, towards a place where
+    they can pass (docs/cooperation.md). A drone that swapped (`_swapped`) did not give way: it leads.
+    """
+    nxt = list(taken)
+    now = {c: i for i, c in enumerate(here)}
+    claimed = {c: i for i, c in enumerate(nxt) if c >= 0}
+    corridors = None if world is None else Corridors(world[0], world[1], now, world[2])
+    gave_way = []
+    for root in order:
+        if nxt[root] >= 0:
+            continue  # moved already, pushed by a drone of higher priority
+        # One PIBT call, iterative (a push chain may be as long as the swarm): frames of [drone, its
+        # candidates, the next one to try, the drone it pulls if it swaps (-1: none)]; `ok` is the last
+        # finished call's result.
+        first, partner = cand[root], -1
+        if corridors is not None and now.get(first[0], root) != root:  # its best cell holds a drone: a swap?
+            first, partner = _swapped(root, first, here, cand, nxt, now, corridors)
+        stack: list[list[Any]] = [[root, first, 0, partner]]
+        chain = {root}
+        contested = False  # a drone outside the chain took a cell the chain wanted
+        led = partner >= 0  # the root swaps: it leads the other one out of a corridor
+        ok = None
+        while stack:
+            frame = stack[-1]
+            i, mine, k, pull = frame
+            if ok:  # the drone it pushed moved away: so does it
+                if pull >= 0 and k == 1:
+                    _pull(i, pull, here, cand, nxt, claimed)
+                chain.discard(stack.pop()[0])
+                continue
+            ok = None
+            src = here[i]
+            pushed = False
+            while k < len(mine):
+                v = mine[k]
+                k += 1
+                if v < 0:
+                    break
+                if v in claimed:
+                    contested = contested or claimed[v] not in chain
+                    continue
+                j = now.get(v)
+                if j is not None and j != i and nxt[j] == src:  # a swap
+                    contested = contested or j not in chain
+                    continue
+                nxt[i] = v
+                claimed[v] = i
+                if j is not None and j != i and nxt[j] < 0:  # priority inheritance: j must make room
+                    frame[2] = k
+                    theirs, pulls = _out_of_the_way(cand[j], here[j], v - src + here[j]), -1
+                    if corridors is not None and now.get(theirs[0], j) != j:
+                        theirs, pulls = _swapped(j, theirs, here, cand, nxt, now, corridors)
+                    stack.append([j, theirs, 0, pulls])
+                    chain.add(j)
+                    pushed = True
+                    break
+                if pull >= 0 and k == 1:
+                    _pull(i, pull, here, cand, nxt, claimed)
+                ok = True
+                break
+            if pushed:
+                continue
+            if not ok:  # every candidate failed: it stays (its cell is its own, see the module's doc)
+                nxt[i] = src
+                claimed[src] = i
+                ok = False
+            chain.discard(stack.pop()[0])
+        if not contested and not led and nxt[root] != cand[root][0]:
+            gave_way.append(root)
+    return nxt, gave_way
+
+
+class Corridors:
+    """What PIBT's swap needs to know of the world (Okumura, "Improving LaCAM for Scalable Eventually Optimal
+    Multi-Agent Pathfinding", IJCAI 2023): which cells are open, and the drones' targets.
+
+    PIBT pushes: a drone that wants the cell of another makes it move on ahead. In a corridor one cell wide
+    that ends (a dead end) or that holds the pusher's target, with the other drone wanting out the way the
+    pusher comes, pushing only drives the other drone to the end and back, for ever. The swap: the pusher
+    walks back instead, to the nearest junction behind it, pulling the other drone after it (the other one
+    takes the cell it leaves, which it wanted); at the junction the other one steps aside, and both go on.
+    Whether it is needed and possible is read from the world's open cells along the corridor (a cell of
+    which the way on is one cell: a corridor; none: its end; two or more: a junction), a dead end held by a
+    drone on its own target counting as closed (and, for the junction where they pass, one held by any drone:
+    a drone in a pocket cannot make room there). The arbiter still moves a drone only to a cell it offered."""
+
+    __slots__ = ("open", "steps", "now", "goal")
+
+    def __init__(self, open_: OpenCells, steps: list[int], now: dict[int, int], goal: list[int]) -> None:
+        self.open, self.steps, self.now, self.goal = open_, steps, now, goal
+
+    def ways(self, v: int, back: int, parked: bool) -> list[int]:
+        """The open neighbours of v other than `back` through which a drone can go on (two at most: then v is a
+        junction): every open one but a dead end (a pocket one cell deep) held by a drone on its own target, or
+        by any drone if not `parked` (to pass there: a drone in a pocket could only come out into v)."""
+        out = []
+        is_open, now, goal = self.open, self.now, self.goal
+        for d in self.steps:
+            u = v + d
+            if u == back or not is_open[u]:
+                continue
+            k = now.get(u)
+            if k is not None and (not parked or goal[k] == u) and sum(is_open[u + e] for e in self.steps) == 1:
+                continue
+            out.append(u)
+            if len(out) == 2:
+                break  # a junction: its other ways do not matter
+        return out
+
+    def required(self, i: int, j: int, vi: int, vj: int) -> bool:
+        """Whether pushing j (at vj, wanting vi) on ahead of i (at vi, wanting vj) cannot let i pass: beyond vj
+        is a corridor up to its end, or to i's target, with no other drone in it, and j's target is neither in it
+        nor vi. (With more drones in the corridor, pulling one at a time brings them back in turn: pushing them
+        to the end, where i gives way, is what lets them all out.)"""
+        gi, gj = self.goal[i], self.goal[j]
+        if gj < 0:
+            return False
+        a, b = vi, vj
+        walked = {b}
+        while True:
+            on = self.ways(b, a, True)
+            if len(on) >= 2:
+                return False  # a junction: j can be pushed aside there
+            if not on:
+                break  # the corridor's end
+            a, b = b, on[0]
+            if b in walked or b in self.now:
+                return False  # a ring: j goes round; another drone beyond j: pulling j alone lets i by no more
+            walked.add(b)
+            if a == gi:
+                break  # i's target: i stops here, j is in the way beyond it
+        return gj != vi and gj not in walked  # (pulled onto its target, j would park in i's way again)
+
+    def possible(self, vj: int, vi: int) -> bool:
+        """Whether a junction lies behind vi (away from vj) that the two can reach along the corridor."""
+        a, b = vj, vi
+        walked = {b}
+        while True:
+            on = self.ways(b, a, False)
+            if len(on) >= 2:
+                return True
+            if not on:
+                return False
+            a, b = b, on[0]
+            if b in walked or b == vj:
+                return False
+            walked.add(b)
+
+
+def _swapped(i: int, mine: list[int], here: list[int], cand: list[list[int]], nxt: list[int], now: dict[int, int],
+             corridors: Corridors | None) -> tuple[list[int], int]:
+    """Drone i's candidates as it tries them, and the drone it pulls (-1: none). If its best cell holds a drone
+    j that has not moved yet, wants i's cell, and can only pass i at a junction behind i (`Corridors`), i
+    swaps: it tries its cells in reverse (those it ranks after staying, staying, then the others), and pulls
+    j into its cell if it gets the first of them."""
+    v = mine[0]
+    src = here[i]
+    if corridors is None or v < 0 or v == src or src not in mine:
+        return mine, -1
+    j = now.get(v)
+    if j is None or j == i or nxt[j] >= 0:
+        return mine, -1
+    theirs = cand[j]
+    if src not in theirs or v not in theirs or theirs.index(src) > theirs.index(v):
+        return mine, -1  # j does not want i's cell
+    if not (corridors.required(i, j, src, v) and corridors.possible(v, src)):
+        return mine, -1
+    cut = mine.index(src)
+    return [c for c in mine[cut + 1:] if c >= 0] + [src] + mine[:cut], j
+
+
+def _pull(i: int, j: int, here: list[int], cand: list[list[int]], nxt: list[int], claimed: dict[int, int]) -> None:
+    """i swapped and moved back: j, if it has not moved and i's cell is free, takes it (it offered it)."""
+    src = here[i]
+    if nxt[j] < 0 and src not in claimed and src in cand[j]:
+        nxt[j] = src
+        claimed[src] = j
+
+
+def _out_of_the_way(mine: list[int], src: int, ahead: int) -> list[int]:
+    """A pushed drone's candidates: its own order, but the cell straight ahead of the one pushing it (where
+    the pusher would push it again next turn) after the others it ranks below staying, if it ranks it there:
+    a side step (a bay, another floor) gets it out of the way for good."""
+    if ahead not in mine or src not in mine or mine.index(ahead) < mine.index(src):
+        return mine
+    return [c for c in mine if c != ahead and c >= 0] + [ahead]
+
+
+def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray, cooperative: np.ndarray,
+              priority: np.ndarray, targets: np.ndarray | None = None, open_: OpenCells | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The drones' cells after the turn's moves, arbitrated by PIBT; which cooperative drones did not get
+    their first candidate (yielded); which gave way (see `pibt`). Row i is one alive drone (rows in id
+    order): where it is (`before`, (n, 3)), the move it proposed (`proposed`), its ranked steps (`ranked`,
+    (n,) as in an NPS, 0: none), whether it cooperates, its priority (higher first; ties: the smaller row) and
+    its target (`targets`, (n, 3), (-1, -1, -1) for none; None: nobody's known); the world's open cells
+    (`open_cells`; None: unknown, then no swap)."""
+    n = len(before)
+    assert not n or int(ranked.max()) < RANKED_LIMIT
+    here = flat_cells(before, size)
+    wants = flat_cells(proposed, size)
+    goals = None if targets is None else np.where(targets[:, 0] >= 0, flat_cells(targets, size), -1)
+    cand = candidates(here, ranked, wants, size, goals)
+    taken = np.where(cooperative, -1, wants)
+    coop = np.flatnonzero(cooperative)
+    order = coop[np.lexsort((coop, -priority[coop].astype(np.int64)))]
+    world = None if open_ is None or goals is None else \
+        (open_, [d for d in steps_flat(size)[1:].tolist() if d], goals.tolist())
+    chosen, gave = pibt(here.tolist(), cand.tolist(), order.tolist(), taken.tolist(), world)
+    nxt = np.array(chosen, np.int64)
+    final = np.where(cooperative[:, None], cells_of(nxt, size), proposed)
+    yielded = cooperative & (nxt != wants_first(here, ranked, wants, size))
+    gave_way = np.zeros(n, bool)
+    gave_way[gave] = True
+    gave_way &= yielded  # one that got the cell it ranked first (not its first to try) did not give way
+    return final.astype(np.int32), yielded, gave_way
+
+
+def fixed(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray, cooperative: np.ndarray,
+          priority: np.ndarray, targets: np.ndarray | None = None, open_: OpenCells | None = None
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The former arbitration (`arbitrate`: one proposed move per drone, a fixed priority, the id) with
+    `cooperate`'s signature and results, for the benchmark: rankings, priorities, targets and the world are ignored,
+    nobody gives way."""
+    ids = [f"{i:08d}" for i in range(len(before))]  # rows as names that sort as the rows (the id order)
+    wants: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, proposed.tolist())}
+    was: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, before.tolist())}
+    done = arbitrate(was, wants, {ids[i] for i in np.flatnonzero(cooperative).tolist()})
+    final = np.array([done[i] for i in ids], np.int32).reshape(len(ids), 3)
+    return final, (final != proposed).any(axis=1), np.zeros(len(ids), bool)

@@ -1,8 +1,11 @@
-"""The turn engine: admission, the lockstep turn cycle and the observer, as a pure state machine.
+"""The turn engine: the lockstep turn cycle and the observer, as a pure state machine.
 
 No network and no clock here. The Zenoh adapter (coordinator/node.py) feeds it validated messages,
 expired deadlines and vanished entities, one at a time from one thread, and carries out the effects
-it returns (publish, reply to a CONNECT query, append to the journal).
+it returns (publish, reply to a CONNECT query, append to the journal, count a refused input: input
+that cannot be accepted changes nothing and comes back as a `Refusal`, never as an exception). Who may
+join is admission.py's (the engine starts the game once everyone is there); a game restarted from its
+journal is resume.py's.
 
 One turn (the seed's cycle GCS -> D01 -> ENV -> OBS -> GCS):
 
@@ -31,34 +34,49 @@ import hashlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from dronesim.schema import (
-    AimTable, Cause, Cell, CellKind, Connect, Done, DroneState, EndReason, Intent, Message, Moves, MoveTable, Note, Nps,
-    OrderTable, Over, Phase, Refused, RemoteInputError, Role, StartTable, Status, StatusTable, Target, Turn, Upd, Welcome, WorldSpec, encode,
+from entities.environment import build_world
+from entities.world import World, inside_rows, linear_rows
+from schema import (
+    AimTable,
+    Cause,
+    Cell,
+    CellKind,
+    Connect,
+    Done,
+    DroneState,
+    EndReason,
+    Intent,
+    Message,
+    Moves,
+    MoveTable,
+    Note,
+    Nps,
+    Over,
+    Phase,
+    Refused,
+    RemoteInputError,
+    Role,
+    StartTable,
+    Status,
+    Target,
+    Turn,
+    Upd,
+    Welcome,
+    WorldSpec,
+    encode,
 )
-from dronesim.entities.environment import build_world
-from dronesim.entities.world import World, inside_rows
-from dronesim.schema.messages import is_drone_id, is_host_id, unchecked
-from dronesim.schema.errors import OutOfRange, StaleTurn, UnknownEntity, UsageError, WrongSender
-from dronesim.schema.tables import code_of, drone_name
+from schema.errors import OutOfRange, Refusal, StaleTurn, UnknownEntity, UsageError, WrongSender
+from schema.messages import is_drone_id
+from schema.tables import code_of, drone_name
+from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
 
 from . import arbiter, observer
+from .admission import Roster
 from .fleet import ALIVE, CAUSES, NOTES, REACHED, UNREACHABLE, Drones, Fleet, cell_of
-
-
-#: The engine's own TURN and STATUS messages, built from its state (checked when it changed) without
-#: checking again, as records are (`messages.unchecked`): positional, every field given.
-_turn, _status = unchecked(Turn), unchecked(Status)
-NO_ORDERS, NO_MOVES = OrderTable.trusted(OrderTable.empty(0)), MoveTable.trusted(MoveTable.empty(0))
-#: How many turns ahead a ground station may answer GCS phases (when it has nothing new to say).
-AHEAD_MAX = 8
-#: Up to this many moves in a MOVES, or targets in a DONE, are taken one by one (array operations cost
-#: more than they save).
-FEW = 8
-#: How many turns an ENV phase's report (UPD) may lag behind and still be checked.
-UPD_WINDOW = 8
 
 
 class Stage(enum.Enum):
@@ -67,16 +85,6 @@ class Stage(enum.Enum):
     GCS = "GCS"
     DRONES = "DRONES"
     OVER = "OVER"
-
-
-#: The state machine in one place: stage -> (phase announced, message that closes it, next stage).
-STAGES: dict[Stage, tuple[Phase | None, type[Message] | tuple[type[Message], ...] | None, Stage]] = {
-    Stage.ADMITTING: (None, Connect, Stage.GCS),
-    Stage.RESUMING: (None, Connect, Stage.GCS),  # the turn after the journal's last
-    Stage.GCS: (Phase.GCS, Done, Stage.DRONES),
-    Stage.DRONES: (Phase.DRONES, (Nps, Moves), Stage.GCS),  # through the (pipelined) ENV phase and the observer
-    Stage.OVER: (None, None, Stage.OVER),
-}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -92,9 +100,10 @@ class GameConfig:
     max_turns: int = 1000
     phase_deadline: float = 5.0  # seconds for the drones and the environment
     gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
-    admit_deadline: float | None = None  # None: wait for every entity forever
+    admit_deadline: float | None = 600.0  # seconds for every entity to connect (None: forever, if asked)
     lost_after: int = 3  # missed DRONES deadlines in a row before a drone is LOST
     env_grace: float = 30.0  # seconds the game waits for a vanished environment to come back
+    link_grace: float = 30.0  # seconds the game holds for the entities after a lost link (a router restart)
     gcs_grace: float = 30.0  # seconds a resumed game waits for its ground station once the others are back
 
     def __post_init__(self) -> None:
@@ -109,9 +118,9 @@ class GameConfig:
         starts = [d.start for d in self.drones]
         if len(set(starts)) != len(starts):
             raise UsageError("two drones cannot start in the same cell")
-        for d in self.drones:
-            if not observer.inside(d.start, self.world.size):
-                raise UsageError(f"{d.drone} starts at {d.start}, outside the world {self.world.size}")
+        for spec in self.drones:
+            if not observer.inside(spec.start, self.world.size):
+                raise UsageError(f"{spec.drone} starts at {spec.start}, outside the world {self.world.size}")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
 
@@ -138,35 +147,33 @@ class Record:
     data: dict
 
 
-@dataclass(frozen=True, slots=True)
-class Refusal:
-    """Remote input the engine refused on its own (not in answer to the message being received): the
-    adapter counts and logs it like any rejected input."""
-
-    what: str
-    err: RemoteInputError
-
-
 Effect = Publish | Reply | Record | Refusal
 
 
 class Engine:
     """The coordinator's game: feed it events, carry out the effects it returns."""
 
-    def __init__(self, config: GameConfig, logger: logging.Logger, world: World | None = None) -> None:
-        """`world` is the game's world if the caller has already built it (else built here from the spec)."""
+    def __init__(self, config: GameConfig, logger: logging.Logger, world: World | None = None, game: str = "") -> None:
+        """`world` is the game's world if the caller has already built it (else built here from the spec);
+        `game` the game's identity, which its WELCOME, TURN, STATUS and OVER carry (the adapter draws one
+        per coordinator: a message of another game, or of an earlier coordinator, is then foreign)."""
         self.config = config
+        self.game = game
         self._log = logger
         self.world = world if world is not None else build_world(config.world, (d.start for d in config.drones))
         if self.world.size != config.world.size:
             raise UsageError(f"the world is {self.world.size}, the game's is {config.world.size}")
+        # The buildings, flat (a view of the world's grid, not a copy: the coordinator holds the world once).
+        self._solid = self.world.grid.reshape(-1)
+        self._open: arbiter.OpenCells | None = None  # the same, as the arbiter reads it (PIBT's swap; made once needed)
         self.stage = Stage.ADMITTING
         self.turn = 0
         self.fleet = Fleet((d.drone, d.start) for d in config.drones)
         #: The drones one by one (a read-only view of the fleet).
         self.drones = Drones(self.fleet)
-        self.entities: dict[str, Role] = {}  # admitted entity id -> role
-        self.sessions: dict[str, str] = {}  # admitted entity id -> its Zenoh session id
+        self.roster = Roster()
+        #: The admitted entities: id -> role (the roster's).
+        self.entities = self.roster.roles
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
         n = len(self.fleet)
@@ -175,6 +182,14 @@ class Engine:
         self._moved = np.zeros(n, bool)  # whose move this DRONES phase took
         self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
+        self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
+        #: Each drone's priority for the arbitration (PIBT): the turns since it was last at rest (on its
+        #: target, without one, or unable to reach it) or gave way. A function of the journaled turns (`age`).
+        self.priority = np.zeros(n, np.int64)
+        self._gave_way = np.zeros(n, bool)  # who gave way this turn (arbiter.pibt)
+        #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule), which the benchmark
+        #: compares with it (its signature and results are cooperate's).
+        self.arbiter: arbiter.Arbiter = arbiter.cooperate
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log: dict = {}
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
@@ -189,7 +204,9 @@ class Engine:
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
-        self._intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
+        self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
+        #: While the coordinator's link is down (`link_lost`): the admitted entities not seen back yet.
+        self._away: set[str] | None = None
 
     # ------------------------------------------------------------------ queries
 
@@ -226,20 +243,23 @@ class Engine:
         return self.stage in (Stage.GCS, Stage.DRONES)
 
     def _env_missing(self) -> bool:
-        return self._playing() and Role.ENV not in self.entities.values()
+        return self._playing() and not self.roster.has(Role.ENV)
 
-    def clock(self) -> tuple[Stage, int, bool, bool, bool]:
+    def clock(self) -> tuple[Stage, int, bool, bool, bool, bool]:
         """What the current deadline is measured from: it restarts whenever this changes."""
-        return self.stage, self.turn, self._done is not None, self._env_missing(), self._back_but_gcs()
+        return (self.stage, self.turn, self._done is not None, self._env_missing(), self._back_but_gcs(),
+                self._away is not None)
 
     def _back_but_gcs(self) -> bool:
         """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
-        roles = set(self.entities.values())
-        return (self.stage is Stage.RESUMING and Role.ENV in roles and Role.GCS not in roles
+        roster = self.roster
+        return (self.stage is Stage.RESUMING and roster.has(Role.ENV) and not roster.has(Role.GCS)
                 and self._hosted(self.fleet.alive_rows()))
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
+        if self._away is not None:
+            return self.config.link_grace
         if self._env_missing():
             return self.config.env_grace
         if self._back_but_gcs():
@@ -260,19 +280,20 @@ class Engine:
         the end of the previous one."""
         if turn is None:
             turn = self.turn - 1 if self._playing() else self.turn
-        return _status(turn, "OBS", self.fleet.status())
+        return Status(turn=turn, sender="OBS", drones=self.fleet.status(), game=self.game)
 
     # ------------------------------------------------------------------ admission
 
     def connect(self, msg: Connect, token: object) -> list[Effect]:
         """Admit an entity or refuse it; start the game when everyone is there."""
-        refusal = self._refusal(msg)
+        refusal = self.roster.refusal(msg, self.fleet, over=self.stage is Stage.OVER,
+                                      admitting=self.stage in (Stage.ADMITTING, Stage.RESUMING))
         if refusal:
             self._log.warning("refused %s: %s", msg.sender, refusal)
-            return [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
-        again = msg.sender in self.entities  # the same process connecting again (its session says so)
-        self.entities[msg.sender] = msg.role
-        self.sessions[msg.sender] = msg.session
+            refused: list[Effect] = [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
+            # one that comes back after the end (its link was down when OVER went out) is told the end again
+            return refused + ([Publish(self.end)] if self.end is not None else [])
+        again = self.roster.admit(msg)  # the same process connecting again (its session says so)
         fleet = self.fleet
         for d in msg.drones:
             fleet.fly(fleet.index[d], msg.sender, msg.autopilot, msg.cooperative)
@@ -283,7 +304,7 @@ class Engine:
             f"{msg.sender} flying {', '.join(msg.drones)}"
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
         welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
-                          world=self.config.world, starts=StartTable.trusted(starts))
+                          world=self.config.world, starts=StartTable(starts), game=self.game)
         effects: list[Effect] = [Reply(token, welcome)]
         if self.stage in (Stage.ADMITTING, Stage.RESUMING):
             if self._everyone_here():
@@ -291,54 +312,29 @@ class Engine:
             return effects
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
         # A returning environment or ground station takes up the phase in progress.
-        if msg.role is Role.ENV and self._held:
+        if msg.role is Role.ENV and self._held and self._phase_msg is not None:
             self._held = False
             effects.append(Publish(self._phase_msg))
         elif self._phase_msg is not None and (msg.role, self.stage) == (Role.GCS, Stage.GCS):
             effects.append(Publish(self._phase_msg))
         return effects
 
-    def _refusal(self, msg: Connect) -> str:
-        if self.stage is Stage.OVER:
-            return "the game is over"
-        if msg.sender in self.entities:
-            if msg.session and self.sessions.get(msg.sender) == msg.session and \
-                    self.entities[msg.sender] is msg.role:
-                return ""  # the same process again (e.g. after a cut link): welcome it back
-            return f"{msg.sender} is already connected"
-        match msg.role:
-            case Role.ENV | Role.GCS:
-                if msg.sender != msg.role.value:
-                    return f"the {msg.role.value} must connect as {msg.role.value}, not {msg.sender}"
-            case Role.DRONE:
-                if not is_host_id(msg.sender) and msg.drones != (msg.sender,):
-                    return (f"{msg.sender} cannot connect for {', '.join(msg.drones)}: a drone flies itself, "
-                            "a swarm host connects as Hnn")
-                if self.stage not in (Stage.ADMITTING, Stage.RESUMING):
-                    return "drones cannot join a running game"
-                for d in msg.drones:
-                    if d not in self.fleet.index:
-                        return f"unknown drone {d}: this game flies {', '.join(self.fleet.ids)}"
-                    host = self.fleet.host[self.fleet.index[d]]
-                    if host is not None:
-                        return f"drone {d} is already taken by {host}"
-        return ""
-
     def _everyone_here(self) -> bool:
-        roles = set(self.entities.values())
         if self.stage is Stage.RESUMING:  # the alive drones, the environment and the ground station (which
             # gets `gcs_grace` seconds once the others are back: it may have left the game for good)
-            return Role.ENV in roles and Role.GCS in roles and self._hosted(self.fleet.alive_rows())
-        return Role.ENV in roles and Role.GCS in roles and all(self.fleet.host)
+            return self.roster.everyone_here(self.fleet, self.fleet.alive_rows().tolist())
+        return self.roster.everyone_here(self.fleet)
 
     def header(self) -> dict:
+        """The journal's first record: what identifies the game (see resume.py)."""
+        fleet = self.fleet
         return {
             "record": "header", "format": "dronesim-journal", "version": 1,
             "world": {"size": list(self.size), "seed": self.config.world.seed,
                       "cells": self.config.world.cells.hex()},
             "drones": [{"drone": d, "start": start, "autopilot": autopilot, "cooperative": cooperative}
-                       for d, start, autopilot, cooperative in zip(self.fleet.ids, self.fleet.pos.tolist(),
-                                                                   self.fleet.autopilot, self.fleet.cooperative.tolist())],
+                       for d, start, autopilot, cooperative in zip(fleet.ids, fleet.pos.tolist(),
+                                                                   fleet.autopilot, fleet.cooperative.tolist())],
             "max_turns": self.config.max_turns, "lost_after": self.config.lost_after,
         }
 
@@ -350,83 +346,27 @@ class Engine:
         self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
         return [Publish(self.status()), *self._enter(Stage.GCS, self.turn + 1)]
 
-    @classmethod
-    def resume(cls, config: GameConfig, records: list[dict], logger: logging.Logger) -> "Engine":
-        """An engine restored from a journal, waiting (RESUMING) for the entities to connect again;
-        it then plays the turn after the journal's last. UsageError if the journal is not this game's."""
-        engine = cls(config, logger)
-        if not records or records[0].get("record") != "header":
-            raise UsageError("the journal has no header: nothing to resume")
-        theirs = dict(records[0])
-        fleet = engine.fleet
-        for d in theirs.get("drones", []):  # autopilots are learnt at admission, not configured
-            i = fleet.index.get(d.get("drone"))
-            if i is not None:
-                fleet.autopilot[i] = d.get("autopilot", "")
-                fleet.cooperative[i] = d.get("cooperative", False)
-        if engine.header() != theirs:
-            raise UsageError("the journal is of another game (world, drones or limits differ)")
-        for r in records[1:]:
-            match r.get("record"):
-                case "turn":
-                    engine._restore_turn(r)
-                case "over":
-                    raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
-        engine.stage = Stage.RESUMING
-        logger.info("restored turn %d from the journal", engine.turn)
-        return engine
-
-    def _restore_turn(self, r: dict) -> None:
-        """Apply one journaled turn to the state, as `_observe` did when it was played."""
-        fleet, row = self.fleet, self.fleet.index
-        alive = fleet.alive_rows()
-        for d, p in r.get("targets", {}).items():
-            fleet.aim(row[d], tuple(p))
-        if "intent" in r:
-            self._intent = Intent(r["intent"])
-            self.final = self._intent is Intent.FINAL
-        for d, p in r.get("moves", {}).items():
-            fleet.pos[row[d]] = p
-        for d, n in r.get("notes", {}).items():
-            fleet.note[row[d]] = code_of(Note(n))
-        hovered = np.zeros(len(fleet), bool)
-        hovered[[row[d] for d in r.get("hovered", ())]] = True
-        fleet.misses[alive] = np.where(hovered[alive], fleet.misses[alive] + 1, 0)
-        for d, cause in r.get("deaths", {}).items():
-            fleet.end(row[d], DroneState.DEAD, Cause(cause))
-        for d in r.get("lost", ()):
-            fleet.end(row[d], DroneState.LOST, Cause.LOST)
-        self.turn = r["turn"]
-        state = hashlib.sha256(encode(self.status())).hexdigest()[:16]
-        if state != r.get("state"):
-            raise UsageError(f"the journal's turn {self.turn} does not replay to its recorded state")
+    def restored(self, turn: int) -> None:
+        """The state is the journal's up to `turn` (see resume.py): wait for the entities to connect again."""
+        self.turn, self.stage = turn, Stage.RESUMING
 
     # ------------------------------------------------------------------ stages
 
     def _enter(self, stage: Stage, turn: int) -> list[Effect]:
-        self.stage, self.turn = stage, turn
         match stage:
             case Stage.GCS:
-                self._aimed[:] = False
-                self._tgt_seen, self._done = 0, None
-                self._turn_log = {"record": "turn", "turn": turn}
-                early = self._early.pop(turn, None)
-                self._early = {t: d for t, d in self._early.items() if t > turn}
-                if "GCS" not in self.entities:  # no ground station: the drones keep their targets
+                early = self._open_gcs(turn)
+                if not self.roster.has(Role.GCS):  # no ground station: the drones keep their targets
                     return self._enter(Stage.DRONES, turn)
-                self._phase_msg = _turn(turn, "SRV", Phase.GCS, NO_ORDERS, NO_MOVES)
+                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS, game=self.game)
                 if early is None:
                     return [Publish(self._phase_msg)]
-                try:  # the ground station answered this phase ahead: it opens and closes at once, unannounced
-                    return self._gcs_done(early)  # (the station goes by STATUS: it knows the turn began)
-                except RemoteInputError as err:
-                    return [Refusal(f"DONE ahead for turn {turn}", err), *err.follow]
+                # the ground station answered this phase ahead: it opens and closes at once, unannounced
+                return self._gcs_done(early)  # (the station goes by STATUS: it knows the turn began)
             case Stage.DRONES:
-                self._moved[:] = False
-                alive = self.fleet.alive_rows()
-                self._awaiting = len(alive)
+                alive = self._open_drones(turn)
                 orders = self.fleet.orders(alive)
-                self._phase_msg = _turn(turn, "SRV", Phase.DRONES, orders, NO_MOVES)
+                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders, game=self.game)
                 if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
                     self._held = True
                     self._log.warning("turn %d waits for the environment to come back", turn)
@@ -434,39 +374,70 @@ class Engine:
                 return [Publish(self._phase_msg)]
         raise AssertionError(stage)
 
+    def _open_gcs(self, turn: int) -> Done | None:
+        """The GCS phase of `turn` begins: nothing received yet; the DONE sent ahead for it, if any."""
+        self.stage, self.turn = Stage.GCS, turn
+        if np.count_nonzero(self._aimed):
+            self._aimed[:] = False
+        self._tgt_seen, self._done = 0, None
+        self._turn_log = {"record": "turn", "turn": turn}
+        early = self._early.pop(turn, None)
+        if self._early:
+            self._early = {t: d for t, d in self._early.items() if t > turn}
+        return early
+
+    def _open_drones(self, turn: int) -> np.ndarray:
+        """The drones' phase of `turn` begins: no move taken yet; the alive rows, whose moves it awaits."""
+        self.stage, self.turn = Stage.DRONES, turn
+        self._moved[:] = False
+        alive = self.fleet.alive_rows()
+        self._awaiting = len(alive)
+        return alive
+
     def _drones_finish(self) -> list[Effect]:
         """The drones' phase is over: arbitrate, announce the ENV phase (the accepted moves), observe."""
         turn, fleet = self.turn, self.fleet
-        alive = fleet.alive_rows()
-        before = fleet.pos[alive]
-        proposed = np.where(self._moved[alive, None], self._proposed[alive], before)
-        final = proposed
-        if np.count_nonzero(fleet.cooperative[alive]):
-            final = self._arbitrate(alive, before, proposed)
-        moving = (final != before).any(axis=1)
-        if not np.count_nonzero(moving):
-            return _drones_first(self._observe(alive, before, final, moving))
-        rows = MoveTable.empty(np.count_nonzero(moving))
-        rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
-        moves = MoveTable.trusted(rows)
-        if self.verify_env:
-            self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
-            for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
-                del self._upd_due[old]
-        return _drones_first([Publish(_turn(turn, "SRV", Phase.ENV, NO_ORDERS, moves)),
-                              *self._observe(alive, before, final, moving)])
+        alive, before, final, moving = self._judge()
+        effects: list[Effect] = []
+        if np.count_nonzero(moving):
+            rows = MoveTable.empty(int(np.count_nonzero(moving)))
+            rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
+            moves = MoveTable(rows)
+            if self.verify_env:
+                self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
+                for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
+                    del self._upd_due[old]
+            effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
+        return _drones_first(effects + self._observed())
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
-        """`proposed` after the cooperative drones gave way (see arbiter.py); the yielded are journaled."""
-        ids = [self.fleet.ids[i] for i in alive.tolist()]
-        was = dict(zip(ids, map(tuple, before.tolist())))
-        wants = dict(zip(ids, map(tuple, proposed.tolist())))
-        coop = {d for d, c in zip(ids, self.fleet.cooperative[alive].tolist()) if c}
-        final = arbiter.arbitrate(was, wants, coop)
-        yielded = sorted(d for d in final if final[d] != wants[d])
-        if yielded:
-            self._turn_log["yielded"] = yielded
-        return np.array([final[d] for d in ids], np.int32).reshape(len(ids), 3)
+        """`proposed` after the cooperative drones' arbitration (arbiter.py); those that did not get their first
+        choice are journaled ("yielded"), and those that gave way ("gave_way": their priority resets)."""
+        fleet = self.fleet
+        ranked = np.where(self._moved[alive], self._ranked[alive], 0)
+        if self._open is None:
+            self._open = arbiter.open_cells(self.world.grid)
+        final, yielded, gave_way = self.arbiter(self.size, before, proposed, ranked, fleet.cooperative[alive],
+                                                self.priority[alive], fleet.target[alive], self._open)
+        self._gave_way[alive] = gave_way
+        if np.count_nonzero(gave_way):
+            self._turn_log["gave_way"] = [fleet.ids[i] for i in alive[gave_way].tolist()]
+        if np.count_nonzero(yielded):
+            self._turn_log["yielded"] = [fleet.ids[i] for i in alive[yielded].tolist()]
+        return final
+
+    def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
+        """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target,
+        without one, or saying it cannot reach it) or that gave way this turn (`gave_way` rows, else the
+        arbiter's), one more for each other (PIBT's rule; ties go by id). resume.py replays it turn by turn."""
+        fleet = self.fleet
+        if gave_way is not None:
+            self._gave_way[gave_way] = True
+        target = fleet.target  # (every row, then the alive ones: fewer operations than selecting first)
+        rest = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1) | (fleet.note == UNREACHABLE) | self._gave_way
+        self.priority[alive] = np.where(rest, 0, self.priority + 1)[alive]
+        if np.count_nonzero(self._gave_way):
+            self._gave_way[:] = False
 
     def _kind(self, cell: Cell) -> CellKind:
         if not self.world.contains(cell):
@@ -474,41 +445,38 @@ class Engine:
         return CellKind.BUILDING if self.world.is_building(cell) else CellKind.EMPTY
 
     def receive(self, msg: Message) -> list[Effect]:
-        """A message from the network, decoded and addressed correctly; raises RemoteInputError if it
-        cannot be accepted now (and changes nothing then)."""
-        if isinstance(msg, Target):
-            return self.target(msg)
-        if isinstance(msg, Upd):
-            return self._upd(msg)
-        if (isinstance(msg, Done) and self.turn < msg.turn <= self.turn + AHEAD_MAX
-                and self.stage in (Stage.GCS, Stage.DRONES)):
-            return self._hold(msg)
-        expected = STAGES[self.stage][1]
-        if not isinstance(msg, expected or ()) or msg.turn != self.turn:
+        """A message from the network, decoded and addressed correctly: its effects. One that cannot be
+        accepted now changes nothing and gives a `Refusal` (followed by what goes on all the same: a
+        refused target still counts towards its DONE, a batch's other items are taken)."""
+        now = msg.turn == self.turn
+        try:
+            match msg:
+                case Target():
+                    return self._target(msg)
+                case Upd():
+                    return self._upd(msg)
+                case Done() if self._playing() and self.turn < msg.turn <= self.turn + AHEAD_MAX:
+                    return self._hold(msg)
+                case Done() if self.stage is Stage.GCS and now:
+                    return self._gcs_done(msg)
+                case Nps() if self.stage is Stage.DRONES and now:
+                    return self._nps(msg)
+                case Moves() if self.stage is Stage.DRONES and now:
+                    return self._moves_of_host(msg)
             raise StaleTurn(f"{msg.TAG} for turn {msg.turn} from {msg.sender} while in {self.stage.value} "
                             f"of turn {self.turn}")
-        match msg:
-            case Done():
-                return self._gcs_done(msg)
-            case Nps():
-                return self._nps(msg)
-            case Moves():
-                return self._moves_of_host(msg)
-        raise StaleTurn(f"{msg.TAG} is not expected now")
+        except RemoteInputError as err:  # raised before anything changed
+            return [Refusal(f"{msg.TAG} from {msg.sender}", err)]
 
-    def target(self, msg: Target) -> list[Effect]:
+    def _target(self, msg: Target) -> list[Effect]:
         """A TGT from the GCS during its phase: checked (sender, turn, drone, inside the world), kept."""
         if msg.sender != "GCS":
             raise WrongSender(f"target for {msg.drone} from {msg.sender}: only the GCS sets targets")
         if self.stage is not Stage.GCS or msg.turn != self.turn:
             raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
         self._tgt_seen += 1  # counted against the DONE's count even if refused below
-        try:
-            self._aim(msg.drone, msg.pos)
-        except RemoteInputError as err:
-            err.follow = self._gcs_check()  # the target is refused; the phase it was awaited for goes on
-            raise
-        return self._gcs_check()
+        refused = _each([msg], lambda m: self._aim(m.drone, m.pos))
+        return _with_refusals(msg, refused, self._gcs_check())  # a refused target: the phase goes on
 
     def _aim(self, d: str, pos: Cell) -> None:
         """Keep a target for this GCS phase, or raise (and keep nothing)."""
@@ -541,7 +509,7 @@ class Engine:
         if self._done is not None:
             raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
         self._done = msg
-        return _with_refusals(self._take_aims(msg.targets), self._gcs_check())
+        return _with_refusals(msg, self._take_aims(msg.targets), self._gcs_check())
 
     def _take_aims(self, aims: AimTable) -> list[RemoteInputError]:
         """Keep a DONE's targets: each is kept or refused on its own, as if sent as a TGT. A big batch is
@@ -566,23 +534,72 @@ class Engine:
         return self._gcs_finish(self._done)
 
     def _gcs_finish(self, msg: Done) -> list[Effect]:
+        if not self._targets_set(msg.intent):
+            return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
+        return self._enter(Stage.DRONES, self.turn)
+
+    def _targets_set(self, intent: Intent) -> bool:
+        """The GCS phase closes: the targets it received take force and its intent is noted; whether the game
+        goes on (not QUIT). From messages (`_gcs_finish`) or from arrays (`play`)."""
         fleet = self.fleet
-        if self._aimed.any():  # (most GCS phases bring no target)
+        if np.count_nonzero(self._aimed):  # (most GCS phases bring no target)
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
             fleet.aim(changed, self._aims[changed])
             if len(changed) and self.journaled:
                 self._turn_log["targets"] = dict(zip([fleet.ids[i] for i in changed.tolist()],
                                                      self._aims[changed].tolist()))
-        if msg.intent is not self._intent:
-            self._turn_log["intent"] = msg.intent.value
-            self._intent = msg.intent
-        if msg.intent is Intent.QUIT:
-            return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
-        self.final = msg.intent is Intent.FINAL
-        return self._enter(Stage.DRONES, self.turn)
+        if intent is not self.intent:
+            self._turn_log["intent"] = intent.value
+            self.intent = intent
+        if intent is Intent.QUIT:
+            return False
+        self.final = intent is Intent.FINAL
+        return True
+
+    def play(self, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
+             notes: np.ndarray) -> Over | None:
+        """One whole turn from arrays, for a caller in this process that is both the ground station and the
+        host of every drone (the RL environment, dronesim/rl.py): as if the ground station's DONE (CONTINUE)
+        carried the targets `aims` of the rows `aim_rows` and a MOVES then the moves `moves` (cells) and
+        `notes` (Note codes) of the rows `move_rows` (each row once; the other alive drones hover, as at the
+        deadline), through the same steps (`_targets_set`, `_judge`) without a message built: the caller
+        reads the fleet's columns, as the STATUS would say them (`Fleet.notes`); the turn's journal record is
+        not returned (the caller keeps no journal). The turn's OVER if the game ended with it. UsageError, and
+        nothing changed, if the turn is not the ground station's (or it sent a DONE ahead) or an input would
+        be refused: a target outside the world or a move of more than one cell, for a drone not alive."""
+        fleet = self.fleet
+        if self.stage is not Stage.GCS or self._done is not None or self._early:
+            raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
+                             f"of turn {self.turn}")
+        state = fleet.state
+        if len(aim_rows) and not (np.count_nonzero(state[aim_rows] != ALIVE) == 0
+                                  and np.count_nonzero(inside_rows(aims, self.size)) == len(aim_rows)):
+            raise UsageError("a target for a drone not alive, or outside the world")
+        if len(move_rows) <= FEW_ROWS:  # (as `_in_batch` takes a few rows: in Python, an array's fixed costs)
+            ok = all(s == ALIVE and abs(a - x) + abs(b - y) + abs(c - z) <= 1 for s, (a, b, c), (x, y, z)
+                     in zip(state[move_rows].tolist(), moves.tolist(), fleet.pos[move_rows].tolist()))
+        else:
+            ok = (np.count_nonzero(state[move_rows] != ALIVE) == 0
+                  and np.abs(moves - fleet.pos[move_rows]).sum(axis=1).max() <= 1)
+        if not ok:
+            raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
+        if len(aim_rows):
+            self._aimed[aim_rows], self._aims[aim_rows] = True, aims
+        self._targets_set(Intent.CONTINUE)
+        alive = self._open_drones(self.turn)
+        self._proposed[move_rows], self._said[move_rows], self._moved[move_rows] = moves, notes, True
+        if np.count_nonzero(fleet.cooperative):  # (only the arbitration reads them)
+            self._ranked[move_rows] = 0
+        self._judge(alive)
+        end = self._end_reason()
+        if end:
+            self._over(*end)
+            return self.end
+        self._open_gcs(self.turn + 1)
+        return None
 
     def _nps(self, msg: Nps) -> list[Effect]:
-        self._move(msg.sender, msg.pos, msg.note)
+        self._move(msg.sender, msg.pos, msg.note, msg.ranked)
         return self._drones_check()
 
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
@@ -600,22 +617,23 @@ class Engine:
                   & ~self._moved[rows] & (np.abs(pos - fleet.pos[rows]).sum(axis=1) <= 1))
             take = rows[ok]
             self._proposed[take], self._moved[take], self._said[take] = pos[ok], True, notes[ok]
+            self._ranked[take] = steps.column("ranked")[ok]
             self._awaiting -= len(take)
             return ok
 
         refused = _in_batch(len(steps), whole, lambda j: self._host_move(
-            msg.sender, drone_name(int(numbers[j])), cell_of(pos[j]), NOTES[notes[j]]))
-        return _with_refusals(refused, self._drones_check())
+            msg.sender, drone_name(int(numbers[j])), cell_of(pos[j]), NOTES[notes[j]], int(steps.column("ranked")[j])))
+        return _with_refusals(msg, refused, self._drones_check())
 
-    def _host_move(self, sender: str, d: str, pos: Cell, note: Note) -> None:
+    def _host_move(self, sender: str, d: str, pos: Cell, note: Note, ranked: int) -> None:
         """Take a move a swarm host sent for one of its drones, or raise (and take nothing)."""
         i = self.fleet.index.get(d)
         host = None if i is None else self.fleet.host[i]
         if host != sender:
             raise WrongSender(f"MOVES from {sender} for {d}, which {host or 'nobody'} flies")
-        self._move(d, pos, note)
+        self._move(d, pos, note, ranked)
 
-    def _move(self, d: str, pos: Cell, note: Note) -> None:
+    def _move(self, d: str, pos: Cell, note: Note, ranked: int = 0) -> None:
         """Take a drone's move for this phase, or raise (and take nothing)."""
         fleet = self.fleet
         i = fleet.index.get(d)
@@ -627,7 +645,7 @@ class Engine:
         if abs(pos[0] - x) + abs(pos[1] - y) + abs(pos[2] - z) > 1:
             # refused: the drone may still send a valid move, or hover at the deadline
             raise OutOfRange(f"{d} cannot move from {here} to {pos}: one cell per turn, 6-connectivity")
-        self._proposed[i], self._moved[i], self._said[i] = pos, True, code_of(note)
+        self._proposed[i], self._moved[i], self._said[i], self._ranked[i] = pos, True, code_of(note), ranked
         self._awaiting -= 1
 
     def _drones_check(self) -> list[Effect]:
@@ -652,27 +670,49 @@ class Engine:
         del self._upd_due[turn]
         return []
 
-    def _observe(self, alive: np.ndarray, before: np.ndarray, after: np.ndarray, moved: np.ndarray) -> list[Effect]:
-        """The observer's turn: `alive` drones went from `before` to `after` (`moved`: the rows that differ)."""
+    def _judge(self, alive: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The turn's moves take effect, as the drones' phase closes: the moves taken (the others hover) after
+        the arbitration, then the observer's judgement (who dies), the notes, priorities, missed deadlines and
+        the turn's journal record. The alive rows of the phase (`alive`, if the caller has them), their cells
+        before and after, and which moved. Every turn goes through here, from messages (`_drones_finish`) or
+        from arrays (`play`)."""
         fleet, ids = self.fleet, self.fleet.ids
+        if alive is None:
+            alive = fleet.alive_rows()
+        before = fleet.pos[alive]
+        took = self._moved[alive]
+        hovering = len(alive) - np.count_nonzero(took)  # (most turns: none, whose bookkeeping is skipped)
+        after = np.where(took[:, None], self._proposed[alive], before) if hovering else self._proposed[alive]
+        if np.count_nonzero(fleet.cooperative) and np.count_nonzero(fleet.cooperative[alive]):
+            after = self._arbitrate(alive, before, after)
+        moved = (after != before).any(axis=1)
         any_moved = np.count_nonzero(moved) > 0
-        if any_moved:
-            building = np.zeros(len(alive), bool)
-            enter = moved & inside_rows(after, self.size)
-            building[enter] = self.world.grid[tuple(after[enter].T)]
+        if any_moved:  # a cell outside the world is the observer's to judge (OUTSIDE), never a building
+            inside = inside_rows(after, self.size)
+            building = moved & inside & self._solid[np.where(inside, linear_rows(after, self.size), 0)]
             cause = observer.judge(self.size, before, after, building)
         else:  # where the drones were, alive and apart, they still are
             cause = np.zeros(len(alive), np.uint8)
-        took = self._moved[alive]
         fleet.pos[alive] = after
-        said = alive[took & (self._said[alive] != fleet.note[alive])]
-        fleet.note[said] = self._said[said]
-        hovered = alive[~took]
-        fleet.misses[alive[took]] = 0
-        fleet.misses[hovered] += 1
-        lost = hovered[fleet.misses[hovered] >= self.config.lost_after]
-        dead = alive[cause != 0]
-        fleet.state[dead], fleet.cause[dead] = code_of(DroneState.DEAD), cause[cause != 0]
+        said = took & (self._said[alive] != fleet.note[alive]) if hovering else self._said[alive] != fleet.note[alive]
+        said = alive[said] if np.count_nonzero(said) else alive[:0]  # (most turns: the notes said before)
+        if len(said):
+            fleet.note[said] = self._said[said]
+        self.age(alive)
+        if hovering:
+            hovered = alive[~took]
+            fleet.misses[alive[took]] = 0
+            fleet.misses[hovered] += 1
+            lost = hovered[fleet.misses[hovered] >= self.config.lost_after]
+        else:
+            hovered = lost = alive[:0]
+            if np.count_nonzero(fleet.misses):
+                fleet.misses[alive] = 0
+        dead = alive[:0]
+        if np.count_nonzero(cause):
+            dying = cause != 0
+            dead = alive[dying]
+            fleet.state[dead], fleet.cause[dead] = code_of(DroneState.DEAD), cause[dying]
         for i in dead.tolist():
             self._log.warning("turn %d: %s died (%s) at %s", self.turn, ids[i], CAUSES[fleet.cause[i]].value,
                               cell_of(fleet.pos[i]))
@@ -689,13 +729,18 @@ class Engine:
                 log["hovered"] = [ids[i] for i in hovered.tolist()]
             if len(dead):
                 log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
+        return alive, before, after, moved
+
+    def _observed(self) -> list[Effect]:
+        """The observer's STATUS of the turn just judged, its journal record, then the next turn or the end."""
+        log = self._turn_log
         status = self.status(self.turn)
         data = encode(status)
         if self.journaled:
-            log["state"] = hashlib.sha256(data).hexdigest()[:16]
+            log["state"] = state_hash(status, data)
         self._log.debug("turn %d observed: %s", self.turn, log)
         effects: list[Effect] = [Record(log), Publish(status, data)]
-        end = self._end_reason(status.drones)
+        end = self._end_reason()
         if end:
             return effects + self._over(*end)
         return effects + self._enter(Stage.GCS, self.turn + 1)
@@ -708,31 +753,32 @@ class Engine:
         self._turn_log.setdefault("lost", []).append(d)
         self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
 
-    def _end_reason(self, status: StatusTable) -> tuple[EndReason, str] | None:
-        """Whether the game ends with the turn whose STATUS is `status`, and why."""
-        alive = status.alive_mask()
+    def _end_reason(self) -> tuple[EndReason, str] | None:
+        """Whether the game ends with the turn just judged, and why."""
+        fleet = self.fleet
+        alive = fleet.state == ALIVE
         if not np.count_nonzero(alive):
             causes = ", ".join(f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
                                for d, r in self.drones.items())
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
         if self.final:
-            notes = status.column("note")[alive]
+            notes = fleet.notes()[alive]
             if np.count_nonzero(notes == REACHED) == len(notes):
                 return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
             if np.count_nonzero((notes == REACHED) | (notes == UNREACHABLE)) == len(notes):
-                ids = status.ids()
-                stuck = [ids[i] for i in alive.nonzero()[0][notes == UNREACHABLE].tolist()]
+                stuck = [fleet.ids[i] for i in alive.nonzero()[0][notes == UNREACHABLE].tolist()]
                 return EndReason.SETTLED, f"targets reached, except unreachable for {', '.join(stuck)}"
         if self.turn >= self.config.max_turns:
             return EndReason.TURN_LIMIT, f"turn limit {self.config.max_turns} reached"
         return None
 
-    def _over(self, reason: EndReason, text: str) -> list[Effect]:
+    def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
+        """The game ends with `turn` (by default the current one)."""
+        turn = self.turn if turn is None else turn
         self.stage = Stage.OVER
-        self.end = Over(turn=self.turn, sender="SRV", reason=reason, text=text)
-        self._log.info("game over at turn %d: %s", self.turn, text)
-        return [Record({"record": "over", "turn": self.turn, "reason": reason.value, "text": text}),
-                Publish(self.end)]
+        self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
+        self._log.info("game over at turn %d: %s", turn, text)
+        return [Record({"record": "over", "turn": turn, "reason": reason.value, "text": text}), Publish(self.end)]
 
     # ------------------------------------------------------------------ faults
 
@@ -740,6 +786,11 @@ class Engine:
         """The deadline of (stage, turn) passed; ignored if the game has moved on since."""
         if stage is not self.stage or turn != self.turn:
             return []
+        if self._away is not None:  # who is not back after a lost link has vanished
+            gone, self._away = sorted(self._away), None
+            self._log.warning("%s did not come back within %g s", ", ".join(gone), self.config.link_grace)
+            effects = [e for entity in gone for e in self.vanished(entity)]
+            return effects + (self._go_on() if self.stage is not Stage.OVER else [])
         if self._env_missing():
             return self._over(EndReason.ABORTED,
                               f"the environment vanished and did not come back within {self.config.env_grace:g} s")
@@ -749,8 +800,7 @@ class Engine:
                                   self.config.gcs_grace)
                 return self._resume()
             case Stage.ADMITTING | Stage.RESUMING:
-                missing = [d for d, host in zip(self.fleet.ids, self.fleet.host) if host is None]
-                missing += [r.value for r in (Role.ENV, Role.GCS) if r not in set(self.entities.values())]
+                missing = self.roster.missing(self.fleet)
                 return self._over(EndReason.ABORTED, f"entities never connected: {', '.join(missing)}")
             case Stage.GCS:
                 if self._done is not None:
@@ -767,15 +817,53 @@ class Engine:
                 return self._drones_finish()
         return []
 
+    def interrupt(self, why: str) -> list[Effect]:
+        """The coordinator was told to stop (a signal): the game ends now (INTERRUPTED)."""
+        if self.stage is Stage.OVER:
+            return []
+        return self._over(EndReason.INTERRUPTED, why, self.status().turn)  # the last turn played (and STATUS sent)
+
+    def link_lost(self) -> list[Effect]:
+        """The coordinator's link to the others is down (its own presence vanished, as every other's does
+        when the router restarts): nobody has left, the game holds (no deadline runs) until every admitted
+        entity is back (`present`) or `link_grace` has passed (`expire`: those still away have vanished)."""
+        if self.stage is Stage.OVER or self._away is not None:
+            return []
+        self._away = set(self.entities)
+        self._log.warning("the link is down: the game holds up to %g s for %s to come back", self.config.link_grace,
+                          ", ".join(sorted(self._away)) or "its entities")
+        return []
+
+    def present(self, entity: str, session: str) -> list[Effect]:
+        """An entity's presence token is there (again). The last admitted one back after a lost link
+        ends the hold: the current STATUS and phase go out again (what was sent during the outage was
+        lost; a repeated TURN is answered with the same moves, a second answer is refused)."""
+        if self._away is None or entity not in self._away or self.roster.sessions.get(entity) not in ("", session):
+            return []
+        self._away.discard(entity)
+        if self._away:
+            return []
+        self._away = None
+        self._log.warning("every entity is back: turn %d goes on", self.turn)
+        return self._go_on()
+
+    def _go_on(self) -> list[Effect]:
+        """What an entity that missed messages needs to go on with the current turn."""
+        if not self._playing():
+            return []
+        effects: list[Effect] = [Publish(self.status())]
+        if self._phase_msg is not None and self._phase_msg.turn == self.turn and not self._held:
+            effects.append(Publish(self._phase_msg))
+        return effects
+
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
         """An admitted entity's presence token disappeared (its process died or was cut off).
 
         Only the admitted process's own token counts: another process's (a refused impostor's) does not."""
-        if entity not in self.entities or (session and self.sessions.get(entity) not in ("", session)):
-            return []
-        role = self.entities.pop(entity)
-        self.sessions.pop(entity, None)
-        if self.stage is Stage.OVER:
+        if self._away is not None and entity in self._away:
+            return []  # the link is down: it is away, not gone (until `link_grace` has passed)
+        role = self.roster.leave(entity, session)
+        if role is None or self.stage is Stage.OVER:
             return []
         self._log.warning("%s vanished", entity)
         match role:
@@ -803,6 +891,14 @@ class Engine:
         return []
 
 
+def state_hash(status: Status, data: bytes | None = None) -> str:
+    """The journal's digest of a turn's state: its STATUS as the wire says it (`data`, if encoded already),
+    the game's identity left out: a journal depends on the seed, the scenario and the inputs only."""
+    if status.game:
+        data = encode(Status(turn=status.turn, sender=status.sender, drones=status.drones))
+    return hashlib.sha256(encode(status) if data is None else data).hexdigest()[:16]
+
+
 def opens_drones_phase(effect: Effect) -> bool:
     return isinstance(effect, Publish) and isinstance(effect.msg, Turn) and effect.msg.phase is Phase.DRONES
 
@@ -816,10 +912,10 @@ def _drones_first(effects: list[Effect]) -> list[Effect]:
 
 def _in_batch(n: int, whole: Callable[[], np.ndarray], one: Callable[[int], None]) -> list[RemoteInputError]:
     """Take a batch of `n` items (a MOVES's moves, a DONE's targets), each on its own: `one(j)` takes item j
-    or raises why not. Up to FEW items go one by one; a bigger batch is taken as a whole first (`whole()`
+    or raises why not. Up to FEW_ROWS items go one by one; a bigger batch is taken as a whole first (`whole()`
     takes, in array operations, every item `one` would take, and says which), then the others one by one,
     which gives the reason of each refusal. The refusals, in order."""
-    return _each(range(n) if n <= FEW else np.flatnonzero(~whole()).tolist(), one)
+    return _each(range(n) if n <= FEW_ROWS else np.flatnonzero(~whole()).tolist(), one)
 
 
 def _each(items, take) -> list[RemoteInputError]:
@@ -833,16 +929,14 @@ def _each(items, take) -> list[RemoteInputError]:
     return refused
 
 
-def _with_refusals(refused: list[RemoteInputError], effects: list[Effect]) -> list[Effect]:
-    """The effects of a batch; if some of it was refused, raised as one error that carries them."""
+def _with_refusals(msg: Message, refused: list[RemoteInputError], effects: list[Effect]) -> list[Effect]:
+    """The effects of `msg`, a batch some items of which were `refused` (the first error names the others)."""
     if not refused:
         return effects
     first = refused[0]
     more = f" (and {len(refused) - 1} more: {'; '.join(map(str, refused[1:4]))})" if len(refused) > 1 else ""
-    err = type(first)(f"{first}{more}")
-    err.follow = effects
-    raise err
+    return [Refusal(f"{msg.TAG} from {msg.sender}", type(first)(f"{first}{more}")), *effects]
 
 
-def replace_config(config: GameConfig, **changes: object) -> GameConfig:
+def replace_config(config: GameConfig, **changes: Any) -> GameConfig:
     return dataclasses.replace(config, **changes)

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dronesim.schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable, UsageError, is_drone_id
-from dronesim.schema.tables import MAX_DRONE, code_of, drone_number
+from schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable, UsageError, is_drone_id
+from schema.tables import MAX_DRONE, code_of, drone_number
 
 ALIVE, DEAD, LOST = (code_of(s) for s in (DroneState.ALIVE, DroneState.DEAD, DroneState.LOST))
 REACHED, UNREACHABLE = code_of(Note.REACHED), code_of(Note.UNREACHABLE)
@@ -99,13 +99,13 @@ class Fleet:
         rows = StatusTable.empty(len(self))
         rows["drone"], rows["pos"], rows["state"] = self.numbers, self.pos, self.state
         rows["target"], rows["note"], rows["cause"] = self.target, self.notes(), self.cause
-        return StatusTable.trusted(rows)  # type: ignore[return-value]  # from the engine's checked state
+        return StatusTable(rows)
 
     def orders(self, rows: np.ndarray) -> OrderTable:
         """The orders of the drones in `rows`: where each is and where it must go."""
         table = OrderTable.empty(len(rows))
         table["drone"], table["pos"], table["target"] = self.numbers[rows], self.pos[rows], self.target[rows]
-        return OrderTable.trusted(table)  # type: ignore[return-value]
+        return OrderTable(table)
 
     # ------------------------------------------------------------------ writing
 

@@ -11,7 +11,7 @@ import os
 import pathlib
 from collections.abc import Iterator
 
-from dronesim.schema import UsageError
+from schema import UsageError
 
 
 def dumps(record: dict) -> str:
@@ -35,7 +35,7 @@ class JournalWriter:
             self._f.close()
             self._f = None
 
-    def __enter__(self) -> "JournalWriter":
+    def __enter__(self) -> JournalWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:

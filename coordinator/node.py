@@ -1,7 +1,8 @@
 """The coordinator process (the seed's SRV with its observer OBS): the Zenoh adapter of `Engine`.
 
-It serves admission (queryable SRV/CONNECT), publishes TURN/STATUS/OVER, listens to TGT, DONE, NPS,
-MOVES and UPD, watches liveliness tokens, enforces phase deadlines and writes the journal.
+It serves admission (queryable SRV/CONNECT), publishes TURN/STATUS/OVER,
+listens to TGT, DONE, NPS, MOVES and UPD, watches presence tokens, enforces phase deadlines and writes the
+journal. `Coordinator` is that loop without Zenoh (driven by events and the time); `main` wires it up.
 """
 
 from __future__ import annotations
@@ -9,27 +10,63 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import secrets
 import sys
 import time
+from collections.abc import Callable
+from functools import partial
+from typing import Any
 
 import zenoh
 
-from dronesim.schema import (
-    Connect, Done, Keys, Message, Moves, Nps, Over, Phase, RejectCounter, Refused, RemoteInputError, Status,
-    StatusRequest, Target, Turn, Upd, UsageError, drone_id, encode,
-)
-from dronesim.schema.errors import WrongSender
-from dronesim.schema.messages import WorldSpec
+from dronesim.signals import Interrupted, exit_status, on_stop, waking
 from dronesim.transport import (
-    Asked, Event, Inbox, Outbox, Presence, Received, add_zenoh_args, inline_for, session_id, setup_logging,
+    Asked,
+    Inbox,
+    Outbox,
+    Presence,
+    Received,
+    Sessions,
+    add_zenoh_args,
+    audit_sessions,
+    session_id,
+    setup_logging,
     zenoh_config,
 )
+from schema import (
+    Connect,
+    Done,
+    Keys,
+    Message,
+    Moves,
+    Nps,
+    Over,
+    Phase,
+    Refused,
+    RejectCounter,
+    Status,
+    Target,
+    Turn,
+    Upd,
+    UsageError,
+    drone_id,
+    encode,
+)
+from schema.errors import WrongSender
+from schema.messages import WorldSpec
 
+from .admission import Presences
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
 from .journal import JournalWriter, read, repair_tail
+from .resume import restore
 
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway.
 LINGER_S = 5.0
+#: Seconds a vanished presence is held before it counts: when the router goes away, every token vanishes,
+#: the others' sometimes just before the coordinator's own (which tells a lost link from departures).
+SETTLE_S = 0.5
+#: Seconds a starting coordinator looks for another one on its root.
+PEER_CHECK_S = 2.0
 
 
 def _key_of(keys: Keys, msg: Message) -> str:
@@ -43,48 +80,6 @@ def _key_of(keys: Keys, msg: Message) -> str:
     raise AssertionError(f"the coordinator does not publish {msg.TAG}")
 
 
-#: Seconds a CONNECT may wait for its sender's presence token to be seen.
-PRESENCE_WAIT_S = 5.0
-
-
-class Admissions:
-    """Presence tokens, and the CONNECTs waiting for theirs.
-
-    A CONNECT names its sender and session; it is admitted only once the presence token of that same
-    (sender, session) is seen. Under the router's access control only the real principal may declare
-    that token, so a process cannot take another's seat by writing its name in a CONNECT (defence in
-    depth: the coordinator cannot see who sent a query). The token may arrive just after the query
-    (another path), hence the short wait; a CONNECT without one is refused."""
-
-    def __init__(self) -> None:
-        self.present: set[tuple[str, str]] = set()
-        self._waiting: list[tuple[float, zenoh.Query, Connect]] = []
-
-    def connect(self, query: zenoh.Query, msg: Connect) -> list[tuple[zenoh.Query, Connect]]:
-        if (msg.sender, msg.session) in self.present:
-            return [(query, msg)]
-        self._waiting.append((time.monotonic() + PRESENCE_WAIT_S, query, msg))
-        return []
-
-    def presence(self, entity: str, session: str, alive: bool) -> list[tuple[zenoh.Query, Connect]]:
-        if not alive:
-            self.present.discard((entity, session))
-            return []
-        self.present.add((entity, session))
-        ready = [(q, m) for _, q, m in self._waiting if (m.sender, m.session) == (entity, session)]
-        self._waiting = [w for w in self._waiting if (w[2].sender, w[2].session) != (entity, session)]
-        return ready
-
-    def due_in(self) -> float | None:
-        return max(0.0, min(w[0] for w in self._waiting) - time.monotonic()) if self._waiting else None
-
-    def expired(self) -> list[tuple[zenoh.Query, Connect]]:
-        now = time.monotonic()
-        gone = [(q, m) for due, q, m in self._waiting if due <= now]
-        self._waiting = [w for w in self._waiting if w[0] > now]
-        return gone
-
-
 def _soonest(*delays: float | None) -> float | None:
     known = [d for d in delays if d is not None]
     return min(known) if known else None
@@ -92,160 +87,249 @@ def _soonest(*delays: float | None) -> float | None:
 
 class Executor:
     """Carries out the engine's effects in order; with `pace`, a new turn starts at most every `pace`
-    seconds (the effects from its TURN on are held until then: a watchable speed, not a synchronisation)."""
+    seconds (the effects from its TURN on are held until then: a watchable speed, not a synchronisation).
+    The end of the game is never held: OVER sends what was held before it, at once."""
 
-    def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, rejects: RejectCounter, status: bytes,
-                 pace: float = 0.0) -> None:
-        self.keys, self.out, self.writer, self.rejects, self.pace = keys, out, writer, rejects, pace
+    def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, rejects: RejectCounter,
+                 pace: float = 0.0, clock: Callable[[], float] = time.monotonic) -> None:
+        self.keys, self.out, self.writer, self.rejects, self.pace, self.clock = keys, out, writer, rejects, pace, clock
         self._held: list = []
         self._due = 0.0
         self._turn = 0  # the last turn whose first TURN went out
         self._last = float("-inf")  # when it went out
-        # the last STATUS that went out, encoded (served on OBS/LAST); before the first, the state the game
-        # starts (or resumes) from, which that first STATUS will say
-        self.last_status = status
 
     def run(self, effects: list) -> None:
         for eff in effects:
             if self._held:
                 self._held.append(eff)
+                if isinstance(eff, Publish) and isinstance(eff.msg, Over):
+                    self.pace = 0.0  # the game is over: nothing waits for a pace any more
+                    self.release()
                 continue
             match eff:
                 case Publish(Turn() as turn) if self.pace and turn.turn > self._turn:
                     self._turn = turn.turn
                     due = self._last + self.pace
-                    if time.monotonic() < due:
+                    if self.clock() < due:
                         self._held, self._due = [eff], due
                         continue
-                    self._last = time.monotonic()
+                    self._last = self.clock()
                     self.out.put(self.keys.turn_of(turn.phase), turn)
                 case Publish(Turn(phase=Phase.ENV)) if not self.out.matching(self.keys.turn_of(Phase.ENV)):
                     pass  # nobody follows the ENV phase (the environment does when someone wants its UPD)
                 case Publish(msg, data):
-                    data = encode(msg) if data is None else data
-                    if isinstance(msg, Status):
-                        self.last_status = data
                     self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):
-                    query.reply(query.key_expr, encode(msg))
-                    query.drop()  # the final answer: the asker stops waiting now
+                    self.answer(query, encode(msg))
                 case Record(data):
                     self.writer.append(data)
                 case Refusal(what, err):
                     self.rejects.reject(what, err)
 
+    def answer(self, query: Any, data: bytes) -> None:  # a zenoh.Query (a Reply's token)
+        """Reply to a query; the final answer: the asker stops waiting now."""
+        query.reply(query.key_expr, data)
+        query.drop()
+
     def due_in(self) -> float | None:
         """Seconds until held effects are due (None: nothing held)."""
-        return max(0.0, self._due - time.monotonic()) if self._held else None
+        return max(0.0, self._due - self.clock()) if self._held else None
 
     def release(self) -> None:
         held, self._held = self._held, []
-        self._last = time.monotonic()
+        self._last = self.clock()
         first, rest = held[0], held[1:]
         self.out.put(self.keys.turn_of(first.msg.phase), first.msg)
         self.run(rest)
 
 
-def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None,
-         logger: logging.Logger, resume: bool = False, pace: float = 0.0, verify_env: bool = False) -> Over:
-    """Run one game to its end (or, with `resume`, the rest of the journal's game); return the OVER message."""
+class Coordinator:
+    """The coordinator's loop around the engine, without Zenoh: feed it the inbox's events (None when
+    `timeout()` passed), until `finished()`.
+
+    It admits a CONNECT once its sender's presence token is seen (`Presences`), keeps the phase deadline,
+    holds a vanished presence SETTLE_S before it counts (its own vanishing too means the link is down: the
+    engine holds the game), refuses to share its root with another coordinator, ends the game on a signal,
+    and after OVER waits (up to LINGER_S) for the entities to leave. When a phase's deadline passes it asks
+    (`audit`) which sessions the routers connect: an admitted entity whose session is not among them has
+    gone, whoever holds a copy of its presence token."""
+
+    def __init__(self, engine: Engine, effects: Executor, rejects: RejectCounter, logger: logging.Logger, me: str,
+                 clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None) -> None:
+        self.engine, self.effects, self.rejects, self.log, self.me, self.clock = \
+            engine, effects, rejects, logger, me, clock
+        self.audit = audit  # asks which sessions are connected: a `Sessions` event comes back
+        self._auditing = False
+        self.presences: Presences[zenoh.Query] = Presences()
+        self.signal: int | None = None  # the signal that stopped the game
+        self.rival: str | None = None  # another coordinator's session on this root, which this one yields to
+        self._phase = engine.clock()
+        self._started = clock()
+        self._vanishing: dict[tuple[str, str], float] = {}  # (entity, session) -> when its going counts
+        self._linger_until: float | None = None
+        self._stops: list[Interrupted] = []  # signals noted by `stop`, not yet acted on
+
+    def stop(self, event: Interrupted) -> None:
+        """A signal, from its handler (which may run while the loop holds the inbox's lock): noted only; the
+        loop, woken, acts on it (`timeout` is 0 then)."""
+        self._stops.append(event)
+
+    def _interrupted(self, event: Interrupted, now: float) -> None:
+        if self.signal is not None:  # a second one: stop waiting for the entities to leave
+            self._linger_until = now
+        self.signal = event.signum
+        self.effects.run(self.engine.interrupt(f"the coordinator was stopped ({event.name})"))
+
+    def timeout(self) -> float | None:
+        now = self.clock()
+        if self._stops:
+            return 0.0
+        if self._linger_until is not None:
+            return max(0.0, self._linger_until - now)
+        limit = self.engine.deadline()
+        left = None if limit is None else max(0.0, self._started + limit - now)
+        vanish = max(0.0, min(self._vanishing.values()) - now) if self._vanishing else None
+        return _soonest(left, self.effects.due_in(), self.presences.due_in(now), vanish)
+
+    def finished(self) -> bool:
+        if self.rival is not None:
+            return True
+        return self._linger_until is not None and (not self.presences.others() or self.clock() >= self._linger_until)
+
+    def handle(self, event: object) -> None:
+        run, engine, now = self.effects.run, self.engine, self.clock()
+        while self._stops:
+            self._interrupted(self._stops.pop(0), now)
+        match event:
+            case None:
+                self._due(now)
+            case Interrupted():
+                self._interrupted(event, now)
+            case Asked(asked, Connect() as hello):
+                for gone in [k for k in self._vanishing if k[0] == hello.sender]:  # a process that replaces a
+                    del self._vanishing[gone]  # vanished one: the departure counts now, not after SETTLE_S
+                    run(engine.vanished(*gone))
+                for query, msg in self.presences.connect(asked, hello, now):
+                    run(engine.connect(msg, query))
+            case Received(_, msg) if engine.stage is not Stage.OVER:  # after OVER: sent before it was seen
+                run(engine.receive(msg))
+            case Presence("SRV", sid, alive) if sid == self.me:
+                if not alive:  # every presence vanishes with the link: nobody has left
+                    self._vanishing.clear()
+                    run(engine.link_lost())
+            case Presence("SRV", sid, True) if engine.stage is not Stage.OVER and sid < self.me:
+                self.rival = sid  # two started at once: the one with the smaller session id goes on
+            case Sessions(connected):
+                self._auditing = False
+                self._gone_unless(connected)
+            case Presence(entity, sid, alive):
+                for query, msg in self.presences.presence(entity, sid, alive):
+                    run(engine.connect(msg, query))
+                if alive:
+                    self._vanishing.pop((entity, sid), None)
+                    run(engine.present(entity, sid))
+                else:
+                    self._vanishing[(entity, sid)] = now + SETTLE_S
+        self._tick()
+        if engine.stage is Stage.OVER and self._linger_until is None:
+            self._linger_until = self.clock() + LINGER_S  # let OVER reach everyone
+
+    def _gone_unless(self, connected: frozenset[str] | None) -> None:
+        """Admitted entities whose session is not `connected` have gone (their token is a copy's); nothing
+        is concluded from a listing that may be incomplete or that misses this coordinator itself."""
+        if connected is None or self.me not in connected or self.engine.stage is Stage.OVER:
+            return
+        for entity, sid in sorted(self.engine.roster.sessions.items()):
+            if sid and sid not in connected:
+                self.log.warning("%s's session %s is not connected to any router: its presence token is "
+                                 "held by another session", entity, sid)
+                self.presences.presence(entity, sid, False)
+                self._vanishing.pop((entity, sid), None)
+                self.effects.run(self.engine.vanished(entity, sid))
+
+    def _tick(self) -> None:
+        """The deadline restarts whenever what it is measured from changes (`Engine.clock`)."""
+        if self.engine.clock() != self._phase:
+            self._phase, self._started = self.engine.clock(), self.clock()
+
+    def _due(self, now: float) -> None:
+        """Whatever is due: held turns, CONNECTs without a token, vanished presences, the phase deadline."""
+        if self.effects.due_in() == 0:
+            self.effects.release()
+        for query, msg in self.presences.expired(now):
+            why = (f"no presence token of {msg.sender} (session {msg.session or '?'}): "
+                   "a process connects under its own name only")
+            self.rejects.reject(f"CONNECT from {msg.sender}", WrongSender(why))
+            self.effects.answer(query, encode(Refused(turn=self.engine.turn, sender="SRV", text=why)))
+        for (entity, sid), due in sorted(self._vanishing.items()):
+            if due <= now:
+                del self._vanishing[(entity, sid)]
+                self.effects.run(self.engine.vanished(entity, sid))
+        self._tick()  # (a departure may have changed what the deadline is measured from)
+        limit = self.engine.deadline()
+        if limit is not None and now >= self._started + limit and self._linger_until is None:
+            if self.engine.stage in (Stage.GCS, Stage.DRONES) and not self._auditing:
+                self._auditing = True  # someone missed a deadline: is everyone whose token we see connected?
+                self.audit()
+            self.effects.run(self.engine.expire(*self._phase))
+
+
+def rival(session: zenoh.Session, keys: Keys) -> str | None:
+    """The session id of a coordinator already on this root, if any."""
+    for reply in session.liveliness().get(keys.alive_of("SRV"), timeout=PEER_CHECK_S):
+        if reply.ok is not None:
+            return keys.presence_of(str(reply.ok.key_expr))[1]
+    return None
+
+
+def open_game(game: GameConfig, journal: str | None, resume: bool, logger: logging.Logger) -> Engine:
+    """A new game, or with `resume` the rest of the journal's (a new one if it has none yet); either way
+    under a new identity (`Engine`'s `game`): what an earlier coordinator sent is foreign to it."""
+    identity = secrets.token_hex(8)
     if resume and not journal:
         raise UsageError("--resume needs --journal")
-    if resume and os.path.exists(journal) and os.path.getsize(journal) > 0:
+    if resume and journal and os.path.exists(journal) and os.path.getsize(journal) > 0:
         repair_tail(journal)
-        engine = Engine.resume(game, list(read(journal)), logger)
-    else:
-        if resume:  # e.g. a container restarted before the game began: nothing to resume yet
-            logger.info("no journal at %s yet: starting a new game", journal)
-        engine = Engine(game, logger)
-    engine.verify_env = verify_env
-    engine.journaled = journal is not None
-    with zenoh.open(conf) as session, JournalWriter(journal) as writer:
-        inbox = Inbox(session, keys, logger)
-        out = Outbox(session)
+        return restore(game, list(read(journal)), logger, identity)
+    if resume:  # e.g. a container restarted before the game began: nothing to resume yet
+        logger.info("no journal at %s yet: starting a new game", journal)
+    return Engine(game, logger, game=identity)
+
+
+def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None, logger: logging.Logger,
+         resume: bool = False, pace: float = 0.0, verify_env: bool = False) -> tuple[Over, int | None]:
+    """Run one game to its end (or, with `resume`, the rest of the journal's game): its OVER, and the signal
+    that stopped it (None: it ended by itself)."""
+    engine = open_game(game, journal, resume, logger)
+    engine.verify_env, engine.journaled = verify_env, journal is not None
+    with zenoh.open(conf) as session:
+        other = rival(session, keys)
+        if other is not None:
+            raise UsageError(f"another coordinator (session {other}) runs on {keys.root}: one game per root")
+        me, inbox = session_id(session), Inbox(session, keys, logger)
         inbox.serve(keys.connect, Connect)
-        inbox.subscribe(keys.any_tgt, Target)
-        inbox.subscribe(keys.gcs_done, Done)
-        inbox.subscribe(keys.any_nps, Nps)
-        inbox.subscribe(keys.any_moves, Moves)
-        if verify_env:  # the environment's report of each ENV phase, checked against the engine's world
-            inbox.subscribe(keys.upd, Upd)
+        for key, kind in [(keys.any_tgt, Target), (keys.gcs_done, Done), (keys.any_nps, Nps),
+                          (keys.any_moves, Moves)] + [(keys.upd, Upd)] * verify_env:
+            # (UPD: each ENV phase's report, checked against the engine's world; the others are refused
+            # unread when they are for a turn before the engine's: stale)
+            inbox.subscribe(key, kind, since=None if kind is Upd else lambda: engine.turn)
         inbox.watch_presence()
-        token = session.liveliness().declare_token(keys.alive("SRV", session_id(session)))
-        admissions = Admissions()
-        present = admissions.present  # (entity, session) of every presence token
-
-        def refuse(query: zenoh.Query, msg: Connect, why: str) -> None:
-            inbox.rejects.reject(f"CONNECT from {msg.sender}", WrongSender(why))
-            query.reply(query.key_expr, encode(Refused(turn=engine.turn, sender="SRV", text=why)))
-            query.drop()
-        logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
-                    keys.root, ", ".join(d.drone for d in game.drones))
-
-        effects = Executor(keys, out, writer, inbox.rejects, encode(engine.status()), pace)
-        run = effects.run
-
-        def last_status(query: zenoh.Query, _msg: StatusRequest) -> bool:
-            """OBS/LAST, answered on Zenoh's thread (it reads one reference): the last STATUS published."""
-            query.reply(query.key_expr, effects.last_status)
-            query.drop()
-            return True
-
-        inbox.serve(keys.last_status, StatusRequest, inline=last_status)
-        phase = engine.clock()
-        started = time.monotonic()
-
-        def timeout() -> float | None:
-            limit = engine.deadline()
-            left = None if limit is None else max(0.0, started + limit - time.monotonic())
-            return _soonest(left, effects.due_in(), admissions.due_in())
-
-        def handle(event: Event | None) -> None:
-            nonlocal phase, started
-            match event:
-                case None if effects.due_in() == 0:
-                    effects.release()
-                case None if admissions.due_in() == 0:
-                    for query, msg in admissions.expired():
-                        refuse(query, msg, f"no presence token of {msg.sender} (session {msg.session or '?'}): "
-                                           "a process connects under its own name only")
-                case None:
-                    run(engine.expire(*phase))
-                case Asked(query, Connect() as msg):
-                    for query, msg in admissions.connect(query, msg):
-                        run(engine.connect(msg, query))
-                case Received(_, msg):
-                    try:
-                        run(engine.receive(msg))
-                    except RemoteInputError as err:  # counted and logged; the engine changed nothing
-                        inbox.rejects.reject(f"{msg.TAG} from {msg.sender}", err)
-                        run(err.follow)
-                case Presence(entity, sid, alive):
-                    for query, msg in admissions.presence(entity, sid, alive):
-                        run(engine.connect(msg, query))
-                    if not alive:
-                        run(engine.vanished(entity, sid))
-            if engine.clock() != phase:
-                phase = engine.clock()
-                started = time.monotonic()
-
-        # A small game's messages are handled on Zenoh's thread when nothing else is under way (see Inbox.run).
-        inbox.run(handle, timeout=timeout, until=lambda: engine.stage is Stage.OVER,
-                  inline=inline_for(len(game.drones)))
-        # Let OVER reach everyone: wait (on events, bounded) until the admitted entities have left.
-        end = time.monotonic() + LINGER_S
-        while {e for e, _ in present} - {"SRV"} and time.monotonic() < end:
-            event = inbox.get(end - time.monotonic())
-            match event:
-                case Presence(entity, sid, False):
-                    present.discard((entity, sid))
-                case Asked(query, Connect() as msg):
-                    run(engine.connect(msg, query))
+        token = session.liveliness().declare_token(keys.alive("SRV", me))
+        with JournalWriter(journal) as writer:
+            srv = Coordinator(engine, Executor(keys, Outbox(session), writer, inbox.rejects, pace), inbox.rejects,
+                              logger, me, audit=partial(audit_sessions, session, inbox.post))
+            logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
+                        keys.root, ", ".join(d.drone for d in game.drones))
+            with on_stop(srv.stop), waking(partial(inbox.post, None)):  # a signal is noted, the loop woken
+                inbox.run(srv.handle, timeout=srv.timeout, until=srv.finished)
         token.undeclare()
+        if srv.rival is not None:
+            raise UsageError(f"another coordinator (session {srv.rival}) started on {keys.root} at the same time")
+        inbox.rejects.flush(everything=True)
         if inbox.rejects.total:
-            logger.info("rejected inputs: %s", inbox.rejects.snapshot())
+            logger.info("rejected inputs: %s", inbox.rejects.report())
     assert engine.end is not None
-    return engine.end
+    return engine.end, srv.signal
 
 
 def parse_starts(text: str, count: int) -> tuple[DroneSpec, ...]:
@@ -271,11 +355,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-turns", type=int, default=1000)
     p.add_argument("--phase-deadline", type=float, default=5.0, help="seconds for drones and ENV per phase")
     p.add_argument("--gcs-deadline", type=float, default=0.0, help="seconds for the GCS phase (0: wait)")
-    p.add_argument("--admit-deadline", type=float, default=0.0, help="seconds to wait for entities (0: forever)")
+    p.add_argument("--admit-deadline", type=float, default=600.0, metavar="SECONDS",
+                   help="how long the game waits for every entity to connect (also when resumed), then ends "
+                        "ABORTED naming who never came (default 600; 0: wait forever)")
     p.add_argument("--lost-after", type=int, default=3, help="missed deadlines before a drone is LOST")
     p.add_argument("--gcs-grace", type=float, default=30.0, metavar="SECONDS",
                    help="with --resume: how long the game waits for its ground station once the environment "
                         "and the drones are back (default 30)")
+    p.add_argument("--link-grace", type=float, default=30.0, metavar="SECONDS",
+                   help="how long the game holds when the coordinator's link is down (every presence vanished at "
+                        "once, e.g. a router restart) for its entities to come back (default 30)")
     p.add_argument("--journal", help="append the game's journal to this file")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS (default 0: as fast as the entities answer)")
@@ -297,18 +386,19 @@ def parse_size(text: str) -> tuple[int, int, int]:
         size = size * 3
     if len(size) != 3 or min(size) < 1:
         raise UsageError(f"bad size {text!r}: expected three positive integers")
-    return size  # type: ignore[return-value]
+    return size
 
 
 def game_config(args: argparse.Namespace) -> GameConfig:
-    from dronesim.entities.world import World
+    from entities.world import World
 
     deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
-                     admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace)
+                     admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace,
+                     link_grace=args.link_grace)
     if args.scenario:
         from dronesim.scenario import Scenario
 
-        return Scenario.load(args.scenario).game_config(**deadlines)
+        return Scenario.load(args.scenario, plan=False).game_config(**deadlines)
 
     if args.world:
         world = World.load(args.world)
@@ -327,10 +417,10 @@ def cli(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logger = setup_logging(args.log_level, "SRV")
     try:
-        over = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal, logger=logger,
-                    resume=args.resume, pace=args.pace, verify_env=args.verify_env)
+        over, signum = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal,
+                            logger=logger, resume=args.resume, pace=args.pace, verify_env=args.verify_env)
     except UsageError as err:
         logger.error("%s", err)
         return 2
     print(f"OVER at turn {over.turn}: {over.reason.value}: {over.text}", file=sys.stderr)
-    return 0
+    return 0 if signum is None else exit_status(signum)

@@ -5,37 +5,45 @@ A drone dies when it leaves the world, enters a building cell, shares a cell wit
 order and the first that applies is the one recorded.
 
 `judge` decides for a whole swarm at once, over columns (numpy arrays, one row per alive drone, in id
-order); `deaths` says the same over mappings from drone ids to cells.
+order): the engine's observer. `deaths` is the same rules written drone by drone, over mappings from drone
+ids to cells: the reference that tests/test_observer.py holds `judge` to (a property test).
 """
 
 from __future__ import annotations
 
+from collections import defaultdict
 from collections.abc import Mapping, Set
+from typing import TypeVar
 
 import numpy as np
 
-from dronesim.entities.world import inside_rows, linear_rows
-from dronesim.schema import Cause, Cell
-from dronesim.schema.tables import code_of
-
-from .fleet import CAUSES
+from entities.world import inside_rows, linear_rows
+from schema import Cause, Cell
+from schema.tables import code_of
+from schema.tuning import JUDGE_FEW_DRONES
 
 _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause.BUILDING, Cause.VERTEX, Cause.SWAP))
+_CODE = {c: code_of(c) for c in Cause}
+K = TypeVar("K", str, int)  # what `deaths` knows a drone by: its id, or its row
 
 
 def inside(cell: Cell, size: Cell) -> bool:
     return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
 
 
-def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray) -> np.ndarray:
+def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
+          few: int = JUDGE_FEW_DRONES) -> np.ndarray:
     """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE).
 
     `before` and `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered
     integers, rows in id order (the priority order: when several drones enter one cell, the last in id
     order is the one remembered as entering it, for the swap rule); `building`: whether its `after` cell is
-    a building.
+    a building. Up to `few` drones, judged drone by drone (`deaths`: an array operation's fixed cost is
+    more than a few drones' Python), else in array operations.
     """
     n = len(after)
+    if n <= few:
+        return _judge_few(size, before, after, building)
     cause = np.zeros(n, np.uint8)
     out = ~inside_rows(after, size)
     cause[out] = _OUTSIDE
@@ -70,22 +78,50 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     return cause
 
 
+def _judge_few(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray) -> np.ndarray:
+    """`judge` by `deaths`, rows as keys (their order is the id order)."""
+    cells = list(map(tuple, after.tolist()))
+    buildings = {c for c, hit in zip(cells, building.tolist()) if hit}
+    dead = deaths(size, dict(enumerate(map(tuple, before.tolist()))), dict(enumerate(cells)), buildings)
+    cause = np.zeros(len(cells), np.uint8)
+    if dead:
+        cause[list(dead)] = [_CODE[c] for c in dead.values()]
+    return cause
+
+
 def deaths(
     size: Cell,
-    before: Mapping[str, Cell],
-    after: Mapping[str, Cell],
+    before: Mapping[K, Cell],
+    after: Mapping[K, Cell],
     buildings: Set[Cell],
-) -> dict[str, Cause]:
-    """Which of the drones alive at the start of the turn die, and why (`judge` over mappings).
+) -> dict[K, Cause]:
+    """Which of the drones alive at the start of the turn die, and why: the rules drone by drone.
 
     `before` and `after` hold every alive drone's cell at the start and end of the turn (a hovering
-    drone has the same cell in both); `buildings` holds the building cells among the `after` cells
-    (the environment reports them in its UPD).
+    drone has the same cell in both); `buildings` holds the building cells among the `after` cells.
+    Priority is the id order: when several drones enter one cell, the last in id order is the one
+    remembered as entering it, for the swap rule.
     """
+    dead: dict[K, Cause] = {}
     order = sorted(after)
-    if not order:
-        return {}
-    b = np.array([before[d] for d in order], np.int64)
-    a = np.array([after[d] for d in order], np.int64)
-    cause = judge(size, b, a, np.array([after[d] in buildings for d in order], bool))
-    return {order[i]: CAUSES[c] for i, c in enumerate(cause.tolist()) if c}
+    by_cell: dict[Cell, list[K]] = defaultdict(list)
+    for d in order:
+        cell = after[d]
+        if not inside(cell, size):
+            dead[d] = Cause.OUTSIDE
+        elif cell in buildings:
+            dead[d] = Cause.BUILDING
+        else:
+            by_cell[cell].append(d)
+    for ds in by_cell.values():
+        if len(ds) > 1:
+            for d in ds:
+                dead[d] = Cause.VERTEX
+    arriving = {after[d]: d for d in order if after[d] != before[d]}
+    for d in order:
+        src, dst = before[d], after[d]
+        other = arriving.get(src)
+        if src != dst and other is not None and other != d and before[other] == dst:
+            for x in (d, other):
+                dead.setdefault(x, Cause.SWAP)
+    return dead

@@ -84,7 +84,7 @@ def check(state: dict) -> tuple[bool, str]:
             return False, f"router does not accept sessions on {', '.join(endpoints)}: {exc}"
     if not entity:
         return False, f"cannot tell which entity this {role} runs as (see its --id/--host)"
-    from dronesim.schema import Keys
+    from schema import Keys
 
     conf = probe_config(args, list(args.connect))
     endpoints = connect_endpoints(conf)  # --connect, or the entity's config file

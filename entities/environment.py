@@ -1,20 +1,44 @@
-"""The environment's state (the seed's ENV): the static world plus where each drone is. Pure.
+"""The environment (the seed's ENV), pure: no network, no clock.
 
-`answer` is the seed's whatInside for an ASK; `apply` is moveDrone, returning the changed cells
-(the UPD); `sync` sets the drones from the observer's STATUS at the end of a turn (the dead and
-lost are removed from the grid).
+`Environment` is its state, the static world plus where each drone is: `answer` is the seed's
+whatInside for an ASK; `apply` is moveDrone, returning the changed cells (the UPD); `sync` sets the
+drones from the observer's STATUS at the end of a turn (the dead and lost are removed from the grid).
+
+`EnvironmentProcess` is its protocol, driven by messages and returning effects, which the Zenoh
+adapter (entities/env_node.py) carries out.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from dronesim.schema import Cell, CellInfo, CellKind, Move, Status, WorldSpec
-from dronesim.schema.messages import AROUND, asked_cells
-from dronesim.schema.errors import OutOfRange, UnknownEntity
+from schema import (
+    Ans,
+    Ask,
+    Cell,
+    CellInfo,
+    CellKind,
+    MapRequest,
+    MoveTable,
+    Over,
+    Phase,
+    RemoteInputError,
+    Status,
+    Turn,
+    Upd,
+    Welcome,
+    WorldMap,
+    WorldSpec,
+    is_drone_id,
+)
+from schema.errors import OutOfRange, Refusal, StaleTurn, UnknownEntity, WrongSender
+from schema.messages import AROUND, asked_cells, is_host_id
+from schema.tables import drone_name, drone_number
+from schema.tuning import SURVEY_FEW_CELLS
 
 from .world import World, inside_rows, linear_rows
 
@@ -26,57 +50,61 @@ def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
     return World.generate(spec.size, np.random.default_rng(spec.seed), keep_free=tuple(starts))
 
 
-#: Turns the environment keeps following STATUS after the last question about the drones.
-FOLLOW_TURNS = 8
-
-
-class Following:
-    """Whether the environment needs the drones' positions turn by turn, i.e. follows STATUS: while someone
-    listens to its UPD reports (made from the ENV phase's moves), while an ASK about the drones waits for
-    its turn's STATUS, and for `turns` STATUS after the last ASK about the drones (one for turn 0 asks the
-    static world). Otherwise nobody needs them: drone processes chart the static map and compose their
-    answers themselves, so in most games the environment is asked nothing once the game runs, and a
-    STATUS a turn would cost it (and the router) a message a turn for nothing."""
-
-    def __init__(self, turns: int = FOLLOW_TURNS) -> None:
-        self.turns = turns
-        self.listened = False  # someone subscribes to UPD
-        self._quiet: int | None = None  # STATUS since the last ASK about the drones (None: none yet)
-
-    def asked(self) -> None:
-        self._quiet = 0
-
-    def status(self) -> None:
-        if self._quiet is not None:
-            self._quiet += 1
-
-    def wanted(self, waiting: bool) -> bool:
-        """`waiting`: an ASK waits for a STATUS."""
-        return self.listened or waiting or (self._quiet is not None and self._quiet <= self.turns)
-
-
-#: Up to this many cells, `survey` answers cell by cell rather than with numpy (whose fixed cost dominates).
-SMALL = 48
-
-
 class Environment:
-    def __init__(self, world: World, drones: dict[str, Cell]) -> None:
-        self.world = world
-        self.drones: dict[str, Cell] = dict(drones)  # drone -> cell (only drones inside the world)
-        self._occupants = self._index()
+    """The world and where each drone is. The drones are rows, not records: their numbers (`schema.tables`)
+    and cells, sorted by cell (`_linear`, the grid index) and by number within a cell; a cell's drones are
+    found by bisection. A swarm of 1000 costs a few dozen bytes a drone."""
 
-    def _index(self) -> dict[Cell, tuple[str, ...]]:
-        cells: dict[Cell, list[str]] = defaultdict(list)
-        for d, c in sorted(self.drones.items()):
-            cells[c].append(d)
-        self._occupied_linear = linear_rows(np.array(list(cells), np.int64).reshape(-1, 3), self.world.size)
-        return {c: tuple(ds) for c, ds in cells.items()}
+    def __init__(self, world: World, drones: Mapping[str, Cell]) -> None:
+        self.world = world
+        self._set(np.array([drone_number(d) for d in drones], np.int64),
+                  np.array(list(drones.values()), np.int64).reshape(-1, 3))
+
+    @classmethod
+    def of_rows(cls, world: World, numbers: np.ndarray, cells: np.ndarray) -> Environment:
+        """The drones numbered `numbers` at `cells` ((n, 3)), as a table holds them."""
+        env = cls(world, {})
+        env._set(numbers.astype(np.int64), cells.astype(np.int64))
+        return env
+
+    def _set(self, numbers: np.ndarray, cells: np.ndarray) -> None:
+        """The drones: `numbers` and their `cells` ((n, 3)); only those inside the world are kept."""
+        inside = inside_rows(cells, self.world.size)
+        numbers, cells = numbers[inside], cells[inside]
+        linear = linear_rows(cells, self.world.size)
+        order = np.lexsort((numbers, linear))
+        self._numbers, self._cells, self._linear = numbers[order], cells[order], linear[order]
+
+    @property
+    def drones(self) -> dict[str, Cell]:
+        """drone -> cell (only drones inside the world), in id order: built on demand, for people."""
+        pairs = zip(self._numbers.tolist(), map(tuple, self._cells.tolist()))
+        return dict(sorted((drone_name(n), c) for n, c in pairs))
+
+    def _occupants(self, linear: np.ndarray) -> list[tuple[str, ...]]:
+        """The drones in each cell of `linear` (grid indexes of inside cells), each sorted by id."""
+        lo = np.searchsorted(self._linear, linear, "left").tolist()
+        hi = np.searchsorted(self._linear, linear, "right").tolist()
+        numbers = self._numbers
+        return [tuple(sorted(drone_name(n) for n in numbers[a:b].tolist())) if b > a else () for a, b in zip(lo, hi)]
+
+    def _at(self, cells: Sequence[Cell]) -> dict[Cell, tuple[str, ...]]:
+        """The occupied cells among `cells` and their drones (as `World.what_inside` takes them)."""
+        if not len(self._linear) or not cells:
+            return {}
+        a = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
+        inside = inside_rows(a, self.world.size)
+        kept: list[Cell] = [(c[0], c[1], c[2]) for c, ok in zip(cells, inside.tolist()) if ok]
+        found = self._occupants(linear_rows(a[inside], self.world.size))
+        return {c: ds for c, ds in zip(kept, found) if ds}
 
     def what_inside(self, cell: Cell) -> CellInfo:
-        return self.world.what_inside(cell, self._occupants)
+        return self.world.what_inside(cell, self._at([cell]))
 
     def answer(self, cells: Iterable[Cell]) -> tuple[CellInfo, ...]:
-        return tuple(self.world.what_inside(c, self._occupants) for c in cells)
+        cells = list(cells)
+        at = self._at(cells)
+        return tuple(self.world.what_inside(c, at) for c in cells)
 
     def kinds(self, cells: np.ndarray, inside: np.ndarray | None = None) -> np.ndarray:
         """The CellKind code of each cell of an (n, 3) integer array (uint8): the static world, no drones
@@ -93,7 +121,7 @@ class Environment:
         neighbours of each `around` cell): one CellKind byte per cell and (index, drone) for every drone
         in an asked cell (none with `drones` False: the static world), in numpy over the grid (a few
         cells: in plain Python, cheaper then)."""
-        if len(cells) + 6 * len(around) <= SMALL:
+        if len(cells) + 6 * len(around) <= SURVEY_FEW_CELLS:
             infos = self.answer(asked_cells(cells, around))
             pairs = tuple((n, d) for n, info in enumerate(infos) for d in info.drones) if drones else ()
             return bytes(info.kind for info in infos), pairs
@@ -103,47 +131,212 @@ class Environment:
             a = np.concatenate([a, ring.reshape(-1, 3)])
         inside = inside_rows(a, self.world.size)
         kinds = self.kinds(a, inside)
-        if not drones or not self._occupants:
+        if not drones or not len(self._linear):
             return kinds.tobytes(), ()
         linear = np.where(inside, linear_rows(a, self.world.size), -1)
-        occupied = self._occupied_linear
-        hits = np.flatnonzero(np.isin(linear, occupied)).tolist()
-        at = a[hits].tolist()
-        pairs = tuple((n, d) for n, c in zip(hits, at) for d in self._occupants[tuple(c)])
+        hits = np.flatnonzero(np.isin(linear, self._linear))
+        pairs = tuple((n, d) for n, ds in zip(hits.tolist(), self._occupants(linear[hits])) for d in ds)
         return kinds.tobytes(), pairs
 
-    def apply(self, moves: Iterable[Move]) -> tuple[CellInfo, ...]:
+    def apply(self, moves: MoveTable) -> tuple[CellInfo, ...]:
         """Move the drones; return what is now in every changed cell (the UPD): see `move`."""
         return self.answer(self.move(moves))
 
-    def move(self, moves: Iterable[Move]) -> list[Cell]:
+    def move(self, moves: MoveTable) -> list[Cell]:
         """Move the drones; return every changed cell (sources and in-world destinations), sorted.
 
         All moves are checked before any is applied: a move whose source is not where this
         environment has the drone is refused whole (`UnknownEntity` / `OutOfRange`).
         """
-        moves = tuple(moves)
-        for m in moves:
-            if m.drone not in self.drones:
-                raise UnknownEntity(f"move of {m.drone}, which is not in the world")
-            if self.drones[m.drone] != m.src:
-                raise OutOfRange(f"move of {m.drone} from {m.src}, but it is at {self.drones[m.drone]}")
-        changed: set[Cell] = set()
-        for m in moves:
-            changed.add(m.src)
-            if self.world.contains(m.dst):
-                self.drones[m.drone] = m.dst
-                changed.add(m.dst)
-            else:
-                del self.drones[m.drone]  # it left the world (the observer will say it died)
-        self._occupants = self._index()
-        return sorted(changed)
+        numbers, moved = self._numbers, moves.numbers.astype(np.int64)
+        src, dst = moves.column("src").astype(np.int64), moves.column("dst").astype(np.int64)
+        by_number = np.argsort(numbers)  # (numbers are distinct)
+        at = by_number[np.searchsorted(numbers[by_number], moved).clip(0, max(len(numbers) - 1, 0))] \
+            if len(numbers) else np.zeros(len(moved), np.int64)
+        known = numbers[at] == moved if len(numbers) else np.zeros(len(moved), bool)
+        there = known & (self._cells[at] == src).all(axis=1) if len(numbers) else known
+        if not there.all():
+            j = int(np.flatnonzero(~there)[0])  # the first move refused, in the table's order
+            drone = drone_name(int(moved[j]))
+            if not known[j]:
+                raise UnknownEntity(f"move of {drone}, which is not in the world")
+            raise OutOfRange(f"move of {drone} from {tuple(src[j].tolist())}, but it is at "
+                             f"{tuple(self._cells[at[j]].tolist())}")
+        cells = self._cells.copy()
+        cells[at] = dst
+        self._set(numbers, cells)  # (a destination outside the world: the drone left it, the observer will say it died)
+        inside = inside_rows(dst, self.world.size)
+        return sorted(set(map(tuple, src.tolist())) | set(map(tuple, dst[inside].tolist())))
 
     def sync(self, status: Status) -> None:
         """Take the drones' positions from the observer's STATUS: alive ones in the world, others removed."""
         table = status.drones
-        pos = table.column("pos")
-        there = table.alive_mask() & inside_rows(pos, self.world.size)
-        ids = table.ids()
-        self.drones = {ids[i]: (x, y, z) for i, (x, y, z) in zip(np.flatnonzero(there).tolist(), pos[there].tolist())}
-        self._occupants = self._index()
+        alive = table.alive_mask()
+        self._set(table.numbers[alive].astype(np.int64), table.column("pos")[alive].astype(np.int64))
+
+
+# --------------------------------------------------------------------------- the environment's protocol
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """Answer the query `query` (the adapter's handle: a zenoh.Query) with `msg` (an ANS or the MAP)."""
+
+    query: Any
+    msg: Ans | WorldMap
+
+
+@dataclass(frozen=True, slots=True)
+class Fail:
+    """Answer the query `query` (the adapter's handle) with an error reply saying `why`."""
+
+    query: Any
+    why: str
+
+
+@dataclass(frozen=True, slots=True)
+class Report:
+    """Publish the UPD (the cells the ENV phase's moves changed), for whoever listens."""
+
+    msg: Upd
+
+
+@dataclass(frozen=True, slots=True)
+class Follow:
+    """Subscribe to the ENV phase's TURN (`moves` True) or stop (False)."""
+
+    moves: bool
+
+
+Effect = Reply | Fail | Report | Follow | Refusal
+
+
+class EnvironmentProcess:
+    """The environment process's protocol (the seed's ENV), a pure state machine: no network, no clock.
+    Its Zenoh adapter (entities/env_node.py) feeds it, one at a time, the queries it serves (`asked`:
+    ASK and MAPREQ, each with an opaque handle to answer it by), the coordinator's messages it hears
+    (`receive`: STATUS, TURN of the ENV phase, OVER) and whether anyone listens to its UPD (`listened`),
+    and carries out the effects they return.
+
+    It answers an ASK from the world as it stands at the start of the ASK's turn: an ASK for turn t once
+    STATUS(t - 1) has been taken; one that arrives earlier (messages take different routes) waits for
+    it, one for a past turn is refused. An ASK for turn 0 asks the static world (the kinds of the cells,
+    buildings never move; no drones) and is answered at once. The drones' positions come from each
+    STATUS, put on the map only when needed (for an ASK of the turn, or to apply the ENV phase's moves).
+
+    The ENV phase's moves make the UPD report. Nobody listening, the environment does not even follow
+    that phase (the coordinator then publishes none): the drones' cells come from STATUS alone (the same
+    cells), and a swarm's thousands of moves a turn go nowhere.
+    """
+
+    def __init__(self, welcome: Welcome) -> None:
+        numbers, cells = welcome.starts.numbers, welcome.starts.column("pos")
+        self.spec = welcome.world
+        self.world = build_world(welcome.world, map(tuple, cells.tolist()))
+        self.env = Environment.of_rows(self.world, numbers, cells)
+        self.over: Over | None = None
+        self._ready = 1  # the turn whose ASKs can be answered now (STATUS(ready - 1) is the last one taken)
+        self._applied = False  # the ENV phase of turn `ready` is done
+        self._early: Turn | None = None  # the ENV phase of turn `ready` + 1, come before STATUS(ready)
+        self._waiting: list[tuple[object, Ask]] = []  # ASKs for a turn after `ready`
+        self._unsynced: Status | None = None  # the last STATUS, until the drones' positions are needed
+        self._listened = False  # someone subscribes to the UPD
+
+    def drawing(self) -> str:
+        """The world and the drones in it, floor by floor, under a line saying what it is."""
+        world = self.world
+        return (f"World {world.size} seed {self.spec.seed}, {len(world.buildings)} buildings, "
+                f"{int(world.grid.sum())} building cells:\n{world.draw(self.env.drones)}")
+
+    # inputs
+
+    def asked(self, query: object, msg: Ask | MapRequest) -> list[Effect]:
+        """A query to answer (through `Reply` or `Fail` with `query`)."""
+        match msg:
+            case MapRequest():
+                return [Reply(query, WorldMap(turn=self._ready - 1, sender="ENV", size=self.world.size,
+                                              buildings=self.world.packed()))]
+            case Ask(sender=who) if not (is_drone_id(who) or is_host_id(who)):
+                return self._refuse(query, WrongSender(f"ASK from {who}: only drones ask"))
+            case Ask(turn=turn) if turn == self._ready or turn == 0:
+                return [self._answer(query, msg)]
+            case Ask(turn=turn) if turn > self._ready:
+                self._waiting.append((query, msg))
+                return []
+            case Ask(turn=turn, sender=who):
+                return self._refuse(query, StaleTurn(f"ASK for past turn {turn} from {who}, "
+                                                     f"the world is at turn {self._ready}"))
+        raise TypeError(f"not a query the environment serves: {msg!r}")
+
+    def receive(self, msg: Status | Turn | Over) -> list[Effect]:
+        """A message of the coordinator (already screened by the entity's `TurnClock`)."""
+        match msg:
+            case Status():
+                return self._status(msg)
+            case Turn(phase=Phase.ENV, turn=turn):
+                if turn == self._ready and not self._applied:
+                    return self._apply(msg)
+                if turn == self._ready + 1 and self._applied:
+                    self._early = msg  # STATUS(turn - 1) travels on another key and has not arrived yet
+                elif turn != self._ready - 1:  # (after its own STATUS: the drones are already there)
+                    return [Refusal("ENV", StaleTurn(f"ENV phase of turn {turn} while the world is at turn "
+                                                     f"{self._ready}"))]
+                return []
+            case Over():
+                self.over = msg
+                waiting, self._waiting = self._waiting, []
+                return [Fail(query, "the game is over") for query, _ in waiting]
+        raise TypeError(f"not a message the environment takes: {msg!r}")
+
+    def listened(self, matching: bool) -> list[Effect]:
+        """Whether someone subscribes to the UPD now: the environment follows the ENV phase's moves then."""
+        changed, self._listened = matching != self._listened, matching
+        return [Follow(moves=matching)] if changed else []
+
+    # the protocol
+
+    def _status(self, status: Status) -> list[Effect]:
+        self._unsynced = status
+        self._ready, self._applied = status.turn + 1, False
+        out: list[Effect] = []
+        still = []
+        for query, ask in self._waiting:
+            if ask.turn == self._ready:
+                out.append(self._answer(query, ask))
+            elif ask.turn > self._ready:
+                still.append((query, ask))
+            else:
+                out += self._refuse(query, StaleTurn(f"ASK for turn {ask.turn} from {ask.sender}: the world "
+                                                     f"went on to turn {self._ready}"))
+        self._waiting = still
+        early, self._early = self._early, None
+        if early is not None and early.turn == self._ready:
+            out += self._apply(early)
+        return out
+
+    def _sync(self) -> None:
+        """The drones where the last STATUS has them."""
+        if self._unsynced is not None:
+            self.env.sync(self._unsynced)
+            self._unsynced = None
+
+    def _apply(self, turn: Turn) -> list[Effect]:
+        self._applied = True
+        self._sync()
+        try:
+            changed = self.env.move(turn.moves)
+        except RemoteInputError as err:
+            return [Refusal(f"ENV phase of turn {turn.turn}", err)]
+        if not self._listened:  # the report costs a record per cell: only for someone listening
+            return []
+        return [Report(Upd(turn=turn.turn, sender="ENV", cells=self.env.answer(changed)))]
+
+    def _answer(self, query: object, ask: Ask) -> Reply:
+        if ask.turn != 0:
+            self._sync()
+        kinds, drones = self.env.survey(ask.cells, ask.around, drones=ask.turn != 0)
+        return Reply(query, Ans(turn=ask.turn, sender="ENV", kinds=kinds, drones=drones))
+
+    @staticmethod
+    def _refuse(query: object, err: RemoteInputError) -> list[Effect]:
+        return [Fail(query, str(err)), Refusal("ENV/ASK", err)]

@@ -1,4 +1,5 @@
-"""The ground station's pure parts: the seed's input check (correctForm), scripted plans, the display.
+"""The ground station, pure: the seed's input check (correctForm), scripted plans, the console's reading,
+the display, and `Station`, the protocol every ground station plays (scripted, interactive, web, benchmark).
 
 A plan maps turns to targets: ``9,9,0`` (D01 from turn 1), ``D02=3,4,0`` (D02 from turn 1),
 ``D01=5,5,0@12`` (from turn 12). A script file holds one such item per line (``#`` comments).
@@ -9,33 +10,55 @@ from __future__ import annotations
 import bisect
 import pathlib
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from dronesim.schema import (
-    Aim, Cell, Done, DroneState, DroneStatus, Intent, Note, Phase, Status, UsageError, Welcome, is_drone_id,
+from schema import (
+    Aim,
+    AimTable,
+    Cell,
+    Done,
+    DroneState,
+    DroneStatus,
+    EndReason,
+    Intent,
+    Message,
+    Note,
+    Over,
+    Phase,
+    Status,
+    Turn,
+    UsageError,
+    Welcome,
+    is_drone_id,
 )
+from schema.tables import drone_name
+from schema.tuning import ANSWER_AHEAD
 
 from .environment import build_world
 from .world import World
 
-_ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,4})\s*[= ]\s*)?(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")
+_ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,4})\s*[= ]\s*)?"
+                   r"(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")
 
 
-def correct_form(text: str, size: Cell) -> Cell:
-    """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed) must name a cell inside the world."""
+def correct_form(text: str, size: Cell, world: World | None = None) -> Cell:
+    """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed) must name a cell inside the world (of `size`), and,
+    given the `world`, not a building cell (no drone can get there: a seed drone would wander to the turn
+    limit looking for a way in)."""
     parts = [p.strip() for p in text.replace(" ", ",").split(",") if p.strip()]
     try:
-        cell = tuple(int(p) for p in parts)
+        x, y, z = (int(p) for p in parts)
     except ValueError:
         raise UsageError(f"{text!r} is not x,y,z") from None
-    if len(cell) != 3:
-        raise UsageError(f"{text!r} is not x,y,z")
+    cell = (x, y, z)
     if not all(0 <= c < s for c, s in zip(cell, size)):
         raise UsageError(f"{cell} is outside the world: 0 <= x < {size[0]}, 0 <= y < {size[1]}, 0 <= z < {size[2]}")
-    return cell  # type: ignore[return-value]
+    if world is not None and world.is_building(cell):
+        raise UsageError(f"{cell} is inside a building: no drone can get there")
+    return cell
 
 
 def gcs_done(turn: int, targets: Mapping[str, Cell], intent: Intent,
@@ -46,16 +69,10 @@ def gcs_done(turn: int, targets: Mapping[str, Cell], intent: Intent,
     swarm's GCS phase costs what changes, not what is."""
     keep = in_force or {}
     return Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=intent,
-                targets=tuple(Aim(drone=d, pos=c) for d, c in sorted(targets.items()) if keep.get(d) != c))
+                targets=AimTable.of(Aim(drone=d, pos=c) for d, c in sorted(targets.items()) if keep.get(d) != c))
 
 
-#: How many GCS phases a scripted ground station answers ahead, when its plan has nothing new for
-#: them (the coordinator holds up to coordinator.engine.AHEAD_MAX): two keeps the ground station off
-#: the turn's critical path even when its answer takes as long as the drones' phase.
-ANSWER_AHEAD = 2
-
-
-def turns_to_answer_ahead(plan: "Plan", turn: int, answered: int, *, last: int | None = None,
+def turns_to_answer_ahead(plan: Plan, turn: int, answered: int, *, last: int | None = None,
                           horizon: int = ANSWER_AHEAD) -> list[int]:
     """The turns after `turn` a scripted station can answer now: up to `horizon` of them, before the
     plan's next change (and before `last`), except those already answered (up to `answered`)."""
@@ -68,8 +85,10 @@ def turns_to_answer_ahead(plan: "Plan", turn: int, answered: int, *, last: int |
     return out
 
 
-def _plan_items(texts: Iterable[str], size: Cell, default_drone: str) -> Iterable[tuple[int, str, Cell]]:
-    """(turn, drone, cell) of each target item in `texts`, in the order written; UsageError on a bad one."""
+def _plan_items(texts: Iterable[str], size: Cell, default_drone: str,
+                world: World | None) -> Iterable[tuple[int, str, Cell]]:
+    """(turn, drone, cell) of each target item in `texts`, in the order written; UsageError on a bad one
+    (`correct_form`'s checks, with the `world`'s buildings if given)."""
     for text in texts:
         for chunk in text.split(";"):
             if not chunk.strip() or chunk.strip().startswith("#"):
@@ -80,7 +99,11 @@ def _plan_items(texts: Iterable[str], size: Cell, default_drone: str) -> Iterabl
             turn = int(m["turn"] or 1)
             if turn < 1:
                 raise UsageError(f"bad target {chunk.strip()!r}: turns start at 1")
-            yield turn, m["drone"] or default_drone, correct_form(m["cell"], size)
+            try:
+                cell = correct_form(m["cell"], size, world)
+            except UsageError as err:
+                raise UsageError(f"bad target {chunk.strip()!r}: {err}") from None
+            yield turn, m["drone"] or default_drone, cell
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,23 +113,23 @@ class Plan:
     items: tuple[tuple[int, str, Cell], ...]
 
     @classmethod
-    def parse(cls, texts: Iterable[str], size: Cell, default_drone: str = "D01") -> "Plan":
-        items = sorted(_plan_items(texts, size, default_drone), key=lambda item: item[0])
+    def parse(cls, texts: Iterable[str], size: Cell, default_drone: str = "D01", world: World | None = None) -> Plan:
+        items = sorted(_plan_items(texts, size, default_drone, world), key=lambda item: item[0])
         return cls(tuple(items))  # a stable sort: within a turn, the last written wins
 
     @staticmethod
-    def drones_of(texts: Iterable[str], size: Cell, default_drone: str = "D01") -> set[str]:
+    def drones_of(texts: Iterable[str], size: Cell, default_drone: str = "D01", world: World | None = None) -> set[str]:
         """The drones the plan `texts` gives targets to, every item checked as `parse` checks it,
         none kept (a process that needs no plan checks a swarm's thousands of targets for free)."""
-        return {drone for _, drone, _ in _plan_items(texts, size, default_drone)}
+        return {drone for _, drone, _ in _plan_items(texts, size, default_drone, world)}
 
     @classmethod
-    def load(cls, path: str, size: Cell) -> "Plan":
+    def load(cls, path: str, size: Cell, world: World | None = None) -> Plan:
         try:
             lines = pathlib.Path(path).read_text(encoding="utf-8").splitlines()
         except OSError as exc:
             raise UsageError(f"cannot read the target script {path}: {exc}") from None
-        return cls.parse((ln.split("#", 1)[0] for ln in lines), size)
+        return cls.parse((ln.split("#", 1)[0] for ln in lines), size, world=world)
 
     def at(self, turn: int) -> dict[str, Cell]:
         """Targets that take effect at `turn` (found by bisection: `items` are sorted by turn)."""
@@ -122,7 +145,7 @@ class Plan:
         return {d for _, d, _ in self.items}
 
 
-def parse_command(line: str, size: Cell, drones: Iterable[str]) -> dict[str, Cell]:
+def parse_command(line: str, size: Cell, drones: Iterable[str], world: World | None = None) -> dict[str, Cell]:
     """One interactive line: ``x,y,z`` (the only or first drone) or ``Dnn x,y,z``."""
     drones = list(drones)
     head = re.match(r"\s*(D\d{2,4})(?:\s*=\s*|\s+)(.*)\Z", line)  # "D02 1 2 3", "D02=1,2,3"
@@ -135,7 +158,7 @@ def parse_command(line: str, size: Cell, drones: Iterable[str]) -> dict[str, Cel
     drone = m["drone"] or drones[0]
     if not is_drone_id(drone) or drone not in drones:
         raise UsageError(f"unknown drone {drone}: this game flies {', '.join(drones)}")
-    return {drone: correct_form(m["cell"], size)}
+    return {drone: correct_form(m["cell"], size, world)}
 
 
 def describe(s: DroneStatus) -> str:
@@ -163,26 +186,37 @@ def format_status(status: Status, limit: int = 16) -> str:
 
 class Tracks:
     """The last STATUS and each drone's path so far, kept as the game goes (memory grows with the moves
-    made, not with the turns played: a long game of hovering drones costs nothing)."""
+    made, not with the turns played: a long game of hovering drones costs nothing). A STATUS adds the
+    rows of the drones that moved, as arrays (a swarm's turn is a few array operations); the paths are
+    read from them when asked for."""
 
     def __init__(self) -> None:
         self.last: Status | None = None
-        self.paths: dict[str, list[Cell]] = {}
+        self._moves: list[tuple[np.ndarray, np.ndarray]] = []  # (drone numbers, their cells) per STATUS
 
     def add(self, status: Status) -> None:
         """Extend the paths with `status` (read from its columns: after the first STATUS, only the drones
-        that moved since the last one are looked at)."""
+        that moved since the last one are kept)."""
         last, self.last = self.last, status
         table = status.drones
-        pos = table.column("pos")
-        rows = np.arange(len(table))
-        if last is not None and np.array_equal(last.drones.numbers, table.numbers):
-            rows = np.flatnonzero((pos != last.drones.column("pos")).any(axis=1))
-        ids = table.ids()
-        for i, (x, y, z) in zip(rows.tolist(), pos[rows].tolist()):
-            path = self.paths.setdefault(ids[i], [])
-            if not path or path[-1] != (x, y, z):
-                path.append((x, y, z))
+        numbers, pos = table.numbers, table.column("pos")
+        if last is not None and np.array_equal(last.drones.numbers, numbers):
+            moved = np.flatnonzero((pos != last.drones.column("pos")).any(axis=1))
+            if len(moved):
+                self._moves.append((numbers[moved], pos[moved]))
+        else:
+            self._moves.append((numbers.copy(), pos.copy()))
+
+    @property
+    def paths(self) -> dict[str, list[Cell]]:
+        """Each drone's path, without repeats of consecutive cells."""
+        paths: dict[str, list[Cell]] = {}
+        for numbers, cells in self._moves:
+            for n, (x, y, z) in zip(numbers.tolist(), cells.tolist()):
+                path = paths.setdefault(drone_name(n), [])
+                if not path or path[-1] != (x, y, z):
+                    path.append((x, y, z))
+        return paths
 
 
 def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
@@ -205,19 +239,293 @@ def targets_of(status: Status) -> Mapping[str, Cell]:
 @dataclass(frozen=True, slots=True)
 class Ground:
     """What a ground station knows once admitted: the world (rebuilt with the environment's own recipe),
-    the drones of the game, and its plan of targets checked against both."""
+    the drones of the game with their starts, and its plan of targets checked against both."""
 
     world: World
-    drones: list[str]
+    starts: dict[str, Cell]
     plan: Plan
 
+    @property
+    def drones(self) -> list[str]:
+        return list(self.starts)
+
     @classmethod
-    def from_welcome(cls, welcome: Welcome, plan_texts: Iterable[str], script: str | None) -> "Ground":
+    def from_welcome(cls, welcome: Welcome, plan_texts: Iterable[str], script: str | None) -> Ground:
         size = welcome.world.size
         starts = welcome.starts.cells()
         drones = list(starts)
-        plan = Plan.load(script, size) if script else Plan.parse(plan_texts, size, default_drone=drones[0])
+        world = build_world(welcome.world, starts.values())
+        plan = Plan.load(script, size, world) if script else Plan.parse(plan_texts, size, drones[0], world)
         unknown = plan.drones() - set(drones)
         if unknown:
             raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
-        return cls(build_world(welcome.world, starts.values()), drones, plan)
+        return cls(world, starts, plan)
+
+
+class Console:
+    """The seed's interactive loop over a line reader (stdin by default)."""
+
+    def __init__(self, world: World, drones: list[str], read: Callable[[str], str] = input,
+                 write: Callable[[str], None] = print) -> None:
+        self.world, self.drones, self.read, self.write = world, drones, read, write
+
+    def ask(self, turn: int, current: Mapping[str, Cell],
+            gone: Collection[str] = ()) -> tuple[dict[str, Cell], Intent]:
+        """New targets for this turn. Drones without a target must get one (the seed forces the first), but
+        those `gone` (dead or lost)."""
+        new: dict[str, Cell] = {}
+        while True:
+            missing = [d for d in self.drones if d not in current and d not in new and d not in gone]
+            if missing:
+                prompt = f"turn {turn}: target for {missing[0]} (x,y,z): "
+            else:
+                prompt = f"turn {turn}: new target ([Dnn] x,y,z; ...), Enter to keep, q to quit: "
+            try:
+                line = self.read(prompt).strip()
+            except EOFError:
+                return new, Intent.QUIT
+            if line.lower() in ("q", "quit", "exit"):
+                return new, Intent.QUIT
+            if not line:
+                if missing:
+                    self.write(f"a first target is required for {missing[0]}")
+                    continue
+                return new, Intent.CONTINUE
+            given: dict[str, Cell] = {}
+            try:  # all or nothing: one bad item rejects the line
+                for part in line.split(";"):
+                    part = part.strip()
+                    if missing and not part.startswith("D"):
+                        part = f"{missing[0]} {part}"
+                    given.update(parse_command(part, self.world.size, self.drones, self.world))
+                    missing = [d for d in self.drones
+                               if d not in current and d not in new and d not in given and d not in gone]
+            except UsageError as err:
+                self.write(f"invalid: {err}")
+                continue
+            new.update(given)
+            if not missing:
+                return new, Intent.CONTINUE
+
+
+# --------------------------------------------------------------------------- the protocol
+
+
+#: Seconds a station waits after OVER for the last STATUS (published before OVER, but on another key).
+FINAL_STATUS_WAIT = 5.0
+#: End reasons whose last turn produced a STATUS (the others end a turn before its STATUS).
+OBSERVED_ENDS = frozenset({EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndReason.SETTLED, EndReason.TURN_LIMIT})
+
+
+@dataclass(frozen=True, slots=True)
+class Send:
+    """Publish this DONE on the ground station's key (`ahead`: before its phase has begun)."""
+
+    msg: Done
+    ahead: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Show:
+    """Show this text to the person at the station."""
+
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class End:
+    """The game is over and the station has seen all it will see of it: the process may finish."""
+
+    over: Over
+
+
+Effect = Send | Show | End
+
+
+class Station:
+    """The ground station's side of the protocol, shared by the scripted, the interactive and the web
+    station (and the benchmark's): fed the coordinator's messages, it returns what to do. No network,
+    no clock (times are given: seconds of any monotonic clock).
+
+    Each GCS phase it answers with a DONE carrying the targets that change (`gcs_done`): those of its plan
+    taking effect that turn and the person's. Who decides, and when:
+    - a script (neither `console` nor `hold`) answers at once from its plan, with intent FINAL from the
+      plan's last turn (or, given `quit_at`, CONTINUE until that turn, then QUIT: the benchmark), and
+      answers ahead the coming phases in which its plan has nothing new (`turns_to_answer_ahead`): the
+      coordinator takes them without a round trip, and without announcing them, so it goes by STATUS;
+    - a console (`console`) asks its person at once, in the phase;
+    - a held station (`hold`: the web page) keeps the phase `pending` until `answer` is called.
+    It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the
+    targets in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last
+    turn is in, or `FINAL_STATUS_WAIT` seconds after OVER.
+    """
+
+    def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
+                 quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD) -> None:
+        self.ground, self.plan = ground, ground.plan
+        self.console, self.hold, self.quit_at, self.verbose = console, hold, quit_at, verbose
+        self.ahead = ahead  # phases a script answers ahead at most (0: none; the benchmark's switch)
+        self.wanted: dict[str, Cell] = {}  # the targets this station wants, of drones alive
+        self.gone: set[str] = set()  # drones dead or lost: nothing more to say to them
+        self.tracks = Tracks()
+        self.answered = 0  # the last turn whose GCS phase this station has answered (maybe ahead)
+        self.pending: int | None = None  # a held GCS phase not answered yet
+        self.over: Over | None = None
+        self._over_since: float | None = None  # when OVER came, while its turn's STATUS is awaited
+        self._joining = True  # until the first STATUS since admission: it tells the targets in force
+        self.ended = False
+
+    @property
+    def scripted(self) -> bool:
+        return self.console is None and not self.hold
+
+    @property
+    def status_turn(self) -> int:
+        """The turn of the last STATUS (-1 before the first)."""
+        return -1 if self.tracks.last is None else self.tracks.last.turn
+
+    # ------------------------------------------------------------------ events
+
+    def receive(self, msg: Message, now: float) -> list[Effect]:
+        """A message from the coordinator (TURN, STATUS or OVER), already screened by its turn clock."""
+        if self.ended:
+            return []
+        match msg:
+            case Turn(phase=Phase.GCS):
+                return self._gcs_phase(msg.turn)
+            case Turn():  # a held phase the coordinator closed without us (its GCS deadline passed)
+                if self.pending is not None and self.pending <= msg.turn:
+                    self.pending = None
+            case Status():
+                return self._status(msg)
+            case Over():
+                return self._over(msg, now)
+        return []
+
+    def admitted(self, welcome: Welcome) -> list[Effect]:
+        """Admitted again (the coordinator came back): it does not know what was answered ahead."""
+        self.answered, self._joining = 0, True
+        return []
+
+    def wake(self, now: float) -> float | None:
+        """Seconds until `tick` has something to do (None: nothing, whatever the time)."""
+        if self._over_since is None or self.ended:
+            return None
+        return max(0.0, self._over_since + FINAL_STATUS_WAIT - now)
+
+    def tick(self, now: float) -> list[Effect]:
+        """What is due at `now` without a message: the end, once the last STATUS is given up."""
+        return [self._end()] if self.wake(now) == 0.0 else []
+
+    def want(self, targets: Mapping[str, Cell]) -> dict[str, Cell]:
+        """Take `targets` for the drones still flying; returns those that changed."""
+        changed = {d: c for d, c in targets.items() if d not in self.gone and self.wanted.get(d) != c}
+        self.wanted.update(changed)
+        return changed
+
+    def answer(self, turn: int, intent: Intent, new: Mapping[str, Cell] = {}) -> list[Effect]:
+        """Answer the GCS phase of `turn` now, with `new` targets and `intent`."""
+        self.want(new)
+        in_force = targets_of(self.tracks.last) if self.tracks.last is not None else None
+        self.answered, self.pending = max(self.answered, turn), None
+        return [Send(gcs_done(turn, self.wanted, intent, in_force))]
+
+    # ------------------------------------------------------------------ inside
+
+    def intent(self, turn: int) -> Intent:
+        """A script's intent at `turn`."""
+        if self.quit_at is not None:
+            return Intent.QUIT if turn >= self.quit_at else Intent.CONTINUE
+        return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
+
+    def _gcs_phase(self, turn: int) -> list[Effect]:
+        effects: list[Effect] = []
+        if turn > self.answered and turn != self.pending:
+            if self.scripted and self.quit_at is not None and turn >= self.quit_at:
+                self.answered = turn
+                return [Send(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
+            self.want(self.plan.at(turn))
+            if self.hold:
+                self.pending = turn
+                return []
+            if self.console is not None:
+                new, intent = self.console.ask(turn, self.wanted, self.gone)
+                effects = self.answer(turn, intent, new)
+            else:
+                effects = self.answer(turn, self.intent(turn))
+        self.answered = max(self.answered, turn)
+        return effects + self._ahead(turn)
+
+    def _ahead(self, turn: int) -> list[Effect]:
+        """A script with nothing new in the turns after `turn` answers them now."""
+        if not self.scripted:
+            return []
+        effects: list[Effect] = []
+        for ahead in turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead):
+            effects.append(Send(gcs_done(ahead, {}, self.intent(ahead)), ahead=True))
+            self.answered = ahead
+        return effects
+
+    def _status(self, status: Status) -> list[Effect]:
+        if status.turn < self.status_turn:
+            return []
+        # the coming turn was answered ahead: no TURN(GCS) comes for it, its STATUS says it has begun
+        effects = self._ahead(status.turn + 1) if status.turn + 1 <= self.answered else []
+        self.tracks.add(status)
+        table = status.drones
+        alive = table.alive_mask()
+        if not alive.all():
+            ended = {drone_name(n) for n in table.numbers[~alive].tolist()}
+            self.gone.update(ended)
+            for d in ended & self.wanted.keys():
+                del self.wanted[d]
+        if self._joining:  # a late joiner takes over the targets in force (after that, they are its own)
+            self._joining = False
+            for d, c in targets_of(status).items():
+                if d not in self.gone:
+                    self.wanted.setdefault(d, c)
+        if self.verbose:
+            effects.append(Show(format_status(status)))
+        if self.over is not None and status.turn >= self.over.turn:
+            effects.append(self._end())
+        return effects
+
+    def _over(self, over: Over, now: float) -> list[Effect]:
+        if self.over is not None:
+            return []
+        self.over, self.pending = over, None
+        if over.reason not in OBSERVED_ENDS or self.status_turn >= over.turn:
+            return [self._end()]
+        self._over_since = now
+        return []
+
+    def _end(self) -> End:
+        assert self.over is not None
+        self.ended, self._over_since = True, None
+        return End(self.over)
+
+    # ------------------------------------------------------------------ for people
+
+    def opening(self) -> str:
+        """The world and the drones' floors at the start."""
+        world, starts = self.ground.world, self.ground.starts
+        return (f"World {world.size}, {int(world.grid.sum())} building cells; the drones' floor at start:\n"
+                + world.draw(starts, floors=sorted({c[2] for c in starts.values()})))
+
+    def report(self, *, draw: bool) -> str:
+        """After the game: the world with the drones' paths (if `draw`), the end, each drone's moves and state."""
+        assert self.over is not None
+        world, last, paths = self.ground.world, self.tracks.last, self.tracks.paths
+        lines = []
+        if draw and last is not None:
+            trail = [c for p in paths.values() for c in p if world.contains(c)]
+            targets = {s.drone: s.target for s in last.drones if s.target is not None}
+            floors = sorted({c[2] for c in trail} | {t[2] for t in targets.values()})
+            lines += ["\nFinal world with the drones' paths:",
+                      world.draw({s.drone: s.pos for s in last.drones if s.alive and world.contains(s.pos)},
+                                 targets=targets, trail=trail, floors=floors)]
+        lines.append(f"\nGAME OVER at turn {self.over.turn}: {self.over.reason.value} - {self.over.text}")
+        if last is not None:
+            lines += [f"  {s.drone}: {len(paths[s.drone]) - 1} moves, {describe(s).split(': ', 1)[1]}"
+                      for s in last.drones]
+        return "\n".join(lines)

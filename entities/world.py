@@ -18,23 +18,23 @@ from __future__ import annotations
 
 import json
 import operator
+import typing
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from dronesim.schema import Cell, CellInfo, CellKind, UsageError
-from dronesim.schema.messages import MAX_COORD
+from schema import Cell, CellInfo, CellKind, UsageError
+from schema.messages import AROUND, MAX_COORD
+
+from .movingai import read_map, world_grid
 
 __all__ = ["Building", "World", "FORMAT", "FORMAT_VERSION"]
 
 #: The JSON file's ``format`` and ``version`` values.
 FORMAT = "dronesim-world"
 FORMAT_VERSION = 1
-
-#: Neighbour offsets in the fixed order +x, -x, +y, -y, +z, -z.
-_STEPS6: tuple[Cell, ...] = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
 
 #: Default generation parameters (the seed: a size-10 cube with a handful of small buildings).
 _DEFAULT_FOOTPRINT = 3
@@ -58,13 +58,21 @@ def inside_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
     """Which rows of an (n, 3) integer array of cells are inside a world of `size` (negative coordinates,
     seen unsigned, are huge: one comparison checks both bounds)."""
     unsigned = cells.view(np.dtype(f"u{cells.itemsize}"))
-    return (unsigned < np.array(size, unsigned.dtype)).all(axis=1)
+    return np.asarray((unsigned < np.array(size, unsigned.dtype)).all(axis=1))
 
 
 def linear_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
     """The index in the C-ordered grid of each row's cell, as int64 (meaningful for inside cells)."""
     _, ny, nz = size
     return (cells[:, 0].astype(np.int64) * ny + cells[:, 1]) * nz + cells[:, 2]
+
+
+def padded_steps(size: Cell) -> tuple[int, int, tuple[int, ...]]:
+    """For a C-ordered grid of `size` with a border of one cell on every side (so that a cell's neighbours
+    need no bounds checks): the strides of x and y, and each neighbour's offset, in AROUND order."""
+    sy = size[2] + 2
+    sx = (size[1] + 2) * sy
+    return sx, sy, tuple(dx * sx + dy * sy + dz for dx, dy, dz in AROUND)
 
 
 def _int(value: object, what: str) -> int:
@@ -80,7 +88,7 @@ def _int(value: object, what: str) -> int:
 def _cell(value: object, what: str = "cell") -> Cell:
     """`value` as a Cell of three plain ints."""
     try:
-        items = tuple(value)  # type: ignore[arg-type]
+        items = tuple(typing.cast(Iterable[object], value))
     except TypeError:
         raise UsageError(f"{what} must be 3 integers, got {value!r}") from None
     if len(items) != 3:
@@ -380,11 +388,17 @@ class World:
 
     @classmethod
     def load(cls, path: str | Path) -> World:
-        """Read a world file (see `to_json`); `UsageError` if unreadable or invalid."""
+        """Read a world file (see `to_json`), or a MovingAI .map (a world 1 cell high, entities/movingai.py);
+        `UsageError` if unreadable or invalid."""
         try:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read world file {str(path)!r}: {exc}") from None
+        if Path(path).suffix == ".map":
+            try:
+                return cls.from_grid(world_grid(read_map(text)))
+            except UsageError as exc:
+                raise UsageError(f"world file {str(path)!r}: {exc}") from None
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
@@ -434,7 +448,7 @@ class World:
         """The in-bounds, non-building 6-neighbours of `cell`, in the order +x, -x, +y, -y, +z, -z."""
         x, y, z = _cell(cell)
         out = []
-        for dx, dy, dz in _STEPS6:
+        for dx, dy, dz in AROUND:
             n = (x + dx, y + dy, z + dz)
             if self.contains(n) and not self.grid[n]:
                 out.append(n)
@@ -453,8 +467,8 @@ class World:
         # Pad the free map with a blocked border, so flat-index neighbours need no bounds checks.
         free = np.zeros((nx + 2, ny + 2, nz + 2), dtype=bool)
         free[1:-1, 1:-1, 1:-1] = ~self.grid
-        sx, sy = (ny + 2) * (nz + 2), nz + 2
-        offsets = np.array([sx, -sx, sy, -sy, 1, -1], dtype=np.int64)
+        sx, sy, steps = padded_steps(self.size)
+        offsets = np.array(steps, dtype=np.int64)
         unseen = free.ravel()
         s = (start[0] + 1) * sx + (start[1] + 1) * sy + start[2] + 1
         g = (goal[0] + 1) * sx + (goal[1] + 1) * sy + goal[2] + 1

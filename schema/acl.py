@@ -23,9 +23,9 @@ client certificate's common name (``--identity cert``: mutual TLS) or by both (`
 is the entity id (``D01``, ``H01``, ``GCS``...). Subjects never overlap (each has one distinct name):
 with Zenoh, rules of overlapping subjects were seen not to hold.
 
-    python -m dronesim.schema.acl --drones 16 --root sim --identity usrpwd > config/router-acl.json5
-    python -m dronesim.schema.acl --drones 16 --host H01=D01-D08 --identity cert
-    python -m dronesim.schema.acl --write-examples config/    # regenerate the examples in config/
+    python -m schema.acl --drones 16 --root sim --identity usrpwd > config/router-acl.json5
+    python -m schema.acl --drones 16 --host H01=D01-D08 --identity cert
+    python -m schema.acl --write-examples config/    # regenerate the examples in config/
 """
 
 from __future__ import annotations
@@ -36,10 +36,11 @@ import json
 import pathlib
 import re
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
-from .keys import KEY_TABLE, Keys, KeySpec
+from .keys import KEY_TABLE, Keys, KeySpec, size_limit
 from .messages import drone_id, is_drone_id, is_host_id
+from .tuning import DRONE_PUT_RATE
 
 #: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
 ROLES = ("SRV", "ENV", "GCS", "DRONE")
@@ -64,7 +65,7 @@ class Principal:
     drones: tuple[str, ...] = ()
 
 
-def principals(drones: Iterable[str], hosts: dict[str, Sequence[str]] | None = None) -> list[Principal]:
+def principals(drones: Iterable[str], hosts: Mapping[str, Sequence[str]] | None = None) -> list[Principal]:
     """SRV, ENV, GCS, every drone not flown by a host, and every host with its drones."""
     hosts = dict(hosts or {})
     hosted: dict[str, str] = {}
@@ -174,7 +175,7 @@ def _subject(p: Principal, identity: str) -> dict:
 
 
 def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), identity: str = "usrpwd",
-                   hosts: dict[str, Sequence[str]] | None = None) -> dict:
+                   hosts: Mapping[str, Sequence[str]] | None = None) -> dict:
     """The ``access_control`` block (a plain dict, JSON-able) for a router."""
     if identity not in IDENTITIES:
         raise ValueError(f"identity must be one of {', '.join(IDENTITIES)}, not {identity!r}")
@@ -255,9 +256,43 @@ def render(block: dict, header: str = "") -> str:
     return "\n".join([*lines, json.dumps({"access_control": block}, indent=2), ""])
 
 
+def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
+    """A router's `low_pass_filter` and `downsampling` blocks, from the key table: each key's payloads
+    (a put's, a query's) above its message's largest valid size (`schema.keys.size_limit`) are dropped,
+    and each session's puts on a drone key (NPS, MOVES) beyond `DRONE_PUT_RATE` a second. Both act on
+    what the router receives from each session (ingress): one peer's flood costs the others nothing.
+    With `acl` (an `access_control` block) the rate is kept key by key for the drone keys it grants (a
+    session's puts on another drone's key, refused, do not count against its own); without, for all the
+    drone keys of a session at once."""
+    import zenoh
+
+    sizes: dict[tuple[str, int], list[str]] = {}
+    drone_keys = []
+    for spec in KEY_TABLE:
+        if spec.message is None:
+            continue
+        exprs = [str(zenoh.KeyExpr.autocanonize(f"{root}/{_PLACEHOLDER.sub('*', spec.template)}")) for root in roots]
+        sizes.setdefault((spec.how, size_limit(spec.message)), []).extend(exprs)
+        if spec.how == "put" and spec.writer == "DRONE":
+            granted = exprs if acl is None else _granted_puts(acl)
+            drone_keys += [k for k in granted if any(_includes(x, k) for x in exprs)]
+    low_pass = [{"id": f"{how}-{limit}", "messages": [how], "flows": ["ingress"], "key_exprs": exprs,
+                 "size_limit": limit} for (how, limit), exprs in sorted(sizes.items())]
+    rate = {"id": "drone-puts", "messages": ["put"], "flows": ["ingress"],
+            "rules": [{"key_expr": expr, "freq": DRONE_PUT_RATE} for expr in drone_keys]}
+    return {"low_pass_filter": low_pass, "downsampling": [rate]}
+
+
+def _granted_puts(acl: dict) -> list[str]:
+    """Every key expression `acl` lets some subject put on (ingress)."""
+    return sorted({k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
+                   and "ingress" in rule["flows"] for k in rule["key_exprs"]})
+
+
 def router_config(block: dict, *, listen: str = "tls/0.0.0.0:7447", certs: str = "certs", mtls: bool = False,
-                  users: str | None = None) -> dict:
-    """A whole router config: TLS listener, optional mutual TLS and user/password dictionary, ACL."""
+                  users: str | None = None, roots: Sequence[str] = (EXAMPLE_ROOT,)) -> dict:
+    """A whole router config: TLS listener, optional mutual TLS and user/password dictionary, ACL and the
+    flood filters (`flood_filters`) of the game's `roots`."""
     tls: dict = {"root_ca_certificate": f"{certs}/ca.pem", "listen_certificate": f"{certs}/router.pem",
                  "listen_private_key": f"{certs}/router.key", "enable_mtls": mtls}
     transport: dict = {"link": {"tls": tls}}
@@ -267,7 +302,7 @@ def router_config(block: dict, *, listen: str = "tls/0.0.0.0:7447", certs: str =
     # it); the ACL keeps every remote session out of it (nothing outside the roots is granted).
     return {"mode": "router", "listen": {"endpoints": [listen]}, "scouting": {"multicast": {"enabled": False}},
             "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}},
-            "transport": transport, "access_control": block}
+            "transport": transport, "access_control": block, **flood_filters(roots, block)}
 
 
 def client_config(entity: str, *, connect: str = "tls/ROUTER_HOST:7447", certs: str = "certs",
@@ -286,7 +321,7 @@ def client_config(entity: str, *, connect: str = "tls/ROUTER_HOST:7447", certs: 
 def examples() -> dict[str, str]:
     """The files of config/ (regenerated by ``--write-examples``; a test checks they are current)."""
     drones = [drone_id(n) for n in range(1, EXAMPLE_DRONES + 1)]
-    cmd = "python -m dronesim.schema.acl --write-examples config/"
+    cmd = "python -m schema.acl --write-examples config/"
     gen = f"Generated from schema/keys.py KEY_TABLE by `{cmd}`: do not edit by hand."
     usrpwd = access_control(drones, roots=[EXAMPLE_ROOT], identity="usrpwd")
     cert = access_control(drones, roots=[EXAMPLE_ROOT], identity="cert")
@@ -295,11 +330,12 @@ def examples() -> dict[str, str]:
 {gen}
 Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by user (user/password auth).
 Use: dronesim router --config config/router-tls-usrpwd.json5, or add it to a router's config with --acl.
-Other games: python -m dronesim.schema.acl --drones N --root ROOT [--host H01=D01-D08] --identity usrpwd"""),
+Other games: python -m schema.acl --drones N --root ROOT [--host H01=D01-D08] --identity usrpwd"""),
         "router-acl-cert.json5": render(cert, f"""
 {gen}
-Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by their TLS client certificate's CN.
-Other games: python -m dronesim.schema.acl --drones N --root ROOT [--host H01=D01-D08] --identity cert"""),
+Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by their TLS client
+certificate's CN.
+Other games: python -m schema.acl --drones N --root ROOT [--host H01=D01-D08] --identity cert"""),
         "router-tls-usrpwd.json5": _json5(router_config(usrpwd, users="certs/users.txt"), f"""
 {gen}
 A router: TLS on port 7447 (server certificate certs/router.pem), every process authenticated by
@@ -334,7 +370,7 @@ def _json5(conf: dict, header: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m dronesim.schema.acl",
+    p = argparse.ArgumentParser(prog="python -m schema.acl",
                                 description="Zenoh access_control rules generated from the key table.")
     p.add_argument("--drones", type=int, default=1, help="grant drones D01..Dnn (default 1)")
     p.add_argument("--root", action="append", default=[], help="key root (repeatable; default sim)")
@@ -364,11 +400,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.router_config:
         users = f"{args.certs}/users.txt" if args.identity in ("usrpwd", "both") else None
-        conf = router_config(block, listen=args.listen, certs=args.certs,
+        conf = router_config(block, listen=args.listen, certs=args.certs, roots=args.root or ["sim"],
                              mtls=args.identity in ("cert", "both"), users=users)
-        sys.stdout.write(_json5(conf, "Generated by: python -m dronesim.schema.acl " + " ".join(argv or sys.argv[1:])))
+        sys.stdout.write(_json5(conf, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
     else:
-        sys.stdout.write(render(block, "Generated by: python -m dronesim.schema.acl " + " ".join(argv or sys.argv[1:])))
+        sys.stdout.write(render(block, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
     return 0
 
 

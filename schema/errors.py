@@ -10,8 +10,13 @@ reason, count it (see `RejectCounter`) and change nothing: a remote peer can nev
 from __future__ import annotations
 
 import collections
+import dataclasses
 import logging
 import threading
+import time
+from collections.abc import Callable
+
+from .tuning import REJECT_EXCERPT, REJECT_LOG_FIRST, REJECT_LOG_WINDOW
 
 
 class DronesimError(Exception):
@@ -34,9 +39,6 @@ class RemoteInputError(DronesimError):
         super().__init__(detail)
         if reason is not None:
             self.reason = reason
-        #: Effects that still follow although this input was refused (a state machine may set it: e.g. the
-        #: refused message was the last one a phase awaited, so the phase ends). The adapter carries them out.
-        self.follow: list = []
 
 
 class MalformedMessage(RemoteInputError):
@@ -49,6 +51,16 @@ class WrongSender(RemoteInputError):
     """A message whose sender is not allowed to say it on that key."""
 
     reason = "wrong-sender"
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Refusal:
+    """An effect of every pure core (the engine, the environment, the drone process): remote input it
+    refused, having changed nothing. `what` names the input; the adapter counts and logs `err`. Refusals are
+    effects like the others, in order: a refused message may still end the phase that awaited it."""
+
+    what: str
+    err: RemoteInputError
 
 
 class StaleTurn(RemoteInputError):
@@ -70,20 +82,66 @@ class UnknownEntity(RemoteInputError):
 
 
 class RejectCounter:
-    """Thread-safe count of rejected remote inputs by reason, logging each one.
+    """Thread-safe count of rejected remote inputs, by reason and by origin, with a bounded log.
 
-    Zenoh callbacks run on other threads, hence the lock.
+    Per origin (the sender, or the key it came on) and reason, the first `REJECT_LOG_FIRST` rejections
+    of each `REJECT_LOG_WINDOW` seconds are logged, each as a short excerpt; the rest are counted and
+    summarised in one line (how many, the last one's excerpt) by `flush` once the window is over. A flood
+    thus writes a few lines a second, not one per message. Zenoh callbacks reject on their own threads,
+    hence the lock.
     """
 
-    def __init__(self, logger: logging.Logger) -> None:
+    def __init__(self, logger: logging.Logger, clock: Callable[[], float] = time.monotonic, *,
+                 wake: Callable[[], None] | None = None) -> None:
+        """`wake`: called when a window starts holding rejections (its summary will be due: the thread
+        that calls `flush` may be waiting for something else)."""
         self._log = logger
+        self._clock = clock
+        self._wake = wake
         self._lock = threading.Lock()
         self._counts: collections.Counter[str] = collections.Counter()
+        self._origins: collections.Counter[str] = collections.Counter()
+        self._windows: dict[tuple[str, str], _Window] = {}
 
-    def reject(self, where: str, err: RemoteInputError) -> None:
+    def reject(self, where: str, err: RemoteInputError, origin: str | None = None) -> None:
+        """Count `err`, refused at `where` (a key, or what was refused), from `origin` (default: `where`)."""
+        who = origin or where
+        now = self._clock()
         with self._lock:
             self._counts[err.reason] += 1
-        self._log.warning("rejected %s: %s (%s)", where, err, err.reason)
+            self._origins[who] += 1
+            window = self._windows.get((who, err.reason))
+            if window is None or now >= window.start + REJECT_LOG_WINDOW and not window.held:
+                window = self._windows[(who, err.reason)] = _Window(now)
+            window.logged += 1
+            if window.logged > REJECT_LOG_FIRST:
+                window.held += 1
+                window.last = f"{where}: {err}"
+                first = window.held == 1
+            else:
+                first = None
+        if first is None:
+            self._log.warning("rejected %s: %s (%s)", where, excerpt(str(err)), err.reason)
+        elif first and self._wake is not None:
+            self._wake()
+
+    def due_in(self) -> float | None:
+        """Seconds until `flush` has a summary to log (None: none held)."""
+        with self._lock:
+            ends = [w.start + REJECT_LOG_WINDOW for w in self._windows.values() if w.held]
+        return None if not ends else max(0.0, min(ends) - self._clock())
+
+    def flush(self, everything: bool = False) -> None:
+        """Log the summary of every window that is over (`everything`: of every window)."""
+        now = self._clock()
+        with self._lock:
+            over = [(k, w) for k, w in self._windows.items()
+                    if w.held and (everything or now >= w.start + REJECT_LOG_WINDOW)]
+            for k, _ in over:
+                del self._windows[k]
+        for (who, reason), w in over:
+            self._log.warning("rejected %d more from %s (%s) in %.1f s; the last: %s", w.held, who, reason,
+                              now - w.start, excerpt(w.last))
 
     @property
     def total(self) -> int:
@@ -93,3 +151,21 @@ class RejectCounter:
     def snapshot(self) -> dict[str, int]:
         with self._lock:
             return dict(self._counts)
+
+    def report(self) -> str:
+        """Every rejection so far, by reason and by origin (e.g. for a process's last words)."""
+        with self._lock:
+            return f"{dict(self._counts)}, from {dict(self._origins.most_common())}"
+
+
+@dataclasses.dataclass(slots=True)
+class _Window:
+    start: float  # when its first rejection came (the clock's seconds)
+    logged: int = 0  # rejections in it
+    held: int = 0  # of which not logged
+    last: str = ""  # the last one held
+
+
+def excerpt(text: str) -> str:
+    """`text`, cut to `REJECT_EXCERPT` characters (saying how long it was)."""
+    return text if len(text) <= REJECT_EXCERPT else f"{text[:REJECT_EXCERPT]}... ({len(text)} characters)"

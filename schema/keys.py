@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import typing
 
 from . import messages as m
+from .tables import MAX_DRONE, Table
 
 _ROOT = re.compile(r"[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*\Z")
 
@@ -36,9 +38,8 @@ KEY_TABLE: tuple[KeySpec, ...] = (
             "phase GCS, DRONES (orders) or ENV (moves) of turn t begins; each entity hears only its own"),
     KeySpec("SRV/OVER", "put", m.Over, None, "SRV", "all", "`SRV:X:OVER`: the game has ended"),
     KeySpec("OBS/STATUS", "put", m.Status, None, "SRV", "all", "every drone's state at the end of the turn"),
-    KeySpec("OBS/LAST", "query", m.StatusRequest, m.Status, "SRV", "ENV, GCS",
-            "the last STATUS, for a process that does not follow every turn or has just joined"),
-    KeySpec("{drone}/TGT", "put", m.Target, None, "GCS", "SRV", "`GCS:D01:TGT:x:y:z`, relayed to the drone in its order"),
+    KeySpec("{drone}/TGT", "put", m.Target, None, "GCS", "SRV",
+            "`GCS:D01:TGT:x:y:z`, relayed to the drone in its order"),
     KeySpec("GCS/DONE", "put", m.Done, None, "GCS", "SRV", "`GCS:SRV:DONE`: the GCS phase is over"),
     KeySpec("ENV/ASK", "query", m.Ask, m.Ans, "ENV", "drones", "`D01:ENV:ASK:x:y:z` -> `ENV:D01:ANS:content`"),
     KeySpec("ENV/MAP", "query", m.MapRequest, m.WorldMap, "ENV", "GCS, drones",
@@ -50,6 +51,38 @@ KEY_TABLE: tuple[KeySpec, ...] = (
     KeySpec("{entity}/ALIVE/{session}", "liveliness", None, None, "each entity", "SRV, entities",
             "presence token of a process (one per Zenoh session, so an impostor cannot mask a death)"),
 )
+
+
+#: Bytes of a payload beyond its tables and its cells: the header and the other fields, with room to spare.
+ENVELOPE = 1024
+#: Bytes one cell may take in MessagePack (an array of three integers of up to 5 bytes each).
+CELL_BYTES = 16
+#: Bytes one drone id may take in MessagePack (a string of up to 5 ASCII characters, D9999, and its header).
+ID_BYTES = 6
+
+
+def size_limit(message: type[m.Message]) -> int:
+    """The most bytes a valid `message` can take on the wire: its tables at `MAX_DRONE` rows, an ASK's
+    `MAX_ASKED` cells, a UPD's cells (two per drone) and drone ids, an ANS's kinds and drones, a CONNECT's
+    drone ids (a swarm host's, up to `MAX_DRONE` canonical ones), plus
+    `ENVELOPE`; a world's map (MAP, WELCOME) is bounded by `MAX_PAYLOAD` alone. Every receiver refuses a
+    bigger payload before reading it, and the secured router's `low_pass_filter` (schema/acl.py) drops it
+    on the way."""
+    if message in (m.WorldMap, m.Welcome):
+        return m.MAX_PAYLOAD
+    size = ENVELOPE
+    for hint in typing.get_type_hints(message).values():
+        if isinstance(hint, type) and issubclass(hint, Table):
+            size += hint.DTYPE.itemsize * MAX_DRONE
+    if message is m.Ask:
+        size += CELL_BYTES * m.MAX_ASKED
+    elif message is m.Ans:
+        size += m.MAX_ASKED + MAX_DRONE * 12
+    elif message is m.Upd:
+        size += 2 * MAX_DRONE * (CELL_BYTES + 3) + MAX_DRONE * ID_BYTES
+    elif message is m.Connect:
+        size += MAX_DRONE * ID_BYTES
+    return size
 
 
 class Keys:
@@ -75,8 +108,6 @@ class Keys:
     def over(self) -> str: return self._k("SRV", "OVER")
     @property
     def status(self) -> str: return self._k("OBS", "STATUS")
-    @property
-    def last_status(self) -> str: return self._k("OBS", "LAST")
     @property
     def gcs_done(self) -> str: return self._k("GCS", "DONE")
     @property
@@ -111,6 +142,14 @@ class Keys:
             raise ValueError(f"{key!r} is not <root>/<ENTITY>/ALIVE/<session>")
         return parts[0], parts[2]
 
+    def origin_of(self, key: str) -> str:
+        """Who writes a put key, by the key table: its writer role (SRV also for OBS/STATUS, the GCS for a
+        drone's TGT), or the key's entity for keys each drone or host writes (NPS, MOVES). ValueError if
+        the key is not one of ours."""
+        entity, action = self.parts_of(key)[:2]
+        writer = _WRITERS.get(action)
+        return entity if writer is None else writer
+
     def entity_of(self, key: str) -> str:
         """The ENTITY part of ``<root>/<ENTITY>/<ACTION>[/<PHASE>]`` (ValueError if not under root)."""
         return self.parts_of(key)[0]
@@ -124,3 +163,10 @@ class Keys:
         if not (len(parts) == 2 or (len(parts) == 3 and parts[1] == "TURN")):
             raise ValueError(f"{key!r} is not <root>/<ENTITY>/<ACTION> (or <root>/SRV/TURN/<PHASE>)")
         return parts
+
+
+#: The writer of each put key's action (None: the key's entity, a drone or a host), from `KEY_TABLE`.
+_WRITERS: dict[str, str | None] = {
+    spec.template.split("/")[1]: None if spec.writer == "DRONE" else spec.writer
+    for spec in KEY_TABLE if spec.how == "put"
+}

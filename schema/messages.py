@@ -6,8 +6,9 @@ instance that exists is well formed. On the wire each message is a MessagePack m
     {"v": SCHEMA_VERSION, "t": "<TRIGRAM>", "turn": int, "from": "<sender id>", ...fields}
 
 Fields are written in declaration order, so encoding is byte-for-byte deterministic
-(see ``schema/vectors.json`` for the golden bytes). Nested records (cells, orders, moves,
-drone states) travel as MessagePack arrays in their declaration order; enums as their value.
+(see ``schema/vectors.json`` for the golden bytes). Nested records (cells, cell infos, the world spec)
+travel as MessagePack arrays in their declaration order; enums as their value; the swarm-sized fields
+as tables (tables.py), whose rows people read and write as records (`Order`, `DroneStatus`, ...).
 
 World bounds are context, not syntax: a message can only check that a cell is three
 non-negative integers; receivers check it against the world (``OutOfRange``).
@@ -27,9 +28,26 @@ import msgpack
 import numpy as np
 
 from .errors import MalformedMessage
-from .tables import MAX_COORD, Col, Table, code_of, drone_name, optional_cell
+from .tables import (
+    MAX_COORD,
+    RANK_STEPS,
+    Col,
+    Row,
+    Table,
+    _cell_ok,
+    _numbered,
+    code_of,
+    drone_name,
+    is_drone_id,
+    optional_cell,
+    ranked_ok,
+)
+from .tuning import PACK_BUFFER
 
-SCHEMA_VERSION = 3  # 2: swarm-sized record tuples travel as tables (tables.py); 3: also WELCOME's starts, DONE's targets
+#: 2: swarm-sized record tuples travel as tables (tables.py); 3: also WELCOME's starts, DONE's targets;
+#: 4: NPS and a MOVES's steps carry the drone's ranked candidate steps (`ranked`, for cooperative arbitration);
+#: 5: WELCOME, TURN, STATUS and OVER carry the game's identity.
+SCHEMA_VERSION = 5
 
 #: Largest turn a message may carry (MAX_COORD, the largest coordinate, is in tables.py).
 MAX_TURN = 1 << 40
@@ -39,21 +57,6 @@ MAX_PAYLOAD = 1 << 22
 Cell = tuple[int, int, int]
 
 FIXED_IDS = ("ENV", "GCS", "SRV", "OBS")
-
-
-def _numbered(value: object, letter: str) -> bool:
-    """`letter` then 2 to 4 ASCII digits (D01, H12, D1000)."""
-    return (type(value) is str and 3 <= len(value) <= 5 and value[0] == letter and value.isascii()
-            and value[1:].isdigit())
-
-
-def is_drone_id(value: object) -> bool:
-    """A drone's id: D01, D02, ... D9999, canonical (`drone_id(n)`: no D00, D001 or D0100), so that it is
-    one number in a table's drone column."""
-    return _numbered(value, "D") and value[1] != "0" or value in _TWO_DIGITS  # type: ignore[index]
-
-
-_TWO_DIGITS = frozenset(f"D0{n}" for n in range(1, 10))
 
 
 def is_host_id(value: object) -> bool:
@@ -122,6 +125,7 @@ class EndReason(enum.Enum):
     TURN_LIMIT = "TURN_LIMIT"
     GCS_QUIT = "GCS_QUIT"
     ABORTED = "ABORTED"
+    INTERRUPTED = "INTERRUPTED"  # the coordinator was told to stop (SIGINT, SIGTERM)
 
 
 class Intent(enum.Enum):
@@ -140,32 +144,18 @@ def _check(cond: bool, what: str) -> None:
         raise MalformedMessage(what)
 
 
-# The checks run on every decoded record: they test first and build their message only on failure.
-
-
 def _check_int(value: object, name: str, lo: int, hi: int) -> None:
     if not (type(value) is int and lo <= value <= hi):
         raise MalformedMessage(f"{name} must be an int in {lo}..{hi}, got {value!r}")
 
 
-def _cell_ok(value: object, lo: int) -> bool:
-    """Is `value` a cell of 3 ints in lo..MAX_COORD (the fast check; `_check_cell` says what is wrong)?"""
-    if type(value) is tuple and len(value) == 3:
-        x, y, z = value
-        return (type(x) is int and type(y) is int and type(z) is int
-                and lo <= x <= MAX_COORD and lo <= y <= MAX_COORD and lo <= z <= MAX_COORD)
-    return False
-
-
 def _check_cell(value: object, name: str, *, signed: bool = False) -> None:
     lo = -MAX_COORD if signed else 0
-    if type(value) is tuple and len(value) == 3:
-        x, y, z = value
-        if (type(x) is int and type(y) is int and type(z) is int
-                and lo <= x <= MAX_COORD and lo <= y <= MAX_COORD and lo <= z <= MAX_COORD):
-            return
-    _check(isinstance(value, tuple) and len(value) == 3, f"{name} must be 3 integers, got {value!r}")
-    for c in value:  # type: ignore[union-attr]
+    if _cell_ok(value, lo):
+        return
+    if not (isinstance(value, tuple) and len(value) == 3):
+        raise MalformedMessage(f"{name} must be 3 integers, got {value!r}")
+    for c in value:
         _check_int(c, name, lo, MAX_COORD)
 
 
@@ -174,8 +164,18 @@ def _check_drone(value: object, name: str = "drone") -> None:
         raise MalformedMessage(f"{name} must be a drone id like D01, got {value!r}")
 
 
+def _check_game(value: object) -> None:
+    _check(isinstance(value, str) and len(value) <= 32 and (value.isalnum() or value == ""),
+           "game must be a game id (up to 32 alphanumerics)")
+
+
+def is_entity_id(value: object) -> bool:
+    """ENV, GCS, SRV, OBS, a drone's id or a host's."""
+    return isinstance(value, str) and (value in FIXED_IDS or is_drone_id(value) or is_host_id(value))
+
+
 def _check_sender(value: object) -> None:
-    if not (isinstance(value, str) and (value in FIXED_IDS or is_drone_id(value) or is_host_id(value))):
+    if not is_entity_id(value):
         raise MalformedMessage(f"sender must be ENV, GCS, SRV, OBS, Dnn or Hnn, got {value!r}")
 
 
@@ -206,68 +206,52 @@ class CellInfo:
 
 
 #: The 6-neighbourhood, in the order an ASK's `around` cells are expanded: +x, -x, +y, -y, +z, -z.
-AROUND: tuple[Cell, ...] = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+AROUND: tuple[Cell, ...] = RANK_STEPS[:6]
 #: Most cells one ASK may ask (its cells plus 6 per `around` cell).
 MAX_ASKED = 1 << 15
 
 
+# Rows of the tables below: each is checked by its table's column rules (`Row`), on the wire only as a row.
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Order:
+class Order(Row):
     """Coordinator -> drone, in the DRONES phase: where the drone is and where it must go."""
 
     drone: str
     pos: Cell
     target: Cell | None = None
 
-    def __post_init__(self) -> None:
-        _check_drone(self.drone)
-        _check_cell(self.pos, "pos")
-        if self.target is not None:
-            _check_cell(self.target, "target")
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Move:
+class Move(Row):
     """Coordinator -> environment, in the ENV phase: a drone's accepted move (may leave the world)."""
 
     drone: str
     src: Cell
     dst: Cell
 
-    def __post_init__(self) -> None:
-        _check_drone(self.drone)
-        _check_cell(self.src, "src")
-        _check_cell(self.dst, "dst", signed=True)
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Aim:
+class Aim(Row):
     """GCS -> SRV, inside its DONE: one drone's target (the seed's ``GCS:D01:TGT:x:y:z``, batched)."""
 
     drone: str
     pos: Cell
 
-    def __post_init__(self) -> None:
-        _check_drone(self.drone)
-        _check_cell(self.pos, "target")
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Step:
+class Step(Row):
     """Swarm host -> SRV, inside its MOVES: one hosted drone's move (the seed's NPS, batched)."""
 
     drone: str
     pos: Cell
     note: Note = Note.NONE
-
-    def __post_init__(self) -> None:
-        _check_drone(self.drone)
-        _check_cell(self.pos, "pos", signed=True)
-        _check(isinstance(self.note, Note), "note must be a Note")
+    ranked: int = 0  # as an NPS's
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class DroneStatus:
+class DroneStatus(Row):
     """One drone's state at the end of a turn, as the observer sees it."""
 
     drone: str
@@ -277,22 +261,17 @@ class DroneStatus:
     note: Note = Note.NONE
     cause: Cause = Cause.NONE
 
-    def __post_init__(self) -> None:
-        if (is_drone_id(self.drone) and _cell_ok(self.pos, -MAX_COORD)
-                and (self.target is None or _cell_ok(self.target, 0)) and type(self.state) is DroneState
-                and type(self.note) is Note and type(self.cause) is Cause):
-            return  # the common case, in one expression (a swarm's STATUS holds thousands of these)
-        _check_drone(self.drone)
-        _check_cell(self.pos, "pos", signed=True)
-        _check(isinstance(self.state, DroneState), "state must be a DroneState")
-        if self.target is not None:
-            _check_cell(self.target, "target")
-        _check(isinstance(self.note, Note), "note must be a Note")
-        _check(isinstance(self.cause, Cause), "cause must be a Cause")
-
     @property
     def alive(self) -> bool:
         return self.state is DroneState.ALIVE
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Start(Row):
+    """A drone admitted to the game and the cell it starts in."""
+
+    drone: str
+    pos: Cell
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -312,18 +291,6 @@ class WorldSpec:
         _check(isinstance(self.cells, bytes), "cells must be bytes")
         n = self.size[0] * self.size[1] * self.size[2]
         _check(not self.cells or len(self.cells) == (n + 7) // 8, "cells must hold one bit per cell")
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Start:
-    """A drone admitted to the game and the cell it starts in."""
-
-    drone: str
-    pos: Cell
-
-    def __post_init__(self) -> None:
-        _check_drone(self.drone)
-        _check_cell(self.pos, "pos")
 
 
 # --------------------------------------------------------------------------- tables (see tables.py)
@@ -380,7 +347,7 @@ class StepTable(Table):
 
     __slots__ = ()
     RECORD = Step
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note))
+    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note), ("ranked", Col.RANKED))
 
 
 class StatusTable(Table):
@@ -405,7 +372,7 @@ TABLES: tuple[type[Table], ...] = (StartTable, AimTable, OrderTable, MoveTable, 
 _EMPTY: dict[type[Table], Table] = {cls: cls(cls.empty(0)) for cls in TABLES}  # immutable: one of each is enough
 
 
-def _as_table(msg: "Message", name: str, cls: type[Table]) -> None:
+def _as_table(msg: Message, name: str, cls: type[Table]) -> None:
     """A message's table field given as a tuple of records becomes the table (messages hold tables)."""
     value = getattr(msg, name)
     if type(value) is not cls:
@@ -452,7 +419,8 @@ class Connect(Message):
         _check(self.role is not Role.DRONE or bool(self.drones), "a DRONE entity must host at least one drone")
         _check(isinstance(self.autopilot, str) and len(self.autopilot) <= 32, "autopilot must be a short string")
         _check(type(self.cooperative) is bool, "cooperative must be a bool")
-        _check(isinstance(self.session, str) and len(self.session) <= 64 and self.session.isalnum() or self.session == "",
+        _check(isinstance(self.session, str) and (self.session == "" or len(self.session) <= 64
+                                                  and self.session.isalnum()),
                "session must be a Zenoh id (up to 64 alphanumerics)")
 
 
@@ -465,9 +433,11 @@ class Welcome(Message):
     text: str
     world: WorldSpec
     starts: StartTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table
+    game: str = ""  # the game's identity: its TURN, STATUS and OVER carry it, the entity takes no other
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
+        _check_game(self.game)
         _check_sender(self.entity)
         _check(isinstance(self.text, str), "text must be a string")
         _check(isinstance(self.world, WorldSpec), "world must be a WorldSpec")
@@ -494,9 +464,11 @@ class Turn(Message):
     phase: Phase
     orders: OrderTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table
     moves: MoveTable = ()  # type: ignore[assignment]
+    game: str = ""  # the game's identity (its WELCOME's)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
+        _check_game(self.game)
         _as_table(self, "orders", OrderTable)
         _as_table(self, "moves", MoveTable)
         _check(isinstance(self.phase, Phase), "phase must be a Phase")
@@ -569,10 +541,7 @@ class Ask(Message):
 
 def asked_cells(cells: typing.Iterable[Cell], around: typing.Iterable[Cell]) -> tuple[Cell, ...]:
     """`cells`, then the 6 neighbours of each `around` cell in `AROUND` order: what an ASK asks."""
-    out = list(cells)
-    for x, y, z in around:  # AROUND, unrolled: a swarm's prefetch has thousands of these
-        out += ((x + 1, y, z), (x - 1, y, z), (x, y + 1, z), (x, y - 1, z), (x, y, z + 1), (x, y, z - 1))
-    return tuple(out)
+    return (*cells, *((x + dx, y + dy, z + dz) for x, y, z in around for dx, dy, dz in AROUND))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -623,12 +592,16 @@ class Nps(Message):
     TAG: ClassVar[str] = "NPS"
     pos: Cell
     note: Note = Note.NONE
+    #: The cells the drone offers the arbiter, best first, as steps from where it is (packed by
+    #: `tables.rank_steps`; 0: none, it takes `pos` or hovers): a cooperative drone may be given any of them.
+    ranked: int = 0
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
         _check_drone(self.sender, "sender")
         _check_cell(self.pos, "pos", signed=True)
         _check(isinstance(self.note, Note), "note must be a Note")
+        _check(ranked_ok(self.ranked), f"ranked must be steps packed by rank_steps (each once), got {self.ranked!r}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -662,9 +635,11 @@ class Status(Message):
 
     TAG: ClassVar[str] = "STATUS"
     drones: StatusTable  # a tuple of records becomes the table (which holds one row per drone)
+    game: str = ""  # the game's identity (its WELCOME's)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
+        _check_game(self.game)
         _as_table(self, "drones", StatusTable)
 
 
@@ -675,9 +650,11 @@ class Over(Message):
     TAG: ClassVar[str] = "OVER"
     reason: EndReason
     text: str = ""
+    game: str = ""  # the game's identity (its WELCOME's)
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
+        _check_game(self.game)
         _check(isinstance(self.reason, EndReason), "reason must be an EndReason")
         _check(isinstance(self.text, str), "text must be a string")
 
@@ -688,15 +665,6 @@ class MapRequest(Message):
     process's chart."""
 
     TAG: ClassVar[str] = "MAPREQ"
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class StatusRequest(Message):
-    """ENV or GCS -> SRV (query on OBS/LAST): the last STATUS the coordinator published, for a process
-    that does not follow every turn (the environment, asked about the drones after turns without a
-    question) or that has just joined."""
-
-    TAG: ClassVar[str] = "STATUSREQ"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -722,40 +690,10 @@ _KINDS = tuple(CellKind)
 
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Moves, Upd, Status, Over, MapRequest, WorldMap,
-    StatusRequest,
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
-_RECORDS = (CellInfo, Order, Move, Aim, Step, DroneStatus, Start, WorldSpec)
-
-
-def unchecked(cls: type[R]) -> typing.Callable[..., R]:
-    """A positional constructor of record type `cls` (fields in declaration order) that skips the
-    validation: only for values this process has already checked, i.e. its own state or pieces of a
-    message that was validated whole. A swarm builds thousands of records a turn; this one is about
-    three times cheaper than the checked constructor."""
-    make = _UNCHECKED.get(cls)
-    if make is None:
-        names = [f.name for f in dataclasses.fields(cls)]
-        env: dict[str, object] = {}
-        body = "\n".join(_building(cls, names, env))
-        exec(f"def make({', '.join(names)}):\n{body}\n    return o\n", env)  # noqa: S102 - our own fields
-        make = _UNCHECKED[cls] = env["make"]
-    return make  # type: ignore[return-value]
-
-
-def _building(cls: type, values: list[str], env: dict[str, object]) -> list[str]:
-    """Generated lines that make `o`, a `cls` record whose fields (in declaration order) are set to the
-    variables `values` without any check (`env` receives what the lines use)."""
-    env["new"], env["cls"] = object.__new__, cls
-    lines = ["    o = new(cls)"]
-    for i, (f, v) in enumerate(zip(dataclasses.fields(cls), values)):
-        env[f"set{i}"] = getattr(cls, f.name).__set__
-        lines.append(f"    set{i}(o, {v})")
-    return lines
-
-
-R = typing.TypeVar("R")
-_UNCHECKED: dict[type, typing.Callable[..., object]] = {}
+#: The records that travel as records (the rows of tables travel in their tables).
+_RECORDS = (CellInfo, WorldSpec)
 
 
 # --------------------------------------------------------------------------- codec
@@ -768,64 +706,78 @@ def _identity(v: object) -> object:
     return v
 
 
+def _optional(hint: object) -> object | None:
+    """X of an `X | None` hint (None for any other hint)."""
+    if typing.get_origin(hint) in (Union, types.UnionType):
+        return next(a for a in typing.get_args(hint) if a is not type(None))
+    return None
+
+
 def _wire_encoder(hint: object) -> typing.Callable[[object], object]:
     """How a field of type `hint` goes on the wire; msgpack packs ints, strings, bytes and tuples itself."""
-    origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if origin in (Union, types.UnionType):
-        inner = _wire_encoder(next(a for a in args if a is not type(None)))
-        return _identity if inner is _identity else (lambda v: None if v is None else inner(v))
-    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+    inner = _optional(hint)
+    if inner is not None:
+        enc = _wire_encoder(inner)
+        return _identity if enc is _identity else (lambda v: None if v is None else enc(v))
+    args = typing.get_args(hint)
+    if typing.get_origin(hint) is tuple and len(args) == 2 and args[1] is Ellipsis:
         item = _wire_encoder(args[0])
-        return _identity if item is _identity else (lambda v: [item(x) for x in v])
+        return _identity if item is _identity else (lambda v: [item(x) for x in typing.cast(tuple, v)])
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        return operator.attrgetter("value")
+        return _enum_value
     if hint in _RECORDS:
-        return _record_encoder(hint)  # type: ignore[arg-type]
+        return _record_encoder(hint)
     if hint in TABLES:
         return Table.to_wire  # type: ignore[return-value]
     return _identity
 
 
-_FieldEncoder = tuple[str, str, typing.Callable[[object], object], typing.Callable[[object], object] | None]
-_ENCODERS: dict[type, list[_FieldEncoder]] = {}
+def _enum_value(member: object) -> object:
+    return typing.cast(enum.Enum, member).value
 
 
-def _encoders_of(cls: type) -> list[_FieldEncoder]:
-    """(attribute, wire name, encoder, record encoder) of each field of `cls`, in order; computed once
-    per class. The record encoder is set for a tuple of records, which `encode` packs one by one."""
+def _record_encoder(cls: type) -> typing.Callable[[object], list]:
+    """A record's encoder: the array of its fields, in declaration order."""
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    values, encoders = operator.attrgetter(*names), [_wire_encoder(hints[name]) for name in names]
+    return lambda record: [enc(v) for enc, v in zip(encoders, values(record))]
+
+
+_ENCODERS: dict[type, list[tuple[str, str, typing.Callable[[object], object]]]] = {}
+
+
+def _encoders_of(cls: type) -> list[tuple[str, str, typing.Callable[[object], object]]]:
+    """(attribute, wire name, encoder) of each field of `cls`, in order; computed once per class."""
     enc = _ENCODERS.get(cls)
     if enc is None:
         hints = typing.get_type_hints(cls)
-        enc = []
-        for f in dataclasses.fields(cls):
-            hint = hints[f.name]
-            args = typing.get_args(hint)
-            records = typing.get_origin(hint) is tuple and len(args) == 2 and args[0] in _RECORDS
-            enc.append((f.name, "from" if f.name == "sender" else f.name, _wire_encoder(hint),
-                        _record_encoder(args[0]) if records else None))
-        _ENCODERS[cls] = enc
+        enc = _ENCODERS[cls] = [(f.name, "from" if f.name == "sender" else f.name, _wire_encoder(hints[f.name]))
+                                for f in dataclasses.fields(cls)]
     return enc
 
 
 def _converter(hint: object) -> typing.Callable[[object], object]:
-    origin = typing.get_origin(hint)
+    """How a field of type `hint` is read from the wire (the types only: the values are checked by the
+    message or record that receives them)."""
+    inner = _optional(hint)
+    if inner is not None:
+        conv = _converter(inner)
+        return lambda v: None if v is None else conv(v)
     args = typing.get_args(hint)
-    if origin in (Union, types.UnionType):
-        inner = _converter(next(a for a in args if a is not type(None)))
-        return lambda v: None if v is None else inner(v)
-    if origin is tuple:
+    if typing.get_origin(hint) is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
             item = _converter(args[0])
-            if item is _as_seq:
+            if item is _as_seq or item is _identity:
                 return _as_seq
             return lambda v: tuple(map(item, _as_seq(v)))
         return _as_seq  # Cell: validated by the record itself
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        return lambda v: _enum(hint, v)
+        return _enum_converter(hint)
     if hint in _RECORDS:
-        return _record_converter(hint)  # type: ignore[arg-type]
+        return _record_converter(hint)
     if hint in TABLES:
-        return hint.from_wire  # type: ignore[union-attr]
+        return hint.from_wire
     return _identity  # int, str, bytes: checked by __post_init__
 
 
@@ -836,13 +788,17 @@ def _as_seq(v: object) -> tuple:
     return v
 
 
-def _enum(cls: type[enum.Enum], v: object) -> enum.Enum:
-    if issubclass(cls, int) and type(v) is not int:  # IntEnum: not True, not 1.0
-        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}")
-    try:
-        return cls(v)
-    except (ValueError, TypeError):
-        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}") from None
+def _enum_converter(cls: type[enum.Enum]) -> typing.Callable[[object], enum.Enum]:
+    """The member of `cls` whose value is v, of the members' type (an IntEnum takes an int, not True or 1.0)."""
+    members = {m.value: m for m in cls}
+    value_type, = {type(v) for v in members}
+
+    def convert(v: object) -> enum.Enum:
+        m = members.get(v) if type(v) is value_type else None
+        if m is None:
+            raise MalformedMessage(f"{v!r:.40} is not a valid {cls.__name__}")
+        return m
+    return convert
 
 
 _FIELD_CONVERTERS: dict[type, list[tuple[str, typing.Callable[[object], object]]]] = {}
@@ -857,116 +813,29 @@ def _fields_of(cls: type) -> list[tuple[str, typing.Callable[[object], object]]]
     return conv
 
 
-def _enum_table(hint: type[enum.Enum]) -> dict:
-    return {m.value: m for m in hint}
-
-
 def _record_converter(cls: type) -> typing.Callable[[object], object]:
-    """A decoder for one record type, generated once from its type hints: one function with the field
-    conversions inlined (records come by the thousand in a swarm's STATUS). The record's own
-    `__post_init__` still validates every field."""
-    hints = typing.get_type_hints(cls)
-    fields = dataclasses.fields(cls)
-    env: dict[str, object] = {"cls": cls, "MalformedMessage": MalformedMessage, "_as_seq": _as_seq}
-    names = [f"a{i}" for i in range(len(fields))]
-    body = [
-        "def convert(v):",
-        f"    if type(v) is not tuple or len(v) != {len(fields)}:",
-        f"        raise MalformedMessage(f'{cls.__name__} needs {len(fields)} items, got {{v!r:.80}}')",
-        f"    {', '.join(names)}, = v",
-    ]
-    for i, f in enumerate(fields):
-        a, hint = names[i], hints[f.name]
-        origin, args = typing.get_origin(hint), typing.get_args(hint)
-        optional = origin in (Union, types.UnionType)
-        if optional:
-            hint = next(x for x in args if x is not type(None))
-            origin, args = typing.get_origin(hint), typing.get_args(hint)
-        guard = f"if {a} is not None: " if optional else ""
-        if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
-            item = _converter(args[0])
-            if item is _as_seq:
-                body.append(f"    {guard}_as_seq({a})")
-            else:
-                env[f"c{i}"] = item
-                body.append(f"    {guard}{a} = tuple(map(c{i}, _as_seq({a})))")
-        elif origin is tuple:  # a Cell: its type, length and ints are the record's to check
-            pass
-        elif isinstance(hint, type) and issubclass(hint, enum.Enum):
-            value_types = {type(m.value) for m in hint}
-            assert len(value_types) == 1, f"{hint.__name__}: members' values of one type"
-            env[f"e{i}"], env[f"E{i}"], env[f"T{i}"] = _enum_table(hint), hint, value_types.pop()
-            # a value of the members' type (an IntEnum takes an int, not True or 1.0), then a member
-            body.append(f"    {guard}m{i} = e{i}.get({a}) if type({a}) is T{i} else None")
-            body.append(f"    {guard}{a} = m{i} if m{i} is not None else _member(e{i}, E{i}, {a})")
-        elif hint in _RECORDS:
-            env[f"c{i}"] = _record_converter(hint)
-            body.append(f"    {guard}{a} = c{i}({a})")
-    env["_member"] = _member  # raises with the reason
-    body += _building(cls, names, env)  # every field set as `unchecked` does, then checked by the record
-    if hasattr(cls, "__post_init__"):
-        body.append("    o.__post_init__()")
-    body.append("    return o")
-    exec("\n".join(body), env)  # noqa: S102 - code generated from our own type hints only
-    return env["convert"]  # type: ignore[return-value]
+    """A record's decoder: from the array of its fields, built by its constructor (which checks them)."""
+    fields = _fields_of(cls)
+    n = len(fields)
 
-
-def _member(table: dict, cls: type[enum.Enum], v: object) -> enum.Enum:
-    try:
-        m = table[v]
-    except (KeyError, TypeError):
-        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}") from None
-    if type(v) is not type(m.value):  # an IntEnum is given an int, not True or 1.0
-        raise MalformedMessage(f"{v!r} is not a valid {cls.__name__}")
-    return m
-
-
-def _record_encoder(cls: type) -> typing.Callable[[object], object]:
-    """An encoder for one record type, generated once from its type hints (see `_record_converter`)."""
-    hints = typing.get_type_hints(cls)
-    env: dict[str, object] = {}
-    parts = []
-    for i, f in enumerate(dataclasses.fields(cls)):
-        hint, v = hints[f.name], f"v.{f.name}"
-        origin, args = typing.get_origin(hint), typing.get_args(hint)
-        optional = origin in (Union, types.UnionType)
-        if optional:
-            hint = next(x for x in args if x is not type(None))
-        enc = _wire_encoder(hint)
-        if enc is _identity:
-            expr = v
-        elif isinstance(hint, type) and issubclass(hint, enum.Enum):
-            expr = f"{v}._value_"
-        else:
-            env[f"c{i}"] = enc
-            expr = f"c{i}({v})"
-        parts.append(f"(None if {v} is None else {expr})" if optional and expr != v else expr)
-    exec(f"def encode_record(v):\n    return [{', '.join(parts)}]", env)  # noqa: S102 - from our type hints
-    return env["encode_record"]  # type: ignore[return-value]
-
-
-#: The packer's first buffer (msgpack's default, 256 KiB, is allocated for every message packed).
-_PACK_BUFFER = 1024
+    def convert(v: object) -> object:
+        if type(v) is not tuple or len(v) != n:
+            raise MalformedMessage(f"{cls.__name__} needs {n} items, got {v!r:.80}")
+        return cls(**{name: conv(x) for (name, conv), x in zip(fields, v)})
+    return convert
 
 
 def encode(msg: Message) -> bytes:
     """The MessagePack bytes of a message (deterministic: same message, same bytes): a map of the
-    header ("v", "t") and the fields, in order. A tuple of records is packed record by record, so a
-    swarm's STATUS never exists as a second, list-of-lists copy of itself."""
+    header ("v", "t") and the fields, in order."""
     fields = _encoders_of(type(msg))
-    packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=_PACK_BUFFER)  # it grows as needed
+    packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=PACK_BUFFER)  # it grows as needed
     pack = packer.pack
     packer.pack_map_header(2 + len(fields))
     pack("v"), pack(SCHEMA_VERSION), pack("t"), pack(msg.TAG)
-    for name, wire, enc, record in fields:
+    for name, wire, enc in fields:
         pack(wire)
-        value = getattr(msg, name)
-        if record is None:
-            pack(enc(value))
-        else:
-            packer.pack_array_header(len(value))
-            for r in value:
-                pack(record(r))
+        pack(enc(getattr(msg, name)))
     return packer.bytes()
 
 
@@ -976,7 +845,7 @@ M = typing.TypeVar("M", bound=Message)
 @typing.overload
 def decode(data: bytes, expect: type[M]) -> M: ...
 @typing.overload
-def decode(data: bytes, expect: None = None) -> Message: ...
+def decode(data: bytes, expect: tuple[type[Message], ...] | None = None) -> Message: ...
 
 
 def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None = None) -> Message:
@@ -1010,10 +879,9 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
     if "from" in body:
         body["sender"] = body.pop("from")
     fields = _fields_of(cls)
-    names = {n for n, _ in fields}
-    extra = set(body) - names
+    extra = set(body) - {n for n, _ in fields}
     _check(not extra, f"unknown fields {sorted(map(str, extra))} in {tag}")
-    kwargs = {}
+    kwargs: dict[str, typing.Any] = {}
     try:
         for name, conv in fields:
             if name in body:

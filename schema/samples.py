@@ -1,6 +1,6 @@
 """The canonical sample of every message type, whose bytes are the golden test vectors.
 
-``python -m dronesim.schema.samples --write`` regenerates schema/vectors.json after a deliberate
+``python -m schema.samples --write`` regenerates schema/vectors.json after a deliberate
 change of the contract (bump SCHEMA_VERSION when the bytes of an existing message change).
 """
 
@@ -11,10 +11,47 @@ import json
 import pathlib
 
 from .messages import (
-    Aim, Ans, Ask, Cause, CellInfo, CellKind, Connect, Done, DroneState, DroneStatus, EndReason, MapRequest,
-    Message, Move, Moves, Note, Nps, Order, Over, Phase, Refused, Role, Start, Status, StatusRequest, Step, Target, Turn, Upd, Welcome,
-    WorldMap, WorldSpec, Intent, encode,
+    Aim,
+    AimTable,
+    Ans,
+    Ask,
+    Cause,
+    CellInfo,
+    CellKind,
+    Connect,
+    Done,
+    DroneState,
+    DroneStatus,
+    EndReason,
+    Intent,
+    MapRequest,
+    Message,
+    Move,
+    Moves,
+    MoveTable,
+    Note,
+    Nps,
+    Order,
+    OrderTable,
+    Over,
+    Phase,
+    Refused,
+    Role,
+    Start,
+    StartTable,
+    Status,
+    StatusTable,
+    Step,
+    StepTable,
+    Target,
+    Turn,
+    Upd,
+    Welcome,
+    WorldMap,
+    WorldSpec,
+    encode,
 )
+from .tables import rank_steps
 
 VECTORS_PATH = pathlib.Path(__file__).with_name("vectors.json")
 
@@ -26,23 +63,24 @@ SAMPLES: dict[str, Message] = {
     "connect_swarm": Connect(turn=0, sender="H01", role=Role.DRONE, drones=("D01", "D02"), autopilot="dstar",
                              cooperative=True),
     "welcome": Welcome(turn=0, sender="SRV", entity="D01", text="You are connected as D01",
-                       world=WorldSpec(size=(10, 10, 10), seed=7), starts=(Start(drone="D01", pos=(0, 0, 0)),)),
+                       world=WorldSpec(size=(10, 10, 10), seed=7),
+                       starts=StartTable.of([Start(drone="D01", pos=(0, 0, 0))]), game="9f2c4e1a7b3d5f60"),
     "welcome_file_world": Welcome(turn=0, sender="SRV", entity="ENV", text="You are connected as ENV",
                                   world=WorldSpec(size=(2, 2, 2), cells=bytes([0b10000000])),
-                                  starts=(Start(drone="D01", pos=(0, 0, 1)),)),
+                                  starts=StartTable.of([Start(drone="D01", pos=(0, 0, 1))])),
     "refused": Refused(turn=0, sender="SRV", text="role GCS is already taken"),
     "turn_gcs": Turn(turn=1, sender="SRV", phase=Phase.GCS),
     "turn_drones": Turn(turn=1, sender="SRV", phase=Phase.DRONES,
-                        orders=(Order(drone="D01", pos=(0, 0, 0), target=(9, 9, 0)),
-                                Order(drone="D02", pos=(0, 1, 0)))),
+                        orders=OrderTable.of([Order(drone="D01", pos=(0, 0, 0), target=(9, 9, 0)),
+                                              Order(drone="D02", pos=(0, 1, 0))]), game="9f2c4e1a7b3d5f60"),
     "turn_env": Turn(turn=1, sender="SRV", phase=Phase.ENV,
-                     moves=(Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),
-                            Move(drone="D02", src=(0, 1, 0), dst=(-1, 1, 0)))),
+                     moves=MoveTable.of([Move(drone="D01", src=(0, 0, 0), dst=(1, 0, 0)),
+                                         Move(drone="D02", src=(0, 1, 0), dst=(-1, 1, 0))])),
     "target": Target(turn=1, sender="GCS", drone="D01", pos=(9, 9, 0)),
     "done_gcs": Done(turn=1, sender="GCS", phase=Phase.GCS, count=1),
     "done_gcs_final": Done(turn=3, sender="GCS", phase=Phase.GCS, intent=Intent.FINAL),
     "done_gcs_targets": Done(turn=2, sender="GCS", phase=Phase.GCS,
-                             targets=(Aim(drone="D01", pos=(9, 9, 0)), Aim(drone="D02", pos=(0, 9, 3)))),
+                             targets=AimTable.of([Aim(drone="D01", pos=(9, 9, 0)), Aim(drone="D02", pos=(0, 9, 3))])),
     "ask": Ask(turn=1, sender="D01", cells=((1, 0, 0), (0, 1, 0))),
     "ans": Ans(turn=1, sender="ENV", kinds=bytes([CellKind.EMPTY, CellKind.BUILDING])),
     "ask_around": Ask(turn=2, sender="H01", cells=((5, 5, 5),), around=((1, 0, 0), (0, 3, 2))),
@@ -50,17 +88,19 @@ SAMPLES: dict[str, Message] = {
                       drones=((0, "D07"), (8, "D02"), (8, "D05"))),
     "nps": Nps(turn=1, sender="D01", pos=(1, 0, 0)),
     "nps_unreachable": Nps(turn=7, sender="D01", pos=(3, 4, 0), note=Note.UNREACHABLE),
-    "moves": Moves(turn=1, sender="H01", moves=(Step(drone="D01", pos=(1, 0, 0)),
-                                                Step(drone="D02", pos=(0, 1, 0), note=Note.UNREACHABLE))),
+    "nps_ranked": Nps(turn=3, sender="D01", pos=(2, 0, 0), ranked=rank_steps([(1, 0, 0), (0, 0, 0), (0, 1, 0)])),
+    "moves": Moves(turn=1, sender="H01", moves=StepTable.of([
+        Step(drone="D01", pos=(1, 0, 0), ranked=rank_steps([(1, 0, 0), (0, 0, 0)])),
+        Step(drone="D02", pos=(0, 1, 0), note=Note.UNREACHABLE)])),
     "upd": Upd(turn=1, sender="ENV", cells=(CellInfo(pos=(0, 0, 0), kind=CellKind.EMPTY),
                                             CellInfo(pos=(1, 0, 0), kind=CellKind.BUILDING, drones=("D01",)))),
-    "status": Status(turn=1, sender="OBS", drones=(
+    "status": Status(turn=1, sender="OBS", drones=StatusTable.of([
         DroneStatus(drone="D01", pos=(1, 0, 0), state=DroneState.DEAD, target=(9, 9, 0), cause=Cause.BUILDING),
         DroneStatus(drone="D02", pos=(0, 1, 0), state=DroneState.ALIVE, note=Note.REACHED),
-    )),
-    "over": Over(turn=1, sender="SRV", reason=EndReason.NO_DRONE_ALIVE, text="D01 crashed into a building"),
+    ]), game="9f2c4e1a7b3d5f60"),
+    "over": Over(turn=1, sender="SRV", reason=EndReason.NO_DRONE_ALIVE, text="D01 crashed into a building",
+                 game="9f2c4e1a7b3d5f60"),
     "map_request": MapRequest(turn=0, sender="GCS"),
-    "status_request": StatusRequest(turn=0, sender="ENV"),
     "map": WorldMap(turn=0, sender="ENV", size=(2, 2, 2), buildings=bytes([0b10000000])),
 }
 

@@ -13,15 +13,18 @@ fixed little-endian layout its class declares (``LAYOUT``, documented in schema/
 - an enum is the ``u8`` index of its member in declaration order.
 
 A table is immutable and validates on construction, like a message: an instance that exists is well
-formed. Iterating it yields the records (``DroneStatus``, ``Order``, ...), so code that reads records keeps
-working; code on a hot path reads the columns (``numbers``, ``column(name)``).
+formed. Its rows can be read as records (``DroneStatus``, ``Order``, ...: a `Row` each, checked by the
+same rules as the table's columns), for people (samples, tests, a console); code that handles a swarm reads
+the columns (``numbers``, ``column(name)``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import enum
+import itertools
 import typing
-from typing import ClassVar
+from typing import ClassVar, Self
 
 import numpy as np
 
@@ -43,11 +46,29 @@ class Col(enum.Enum):
     CELL = "3 x i32, each in 0..65536"
     SIGNED = "3 x i32, each in -65536..65536"
     OPTIONAL = "3 x i32, each in 0..65536, or (-1, -1, -1) for none"
+    RANKED = "u32 ranked steps: 3 bits each, lowest first, codes 1..7 (see `ranked_steps`), 0 for none"
 
 
-_DTYPES = {Col.DRONE: ("<u2", ()), Col.CELL: ("<i4", (3,)), Col.SIGNED: ("<i4", (3,)), Col.OPTIONAL: ("<i4", (3,))}
+_DTYPES = {Col.DRONE: ("<u2", ()), Col.CELL: ("<i4", (3,)), Col.SIGNED: ("<i4", (3,)), Col.OPTIONAL: ("<i4", (3,)),
+           Col.RANKED: ("<u4", ())}
 _NONE = (-1, -1, -1)
-_ABSENT = (1 << 32) - 1  # -1 as a u32
+#: The smallest coordinate of each cell column (the largest is MAX_COORD).
+_LOWEST = {Col.CELL: 0, Col.SIGNED: -MAX_COORD, Col.OPTIONAL: 0}
+
+
+def _numbered(value: object, letter: str) -> bool:
+    """`letter` then 2 to 4 ASCII digits (D01, H12, D1000)."""
+    return (type(value) is str and 3 <= len(value) <= 5 and value[0] == letter and value.isascii()
+            and value[1:].isdigit())
+
+
+def is_drone_id(value: object) -> bool:
+    """A drone's id: D01, D02, ... D9999, canonical (`drone_name(n)`: no D00, D001 or D0100), so that it is
+    one number in a table's drone column."""
+    return _numbered(value, "D") and value[1] != "0" or value in _TWO_DIGITS  # type: ignore[index]
+
+
+_TWO_DIGITS = frozenset(f"D0{n}" for n in range(1, 10))
 
 
 def drone_number(drone: str) -> int:
@@ -58,6 +79,66 @@ def drone_number(drone: str) -> int:
 def drone_name(n: int) -> str:
     """The canonical id of drone number n: 1 -> 'D01' (unchecked: `messages.drone_id` checks n)."""
     return f"D{n:02d}"
+
+
+#: The steps a drone may rank (`Col.RANKED`, an NPS's `ranked`), code k + 1 for RANK_STEPS[k]: the
+#: 6-neighbourhood (+x, -x, +y, -y, +z, -z) and staying.
+RANK_STEPS: tuple[tuple[int, int, int], ...] = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1),
+                                                (0, 0, 0))
+_RANK_CODE = {s: k + 1 for k, s in enumerate(RANK_STEPS)}
+#: Largest valid ranking (all seven codes): anything at or above 8**7 is malformed.
+RANKED_LIMIT = 8 ** len(RANK_STEPS)
+
+
+def rank_steps(steps: Iterable[tuple[int, int, int]]) -> int:
+    """A drone's ranked steps, best first (each in RANK_STEPS, distinct), packed: 3 bits each, best lowest."""
+    value, shift = 0, 0
+    for s in steps:
+        value |= _RANK_CODE[s] << shift
+        shift += 3
+    return value
+
+
+def ranked_steps(value: int) -> tuple[tuple[int, int, int], ...]:
+    """The steps packed by `rank_steps`, best first (() for 0: no ranking)."""
+    out = []
+    while value:
+        out.append(RANK_STEPS[(value & 7) - 1])
+        value >>= 3
+    return tuple(out)
+
+
+def ranked_ok(value: object) -> bool:
+    """Is `value` steps packed by `rank_steps`: an int below RANKED_LIMIT whose 3-bit codes are nonzero up to
+    the last and distinct (0: none)? `_ranked_column_ok` is the same rule on a column."""
+    if type(value) is not int or not 0 <= value < RANKED_LIMIT:
+        return False
+    seen = 0
+    while value:
+        code = value & 7
+        if not code or seen >> code & 1:
+            return False
+        seen, value = seen | 1 << code, value >> 3
+    return True
+
+
+def _every_ranking() -> np.ndarray:
+    """Every valid ranking (`ranked_ok`), sorted: each ordered choice of distinct codes, packed (13,700;
+    54 KiB)."""
+    codes = range(1, len(RANK_STEPS) + 1)
+    choices = itertools.chain.from_iterable(itertools.permutations(codes, k) for k in range(len(RANK_STEPS) + 1))
+    values = np.fromiter((sum(c << 3 * i for i, c in enumerate(p)) for p in choices), np.int32)
+    values.sort()
+    return values
+
+
+_RANKINGS = _every_ranking()
+
+
+def _ranked_column_ok(col: np.ndarray) -> bool:
+    """`ranked_ok` for every value of a column: each one among the valid rankings (a bisection each)."""
+    at = np.searchsorted(_RANKINGS, col).clip(max=len(_RANKINGS) - 1)
+    return bool((_RANKINGS[at] == col).all())
 
 
 def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
@@ -77,8 +158,10 @@ class Table:
 
     def __init_subclass__(cls) -> None:
         names = tuple(name for name, _ in cls.LAYOUT)
-        assert names == tuple(cls.RECORD.__dataclass_fields__), \
+        assert names == tuple(f.name for f in dataclasses.fields(cls.RECORD)), \
             f"{cls.__name__}: LAYOUT must name {cls.RECORD.__name__}'s fields in order"
+        assert issubclass(cls.RECORD, Row) and "LAYOUT" not in vars(cls.RECORD), f"{cls.__name__}: one table per Row"
+        cls.RECORD.LAYOUT = cls.LAYOUT
         cls.DTYPE = np.dtype([(name, *(_DTYPES[kind] if isinstance(kind, Col) else ("u1", ())))
                               for name, kind in cls.LAYOUT])
 
@@ -101,7 +184,7 @@ class Table:
         return np.zeros(n, cls.DTYPE)
 
     @classmethod
-    def of(cls, records: Iterable[object]) -> "Table":
+    def of(cls, records: Iterable[object]) -> Self:
         """The table of records (each already a checked instance of `RECORD`)."""
         records = tuple(records)
         for r in records:
@@ -124,10 +207,12 @@ class Table:
         return cls(rows)
 
     @classmethod
-    def build(cls, **columns: object) -> "Table":
+    def build(cls, **columns: object) -> Self:
         """The table of the given columns, each a sequence of raw values (drone numbers, cells, enum codes),
-        one per row; every column of `LAYOUT` must be given (an absent optional cell is (-1, -1, -1))."""
-        if set(columns) != {name for name, _ in cls.LAYOUT}:
+        one per row; every column of `LAYOUT` must be given (an absent optional cell is (-1, -1, -1)), but a
+        ranking (`Col.RANKED`), which is 0 (none) where it is not."""
+        needed = {name for name, kind in cls.LAYOUT if kind is not Col.RANKED}
+        if not needed <= set(columns) <= {name for name, _ in cls.LAYOUT}:
             raise MalformedMessage(f"{cls.__name__} needs the columns {[name for name, _ in cls.LAYOUT]}")
         n = len(columns[cls.LAYOUT[0][0]])  # type: ignore[arg-type]
         rows = cls.empty(n)
@@ -137,7 +222,7 @@ class Table:
         return cls(rows)
 
     @classmethod
-    def from_wire(cls, data: object) -> "Table":
+    def from_wire(cls, data: object) -> Self:
         if not isinstance(data, bytes):
             raise MalformedMessage(f"{cls.__name__} travels as bytes, got {type(data).__name__}")
         size = cls.DTYPE.itemsize
@@ -151,33 +236,25 @@ class Table:
     # ------------------------------------------------------------------ checks
 
     @classmethod
-    def trusted(cls, rows: np.ndarray) -> "Table":
-        """The table of rows this process built from values it has already checked (its own state), without
-        checking them again, as `messages.unchecked` builds records: receivers check every table they get."""
-        rows.flags.writeable = False
-        table = object.__new__(cls)
-        object.__setattr__(table, "rows", rows)
-        return table
-
-    @classmethod
     def _check(cls, rows: np.ndarray) -> None:
-        """Every row valid: a few array operations per column, or for a few rows (where numpy's fixed cost
-        per operation is the whole cost) the same test on Python lists."""
+        """Every row valid: a few array operations per column (about a microsecond each, at any size)."""
         if not len(rows):
             return
-        small = len(rows) <= SMALL
         for name, kind in cls.LAYOUT:
             col = rows[name]
             if kind is Col.DRONE:
-                numbers = col.tolist()
-                if min(numbers) < 1 or max(numbers) > MAX_DRONE:
+                if col.min() < 1 or col.max() > MAX_DRONE:
                     raise MalformedMessage(f"{cls.__name__}: drone numbers must be in 1..{MAX_DRONE}")
-                if len(set(numbers)) != len(numbers):
+                ordered = len(col) == 1 or (col[1:] > col[:-1]).all()  # (rows in order: at once)
+                if not ordered and len(np.unique(col)) != len(col):
                     raise MalformedMessage(f"{cls.__name__}: one row per drone")
+            elif kind is Col.RANKED:
+                if not _ranked_column_ok(col):
+                    raise MalformedMessage(f"{cls.__name__}: each {name} must be {kind.value}, each code once")
             elif isinstance(kind, Col):
-                if not (_cells_ok_few if small else _cells_ok)(col, kind):
+                if not _cells_ok(col, kind):
                     raise MalformedMessage(f"{cls.__name__}: each {name} must be {kind.value}")
-            elif (max(col.tolist()) if small else col.max()) >= len(kind):
+            elif col.max() >= len(kind):
                 raise MalformedMessage(f"{cls.__name__}: {name} codes must be below {len(kind)} "
                                        f"(members of {kind.__name__})")
 
@@ -200,21 +277,8 @@ class Table:
         return self.rows[name]
 
     def records(self) -> tuple:
-        """The rows as records (built unchecked: the table was checked whole)."""
-        columns = []
-        for name, kind in self.LAYOUT:
-            values = self.rows[name].tolist()
-            if kind is Col.DRONE:
-                columns.append([drone_name(n) for n in values])
-            elif kind is Col.OPTIONAL:
-                columns.append([optional_cell(c) for c in values])
-            elif isinstance(kind, Col):
-                columns.append([tuple(c) for c in values])
-            else:
-                members = tuple(kind)
-                columns.append([members[c] for c in values])
-        make = _unchecked(self.RECORD)
-        return tuple(make(*r) for r in zip(*columns))
+        """The rows as records, for people (each checked as it is built: a few microseconds a row)."""
+        return _records(self.RECORD, self.LAYOUT, self.rows)
 
     def __iter__(self) -> Iterator:
         return iter(self.records())
@@ -222,15 +286,15 @@ class Table:
     def __getitem__(self, i: int | slice):
         """A row's record (a slice: a tuple of them), built from that row alone."""
         if isinstance(i, slice):
-            return type(self).trusted(self.rows[i]).records()
-        return type(self).trusted(self.rows[[i]]).records()[0]
+            return _records(self.RECORD, self.LAYOUT, self.rows[i])
+        return _records(self.RECORD, self.LAYOUT, self.rows[[i]])[0]
 
     def __bool__(self) -> bool:
         return len(self.rows) > 0
 
     def __eq__(self, other: object) -> bool:
         if type(other) is type(self):
-            return self.rows.tobytes() == other.rows.tobytes()  # type: ignore[union-attr]
+            return self.rows.tobytes() == other.rows.tobytes()
         if isinstance(other, tuple):
             return self.records() == other
         return NotImplemented
@@ -245,28 +309,71 @@ class Table:
         return (type(self).from_wire, (self.to_wire(),))
 
 
-#: Up to this many rows, a table is checked on Python lists rather than with numpy.
-SMALL = 8
+def _records(cls: type, layout: tuple[tuple[str, Col | type[enum.Enum]], ...], rows: np.ndarray) -> tuple:
+    """Rows as `cls` records (each checked by its constructor)."""
+    columns: list[list[object]] = []
+    for name, kind in layout:
+        values = rows[name].tolist()
+        if kind is Col.DRONE:
+            columns.append([drone_name(n) for n in values])
+        elif kind is Col.OPTIONAL:
+            columns.append([optional_cell(c) for c in values])
+        elif kind is Col.RANKED:
+            columns.append(values)
+        elif isinstance(kind, Col):
+            columns.append([tuple(c) for c in values])
+        else:
+            members = tuple(kind)
+            columns.append([members[c] for c in values])
+    names = [name for name, _ in layout]
+    return tuple(cls(**dict(zip(names, r))) for r in zip(*columns))
+
+
+class Row:
+    """A table's row as a record (a frozen dataclass deriving from this, named as a `Table`'s RECORD): how
+    people write and read swarm-sized data (samples, tests, a console). It is checked on construction by
+    the rules of its table's columns (`LAYOUT`), which the table checks with numpy."""
+
+    __slots__ = ()
+    LAYOUT: ClassVar[tuple[tuple[str, Col | type[enum.Enum]], ...]]
+
+    def __post_init__(self) -> None:
+        for name, kind in self.LAYOUT:
+            value = getattr(self, name)
+            if kind is Col.DRONE:
+                if not is_drone_id(value):
+                    raise MalformedMessage(f"{name} must be a drone id like D01, got {value!r}")
+            elif kind is Col.RANKED:
+                if not ranked_ok(value):
+                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {kind.value}, each code once, "
+                                           f"got {value!r:.60}")
+            elif isinstance(kind, Col):
+                if not (value is None and kind is Col.OPTIONAL or _cell_ok(value, _LOWEST[kind])):
+                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {kind.value}, got {value!r:.60}")
+            elif type(value) is not kind:
+                raise MalformedMessage(f"{type(self).__name__}: {name} must be a {kind.__name__}, got {value!r:.60}")
+
+
+def _cell_ok(value: object, lo: int) -> bool:
+    """Is `value` a cell, a tuple of 3 ints in lo..MAX_COORD?"""
+    if type(value) is tuple and len(value) == 3:
+        x, y, z = value
+        return (type(x) is int and type(y) is int and type(z) is int
+                and lo <= x <= MAX_COORD and lo <= y <= MAX_COORD and lo <= z <= MAX_COORD)
+    return False
 
 
 def _cells_ok(col: np.ndarray, kind: Col) -> bool:
     """A cell column valid, with numpy: a u32 view of an i32 turns negative values into huge ones, so one
     maximum checks both bounds."""
-    if kind is Col.CELL:
-        return bool(col.view(np.uint32).max() <= MAX_COORD)
-    if kind is Col.SIGNED:
-        return bool((col + MAX_COORD).view(np.uint32).max() <= 2 * MAX_COORD)
-    u = col.view(np.uint32)  # OPTIONAL: an absent cell is (-1, -1, -1), all three 2**32 - 1
-    return bool(np.where(u.min(axis=1) == _ABSENT, 0, u.max(axis=1)).max() <= MAX_COORD)
-
-
-def _cells_ok_few(col: np.ndarray, kind: Col) -> bool:
-    """`_cells_ok` on Python lists."""
-    cells = col.tolist()
-    if kind is Col.OPTIONAL:
-        cells = [c for c in cells if c != [-1, -1, -1]]
-    lo = -MAX_COORD if kind is Col.SIGNED else 0
-    return all(lo <= v <= MAX_COORD for c in cells for v in c)
+    lo = _LOWEST[kind]
+    if kind is not Col.OPTIONAL:
+        return bool((col - lo if lo else col).view(np.uint32).max() <= MAX_COORD - lo)
+    u = np.ascontiguousarray(col).view(np.uint32) + np.uint32(1)  # an absent cell's -1 is 0 (u32 wraps)
+    if u.max() > MAX_COORD + 1:
+        return False
+    absent = u == 0
+    return bool(((absent[:, 0] == absent[:, 1]) & (absent[:, 1] == absent[:, 2])).all())  # all three or none
 
 
 _INDEXES: dict[type, dict] = {}
@@ -282,8 +389,3 @@ def _index_of(kind: type[enum.Enum]) -> dict:
 def code_of(member: enum.Enum) -> int:
     """A member's code in a table: its index in its enum's declaration order."""
     return _index_of(type(member))[member]
-
-
-def _unchecked(cls: type):
-    from .messages import unchecked  # the records' module imports this one
-    return unchecked(cls)

@@ -8,7 +8,7 @@ import logging
 
 import pytest
 
-from dronesim.schema.samples import SAMPLES, VECTORS_PATH
+from schema.samples import SAMPLES, VECTORS_PATH
 
 SAMPLE_NAMES = sorted(SAMPLES)
 
@@ -46,3 +46,22 @@ def logger() -> logging.Logger:
     log = logging.getLogger("dronesim.tests")
     log.addHandler(logging.NullHandler())
     return log
+
+
+@pytest.fixture(scope="session")
+def playwright_driver():
+    """The session's one Playwright driver (a second sync Playwright in the same process fails), for the
+    browser tests (tests/e2e/) and the engine test of the web page; skipped, saying why, without a browser."""
+    from tests.e2e.conftest import _skipped, browser_problem
+
+    problem = browser_problem()
+    if problem:
+        _skipped.append(problem)
+        pytest.skip(f"browser tests skipped: {problem}")
+    from playwright.sync_api import sync_playwright
+
+    pw = sync_playwright().start()
+    try:
+        yield pw
+    finally:
+        pw.stop()

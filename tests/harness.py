@@ -7,9 +7,9 @@ import contextlib
 import importlib.metadata
 import json
 import os
-import shutil
 import queue
 import re
+import shutil
 import subprocess
 import sys
 import threading
@@ -19,6 +19,8 @@ from pathlib import Path
 
 import zenoh
 
+from dronesim import child_env
+from dronesim.scenario import Scenario, swarm_hosts
 from dronesim.transport import client_config, router_config, router_locators
 
 TIMEOUT = 60.0
@@ -48,7 +50,7 @@ class Proc:
         self.lines: queue.SimpleQueue[tuple[str, str] | None] = queue.SimpleQueue()
         self.out: list[str] = []
         self.err: list[str] = []
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        env = child_env(PYTHONUNBUFFERED="1")
         self.p = subprocess.Popen(argv, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                   env=env)
         self._log = log_dir / f"{name}.log"
@@ -58,9 +60,10 @@ class Proc:
             t.start()
 
     def _read(self, stream, tag: str, sink: list[str]) -> None:
-        for line in stream:
-            sink.append(line.rstrip("\n"))
-            self.lines.put((tag, line.rstrip("\n")))
+        with stream:  # closed at the end of the output: no pipe left for the garbage collector to warn about
+            for line in stream:
+                sink.append(line.rstrip("\n"))
+                self.lines.put((tag, line.rstrip("\n")))
         self.lines.put(None)
 
     def expect(self, pattern: str, timeout: float = TIMEOUT, *, fresh: bool = False) -> str:
@@ -75,7 +78,8 @@ class Proc:
             try:
                 item = self.lines.get(timeout=timeout)
             except queue.Empty:
-                raise AssertionError(f"{self.name}: no line matching {pattern!r} within {timeout}s:\n{self.text}")
+                why = f"{self.name}: no line matching {pattern!r} within {timeout}s:\n{self.text}"
+                raise AssertionError(why) from None
             if item is None:
                 closed += 1
                 continue
@@ -137,11 +141,36 @@ class Cluster:
         for p in self.procs:
             p.kill()
 
-    def __enter__(self) -> "Cluster":
+    def __enter__(self) -> Cluster:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def play_scenario(locator: str, tmp: Path, scenario: Path, layout: str,
+                  *host_args: str) -> tuple[Path, Proc, list[Proc]]:
+    """A scenario file played to its end by real processes over `locator`: the coordinator (journal), the
+    environment, the drones (`layout` "processes": one process per drone; "swarm": one host per autopilot, with
+    `host_args`) and a scripted ground station; every process must exit 0. The journal, the coordinator's
+    process and every process (their output stays readable)."""
+    autopilots = Scenario.load(scenario).autopilots
+    journal = tmp / f"{layout}.journal"
+    with Cluster(locator, tmp, log_level="WARNING") as c:
+        srv = c.start("SRV", "coordinator", "--scenario", str(scenario), "--journal", str(journal),
+                      "--admit-deadline", "120", "--log-level", "INFO")
+        srv.expect("coordinator ready")
+        c.start("ENV", "env", "--no-draw")
+        if layout == "processes":  # one process per drone
+            for d, pilot in sorted(autopilots.items()):
+                c.start(d, "drone", "--id", d, "--autopilot", pilot)
+        else:  # one swarm host per autopilot
+            for host, (pilot, ids) in swarm_hosts(autopilots).items():
+                c.start(host, "drone", "--id", ",".join(ids), "--host", host, "--autopilot", pilot, *host_args)
+        c.start("GCS", "gcs", "--scenario", str(scenario), "--quiet")
+        codes = c.wait_all(timeout=240)
+        assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
+        return journal, srv, list(c.procs)
 
 
 class Hosts:
@@ -160,7 +189,7 @@ class Hosts:
     def _ip(self, *args: str) -> None:
         subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
 
-    def __enter__(self) -> "Hosts":
+    def __enter__(self) -> Hosts:
         try:
             self._ip("netns", "add", self.router)
             self._ip("-n", self.router, "link", "set", "lo", "up")
@@ -219,9 +248,9 @@ class ScriptedGCS:
                  intent: str = "FINAL") -> None:
         import logging
 
-        from dronesim.entity import Membership
-        from dronesim.schema import Connect, Intent, Keys, Over, Role, Status, Turn
+        from dronesim.membership import Membership
         from dronesim.transport import Inbox, Outbox, session_id
+        from schema import Connect, Intent, Keys, Over, Role, Status, Turn
 
         self.keys = Keys(root)
         self.targets = dict(targets)
@@ -241,7 +270,7 @@ class ScriptedGCS:
 
     def next_event(self, timeout: float = TIMEOUT):
         from dronesim.transport import Presence, Received
-        from dronesim.schema import Over, Status
+        from schema import Over, Status
 
         ev = self.inbox.get(timeout)
         if ev is None:
@@ -258,7 +287,7 @@ class ScriptedGCS:
     def wait_phase(self, phase: str, turn: int | None = None, timeout: float = TIMEOUT):
         """Block until TURN(turn, phase) arrives (any turn if None); returns it (None if the game ended)."""
         from dronesim.transport import Received
-        from dronesim.schema import Turn
+        from schema import Turn
 
         while self.over is None:
             ev = self.next_event(timeout)
@@ -268,7 +297,7 @@ class ScriptedGCS:
         return None
 
     def answer(self, turn: int) -> None:
-        from dronesim.schema import Done, Phase, Target
+        from schema import Done, Phase, Target
 
         alive = {s.drone for s in self.statuses[-1].drones if s.alive} if self.statuses else set(self.targets)
         sent = 0

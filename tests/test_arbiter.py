@@ -1,4 +1,10 @@
-"""Move arbitration (coordinator/arbiter.py): cooperative drones give way by a fixed priority.
+"""Move arbitration (coordinator/arbiter.py).
+
+The second half tests `cooperate`, the arbitration in force (PIBT over each cooperative drone's ranked
+candidates): a cooperative drone only ever ends in a cell it offered or its own, never shares a cell or swaps
+with another cooperative drone, never with a non-cooperative one unless that one flew into it; pushes,
+backtracking, giving way. The first half tests `arbitrate`, the former fixed-priority rule, which the
+benchmark still compares (`dronesim bench swarm`): cooperative drones give way by a fixed priority.
 
 What `arbitrate(before, proposed, cooperative)` guarantees, and what these tests check:
 
@@ -19,13 +25,16 @@ from __future__ import annotations
 import random
 from collections import Counter
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from dronesim.coordinator.arbiter import arbitrate
-from dronesim.coordinator.observer import deaths
-from dronesim.schema import Cause
+from coordinator.arbiter import arbitrate, cooperate, open_cells
+from coordinator.observer import deaths
+from schema import Cause
+from schema.messages import AROUND
+from schema.tables import rank_steps
 
 A, B, C, D, E, F = (0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0), (4, 0, 0), (5, 0, 0)
 
@@ -284,3 +293,228 @@ def test_property_cooperative_drones_never_kill_each_other(scene) -> None:
     # and among cooperative drones alone, nobody ever dies
     only = sorted(coop)
     assert deaths(WORLD, {d: before[d] for d in only}, {d: final[d] for d in only}, set()) == {}
+
+
+# =========================================================================== PIBT (arbiter.cooperate)
+
+SIZE = (8, 8, 3)
+STAY = (0, 0, 0)
+
+
+def coop_arb(drones: dict[str, tuple], priority: dict[str, int] | None = None,
+             targets: dict[str, tuple] | None = None, blocked: np.ndarray | None = None, size: tuple = SIZE):
+    """`drones`: id -> (cell, [offered steps, best first]) for a cooperative drone, or (cell, proposed cell,
+    None) for one that is not; `targets` (id -> cell) and the world's buildings (`blocked`, a grid of `size`)
+    for the swap, which needs both. Returns (final cells by id, yielded ids, gave-way ids)."""
+    ids = sorted(drones)
+    before = np.array([drones[d][0] for d in ids], np.int32).reshape(len(ids), 3)
+    coop = np.array([len(drones[d]) == 2 for d in ids])
+    proposed = before.copy()
+    ranked = np.zeros(len(ids), np.uint32)
+    for k, d in enumerate(ids):
+        if coop[k]:
+            steps = drones[d][1]
+            ranked[k] = rank_steps(steps)
+            if steps:
+                proposed[k] = np.add(drones[d][0], steps[0])
+        else:
+            proposed[k] = drones[d][1]
+    prio = np.array([(priority or {}).get(d, 0) for d in ids], np.int64)
+    aims = None if targets is None else \
+        np.array([targets.get(d, (-1, -1, -1)) for d in ids], np.int32).reshape(len(ids), 3)
+    world = None if blocked is None else open_cells(blocked)
+    final, yielded, gave = cooperate(size, before, proposed, ranked, coop, prio, aims, world)
+    cells = {d: tuple(final[k].tolist()) for k, d in enumerate(ids)}
+    return cells, {d for k, d in enumerate(ids) if yielded[k]}, {d for k, d in enumerate(ids) if gave[k]}
+
+
+X, NX, Y, NY, Z, NZ = AROUND
+
+
+def test_pibt_free_moves_are_taken() -> None:
+    cells, yielded, _ = coop_arb({"D01": ((1, 1, 0), [X, STAY]), "D02": ((4, 4, 0), [Y, STAY])})
+    assert cells == {"D01": (2, 1, 0), "D02": (4, 5, 0)} and not yielded
+
+
+def test_pibt_higher_priority_wins_a_cell_then_the_id() -> None:
+    drones = {"D01": ((1, 1, 0), [X, STAY]), "D02": ((3, 1, 0), [NX, STAY])}
+    assert coop_arb(drones)[0] == {"D01": (2, 1, 0), "D02": (3, 1, 0)}
+    assert coop_arb(drones, {"D02": 5})[0] == {"D01": (1, 1, 0), "D02": (2, 1, 0)}
+
+
+def test_pibt_pushes_a_drone_that_offers_another_cell() -> None:
+    # D01 wants D02's cell; D02 (parked) offers to stay, then to step sideways: it is pushed aside.
+    cells, yielded, gave = coop_arb({"D01": ((1, 1, 0), [X, STAY]), "D02": ((2, 1, 0), [STAY, Y, NY])}, {"D01": 3})
+    assert cells == {"D01": (2, 1, 0), "D02": (2, 2, 0)} and yielded == {"D02"} and not gave
+
+
+def test_pibt_pushed_drone_steps_out_of_line_before_straight_on() -> None:
+    # D02 ranks straight on (+x) before the side step (+y), both below staying: pushed, it sidesteps.
+    cells, _, _ = coop_arb({"D01": ((1, 1, 0), [X]), "D02": ((2, 1, 0), [STAY, X, Y])}, {"D01": 3})
+    assert cells == {"D01": (2, 1, 0), "D02": (2, 2, 0)}
+    # ... unless straight on is what it prefers anyway (ranked above staying)
+    cells, _, _ = coop_arb({"D01": ((1, 1, 0), [X]), "D02": ((2, 1, 0), [X, STAY, Y])}, {"D01": 3})
+    assert cells == {"D01": (2, 1, 0), "D02": (3, 1, 0)}
+
+
+def test_pibt_never_moves_a_drone_to_a_cell_it_did_not_offer() -> None:
+    # D02 offers nothing but its cell: D01 cannot push it, takes its next candidate, and gave way.
+    cells, yielded, gave = coop_arb({"D01": ((1, 1, 0), [X, STAY, Y]), "D02": ((2, 1, 0), [STAY])}, {"D01": 3})
+    assert cells == {"D01": (1, 1, 0), "D02": (2, 1, 0)} and yielded == {"D01"} and gave == {"D01"}
+
+
+def test_pibt_goes_round_a_drone_rather_than_pushing_it_when_as_short() -> None:
+    # +x and +y both get D01 closer (ranked before staying): it takes the free one, whatever its order
+    cells, yielded, gave = coop_arb({"D01": ((1, 1, 0), [X, Y, STAY]), "D02": ((2, 1, 0), [STAY, NY])}, {"D01": 3})
+    assert cells == {"D01": (1, 2, 0), "D02": (2, 1, 0)} and yielded == {"D01"} and not gave
+    # without its cell in the ranking, nothing says which cells are as good: its order holds
+    cells, _, _ = coop_arb({"D01": ((1, 1, 0), [X, Y]), "D02": ((2, 1, 0), [STAY, NY])}, {"D01": 3})
+    assert cells == {"D01": (2, 1, 0), "D02": (2, 0, 0)}
+
+
+def test_pibt_push_chain_backtracks() -> None:
+    # D01 pushes D02, which can only go on into D03, which can go nowhere: both fail; D01 takes +y.
+    drones = {"D01": ((1, 1, 0), [X, Y]), "D02": ((2, 1, 0), [STAY, X]), "D03": ((3, 1, 0), [STAY])}
+    cells, _, gave = coop_arb(drones, {"D01": 9})
+    assert cells == {"D01": (1, 2, 0), "D02": (2, 1, 0), "D03": (3, 1, 0)} and gave == {"D01"}
+
+
+def test_pibt_a_long_push_chain_moves_as_one() -> None:
+    n = 7  # a queue along x, each wanting the cell ahead; the head is free to go on
+    drones = {f"D0{k + 1}": ((k, 0, 0), [X, STAY]) for k in range(n)}
+    cells, yielded, _ = coop_arb(drones, {"D01": 9})
+    assert cells == {f"D0{k + 1}": (k + 1, 0, 0) for k in range(n)} and not yielded
+
+
+def test_pibt_no_swap_between_cooperative_drones() -> None:
+    cells, _, _ = coop_arb({"D01": ((1, 1, 0), [X, STAY]), "D02": ((2, 1, 0), [NX, STAY])})
+    assert cells == {"D01": (1, 1, 0), "D02": (2, 1, 0)}  # D02 would have to enter D01's cell: refused
+
+
+def test_pibt_rotation_is_allowed() -> None:
+    ring = [(1, 1, 0), (2, 1, 0), (2, 2, 0), (1, 2, 0)]
+    steps = [X, Y, NX, NY]
+    drones = {f"D0{k + 1}": (ring[k], [steps[k]]) for k in range(4)}
+    assert coop_arb(drones)[0] == {f"D0{k + 1}": ring[(k + 1) % 4] for k in range(4)}
+
+
+def test_pibt_non_cooperative_moves_are_kept_and_avoided() -> None:
+    # D09 (not cooperative) flies into (2, 1, 0): D01 may not enter it, nor swap with D08.
+    drones = {"D01": ((1, 1, 0), [X, Y, STAY]), "D09": ((3, 1, 0), (2, 1, 0), None),
+              "D02": ((5, 5, 0), [X, STAY]), "D08": ((6, 5, 0), (5, 5, 0), None)}
+    cells, _, _ = coop_arb(drones, {"D01": 9, "D02": 9})
+    assert cells == {"D01": (1, 2, 0), "D09": (2, 1, 0), "D02": (5, 5, 0), "D08": (5, 5, 0)}
+
+
+def test_pibt_a_cooperative_drone_flees_a_non_cooperative_one() -> None:
+    cells, _, _ = coop_arb({"D01": ((1, 1, 0), [STAY, Y]), "D09": ((2, 1, 0), (1, 1, 0), None)})
+    assert cells == {"D01": (1, 2, 0), "D09": (1, 1, 0)}
+
+
+def test_pibt_without_a_ranking_a_cooperative_drone_takes_its_move_or_stays() -> None:
+    cells, _, _ = coop_arb({"D01": ((1, 1, 0), []), "D02": ((2, 2, 0), [NY, STAY])})
+    assert cells == {"D01": (1, 1, 0), "D02": (2, 1, 0)}
+
+
+def grid_of(rows: list[str]) -> np.ndarray:
+    """A one-floor grid [x, y, z] from rows of text (row k is y = k; '#' a building)."""
+    return np.array([[c == "#" for c in r] for r in rows]).T[:, :, None]
+
+
+#: A dead-end corridor (y = 1, x = 2..5) off a 2 x 3 room (x = 0..1): its junction is (1, 1).
+DEAD_END = grid_of(["..####", "......", "..####"])
+
+
+@pytest.mark.parametrize("swap", [True, False])
+def test_pibt_swap_leads_a_drone_out_of_a_dead_end(swap: bool) -> None:
+    """PIBT's swap (Okumura, IJCAI 2023): D01 (at the mouth, going to the end) meets D02 (coming out). Pushing
+    D02 on would drive it to the end and back; with the swap D01 steps back, towards the junction, and pulls
+    D02 into the cell it leaves (which D02 offered first). Without the world (no swap), it pushes."""
+    drones = {"D01": ((2, 1, 0), [X, STAY, NX]), "D02": ((3, 1, 0), [NX, STAY, X])}
+    cells, _, gave = coop_arb(drones, {"D01": 5, "D02": 1}, {"D01": (5, 1, 0), "D02": (0, 1, 0)},
+                              DEAD_END if swap else None, DEAD_END.shape)
+    if swap:
+        assert cells == {"D01": (1, 1, 0), "D02": (2, 1, 0)} and not gave  # it leads: it does not give way
+    else:
+        assert cells == {"D01": (3, 1, 0), "D02": (4, 1, 0)}
+
+
+def test_pibt_no_swap_where_the_other_drone_can_be_pushed_aside() -> None:
+    """Beyond D02 the corridor meets a junction (x = 4 opens up and down): pushing it on lets D01 pass there."""
+    grid = grid_of(["..##.#", "......", "..##.#"])
+    drones = {"D01": ((2, 1, 0), [X, STAY, NX]), "D02": ((3, 1, 0), [NX, STAY, X])}
+    cells, _, _ = coop_arb(drones, {"D01": 5, "D02": 1}, {"D01": (5, 1, 0), "D02": (0, 1, 0)}, grid, grid.shape)
+    assert cells == {"D01": (3, 1, 0), "D02": (4, 1, 0)}
+
+
+def test_pibt_no_swap_with_a_drone_whose_target_is_in_the_corridor() -> None:
+    """D02 is going to the end itself (it wants D01's cell only to let it by): pulling it out gains nothing."""
+    drones = {"D01": ((2, 1, 0), [X, STAY, NX]), "D02": ((3, 1, 0), [NX, STAY, X])}
+    cells, _, _ = coop_arb(drones, {"D01": 5, "D02": 1}, {"D01": (5, 1, 0), "D02": (4, 1, 0)}, DEAD_END,
+                           DEAD_END.shape)
+    assert cells == {"D01": (3, 1, 0), "D02": (4, 1, 0)}
+
+
+@st.composite
+def ranked_scenes(draw):
+    n = draw(st.integers(1, 10))
+    cells = draw(st.lists(st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(0, 1)),
+                          min_size=n, max_size=n, unique=True))
+    ids = [f"D{i:02d}" for i in draw(st.lists(st.integers(1, 40), min_size=n, max_size=n, unique=True))]
+    drones, priority = {}, {}
+    for d, c in zip(ids, cells):
+        if draw(st.booleans()) or draw(st.booleans()):
+            steps = draw(st.lists(st.sampled_from(AROUND + (STAY,)), unique=True, max_size=7))
+            drones[d] = (c, steps)
+        else:
+            s = draw(st.sampled_from(AROUND + (STAY,)))
+            drones[d] = (c, (c[0] + s[0], c[1] + s[1], c[2] + s[2]), None)
+        priority[d] = draw(st.integers(0, 3))
+    # targets and buildings (for the swap, in half the scenes): corridors appear among random buildings
+    if draw(st.booleans()):
+        return drones, priority, None, None
+    spots = st.tuples(st.integers(0, 4), st.integers(0, 4), st.integers(0, 1))
+    targets = {d: draw(spots) for d in ids if draw(st.booleans()) or draw(st.booleans())}
+    blocked = np.zeros(SIZE, bool)
+    for c in draw(st.lists(spots, max_size=20)):
+        blocked[c] = c not in cells
+    return drones, priority, targets, blocked
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(ranked_scenes())
+def test_property_pibt_guarantees(scene) -> None:
+    drones, priority, targets, blocked = scene
+    cells, yielded, gave = coop_arb(drones, priority, targets, blocked)
+    coop = {d for d in drones if len(drones[d]) == 2}
+    before = {d: drones[d][0] for d in drones}
+    for d in drones:
+        if d not in coop:
+            assert cells[d] == drones[d][1], "a non-cooperative move was changed"
+            continue
+        offered = {(before[d][0] + s[0], before[d][1] + s[1], before[d][2] + s[2]) for s in drones[d][1]}
+        assert cells[d] in offered | {before[d]}, f"{d} moved to a cell it did not offer"
+        first = drones[d][1][0] if drones[d][1] else STAY
+        assert (d in yielded) == (cells[d] != tuple(np.add(before[d], first).tolist()))
+        for e in drones:
+            if e == d:
+                continue
+            if cells[e] == cells[d]:  # sharing a cell: only ever with a non-cooperative drone that forced it
+                assert e not in coop and cells[d] == before[d], f"{d} and {e} share {cells[d]}"
+            swapped = cells[d] == before[e] and cells[e] == before[d] and cells[d] != before[d]
+            assert not swapped, f"{d} swapped with {e}"
+    assert gave <= yielded
+    dead = deaths(WORLD, before, cells, set())  # (a drone offering a cell off the world may die there)
+    for d, cause in dead.items():  # a cooperative drone collides only where a non-cooperative one flew into it
+        if d in coop and cause in (Cause.VERTEX, Cause.SWAP):
+            assert any(e not in coop and cells[e] == cells[d] for e in drones if e != d)
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 1), (3, 5, 2), (17, 9, 4), (40, 33, 7)])
+def test_the_open_cells_read_as_the_world_padded_with_blocked_cells(shape) -> None:
+    """One bit a cell, made a slab at a time: the same as a padded copy of the world would say."""
+    grid = np.random.default_rng(sum(shape)).random(shape) < 0.3
+    padded = np.zeros(tuple(n + 2 for n in shape), bool)
+    padded[1:-1, 1:-1, 1:-1] = ~grid
+    is_open = open_cells(grid)
+    assert [is_open[u] for u in range(padded.size)] == padded.reshape(-1).astype(int).tolist()

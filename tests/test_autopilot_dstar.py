@@ -16,11 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dronesim.entities.autopilots import make_autopilot
-from dronesim.entities.autopilots.base import STEPS6, Decision
-from dronesim.entities.autopilots.dstar import DStarPilot
-from dronesim.entities.world import World
-from dronesim.schema import Cell, CellInfo, CellKind, Note
+from entities.autopilots import make_autopilot
+from entities.autopilots.base import Decision
+from entities.autopilots.dstar import DStarPilot
+from entities.world import World
+from schema import Cell, CellInfo, CellKind, Note
+from schema.messages import AROUND
+from schema.tables import rank_steps, ranked_steps
+
+STAY = (0, 0, 0)
 
 # --------------------------------------------------------------------------- a tiny grid oracle
 
@@ -58,7 +62,7 @@ class Grid:
             c = queue.popleft()
             if c == goal:
                 return dist[c]
-            for d in STEPS6:
+            for d in AROUND:
                 n = (c[0] + d[0], c[1] + d[1], c[2] + d[2])
                 if _inside(n, self.size) and n not in wall and n not in dist:
                     dist[n] = dist[c] + 1
@@ -138,12 +142,15 @@ def test_registry_and_trivial_cases() -> None:
     pilot = make_autopilot("dstar", world_size=(4, 4, 4))
     assert isinstance(pilot, DStarPilot) and pilot.name == "dstar"
     grid = Grid((4, 4, 4))
-    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), None)
-    assert decision == Decision(pos=(1, 1, 1)) and asks == 0
+    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), None)  # no target: it offers its own cell only,
+    assert decision == Decision(pos=(1, 1, 1), ranked=rank_steps([STAY])) and asks == 0  # knowing nothing
+    # on its target, it offers its cell first, then its free neighbours (asked once, to be pushed aside)
     decision, asks, _ = step_once(pilot, grid, (1, 1, 1), (1, 1, 1))
-    assert decision == Decision(pos=(1, 1, 1), note=Note.REACHED) and asks == 0
+    assert decision == Decision(pos=(1, 1, 1), note=Note.REACHED, ranked=rank_steps([STAY, *AROUND])) and asks == 1
+    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), (1, 1, 1))
+    assert decision.ranked == rank_steps([STAY, *AROUND]) and asks == 0
     decision, asks, _ = step_once(pilot, grid, (1, 1, 1), (9, 1, 1))  # outside the world
-    assert decision == Decision(pos=(1, 1, 1), note=Note.UNREACHABLE)
+    assert (decision.pos, decision.note) == ((1, 1, 1), Note.UNREACHABLE)
 
 
 def test_open_world_flies_an_optimal_path() -> None:
@@ -246,7 +253,8 @@ def test_never_enters_a_building_in_random_cities() -> None:
 def _hovers(pilot: DStarPilot, grid: Grid, pos: Cell, target: Cell, turns: int = 5) -> None:
     for _ in range(turns):
         decision, _, _ = step_once(pilot, grid, pos, target)
-        assert decision == Decision(pos=pos, note=Note.UNREACHABLE)
+        assert (decision.pos, decision.note) == (pos, Note.UNREACHABLE)
+        assert ranked_steps(decision.ranked)[0] == STAY  # at rest: it may be pushed aside, never drawn away
 
 
 def test_enclosed_target_is_unreachable_and_the_drone_hovers() -> None:
@@ -282,7 +290,7 @@ def test_target_inside_a_building_is_unreachable_at_once() -> None:
     pilot = DStarPilot(world_size=size)
     flight = fly(pilot, grid, (0, 0, 0), (5, 5, 2), limit=50)
     assert len(flight.decisions) == 1  # the first ASK includes the target
-    assert flight.decisions[0] == Decision(pos=(0, 0, 0), note=Note.UNREACHABLE)
+    assert (flight.decisions[0].pos, flight.decisions[0].note) == ((0, 0, 0), Note.UNREACHABLE)
     _hovers(pilot, grid, (0, 0, 0), (5, 5, 2))
 
 
@@ -325,7 +333,8 @@ def test_waits_behind_a_drone_in_a_corridor_and_never_remembers_it() -> None:
     pilot = DStarPilot(world_size=size)
     for _ in range(4):
         decision, _, _ = step_once(pilot, grid, (0, 0, 0), (5, 0, 0))
-        assert decision == Decision(pos=(0, 0, 0))  # waits, does not give up
+        assert (decision.pos, decision.note) == ((0, 0, 0), Note.NONE)  # waits, does not give up
+        assert ranked_steps(decision.ranked) == ((1, 0, 0), STAY)  # and offers the arbiter the cell ahead
     grid.drones = {}
     flight = fly(pilot, grid, (0, 0, 0), (5, 0, 0))
     assert flight.path == [(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0), (4, 0, 0), (5, 0, 0)]

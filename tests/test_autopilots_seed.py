@@ -10,11 +10,11 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from dronesim.entities.autopilots import make_autopilot, run_step
-from dronesim.entities.autopilots.base import Decision
-from dronesim.entities.autopilots.seed import SeedPilot
-from dronesim.entities.autopilots.v1 import V1Pilot
-from dronesim.schema import Cell, CellInfo, CellKind, Note
+from entities.autopilots import make_autopilot, run_step
+from entities.autopilots.base import Decision, drive
+from entities.autopilots.seed import SeedPilot
+from entities.autopilots.v1 import V1Pilot
+from schema import Cell, CellInfo, CellKind, Note
 
 
 @dataclass
@@ -130,7 +130,7 @@ def test_dead_end_memory_order():
 def test_v1_flies_into_a_building_on_the_dead_end_map():
     grid = dead_end()
     flight = fly(V1Pilot(world_size=grid.size), grid, DEAD_END_START, DEAD_END_TARGET)
-    # (0,2): SOUTH (1,2) and EAST (0,3) are equally close; STEPS6 order (+x first) picks (1,2).
+    # (0,2): SOUTH (1,2) and EAST (0,3) are equally close; AROUND order (+x first) picks (1,2).
     assert flight.path == [(0, 0, 0), (0, 1, 0), (0, 2, 0), (1, 2, 0)]
     assert grid.kind(flight.path[-1]) is CellKind.BUILDING
     assert grid.asked == [] and set(flight.asks) == {0}
@@ -141,7 +141,7 @@ def test_v1_basics():
     grid = Grid((3, 3, 3))
     assert run_step(pilot, (1, 1, 1), None, grid.oracle) == (Decision(pos=(1, 1, 1)), 0)
     assert run_step(pilot, (1, 1, 1), (1, 1, 1), grid.oracle) == (Decision(pos=(1, 1, 1), note=Note.REACHED), 0)
-    # tie (+x, +y, +z all equally close): STEPS6 order, +x first
+    # tie (+x, +y, +z all equally close): AROUND order, +x first
     assert run_step(pilot, (0, 0, 0), (2, 2, 2), grid.oracle) == (Decision(pos=(1, 0, 0)), 0)
     flight = fly(pilot, grid, (0, 0, 0), (2, 1, 2))
     assert flight.path[-1] == (2, 1, 2) and flight.last.note is Note.REACHED
@@ -316,9 +316,9 @@ def _swarm_game(seed: int, size: Cell, n: int, turns: int, drop: float) -> None:
     turns as dead ones do), and a share `drop` of the answers missing: same moves, notes and memories."""
     import numpy as np
 
-    from dronesim.entities.autopilots.base import NO_ANSWER
-    from dronesim.entities.autopilots.seed import SeedSwarm
-    from dronesim.schema.tables import code_of
+    from entities.autopilots.base import NO_ANSWER
+    from entities.autopilots.seed import SeedSwarm
+    from schema.tables import code_of
 
     rng = np.random.default_rng(seed)
     nx, ny, nz = size
@@ -332,26 +332,28 @@ def _swarm_game(seed: int, size: Cell, n: int, turns: int, drop: float) -> None:
     target: dict[int, Cell | None] = {d: None for d in numbers}
     swarm = SeedSwarm(world_size=size, drones=numbers)
     pilots = {d: SeedPilot(world_size=size) for d in numbers}
-    notes = {Note.NONE: code_of(Note.NONE), Note.REACHED: code_of(Note.REACHED), Note.UNREACHABLE: code_of(Note.UNREACHABLE)}
+    notes = {note: code_of(note) for note in Note}
+    lost: set[Cell] = set()  # the cells nobody answers about, this turn
+    calls: list[np.ndarray] = []  # the swarm's questions, this turn
+
+    def kinds(asked):
+        calls.append(asked)
+        return np.array([NO_ANSWER if c in lost else grid.kind(c) for c in map(tuple, asked.tolist())], np.uint8)
+
+    def oracle(cs):
+        return {c: CellInfo(pos=c, kind=grid.kind(c)) for c in cs if c not in lost}
+
     for turn in range(turns):
         for d in numbers:
             if rng.random() < 0.1:  # a new target, now and then none, now and then in a building
                 target[d] = None if rng.random() < 0.1 else cells[int(rng.integers(len(cells)))]
         flying = [d for d in numbers if rng.random() > 0.1]
-        lost = {c for c in cells if rng.random() < drop}  # the cells nobody answers about this turn
-        calls = []
-
-        def kinds(asked):
-            calls.append(asked)
-            return np.array([NO_ANSWER if c in lost else grid.kind(c) for c in map(tuple, asked.tolist())], np.uint8)
-
-        new, note = swarm.step(np.array(flying), np.array([pos[d] for d in flying]).reshape(-1, 3),
-                               np.array([target[d] or (-1, -1, -1) for d in flying]).reshape(-1, 3), kinds)
+        lost.clear()
+        lost.update(c for c in cells if rng.random() < drop)
+        calls.clear()
+        new, note = drive(swarm.step(np.array(flying), np.array([pos[d] for d in flying]).reshape(-1, 3),
+                                     np.array([target[d] or (-1, -1, -1) for d in flying]).reshape(-1, 3)), kinds)
         assert len(calls) <= 1, "SeedSwarm asks at most once a turn"
-
-        def oracle(cs):
-            return {c: CellInfo(pos=c, kind=grid.kind(c)) for c in cs if c not in lost}
-
         for i, d in enumerate(flying):
             decision, _ = run_step(pilots[d], pos[d], target[d], oracle)
             assert (tuple(new[i].tolist()), int(note[i])) == (decision.pos, notes[decision.note]), (seed, turn, d)
@@ -370,18 +372,18 @@ def test_seed_swarm_is_seed_pilot_for_each_drone(seed):
 def test_seed_swarm_refuses_strangers_and_asks_nothing_it_knows():
     import numpy as np
 
-    from dronesim.entities.autopilots.seed import SeedSwarm
-    from dronesim.schema import UsageError
+    from entities.autopilots.seed import SeedSwarm
+    from schema import UsageError
 
     swarm = SeedSwarm(world_size=(4, 4, 1), drones=[3, 5])
     def kinds(cells):
         raise AssertionError(f"asked {cells}")
 
     with pytest.raises(UsageError, match=r"\[4\]"):
-        swarm.step(np.array([4]), np.zeros((1, 3)), np.full((1, 3), -1), kinds)
+        drive(swarm.step(np.array([4]), np.zeros((1, 3)), np.full((1, 3), -1)), kinds)
     with pytest.raises(UsageError):
         SeedSwarm(world_size=(4, 4, 1), drones=[3, 3])
     # No targets: nothing asked, nothing learned, everybody hovers.
-    new, note = swarm.step(np.array([3, 5]), np.array([[0, 0, 0], [1, 1, 0]]), np.full((2, 3), -1), kinds)
+    new, note = drive(swarm.step(np.array([3, 5]), np.array([[0, 0, 0], [1, 1, 0]]), np.full((2, 3), -1)), kinds)
     assert new.tolist() == [[0, 0, 0], [1, 1, 0]] and note.tolist() == [0, 0]
     assert swarm.memory(3) == () and swarm.memory(5) == ()

@@ -4,21 +4,25 @@ Behaviour only: no wall-clock assertion (the machine may be busy)."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
 import pytest
 
-from dronesim.benchmarks import BENCHMARKS, perf, pogema
+from benchmarks import BENCHMARKS, perf, pogema
 
 pytestmark = pytest.mark.integration
 
 
-def _rows(table: str) -> dict[str, dict[str, str]]:
-    lines = [ln for ln in table.splitlines() if ln.startswith("| ")]
-    head = [c.strip() for c in lines[0].strip("|").split("|")]
+def _rows(text: str, first: str = "row") -> dict[str, dict[str, str]]:
+    """The rows, by name, of the table in `text` whose first column is headed `first`."""
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith(f"| {first} |"))
+    table = list(itertools.takewhile(lambda ln: ln.startswith("|"), lines[start:]))
+    head = [c.strip() for c in table[0].strip("|").split("|")]
     rows = {}
-    for ln in lines[1:]:
+    for ln in table[2:]:
         cells = [c.strip() for c in ln.strip("|").split("|")]
         rows[cells[0]] = dict(zip(head, cells))
     return rows
@@ -43,24 +47,55 @@ def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
         assert not row["target"].startswith("FAILED"), row
         assert float(row["turns/s"]) > 0 and float(row["in-process turns/s"]) > 0
         assert row["alive at end, moving per turn, same game in-process"].endswith("yes"), row
-        cpu = [float(v) for v in row["CPU ms per turn coordinator / env / swarm / router / ground station"].split(" / ")]
+        cpu = [float(v) for v in
+               row["CPU ms per turn coordinator / env / swarm / router / ground station"].split(" / ")]
         assert len(cpu) == 5 and all(v >= 0 for v in cpu)
         for col in ("coordinator MiB (÷ model)", "environment MiB (÷ model)"):
             mib, ratio = row[col].replace("(", "").replace(")", "").split()
             assert float(mib) > 0 and float(ratio) > 0
-    assert rows["1 drone @ 10x10x10"]["target"].startswith("≤ 3x RTT: ")  # met or UNMET, measured either way
+    # met or UNMET, measured either way
+    assert rows["1 drone @ 10x10x10"]["target"].startswith(f"≤ {perf.TARGETS['latency']:g}x RTT: ")
     assert rows["128 drones @ 10x10x10"]["target"].startswith("skipped: 128 drones do not fit")
     assert "world generation 64x64x16" in rows
+    # each mechanism that remains: its lines of code, and, switched off, the same game (4 drones here)
+    mechanisms = _rows(out, "mechanism")
+    assert len(mechanisms) == len(perf.MECHANISMS)
+    for m in perf.MECHANISMS:
+        row = mechanisms[m.name]
+        assert int(row["lines of code"]) == perf.code_lines(m.code) > 0
+        if m.off is None:
+            assert row["switched off by"].startswith("not switched off: "), row
+        else:
+            assert row["game"] == "4 drones @ 10x10x10" and row["same game"] == "yes", row
+            assert row["gain (off ÷ on)"].startswith("turn "), row
     # --write replaced only its own section
     text = out_file.read_text(encoding="utf-8")
     assert "## Autopilot benchmark\n\nkept\n" in text
     assert text.count("## Performance") == 1 and "`dronesim bench perf --quick --write --output" in text
     assert "1 drone @ 10x10x10" in text.split("## Performance", 1)[1]
+    assert perf.MECHANISMS_TITLE in text.split("## Performance", 1)[1]
+
+
+def test_lines_of_code_are_counted_once_from_definitions_and_regexes(tmp_path):
+    (tmp_path / "m.py").write_text(
+        "X = 1\n\n\n@dec\nclass A:\n    def f(self):\n        return X\n\n    def g(self):\n"
+        "        pass\n\n\ndef h():\n    # uses X\n    return 2\n", encoding="utf-8")
+    assert perf.code_lines(["m.py::X"], tmp_path) == 1
+    assert perf.code_lines(["m.py::A"], tmp_path) == 7  # its decorator in
+    assert perf.code_lines(["m.py::A.g"], tmp_path) == 2
+    assert perf.code_lines(["m.py::A.f", "m.py:/X/"], tmp_path) == 4  # line 7 once
+    assert perf.code_lines(["m.py"], tmp_path) == 15
+    for missing in ("m.py::B", "m.py::A.k", "m.py:/nowhere/"):
+        with pytest.raises(KeyError):
+            perf.code_lines([missing], tmp_path)
+    for m in perf.MECHANISMS:  # every name the table counts is there
+        assert perf.code_lines(m.code) > 0, m.name
+        assert (m.off is None) == (not m.games) and m.switch, m.name
 
 
 def test_scenarios_fit_start_free_and_are_valid(tmp_path):
-    from dronesim.entities.environment import build_world
     from dronesim.scenario import Scenario
+    from entities.environment import build_world
 
     assert perf.make_scenario(perf.Case(1000, (10, 10, 10), 5, 10)) is None
     for case in (perf.Case(16, (10, 10, 10), 3, 20), perf.Case(128, (64, 64, 16), 10, 30)):
@@ -92,7 +127,8 @@ def test_memory_growth_is_judged_per_drone_and_per_world_byte():
     assert per_drone.cells["srv"] == "2.00 KiB/drone" and per_drone.cells["env"] == "1.00 KiB/drone"
     assert per_drone.cells["target"] == "≤ 1 KiB per drone: UNMET"  # the worse of the two decides
     from_one = rows[f"memory per drone from 1 drone (1 → 1000 drones @ {perf._size_text(mid)})"]
-    assert from_one.cells["srv"] == f"{3_000 / 999:.2f} KiB/drone" and from_one.cells["env"] == f"{1_872 / 999:.2f} KiB/drone"
+    assert from_one.cells["srv"] == f"{3_000 / 999:.2f} KiB/drone"
+    assert from_one.cells["env"] == f"{1_872 / 999:.2f} KiB/drone"
     assert from_one.cells["target"].startswith("—")  # shown, not judged
     grown = int(np.prod(large)) - int(np.prod(small))
     per_byte = rows[f"memory per world byte (1 drone, {perf._size_text(small)} → {perf._size_text(large)})"]

@@ -4,7 +4,7 @@
   (and with `docker compose config` where the compose plugin exists);
 - every command in them is `dronesim ROLE ...` and parses with that role's real argparse parser; every
   file they name exists in the repository or the image;
-- docker/Dockerfile copies what exists, what Dockerfile.dockerignore lets through and all the package
+- docker/Dockerfile copies what exists, what .dockerignore lets through and all the package
   needs; its lock files pin what pyproject.toml asks for and what is installed here; the build stage's
   commands run here (a venv instead of an image);
 - docker/zenohd.json5 and the compose command lines play a whole game: through an embedded router
@@ -39,7 +39,7 @@ DOCKER = ROOT / "docker"
 COMPOSE = DOCKER / "compose.yaml"
 COMPOSE_TLS = DOCKER / "compose.tls.yaml"
 DOCKERFILE = DOCKER / "Dockerfile"
-DOCKERIGNORE = DOCKER / "Dockerfile.dockerignore"
+DOCKERIGNORE = ROOT / ".dockerignore"
 ZENOHD_CONF = DOCKER / "zenohd.json5"
 ENTRYPOINT = DOCKER / "entrypoint.py"
 HEALTH = DOCKER / "healthcheck.py"
@@ -47,10 +47,10 @@ HEALTH = DOCKER / "healthcheck.py"
 COMPOSE_SCHEMA_SOURCE = ("docker-compose==1.29.2", "compose/config/compose_spec.json")
 #: the dronesim subcommands that are entities or a router, and the module holding each one's `cli`.
 ROLE_MODULES = {
-    "coordinator": "dronesim.coordinator.node",
-    "env": "dronesim.entities.env_node",
-    "drone": "dronesim.entities.drone_node",
-    "gcs": "dronesim.entities.gcs_node",
+    "coordinator": "coordinator.node",
+    "env": "entities.env_node",
+    "drone": "entities.drone_node",
+    "gcs": "entities.gcs_node",
     "router": "dronesim.router",
 }
 ROUTER_ENDPOINT = "tcp/router:7447"
@@ -228,19 +228,32 @@ def test_compose_file_validates_against_the_compose_specification(path):
     assert not errors, "\n".join(f"{'/'.join(map(str, e.absolute_path))}: {e.message}" for e in errors)
 
 
-def docker_compose_plugin() -> bool:
-    docker = shutil.which("docker")
-    if docker is None:
-        return False
-    return subprocess.run([docker, "compose", "version"], capture_output=True, timeout=30).returncode == 0
+#: The compose tools the files are written for: Compose v2 (the docker CLI plugin) and v1 (Debian's).
+COMPOSE_TOOLS = {"compose-v2": ["docker", "compose"], "compose-v1": ["docker-compose"]}
 
 
-@pytest.mark.skipif(not docker_compose_plugin(), reason="no `docker compose` plugin here (the schema test stands in)")
-def test_docker_compose_config_accepts_the_files():
-    files = [a for p in compose_files() for a in ("-f", str(p))]
-    p = subprocess.run(["docker", "compose", *files, "config", "--quiet"], capture_output=True, text=True,
-                       timeout=60)
-    assert p.returncode == 0, p.stderr
+def compose_tool(name: str) -> list[str] | None:
+    argv = COMPOSE_TOOLS[name]
+    if shutil.which(argv[0]) is None:
+        return None
+    return argv if subprocess.run([*argv, "version"], capture_output=True, timeout=30).returncode == 0 else None
+
+
+@pytest.mark.parametrize("tool", sorted(COMPOSE_TOOLS))
+def test_the_compose_tool_accepts_the_files(tool):
+    """`config` of each tool here, with and without the TLS override (the schema test stands in for a
+    tool that is not installed)."""
+    argv = compose_tool(tool)
+    if argv is None:
+        pytest.skip(f"{shlex.join(COMPOSE_TOOLS[tool])} is not installed here (the schema test stands in)")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHON_IMAGE", "ZENOH_IMAGE", "WHEELHOUSE")}
+    for files in ([COMPOSE], compose_files()):
+        flags = [a for p in files for a in ("-f", str(p))]
+        p = subprocess.run([*argv, *flags, "config"], capture_output=True, text=True, timeout=60, env=env)
+        assert p.returncode == 0, p.stderr
+        config = yaml.safe_load(p.stdout)
+        assert config["services"]["router"]["image"] == f"eclipse/zenoh:{zenoh_pin()}"
+        assert config["services"]["coordinator"]["build"]["args"]["PYTHON_IMAGE"] == "python:3.11-slim-bookworm"
 
 
 # --------------------------------------------------------------------------- what the compose file says
@@ -278,7 +291,8 @@ def test_every_dronesim_service_is_an_explicit_client_of_the_router():
         assert flag_values(argv, "--connect", "-e") == [ROUTER_ENDPOINT], name
         assert flag_values(argv, "--mode", "-m") == ["client"], name
         assert not flag_values(argv, "--listen", "-l"), name
-        assert svc["build"]["dockerfile"] == "docker/Dockerfile" and (DOCKER / svc["build"]["context"]).resolve() == ROOT
+        assert svc["build"]["dockerfile"] == "docker/Dockerfile"
+        assert (DOCKER / svc["build"]["context"]).resolve() == ROOT
         assert svc["depends_on"]["router"]["condition"] == "service_healthy", name
         assert svc["init"] is True and svc["read_only"] is True, name
 
@@ -337,12 +351,12 @@ def test_every_compose_command_parses_with_the_roles_own_parser(path):
             rest = replace_flag(rest, "--id", "D01")  # what the entrypoint passes on
         args = parse_role(role, rest)
         if role == "coordinator":
-            from dronesim.coordinator.node import game_config
+            from coordinator.node import game_config
 
             game = game_config(args)
             assert len(game.drones) == int(flag_values(argv, "--drones")[0])
         if role == "drone":
-            from dronesim.entities.drone_node import parse_drones
+            from entities.drone_node import parse_drones
 
             assert parse_drones(args.id)
 
@@ -389,7 +403,7 @@ def test_every_file_a_compose_command_names_exists(path):
     cluster = load_cluster(path)
     image = container_files(cluster)
     for name, svc in cluster["services"].items():
-        for dst, src in mounts(svc).items():
+        for src in mounts(svc).values():
             if src.startswith(".") and src not in GENERATED:
                 assert (DOCKER / src).exists(), f"{name}: volume source {src} is missing"
         argv = svc.get("command") or []
@@ -427,12 +441,20 @@ def dockerfile_instructions() -> list[tuple[str, str]]:
     return [(line.split(None, 1)[0].upper(), line.split(None, 1)[1] if " " in line else "") for line in lines]
 
 
+def dockerfile_args() -> dict[str, str]:
+    """The default of every build argument (ARG NAME=value)."""
+    return dict(a.split("=", 1) for i, a in dockerfile_instructions() if i == "ARG" and "=" in a)
+
+
 def dockerfile_copies() -> list[tuple[str, str]]:
-    """(source, destination) of every COPY from the build context (not --from a stage)."""
+    """(source, destination) of every COPY from the build context (not --from a stage), build arguments
+    at their defaults."""
     out = []
+    defaults = dockerfile_args()
     for instr, args in dockerfile_instructions():
         if instr != "COPY":
             continue
+        args = re.sub(r"\$\{(\w+)\}", lambda m: defaults[m.group(1)], args)
         parts = [p for p in shlex.split(args) if not p.startswith("--chmod") and not p.startswith("--chown")]
         if any(p.startswith("--from") for p in parts):
             continue
@@ -469,7 +491,7 @@ def dockerignore_patterns() -> list[str]:
 def test_dockerfile_is_multi_stage_slim_non_root_with_a_healthcheck():
     instrs = dockerfile_instructions()
     froms = [a for i, a in instrs if i == "FROM"]
-    args = dict(a.split("=", 1) for i, a in instrs if i == "ARG" and "=" in a)
+    args = dockerfile_args()
     assert len(froms) >= 2, "multi-stage: a build stage and a runtime stage"
     assert args["PYTHON_IMAGE"].startswith("python:3.11-slim")
     user = [a for i, a in instrs if i == "USER"]
@@ -484,19 +506,35 @@ def test_dockerfile_is_multi_stage_slim_non_root_with_a_healthcheck():
     assert any("pip wheel" in a for i, a in instrs if i == "RUN"), "the build stage builds a wheel"
 
 
+def test_dockerfile_builds_with_either_builder_and_compose_passes_its_build_arguments():
+    """No registry and Compose v1 mean the legacy builder, and no frontend image: nothing BuildKit alone
+    knows. Compose's build arguments default to the Dockerfile's, so setting none changes nothing."""
+    text = DOCKERFILE.read_text()
+    assert not re.search(r"^#\s*syntax\s*=", text, re.M | re.I), "a # syntax= line pulls a frontend image"
+    for instr, args in dockerfile_instructions():
+        assert not (instr == "COPY" and re.search(r"--(chmod|link|parents|exclude)\b", args)), f"COPY {args}"
+        assert not (instr == "RUN" and re.search(r"--(mount|network|security)\b", args)), f"RUN {args}"
+    assert not DOCKERFILE.with_name("Dockerfile.dockerignore").exists(), "the legacy builder reads .dockerignore only"
+    build = load_compose()["x-dronesim"]["build"]
+    defaults = dockerfile_args()
+    assert build["args"] == {k: defaults[k] for k in ("PYTHON_IMAGE", "WHEELHOUSE")}
+    assert load_compose(PYTHON_IMAGE="local/py:3.11")["x-dronesim"]["build"]["args"]["PYTHON_IMAGE"] == "local/py:3.11"
+    assert load_compose(ZENOH_IMAGE="local/zenoh:x")["services"]["router"]["image"] == "local/zenoh:x"
+
+
 def test_every_copy_source_exists_and_passes_the_dockerignore():
     patterns = dockerignore_patterns()
     for src, _ in dockerfile_copies():
         assert (ROOT / src).exists(), f"COPY {src}: missing"
         assert not ignored(src.rstrip("/"), patterns), f"COPY {src}: excluded by {DOCKERIGNORE.name}"
     assert ignored(".git", patterns) and ignored("tests/test_docker.py", patterns)
-    assert ignored("runtime/__pycache__/cli.cpython-311.pyc", patterns)
+    assert ignored("dronesim/__pycache__/cli.cpython-311.pyc", patterns)
 
 
 def test_the_image_gets_everything_the_package_is_built_from():
     project = pyproject()
     copied = {src.rstrip("/") for src, _ in dockerfile_copies()}
-    package_dirs = {Path(d).parts[0] for d in project["tool"]["setuptools"]["package-dir"].values()}
+    package_dirs = {name.split(".")[0] for name in project["tool"]["setuptools"]["packages"]}
     assert package_dirs <= copied, f"not copied into the build stage: {package_dirs - copied}"
     assert {"pyproject.toml", project["project"]["readme"]} <= copied
 
@@ -578,13 +616,25 @@ def test_the_build_stage_runs_here(tmp_path):
         assert any(n.endswith("/".join(rel.parts[1:])) or n.endswith(rel.name) for n in names)
     modules = sorted({n[:-3].replace("/", ".").removesuffix(".__init__") for n in names
                       if n.endswith(".py") and not n.endswith("__main__.py")})
-    code = "import importlib, sys\nfor m in sys.argv[1:]: importlib.import_module(m)\n"
+    # Every module imports, but for those needing an optional extra (the image installs none).
+    code = ("import importlib, json, sys\nfailed = {}\nfor m in sys.argv[1:]:\n"
+            "    try: importlib.import_module(m)\n"
+            "    except ModuleNotFoundError as e: failed[m] = e.name\n"
+            "    except Exception as e: failed[m] = repr(e)\n"
+            "print(json.dumps(failed))\n")
     p = run(str(venv / "bin" / "python"), "-c", code, *modules, cwd=tmp_path)
     assert p.returncode == 0, f"the installed wheel does not import: {p.stderr}"
+    from packaging.requirements import Requirement
+
+    extras = {Requirement(r).name.lower().replace("-", "_")
+              for reqs in pyproject()["project"].get("optional-dependencies", {}).values() for r in reqs}
+    failed = json.loads(p.stdout)
+    assert all(str(name).split(".")[0] in extras for name in failed.values()), \
+        f"the installed wheel does not import: {failed}"
     p = run(str(venv / "bin" / "python"), "-m", "dronesim", "--help", cwd=tmp_path)
     assert p.returncode == 0 and "coordinator" in p.stdout
     for pkg_data, patterns in pyproject()["tool"]["setuptools"].get("package-data", {}).items():
-        src_dir = ROOT / pyproject()["tool"]["setuptools"]["package-dir"][pkg_data]
+        src_dir = ROOT.joinpath(*pkg_data.split("."))  # every package is its folder
         for pattern in patterns:
             for f in src_dir.glob(pattern):
                 want = "/".join([*pkg_data.split("."), str(f.relative_to(src_dir))])
@@ -608,7 +658,8 @@ def test_entrypoint_names_each_containers_entity():
     assert ep.drone_entity(ep.flags(["--id", "1-8", "--host", "H02"])) == "H02"
     assert ep.with_id(["--id", "auto", "--autopilot", "v1"], "D04") == ["--id", "D04", "--autopilot", "v1"]
     assert ep.with_id(["--id=auto"], "D12") == ["--id=D12"]
-    assert ep.fill(["--tls-cert", "/certs/{id}.pem", "--seed", "7"], "D03") == ["--tls-cert", "/certs/D03.pem", "--seed", "7"]
+    filled = ep.fill(["--tls-cert", "/certs/{id}.pem", "--seed", "7"], "D03")
+    assert filled == ["--tls-cert", "/certs/D03.pem", "--seed", "7"]
     assert ep.TAKEN.search("dronesim drone: connection refused: D01 is already connected")
     assert ep.TAKEN.search("dronesim drone: connection refused: drone D02 is already taken by H01")
     assert ep.UNKNOWN.search("dronesim drone: connection refused: unknown drone D04: this game flies D01, D02")
@@ -742,7 +793,8 @@ def play_compose_game(cluster: dict, rewrite: dict[str, str], tmp_path: Path) ->
 
 def check_game(procs: dict[str, Proc], journal: Path) -> None:
     codes = {name: p.p.returncode for name, p in procs.items()}
-    extra = [n for n, p in procs.items() if n.startswith("drone-") and any("no free drone id" in l for l in p.err)]
+    extra = [n for n, p in procs.items()
+             if n.startswith("drone-") and any("no free drone id" in line for line in p.err)]
     assert len(extra) == 1 and codes.pop(extra[0]) == 2, {n: p.text for n, p in procs.items()}
     assert set(codes.values()) == {0}, {n: p.text for n, p in procs.items()}
     records = journal_records(journal)
@@ -750,8 +802,8 @@ def check_game(procs: dict[str, Proc], journal: Path) -> None:
     assert header["record"] == "header" and over["record"] == "over"
     assert [d["drone"] for d in header["drones"]] == ["D01", "D02"]
     assert {d["autopilot"] for d in header["drones"]} == {"dstar"}
-    flown = sorted(l.split()[-1] for n, p in procs.items() if n.startswith("drone-")
-                   for l in p.err if "You are connected as" in l)
+    flown = sorted(line.split()[-1] for n, p in procs.items() if n.startswith("drone-")
+                   for line in p.err if "You are connected as" in line)
     assert flown == ["D01", "D02"], flown  # each id flown by exactly one replica
 
 
@@ -812,3 +864,560 @@ def test_tls_compose_game_through_zenohd_with_access_control(tmp_path):
         procs, journal = play_compose_game(cluster, {endpoint: locator, "/certs/": f"{certs}/"}, tmp_path)
     check_game(procs, journal)
 
+
+
+# =========================================================================== on a Docker engine
+#
+# The cluster for real: docker/compose.yaml (and compose.tls.yaml) run by the machine's compose tool on a
+# Docker engine, from images built without a registry (tests/setup.d/docker.sh: docker/offline.sh's local
+# base images and wheelhouse). Each test runs its own compose project (a unique name: its own network,
+# volume and containers, all removed at the end) and talks to it only through the ports it publishes on
+# 127.0.0.1. The images are built once per session and shared.
+
+SETUP = ROOT / "tests" / "setup.d" / "docker.sh"
+SETUP_STATUS = CACHE / "docker-setup.txt"
+OFFLINE_ENV = DOCKER / "offline.env"
+PROJECT_LABEL = "com.docker.compose.project"
+SERVICE_LABEL = "com.docker.compose.service"
+#: raw `docker run` containers of a test carry this label with the project's name, for the cleanup.
+TEST_LABEL = "org.dronesim.test-project"
+ENGINE_TIMEOUT = 240.0
+in_ci = os.environ.get("CI", "").lower() == "true"
+docker_engine = pytest.mark.docker
+
+
+def skip_or_fail(reason: str) -> None:
+    """Under CI an engine test never skips: what would make it skip fails it."""
+    if in_ci:
+        pytest.fail(f"under CI this engine test may not skip: {reason}")
+    pytest.skip(reason)
+
+
+class Engine:
+    """The Docker engine with the session's images; `compose` is the compose tool's command."""
+
+    def __init__(self, compose: list[str], env: dict[str, str], image: str) -> None:
+        self.compose, self.env, self.image = compose, env, image
+
+
+@pytest.fixture(scope="session")
+def engine() -> Engine:
+    """tests/setup.d/docker.sh run again (quick when the images exist), building the dronesim image of
+    this checkout under a tag of its own: a test run in another checkout (another branch) at the same time
+    cannot swap the image under this one."""
+    import hashlib
+
+    image = f"dronesim-test:{hashlib.sha256(str(ROOT).encode()).hexdigest()[:12]}"
+    p = subprocess.run(["bash", str(SETUP)], capture_output=True, text=True, timeout=3600,
+                       env={**os.environ, "DRONESIM_IMAGE": image})
+    status = SETUP_STATUS.read_text().strip() if SETUP_STATUS.exists() else ""
+    if not status:
+        pytest.fail(f"{SETUP} wrote no status: {p.stdout}{p.stderr}")
+    if status.startswith("NO ENGINE"):
+        pytest.skip(status)  # no engine here (under CI too): nothing to run the cluster on
+    if not status.startswith("OK"):
+        pytest.fail(f"{SETUP}: {status}")
+    v2 = subprocess.run(["docker", "compose", "version"], capture_output=True).returncode == 0
+    env = dict(line.split("=", 1) for line in OFFLINE_ENV.read_text().splitlines()
+               if line and not line.startswith("#"))
+    return Engine(["docker", "compose"] if v2 else ["docker-compose"], {**env, "DRONESIM_IMAGE": image}, image)
+
+
+def docker(*argv: str, timeout: float = 120, check: bool = True) -> str:
+    p = subprocess.run(["docker", *argv], capture_output=True, text=True, timeout=timeout)
+    if check:
+        assert p.returncode == 0, f"docker {shlex.join(argv)}: {p.stderr.strip()}"
+    return p.stdout
+
+
+class Game:
+    """A scripted game: its compose settings, the targets, and the same game run by `dronesim up`."""
+
+    def __init__(self, drones: int = 3, seed: int = 7, size: str = "10,10,10", max_turns: int = 80) -> None:
+        self.drones, self.seed, self.size, self.max_turns = drones, seed, size, max_turns
+
+    def env(self) -> dict[str, str]:
+        return {"DRONES": str(self.drones), "SEED": str(self.seed), "SIZE": self.size,
+                "MAX_TURNS": str(self.max_turns), "AUTOPILOT": "dstar"}
+
+    def targets(self) -> str:
+        """For each drone, the free ground cell farthest along x nearest its own column."""
+        from coordinator.node import parse_size, parse_starts
+        from entities.environment import build_world
+        from schema.messages import WorldSpec
+
+        size = parse_size(self.size)
+        starts = parse_starts("", self.drones)
+        world = build_world(WorldSpec(size=size, seed=self.seed), [d.start for d in starts])
+        taken, out = set(), []
+        for d in starts:
+            cells = sorted(((x, y, 0) for x in range(size[0]) for y in range(size[1])),
+                           key=lambda c: (-c[0], abs(c[1] - d.start[1]), c[1]))
+            cell = next(c for c in cells if c not in taken and not world.is_building(c))
+            taken.add(cell)
+            out.append(f"{d.drone}={cell[0]},{cell[1]},{cell[2]}")
+        return ";".join(out)
+
+    def host_journal(self, tmp: Path) -> bytes:
+        """The same game played by `dronesim up` on the host."""
+        journal = tmp / "host.jsonl"
+        p = subprocess.run([sys.executable, "-m", "dronesim", "up", "--seed", str(self.seed), "--size", self.size,
+                            "--drones", str(self.drones), "--autopilot", "dstar", "--targets", self.targets(),
+                            "--max-turns", str(self.max_turns), "--journal", str(journal), "--quiet"],
+                           capture_output=True, text=True, timeout=300, cwd=ROOT)
+        assert p.returncode == 0, p.stdout + p.stderr
+        return journal.read_bytes()
+
+
+@pytest.fixture(scope="session")
+def host_journals(tmp_path_factory):
+    """Game -> its journal from `dronesim up` on the host, each played once per session."""
+    cache: dict[tuple, bytes] = {}
+
+    def get(game: Game) -> bytes:
+        key = (game.drones, game.seed, game.size, game.max_turns)
+        if key not in cache:
+            cache[key] = game.host_journal(tmp_path_factory.mktemp("host"))
+        return cache[key]
+
+    return get
+
+
+def scripted_gcs(command: list[str], targets: str) -> list[str]:
+    """A compose ground station's command with the web page swapped for scripted targets."""
+    out, i = [], 0
+    while i < len(command):
+        if command[i] in ("--web", "--pace", "--linger"):
+            i += 2
+            continue
+        out.append(command[i])
+        i += 1
+    return [*out, "--targets", targets, "--no-draw"]
+
+
+class Project:
+    """One compose project on the engine: a unique name, so its own network, volume and containers."""
+
+    def __init__(self, engine: Engine, tmp: Path, files: list[Path], env: dict[str, str]) -> None:
+        import uuid
+
+        self.engine, self.tmp = engine, tmp
+        self.name = f"dsimtest{uuid.uuid4().hex[:8]}"
+        self.files = files
+        self.env = {**os.environ, **engine.env, "ROUTER_PORT": "0", "WEB_PORT": "0", "WEB_LINGER": "0", **env}
+        self.followers: list[Proc] = []
+        # every health and life event of this project's containers, from before they exist
+        self.events = Proc(f"{self.name}-events", ["docker", "events", "--filter", f"label={PROJECT_LABEL}={self.name}",
+                                                   "--filter", "type=container", "--format", "{{json .}}"], tmp)
+
+    def compose(self, *argv: str, timeout: float = ENGINE_TIMEOUT) -> str:
+        files = [a for f in self.files for a in ("-f", str(f))]
+        cmd = [*self.engine.compose, "-p", self.name, *files, *argv]
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=self.env, cwd=ROOT)
+        assert p.returncode == 0, f"{shlex.join(cmd)}:\n{p.stdout}{p.stderr}"
+        return p.stdout
+
+    def override(self, name: str, services: dict) -> Path:
+        """An extra compose file (JSON is YAML) applied after the others."""
+        path = self.tmp / f"{name}.yaml"
+        path.write_text(json.dumps({"services": services}, indent=1))
+        self.files.append(path)
+        return path
+
+    def containers(self, service: str | None = None) -> dict[str, str]:
+        """container name -> id of the project's containers (of one service), running or not."""
+        label = [f"--filter=label={SERVICE_LABEL}={service}"] if service else []
+        out = docker("ps", "-a", f"--filter=label={PROJECT_LABEL}={self.name}", *label,
+                     "--format", "{{.Names}} {{.ID}}")
+        return dict(line.split() for line in out.splitlines() if line.strip())
+
+    def one(self, service: str) -> str:
+        """The id of a service's one container (of `up`: a `compose run` container is not it)."""
+        found = {n: i for n, i in self.containers(service).items()
+                 if self.inspect(i, '{{index .Config.Labels "com.docker.compose.oneoff"}}') != "True"}
+        assert len(found) == 1, f"{service}: {found}"
+        return next(iter(found.values()))
+
+    def entities(self) -> dict[str, str]:
+        """The dronesim containers (every one but the router)."""
+        router = set(self.containers("router").values())
+        return {n: i for n, i in self.containers().items() if i not in router}
+
+    def inspect(self, cid: str, fmt: str) -> str:
+        return docker("inspect", "--format", fmt, cid).strip()
+
+    def await_healthy(self, ids: list[str], timeout: float = ENGINE_TIMEOUT) -> None:
+        """Until each container has reported "healthy" (Docker's health_status events, not polling)."""
+        want = set(ids)
+        pending = set(want)
+        for line in self.events.out:
+            self._seen_healthy(line, pending)
+        while pending:
+            try:
+                line = self.events.expect(r"health_status: healthy", timeout=timeout, fresh=True)
+            except AssertionError:
+                states = {c: self.inspect(c, "{{json .State.Health}}")[-400:] for c in pending}
+                raise AssertionError(f"never healthy: {states}") from None
+            self._seen_healthy(line, pending)
+
+    @staticmethod
+    def _seen_healthy(line: str, pending: set[str]) -> None:
+        if "health_status: healthy" in line:
+            actor = json.loads(line).get("id", "")
+            for c in list(pending):
+                if actor.startswith(c):
+                    pending.discard(c)
+
+    def healthy_ever(self) -> set[str]:
+        """The short ids of the containers that reported "healthy" so far."""
+        return {json.loads(line)["id"][:12] for line in self.events.out if "health_status: healthy" in line}
+
+    def wait(self, ids: list[str], timeout: float = ENGINE_TIMEOUT) -> dict[str, int]:
+        """Until every container in `ids` has exited: container id -> exit code."""
+        out = docker("wait", *ids, timeout=timeout)
+        return dict(zip(ids, (int(c) for c in out.split())))
+
+    def logs(self, cid: str) -> str:
+        p = subprocess.run(["docker", "logs", cid], capture_output=True, text=True, timeout=60)
+        return p.stdout + p.stderr
+
+    def follow(self, cid: str, name: str) -> Proc:
+        """A container's output, line by line as it comes (Proc.expect)."""
+        proc = Proc(f"{self.name}-{name}", ["docker", "logs", "--follow", cid], self.tmp)
+        self.followers.append(proc)
+        return proc
+
+    def journal(self, path: str = "/data/game.jsonl") -> bytes:
+        """A file of the coordinator's journal volume, read out of its (stopped) container."""
+        import io
+        import tarfile
+
+        p = subprocess.run(["docker", "cp", f"{self.one('coordinator')}:{path}", "-"], capture_output=True,
+                           timeout=60)
+        assert p.returncode == 0, p.stderr.decode()
+        with tarfile.open(fileobj=io.BytesIO(p.stdout)) as tar:
+            member = tar.next()
+            return tar.extractfile(member).read()
+
+    def port(self, service: str, private: int) -> int:
+        """The host port (on 127.0.0.1) publishing a service's port."""
+        out = docker("port", self.one(service), f"{private}/tcp").split()
+        return int(out[0].rsplit(":", 1)[1])
+
+    def network(self) -> str:
+        """The project's network `sim` (Compose v1 and v2 name it alike)."""
+        return f"{self.name}_sim"
+
+    def diagnostics(self) -> str:
+        return "\n".join(f"=== {n} ({self.inspect(i, '{{.State.Status}} {{.State.ExitCode}}')})\n{self.logs(i)[-3000:]}"
+                         for n, i in sorted(self.containers().items()))
+
+    def down(self) -> None:
+        for f in self.followers:
+            f.kill()
+        stray = docker("ps", "-aq", f"--filter=label={TEST_LABEL}={self.name}", check=False).split()
+        if stray:
+            docker("rm", "-f", *stray, check=False)
+        try:
+            self.compose("down", "--volumes", "--remove-orphans", "--timeout", "2")
+        finally:
+            left = docker("ps", "-aq", f"--filter=label={PROJECT_LABEL}={self.name}", check=False).split()
+            if left:  # one-off `compose run` containers
+                docker("rm", "-f", "-v", *left, check=False)
+            self.events.kill()
+
+
+@pytest.fixture
+def projects(engine, tmp_path):
+    """Makes compose projects for a test; every one is taken down (containers, network, volume) after it.
+    What each container said is printed, for a failed test's report."""
+    made: list[Project] = []
+
+    def make(files: list[Path], env: dict[str, str]) -> Project:
+        p = Project(engine, tmp_path, list(files), env)
+        made.append(p)
+        return p
+
+    yield make
+    for p in made:
+        try:
+            print(p.diagnostics())
+        finally:
+            p.down()
+
+
+def scripted(project: Project, game: Game, base: Path = COMPOSE) -> None:
+    """The project's ground station plays `game`'s targets instead of serving the web page."""
+    command = load_cluster(base, **project.env)["services"]["gcs"]["command"]
+    project.override("scripted", {"gcs": {"command": scripted_gcs(command, game.targets())}})
+
+
+def exit_codes(project: Project, names: dict[str, str] | None = None) -> dict[str, int]:
+    """Until every dronesim container (or those of `names`) has exited: name -> exit code."""
+    names = project.entities() if names is None else names
+    codes = project.wait(list(names.values()))
+    return {n: codes[i] for n, i in names.items()}
+
+
+def records(journal: bytes) -> list[dict]:
+    return [json.loads(line) for line in journal.decode().splitlines()]
+
+
+def claimed_id(project: Project, cid: str) -> str:
+    """The drone id a `--id auto` replica flew (the one the coordinator admitted)."""
+    ids = re.findall(r"You are connected as (D\d+)", project.logs(cid))
+    assert len(ids) == 1, project.logs(cid)
+    return ids[0]
+
+
+def turn_of(line: str) -> int:
+    return int(re.match(r"turn (\d+):", line).group(1))
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_up_plays_a_scripted_game_healthy_and_like_dronesim_up(projects, host_journals):
+    """`up` on the engine: every dronesim container turns healthy while the game waits for its ground
+    station, the game plays to its end, every container exits 0 (the router stays up, healthy), and the
+    journal in the volume is byte for byte the one `dronesim up` writes on the host for the same game."""
+    game = Game()
+    p = projects([COMPOSE], {**game.env(), "HEALTH_INTERVAL": "2s"})
+    scripted(p, game)
+    p.compose("up", "-d", "--scale", "gcs=0")  # the game cannot start without its ground station
+    held = p.containers()
+    services = sorted(p.inspect(i, f'{{{{index .Config.Labels "{SERVICE_LABEL}"}}}}') for i in held.values())
+    assert services == ["coordinator", "drone", "drone", "drone", "env", "router"], services
+    p.await_healthy(list(held.values()))
+    p.compose("up", "-d", "--no-deps", "gcs")
+    codes = exit_codes(p)
+    assert set(codes.values()) == {0}, codes
+    router = p.one("router")
+    assert p.inspect(router, "{{.State.Running}} {{.State.Health.Status}}") == "true healthy"
+    assert {i[:12] for i in held.values()} <= p.healthy_ever()
+    assert "GAME OVER at turn" in p.logs(p.one("gcs")) and "ALL_REACHED" in p.logs(p.one("gcs"))
+    assert p.journal() == host_journals(game), "the cluster's journal differs from dronesim up's"
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_scaled_replicas_claim_their_own_ids_and_the_swarm_profile_plays_the_same(projects):
+    """`up --scale drone=8`: eight replicas of one command, each flying its own drone id; the `swarm`
+    profile (one process flying all eight, no replicas) plays the very same game."""
+    game = Game(drones=8, size="16,16,8")
+    p = projects([COMPOSE], game.env())
+    scripted(p, game)
+    p.compose("up", "-d", "--scale", "drone=8")
+    codes = exit_codes(p)
+    assert set(codes.values()) == {0}, codes
+    claimed = sorted(claimed_id(p, cid) for cid in p.containers("drone").values())
+    assert claimed == [f"D{i:02d}" for i in range(1, 9)], claimed
+    journal = p.journal()
+    assert [d["drone"] for d in records(journal)[0]["drones"]] == claimed
+    assert records(journal)[-1]["record"] == "over"
+
+    s = projects([COMPOSE], game.env())
+    scripted(s, game)
+    s.compose("--profile", "swarm", "up", "-d", "--scale", "drone=0")
+    assert not s.containers("drone")
+    codes = exit_codes(s)
+    assert set(codes.values()) == {0}, codes
+    assert "You are connected as H01" in s.logs(s.one("swarm"))
+    assert s.journal() == journal, "the swarm host's game differs from the replicas'"
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_faults_killed_drone_is_lost_restarted_env_and_resumed_coordinator_change_nothing(
+        projects, host_journals):
+    """`docker kill` of a drone container: that drone is LOST and the game plays on to its end. Then, in
+    another game, `docker kill` of the environment and `docker start` of it again, and `docker kill` of
+    the coordinator resumed from the journal volume (`--resume`): the journal is the uninterrupted one."""
+    game = Game()
+    paced = {**game.env(), "PACE": "0.25"}
+    p = projects([COMPOSE], paced)
+    scripted(p, game)
+    p.compose("up", "-d")
+    gcs = p.follow(p.one("gcs"), "gcs")
+    gcs.expect(r"^turn 3:")
+    victim = next(iter(sorted(p.containers("drone").values())))
+    lost = claimed_id(p, victim)
+    docker("kill", victim)
+    codes = exit_codes(p)
+    assert codes.pop(next(n for n, i in p.entities().items() if i == victim)) == 137
+    assert set(codes.values()) == {0}, codes
+    recs = records(p.journal())
+    when = [r["turn"] for r in recs if lost in r.get("lost", ())]
+    assert len(when) == 1, f"{lost} is not LOST once in the journal"
+    assert recs[-1]["record"] == "over" and recs[-2]["turn"] > when[0], "the game did not go on"
+
+    q = projects([COMPOSE], paced)
+    scripted(q, game)
+    q.compose("up", "-d")
+    coordinator, env = q.one("coordinator"), q.one("env")
+    srv = q.follow(coordinator, "coordinator")
+    gcs = q.follow(q.one("gcs"), "gcs")
+    srv.expect("all entities connected")
+    gcs.expect(r"^turn 3:")
+    docker("kill", env)
+    docker("start", env)
+    srv.expect(r"admitted ENV", fresh=True)
+    after = turn_of(gcs.expect(r"^turn \d+:", fresh=True))
+    gcs.expect(rf"^turn {after + 2}:")
+    docker("kill", coordinator)
+    command = load_cluster(COMPOSE, **q.env)["services"]["coordinator"]["command"]
+    resumed = q.compose("run", "-d", "--no-deps", "coordinator", *command, "--resume").strip().splitlines()[-1]
+    names = {n: i for n, i in q.entities().items() if i != coordinator}
+    assert any(n == resumed or i.startswith(resumed) for n, i in names.items()), (resumed, names)
+    codes = exit_codes(q, names)
+    assert set(codes.values()) == {0}, codes
+    assert "restored turn" in "".join(q.logs(i) for n, i in names.items() if n == resumed or i.startswith(resumed))
+    assert q.journal() == host_journals(game), "faults changed the journal"
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_ground_station_cut_off_the_network_catches_up(projects, host_journals):
+    """`docker network disconnect` of the ground station's container while turns go by, then connect it
+    again: it gets the game's state, sees the end (exit 0), and the journal is the uninterrupted one."""
+    game = Game()
+    p = projects([COMPOSE], {**game.env(), "PACE": "0.25"})
+    scripted(p, game)
+    p.compose("up", "-d")
+    gcs_id, coordinator = p.one("gcs"), p.one("coordinator")
+    gcs = p.follow(gcs_id, "gcs")
+    journal = Proc(f"{p.name}-journal", ["docker", "exec", coordinator, "tail", "-n", "+1", "-F", "/data/game.jsonl"],
+                   p.tmp)
+    p.followers.append(journal)
+    cut = turn_of(gcs.expect(r"^turn 4:"))
+    docker("network", "disconnect", p.network(), gcs_id)
+    journal.expect(rf'"record":"turn".*"turn":{cut + 4}\b')  # the game goes on without it
+    docker("network", "connect", "--alias", "gcs", p.network(), gcs_id)
+    codes = exit_codes(p)
+    assert set(codes.values()) == {0}, codes
+    recs = records(p.journal())
+    assert recs[-1]["record"] == "over"
+    assert f"GAME OVER at turn {recs[-1]['turn']}" in p.logs(gcs_id)
+    assert p.journal() == host_journals(game)
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_router_restarted_mid_game_the_game_survives(projects, host_journals):
+    """`docker restart` of the router container mid-game: the entities reconnect, the coordinator holds
+    the game for its link grace (docs/reliability.md), every container exits 0 and the journal is the
+    uninterrupted one."""
+    game = Game()
+    p = projects([COMPOSE], {**game.env(), "PACE": "0.25"})
+    scripted(p, game)
+    p.compose("up", "-d")
+    gcs = p.follow(p.one("gcs"), "gcs")
+    gcs.expect(r"^turn 4:")
+    docker("restart", "--time", "0", p.one("router"))
+    codes = exit_codes(p)
+    assert set(codes.values()) == {0}, codes
+    assert "the link is down: the game holds" in p.logs(p.one("coordinator")), "the restart was not mid-game"
+    assert p.journal() == host_journals(game)
+
+
+SPOOF = """
+import argparse, sys, threading, zenoh
+from dronesim.transport import add_zenoh_args, zenoh_config
+parser = argparse.ArgumentParser()
+add_zenoh_args(parser)
+with zenoh.open(zenoh_config(parser.parse_args(sys.argv[1:]))) as session:
+    seen = threading.Event()
+    # the coordinator's token follows its subscriptions: once it is seen, a put reaches them if allowed
+    watch = session.liveliness().declare_subscriber("sim/SRV/ALIVE/*", lambda s: seen.set(), history=True)
+    assert seen.wait(120), "the coordinator never showed up"
+    block = zenoh.CongestionControl.BLOCK
+    session.put("sim/D02/NPS", b"docker test: D01 spoofing D02's move", congestion_control=block)
+    session.put("sim/D01/NPS", b"docker test: D01 on its own key", congestion_control=block)
+    watch.undeclare()
+print("spoofer: sent", flush=True)
+"""
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_tls_cluster_plays_and_zenohd_drops_a_spoofed_move(projects, host_journals, tmp_path):
+    """compose.tls.yaml with certificates from `dronesim certs`: mutual TLS and zenohd's access control.
+    An extra container holding D01's credentials puts a move on D02's key, then one on its own: the
+    coordinator gets (and refuses, as garbage) only its own, so zenohd dropped the spoof; the game
+    then plays, with the journal of `dronesim up`."""
+    if shutil.which("openssl") is None:
+        skip_or_fail("openssl is needed by dronesim certs (tests/setup.d/security.sh installs it)")
+    game = Game()
+    certs = tmp_path / "certs"
+    made = subprocess.run([sys.executable, "-m", "dronesim", "certs", str(certs), "--drones", str(game.drones),
+                           "--router-host", "router"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert made.returncode == 0, made.stderr
+    for path in [certs, *certs.iterdir()]:  # the image's user owns the keys (they are 0600)
+        os.chown(path, 10001, 10001)
+    p = projects([COMPOSE, COMPOSE_TLS], {**game.env(), "CERTS": str(certs)})
+    scripted(p, game, COMPOSE_TLS)
+    p.compose("up", "-d", "--scale", "gcs=0")
+    srv = p.follow(p.one("coordinator"), "coordinator")
+    srv.expect("coordinator ready")
+    flags = ["--mode", "client", "--connect", "tls/router:7447", "--tls-ca", "/certs/ca.pem",
+             "--tls-cert", "/certs/D01.pem", "--tls-key", "/certs/D01.key"]
+    spoof = docker("run", "--rm", "--label", f"{TEST_LABEL}={p.name}", "--network", p.network(),
+                   "--volume", f"{certs}:/certs:ro", "--read-only", "--cap-drop", "ALL", p.engine.image,
+                   "python3", "-c", SPOOF, *flags, timeout=ENGINE_TIMEOUT)
+    assert "spoofer: sent" in spoof
+    srv.expect(r"rejected sim/D01/NPS")  # its own key: through the router, refused by the coordinator
+    p.compose("up", "-d", "--no-deps", "gcs")
+    codes = exit_codes(p)
+    assert set(codes.values()) == {0}, codes
+    assert "sim/D02/NPS" not in p.logs(p.one("coordinator")), "zenohd let the spoofed move through"
+    assert p.journal() == host_journals(game)
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_remote_ground_station_and_web_page_in_chromium(projects, host_journals, tmp_path, request):
+    """A ground station on the host, outside the compose network, joins through the router's published
+    port and plays the game. Then the web ground station's page, published by its container, in Debian's
+    chromium driven by Playwright: a click on a cell sets the drone's target and the drone arrives."""
+    game = Game()
+    p = projects([COMPOSE], game.env())
+    p.compose("up", "-d", "--scale", "gcs=0")
+    port = p.port("router", 7447)
+    remote = Proc("remote-gcs", [sys.executable, "-m", "dronesim", "gcs", "--mode", "client", "--connect",
+                                 f"tcp/127.0.0.1:{port}", "--targets", game.targets(), "--no-draw",
+                                 "--connect-timeout", "120"], tmp_path)
+    try:
+        assert remote.wait(ENGINE_TIMEOUT) == 0, remote.text
+    finally:
+        remote.kill()
+    codes = exit_codes(p)
+    assert set(codes.values()) == {0}, codes
+    assert p.journal() == host_journals(game)
+
+    from tests.e2e.conftest import CHROMIUM_FLAGS, browser_problem, chromium_path, fly_to_clicked_cell
+
+    problem = browser_problem()
+    if problem:
+        skip_or_fail(problem)
+    pw = request.getfixturevalue("playwright_driver")  # the session's one driver (the browser tests' too)
+
+    w = projects([COMPOSE], {"DRONES": "1", "SEED": "7", "MAX_TURNS": "80", "WEB_PACE": "0.05",
+                             "HEALTH_INTERVAL": "2s"})
+    w.compose("up", "-d")
+    w.await_healthy(list(w.containers().values()))  # the page holds the game until the first target
+    url = f"http://127.0.0.1:{w.port('gcs', 8080)}/"
+    browser = pw.chromium.launch(executable_path=chromium_path(), headless=True, args=CHROMIUM_FLAGS)
+    try:
+        page = browser.new_page(viewport={"width": 1440, "height": 900})
+        page.set_default_timeout(ENGINE_TIMEOUT * 1000)
+        page.goto(url)
+        page.wait_for_selector("#conn[data-state=live]")
+        fly_to_clicked_cell(page, "D01", (9, 9, 0))
+        page.click("#quit")
+        page.click("#quit-yes")
+        page.wait_for_selector("#over:not([hidden])")
+    finally:
+        browser.close()
+    codes = exit_codes(w)
+    assert set(codes.values()) == {0}, codes
+    recs = records(w.journal())
+    assert recs[1]["targets"] == {"D01": [9, 9, 0]} and recs[-1]["reason"] == "GCS_QUIT"

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import pathlib
 
-from dronesim.schema import doc
+from schema import doc
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
 def test_schema_readme_is_generated_from_the_schema():
     assert (ROOT / "schema" / "README.md").read_text() == doc.render(), \
-        "schema/README.md is stale: run python -m dronesim.schema.doc --write"
+        "schema/README.md is stale: run python -m schema.doc --write"
 
 
 def test_ci_runs_the_readme_test_command():

@@ -2,8 +2,8 @@
 
 The game is held in a GCS phase (the test plays the ground station) while Hypothesis throws random
 bytes, mutated golden vectors, well-formed messages of the wrong type for the key, out-of-range cells,
-stale and future turns, wrong senders and huge payloads at every subscribed key and queryable. Then the
-game is played to its end. Every process must survive (no crash, no hang), count and log its
+stale and future turns, wrong senders and huge payloads (which the router drops) at every subscribed key
+and queryable. Then the game is played to its end. Every process must survive (no crash, no hang), count and log its
 rejections with a reason, and the journal must be byte-identical to an unattacked run: nothing changed.
 
 Forging a legitimate sender in the right phase (a well-formed TGT "from the GCS" for the current turn)
@@ -17,16 +17,35 @@ import re
 import uuid
 
 import msgpack
-
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from dronesim.schema import (
-    Ask, Cause, CellInfo, CellKind, Done, DroneState, DroneStatus, Keys, MalformedMessage, Move, Nps, Order, Over,
-    EndReason, Phase, SCHEMA_VERSION, Status, Target, Turn, Upd, decode, encode,
+from schema import (
+    SCHEMA_VERSION,
+    Ask,
+    Cause,
+    CellInfo,
+    CellKind,
+    Done,
+    DroneState,
+    DroneStatus,
+    EndReason,
+    Keys,
+    MalformedMessage,
+    Move,
+    Nps,
+    Order,
+    Over,
+    Phase,
+    Status,
+    Target,
+    Turn,
+    Upd,
+    decode,
+    encode,
 )
-from dronesim.schema.samples import SAMPLES
+from schema.samples import SAMPLES
 from tests.harness import Cluster, ScriptedGCS, embedded_router, play_to_the_end
 
 pytestmark = pytest.mark.integration
@@ -130,11 +149,13 @@ def test_fuzz_every_key_changes_nothing(tmp_path):
                 def attack(key: str, data: bytes) -> None:
                     if spoofs_the_current_gcs_phase(data):
                         return
-                    if data == HUGE:
+                    huge = data == HUGE
+                    if huge:
                         data = b"\x00" * (5 * 1024 * 1024)
                     if key in query_keys:
                         replies = list(s.get(key, payload=data, timeout=10))
-                        assert replies, f"{key} did not answer"
+                        # (a huge query is dropped by the router, its low_pass_filter: nobody sees it)
+                        assert bool(replies) != huge, f"{key} did not answer" if not huge else f"{key} got it"
                         stats["query"] += 1
                     else:
                         s.put(key, data)
@@ -168,5 +189,5 @@ def test_fuzz_every_key_changes_nothing(tmp_path):
             reasons = set(re.findall(r"rejected .*\(([a-z-]+)\)$", "\n".join(proc.err), re.M))
             assert reasons, f"{proc.name} logged no rejection:\n{proc.text[-3000:]}"
         summary = next(line for line in srv.err if "rejected inputs:" in line)
-        for reason in ("malformed", "stale-turn", "wrong-type", "too-large"):
+        for reason in ("malformed", "stale-turn", "wrong-type"):  # (too large: dropped by the router)
             assert reason in summary, summary

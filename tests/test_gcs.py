@@ -4,10 +4,24 @@ from __future__ import annotations
 
 import pytest
 
-from dronesim.entities.gcs import Plan, correct_form, describe, format_status, parse_command, targets_of, trails
-from dronesim.schema import Cause, DroneState, DroneStatus, Intent, Note, Status, UsageError
+from entities.gcs import (
+    Console,
+    Ground,
+    Plan,
+    correct_form,
+    describe,
+    format_status,
+    parse_command,
+    targets_of,
+    trails,
+)
+from entities.world import Building, World
+from schema import Cause, DroneState, DroneStatus, Intent, Note, Start, Status, UsageError, Welcome, WorldSpec
 
 SIZE = (10, 10, 5)
+OPEN = World.from_buildings(SIZE, [])
+#: A building on (3..4, 3..4), two floors high: (3, 3, 0) and (4, 4, 1) are inside, (3, 3, 2) is its roof.
+CITY = World.from_buildings(SIZE, [Building(x=3, y=3, length=2, width=2, height=2)])
 
 
 # --------------------------------------------------------------------------- correct_form
@@ -36,6 +50,14 @@ def test_correct_form_outside(text: str) -> None:
 def test_correct_form_garbage(text: str) -> None:
     with pytest.raises(UsageError, match="is not x,y,z"):
         correct_form(text, SIZE)
+
+
+def test_correct_form_refuses_a_building_cell_given_the_world() -> None:
+    for text in ("3,3,0", "4,4,1"):
+        with pytest.raises(UsageError, match=r"inside a building: no drone can get there"):
+            correct_form(text, SIZE, CITY)
+    assert correct_form("3,3,2", SIZE, CITY) == (3, 3, 2)  # on the roof
+    assert correct_form("3,3,0", SIZE) == (3, 3, 0)  # no world given: the bounds alone
 
 
 # --------------------------------------------------------------------------- plans
@@ -142,6 +164,29 @@ def test_plan_load_errors(tmp_path) -> None:
     bad.write_text("1,2,3\nwhat\n", encoding="utf-8")
     with pytest.raises(UsageError, match="'what'"):
         Plan.load(str(bad), SIZE)
+
+
+def test_a_plan_or_a_script_with_a_target_inside_a_building_is_refused_at_load(tmp_path) -> None:
+    texts = ["D01=1,1,1", "D02=4,3,1@5"]
+    with pytest.raises(UsageError, match=r"bad target 'D02=4,3,1@5': \(4, 3, 1\) is inside a building"):
+        Plan.parse(texts, SIZE, world=CITY)
+    with pytest.raises(UsageError, match="inside a building"):
+        Plan.drones_of(texts, SIZE, world=CITY)
+    script = tmp_path / "targets.txt"
+    script.write_text("1,1,1\nD02=3,4,0@2\n", encoding="utf-8")
+    with pytest.raises(UsageError, match=r"\(3, 4, 0\) is inside a building"):
+        Plan.load(str(script), SIZE, CITY)
+    assert Plan.parse(texts, SIZE).last_turn == 5  # without the world: its bounds alone
+
+
+def test_a_ground_station_refuses_a_target_inside_a_building_of_its_game() -> None:
+    welcome = Welcome(turn=0, sender="SRV", entity="GCS", text="You are connected as GCS",
+                      world=WorldSpec(size=SIZE, cells=CITY.packed()),
+                      starts=(Start(drone="D01", pos=(0, 0, 0)), Start(drone="D02", pos=(0, 2, 0))))
+    with pytest.raises(UsageError, match=r"bad target 'D02=3,3,0@4': \(3, 3, 0\) is inside a building"):
+        Ground.from_welcome(welcome, ["9,9,0", "D02=3,3,0@4"], None)
+    ground = Ground.from_welcome(welcome, ["9,9,0", "D02=3,3,2@4"], None)  # its roof is fine
+    assert ground.plan.at(4) == {"D02": (3, 3, 2)} and ground.world.is_building((3, 3, 0))
 
 
 # --------------------------------------------------------------------------- interactive commands
@@ -258,20 +303,13 @@ class Script:
         self.written.append(text)
 
 
-@pytest.fixture
-def gcs_node():
-    from dronesim.entities import gcs_node
-
-    return gcs_node
+def console(script: Script, drones=("D01",), world: World = OPEN) -> Console:
+    return Console(world, list(drones), read=script.read, write=script.write)
 
 
-def console(gcs_node, script: Script, drones=("D01",)):
-    return gcs_node.Console(SIZE, list(drones), read=script.read, write=script.write)
-
-
-def test_console_forces_the_first_target(gcs_node) -> None:
+def test_console_forces_the_first_target() -> None:
     s = Script("", "garbage", "99,0,0", "3,4,1")
-    new, intent = console(gcs_node, s).ask(1, {})
+    new, intent = console(s).ask(1, {})
     assert (new, intent) == ({"D01": (3, 4, 1)}, Intent.CONTINUE)
     assert s.prompts == ["turn 1: target for D01 (x,y,z): "] * 4
     assert s.written[0] == "a first target is required for D01"
@@ -280,69 +318,77 @@ def test_console_forces_the_first_target(gcs_node) -> None:
     assert len(s.written) == 3
 
 
-def test_console_forces_a_target_for_every_drone(gcs_node) -> None:
+def test_console_forces_a_target_for_every_drone() -> None:
     s = Script("1,1,1", "", "2,2,2")
-    new, intent = console(gcs_node, s, DRONES).ask(1, {})
+    new, intent = console(s, DRONES).ask(1, {})
     assert (new, intent) == ({"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)
     assert s.prompts == ["turn 1: target for D01 (x,y,z): ", "turn 1: target for D02 (x,y,z): ",
                          "turn 1: target for D02 (x,y,z): "]
     assert s.written == ["a first target is required for D02"]
 
 
-def test_console_several_first_targets_on_one_line(gcs_node) -> None:
+def test_console_several_first_targets_on_one_line() -> None:
     s = Script("1,1,1; 2,2,2")
-    assert console(gcs_node, s, DRONES).ask(1, {}) == ({"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)
+    assert console(s, DRONES).ask(1, {}) == ({"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)
 
 
-def test_console_enter_keeps(gcs_node) -> None:
+def test_console_refuses_a_building_cell_and_asks_again() -> None:
+    s = Script("3,3,0", "4,4,1", "3,3,2")
+    new, intent = console(s, world=CITY).ask(1, {})
+    assert (new, intent) == ({"D01": (3, 3, 2)}, Intent.CONTINUE)
+    assert s.written == ["invalid: (3, 3, 0) is inside a building: no drone can get there",
+                         "invalid: (4, 4, 1) is inside a building: no drone can get there"]
+
+
+def test_console_enter_keeps() -> None:
     s = Script("")
-    assert console(gcs_node, s).ask(2, {"D01": (1, 1, 1)}) == ({}, Intent.CONTINUE)
+    assert console(s).ask(2, {"D01": (1, 1, 1)}) == ({}, Intent.CONTINUE)
     assert s.prompts == ["turn 2: new target ([Dnn] x,y,z; ...), Enter to keep, q to quit: "]
     assert s.written == []
 
 
 @pytest.mark.parametrize("line", ["q", "Q", "quit", "exit", "  q  "])
-def test_console_q_quits(gcs_node, line: str) -> None:
-    assert console(gcs_node, Script(line)).ask(2, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
+def test_console_q_quits(line: str) -> None:
+    assert console(Script(line)).ask(2, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
 
 
-def test_console_q_quits_even_before_the_first_target(gcs_node) -> None:
-    assert console(gcs_node, Script("q")).ask(1, {}) == ({}, Intent.QUIT)
+def test_console_q_quits_even_before_the_first_target() -> None:
+    assert console(Script("q")).ask(1, {}) == ({}, Intent.QUIT)
 
 
-def test_console_eof_quits(gcs_node) -> None:
-    assert console(gcs_node, Script()).ask(1, {}) == ({}, Intent.QUIT)
-    assert console(gcs_node, Script()).ask(3, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
+def test_console_eof_quits() -> None:
+    assert console(Script()).ask(1, {}) == ({}, Intent.QUIT)
+    assert console(Script()).ask(3, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
     # EOF after a refused line: still a clean quit
-    assert console(gcs_node, Script("nope")).ask(3, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
+    assert console(Script("nope")).ask(3, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
 
 
-def test_console_changes_one_drone(gcs_node) -> None:
+def test_console_changes_one_drone() -> None:
     current = {"D01": (1, 1, 1), "D02": (2, 2, 2)}
     s = Script("D02 1,2,3")
-    assert console(gcs_node, s, DRONES).ask(4, current) == ({"D02": (1, 2, 3)}, Intent.CONTINUE)
+    assert console(s, DRONES).ask(4, current) == ({"D02": (1, 2, 3)}, Intent.CONTINUE)
     s = Script("4,4,4")
-    assert console(gcs_node, s, DRONES).ask(4, current) == ({"D01": (4, 4, 4)}, Intent.CONTINUE)
+    assert console(s, DRONES).ask(4, current) == ({"D01": (4, 4, 4)}, Intent.CONTINUE)
 
 
-def test_console_line_with_one_bad_item_changes_nothing(gcs_node) -> None:
+def test_console_line_with_one_bad_item_changes_nothing() -> None:
     current = {"D01": (1, 1, 1), "D02": (2, 2, 2)}
     s = Script("D02 1,2,3; D09 1,1,1", "D01 1,2,3; D02 0,0,99", "")
-    new, intent = console(gcs_node, s, DRONES).ask(4, current)
+    new, intent = console(s, DRONES).ask(4, current)
     assert (new, intent) == ({}, Intent.CONTINUE)
     assert len(s.written) == 2 and all(w.startswith("invalid: ") for w in s.written)
     assert "D09" in s.written[0]
     assert current == {"D01": (1, 1, 1), "D02": (2, 2, 2)}
 
 
-def test_console_several_changes_on_one_line(gcs_node) -> None:
+def test_console_several_changes_on_one_line() -> None:
     current = {"D01": (1, 1, 1), "D02": (2, 2, 2)}
     s = Script("D02 3,3,3; D01 4,4,4")
-    assert console(gcs_node, s, DRONES).ask(4, current) == ({"D01": (4, 4, 4), "D02": (3, 3, 3)}, Intent.CONTINUE)
+    assert console(s, DRONES).ask(4, current) == ({"D01": (4, 4, 4), "D02": (3, 3, 3)}, Intent.CONTINUE)
 
 
 def test_a_script_answers_ahead_up_to_its_next_change() -> None:
-    from dronesim.entities.gcs import Plan, turns_to_answer_ahead
+    from entities.gcs import Plan, turns_to_answer_ahead
 
     plan = Plan.parse(["D01=1,1,1@1", "D01=2,2,2@5"], (9, 9, 9))
     assert turns_to_answer_ahead(plan, 1, 1) == [2, 3]
@@ -350,3 +396,138 @@ def test_a_script_answers_ahead_up_to_its_next_change() -> None:
     assert turns_to_answer_ahead(plan, 3, 4) == []
     assert turns_to_answer_ahead(plan, 5, 5, last=7) == [6]
     assert turns_to_answer_ahead(plan, 5, 5, horizon=4) == [6, 7, 8, 9]
+
+
+# --------------------------------------------------------------------------- the protocol (Station)
+
+
+from entities.gcs import FINAL_STATUS_WAIT, End, Send, Show, Station  # noqa: E402
+from schema import EndReason, Over, Phase, Turn  # noqa: E402
+
+
+def ground(plan: list[str] = (), drones=("D01", "D02")) -> Ground:
+    starts = {d: (0, 2 * i, 0) for i, d in enumerate(drones)}
+    return Ground(OPEN, starts, Plan.parse(plan, SIZE))
+
+
+def gcs(t: int) -> Turn:
+    return Turn(turn=t, sender="SRV", phase=Phase.GCS)
+
+
+def status(t: int, *drones: DroneStatus) -> Status:
+    return Status(turn=t, sender="OBS", drones=drones)
+
+
+def sent(effects) -> list[tuple[int, dict, Intent]]:
+    """The DONEs among `effects`: (turn, the targets they carry, intent)."""
+    return [(e.msg.turn, {a.drone: a.pos for a in e.msg.targets}, e.msg.intent) for e in effects if isinstance(e, Send)]
+
+
+def over(t: int, reason: EndReason) -> Over:
+    return Over(turn=t, sender="SRV", reason=reason, text="the end")
+
+
+def test_a_script_answers_its_phase_at_once_and_the_phases_with_nothing_new_ahead() -> None:
+    station = Station(ground(["D01=1,1,1", "D02=2,2,2@5"]))
+    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE),
+                                                  (2, {}, Intent.CONTINUE), (3, {}, Intent.CONTINUE)]
+    # the coordinator does not announce a phase answered ahead: STATUS(1) says turn 2 has begun
+    assert sent(station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) \
+        == [(4, {}, Intent.CONTINUE)]
+    assert station.receive(gcs(3), 0.0) == []  # (announced all the same: answered already, 5 brings a change)
+    assert sent(station.receive(gcs(5), 0.0)) == [(5, {"D02": (2, 2, 2)}, Intent.FINAL),
+                                                  (6, {}, Intent.FINAL), (7, {}, Intent.FINAL)]
+
+
+def test_a_script_told_to_answer_nothing_ahead_answers_each_phase_in_it() -> None:
+    station = Station(ground(["D01=1,1,1", "D02=2,2,2@5"]), ahead=0)
+    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]
+    assert sent(station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) == []
+    assert sent(station.receive(gcs(2), 0.0)) == [(2, {}, Intent.CONTINUE)]
+
+
+def test_a_script_sends_only_the_targets_that_differ_from_those_in_force() -> None:
+    station = Station(ground(["D01=1,1,1", "D01=1,1,1@2"]))
+    station.receive(gcs(1), 0.0)
+    station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)
+    assert sent(station.receive(gcs(2), 0.0))[0] == (2, {}, Intent.FINAL)
+
+
+def test_dead_drones_are_forgotten_and_a_late_station_takes_over_the_targets_in_force() -> None:
+    station = Station(ground(["D02=3,3,3@2"]))
+    station.receive(status(4, st("D01", (1, 0, 0), target=(5, 5, 0)),
+                           st("D02", (0, 2, 0), DroneState.DEAD, target=(4, 4, 4), cause=Cause.BUILDING)), 0.0)
+    assert station.wanted == {"D01": (5, 5, 0)} and station.gone == {"D02"}
+    assert station.want({"D02": (1, 1, 1), "D01": (6, 6, 0)}) == {"D01": (6, 6, 0)}
+    assert sent(station.receive(gcs(5), 0.0))[0] == (5, {"D01": (6, 6, 0)}, Intent.FINAL)
+
+
+def test_a_console_is_asked_in_the_phase_and_never_answers_ahead() -> None:
+    script = Script("1,1,1; 2,2,2", "", "q")
+    station = Station(ground(), console=console(script, DRONES))
+    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)]
+    station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0), target=(2, 2, 2))), 0.0)
+    assert sent(station.receive(gcs(2), 0.0)) == [(2, {}, Intent.CONTINUE)]  # Enter keeps
+    assert sent(station.receive(gcs(3), 0.0)) == [(3, {}, Intent.QUIT)]
+    assert script.prompts[1].startswith("turn 2: new target")
+
+
+def test_a_console_asks_no_first_target_for_a_drone_that_died_before_its_first_phase() -> None:
+    script = Script("1,1,1")
+    station = Station(ground(), console=console(script, DRONES))
+    station.receive(status(0, st("D01", (0, 0, 0)), st("D02", (0, 2, 0), DroneState.LOST, cause=Cause.LOST)), 0.0)
+    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]
+    assert script.prompts == ["turn 1: target for D01 (x,y,z): "]
+
+
+def test_a_held_station_answers_when_told_and_forgets_a_phase_the_coordinator_closed() -> None:
+    station = Station(ground(["D01=1,1,1"]), hold=True)
+    assert station.receive(gcs(1), 0.0) == [] and station.pending == 1
+    assert station.wanted == {"D01": (1, 1, 1)}  # the plan's, taken at its turn
+    assert sent(station.answer(1, Intent.CONTINUE, {"D02": (2, 2, 2)})) == \
+        [(1, {"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)]
+    assert station.pending is None
+    station.receive(gcs(2), 0.0)
+    station.receive(Turn(turn=2, sender="SRV", phase=Phase.DRONES), 0.0)  # its GCS deadline passed
+    assert station.pending is None
+
+
+def test_admitted_again_it_answers_again_what_it_had_answered_ahead() -> None:
+    station = Station(ground(["D01=1,1,1"]))
+    assert len(station.receive(gcs(1), 0.0)) == 3  # 2 and 3 ahead
+    station.admitted(None)  # a restarted coordinator does not know what was said ahead
+    assert sent(station.receive(gcs(2), 0.0))[0] == (2, {"D01": (1, 1, 1)}, Intent.FINAL)
+
+
+def test_a_script_that_quits_at_a_turn_says_continue_until_then_and_answers_no_further_ahead() -> None:
+    station = Station(ground(["D01=1,1,1"]), quit_at=3)
+    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE), (2, {}, Intent.CONTINUE)]
+    assert sent(station.receive(gcs(3), 0.0)) == [(3, {}, Intent.QUIT)]
+
+
+def test_it_ends_after_over_once_the_last_status_is_in_or_given_up() -> None:
+    station = Station(ground())
+    assert station.receive(over(3, EndReason.GCS_QUIT), 10.0) == [End(over(3, EndReason.GCS_QUIT))]  # no STATUS(3)
+    station = Station(ground(), verbose=True)
+    assert station.receive(over(3, EndReason.ALL_REACHED), 10.0) == []  # STATUS(3) is on its way (another key)
+    effects = station.receive(status(3, st("D01", (1, 0, 0)), st("D02", (0, 2, 0))), 10.5)
+    assert isinstance(effects[0], Show) and effects[0].text.startswith("turn 3:")
+    assert effects[-1] == End(over(3, EndReason.ALL_REACHED))
+    assert station.receive(gcs(4), 11.0) == []  # nothing after the end
+    station = Station(ground())
+    station.receive(over(3, EndReason.TURN_LIMIT), 10.0)
+    assert station.wake(11.0) == FINAL_STATUS_WAIT - 1.0 and station.tick(11.0) == []
+    assert station.tick(10.0 + FINAL_STATUS_WAIT) == [End(over(3, EndReason.TURN_LIMIT))]
+    assert station.wake(20.0) is None and station.tick(20.0) == []
+
+
+def test_the_report_draws_the_paths_and_counts_each_drones_moves() -> None:
+    station = Station(ground(drones=("D01",)))
+    for t, pos in enumerate([(0, 0, 0), (1, 0, 0), (1, 0, 0), (2, 0, 0)]):
+        station.receive(status(t, st("D01", pos, target=(2, 0, 0))), 0.0)
+    station.receive(over(3, EndReason.ALL_REACHED), 0.0)
+    text = station.report(draw=True)
+    assert "Final world with the drones' paths:" in text
+    assert text.endswith("GAME OVER at turn 3: ALL_REACHED - the end\n  D01: 2 moves, alive, target (2, 0, 0)")
+    assert "Final world" not in station.report(draw=False)
+    assert station.opening().startswith("World (10, 10, 5), 0 building cells")

@@ -1,4 +1,4 @@
-"""The in-process game (runtime/local.py) and the journal replay (runtime/replay.py, coordinator/journal.py).
+"""The in-process game (dronesim/local.py) and the journal replay (dronesim/replay.py, coordinator/journal.py).
 
 No network: `simulate` wires the Engine, the Environment and the autopilots by function calls.
 """
@@ -11,12 +11,12 @@ import pathlib
 
 import pytest
 
+from coordinator import journal
+from coordinator.journal import dumps
 from dronesim import replay
-from dronesim.coordinator import journal
-from dronesim.coordinator.journal import dumps
 from dronesim.local import Inputs, Result, simulate
 from dronesim.scenario import Scenario
-from dronesim.schema import DroneState, EndReason, Intent, UsageError
+from schema import DroneState, EndReason, Intent, UsageError
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SWARM16 = ROOT / "scenarios" / "swarm16.json"
@@ -318,7 +318,7 @@ def test_main_turns_prints_one_line_per_turn(swarm_journal: pathlib.Path, swarm_
     assert [ln.split(":")[0] for ln in turns] == [f"turn {t}" for t in range(1, swarm_run.over.turn + 1)]
     assert all(ln.count("D") >= 16 for ln in turns)
     first = swarm_run.records[1]
-    for d, cause in first.get("deaths", {}).items():
+    for d in first.get("deaths", {}):
         assert f"{d} {tuple(first['moves'][d])} DEAD" in turns[0]
     for d, p in first.get("moves", {}).items():
         assert f"{d} {tuple(p)} " in turns[0]

@@ -9,10 +9,10 @@ import sys
 
 import pytest
 
+from coordinator.journal import read
 from dronesim import replay
-from dronesim.coordinator.journal import read
-from dronesim.scenario import Scenario, swarm_hosts
-from tests.harness import Cluster, embedded_router, journal_records
+from dronesim.scenario import Scenario
+from tests.harness import embedded_router, journal_records, play_scenario
 
 pytestmark = pytest.mark.integration
 
@@ -20,31 +20,16 @@ SCENARIO = pathlib.Path(__file__).resolve().parent.parent / "scenarios" / "swarm
 
 
 def run_layout(locator: str, tmp: pathlib.Path, layout: str) -> pathlib.Path:
-    scenario = Scenario.load(SCENARIO)
-    journal = tmp / f"{layout}.journal"
-    with Cluster(locator, tmp, log_level="WARNING") as c:
-        srv = c.start("SRV", "coordinator", "--scenario", str(SCENARIO), "--journal", str(journal),
-                      "--admit-deadline", "120", "--log-level", "INFO")
-        srv.expect("coordinator ready")
-        c.start("ENV", "env", "--no-draw")
-        if layout == "processes":  # one process per drone
-            for d, pilot in sorted(scenario.autopilots.items()):
-                c.start(d, "drone", "--id", d, "--autopilot", pilot)
-        else:  # one swarm host per autopilot
-            for host, (pilot, ids) in swarm_hosts(scenario.autopilots).items():
-                c.start(host, "drone", "--id", ",".join(ids), "--host", host, "--autopilot", pilot,
-                        "--log-level", "INFO", "--swarm-pilot-min", "1")  # the seed's drones flown by SeedSwarm
-        c.start("GCS", "gcs", "--scenario", str(SCENARIO), "--quiet")
-        codes = c.wait_all(timeout=240)
-        assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
-        # the coordinator checked every UPD (--verify-env, see the harness) and none disagreed with its world
-        assert "UPD" not in "\n".join(line for line in srv.err if "rejected" in line), srv.text[-3000:]
-        if layout == "swarm":  # the hosts whose autopilot senses charted the environment's whole map
-            for host in (p for p in c.procs if p.name.startswith("H")):
-                charted = "charted the environment's map: 1024 cells" in host.text
-                assert charted == ("--autopilot v1" not in " ".join(host.argv)), host.text[-2000:]
-                vectorised = "drones with the seed autopilot's swarm form" in host.text
-                assert vectorised == ("--autopilot seed" in " ".join(host.argv)), host.text[-2000:]
+    journal, srv, procs = play_scenario(locator, tmp, SCENARIO, layout,  # the seed's drones flown by SeedSwarm:
+                                        "--log-level", "INFO", "--swarm-pilot-min", "1")
+    # the coordinator checked every UPD (--verify-env, see the harness) and none disagreed with its world
+    assert "UPD" not in "\n".join(line for line in srv.err if "rejected" in line), srv.text[-3000:]
+    if layout == "swarm":  # the hosts whose autopilot senses charted the environment's whole map
+        for host in (p for p in procs if p.name.startswith("H")):
+            charted = "charted the environment's map: 1024 cells" in host.text
+            assert charted == ("--autopilot v1" not in " ".join(host.argv)), host.text[-2000:]
+            vectorised = "drones with the seed autopilot's swarm form" in host.text
+            assert vectorised == ("--autopilot seed" in " ".join(host.argv)), host.text[-2000:]
     return journal
 
 

@@ -8,11 +8,29 @@ game inside a DRONES phase while another is killed, so the fault lands mid-turn,
 
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
+import zenoh
 
-from tests.harness import Cluster, ScriptedGCS, embedded_router, journal_records, play_to_the_end
+from dronesim.membership import await_presence
+from dronesim.transport import client_config, router_config
+from schema import Keys
+from tests.harness import (
+    TIMEOUT,
+    Cluster,
+    Proc,
+    ScriptedGCS,
+    embedded_router,
+    journal_records,
+    play_to_the_end,
+    unique_root,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -205,3 +223,325 @@ def test_a_ground_station_that_answered_ahead_answers_a_resumed_coordinator_agai
     with Cluster(router, tmp_path / "killed") as c:
         got = scripted_gcs_game(c, tmp_path / "killed", kill_coordinator=True)
     assert got == expected
+
+
+# --------------------------------------------------------------------------- ends, signals, outages
+
+
+def children(pid: int) -> dict[int, str]:
+    """The processes whose parent is `pid`: their command lines."""
+    found = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            if int(fields[1]) == pid:
+                found[int(stat.parent.name)] = (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except (OSError, IndexError, ValueError):
+            continue  # gone meanwhile
+    return found
+
+
+@contextlib.contextmanager
+def dronesim_up(tmp_path, *args: str) -> Iterator[tuple[Proc, Path]]:
+    """`dronesim up` as a process, with its journal; whatever it leaves behind is killed on leaving."""
+    journal = tmp_path / "up.journal"
+    up = Proc("up", [sys.executable, "-m", "dronesim", "up", "--journal", str(journal), "--root", unique_root(),
+                     "--log-level", "INFO", *args], tmp_path)
+    try:
+        yield up, journal
+    finally:
+        left = children(up.p.pid)
+        up.kill()
+        for pid in left:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def test_a_paced_game_whose_last_drone_is_killed_ends_with_over_and_its_record(tmp_path):
+    """dronesim up --pace: OVER must not wait behind a turn held for its pace."""
+    with dronesim_up(tmp_path, "--seed", "7", "--drones", "1", "--pace", "0.2", "--targets", "9,9,0") as (up, journal):
+        up.expect(r"^turn 2:")
+        drone = next(pid for pid, cmd in children(up.p.pid).items() if " drone " in cmd)
+        os.kill(drone, signal.SIGKILL)
+        up.expect("GAME OVER at turn .*: NO_DRONE_ALIVE")
+        assert up.wait() == 1, up.text  # D01 was killed: up says so
+        assert "processes failed: {'D01': -9}" in up.text, "the coordinator, environment and GCS exited 0"
+    assert journal_records(journal)[-1]["reason"] == "NO_DRONE_ALIVE"
+
+
+def test_dronesim_up_stops_the_game_when_its_ground_station_refuses_a_target(tmp_path):
+    """A target inside a building: the ground station refuses it and exits 2; `up` stops the game at once
+    (OVER INTERRUPTED, with its record) instead of letting it run without a ground station to its limit."""
+    world = tmp_path / "block.json"
+    world.write_text('{"format": "dronesim-world", "version": 1, "size": [10, 10, 10], '
+                     '"buildings": [[4, 4, 3, 3, 5]]}')
+    with dronesim_up(tmp_path, "--world", str(world), "--starts", "0,0,0", "--pace", "0.2",
+                     "--max-turns", "100000", "--targets", "5,5,0") as (up, journal):
+        assert up.wait() == 1, up.text
+        assert "inside a building" in up.text, up.text
+        assert "dronesim up: GCS exited 2: stopping the game" in up.text
+        assert "Traceback" not in up.text
+    over = journal_records(journal)[-1]
+    assert over["record"] == "over" and over["reason"] == "INTERRUPTED", over
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_to_dronesim_up_ends_the_game_interrupted_and_stops_every_process(tmp_path, signum):
+    with dronesim_up(tmp_path, "--seed", "7", "--drones", "2", "--pace", "0.2", "--targets", "9,9,0") as (up, journal):
+        up.expect(r"^turn 2:")
+        procs = children(up.p.pid)
+        assert len(procs) == 5, procs
+        up.p.send_signal(signum)
+        assert up.wait() == 128 + signum, up.text
+        assert "Traceback" not in up.text
+        assert "GAME OVER at turn" in up.text and "INTERRUPTED" in up.text
+        assert not set(children(up.p.pid)) and not any(Path(f"/proc/{pid}").exists() for pid in procs), \
+            "every child stopped"
+    over = journal_records(journal)[-1]
+    assert over["record"] == "over" and over["reason"] == "INTERRUPTED"
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_to_the_coordinator_ends_the_game_and_the_entities_exit_0(router, tmp_path, signum):
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path, "--pace", "0.2")
+        entities(c)
+        gcs = ScriptedGCS(router, c.root, TARGETS)
+        try:
+            gcs.play_until(2)
+            srv.p.send_signal(signum)
+            gcs.play_until()
+            assert gcs.over.reason.value == "INTERRUPTED"
+        finally:
+            gcs.close()
+        assert srv.wait() == 128 + signum and "Traceback" not in srv.text
+        c.procs.remove(srv)
+        assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    assert journal_records(journal)[-1]["reason"] == "INTERRUPTED"
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_to_a_drone_process_stops_it_cleanly_and_the_game_goes_on(router, tmp_path, signum):
+    """Ctrl-C or SIGTERM (`docker stop`) on a drone process, waiting to be admitted or playing: it stops at
+    once, without a traceback, exits 130 / 143; in a game, the coordinator sees it gone (LOST)."""
+    with Cluster(router, tmp_path) as c:
+        nobody = Keys(unique_root())  # no coordinator there: the drone waits to be admitted
+        early = c.start("D01@", "drone", "--id", "D01", "--root", nobody.root)
+        with zenoh.open(client_config(router)) as session:
+            assert await_presence(session, nobody.alive_of("D01"), TIMEOUT)  # it is connecting
+        srv, journal = start(c, tmp_path)
+        c.start("ENV", "env", "--no-draw")
+        c.start("D01", "drone", "--id", "D01", "--autopilot", "dstar")
+        d2 = c.start("D02", "drone", "--id", "D02", "--autopilot", "seed")
+        gcs = ScriptedGCS(router, c.root, TARGETS)
+        early.p.send_signal(signum)
+        assert early.wait() == 128 + signum and "Traceback" not in early.text, early.text
+        try:
+            gcs.play_until(2)
+            d2.p.send_signal(signum)
+            assert d2.wait() == 128 + signum and "Traceback" not in d2.text, d2.text
+            gcs.play_until()
+            assert {s.drone: s.state.value for s in gcs.statuses[-1].drones}["D02"] == "LOST"
+        finally:
+            gcs.close()
+        for p in (early, d2):
+            c.procs.remove(p)
+        assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    assert any("D02" in r.get("lost", ()) for r in journal_records(journal))
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_to_the_environment_stops_it_cleanly_and_a_new_one_takes_over(router, tmp_path, signum):
+    """Ctrl-C or SIGTERM (`docker stop`) on the environment mid-game: it stops at once, without a traceback,
+    exits 130 / 143; a restarted environment is admitted and the game plays to the end it has without the fault."""
+    expected = reference_journal(router, tmp_path)
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path)
+        env, _, _ = entities(c)
+        gcs = ScriptedGCS(router, c.root, TARGETS)
+        try:
+            gcs.play_until(2)
+            env.p.send_signal(signum)
+            assert env.wait() == 128 + signum and "Traceback" not in env.text, env.text
+            env.expect(f"stopped by {signal.Signals(signum).name}")
+            c.procs.remove(env)
+            c.start("ENV2", "env", "--no-draw")
+            gcs.play_until()
+        finally:
+            gcs.close()
+        assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    assert journal.read_bytes() == expected
+
+
+def test_a_second_coordinator_on_the_same_root_is_refused_and_exits(router, tmp_path):
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path)
+        second = c.start("SRV2", "coordinator", "--drones", "2")
+        assert second.wait() == 2
+        assert "another coordinator" in second.text
+        c.procs.remove(second)
+        entities(c)
+        play_to_the_end(c, TARGETS)
+
+
+@contextlib.contextmanager
+def restartable_router() -> Iterator[tuple[str, Callable[[], None], Callable[[], None]]]:
+    """A router in this process on a fixed free port: (locator, stop, start again)."""
+    with embedded_router() as locator:
+        pass  # a free port, now free again
+    state: dict = {}
+
+    def up() -> None:
+        state["cm"] = zenoh.open(router_config(locator))
+        state["cm"].__enter__()
+
+    def down() -> None:
+        state.pop("cm").__exit__(None, None, None)
+
+    up()
+    try:
+        yield locator, down, up
+    finally:
+        if "cm" in state:
+            down()
+
+
+def scripted_game(c: Cluster, tmp_path, *, restart: Callable[[Cluster, Proc, list[Proc]], None] | None) -> bytes:
+    """A paced game with the real scripted ground station; `restart` breaks it somewhere."""
+    srv, journal = start(c, tmp_path, "--pace", "0.05", "--max-turns", "60")
+    ents = [*entities(c)]
+    targets = [item for d, (x, y, z) in TARGETS.items() for item in ("--targets", f"{d}={x},{y},{z}")]
+    ents.append(c.start("GCS", "gcs", *targets, "--quiet"))
+    if restart is not None:
+        restart(c, srv, ents)
+    assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    return journal.read_bytes()
+
+
+def test_a_router_restart_is_survived_and_the_journal_equals_an_uninterrupted_runs(tmp_path):
+    for run in ("clean", "restarted"):
+        (tmp_path / run).mkdir()
+    with restartable_router() as (locator, down, up):
+        with Cluster(locator, tmp_path / "clean") as c:
+            expected = scripted_game(c, tmp_path / "clean", restart=None)
+
+        def restart(c: Cluster, srv: Proc, ents: list[Proc]) -> None:
+            srv.expect("the game starts")
+            for e in ents:  # every Welcome has arrived (the last one goes out as the game starts: it may
+                e.expect("You are connected as")  # still be on its way, and would be lost with the link)
+            ents[1].expect("charted|connected")
+            down()  # every link goes: each side sees every presence vanish
+            srv.expect("the link is down")
+            for e in ents:
+                e.expect("the coordinator vanished")
+            up()
+            srv.expect("every entity is back")
+
+        with Cluster(locator, tmp_path / "restarted") as c:
+            got = scripted_game(c, tmp_path / "restarted", restart=restart)
+    assert got == expected
+
+
+def test_a_lost_drone_that_comes_back_stays_out_and_exits_0_at_the_end(router, tmp_path):
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path, "--phase-deadline", "60")
+        c.start("ENV", "env", "--no-draw")
+        c.start("D01", "drone", "--id", "D01", "--autopilot", "dstar")
+        d2 = c.start("D02", "drone", "--id", "D02", "--autopilot", "seed", "--lease", "1")
+        gcs = ScriptedGCS(router, c.root, TARGETS)
+        try:
+            gcs.play_until(2)
+            d2.p.send_signal(signal.SIGSTOP)  # frozen past its lease: the router drops it, it is LOST
+            srv.expect("D02 vanished")
+            d2.p.send_signal(signal.SIGCONT)
+            d2.expect("D02 is LOST: drones cannot join a running game.*takes no further part")
+            gcs.play_until()
+            assert {s.drone: s.state.value for s in gcs.statuses[-1].drones} == {"D01": "ALIVE", "D02": "LOST"}
+        finally:
+            gcs.close()
+        assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+
+
+def test_a_replayed_or_foreign_over_turn_or_status_is_refused_by_every_entity(router, tmp_path):
+    from schema import DroneState, DroneStatus, EndReason, Keys, Over, Phase, Status, StatusTable, Turn
+
+    expected = reference_journal(router, tmp_path)
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path)
+        env, d1, d2 = entities(c)
+        gcs = ScriptedGCS(router, c.root, TARGETS)
+        try:
+            gcs.play_until(2)
+            gcs.wait_phase("GCS", 3)
+            keys, out = Keys(c.root), gcs.out
+            for game in ("", "0badc0de"):  # a replay of a game without identity, another game's
+                out.put(keys.over, Over(turn=0, sender="SRV", reason=EndReason.ABORTED, game=game))
+                out.put(keys.over, Over(turn=3, sender="SRV", reason=EndReason.ABORTED, game=game))
+                out.put(keys.status, Status(turn=2, sender="OBS", game=game, drones=StatusTable.of([
+                    DroneStatus(drone="D01", pos=(0, 0, 0), state=DroneState.DEAD),
+                    DroneStatus(drone="D02", pos=(0, 2, 0), state=DroneState.DEAD)])))
+                out.put(keys.turn_of(Phase.DRONES), Turn(turn=3, sender="SRV", phase=Phase.DRONES, game=game))
+            for p in (env, d1, d2):
+                p.expect(r"rejected .*OVER of game 0badc0de.*\(foreign-game\)")
+            gcs.answer(3)
+            gcs.play_until()
+        finally:
+            gcs.close()
+        assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    assert journal.read_bytes() == expected
+
+
+def test_a_foreign_coordinator_token_does_not_hold_the_entities(router, tmp_path):
+    """A token under the coordinator's name that is not the one that admitted them (a second coordinator,
+    any client on a plain router) must not keep the entities waiting once their coordinator has died."""
+    from schema import Keys
+
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path)
+        env = c.start("ENV", "env", "--no-draw", "--grace", "2")
+        d1 = c.start("D01", "drone", "--id", "D01", "--autopilot", "dstar", "--grace", "2")
+        d2 = c.start("D02", "drone", "--id", "D02", "--autopilot", "seed", "--grace", "2")
+        gcs = ScriptedGCS(router, c.root, TARGETS)
+        try:
+            gcs.play_until(2)
+            fake = gcs.session.liveliness().declare_token(Keys(c.root).alive("SRV", "0fa4e1d2"))
+            srv.p.kill()
+            assert srv.wait() == -signal.SIGKILL
+            for p in (env, d1, d2):
+                assert p.wait(30) == 2, p.text
+                assert "did not come back within 2 s" in p.text
+            fake.undeclare()
+        finally:
+            gcs.close()
+        c.procs.remove(srv)
+
+
+def test_a_copy_of_a_drones_exact_presence_key_does_not_hide_its_death(router, tmp_path):
+    """On a plain router any client may declare a token on a drone's own presence key: when the drone dies
+    its token stays. Its first missed deadline makes the coordinator ask the router which sessions are
+    connected: the drone is LOST then, not after --lost-after missed deadlines."""
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path, "--phase-deadline", "1", "--lost-after", "5")
+        env, d1, d2 = entities(c)
+        gcs = ScriptedGCS(router, c.root, TARGETS)
+        try:
+            gcs.play_until(2)
+            (reply,) = [r for r in gcs.session.liveliness().get(Keys(c.root).alive_of("D02"), timeout=10)
+                        if r.ok is not None]
+            copy = gcs.session.liveliness().declare_token(str(reply.ok.key_expr))  # the same key, another session
+            gcs.wait_phase("GCS", 3)
+            d2.p.kill()
+            d2.wait()
+            gcs.answer(3)
+            gcs.play_until()
+            copy.undeclare()
+            assert {s.drone: s.state.value for s in gcs.statuses[-1].drones}["D02"] == "LOST"
+        finally:
+            gcs.close()
+        c.procs.remove(d2)
+        assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    assert "is not connected to any router" in srv.text and "D02 vanished" in srv.text
+    records = journal_records(journal)
+    hovered = [r["turn"] for r in records if "D02" in r.get("hovered", ())]
+    lost = [r["turn"] for r in records if "D02" in r.get("lost", ())]
+    assert len(lost) == 1 and len(hovered) <= 2 and lost[0] <= hovered[0] + 1, (hovered, lost)

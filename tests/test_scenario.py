@@ -1,4 +1,4 @@
-"""Scenario files (runtime/scenario.py): loading, validation with clear UsageErrors, plan and game config."""
+"""Scenario files (dronesim/scenario.py): loading, validation with clear UsageErrors, plan and game config."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ import pathlib
 
 import pytest
 
-from dronesim.coordinator.engine import DroneSpec, GameConfig
-from dronesim.entities.environment import build_world
-from dronesim.entities.gcs import Plan
-from dronesim.entities.world import Building, World
+from coordinator.engine import DroneSpec, GameConfig
 from dronesim.local import Inputs, simulate
 from dronesim.scenario import FORMAT, Scenario
-from dronesim.schema import UsageError, WorldSpec
+from entities.environment import build_world
+from entities.gcs import Plan
+from entities.world import Building, World
+from schema import UsageError, WorldSpec
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SWARM16 = ROOT / "scenarios" / "swarm16.json"
@@ -26,7 +26,7 @@ def base() -> dict:
         "world": {"size": [8, 8, 3], "seed": 3},
         "drones": [{"id": "D01", "start": [0, 0, 0], "autopilot": "dstar"},
                    {"id": "D02", "start": [0, 2, 0], "autopilot": "v1"}],
-        "targets": ["D01=7,7,0", "D02=5,2,0@3"],
+        "targets": ["D01=7,7,0", "D02=5,3,0@3"],
         "max_turns": 50,
     }
 
@@ -75,6 +75,7 @@ def test_world_by_seed() -> None:
 def test_seed_defaults_to_zero() -> None:
     data = base()
     data["world"] = {"size": [8, 8, 3]}
+    data["targets"] = ["D01=6,6,0"]  # (7, 7, 0) is a building of seed 0's world
     assert Scenario.from_json(data).world.seed == 0
 
 
@@ -111,6 +112,22 @@ def test_world_file_scenario_runs(tmp_path: pathlib.Path) -> None:
     deaths = {d: c for r in result.records for d, c in r.get("deaths", {}).items()}
     assert deaths == {"D02": "BUILDING"}
     assert result.over.reason.value == "ALL_REACHED"
+
+
+def test_a_target_inside_a_building_is_refused_at_load(tmp_path: pathlib.Path) -> None:
+    data = base()  # seed 3's generated world: (5, 2, 0) is a building cell
+    data["targets"] = ["D01=7,7,0", "D02=5,2,0@3"]
+    with pytest.raises(UsageError, match=r"bad target 'D02=5,2,0@3': \(5, 2, 0\) is inside a building"):
+        Scenario.from_json(data)
+    city().save(tmp_path / "city.json")
+    data["world"] = {"file": "city.json"}
+    data["targets"] = ["D01=7,7,0", "D02=3,2,1@4"]
+    (tmp_path / "s.json").write_text(json.dumps(data), encoding="utf-8")
+    with pytest.raises(UsageError, match=r"s\.json: bad target 'D02=3,2,1@4': \(3, 2, 1\) is inside a building"):
+        Scenario.load(tmp_path / "s.json")
+    data["targets"] = ["D01=7,7,0", "D02=3,2,2@4"]  # on the roof: fine
+    (tmp_path / "s.json").write_text(json.dumps(data), encoding="utf-8")
+    assert Scenario.load(tmp_path / "s.json").plan().at(4) == {"D02": (3, 2, 2)}
 
 
 def test_start_in_a_building_of_a_file_world(tmp_path: pathlib.Path) -> None:
@@ -259,8 +276,8 @@ def test_defaults() -> None:
 def test_plan() -> None:
     s = Scenario.from_json(base())
     plan = s.plan()
-    assert plan.items == ((1, "D01", (7, 7, 0)), (3, "D02", (5, 2, 0)))
-    assert plan.at(3) == {"D02": (5, 2, 0)}
+    assert plan.items == ((1, "D01", (7, 7, 0)), (3, "D02", (5, 3, 0)))
+    assert plan.at(3) == {"D02": (5, 3, 0)}
     assert plan.last_turn == 3
 
 
@@ -287,3 +304,22 @@ def test_scenario_roundtrips_through_a_file(tmp_path: pathlib.Path) -> None:
     path = tmp_path / "s.json"
     path.write_text(json.dumps(base()), encoding="utf-8")
     assert Scenario.load(path) == Scenario.from_json(base())
+
+
+
+def test_the_coordinators_reading_leaves_the_plan_out_and_reads_the_same_game(tmp_path) -> None:
+    """The coordinator reads a scenario without its targets (the ground station flies and checks them): the
+    same game, without a string per target in memory; a plan it cannot cut out safely (a bracket inside) is
+    read whole, then left out."""
+    data = {"format": "dronesim-scenario", "version": 1, "world": {"size": [8, 8, 3], "seed": 2},
+            "drones": [{"id": "D01", "start": [0, 0, 0]}, {"id": "D02", "start": [0, 2, 0]}],
+            "targets": ["D01=7,7,1", "D02=7,0,2@3"], "max_turns": 40}
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(data))
+    whole, game = Scenario.load(path), Scenario.load(path, plan=False)
+    assert whole.targets == tuple(data["targets"]) and game.targets == ()
+    assert game.game_config() == whole.game_config() and game.autopilots == whole.autopilots
+    path.write_text(json.dumps({**data, "targets": ["D01=7,7,1", "D02=]"]}))
+    with pytest.raises(UsageError):
+        Scenario.load(path)
+    assert Scenario.load(path, plan=False).game_config() == whole.game_config()

@@ -6,7 +6,7 @@ certificates, and the security flags make the right zenoh config.
 
 Integration tests, each against a real router -- an embedded Python router (a `zenoh.open` session in
 router mode, configured by the very flags `dronesim router` takes: --tls-*, --users-file, --acl) and
-`zenohd` (configured by the whole router config `python -m dronesim.schema.acl --router-config` writes)
+`zenohd` (configured by the whole router config `python -m schema.acl --router-config` writes)
 -- and with either identity (user/password over TLS, or mutual TLS where the certificate's CN names the
 principal):
 
@@ -70,12 +70,30 @@ import pytest
 import zenoh
 
 from dronesim import certs
-from dronesim.schema import (
-    KEY_TABLE, KeySpec, CellKind, Done, DroneState, DroneStatus, EndReason, Intent, Keys, Nps, Over, Phase,
-    Refused, Status, Target, Turn, Upd, UsageError, decode, encode,
-)
-from dronesim.schema import acl
 from dronesim.transport import add_zenoh_args, router_locators, zenoh_config
+from schema import (
+    KEY_TABLE,
+    CellKind,
+    Done,
+    DroneState,
+    DroneStatus,
+    EndReason,
+    Intent,
+    Keys,
+    KeySpec,
+    Nps,
+    Over,
+    Phase,
+    Refused,
+    Status,
+    Target,
+    Turn,
+    Upd,
+    UsageError,
+    acl,
+    decode,
+    encode,
+)
 from tests.harness import Cluster, zenohd
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -205,7 +223,7 @@ def test_config_folder_is_what_the_generator_writes():
     files = acl.examples()
     for name, text in files.items():
         assert (CONFIG / name).read_text() == text, \
-            f"config/{name} is stale: run python -m dronesim.schema.acl --write-examples config/"
+            f"config/{name} is stale: run python -m schema.acl --write-examples config/"
     for name in files:  # each is a valid zenoh config (the ACL alone is a partial one)
         zenoh.Config.from_file(str(CONFIG / name))
 
@@ -318,7 +336,8 @@ def test_security_flags_make_the_zenoh_config(kit, monkeypatch, tmp_path):
     acl_file = tmp_path / "acl.json5"
     acl_file.write_text(acl.render(acl.access_control(["D01"])))
     router = zenoh_config(parse("-m", "router", "--tls-cert", str(kit / "router.pem"), "--tls-key",
-                                str(kit / "router.key"), "--users-file", str(kit / "users.txt"), "--acl", str(acl_file)))
+                                str(kit / "router.key"), "--users-file", str(kit / "users.txt"),
+                                "--acl", str(acl_file)))
     assert conf_value(router, "transport/link/tls/listen_certificate") == str(kit / "router.pem")
     assert not conf_value(router, "transport/link/tls/enable_mtls")  # unset: zenoh's default, off
     assert conf_value(router, "transport/auth/usrpwd/dictionary_file") == str(kit / "users.txt")
@@ -560,7 +579,7 @@ def test_the_router_drops_every_forbidden_put(secured, kit):
         await_markers({f"control {w} {k}".encode() for k, w in WRITER.items()})
         # The attacks, each attacker's forbidden puts followed by its marker.
         for attacker in attackers:
-            for a, key, what in FORBIDDEN_PUTS:
+            for a, key, _what in FORBIDDEN_PUTS:
                 if a == attacker:
                     s[a].put(key, f"forbidden {a} {key}".encode(), congestion_control=BLOCK)
             s[attacker].put(MARKER[attacker], f"marker {attacker}".encode(), congestion_control=BLOCK)
@@ -617,8 +636,8 @@ def test_the_router_drops_a_foreign_queryable_and_presence(secured, kit):
         for who in names:
             assert seen[who].wait(TIMEOUT), f"{who}'s own presence token never showed"
         consolidation = zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE)
-        ask = sorted(r.ok.payload.to_bytes() for r in s["D01"].get(keys.ask, timeout=TIMEOUT, consolidation=consolidation,
-                                                                   target=zenoh.QueryTarget.ALL) if r.ok)
+        replies = s["D01"].get(keys.ask, timeout=TIMEOUT, consolidation=consolidation, target=zenoh.QueryTarget.ALL)
+        ask = sorted(r.ok.payload.to_bytes() for r in replies if r.ok)
         assert ask == [b"real ENV", b"real ENV, second"], ask  # both legitimate ones: several answers do come
         connect = [r.ok.payload.to_bytes() for r in s["D01"].get(keys.connect, timeout=TIMEOUT,
                                                                  consolidation=consolidation,
@@ -672,7 +691,7 @@ class Attacker:
 
     def _fake_answer(self, what: str):
         def on_query(q: zenoh.Query) -> None:
-            from dronesim.schema import Ans, Ask
+            from schema import Ans, Ask
 
             ask = decode(q.payload.to_bytes(), Ask)
             kinds = bytes([CellKind.BUILDING] * len(ask.asked()))
@@ -736,7 +755,8 @@ def remote_gcs_config(kit: Path, identity: str, locator: str, tmp: Path) -> list
     return flags + (["--user", "GCS", "--password-file", str(kit / "GCS.password")] if identity == "usrpwd" else [])
 
 
-def play(locator: str, kit: Path, identity: str, tmp: Path, *, attacked: bool) -> tuple[bytes, Cluster, Attacker | None]:
+def play(locator: str, kit: Path, identity: str, tmp: Path, *,
+         attacked: bool) -> tuple[bytes, Cluster, Attacker | None]:
     tag = "attacked" if attacked else "clean"
     journal = tmp / f"{tag}.journal"
     run = tmp / tag

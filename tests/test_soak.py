@@ -26,14 +26,20 @@ def rss_kib(pid: int) -> int:
 
 
 def scenario(path) -> None:
+    from entities.environment import build_world
+    from schema import WorldSpec
+
+    starts = [(8 * (i % 8), 8 * (i // 8), 0) for i in range(DRONES)]
+    world = build_world(WorldSpec(size=(64, 64, 16), seed=1), starts)
     drones, targets = [], []
-    for i in range(DRONES):
-        x, y = 8 * (i % 8), 8 * (i // 8)
+    for i, (x, y, _) in enumerate(starts):
         d = f"D{i + 1:02d}"
         drones.append({"id": d, "start": [x, y, 0], "autopilot": "dstar"})
-        # a patrol: back and forth between two cells every 1,000 turns (the GCS keeps the game going)
+        # a patrol: back and forth between two cells every 1,000 turns (the GCS keeps the game going); the
+        # column above a start is free (buildings rise from the ground), the cell beside it may be a building's
+        far = [x + 1, y + 1, 4] if not world.is_building((x + 1, y + 1, 4)) else [x, y, 4]
         for k, t in enumerate(range(1, TURNS, 1000)):
-            cell = [x + 1, y + 1, 4] if k % 2 == 0 else [x, y, 2]
+            cell = far if k % 2 == 0 else [x, y, 2]
             targets.append(f"{d}={cell[0]},{cell[1]},{cell[2]}@{t}")
         targets.append(f"{d}={x},{y},3@{TURNS}")  # a last order at the last turn: CONTINUE until then
     path.write_text(json.dumps({"format": "dronesim-scenario", "version": 1,

@@ -1,18 +1,23 @@
-"""Inbox.run over a real router: events handled one at a time, in order of arrival, on the main thread or
-on Zenoh's; deadlines that an event handled on Zenoh's thread moves are kept; a failure there is raised
-by `run`; an event arriving after the end is kept for `get`."""
+"""Inbox over a real router: the threading model of dronesim/transport.py. Zenoh's callbacks only
+enqueue; `run` hands every event to its handler on the calling thread, one at a time, in order of
+arrival; a deadline the handler sets is kept; a handler's failure is raised by `run` at once; events
+arriving after the end stay queued for `get`. And floods: stale, oversized and over-budget messages are
+refused before they are queued, and the origins take turns (FairQueue)."""
 
 from __future__ import annotations
 
 import logging
 import threading
 import time
+from typing import Any
 
 import pytest
 import zenoh
 
-from dronesim.schema import Keys, Over, EndReason
-from dronesim.transport import Inbox, Outbox, Received
+from dronesim.transport import FairQueue, Inbox, Outbox, Received, _direct, router_locators
+from schema import Ask, Connect, EndReason, Keys, Over, RemoteInputError, Role, Target, encode
+from schema.keys import size_limit
+from schema.tables import MAX_DRONE, drone_name
 from tests.harness import client_config, embedded_router, unique_root
 
 pytestmark = pytest.mark.integration
@@ -43,7 +48,7 @@ def over(turn: int) -> Over:
     return Over(turn=turn, sender="SRV", reason=EndReason.TURN_LIMIT, text=f"#{turn}")
 
 
-def test_run_handles_events_one_at_a_time_in_order_some_on_zenohs_thread(pair) -> None:
+def test_run_handles_every_event_on_its_own_thread_one_at_a_time_in_order(pair) -> None:
     inbox, out, keys = pair
     n = 400
     seen: list[int] = []
@@ -71,12 +76,12 @@ def test_run_handles_events_one_at_a_time_in_order_some_on_zenohs_thread(pair) -
     sender.join()
     assert seen == list(range(n)), "every event, in order of arrival"
     assert max(overlap) == 1, "never two at once"
-    assert threads - {threading.main_thread().name}, "some were handled on Zenoh's thread, without a handoff"
+    assert threads == {threading.current_thread().name}, "every event on the thread that runs the inbox"
 
 
-def test_a_deadline_set_on_zenohs_thread_wakes_the_waiting_thread(pair) -> None:
-    """`run` waits without a deadline; an event handled on Zenoh's thread sets one: the handler gets its
-    None when it is due (not never)."""
+def test_a_deadline_the_handler_sets_brings_a_none_when_due(pair) -> None:
+    """`run` waits without a deadline; handling an event sets one: the handler gets its None when it is
+    due (not never, not before)."""
     inbox, out, keys = pair
     due: list[float] = []
     timed_out: list[float] = []
@@ -90,24 +95,12 @@ def test_a_deadline_set_on_zenohs_thread_wakes_the_waiting_thread(pair) -> None:
         else:
             due.append(time.monotonic() + 0.05)
 
-    result: list[BaseException | None] = []
-
-    def go() -> None:
-        try:
-            inbox.run(handle, timeout=timeout, until=lambda: bool(timed_out))
-            result.append(None)
-        except BaseException as exc:  # pragma: no cover - reported below
-            result.append(exc)
-
-    runner = threading.Thread(target=go)
-    runner.start()
     out.put(keys.over, over(1))
-    runner.join(20)
-    assert not runner.is_alive(), "run never woke up for the deadline set on Zenoh's thread"
-    assert result == [None] and timed_out[0] >= due[0]
+    inbox.run(handle, timeout=timeout, until=lambda: bool(timed_out))
+    assert len(due) == 1 and timed_out[0] >= due[0]
 
 
-def test_a_handler_failing_on_zenohs_thread_fails_run(pair) -> None:
+def test_a_handler_failing_fails_run_and_the_events_behind_it_stay_queued(pair) -> None:
     inbox, out, keys = pair
 
     class Boom(Exception):
@@ -116,15 +109,14 @@ def test_a_handler_failing_on_zenohs_thread_fails_run(pair) -> None:
     def handle(event) -> None:
         raise Boom(event)
 
-    def send() -> None:
-        out.put(keys.over, over(1))
-
-    threading.Thread(target=send).start()
+    for t in range(2):
+        out.put(keys.over, over(t))
     with pytest.raises(Boom):
         inbox.run(handle, timeout=within(30), until=lambda: False)
+    assert inbox.get(10).msg.turn == 1
 
 
-def test_an_event_after_the_end_is_kept_for_get(pair) -> None:
+def test_events_after_the_end_stay_queued_for_get(pair) -> None:
     inbox, out, keys = pair
     seen: list[int] = []
     for t in range(3):
@@ -132,3 +124,180 @@ def test_an_event_after_the_end_is_kept_for_get(pair) -> None:
     inbox.run(lambda e: seen.append(e.msg.turn), timeout=within(30), until=lambda: len(seen) == 1)
     rest = [inbox.get(10), inbox.get(10)]
     assert seen == [0] and [e.msg.turn for e in rest] == [1, 2]
+
+
+def test_get_with_a_deadline_already_past_returns_at_once(pair) -> None:
+    inbox, _, _ = pair
+    assert inbox.get(-1.0) is None
+
+
+# --------------------------------------------------------------------------- floods (issue 18)
+
+
+def test_below_its_share_an_origin_keeps_the_order_of_arrival() -> None:
+    q = FairQueue(budget=100, share=3)
+    for event in [("GCS", 19), ("D01", 18), ("GCS", 20), ("GCS", 21), ("SRV", 1)]:
+        q.put(event[0], event)
+    assert q.drain() == [("GCS", 19), ("D01", 18), ("GCS", 20), ("GCS", 21), ("SRV", 1)]
+
+
+def test_beyond_its_share_a_bursting_origin_waits_its_turn() -> None:
+    q = FairQueue(budget=100, share=2)
+    for n in range(6):
+        q.put("D01", ("D01", n))
+    q.put("D02", ("D02", 0))
+    q.put("D02", ("D02", 1))
+    # D02's events came after six of D01's: they wait behind two of them (the share), not six
+    assert q.drain() == [("D01", 0), ("D01", 1), ("D02", 0), ("D02", 1), ("D01", 2), ("D01", 3), ("D01", 4),
+                         ("D01", 5)]
+
+
+def test_the_origins_take_turns_each_in_order_of_arrival() -> None:
+    q = FairQueue(budget=100, share=1)
+    for n in range(4):
+        q.put("D01", ("D01", n))
+    q.put("D02", ("D02", 0))
+    q.put("SRV", ("SRV", 0))
+    q.put("D02", ("D02", 1))
+    assert [q.take(0)[1] for _ in range(3)] == [("D01", 0), ("D02", 0), ("SRV", 0)]
+    assert q.drain() == [("D01", 1), ("D02", 1), ("D01", 2), ("D01", 3)]
+    assert q.take(0) == (False, None)
+
+
+def test_an_origin_over_its_budget_is_refused_and_the_others_are_not() -> None:
+    q = FairQueue(budget=3, share=1)
+    for n in range(3):
+        q.put("D01", n)
+    assert q.full("D01") and not q.full("D02")
+    with pytest.raises(RemoteInputError, match="3 events from D01 are already waiting") as err:
+        q.put("D01", 3)
+    assert err.value.reason == "flood"
+    q.put("D02", "d")
+    q.put("D01", "mine", budgeted=False)  # this process's own events are never refused
+    assert q.drain() == [0, "d", 1, 2, "mine"]
+
+
+def test_an_origin_over_its_bytes_is_refused_and_its_first_event_never_is() -> None:
+    q = FairQueue(budget=100, budget_bytes=1000, share=1)
+    q.put("D01", "huge", 5000)  # alone: its key's size limit bounds it
+    with pytest.raises(RemoteInputError, match="5000 bytes from D01 are already waiting"):
+        q.put("D01", "more", 1)
+    q.put("D02", "small", 10)
+    assert q.take(0) == (True, "huge")
+    q.put("D01", "next", 600)
+    q.put("D01", "and next", 400)
+    assert q.full("D01", 1) == "1000 bytes from D01 are already waiting"
+    assert q.drain() == ["small", "next", "and next"] and q.full("D01", 5000) is None
+
+
+def target(turn: int) -> Target:
+    return Target(turn=turn, sender="GCS", drone="D01", pos=(1, 2, 3))
+
+
+def test_a_message_for_a_turn_before_since_is_refused_before_it_is_queued(pair) -> None:
+    inbox, out, keys = pair
+    inbox.subscribe(keys.tgt("D01"), Target, since=lambda: 4)
+    while not out.matching(keys.tgt("D01")):
+        inbox.get(0.01)
+    for turn in range(1, 7):
+        out.put(keys.tgt("D01"), target(turn))
+    got = [inbox.get(10).msg.turn for _ in range(3)]
+    assert got == [4, 5, 6] and inbox.drain() == []
+    assert inbox.rejects.snapshot() == {"stale-turn": 3}
+    assert inbox.rejects.report() == "{'stale-turn': 3}, from {'GCS': 3}", "counted against the key's writer"
+
+
+def test_an_origin_over_its_budget_in_the_inbox_is_refused_unread(pair) -> None:
+    _, out, keys = pair
+    inbox = Inbox(pair[0].session, keys, LOG, budget=2)
+    inbox.subscribe(keys.tgt("D01"), Target)
+    inbox.subscribe(keys.over, Over)
+    while not (out.matching(keys.tgt("D01")) and out.matching(keys.over)):
+        inbox.get(0.01)
+    arrived = threading.Event()  # the OVER, seen by a plain subscriber after the inbox's callbacks ran
+    barrier = inbox.session.declare_subscriber(keys.over, _direct(lambda sample: arrived.set()))
+    for turn in range(1, 6):
+        out.put(keys.tgt("D01"), target(turn))
+    out.put(keys.over, over(9))  # after them on the same session: once it is here, so are they
+    assert arrived.wait(10)
+    events: list[Any] = inbox.drain()
+    events += [] if len(events) == 3 else [inbox.get(10)]  # (the OVER's own callback may come just after)
+    turns = [e.msg.turn for e in events]
+    assert sorted(turns) == [1, 2, 9] and inbox.rejects.snapshot() == {"flood": 3}
+    barrier.undeclare()
+    inbox.close()
+
+
+def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_another(pair) -> None:
+    inbox, _, keys = pair
+    inbox = Inbox(inbox.session, keys, LOG, budget=3, share=1)
+    inbox.serve(keys.ask, Ask)
+    asker = pair[1].session
+    replies = {}
+
+    def ask(sender: str, n: int) -> None:
+        data = encode(Ask(turn=1, sender=sender, cells=((n, 0, 0),)))
+        replies[(sender, n)] = asker.get(keys.ask, payload=data, timeout=10)
+
+    arrived = threading.Event()  # a put after the queries, from the same session: they came before it
+    barrier = inbox.session.declare_subscriber(keys.over, _direct(lambda sample: arrived.set()))
+    querier = asker.declare_querier(keys.ask)  # (the fixture's OVER subscriber says nothing of the queryable)
+    while not querier.matching_status.matching:  # the queryable has reached the asker's side
+        arrived.wait(0.01)
+    querier.undeclare()
+    for n in range(8):
+        ask("D01", n)
+    ask("D02", 0)
+    asker.put(keys.over, encode(over(1)))
+    assert arrived.wait(10)
+    barrier.undeclare()
+    asked: list[Any] = [inbox.get(10) for _ in range(4)]
+    assert [(e.msg.sender, e.msg.cells[0][0]) for e in asked] == [("D01", 0), ("D02", 0), ("D01", 1), ("D01", 2)]
+    for e in asked:
+        e.query.reply(e.query.key_expr, b"ok")
+        e.query.drop()
+    refused = [r for n in range(3, 8) for r in replies[("D01", n)] if r.err is not None]
+    assert len(refused) == 5 and b"already waiting" in refused[0].err.payload.to_bytes()
+    assert inbox.rejects.report() == "{'flood': 5}, from {'D01': 5}"
+    inbox.close()
+
+
+@pytest.fixture
+def bare():
+    """(inbox of a router session without flood filters, outbox of a client of it, keys): what a
+    process's own checks do, with nothing dropped on the way."""
+    keys = Keys(unique_root())
+    conf = zenoh.Config()
+    for name, value in (("mode", '"router"'), ("listen/endpoints", '["tcp/127.0.0.1:0"]'),
+                        ("scouting/multicast/enabled", "false"),
+                        ("adminspace", '{"enabled": true, "permissions": {"read": true, "write": false}}')):
+        conf.insert_json5(name, value)
+    with zenoh.open(conf) as a, zenoh.open(client_config(router_locators(a)[0])) as b:
+        inbox = Inbox(a, keys, LOG)
+        inbox.subscribe(keys.tgt("D01"), Target)
+        out = Outbox(b)
+        while not out.matching(keys.tgt("D01")):
+            inbox.get(0.01)
+        yield inbox, out, keys
+
+
+def test_the_largest_valid_connect_is_within_its_keys_size_limit() -> None:
+    """A swarm host flying every drone there can be connects (its CONNECT lists their ids)."""
+    host = Connect(turn=0, sender="H9999", role=Role.DRONE, drones=tuple(map(drone_name, range(1, MAX_DRONE + 1))),
+                   autopilot="a" * 32, cooperative=True, session="f" * 64)
+    assert len(encode(host)) <= size_limit(Connect)
+
+
+@pytest.mark.parametrize("where", ["bare", "pair"])
+def test_a_payload_above_its_keys_size_limit_is_refused_unread(where, request) -> None:
+    """The inbox refuses it before reading it; a router this project configures drops it on the way."""
+    inbox, out, keys = request.getfixturevalue(where)
+    if where == "pair":
+        inbox.subscribe(keys.tgt("D01"), Target)
+        while not out.matching(keys.tgt("D01")):
+            inbox.get(0.01)
+    out.session.put(keys.tgt("D01"), b"\x81" * (size_limit(Target) + 1))
+    out.put(keys.tgt("D01"), target(1))  # after it: once this one is here, the big one was dealt with
+    assert inbox.get(10).msg == target(1)
+    expected = {"too-large": 1} if where == "bare" else {}
+    assert inbox.rejects.snapshot() == expected

@@ -10,23 +10,36 @@ import json
 import logging
 import queue
 import re
+import signal
 import socket
+import sys
 import threading
 from pathlib import Path
 
 import pytest
 
-from dronesim.coordinator.engine import DroneSpec, GameConfig
-from dronesim.coordinator.journal import dumps
-from dronesim.entities.gcs import Plan
-from dronesim.entities.web import node as web_node
-from dronesim.entities.web.model import GroundState, Rejected, parse_cell, world_json
-from dronesim.entities.web.replay import Replay
-from dronesim.entities.web.server import Hub, WebServer, parse_address
-from dronesim.entities.world import Building, World
+from coordinator.engine import DroneSpec, GameConfig
+from coordinator.journal import dumps
 from dronesim.local import Inputs, simulate
-from dronesim.schema import (
-    Cause, DroneState, DroneStatus, EndReason, Intent, Note, Over, Phase, Status, Turn, UsageError, WorldSpec,
+from entities.gcs import Ground, Plan, Send
+from entities.web import node as web_node
+from entities.web.model import GroundState, Rejected, parse_cell, world_json
+from entities.web.replay import Replay
+from entities.web.server import Hub, WebServer, parse_address
+from entities.world import Building, World
+from schema import (
+    Cause,
+    DroneState,
+    DroneStatus,
+    EndReason,
+    Intent,
+    Note,
+    Over,
+    Phase,
+    Status,
+    Turn,
+    UsageError,
+    WorldSpec,
 )
 
 LOG = logging.getLogger("dronesim.tests.web")
@@ -48,13 +61,23 @@ def gcs_turn(t: int) -> Turn:
     return Turn(turn=t, sender="SRV", phase=Phase.GCS)
 
 
-def started(pace: float = 0.5, drones=("D01", "D02")) -> GroundState:
+NO_PLAN = Plan(())
+
+
+def started(pace: float = 0.5, drones=("D01", "D02"), plan: Plan = NO_PLAN) -> GroundState:
     """A state at turn 1's GCS phase, STATUS(0) in, nothing targeted."""
     starts = {d: (0, 2 * i, 0) for i, d in enumerate(drones)}
-    g = GroundState(WALL, starts, pace=pace)
-    g.on_status(status(0, *(ds(d, p) for d, p in starts.items())))
-    g.on_turn(gcs_turn(1), now=100.0)
+    g = GroundState(Ground(WALL, starts, plan), pace=pace)
+    g.receive(status(0, *(ds(d, p) for d, p in starts.items())), 100.0)
+    g.receive(gcs_turn(1), 100.0)
     return g
+
+
+def answer(g: GroundState, now: float) -> tuple[int, dict, Intent]:
+    """The pending phase answered: its DONE's turn, the targets it carries (those that change), its intent."""
+    [send] = g.answer(now)
+    assert isinstance(send, Send)
+    return send.msg.turn, {a.drone: a.pos for a in send.msg.targets}, send.msg.intent
 
 
 # --------------------------------------------------------------------------- the model
@@ -88,46 +111,47 @@ def test_holds_the_gcs_phase_until_a_first_target():
     assert g.due(100.0) is None  # held: no timer at all
     g.set_target("D01", (4, 4, 0))
     assert g.due(100.0) == 0.0
-    turn, targets, intent = g.answer(100.0)
+    turn, targets, intent = answer(g, 100.0)
     assert (turn, targets, intent) == (1, {"D01": (4, 4, 0)}, Intent.CONTINUE)
     assert g.due(100.0) is None  # answered: nothing pending
 
 
-def test_re_sends_every_alive_drones_last_target_each_turn_at_the_pace():
+def test_answers_at_the_pace_with_the_targets_that_change():
     g = started(pace=0.5)
     g.set_target("D01", (4, 4, 0))
     g.set_target("D02", (4, 0, 1))
-    g.answer(100.0)
-    g.on_status(status(1, ds("D01", (1, 0, 0), target=(4, 4, 0)), ds("D02", (0, 2, 1), target=(4, 0, 1))))
-    g.on_turn(gcs_turn(2), now=100.1)
+    assert answer(g, 100.0) == (1, {"D01": (4, 4, 0), "D02": (4, 0, 1)}, Intent.CONTINUE)
+    g.receive(status(1, ds("D01", (1, 0, 0), target=(4, 4, 0)), ds("D02", (0, 2, 1), target=(4, 0, 1))), 0.0)
+    g.receive(gcs_turn(2), 100.1)
     assert g.due(100.1) == pytest.approx(0.4)  # the pace, from the last answer
-    turn, targets, _ = g.answer(100.5)
-    assert turn == 2 and targets == {"D01": (4, 4, 0), "D02": (4, 0, 1)}
+    g.set_target("D02", (3, 0, 1))
+    assert answer(g, 100.5) == (2, {"D02": (3, 0, 1)}, Intent.CONTINUE)  # D01's is in force already
+    assert g.wanted == {"D01": (4, 4, 0), "D02": (3, 0, 1)}
 
 
 def test_waits_for_the_previous_turns_status_before_deciding():
     g = started(pace=0)
     g.set_target("D01", (4, 4, 0))
-    g.answer(100.0)
-    g.on_turn(gcs_turn(2), now=101.0)  # TURN(2) overtook STATUS(1) (different keys)
+    answer(g, 100.0)
+    g.receive(gcs_turn(2), 101.0)  # TURN(2) overtook STATUS(1) (different keys)
     assert g.due(101.0) == pytest.approx(2.0)  # bounded wait for it
-    g.on_status(status(1, ds("D01", (0, 0, 0), target=(4, 4, 0), note=Note.REACHED), ds("D02", (0, 2, 0))))
+    g.receive(status(1, ds("D01", (0, 0, 0), target=(4, 4, 0), note=Note.REACHED), ds("D02", (0, 2, 0))), 0.0)
     assert g.status_turn == 1
 
 
 def test_holds_when_every_drone_is_at_its_target_and_step_or_a_new_target_resumes():
     g = started(pace=0)
     g.set_target("D01", (1, 0, 0))
-    g.answer(100.0)
-    g.on_status(status(1, ds("D01", (1, 0, 0), target=(1, 0, 0), note=Note.REACHED), ds("D02", (0, 2, 0))))
-    g.on_turn(gcs_turn(2), now=100.0)
+    answer(g, 100.0)
+    g.receive(status(1, ds("D01", (1, 0, 0), target=(1, 0, 0), note=Note.REACHED), ds("D02", (0, 2, 0))), 0.0)
+    g.receive(gcs_turn(2), 100.0)
     assert g.due(100.0) is None and g.waiting()[0] == "idle"
     assert any(e["kind"] == "reached" and "D01 reached its target (1, 0, 0)" in e["text"] for e in g.log)
     g.control("step")
     assert g.due(100.0) == 0.0
-    assert g.answer(100.0)[1] == {"D01": (1, 0, 0)}
-    g.on_status(status(2, ds("D01", (1, 0, 0), target=(1, 0, 0), note=Note.REACHED), ds("D02", (0, 2, 0))))
-    g.on_turn(gcs_turn(3), now=100.0)
+    assert answer(g, 100.0)[1] == {} and g.wanted == {"D01": (1, 0, 0)}  # in force already
+    g.receive(status(2, ds("D01", (1, 0, 0), target=(1, 0, 0), note=Note.REACHED), ds("D02", (0, 2, 0))), 0.0)
+    g.receive(gcs_turn(3), 100.0)
     assert g.due(100.0) is None
     g.set_target("D01", (3, 3, 1))  # a changed target is work to do
     assert g.due(100.0) == 0.0
@@ -135,11 +159,10 @@ def test_holds_when_every_drone_is_at_its_target_and_step_or_a_new_target_resume
 
 def test_unreachable_target_holds_too():
     g = started(pace=0)
-    g.set_target("D01", (2, 2, 0))  # a building cell: accepted (the seed's correctForm), with a warning
-    assert "building" in g.log[-1]["text"]
-    g.answer(100.0)
-    g.on_status(status(1, ds("D01", (1, 0, 0), target=(2, 2, 0), note=Note.UNREACHABLE), ds("D02", (0, 2, 0))))
-    g.on_turn(gcs_turn(2), now=100.0)
+    g.set_target("D01", (4, 4, 0))  # (the drone will find no way there)
+    answer(g, 100.0)
+    g.receive(status(1, ds("D01", (1, 0, 0), target=(4, 4, 0), note=Note.UNREACHABLE), ds("D02", (0, 2, 0))), 0.0)
+    g.receive(gcs_turn(2), 100.0)
     assert g.due(100.0) is None
     assert g.snapshot()["drones"][0]["status"] == "unreachable"
 
@@ -154,9 +177,9 @@ def test_pause_holds_and_quit_ends_even_when_paused():
     g.control("pause")
     g.control("quit")
     assert g.due(100.0) == 0.0
-    turn, targets, intent = g.answer(100.0)
+    turn, targets, intent = answer(g, 100.0)
     assert intent is Intent.QUIT and targets == {"D01": (4, 4, 0)}
-    g.on_turn(gcs_turn(2), now=100.0)  # whatever comes next, the QUIT is said once
+    g.receive(gcs_turn(2), 100.0)  # whatever comes next, the QUIT is said once
     assert g.due(100.0) is None
 
 
@@ -164,6 +187,7 @@ def test_pause_holds_and_quit_ends_even_when_paused():
     ("D01", (5, 0, 0), 422, "(5, 0, 0) is outside the world: 0 <= x < 5, 0 <= y < 5, 0 <= z < 2"),
     ("D01", (0, -1, 0), 422, "outside the world"),
     ("D01", (0, 0, 2), 422, "outside the world"),
+    ("D01", (2, 2, 0), 422, "(2, 2, 0) is inside a building: no drone can get there"),
     ("D07", (1, 1, 0), 422, "unknown drone D07: this game flies D01, D02"),
     ("X1", (1, 1, 0), 400, "is not a drone id"),
     (None, (1, 1, 0), 400, "is not a drone id"),
@@ -180,10 +204,10 @@ def test_deaths_and_losses_are_logged_with_their_cause_and_refuse_targets():
     g = started()
     g.set_target("D01", (4, 0, 0))
     g.set_target("D02", (4, 2, 0))
-    g.answer(100.0)
-    g.on_status(status(1, ds("D01", (1, 0, 0), target=(4, 0, 0)), ds("D02", (1, 2, 0), target=(4, 2, 0))))
-    g.on_status(status(2, ds("D01", (2, 0, 0), DroneState.DEAD, (4, 0, 0), cause=Cause.BUILDING),
-                       ds("D02", (1, 2, 0), DroneState.LOST, (4, 2, 0), cause=Cause.LOST)))
+    answer(g, 100.0)
+    g.receive(status(1, ds("D01", (1, 0, 0), target=(4, 0, 0)), ds("D02", (1, 2, 0), target=(4, 2, 0))), 0.0)
+    g.receive(status(2, ds("D01", (2, 0, 0), DroneState.DEAD, (4, 0, 0), cause=Cause.BUILDING),
+                       ds("D02", (1, 2, 0), DroneState.LOST, (4, 2, 0), cause=Cause.LOST)), 0.0)
     texts = [e["text"] for e in g.log]
     assert "D01 died at (2, 0, 0): crashed into a building" in texts
     assert "D02 is LOST at (1, 2, 0): missed its deadlines or its process vanished" in texts
@@ -193,7 +217,7 @@ def test_deaths_and_losses_are_logged_with_their_cause_and_refuse_targets():
     snap = g.snapshot()
     assert [(d["status"], d["cause"]) for d in snap["drones"]] == [("dead", "building"), ("lost", "lost")]
     assert snap["drones"][0]["trail"] == [[0, 0, 0], [1, 0, 0], [2, 0, 0]]
-    g.on_over(Over(turn=2, sender="SRV", reason=EndReason.NO_DRONE_ALIVE, text="no drone alive"))
+    g.receive(Over(turn=2, sender="SRV", reason=EndReason.NO_DRONE_ALIVE, text="no drone alive"), 0.0)
     assert g.log[-1] == {"turn": 2, "kind": "over", "text": "GAME OVER at turn 2: NO_DRONE_ALIVE - no drone alive"}
     with pytest.raises(Rejected) as err:
         g.set_target("D01", (0, 0, 0))
@@ -206,47 +230,48 @@ def test_deaths_and_losses_are_logged_with_their_cause_and_refuse_targets():
 
 def test_collision_causes_read_as_collisions():
     g = started()
-    g.on_status(status(1, ds("D01", (0, 1, 0), DroneState.DEAD, cause=Cause.VERTEX),
-                       ds("D02", (0, 1, 0), DroneState.DEAD, cause=Cause.SWAP)))
+    g.receive(status(1, ds("D01", (0, 1, 0), DroneState.DEAD, cause=Cause.VERTEX),
+                       ds("D02", (0, 1, 0), DroneState.DEAD, cause=Cause.SWAP)), 0.0)
     assert "D01 died at (0, 1, 0): collided with another drone (same cell)" in [e["text"] for e in g.log]
     assert "swapped cells" in g.log[-1]["text"]
 
 
 def test_a_late_ground_station_takes_over_the_targets_in_force():
-    g = GroundState(WALL, {"D01": (0, 0, 0)})
-    g.on_status(status(6, ds("D01", (1, 1, 0), target=(4, 4, 1))))
+    g = GroundState(Ground(WALL, {"D01": (0, 0, 0)}, NO_PLAN))
+    g.receive(status(6, ds("D01", (1, 1, 0), target=(4, 4, 1))), 0.0)
     assert g.wanted == {"D01": (4, 4, 1)}
-    g.on_turn(gcs_turn(7), now=0.0)
+    g.receive(gcs_turn(7), 0.0)
     assert g.due(0.0) == 0.0  # it has work to do: the drone is on its way
-    assert g.answer(0.0)[1] == {"D01": (4, 4, 1)}
+    assert answer(g, 0.0) == (7, {}, Intent.CONTINUE)  # its target is in force: nothing to send
 
 
 def test_stale_messages_do_not_go_back_in_time():
     g = started()
-    g.on_status(status(3, ds("D01", (1, 0, 0)), ds("D02", (0, 2, 0))))
-    g.on_status(status(2, ds("D01", (0, 0, 0)), ds("D02", (0, 2, 0))))
+    g.receive(status(3, ds("D01", (1, 0, 0)), ds("D02", (0, 2, 0))), 0.0)
+    g.receive(status(2, ds("D01", (0, 0, 0)), ds("D02", (0, 2, 0))), 0.0)
     assert g.drones["D01"].pos == (1, 0, 0)
-    g.on_turn(gcs_turn(4), now=0.0)
-    g.on_turn(gcs_turn(3), now=0.0)
+    g.receive(gcs_turn(4), 0.0)
+    g.receive(gcs_turn(3), 0.0)
     assert g.turn == 4 and g.pending == 4
 
 
 def test_a_phase_the_coordinator_closed_without_us_is_no_longer_pending():
     g = started()
-    g.on_turn(Turn(turn=1, sender="SRV", phase=Phase.DRONES), now=0.0)  # its GCS deadline passed
+    g.receive(Turn(turn=1, sender="SRV", phase=Phase.DRONES), 0.0)  # its GCS deadline passed
     assert g.pending is None and g.due(0.0) is None
 
 
 def test_scripted_targets_keep_the_turns_going_until_their_last_turn():
-    g = started(pace=0)
-    plan = Plan.parse(["D02=3,3,0@3"], WALL.size)
-    g.schedule(1, plan.at(1), plan.last_turn)
+    g = started(pace=0, plan=Plan.parse(["D02=3,3,0@3"], WALL.size))
     assert g.busy() and g.due(0.0) == 0.0  # nothing targeted yet, but turn 3 must come
-    g.answer(0.0)
-    g.on_status(status(1, ds("D01"), ds("D02", (0, 2, 0))))
-    g.on_turn(gcs_turn(3), now=0.0)
-    g.schedule(3, plan.at(3), plan.last_turn)
+    answer(g, 0.0)
+    g.receive(status(1, ds("D01"), ds("D02", (0, 2, 0))), 0.0)
+    g.receive(gcs_turn(3), 0.0)
     assert g.wanted == {"D02": (3, 3, 0)}
+    assert g.log[-1]["text"] == "scripted target of D02: (3, 3, 0)"
+    assert answer(g, 0.0) == (3, {"D02": (3, 3, 0)}, Intent.CONTINUE)
+    g.receive(gcs_turn(3), 0.0)  # a repeat of an answered phase is not answered again
+    assert g.pending is None and g.due(0.0) is None
 
 
 @pytest.mark.parametrize("value", [-1, 11, "fast", None, True])
@@ -262,11 +287,11 @@ def test_unknown_control_action_is_refused():
 
 
 def test_log_and_trails_stay_bounded():
-    from dronesim.entities.web import model
+    from entities.web import model
 
-    g = GroundState(World.from_buildings((40, 40, 1), []), {"D01": (0, 0, 0)})
+    g = GroundState(Ground(World.from_buildings((40, 40, 1), []), {"D01": (0, 0, 0)}, Plan(())))
     for t in range(1, 700):
-        g.on_status(status(t, ds("D01", (t % 40, (t // 40) % 40, 0), target=(39, 39, 0))))
+        g.receive(status(t, ds("D01", (t % 40, (t // 40) % 40, 0), target=(39, 39, 0))), 0.0)
         g.note("info", f"event {t}")
     snap = g.snapshot()
     assert len(snap["log"]) == model.LOG_LIMIT
@@ -285,6 +310,21 @@ def write_journal(path: Path, world: World, drones: dict, autopilots: dict, targ
     result = simulate(config, autopilots, Inputs(plan=Plan.parse(targets, world.size), intents=intents), LOG)
     path.write_text("".join(dumps(r) + "\n" for r in result.records))
     return result.records
+
+
+@pytest.mark.parametrize("signum,status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_replay_serves_until_a_signal_stops_it_cleanly(tmp_path, signum, status):
+    from tests.harness import Proc
+
+    journal = tmp_path / "crash.journal"
+    write_journal(journal, WALL, {"D01": (0, 0, 0)}, {"D01": "v1"}, ["D01=4,0,0"])
+    proc = Proc("GCS", [sys.executable, "-m", "dronesim", "gcs", "--web", "127.0.0.1:0", "--replay", str(journal)],
+                tmp_path)
+    proc.expect(r"^web ground station: http")
+    proc.p.send_signal(signum)
+    assert proc.wait() == status, proc.text
+    proc.expect(rf"stopped by {signal.Signals(signum).name}")
+    assert "Traceback" not in proc.text
 
 
 def test_replay_frames_follow_the_journal(tmp_path):
@@ -415,7 +455,8 @@ def test_target_and_control_reach_the_backend(served):
     assert json_call(server, "POST", "/api/target", '{"drone": "D02", "cell": "3, 4, 1"}')[0] == 200
     assert json_call(server, "POST", "/api/control", '{"action": "pace", "value": 0.25}')[0] == 200
     assert json_call(server, "POST", "/api/control", '{"action": "quit"}')[0] == 200
-    assert backend.calls == [("target", {"drone": "D01", "cell": (1, 2, 0)}), ("target", {"drone": "D02", "cell": (3, 4, 1)}),
+    assert backend.calls == [("target", {"drone": "D01", "cell": (1, 2, 0)}),
+                             ("target", {"drone": "D02", "cell": (3, 4, 1)}),
                              ("pace", {"value": 0.25}), ("quit", {"value": None})]
 
 

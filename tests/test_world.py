@@ -8,8 +8,8 @@ from collections import deque
 import numpy as np
 import pytest
 
-from dronesim.entities.world import Building, World
-from dronesim.schema import CellInfo, CellKind, UsageError
+from entities.world import Building, World
+from schema import CellInfo, CellKind, UsageError
 
 
 def B(x: int, y: int, length: int, width: int, height: int) -> Building:

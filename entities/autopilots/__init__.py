@@ -5,9 +5,10 @@ from __future__ import annotations
 import importlib
 from collections.abc import Sequence
 
-from dronesim.schema import Cell, UsageError
+from schema import Cell, UsageError
+from schema.tuning import SWARM_MIN
 
-from .base import Autopilot, Decision, Oracle, Sensing, SwarmPilot, fly_round, run_step
+from .base import Autopilot, Decision, Oracle, Sensing, SwarmPilot, drive, fly_round, run_step
 
 #: name -> (module, class). Modules are imported on first use.
 REGISTRY: dict[str, tuple[str, str]] = {
@@ -20,9 +21,6 @@ REGISTRY: dict[str, tuple[str, str]] = {
 SWARMS: dict[str, tuple[str, str]] = {
     "seed": ("seed", "SeedSwarm"),
 }
-#: From this many drones on, a host flies them with the swarm form (below, numpy's fixed cost per
-#: operation makes one instance per drone faster: `dronesim bench` shows both).
-SWARM_MIN = 32
 
 
 def _load(entry: tuple[str, str]) -> type:
@@ -38,9 +36,9 @@ def pilot_class(name: str) -> type[Autopilot]:
         raise UsageError(f"unknown autopilot {name!r}; choose one of {', '.join(REGISTRY)}") from None
 
 
-def make_autopilot(name: str, *, world_size: Cell) -> Autopilot:
-    """A fresh autopilot instance (one per drone) for a world of `world_size`."""
-    return pilot_class(name)(world_size=world_size)
+def make_autopilot(name: str, *, world_size: Cell, **options: object) -> Autopilot:
+    """A fresh autopilot instance (one per drone) for a world of `world_size` (`options`: the autopilot's own)."""
+    return pilot_class(name)(world_size=world_size, **options)
 
 
 def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int], least: int = SWARM_MIN) -> SwarmPilot | None:
@@ -52,4 +50,5 @@ def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int], least: int
     return _load(SWARMS[name])(world_size=world_size, drones=drones)
 
 
-__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "SwarmPilot", "REGISTRY", "SWARMS", "SWARM_MIN", "fly_round", "make_autopilot", "make_swarm", "pilot_class", "run_step"]
+__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "SwarmPilot", "REGISTRY", "SWARMS", "SWARM_MIN", "drive",
+           "fly_round", "make_autopilot", "make_swarm", "pilot_class", "run_step"]

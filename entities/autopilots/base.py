@@ -1,10 +1,15 @@
 """The autopilot interface: a pure, network-free decision procedure for one drone.
 
-An autopilot's `step` is a generator. It yields the cells it wants to sense (an ASK, one or more
-cells), receives a mapping cell -> CellInfo in return, may ask again, and finally returns a
-`Decision`. The same generator is driven by an in-process oracle over a `World` (tests, benchmarks)
-or by the Zenoh drone adapter (each yield is one ASK query to the environment). Because the world
-is frozen during a turn's DRONES phase, both give identical decisions.
+An autopilot's `step` is a generator. It yields the cells it wants to sense (one or more cells),
+receives a mapping cell -> CellInfo in return, may ask again, and finally returns a `Decision`. The
+same generator is driven by an in-process oracle over a `World` (`drive`: tests, benchmarks, the
+in-process game) or by the drone process's core (entities/drone.py: each yield is answered from its
+chart of the environment's map, or by an ASK to the environment). Because the world is frozen during a
+turn's DRONES phase, both give identical decisions.
+
+A process's drones are flown together as one plan, itself a generator of the same kind: `fly_pilots`
+(one pilot per drone, a round of every drone's questions at a time) or `fly_swarm` (a swarm pilot over
+arrays). Whoever drives a plan answers its questions; the plan returns the turn's moves.
 
 Autopilots keep their memory in the instance: one instance per drone, for the whole game.
 """
@@ -13,23 +18,25 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass
-from typing import ClassVar, Protocol
+from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
-from dronesim.schema import Cell, CellInfo, Note, StepTable
-from dronesim.schema.tables import code_of, drone_number
-from dronesim.schema.messages import AROUND
+from schema import Cell, CellInfo, Note, StepTable
+from schema.messages import AROUND
+from schema.tables import code_of, drone_number
 
 Answers = Mapping[Cell, CellInfo]
 #: The kind a swarm pilot is given for a cell nobody answered (see `fly_swarm`).
 NO_ANSWER = 255
 Sensing = Generator[tuple[Cell, ...], Answers, "Decision"]
 Oracle = Callable[[tuple[Cell, ...]], Answers]
-
-#: The 6-connectivity moves, in a fixed order (+x, -x, +y, -y, +z, -z).
-STEPS6: tuple[Cell, ...] = AROUND  # +x, -x, +y, -y, +z, -z
-
+#: A process's turn for drones flown one pilot each (`fly_pilots`): each round yields every drone's
+#: pending question ({drone: cells}) and receives {drone: answers}; it returns the turn's moves.
+PilotsPlan = Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers], "StepTable | dict[str, Decision]"]
+#: A swarm pilot's turn (`SwarmPilot.step`): it yields an (m, 3) array of cells (at most once) and receives
+#: their CellKind codes ((m,) uint8, `NO_ANSWER` for a cell nobody answered).
+SwarmSensing = Generator[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Decision:
@@ -37,6 +44,9 @@ class Decision:
 
     pos: Cell
     note: Note = Note.NONE
+    #: A cooperative drone's candidate cells for the arbiter, best first, as steps packed by
+    #: `schema.tables.rank_steps` (0: none; the arbiter then takes `pos` or keeps the drone where it is).
+    ranked: int = 0
 
 
 class Autopilot(Protocol):
@@ -45,8 +55,13 @@ class Autopilot(Protocol):
     name: ClassVar[str]
     #: True if the drone gives way to other drones when the coordinator arbitrates moves.
     cooperative: ClassVar[bool]
-    #: True if it senses by ASK (its process then asks ahead for its drones' neighbourhoods).
+    #: True if its `step` asks about cells (yields). Its process then charts the environment's static map
+    #: (ENV/MAP) and, until that comes, asks ahead for the cells around its drones; each question is
+    #: answered from that chart, or by an ASK to the environment. False: it flies blind, asking nothing.
     senses: ClassVar[bool]
+
+    def __init__(self, *, world_size: Cell, **options: Any) -> None:
+        """A pilot for a world of `world_size` (`options`: the autopilot's own)."""
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         """Decide this turn's move from `pos` towards `target` (None: no target yet, hover)."""
@@ -57,11 +72,11 @@ class SwarmPilot(Protocol):
     """One pilot for all the drones of a swarm host, over arrays (`autopilots.SWARMS`): the same
     decisions as one autopilot per drone."""
 
-    def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray,
-             kinds: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """The moves of the drones numbered `drones`, standing at `pos` ((n, 3)) with `target` ((n, 3),
-        (-1, -1, -1) for none): (new cells (n, 3), note codes (n,) as in a StepTable). `kinds` answers
-        an (m, 3) array of cells with their CellKind codes (`NO_ANSWER` for a cell not answered)."""
+        (-1, -1, -1) for none): returns (new cells (n, 3), note codes (n,) as in a StepTable). It may
+        yield once an (m, 3) array of cells, and receives their CellKind codes (`NO_ANSWER` for a cell
+        not answered)."""
         ...
 
 
@@ -70,11 +85,26 @@ def add(a: Cell, b: Cell) -> Cell:
 
 
 def neighbours6(pos: Cell) -> tuple[Cell, ...]:
-    return tuple(add(pos, d) for d in STEPS6)
+    return tuple(add(pos, d) for d in AROUND)
 
 
 def in_bounds(cell: Cell, size: Cell) -> bool:
     return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
+
+
+Q = TypeVar("Q")
+A = TypeVar("A")
+R = TypeVar("R")
+
+
+def drive(plan: Generator[Q, A, R], oracle: Callable[[Q], A]) -> R:
+    """Run a sensing generator (an autopilot's step, a plan) to its end, `oracle` answering every question."""
+    try:
+        question = next(plan)
+        while True:
+            question = plan.send(oracle(question))
+    except StopIteration as stop:
+        return stop.value
 
 
 def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -> tuple[Decision, int]:
@@ -82,27 +112,25 @@ def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -
 
     Returns the decision and the number of ASK round trips it took.
     """
-    gen = pilot.step(pos, target)
     asks = 0
-    try:
-        cells = next(gen)
-        while True:
-            asks += 1
-            cells = gen.send(oracle(cells))
-    except StopIteration as stop:
-        decision = stop.value
+
+    def counted(cells: tuple[Cell, ...]) -> Answers:
+        nonlocal asks
+        asks += 1
+        return oracle(cells)
+
+    decision = drive(pilot.step(pos, target), counted)
     if not isinstance(decision, Decision):
         raise TypeError(f"{type(pilot).__name__}.step returned {decision!r}, not a Decision")
     return decision, asks
 
 
-def fly_round(
-    steps: Mapping[str, Sensing],
-    ask_all: Callable[[dict[str, tuple[Cell, ...]]], Mapping[str, Answers]],
-) -> dict[str, Decision]:
-    """Drive several drones' `step` generators together: each round gathers every pending ASK and
-    answers them all at once (`ask_all`, concurrent on the network), so a turn takes as many
-    sequential ASK round trips as the most inquisitive drone, not the sum over drones."""
+def fly_round(steps: Mapping[str, Sensing]) -> Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers],
+                                                          dict[str, Decision]]:
+    """Drive several drones' `step` generators together: each round yields every pending question at
+    once ({drone: cells}) and receives every answer ({drone: answers}, asked concurrently on the network),
+    so a turn takes as many sequential ASK round trips as the most inquisitive drone, not the sum over
+    drones. Returns each drone's decision."""
     decisions: dict[str, Decision] = {}
     pending: dict[str, tuple[Cell, ...]] = {}
     for d, gen in steps.items():
@@ -111,9 +139,9 @@ def fly_round(
         except StopIteration as stop:
             decisions[d] = stop.value
     while pending:
-        answers = ask_all(pending)
+        answers = yield pending
         nxt: dict[str, tuple[Cell, ...]] = {}
-        for d, cells in pending.items():
+        for d in pending:
             try:
                 nxt[d] = steps[d].send(answers[d])
             except StopIteration as stop:
@@ -132,19 +160,20 @@ def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
     n = len(ids)
     return StepTable.build(drone=np.fromiter(map(drone_number, ids), np.uint16, n),
                            pos=np.array([d.pos for d in decided], np.int32).reshape(n, 3),
-                           note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n))
+                           note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n),
+                           ranked=np.fromiter((d.ranked for d in decided), np.uint32, n))
 
 
-def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell, Cell | None]],
-               ask_all: Callable[[dict[str, tuple[Cell, ...]]], Mapping[str, Answers]], *,
-               host: str | None) -> StepTable | dict[str, Decision]:
-    """One autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell, target) orders:
-    a swarm host's MOVES steps, or a lone drone's decision."""
-    decisions = fly_round({d: pilots[d].step(pos, target) for d, pos, target in orders}, ask_all)
+def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell, Cell | None]], *,
+               host: str | None) -> PilotsPlan:
+    """The plan of one autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell,
+    target) orders: returns a swarm host's MOVES steps, or a lone drone's decision."""
+    decisions = yield from fly_round({d: pilots[d].step(pos, target) for d, pos, target in orders})
     return steps_of(decisions) if host else decisions
 
 
-def fly_swarm(swarm: SwarmPilot, rows: np.ndarray, kinds: Callable[[np.ndarray], np.ndarray]) -> StepTable:
-    """A swarm pilot's moves for the orders `rows` (an OrderTable's), the cells it asks about answered by `kinds`."""
-    pos, note = swarm.step(rows["drone"], rows["pos"], rows["target"], kinds)
+def fly_swarm(swarm: SwarmPilot, rows: np.ndarray) -> Generator[np.ndarray, np.ndarray, StepTable]:
+    """The plan of a swarm pilot for the orders `rows` (an OrderTable's): it yields the cells it asks
+    about (at most once), receives their kinds, and returns the MOVES steps."""
+    pos, note = yield from swarm.step(rows["drone"], rows["pos"], rows["target"])
     return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note)

@@ -48,17 +48,17 @@ identical to the one-by-one seed.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from itertools import repeat
 from typing import ClassVar
 
 import numpy as np
 
-from dronesim.entities.world import linear_rows
-from dronesim.schema import Cell, CellInfo, CellKind, Note, UsageError
-from dronesim.schema.tables import code_of
+from entities.world import linear_rows
+from schema import Cell, CellInfo, CellKind, Note, UsageError
+from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, in_bounds
+from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds
 
 #: The 4 horizontal directions as (dx, dy), in the seed's tie-break order.
 DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
@@ -210,7 +210,7 @@ class SeedSwarm:
     directionOrder repeats its best cell where a direction leads outside the world; the repeats change
     nothing (the cell is known by then, or was never answered) and are skipped.
 
-    Sensing: `kinds` is asked once per turn, for every candidate some drone does not know: all a turn may
+    Sensing: it asks once per turn, for every candidate some drone does not know: all a turn may
     need. A drone learns only the cells it gets to, so asking more changes nothing but the number of
     round trips: one per turn at most, where the seed's sequential questions take up to 4.
     """
@@ -240,17 +240,17 @@ class SeedSwarm:
         drones = np.asarray(drones, dtype=np.int64)
         rows = np.searchsorted(self._drones, drones)
         if len(drones) and (rows.max() >= len(self._drones) or (self._drones[rows] != drones).any()):
-            raise UsageError(f"drones {sorted(set(drones.tolist()) - set(self._drones.tolist()))} are not in this swarm")
+            strangers = sorted(set(drones.tolist()) - set(self._drones.tolist()))
+            raise UsageError(f"drones {strangers} are not in this swarm")
         return rows
 
     # ------------------------------------------------------------------ one turn
 
-    def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray,
-             kinds: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """This turn's moves of the drones numbered `drones` (distinct), standing at `pos` ((n, 3)) with
-        `target` ((n, 3), (-1, -1, -1) for none). `kinds` answers an (m, 3) array of cells with their
-        CellKind codes ((m,) uint8, `NO_ANSWER` for a cell not answered); it is called at most once.
-        Returns (new cells (n, 3) int64, note codes (n,) uint8 as in a StepTable)."""
+        `target` ((n, 3), (-1, -1, -1) for none). It yields at most once an (m, 3) array of cells and
+        receives their CellKind codes ((m,) uint8, `NO_ANSWER` for a cell not answered). Returns (new
+        cells (n, 3) int64, note codes (n,) uint8 as in a StepTable)."""
         nx, ny, nz = size = self.world_size
         n = len(drones)
         rows = self._rows(drones)
@@ -293,7 +293,7 @@ class SeedSwarm:
         ask = unknown.copy()
         ask[:, 0] = False
         if ask.any():
-            told[ask] = kinds(cand[ask])
+            told[ask] = yield cand[ask]
         fresh_empty = unknown & (told == CellKind.EMPTY)
         known_empty = usable & (entry >= 0) & (entry & 1 == 1)
 

@@ -5,7 +5,7 @@ senses anything: it can fly straight into a building and die, exactly like the s
 
 Choices the seed leaves open, fixed here:
 
-* Ties between equally close neighbours are broken by `base.STEPS6` order:
+* Ties between equally close neighbours are broken by `AROUND` order (schema.messages):
   +x, -x, +y, -y, +z, -z (the first one in that order wins).
 * Only in-bounds neighbours are candidates, so the drone never leaves the world. Since the target
   lies inside the world, the closest in-bounds neighbour is always strictly closer than the
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from dronesim.schema import Cell, Note
+from schema import Cell, Note
 
 from .base import Decision, Sensing, in_bounds, neighbours6
 
@@ -46,7 +46,7 @@ class V1Pilot:
         candidates = [c for c in neighbours6(pos) if in_bounds(c, self.world_size)]
         if not candidates:
             return Decision(pos=pos)
-        # min() keeps the first of equal keys, i.e. the STEPS6 order breaks ties.
+        # min() keeps the first of equal keys, i.e. the AROUND order breaks ties.
         return Decision(pos=min(candidates, key=lambda c: _dist2(c, target)))
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:

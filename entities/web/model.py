@@ -2,8 +2,9 @@
 
 `GroundState` is owned by one thread (the Zenoh main loop). It is fed the coordinator's TURN, STATUS
 and OVER, and the human's commands (set a target, pause, resume, step, pace, quit), and it says when
-the ground station answers its GCS phase and with what: every alive drone's last target (re-sent each
-turn, as the seed does), then DONE with their count. `snapshot()` is the JSON the page renders.
+the ground station answers its GCS phase; what it answers is the protocol's (`entities.gcs.Station`, as
+every ground station): one DONE carrying the alive drones' targets that differ from those in force (the
+last STATUS's). `snapshot()` is the JSON the page renders.
 
 Pacing: a human cannot click between turns that take milliseconds, so the GCS phase is answered at most
 every `pace` seconds, and is *held* (not answered) while there is nothing to do -- no alive drone has a
@@ -16,13 +17,26 @@ from __future__ import annotations
 
 import re
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from dronesim.schema import (
-    Cause, Cell, DroneState, DroneStatus, Intent, Note, Over, Status, Turn, UsageError, is_drone_id,
+from schema import (
+    Cause,
+    Cell,
+    DroneState,
+    DroneStatus,
+    Intent,
+    Message,
+    Note,
+    Over,
+    Status,
+    Turn,
+    UsageError,
+    Welcome,
+    is_drone_id,
 )
 
+from ..gcs import Effect, Ground, Station
 from ..world import World
 
 #: How the page names a drone's state.
@@ -106,19 +120,24 @@ class DroneView:
         return self.status not in (DEAD, LOST)
 
 
-class GroundState:
-    """The live ground station's state (see the module doc). Times are seconds of any monotonic clock."""
+@dataclass(frozen=True, slots=True)
+class Refresh:
+    """The state the page shows has changed: send it the new snapshot."""
 
-    def __init__(self, world: World, starts: Mapping[str, Cell], *, pace: float = 0.5, title: str = "") -> None:
-        self.world = world
+
+class GroundState:
+    """The live ground station's state (see the module doc) around the protocol's `Station` (held: the
+    page's pacing says when it answers). Times are seconds of any monotonic clock."""
+
+    def __init__(self, ground: Ground, *, pace: float = 0.5, title: str = "", intro: str = "") -> None:
+        """`intro`: the first line of the page's log (the coordinator's welcome), with the game's `describe`."""
+        self.station = Station(ground, hold=True)
+        self.world = ground.world
         self.title = title
-        self.drones: dict[str, DroneView] = {d: DroneView(pos=tuple(c), trail=[tuple(c)])
-                                             for d, c in sorted(starts.items())}
-        self.wanted: dict[str, Cell] = {}  # the targets this GCS sends (re-sent every turn)
+        self.drones: dict[str, DroneView] = {d: DroneView(pos=c, trail=[c])
+                                             for d, c in sorted(ground.starts.items())}
         self.turn = 0  # the turn in progress (the latest TURN seen)
         self.phase: str | None = None
-        self.status_turn = -1  # the turn of the latest STATUS
-        self.pending: int | None = None  # a GCS phase not answered yet
         self.pending_since = 0.0
         self.last_answer: float | None = None
         self.paused = False
@@ -126,10 +145,33 @@ class GroundState:
         self.step_requested = False
         self.quit_requested = False
         self.quit_sent = False
-        self.scheduled_until = 0  # the last turn of a scripted plan (--targets): turns must reach it
-        self.over: Over | None = None
         self.log: deque[dict] = deque(maxlen=LOG_LIMIT)
         self.seq = 0  # bumped on every change the page should see
+        self._shown = 0  # the `seq` the page was last sent
+        if intro:
+            self.note("info", f"{intro}; {self.describe()}")
+
+    def describe(self) -> str:
+        """The world and the drones of the game, in a line."""
+        return (f"world {'x'.join(map(str, self.world.size))} with {int(self.world.grid.sum())} building cells; "
+                f"drones {', '.join(self.drones)}")
+
+    @property
+    def wanted(self) -> dict[str, Cell]:
+        """The targets this GCS wants (sent when they differ from those in force)."""
+        return self.station.wanted
+
+    @property
+    def pending(self) -> int | None:
+        return self.station.pending
+
+    @property
+    def over(self) -> Over | None:
+        return self.station.over
+
+    @property
+    def status_turn(self) -> int:
+        return self.station.status_turn
 
     # ------------------------------------------------------------------ helpers
 
@@ -154,21 +196,37 @@ class GroundState:
 
     # ------------------------------------------------------------------ from the coordinator
 
-    def on_turn(self, msg: Turn, now: float) -> None:
-        if msg.turn < self.turn:
-            return  # an old phase overtaken by a newer one
-        self.turn, self.phase = msg.turn, msg.phase.value
-        if msg.phase.value == "GCS":
-            if self.pending != msg.turn:
-                self.pending, self.pending_since = msg.turn, now
-        elif self.pending is not None and self.pending <= msg.turn:
-            self.pending = None  # the coordinator moved on without us (its GCS deadline passed)
+    def receive(self, msg: Message, now: float) -> list[Effect]:
+        """A message from the coordinator (TURN of any phase, STATUS, OVER)."""
+        effects: list[Effect] = []
+        match msg:
+            case Turn() if msg.turn >= self.turn:  # (an older phase is overtaken by a newer one)
+                self.turn, self.phase = msg.turn, msg.phase.value
+                was, before = self.pending, dict(self.wanted)
+                effects = self.station.receive(msg, now)
+                if self.pending is not None and self.pending != was:
+                    self.pending_since = now
+                for d, c in self.wanted.items():
+                    if before.get(d) != c:
+                        self._event("target", f"scripted target of {d}: {fmt(c)}")
+            case Status() if msg.turn >= self.status_turn:
+                self._show_status(msg)
+                effects = self.station.receive(msg, now)
+            case Over() if self.over is None:
+                effects = self.station.receive(msg, now)
+                self._event("over", f"GAME OVER at turn {msg.turn}: {msg.reason.value}"
+                                    + (f" - {msg.text}" if msg.text else ""), msg.turn)
+            case _:
+                return []
         self._changed()
+        return effects
 
-    def on_status(self, msg: Status) -> None:
-        if msg.turn < self.status_turn:
-            return
-        self.status_turn = msg.turn
+    def admitted(self, welcome: Welcome) -> list[Effect]:
+        """Admitted again: the coordinator came back."""
+        self.note("info", "the coordinator came back: connected again")
+        return self.station.admitted(welcome)
+
+    def _show_status(self, msg: Status) -> None:
         for s in msg.drones:
             view = self.drones.get(s.drone)
             if view is None:  # not in our Welcome (cannot happen with a correct coordinator): show it anyway
@@ -182,11 +240,6 @@ class GroundState:
                     del view.trail[:-TRAIL_LIMIT]
             if view.status != was:
                 self._transition(s.drone, view, msg.turn)
-            if not s.alive:
-                self.wanted.pop(s.drone, None)  # nothing more to say to a dead or lost drone
-            elif s.target is not None:
-                self.wanted.setdefault(s.drone, s.target)  # a GCS joining late takes over the targets in force
-        self._changed()
 
     def _transition(self, drone: str, view: DroneView, turn: int) -> None:
         where = fmt(view.pos)
@@ -201,28 +254,10 @@ class GroundState:
                 self._event("unreachable", f"{drone} reports its target {fmt(view.target)} unreachable; "
                                            f"hovering at {where}", turn)
 
-    def on_over(self, msg: Over) -> None:
-        if self.over is not None:
-            return
-        self.over = msg
-        self.pending = None
-        self._event("over", f"GAME OVER at turn {msg.turn}: {msg.reason.value}"
-                            + (f" - {msg.text}" if msg.text else ""), msg.turn)
-        self._changed()
-
-    def schedule(self, turn: int, targets: Mapping[str, Cell], last_turn: int) -> None:
-        """Scripted targets (--targets / --script) taking effect at `turn`; `last_turn` ends the script."""
-        self.scheduled_until = last_turn
-        for d, c in sorted(targets.items()):
-            if d in self.drones and self.drones[d].alive and self.wanted.get(d) != c:
-                self.wanted[d] = c
-                self._event("target", f"scripted target of {d}: {fmt(c)}", turn)
-        self._changed()
-
     # ------------------------------------------------------------------ from the human
 
     def check_target(self, drone: object, cell: Cell) -> str:
-        """The seed's correctForm and more: a known, alive drone and a cell inside the world."""
+        """The seed's correctForm and more: a known, alive drone and a cell inside the world, not a building's."""
         if self.over is not None:
             raise Rejected("the game is over: no more targets", 409)
         if not isinstance(drone, str) or not is_drone_id(drone):
@@ -235,16 +270,17 @@ class GroundState:
         nx, ny, nz = self.world.size
         if not self.world.contains(cell):
             raise Rejected(f"{fmt(cell)} is outside the world: 0 <= x < {nx}, 0 <= y < {ny}, 0 <= z < {nz}")
+        if self.world.is_building(cell):
+            raise Rejected(f"{fmt(cell)} is inside a building: no drone can get there")
         return drone
 
     def set_target(self, drone: object, cell: Cell) -> dict:
         d = self.check_target(drone, cell)
-        self.wanted[d] = cell
+        self.station.want({d: cell})
         self.step_requested = False
-        extra = " (a building cell: the drone will not get in)" if self.world.is_building(cell) else ""
-        self._event("target", f"target of {d} set to {fmt(cell)}{extra}")
+        self._event("target", f"target of {d} set to {fmt(cell)}")
         self._changed()
-        return {"ok": True, "text": f"target of {d} set to {fmt(cell)}{extra}; sent at the next GCS phase"}
+        return {"ok": True, "text": f"target of {d} set to {fmt(cell)}; sent at the next GCS phase"}
 
     def control(self, action: object, value: object = None) -> dict:
         """pause, resume, step, quit, or pace (with `value` seconds)."""
@@ -277,7 +313,7 @@ class GroundState:
     def busy(self) -> bool:
         """Whether turns must go on by themselves: a drone has a target it has not reached (or found
         unreachable), or a scripted target is still to come."""
-        if self.pending is not None and self.scheduled_until > self.pending - 1:
+        if self.pending is not None and self.station.plan.last_turn >= self.pending:
             return True
         for d, cell in self.wanted.items():
             view = self.drones.get(d)
@@ -320,23 +356,30 @@ class GroundState:
             wait = max(wait, self.pending_since + STATUS_GRACE - now)
         return max(0.0, wait)
 
-    def in_force(self) -> dict[str, Cell]:
-        """The targets of the last STATUS."""
-        return {d: v.target for d, v in self.drones.items() if v.target is not None}
+    def wake(self, now: float) -> float | None:
+        """Seconds until `tick` has something to do (None: nothing, whatever the time)."""
+        waits = [w for w in (self.due(now), self.station.wake(now)) if w is not None]
+        return min(waits) if waits else None
 
-    def answer(self, now: float) -> tuple[int, dict[str, Cell], Intent]:
-        """Answer the pending phase: (turn, targets to send, intent); call when `due` says 0."""
+    def tick(self, now: float) -> list[Effect | Refresh]:
+        """What is due at `now`: the pending phase's answer, the end, the page's new state."""
+        effects: list[Effect | Refresh] = [*self.answer(now)] if self.due(now) == 0.0 else []
+        effects += self.station.tick(now)
+        if self.seq != self._shown:
+            self._shown = self.seq
+            effects.append(Refresh())
+        return effects
+
+    def answer(self, now: float) -> list[Effect]:
+        """Answer the pending phase (call when `due` says 0): the DONE to send."""
         assert self.pending is not None
-        turn = self.pending
-        targets = {d: c for d, c in sorted(self.wanted.items()) if d in self.drones and self.drones[d].alive}
         intent = Intent.QUIT if self.quit_requested else Intent.CONTINUE
-        self.pending = None
         self.last_answer = now
         self.step_requested = False
         if intent is Intent.QUIT:
             self.quit_sent = True
         self._changed()
-        return turn, targets, intent
+        return self.station.answer(self.pending, intent)
 
     # ------------------------------------------------------------------ for the page
 

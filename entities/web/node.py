@@ -1,12 +1,12 @@
 """``dronesim gcs --web [HOST:]PORT``: the ground station as a web page; ``--replay JOURNAL`` plays a journal.
 
-Live mode holds a Zenoh session like the terminal ground station (same admission, same protocol: each GCS
-phase, a TGT per alive drone with its last target, then DONE with their count and intent CONTINUE, or QUIT
-from the page's button). One main thread owns the `GroundState`: it drains one queue fed by the Zenoh
-callbacks (TURN, STATUS, OVER, presence) and by the HTTP threads (the human's commands, each answered
-through its own reply queue). After every change it publishes the state to the `Hub`, which streams it
-to every page (Server-Sent Events). After OVER it serves the final state, then exits 0 (or keeps the page
-up for ``--linger`` seconds).
+Live mode holds a Zenoh session like the terminal ground station (same admission, same protocol,
+`entities.gcs.Station`: each GCS phase one DONE carrying the targets that change, intent CONTINUE, or QUIT
+from the page's button). One main thread owns the `GroundState` (`gcs_node.play`): it drains one queue fed
+by the Zenoh callbacks (TURN, STATUS, OVER, presence) and by the HTTP threads (the human's commands, each
+answered through its own reply queue). After every change it publishes the state to the `Hub`, which
+streams it to every page (Server-Sent Events). After OVER it serves the final state, then exits 0 (or keeps
+the page up for ``--linger`` seconds).
 """
 
 from __future__ import annotations
@@ -14,28 +14,24 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
-import signal
 import sys
 import threading
-import time
 from dataclasses import dataclass
+from functools import partial
 
 import zenoh
 
-from dronesim.entity import Membership
-from dronesim.schema import Connect, EndReason, Keys, Over, Phase, Role, Status, Turn, UsageError
-from dronesim.transport import Inbox, Outbox, Presence, Received, session_id, zenoh_config
+from dronesim.signals import waking
+from dronesim.transport import Outbox, zenoh_config
+from schema import Keys, Over, UsageError
 
-from ..gcs import Ground, Plan, gcs_done
-from .model import GroundState, Rejected, check_pace_arg, world_json
+from ..gcs import Ground
+from ..gcs_node import join, listen, play, publisher
+from .model import GroundState, Refresh, Rejected, check_pace_arg, world_json
 from .server import Hub, WebServer, parse_address
 
 #: Seconds an HTTP thread waits for the main thread to carry out a command.
 COMMAND_TIMEOUT = 10.0
-#: Seconds to wait after OVER for the last STATUS (published before OVER, but on another key).
-FINAL_STATUS_WAIT = 5.0
-#: End reasons whose last turn produced a STATUS (GCS_QUIT and ABORTED end a turn before its STATUS).
-_OBSERVED_ENDS = {EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndReason.SETTLED, EndReason.TURN_LIMIT}
 
 
 def add_web_args(parser: argparse.ArgumentParser) -> None:
@@ -109,10 +105,14 @@ class LiveBackend:
             self._closed = True
 
 
-def carry_out(state: GroundState, cmd: Command) -> None:
+def carry_out(state: GroundState, cmd: object) -> None:
+    """Carry out a command posted by an HTTP thread (anything else in the queue is a bug: logged)."""
+    if not isinstance(cmd, Command):
+        logging.getLogger("dronesim.GCS").error("unexpected event %r", cmd)
+        return
     try:
         if cmd.action == "target":
-            result = state.set_target(cmd.args.get("drone"), cmd.args.get("cell"))
+            result = state.set_target(cmd.args.get("drone"), cmd.args["cell"])
         else:
             result = state.control(cmd.action, cmd.args.get("value"))
     except Rejected as err:
@@ -132,30 +132,25 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
              connect_timeout: float, grace: float) -> Over:
     hub = Hub()
     with zenoh.open(conf) as session:
-        inbox = Inbox(session, keys, logger)
-        inbox.subscribe(keys.turn, Turn)
-        inbox.subscribe(keys.status, Status)
-        inbox.subscribe(keys.over, Over)
+        inbox = listen(session, keys, logger, every_phase=True)
         backend = LiveBackend(inbox.post)
         server = WebServer(address, backend, hub, logger)  # binds now: a taken port fails before admission
         try:
-            member = Membership(session, inbox, Connect(turn=0, sender="GCS", role=Role.GCS,
-                                                        session=session_id(session)),
-                                logger, connect_timeout=connect_timeout, grace=grace)
-            welcome = member.welcome
-            ground = Ground.from_welcome(welcome, plan_texts, script)
-            world, drones, plan, size = ground.world, ground.drones, ground.plan, welcome.world.size
-            title = f"root {keys.root}"
-            state = GroundState(world, welcome.starts.cells(), pace=pace, title=title)
-            state.note("info", f"{welcome.text}; world {'x'.join(map(str, size))} with "
-                               f"{int(world.grid.sum())} building cells; drones {', '.join(drones)}")
-            backend.set_world(world_json(world, mode="live", title=title))
+            with waking(partial(inbox.post, None)):  # a signal ends any wait (a phase held for the human)
+                member = join(session, inbox, logger, connect_timeout=connect_timeout, grace=grace)
+                ground = Ground.from_welcome(member.welcome, plan_texts, script)
+                state = GroundState(ground, pace=pace, title=f"root {keys.root}", intro=member.welcome.text)
+                backend.set_world(world_json(ground.world, mode="live", title=state.title))
+                hub.publish(state.snapshot())
+                server.start()
+                print(f"web ground station: {server.url} ({state.describe()})", flush=True)
+                send = publisher(Outbox(session), keys, logger, lambda text: state.note("info", text))
+                over = play(state, inbox, member, lambda e: hub.publish(state.snapshot()) if isinstance(e, Refresh)
+                            else send(e), other=lambda cmd: carry_out(state, cmd))
+            backend.close()  # the commands still queued are refused: the game is over
+            for cmd in inbox.drain():
+                carry_out(state, cmd)
             hub.publish(state.snapshot())
-            server.start()
-            print(f"web ground station: {server.url} (world {'x'.join(map(str, size))}, "
-                  f"drones {', '.join(drones)})", flush=True)
-            over = _play(state, inbox, Outbox(session), member, keys, plan, hub, logger)
-            _finish(state, inbox, member, backend, hub, over)
             if inbox.rejects.total:
                 logger.info("rejected inputs: %s", inbox.rejects.snapshot())
             member.close()
@@ -163,75 +158,14 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
             backend.close()
             server.stop(drain=1.0)
             raise
-    print(f"GAME OVER at turn {over.turn}: {over.reason.value} - {over.text}", flush=True)
-    for d, v in state.drones.items():
-        print(f"  {d}: {v.status} at {v.pos}, {len(v.trail) - 1} moves, target {v.target}", flush=True)
+    print(state.station.report(draw=False), flush=True)
     try:
         if linger > 0:
             print(f"web ground station: serving the final state on {server.url} for {linger:g} s", flush=True)
             threading.Event().wait(linger)
-    except KeyboardInterrupt:
-        pass
     finally:
         server.stop()
     return over
-
-
-def _play(state: GroundState, inbox: Inbox, out: Outbox, member: Membership, keys: Keys,
-          plan: Plan, hub: Hub, logger: logging.Logger) -> Over:
-    published = state.seq
-    while state.over is None:
-        waits = [w for w in (state.due(time.monotonic()), member.timeout()) if w is not None]
-        event = inbox.get(min(waits) if waits else None)
-        if not member.clock.screen(event, inbox.rejects):
-            continue
-        now = time.monotonic()
-        match event:
-            case None:
-                member.check()
-            case Command() as cmd:
-                carry_out(state, cmd)
-            case Presence() as presence:
-                if member.on_presence(presence) is not None:
-                    state.note("info", "the coordinator came back: connected again")
-            case Received(_, Turn() as turn):
-                state.on_turn(turn, now)
-                if turn.phase is Phase.GCS and plan.items:
-                    state.schedule(turn.turn, plan.at(turn.turn), plan.last_turn)
-            case Received(_, Status() as status):
-                state.on_status(status)
-            case Received(_, Over() as over):
-                state.on_over(over)
-        if state.due(now) == 0.0:
-            turn_no, targets, intent = state.answer(now)
-            out.put(keys.gcs_done, gcs_done(turn_no, targets, intent, state.in_force()))
-            logger.debug("turn %d: sent %d targets, %s", turn_no, len(targets), intent.value)
-        if state.seq != published:
-            hub.publish(state.snapshot())
-            published = state.seq
-    assert state.over is not None
-    return state.over
-
-
-def _finish(state: GroundState, inbox: Inbox, member: Membership, backend: LiveBackend, hub: Hub,
-            over: Over) -> None:
-    """After OVER: take the last STATUS if it is still on its way, refuse the commands left, publish."""
-    if over.reason in _OBSERVED_ENDS:
-        end = time.monotonic() + FINAL_STATUS_WAIT
-        while state.status_turn < over.turn and time.monotonic() < end:
-            event = inbox.get(end - time.monotonic())
-            if not member.clock.screen(event, inbox.rejects):
-                continue
-            match event:
-                case Received(_, Status() as status):
-                    state.on_status(status)
-                case Command() as cmd:
-                    carry_out(state, cmd)  # refused: the game is over
-    backend.close()
-    while (event := inbox.get(0)) is not None:
-        if isinstance(event, Command):
-            carry_out(state, event)
-    hub.publish(state.snapshot())
 
 
 # --------------------------------------------------------------------------- replay mode
@@ -263,8 +197,6 @@ def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: lo
     print(f"web ground station: {server.url} (replay of {path}: {len(replay.frames) - 1} turns)", flush=True)
     try:
         threading.Event().wait(linger if linger > 0 else None)
-    except KeyboardInterrupt:
-        pass
     finally:
         server.stop(drain=1.0)
 
@@ -272,38 +204,21 @@ def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: lo
 # --------------------------------------------------------------------------- command line
 
 
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
 def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
-    """`dronesim gcs --web ...`: 0 after OVER (or at the end of a replay), 2 on a usage error."""
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _interrupt)  # a terminated replay or lingering page exits cleanly
-    try:
-        if args.web is None:
-            raise UsageError("--replay needs --web [HOST:]PORT")
-        address = parse_address(args.web)
-        if args.linger < 0:
-            raise UsageError(f"--linger must be >= 0, got {args.linger:g}")
-        if args.replay is not None:
-            run_replay(args.replay, address=address, linger=args.linger, logger=logger)
-            return 0
-        pace = check_pace_arg(args.pace)
-        targets = list(args.targets)
-        if getattr(args, "scenario", None):
-            from dronesim.scenario import Scenario
-
-            targets = [*Scenario.load(args.scenario).targets, *targets]
-        run_live(zenoh_config(args), keys=Keys(args.root), logger=logger, address=address, plan_texts=targets,
-                 script=args.script, pace=pace, linger=args.linger,
-                 connect_timeout=args.connect_timeout, grace=getattr(args, "grace", 30.0))
-    except UsageError as err:
-        logger.error("%s", err)
-        return 2
-    except KeyboardInterrupt:
-        logger.warning("interrupted")
-        return 130
+    """`dronesim gcs --web ...` (its targets, scenario's included, in `args.targets`): 0 after OVER or at the
+    end of a replay's `--linger`; a UsageError for bad flags. Stopped by a signal (gcs_node.cli), it exits
+    with 128 + its number, the page's server stopped."""
+    if args.web is None:
+        raise UsageError("--replay needs --web [HOST:]PORT")
+    address = parse_address(args.web)
+    if args.linger < 0:
+        raise UsageError(f"--linger must be >= 0, got {args.linger:g}")
+    if args.replay is not None:
+        run_replay(args.replay, address=address, linger=args.linger, logger=logger)
+        return 0
+    run_live(zenoh_config(args), keys=Keys(args.root), logger=logger, address=address, plan_texts=args.targets,
+             script=args.script, pace=check_pace_arg(args.pace), linger=args.linger,
+             connect_timeout=args.connect_timeout, grace=args.grace)
     return 0
 
 

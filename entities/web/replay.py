@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import pathlib
 
-from dronesim.coordinator.journal import read
+from coordinator.journal import read
 from dronesim.replay import header_config, tracks
-from dronesim.schema import Cause, UsageError
+from schema import Cause, UsageError
 
 from ..environment import build_world
 from ..world import World

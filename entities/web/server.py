@@ -27,7 +27,7 @@ from importlib import resources
 from typing import Protocol
 from urllib.parse import urlsplit
 
-from dronesim.schema import UsageError
+from schema import UsageError
 
 from .model import Rejected, parse_cell
 
@@ -120,7 +120,7 @@ class Hub:
 class _Handler(BaseHTTPRequestHandler):
     server_version = "dronesim-web"
     protocol_version = "HTTP/1.0"  # one request per connection: simple, and an SSE stream ends with it
-    server: "WebServer"
+    server: WebServer
 
     # ------------------------------------------------------------------ plumbing
 
@@ -340,6 +340,7 @@ class WebServer(ThreadingHTTPServer):
     @property
     def url(self) -> str:
         host, port = self.server_address[:2]
+        assert isinstance(host, str)  # bound to a host name or address, never bytes
         shown = {"0.0.0.0": "127.0.0.1", "::": "[::1]"}.get(host, f"[{host}]" if ":" in host else host)
         return f"http://{shown}:{port}/"
 

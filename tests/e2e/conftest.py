@@ -37,19 +37,8 @@ def browser_problem() -> str | None:
     return None
 
 
-@pytest.fixture(scope="session")
-def playwright_driver():
-    problem = browser_problem()
-    if problem:
-        _skipped.append(problem)
-        pytest.skip(f"browser tests skipped: {problem}")
-    from playwright.sync_api import sync_playwright
-
-    pw = sync_playwright().start()
-    try:
-        yield pw
-    finally:
-        pw.stop()
+# The session's one Playwright driver, `playwright_driver`, is in tests/conftest.py: the engine tests
+# (tests/test_docker.py) drive the web page too, and a second sync Playwright in one process fails.
 
 
 @pytest.fixture
@@ -81,3 +70,15 @@ def artifacts() -> Path:
 def pytest_terminal_summary(terminalreporter):
     for reason in sorted(set(_skipped)):
         terminalreporter.write_line(f"BROWSER TESTS SKIPPED: {reason}", yellow=True, bold=True)
+
+
+def fly_to_clicked_cell(page, drone: str, cell: tuple[int, int, int]) -> None:
+    """As a human would: pick the cell's floor and click the cell; the page says `drone`'s target is set
+    (the drone selected in the page), and the drone arrives there."""
+    x, y, z = cell
+    page.click(f"#floors button[data-z='{z}']")
+    page.click(f"#grid .cell[data-x='{x}'][data-y='{y}']")
+    page.wait_for_selector("#message.ok")
+    assert f"target of {drone} set to ({x}, {y}, {z})" in page.inner_text("#message")
+    page.wait_for_selector(f"#drone-{drone} [data-status=reached]")
+    assert page.inner_text(f"#drone-{drone} .pos") == f"({x}, {y}, {z})"

@@ -93,6 +93,7 @@ function checkTarget(drone, cell) {
   if (!d) return `unknown drone ${drone}`;
   if (d.status === "dead" || d.status === "lost") return `${drone} is ${d.status}: it takes no more targets`;
   if (!inside(cell)) return `${fmt(cell)} is outside the world: 0 <= x < ${nx}, 0 <= y < ${ny}, 0 <= z < ${nz}`;
+  if (isBuilding(...cell)) return `${fmt(cell)} is inside a building: no drone can get there`;
   return null;
 }
 

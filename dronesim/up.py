@@ -10,28 +10,38 @@ process exited 0.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
+import pathlib
+import queue
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
+import time
 
 import zenoh
 
-from dronesim.schema import UsageError
+from dronesim import child_env
+from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
+from dronesim.signals import Stop, exit_status, on_stop, stop, waking
 from dronesim.transport import router_config, router_locators
-
-from dronesim.scenario import Scenario, swarm_hosts
-from dronesim.schema import drone_id
+from schema import UsageError, drone_id
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dronesim up", description=__doc__)
     p.add_argument("--seed", type=int, default=7, help="world seed (default 7)")
     p.add_argument("--size", default="10,10,10", help="world size nx,ny,nz (default 10,10,10)")
-    p.add_argument("--world", help="a world file (JSON) instead of a generated world")
+    p.add_argument("--world", help="a world file (JSON, or a MovingAI .map) instead of a generated world")
+    p.add_argument("--scen", help="a MovingAI .scen on the --world .map: its agents are the drones, their goals the "
+                                  "targets (the autopilot: --autopilot, default dstar here)")
+    p.add_argument("--agents", type=int, help="with --scen: its first N agents (default: all)")
     p.add_argument("--scenario", help="a scenario file: world, drones with starts and autopilots, targets")
     p.add_argument("--drones", type=int, default=1, help="number of drones (default 1)")
     p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: a row along y)')
-    p.add_argument("--autopilot", default="seed", help="v1, seed or dstar (default seed)")
+    p.add_argument("--autopilot", help="v1, seed or dstar (default seed; with --scen, dstar)")
     p.add_argument("--swarm", action="store_true", help="fly all drones from one swarm host process")
     p.add_argument("--targets", action="append", default=[], metavar="[Dnn=]x,y,z[@turn]",
                    help="scripted targets; without --targets or --script the ground station is interactive")
@@ -89,7 +99,22 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
     return procs
 
 
+#: Seconds the entities have, once the coordinator is told to stop, to see its OVER and exit by themselves.
+STOP_S = 3.0
+#: Seconds a process still running after that has to end on SIGTERM before it is killed.
+KILL_S = 1.0
+
+
 def main(args: argparse.Namespace) -> int:
+    if args.scen:  # a MovingAI instance: played as the scenario it makes (a file the processes read)
+        if not args.world or args.scenario:
+            raise UsageError("--scen needs --world FILE.map (and no --scenario)")
+        data = movingai_scenario(args.world, args.scen, args.agents, args.autopilot, args.max_turns)
+        Scenario.from_json(data)  # checked here, once: the processes would each refuse it
+        with tempfile.TemporaryDirectory(prefix="dronesim-scen-") as tmp:
+            path = pathlib.Path(tmp) / "scenario.json"
+            path.write_text(json.dumps(data))
+            return main(argparse.Namespace(**{**vars(args), "scen": None, "world": None, "scenario": str(path)}))
     interactive = not args.targets and not args.script and not args.scenario and not args.web
     with zenoh.open(router_config(args.listen)) as router:
         locator = router_locators(router)[0]
@@ -98,14 +123,22 @@ def main(args: argparse.Namespace) -> int:
         print(f"dronesim up: router on {locator}, {what}", flush=True)
         running: list[tuple[str, subprocess.Popen]] = []
         try:
-            for name, argv in commands(args, locator):
-                stdin = None if (name == "GCS" and interactive) else subprocess.DEVNULL
-                running.append((name, subprocess.Popen(argv, stdin=stdin)))
-            codes = {name: proc.wait() for name, proc in running}
-        except KeyboardInterrupt:
-            for _, proc in running:
-                proc.send_signal(signal.SIGINT)
-            codes = {name: proc.wait() for name, proc in running}
+            with on_stop(stop):
+                for name, argv in commands(args, locator):
+                    console = name == "GCS" and interactive  # it reads the terminal: it stays in its group
+                    running.append((name, subprocess.Popen(argv, stdin=None if console else subprocess.DEVNULL,
+                                                           env=child_env(), start_new_session=not console)))
+                codes = supervise(running)
+        except Stop as sig:
+            print(f"dronesim up: {signal.Signals(sig.signum).name}: stopping the game", file=sys.stderr, flush=True)
+            try:
+                with on_stop(stop):
+                    stop_all(running, sig.signum)
+            except Stop:  # a second signal: no more waiting
+                for _, proc in running:
+                    proc.kill()
+                    proc.wait()
+            return exit_status(sig.signum)
         failed = {n: c for n, c in codes.items() if c != 0}
         if failed:
             print(f"dronesim up: processes failed: {failed}", file=sys.stderr)
@@ -114,8 +147,57 @@ def main(args: argparse.Namespace) -> int:
         return 0
 
 
+#: The processes without which the game cannot go on: one of them failing stops the game at once (a drone
+#: that fails is LOST and the others play on; a ground station that refuses its targets exits 2).
+VITAL = ("SRV", "GCS")
+
+
+def supervise(running: list[tuple[str, subprocess.Popen]]) -> dict[str, int]:
+    """Wait for every process to exit and return their exit codes. If a vital one fails while others still
+    run, the game is stopped at once (the coordinator ends it INTERRUPTED, as on Ctrl-C) instead of running
+    on without it to its turn limit."""
+    done: queue.SimpleQueue[tuple[str, int] | None] = queue.SimpleQueue()
+    for name, proc in running:
+        threading.Thread(target=lambda n=name, p=proc: done.put((n, p.wait())), name=f"wait-{name}",
+                         daemon=True).start()
+    codes: dict[str, int] = {}
+    with waking(lambda: done.put(None)):  # a signal's handler runs at once, even while blocked in get()
+        while len(codes) < len(running):
+            item = done.get()
+            if item is None:
+                continue
+            name, code = item
+            codes[name] = code
+            left = [(n, p) for n, p in running if n not in codes]
+            if code != 0 and name in VITAL and left:
+                print(f"dronesim up: {name} exited {code}: stopping the game", file=sys.stderr, flush=True)
+                stop_all(left, signal.SIGTERM)
+                codes.update((n, p.wait()) for n, p in left)
+    return codes
+
+
+def stop_all(running: list[tuple[str, subprocess.Popen]], signum: int) -> None:
+    """Stop the game: the coordinator gets `signum` (it ends the game, INTERRUPTED, and closes its journal),
+    the others see its OVER and exit; whoever is still running after STOP_S gets SIGTERM, then SIGKILL."""
+    procs = dict(running)
+    if "SRV" in procs and procs["SRV"].poll() is None:
+        procs["SRV"].send_signal(signum)
+    end = time.monotonic() + STOP_S
+    for sig in (None, signal.SIGTERM, signal.SIGKILL):
+        for proc in procs.values():
+            if sig is not None and proc.poll() is None:
+                proc.send_signal(sig)
+        for proc in procs.values():
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(max(0.0, end - time.monotonic()))
+        if all(proc.poll() is not None for proc in procs.values()):
+            return
+        end = time.monotonic() + KILL_S
+
+
 def cli(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.autopilot = args.autopilot or ("dstar" if args.scen else "seed")
     try:
         return main(args)
     except UsageError as err:

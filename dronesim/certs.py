@@ -11,7 +11,7 @@ writes into ``certs/``:
   IP address), so that a client connecting to ``tls/NAME:7447`` can verify it;
 * ``SRV``, ``ENV``, ``GCS``, ``D01``..``Dnn`` and each swarm host ``Hnn`` (``--host H01``) ``.pem`` /
   ``.key`` -- client certificates whose common name is the entity id: with mutual TLS the router
-  knows who is connecting, and the access-control rules (``python -m dronesim.schema.acl --identity
+  knows who is connecting, and the access-control rules (``python -m schema.acl --identity
   cert``) grant each name its keys;
 * with ``--passwords``: ``<ID>.password`` (a random password per entity) and ``users.txt``, the
   router's ``user:password`` dictionary (``--users-file``) for ``--identity usrpwd``.
@@ -37,8 +37,8 @@ import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from dronesim.schema import UsageError, drone_id
-from dronesim.schema.messages import is_drone_id, is_host_id
+from schema import UsageError, drone_id
+from schema.messages import is_drone_id, is_host_id
 
 CA_NAME = "dronesim development CA"
 ROUTER = "router"

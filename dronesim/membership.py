@@ -1,6 +1,8 @@
 """What every entity process does the same way: connect (admission), stay admitted when the coordinator
-restarts or a link is cut, and wait for another entity's presence. The role-specific loops live in
-entities/*_node.py."""
+restarts or a link is cut, and wait for another entity's presence. Each role's protocol is a pure class
+(coordinator/engine.py, entities/environment.py, entities/drone.py, entities/gcs.py); its Zenoh adapter
+(coordinator/node.py, entities/*_node.py) connects with this module and screens the coordinator's messages
+with its `TurnClock`."""
 
 from __future__ import annotations
 
@@ -10,11 +12,21 @@ import time
 
 import zenoh
 
-from dronesim.schema import (
-    Connect, Keys, Message, Over, Refused, RejectCounter, RemoteInputError, Status, Turn, UsageError, Welcome,
+from dronesim.transport import Inbox, Presence, Received, ask
+from schema import (
+    Connect,
+    Keys,
+    Message,
+    Over,
+    Refused,
+    RejectCounter,
+    RemoteInputError,
+    Status,
+    Turn,
+    UsageError,
+    Welcome,
 )
-from dronesim.schema.errors import StaleTurn
-from dronesim.transport import Inbox, Presence, Received, request
+from schema.errors import StaleTurn
 
 
 class Refusal(UsageError):
@@ -28,10 +40,17 @@ class CoordinatorLost(UsageError):
 def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Logger, *,
           timeout: float) -> Welcome:
     """Send CONNECT, wait for the coordinator's answer (waiting for it to appear, until `timeout`)."""
+    return join(session, keys, hello, logger, timeout=timeout)[0]
+
+
+def join(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Logger, *,
+         timeout: float) -> tuple[Welcome, str]:
+    """`admit`, and the session id of the coordinator that admitted this entity."""
     end = time.monotonic() + timeout
     while True:
         try:
-            reply = request(session, keys.connect, hello, (Welcome, Refused), timeout=max(0.1, end - time.monotonic()))
+            reply, coordinator = ask(session, keys.connect, hello, (Welcome, Refused),
+                                     timeout=max(0.1, end - time.monotonic()))
             break
         except (TimeoutError, RemoteInputError) as err:
             if time.monotonic() >= end:
@@ -43,7 +62,7 @@ def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Lo
             raise Refusal(f"connection refused: {text}")
         case Welcome():
             logger.info("%s", reply.text)
-            return reply
+            return reply, coordinator
     raise AssertionError(reply)
 
 
@@ -60,10 +79,12 @@ def await_presence(session: zenoh.Session, key: str, timeout: float) -> bool:
 class Membership:
     """An entity's admission, kept through a coordinator restart or a cut link.
 
-    It declares the entity's presence token, connects, and watches the coordinator's token: when every
-    coordinator session has gone, it waits up to `grace` seconds for one to come back and then connects
-    again (the coordinator re-admits the same process, or resumes a game from its journal). Feed it every
-    `Presence` event of the inbox; use `timeout()` for the inbox wait and `check()` when it times out.
+    It declares the entity's presence token, connects, and watches the token of the coordinator that admitted
+    it (the session that answered its CONNECT: another token under the coordinator's name holds nothing): when
+    it has gone, it waits up to `grace` seconds for a coordinator to appear and then connects again (the
+    coordinator re-admits the same process, or resumes a game from its journal). Refused then (a drone declared
+    LOST meanwhile), the entity takes no further part: it says so and leaves at OVER. Feed it every `Presence`
+    event of the inbox; use `timeout()` for the inbox wait and `check()` when it times out.
     """
 
     def __init__(self, session: zenoh.Session, inbox: Inbox, hello: Connect, logger: logging.Logger, *,
@@ -74,9 +95,8 @@ class Membership:
         self.connect_timeout = connect_timeout
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
         inbox.watch_presence("SRV")
-        self.welcome = admit(session, self.keys, hello, logger, timeout=connect_timeout)
-        self.clock = TurnClock()  # the coordinator's messages pass through it (see `TurnClock.screen`)
-        self._srv: set[str] = set()
+        self.welcome, self.coordinator = join(session, self.keys, hello, logger, timeout=connect_timeout)
+        self.clock = TurnClock(game=self.welcome.game)  # the coordinator's messages pass through it (`screen`)
         self._lost_since: float | None = None
 
     def on_presence(self, event: Presence) -> Welcome | None:
@@ -84,18 +104,21 @@ class Membership:
         if event.entity != "SRV":
             return None
         if event.alive:
-            self._srv.add(event.session)
             if self._lost_since is not None:
                 self._lost_since = None
                 self.log.warning("the coordinator is back: connecting again")
-                self.welcome = admit(self.session, self.keys, self.hello, self.log, timeout=self.connect_timeout)
-                self.clock = TurnClock(self.welcome.turn)  # turns went by while it was away
+                try:
+                    self.welcome, self.coordinator = join(self.session, self.keys, self.hello, self.log,
+                                                          timeout=self.connect_timeout)
+                except Refusal as err:  # e.g. a drone declared LOST while it was away: its part is over
+                    self.log.warning("%s: %s takes no further part and leaves at the end of the game",
+                                     err, self.hello.sender)
+                    return None
+                self.clock = TurnClock(self.welcome.turn, game=self.welcome.game)  # turns went by meanwhile
                 return self.welcome
-        else:
-            self._srv.discard(event.session)
-            if not self._srv and self._lost_since is None:
-                self._lost_since = time.monotonic()
-                self.log.warning("the coordinator vanished: waiting up to %g s for it to come back", self.grace)
+        elif event.session == (self.coordinator or event.session) and self._lost_since is None:
+            self._lost_since = time.monotonic()  # (the one that admitted it; any, if Zenoh did not say which)
+            self.log.warning("the coordinator vanished: waiting up to %g s for it to come back", self.grace)
         return None
 
     def timeout(self) -> float | None:
@@ -129,16 +152,22 @@ class TurnClock:
     or one more than a turn ahead, a STATUS for other than the turn just played (or a repeat of the one
     before), an OVER far from now, or a repeat (same message, phase and turn) that differs from what
     was received first. TURN(t) and STATUS(t - 1) are current while turn t is played; so is OVER(t - 1)
-    after STATUS(t - 1), and OVER of any later turn (a process that was frozen learns the end late). A replayed or garbled TURN must not make a drone plan, nor a STATUS move the world;
-    a repeat re-sent to a process that connected again is identical and passes. (A forged message for the
-    right turn is spoofing: the router's access control stops it.)"""
+    after STATUS(t - 1), and OVER of any later turn (a process that was frozen learns the end late). A
+    replayed or garbled TURN must not make a drone plan, nor a STATUS move the world;
+    a repeat re-sent to a process that connected again is identical and passes. Each must be of this entity's
+    game (`game`, from its WELCOME): one of another game, or of an earlier coordinator, is foreign, whatever
+    its turn. (A forged message for the right turn is spoofing: the router's access control stops it.)"""
 
-    def __init__(self, turn: int | None = None) -> None:
+    def __init__(self, turn: int | None = None, *, game: str = "") -> None:
         self.turn: int | None = turn or None  # the turn being played (after STATUS(t): t + 1, the next)
+        self.game = game
         self._seen: dict[tuple[str, object, int], Message] = {}
 
     def admit(self, msg: Turn | Status | Over) -> None:
         """Check `msg` against the clock (StaleTurn if it cannot be current) and advance the clock."""
+        if msg.game != self.game:
+            raise StaleTurn(f"a {msg.TAG} of game {msg.game or '(none)'}, not this one ({self.game or '(none)'})",
+                            reason="foreign-game")
         now = msg.turn + 1 if isinstance(msg, Status) else msg.turn
         if self.turn is not None:
             lo = self.turn - 1 if isinstance(msg, Over) else self.turn  # STATUS(t) makes t + 1 "now"
@@ -153,11 +182,6 @@ class TurnClock:
         self._seen = {k: m for k, m in self._seen.items() if k[2] >= now - 1}  # keep this turn and the last
         self._seen[key] = msg
         self.turn = now if self.turn is None else max(self.turn, now)
-
-    def lose_track(self) -> None:
-        """This entity stopped following the game for a while (the environment, when nobody asks it about
-        the drones): the next TURN, STATUS or OVER sets the clock again, as at the start."""
-        self.turn, self._seen = None, {}
 
     def screen(self, event: object, rejects: RejectCounter) -> bool:
         """False (the rejection counted and logged) for a coordinator message that fails `admit`."""

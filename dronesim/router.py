@@ -14,7 +14,13 @@ import sys
 import zenoh
 
 from dronesim.transport import (
-    add_zenoh_args, apply_lease, apply_security, router_config, router_locators, setup_logging, zenoh_config,
+    add_zenoh_args,
+    apply_lease,
+    apply_security,
+    router_config,
+    router_locators,
+    setup_logging,
+    zenoh_config,
 )
 
 

@@ -8,6 +8,7 @@ deadline or vanished), it writes the same journal, byte for byte, as a run over 
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections import deque
 from collections.abc import Mapping
@@ -15,18 +16,41 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dronesim.coordinator.engine import (
-    Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase,
+from coordinator.arbiter import Arbiter
+from coordinator.engine import (
+    Engine,
+    GameConfig,
+    Publish,
+    Record,
+    Refusal,
+    Reply,
+    Stage,
+    opens_drones_phase,
 )
-from dronesim.entities.autopilots import SWARM_MIN, make_autopilot, make_swarm, pilot_class
-from dronesim.entities.autopilots.base import fly_pilots, fly_swarm
-from dronesim.entities.environment import Environment, build_world
-from dronesim.entities.gcs import Plan, gcs_done
 from dronesim.scenario import swarm_hosts
-from dronesim.schema import (
-    Cell, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, UsageError, Upd, Welcome,
+from entities.autopilots import make_autopilot, make_swarm, pilot_class
+from entities.autopilots.base import Decision, drive, fly_pilots, fly_swarm
+from entities.environment import Environment, build_world
+from entities.gcs import Plan, gcs_done
+from schema import (
+    Cell,
+    CellInfo,
+    Connect,
+    Intent,
+    Moves,
+    Nps,
+    Over,
+    Phase,
+    Role,
+    Status,
+    StepTable,
+    Turn,
+    Upd,
+    UsageError,
+    Welcome,
 )
-from dronesim.schema.tables import drone_number
+from schema.tables import drone_number
+from schema.tuning import SWARM_MIN
 
 
 @dataclass(slots=True)
@@ -53,18 +77,28 @@ class Result:
     statuses: list[Status]
 
 
+def _answers(env: Environment, pending: Mapping[str, tuple[Cell, ...]]) -> dict[str, dict[Cell, CellInfo]]:
+    """What the environment answers about each drone's cells (the oracle of pilots flown in-process)."""
+    return {d: dict(zip(c, env.answer(c))) for d, c in pending.items()}
+
+
 def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
              logger: logging.Logger | None = None, *, keep_statuses: bool = False, verify_env: bool = True,
-             swarm: bool = False, swarm_min: int = SWARM_MIN) -> Result:
+             swarm: bool = False, swarm_min: int = SWARM_MIN, arbiter: Arbiter | None = None,
+             pilot_options: Mapping[str, Mapping[str, object]] | None = None) -> Result:
     """Play the game. `swarm`: the drones flown as `dronesim up --swarm` flies them, one host per
     autopilot sending one MOVES a turn, with the autopilot's swarm form from `swarm_min` drones on (the
-    journal is the same; drones that miss or vanish need the layout of a process per drone)."""
+    journal is the same; drones that miss or vanish need the layout of a process per drone).
+    `arbiter` (`Engine.arbiter`, e.g. the former `arbiter.fixed`) and `pilot_options` (autopilot name ->
+    options for each of its instances flown one per drone, e.g. D*'s `known` map) are the benchmark's."""
     log = logger or logging.getLogger("dronesim.local")
     if swarm and (inputs.hovered or inputs.vanished):
         raise UsageError("drones that miss a turn or vanish are played with one process per drone, not swarm hosts")
     world = build_world(config.world, (d.start for d in config.drones))
     engine = Engine(config, log, world)
     engine.verify_env = verify_env
+    if arbiter is not None:
+        engine.arbiter = arbiter
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()
@@ -98,8 +132,9 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                                             least=swarm_min) for h, (a, ds) in flyers.items()}
                 host_of = {d: sender for sender, (_, drones) in flyers.items() for d in drones}
                 numbers = {sender: [drone_number(d) for d in drones] for sender, (_, drones) in flyers.items()}
-                pilots = {d: make_autopilot(a, world_size=world.size) for d, a in autopilots.items()
-                          if swarms.get(host_of[d]) is None}
+                options = pilot_options or {}
+                pilots = {d: make_autopilot(a, world_size=world.size, **options.get(a, {}))
+                          for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
             case Record(data):
                 records.append(data)
             case Publish(Turn(phase=Phase.GCS, turn=t)):
@@ -107,7 +142,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 alive = set(engine.alive())
                 current = {d: c for d, c in current.items() if d in alive}
                 in_force = engine.targets()
-                push(_accept(engine, log, gcs_done(t, current, inputs.intent(t), in_force)))
+                push(engine.receive(gcs_done(t, current, inputs.intent(t), in_force)))
             case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
                 assert env is not None
                 for d in sorted(inputs.vanished.get(t, ())):
@@ -117,22 +152,22 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 for order in turn.orders.orders(pilots):
                     if order[0] not in skip:
                         flown.setdefault(host_of[order[0]], []).append(order)
-                oracle = env.answer
-                ask = lambda pending: {d: dict(zip(c, oracle(c))) for d, c in pending.items()}  # noqa: E731
+                ask = functools.partial(_answers, env)
                 for sender in flyers:  # each as its process would: a swarm host's MOVES, a drone's NPS
                     if swarms.get(sender) is not None:
                         rows = turn.orders.rows
-                        moves = fly_swarm(swarms[sender], rows[np.isin(rows["drone"], numbers[sender])], env.kinds)
+                        mine = rows[np.isin(rows["drone"], numbers[sender])]
+                        moves: StepTable | dict[str, Decision] = drive(fly_swarm(swarms[sender], mine), env.kinds)
                     elif sender in flown:
-                        moves = fly_pilots(pilots, flown[sender], ask, host=sender if swarm else None)
+                        moves = drive(fly_pilots(pilots, flown[sender], host=sender if swarm else None), ask)
                     else:
                         continue
                     if isinstance(moves, StepTable):
                         if moves:
-                            push(_accept(engine, log, Moves(turn=t, sender=sender, moves=moves)))
+                            push(engine.receive(Moves(turn=t, sender=sender, moves=moves)))
                     else:
                         for d, dec in sorted(moves.items()):
-                            push(_accept(engine, log, Nps(turn=t, sender=d, pos=dec.pos, note=dec.note)))
+                            push(engine.receive(Nps(turn=t, sender=d, pos=dec.pos, note=dec.note, ranked=dec.ranked)))
                 if skip:
                     push(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):
@@ -153,12 +188,3 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     assert engine.end is not None
     return Result(records=records, over=engine.end, statuses=statuses)
 
-
-def _accept(engine: Engine, log: logging.Logger, msg) -> list:
-    from dronesim.schema import RemoteInputError
-
-    try:
-        return engine.receive(msg)
-    except RemoteInputError as err:  # e.g. a V1 drone's move refused: counted in the real run too
-        log.warning("rejected %s: %s", msg.TAG, err)
-        return err.follow

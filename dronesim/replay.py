@@ -14,12 +14,12 @@ import sys
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from dronesim.coordinator.engine import DroneSpec, GameConfig
-from dronesim.coordinator.journal import dumps, read
-from dronesim.entities.environment import build_world
-from dronesim.entities.gcs import Plan
-from dronesim.entities.world import World
-from dronesim.schema import Cell, Intent, RemoteInputError, UsageError, WorldSpec
+from coordinator.engine import DroneSpec, GameConfig
+from coordinator.journal import dumps, read
+from entities.environment import build_world
+from entities.gcs import Plan
+from entities.world import World
+from schema import Cell, Intent, RemoteInputError, UsageError, WorldSpec
 
 from .local import Inputs, simulate
 

@@ -10,19 +10,27 @@
 ```
 The game ends when every drone has reached its last target (or said it is unreachable), when no drone
 is alive, or at ``max_turns``.
+
+A MovingAI instance (a ``.map`` and its ``.scen``, entities/movingai.py) becomes a scenario with
+`movingai_scenario`: the map as the world (1 cell high), the first N agents as drones D01..DN starting at
+their starts with their goals as targets from turn 1 (``dronesim up --world room.map --scen room.scen
+--agents 200``).
 """
 
 from __future__ import annotations
 
 import json
 import pathlib
+import re
 from dataclasses import dataclass
 
-from dronesim.coordinator.engine import DroneSpec, GameConfig
-from dronesim.entities.autopilots import REGISTRY
-from dronesim.entities.gcs import Plan
-from dronesim.entities.world import World
-from dronesim.schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
+from coordinator.engine import DroneSpec, GameConfig
+from entities.autopilots import REGISTRY
+from entities.environment import build_world
+from entities.gcs import Plan
+from entities.movingai import read_scen
+from entities.world import World
+from schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
 
 FORMAT = "dronesim-scenario"
 
@@ -49,19 +57,21 @@ class Scenario:
         return Plan.parse(self.targets, self.world.size, default_drone=self.drones[0].drone)
 
     @classmethod
-    def load(cls, path: str | pathlib.Path) -> "Scenario":
+    def load(cls, path: str | pathlib.Path, *, plan: bool = True) -> Scenario:
+        """The scenario in `path`; without `plan`, its targets are neither kept nor checked (the coordinator's
+        reading: the ground station flies the plan, and checks it)."""
         path = pathlib.Path(path)
         try:
-            data = json.loads(path.read_text(encoding="utf-8"), object_hook=_compact)
+            data = _parse(path.read_text(encoding="utf-8"), plan)
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise UsageError(f"cannot read scenario {path}: {exc}") from None
         try:
-            return cls.from_json(data, base=path.parent)
+            return cls.from_json(data, base=path.parent, plan=plan)
         except UsageError as err:
             raise UsageError(f"{path}: {err}") from None
 
     @classmethod
-    def from_json(cls, data: object, base: pathlib.Path = pathlib.Path(".")) -> "Scenario":
+    def from_json(cls, data: object, base: pathlib.Path = pathlib.Path("."), *, plan: bool = True) -> Scenario:
         if not isinstance(data, dict) or data.get("format") != FORMAT or data.get("version") != 1:
             raise UsageError(f'not a scenario: expected "format": "{FORMAT}", "version": 1')
         w = data.get("world")
@@ -86,16 +96,60 @@ class Scenario:
                 raise UsageError(f"{drone.drone} starts inside a building at {drone.start}")
             drones.append(drone)
             autopilots[drone.drone] = pilot
-        targets = data.get("targets", [])
+        targets = data.get("targets", []) if plan else []
         if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets):
             raise UsageError('"targets" must be a list of "[Dnn=]x,y,z[@turn]" strings')
         scenario = cls(world=spec, drones=tuple(drones), autopilots=autopilots, targets=tuple(targets),
                        max_turns=_int(data.get("max_turns", 1000), "max_turns"))
         scenario.game_config()  # validates ids, starts
-        unknown = Plan.drones_of(scenario.targets, spec.size, default_drone=scenario.drones[0].drone) - set(autopilots)
+        # targets are checked against the world's buildings too: built here (as every process builds it) only
+        # when there are targets and the world is generated
+        world = world_file or (build_world(spec, (d.start for d in drones)) if targets else None)
+        unknown = Plan.drones_of(scenario.targets, spec.size, scenario.drones[0].drone, world) - set(autopilots)
         if unknown:
             raise UsageError(f"targets for drones not in the scenario: {', '.join(sorted(unknown))}")
         return scenario
+
+
+def movingai_scenario(map_path: str | pathlib.Path, scen_path: str | pathlib.Path, agents: int | None = None,
+                      autopilot: str = "dstar", max_turns: int = 1000) -> dict:
+    """The scenario (its JSON form, for `Scenario.from_json` or a file) of the first `agents` agents of a
+    MovingAI .scen (all of them: None) on its .map. UsageError if either is unreadable or they disagree."""
+    world = World.load(map_path)
+    try:
+        entries = read_scen(pathlib.Path(scen_path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"cannot read {scen_path}: {exc}") from None
+    entries = entries[:agents] if agents is not None else entries
+    if agents is not None and len(entries) < agents:
+        raise UsageError(f"{scen_path} has {len(entries)} agents, {agents} asked")
+    if not entries:
+        raise UsageError(f"{scen_path} has no agents")
+    for a in entries:
+        if (a.width, a.height) != world.size[:2]:
+            raise UsageError(f"{scen_path} is for a {a.width} x {a.height} map, {map_path} is {world.size[0]} x "
+                             f"{world.size[1]}")
+    ids = [f"D{n:02d}" for n in range(1, len(entries) + 1)]
+    return {"format": FORMAT, "version": 1, "world": {"file": str(pathlib.Path(map_path).resolve())},
+            "drones": [{"id": d, "start": [*a.start, 0], "autopilot": autopilot} for d, a in zip(ids, entries)],
+            "targets": [f"{d}={a.goal[0]},{a.goal[1]},0" for d, a in zip(ids, entries)], "max_turns": max_turns}
+
+
+#: The key "targets" and its list, up to the first closing bracket (no backslash inside): a valid plan is a
+#: list of plain strings. Emptied, the document is the same JSON but for it, or no JSON at all (a bracket
+#: inside: then the whole document is read as it is).
+_TARGETS = re.compile(r'"targets"\s*:\s*\[[^\]\\]*\]')
+
+
+def _parse(text: str, plan: bool) -> object:
+    """The scenario's JSON; without `plan`, its target list is emptied before it is parsed (5 targets a drone
+    take more memory than the drone itself), when that can be done safely."""
+    if not plan:
+        try:
+            return json.loads(_TARGETS.sub('"targets": []', text, count=1), object_hook=_compact)
+        except json.JSONDecodeError:
+            pass
+    return json.loads(text, object_hook=_compact)
 
 
 def _compact(obj: dict) -> object:

@@ -8,14 +8,14 @@ import sys
 #: subcommand -> (module, function taking argv), imported on use.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "up": ("dronesim.up", "cli", "run everything on one machine (embedded router + every entity)"),
-    "coordinator": ("dronesim.coordinator.node", "cli", "the coordinator (SRV + observer)"),
-    "env": ("dronesim.entities.env_node", "cli", "the environment (ENV)"),
-    "drone": ("dronesim.entities.drone_node", "cli", "a drone, or a swarm host of several drones"),
-    "gcs": ("dronesim.entities.gcs_node", "cli", "the ground control station (GCS)"),
+    "coordinator": ("coordinator.node", "cli", "the coordinator (SRV + observer)"),
+    "env": ("entities.env_node", "cli", "the environment (ENV)"),
+    "drone": ("entities.drone_node", "cli", "a drone, or a swarm host of several drones"),
+    "gcs": ("entities.gcs_node", "cli", "the ground control station (GCS)"),
     "router": ("dronesim.router", "cli", "a standalone Zenoh router (for multi-host runs without zenohd)"),
     "certs": ("dronesim.certs", "cli", "a development CA and per-role TLS certificates/passwords (docs/security.md)"),
     "replay": ("dronesim.replay", "main", "re-render a run from its journal; --verify re-simulates it"),
-    "bench": ("dronesim.benchmarks", "cli", "benchmarks: `dronesim bench autopilot|perf` (results in BENCHMARKS.md)"),
+    "bench": ("benchmarks", "cli", "benchmarks: `dronesim bench autopilot|perf|rl` (results in BENCHMARKS.md)"),
 }
 
 

@@ -1,0 +1,340 @@
+"""Flood benchmark (issue 18, "Floods cannot move a game"): the same game clean and under two floods.
+
+    dronesim bench flood                   # 16 seed drones on 64x64x16, 1000 measured turns (under a minute)
+    dronesim bench flood --write           # ... and updates "## Floods" in BENCHMARKS.md
+    dronesim bench flood --quick           # a tiny game and small floods (used by the tests)
+
+In one run, each game as `dronesim bench perf` plays it (`benchmarks.perf.play_distributed`: a
+loopback `dronesim router` process, secured as docs/security.md says (TLS, user/password, the access
+control generated from the key table; `--plain`: none of these) with the flood filters generated from
+the key table (`schema.acl.flood_filters`), every process with its own credentials; the coordinator,
+the environment and one swarm host (H01) flying every drone with the seed autopilot, each a process;
+this process the scripted ground station; the coordinator keeps a journal), four games of the same
+scenario:
+
+1. clean;
+2. flood (a): once the warm-up turns are over, an attacker process (`benchmarks.flooder nps`, a client
+   of the router authenticated as H01, the principal D01's keys belong to) publishes 200,000 well-formed
+   NPS for turn 1 from D01 on D01's own key, as fast as it can: what an authenticated drone may do on its
+   own key under access control;
+3. flood (b): the attacker sends 300 ASKs of 32,768 cells from D01 to the environment at once and waits
+   for their replies;
+4. clean again (the machine's speed drifts: the clean speed is the mean of games 1 and 4).
+
+For each: turns/s over the measured turns, and turns/s during the flood (over the turns it overlaps:
+from the last turn begun before the attacker's first message to the first begun after its last message
+or reply), its ratio to the clean speed (target ≥ 0.5), whether the journal is byte-identical to the
+first clean game's (the journal leaves out the game identity each coordinator draws) and every drone's
+state after every turn equal, the rejections the coordinator and the environment report in their last
+lines, and the exit codes. `--repeat N` plays the four games N times and gives the ratios' range.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from benchmarks import add_write_args, command_line, replace_section
+from benchmarks.perf import (
+    Case,
+    Game,
+    Row,
+    Secured,
+    Variant,
+    busy_seconds,
+    make_scenario,
+    play_distributed,
+    render,
+)
+from dronesim import child_env
+from schema import Keys
+
+SECTION = "## Floods"
+TARGET = 0.5  # flooded turns/s ÷ clean turns/s, at least
+SIZE = (64, 64, 16)
+DRONES = 16
+FLOODS = {"nps": 200_000, "ask": 300}
+ATTACKER = "H01"  # on the secured router: the principal D01's keys belong to (the swarm host flying it)
+QUICK_FLOODS = {"nps": 2_000, "ask": 100}  # --quick: small floods (some ASKs still over the budget)
+
+
+def quick_case() -> Case:
+    """--quick: a tiny game."""
+    return Case(4, (10, 10, 10), 3, 150)
+
+
+@dataclass(slots=True)
+class Played:
+    name: str
+    flood: str | None  # "nps", "ask" or None (clean)
+    game: Game
+    journal: bytes = b""
+    rejected: dict[str, str] = field(default_factory=dict)  # process -> its "rejected inputs" report
+    attacker: dict = field(default_factory=dict)  # the flooder's JSON line
+    attacker_error: str = ""
+    ratio: float = float("nan")  # turns/s during the flood ÷ clean
+
+
+def rejections(log: Path) -> str:
+    """The last "rejected inputs: ..." report in a process's log ("" if none)."""
+    found = re.findall(r"rejected inputs: (.*)", log.read_text(errors="replace")) if log.exists() else []
+    return found[-1].strip() if found else ""
+
+
+def play(name: str, flood: str | None, count: int, case: Case, scenario: Path, logs: Path,
+         secured: Secured | None) -> Played:
+    """One game, with the attacker `flood` (`benchmarks.flooder`) started once its warm-up is over."""
+    logs.mkdir()
+    attackers: list[subprocess.Popen] = []
+    went: list[int] = []  # the turn it was told to go at
+
+    def on_status(locator: str, keys: Keys, turn: int) -> None:
+        """At the first STATUS (a warm-up turn: the game waits), the attacker is started and connects; at
+        the last warm-up turn's, it is told to go."""
+        if flood is None:
+            return
+        if turn == 1:
+            creds = secured.flags(ATTACKER) if secured is not None else []
+            a = subprocess.Popen([sys.executable, "-m", "benchmarks.flooder", flood, "--mode", "client", "--connect",
+                                  locator, "--root", keys.root, "--count", str(count), *creds],
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                 env=child_env())
+            attackers.append(a)
+            line = a.stdout.readline() if a.stdout else ""
+            if line.strip() != "ready":
+                raise RuntimeError(f"the attacker did not start: {line.strip()}")
+        elif turn == case.warmup and attackers and attackers[0].stdin:
+            attackers[0].stdin.write("go\n")
+            attackers[0].stdin.flush()
+            went.append(turn)
+
+    try:
+        game = play_distributed(case, scenario, logs, variant=Variant(journal=True, secured=secured),
+                                on_status=on_status)
+    finally:
+        outputs = []
+        for a in attackers:
+            if not went:  # the game failed before: no flood after it
+                a.kill()
+            try:
+                outputs.append(a.communicate(timeout=180)[0])
+            except subprocess.TimeoutExpired:
+                a.kill()
+                outputs.append(a.communicate()[0])
+    played = Played(name, flood, game)
+    journal = logs / "journal.jsonl"
+    played.journal = journal.read_bytes() if journal.exists() else b""
+    played.rejected = {n: rejections(logs / f"{n}.log") for n in ("coordinator", "env")}
+    if flood is not None:
+        lines = outputs[0].strip().splitlines() if outputs else []
+        try:
+            played.attacker = json.loads(lines[-1])
+        except (IndexError, ValueError):
+            played.attacker_error = "the attacker did not start" if not outputs else \
+                "the attacker failed: " + " | ".join(line.strip() for line in lines[-2:])
+    return played
+
+
+def measured_rate(game: Game, case: Case) -> float:
+    """Turns/s over the measured turns (1 / the mean turn)."""
+    return 1 / statistics.fmean(game.latencies) if game.latencies else float("nan")
+
+
+def flood_rate(game: Game, case: Case, first: float, last: float) -> tuple[float, int, float, bool]:
+    """(turns/s, turns, seconds, cut) over the turns the flood overlaps: from the last turn begun at or
+    before its first message to the first begun at or after its last message or reply (a turn begins when
+    the STATUS of the one before arrives); `cut`: the flood outlasted the measured turns (then up to the last)."""
+    stamps = sorted(game.arrived[t] for t in range(case.warmup, case.end_turn) if t in game.arrived)
+    before = [s for s in stamps if s <= first]
+    after = [s for s in stamps if s >= last]
+    lo = before[-1] if before else stamps[0]
+    hi = after[0] if after else stamps[-1]
+    turns = sum(lo < s <= hi for s in stamps)
+    seconds = hi - lo
+    return (turns / seconds if seconds > 0 else float("nan")), turns, seconds, not after
+
+
+def _states(game: Game) -> dict[int, object]:
+    return {t: st.drones for t, st in game.statuses.items()}
+
+
+COLUMNS = (
+    ("game", "game"), ("tps", "turns/s (measured turns)"), ("during", "turns/s during the flood (turns, s)"),
+    ("ratio", "÷ clean"), ("target", f"target ≥ {TARGET:g}"), ("same", "same journal / states"),
+    ("attacker", "attacker: sent / answered / refused (its CPU s)"), ("srv", "rejected by the coordinator"),
+    ("env", "rejected by the environment"), ("cpu", "CPU ms per turn: router / coordinator / environment"),
+    ("codes", "exit codes"),
+)
+
+
+def rows_of(games: list[Played], case: Case) -> tuple[list[Row], list[str]]:
+    clean = [p for p in games if p.flood is None and not p.game.error]
+    reference = clean[0] if clean else None
+    clean_rate = statistics.fmean(measured_rate(p.game, case) for p in clean) if clean else float("nan")
+    rows, errors = [], []
+    for p in games:
+        g = p.game
+        cells = {"codes": " / ".join(f"{g.codes.get(n)}" for n in ("coordinator", "env", "swarm")),
+                 "srv": p.rejected.get("coordinator") or "-", "env": p.rejected.get("env") or "-"}
+        ok = not g.error and not p.attacker_error and all(c == 0 for c in g.codes.values())
+        if g.error:
+            cells["target"] = "FAILED: " + g.error.splitlines()[0]
+            errors.append(f"{p.name}: {g.error}")
+        else:
+            cells["tps"] = f"{measured_rate(g, case):.1f}"
+            cells["cpu"] = " / ".join(f"{g.cpu.get(n, float('nan')) * 1e3:.2f}"
+                                      for n in ("router", "coordinator", "env"))
+            if reference is not None:
+                same_journal = p.journal == reference.journal and bool(p.journal)
+                same_states = _states(g) == _states(reference.game)
+                cells["same"] = f"{'yes' if same_journal else 'NO'} / {'yes' if same_states else 'NO'}"
+                ok = ok and same_journal and same_states
+        if p.flood is not None:
+            if p.attacker_error:
+                cells["target"] = p.attacker_error
+                errors.append(f"{p.name}: {p.attacker_error}")
+            elif p.attacker:
+                a = p.attacker
+                cells["attacker"] = f"{a['sent']:,} / {a['answered']:,} / {a['refused']:,} ({a['cpu']:.2f})"
+                if not g.error:
+                    rate, turns, seconds, cut = flood_rate(g, case, a["first"], a["last"])
+                    ratio = rate / clean_rate
+                    cells["during"] = f"{rate:.1f} ({turns}, {seconds:.2f}{', cut' if cut else ''})"
+                    cells["ratio"] = f"{ratio:.2f}"
+                    p.ratio = ratio
+                    cells["target"] = "met" if ratio >= TARGET else "MISSED"
+        rows.append(Row(p.name, cells, ok=ok))
+    return rows, errors
+
+
+def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
+    case = quick_case() if args.quick else Case(DRONES, SIZE, 10, args.turns)
+    counts = QUICK_FLOODS if args.quick else FLOODS
+    logs = Path(tempfile.mkdtemp(prefix="dronesim-flood-"))
+    facts: dict = {"logs": logs, "case": case, "counts": counts}
+    busy0, t0 = busy_seconds(), time.perf_counter()
+    scenario = logs / "scenario.json"
+    scen = make_scenario(case)
+    if scen is None:
+        raise SystemExit(f"{case.drones} drones do not fit in {case.size}")
+    scenario.write_text(json.dumps(scen), encoding="utf-8")
+    secured = None if args.plain else Secured.make(logs / "certs", [d["id"] for d in scen["drones"]], "H01")
+    facts["secured"] = secured is not None
+    plan = [("clean", None), (f"flood (a): {counts['nps']:,} stale NPS", "nps"),
+            (f"flood (b): {counts['ask']} ASKs of 32,768 cells", "ask"), ("clean again", None)]
+    rows: list[Row] = []
+    facts["errors"], facts["loads"], facts["ratios"] = [], [], {flood: [] for _, flood in plan if flood}
+    for k in range(1, args.repeat + 1):
+        facts["loads"].append(os.getloadavg()[0])
+        games = [play(f"run {k}: {name}" if args.repeat > 1 else name, flood, counts.get(flood or "", 0), case,
+                      scenario, logs / f"run{k}-game{i}", secured) for i, (name, flood) in enumerate(plan)]
+        more, errors = rows_of(games, case)
+        rows += more
+        facts["errors"] += errors
+        for p in games:
+            if p.flood is not None:
+                facts["ratios"][p.flood].append(p.ratio)
+    facts["seconds"] = time.perf_counter() - t0
+    (b0, m0), (b1, m1) = busy0, busy_seconds()
+    facts["others"] = max(0.0, (b1 - b0) - (m1 - m0)) / max(facts["seconds"], 1e-9)
+    facts["load_after"] = os.getloadavg()
+    return rows, facts
+
+
+def legend(facts: dict) -> str:
+    case: Case = facts["case"]
+    return (
+        f"Legend. One scenario ({case.drones} seed drones on {'x'.join(map(str, case.size))}, {case.warmup} warm-up "
+        f"turns, {case.turns} measured), played four times in this run as `dronesim bench perf` plays a game: a "
+        "loopback `dronesim router` process (" + (
+            "the secured router of docs/security.md: TLS, user/password, the access control generated from the key "
+            "table for the game's root, every process with its own credentials, the attacker a second "
+            "session of H01, the swarm host flying D01, whose keys it may write; "
+            if facts["secured"] else "the plain router: no TLS, no authentication, no access control; ")
+        + "the flood filters generated from the key table, `low_pass_filter` and `downsampling`), coordinator "
+        "(with a journal), environment and "
+        "one swarm host as processes, this process the scripted ground station. When the warm-up is over, an "
+        "attacker process (`benchmarks/flooder.py`, a client of the router) floods as D01: (a) NPS for turn 1 on "
+        "D01's own key, as fast as it can; (b) ASKs of 32,768 cells to the environment, all at once, then waits "
+        "for their replies. Turns/s (measured turns) = 1 ÷ the mean time between consecutive STATUS; during the "
+        "flood = the turns it overlaps (from the last turn begun before the attacker's first message to the first "
+        "begun after its last message or reply; \"cut\": the flood outlasted the measured turns, counted to the "
+        "last) ÷ their time; ÷ clean = that ÷ the mean of the two clean games' turns/s. Same "
+        "journal: byte-identical to the first clean game's; same states: every drone's state after every turn "
+        "equal. Rejected: the coordinator's and the environment's last report (by reason, then by origin). "
+        "CPU: user + system time of each process over the measured turns ÷ turns; the attacker's CPU "
+        "seconds during its flood are in its column: it runs on this machine, beside the router (which receives "
+        "every message of the flood and drops most) and the game's processes, so on a machine of few cores a "
+        "flood costs the game CPU as well as whatever reaches it (the attacker's CPU seconds ÷ the flood's "
+        "seconds: the cores it took). Exit codes: coordinator / environment / swarm host."
+    )
+
+
+def _span(values: list[float]) -> str:
+    lo, hi = min(values), max(values)
+    return f"{lo:.2f}" if f"{lo:.2f}" == f"{hi:.2f}" else f"{lo:.2f}–{hi:.2f}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="dronesim bench flood", description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true",
+                        help=f"a tiny game ({quick_case().name}, {quick_case().turns} turns) and small floods "
+                             f"({QUICK_FLOODS['nps']:,} NPS, {QUICK_FLOODS['ask']} ASKs), for the tests")
+    parser.add_argument("--turns", type=int, default=1000,
+                        help="measured turns per game (default 1000: the floods end within them)")
+    parser.add_argument("--plain", action="store_true",
+                        help="the plain router (flood filters, no TLS, no authentication, no access control) instead "
+                             "of the secured one")
+    parser.add_argument("--repeat", type=int, default=1, help="play the four games this many times (default 1)")
+    parser.add_argument("--keep-logs", action="store_true", help="keep the processes' logs (kept anyway on failure)")
+    add_write_args(parser)
+    args = parser.parse_args(argv)
+    if args.turns < 2 or args.repeat < 1:
+        parser.error("--turns must be >= 2 and --repeat >= 1")
+    rows, facts = run(args)
+    table = render(rows, COLUMNS)
+    print(table)
+    print()
+    print(legend(facts))
+    for err in facts["errors"]:
+        print(f"\n{err}", file=sys.stderr)
+    ok = all(r.ok for r in rows)
+    missed = [r.name for r in rows if r.cells.get("target") == "MISSED"]
+    if ok and not args.keep_logs:
+        shutil.rmtree(facts["logs"], ignore_errors=True)
+    else:
+        print(f"logs: {facts['logs']}", file=sys.stderr)
+    others = facts["others"]
+    befores = ", ".join(f"{v:.2f}" for v in facts["loads"])
+    load = (f"Load average (1 min) before {'each' if len(facts['loads']) > 1 else 'the'} run {befores}, after "
+            f"{facts['load_after'][0]:.2f}; other processes "
+            f"used {others:.2f} cores on average during the run"
+            + (" (other work ran alongside: absolute numbers are pessimistic)." if others > 0.2 else "."))
+    verdict = ("Target (flooded turns/s ≥ 0.5 × clean, journal unchanged): "
+               + ("met." if ok and not missed else
+                  "MISSED" + (f" ({', '.join(missed)})" if missed else "")
+                  + ("; a game failed or its journal changed" if not ok else "") + "."))
+    ranges = "; ".join(f"flood ({'a' if flood == 'nps' else 'b'}) ÷ clean: {_span(values)}"
+                       for flood, values in facts["ratios"].items() if values)
+    verdict += f" Over {args.repeat} run{'s' if args.repeat > 1 else ''}: {ranges}." if ranges else ""
+    print(f"\n{load}\n{verdict}", file=sys.stderr)
+    if args.write:
+        body = (f"{command_line('flood', argv, facts['seconds'])} {load}\n\n{verdict}\n\n{table}\n\n"
+                f"{legend(facts)}\n")
+        replace_section(args.output, SECTION, body)
+        print(f"wrote {SECTION!r} in {args.output}", file=sys.stderr)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

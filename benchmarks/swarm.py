@@ -1,0 +1,371 @@
+"""``dronesim bench swarm``: cooperative drones judged by multi-agent path finding (MAPF) metrics.
+
+    dronesim bench swarm                    # the MovingAI families, 50-400 agents, a 3D city of 1000 drones
+    dronesim bench swarm --quick            # a few small instances (for tests)
+    dronesim bench swarm --write            # ... and updates "## Swarm benchmark" in BENCHMARKS.md
+
+Every instance is played in process (dronesim/local.py: the same engine, environment and autopilots as a
+distributed run, whose journal is the same) by D* drones, three ways side by side:
+
+- ``fixed``: the former arbitration (`coordinator.arbiter.fixed`: one move per drone, a fixed priority);
+- ``pibt``: PIBT over each drone's ranked candidates (`coordinator.arbiter.cooperate`, the one in force);
+- ``pibt+map``: the same with every drone given the map at the start (D*'s `known`): an upper bound on what
+  cooperation gives when the drones need not discover the walls.
+
+Instances: the MovingAI 32 x 32 families (entities/movingai.py: empty, random 10 % and 20 %, maze, rooms, a
+warehouse), one map and one random scenario per family and seed, with 50, 100, 200 and 400 agents (the first
+N of the scenario); and a 3D city (`World.generate`) with 1000 drones. The ground station gives every target at
+turn 1 and says its plan is final; a game ends when every drone has arrived, has said UNREACHABLE, or at the
+turn limit: on 32 x 32, 4 times the lower-bound makespan (the longest single-agent optimal path) and at least
+256 (POGEMA's episode), as MAPF evaluations bound a run by a multiple of what it must at least take; the ISR at
+turn 256 is reported too, and, for a game that reached its limit, how many agents off their goal were still
+moving in its last 10 turns (a livelock, not a slow crowd, if the ISR did not grow meanwhile).
+
+Metrics, as POGEMA reports them: CSR (1 if every agent is on its goal at the end, averaged over instances),
+ISR (the share of agents on their goal at the end), sum of costs (each agent's cost is the turn after which it
+stays on its goal; an agent not there at the end costs the game's length) and makespan (the largest cost), each
+also divided by its lower bound (the sum, resp. the largest, of the single-agent optimal lengths); collisions
+(deaths of VERTEX or SWAP: none may happen between cooperative drones); turns per second of the whole
+in-process game (every drone's planning included); and the arbiter's CPU time per turn (process time inside
+`Engine.arbiter`, the garbage collector held off: see `Timed`). POGEMA (benchmarks/pogema.py) is run at the
+same agent counts in the same run: its steps per second with random actions on its 64 x 64 grid.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import logging
+import sys
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from coordinator import arbiter
+from coordinator.engine import DroneSpec, GameConfig
+from dronesim.local import Inputs, simulate
+from entities import movingai
+from entities.gcs import Plan
+from entities.world import World
+from schema import Cell, WorldSpec
+from schema.tables import RANK_STEPS, rank_steps
+
+from . import add_write_args, command_line, pogema, replace_section
+
+SECTION = "## Swarm benchmark"
+AGENTS = (50, 100, 200, 400)
+#: The 3D city: size, drones.
+CITY = ((64, 64, 8), 1000)
+QUICK_CITY = ((16, 16, 4), 40)
+VARIANTS = ("fixed", "pibt", "pibt+map")
+#: POGEMA's episode on 32 x 32 (turns): the ISR at this turn is reported too.
+TURNS_32 = 256
+#: The turn limit on 32 x 32 is this many times the instance's lower-bound makespan (the longest single-agent
+#: optimal path), and at least TURNS_32: the maze's longest paths are 184 moves, which 256 turns barely cover.
+LIMIT_PER_MAKESPAN = 4
+#: An agent not on its goal at the end that moved in the game's last this many turns was still moving.
+RECENT = 10
+
+LOG = logging.getLogger("dronesim.bench.swarm")
+
+
+@dataclass(frozen=True, slots=True)
+class Instance:
+    """One MAPF instance: a world (blocked cells [x, y, z]) and each agent's start and goal."""
+
+    name: str
+    grid: np.ndarray
+    starts: tuple[Cell, ...]
+    goals: tuple[Cell, ...]
+    optimal: tuple[int, ...]
+    max_turns: int
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    """One instance played one way."""
+
+    instance: str
+    agents: int
+    variant: str
+    arrived: int
+    soc: int
+    makespan: int
+    soc_lb: int
+    makespan_lb: int
+    collisions: int
+    arrived_256: int  # on their goal at turn TURNS_32 (or at the end if the game ended before)
+    moving: int  # not on their goal at the end but moved in the last RECENT turns (a game at its turn limit)
+    turns: int
+    seconds: float
+    arbiter_cpu: float  # seconds of process time inside the arbiter, over the game
+    arbitrated: int  # turns the arbiter ran
+    max_turns: int
+
+    @property
+    def csr(self) -> float:
+        return float(self.arrived == self.agents)
+
+    @property
+    def isr(self) -> float:
+        return self.arrived / self.agents
+
+    @property
+    def limited(self) -> bool:
+        """The game ended at its turn limit (not every agent arrived or said UNREACHABLE)."""
+        return self.turns >= self.max_turns
+
+
+
+class Timed:
+    """An arbiter that counts the process time spent in it. The cyclic garbage collector is held off meanwhile:
+    in process, the drones' pilots make most of the garbage (their ASK answers), and a collection that the
+    arbiter's allocations happen to trigger would bill it their cost (a coordinator has no pilots)."""
+
+    def __init__(self, inner: arbiter.Arbiter) -> None:
+        self.inner, self.cpu, self.calls = inner, 0.0, 0
+
+    def __call__(self, size: Cell, *args: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        gc.disable()
+        try:
+            t0 = time.process_time()
+            out = self.inner(size, *args)
+            self.cpu += time.process_time() - t0
+        finally:
+            gc.enable()
+        self.calls += 1
+        return out
+
+
+def movingai_instance(family: str, agents: int, seed: int) -> Instance:
+    blocked = movingai.generate(family, seed)
+    scen = movingai.scenario(blocked, agents, seed, f"{family}.map")
+    cells = movingai.starts_and_goals(scen)
+    optimal = tuple(int(a.optimal) for a in scen)
+    return Instance(f"{family}", movingai.world_grid(blocked), tuple(s for s, _ in cells), tuple(g for _, g in cells),
+                    optimal, max(TURNS_32, LIMIT_PER_MAKESPAN * max(optimal)))
+
+
+def city_instance(size: Cell, agents: int, seed: int) -> Instance:
+    """A 3D city with `agents` drones at random free cells with random free goals, every goal reachable."""
+    rng = np.random.default_rng(seed)
+    world = World.generate(size, rng)
+    grid = np.asarray(world.grid)
+    free = np.argwhere(~grid)
+    starts: list[Cell] = [(x, y, z) for x, y, z in free[rng.permutation(len(free))[:agents]].tolist()]
+    goals: list[Cell] = [(x, y, z) for x, y, z in free[rng.permutation(len(free))[:agents]].tolist()]
+    optimal = [world.shortest_path_length(s, g) for s, g in zip(starts, goals)]
+    keep = [k for k, o in enumerate(optimal) if o is not None]
+    return Instance(f"city-{size[0]}-{size[1]}-{size[2]}", grid, tuple(starts[k] for k in keep),
+                    tuple(goals[k] for k in keep), tuple(int(optimal[k] or 0) for k in keep),
+                    4 * max(size) + 64)
+
+
+def play(inst: Instance, variant: str) -> Outcome:
+    world = World.from_grid(inst.grid)
+    ids = [f"D{k + 1:02d}" for k in range(len(inst.starts))]
+    config = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=inst.max_turns,
+                        drones=tuple(DroneSpec(drone=d, start=s) for d, s in zip(ids, inst.starts)))
+    plan = Plan(tuple(sorted((1, d, g) for d, g in zip(ids, inst.goals))))
+    timed = Timed(arbiter.fixed if variant == "fixed" else arbiter.cooperate)
+    # the former D* never said UNREACHABLE while stuck behind drones: it waited to the turn limit
+    options = {"pibt": None, "pibt+map": {"dstar": {"known": inst.grid}},
+               "fixed": {"dstar": {"stuck_after": inst.max_turns + 1}}}[variant]
+    t0 = time.perf_counter()
+    result = simulate(config, dict.fromkeys(ids, "dstar"), Inputs(plan=plan), LOG, verify_env=False,
+                      arbiter=timed, pilot_options=options)
+    seconds = time.perf_counter() - t0
+    costs, turns, collisions, at_256, last_move = _costs(result.records, ids, dict(zip(ids, inst.starts)),
+                                                        dict(zip(ids, inst.goals)))
+    arrived = sum(c is not None for c in costs)
+    paid = [turns if c is None else c for c in costs]
+    moving = sum(c is None and m > turns - RECENT for c, m in zip(costs, last_move))
+    return Outcome(inst.name, len(ids), variant, arrived, sum(paid), max(paid), sum(inst.optimal), max(inst.optimal),
+                   collisions, at_256, moving, turns, seconds, timed.cpu, timed.calls, inst.max_turns)
+
+
+def _costs(records: list[dict], ids: list[str], starts: dict[str, Cell], goals: dict[str, Cell]
+           ) -> tuple[list[int | None], int, int, int, list[int]]:
+    """Each agent's cost (the turn after which it stays on its goal; None if not on it at the end), the game's
+    length in turns, the collisions (VERTEX and SWAP deaths), how many agents were on their goal at turn
+    TURNS_32 (or at the end, if sooner), and each agent's last move (its turn, 0: never moved)."""
+    pos = {d: tuple(c) for d, c in starts.items()}
+    since = {d: (0 if pos[d] == goals[d] else None) for d in ids}
+    last = dict.fromkeys(ids, 0)
+    turns = collisions = 0
+    at_256 = None
+    dead: set[str] = set()
+    for r in records:
+        if r.get("record") != "turn":
+            continue
+        turns = r["turn"]
+        for d, c in r.get("moves", {}).items():
+            pos[d] = tuple(c)
+            last[d] = turns
+            since[d] = turns if pos[d] == goals[d] else None
+        for d, cause in r.get("deaths", {}).items():
+            dead.add(d)
+            collisions += cause in ("VERTEX", "SWAP")
+        if turns == TURNS_32:
+            at_256 = sum(since[d] is not None and d not in dead for d in ids)
+    costs = [None if d in dead else since[d] for d in ids]
+    if at_256 is None:
+        at_256 = sum(c is not None for c in costs)
+    return costs, turns, collisions, at_256, [last[d] for d in ids]
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def _row(cells: Iterable[object]) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def table(outcomes: list[Outcome], pogema_sps: dict[int, float]) -> str:
+    """One row per instance kind, agent count and variant (averaged over instances)."""
+    head = ["instance", "agents", "arbitration", "CSR", "ISR", f"ISR@{TURNS_32}", "turn limit", "moving at limit",
+            "SoC", "SoC/LB", "makespan", "makespan/LB", "collisions", "turns/s", "arbiter ms/turn", "POGEMA steps/s"]
+    lines = [_row(head), _row(["---"] * len(head))]
+    groups: dict[tuple[str, int, str], list[Outcome]] = {}
+    for o in outcomes:
+        groups.setdefault((o.instance, o.agents, o.variant), []).append(o)
+    for (name, agents, variant), group in groups.items():
+        n = len(group)
+        pog = pogema_sps.get(agents)
+        lines.append(_row([
+            name if n == 1 else f"{name} (x{n})", agents, variant,
+            f"{sum(o.csr for o in group) / n:.2f}", f"{100 * sum(o.isr for o in group) / n:.1f} %",
+            f"{100 * sum(o.arrived_256 / o.agents for o in group) / n:.1f} %",
+            "/".join(sorted({str(o.max_turns) for o in group})),
+            sum(o.moving for o in group if o.limited) if any(o.limited for o in group) else "-",
+            f"{sum(o.soc for o in group) / n:.0f}", f"{sum(o.soc / o.soc_lb for o in group) / n:.2f}",
+            f"{sum(o.makespan for o in group) / n:.0f}", f"{sum(o.makespan / o.makespan_lb for o in group) / n:.2f}",
+            sum(o.collisions for o in group),
+            f"{sum(o.turns for o in group) / sum(o.seconds for o in group):.1f}",
+            f"{1000 * sum(o.arbiter_cpu for o in group) / max(1, sum(o.arbitrated for o in group)):.2f}",
+            "-" if pog is None else f"{pog:.0f}",
+        ]))
+    return "\n".join(lines)
+
+
+def summary(outcomes: list[Outcome]) -> str:
+    """Per variant: ISR over every agent of every instance, CSR over instances, and the worst arbiter turn."""
+    out = []
+    for v in VARIANTS:
+        mine = [o for o in outcomes if o.variant == v]
+        if not mine:
+            continue
+        agents = sum(o.agents for o in mine)
+        out.append(f"- `{v}`: ISR {100 * sum(o.arrived for o in mine) / agents:.2f} % of {agents} agents (at turn "
+                   f"{TURNS_32}: {100 * sum(o.arrived_256 for o in mine) / agents:.2f} %), CSR "
+                   f"{sum(o.csr for o in mine):.0f} of {len(mine)} instances, {sum(o.collisions for o in mine)} "
+                   f"collisions; {sum(o.limited for o in mine)} games ended at their turn limit, with "
+                   f"{sum(o.moving for o in mine if o.limited)} agents off their goal still moving")
+    return "\n".join(out)
+
+
+def arbiter_alone(counts: Iterable[int], repeats: int = 21) -> dict[int, float]:
+    """The arbiter's process time per turn (ms, median of `repeats`) on its own, for each drone count: a dense
+    cube of drones (one in three cells taken), each ranking all 7 of its steps in a random order, random
+    priorities — a turn of conflicts everywhere, many push chains."""
+    rng = np.random.default_rng(1)
+    out = {}
+    for n in counts:
+        side = round((3 * n) ** (1 / 3)) + 1
+        flat = rng.permutation(side ** 3)[:n]
+        before = (np.stack(np.unravel_index(flat, (side, side, side)), axis=1) + 1).astype(np.int32)
+        ranked = np.array([rank_steps(RANK_STEPS[k] for k in rng.permutation(len(RANK_STEPS))) for _ in range(n)],
+                          np.uint32)
+        priority = rng.integers(0, 50, n)
+        spent = []
+        for _ in range(repeats):
+            t0 = time.process_time()
+            arbiter.cooperate((side + 2,) * 3, before, before, ranked, np.ones(n, bool), priority)
+            spent.append(time.process_time() - t0)
+        out[n] = 1000 * sorted(spent)[len(spent) // 2]
+    return out
+
+
+# --------------------------------------------------------------------------- main
+
+
+def instances(quick: bool, seeds: int, agents: tuple[int, ...], families: list[str], city: bool
+              ) -> list[Instance]:
+    out = [movingai_instance(f, n, seed) for seed in range(1, seeds + 1) for f in families for n in agents]
+    if city:
+        size, n = QUICK_CITY if quick else CITY
+        out.append(city_instance(size, n, 1))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="dronesim bench swarm", description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="small instances (for tests)")
+    parser.add_argument("--agents", default=",".join(map(str, AGENTS)), help="agent counts on the 32x32 maps")
+    parser.add_argument("--families", default=",".join(movingai.FAMILIES), help="MovingAI families to play")
+    parser.add_argument("--seeds", type=int, default=1, help="instances per family and agent count (default 1)")
+    parser.add_argument("--variants", default=",".join(VARIANTS), help=f"among {', '.join(VARIANTS)}")
+    parser.add_argument("--no-city", action="store_true", help="skip the 3D city of 1000 drones")
+    parser.add_argument("--no-pogema", action="store_true", help="do not run POGEMA")
+    add_write_args(parser)
+    args = parser.parse_args(argv)
+    agents = (10, 20) if args.quick else tuple(int(a) for a in args.agents.split(","))
+    families = [f for f in args.families.split(",") if f]
+    variants = [v for v in args.variants.split(",") if v]
+    bad = [v for v in variants if v not in VARIANTS] + [f for f in families if f not in movingai.FAMILIES]
+    if bad:
+        print(f"unknown: {', '.join(bad)}", file=sys.stderr)
+        return 2
+    t_start = time.perf_counter()
+    todo = instances(args.quick, args.seeds, agents, families, not args.no_city)
+    outcomes = []
+    for inst in todo:
+        for v in variants:
+            o = play(inst, v)
+            outcomes.append(o)
+            print(f"  {inst.name} {o.agents} {v}: ISR {100 * o.isr:.1f} % (at {TURNS_32}: "
+                  f"{100 * o.arrived_256 / o.agents:.1f} %, moving at the end {o.moving}), "
+                  f"SoC/LB {o.soc / o.soc_lb:.2f}, "
+                  f"{o.turns} turns in {o.seconds:.1f} s, arbiter {1000 * o.arbiter_cpu / max(1, o.arbitrated):.2f} "
+                  "ms/turn", file=sys.stderr, flush=True)
+    counts = sorted({o.agents for o in outcomes})
+    pogema_sps: dict[int, float] = {}
+    if not args.no_pogema:
+        try:
+            pogema_sps = pogema.steps_per_second(counts, 1.0)
+        except pogema.Unavailable as err:
+            print(f"POGEMA not measured: {err}", file=sys.stderr)
+    body_table = table(outcomes, pogema_sps)
+    alone = arbiter_alone((100, 1000) if args.quick else (1000, 2000, 5000, 10000))
+    lines = summary(outcomes) + "\n- the arbiter alone (a dense cube of drones, conflicts everywhere), ms/turn: " + \
+        ", ".join(f"{n} drones {ms:.2f}" for n, ms in alone.items())
+    print()
+    print(body_table)
+    print()
+    print(lines)
+    if args.write:
+        body = (
+            f"{command_line('swarm', argv, time.perf_counter() - t_start)}\n\n"
+            "Every instance played in process by D* drones (the journal is the one a distributed run writes), three "
+            "ways: `fixed` the former arbitration (one move per drone, fixed priority), `pibt` PIBT over the drones' "
+            "ranked candidates (in force), `pibt+map` the same with the map known from the start. MovingAI 32x32 "
+            "families generated by entities/movingai.py (seeded), the first N agents of one random scenario each; "
+            "a 3D city of World.generate. CSR/ISR: on the goal at the end; SoC and makespan with their ratio to the "
+            "lower bound (sum and max of single-agent optimal lengths); turns/s of the whole in-process game "
+            "(every drone's D* planning included, one process); arbiter ms/turn: process time inside the "
+            "arbitration; POGEMA steps/s: POGEMA 1.4.0 with as many agents, random actions, 64x64, same run. "
+            f"Turn limit on 32x32: {LIMIT_PER_MAKESPAN} x the lower-bound makespan, at least {TURNS_32}; "
+            f"ISR@{TURNS_32}: on the goal at turn {TURNS_32} (POGEMA's episode); moving at limit: in games that "
+            f"reached their turn limit, agents off their goal that moved in the last {RECENT} turns.\n\n"
+            f"{body_table}\n\n{lines}\n"
+        )
+        replace_section(args.output, SECTION, body)
+        print(f"\nwrote {SECTION!r} in {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

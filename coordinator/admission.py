@@ -1,0 +1,134 @@
+"""Admission: who may join the game, who is there, and the presence a CONNECT must show first.
+
+Pure, like the engine: no network and no clock of its own (the time is passed in).
+
+- `Roster`: the admitted entities (id -> role and Zenoh session) and the rules that refuse a CONNECT;
+  the engine asks it and starts (or resumes) the game once everyone is there.
+- `Presences`: the presence tokens seen, and the CONNECTs waiting for theirs. A CONNECT names its sender
+  and session; it is admitted only once the presence token of that same (sender, session) is seen. Under
+  the router's access control only the real principal may declare that token, so a process cannot take
+  another's seat by writing its name in a CONNECT (defence in depth: the coordinator cannot see who sent a
+  query). The token may arrive just after the query (another path), hence a short wait; a CONNECT without
+  one is refused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Generic, TypeVar
+
+from schema import Connect, Role
+from schema.messages import is_host_id
+
+from .fleet import ALIVE, STATES, Fleet
+
+#: Seconds a CONNECT may wait for its sender's presence token to be seen.
+PRESENCE_WAIT_S = 5.0
+
+Q = TypeVar("Q")  # what a CONNECT is answered through (a Zenoh query in the adapter)
+
+
+class Roster:
+    """The admitted entities: id -> role, and the Zenoh session each was admitted with."""
+
+    def __init__(self) -> None:
+        self.roles: dict[str, Role] = {}
+        self.sessions: dict[str, str] = {}
+
+    def has(self, role: Role) -> bool:
+        return role in self.roles.values()
+
+    def refusal(self, msg: Connect, fleet: Fleet, *, over: bool, admitting: bool) -> str:
+        """Why `msg` cannot be admitted ("" if it can). `admitting`: the game has not started (or is being
+        resumed), so drones may still join."""
+        if over:
+            return "the game is over"
+        if msg.sender in self.roles:
+            if msg.session and self.sessions.get(msg.sender) == msg.session and self.roles[msg.sender] is msg.role:
+                return ""  # the same process again (e.g. after a cut link): welcome it back
+            return f"{msg.sender} is already connected"
+        match msg.role:
+            case Role.ENV | Role.GCS:
+                if msg.sender != msg.role.value:
+                    return f"the {msg.role.value} must connect as {msg.role.value}, not {msg.sender}"
+            case Role.DRONE:
+                if not is_host_id(msg.sender) and msg.drones != (msg.sender,):
+                    return (f"{msg.sender} cannot connect for {', '.join(msg.drones)}: a drone flies itself, "
+                            "a swarm host connects as Hnn")
+                if not admitting:  # (a LOST drone that comes back included: it stays LOST)
+                    ended = [f"{d} is {STATES[fleet.state[fleet.index[d]]].value}" for d in msg.drones
+                             if d in fleet.index and fleet.state[fleet.index[d]] != ALIVE]
+                    return f"{', '.join(ended)}: drones cannot join a running game" if ended else \
+                        "drones cannot join a running game"
+                for d in msg.drones:
+                    if d not in fleet.index:
+                        return f"unknown drone {d}: this game flies {', '.join(fleet.ids)}"
+                    host = fleet.host[fleet.index[d]]
+                    if host is not None:
+                        return f"drone {d} is already taken by {host}"
+        return ""
+
+    def admit(self, msg: Connect) -> bool:
+        """Admit `msg`'s sender (checked by `refusal`); True if it was admitted already (the same process
+        connecting again)."""
+        again = msg.sender in self.roles
+        self.roles[msg.sender] = msg.role
+        self.sessions[msg.sender] = msg.session
+        return again
+
+    def leave(self, entity: str, session: str = "") -> Role | None:
+        """`entity`'s presence went away: its role, if that was the admitted process's own (`session`; ""
+        stands for any), else None and nothing changes (a refused impostor's token does not count)."""
+        if entity not in self.roles or (session and self.sessions.get(entity) not in ("", session)):
+            return None
+        self.sessions.pop(entity, None)
+        return self.roles.pop(entity)
+
+    def everyone_here(self, fleet: Fleet, rows: Sequence[int] | None = None) -> bool:
+        """The environment, the ground station and a process flying each drone (of `rows`, or all)."""
+        drones = fleet.host if rows is None else [fleet.host[i] for i in rows]
+        return self.has(Role.ENV) and self.has(Role.GCS) and all(drones)
+
+    def missing(self, fleet: Fleet) -> list[str]:
+        """Who never connected: the drones nobody flies, then the environment and the ground station."""
+        return ([d for d, host in zip(fleet.ids, fleet.host) if host is None]
+                + [r.value for r in (Role.ENV, Role.GCS) if not self.has(r)])
+
+
+class Presences(Generic[Q]):
+    """The presence tokens seen, and the CONNECTs waiting for theirs (see the module)."""
+
+    def __init__(self) -> None:
+        self.present: set[tuple[str, str]] = set()
+        self._waiting: list[tuple[float, Q, Connect]] = []
+
+    def connect(self, query: Q, msg: Connect, now: float) -> list[tuple[Q, Connect]]:
+        """A CONNECT: ready at once if its token is there, else it waits (up to PRESENCE_WAIT_S)."""
+        if (msg.sender, msg.session) in self.present:
+            return [(query, msg)]
+        self._waiting.append((now + PRESENCE_WAIT_S, query, msg))
+        return []
+
+    def presence(self, entity: str, session: str, alive: bool) -> list[tuple[Q, Connect]]:
+        """A token came or went: the CONNECTs it makes ready."""
+        if not alive:
+            self.present.discard((entity, session))
+            return []
+        self.present.add((entity, session))
+        ready = [(q, m) for _, q, m in self._waiting if (m.sender, m.session) == (entity, session)]
+        self._waiting = [w for w in self._waiting if (w[2].sender, w[2].session) != (entity, session)]
+        return ready
+
+    def due_in(self, now: float) -> float | None:
+        """Seconds until the first waiting CONNECT expires (None: none waits)."""
+        return max(0.0, min(w[0] for w in self._waiting) - now) if self._waiting else None
+
+    def expired(self, now: float) -> list[tuple[Q, Connect]]:
+        """The CONNECTs whose token did not come in time (to be refused)."""
+        gone = [(q, m) for due, q, m in self._waiting if due <= now]
+        self._waiting = [w for w in self._waiting if w[0] > now]
+        return gone
+
+    def others(self, me: Iterable[str] = ("SRV",)) -> set[str]:
+        """The entities with a token, but `me`."""
+        return {e for e, _ in self.present} - set(me)

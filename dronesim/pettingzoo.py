@@ -1,0 +1,222 @@
+"""The game as a PettingZoo environment (``pip install 'dronesim[rl]'``): `parallel_env(**config)` and its
+AEC form `env(**config)`, as PettingZoo's own environments expose them.
+
+    from dronesim.pettingzoo import parallel_env
+    env = parallel_env(num_drones=16, seed=3, on_target="new", backend="local")
+    observations, infos = env.reset()
+    while env.agents:
+        observations, rewards, terminations, truncations, infos = env.step(
+            {a: env.action_space(a).sample() for a in env.agents})
+    env.close()
+
+Agents are the drones (``drone_1`` flies D01); actions `Discrete(7)` (0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z,
+6 -z); observations a `Box` of int32: the cells around the drone (`dronesim.rl.Seen` codes) then the offset
+to its target. The rules, the configuration and the backends are in dronesim/rl.py and docs/rl.md.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from dronesim.rl import (
+    ACTIONS,
+    RENDER_MODES,
+    Config,
+    ConfigError,
+    Episode,
+    Expert,
+    Eyes,
+    Layout,
+    LocalTurns,
+    Seen,
+    Turns,
+    checked_int,
+)
+from dronesim.rl_few import FEW_MAX, FewEpisode
+from schema.tuning import EPISODE_FEW_DRONES
+
+__all__ = ["DroneParallelEnv", "Expert", "env", "expert_policy", "parallel_env"]
+
+
+class DroneParallelEnv(ParallelEnv):
+    """The drones of one game as PettingZoo agents; see the module's docstring and docs/rl.md."""
+
+    metadata = {"render_modes": list(RENDER_MODES), "name": "dronesim_v0", "is_parallelizable": True}
+
+    def __init__(self, **config: object) -> None:
+        self.config = Config.of(**config)
+        cfg = self.config
+        self.render_mode = cfg.render_mode
+        #: Steps before truncation; read at each reset (PettingZoo's tests set it).
+        self.max_cycles = cfg.max_cycles
+        self.possible_agents = [f"drone_{i}" for i in range(1, cfg.num_drones + 1)]
+        self._row = {a: i for i, a in enumerate(self.possible_agents)}
+        self.agents: list[str] = []
+        world_size = cfg.world.size if cfg.world is not None else cfg.size
+        self._obs_bounds = Eyes.bounds_for(world_size, cfg.obs_radius)
+        #: The space of `state()`: the whole world as observation codes.
+        self.state_space = spaces.Box(0, max(Seen), shape=tuple(world_size), dtype=np.int8)
+        # Action spaces are seeded from the configuration's seed, so sampled actions are reproducible too.
+        self._action_spaces = {a: spaces.Discrete(len(ACTIONS), seed=cfg.seed + i)
+                               for i, a in enumerate(self.possible_agents)}
+        self._observation_spaces: dict[str, spaces.Box] = {}
+        self._episodes = np.random.default_rng(cfg.seed)  # seeds of the episodes reset() without a seed starts
+        self._seeded = False
+        self._turns: Turns | None = None
+        self._eyes: Eyes | None = None
+        self.episode: Episode | FewEpisode | None = None
+        #: Episodes of up to this many drones are played drone by drone (`FewEpisode`: the same steps, fewer
+        #: array operations) on the local backend; 0: always by `Episode` and the engine.
+        self.few_drones = min(EPISODE_FEW_DRONES, FEW_MAX) if cfg.backend == "local" else 0
+
+    # ------------------------------------------------------------------ spaces
+
+    def observation_space(self, agent: str) -> spaces.Box:
+        space = self._observation_spaces.get(agent)
+        if space is None:
+            self._check_agent(agent)
+            low, high = self._obs_bounds
+            space = self._observation_spaces[agent] = spaces.Box(low, high, dtype=np.int32)
+        return space
+
+    def action_space(self, agent: str) -> spaces.Discrete:
+        space = self._action_spaces.get(agent)
+        if space is None:
+            self._check_agent(agent)
+        return space  # type: ignore[return-value]
+
+    def _check_agent(self, agent: object) -> None:
+        if agent not in self._row:
+            raise ConfigError(f"unknown agent {agent!r}: this environment's agents are drone_1 .. "
+                              f"drone_{len(self.possible_agents)}")
+
+    # ------------------------------------------------------------------ episodes
+
+    def _backend(self) -> Turns:
+        if self._turns is None:
+            if self.config.backend == "zenoh":
+                from dronesim.rl_zenoh import ZenohTurns
+
+                self._turns = ZenohTurns(connect=self.config.connect, deadline=self.config.deadline,
+                                         logger=logging.getLogger("dronesim.rl"))
+            else:
+                self._turns = LocalTurns()
+        return self._turns
+
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        max_cycles = checked_int(self.max_cycles, "max_cycles")
+        if max_cycles < 1:
+            raise ConfigError(f"max_cycles must be >= 1, got {self.max_cycles}")
+        if seed is not None:
+            episode_seed = checked_int(seed, "seed")
+            if episode_seed < 0:
+                raise ConfigError(f"seed must be >= 0, got {seed}")
+            self._episodes = np.random.default_rng(episode_seed)
+        elif not self._seeded:
+            episode_seed = self.config.seed
+        else:
+            episode_seed = int(self._episodes.integers(2**31))
+        self._seeded = True
+        layout = Layout.draw(self.config, episode_seed)
+        self.episode = None
+        if self.config.num_drones <= self.few_drones:
+            self.episode = FewEpisode(self.config, layout, max_cycles, self._eyes)
+        else:
+            self.episode = Episode(self.config, layout, self._backend(), max_cycles, self._eyes)
+        self._eyes = self.episode.eyes
+        self.agents = self.possible_agents[:]
+        rows = np.arange(len(self.agents))
+        observations = dict(zip(self.agents, self.episode.observe(rows)))
+        infos = dict(zip(self.agents, self.episode.infos(rows)))
+        if self.render_mode == "human":
+            self.render()
+        return observations, infos
+
+    def step(self, actions: dict) -> tuple[dict, dict, dict, dict, dict]:
+        episode = self.episode
+        if episode is None:
+            raise ConfigError("step() before reset()")
+        if episode.ended:
+            raise ConfigError("step() after the end of the episode: call reset()")
+        if type(actions) is not dict and not isinstance(actions, Mapping):
+            raise ConfigError(f"actions must be a dict of agent -> action, got {type(actions).__name__}")
+        row = self._row
+        try:
+            rows = list(map(row.__getitem__, actions))
+        except (KeyError, TypeError):
+            bad = [a for a in actions if a not in row] if isinstance(actions, dict) else actions
+            raise ConfigError(f"actions must map agents to actions; unknown agents: {bad!r}") from None
+        out = episode.act(rows, list(actions.values()))
+        names = self.possible_agents if len(out.rows) == episode.n else [self.possible_agents[i] for i in out.rows]
+        terminated, truncated = out.terminated, out.truncated
+        observations = dict(zip(names, out.observations))
+        rewards = dict(zip(names, out.rewards))
+        terminations = dict(zip(names, terminated))
+        truncations = dict(zip(names, truncated))
+        infos = dict(zip(names, out.infos))
+        self.agents = [a for a, end, cut in zip(names, terminated, truncated) if not (end or cut)] \
+            if True in terminated or True in truncated else names[:]
+        if self.render_mode == "human":
+            self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    # ------------------------------------------------------------------ the rest
+
+    def render(self) -> str | np.ndarray | None:
+        if self.render_mode is None:
+            logging.getLogger("dronesim.rl").warning("render() without a render_mode: nothing to render")
+            return None
+        if self.episode is None:
+            raise ConfigError("render() before reset()")
+        if self.render_mode == "rgb_array":
+            return self.episode.rgb()
+        text = self.episode.ansi()
+        if self.render_mode == "ansi":
+            return text
+        print(text, flush=True)
+        return None
+
+    def state(self) -> np.ndarray:
+        """The whole world as the observations' codes (nx, ny, nz) int8: buildings and alive drones."""
+        if self.episode is None:
+            raise ConfigError("state() before reset()")
+        return self.episode.state_grid()
+
+    def close(self) -> None:
+        self.episode = None
+        if self._turns is not None:
+            self._turns.close()
+            self._turns = None
+
+    def __str__(self) -> str:
+        return "dronesim_v0"
+
+
+def expert_policy(env: DroneParallelEnv, autopilot: str = "dstar"):
+    """A policy for `env` (a `parallel_env`): called with no argument, the actions of every agent for the
+    current step, chosen by one of the project's autopilots per drone (see `dronesim.rl.Expert`)."""
+    expert = Expert(autopilot)
+    names = env.possible_agents
+
+    def act() -> dict[str, int]:
+        if env.episode is None:
+            raise ConfigError("the expert acts after reset()")
+        return {names[row]: a for row, a in expert.actions(env.episode).items()}
+
+    return act
+
+
+def parallel_env(**config: object) -> DroneParallelEnv:
+    """The game as a PettingZoo ParallelEnv (keywords: see dronesim.rl.Config)."""
+    return DroneParallelEnv(**config)
+
+
+def env(**config: object):
+    """The game as a PettingZoo AECEnv (PettingZoo's `parallel_to_aec` of `parallel_env`)."""
+    return parallel_to_aec(parallel_env(**config))

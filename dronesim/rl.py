@@ -1,0 +1,842 @@
+"""Multi-agent reinforcement learning on the game, with no RL library: the episode's rules as arrays.
+
+`dronesim.pettingzoo` wraps this in PettingZoo's API; this module needs numpy and the project alone.
+
+An episode is a game of the project's own engine (coordinator/engine.py): the agents are its drones, the
+policy plays both the ground station (the targets) and one swarm host flying every drone (their moves).
+Each step is one turn: a DONE with the targets that change, a MOVES with every alive drone's move, then
+the observer's STATUS, from which the observations, rewards and terminations are read. Where the turn is
+played is the backend's business (`Turns`): `LocalTurns` feeds the engine in this process; the Zenoh
+backend (dronesim/rl_zenoh.py) sends the same messages to the real coordinator and environment
+processes. Both get the same STATUS for the same messages, so an episode does not depend on the backend.
+
+The rules are the seed's observer's: a drone that enters a building, leaves the world, shares a cell with
+another drone or swaps cells with one dies. A drone on its target has arrived; what follows depends on
+`on_target`: "finish" (the agent is done; its drone stays parked on the target, in the way of others),
+"stay" (it goes on acting; a reward each time it arrives again) or "new" (a new target at once, drawn from
+the episode's generator: the lifelong variant).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import logging
+import math
+import operator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple, Protocol
+
+import numpy as np
+
+from coordinator.engine import DroneSpec, Engine, GameConfig, Publish, Stage
+from coordinator.fleet import ALIVE, CAUSES, NOTES, STATES
+from entities.world import World, inside_rows, padded_steps
+from schema import (
+    AimTable,
+    Cell,
+    Connect,
+    Done,
+    Intent,
+    Moves,
+    Note,
+    Over,
+    Phase,
+    Role,
+    Status,
+    StepTable,
+    UsageError,
+    WorldSpec,
+)
+from schema.messages import AROUND
+from schema.tables import MAX_DRONE, code_of, drone_name
+from schema.tuning import EYES_ONE_BY_ONE
+
+if TYPE_CHECKING:
+    from dronesim.rl_few import FewEpisode
+
+#: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
+ACTIONS: tuple[Cell, ...] = ((0, 0, 0), *AROUND)
+_DELTAS = np.array(ACTIONS, np.int32)
+#: What happens when a drone reaches its target (see the module's docstring).
+ON_TARGET = ("finish", "stay", "new")
+BACKENDS = ("local", "zenoh")
+RENDER_MODES = ("human", "ansi", "rgb_array")
+#: The swarm host that flies every drone of an episode (the policy).
+HOST = "H01"
+#: The name the swarm host gives as its autopilot (journaled in the header).
+PILOT = "policy"
+_UNREACHABLE, _NONE_NOTE = code_of(Note.UNREACHABLE), code_of(Note.NONE)
+_NO_AIMS = AimTable(AimTable.empty(0))  # a DONE that changes no target
+_NO_ROWS, _NO_CELLS = np.zeros(0, np.intp), np.zeros((0, 3), np.int32)  # (read-only: nothing to hold)
+_NO_ROWS.flags.writeable = _NO_CELLS.flags.writeable = False
+
+
+class Seen(enum.IntEnum):
+    """What an observation says of a cell around the drone."""
+
+    FREE = 0
+    BUILDING = 1
+    DRONE = 2  # another alive drone (a finished one parked on its target too)
+    OUTSIDE = 3  # beyond the world's bounds
+    UNKNOWN = 4  # in the observation's cube but beyond the radius (a sphere): not sensed
+
+
+_FREE, _DRONE, _UNKNOWN = int(Seen.FREE), int(Seen.DRONE), int(Seen.UNKNOWN)  # (an enum's member is slow to get)
+
+
+class ConfigError(UsageError, ValueError):
+    """A bad configuration or call: an unknown key, a value out of range, a world too small for the drones,
+    an action outside the space, a step after the end."""
+
+
+class BackendError(RuntimeError):
+    """The backend cannot play the turn: a process of the game died, or it did not answer in time."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Config:
+    """An environment's configuration: `Config.of(**keywords)` checks every key and value."""
+
+    num_drones: int = 8
+    size: Cell = (16, 16, 8)  # a generated world's size (with `seed`)
+    seed: int = 0  # the first episode's seed (worlds, starts, targets); reset(seed=...) overrides it
+    world: World | None = None  # a given world (a `World`, a world file's or a MovingAI .map's path) instead
+    max_cycles: int = 128  # steps before every agent still acting is truncated
+    obs_radius: int = 2  # cells sensed within this Euclidean distance, in a cube of side 2 r + 1
+    on_target: str = "finish"
+    reward_target: float = 1.0
+    reward_death: float = -1.0
+    step_cost: float = 0.0  # subtracted from every acting agent's reward at every step
+    render_mode: str | None = None
+    backend: str = "local"
+    connect: str | None = None  # zenoh backend: a router's endpoint to join (default: start one in-process)
+    deadline: float = 30.0  # zenoh backend: seconds any wait may last (start of a game, a turn, the end)
+
+    @classmethod
+    def of(cls, **config: object) -> Config:
+        names = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(set(config) - set(names))
+        if unknown:
+            raise ConfigError(f"unknown configuration key(s) {', '.join(unknown)}; the keys are {', '.join(names)}")
+        world = config.get("world")
+        if isinstance(world, (str, Path)):
+            try:
+                config["world"] = World.load(world)
+            except UsageError as err:
+                raise ConfigError(str(err)) from None
+        if world is not None and "size" in config:
+            raise ConfigError("give a world or a size, not both (a world has its own size)")
+        return cls(**config)  # type: ignore[arg-type]
+
+    def __post_init__(self) -> None:
+        n = checked_int(self.num_drones, "num_drones")
+        if not 1 <= n <= MAX_DRONE:
+            raise ConfigError(f"num_drones must be in 1..{MAX_DRONE}, got {n}")
+        if self.world is not None and not isinstance(self.world, World):
+            raise ConfigError(f"world must be a World or a world file's path, got {self.world!r}")
+        given: object = self.world.size if self.world is not None else self.size
+        try:
+            size = tuple(checked_int(v, "size") for v in given)  # type: ignore[attr-defined]
+        except TypeError:
+            raise ConfigError(f"size must be 3 integers (nx, ny, nz), got {self.size!r}") from None
+        if len(size) != 3 or min(size) < 1 or max(size) > 65536:
+            raise ConfigError(f"size must be 3 integers in 1..65536, got {self.size!r}")
+        object.__setattr__(self, "size", size)
+        cells = math.prod(size) if self.world is None else int(np.count_nonzero(~self.world.grid))
+        if cells < 2 * n:
+            raise ConfigError(f"the world has {cells} free cells, too few for {n} drones (a start and a target each)")
+        if checked_int(self.seed, "seed") < 0:
+            raise ConfigError(f"seed must be >= 0, got {self.seed}")
+        if checked_int(self.max_cycles, "max_cycles") < 1:
+            raise ConfigError(f"max_cycles must be >= 1, got {self.max_cycles}")
+        if not 0 <= checked_int(self.obs_radius, "obs_radius") <= 8:
+            raise ConfigError(f"obs_radius must be in 0..8, got {self.obs_radius}")
+        for name in ("reward_target", "reward_death", "step_cost"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(value):
+                raise ConfigError(f"{name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        _choice(self.on_target, ON_TARGET, "on_target")
+        _choice(self.backend, BACKENDS, "backend")
+        if self.render_mode is not None:
+            _choice(self.render_mode, RENDER_MODES, "render_mode")
+        if self.connect is not None and (self.backend != "zenoh" or not isinstance(self.connect, str)):
+            raise ConfigError("connect (a router's endpoint, e.g. tcp/127.0.0.1:7447) is for backend='zenoh'")
+        if isinstance(self.deadline, bool) or not isinstance(self.deadline, (int, float)) or not self.deadline > 0:
+            raise ConfigError(f"deadline must be a positive number of seconds, got {self.deadline!r}")
+
+
+def checked_int(value: object, what: str) -> int:
+    if isinstance(value, bool):
+        raise ConfigError(f"{what} must be an integer, got {value!r}")
+    try:
+        return operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise ConfigError(f"{what} must be an integer, got {value!r}") from None
+
+
+def _choice(value: object, choices: tuple[str, ...], what: str) -> None:
+    if value not in choices:
+        raise ConfigError(f"{what} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+
+
+# --------------------------------------------------------------------------- an episode's layout
+
+
+def components(grid: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """The label of every cell (C order, -1: a building or a free cell reached from no seed): the free cells
+    6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component."""
+    nx, ny, nz = grid.shape
+    free = np.zeros((nx + 2, ny + 2, nz + 2), bool)  # a blocked border: flat neighbours need no bounds checks
+    free[1:-1, 1:-1, 1:-1] = ~grid
+    sx, sy, offsets = padded_steps((nx, ny, nz))
+    steps = np.array(offsets, np.int64)
+    label = np.full(free.size, -1, np.int64)
+    open_ = free.ravel().copy()
+    for i, (x, y, z) in enumerate(seeds.tolist()):
+        s = (x + 1) * sx + (y + 1) * sy + z + 1
+        if not open_[s]:
+            continue  # in a component already labelled (or a building)
+        open_[s] = False
+        label[s] = i
+        frontier = np.array([s], np.int64)
+        while frontier.size:
+            nxt = (frontier[:, None] + steps).ravel()
+            nxt = np.unique(nxt[open_[nxt]])
+            open_[nxt] = False
+            label[nxt] = i
+            frontier = nxt
+    return label.reshape(free.shape)[1:-1, 1:-1, 1:-1].ravel()
+
+
+def clear_cells(grid: np.ndarray) -> np.ndarray:
+    """Which cells are free with their 6 neighbours free and inside the world (bool, the grid's shape)."""
+    free = np.zeros(tuple(s + 2 for s in grid.shape), bool)
+    free[1:-1, 1:-1, 1:-1] = ~grid
+    clear = free[1:-1, 1:-1, 1:-1].copy()
+    for axis in range(3):
+        for shift in (1, -1):
+            clear &= np.roll(free, shift, axis=axis)[1:-1, 1:-1, 1:-1]
+    return clear
+
+
+@dataclass(frozen=True, slots=True)
+class Layout:
+    """One episode's world, starts and first targets, and the generator that draws its later targets."""
+
+    world: World
+    starts: np.ndarray  # (n, 3) int32, drone i + 1's start
+    targets: np.ndarray  # (n, 3) int32
+    reachable: np.ndarray  # (n,) bool: the target is in the start's component
+    label: np.ndarray  # each cell's component (see `components`), C order
+    rng: np.random.Generator
+
+    @classmethod
+    def draw(cls, config: Config, seed: int) -> Layout:
+        """The layout of an episode: the world (given, or generated from `seed`), starts drawn among its clear
+        cells (free, their 6 neighbours free and inside; among all free cells if too few are clear), each target
+        among the free cells of its start's component (none on a start or on another target; if the component
+        has none left, any free cell, and the drone says it is unreachable)."""
+        rng = np.random.default_rng(seed)
+        world = config.world if config.world is not None else World.generate(config.size, rng, keep_free=())
+        n = config.num_drones
+        free = np.flatnonzero(~world.grid.ravel())
+        if len(free) < 2 * n:
+            raise ConfigError(f"the world of seed {seed} has {len(free)} free cells, too few for {n} drones "
+                              "(a start and a target each)")
+        clear = np.flatnonzero(clear_cells(world.grid).ravel())  # room around: no death at the first move
+        start_lin = rng.choice(clear if len(clear) >= n else free, n, replace=False)
+        starts = np.stack(np.unravel_index(start_lin, world.size), axis=1).astype(np.int32)
+        label = components(world.grid, starts)
+        taken = np.zeros(world.grid.size, bool)
+        taken[start_lin] = True
+        order = rng.permutation(free)  # every free cell once, in a random order: targets are taken from it
+        order_label = label[order]
+        targets = np.empty((n, 3), np.int32)
+        reachable = np.ones(n, bool)
+        pointer: dict[int, int] = {}  # component -> how far its cells in `order` are used
+        for i, s in enumerate(start_lin.tolist()):
+            comp = int(label[s])
+            cell = cls._next(order, order_label, taken, comp, pointer)
+            if cell < 0:
+                cell = cls._next(order, order_label, taken, None, pointer)  # any free cell: unreachable
+                reachable[i] = False
+            taken[cell] = True
+            targets[i] = np.unravel_index(cell, world.size)
+        return cls(world=world, starts=starts, targets=targets, reachable=reachable, label=label, rng=rng)
+
+    @staticmethod
+    def _next(order: np.ndarray, order_label: np.ndarray, taken: np.ndarray, comp: int | None,
+              pointer: dict) -> int:
+        """The next cell of `order` in component `comp` (None: any) not taken yet, or -1."""
+        key = -2 if comp is None else comp
+        at = pointer.get(key, 0)
+        while at < len(order):
+            block = order[at:at + 256]
+            ok = ~taken[block] if comp is None else (order_label[at:at + 256] == comp) & ~taken[block]
+            hit = np.flatnonzero(ok)
+            if hit.size:
+                pointer[key] = at + int(hit[0]) + 1
+                return int(block[hit[0]])
+            at += len(block)
+        pointer[key] = at
+        return -1
+
+    def new_target(self, i: int, here: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, bool]:
+        """A new target for drone row `i` at `here` (the lifelong variant): a free cell of its start's
+        component other than `here` and the other targets (`others`, (n, 3)), drawn from the episode's
+        generator; (the cell, whether it is reachable)."""
+        size = self.world.size
+        comp = self.label[int(np.ravel_multi_index(tuple(self.starts[i]), size))]
+        cells = np.flatnonzero(self.label == comp)
+        used = {tuple(c) for c in others.tolist()} | {tuple(here.tolist())}
+        if len(cells) > len(used):
+            while True:
+                cell = np.array(np.unravel_index(int(cells[self.rng.integers(len(cells))]), size), np.int32)
+                if tuple(cell.tolist()) not in used:
+                    return cell, True
+        return self.targets[i].copy(), bool(self.reachable[i])  # nowhere else to go: the same target
+
+    def game(self, max_turns: int, phase_deadline: float = 5.0) -> GameConfig:
+        """The engine's game for this layout (the world given cell by cell: every backend builds the same)."""
+        spec = WorldSpec(size=self.world.size, cells=self.world.packed())
+        drones = tuple(DroneSpec(drone=drone_name(i + 1), start=(x, y, z))
+                       for i, (x, y, z) in enumerate(self.starts.tolist()))
+        return GameConfig(world=spec, drones=drones, max_turns=max_turns, phase_deadline=phase_deadline)
+
+
+# --------------------------------------------------------------------------- backends
+
+
+class Board(NamedTuple):
+    """Every drone's state after a turn as the observer's STATUS says it, row i for drone i + 1: its cell
+    ((n, 3) int32), state, note (REACHED on its target) and cause of death (fleet codes, uint8). (A named
+    tuple: made at every step, where a frozen dataclass costs three times as much.)"""
+
+    pos: np.ndarray
+    state: np.ndarray
+    note: np.ndarray
+    cause: np.ndarray
+
+    @classmethod
+    def of_status(cls, status: Status, n: int) -> Board:
+        """The board a STATUS of `n` drones D01..Dn says (its rows are in id text order: D10 < D100 < D11)."""
+        rows = status.drones.rows
+        if len(rows) != n:
+            raise BackendError(f"the STATUS of turn {status.turn} holds {len(rows)} drones, not {n}")
+        rows = rows[np.argsort(rows["drone"], kind="stable")]
+        if not np.array_equal(rows["drone"], np.arange(1, n + 1)):
+            raise BackendError("the STATUS does not hold this episode's drones")
+        return cls(pos=rows["pos"].astype(np.int32), state=rows["state"].copy(), note=rows["note"].copy(),
+                   cause=rows["cause"].copy())
+
+
+class Turns(Protocol):
+    """Where an episode's turns are played. Rows are drone number - 1."""
+
+    def start(self, game: GameConfig, world: World) -> Board:
+        """Start a game (ending any running one): the board of turn 0."""
+        ...
+
+    def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
+             notes: np.ndarray) -> tuple[Board, Over | None]:
+        """Turn `turn`: the ground station sets the targets `aims` of `aim_rows`, then the swarm host moves
+        `move_rows` (every alive drone, ascending) to `moves` with `notes` (Note codes); the turn's board and,
+        if the game ended with it, the OVER."""
+        ...
+
+    def stop(self) -> None:
+        """End the running game, if any (the ground station quits)."""
+        ...
+
+    def close(self) -> None:
+        ...
+
+
+def hellos(game: GameConfig, session: str = "") -> tuple[Connect, ...]:
+    """The ground station's and the swarm host's CONNECT (the policy plays both)."""
+    drones = tuple(sorted((d.drone for d in game.drones), key=lambda d: int(d[1:])))
+    return (Connect(turn=0, sender="GCS", role=Role.GCS, session=session),
+            Connect(turn=0, sender=HOST, role=Role.DRONE, drones=drones, autopilot=PILOT, session=session))
+
+
+def turn_messages(turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
+                  notes: np.ndarray) -> tuple[Done, Moves | None]:
+    """A turn's messages (see `Turns.play`): the ground station's DONE carrying the targets, the host's MOVES
+    (None: no drone alive)."""
+    targets = AimTable.build(drone=aim_rows + 1, pos=aims) if len(aim_rows) else _NO_AIMS
+    done = Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.CONTINUE, targets=targets)
+    if not len(move_rows):
+        return done, None
+    steps = StepTable.build(drone=(move_rows + 1).astype(np.uint16), pos=moves, note=notes)
+    return done, Moves(turn=turn, sender=HOST, moves=steps)
+
+
+class LocalTurns:
+    """The engine in this process, its turns played from arrays (`Engine.play`: the same steps as from the
+    messages the processes would send, none of them built) and read from its fleet. No environment process:
+    the engine judges the moves from its own copy of the world, as the coordinator does."""
+
+    def __init__(self, logger: logging.Logger | None = None) -> None:
+        # Deaths are the engine's warnings, and an episode's everyday business: only its errors are said.
+        self._log = logger or logging.Logger("dronesim.rl.engine", logging.ERROR)
+        self.engine: Engine | None = None
+        self._rows: np.ndarray | None = None  # the engine's row of each of ours (None: the same)
+
+    def start(self, game: GameConfig, world: World) -> Board:
+        engine = Engine(game, self._log, world)
+        engine.verify_env, engine.journaled = False, False
+        effects = engine.connect(Connect(turn=0, sender="ENV", role=Role.ENV), None)
+        for hello in hellos(game):
+            effects += engine.connect(hello, None)
+        if engine.stage is not Stage.GCS or not any(isinstance(e, Publish) and isinstance(e.msg, Status)
+                                                    for e in effects):
+            raise BackendError("the engine did not start the game")
+        fleet = engine.fleet
+        rows = fleet.row_of_number[1:len(fleet) + 1].astype(np.intp)  # engine rows are in id text order
+        self._rows = None if np.array_equal(rows, np.arange(len(fleet))) else rows
+        self.engine = engine
+        return self._board()
+
+    def _board(self) -> Board:
+        """The fleet's columns (in our row order): with the engine's order ours, its columns themselves, valid
+        until the next turn changes them (the episode reads a board before it plays the next turn)."""
+        fleet, rows = self.engine.fleet, self._rows  # type: ignore[union-attr]
+        if rows is None:
+            return Board(pos=fleet.pos, state=fleet.state, note=fleet.notes(), cause=fleet.cause)
+        return Board(pos=fleet.pos[rows], state=fleet.state[rows], note=fleet.notes()[rows], cause=fleet.cause[rows])
+
+    def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
+             notes: np.ndarray) -> tuple[Board, Over | None]:
+        engine = self.engine
+        if engine is None or engine.stage is Stage.OVER:
+            raise BackendError("no game is running")
+        if engine.turn != turn:
+            raise BackendError(f"turn {turn} cannot be played: the game is at turn {engine.turn}")
+        rows = self._rows
+        if rows is not None:
+            aim_rows, move_rows = rows[aim_rows], rows[move_rows]
+        try:
+            over = engine.play(aim_rows, aims, move_rows, moves, notes)
+        except UsageError as err:  # our own input: a bug, never the policy's doing
+            raise BackendError(f"the engine refused turn {turn}: {err}") from err
+        return self._board(), over
+
+    def stop(self) -> None:
+        self.engine = None
+
+    def close(self) -> None:
+        self.engine = None
+
+
+# --------------------------------------------------------------------------- observations and rendering
+
+
+class Eyes:
+    """Each drone's observation: the cells of the cube of side 2 r + 1 around it (in C order of the offsets
+    (dx, dy, dz), each -r..r), those beyond the radius UNKNOWN, its own cell FREE; then the offset from it
+    to its target (dx, dy, dz)."""
+
+    def __init__(self, world: World, radius: int) -> None:
+        self.radius = r = radius
+        self.pad = pad = r + 1  # a dead drone may stand one cell outside the world
+        nx, ny, nz = world.size
+        static = np.full((nx + 2 * pad, ny + 2 * pad, nz + 2 * pad), Seen.OUTSIDE, np.int8)
+        static[pad:pad + nx, pad:pad + ny, pad:pad + nz] = np.where(world.grid, Seen.BUILDING, Seen.FREE)
+        self._static = static.ravel()
+        self._sx, self._sy = static.shape[1] * static.shape[2], static.shape[2]
+        self._strides = np.array([self._sx, self._sy, 1], np.int64)
+        self._origin = (self._sx + self._sy + 1) * pad  # where the world's cell (0, 0, 0) is
+        span = np.arange(-r, r + 1)
+        cube = np.stack(np.meshgrid(span, span, span, indexing="ij"), axis=-1).reshape(-1, 3)
+        self.cells = len(cube)
+        self._ball = np.flatnonzero((cube ** 2).sum(axis=1) <= r * r)  # the cells of the cube sensed
+        self._offsets = (cube[self._ball] @ self._strides).astype(np.intp)  # each, from the drone's cell
+        self._low = int(self._offsets.min())  # the first, from the drone's cell
+        self._up = self._offsets - self._low  # each, from the first
+        self._centre = self.cells // 2
+        self._blank = np.full((0, self.cells + 3), _UNKNOWN, np.int32)  # rows to start observations from
+        self._blank_one = np.full(self.cells + 3, _UNKNOWN, np.int32)  # (see_few's, one by one)
+        self.world = world
+
+    def fits(self, world: World, radius: int) -> bool:
+        """Whether these eyes see `world` with `radius` (an episode reuses its predecessor's when they do)."""
+        return radius == self.radius and (world is self.world or world == self.world)
+
+    @staticmethod
+    def bounds_for(size: Cell, radius: int) -> tuple[np.ndarray, np.ndarray]:
+        """The observation space's bounds (low, high) in a world of `size` with `radius`: a cell's code, then
+        an offset per axis (a dead drone may stand one cell outside the world: up to the size itself)."""
+        cells = (2 * radius + 1) ** 3
+        extent = np.array(size, np.int32)
+        return (np.concatenate([np.zeros(cells, np.int32), -extent]),
+                np.concatenate([np.full(cells, max(Seen), np.int32), extent]))
+
+    def see(self, pos: np.ndarray, targets: np.ndarray, drones: np.ndarray | None = None) -> np.ndarray:
+        """The observations ((m, cells + 3) int32) of drones at `pos` ((m, 3)) with `targets`, among the
+        alive drones at `drones` ((k, 3), inside the world; None: the drones at `pos`, all alive). One gather
+        of every drone's sensed cells from the padded world, with the drones marked in it for the while."""
+        cells = self._static
+        base = pos @ self._strides + self._origin
+        at = base if drones is None else drones @ self._strides + self._origin
+        cells[at] = _DRONE
+        try:
+            window = cells[base[:, None] + self._offsets]
+        finally:
+            cells[at] = _FREE  # an alive drone's cell is free in the static world
+        return self._rows(window, targets - pos)
+
+    def _rows(self, window: np.ndarray, offsets: np.ndarray | list[Cell]) -> np.ndarray:
+        """Observations from each drone's sensed cells (`window`, (m, the ball's cells)) and target offsets."""
+        m, n = len(window), self.cells
+        if len(self._blank) < m:
+            self._blank = np.full((m, n + 3), _UNKNOWN, np.int32)
+        out = self._blank[:m].copy()  # UNKNOWN beyond the radius
+        out[:, self._ball] = window
+        out[:, self._centre] = _FREE
+        out[:, n:] = offsets
+        return out
+
+    def see_few(self, pos: list[Cell], targets: list[Cell], drones: list[Cell]) -> list[np.ndarray] | np.ndarray:
+        """`see` of drones given as cells (lists of (x, y, z)), with fewer array operations: for up to
+        EYES_ONE_BY_ONE drones, their observations one by one (a list of arrays), else `see`'s rows."""
+        cells, sx, sy, o = self._static, self._sx, self._sy, self._origin
+        at = [x * sx + y * sy + z + o for x, y, z in drones]
+        offsets = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
+        for k in at:
+            cells[k] = _DRONE
+        try:
+            if len(pos) <= EYES_ONE_BY_ONE:
+                blank, ball, up, low, n = self._blank_one, self._ball, self._up, self._low + o, self.cells
+                out = []
+                for (x, y, z), d in zip(pos, offsets):
+                    one = blank.copy()
+                    one[ball] = cells[x * sx + y * sy + z + low:][up]  # (a view, then one gather)
+                    one[self._centre] = _FREE
+                    one[n:] = d
+                    out.append(one)
+                return out
+            window = cells[np.array([x * sx + y * sy + z + o for x, y, z in pos])[:, None] + self._offsets]
+        finally:
+            for k in at:
+                cells[k] = _FREE  # an alive drone's cell is free in the static world
+        return self._rows(window, offsets)
+
+
+#: rgb_array colours.
+_FREE_RGB, _BUILDING_RGB, _GRID_RGB, _TARGET_RGB = (245, 245, 245), (90, 90, 100), (200, 200, 200), (240, 180, 0)
+
+
+def drone_colours(n: int) -> np.ndarray:
+    """A distinct-ish colour per drone (golden-angle hues), (n, 3) uint8."""
+    hue = (np.arange(n) * 0.618033988749895) % 1.0
+    k = (np.array([5.0, 3.0, 1.0])[None, :] + hue[:, None] * 6) % 6
+    rgb = 1 - np.clip(np.minimum(k, 4 - k), 0, 1) * 0.85
+    return (rgb * 200).astype(np.uint8)
+
+
+def floors_image(world: World, drones: np.ndarray, colours: np.ndarray, targets: np.ndarray,
+                 max_pixels: int = 1024) -> np.ndarray:
+    """The world floor by floor as an image (H, W, 3) uint8: floors side by side in a grid of panels
+    (z = 0 top-left, rows of panels left to right), one square of pixels per cell, row = x and column = y
+    as in the text drawing; buildings dark, targets gold, each drone its colour (`colours`, one row each)."""
+    nx, ny, nz = world.size
+    across = math.ceil(math.sqrt(nz))
+    down = math.ceil(nz / across)
+    scale = max(1, min(16, max_pixels // max(across * (ny + 1), down * (nx + 1))))
+    image = np.empty((down * (nx + 1) * scale + scale, across * (ny + 1) * scale + scale, 3), np.uint8)
+    image[:] = _GRID_RGB
+    for z in range(nz):
+        floor = np.empty((nx, ny, 3), np.uint8)
+        floor[:] = _FREE_RGB
+        floor[world.grid[:, :, z]] = _BUILDING_RGB
+        for cells, colour in ((targets, None), (drones, colours)):
+            on = (cells[:, 2] == z) & inside_rows(cells, world.size) if len(cells) else np.zeros(0, bool)
+            floor[cells[on, 0], cells[on, 1]] = _TARGET_RGB if colour is None else colour[on]
+        r0 = (z // across) * (nx + 1) * scale + scale
+        c0 = (z % across) * (ny + 1) * scale + scale
+        image[r0:r0 + nx * scale, c0:c0 + ny * scale] = np.repeat(np.repeat(floor, scale, 0), scale, 1)
+    return image
+
+
+# --------------------------------------------------------------------------- the episode
+
+
+class Outcome(NamedTuple):
+    """One step's result for the rows that acted (rows: drone number - 1, ascending)."""
+
+    rows: list[int]
+    observations: np.ndarray | list[np.ndarray]  # (m, cells + 3) int32, or m such rows
+    rewards: list[float]
+    terminated: list[bool]
+    truncated: list[bool]
+    infos: list[dict]
+
+
+class Drawing:
+    """An episode's drawings, from its world and columns (`columns`)."""
+
+    world: World
+    n: int
+    cycle: int
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Every drone's cell ((n, 3) int32), state (uint8), target ((n, 3) int32) and whether it acts (bool)."""
+        raise NotImplementedError
+
+    def ansi(self) -> str:
+        pos, state, targets_, acting_ = self.columns()
+        alive = np.flatnonzero(state == ALIVE)
+        drones = dict(zip((drone_name(i + 1) for i in alive.tolist()), map(tuple, pos[alive].tolist())))
+        acting = np.flatnonzero(acting_)
+        targets = dict(zip((drone_name(i + 1) for i in acting.tolist()), map(tuple, targets_[acting].tolist())))
+        head = f"turn {self.cycle}: {len(acting)} acting, {len(alive)} alive of {self.n}"
+        return head + "\n\n" + self.world.draw(drones, targets=targets)
+
+    def state_grid(self) -> np.ndarray:
+        """The world as observation codes (nx, ny, nz) int8: FREE, BUILDING, and DRONE where an alive drone is."""
+        grid = np.where(self.world.grid, Seen.BUILDING, Seen.FREE).astype(np.int8)
+        pos, state, _, _ = self.columns()
+        alive = pos[state == ALIVE]
+        grid[tuple(alive.T)] = Seen.DRONE
+        return grid
+
+    def rgb(self) -> np.ndarray:
+        pos, state, targets, acting = self.columns()
+        alive = state == ALIVE
+        return floors_image(self.world, pos[alive], drone_colours(self.n)[alive], targets[acting])
+
+
+def done_agents(rows: list[int]) -> ConfigError:
+    return ConfigError("actions for agents that are done: " + ", ".join(f"drone_{r + 1}" for r in rows))
+
+
+class Episode(Drawing):
+    """One episode's state and rules over a backend's turns; rows are drone number - 1."""
+
+    def __init__(self, config: Config, layout: Layout, turns: Turns, max_cycles: int, eyes: Eyes | None = None) -> None:
+        self.config, self.layout, self.turns = config, layout, turns
+        self.max_cycles = max_cycles
+        self.world = layout.world
+        self.eyes = eyes if eyes is not None and eyes.fits(self.world, config.obs_radius) \
+            else Eyes(self.world, config.obs_radius)
+        n = config.num_drones
+        self.n = n
+        self.targets = layout.targets.copy()
+        self.reachable = layout.reachable.copy()
+        self.cycle = 0
+        self.over: Over | None = None
+        self._read(turns.start(layout.game(max_cycles, phase_deadline=config.deadline), self.world))
+        if not (self.state == ALIVE).all():
+            raise BackendError("a drone was not alive at the start")
+        self.acting = np.ones(n, bool)  # rows still acting (PettingZoo's agents)
+        self.left = n  # how many
+        #: Every row acting and alive (no agent has ended yet): the step then needs no row selection.
+        self.everyone = True
+        self._all = np.arange(n)
+        self._rows_all = list(range(n))  # (read-only)
+        self.on = np.zeros(n, bool)  # rows on their target at the last STATUS
+        self.aim_next = self._all  # rows whose target the next DONE carries (all, at turn 1)
+        self._say = self._notes()  # each row's note to the engine (whether its target is reachable)
+        cfg = self.config
+        # a step's reward by (arrived, dead): 0 + 0 - step_cost, target + 0 - cost, 0 + death - cost
+        self._reward = np.array([0.0 + 0.0 - cfg.step_cost, cfg.reward_target + 0.0 - cfg.step_cost,
+                                 0.0 + cfg.reward_death - cfg.step_cost], np.float64)
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return self.pos, self.state, self.targets, self.acting
+
+    def _read(self, board: Board) -> None:
+        self.pos, self.state, self.note, self.cause = board.pos, board.state, board.note, board.cause
+
+    def _notes(self) -> np.ndarray:
+        return np.where(self.reachable, _NONE_NOTE, _UNREACHABLE).astype(np.uint8)
+
+    # ------------------------------------------------------------------ reading
+
+    def observe(self, rows: np.ndarray, whole: bool | None = None) -> np.ndarray:
+        """The observations of `rows`; `whole`: whether they are every drone, all alive (by default, whether
+        no agent has ended yet: not so in the step where the first drones die)."""
+        if self.everyone if whole is None else whole:
+            return self.eyes.see(self.pos, self.targets)
+        return self.eyes.see(self.pos[rows], self.targets[rows], self.pos[self.state == ALIVE])
+
+    def infos(self, rows: np.ndarray) -> list[dict]:
+        """Each row's info: its cell, target, note (as the STATUS says: reached, unreachable or none), state
+        and cause of death (none while alive)."""
+        columns = (self.pos, self.targets, self.note, self.state, self.cause)
+        if len(rows) < self.n:
+            columns = tuple(c[rows] for c in columns)
+        pos, tgt, note, state, cause = (c.tolist() for c in columns)
+        pos, tgt = map(tuple, pos), map(tuple, tgt)
+        notes = [_NOTE_TEXT[c] for c in note]
+        states = [_STATE_TEXT[c] for c in state]
+        causes = [_CAUSE_TEXT[c] for c in cause]
+        return [{"cell": p, "target": t, "note": nt, "state": s, "cause": c}
+                for p, t, nt, s, c in zip(pos, tgt, notes, states, causes)]
+
+    @property
+    def ended(self) -> bool:
+        return not self.left
+
+    # ------------------------------------------------------------------ acting
+
+    def act(self, rows: list[int], values: list) -> Outcome:
+        """One turn: the action `values[k]` for row `rows[k]` (the other acting rows hover); ConfigError (and no
+        turn played) after the end, for a row no longer acting or an action outside the space."""
+        if self.ended:
+            raise ConfigError("step() after the end of the episode: call reset()")
+        at = np.array(rows, np.intp)
+        if not self.everyone:
+            done = at[~self.acting[at]]
+            if len(done):
+                raise done_agents(done.tolist())
+        return self.step(actions_array(self.n, at, values))
+
+    def step(self, actions: np.ndarray) -> Outcome:
+        """One turn: `actions` holds an action (0..6) for every row (those of rows not acting are ignored)."""
+        if self.ended:
+            raise ConfigError("step() after the end of the episode: call reset()")
+        t = self.cycle + 1
+        aim = self.aim_next
+        everyone = self.everyone
+        if everyone:  # (the whole arrays: no row selection)
+            alive, dest, note = self._all, self.pos + _DELTAS[actions], self._say
+        else:
+            alive = np.flatnonzero(self.state == ALIVE)
+            dest = self.pos[alive] + np.where(self.acting[alive, None], _DELTAS[actions[alive]], 0)
+            note = self._say[alive]
+        board, over = self.turns.play(t, aim, self.targets[aim] if len(aim) else _NO_CELLS, alive, dest, note)
+        self.cycle = t
+        self.over = over
+        self._read(board)
+        cfg = self.config
+        if everyone:
+            rows, state, pos, targets, was_on = self._all, self.state, self.pos, self.targets, self.on
+        else:
+            rows = np.flatnonzero(self.acting)
+            state, pos, targets, was_on = self.state[rows], self.pos[rows], self.targets[rows], self.on[rows]
+        died = np.count_nonzero(state != ALIVE)
+        if died:
+            dead = state != ALIVE
+            on = (pos == targets).all(axis=1) & ~dead
+            arrived = on > was_on
+            rewards = self._reward[arrived + 2 * dead]
+        else:  # (most steps: nobody died)
+            dead = np.zeros(len(rows), bool)
+            on = (pos == targets).all(axis=1)
+            arrived = on > was_on
+            rewards = self._reward[arrived.view(np.uint8)]
+        terminated = dead | arrived if cfg.on_target == "finish" else dead
+        truncated = ~terminated if t >= self.max_cycles else np.zeros(len(rows), bool)
+        ended = terminated | truncated
+        stops = int(np.count_nonzero(ended))
+        if over is not None and stops < len(rows):
+            raise BackendError(f"the game ended at turn {t} ({over.reason.value}: {over.text})")
+        if everyone:
+            self.on = on
+        else:
+            self.on[rows] = on
+        self.aim_next = rows[arrived] if cfg.on_target == "new" else _NO_ROWS
+        if len(self.aim_next):
+            for i in self.aim_next.tolist():
+                self.targets[i], self.reachable[i] = self.layout.new_target(i, self.pos[i], self.targets)
+                self.on[i] = False
+            self._say = self._notes()
+        observations = self.observe(rows, everyone and not died)  # (the dead are not seen)
+        infos = self.infos(rows)
+        if stops:
+            self.acting[rows[ended]] = False
+            self.left -= stops
+            self.everyone = False
+        if self.ended and over is None:
+            self.turns.stop()  # the drones left (parked on their targets) need no more turns
+        return Outcome(self._rows_all if everyone else rows.tolist(), observations, rewards.tolist(),
+                       terminated.tolist(), truncated.tolist(), infos)
+
+
+_NOTE_TEXT = tuple(n.value.lower() for n in NOTES)
+_STATE_TEXT = tuple(s.value.lower() for s in STATES)
+_CAUSE_TEXT = tuple(c.value.lower() for c in CAUSES)
+
+
+class Expert:
+    """One of the project's autopilots per drone (the D* planner by default) choosing each acting drone's
+    action: an expert for imitation learning, or a baseline. It senses as a drone process does, by asking
+    the environment (here answered from the episode's world and the drones' cells, as the environment
+    answers an ASK), and its drones give way to each other by the coordinator's arbitration rule
+    (coordinator/arbiter.py), which a cooperative autopilot's drones get in a game."""
+
+    def __init__(self, autopilot: str = "dstar") -> None:
+        from entities.autopilots import pilot_class
+
+        self.autopilot = autopilot
+        self.cooperative = pilot_class(autopilot).cooperative
+        self._episode: Episode | FewEpisode | None = None
+        self._pilots: dict[str, object] = {}
+
+    def actions(self, episode: Episode | FewEpisode) -> dict[int, int]:
+        """row -> action of every acting drone of `episode` at its current turn."""
+        from coordinator.arbiter import arbitrate
+        from entities.autopilots import make_autopilot
+        from entities.autopilots.base import drive, fly_round
+        from entities.environment import Environment
+
+        if episode is not self._episode:  # a new episode: fresh pilots (they remember the world they saw)
+            self._episode, self._pilots = episode, {}
+        alive = np.flatnonzero(episode.state == ALIVE)
+        ids = [drone_name(i + 1) for i in alive.tolist()]
+        here = dict(zip(ids, map(tuple, episode.pos[alive].tolist())))
+        env = Environment(episode.world, here)
+        acting = [i for i in alive.tolist() if episode.acting[i]]
+        steps = {}
+        for i in acting:
+            d = drone_name(i + 1)
+            pilot = self._pilots.get(d)
+            if pilot is None:
+                pilot = self._pilots[d] = make_autopilot(self.autopilot, world_size=episode.world.size)
+            steps[d] = pilot.step(here[d], tuple(episode.targets[i].tolist()))  # type: ignore[attr-defined]
+        decided = drive(fly_round(steps), lambda pending: {d: dict(zip(c, env.answer(c))) for d, c in pending.items()})
+        wants = {d: decided[d].pos if d in decided else c for d, c in here.items()}
+        if self.cooperative:
+            wants = arbitrate(here, wants, set(decided))
+        index: dict[tuple[int, ...], int] = {a: k for k, a in enumerate(ACTIONS)}
+        out = {}
+        for i in acting:
+            d = drone_name(i + 1)
+            out[i] = index[tuple(w - h for w, h in zip(wants[d], here[d]))]
+        return out
+
+
+_BOOLS = frozenset({bool, np.bool_})
+_INTEGERS = frozenset({int, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64})
+_VALID = frozenset(range(len(ACTIONS)))
+
+
+def actions_array(n: int, rows: np.ndarray, values: list) -> np.ndarray:
+    """An (n,) int array of actions, `values[k]` at row `rows[k]` (the other rows hover); ConfigError for an
+    action that is not an integer in 0..6 (a Python or numpy integer, or a 0-d integer array)."""
+    out = np.zeros(n, np.intp)
+    if not values:
+        return out
+    if set(map(type, values)) <= _INTEGERS and set(values) <= _VALID:  # (the usual case, without an array)
+        out[rows] = values
+        return out
+    try:
+        taken = np.array(values)
+    except (TypeError, ValueError):
+        taken = None
+    if taken is not None and taken.ndim == 1 and taken.dtype.kind in "iu" \
+            and not any(type(v) in _BOOLS for v in values) and ((taken >= 0) & (taken < len(ACTIONS))).all():
+        out[rows] = taken
+        return out
+    for row, a in zip(rows.tolist(), values):  # which is wrong, and why
+        ok = type(a) not in _BOOLS and isinstance(a, (int, np.integer, np.ndarray)) and np.ndim(a) == 0 \
+            and np.issubdtype(np.asarray(a).dtype, np.integer) and 0 <= int(a) < len(ACTIONS)
+        if not ok:
+            raise ConfigError(f"action {a!r} for drone_{row + 1} is outside Discrete({len(ACTIONS)}): "
+                              "0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z, 6 -z")
+    raise AssertionError("unreachable: every action was valid")

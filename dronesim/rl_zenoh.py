@@ -1,0 +1,286 @@
+"""The Zenoh backend of an RL episode (`dronesim.rl.Turns`): each step is one lockstep turn of the real
+coordinator and environment processes, on a router this process starts (or joins: `connect`).
+
+This process plays the ground station and one swarm host (H01, flying every drone) from one Zenoh
+session: per turn it sends the DONE, waits for the drones' phase to open, sends the policy's moves as
+the host's MOVES and waits for the observer's STATUS. Every wait has a deadline and watches the processes:
+a game whose coordinator or environment dies raises `BackendError` at once, and one that stops answering
+raises it when the deadline passes; `close()` ends the game, the processes, the session and the router.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+import weakref
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from coordinator.engine import GameConfig
+from dronesim import child_env
+from dronesim.membership import Refusal, admit
+from dronesim.rl import HOST, BackendError, Board, hellos, turn_messages
+from dronesim.transport import (
+    Inbox,
+    Outbox,
+    Presence,
+    Received,
+    client_config,
+    router_config,
+    router_locators,
+    session_id,
+)
+from entities.world import World
+from schema import Done, Intent, Keys, Moves, Over, Phase, Status, Turn, UsageError
+
+#: The processes of a game, by the name their presence token has.
+ROLES = ("SRV", "ENV")
+
+
+class ZenohTurns:
+    """Games on real processes over Zenoh, one per episode (see the module's docstring)."""
+
+    def __init__(self, *, connect: str | None = None, deadline: float = 30.0,
+                 logger: logging.Logger | None = None) -> None:
+        self.deadline = deadline
+        self._log = logger or logging.getLogger("dronesim.rl")
+        self._logs = tempfile.TemporaryDirectory(prefix="dronesim-rl-")
+        self._tag = uuid.uuid4().hex[:8]
+        self._games = 0
+        self._router: zenoh.Session | None = None
+        self._session: zenoh.Session | None = None
+        self._game: _Game | None = None
+        #: Every process started, for the finalizer: an environment dropped without close() (or an interpreter
+        #: that exits) must not leave a coordinator behind that waits for a router gone with this process.
+        self._children: list[subprocess.Popen] = []
+        self._files: list = []  # the current game's log files
+        self._finalizer = weakref.finalize(self, _abandon, self._children, self._files, self._logs)
+        try:
+            if connect is None:
+                self._router = zenoh.open(router_config("tcp/127.0.0.1:0"))
+                connect = router_locators(self._router)[0]
+            self.locator = connect
+            self._session = zenoh.open(client_config(connect))
+        except Exception as err:
+            self.close()
+            where = f"the Zenoh router at {connect}" if connect else "a Zenoh router in this process"
+            raise BackendError(f"cannot open a session with {where}: {err}") from err
+
+    def start(self, game: GameConfig, world: World) -> Board:
+        self.stop()
+        self._games += 1
+        assert self._session is not None
+        self._children[:] = [p for p in self._children if p.poll() is None]
+        self._game = _Game(self._session, f"rl{self._tag}g{self._games}", Path(self._logs.name), self.locator,
+                           game, world, self.deadline, self._log, self._children, self._files)
+        return Board.of_status(self._game.begin(), len(game.drones))
+
+    def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
+             notes: np.ndarray) -> tuple[Board, Over | None]:
+        if self._game is None:
+            raise BackendError("no game is running")
+        status, over = self._game.play(*turn_messages(turn, aim_rows, aims, move_rows, moves, notes))
+        return Board.of_status(status, len(self._game.game.drones)), over
+
+    def stop(self) -> None:
+        game, self._game = self._game, None
+        if game is not None:
+            game.end()
+
+    def close(self) -> None:
+        try:
+            self.stop()
+        finally:
+            for session in (self._session, self._router):
+                if session is not None:
+                    with contextlib.suppress(Exception):
+                        session.close()
+            self._session = self._router = None
+            self._finalizer()
+
+
+class _Game:
+    """One game: its processes, this process's presence and subscriptions, and the turn being played."""
+
+    def __init__(self, session: zenoh.Session, root: str, logs: Path, locator: str, game: GameConfig, world: World,
+                 deadline: float, logger: logging.Logger, children: list[subprocess.Popen], files: list) -> None:
+        self.session, self.keys, self.deadline, self.log = session, Keys(root), deadline, logger
+        self.game = game
+        self.turn = 0  # the last turn whose STATUS arrived
+        self.over: Over | None = None
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.children = children
+        self.logs = logs
+        self.root = root
+        self._files = files
+        self.inbox = Inbox(session, self.keys, logger)
+        self.out = Outbox(session)
+        self.tokens: list = []
+        world_file = logs / f"{root}.world.json"
+        world.save(world_file)
+        base = [sys.executable, "-m", "dronesim"]
+        common = ["--mode", "client", "--connect", locator, "--root", root, "--log-level", "WARNING"]
+        starts = ";".join(f"{x},{y},{z}" for x, y, z in (d.start for d in game.drones))
+        try:
+            for key, typ in ((self.keys.turn_of(Phase.DRONES), Turn), (self.keys.status, Status),
+                             (self.keys.over, Over)):
+                self.inbox.subscribe(key, typ)
+            self.inbox.watch_presence()
+            self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
+                                "--drones", str(len(game.drones)), "--starts", starts,
+                                "--max-turns", str(game.max_turns), "--phase-deadline", str(deadline),
+                                "--admit-deadline", str(deadline)])
+            self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", str(deadline)])
+        except BaseException:
+            self.end()
+            raise
+
+    def _start(self, name: str, argv: list[str]) -> None:
+        log = open(self.logs / f"{self.root}.{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed in end()
+        self._files.append(log)
+        self.procs[name] = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                            env=child_env(PYTHONUNBUFFERED="1"))
+        self.children.append(self.procs[name])
+
+    # ------------------------------------------------------------------ failures
+
+    def _tail(self, name: str) -> str:
+        with contextlib.suppress(OSError):
+            lines = (self.logs / f"{self.root}.{name}.log").read_text(errors="replace").splitlines()
+            return " | ".join(lines[-6:])
+        return ""
+
+    def _check(self) -> None:
+        """BackendError if a process of the game has exited before the game's end."""
+        for name, proc in self.procs.items():
+            code = proc.poll()
+            if code is not None and self.over is None:
+                raise BackendError(f"the {'coordinator' if name == 'SRV' else 'environment'} process exited "
+                                   f"with {code} during the game: {self._tail(name)}")
+
+    def _event(self, end: float, waiting_for: str):
+        """The next event, checking the processes while none comes; BackendError past `end`."""
+        while True:
+            left = end - time.monotonic()
+            if left <= 0:
+                raise BackendError(f"no {waiting_for} within {self.deadline:g} s: the game's processes stopped "
+                                   "answering")
+            event = self.inbox.get(min(left, 0.25))
+            if event is None:
+                self._check()
+                continue
+            if isinstance(event, Presence) and not event.alive and event.entity in ROLES and self.over is None:
+                self._check()
+                raise BackendError(f"the {'coordinator' if event.entity == 'SRV' else 'environment'} left the "
+                                   "game (its presence token vanished)")
+            return event
+
+    # ------------------------------------------------------------------ the game
+
+    def begin(self) -> Status:
+        """Connect as the ground station and the swarm host, then wait for the STATUS of turn 0."""
+        sid = session_id(self.session)
+        end = time.monotonic() + self.deadline
+        try:
+            for hello in hellos(self.game, sid):
+                self.tokens.append(self.session.liveliness().declare_token(self.keys.alive(hello.sender, sid)))
+                while True:  # in slices, to notice a process that died instead of waiting for the deadline
+                    self._check()
+                    try:
+                        slice_ = min(1.0, max(0.1, end - time.monotonic()))
+                        admit(self.session, self.keys, hello, self.log, timeout=slice_)
+                        break
+                    except Refusal as err:
+                        raise BackendError(f"the coordinator refused {hello.sender}: {err}") from None
+                    except UsageError:
+                        if time.monotonic() >= end:
+                            raise BackendError(f"no coordinator admitted {hello.sender} within {self.deadline:g} s: "
+                                               f"{self._tail('SRV')}") from None
+            return self._status(0, end)
+        except BaseException:
+            self.end()
+            raise
+
+    def _status(self, turn: int, end: float) -> Status:
+        while True:
+            match self._event(end, f"STATUS of turn {turn}"):
+                case Received(_, Status() as status) if status.turn == turn:
+                    self.turn = turn
+                    return status
+                case Received(_, Over() as over):
+                    self.over = over
+                    raise BackendError(f"the game ended before turn {turn}'s STATUS: {over.reason.value}: {over.text}")
+
+    def play(self, done: Done, moves: Moves | None) -> tuple[Status, Over | None]:
+        t = done.turn
+        if self.over is not None or t != self.turn + 1:
+            where = "over" if self.over else f"at turn {self.turn}"
+            raise BackendError(f"turn {t} cannot be played: the game is {where}")
+        end = time.monotonic() + self.deadline
+        self.out.put(self.keys.gcs_done, done)
+        if moves is not None:  # the drones' phase opens once the DONE is in: then the moves go
+            while True:
+                match self._event(end, f"drones' phase of turn {t}"):
+                    case Received(_, Turn(phase=Phase.DRONES) as turn) if turn.turn == t:
+                        break
+                    case Received(_, Over() as over):
+                        self.over = over
+                        raise BackendError(f"the game ended at turn {over.turn}: {over.reason.value}: {over.text}")
+            self.out.put(self.keys.moves(HOST), moves)
+        status = self._status(t, end)
+        last = t >= self.game.max_turns or not status.drones.alive_mask().any()
+        return status, (self._over(end) if last else None)
+
+    def _over(self, end: float) -> Over:
+        while True:
+            if self.over is not None:
+                return self.over
+            match self._event(end, "OVER"):
+                case Received(_, Over() as over):
+                    self.over = over
+
+    def end(self) -> None:
+        """End the game if it runs (the ground station quits), then its processes, subscriptions and presence."""
+        try:
+            if self.over is None and self.tokens and all(p.poll() is None for p in self.procs.values()):
+                self.out.put(self.keys.gcs_done, Done(turn=self.turn + 1, sender="GCS", phase=Phase.GCS,
+                                                      intent=Intent.QUIT))
+                self._over(time.monotonic() + min(self.deadline, 10.0))
+        except BackendError as err:
+            self.log.warning("the game did not end cleanly: %s", err)
+        finally:
+            for token in self.tokens:  # gone: the coordinator, which waits for its entities to leave, ends
+                with contextlib.suppress(Exception):
+                    token.undeclare()
+            self.tokens.clear()
+            end = time.monotonic() + min(self.deadline, 10.0)
+            for proc in self.procs.values():
+                try:
+                    proc.wait(max(0.1, end - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+            self.inbox.close()
+            self.out.close()
+            for f in self._files:
+                f.close()
+            self._files.clear()
+
+
+def _abandon(children: list[subprocess.Popen], files: list, logs: tempfile.TemporaryDirectory) -> None:
+    """Kill the processes still running and remove their logs (after close(), or as the finalizer of an
+    environment dropped without it)."""
+    for proc in children:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    for f in files:
+        f.close()
+    logs.cleanup()

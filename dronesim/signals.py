@@ -1,0 +1,106 @@
+"""Stopping on a signal: SIGINT (Ctrl-C) and SIGTERM (a process manager, `docker stop`, a closed terminal)
+become an event of the process's loop instead of a traceback or a sudden death, so that it can end its
+game cleanly; the process then exits with the status shells expect (128 + the signal: 130, 143)."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import signal
+import socket
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+#: The signals that ask a process to stop.
+STOPPING = (signal.SIGINT, signal.SIGTERM)
+
+
+@dataclass(frozen=True, slots=True)
+class Interrupted:
+    """A signal asked this process to stop."""
+
+    signum: int
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name
+
+
+class Stop(BaseException):
+    """Raised by a signal handler to unwind the main thread (see `on_stop`). A BaseException, as
+    KeyboardInterrupt is: the handlers that turn a bad payload into a counted rejection (`except Exception`)
+    must not swallow a signal that lands while a message is decoded."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def stop(event: Interrupted) -> None:
+    """`on_stop`'s handler for a main thread that waits in a blocking call: raise `Stop`."""
+    raise Stop(event.signum)
+
+
+def exit_status(signum: int) -> int:
+    """The exit status of a process stopped by `signum`, as shells report it (SIGINT: 130, SIGTERM: 143)."""
+    return 128 + signum
+
+
+@contextlib.contextmanager
+def on_stop(post: Callable[[Interrupted], None]) -> Iterator[None]:
+    """While inside (on the main thread): SIGINT and SIGTERM call `post(Interrupted(signum))` instead of
+    raising KeyboardInterrupt or ending the process; the previous handlers come back on leaving. `post`
+    runs on the main thread between two bytecodes: it hands the event over (e.g. `Inbox.post`), or raises
+    `Stop` to unwind what the main thread is waiting in."""
+    previous = {s: signal.signal(s, lambda signum, _frame: post(Interrupted(signum))) for s in STOPPING}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def until_stopped(run: Callable[[], object], logger: logging.Logger) -> int:
+    """Run an entity's `run` on the main thread; Ctrl-C or SIGTERM unwinds it wherever it waits (its sessions,
+    presence and servers close on the way out): one warning line, no traceback, and the status shells expect.
+    Otherwise the exit status `run` returns, or 0 if it returns something else (an entity's `main`: the OVER
+    that ended its game)."""
+    try:
+        with on_stop(stop):
+            status = run()
+        return status if isinstance(status, int) else 0
+    except Stop as sig:
+        logger.warning("stopped by %s", sig)
+        return exit_status(sig.signum)
+
+
+@contextlib.contextmanager
+def waking(*wake: Callable[[], None]) -> Iterator[None]:
+    """While inside (on the main thread): every signal that has a Python handler also calls each `wake`, on
+    a helper thread. A Python handler runs only when the main thread runs Python code: a signal that lands
+    just before that thread blocks in a wait (the C handler has run, the Python one is pending) would wait
+    for the next event, maybe forever (a prompt, a phase held for a person). A `wake` puts something in a
+    queue the main thread waits on, so that the wait returns and the handler runs at once. (Off the main
+    thread, nothing is done: signals are for the main thread.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    reader, writer = socket.socketpair()
+    writer.setblocking(False)
+    previous = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
+
+    def pump() -> None:
+        while reader.recv(64):  # one byte per signal; empty once `writer` is closed
+            for fn in wake:
+                fn()
+
+    thread = threading.Thread(target=pump, name="signal-wake", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        signal.set_wakeup_fd(previous)
+        writer.close()
+        thread.join()
+        reader.close()

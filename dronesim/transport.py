@@ -1,0 +1,740 @@
+"""The thin Zenoh adapter shared by every process: flags, session config, and an event inbox.
+
+The threading model, the same in every process and at every fleet size:
+- Zenoh's callbacks (subscribers, queryables, query replies, liveliness, matching listeners) run on
+  Zenoh's threads and swallow exceptions. They only do what is cheap: refuse, unread, what is too big,
+  stale or over its origin's budget (see `Inbox`), and put the payload in the process's `Inbox`; what
+  fails there is counted and logged as a rejection, never raised. (A query's reply, which its asker
+  waits for, is decoded there too.)
+- The process's main thread takes the payloads one at a time (`Inbox.get`, or `Inbox.run` with a
+  handler), in order of arrival but for a bursting origin (`FairQueue`), decodes each and checks it
+  against its key (`check_addressed`) into an `Event`, and does everything else: every change of state,
+  every reply to a query, every publication that follows from a message. (A big payload so costs its origin's turn, not
+  Zenoh's thread, which every other message waits for; and its objects are made by the thread that
+  uses and frees them.)
+So a process's state is touched by one thread only: the cores (engine, environment, pilots) have no
+locks. The only ones are the inbox's queue (`FairQueue`) and its count of rejections (`RejectCounter`),
+the two things Zenoh's threads and the main thread share.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+import zenoh
+
+from schema import (
+    Keys,
+    MalformedMessage,
+    Message,
+    RejectCounter,
+    RemoteInputError,
+    StaleTurn,
+    Target,
+    Turn,
+    UsageError,
+    decode,
+    encode,
+)
+from schema.acl import flood_filters
+from schema.errors import WrongSender, excerpt
+from schema.keys import size_limit
+from schema.messages import is_entity_id
+from schema.tuning import ORIGIN_BYTES, ORIGIN_QUEUE, ORIGIN_SHARE
+
+# --------------------------------------------------------------------------- flags and config
+
+
+def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
+    """Zenoh's conventional flags (as in zenoh-python's examples), plus the key root and logging."""
+    g = parser.add_argument_group("zenoh")
+    g.add_argument("-m", "--mode", choices=["peer", "client", "router"], help="the zenoh session mode")
+    g.add_argument("-e", "--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    g.add_argument("-l", "--listen", action="append", default=[], metavar="ENDPOINT",
+                   help="endpoint to listen on (repeatable)")
+    g.add_argument("-c", "--config", metavar="FILE", help="a zenoh JSON5 configuration file")
+    g.add_argument("--lease", type=float, metavar="SECONDS",
+                   help="link lease (transport/link/tx/lease): a hung or cut-off process is declared gone after "
+                        "about 0.75 x this (zenoh's default: 10)")
+    g.add_argument("--root", default="sim", help="key expression root of this simulation (default: sim)")
+    g.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ERROR (default: INFO)")
+    s = parser.add_argument_group("zenoh security (docs/security.md)")
+    s.add_argument("--tls-ca", metavar="FILE", help="CA certificate that signed the router's (and peers') TLS "
+                   "certificates, for tls/HOST:PORT endpoints")
+    s.add_argument("--tls-cert", metavar="FILE", help="this process's TLS certificate (mutual TLS; with --tls-key)")
+    s.add_argument("--tls-key", metavar="FILE", help="the private key of --tls-cert")
+    s.add_argument("--tls-mtls", action="store_true",
+                   help="a router: require every client to present a certificate signed by --tls-ca")
+    s.add_argument("--user", metavar="NAME", help="user name for the router's user/password authentication")
+    s.add_argument("--password-file", metavar="FILE",
+                   help=f"file whose first line is the password of --user (or set {PASSWORD_ENV}); never a flag")
+    s.add_argument("--users-file", metavar="FILE",
+                   help="a router: the user:password dictionary it authenticates clients against")
+    s.add_argument("--acl", metavar="FILE", help="a router: a JSON5 file with an access_control block "
+                   "(python -m schema.acl)")
+
+
+def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
+    """A zenoh.Config from the conventional flags. Multicast scouting and shared memory are off unless
+    a config file turns them on: endpoints are explicit, so parallel runs never cross-talk; and Zenoh's
+    shared-memory transport maps a pool of tens of MiB into every process that receives a message of
+    a few KiB from a peer on the same host (a swarm's STATUS), for no measurable gain at these sizes."""
+    if args.config:
+        try:
+            conf = zenoh.Config.from_file(args.config)
+        except Exception as exc:
+            raise UsageError(f"cannot load zenoh config {args.config}: {exc}") from None
+    else:
+        conf = _local_defaults()
+    conf.insert_json5("scouting/delay", "0")
+    if args.mode:
+        conf.insert_json5("mode", json.dumps(args.mode))
+    if args.connect:
+        conf.insert_json5("connect/endpoints", json.dumps(args.connect))
+    if args.listen:
+        conf.insert_json5("listen/endpoints", json.dumps(args.listen))
+    apply_lease(conf, args)
+    apply_security(conf, args)
+    return conf
+
+
+def apply_lease(conf: zenoh.Config, args: argparse.Namespace) -> None:
+    """--lease into `conf` (transport/link/tx/lease, in milliseconds)."""
+    if getattr(args, "lease", None) is not None:
+        if args.lease <= 0:
+            raise UsageError("--lease must be positive")
+        conf.insert_json5("transport/link/tx/lease", str(int(args.lease * 1000)))
+        conf.insert_json5("transport/link/tx/keep_alive", "4")  # keep-alives per lease, zenoh's default
+
+
+#: The environment variable holding the password of --user when no --password-file is given.
+PASSWORD_ENV = "DRONESIM_PASSWORD"
+
+
+def _existing(path: str, flag: str) -> str:
+    import os
+
+    if not os.path.isfile(path):
+        if flag == "--password-file":  # never echo it: it may be a password typed as `--password SECRET`
+            raise UsageError("--password-file: no such file (it takes the path of a file holding the password)")
+        raise UsageError(f"{flag} {path}: no such file")
+    return os.path.abspath(path)
+
+
+def apply_security(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | None = None) -> None:
+    """The security flags (TLS, mutual TLS, user/password, a router's dictionary and ACL) into `conf`.
+
+    A client's --tls-cert/--tls-key are presented to the router (mutual TLS); a router's are its server
+    certificate, and --tls-mtls makes it require clients' ones. `router` defaults to the config's mode."""
+    get = lambda name: getattr(args, name, None)  # noqa: E731 -- parsers without these flags
+    tls = "transport/link/tls/"
+    if router is None:
+        mode = get("mode") or json.loads(conf.get_json("mode") or "null")
+        router = mode == "router"
+    if get("tls_ca"):
+        conf.insert_json5(tls + "root_ca_certificate", json.dumps(_existing(args.tls_ca, "--tls-ca")))
+    if bool(get("tls_cert")) != bool(get("tls_key")):
+        raise UsageError("--tls-cert and --tls-key go together")
+    if get("tls_cert"):
+        cert, key = _existing(args.tls_cert, "--tls-cert"), _existing(args.tls_key, "--tls-key")
+        for side in ("listen", "connect"):
+            conf.insert_json5(f"{tls}{side}_certificate", json.dumps(cert))
+            conf.insert_json5(f"{tls}{side}_private_key", json.dumps(key))
+        if not router:
+            conf.insert_json5(tls + "enable_mtls", "true")  # a client presents its certificate only then
+    if get("tls_mtls"):
+        conf.insert_json5(tls + "enable_mtls", "true")
+    password = None
+    if get("password_file"):
+        with open(_existing(args.password_file, "--password-file"), encoding="utf-8") as f:
+            password = f.readline().rstrip("\r\n")
+        if not password:
+            raise UsageError(f"--password-file {args.password_file}: its first line is empty")
+    elif get("user"):
+        import os
+
+        password = os.environ.get(PASSWORD_ENV) or None
+    if get("user"):
+        if password is None:
+            raise UsageError(f"--user {args.user} needs --password-file FILE or the {PASSWORD_ENV} "
+                             "environment variable")
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(args.user))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+    elif get("password_file"):
+        raise UsageError("--password-file needs --user NAME")
+    if get("users_file"):
+        users = _existing(args.users_file, "--users-file")
+        conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(users))
+    if get("acl"):
+        try:
+            block = zenoh.Config.from_file(_existing(args.acl, "--acl")).get_json("access_control")
+        except Exception as exc:
+            raise UsageError(f"cannot load --acl {args.acl}: {exc}") from None
+        if not json.loads(block).get("enabled"):
+            raise UsageError(f"--acl {args.acl}: its access_control block is missing or not enabled")
+        conf.insert_json5("access_control", block)
+
+
+def setup_logging(level: str, name: str) -> logging.Logger:
+    """Entry points only: configure logging to stderr, prefixed with the process's role."""
+    logging.basicConfig(level=level.upper(), format=f"%(asctime)s {name} %(levelname)s %(message)s",
+                        datefmt="%H:%M:%S")
+    return logging.getLogger(f"dronesim.{name}")
+
+
+def _local_defaults() -> zenoh.Config:
+    """A config with this project's defaults (see `zenoh_config`): no multicast scouting, no shared memory."""
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    return conf
+
+
+def router_config(listen: str = "tcp/127.0.0.1:0") -> zenoh.Config:
+    """An embedded router's config: fast start, no multicast, admin space readable (for its port), and
+    the key table's flood filters for any root (`schema.acl.flood_filters`)."""
+    conf = _local_defaults()
+    for name, block in flood_filters(["**"]).items():
+        conf.insert_json5(name, json.dumps(block))
+    conf.insert_json5("mode", '"router"')
+    conf.insert_json5("listen/endpoints", json.dumps([listen]))
+    conf.insert_json5("scouting/delay", "0")
+    conf.insert_json5("adminspace", '{"enabled": true, "permissions": {"read": true, "write": false}}')
+    return conf
+
+
+def client_config(locator: str) -> zenoh.Config:
+    """A client session's config for one router endpoint: no multicast, fast start."""
+    conf = _local_defaults()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([locator]))
+    conf.insert_json5("scouting/delay", "0")
+    return conf
+
+
+def router_locators(session: zenoh.Session) -> list[str]:
+    """The endpoints a router session really listens on (with the port chosen for `:0`)."""
+    zid = str(session.info.zid())
+    for reply in session.get(f"@/{zid}/router", timeout=5.0):
+        if reply.ok is not None:
+            return list(json.loads(reply.ok.payload.to_bytes())["locators"])
+    raise UsageError("the router did not report its locators")
+
+
+@dataclass(frozen=True, slots=True)
+class Sessions:
+    """The sessions the routers say are connected (`audit_sessions`); None: the listing may be incomplete."""
+
+    connected: frozenset[str] | None
+
+
+def sessions_listed(answers: list[dict[str, Any]]) -> frozenset[str] | None:
+    """The session ids in the routers' admin-space answers (`@/<zid>/router`), if they cover every session:
+    None when one lists a peer (which may carry sessions of its own) or a router that did not answer."""
+    routers = {str(a.get("zid")) for a in answers}
+    connected = set(routers)
+    for answer in answers:
+        for s in answer.get("sessions", []):
+            zid, what = str(s.get("peer")), s.get("whatami")
+            if what == "peer" or (what == "router" and zid not in routers):
+                return None
+            connected.add(zid)
+    return frozenset(connected) if answers else None
+
+
+def audit_sessions(session: zenoh.Session, post: Callable[[object], None], timeout: float = 2.0) -> None:
+    """Ask every router which sessions it connects (its admin space), without waiting: `post(Sessions(...))`
+    once the query is finished. A presence token says nothing of who declared it; this tells a token held by
+    a copy (on a plain router) from the admitted session's own."""
+    answers: list[dict[str, Any]] = []
+
+    def on_reply(reply: zenoh.Reply) -> None:
+        try:
+            if reply.ok is not None:
+                answers.append(json.loads(reply.ok.payload.to_bytes()))
+        except ValueError:
+            pass  # not a router's answer: the listing stays incomplete only if a router is missing
+
+    session.get("@/*/router", zenoh.handlers.Callback(on_reply, lambda: post(Sessions(sessions_listed(answers))),
+                                                      indirect=False), timeout=timeout)
+
+
+# --------------------------------------------------------------------------- inbox
+
+
+@dataclass(frozen=True, slots=True)
+class Received:
+    """A valid message that arrived on `key`."""
+
+    key: str
+    msg: Message
+
+
+@dataclass(frozen=True, slots=True)
+class Asked:
+    """A valid query payload; `query` must be replied to (or dropped) by the main thread."""
+
+    query: zenoh.Query
+    msg: Message
+
+
+@dataclass(frozen=True, slots=True)
+class Presence:
+    """A process's liveliness token appeared (`alive`) or disappeared."""
+
+    entity: str
+    session: str
+    alive: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Matching:
+    """Whether anyone subscribes to `key`, this process's publication, has changed (see `Outbox.watch`)."""
+
+    key: str
+    matching: bool
+
+
+Event = Received | Asked | Presence | Matching
+
+
+@dataclass(frozen=True, slots=True)
+class _Unread:
+    """A message or query that passed the cheap checks, its payload not decoded yet (`Inbox._read` does);
+    `query`: None for a published message."""
+
+    key: str
+    origin: str
+    query: zenoh.Query | None
+    data: bytes
+    expect: type[Message] | tuple[type[Message], ...]
+
+
+def session_id(session: zenoh.Session) -> str:
+    return str(session.info.zid())
+
+
+def check_addressed(keys: Keys, key: str, msg: Message) -> None:
+    """The entity part of a key must be the message's subject: its drone for TGT, else its sender."""
+    subject = msg.drone if isinstance(msg, Target) else msg.sender
+    parts = keys.parts_of(key)
+    if parts[0] != subject:
+        raise WrongSender(f"a {msg.TAG} about {subject} on {parts[0]}'s key {key}")
+    phase = msg.phase.value if isinstance(msg, Turn) else None
+    if parts[2:] != ([phase] if phase else []):
+        raise WrongSender(f"a {msg.TAG}{'(' + phase + ')' if phase else ''} on key {key}")
+
+
+def _direct(callback: Callable[[Any], None]) -> zenoh.handlers.Callback:
+    """Run `callback` on Zenoh's receiving thread itself. By default zenoh-python hands each Python
+    callback to a thread of its own, and then messages on different keys overtake each other on their
+    way into the inbox; our callbacks only check and enqueue, so they run in place, in order."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
+_EVERY_REPLY = zenoh.ConsolidationMode.NONE
+
+
+#: The origin of the events a process queues itself (`Inbox.post`).
+LOCAL = "local"
+
+
+def _stamp(data: bytes) -> tuple[object, object, object]:
+    """(type, turn, sender) as the first bytes of a payload say them, without decoding the rest (a
+    payload's map starts with them: schema/README.md); None for what they do not say."""
+    head = msgpack.Unpacker(raw=False)
+    head.feed(data[:64])
+    found: dict[object, object] = {}
+    try:
+        for _ in range(min(head.read_map_header(), 4)):
+            name = head.unpack()
+            found[name] = head.unpack()
+    except Exception:  # noqa: BLE001 - not MessagePack, or cut short: decode says why
+        pass
+    return found.get("t"), found.get("turn"), found.get("from")
+
+
+def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Message], ...]) -> Message:
+    """A query's reply, decoded (RemoteInputError on an error reply or a malformed one)."""
+    if reply.ok is None:
+        said = reply.err.payload.to_bytes().decode(errors="replace") if reply.err is not None else "nothing"
+        raise RemoteInputError(f"{key} answered an error: {said}", reason="error-reply")
+    return decode(reply.ok.payload.to_bytes(), expect)
+
+
+class FairQueue:
+    """Events by origin, for one consuming thread, with a bound per origin and turns under pressure.
+
+    Events are taken in order of arrival, except that an origin has at most `share` of its events in
+    line at a time: the rest wait and join the end of the line one by one, as its events are taken. So
+    one origin's burst delays another origin's next event by at most `share` of its own, and below that
+    nothing is reordered. At most `budget` events and `budget_bytes` bytes (the payloads they came as)
+    are queued per origin: `put` raises a `flood` RemoteInputError beyond. Thread-safe."""
+
+    def __init__(self, budget: int = ORIGIN_QUEUE, budget_bytes: int = ORIGIN_BYTES, share: int = ORIGIN_SHARE) -> None:
+        self.budget, self.budget_bytes, self.share = budget, budget_bytes, share
+        self._lock = threading.Lock()  # guards the three below and the order of entries into the line
+        self._queues: dict[str, collections.deque[tuple[object, int]]] = {}  # origin -> (event, size), in order
+        self._bytes: dict[str, int] = {}  # origin -> bytes of its events queued
+        self._lined: dict[str, int] = {}  # origin -> its events in line
+        # an origin per event in line, in order (None: a wake-up); the consumer waits on it, in C, lock-free
+        self._line: queue.SimpleQueue[str | None] = queue.SimpleQueue()
+
+    def full(self, origin: str, size: int = 0) -> str | None:
+        """Why an event of `size` bytes from `origin` would be over its budget (None: it would not). A
+        hint for refusing it unread: `put` checks again."""
+        queued = len(self._queues.get(origin, ()))
+        if queued >= self.budget:
+            return f"{queued} events from {origin} are already waiting"
+        held = self._bytes.get(origin, 0)
+        if queued and held + size > self.budget_bytes:  # (one event alone is bounded by its size limit)
+            return f"{held} bytes from {origin} are already waiting"
+        return None
+
+    def put(self, origin: str, event: object, size: int = 0, *, budgeted: bool = True) -> None:
+        with self._lock:
+            why = self.full(origin, size) if budgeted else None
+            if why is not None:
+                raise RemoteInputError(why, reason="flood")
+            self._queues.setdefault(origin, collections.deque()).append((event, size))
+            self._bytes[origin] = self._bytes.get(origin, 0) + size
+            if self._lined.get(origin, 0) < self.share:
+                self._enter(origin)
+
+    def _enter(self, origin: str) -> None:
+        self._lined[origin] = self._lined.get(origin, 0) + 1
+        self._line.put(origin)
+
+    def wake(self) -> None:
+        """Make a `take` waiting now return (with nothing)."""
+        self._line.put(None)
+
+    def _take(self, origin: str) -> object:
+        with self._lock:
+            self._lined[origin] -= 1
+            waiting = self._queues[origin]
+            event, size = waiting.popleft()
+            self._bytes[origin] -= size
+            if len(waiting) > self._lined[origin]:
+                self._enter(origin)  # its next event waiting joins the end of the line
+            elif not waiting:
+                del self._queues[origin], self._bytes[origin], self._lined[origin]
+            return event
+
+    def take(self, timeout: float | None) -> tuple[bool, object]:
+        """(True, the next event), or (False, None) once `timeout` seconds (None: no limit) pass first or
+        `wake` is called."""
+        try:
+            origin = self._line.get(timeout=timeout)
+        except queue.Empty:
+            return False, None
+        return (False, None) if origin is None else (True, self._take(origin))
+
+    def drain(self) -> list[object]:
+        """Every event queued, in the order `take` would give them."""
+        out: list[object] = []
+        while True:
+            try:
+                origin = self._line.get_nowait()
+            except queue.Empty:
+                return out
+            if origin is not None:
+                out.append(self._take(origin))
+
+
+class Inbox:
+    """Events from Zenoh callbacks, decoded by the process's main thread (see the module's docstring);
+    rejections are counted.
+
+    A flood cannot move a game. Each event has an origin: the writer of the key it came on (by the key
+    table: the coordinator for TURN, STATUS and OVER, the ground station for TGT and DONE, the drone or
+    host whose key an NPS or MOVES is on), the sender a query names, the entity of a presence token. A
+    callback refuses, before anything is queued and before the payload is decoded: a payload above its
+    message's size limit (`schema.keys.size_limit`), a message stamped with a turn older than its
+    subscription's `since()` (read from the first bytes alone), one whose sender is not its key's, and one
+    from an origin over its budget (`FairQueue`; the coordinator's messages are never refused for it).
+    The main thread takes the events in order of arrival, except that a bursting origin has at most
+    `share` of its events in line at a time: it delays another origin's next event by at most that many.
+    """
+
+    def __init__(self, session: zenoh.Session, keys: Keys, logger: logging.Logger, *,
+                 budget: int = ORIGIN_QUEUE, share: int = ORIGIN_SHARE) -> None:
+        self.session = session
+        self.keys = keys
+        self.log = logger
+        self._handles: list[Any] = []  # subscribers, queryables: undeclared by `close`
+        self._events = FairQueue(budget, share=share)
+        self.rejects = RejectCounter(logger, wake=self._events.wake)  # (its summaries are logged by `get`)
+
+    def run(self, handler: Callable[[Event | None], None], *, timeout: Callable[[], float | None],
+            until: Callable[[], bool]) -> None:
+        """Hand every event to `handler`, one at a time, on this thread (None when `timeout()` seconds
+        pass without one), until `until()`; events after the end stay queued."""
+        while not until():
+            handler(self.get(timeout()))  # (no reference kept while waiting: a swarm's MOVES is big)
+
+    # callbacks (Zenoh threads): check, enqueue; never raise
+
+    def _put(self, origin: str, event: Event | _Unread, size: int) -> None:
+        self._events.put(origin, event, size, budgeted=origin != "SRV")
+
+    def _admit(self, origin: str, size: int, limit: int) -> None:
+        """Refuse, unread, a payload that is too big or comes from an origin over its budget (the
+        coordinator's messages never are: a process that lags behind must not lose the game's end)."""
+        if size > limit:
+            raise MalformedMessage(f"a payload of {size} bytes, above the key's limit of {limit}", reason="too-large")
+        why = None if origin == "SRV" else self._events.full(origin, size)
+        if why is not None:
+            raise RemoteInputError(why, reason="flood")
+
+    def _guard(self, where: str, origin: str, fn: Callable[[], None]) -> None:
+        try:
+            fn()
+        except RemoteInputError as err:
+            self.rejects.reject(where, err, origin)
+        except Exception:  # a bug: log it, never let Zenoh swallow it silently
+            self.log.exception("error handling %s", where)
+
+    def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
+                  since: Callable[[], int] | None = None) -> zenoh.Subscriber:
+        """Decoded messages on `key` become `Received` events (until `unsubscribe`); with `since`, those
+        stamped with a turn before `since()` are refused as stale."""
+        types = expect if isinstance(expect, tuple) else (expect,)
+        limit = max(size_limit(t) for t in types)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            k = str(sample.key_expr)
+            origin = self._origin(k)
+
+            def handle() -> None:
+                self._admit(origin, len(sample.payload), limit)
+                data = sample.payload.to_bytes()
+                if since is not None:
+                    turn = _stamp(data)[1]
+                    if type(turn) is int and turn < since():
+                        raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
+                self._put(origin, _Unread(k, origin, None, data, expect), len(data))  # (read by `get`)
+
+            self._guard(k, origin, handle)
+
+        sub = self.session.declare_subscriber(key, _direct(on_sample))
+        self._handles.append(sub)
+        return sub
+
+    def _origin(self, key: str) -> str:
+        try:
+            return self.keys.origin_of(key)
+        except ValueError:
+            return key
+
+    def unsubscribe(self, sub: zenoh.Subscriber) -> None:
+        sub.undeclare()
+        self._handles.remove(sub)
+
+    def serve(self, key: str, expect: type[Message]) -> None:
+        """Declare a queryable; valid queries become `Asked` events, refused ones get an error reply (their
+        origin is the sender they name). Zenoh's thread only checks a query's size, sender and budget; its
+        payload is decoded on the main thread when its turn comes (`get`)."""
+        limit = size_limit(expect)
+
+        def on_query(query: zenoh.Query) -> None:
+            payload = query.payload
+            origin = key
+            try:
+                if payload is None:
+                    raise MalformedMessage(f"query on {key} without payload")
+                data = payload.to_bytes() if len(payload) <= limit else b""
+                sender = _stamp(data)[2]
+                origin = sender if isinstance(sender, str) and is_entity_id(sender) else key
+                self._admit(origin, len(payload), limit)
+                self._put(origin, _Unread(key, origin, query, data, expect), len(data))  # (read by `get`)
+            except RemoteInputError as err:
+                self._refuse(key, origin, query, err)
+            except Exception:
+                self.log.exception("error handling a query on %s", key)
+                query.reply_err(b"internal error")
+                query.drop()
+
+        self._handles.append(self.session.declare_queryable(key, _direct(on_query), complete=True))
+
+    def _refuse(self, key: str, origin: str, query: zenoh.Query, err: RemoteInputError) -> None:
+        self.rejects.reject(key, err, origin)
+        query.reply_err(excerpt(str(err)).encode())
+        query.drop()
+
+    def _read(self, event: object) -> Event | None:
+        """A payload, decoded on the main thread (the thread that handles it: its caches are warm then, and
+        a big one costs its origin's turn, not Zenoh's thread, which every other message waits for); None
+        if it is malformed or not its key's (counted as a rejection; a query gets an error reply)."""
+        if not isinstance(event, _Unread):
+            return event  # type: ignore[return-value]
+        try:
+            msg = decode(event.data, event.expect)
+            if event.query is not None:
+                return Asked(event.query, msg)
+            check_addressed(self.keys, event.key, msg)
+            return Received(event.key, msg)
+        except RemoteInputError as err:
+            if event.query is not None:
+                self._refuse(event.key, event.origin, event.query, err)
+            else:
+                self.rejects.reject(event.key, err, event.origin)
+            return None
+
+    def query(self, key: str, msg: Message, expect: type[Message], *, timeout: float,
+              then: Callable[[tuple[Message | RemoteInputError, ...]], object]) -> None:
+        """One query, not waited for: once it is finished, the event `then(replies)` is queued, with every
+        reply decoded, or the RemoteInputError of an error reply or a malformed one (none: nobody answered
+        within `timeout`). This process asked: its answer is never refused for the budget (`LOCAL`)."""
+        replies: list[Message | RemoteInputError] = []
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if reply.err is not None and reply.err.payload.to_bytes() == b"Timeout":
+                return  # zenoh's own error reply: nobody answered in time
+            try:
+                got = _answer(key, reply, expect)
+                check_addressed(self.keys, key, got)
+                replies.append(got)
+            except RemoteInputError as err:
+                replies.append(err)
+            except Exception:  # a bug: log it, never let Zenoh swallow it silently
+                self.log.exception("error handling a reply on %s", key)
+
+        def on_done() -> None:  # zenoh calls it once the query is finished, after its last reply
+            self._events.put(LOCAL, then(tuple(replies)), budgeted=False)
+
+        self.session.get(key, zenoh.handlers.Callback(on_reply, on_done, indirect=False),
+                         payload=encode(msg), timeout=timeout, consolidation=_EVERY_REPLY)
+
+    def watch_presence(self, entity: str | None = None) -> None:
+        """Presence events for every process (or only `entity`'s), starting with those already there."""
+
+        def on_token(sample: zenoh.Sample) -> None:
+            k = str(sample.key_expr)
+
+            def handle() -> None:
+                who, session = self.keys.presence_of(k)
+                self._put(who, Presence(who, session, sample.kind == zenoh.SampleKind.PUT), 0)
+
+            self._guard(k, k, handle)
+
+        key = self.keys.any_alive if entity is None else self.keys.alive_of(entity)
+        self._handles.append(self.session.liveliness().declare_subscriber(key, _direct(on_token), history=True))
+
+    def close(self) -> None:
+        """Undeclare every subscription, queryable and presence watch of this inbox (the session stays open)."""
+        handles, self._handles = self._handles, []
+        for handle in handles:
+            handle.undeclare()
+
+    def post(self, event: object) -> None:
+        """Queue an event from another thread of this process (e.g. a web request for the main loop)."""
+        self._events.put(LOCAL, event, budgeted=False)  # (never refused: this process's own)
+
+    # the main thread
+
+    def drain(self) -> list[Event]:
+        """Every event already queued, without waiting (in the order `get` takes them)."""
+        return [e for e in map(self._read, self._events.drain()) if e is not None]
+
+    def get(self, timeout: float | None = None) -> Event | None:
+        """The next event, or None when `timeout` seconds pass first."""
+        end = None if timeout is None else time.monotonic() + max(0.0, timeout)
+        while True:
+            self.rejects.flush()
+            left = None if end is None else max(0.0, end - time.monotonic())
+            summary = self.rejects.due_in()  # (a summary of rejections is logged when due)
+            got, event = self._events.take(left if summary is None else summary if left is None else min(left, summary))
+            read = self._read(event) if got else None
+            if read is not None:
+                return read
+            if left is not None and time.monotonic() >= end:  # type: ignore[operator]
+                return None
+
+
+class Outbox:
+    """Publishes messages with BLOCK congestion control (control messages must not be dropped)."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.session = session
+        self._pubs: dict[str, zenoh.Publisher] = {}
+        self._listeners: list[zenoh.MatchingListener] = []
+        self._matching: dict[str, bool] = {}  # key -> whether anyone subscribes to it (see `matching`)
+
+    def _pub(self, key: str) -> zenoh.Publisher:
+        pub = self._pubs.get(key)
+        if pub is None:
+            pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                 reliability=zenoh.Reliability.RELIABLE)
+            self._pubs[key] = pub
+        return pub
+
+    def put(self, key: str, msg: Message, data: bytes | None = None) -> None:
+        """Publish `msg` (`data`: its encoding, if the caller already has it)."""
+        self._pub(key).put(encode(msg) if data is None else data)
+
+    def close(self) -> None:
+        """Undeclare this outbox's publishers and matching listeners (the session stays open)."""
+        for listener in self._listeners:
+            listener.undeclare()
+        for pub in self._pubs.values():
+            pub.undeclare()
+        self._listeners, self._pubs, self._matching = [], {}, {}
+
+    def matching(self, key: str) -> bool:
+        """Does anyone subscribe to `key` now? (Asked once of Zenoh, then kept by a matching listener: a
+        publisher's matching status is a call into Zenoh each time.)"""
+        known = self._matching.get(key)
+        if known is None:
+            pub = self._pub(key)
+
+            def on_status(status: zenoh.MatchingStatus) -> None:  # (a bool's assignment: safe from any thread)
+                self._matching[key] = status.matching
+
+            self._listeners.append(pub.declare_matching_listener(_direct(on_status)))
+            known = self._matching.setdefault(key, pub.matching_status.matching)  # type: ignore[attr-defined]
+        return known
+
+    def watch(self, key: str, inbox: Inbox) -> None:
+        """A `Matching` event in `inbox` each time someone starts or stops subscribing to `key` (the
+        first, at once, if someone already does)."""
+        def on_status(status: zenoh.MatchingStatus) -> None:
+            inbox.post(Matching(key, status.matching))
+
+        self._listeners.append(self._pub(key).declare_matching_listener(_direct(on_status)))
+
+
+def request(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
+            timeout: float) -> Message:
+    """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none)."""
+    return ask(session, key, msg, expect, timeout)[0]
+
+
+def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
+        timeout: float) -> tuple[Message, str]:
+    """`request`, and the session id of the process that answered (as Zenoh says it, "" if it does not)."""
+    for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=_EVERY_REPLY):
+        replier = reply.replier_id
+        return _answer(key, reply, expect), "" if replier is None else str(replier.zid)
+    raise TimeoutError(f"no answer on {key} within {timeout:.1f} s")
+
+
+def wait_for(what: str, predicate: Callable[[], bool], inbox_get: Callable[[float], object], timeout: float) -> None:
+    """Block on events until `predicate()` holds (no sleeping); UsageError after `timeout`."""
+    end = time.monotonic() + timeout
+    while not predicate():
+        left = end - time.monotonic()
+        if left <= 0:
+            raise UsageError(f"timed out waiting for {what}")
+        inbox_get(left)

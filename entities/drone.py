@@ -1,0 +1,564 @@
+"""The drone process's protocol (a lone drone, the seed's D01, or a swarm host flying several): a pure
+state machine, no network and no clock. Its Zenoh adapter (entities/drone_node.py) feeds it, in
+batches of everything queued (`DroneProcess.receive`), the coordinator's TURN and OVER, the outcome
+of every query it asked for (`Answer`), the environment's presence (`EnvPresence`) and its expired
+timer (`Expired`), and carries out the effects it returns: publish an NPS or a MOVES (`Send`), send
+an ASK or a MAP query (`Query`), set its one timer (`Timer`), count a refused input (`Refusal`).
+
+Deciding. Each DRONES phase it flies every hosted drone's autopilot together (`fly_pilots`: every
+drone's questions of a round at once), or a swarm host's drones with the autopilot's one pilot over
+arrays (`fly_swarm`, when it has that form). Each round of questions is answered from the chart where
+it can; the rest goes out in ASKs (one per Ask.MAX_CELLS cells, together), and the plan goes on when
+every answer is in. Then a lone drone publishes its NPS, a swarm host the MOVES of all its drones in
+one message (`_messages`, the one place moves become messages). A TURN that repeats the last one gets
+the same moves again. A later TURN or an OVER received while a turn is being decided ends that turn's
+decision without publishing it, and a batch acts only on its latest TURN: a process that was frozen or
+slow catches up instead of planning turns that are long gone.
+
+Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings
+never move, so a cell's kind holds for the whole game). As soon as it is admitted it asks the
+environment for its static map (ENV/MAP, the query a ground station draws with; asked again in a later
+turn, up to `MAP_TRIES` times, while nobody answers it, as the environment may still be building its
+world); until the map comes, once it has sent its moves, it asks, for the static world (an ASK for turn
+0, answered at once), the never-told cells around where its drones are going (within `ASK_AHEAD_REACH`
+steps for a few drones, so that it asks only every few turns; the next ring for a swarm). A question about cells
+whose kinds are all charted is answered from the chart plus the drones in them, which the turn's orders
+list (every alive drone's cell at the start of the turn): exactly the CellInfo the environment would
+give for that turn. The autopilots see only the cells they ask for, so decisions, and journals, do not
+change. Without a chart (`chart=False`, `dronesim drone --no-chart`: the benchmark switches the chart
+off to measure it) nothing is asked ahead or charted, and every question goes to the environment.
+
+The environment away. An ASK nobody answered is asked again as soon as an environment is present (at
+once if one is), for up to `patience` seconds from the first miss; after that, or once the turn is
+superseded, the drones decide without those answers.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import logging
+from collections.abc import Callable, Generator, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from schema import (
+    Ans,
+    Ask,
+    Cell,
+    CellInfo,
+    CellKind,
+    MapRequest,
+    Moves,
+    Nps,
+    OrderTable,
+    Over,
+    Phase,
+    RemoteInputError,
+    StepTable,
+    Turn,
+    Welcome,
+    WorldMap,
+)
+from schema.errors import OutOfRange, Refusal
+from schema.messages import _KINDS, AROUND
+from schema.tables import drone_number
+from schema.tuning import ASK_AHEAD_MAX_DRONES, ASK_AHEAD_REACH, CHART_FEW_CELLS, MAP_TRIES, PREFETCH_CHUNK, SWARM_MIN
+
+from .autopilots import make_autopilot, make_swarm, pilot_class
+from .autopilots.base import NO_ANSWER, Answers, Decision, fly_pilots, fly_swarm
+from .world import World, inside_rows, linear_rows
+
+# --------------------------------------------------------------------------- effects and inputs
+
+
+@dataclass(frozen=True, slots=True)
+class Send:
+    """Publish a lone drone's NPS (on its NPS key) or a swarm host's MOVES (on its MOVES key)."""
+
+    msg: Nps | Moves
+
+
+@dataclass(frozen=True, slots=True)
+class Query:
+    """Send an ASK (ENV/ASK) or a MapRequest (ENV/MAP); once the query is finished, feed back `Answer(ref, ...)`."""
+
+    ref: int
+    msg: Ask | MapRequest
+
+
+@dataclass(frozen=True, slots=True)
+class Timer:
+    """Feed back `Expired(ref)` in `seconds` (it replaces any timer set before)."""
+
+    ref: int
+    seconds: float
+
+
+Effect = Send | Query | Timer | Refusal
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """`Query(ref)` is finished: its replies, each the decoded message or the RemoteInputError of an
+    error reply or a malformed one; none if nobody answered in time."""
+
+    ref: int
+    replies: tuple[Ans | WorldMap | RemoteInputError, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class EnvPresence:
+    """An environment process's presence token appeared (`alive`) or went away."""
+
+    session: str
+    alive: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Expired:
+    """The timer `Timer(ref)` ran out."""
+
+    ref: int
+
+
+Input = Turn | Over | Answer | EnvPresence | Expired
+#: A turn's plan (`fly_pilots` or `fly_swarm`): it yields questions, and returns the turn's moves.
+Plan = Generator[Any, Any, "StepTable | dict[str, Decision]"]
+
+
+# --------------------------------------------------------------------------- the process
+
+
+@dataclass(slots=True, eq=False)
+class _Round:
+    """One round of a plan's questions: its parts (a drone's cells, or a chunk of a swarm's) asked by
+    ASK, the answers so far, and how the answers become the plan's reply."""
+
+    parts: dict[str, tuple[Cell, ...]]
+    answers: dict[str, Answers]
+    reply: Callable[[dict[str, Answers]], object]
+    asking: set[int] = field(default_factory=set)  # refs of its ASKs on their way
+    unanswered: list[str] = field(default_factory=list)  # parts nobody answered (the environment is away)
+    timer: int | None = None  # the timer of its patience, once a part went unanswered
+
+
+@dataclass(eq=False)
+class _Deciding:
+    """The turn being decided: its plan and the round of questions it waits on."""
+
+    turn: Turn
+    key: tuple
+    plan: Plan
+    round: _Round | None = None
+    offline: bool = False  # no more ASKs: what the chart cannot answer gets no answer (patience over, or superseded)
+
+    def next(self, r: _Round | None) -> object:
+        """The plan's next question, `r`'s answers given (StopIteration with the moves at its end)."""
+        return next(self.plan) if r is None else self.plan.send(r.reply(r.answers))
+
+    @functools.cached_property
+    def occupancy(self) -> dict[Cell, tuple[str, ...]]:
+        return occupancy_of(self.turn.orders)
+
+
+class DroneProcess:
+    """A drone process's protocol: feed it inputs, carry out the effects it returns (see the module)."""
+
+    def __init__(self, welcome: Welcome, *, drones: Sequence[str], autopilot: str, logger: logging.Logger,
+                 host: str | None = None, swarm_min: int = SWARM_MIN, patience: float = 30.0,
+                 chart: bool = True) -> None:
+        self.sender = host or drones[0]
+        self.host = host
+        self.drones = tuple(drones)
+        self.log = logger
+        self.patience = patience
+        self.welcome = welcome
+        size = welcome.world.size
+        # A swarm host flies its drones with one pilot over arrays when the autopilot has that form.
+        self.swarm = make_swarm(autopilot, world_size=size, drones=[drone_number(d) for d in drones],
+                                least=swarm_min) if host else None
+        self.pilots = {} if self.swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
+        if self.swarm:
+            logger.info("flying %d drones with the %s autopilot's swarm form", len(drones), autopilot)
+        self.senses = pilot_class(autopilot).senses
+        self.chart = Chart(size)
+        self.charting = chart and self.senses  # False: every question goes to the environment (a benchmark's switch)
+        self.over: Over | None = None
+        self._numbers = np.array(sorted(drone_number(d) for d in drones))
+        self._mine = set(drones)
+        self._refs = itertools.count(1)
+        self._queries: dict[int, tuple[Ask | MapRequest, tuple[str, ...]]] = {}  # ref -> (query, parts asked)
+        self._map_asked: list[int] = []  # the turns in which the map was asked
+        self._map_ref: int | None = None  # the MAP query on its way
+        self._map_settled = False  # charted, or refused: not asked again
+        self._env: set[str] = set()  # the sessions of the environment processes present
+        self._deciding: _Deciding | None = None
+        self._done: tuple[tuple, StepTable | dict[str, Decision]] | None = None  # the last turn decided: key, moves
+
+    # ------------------------------------------------------------------ inputs
+
+    def start(self) -> list[Effect]:
+        """Once admitted: ask for the map, and for the static world around the starts (the first
+        turn's sensing then needs no ASK)."""
+        if not self.charting:
+            return []
+        starts = self.welcome.starts.cells()
+        return self._prefetch(0, sorted({c for d, c in starts.items() if d in self._mine}))
+
+    def receive(self, inputs: Iterable[Input]) -> list[Effect]:
+        """Everything queued, in order of arrival: it acts only on the latest DRONES TURN among them."""
+        effects: list[Effect] = []
+        latest: Turn | None = None
+        for item in inputs:
+            match item:
+                case Turn(phase=Phase.DRONES):
+                    latest = item
+                case Over():
+                    if self.over is None:
+                        self.log.info("OVER: %s", item.text)
+                    self.over = item
+                case Answer(ref, replies):
+                    effects += self._answered(ref, replies)
+                case EnvPresence(session, alive):
+                    (self._env.add if alive else self._env.discard)(session)
+                case Expired(ref):
+                    self._expired(ref)
+        if self.over is not None:
+            self._deciding = None  # the game is over: nothing more to decide or to say
+            return effects
+        if latest is not None:
+            effects += self._turn(latest)
+        return effects + self._advance()
+
+    # ------------------------------------------------------------------ turns
+
+    def _plan(self, turn: Turn) -> tuple[tuple, Plan]:
+        """The key of `turn`'s orders for this process's drones (a repeat has the same) and its plan."""
+        if self.swarm is not None:  # one pilot over arrays, reading its drones' rows of the orders
+            rows = turn.orders.rows[np.isin(turn.orders.numbers, self._numbers)]
+            return (turn.turn, rows.tobytes()), fly_swarm(self.swarm, rows)
+        orders = turn.orders.orders(self._mine)
+        return (turn.turn, orders), fly_pilots(self.pilots, orders, host=self.host)
+
+    def _turn(self, turn: Turn) -> list[Effect]:
+        key, plan = self._plan(turn)
+        deciding = self._deciding
+        if deciding is not None and deciding.key == key:
+            return []  # a repeat of the TURN being decided: its moves go out when decided
+        if deciding is not None:  # superseded: decided without asking anything more, and not sent
+            self._finish_offline(deciding)
+        if self._done is not None and self._done[0] == key:  # a repeat of the last TURN: the same moves
+            self._deciding = None
+            return self._messages(turn, self._done[1])
+        self._deciding = _Deciding(turn, key, plan)
+        return self._poll_map(turn.turn) if self.charting else []
+
+    def _advance(self) -> list[Effect]:
+        """Take the turn being decided as far as the answers in hand allow; once decided, send its moves."""
+        d = self._deciding
+        effects: list[Effect] = []
+        if d is None or (moves := self._run(d, effects)) is None:
+            return effects
+        self._deciding = None
+        self._done = (d.key, moves)
+        effects += self._messages(d.turn, moves)
+        if self.charting and not self.chart.complete:  # around where its drones mean to be: their next
+            effects += self._prefetch(d.turn.turn, sorted(set(_cells_of(moves))))  # sensing, asked ahead
+        return effects
+
+    def _run(self, d: _Deciding, effects: list[Effect]) -> StepTable | dict[str, Decision] | None:
+        """Drive `d`'s plan with the answers in hand (asking for the others): its moves, or None while
+        it waits."""
+        while True:
+            r = d.round
+            if r is not None and (r.asking or (r.unanswered and not self._settle_unanswered(d, r, effects))):
+                return None  # answers on their way, or an environment awaited
+            try:
+                question = d.next(r)
+            except StopIteration as stop:
+                return stop.value
+            d.round = r = self._pose(d, question)
+            if d.offline:
+                r.answers.update({p: {} for p in r.parts})
+            else:
+                effects += self._ask(d.turn.turn, r, list(r.parts))
+
+    def _finish_offline(self, d: _Deciding) -> None:
+        """Let a superseded plan end (the autopilots' memory stays as it would be): the questions the chart
+        cannot answer get no answer, nothing more is asked, and its moves are not sent."""
+        d.offline = True
+        r = d.round
+        if r is not None:
+            r.asking.clear()
+            r.unanswered = []
+            r.answers.update({p: {} for p in r.parts if p not in r.answers})
+        self._run(d, [])
+
+    def _messages(self, turn: Turn, moves: StepTable | dict[str, Decision]) -> list[Effect]:
+        """A turn's moves as messages: a swarm host's MOVES (none if it has no drone left), a lone drone's NPS."""
+        if isinstance(moves, StepTable):
+            return [Send(Moves(turn=turn.turn, sender=self.sender, moves=moves))] if moves else []
+        return [Send(Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note, ranked=dec.ranked))
+                for d, dec in moves.items()]
+
+    # ------------------------------------------------------------------ questions
+
+    def _pose(self, d: _Deciding, question: Any) -> _Round:
+        """A plan's question as a round: what the chart answers, and the parts left to ask."""
+        if isinstance(question, np.ndarray):  # a swarm pilot's cells: their kinds
+            cells = question
+            kinds = self.chart.kinds(cells)
+            missing = np.flatnonzero(kinds == Chart.UNKNOWN)
+            asked = list(dict.fromkeys(map(tuple, cells[missing].tolist())))
+            parts = {f"{self.sender}#{i}": tuple(asked[i:i + Ask.MAX_CELLS])
+                     for i in range(0, len(asked), Ask.MAX_CELLS)}
+
+            def kinds_of(answers: dict[str, Answers]) -> np.ndarray:
+                told = {c: info.kind for got in answers.values() for c, info in got.items()}
+                kinds[missing] = [told.get(c, NO_ANSWER) for c in map(tuple, cells[missing].tolist())]
+                return kinds
+
+            return _Round(parts, {}, kinds_of)
+        # one pilot per drone: each drone's cells as CellInfo, from the chart when it knows them all
+        kind = self.chart.kind
+        answers: dict[str, Answers] = {}
+        asking: dict[str, tuple[Cell, ...]] = {}
+        for drone, wanted in question.items():
+            infos: dict[Cell, CellInfo] = {}
+            for c in wanted:
+                k = kind(c)
+                if k is None:
+                    asking[drone] = wanted
+                    break
+                infos[c] = CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))
+            else:
+                answers[drone] = infos
+        return _Round(asking, answers, lambda got: got)
+
+    def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Effect]:
+        """ASKs for the parts `names` of round `r`, batched up to Ask.MAX_CELLS cells (a part whole)."""
+        batches: list[list[str]] = []
+        size = Ask.MAX_CELLS
+        for name in names:
+            if size + len(r.parts[name]) > Ask.MAX_CELLS:
+                batches.append([])
+                size = 0
+            batches[-1].append(name)
+            size += len(r.parts[name])
+        effects: list[Effect] = []
+        for batch in batches:
+            query = self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
+                                tuple(batch))
+            r.asking.add(query.ref)
+            effects.append(query)
+        return effects
+
+    def _settle_unanswered(self, d: _Deciding, r: _Round, effects: list[Effect]) -> bool:
+        """Parts of `r` nobody answered: given no answer once `d` is offline (True: the plan goes on), else
+        asked again now that an environment is present, or left until one is (False)."""
+        if d.offline:
+            r.answers.update({p: {} for p in r.unanswered})
+            r.unanswered = []
+            return True
+        if r.timer is None:
+            r.timer = next(self._refs)
+            effects.append(Timer(r.timer, self.patience))
+            self.log.warning("no environment answered %s: waiting for it", ", ".join(r.unanswered))
+        if self._env:
+            names, r.unanswered = r.unanswered, []
+            effects += self._ask(d.turn.turn, r, names)
+        return False
+
+    def _expired(self, ref: int) -> None:
+        """Patience is over: the turn being decided goes on without the answers it still waits for."""
+        d = self._deciding
+        if d is not None and d.round is not None and d.round.timer == ref:
+            self.log.error("no environment answered %s within %g s", ", ".join(d.round.unanswered) or "an ASK",
+                           self.patience)
+            d.offline = True
+
+    def _query(self, msg: Ask | MapRequest, parts: tuple[str, ...] = ()) -> Query:
+        ref = next(self._refs)
+        self._queries[ref] = (msg, parts)
+        return Query(ref, msg)
+
+    def _answered(self, ref: int, replies: tuple) -> list[Effect]:
+        """A query is finished: learn what it told, and hand the answers to the round that asked."""
+        asked = self._queries.pop(ref, None)
+        if asked is None:
+            return []
+        msg, parts = asked
+        if isinstance(msg, MapRequest):
+            return self._map_answered(replies)
+        effects: list[Effect] = []
+        cells = msg.asked()
+        got: dict[Cell, CellInfo] | None = None  # None: nobody answered
+        for reply in replies:
+            try:
+                if isinstance(reply, RemoteInputError):
+                    raise reply
+                reply.check_fits(cells)
+                if self.charting:
+                    self.chart.learn(cells, reply.kinds)
+                got = dict(zip(cells, reply.infos(cells))) if parts else {}
+            except RemoteInputError as err:
+                effects.append(Refusal(f"ANS for {', '.join(parts) or 'cells asked ahead'}", err))
+                got = got or {}
+        d = self._deciding
+        if d is not None and d.round is not None and ref in d.round.asking:
+            r = d.round
+            r.asking.discard(ref)
+            for part in parts:
+                if got is None:
+                    r.unanswered.append(part)
+                else:
+                    r.answers[part] = {c: got[c] for c in r.parts[part] if c in got}
+        return effects
+
+    # ------------------------------------------------------------------ the chart
+
+    def _poll_map(self, turn: int) -> list[Effect]:
+        """Ask for the environment's map if it was never asked, or if nobody answered it in an earlier
+        turn (up to MAP_TRIES times); `turn`: the turn being played (0 before the game)."""
+        if self._map_settled or self._map_ref is not None or len(self._map_asked) >= MAP_TRIES:
+            return []
+        if self._map_asked and turn <= self._map_asked[-1]:
+            return []
+        self._map_asked.append(turn)
+        query = self._query(MapRequest(turn=0, sender=self.sender))
+        self._map_ref = query.ref
+        return [query]
+
+    def _map_answered(self, replies: tuple) -> list[Effect]:
+        self._map_ref = None
+        for reply in replies:
+            self._map_settled = True
+            try:
+                if isinstance(reply, RemoteInputError):
+                    raise reply
+                self.chart.learn_map(reply)
+                self.log.info("charted the environment's map: %d cells", len(self.chart))
+                return []
+            except RemoteInputError as err:
+                return [Refusal("MAP", err)]
+        return []  # nobody answered: asked again in a later turn
+
+    def _prefetch(self, turn: int, around: list[Cell]) -> list[Effect]:
+        """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
+        `around` that this process has not been told yet (nothing once the whole map is charted);
+        `turn`: the turn being played (0 before the game)."""
+        effects = self._poll_map(turn)
+        if self.chart.complete:
+            return effects
+        cells = self.chart.unknown(around)
+        if cells and len(around) <= ASK_AHEAD_MAX_DRONES:  # a few drones: ask farther at once, and again only
+            cells = self.chart.unknown(around, reach=ASK_AHEAD_REACH)  # every few turns (a swarm: its next ring)
+        chunk = min(PREFETCH_CHUNK, Ask.MAX_CELLS)
+        for i in range(0, len(cells), chunk):
+            effects.append(self._query(Ask(turn=0, sender=self.sender, cells=cells[i:i + chunk])))
+        return effects
+
+
+def _cells_of(moves: StepTable | dict[str, Decision]) -> Iterable[Cell]:
+    """Where a turn's moves take the drones."""
+    if isinstance(moves, StepTable):
+        return map(tuple, moves.column("pos").tolist())
+    return (dec.pos for dec in moves.values())
+
+
+@functools.cache
+def _ball(reach: int) -> np.ndarray:
+    """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first (the
+    neighbours in AROUND order)."""
+    r = range(-reach, reach + 1)
+    farther = [(dx, dy, dz) for dx in r for dy in r for dz in r if 1 < abs(dx) + abs(dy) + abs(dz) <= reach]
+    return np.asarray([*AROUND, *sorted(farther, key=lambda o: abs(o[0]) + abs(o[1]) + abs(o[2]))],
+                      dtype=np.int64)
+
+
+def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
+    """Which drones are in which cell at the start of a turn: the orders list every alive drone."""
+    cells: dict[Cell, list[str]] = {}
+    for d, (x, y, z) in zip(orders.ids(), orders.column("pos").tolist()):
+        cells.setdefault((x, y, z), []).append(d)
+    return {c: tuple(sorted(ds)) for c, ds in cells.items()}
+
+
+class Chart:
+    """The kinds of the cells this process has been told by the environment (buildings never move,
+    so what it is told once holds for the whole game): one byte per cell of the world, 255 until told.
+    Cells outside the world are OUTSIDE (their kind follows from the world's size)."""
+
+    UNKNOWN = 255
+
+    def __init__(self, size: Cell) -> None:
+        self.size = size
+        self._kinds = bytearray([self.UNKNOWN]) * (size[0] * size[1] * size[2])
+        self.complete = False  # every cell's kind is known (the environment's map was charted)
+
+    def __len__(self) -> int:
+        return len(self._kinds)
+
+    def learn_map(self, world_map: WorldMap) -> None:
+        """Every cell's kind, from the environment's static map (RemoteInputError if it is another world's)."""
+        if world_map.size != self.size:
+            raise OutOfRange(f"a MAP of a {world_map.size} world, this game's is {self.size}")
+        grid = World.from_packed(world_map.size, world_map.buildings).grid  # the format's one reader
+        kinds = np.where(grid.ravel(), np.uint8(CellKind.BUILDING), np.uint8(CellKind.EMPTY))
+        np.frombuffer(self._kinds, dtype=np.uint8)[:] = kinds
+        self.complete = True
+
+    def _at(self, cell: Cell) -> int | None:
+        x, y, z = cell
+        nx, ny, nz = self.size
+        return (x * ny + y) * nz + z if 0 <= x < nx and 0 <= y < ny and 0 <= z < nz else None
+
+    def kind(self, cell: Cell) -> CellKind | None:
+        """The cell's kind, None if never told."""
+        i = self._at(cell)
+        if i is None:
+            return CellKind.OUTSIDE
+        k = self._kinds[i]
+        return None if k == self.UNKNOWN else _KINDS[k]
+
+    def _linear(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(inside mask, linear index of each inside cell) of an (n, 3) array of cells."""
+        inside = inside_rows(cells, self.size)
+        return inside, linear_rows(cells[inside], self.size)
+
+    def kinds(self, cells: np.ndarray) -> np.ndarray:
+        """The kind of each cell of an (n, 3) integer array (uint8; UNKNOWN if never told)."""
+        inside, at = self._linear(cells)
+        kinds = np.full(len(cells), CellKind.OUTSIDE, dtype=np.uint8)
+        kinds[inside] = np.frombuffer(self._kinds, dtype=np.uint8)[at]
+        return kinds
+
+    def learn(self, cells: Sequence[Cell], kinds: bytes) -> None:
+        if len(cells) <= CHART_FEW_CELLS:  # a few: cell by cell (numpy's fixed cost dominates)
+            for cell, k in zip(cells, kinds):
+                i = self._at(cell)
+                if i is not None:
+                    self._kinds[i] = k
+            return
+        inside, at = self._linear(np.asarray(cells, dtype=np.int64).reshape(-1, 3))
+        np.frombuffer(self._kinds, dtype=np.uint8)[at] = np.frombuffer(kinds, dtype=np.uint8)[inside]
+
+    def unknown(self, around: Sequence[Cell], reach: int = 1) -> tuple[Cell, ...]:
+        """The cells within `reach` steps (6-connectivity) of the `around` cells whose kind was never
+        told, once each, in order (by default their neighbours, in AROUND order)."""
+        if reach == 1 and len(around) * 6 <= CHART_FEW_CELLS:  # a few: cell by cell
+            out: dict[Cell, None] = {}
+            for x, y, z in around:
+                for dx, dy, dz in AROUND:
+                    c = (x + dx, y + dy, z + dz)
+                    i = self._at(c)
+                    if i is not None and self._kinds[i] == self.UNKNOWN:
+                        out[c] = None
+            return tuple(out)
+        ball = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _ball(reach)).reshape(-1, 3)
+        inside, at = self._linear(ball)
+        fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN
+        return tuple(dict.fromkeys(map(tuple, ball[inside][fresh].tolist())))

@@ -1,0 +1,45 @@
+"""`dronesim bench flood --quick` (the secured router): the same game clean, under a flood of stale NPS
+and under a flood of big ASKs; the table has its four rows, every journal equals the clean game's, every
+process exits 0, and the rejections are reported (the environment refuses exactly the ASKs the attacker
+saw refused).
+
+Behaviour only: no wall-clock assertion (the machine may be busy); the speed target is the benchmark's."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from benchmarks import BENCHMARKS, flood
+from tests.test_bench_perf import _rows
+
+pytestmark = pytest.mark.integration
+
+
+def test_quick_run_records_the_table_and_the_floods_change_no_journal(capsys, tmp_path):
+    assert BENCHMARKS["flood"] == "flood"
+    recorded = tmp_path / "recorded.md"
+    assert flood.main(["--quick", "--write", "--output", str(recorded)]) == 0, capsys.readouterr()
+    section = recorded.read_text(encoding="utf-8").split(flood.SECTION, 1)[1]
+    assert section.splitlines()[2].startswith("Command: `dronesim bench flood --quick --write --output ")
+    assert re.search(r"Load average \(1 min\) before the run \d+\.\d\d", section)
+    rows = _rows(section, "game")
+    counts = flood.QUICK_FLOODS
+    nps, ask = f"flood (a): {counts['nps']:,} stale NPS", f"flood (b): {counts['ask']} ASKs of 32,768 cells"
+    assert list(rows) == ["clean", nps, ask, "clean again"]
+    for row in rows.values():
+        assert row["same journal / states"] == "yes / yes", row
+        assert row["exit codes"] == "0 / 0 / 0", row
+        assert re.fullmatch(r"\d+\.\d", row["turns/s (measured turns)"]), row
+    for name in (nps, ask):
+        assert re.fullmatch(r"\d+\.\d\d", rows[name]["÷ clean"]), rows[name]
+        assert rows[name][f"target ≥ {flood.TARGET:g}"] in ("met", "MISSED"), rows[name]
+    attacker = "attacker: sent / answered / refused (its CPU s)"
+    found = re.fullmatch(r"([\d,]+) / ([\d,]+) / ([\d,]+) \(\d+\.\d\d\)", rows[ask][attacker])
+    assert found, rows[ask]
+    sent, answered, refused = (int(v.replace(",", "")) for v in found.groups())
+    assert sent == flood.QUICK_FLOODS["ask"] and answered + refused == sent and refused > 0, rows[ask]
+    assert f"{{'flood': {refused}}}, from {{'D01': {refused}}}" == rows[ask]["rejected by the environment"]
+    assert rows[nps][attacker].startswith(f"{flood.QUICK_FLOODS['nps']:,} / 0 / 0 ("), rows[nps]
+    assert re.fullmatch(r"\{'stale-turn': (\d+)\}, from \{'D01': \1\}", rows[nps]["rejected by the coordinator"])

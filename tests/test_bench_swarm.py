@@ -1,0 +1,46 @@
+"""`dronesim bench swarm` (benchmarks/swarm.py): a quick run writes its table, and its metrics are right."""
+
+from __future__ import annotations
+
+import pathlib
+
+from benchmarks import cli, swarm
+
+
+def test_quick_run_writes_the_section(tmp_path: pathlib.Path) -> None:
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text("# Benchmarks\n\n## Other\n\nkept\n")
+    assert cli(["swarm", "--quick", "--families", "empty-32-32", "--no-city", "--no-pogema", "--write",
+                "--output", str(out)]) == 0
+    text = out.read_text()
+    assert "## Other\n\nkept" in text and swarm.SECTION in text
+    rows = [line for line in text.splitlines() if line.startswith("| empty-32-32 |")]
+    assert [r.split(" | ")[2] for r in rows] == ["fixed", "pibt", "pibt+map"] * 2
+    for r in rows:
+        if r.split(" | ")[2] != "fixed":
+            assert r.split(" | ")[3:5] == ["1.00", "100.0 %"], r  # every agent arrives on an empty map
+
+
+def test_costs_follow_the_journal() -> None:
+    starts = {"D01": (0, 0, 0), "D02": (5, 5, 0)}
+    goals = {"D01": (1, 0, 0), "D02": (5, 5, 0)}
+    records = [{"record": "header"},
+               {"record": "turn", "turn": 1, "moves": {"D01": [1, 0, 0], "D02": [5, 6, 0]}},
+               {"record": "turn", "turn": 2, "moves": {"D02": [5, 5, 0]}},
+               {"record": "turn", "turn": 3}]
+    costs, turns, collisions, at_256, last = swarm._costs(records, ["D01", "D02"], starts, goals)
+    assert costs == [1, 2] and turns == 3 and collisions == 0  # D02 was pushed off its goal and came back
+    assert at_256 == 2 and last == [1, 2]  # (a game shorter than 256 turns: its end counts)
+    records.append({"record": "turn", "turn": 4, "moves": {"D01": [2, 0, 0]}, "deaths": {"D02": "VERTEX"}})
+    assert swarm._costs(records, ["D01", "D02"], starts, goals) == ([None, None], 4, 1, 0, [4, 2])
+
+
+def test_isr_at_256_and_the_turn_limit() -> None:
+    """The ISR at turn 256 (POGEMA's episode) counts who was on its goal then, whatever came later; the turn
+    limit on 32 x 32 is 4 x the lower-bound makespan, at least 256."""
+    starts, goals = {"D01": (0, 0, 0)}, {"D01": (1, 0, 0)}
+    records = [{"record": "turn", "turn": t, **({"moves": {"D01": [1, 0, 0]}} if t == 300 else {})}
+               for t in range(1, 301)]
+    assert swarm._costs(records, ["D01"], starts, goals) == ([300], 300, 0, 0, [300])
+    maze = swarm.movingai_instance("maze-32-32-2", 10, 1)
+    assert maze.max_turns == max(swarm.TURNS_32, swarm.LIMIT_PER_MAKESPAN * max(maze.optimal)) > swarm.TURNS_32

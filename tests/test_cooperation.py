@@ -1,0 +1,336 @@
+"""Cooperative drones get past each other (docs/cooperation.md): whole games, in process (dronesim/local.py).
+
+Head-on in a corridor with a bay (at every position) and with a second floor, a drone parked in a corridor
+that steps aside and comes back, a crowd that drains through a door, a dead end that the drones say instead of
+waiting forever, mixed autopilots, and random small worlds in every layout with the same journal, which
+`replay --verify` reproduces and from which a coordinator resumes; and one game through real processes
+(coordinator, environment, drones, ground station over a router) in two layouts.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import pathlib
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from coordinator.arbiter import Arbiter, cooperate, fixed
+from coordinator.engine import DroneSpec, GameConfig
+from coordinator.journal import dumps, read
+from coordinator.resume import restore
+from dronesim import replay
+from dronesim.local import Inputs, Result, simulate
+from entities import movingai
+from entities.autopilots.dstar import DStarPilot
+from entities.gcs import Plan
+from entities.world import World
+from schema import Cell, EndReason, WorldSpec
+from tests.harness import embedded_router, journal_records, play_scenario
+
+LOG = logging.getLogger("test.cooperation")
+
+
+def world_of(rows: list[str], floors: int = 1) -> np.ndarray:
+    """A grid [x, y, z] from rows of text (row k is y = k; '#' a building), the same on every floor."""
+    plane = np.array([[c == "#" for c in r] for r in rows]).T
+    return np.repeat(plane[:, :, None], floors, axis=2)
+
+
+def config(grid: np.ndarray, drones: dict[str, tuple[Cell, Cell, str]], max_turns: int = 300) -> GameConfig:
+    world = World.from_grid(grid)
+    return GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=max_turns,
+                      drones=tuple(DroneSpec(drone=d, start=s) for d, (s, _, _) in sorted(drones.items())))
+
+
+def play(grid: np.ndarray, drones: dict[str, tuple[Cell, Cell, str]], max_turns: int = 300, *,
+         swarm: bool = False, arbiter: Arbiter | None = None) -> Result:
+    """Every drone given its target at turn 1, the ground station's plan final at once."""
+    plan = Plan(tuple(sorted((1, d, t) for d, (_, t, _) in drones.items())))
+    return simulate(config(grid, drones, max_turns), {d: a for d, (_, _, a) in drones.items()}, Inputs(plan=plan),
+                    LOG, swarm=swarm, arbiter=arbiter)
+
+
+def deaths(result: Result) -> dict[str, str]:
+    return {d: c for r in result.records for d, c in r.get("deaths", {}).items()}
+
+
+def arrived(result: Result) -> None:
+    assert result.over.reason is EndReason.ALL_REACHED, result.over.text
+    assert not deaths(result)
+
+
+# --------------------------------------------------------------------------- head-on in a corridor
+
+CORRIDOR = 10
+
+
+@pytest.mark.parametrize("bay", range(CORRIDOR))
+def test_head_on_in_a_corridor_with_a_bay_anywhere(bay: int) -> None:
+    rows = ["".join("." if x == bay else "#" for x in range(CORRIDOR)), "." * CORRIDOR]
+    drones = {"D01": ((0, 1, 0), (CORRIDOR - 1, 1, 0), "dstar"), "D02": ((CORRIDOR - 1, 1, 0), (0, 1, 0), "dstar")}
+    result = play(world_of(rows), drones)
+    assert not deaths(result)
+    if 0 < bay < CORRIDOR - 1:
+        arrived(result)
+        assert result.over.turn <= 4 * CORRIDOR
+    else:  # a bay above an end of the corridor is above one drone's target: no way to pass, and they say so
+        assert result.over.reason is EndReason.SETTLED, result.over.text
+
+
+def test_the_former_arbitration_never_resolved_it() -> None:
+    # what issue 17 found: with one move per drone and a fixed priority, both wait, side-step, come back
+    rows = ["#####.####", ".........."]
+    drones = {"D01": ((0, 1, 0), (9, 1, 0), "dstar"), "D02": ((9, 1, 0), (0, 1, 0), "dstar")}
+    result = play(world_of(rows), drones, max_turns=100, arbiter=fixed)
+    assert result.over.reason is EndReason.SETTLED and not deaths(result)  # stuck: now they say so
+
+
+@pytest.mark.parametrize("second", ["D01", "D02", "D03"])
+def test_head_on_in_a_corridor_with_a_second_floor(second: str) -> None:
+    # three drones, one of them coming the other way, in a corridor two floors high
+    ends = {"D01": ((0, 0, 0), (9, 0, 0)), "D02": ((1, 0, 0), (8, 0, 0)), "D03": ((2, 0, 0), (7, 0, 0))}
+    start, target = ends[second]
+    ends[second] = ((9, 0, 1) if second != "D01" else (9, 0, 0), start)
+    result = play(world_of(["." * 10], floors=2), {d: (s, t, "dstar") for d, (s, t) in ends.items()})
+    arrived(result)
+
+
+def test_parked_drone_steps_aside_and_comes_back() -> None:
+    # D02 sits on its target in the middle of a corridor between two rooms; D01 crosses it.
+    rows = ["...#######...",
+            ".............",
+            "...#######..."]
+    drones = {"D01": ((0, 1, 0), (12, 1, 0), "dstar"), "D02": ((6, 1, 0), (6, 1, 0), "dstar")}
+    result = play(world_of(rows), drones)
+    arrived(result)
+    assert any("D02" in r.get("moves", {}) for r in result.records), "D02 was never pushed aside"
+
+
+@pytest.mark.parametrize("bay", [3, 5, 7])
+def test_parked_drone_in_a_corridor_with_a_bay(bay: int) -> None:
+    # D02 is parked beside the bay (it steps in), before it (it is pushed to it, then comes back), or behind
+    # D01's way in: there it would have to move towards D01 first, which PIBT's greedy steps never do, and
+    # D01 says so (docs/cooperation.md, "Where it is complete").
+    rows = ["".join("." if x == bay else "#" for x in range(10)), "." * 10]
+    drones = {"D01": ((0, 1, 0), (9, 1, 0), "dstar"), "D02": ((5, 1, 0), (5, 1, 0), "dstar")}
+    result = play(world_of(rows), drones)
+    assert not deaths(result)
+    if bay < 5:
+        assert result.over.reason is EndReason.SETTLED and "D01" in result.over.text, result.over.text
+        return
+    arrived(result)
+    assert any(r.get("moves", {}).get("D02") == [bay, 0, 0] for r in result.records)
+
+
+def test_a_crowd_drains_through_a_door() -> None:
+    # 16 drones in a 4 x 4 room leave it through one door for targets spread over the hall beyond.
+    rows = ["......#.........",
+            "......#.........",
+            "...............",
+            "......#.........",
+            "......#........."]
+    rows = [r.ljust(16, ".") for r in rows]
+    starts = [(x, y, 0) for x in range(1, 5) for y in range(0, 5) if (x, y) != (4, 2)][:16]
+    targets = [(x, y, 0) for x in range(8, 16, 2) for y in range(0, 5)][:16]
+    drones = {f"D{k + 1:02d}": (s, t, "dstar") for k, (s, t) in enumerate(zip(starts, targets))}
+    result = play(world_of(rows), drones, max_turns=200)
+    arrived(result)
+
+
+# --------------------------------------------------------------------------- PIBT's swap
+
+SWAPS = {
+    # a dead-end corridor off a small room: D01 goes to its end, D02 comes out
+    "dead end": (["...#######", "..........", "...#######"],
+                 {"D01": ((2, 1, 0), (9, 1, 0), "dstar"), "D02": ((5, 1, 0), (0, 1, 0), "dstar")}),
+    # head-on in a corridor crossed by another one in its middle
+    "crossing": (["####.####", ".........", "####.####"],
+                 {"D01": ((0, 1, 0), (8, 1, 0), "dstar"), "D02": ((8, 1, 0), (0, 1, 0), "dstar")}),
+}
+
+
+def _without_swap(size: Cell, *args: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arbitration in force without the world's cells: PIBT with no swap."""
+    return cooperate(size, *args[:6])  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("case", sorted(SWAPS))
+def test_swap_leads_the_other_drone_to_a_junction(case: str) -> None:
+    """With PIBT's swap the drone of higher priority walks back to the nearest junction, pulling the other one
+    after it, and they pass there: both home in 12 turns; without it, the one going deeper pushes the other to
+    the end (or to the far side of the crossing) first, gives way there and is pushed all the way back (17 and 22
+    turns)."""
+    rows, drones = SWAPS[case]
+    result = play(world_of(rows), drones, max_turns=100)
+    arrived(result)
+    assert result.over.turn <= 12
+    slower = play(world_of(rows), drones, max_turns=100, arbiter=_without_swap)
+    arrived(slower)
+    assert slower.over.turn > 12
+
+
+# --------------------------------------------------------------------------- neighbouring targets: going round
+
+#: A ring of one-cell corridors round a block; D01's target (2, 0) and D02's (3, 0) are next to each other on
+#: its top side, and each drone comes along it from the side of the other's target.
+RING = [".......", ".#####.", "......."]
+NEIGHBOURS = {"D01": ((6, 0, 0), (2, 0, 0), "dstar"), "D02": ((0, 0, 0), (3, 0, 0), "dstar")}
+
+
+def test_neighbouring_targets_one_drone_goes_round(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The one home first is pushed off by the other going through to its own target, comes back and pushes
+    that one off in turn, for ever (each arrival looks like progress: neither ever says it is stuck). Pushed
+    off its target a third time, a drone that finds a drone in its way near its target goes round the ring
+    instead (D02: 8 moves longer, within the bound; D01's way round, 10 longer, is not taken), and both are
+    home in 30 turns; without that rule they never are."""
+    result = play(world_of(RING), NEIGHBOURS, max_turns=100)
+    arrived(result)
+    assert result.over.turn <= 40
+    monkeypatch.setattr(DStarPilot, "PUSHED_OFF", 10 ** 6)
+    assert play(world_of(RING), NEIGHBOURS, max_turns=100).over.reason is EndReason.TURN_LIMIT
+
+
+# --------------------------------------------------------------------------- where nobody can pass
+
+
+def test_a_dead_end_is_said_not_waited_for() -> None:
+    # a corridor closed at both ends, no passing place: both drones say UNREACHABLE and the game settles
+    drones = {"D01": ((0, 0, 0), (9, 0, 0), "dstar"), "D02": ((9, 0, 0), (0, 0, 0), "dstar")}
+    result = play(world_of(["." * 10]), drones, max_turns=400)
+    assert result.over.reason is EndReason.SETTLED, result.over.text
+    assert "D01" in result.over.text and "D02" in result.over.text
+    assert result.over.turn < 200 and not deaths(result)
+
+
+def test_a_target_behind_a_drone_parked_at_a_dead_end() -> None:
+    drones = {"D01": ((0, 0, 0), (8, 0, 0), "dstar"), "D02": ((9, 0, 0), (9, 0, 0), "dstar")}
+    result = play(world_of(["." * 10]), drones)
+    assert result.over.reason is EndReason.ALL_REACHED  # reachable: D02 is pushed along... and back
+    drones = {"D01": ((0, 0, 0), (9, 0, 0), "dstar"), "D02": ((8, 0, 0), (8, 0, 0), "dstar")}
+    result = play(world_of(["." * 10]), drones, max_turns=400)
+    assert result.over.reason is EndReason.SETTLED and "D01" in result.over.text  # never: D01 says so
+
+
+# --------------------------------------------------------------------------- mixed games
+
+
+def test_mixed_autopilots_cooperative_drones_only_die_with_others() -> None:
+    rng = np.random.default_rng(4)
+    grid = rng.random((12, 12, 2)) < 0.15
+    free = [tuple(int(v) for v in c) for c in np.argwhere(~grid)]
+    picks = rng.choice(len(free), 24, replace=False)
+    pilots = ["dstar", "seed", "v1"] * 4
+    drones = {f"D{k + 1:02d}": (free[picks[k]], free[picks[12 + k]], pilots[k]) for k in range(12)}
+    result = play(grid, drones, max_turns=150)
+    coop = {d for d, (_, _, a) in drones.items() if a == "dstar"}
+    for r in result.records:
+        for d, cause in r.get("deaths", {}).items():
+            if d in coop and cause in ("VERTEX", "SWAP"):
+                partners = [e for e in r["deaths"] if e != d and e not in coop]
+                assert partners, f"turn {r['turn']}: cooperative {d} died ({cause}) with no other drone"
+    reached = {d for d in coop if not deaths(result).get(d)}
+    assert reached, "every cooperative drone died"
+
+
+# --------------------------------------------------------------------------- random small worlds
+
+
+@st.composite
+def small_games(draw):
+    size = (draw(st.integers(3, 6)), draw(st.integers(2, 5)), draw(st.integers(1, 2)))
+    seed = draw(st.integers(0, 1 << 30))
+    rng = np.random.default_rng(seed)
+    grid = rng.random(size) < draw(st.sampled_from([0.0, 0.1, 0.25]))
+    free = [tuple(int(v) for v in c) for c in np.argwhere(~grid)]
+    n = min(len(free) // 2, draw(st.integers(2, 7)))
+    if n < 2:
+        grid[:] = False
+        free = [tuple(int(v) for v in c) for c in np.argwhere(~grid)]
+        n = 2
+    picks = rng.choice(len(free), 2 * n, replace=False)
+    pilots = draw(st.lists(st.sampled_from(["dstar", "dstar", "seed"]), min_size=n, max_size=n))
+    drones = {f"D{k + 1:02d}": (free[picks[k]], free[picks[n + k]], pilots[k]) for k in range(n)}
+    return grid, drones
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(small_games())
+def test_property_random_small_worlds(game) -> None:
+    grid, drones = game
+    coop = {d for d, (_, _, a) in drones.items() if a == "dstar"}
+    result = play(grid, drones, max_turns=120)
+    for r in result.records:
+        for d, cause in r.get("deaths", {}).items():
+            if d in coop and cause in ("VERTEX", "SWAP"):
+                assert any(e not in coop for e in r["deaths"] if e != d), f"cooperative {d} killed by one of its own"
+    assert play(grid, drones, max_turns=120, swarm=True).records == result.records  # the same in every layout
+
+
+# --------------------------------------------------------------------------- journal: replay and resume
+
+
+def test_a_cooperative_game_replays_and_resumes(tmp_path: pathlib.Path) -> None:
+    rows = ["###.######", ".........."]
+    drones = {"D01": ((0, 1, 0), (9, 1, 0), "dstar"), "D02": ((9, 1, 0), (0, 1, 0), "dstar"),
+              "D03": ((5, 1, 0), (5, 1, 0), "dstar")}
+    result = play(world_of(rows), drones)
+    arrived(result)
+    assert any("gave_way" in r for r in result.records)  # the head-on meeting was resolved by giving way
+    path = tmp_path / "game.jsonl"
+    path.write_text("".join(dumps(r) + "\n" for r in result.records))
+    records = list(read(path))
+    cfg = config(world_of(rows), drones)
+    autopilots = {d: a for d, (_, _, a) in drones.items()}
+    assert replay.verify(str(path), records, cfg, autopilots) is None, "replay --verify disagrees"
+    # a coordinator resumed after any turn has the priorities PIBT's rule gives from the journal alone
+    for cut in range(2, len(records) - 1):
+        resumed = restore(cfg, records[:cut], LOG)
+        assert resumed.priority.tolist() == _priorities(records[:cut], cfg), f"after {cut - 1} turns"
+        assert cut > 2 or any(resumed.priority), "nobody away from its target after the first turn?"
+
+
+def _priorities(records: list[dict], cfg: GameConfig) -> list[int]:
+    """The priorities after the journal's turns, recomputed here from PIBT's rule and the journal alone."""
+    ids = sorted(d.drone for d in cfg.drones)
+    pos = {d.drone: tuple(d.start) for d in cfg.drones}
+    target: dict[str, tuple] = {}
+    note: dict[str, str] = {}
+    prio = dict.fromkeys(ids, 0)
+    for r in records[1:]:
+        target.update({d: tuple(c) for d, c in r.get("targets", {}).items()})
+        pos.update({d: tuple(c) for d, c in r.get("moves", {}).items()})
+        note.update(r.get("notes", {}))
+        for d in ids:
+            rest = d not in target or pos[d] == target[d] or note.get(d) == "UNREACHABLE" or d in r.get("gave_way", ())
+            prio[d] = 0 if rest else prio[d] + 1
+    return [prio[d] for d in ids]
+
+
+# --------------------------------------------------------------------------- through real processes
+
+
+@pytest.mark.integration
+def test_head_on_with_a_bay_through_real_processes_in_two_layouts(tmp_path: pathlib.Path) -> None:
+    """A .map corridor with a bay, a parked drone and two meeting head-on, played by the real coordinator,
+    environment, drone processes (one per drone, then one swarm host) and ground station over a router: the
+    same journal both ways, every drone home, and `replay --verify` re-simulates it."""
+    rows = ["###.######", ".........."]
+    (tmp_path / "corridor.map").write_text(movingai.write_map(world_of(rows)[:, :, 0]))
+    drones = {"D01": ((0, 1, 0), (9, 1, 0)), "D02": ((9, 1, 0), (0, 1, 0)), "D03": ((5, 1, 0), (5, 1, 0))}
+    scenario = tmp_path / "corridor.json"
+    scenario.write_text(json.dumps({
+        "format": "dronesim-scenario", "version": 1, "world": {"file": "corridor.map"}, "max_turns": 100,
+        "drones": [{"id": d, "start": list(s), "autopilot": "dstar"} for d, (s, _) in drones.items()],
+        "targets": [f"{d}={t[0]},{t[1]},{t[2]}" for d, (_, t) in drones.items()]}))
+    with embedded_router() as locator:
+        journals = [play_scenario(locator, tmp_path, scenario, layout)[0] for layout in ("processes", "swarm")]
+    assert journals[0].read_bytes() == journals[1].read_bytes()
+    records = journal_records(journals[0])
+    assert records[-1]["reason"] == "ALL_REACHED", records[-1]
+    assert any("gave_way" in r or "yielded" in r for r in records)
+    config, autopilots = replay.header_config(records[0])
+    assert replay.verify(str(journals[0]), list(read(journals[0])), config, autopilots) is None

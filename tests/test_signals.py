@@ -1,0 +1,53 @@
+"""dronesim/signals.py: a signal that another thread takes still ends the main thread's wait at once."""
+
+from __future__ import annotations
+
+import queue
+import signal
+import threading
+
+from dronesim.signals import Interrupted, on_stop, waking
+
+
+def test_a_signal_taken_by_another_thread_ends_the_main_threads_wait() -> None:
+    """The C handler runs on the thread the signal reached (any of Zenoh's may); the Python handler waits for
+    the main thread to run Python code, which, blocked in a queue, it would not do: `waking` wakes it."""
+    woken: queue.SimpleQueue[str] = queue.SimpleQueue()
+    seen: list[Interrupted] = []
+
+    def other() -> None:
+        signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+
+    with on_stop(seen.append), waking(lambda: woken.put("woken")):
+        threading.Thread(target=other).start()
+        assert woken.get(timeout=60) == "woken"  # without waking: queue.Empty after 60 s
+    assert seen == [Interrupted(signal.SIGTERM)]
+
+
+def test_waking_off_the_main_thread_does_nothing() -> None:
+    done: list[bool] = []
+
+    def off_main() -> None:
+        with waking(lambda: None):
+            done.append(True)
+
+    t = threading.Thread(target=off_main)
+    t.start()
+    t.join()
+    assert done == [True]
+
+
+def test_a_signal_that_lands_while_a_message_is_decoded_is_not_taken_for_a_bad_payload(monkeypatch) -> None:
+    """The handlers that count a bad payload as a rejection catch Exception: Stop is not one."""
+    import msgpack
+    import pytest
+
+    from dronesim.signals import Stop
+    from schema import decode
+
+    def interrupted(*args, **kwargs):
+        raise Stop(2)
+
+    monkeypatch.setattr(msgpack, "unpackb", interrupted)
+    with pytest.raises(Stop):
+        decode(b"\x80")
