@@ -156,8 +156,8 @@ def flood_rate(game: Game, case: Case, first: float, last: float) -> tuple[float
     the STATUS of the one before arrives); `cut`: the flood outlasted the measured turns (then up to the last)."""
     stamps = sorted(game.arrived[t] for t in range(case.warmup, case.end_turn) if t in game.arrived)
     before = [s for s in stamps if s <= first]
-    after = [s for s in stamps if s >= last]
     lo = before[-1] if before else stamps[0]
+    after = [s for s in stamps if s >= last and s > lo]  # a flood within one turn: that turn
     hi = after[0] if after else stamps[-1]
     turns = sum(lo < s <= hi for s in stamps)
     seconds = hi - lo

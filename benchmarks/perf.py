@@ -608,9 +608,9 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             stamps[("STATUS", st.turn)] = now  # turn st.turn + 1 begins
                             game.last_status = st
                             game.statuses[st.turn] = st
+                            game.arrived[st.turn] = time.monotonic()  # before on_status, which may start a flood
                             if on_status is not None:
                                 on_status(loc, keys, st.turn)
-                            game.arrived[st.turn] = time.monotonic()
                             if st.turn == case.warmup:  # CPU time over the measured turns: from here...
                                 game.cpu = {n: cpu_seconds(pid) for n, pid in pids.items()}
                         case Received(_, Turn() as turn):

@@ -14,6 +14,8 @@ import threading
 import pytest
 import zenoh
 
+from benchmarks.flood import flood_rate
+from benchmarks.perf import Case, Game
 from schema import Keys, Nps, encode
 from tests.harness import Cluster, ScriptedGCS, client_config, embedded_router, play_to_the_end
 
@@ -118,3 +120,15 @@ def test_a_flood_of_big_asks_from_one_drone_does_not_starve_another_drones_ask(t
     queued_at_most = ORIGIN_BYTES // len(big) + 1
     assert answered_before <= queued_at_most + ORIGIN_SHARE, order
     assert "D01 refused" in order, "past its budget, D01's ASKs are refused unread"
+
+
+def test_the_flood_rate_counts_the_turns_its_window_overlaps():
+    """`dronesim bench flood`: a flood within one turn counts that turn; one over several counts them all;
+    one that outlasts the measured turns is cut at the last."""
+    case = Case(drones=1, size=(10, 10, 10), warmup=3, turns=4)
+    game = Game(arrived={t: float(t) for t in range(1, case.end_turn)})  # turn t's STATUS at t s
+    assert flood_rate(game, case, 3.0, 3.1) == (1.0, 1, 1.0, False)  # within the turn from 3 s to 4 s
+    assert flood_rate(game, case, 3.5, 3.5) == (1.0, 1, 1.0, False)
+    assert flood_rate(game, case, 3.2, 5.5) == (1.0, 3, 3.0, False)
+    rate, turns, seconds, cut = flood_rate(game, case, 4.5, 99.0)
+    assert (turns, seconds, cut) == (case.end_turn - 1 - 4, case.end_turn - 1 - 4.0, True)
