@@ -149,7 +149,8 @@ class Coordinator:
 
     It admits a CONNECT once its sender's presence token is seen (`Presences`), keeps the phase deadline,
     holds a vanished presence SETTLE_S before it counts (its own vanishing too means the link is down: the
-    engine holds the game), refuses to share its root with another coordinator, ends the game on a signal,
+    engine holds the game) unless the routers, asked at once (`audit`), no longer connect that session,
+    refuses to share its root with another coordinator, ends the game on a signal,
     and after OVER waits (up to LINGER_S) for the entities to leave. When a phase's deadline passes it asks
     (`audit`) which sessions the routers connect: an admitted entity whose session is not among them has
     gone, whoever holds a copy of its presence token."""
@@ -159,7 +160,7 @@ class Coordinator:
         self.engine, self.effects, self.rejects, self.log, self.me, self.clock = \
             engine, effects, rejects, logger, me, clock
         self.audit = audit  # asks which sessions are connected: a `Sessions` event comes back
-        self._auditing = False
+        self._auditing = self._audit_again = False
         self.presences: Presences[zenoh.Query] = Presences()
         self.signal: int | None = None  # the signal that stopped the game
         self.rival: str | None = None  # another coordinator's session on this root, which this one yields to
@@ -222,6 +223,8 @@ class Coordinator:
             case Sessions(connected):
                 self._auditing = False
                 self._gone_unless(connected)
+                if self._audit_again:
+                    self._ask_who_is_connected()
             case Presence(entity, sid, alive):
                 for query, msg in self.presences.presence(entity, sid, alive):
                     run(engine.connect(msg, query))
@@ -230,6 +233,8 @@ class Coordinator:
                     run(engine.present(entity, sid))
                 else:
                     self._vanishing[(entity, sid)] = now + SETTLE_S
+                    if self.engine.roster.sessions.get(entity) == sid:
+                        self._ask_who_is_connected()  # its session gone too: its departure counts at once
         self._tick()
         if engine.stage is Stage.OVER and self._linger_until is None:
             self._linger_until = self.clock() + LINGER_S  # let OVER reach everyone
@@ -241,10 +246,10 @@ class Coordinator:
             return
         for entity, sid in sorted(self.engine.roster.sessions.items()):
             if sid and sid not in connected:
-                self.log.warning("%s's session %s is not connected to any router: its presence token is "
-                                 "held by another session", entity, sid)
+                if self._vanishing.pop((entity, sid), None) is None:
+                    self.log.warning("%s's session %s is not connected to any router: its presence token is "
+                                     "held by another session", entity, sid)
                 self.presences.presence(entity, sid, False)
-                self._vanishing.pop((entity, sid), None)
                 self.effects.run(self.engine.vanished(entity, sid))
 
     def _tick(self) -> None:
@@ -268,10 +273,17 @@ class Coordinator:
         self._tick()  # (a departure may have changed what the deadline is measured from)
         limit = self.engine.deadline()
         if limit is not None and now >= self._started + limit and self._linger_until is None:
-            if self.engine.stage in (Stage.GCS, Stage.DRONES) and not self._auditing:
-                self._auditing = True  # someone missed a deadline: is everyone whose token we see connected?
-                self.audit()
+            if self.engine.stage in (Stage.GCS, Stage.DRONES):
+                self._ask_who_is_connected()  # someone missed a deadline: is everyone whose token we see connected?
             self.effects.run(self.engine.expire(*self._phase))
+
+    def _ask_who_is_connected(self) -> None:
+        """One audit at a time; one asked meanwhile follows its answer."""
+        if self._auditing:
+            self._audit_again = True  # the answer under way may predate what prompted this one
+        else:
+            self._auditing, self._audit_again = True, False
+            self.audit()
 
 
 def rival(session: zenoh.Session, keys: Keys) -> str | None:

@@ -312,3 +312,36 @@ def test_the_listing_of_the_routers_is_complete_only_without_peers_and_unanswere
     assert sessions_listed([router("r0", ("a", "client"), ("r1", "router"))]) is None, "r1 did not answer"
     assert sessions_listed([router("r0", ("p", "peer"))]) is None, "a peer may carry others"
     assert sessions_listed([]) is None, "nobody answered (no admin space, a link down)"
+
+
+def test_a_vanished_presence_asks_who_is_connected_and_counts_at_once_when_its_session_is_gone() -> None:
+    """A killed drone: its token vanishes with its session. The routers, asked at once, no longer list
+    the session, so it is lost before SETTLE_S (which waits in case the coordinator's own link is down)."""
+    run = Run(drones=2, phase_deadline=1.0)
+    run.leave("D02")
+    assert run.audits == [run.clock.now] and run.engine.drones["D02"].state.value == "ALIVE"
+    run.leave("D01")  # asked while the first audit is under way: asked again after its answer
+    assert len(run.audits) == 1
+    run.srv.handle(Sessions(frozenset({ME, "e0", "g0", "d1", "r0"})))  # listed before D01 went
+    assert run.engine.drones["D02"].state.value == "LOST" and run.engine.drones["D01"].state.value == "ALIVE"
+    assert len(run.audits) == 2
+    run.srv.handle(Sessions(frozenset({ME, "e0", "g0", "r0"})))
+    assert run.engine.drones["D01"].state.value == "LOST"
+
+
+def test_a_vanished_presence_whose_session_is_still_listed_waits_its_settle_time() -> None:
+    """The listing may lag the token (or the routers cannot be asked): then SETTLE_S decides, as before."""
+    for listed in (frozenset({ME, "e0", "g0", "d1", "d2", "r0"}), None):
+        run = Run(drones=2, phase_deadline=1.0)
+        run.leave("D02")
+        run.srv.handle(Sessions(listed))
+        assert run.engine.drones["D02"].state.value == "ALIVE"
+        run.wait(SETTLE_S)
+        assert run.engine.drones["D02"].state.value == "LOST"
+
+
+def test_a_presence_that_was_never_admitted_asks_nothing() -> None:
+    run = Run(drones=2, phase_deadline=1.0)
+    run.srv.handle(Presence("D02", "other", False))  # not D02's admitted session
+    run.srv.handle(Presence("D07", "d7", False))
+    assert not run.audits
