@@ -116,11 +116,6 @@ class OpenCells:
         return self._bits[u >> 3] >> (u & 7) & 1
 
 
-def open_cells(grid: np.ndarray) -> OpenCells:
-    """The world's open cells as the arbiter reads them (`OpenCells`)."""
-    return OpenCells(grid)
-
-
 def cells_of(flat: np.ndarray, size: Cell) -> np.ndarray:
     """`flat_cells` undone: (n, 3) int32."""
     _, Y, Z = size
@@ -177,7 +172,7 @@ def pibt(here: list[int], cand: list[list[int]], order: list[int], taken: list[i
     `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them);
     `order`: the drones that choose (cooperative), highest priority first; `taken[i]`: the next cell of a
     drone that does not choose (non-cooperative: fixed in advance), -1 for those that choose; `world`: the
-    world's open cells (`open_cells`), the flat steps to a neighbour and each drone's target (flat, -1 for
+    world's open cells (`OpenCells`), the flat steps to a neighbour and each drone's target (flat, -1 for
     none), for the swap (None: no swap).
 
     A drone gives way when, choosing first in its push chain, it could not have its first candidate
@@ -379,7 +374,7 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
     order): where it is (`before`, (n, 3)), the move it proposed (`proposed`), its ranked steps (`ranked`,
     (n,) as in an NPS, 0: none), whether it cooperates, its priority (higher first; ties: the smaller row) and
     its target (`targets`, (n, 3), (-1, -1, -1) for none; None: nobody's known); the world's open cells
-    (`open_cells`; None: unknown, then no swap)."""
+    (`OpenCells`; None: unknown, then no swap)."""
     n = len(before)
     assert not n or int(ranked.max()) < RANKED_LIMIT
     here = flat_cells(before, size)

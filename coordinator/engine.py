@@ -416,7 +416,7 @@ class Engine:
         fleet = self.fleet
         ranked = np.where(self._moved[alive], self._ranked[alive], 0)
         if self._open is None:
-            self._open = arbiter.open_cells(self.world.grid)
+            self._open = arbiter.OpenCells(self.world.grid)
         final, yielded, gave_way = self.arbiter(self.size, before, proposed, ranked, fleet.cooperative[alive],
                                                 self.priority[alive], fleet.target[alive], self._open)
         self._gave_way[alive] = gave_way

@@ -30,7 +30,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coordinator.arbiter import arbitrate, cooperate, open_cells
+from coordinator.arbiter import OpenCells, arbitrate, cooperate
 from coordinator.observer import deaths
 from schema import Cause
 from schema.messages import AROUND
@@ -322,7 +322,7 @@ def coop_arb(drones: dict[str, tuple], priority: dict[str, int] | None = None,
     prio = np.array([(priority or {}).get(d, 0) for d in ids], np.int64)
     aims = None if targets is None else \
         np.array([targets.get(d, (-1, -1, -1)) for d in ids], np.int32).reshape(len(ids), 3)
-    world = None if blocked is None else open_cells(blocked)
+    world = None if blocked is None else OpenCells(blocked)
     final, yielded, gave = cooperate(size, before, proposed, ranked, coop, prio, aims, world)
     cells = {d: tuple(final[k].tolist()) for k, d in enumerate(ids)}
     return cells, {d for k, d in enumerate(ids) if yielded[k]}, {d for k, d in enumerate(ids) if gave[k]}
@@ -516,5 +516,5 @@ def test_the_open_cells_read_as_the_world_padded_with_blocked_cells(shape) -> No
     grid = np.random.default_rng(sum(shape)).random(shape) < 0.3
     padded = np.zeros(tuple(n + 2 for n in shape), bool)
     padded[1:-1, 1:-1, 1:-1] = ~grid
-    is_open = open_cells(grid)
+    is_open = OpenCells(grid)
     assert [is_open[u] for u in range(padded.size)] == padded.reshape(-1).astype(int).tolist()
