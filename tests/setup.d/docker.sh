@@ -43,7 +43,12 @@ if ! bash docker/offline.sh >"$LOG_FILE" 2>&1; then
   exit 0
 fi
 # The dronesim image, as `up --build` builds it: one service builds the image all of them run.
-if ! "${compose[@]}" --env-file "$PWD/docker/offline.env" -f docker/compose.yaml build coordinator >>"$LOG_FILE" 2>&1; then
+# (Compose v1's client gives up on a silent daemon after COMPOSE_HTTP_TIMEOUT, 60 s by default; once, on a
+# loaded machine, the client dropped a build midway with no error but a broken pipe in the daemon's log. One
+# retry: a dropped build resumes from Docker's layer cache.)
+export COMPOSE_HTTP_TIMEOUT="${COMPOSE_HTTP_TIMEOUT:-600}"
+build() { "${compose[@]}" --env-file "$PWD/docker/offline.env" -f docker/compose.yaml build coordinator >>"$LOG_FILE" 2>&1; }
+if ! build && ! { echo "(retrying the build once)" >>"$LOG_FILE"; build; }; then
   status "FAILED: ${compose[*]} build: $(tail -n 3 "$LOG_FILE" | tr '\n' ' ')"
   exit 0
 fi
