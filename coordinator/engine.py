@@ -326,12 +326,17 @@ class Engine:
         return self.roster.everyone_here(self.fleet)
 
     def header(self) -> dict:
-        """The journal's first record: what identifies the game (see resume.py)."""
+        """The journal's first record: what identifies the game (see resume.py). Without a journal
+        (`journaled` off) it leaves out its drones and the world's cells, which would only be dropped (a
+        record a drone: a swarm's would be the coordinator's biggest burst of objects)."""
         fleet = self.fleet
+        world = {"size": list(self.size), "seed": self.config.world.seed}
+        if not self.journaled:
+            return {"record": "header", "format": "dronesim-journal", "version": 1, "world": world,
+                    "max_turns": self.config.max_turns, "lost_after": self.config.lost_after}
         return {
             "record": "header", "format": "dronesim-journal", "version": 1,
-            "world": {"size": list(self.size), "seed": self.config.world.seed,
-                      "cells": self.config.world.cells.hex()},
+            "world": world | {"cells": self.config.world.cells.hex()},
             "drones": [{"drone": d, "start": start, "autopilot": autopilot, "cooperative": cooperative}
                        for d, start, autopilot, cooperative in zip(fleet.ids, fleet.pos.tolist(),
                                                                    fleet.autopilot, fleet.cooperative.tolist())],
