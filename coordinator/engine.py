@@ -32,9 +32,9 @@ import dataclasses
 import enum
 import hashlib
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -93,10 +93,53 @@ class DroneSpec:
     start: Cell
 
 
+class DroneTable(Sequence[DroneSpec]):
+    """A game's drones as columns, as a scenario of a swarm holds them: their ids and an (n, 3) array of
+    their start cells (a `DroneSpec` with its cell's tuple costs over a hundred bytes a drone, all kept for
+    the whole game). It reads as the sequence of `DroneSpec`s it stands for, each made when read."""
+
+    __slots__ = ("ids", "starts")
+
+    def __init__(self, ids: Sequence[str], starts: Sequence[Cell] | Sequence[int]) -> None:
+        """`starts`: each drone's start cell, or their coordinates in a row (x, y, z, x, y, z, ...)."""
+        self.ids = tuple(ids)
+        try:
+            self.starts = np.array(starts, np.int64).reshape(len(self.ids), 3)
+        except OverflowError:
+            raise UsageError("a start cell is outside any world") from None
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @overload
+    def __getitem__(self, i: int) -> DroneSpec: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> tuple[DroneSpec, ...]: ...
+
+    def __getitem__(self, i: int | slice) -> DroneSpec | tuple[DroneSpec, ...]:
+        if isinstance(i, slice):
+            return tuple(self)[i]
+        return DroneSpec(drone=self.ids[i], start=cell_of(self.starts[i]))
+
+    def __iter__(self) -> Iterator[DroneSpec]:
+        for d, start in zip(self.ids, self.starts.tolist()):
+            yield DroneSpec(drone=d, start=(start[0], start[1], start[2]))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and len(other) == len(self) and all(a == b for a, b in zip(self, other))
+
+    def __hash__(self) -> int:
+        return hash(tuple(self))
+
+    def __repr__(self) -> str:
+        return f"DroneTable({list(self)!r})"
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class GameConfig:
     world: WorldSpec
-    drones: tuple[DroneSpec, ...]
+    drones: Sequence[DroneSpec]  # a tuple, or a `DroneTable`
     max_turns: int = 1000
     phase_deadline: float = 5.0  # seconds for the drones and the environment
     gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
@@ -107,20 +150,24 @@ class GameConfig:
     gcs_grace: float = 30.0  # seconds a resumed game waits for its ground station once the others are back
 
     def __post_init__(self) -> None:
-        ids = [d.drone for d in self.drones]
-        if not ids:
+        if not self.drones:
             raise UsageError("a game needs at least one drone")
+        # (checked as columns: a swarm's drones as records, sets and lists would double its scenario's peak)
+        table = self.drones if isinstance(self.drones, DroneTable) else \
+            DroneTable([d.drone for d in self.drones], [d.start for d in self.drones])
+        ids, starts = table.ids, table.starts
         for d in ids:
             if not is_drone_id(d):
                 raise UsageError(f"{d!r} is not a drone id (D01 ... D9999)")
         if len(set(ids)) != len(ids):
-            raise UsageError(f"duplicate drone ids in {ids}")
-        starts = [d.start for d in self.drones]
-        if len(set(starts)) != len(starts):
+            raise UsageError(f"duplicate drone ids in {list(ids)}")
+        ordered = starts[np.lexsort(starts.T)]
+        if np.count_nonzero((ordered[1:] == ordered[:-1]).all(axis=1)):
             raise UsageError("two drones cannot start in the same cell")
-        for spec in self.drones:
-            if not observer.inside(spec.start, self.world.size):
-                raise UsageError(f"{spec.drone} starts at {spec.start}, outside the world {self.world.size}")
+        outside = ~((starts >= 0) & (starts < self.world.size)).all(axis=1)
+        if np.count_nonzero(outside):
+            i = int(outside.argmax())
+            raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
 

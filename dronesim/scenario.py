@@ -22,9 +22,11 @@ from __future__ import annotations
 import json
 import pathlib
 import re
+import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
 
-from coordinator.engine import DroneSpec, GameConfig
+from coordinator.engine import DroneSpec, DroneTable, GameConfig
 from entities.autopilots import REGISTRY
 from entities.environment import build_world
 from entities.gcs import Plan
@@ -45,7 +47,7 @@ def swarm_hosts(autopilots: dict[str, str]) -> dict[str, tuple[str, tuple[str, .
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Scenario:
     world: WorldSpec
-    drones: tuple[DroneSpec, ...]
+    drones: Sequence[DroneSpec]  # a `DroneTable` (a tuple will do)
     autopilots: dict[str, str]  # drone -> autopilot name
     targets: tuple[str, ...]
     max_turns: int = 1000
@@ -62,7 +64,7 @@ class Scenario:
         reading: the ground station flies the plan, and checks it)."""
         path = pathlib.Path(path)
         try:
-            data = _parse(path.read_text(encoding="utf-8"), plan)
+            data = _parse(path, plan)
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise UsageError(f"cannot read scenario {path}: {exc}") from None
         try:
@@ -89,17 +91,21 @@ class Scenario:
         drones_raw = data.get("drones")
         if not isinstance(drones_raw, list) or not drones_raw:
             raise UsageError('"drones" must be a non-empty list')
-        drones, autopilots = [], {}
+        ids: list[str] = []
+        starts: list[int] = []  # x, y, z of each drone in a row
+        autopilots: dict[str, str] = {}
         for i, d in enumerate(drones_raw):
-            drone, pilot = d if isinstance(d, _Entry) else _entry(d, i + 1)
-            if world_file is not None and world_file.is_building(drone.start):
-                raise UsageError(f"{drone.drone} starts inside a building at {drone.start}")
-            drones.append(drone)
-            autopilots[drone.drone] = pilot
+            drone, x, y, z, pilot = d if isinstance(d, _Entry) else _entry(d, i + 1)
+            if world_file is not None and world_file.is_building((x, y, z)):
+                raise UsageError(f"{drone} starts inside a building at {(x, y, z)}")
+            ids.append(drone)
+            starts += x, y, z
+            autopilots[drone] = pilot
+        drones = DroneTable(ids, starts)
         targets = data.get("targets", []) if plan else []
         if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets):
             raise UsageError('"targets" must be a list of "[Dnn=]x,y,z[@turn]" strings')
-        scenario = cls(world=spec, drones=tuple(drones), autopilots=autopilots, targets=tuple(targets),
+        scenario = cls(world=spec, drones=drones, autopilots=autopilots, targets=tuple(targets),
                        max_turns=_int(data.get("max_turns", 1000), "max_turns"))
         scenario.game_config()  # validates ids, starts
         # targets are checked against the world's buildings too: built here (as every process builds it) only
@@ -141,14 +147,17 @@ def movingai_scenario(map_path: str | pathlib.Path, scen_path: str | pathlib.Pat
 _TARGETS = re.compile(r'"targets"\s*:\s*\[[^\]\\]*\]')
 
 
-def _parse(text: str, plan: bool) -> object:
-    """The scenario's JSON; without `plan`, its target list is emptied before it is parsed (5 targets a drone
-    take more memory than the drone itself), when that can be done safely."""
+def _parse(path: pathlib.Path, plan: bool) -> object:
+    """The JSON of the scenario in `path`; without `plan`, its target list is emptied before it is parsed (5
+    targets a drone take more memory than the drone itself), when that can be done safely."""
+    text = path.read_text(encoding="utf-8")
     if not plan:
-        try:
-            return json.loads(_TARGETS.sub('"targets": []', text, count=1), object_hook=_compact)
-        except json.JSONDecodeError:
-            pass
+        text, cut = _TARGETS.subn('"targets": []', text, count=1)  # (the whole text is not kept meanwhile)
+        if cut:
+            try:
+                return json.loads(text, object_hook=_compact)
+            except json.JSONDecodeError:
+                text = path.read_text(encoding="utf-8")
     return json.loads(text, object_hook=_compact)
 
 
@@ -165,7 +174,7 @@ def _compact(obj: dict) -> object:
 
 
 class _Entry(tuple):
-    """A checked drone entry of a scenario: (DroneSpec, autopilot name)."""
+    """A checked drone entry of a scenario: (drone id, x, y, z of its start, autopilot name)."""
 
     __slots__ = ()
 
@@ -177,7 +186,7 @@ def _entry(d: object, n: int = 0) -> _Entry:
     pilot = d.get("autopilot", "seed")
     if not isinstance(pilot, str) or pilot not in REGISTRY:
         raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
-    return _Entry((DroneSpec(drone=d["id"], start=_cell(d.get("start"), f"{d['id']} start")), pilot))
+    return _Entry((d["id"], *_cell(d.get("start"), f"{d['id']} start"), sys.intern(pilot)))  # (one name string for all)
 
 
 def _int(v: object, what: str) -> int:

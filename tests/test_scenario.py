@@ -8,7 +8,7 @@ import pathlib
 
 import pytest
 
-from coordinator.engine import DroneSpec, GameConfig
+from coordinator.engine import DroneSpec, DroneTable, GameConfig
 from dronesim.local import Inputs, simulate
 from dronesim.scenario import FORMAT, Scenario
 from entities.environment import build_world
@@ -61,6 +61,21 @@ def test_swarm16_plan_and_config() -> None:
     cfg = s.game_config()
     assert isinstance(cfg, GameConfig)
     assert cfg.world == s.world and cfg.drones == s.drones and cfg.max_turns == 120
+
+
+def test_drones_are_a_table_that_reads_as_drone_specs(tmp_path: pathlib.Path) -> None:
+    """A scenario keeps its drones as columns (no `DroneSpec` a drone for the whole game); read, they are the
+    same `DroneSpec`s, in the file's order, and the game's config is the one a tuple of them gives."""
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(mutate(lambda d: d["drones"][0].update(autopilot="v1"))))
+    s = Scenario.load(path, plan=False)
+    specs = (DroneSpec(drone="D01", start=(0, 0, 0)), DroneSpec(drone="D02", start=(0, 2, 0)))
+    assert isinstance(s.drones, DroneTable) and s.drones.ids == ("D01", "D02")
+    assert s.drones == specs and tuple(s.drones) == specs and s.drones[1] == specs[1] and s.drones[:1] == specs[:1]
+    assert s.game_config() == GameConfig(world=s.world, drones=specs, max_turns=s.max_turns)
+    assert s.autopilots["D01"] is s.autopilots["D02"]  # one string for each autopilot's name
+    with pytest.raises(UsageError, match="outside"):
+        Scenario.from_json(mutate(lambda d: d["drones"][1].update(start=[2 ** 64, 0, 0])))
 
 
 # --------------------------------------------------------------------------- worlds
