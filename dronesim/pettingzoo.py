@@ -36,9 +36,9 @@ from dronesim.rl import (
     LocalTurns,
     Seen,
     Turns,
-    checked_int,
 )
 from dronesim.rl_few import FEW_MAX, FewEpisode
+from entities.world import checked_int
 from schema.tuning import EPISODE_FEW_DRONES
 
 __all__ = ["DroneParallelEnv", "Expert", "env", "expert_policy", "parallel_env"]
@@ -110,11 +110,11 @@ class DroneParallelEnv(ParallelEnv):
         return self._turns
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        max_cycles = checked_int(self.max_cycles, "max_cycles")
+        max_cycles = checked_int(self.max_cycles, "max_cycles", ConfigError)
         if max_cycles < 1:
             raise ConfigError(f"max_cycles must be >= 1, got {self.max_cycles}")
         if seed is not None:
-            episode_seed = checked_int(seed, "seed")
+            episode_seed = checked_int(seed, "seed", ConfigError)
             if episode_seed < 0:
                 raise ConfigError(f"seed must be >= 0, got {seed}")
             self._episodes = np.random.default_rng(episode_seed)

@@ -23,7 +23,6 @@ import dataclasses
 import enum
 import logging
 import math
-import operator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple, Protocol
@@ -32,7 +31,7 @@ import numpy as np
 
 from coordinator.engine import DroneSpec, Engine, GameConfig, Publish, Stage
 from coordinator.fleet import ALIVE, CAUSES, NOTES, STATES
-from entities.world import World, inside_rows, padded_steps
+from entities.world import World, checked_int, inside_rows, padded_steps
 from schema import (
     AimTable,
     Cell,
@@ -131,14 +130,14 @@ class Config:
         return cls(**config)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
-        n = checked_int(self.num_drones, "num_drones")
+        n = checked_int(self.num_drones, "num_drones", ConfigError)
         if not 1 <= n <= MAX_DRONE:
             raise ConfigError(f"num_drones must be in 1..{MAX_DRONE}, got {n}")
         if self.world is not None and not isinstance(self.world, World):
             raise ConfigError(f"world must be a World or a world file's path, got {self.world!r}")
         given: object = self.world.size if self.world is not None else self.size
         try:
-            size = tuple(checked_int(v, "size") for v in given)  # type: ignore[attr-defined]
+            size = tuple(checked_int(v, "size", ConfigError) for v in given)  # type: ignore[attr-defined]
         except TypeError:
             raise ConfigError(f"size must be 3 integers (nx, ny, nz), got {self.size!r}") from None
         if len(size) != 3 or min(size) < 1 or max(size) > 65536:
@@ -147,11 +146,11 @@ class Config:
         cells = math.prod(size) if self.world is None else int(np.count_nonzero(~self.world.grid))
         if cells < 2 * n:
             raise ConfigError(f"the world has {cells} free cells, too few for {n} drones (a start and a target each)")
-        if checked_int(self.seed, "seed") < 0:
+        if checked_int(self.seed, "seed", ConfigError) < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
-        if checked_int(self.max_cycles, "max_cycles") < 1:
+        if checked_int(self.max_cycles, "max_cycles", ConfigError) < 1:
             raise ConfigError(f"max_cycles must be >= 1, got {self.max_cycles}")
-        if not 0 <= checked_int(self.obs_radius, "obs_radius") <= 8:
+        if not 0 <= checked_int(self.obs_radius, "obs_radius", ConfigError) <= 8:
             raise ConfigError(f"obs_radius must be in 0..8, got {self.obs_radius}")
         for name in ("reward_target", "reward_death", "step_cost"):
             value = getattr(self, name)
@@ -167,15 +166,6 @@ class Config:
             raise ConfigError("connect (a router's endpoint, e.g. tcp/127.0.0.1:7447) is for backend='zenoh'")
         if isinstance(self.deadline, bool) or not isinstance(self.deadline, (int, float)) or not self.deadline > 0:
             raise ConfigError(f"deadline must be a positive number of seconds, got {self.deadline!r}")
-
-
-def checked_int(value: object, what: str) -> int:
-    if isinstance(value, bool):
-        raise ConfigError(f"{what} must be an integer, got {value!r}")
-    try:
-        return operator.index(value)  # type: ignore[arg-type]
-    except TypeError:
-        raise ConfigError(f"{what} must be an integer, got {value!r}") from None
 
 
 def _choice(value: object, choices: tuple[str, ...], what: str) -> None:

@@ -75,14 +75,14 @@ def padded_steps(size: Cell) -> tuple[int, int, tuple[int, ...]]:
     return sx, sy, tuple(dx * sx + dy * sy + dz for dx, dy, dz in AROUND)
 
 
-def _int(value: object, what: str) -> int:
-    """`value` as a plain int (numpy integers accepted, bools and floats refused)."""
+def checked_int(value: object, what: str, error: type[UsageError] = UsageError) -> int:
+    """`value` as a plain int (numpy integers accepted, bools and floats refused with `error`)."""
     if isinstance(value, bool):
-        raise UsageError(f"{what} must be an integer, got {value!r}")
+        raise error(f"{what} must be an integer, got {value!r}")
     try:
         return operator.index(value)  # type: ignore[arg-type]
     except TypeError:
-        raise UsageError(f"{what} must be an integer, got {value!r}") from None
+        raise error(f"{what} must be an integer, got {value!r}") from None
 
 
 def _cell(value: object, what: str = "cell") -> Cell:
@@ -93,7 +93,7 @@ def _cell(value: object, what: str = "cell") -> Cell:
         raise UsageError(f"{what} must be 3 integers, got {value!r}") from None
     if len(items) != 3:
         raise UsageError(f"{what} must be 3 integers, got {value!r}")
-    return (_int(items[0], what), _int(items[1], what), _int(items[2], what))
+    return (checked_int(items[0], what), checked_int(items[1], what), checked_int(items[2], what))
 
 
 def _size(value: object) -> Cell:
@@ -119,7 +119,7 @@ class Building:
 
     def __post_init__(self) -> None:
         for name, lo in (("x", 0), ("y", 0), ("length", 1), ("width", 1), ("height", 1)):
-            value = _int(getattr(self, name), f"building {name}")
+            value = checked_int(getattr(self, name), f"building {name}")
             if not lo <= value <= MAX_COORD:
                 raise UsageError(f"building {name} must be in {lo}..{MAX_COORD}, got {value}")
             object.__setattr__(self, name, value)
@@ -255,18 +255,18 @@ class World:
         if rng is None:
             rng = np.random.default_rng(0)
         elif not isinstance(rng, np.random.Generator):
-            rng = np.random.default_rng(_int(rng, "seed"))
-        footprint = _DEFAULT_FOOTPRINT if max_footprint is None else _int(max_footprint, "max_footprint")
+            rng = np.random.default_rng(checked_int(rng, "seed"))
+        footprint = _DEFAULT_FOOTPRINT if max_footprint is None else checked_int(max_footprint, "max_footprint")
         if footprint < 1:
             raise UsageError(f"max_footprint must be >= 1, got {footprint}")
-        top = nz if max_height is None else _int(max_height, "max_height")
+        top = nz if max_height is None else checked_int(max_height, "max_height")
         if top < 1:
             raise UsageError(f"max_height must be >= 1, got {top}")
         max_len, max_wid, top = min(footprint, nx), min(footprint, ny), min(top, nz)
         if count is None:
             mean_area = (max_len + 1) / 2 * (max_wid + 1) / 2
             count = max(1, round(_DEFAULT_GROUND_COVER * nx * ny / mean_area))
-        count = _int(count, "count")
+        count = checked_int(count, "count")
         if count < 0:
             raise UsageError(f"count must be >= 0, got {count}")
         count = min(count, nx * ny)  # every building needs at least one ground cell
@@ -518,7 +518,7 @@ class World:
         if floors is None:
             zs = list(range(nz))
         else:
-            zs = sorted({_int(z, "floor") for z in floors})
+            zs = sorted({checked_int(z, "floor") for z in floors})
             bad = [z for z in zs if not 0 <= z < nz]
             if bad:
                 raise UsageError(f"floors {bad} are outside 0..{nz - 1}")
