@@ -376,19 +376,16 @@ class Engine:
         """The journal's first record: what identifies the game (see resume.py). Without a journal
         (`journaled` off) it leaves out its drones and the world's cells, which would only be dropped (a
         record a drone: a swarm's would be the coordinator's biggest burst of objects)."""
-        fleet = self.fleet
-        world = {"size": list(self.size), "seed": self.config.world.seed}
-        if not self.journaled:
-            return {"record": "header", "format": "dronesim-journal", "version": 1, "world": world,
-                    "max_turns": self.config.max_turns, "lost_after": self.config.lost_after}
-        return {
-            "record": "header", "format": "dronesim-journal", "version": 1,
-            "world": world | {"cells": self.config.world.cells.hex()},
-            "drones": [{"drone": d, "start": start, "autopilot": autopilot, "cooperative": cooperative}
-                       for d, start, autopilot, cooperative in zip(fleet.ids, fleet.pos.tolist(),
-                                                                   fleet.autopilot, fleet.cooperative.tolist())],
-            "max_turns": self.config.max_turns, "lost_after": self.config.lost_after,
-        }
+        fleet, config = self.fleet, self.config
+        world: dict[str, Any] = {"size": list(self.size), "seed": config.world.seed}
+        header: dict[str, Any] = {"record": "header", "format": "dronesim-journal", "version": 1, "world": world,
+                                  "max_turns": config.max_turns, "lost_after": config.lost_after}
+        if self.journaled:  # (the journal's lines sort their keys: the order here is not the written one)
+            world["cells"] = config.world.cells.hex()
+            rows = zip(fleet.ids, fleet.pos.tolist(), fleet.autopilot, fleet.cooperative.tolist())
+            header["drones"] = [{"drone": d, "start": start, "autopilot": autopilot, "cooperative": cooperative}
+                                for d, start, autopilot, cooperative in rows]
+        return header
 
     def _start(self) -> list[Effect]:
         self._log.info("all entities connected: the game starts")
