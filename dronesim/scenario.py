@@ -31,7 +31,7 @@ from entities.autopilots import REGISTRY
 from entities.environment import build_world
 from entities.gcs import Plan
 from entities.movingai import read_scen
-from entities.world import World
+from entities.world import World, checked_int
 from schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
 
 FORMAT = "dronesim-scenario"
@@ -85,7 +85,7 @@ class Scenario:
                 world_file = World.load(base / str(w["file"]))
                 spec = WorldSpec(size=world_file.size, cells=world_file.packed())
             else:
-                spec = WorldSpec(size=_cell(w.get("size"), "world size"), seed=_int(w.get("seed", 0), "seed"))
+                spec = WorldSpec(size=_cell(w.get("size"), "world size"), seed=checked_int(w.get("seed", 0), "seed"))
         except RemoteInputError as err:  # WorldSpec's own checks: sizes 1..65536, seed >= 0
             raise UsageError(f"bad world: {err}") from None
         drones_raw = data.get("drones")
@@ -106,7 +106,7 @@ class Scenario:
         if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets):
             raise UsageError('"targets" must be a list of "[Dnn=]x,y,z[@turn]" strings')
         scenario = cls(world=spec, drones=drones, autopilots=autopilots, targets=tuple(targets),
-                       max_turns=_int(data.get("max_turns", 1000), "max_turns"))
+                       max_turns=checked_int(data.get("max_turns", 1000), "max_turns"))
         scenario.game_config()  # validates ids, starts
         # targets are checked against the world's buildings too: built here (as every process builds it) only
         # when there are targets and the world is generated
@@ -187,12 +187,6 @@ def _entry(d: object, n: int = 0) -> _Entry:
     if not isinstance(pilot, str) or pilot not in REGISTRY:
         raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
     return _Entry((d["id"], *_cell(d.get("start"), f"{d['id']} start"), sys.intern(pilot)))  # (one name string for all)
-
-
-def _int(v: object, what: str) -> int:
-    if type(v) is not int:
-        raise UsageError(f"{what} must be an integer, got {v!r}")
-    return v
 
 
 def _cell(v: object, what: str) -> Cell:
