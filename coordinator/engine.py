@@ -249,6 +249,7 @@ class Engine:
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
+        self._early_moves: dict[str, Moves] = {}  # swarm hosts' MOVES for this turn, sent before its drones' phase
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
@@ -361,7 +362,7 @@ class Engine:
         # A returning environment or ground station takes up the phase in progress.
         if msg.role is Role.ENV and self._held and self._phase_msg is not None:
             self._held = False
-            effects.append(Publish(self._phase_msg))
+            effects += [Publish(self._phase_msg), *self._take_early_moves()]
         elif self._phase_msg is not None and (msg.role, self.stage) == (Role.GCS, Stage.GCS):
             effects.append(Publish(self._phase_msg))
         return effects
@@ -420,7 +421,7 @@ class Engine:
                     self._held = True
                     self._log.warning("turn %d waits for the environment to come back", turn)
                     return []
-                return [Publish(self._phase_msg)]
+                return [Publish(self._phase_msg), *self._take_early_moves()]
         raise AssertionError(stage)
 
     def _open_gcs(self, turn: int) -> Done | None:
@@ -429,6 +430,7 @@ class Engine:
         if np.count_nonzero(self._aimed):
             self._aimed[:] = False
         self._tgt_seen, self._done = 0, None
+        self._early_moves.clear()  # (taken as each drones' phase opens: only a game that ended leaves some)
         self._turn_log = {"record": "turn", "turn": turn}
         early = self._early.pop(turn, None)
         if self._early:
@@ -512,6 +514,8 @@ class Engine:
                     return self._nps(msg)
                 case Moves() if self.stage is Stage.DRONES and now:
                     return self._moves_of_host(msg)
+                case Moves() if self.stage is Stage.GCS and now:
+                    return self._hold_moves(msg)
             raise StaleTurn(f"{msg.TAG} for turn {msg.turn} from {msg.sender} while in {self.stage.value} "
                             f"of turn {self.turn}")
         except RemoteInputError as err:  # raised before anything changed
@@ -551,6 +555,29 @@ class Engine:
             raise StaleTurn(f"second DONE ahead for turn {msg.turn}")
         self._early[msg.turn] = msg
         return []
+
+    def _hold_moves(self, msg: Moves) -> list[Effect]:
+        """A swarm host's moves for this turn, sent before its drones' phase opened (by a host that decides
+        from the STATUS alone, as the RL environment does, sending its DONE and MOVES at once: one round trip a
+        turn): kept, one MOVES per host, and taken as the drones' phase opens, checked then like any MOVES."""
+        if msg.sender not in self.fleet.hosts:
+            raise WrongSender(f"MOVES ahead from {msg.sender}, which flies no drone of this game")
+        if msg.sender in self._early_moves:
+            raise StaleTurn(f"second MOVES ahead from {msg.sender} for turn {msg.turn}")
+        self._early_moves[msg.sender] = msg
+        return []
+
+    def _take_early_moves(self) -> list[Effect]:
+        """The drones' phase is announced: the MOVES held for it are taken (in the order they came)."""
+        held, self._early_moves = self._early_moves, {}
+        effects: list[Effect] = []
+        for msg in held.values():
+            if self.stage is not Stage.DRONES:  # (the phase closed with an earlier one: the rest is late)
+                effects.append(Refusal(f"{msg.TAG} from {msg.sender}",
+                                       StaleTurn(f"MOVES ahead for turn {msg.turn} after its drones' phase")))
+                continue
+            effects += self.receive(msg)
+        return effects
 
     def _gcs_done(self, msg: Done) -> list[Effect]:
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
@@ -614,10 +641,10 @@ class Engine:
         deadline), through the same steps (`_targets_set`, `_judge`) without a message built: the caller
         reads the fleet's columns, as the STATUS would say them (`Fleet.notes`); the turn's journal record is
         not returned (the caller keeps no journal). The turn's OVER if the game ended with it. UsageError, and
-        nothing changed, if the turn is not the ground station's (or it sent a DONE ahead) or an input would
+        nothing changed, if the turn is not the ground station's (or a DONE or MOVES came ahead) or an input would
         be refused: a target outside the world or a move of more than one cell, for a drone not alive."""
         fleet = self.fleet
-        if self.stage is not Stage.GCS or self._done is not None or self._early:
+        if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
                              f"of turn {self.turn}")
         state = fleet.state
@@ -927,6 +954,7 @@ class Engine:
                 pass  # the game waits for it (deadline: env_grace); a returning one resyncs from STATUS
             case Role.DRONE:
                 fleet = self.fleet
+                self._early_moves.pop(entity, None)
                 gone = [i for i, host in enumerate(fleet.host) if host == entity]
                 if self.stage in (Stage.ADMITTING, Stage.RESUMING):
                     for i in gone:

@@ -2,8 +2,9 @@
 coordinator and environment processes, on a router this process starts (or joins: `connect`).
 
 This process plays the ground station and one swarm host (H01, flying every drone) from one Zenoh
-session: per turn it sends the DONE, waits for the drones' phase to open, sends the policy's moves as
-the host's MOVES and waits for the observer's STATUS. Every wait has a deadline and watches the processes:
+session: per turn it sends the DONE and the policy's moves as the host's MOVES at once (the coordinator
+holds MOVES that come before their drones' phase opens) and waits for the observer's STATUS: one round
+trip a turn. Every wait has a deadline and watches the processes:
 a game whose coordinator or environment dies raises `BackendError` at once, and one that stops answering
 raises it when the deadline passes; `close()` ends the game, the processes, the session and the router.
 """
@@ -38,7 +39,7 @@ from dronesim.transport import (
     session_id,
 )
 from entities.world import World
-from schema import Done, Intent, Keys, Moves, Over, Phase, Status, Turn, UsageError
+from schema import Done, Intent, Keys, Moves, Over, Phase, Status, UsageError
 
 #: The processes of a game, by the name their presence token has.
 ROLES = ("SRV", "ENV")
@@ -129,8 +130,7 @@ class _Game:
         common = ["--mode", "client", "--connect", locator, "--root", root, "--log-level", "WARNING"]
         starts = ";".join(f"{x},{y},{z}" for x, y, z in (d.start for d in game.drones))
         try:
-            for key, typ in ((self.keys.turn_of(Phase.DRONES), Turn), (self.keys.status, Status),
-                             (self.keys.over, Over)):
+            for key, typ in ((self.keys.status, Status), (self.keys.over, Over)):
                 self.inbox.subscribe(key, typ)
             self.inbox.watch_presence()
             self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
@@ -225,14 +225,7 @@ class _Game:
             raise BackendError(f"turn {t} cannot be played: the game is {where}")
         end = time.monotonic() + self.deadline
         self.out.put(self.keys.gcs_done, done)
-        if moves is not None:  # the drones' phase opens once the DONE is in: then the moves go
-            while True:
-                match self._event(end, f"drones' phase of turn {t}"):
-                    case Received(_, Turn(phase=Phase.DRONES) as turn) if turn.turn == t:
-                        break
-                    case Received(_, Over() as over):
-                        self.over = over
-                        raise BackendError(f"the game ended at turn {over.turn}: {over.reason.value}: {over.text}")
+        if moves is not None:  # at once: the coordinator holds them until the drones' phase opens
             self.out.put(self.keys.moves(HOST), moves)
         status = self._status(t, end)
         last = t >= self.game.max_turns or not status.drones.alive_mask().any()

@@ -606,7 +606,9 @@ class Nps(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Moves(Message):
-    """Swarm host -> SRV (key ``<host>/MOVES``): the NPS of every drone it flies, in one message."""
+    """Swarm host -> SRV (key ``<host>/MOVES``): the NPS of every drone it flies, in one message. Sent in the
+    turn's GCS phase (with the GCS's DONE, by a host that decides from the STATUS alone), it is held until the
+    drones' phase opens."""
 
     TAG: ClassVar[str] = "MOVES"
     moves: StepTable  # a tuple of records becomes the table (which holds one row per drone)

@@ -1143,6 +1143,78 @@ def test_answers_ahead_give_the_same_journal() -> None:
     assert play(True) == play(False)
 
 
+def _hosted_pair(**kw) -> Game:
+    return Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), **kw), hosts={"H01": ("D01", "D02")})
+
+
+def _host_moves(turn: int, moves: dict) -> Moves:
+    return Moves(turn=turn, sender="H01", moves=tuple(Step(drone=d, pos=p) for d, p in moves.items()))
+
+
+def test_moves_ahead_are_taken_as_the_drones_phase_opens() -> None:
+    """A host that decides from the STATUS alone (the RL environment) sends its MOVES with the GCS's DONE."""
+    g = _hosted_pair()
+    g.gcs({"D01": (3, 0, 0), "D02": (4, 4, 0)})
+    g.feed(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0), "D02": (4, 4, 3)})))
+    assert g.stage is Stage.GCS and g.turn == 2
+    assert g.feed(g.engine.receive(_host_moves(2, {"D01": (2, 0, 0), "D02": (4, 4, 2)}))) == [], "held"
+    assert g.stage is Stage.GCS and g.turn == 2
+    effects = g.done()
+    turns = pubs(effects, Turn)
+    assert [(t.turn, t.phase) for t in turns] == [(2, Phase.DRONES), (2, Phase.ENV), (3, Phase.GCS)], \
+        "the drones' phase is announced, then taken at once"
+    assert g.stage is Stage.GCS and g.turn == 3
+    assert records(effects)[0]["moves"] == {"D01": [2, 0, 0], "D02": [4, 4, 2]}
+
+
+def test_moves_ahead_give_the_same_journal() -> None:
+    def play(ahead: bool) -> list:
+        g = _hosted_pair()
+        for turn, moves in enumerate([{"D01": (1, 0, 0), "D02": (4, 4, 3)}, {"D01": (2, 0, 0)},
+                                      {"D01": (3, 0, 0), "D02": (4, 4, 1)}], 1):
+            if ahead:
+                g.feed(g.engine.receive(_host_moves(turn, moves)))
+            g.gcs({"D01": (3, 0, 0), "D02": (4, 4, 0)} if turn == 1 else None)
+            if not ahead:
+                g.feed(g.engine.receive(_host_moves(turn, moves)))
+            if turn == 2:  # D02 is late: the deadline closes the phase, ahead or not
+                g.feed(g.engine.expire(Stage.DRONES, 2))
+        return records(g.effects)
+
+    assert play(True) == play(False)
+
+
+def test_moves_ahead_misuse_is_refused_and_changes_nothing() -> None:
+    g = _hosted_pair()
+    snap = g.snapshot()
+    refused(g.engine.receive(Moves(turn=1, sender="D07", moves=(Step(drone="D01", pos=(1, 0, 0)),))),
+            WrongSender, "flies no drone")
+    refused(g.engine.receive(_host_moves(2, {"D01": (1, 0, 0)})), StaleTurn)  # only the current turn's
+    assert g.snapshot() == snap and not g.engine._early_moves
+    g.feed(g.engine.receive(_host_moves(1, {"D01": (0, 2, 0), "D02": (4, 4, 3)})))  # D01's: two cells
+    refused(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0)})), StaleTurn, "second MOVES ahead")
+    with pytest.raises(UsageError):  # a turn from arrays cannot jump over what came ahead
+        g.engine.play(*(np.zeros((0,), np.int64), np.zeros((0, 3), np.int64)) * 2, np.zeros((0,), np.uint8))
+    effects = g.done()
+    assert "cannot move from (0, 0, 0) to (0, 2, 0)" in str(refused(effects, OutOfRange)), \
+        "checked when the phase opens, like any MOVES"
+    assert g.stage is Stage.DRONES and g.engine.moves_taken() == {"D02": (4, 4, 3)}
+
+
+def test_moves_ahead_leave_with_their_host_and_wait_for_the_environment() -> None:
+    g = _hosted_pair()
+    g.feed(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0), "D02": (4, 4, 3)})))
+    g.feed(g.engine.vanished("H01"))
+    assert not g.engine._early_moves, "a host's moves leave with it"
+    g = _hosted_pair()
+    g.feed(g.engine.vanished("ENV"))
+    g.feed(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0), "D02": (4, 4, 3)})))
+    assert pubs(g.done(), Turn) == [] and g.stage is Stage.DRONES, "the drones' phase waits for the environment"
+    assert g.engine.moves_taken() == {}
+    effects = g.feed(g.engine.connect(connect("ENV", Role.ENV), Token("ENV2")))
+    assert [(t.turn, t.phase) for t in pubs(effects, Turn)] == [(1, Phase.DRONES), (1, Phase.ENV), (2, Phase.GCS)]
+
+
 def test_a_late_upd_is_still_checked() -> None:
     """Nothing waits for the environment's report, so it may come a turn or more later."""
     g = Game()
