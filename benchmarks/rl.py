@@ -242,7 +242,8 @@ def main(argv: list[str] | None = None) -> int:
             "on_target \"stay\", random safe actions (benchmarks/rl.py: no drone dies, so every step has all "
             "its agents); local = in this process (drone by drone up to 64 drones, `dronesim/rl_few.py`, else the "
             "engine), zenoh = each step a turn of the coordinator and "
-            "environment processes through a router in this process.\n"
+            "environment processes through a router in this process (the step's DONE and MOVES sent at once: one "
+            "round trip).\n"
             + "".join(f"\n{note}\n" for note in notes)
         )
         replace_section(args.output, SECTION, body)
