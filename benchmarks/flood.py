@@ -16,7 +16,9 @@ scenario:
 2. flood (a): once the warm-up turns are over, an attacker process (`benchmarks.flooder nps`, a client
    of the router authenticated as H01, the principal D01's keys belong to) publishes 200,000 well-formed
    NPS for turn 1 from D01 on D01's own key, as fast as it can: what an authenticated drone may do on its
-   own key under access control;
+   own key under access control (the attacker runs at niceness 19, `--attacker-nice`: it stands for a
+   client on a host of its own, so the game's processes go first on this machine's cores; the router,
+   which takes the whole flood, runs as the game does);
 3. flood (b): the attacker sends 300 ASKs of 32,768 cells from D01 to the environment at once and waits
    for their replies;
 4. clean again (the machine's speed drifts: the clean speed is the mean of games 1 and 4).
@@ -42,6 +44,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 from benchmarks import add_write_args, command_line, replace_section
@@ -66,6 +69,10 @@ DRONES = 16
 FLOODS = {"nps": 200_000, "ask": 300}
 ATTACKER = "H01"  # on the secured router: the principal D01's keys belong to (the swarm host flying it)
 QUICK_FLOODS = {"nps": 2_000, "ask": 100}  # --quick: small floods (some ASKs still over the budget)
+#: The attacker's niceness: it stands for a client on a host of its own (an authenticated drone), so the game's
+#: processes go first on this machine's cores; the router, which takes the whole flood, runs as the game does.
+#: `--attacker-nice 0`: an attacker that shares the game's cores as an equal (on 2 cores it takes one of them).
+ATTACKER_NICE = 19
 
 
 def quick_case() -> Case:
@@ -92,8 +99,9 @@ def rejections(log: Path) -> str:
 
 
 def play(name: str, flood: str | None, count: int, case: Case, scenario: Path, logs: Path,
-         secured: Secured | None) -> Played:
-    """One game, with the attacker `flood` (`benchmarks.flooder`) started once its warm-up is over."""
+         secured: Secured | None, nice: int = ATTACKER_NICE) -> Played:
+    """One game, with the attacker `flood` (`benchmarks.flooder`, at niceness `nice`) started once its warm-up
+    is over."""
     logs.mkdir()
     attackers: list[subprocess.Popen] = []
     went: list[int] = []  # the turn it was told to go at
@@ -108,7 +116,7 @@ def play(name: str, flood: str | None, count: int, case: Case, scenario: Path, l
             a = subprocess.Popen([sys.executable, "-m", "benchmarks.flooder", flood, "--mode", "client", "--connect",
                                   locator, "--root", keys.root, "--count", str(count), *creds],
                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                 env=child_env())
+                                 env=child_env(), preexec_fn=partial(os.nice, nice))
             attackers.append(a)
             line = a.stdout.readline() if a.stdout else ""
             if line.strip() != "ready":
@@ -230,6 +238,7 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     scenario.write_text(json.dumps(scen), encoding="utf-8")
     secured = None if args.plain else Secured.make(logs / "certs", [d["id"] for d in scen["drones"]], "H01")
     facts["secured"] = secured is not None
+    facts["nice"] = args.attacker_nice
     plan = [("clean", None), (f"flood (a): {counts['nps']:,} stale NPS", "nps"),
             (f"flood (b): {counts['ask']} ASKs of 32,768 cells", "ask"), ("clean again", None)]
     rows: list[Row] = []
@@ -237,7 +246,8 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     for k in range(1, args.repeat + 1):
         facts["loads"].append(os.getloadavg()[0])
         games = [play(f"run {k}: {name}" if args.repeat > 1 else name, flood, counts.get(flood or "", 0), case,
-                      scenario, logs / f"run{k}-game{i}", secured) for i, (name, flood) in enumerate(plan)]
+                      scenario, logs / f"run{k}-game{i}", secured, args.attacker_nice)
+                 for i, (name, flood) in enumerate(plan)]
         more, errors = rows_of(games, case)
         rows += more
         facts["errors"] += errors
@@ -264,7 +274,10 @@ def legend(facts: dict) -> str:
         + "the flood filters generated from the key table, `low_pass_filter` and `downsampling`), coordinator "
         "(with a journal), environment and "
         "one swarm host as processes, this process the scripted ground station. When the warm-up is over, an "
-        "attacker process (`benchmarks/flooder.py`, a client of the router) floods as D01: (a) NPS for turn 1 on "
+        f"attacker process (`benchmarks/flooder.py`, a client of the router, at niceness {facts['nice']}"
+        + (": it stands for a client on a host of its own, so the game's processes go first on this machine's "
+           "cores, while the router takes the whole flood" if facts["nice"] > 0 else
+           ": it shares this machine's cores with the game as an equal") + ") floods as D01: (a) NPS for turn 1 on "
         "D01's own key, as fast as it can; (b) ASKs of 32,768 cells to the environment, all at once, then waits "
         "for their replies. Turns/s (measured turns) = 1 ÷ the mean time between consecutive STATUS; during the "
         "flood = the turns it overlaps (from the last turn begun before the attacker's first message to the first "
@@ -276,7 +289,8 @@ def legend(facts: dict) -> str:
         "seconds during its flood are in its column: it runs on this machine, beside the router (which receives "
         "every message of the flood and drops most) and the game's processes, so on a machine of few cores a "
         "flood costs the game CPU as well as whatever reaches it (the attacker's CPU seconds ÷ the flood's "
-        "seconds: the cores it took). Exit codes: coordinator / environment / swarm host."
+        "seconds: the cores it took; `--attacker-nice 0` measures an attacker that takes them as an equal). "
+        "Exit codes: coordinator / environment / swarm host."
     )
 
 
@@ -295,6 +309,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plain", action="store_true",
                         help="the plain router (flood filters, no TLS, no authentication, no access control) instead "
                              "of the secured one")
+    parser.add_argument("--attacker-nice", type=int, default=ATTACKER_NICE,
+                        help=f"the attacker's niceness (default {ATTACKER_NICE}: it stands for a client on a host of "
+                             "its own; 0: it shares this machine's cores with the game as an equal)")
     parser.add_argument("--repeat", type=int, default=1, help="play the four games this many times (default 1)")
     parser.add_argument("--keep-logs", action="store_true", help="keep the processes' logs (kept anyway on failure)")
     add_write_args(parser)
