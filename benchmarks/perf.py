@@ -1126,8 +1126,10 @@ def mechanism_rows(pairs: list[Pair], selected: Callable[[str], bool]) -> tuple[
             cells["cpu"] = f"{_span(on['cpu'], '.2f')} / {_span(off['cpu'], '.2f')}"
             cells["mem"] = f"{on['mem']} / {off['mem']}"
             turn = statistics.fmean(off["mean"]) / statistics.fmean(on["mean"])
-            cpu = statistics.fmean(off["cpu"]) / statistics.fmean(on["cpu"])
-            cells["gain"] = f"turn {turn:.2f}x, CPU {cpu:.2f}x"
+            cpu_on, cpu_off = statistics.fmean(on["cpu"]), statistics.fmean(off["cpu"])
+            # (CPU times come in clock ticks: a short game may have used less than one, on or off)
+            cpu = f"{cpu_off / cpu_on:.2f}x" if cpu_on > 0 and cpu_off > 0 else "below the clock tick"
+            cells["gain"] = f"turn {turn:.2f}x, CPU {cpu}"
             if m.off.shared_memory:
                 cells["gain"] += f", peak memory {off['hwm'] - on['hwm']:+.0f} MiB off (the three processes)"
             base = _states(p.on[0].statuses)
