@@ -4,6 +4,7 @@
     dronesim bench rl --repeat 3 --write    # three runs, ranges, "## RL environment" in BENCHMARKS.md
     dronesim bench rl --quick --no-pogema   # a tiny subset (used by the tests)
     dronesim bench rl --few-gain --counts 1,16,64   # the drone-by-drone path on beside off (performance.md)
+    dronesim bench rl --ahead-gain --counts 1,128   # the zenoh backend's MOVES ahead on beside off (idem)
 
 Each run measures, at every agent count, one after the other (the machine's speed drifts): POGEMA 1.4.0's
 PettingZoo integration (`pogema.integrations.pettingzoo.parallel_env`, in its own cached virtual environment,
@@ -29,6 +30,7 @@ import os
 import shlex
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -74,15 +76,18 @@ class SafeRandom:
         return np.argmax(self.rng.random(allowed.shape) * allowed, axis=1)
 
 
-def ours(backend: str, n: int, seconds: float, few_drones: int | None = None) -> tuple[float, int]:
+def ours(backend: str, n: int, seconds: float, few_drones: int | None = None,
+         moves_ahead: bool = True) -> tuple[float, int]:
     """Steps per second of our parallel_env with `n` drones on `backend`, and the agents acting at the end;
-    `few_drones`: the env's (None: its default; 0: the engine's path whatever the count)."""
+    `few_drones`: the env's (None: its default; 0: the engine's path whatever the count); `moves_ahead`: the
+    zenoh backend's (False: each MOVES waits for its drones' phase)."""
     from dronesim.pettingzoo import parallel_env
 
     env = parallel_env(num_drones=n, size=SIZE, obs_radius=RADIUS, on_target="stay", max_cycles=10**6, seed=1,
                        backend=backend)
     if few_drones is not None:
         env.few_drones = few_drones
+    env.moves_ahead = moves_ahead
     policy = SafeRandom(RADIUS)
     try:
         obs, _ = env.reset(seed=1)
@@ -168,18 +173,32 @@ def run(counts: tuple[int, ...], seconds: float, repeat: int, with_pogema: bool,
 
 def few_gain(counts: tuple[int, ...], seconds: float, repeat: int) -> str:
     """The drone-by-drone path's gain (docs/performance.md): local steps/s with it (`FewEpisode`, the default
-    up to EPISODE_FEW_DRONES drones) and without (`few_drones = 0`: `Episode` over the engine), alternated
-    on, off, on, off at each count, `repeat` pairs; each ratio is taken within a pair."""
+    up to EPISODE_FEW_DRONES drones) and without (`few_drones = 0`: `Episode` over the engine)."""
     from dronesim.rl_few import FEW_MAX
 
-    lines = ["| agents | drone by drone steps/s | engine's path steps/s | gain |", "|---|---|---|---|"]
+    return _gain(counts, repeat, ("drone by drone", lambda n: ours("local", n, seconds, FEW_MAX)[0]),
+                 ("engine's path", lambda n: ours("local", n, seconds, 0)[0]), "{:.1f}x")
+
+
+def ahead_gain(counts: tuple[int, ...], seconds: float, repeat: int) -> str:
+    """MOVES ahead's gain (docs/performance.md): zenoh steps/s with each step's MOVES sent with its DONE (the
+    default) and after its drones' phase is announced."""
+    return _gain(counts, repeat, ("MOVES ahead", lambda n: ours("zenoh", n, seconds)[0]),
+                 ("MOVES after the phase", lambda n: ours("zenoh", n, seconds, moves_ahead=False)[0]), "{:.2f}x")
+
+
+def _gain(counts: tuple[int, ...], repeat: int, on: tuple[str, Callable[[int], float]],
+          off: tuple[str, Callable[[int], float]], fmt: str) -> str:
+    """A mechanism on beside off: steps/s of each, alternated on, off, on, off at each count, `repeat` pairs;
+    each ratio is taken within a pair."""
+    lines = [f"| agents | {on[0]} steps/s | {off[0]} steps/s | gain |", "|---|---|---|---|"]
     for n in counts:
-        on, off = [], []
+        ons, offs = [], []
         for _ in range(repeat):
-            on.append(ours("local", n, seconds, FEW_MAX)[0])
-            off.append(ours("local", n, seconds, 0)[0])
-        lines.append(f"| {n} | {_range(on, '{:.0f}')} | {_range(off, '{:.0f}')} | "
-                     f"{_range([a / b for a, b in zip(on, off)], '{:.1f}x')} |")
+            ons.append(on[1](n))
+            offs.append(off[1](n))
+        lines.append(f"| {n} | {_range(ons, '{:.0f}')} | {_range(offs, '{:.0f}')} | "
+                     f"{_range([a / b for a, b in zip(ons, offs)], fmt)} |")
     return "\n".join(lines)
 
 
@@ -195,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"POGEMA and the local backend alternate in this many slices (default {SLICES})")
     parser.add_argument("--few-gain", action="store_true",
                         help="only the local backend, its drone-by-drone path on and off (docs/performance.md)")
+    parser.add_argument("--ahead-gain", action="store_true",
+                        help="only the zenoh backend, MOVES ahead on and off (docs/performance.md)")
     add_write_args(parser)
     args = parser.parse_args(argv)
     try:
@@ -205,8 +226,8 @@ def main(argv: list[str] | None = None) -> int:
         counts, args.seconds = (1, 16), 0.3
     if args.repeat < 1 or args.seconds <= 0 or min(counts) < 1 or args.slices < 1:
         parser.error("--repeat, --seconds, --slices and the counts must be positive")
-    if args.few_gain:
-        print(few_gain(counts, args.seconds, args.repeat))
+    if args.few_gain or args.ahead_gain:
+        print((few_gain if args.few_gain else ahead_gain)(counts, args.seconds, args.repeat))
         return 0
     started, load, busy = time.monotonic(), os.getloadavg()[0], busy_seconds()
     table, ok, notes = run(counts, args.seconds, args.repeat, args.pogema, args.slices)

@@ -74,6 +74,9 @@ class DroneParallelEnv(ParallelEnv):
         #: Episodes of up to this many drones are played drone by drone (`FewEpisode`: the same steps, fewer
         #: array operations) on the local backend; 0: always by `Episode` and the engine.
         self.few_drones = min(EPISODE_FEW_DRONES, FEW_MAX) if cfg.backend == "local" else 0
+        #: The zenoh backend sends a step's MOVES with its DONE (the coordinator holds them); False: once the
+        #: drones' phase is announced, a second round trip a step (`dronesim bench rl --ahead-gain`).
+        self.moves_ahead = True
 
     # ------------------------------------------------------------------ spaces
 
@@ -104,7 +107,7 @@ class DroneParallelEnv(ParallelEnv):
                 from dronesim.rl_zenoh import ZenohTurns
 
                 self._turns = ZenohTurns(connect=self.config.connect, deadline=self.config.deadline,
-                                         logger=logging.getLogger("dronesim.rl"))
+                                         logger=logging.getLogger("dronesim.rl"), moves_ahead=self.moves_ahead)
             else:
                 self._turns = LocalTurns()
         return self._turns

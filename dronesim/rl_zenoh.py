@@ -4,7 +4,8 @@ coordinator and environment processes, on a router this process starts (or joins
 This process plays the ground station and one swarm host (H01, flying every drone) from one Zenoh
 session: per turn it sends the DONE and the policy's moves as the host's MOVES at once (the coordinator
 holds MOVES that come before their drones' phase opens) and waits for the observer's STATUS: one round
-trip a turn. Every wait has a deadline and watches the processes:
+trip a turn (`moves_ahead=False`: the MOVES once the drones' phase is announced, a second round trip, for
+the benchmark's side-by-side measure). Every wait has a deadline and watches the processes:
 a game whose coordinator or environment dies raises `BackendError` at once, and one that stops answering
 raises it when the deadline passes; `close()` ends the game, the processes, the session and the router.
 """
@@ -39,7 +40,7 @@ from dronesim.transport import (
     session_id,
 )
 from entities.world import World
-from schema import Done, Intent, Keys, Moves, Over, Phase, Status, UsageError
+from schema import Done, Intent, Keys, Moves, Over, Phase, Status, Turn, UsageError
 
 #: The processes of a game, by the name their presence token has.
 ROLES = ("SRV", "ENV")
@@ -49,8 +50,9 @@ class ZenohTurns:
     """Games on real processes over Zenoh, one per episode (see the module's docstring)."""
 
     def __init__(self, *, connect: str | None = None, deadline: float = 30.0,
-                 logger: logging.Logger | None = None) -> None:
+                 logger: logging.Logger | None = None, moves_ahead: bool = True) -> None:
         self.deadline = deadline
+        self.moves_ahead = moves_ahead  # False: each MOVES waits for its drones' phase (a second round trip)
         self._log = logger or logging.getLogger("dronesim.rl")
         self._logs = tempfile.TemporaryDirectory(prefix="dronesim-rl-")
         self._tag = uuid.uuid4().hex[:8]
@@ -80,7 +82,7 @@ class ZenohTurns:
         assert self._session is not None
         self._children[:] = [p for p in self._children if p.poll() is None]
         self._game = _Game(self._session, f"rl{self._tag}g{self._games}", Path(self._logs.name), self.locator,
-                           game, world, self.deadline, self._log, self._children, self._files)
+                           game, world, self.deadline, self._log, self._children, self._files, self.moves_ahead)
         return Board.of_status(self._game.begin(), len(game.drones))
 
     def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
@@ -111,8 +113,10 @@ class _Game:
     """One game: its processes, this process's presence and subscriptions, and the turn being played."""
 
     def __init__(self, session: zenoh.Session, root: str, logs: Path, locator: str, game: GameConfig, world: World,
-                 deadline: float, logger: logging.Logger, children: list[subprocess.Popen], files: list) -> None:
+                 deadline: float, logger: logging.Logger, children: list[subprocess.Popen], files: list,
+                 moves_ahead: bool = True) -> None:
         self.session, self.keys, self.deadline, self.log = session, Keys(root), deadline, logger
+        self.moves_ahead = moves_ahead
         self.game = game
         self.turn = 0  # the last turn whose STATUS arrived
         self.over: Over | None = None
@@ -132,6 +136,8 @@ class _Game:
         try:
             for key, typ in ((self.keys.status, Status), (self.keys.over, Over)):
                 self.inbox.subscribe(key, typ)
+            if not moves_ahead:
+                self.inbox.subscribe(self.keys.turn_of(Phase.DRONES), Turn)
             self.inbox.watch_presence()
             self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
                                 "--drones", str(len(game.drones)), "--starts", starts,
@@ -226,10 +232,22 @@ class _Game:
         end = time.monotonic() + self.deadline
         self.out.put(self.keys.gcs_done, done)
         if moves is not None:  # at once: the coordinator holds them until the drones' phase opens
+            if not self.moves_ahead:
+                self._drones_phase(t, end)
             self.out.put(self.keys.moves(HOST), moves)
         status = self._status(t, end)
         last = t >= self.game.max_turns or not status.drones.alive_mask().any()
         return status, (self._over(end) if last else None)
+
+    def _drones_phase(self, t: int, end: float) -> None:
+        """Wait for the drones' phase of turn `t` to be announced (without MOVES ahead)."""
+        while True:
+            match self._event(end, f"drones' phase of turn {t}"):
+                case Received(_, Turn(phase=Phase.DRONES) as turn) if turn.turn == t:
+                    return
+                case Received(_, Over() as over):
+                    self.over = over
+                    raise BackendError(f"the game ended at turn {over.turn}: {over.reason.value}: {over.text}")
 
     def _over(self, end: float) -> Over:
         while True:

@@ -500,10 +500,12 @@ def test_zenoh_seed() -> None:
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize("on_target", ["finish", "new"])
-def test_backends_agree_step_by_step(on_target: str) -> None:
+@pytest.mark.parametrize(("on_target", "moves_ahead"), [("finish", True), ("new", True), ("new", False)])
+def test_backends_agree_step_by_step(on_target: str, moves_ahead: bool) -> None:
+    """(`moves_ahead=False`: each step's MOVES waits for its drones' phase, the benchmark's "off".)"""
     config = dict(num_drones=24, size=(12, 12, 6), on_target=on_target, max_cycles=40, step_cost=0.01)
     local, remote = dz.parallel_env(**config), dz.parallel_env(backend="zenoh", **config)
+    remote.moves_ahead = moves_ahead
     try:
         a, b = trace(local, seed=4), trace(remote, seed=4)
     finally:
