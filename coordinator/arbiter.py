@@ -47,10 +47,13 @@ from schema.tables import RANK_STEPS, RANKED_LIMIT
 
 #: Most candidates a drone may offer (its 6 neighbours and its own cell).
 MOST = len(RANK_STEPS)
+#: A priority (the engine's `age`) is the turns since the drone was last at rest times TIE_SPAN plus a
+#: tie-break below TIE_SPAN (its distance to its target when it left rest).
+TIE_SPAN = 1 << 16
 #: An arbitration as the engine calls it: (world size, before, proposed, ranked, cooperative, priority,
-#: targets, open cells) -> (final cells, yielded, gave way); `cooperate` documents the arguments.
-Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, "OpenCells | None"],
-                   tuple[np.ndarray, np.ndarray, np.ndarray]]
+#: targets, open cells, salt) -> (final cells, yielded, gave way); `cooperate` documents the arguments.
+Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, "OpenCells | None",
+                    "int | None"], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperative: Set[str]) -> dict[str, Cell]:
@@ -131,7 +134,7 @@ def steps_flat(size: Cell) -> np.ndarray:
 
 
 def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell,
-               targets: np.ndarray | None = None) -> np.ndarray:
+               targets: np.ndarray | None = None, salt: int | None = None) -> np.ndarray:
     """Each drone's candidate cells, flat, in the order the arbiter tries them ((n, MOST), -1 after the last):
     its ranked steps from `here` (flat), or, where it ranked none, its `proposed` cell (flat) alone.
 
@@ -141,7 +144,11 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     stands (going round a drone beats pushing it when both are as short: a drone parked on its target is left
     alone when a way round is as good), then those that are no other drone's target (`targets`, flat, -1 for
     none: a drone pushed aside steps off the way of one going home rather than onto its home), then in the
-    drone's order."""
+    drone's order among the cells before staying, and, among those after (where a pushed drone goes), in an
+    order drawn from `salt` (the turn), the drone's cell and the candidate's (`tie_breaks`; None: the drone's
+    order there too). Deterministic, and it changes from turn to turn: the same few drones pushing each other
+    round a loop (a 2 x 2 block, a room) do not choose the same sides at every round, and get out of it
+    (PIBT's random tie-breaks, lacam3's way of ending such loops; docs/cooperation.md)."""
     n = len(here)
     codes = (ranked.astype(np.int64)[:, None] >> (3 * np.arange(MOST))) & 7
     cand = np.where(codes > 0, here[:, None] + steps_flat(size)[codes], -1)
@@ -154,9 +161,31 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     occupied = np.isin(cand, here) & ~stay
     theirs = np.zeros_like(occupied) if targets is None else \
         np.isin(cand, targets[targets >= 0]) & (cand != targets[:, None])
-    key = np.where(ranks_stay[:, None], (col > where) * 32 + (col == where) * 16 + occupied * 8 + theirs * 4, 0) + col
-    key = np.where(cand < 0, 64 + col, key)
+    major = np.where(ranks_stay[:, None], (col > where) * 32 + (col == where) * 16 + occupied * 8 + theirs * 4, 0)
+    minor = np.broadcast_to(col, cand.shape)
+    if salt is not None:
+        minor = np.where(ranks_stay[:, None] & (col > where), tie_breaks(salt, here, cand), minor)
+    key = np.where(cand < 0, 64 << TIE_BITS, (major << TIE_BITS) + minor)
     return np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1) if n else cand
+
+
+#: Bits of a tie-break drawn by `tie_breaks` (equal draws keep the drone's order).
+TIE_BITS = 16
+_M2, _M3 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+
+
+def tie_breaks(salt: int, here: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """A pseudo-random number in [0, 2**TIE_BITS) for each (drone's cell `here[i]`, candidate `cand[i, k]`)
+    pair, a function of those two cells and `salt` alone (SplitMix64's finaliser over their mix): the same in
+    every run, layout and replay, different from one salt (turn) to the next."""
+    seed = np.uint64(salt * 0x9E3779B97F4A7C15 % (1 << 64))  # (Python integers: numpy's scalars warn on wrapping)
+    x = seed + here.astype(np.uint64)[:, None] * _M2 + cand.astype(np.uint64) * _M3  # wraps modulo 2**64, as meant
+    x ^= x >> np.uint64(30)
+    x *= _M2
+    x ^= x >> np.uint64(27)
+    x *= _M3
+    x ^= x >> np.uint64(31)
+    return (x >> np.uint64(64 - TIE_BITS)).astype(np.int64)
 
 
 def wants_first(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell) -> np.ndarray:
@@ -367,20 +396,21 @@ def _out_of_the_way(mine: list[int], src: int, ahead: int) -> list[int]:
 
 
 def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray, cooperative: np.ndarray,
-              priority: np.ndarray, targets: np.ndarray | None = None, open_: OpenCells | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              priority: np.ndarray, targets: np.ndarray | None = None, open_: OpenCells | None = None,
+              salt: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The drones' cells after the turn's moves, arbitrated by PIBT; which cooperative drones did not get
     their first candidate (yielded); which gave way (see `pibt`). Row i is one alive drone (rows in id
     order): where it is (`before`, (n, 3)), the move it proposed (`proposed`), its ranked steps (`ranked`,
     (n,) as in an NPS, 0: none), whether it cooperates, its priority (higher first; ties: the smaller row) and
     its target (`targets`, (n, 3), (-1, -1, -1) for none; None: nobody's known); the world's open cells
-    (`OpenCells`; None: unknown, then no swap)."""
+    (`OpenCells`; None: unknown, then no swap); the tie-breaks' salt (the engine's turn; None: the drones'
+    order, see `candidates`)."""
     n = len(before)
     assert not n or int(ranked.max()) < RANKED_LIMIT
     here = flat_cells(before, size)
     wants = flat_cells(proposed, size)
     goals = None if targets is None else np.where(targets[:, 0] >= 0, flat_cells(targets, size), -1)
-    cand = candidates(here, ranked, wants, size, goals)
+    cand = candidates(here, ranked, wants, size, goals, salt)
     taken = np.where(cooperative, -1, wants)
     coop = np.flatnonzero(cooperative)
     order = coop[np.lexsort((coop, -priority[coop].astype(np.int64)))]
@@ -397,11 +427,11 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
 
 
 def fixed(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray, cooperative: np.ndarray,
-          priority: np.ndarray, targets: np.ndarray | None = None, open_: OpenCells | None = None
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          priority: np.ndarray, targets: np.ndarray | None = None, open_: OpenCells | None = None,
+          salt: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The former arbitration (`arbitrate`: one proposed move per drone, a fixed priority, the id) with
-    `cooperate`'s signature and results, for the benchmark: rankings, priorities, targets and the world are ignored,
-    nobody gives way."""
+    `cooperate`'s signature and results, for the benchmark: rankings, priorities, targets, the world and the salt
+    are ignored, nobody gives way."""
     ids = [f"{i:08d}" for i in range(len(before))]  # rows as names that sort as the rows (the id order)
     wants: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, proposed.tolist())}
     was: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, before.tolist())}

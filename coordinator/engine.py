@@ -231,7 +231,8 @@ class Engine:
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
         self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
         #: Each drone's priority for the arbitration (PIBT): the turns since it was last at rest (on its
-        #: target, without one, or unable to reach it) or gave way. A function of the journaled turns (`age`).
+        #: target, without one, or unable to reach it) or gave way, times arbiter.TIE_SPAN, plus its tie-break
+        #: (`age`). A function of the journaled turns.
         self.priority = np.zeros(n, np.int64)
         self._gave_way = np.zeros(n, bool)  # who gave way this turn (arbiter.pibt)
         #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule), which the benchmark
@@ -469,7 +470,7 @@ class Engine:
         if self._open is None:
             self._open = arbiter.OpenCells(self.world.grid)
         final, yielded, gave_way = self.arbiter(self.size, before, proposed, ranked, fleet.cooperative[alive],
-                                                self.priority[alive], fleet.target[alive], self._open)
+                                                self.priority[alive], fleet.target[alive], self._open, self.turn)
         self._gave_way[alive] = gave_way
         if np.count_nonzero(gave_way):
             self._turn_log["gave_way"] = [fleet.ids[i] for i in alive[gave_way].tolist()]
@@ -480,13 +481,20 @@ class Engine:
     def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
         """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target,
         without one, or saying it cannot reach it) or that gave way this turn (`gave_way` rows, else the
-        arbiter's), one more for each other (PIBT's rule; ties go by id). resume.py replays it turn by turn."""
+        arbiter's), arbiter.TIE_SPAN more for each other (PIBT's rule). Among those away from rest for as long,
+        the one that was farther from its target when it left rest goes first (its Manhattan distance then,
+        kept below TIE_SPAN until it rests again: PIBT2's tie-break by initial distance, which sends the long
+        trips ahead of the short ones), then by id. resume.py replays it turn by turn."""
         fleet = self.fleet
         if gave_way is not None:
             self._gave_way[gave_way] = True
         target = fleet.target  # (every row, then the alive ones: fewer operations than selecting first)
         rest = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1) | (fleet.note == UNREACHABLE) | self._gave_way
-        self.priority[alive] = np.where(rest, 0, self.priority + 1)[alive]
+        prio = self.priority
+        left = prio == 0  # leaving rest now, if not at rest: its tie-break is taken now
+        span = arbiter.TIE_SPAN
+        far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
+        self.priority[alive] = np.where(rest, 0, np.where(left, span + far, prio + span))[alive]
         if np.count_nonzero(self._gave_way):
             self._gave_way[:] = False
 

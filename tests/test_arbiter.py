@@ -302,10 +302,12 @@ STAY = (0, 0, 0)
 
 
 def coop_arb(drones: dict[str, tuple], priority: dict[str, int] | None = None,
-             targets: dict[str, tuple] | None = None, blocked: np.ndarray | None = None, size: tuple = SIZE):
+             targets: dict[str, tuple] | None = None, blocked: np.ndarray | None = None, size: tuple = SIZE,
+             salt: int | None = None):
     """`drones`: id -> (cell, [offered steps, best first]) for a cooperative drone, or (cell, proposed cell,
     None) for one that is not; `targets` (id -> cell) and the world's buildings (`blocked`, a grid of `size`)
-    for the swap, which needs both. Returns (final cells by id, yielded ids, gave-way ids)."""
+    for the swap, which needs both; `salt` for the tie-breaks. Returns (final cells by id, yielded ids,
+    gave-way ids)."""
     ids = sorted(drones)
     before = np.array([drones[d][0] for d in ids], np.int32).reshape(len(ids), 3)
     coop = np.array([len(drones[d]) == 2 for d in ids])
@@ -323,7 +325,7 @@ def coop_arb(drones: dict[str, tuple], priority: dict[str, int] | None = None,
     aims = None if targets is None else \
         np.array([targets.get(d, (-1, -1, -1)) for d in ids], np.int32).reshape(len(ids), 3)
     world = None if blocked is None else OpenCells(blocked)
-    final, yielded, gave = cooperate(size, before, proposed, ranked, coop, prio, aims, world)
+    final, yielded, gave = cooperate(size, before, proposed, ranked, coop, prio, aims, world, salt)
     cells = {d: tuple(final[k].tolist()) for k, d in enumerate(ids)}
     return cells, {d for k, d in enumerate(ids) if yielded[k]}, {d for k, d in enumerate(ids) if gave[k]}
 
@@ -355,6 +357,20 @@ def test_pibt_pushed_drone_steps_out_of_line_before_straight_on() -> None:
     # ... unless straight on is what it prefers anyway (ranked above staying)
     cells, _, _ = coop_arb({"D01": ((1, 1, 0), [X]), "D02": ((2, 1, 0), [X, STAY, Y])}, {"D01": 3})
     assert cells == {"D01": (2, 1, 0), "D02": (3, 1, 0)}
+
+
+def test_pibt_a_pushed_drone_chooses_its_side_by_the_turn() -> None:
+    """Among the cells a drone ranks after staying (where it goes when pushed), the order is drawn from the salt
+    (the turn) and the cells: the same for the same salt, not the same at every turn (a loop of drones pushing
+    each other round does not repeat for ever); without a salt, the drone's order."""
+    drones = {"D01": ((1, 1, 1), [X]), "D02": ((2, 1, 1), [STAY, Y, NY, Z, NZ])}
+    assert coop_arb(drones, {"D01": 3})[0]["D02"] == (2, 2, 1)
+    sides = [coop_arb(drones, {"D01": 3}, salt=t)[0]["D02"] for t in range(40)]
+    assert sides == [coop_arb(drones, {"D01": 3}, salt=t)[0]["D02"] for t in range(40)]
+    assert set(sides) == {(2, 2, 1), (2, 0, 1), (2, 1, 2), (2, 1, 0)}
+    # the cells it ranks before staying keep its order whatever the salt
+    ahead = {"D01": ((1, 1, 1), [X]), "D02": ((2, 1, 1), [Y, NY, STAY, Z])}
+    assert {coop_arb(ahead, {"D01": 3}, salt=t)[0]["D02"] for t in range(40)} == {(2, 2, 1)}
 
 
 def test_pibt_never_moves_a_drone_to_a_cell_it_did_not_offer() -> None:
@@ -482,10 +498,10 @@ def ranked_scenes(draw):
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(ranked_scenes())
-def test_property_pibt_guarantees(scene) -> None:
+@given(ranked_scenes(), st.one_of(st.none(), st.integers(0, 1 << 40)))
+def test_property_pibt_guarantees(scene, salt: int | None) -> None:
     drones, priority, targets, blocked = scene
-    cells, yielded, gave = coop_arb(drones, priority, targets, blocked)
+    cells, yielded, gave = coop_arb(drones, priority, targets, blocked, salt=salt)
     coop = {d for d in drones if len(drones[d]) == 2}
     before = {d: drones[d][0] for d in drones}
     for d in drones:

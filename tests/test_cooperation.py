@@ -18,7 +18,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coordinator.arbiter import Arbiter, cooperate, fixed
+from coordinator.arbiter import TIE_SPAN, Arbiter, cooperate, fixed
 from coordinator.engine import DroneSpec, GameConfig
 from coordinator.journal import dumps, read
 from coordinator.resume import restore
@@ -194,6 +194,40 @@ def test_neighbouring_targets_one_drone_goes_round(monkeypatch: pytest.MonkeyPat
     assert play(world_of(RING), NEIGHBOURS, max_turns=100).over.reason is EndReason.TURN_LIMIT
 
 
+# --------------------------------------------------------------------------- tie-breaks
+
+#: A corridor with a two-cell bay above its middle (a 2 x 2 block): D03 parked in the block's corner, D01 and
+#: D04 coming in from the ends to the bay's cells, D02 leaving the bay for the right end.
+BAY = ["#..#", "....", "####"]
+BLOCK = {"D01": ((0, 1, 0), (1, 0, 0), "dstar"), "D02": ((1, 0, 0), (3, 1, 0), "dstar"),
+         "D03": ((1, 1, 0), (1, 1, 0), "dstar"), "D04": ((3, 1, 0), (2, 0, 0), "dstar")}
+
+
+def test_a_loop_round_a_block_ends_by_the_turns_tie_breaks() -> None:
+    """Pushed drones choosing their sides in the same order at every turn push each other round the block for
+    ever; drawn from the turn (`arbiter.tie_breaks`), the sides differ from one round to the next and every
+    drone is home within 20 turns."""
+    result = play(world_of(BAY), BLOCK, max_turns=120)
+    arrived(result)
+    assert result.over.turn <= 20
+    def same_sides(*args: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return cooperate(*args[:8])  # type: ignore[arg-type]  # (no salt: the drones' own order)
+    assert play(world_of(BAY), BLOCK, max_turns=120, arbiter=same_sides).over.reason is EndReason.TURN_LIMIT
+
+
+def test_the_longer_trip_goes_first_among_drones_away_as_long() -> None:
+    """Priorities (`Engine.age`): the turns away from rest first, then the distance to the target when the drone
+    left rest (PIBT2's initial distance), then the id: D02, with the longer trip, outranks D01."""
+    drones = {"D01": ((0, 0, 0), (3, 0, 0), "dstar"), "D02": ((0, 2, 0), (7, 2, 0), "dstar"),
+              "D03": ((5, 1, 0), (5, 1, 0), "dstar")}
+    grid = world_of(["........"] * 3)
+    records = play(grid, drones, max_turns=3).records
+    first = restore(config(grid, drones, 3), records[:2], LOG).priority.tolist()
+    assert first == [TIE_SPAN + 2, TIE_SPAN + 6, 0]  # one turn away; 2 and 6 moves from the targets then
+    later = restore(config(grid, drones, 3), records[:3], LOG).priority.tolist()
+    assert later == [2 * TIE_SPAN + 2, 2 * TIE_SPAN + 6, 0]  # the tie-break kept until they rest
+
+
 # --------------------------------------------------------------------------- where nobody can pass
 
 
@@ -294,20 +328,24 @@ def test_a_cooperative_game_replays_and_resumes(tmp_path: pathlib.Path) -> None:
 
 
 def _priorities(records: list[dict], cfg: GameConfig) -> list[int]:
-    """The priorities after the journal's turns, recomputed here from PIBT's rule and the journal alone."""
+    """The priorities after the journal's turns, recomputed here from PIBT's rule and the journal alone: the
+    turns away from rest, then (below TIE_SPAN) the Manhattan distance to the target when the drone left rest."""
     ids = sorted(d.drone for d in cfg.drones)
     pos = {d.drone: tuple(d.start) for d in cfg.drones}
     target: dict[str, tuple] = {}
     note: dict[str, str] = {}
-    prio = dict.fromkeys(ids, 0)
+    away = dict.fromkeys(ids, 0)
+    tie = dict.fromkeys(ids, 0)
     for r in records[1:]:
         target.update({d: tuple(c) for d, c in r.get("targets", {}).items()})
         pos.update({d: tuple(c) for d, c in r.get("moves", {}).items()})
         note.update(r.get("notes", {}))
         for d in ids:
             rest = d not in target or pos[d] == target[d] or note.get(d) == "UNREACHABLE" or d in r.get("gave_way", ())
-            prio[d] = 0 if rest else prio[d] + 1
-    return [prio[d] for d in ids]
+            if not rest and not away[d]:
+                tie[d] = sum(abs(a - b) for a, b in zip(pos[d], target[d]))
+            away[d] = 0 if rest else away[d] + 1
+    return [away[d] * TIE_SPAN + tie[d] if away[d] else 0 for d in ids]
 
 
 # --------------------------------------------------------------------------- through real processes
