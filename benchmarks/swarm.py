@@ -270,7 +270,8 @@ def summary(outcomes: list[Outcome]) -> str:
 def arbiter_alone(counts: Iterable[int], repeats: int = 21) -> dict[int, float]:
     """The arbiter's process time per turn (ms, median of `repeats`) on its own, for each drone count: a dense
     cube of drones (one in three cells taken), each ranking all 7 of its steps in a random order, random
-    priorities — a turn of conflicts everywhere, many push chains."""
+    priorities, a salt for the tie-breaks (the turn's, in a game) — a turn of conflicts everywhere, many push
+    chains."""
     rng = np.random.default_rng(1)
     out = {}
     for n in counts:
@@ -281,9 +282,9 @@ def arbiter_alone(counts: Iterable[int], repeats: int = 21) -> dict[int, float]:
                           np.uint32)
         priority = rng.integers(0, 50, n)
         spent = []
-        for _ in range(repeats):
+        for turn in range(1, repeats + 1):
             t0 = time.process_time()
-            arbiter.cooperate((side + 2,) * 3, before, before, ranked, np.ones(n, bool), priority)
+            arbiter.cooperate((side + 2,) * 3, before, before, ranked, np.ones(n, bool), priority, None, None, turn)
             spent.append(time.process_time() - t0)
         out[n] = 1000 * sorted(spent)[len(spent) // 2]
     return out
