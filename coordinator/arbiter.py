@@ -195,14 +195,16 @@ def wants_first(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size
 
 
 def pibt(here: list[int], cand: list[list[int]], order: list[int], taken: list[int],
-         world: tuple[OpenCells, list[int], list[int]] | None = None) -> tuple[list[int], list[int]]:
+         world: tuple[OpenCells, list[int], list[int]] | None = None,
+         aims: tuple[list[int], Cell] | None = None) -> tuple[list[int], list[int]]:
     """PIBT over flat cells: the next cell of each drone, and the drones that gave way.
 
     `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them);
     `order`: the drones that choose (cooperative), highest priority first; `taken[i]`: the next cell of a
     drone that does not choose (non-cooperative: fixed in advance), -1 for those that choose; `world`: the
     world's open cells (`OpenCells`), the flat steps to a neighbour and each drone's target (flat, -1 for
-    none), for the swap (None: no swap).
+    none), for the swap (None: no swap); `aims`: each drone's target (flat, -1 for none) and the flat cells'
+    shape (`flat_cells`: X + 2, Y + 2, Z + 2), for a pushed drone's retreat (`_out_of_the_way`; None: unknown).
 
     A drone gives way when, choosing first in its push chain, it could not have its first candidate
     although no drone outside the chain took a cell the chain needed: the drones it tried to push had
@@ -256,7 +258,7 @@ def pibt(here: list[int], cand: list[list[int]], order: list[int], taken: list[i
                 claimed[v] = i
                 if j is not None and j != i and nxt[j] < 0:  # priority inheritance: j must make room
                     frame[2] = k
-                    theirs, pulls = _out_of_the_way(cand[j], here[j], v - src + here[j]), -1
+                    theirs, pulls = _out_of_the_way(cand[j], here[j], v, src, aims and (aims[0][i], aims[1])), -1
                     if corridors is not None and now.get(theirs[0], j) != j:
                         theirs, pulls = _swapped(j, theirs, here, cand, nxt, now, corridors)
                     stack.append([j, theirs, 0, pulls])
@@ -386,13 +388,35 @@ def _pull(i: int, j: int, here: list[int], cand: list[list[int]], nxt: list[int]
         claimed[src] = j
 
 
-def _out_of_the_way(mine: list[int], src: int, ahead: int) -> list[int]:
-    """A pushed drone's candidates: its own order, but the cell straight ahead of the one pushing it (where
-    the pusher would push it again next turn) after the others it ranks below staying, if it ranks it there:
-    a side step (a bay, another floor) gets it out of the way for good."""
-    if ahead not in mine or src not in mine or mine.index(ahead) < mine.index(src):
+def _out_of_the_way(mine: list[int], src: int, enters: int, leaves: int, aim: tuple[int, Cell] | None) -> list[int]:
+    """A pushed drone's candidates (it is at `src`, which its pusher `enters` from `leaves`): its own order,
+    but, among the cells it ranks below staying (its retreats), those its pusher will want next go after the
+    others — a side step (a bay, another floor) gets it out of the way for good instead of being pushed again
+    next turn. Those cells: the one straight ahead of the pusher and, if the pusher's move brings it closer to
+    its target (`aim`: the target, flat, -1 for none, and the flat cells' shape), every one closer to that
+    target than `enters` (Manhattan distance: any way the pusher may take from there). A pusher that is itself
+    being pushed away from its target goes where the chain drives it: straight on, as far as is known."""
+    if src not in mine:
         return mine
-    return [c for c in mine if c != ahead and c >= 0] + [ahead]
+    cut = mine.index(src)
+    ahead = enters - leaves + enters
+    later = [c for c in mine[cut + 1:] if c == ahead]
+    if aim is not None and aim[0] >= 0:
+        goal, shape = aim
+        near = _manhattan(enters, goal, shape)
+        if near < _manhattan(leaves, goal, shape):  # the pusher goes its own way (not itself pushed back)
+            later = [c for c in mine[cut + 1:] if c >= 0 and (c == ahead or _manhattan(c, goal, shape) < near)]
+    if not later:
+        return mine
+    return [c for c in mine if c >= 0 and c not in later] + later
+
+
+def _manhattan(u: int, v: int, shape: Cell) -> int:
+    """The Manhattan distance between two flat cells (`flat_cells`) of a world padded to `shape`."""
+    _, Y, Z = shape
+    (uxy, uz), (vxy, vz) = divmod(u, Z), divmod(v, Z)
+    (ux, uy), (vx, vy) = divmod(uxy, Y), divmod(vxy, Y)
+    return abs(ux - vx) + abs(uy - vy) + abs(uz - vz)
 
 
 def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray, cooperative: np.ndarray,
@@ -416,7 +440,8 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
     order = coop[np.lexsort((coop, -priority[coop].astype(np.int64)))]
     world = None if open_ is None or goals is None else \
         (open_, [d for d in steps_flat(size)[1:].tolist() if d], goals.tolist())
-    chosen, gave = pibt(here.tolist(), cand.tolist(), order.tolist(), taken.tolist(), world)
+    aims = None if goals is None else (goals.tolist(), (size[0] + 2, size[1] + 2, size[2] + 2))
+    chosen, gave = pibt(here.tolist(), cand.tolist(), order.tolist(), taken.tolist(), world, aims)
     nxt = np.array(chosen, np.int64)
     final = np.where(cooperative[:, None], cells_of(nxt, size), proposed)
     yielded = cooperative & (nxt != wants_first(here, ranked, wants, size))

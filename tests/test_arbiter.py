@@ -359,6 +359,17 @@ def test_pibt_pushed_drone_steps_out_of_line_before_straight_on() -> None:
     assert cells == {"D01": (2, 1, 0), "D02": (3, 1, 0)}
 
 
+def test_pibt_pushed_drone_steps_off_the_way_its_pusher_goes_on() -> None:
+    """Pushed, a drone retreats first to a cell its pusher will not want next: not one closer to the pusher's
+    target than the cell the pusher enters (here +y, towards D01's target), though it ranks it first."""
+    drones = {"D01": ((1, 1, 0), [X, STAY]), "D02": ((2, 1, 0), [STAY, Y, NY])}
+    assert coop_arb(drones, {"D01": 3})[0]["D02"] == (2, 2, 0)  # no target known: its own order
+    cells, _, _ = coop_arb(drones, {"D01": 3}, {"D01": (4, 3, 0), "D02": (2, 1, 0)})
+    assert cells == {"D01": (2, 1, 0), "D02": (2, 0, 0)}
+    cells, _, _ = coop_arb(drones, {"D01": 3}, {"D01": (4, 0, 0), "D02": (2, 1, 0)})  # the pusher turns the other way
+    assert cells == {"D01": (2, 1, 0), "D02": (2, 2, 0)}
+
+
 def test_pibt_a_pushed_drone_chooses_its_side_by_the_turn() -> None:
     """Among the cells a drone ranks after staying (where it goes when pushed), the order is drawn from the salt
     (the turn) and the cells: the same for the same salt, not the same at every turn (a loop of drones pushing

@@ -18,6 +18,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from coordinator import arbiter as arbiter_module
 from coordinator.arbiter import TIE_SPAN, Arbiter, cooperate, fixed
 from coordinator.engine import DroneSpec, GameConfig
 from coordinator.journal import dumps, read
@@ -203,15 +204,23 @@ BLOCK = {"D01": ((0, 1, 0), (1, 0, 0), "dstar"), "D02": ((1, 0, 0), (3, 1, 0), "
          "D03": ((1, 1, 0), (1, 1, 0), "dstar"), "D04": ((3, 1, 0), (2, 0, 0), "dstar")}
 
 
-def test_a_loop_round_a_block_ends_by_the_turns_tie_breaks() -> None:
-    """Pushed drones choosing their sides in the same order at every turn push each other round the block for
-    ever; drawn from the turn (`arbiter.tie_breaks`), the sides differ from one round to the next and every
-    drone is home within 20 turns."""
+def test_a_loop_round_a_block_is_left(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Pushed drones stepping back into their pushers' way, their sides in the same order at every turn, push
+    each other round the block for ever. Retreating off the way to the pusher's target (`_out_of_the_way`),
+    every drone is home in 6 turns; with the cell straight ahead of the pusher as the only one avoided, the
+    sides drawn from the turn (`arbiter.tie_breaks`) still end the loop, in 17 turns."""
+    result = play(world_of(BAY), BLOCK, max_turns=120)
+    arrived(result)
+    assert result.over.turn <= 8
+
+    def same_sides(*args: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return cooperate(*args[:8])  # type: ignore[arg-type]  # (no salt: the drones' own order)
+    out_of_the_way = arbiter_module._out_of_the_way
+    monkeypatch.setattr(arbiter_module, "_out_of_the_way",
+                        lambda mine, src, enters, leaves, aim: out_of_the_way(mine, src, enters, leaves, None))
     result = play(world_of(BAY), BLOCK, max_turns=120)
     arrived(result)
     assert result.over.turn <= 20
-    def same_sides(*args: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return cooperate(*args[:8])  # type: ignore[arg-type]  # (no salt: the drones' own order)
     assert play(world_of(BAY), BLOCK, max_turns=120, arbiter=same_sides).over.reason is EndReason.TURN_LIMIT
 
 
