@@ -431,7 +431,6 @@ class Engine:
         if np.count_nonzero(self._aimed):
             self._aimed[:] = False
         self._tgt_seen, self._done = 0, None
-        self._early_moves.clear()  # (taken as each drones' phase opens: only a game that ended leaves some)
         self._turn_log = {"record": "turn", "turn": turn}
         early = self._early.pop(turn, None)
         if self._early:
@@ -576,16 +575,10 @@ class Engine:
         return []
 
     def _take_early_moves(self) -> list[Effect]:
-        """The drones' phase is announced: the MOVES held for it are taken (in the order they came)."""
+        """The drones' phase is announced: the MOVES held for it are taken (in the order they came; one that
+        comes after an earlier one closed the phase is refused as stale by `receive`, as it would be sent then)."""
         held, self._early_moves = self._early_moves, {}
-        effects: list[Effect] = []
-        for msg in held.values():
-            if self.stage is not Stage.DRONES:  # (the phase closed with an earlier one: the rest is late)
-                effects.append(Refusal(f"{msg.TAG} from {msg.sender}",
-                                       StaleTurn(f"MOVES ahead for turn {msg.turn} after its drones' phase")))
-                continue
-            effects += self.receive(msg)
-        return effects
+        return [e for msg in held.values() for e in self.receive(msg)]
 
     def _gcs_done(self, msg: Done) -> list[Effect]:
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:

@@ -20,7 +20,9 @@ import tempfile
 import time
 import uuid
 import weakref
+from collections.abc import Callable
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import zenoh
@@ -40,7 +42,7 @@ from dronesim.transport import (
     session_id,
 )
 from entities.world import World
-from schema import Done, Intent, Keys, Moves, Over, Phase, Status, Turn, UsageError
+from schema import Done, Intent, Keys, Message, Moves, Over, Phase, Status, Turn, UsageError
 
 #: The processes of a game, by the name their presence token has.
 ROLES = ("SRV", "ENV")
@@ -215,14 +217,19 @@ class _Game:
             raise
 
     def _status(self, turn: int, end: float) -> Status:
+        status = self._awaited(end, f"turn {turn}'s STATUS", lambda m: isinstance(m, Status) and m.turn == turn)
+        self.turn = turn
+        return cast(Status, status)
+
+    def _awaited(self, end: float, what: str, wanted: Callable[[Message], bool]) -> Message:
+        """The next message that is `wanted`; BackendError if the game ends first (or past `end`)."""
         while True:
-            match self._event(end, f"STATUS of turn {turn}"):
-                case Received(_, Status() as status) if status.turn == turn:
-                    self.turn = turn
-                    return status
+            match self._event(end, what):
+                case Received(_, msg) if wanted(msg):
+                    return msg
                 case Received(_, Over() as over):
                     self.over = over
-                    raise BackendError(f"the game ended before turn {turn}'s STATUS: {over.reason.value}: {over.text}")
+                    raise BackendError(f"the game ended before {what}: {over.reason.value}: {over.text}")
 
     def play(self, done: Done, moves: Moves | None) -> tuple[Status, Over | None]:
         t = done.turn
@@ -232,22 +239,13 @@ class _Game:
         end = time.monotonic() + self.deadline
         self.out.put(self.keys.gcs_done, done)
         if moves is not None:  # at once: the coordinator holds them until the drones' phase opens
-            if not self.moves_ahead:
-                self._drones_phase(t, end)
+            if not self.moves_ahead:  # (the benchmark's "off": the MOVES once its drones' phase is announced)
+                self._awaited(end, f"the drones' phase of turn {t}",
+                              lambda m: isinstance(m, Turn) and m.phase is Phase.DRONES and m.turn == t)
             self.out.put(self.keys.moves(HOST), moves)
         status = self._status(t, end)
         last = t >= self.game.max_turns or not status.drones.alive_mask().any()
         return status, (self._over(end) if last else None)
-
-    def _drones_phase(self, t: int, end: float) -> None:
-        """Wait for the drones' phase of turn `t` to be announced (without MOVES ahead)."""
-        while True:
-            match self._event(end, f"drones' phase of turn {t}"):
-                case Received(_, Turn(phase=Phase.DRONES) as turn) if turn.turn == t:
-                    return
-                case Received(_, Over() as over):
-                    self.over = over
-                    raise BackendError(f"the game ended at turn {over.turn}: {over.reason.value}: {over.text}")
 
     def _over(self, end: float) -> Over:
         while True:
