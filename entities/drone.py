@@ -16,17 +16,22 @@ decision without publishing it, and a batch acts only on its latest TURN: a proc
 slow catches up instead of planning turns that are long gone.
 
 Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings
-never move, so a cell's kind holds for the whole game). As soon as it is admitted it asks the
-environment for its static map (ENV/MAP, the query a ground station draws with; asked again in a later
-turn, up to `MAP_TRIES` times, while nobody answers it, as the environment may still be building its
-world); until the map comes, once it has sent its moves, it asks, for the static world (an ASK for turn
-0, answered at once), the never-told cells around where its drones are going (within `ASK_AHEAD_REACH`
-steps for a few drones, so that it asks only every few turns; the next ring for a swarm). A question about cells
+never move, so a cell's kind holds for the whole game). As soon as it is admitted and an environment is
+present (a query sent before any environment serves goes unanswered: a host admitted before the
+environment started asks when its presence appears) it asks the environment for its static map (ENV/MAP,
+the query a ground station draws with; asked again in a later turn, up to `MAP_TRIES` times, while nobody
+answers it, as the environment may still be building its world) and the static world around its drones'
+starts. Until the map comes, once it has sent its moves, it asks, for the static world (an ASK for turn 0,
+answered at once), the never-told cells around where its drones are going (within `ASK_AHEAD_REACH` steps
+for a few drones, so that it asks only every few turns; the next ring for a swarm). A question about cells
 whose kinds are all charted is answered from the chart plus the drones in them, which the turn's orders
 list (every alive drone's cell at the start of the turn): exactly the CellInfo the environment would
-give for that turn. The autopilots see only the cells they ask for, so decisions, and journals, do not
-change. Without a chart (`chart=False`, `dronesim drone --no-chart`: the benchmark switches the chart
-off to measure it) nothing is asked ahead or charted, and every question goes to the environment.
+give for that turn. A question the chart cannot answer yet waits while cells asked ahead are on their way
+(they usually answer it: the first turn's sensing then asks nothing, and a swarm's environment never
+decodes a turn's thousands of cells) and is asked once none is. The autopilots see only the cells they
+ask for, so decisions, and journals, do not change. Without a chart (`chart=False`, `dronesim drone
+--no-chart`: the benchmark switches the chart off to measure it) nothing is asked ahead or charted, and
+every question goes to the environment.
 
 The environment away. An ASK nobody answered is asked again as soon as an environment is present (at
 once if one is), for up to `patience` seconds from the first miss; after that, or once the turn is
@@ -154,9 +159,13 @@ class _Deciding:
     plan: Plan
     round: _Round | None = None
     offline: bool = False  # no more ASKs: what the chart cannot answer gets no answer (patience over, or superseded)
+    question: tuple[object] | None = None  # the plan's next question, held while what was asked ahead is on its way
 
     def next(self, r: _Round | None) -> object:
         """The plan's next question, `r`'s answers given (StopIteration with the moves at its end)."""
+        if self.question is not None:
+            (question,), self.question = self.question, None
+            return question
         return next(self.plan) if r is None else self.plan.send(r.reply(r.answers))
 
     @functools.cached_property
@@ -195,6 +204,7 @@ class DroneProcess:
         self._map_ref: int | None = None  # the MAP query on its way
         self._map_settled = False  # charted, or refused: not asked again
         self._env: set[str] = set()  # the sessions of the environment processes present
+        self._admitted = False  # `start` was called
         self._deciding: _Deciding | None = None
         self._done: tuple[tuple, StepTable | dict[str, Decision]] | None = None  # the last turn decided: key, moves
 
@@ -202,8 +212,13 @@ class DroneProcess:
 
     def start(self) -> list[Effect]:
         """Once admitted: ask for the map, and for the static world around the starts (the first
-        turn's sensing then needs no ASK)."""
-        if not self.charting:
+        turn's sensing then needs no ASK), now if an environment is present, else when one appears."""
+        self._admitted = True
+        return self._ask_before_the_game()
+
+    def _ask_before_the_game(self) -> list[Effect]:
+        """`start`'s questions, once admitted with an environment present, if the game has not begun."""
+        if not (self.charting and self._admitted and self._env) or self._map_asked or self._done or self._deciding:
             return []
         starts = self.welcome.starts.cells()
         return self._prefetch(0, sorted({c for d, c in starts.items() if d in self._mine}))
@@ -224,6 +239,7 @@ class DroneProcess:
                     effects += self._answered(ref, replies)
                 case EnvPresence(session, alive):
                     (self._env.add if alive else self._env.discard)(session)
+                    effects += self._ask_before_the_game() if alive else []
                 case Expired(ref):
                     self._expired(ref)
         if self.over is not None:
@@ -281,10 +297,18 @@ class DroneProcess:
             except StopIteration as stop:
                 return stop.value
             d.round = r = self._pose(d, question)
+            if r.parts and not d.offline and self._asked_ahead():  # the chart cannot answer it yet, but
+                d.question, d.round = (question,), None  # cells asked ahead are on their way: it waits for them
+                return None
             if d.offline:
                 r.answers.update({p: {} for p in r.parts})
             else:
                 effects += self._ask(d.turn.turn, r, list(r.parts))
+
+    def _asked_ahead(self) -> bool:
+        """Is an ASK sent ahead (for the static world, answered at once) on its way while an environment is
+        present? (Not the map: nobody may serve it, and it is not waited for.)"""
+        return bool(self._env) and any(not parts and isinstance(q, Ask) for q, parts in self._queries.values())
 
     def _finish_offline(self, d: _Deciding) -> None:
         """Let a superseded plan end (the autopilots' memory stays as it would be): the questions the chart

@@ -80,6 +80,16 @@ def turn(t: int, pos: dict | None = None) -> Turn:
                 orders=tuple(Order(drone=d, pos=p, target=TARGETS[d]) for d, p in sorted(pos.items())))
 
 
+def started(core: DroneProcess) -> list:
+    """Admitted, with an environment present (its presence, as the adapter feeds it, right after)."""
+    return core.start() + core.receive([EnvPresence("e0", True)])
+
+
+def unprepared(core: DroneProcess) -> None:
+    """`started`, but nobody answered the cells asked before the game (the map stays on its way)."""
+    core.receive([Answer(q.ref, ()) for q in queries(started(core), Ask)])
+
+
 def queries(effects, kind=None) -> list[Query]:
     return [e for e in effects if isinstance(e, Query) and (kind is None or isinstance(e.msg, kind))]
 
@@ -99,7 +109,7 @@ def expected_nps(t: int, drones=("D01",), pos=None) -> list[Nps]:
 def test_a_turn_is_answered_from_the_chart_once_the_map_came() -> None:
     env = Env()
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    start = core.start()
+    start = started(core)
     (ask_map,) = queries(start, MapRequest)
     assert queries(start, Ask)  # the static world around the start, asked ahead
     assert core.receive([env.answer(ask_map)]) == [] and core.chart.complete
@@ -107,11 +117,29 @@ def test_a_turn_is_answered_from_the_chart_once_the_map_came() -> None:
     assert queries(effects) == [] and sent(effects) == expected_nps(1)  # no round trip
 
 
+def test_what_it_asks_before_the_game_waits_for_an_environment() -> None:
+    """A host admitted before the environment started: its questions would go unanswered, so the map and the
+    cells around the starts are asked when the environment's presence appears, once, and not once the game
+    has begun."""
+    core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
+    assert core.start() == []
+    early = core.receive([EnvPresence("e1", True)])
+    assert len(queries(early, MapRequest)) == 1 and queries(early, Ask)
+    assert core.receive([EnvPresence("e1", False), EnvPresence("e2", True)]) == []  # asked already
+    late = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
+    late.start()
+    effects = late.receive([turn(1)])  # the game began first: the turn asks for itself
+    assert len(queries(effects, MapRequest)) == 1 and all(q.msg.turn == 1 for q in queries(effects, Ask))
+    assert late.receive([EnvPresence("e1", True)]) == []
+
+
 def test_a_turn_that_needs_an_ask_waits_for_its_answer_then_asks_ahead() -> None:
     env = Env()
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    (ask_map,) = queries(core.start(), MapRequest)
-    assert core.receive([Answer(ask_map.ref, ())]) == []  # nobody served the map (yet)
+    start = started(core)
+    (ask_map,) = queries(start, MapRequest)
+    nobody = [Answer(q.ref, ()) for q in start]  # nobody served the map or the cells ahead (yet)
+    assert core.receive(nobody) == []
     effects = core.receive([turn(1)])
     assert len(queries(effects, MapRequest)) == 1  # asked again, in a later turn
     (ask,) = queries(effects, Ask)
@@ -123,11 +151,29 @@ def test_a_turn_that_needs_an_ask_waits_for_its_answer_then_asks_ahead() -> None
     assert core.chart.kind(ask.msg.cells[0]) is not None  # what it was told is charted
 
 
+def test_a_turn_waits_for_the_cells_asked_ahead_instead_of_asking_them_again() -> None:
+    env = Env()
+    core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
+    ahead = queries(started(core), Ask)
+    assert ahead and all(q.msg.turn == 0 for q in ahead)
+    assert core.receive([turn(1)]) == []  # the cells around the start are on their way: nothing asked twice
+    effects = core.receive([env.answer(q) for q in ahead])
+    assert queries(effects, Ask) == [] or all(q.msg.turn == 0 for q in queries(effects, Ask))
+    assert sent(effects) == expected_nps(1)  # decided from the chart
+    # With the environment gone, it waits no more: the turn asks (and waits for an environment as usual).
+    core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
+    started(core)
+    (ask,) = queries(core.receive([EnvPresence("e0", False), turn(1)]))
+    assert ask.msg.turn == 1
+
+
 def test_a_late_map_answers_the_turns_after_it() -> None:
     env = Env()
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    (ask_map,) = queries(core.start(), MapRequest)
-    (ask,) = queries(core.receive([turn(1)]))  # the map is on its way: the turn asks
+    start = started(core)
+    (ask_map,) = queries(start, MapRequest)
+    core.receive([Answer(q.ref, ()) for q in queries(start, Ask)])  # nobody answered the cells ahead
+    (ask,) = queries(core.receive([turn(1)]))  # the map is on its way (not waited for): the turn asks
     assert core.receive([env.answer(ask_map)]) == [] and core.chart.complete  # it comes meanwhile
     assert sent(core.receive([env.answer(ask)])) == expected_nps(1)
     effects = core.receive([turn(2, {"D01": expected_nps(1)[0].pos})])
@@ -136,7 +182,7 @@ def test_a_late_map_answers_the_turns_after_it() -> None:
 
 def test_the_map_is_asked_again_in_a_later_turn_while_nobody_answers_it() -> None:
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    (ask_map,) = queries(core.start(), MapRequest)
+    (ask_map,) = queries(started(core), MapRequest)
     core.receive([Answer(ask_map.ref, ())])
     again = queries(core.receive([turn(1)]), MapRequest)
     assert len(again) == 1 and queries(core.receive([turn(1)]), MapRequest) == []  # once per turn at most
@@ -148,7 +194,7 @@ def test_the_map_is_asked_again_in_a_later_turn_while_nobody_answers_it() -> Non
 def test_over_ends_the_turn_being_decided_and_a_late_answer_changes_nothing() -> None:
     env = Env()
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    core.start()
+    unprepared(core)
     (ask,) = queries(core.receive([turn(1)]))
     over = Over(turn=1, sender="SRV", reason=EndReason.ABORTED, text="stopped")
     assert core.receive([over]) == [] and core.over == over
@@ -159,7 +205,7 @@ def test_refused_and_malformed_answers_are_counted_and_the_drone_decides_without
     for reply in (RemoteInputError("ENV/ASK answered an error: busy", reason="error-reply"),
                   Ans(turn=1, sender="ENV", kinds=b"\x00\x00")):  # two kinds for the one cell asked
         core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-        core.start()
+        unprepared(core)
         effects, refusals = core.receive([turn(1)]), []
         while not sent(effects):  # the seed's drone asks cell after cell: every answer is refused
             (ask,) = queries(effects, Ask)
@@ -176,9 +222,9 @@ def test_refused_and_malformed_answers_are_counted_and_the_drone_decides_without
 def test_an_ask_nobody_answered_is_asked_again_once_the_environment_is_back() -> None:
     env = Env()
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG, patience=12.5)
-    core.start()
+    unprepared(core)
     (ask,) = queries(core.receive([turn(1)]))
-    effects = core.receive([Answer(ask.ref, ()), EnvPresence("e1", False)])
+    effects = core.receive([Answer(ask.ref, ()), EnvPresence("e0", False)])
     (timer,) = [e for e in effects if isinstance(e, Timer)]
     assert timer.seconds == 12.5 and queries(effects) == []  # no environment: it waits for one
     (again,) = queries(core.receive([EnvPresence("e2", True)]))
@@ -186,8 +232,8 @@ def test_an_ask_nobody_answered_is_asked_again_once_the_environment_is_back() ->
     assert sent(core.receive([env.answer(again)])) == expected_nps(1)
     # An environment that stays away: once patience is over, the drone decides without its answers.
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    core.start()
-    (ask,) = queries(core.receive([turn(1)]))
+    unprepared(core)
+    (ask,) = queries(core.receive([turn(1), EnvPresence("e0", False)]))
     (timer,) = [e for e in core.receive([Answer(ask.ref, ())]) if isinstance(e, Timer)]
     assert core.receive([Expired(timer.ref - 1)]) == []  # another timer's: nothing
     (nps,) = sent(core.receive([Expired(timer.ref)]))
@@ -197,7 +243,7 @@ def test_an_ask_nobody_answered_is_asked_again_once_the_environment_is_back() ->
 def test_a_later_turn_supersedes_the_one_being_decided_and_a_repeat_gets_the_same_moves() -> None:
     env = Env()
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    core.start()
+    unprepared(core)
     (ask,) = queries(core.receive([turn(1)]))
     effects = core.receive([turn(2)])  # turn 1 was not decided in time: the game moved on
     (ask2,) = queries(effects)
@@ -208,7 +254,7 @@ def test_a_later_turn_supersedes_the_one_being_decided_and_a_repeat_gets_the_sam
     assert sent(core.receive([turn(2)])) == moves  # a repeat (e.g. after the coordinator restarted)
     # A batch of everything queued acts only on its latest TURN.
     core = DroneProcess(welcome(), drones=("D01",), autopilot="seed", logger=LOG)
-    (ask_map,) = queries(core.start(), MapRequest)
+    (ask_map,) = queries(started(core), MapRequest)
     core.receive([env.answer(ask_map)])
     assert [m.turn for m in sent(core.receive([turn(3), turn(4)]))] == [4]
 
@@ -222,7 +268,7 @@ def test_a_swarm_host_sends_one_moves_equal_to_its_drones_decisions(monkeypatch,
     drones = tuple(sorted(STARTS))
     core = DroneProcess(welcome(), drones=drones, autopilot="seed", logger=LOG, host="H01", swarm_min=swarm_min)
     assert (core.swarm is not None) == (swarm_min == 1)
-    core.start()  # (the map and the cells ahead are never answered here)
+    unprepared(core)  # (the map is never answered here)
     effects = core.receive([turn(1)])
     asks = queries(effects, Ask)
     assert asks and all(len(q.msg.cells) <= 4 for q in asks) and sent(effects) == []
@@ -240,7 +286,7 @@ def test_without_its_chart_every_turn_asks_the_environment_and_decides_the_same(
     env = Env()
     drones = ("D01",) if host is None else tuple(sorted(STARTS))
     core = DroneProcess(welcome(), drones=drones, autopilot="seed", logger=LOG, host=host, chart=False)
-    assert core.start() == []
+    assert started(core) == []
     pos = None
     for t in (1, 2):
         effects = core.receive([turn(t, pos)])
@@ -263,7 +309,7 @@ def test_without_its_chart_every_turn_asks_the_environment_and_decides_the_same(
 
 def test_a_blind_autopilot_asks_nothing() -> None:
     core = DroneProcess(welcome(), drones=("D01",), autopilot="v1", logger=LOG)
-    assert core.start() == []
+    assert started(core) == []
     effects = core.receive([turn(1)])
     assert queries(effects) == [] and len(sent(effects)) == 1
 
