@@ -8,6 +8,7 @@ journal. `Coordinator` is that loop without Zenoh (driven by events and the time
 from __future__ import annotations
 
 import argparse
+import itertools
 import logging
 import os
 import secrets
@@ -34,6 +35,7 @@ from dronesim.transport import (
     zenoh_config,
 )
 from schema import (
+    Cell,
     Connect,
     Done,
     Keys,
@@ -344,14 +346,22 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     return engine.end, srv.signal
 
 
-def parse_starts(text: str, count: int) -> tuple[DroneSpec, ...]:
-    """``--starts "0,0,0;0,2,0"`` or, by default, drones in a row along y from (0,0,0), every other cell."""
+def parse_starts(text: str, count: int, size: Cell | None = None,
+                 blocked: Callable[[Cell], bool] | None = None) -> tuple[DroneSpec, ...]:
+    """``--starts "0,0,0;0,2,0"`` or, by default, every other cell along y from (0,0,0), then the next row
+    of them (x + 2), then the next layer (z + 2), skipping `blocked` cells: as many as fit in `size` (a
+    UsageError beyond; without `size`, one row as long as needed)."""
     if text:
         cells = [tuple(int(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
         if len(cells) != count or any(len(c) != 3 for c in cells):
             raise UsageError(f"--starts needs {count} cells x,y,z separated by ';'")
     else:
-        cells = [(0, 2 * i, 0) for i in range(count)]
+        nx, ny, nz = size or (1, 2 * count, 1)
+        spots = ((x, y, z) for z in range(0, nz, 2) for x in range(0, nx, 2) for y in range(0, ny, 2))
+        cells = list(itertools.islice((c for c in spots if blocked is None or not blocked(c)), count))
+        if len(cells) < count:
+            raise UsageError(f"{count} drones do not fit in a {nx}x{ny}x{nz} world one cell apart ({len(cells)} "
+                             f"do): give their cells with --starts, or a bigger --size")
     return tuple(DroneSpec(drone=drone_id(i + 1), start=c) for i, c in enumerate(cells))  # type: ignore[arg-type]
 
 
@@ -363,7 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--world", help="a world file (JSON) instead of a generated world")
     p.add_argument("--scenario", help="a scenario file (world, drones, starts, max turns): overrides those flags")
     p.add_argument("--drones", type=int, default=1, help="number of drones D01..Dnn (default 1)")
-    p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: a row along y)')
+    p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: rows of every other cell)')
     p.add_argument("--max-turns", type=int, default=1000)
     p.add_argument("--phase-deadline", type=float, default=5.0, help="seconds for drones and ENV per phase")
     p.add_argument("--gcs-deadline", type=float, default=0.0, help="seconds for the GCS phase (0: wait)")
@@ -417,7 +427,7 @@ def game_config(args: argparse.Namespace) -> GameConfig:
         spec = WorldSpec(size=world.size, cells=world.packed())
     else:
         spec = WorldSpec(size=parse_size(args.size), seed=args.seed)
-    drones = parse_starts(args.starts, args.drones)
+    drones = parse_starts(args.starts, args.drones, spec.size, world.is_building if args.world else None)
     if args.world:
         for d in drones:
             if world.is_building(d.start):

@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--agents", type=int, help="with --scen: its first N agents (default: all)")
     p.add_argument("--scenario", help="a scenario file: world, drones with starts and autopilots, targets")
     p.add_argument("--drones", type=int, default=1, help="number of drones (default 1)")
-    p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: a row along y)')
+    p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: rows of every other cell)')
     p.add_argument("--autopilot", help="v1, seed or dstar (default seed; with --scen, dstar)")
     p.add_argument("--swarm", action="store_true", help="fly all drones from one swarm host process")
     p.add_argument("--targets", action="append", default=[], metavar="[Dnn=]x,y,z[@turn]",
@@ -99,6 +99,18 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
     return procs
 
 
+def check_game(args: argparse.Namespace) -> None:
+    """The game the coordinator will play, built from the flags it will be given: one it would refuse (a
+    UsageError: drones that do not fit, a start in a building, a bad world file...) is refused here, before
+    any process starts."""
+    from coordinator.node import build_parser as coordinator_parser
+    from coordinator.node import game_config
+
+    (name, argv), *_ = commands(args, "tcp/127.0.0.1:0")
+    assert name == "SRV" and argv[3] == "coordinator"
+    game_config(coordinator_parser().parse_args(argv[4:]))
+
+
 #: Seconds the entities have, once the coordinator is told to stop, to see its OVER and exit by themselves.
 STOP_S = 3.0
 #: Seconds a process still running after that has to end on SIGTERM before it is killed.
@@ -115,6 +127,7 @@ def main(args: argparse.Namespace) -> int:
             path = pathlib.Path(tmp) / "scenario.json"
             path.write_text(json.dumps(data))
             return main(argparse.Namespace(**{**vars(args), "scen": None, "world": None, "scenario": str(path)}))
+    check_game(args)
     interactive = not args.targets and not args.script and not args.scenario and not args.web
     with zenoh.open(router_config(args.listen)) as router:
         locator = router_locators(router)[0]

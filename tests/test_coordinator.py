@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from coordinator.engine import DroneSpec, Engine, GameConfig
-from coordinator.node import LINGER_S, SETTLE_S, Coordinator, Executor
+from coordinator.node import LINGER_S, SETTLE_S, Coordinator, Executor, parse_starts
 from dronesim.signals import Interrupted
 from dronesim.transport import Asked, Presence, Received, Sessions, sessions_listed
 from schema import (
@@ -26,6 +26,7 @@ from schema import (
     Role,
     Status,
     Turn,
+    UsageError,
     WorldSpec,
     decode,
 )
@@ -345,3 +346,24 @@ def test_a_presence_that_was_never_admitted_asks_nothing() -> None:
     run.srv.handle(Presence("D02", "other", False))  # not D02's admitted session
     run.srv.handle(Presence("D07", "d7", False))
     assert not run.audits
+
+
+def test_default_starts_fill_the_world_row_after_row_and_refuse_what_does_not_fit(capsys) -> None:
+    """Every other cell along y from (0,0,0) (the seed's row, unchanged while it fits), then the next row
+    (x + 2), then the next layer (z + 2), skipping blocked cells; more drones than fit are refused, and
+    `dronesim up` refuses them before it starts any process."""
+    from dronesim.up import cli as up
+
+    def cells(count, size, blocked=None):
+        return [d.start for d in parse_starts("", count, size, blocked)]
+
+    assert cells(3, (10, 10, 10)) == [(0, 0, 0), (0, 2, 0), (0, 4, 0)]
+    assert cells(3, (10, 10, 10)) == [d.start for d in parse_starts("", 3)]  # no size: one row
+    assert cells(4, (3, 5, 1)) == [(0, 0, 0), (0, 2, 0), (0, 4, 0), (2, 0, 0)]
+    assert cells(5, (3, 3, 3)) == [(0, 0, 0), (0, 2, 0), (2, 0, 0), (2, 2, 0), (0, 0, 2)]
+    assert cells(2, (1, 5, 1), blocked=lambda c: c == (0, 2, 0)) == [(0, 0, 0), (0, 4, 0)]
+    with pytest.raises(UsageError, match="30 drones do not fit in a 4x4x1 world"):
+        parse_starts("", 30, (4, 4, 1))
+    assert [d.start for d in parse_starts("1,1,1;2,2,2", 2, (4, 4, 1))] == [(1, 1, 1), (2, 2, 2)]
+    assert up(["--size", "4,4,1", "--drones", "30", "--quiet"]) == 2
+    assert "30 drones do not fit" in capsys.readouterr().err

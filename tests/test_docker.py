@@ -947,7 +947,7 @@ class Game:
         from schema.messages import WorldSpec
 
         size = parse_size(self.size)
-        starts = parse_starts("", self.drones)
+        starts = parse_starts("", self.drones, size)
         world = build_world(WorldSpec(size=size, seed=self.seed), [d.start for d in starts])
         taken, out = set(), []
         for d in starts:
