@@ -32,7 +32,7 @@ import dataclasses
 import enum
 import hashlib
 import logging
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, overload
 
@@ -70,8 +70,8 @@ from schema import (
     encode,
 )
 from schema.errors import OutOfRange, Refusal, StaleTurn, UnknownEntity, UsageError, WrongSender
-from schema.messages import is_drone_id
-from schema.tables import code_of, drone_name
+from schema.messages import drone_id, is_drone_id
+from schema.tables import code_of, drone_name, drone_number
 from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
 
 from . import arbiter, observer
@@ -350,7 +350,7 @@ class Engine:
         starts = StartTable.empty(len(rows))
         starts["drone"], starts["pos"] = fleet.numbers[rows], fleet.pos[rows]
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
-            f"{msg.sender} flying {', '.join(msg.drones)}"
+            f"{msg.sender} flying {id_ranges(msg.drones)}"
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
         welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
                           world=self.config.world, starts=StartTable(starts), game=self.game)
@@ -1018,3 +1018,15 @@ def _with_refusals(msg: Message, refused: list[RemoteInputError], effects: list[
 
 def replace_config(config: GameConfig, **changes: Any) -> GameConfig:
     return dataclasses.replace(config, **changes)
+
+
+def id_ranges(drones: Iterable[str]) -> str:
+    """Drone ids as runs of consecutive numbers, as `dronesim drone --id` reads them: "D01-D03, D07"."""
+    numbers = sorted(map(drone_number, drones))
+    runs: list[list[int]] = []
+    for n in numbers:
+        if runs and n == runs[-1][1] + 1:
+            runs[-1][1] = n
+        else:
+            runs.append([n, n])
+    return ", ".join(drone_id(a) if a == b else f"{drone_id(a)}-{drone_id(b)}" for a, b in runs)

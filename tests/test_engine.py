@@ -219,6 +219,13 @@ def test_config_validation() -> None:
 # --------------------------------------------------------------------------- admission
 
 
+def test_a_hosts_drones_are_named_as_runs_of_numbers() -> None:
+    from coordinator.engine import id_ranges
+
+    assert id_ranges(["D07", "D01", "D02", "D03", "D100", "D09", "D10"]) == "D01-D03, D07, D09-D10, D100"
+    assert id_ranges([f"D{n:02d}" for n in range(1, 2001)]) == "D01-D2000"
+
+
 def test_welcome_texts_and_starts() -> None:
     e = Engine(config(("D01", (0, 0, 0)), ("D02", (1, 0, 0))), LOG)
     w = reply(e.connect(connect("ENV", Role.ENV), Token("a")))
@@ -323,7 +330,7 @@ def test_swarm_host_flies_several_drones() -> None:
     e = Engine(config(("D01", (0, 0, 0)), ("D02", (1, 0, 0)), ("D03", (2, 0, 0))), LOG)
     w = reply(e.connect(connect("H01", Role.DRONE, ("D01", "D02"), "dstar"), 1))
     assert isinstance(w, Welcome)
-    assert w.text == "You are connected as H01 flying D01, D02"
+    assert w.text == "You are connected as H01 flying D01-D02"
     assert [s.drone for s in w.starts] == ["D01", "D02"]
     assert e.drones["D01"].host == e.drones["D02"].host == "H01"
     assert e.drones["D01"].autopilot == "dstar"
