@@ -19,8 +19,13 @@ BENCHMARKS = {"autopilot": "autopilot", "flood": "flood", "perf": "perf", "rl": 
 def cli(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] not in BENCHMARKS:
-        print(f"usage: dronesim bench {{{','.join(BENCHMARKS)}}} [options]", file=sys.stderr)
-        return 2
+        lines = [f"usage: dronesim bench {{{','.join(BENCHMARKS)}}} [options]   (dronesim bench NAME --help)", ""]
+        for name, module in BENCHMARKS.items():
+            doc = (importlib.import_module(f"{__name__}.{module}").__doc__ or "").strip().splitlines()
+            lines.append(f"  {name:<10} {doc[0] if doc else ''}")
+        asked = argv[:1] in (["-h"], ["--help"])
+        print("\n".join(lines), file=sys.stdout if asked else sys.stderr)
+        return 0 if asked else 2
     return int(importlib.import_module(f"{__name__}.{BENCHMARKS[argv[0]]}").main(argv[1:]) or 0)
 
 

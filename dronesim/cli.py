@@ -15,7 +15,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "router": ("dronesim.router", "cli", "a standalone Zenoh router (for multi-host runs without zenohd)"),
     "certs": ("dronesim.certs", "cli", "a development CA and per-role TLS certificates/passwords (docs/security.md)"),
     "replay": ("dronesim.replay", "main", "re-render a run from its journal; --verify re-simulates it"),
-    "bench": ("benchmarks", "cli", "benchmarks: `dronesim bench autopilot|perf|rl` (results in BENCHMARKS.md)"),
+    "bench": ("benchmarks", "cli", "benchmarks (`dronesim bench --help` lists them; results in BENCHMARKS.md)"),
 }
 
 

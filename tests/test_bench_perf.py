@@ -158,3 +158,13 @@ def test_pogema_anchor_installs_and_measures_steps_per_second():
     rates = pogema.steps_per_second([1, 16], seconds=0.2)
     assert set(rates) == {1, 16}
     assert all(r > 0 for r in rates.values())
+
+
+def test_dronesim_bench_help_lists_every_benchmark(capsys) -> None:
+    from benchmarks import cli
+    from dronesim.cli import main
+
+    assert main(["bench", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"  {name} " in out for name in BENCHMARKS), out
+    assert cli(["no-such-bench"]) == 2 and "usage: dronesim bench" in capsys.readouterr().err
