@@ -158,7 +158,7 @@ class GameConfig:
         ids, starts = table.ids, table.starts
         for d in ids:
             if not is_drone_id(d):
-                raise UsageError(f"{d!r} is not a drone id (D01 ... D9999)")
+                raise UsageError(f"{d!r} is not a drone id (D01 ... D65535)")
         if len(set(ids)) != len(ids):
             raise UsageError(f"duplicate drone ids in {list(ids)}")
         ordered = starts[np.lexsort(starts.T)]

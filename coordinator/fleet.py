@@ -49,7 +49,7 @@ class Fleet:
         pairs = sorted(starts)
         for d, _ in pairs:
             if not is_drone_id(d):
-                raise UsageError(f"{d!r} is not a drone id (D01 ... D9999)")
+                raise UsageError(f"{d!r} is not a drone id (D01 ... D65535)")
         self.ids: tuple[str, ...] = tuple(d for d, _ in pairs)
         self.index: dict[str, int] = {d: i for i, d in enumerate(self.ids)}
         if len(self.index) != len(self.ids):

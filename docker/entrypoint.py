@@ -40,7 +40,7 @@ ROLES = {"coordinator": "SRV", "env": "ENV", "gcs": "GCS", "drone": None, "route
 TAKEN = re.compile(r"connection refused: .*(is already connected|is already taken)")
 #: the refusal that means "there is no such drone in this game": every id is taken.
 UNKNOWN = re.compile(r"connection refused: (unknown drone .*)")
-MAX_ID = 9999
+MAX_ID = 65535
 
 
 def state_path() -> Path:
@@ -63,7 +63,7 @@ def drone_entity(args: argparse.Namespace) -> str | None:
     ident = args.id or "D01"
     if ident.isdigit():
         return f"D{int(ident):02d}"
-    return ident if re.fullmatch(r"D\d{2,4}", ident) else None
+    return ident if re.fullmatch(r"D\d{2,5}", ident) else None
 
 
 def write_state(role: str, entity: str | None, argv: list[str], pid: int) -> None:

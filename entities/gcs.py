@@ -40,7 +40,7 @@ from schema.tuning import ANSWER_AHEAD
 from .environment import build_world
 from .world import World
 
-_ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,4})\s*[= ]\s*)?"
+_ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,5})\s*[= ]\s*)?"
                    r"(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")
 
 
@@ -148,7 +148,7 @@ class Plan:
 def parse_command(line: str, size: Cell, drones: Iterable[str], world: World | None = None) -> dict[str, Cell]:
     """One interactive line: ``x,y,z`` (the only or first drone) or ``Dnn x,y,z``."""
     drones = list(drones)
-    head = re.match(r"\s*(D\d{2,4})(?:\s*=\s*|\s+)(.*)\Z", line)  # "D02 1 2 3", "D02=1,2,3"
+    head = re.match(r"\s*(D\d{2,5})(?:\s*=\s*|\s+)(.*)\Z", line)  # "D02 1 2 3", "D02=1,2,3"
     drone_part, cell_part = (head[1], head[2]) if head else ("", line)
     cell_part = re.sub(r"(?<=\d)[\s,]+(?=-?\d)", ",", cell_part.strip())  # "1 2 3" -> "1,2,3"
     line = f"{drone_part}={cell_part}" if drone_part else cell_part

@@ -13,7 +13,7 @@ import typing
 from .keys import KEY_TABLE
 from .messages import MESSAGE_TYPES, SCHEMA_VERSION, TABLES
 from .samples import SAMPLES, golden
-from .tables import Col
+from .tables import MAX_DRONE, Col
 
 README = pathlib.Path(__file__).with_name("README.md")
 
@@ -58,8 +58,8 @@ def render() -> str:
             "A table is one MessagePack `bin`: its rows back to back, no padding, little-endian. A drone is its number",
             "(`u16`: D01 is 1, D1000 is 1000; drone ids are canonical, so the number names one drone), a cell is three",
             "`i32` (x, y, z), an enum is the `u8` index of its member in the order listed. A receiver rejects a table",
-            "whose length is not a whole number of rows, with a drone number outside 1..9999 or twice, a cell out of",
-            "range or an enum index past its members.\n",
+            f"whose length is not a whole number of rows, with a drone number outside 1..{MAX_DRONE} or twice, a cell",
+            "out of range or an enum index past its members.\n",
             "| table | carried in | row bytes | columns, in order |", "|---|---|---|---|"]
     carried = {hint: f"{cls.TAG}.{name}" for cls in MESSAGE_TYPES
                for name, hint in typing.get_type_hints(cls).items() if hint in TABLES}

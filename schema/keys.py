@@ -57,8 +57,8 @@ KEY_TABLE: tuple[KeySpec, ...] = (
 ENVELOPE = 1024
 #: Bytes one cell may take in MessagePack (an array of three integers of up to 5 bytes each).
 CELL_BYTES = 16
-#: Bytes one drone id may take in MessagePack (a string of up to 5 ASCII characters, D9999, and its header).
-ID_BYTES = 6
+#: Bytes one drone id may take in MessagePack (a string of up to 6 ASCII characters, D65535, and its header).
+ID_BYTES = 7
 
 
 def size_limit(message: type[m.Message]) -> int:

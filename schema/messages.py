@@ -30,6 +30,7 @@ import numpy as np
 from .errors import MalformedMessage
 from .tables import (
     MAX_COORD,
+    MAX_DRONE,
     RANK_STEPS,
     Col,
     Row,
@@ -66,8 +67,8 @@ def is_host_id(value: object) -> bool:
 
 def drone_id(n: int) -> str:
     """The conventional id of the n-th drone: 1 -> 'D01', 100 -> 'D100'."""
-    if not 1 <= n <= 9999:
-        raise ValueError(f"drone number {n} out of 1..9999")
+    if not 1 <= n <= MAX_DRONE:
+        raise ValueError(f"drone number {n} out of 1..{MAX_DRONE}")
     return drone_name(n)
 
 

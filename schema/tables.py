@@ -35,8 +35,8 @@ if typing.TYPE_CHECKING:
 
 #: Largest coordinate a cell may have, in a table or any message (worlds are far smaller; this bounds garbage).
 MAX_COORD = 1 << 16
-#: Largest drone number (D9999).
-MAX_DRONE = 9999
+#: Largest drone number (D65535): the most a table's `u16` drone column holds.
+MAX_DRONE = 65535
 
 
 class Col(enum.Enum):
@@ -57,15 +57,16 @@ _LOWEST = {Col.CELL: 0, Col.SIGNED: -MAX_COORD, Col.OPTIONAL: 0}
 
 
 def _numbered(value: object, letter: str) -> bool:
-    """`letter` then 2 to 4 ASCII digits (D01, H12, D1000)."""
-    return (type(value) is str and 3 <= len(value) <= 5 and value[0] == letter and value.isascii()
+    """`letter` then 2 to 5 ASCII digits (D01, H12, D1000, D10000)."""
+    return (type(value) is str and 3 <= len(value) <= 6 and value[0] == letter and value.isascii()
             and value[1:].isdigit())
 
 
 def is_drone_id(value: object) -> bool:
-    """A drone's id: D01, D02, ... D9999, canonical (`drone_name(n)`: no D00, D001 or D0100), so that it is
-    one number in a table's drone column."""
-    return _numbered(value, "D") and value[1] != "0" or value in _TWO_DIGITS  # type: ignore[index]
+    """A drone's id: D01, D02, ... D65535 (`MAX_DRONE`), canonical (`drone_name(n)`: no D00, D001 or D0100), so
+    that it is one number in a table's drone column."""
+    return (_numbered(value, "D") and value[1] != "0" and int(value[1:]) <= MAX_DRONE  # type: ignore[index]
+            or value in _TWO_DIGITS)
 
 
 _TWO_DIGITS = frozenset(f"D0{n}" for n in range(1, 10))

@@ -290,7 +290,6 @@ def test_optional_fields_may_be_omitted() -> None:
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 3, 0))),  # no 4th Note
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 6))),  # no 7th Cause
     ("status", "drones", rows(StatusTable, (0, (1, 0, 0), 0, NO_CELL, 0, 0))),  # no drone 0
-    ("status", "drones", rows(StatusTable, (10000, (1, 0, 0), 0, NO_CELL, 0, 0))),
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 0), (1, (2, 0, 0), 0, NO_CELL, 0, 0))),
     ("status", "drones", rows(StatusTable, (1, (MAX_COORD + 1, 0, 0), 0, NO_CELL, 0, 0))),
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 0))[:-1]),  # not whole rows
@@ -331,7 +330,7 @@ def test_signed_cells_where_allowed() -> None:
     assert decode(mutated("ask_around", cells=[], around=[[0, 0, 0]])).asked()[1] == (-1, 0, 0)
 
 
-@pytest.mark.parametrize("drone", ["D1", "d01", "D01x", "D12345", "X01", "D", "", "D01\n", "H01", "ENV"])
+@pytest.mark.parametrize("drone", ["D1", "d01", "D01x", "D65536", "D123456", "X01", "D", "", "D01\n", "H01", "ENV"])
 def test_rejects_invalid_drone_ids(drone: str) -> None:
     rejects(mutated("target", drone=drone), match="drone id")
 
@@ -590,12 +589,12 @@ def test_drone_ids() -> None:
     assert drone_id(1) == "D01"
     assert drone_id(42) == "D42"
     assert drone_id(100) == "D100"
-    assert drone_id(9999) == "D9999"
-    for bad in (0, -1, 10000):
+    assert drone_id(9999) == "D9999" and drone_id(10000) == "D10000" and drone_id(65535) == "D65535"
+    for bad in (0, -1, 65536):
         with pytest.raises(ValueError):
             drone_id(bad)
-    assert is_drone_id("D01") and is_drone_id("D1234")
-    for bad in ("D1", "D12345", "d01", "H01", 1, None, "D01 "):
+    assert is_drone_id("D01") and is_drone_id("D1234") and is_drone_id("D12345") and is_drone_id("D65535")
+    for bad in ("D1", "D65536", "D123456", "D012345", "d01", "H01", 1, None, "D01 "):
         assert not is_drone_id(bad)
 
 
