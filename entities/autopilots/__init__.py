@@ -15,11 +15,13 @@ REGISTRY: dict[str, tuple[str, str]] = {
     "v1": ("v1", "V1Pilot"),
     "seed": ("seed", "SeedPilot"),
     "dstar": ("dstar", "DStarPilot"),
+    "lrta": ("lrta", "LrtaPilot"),
 }
 #: name -> (module, class) of the autopilots that also come as one pilot for a whole swarm, over arrays
 #: (same decisions as one instance per drone; a swarm host flies its drones with it).
 SWARMS: dict[str, tuple[str, str]] = {
     "seed": ("seed", "SeedSwarm"),
+    "lrta": ("lrta", "LrtaSwarm"),
 }
 
 

@@ -35,8 +35,9 @@ Oracle = Callable[[tuple[Cell, ...]], Answers]
 #: pending question ({drone: cells}) and receives {drone: answers}; it returns the turn's moves.
 PilotsPlan = Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers], "StepTable | dict[str, Decision]"]
 #: A swarm pilot's turn (`SwarmPilot.step`): it yields an (m, 3) array of cells (at most once) and receives
-#: their CellKind codes ((m,) uint8, `NO_ANSWER` for a cell nobody answered).
-SwarmSensing = Generator[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]
+#: their CellKind codes ((m,) uint8, `NO_ANSWER` for a cell nobody answered); it returns the new cells and the
+#: note codes, and, for a cooperative pilot, the rankings (`schema.tables.rank_steps`, uint32).
+SwarmSensing = Generator[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Decision:
@@ -74,9 +75,10 @@ class SwarmPilot(Protocol):
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """The moves of the drones numbered `drones`, standing at `pos` ((n, 3)) with `target` ((n, 3),
-        (-1, -1, -1) for none): returns (new cells (n, 3), note codes (n,) as in a StepTable). It may
-        yield once an (m, 3) array of cells, and receives their CellKind codes (`NO_ANSWER` for a cell
-        not answered)."""
+        (-1, -1, -1) for none): returns (new cells (n, 3), note codes (n,) as in a StepTable), and a
+        cooperative pilot its drones' rankings too ((n,) packed as `schema.tables.rank_steps`: a MOVES's
+        `ranked` column). It may yield once an (m, 3) array of cells, and receives their CellKind codes
+        (`NO_ANSWER` for a cell not answered)."""
         ...
 
 
@@ -174,6 +176,7 @@ def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell
 
 def fly_swarm(swarm: SwarmPilot, rows: np.ndarray) -> Generator[np.ndarray, np.ndarray, StepTable]:
     """The plan of a swarm pilot for the orders `rows` (an OrderTable's): it yields the cells it asks
-    about (at most once), receives their kinds, and returns the MOVES steps."""
-    pos, note = yield from swarm.step(rows["drone"], rows["pos"], rows["target"])
-    return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note)
+    about (at most once), receives their kinds, and returns the MOVES steps (with the rankings of a pilot that
+    gives them)."""
+    pos, note, *ranked = yield from swarm.step(rows["drone"], rows["pos"], rows["target"])
+    return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note, **dict(zip(["ranked"], ranked)))
