@@ -34,13 +34,11 @@ same agent counts in the same run: its steps per second with random actions on i
 from __future__ import annotations
 
 import argparse
-import gc
 import logging
 import sys
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -120,26 +118,6 @@ class Outcome:
 
 
 
-class Timed:
-    """An arbiter that counts the process time spent in it. The cyclic garbage collector is held off meanwhile:
-    in process, the drones' pilots make most of the garbage (their ASK answers), and a collection that the
-    arbiter's allocations happen to trigger would bill it their cost (a coordinator has no pilots)."""
-
-    def __init__(self, inner: arbiter.Arbiter) -> None:
-        self.inner, self.cpu, self.calls = inner, 0.0, 0
-
-    def __call__(self, size: Cell, *args: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        gc.disable()
-        try:
-            t0 = time.process_time()
-            out = self.inner(size, *args)
-            self.cpu += time.process_time() - t0
-        finally:
-            gc.enable()
-        self.calls += 1
-        return out
-
-
 def movingai_instance(family: str, agents: int, seed: int) -> Instance:
     blocked = movingai.generate(family, seed)
     scen = movingai.scenario(blocked, agents, seed, f"{family}.map")
@@ -170,7 +148,7 @@ def play(inst: Instance, variant: str) -> Outcome:
     config = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=inst.max_turns,
                         drones=tuple(DroneSpec(drone=d, start=s) for d, s in zip(ids, inst.starts)))
     plan = Plan(tuple(sorted((1, d, g) for d, g in zip(ids, inst.goals))))
-    timed = Timed(arbiter.fixed if variant == "fixed" else arbiter.cooperate)
+    timed = arbiter.Timed(arbiter.fixed if variant == "fixed" else arbiter.cooperate)
     # the former D* never said UNREACHABLE while stuck behind drones: it waited to the turn limit
     options = {"pibt": None, "pibt+map": {"dstar": {"known": inst.grid}},
                "fixed": {"dstar": {"stuck_after": inst.max_turns + 1}}}[variant]

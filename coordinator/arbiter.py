@@ -36,6 +36,8 @@ priority (the id) over one proposed move per drone.
 
 from __future__ import annotations
 
+import gc
+import time
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Set
 from typing import Any
@@ -55,6 +57,28 @@ TIE_SPAN = 1 << 16
 Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, "OpenCells | None",
                     "int | None"], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
+
+
+class Timed:
+    """An arbiter that counts the process time spent in it (`cpu`, seconds, over `calls` turns): a benchmark's
+    in-process games and a coordinator's report at the end of its game (`coordinator/node.py`). The cyclic
+    garbage collector is held off meanwhile: in process, the drones' pilots make most of the garbage (their ASK
+    answers), and a collection that the arbiter's allocations happen to trigger would bill it their cost (a
+    coordinator has no pilots)."""
+
+    def __init__(self, inner: Arbiter) -> None:
+        self.inner, self.cpu, self.calls = inner, 0.0, 0
+
+    def __call__(self, size: Cell, *args: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        gc.disable()
+        try:
+            t0 = time.process_time()
+            out = self.inner(size, *args)
+            self.cpu += time.process_time() - t0
+        finally:
+            gc.enable()
+        self.calls += 1
+        return out
 
 def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperative: Set[str]) -> dict[str, Cell]:
     """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers."""

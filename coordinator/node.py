@@ -57,6 +57,7 @@ from schema import (
 from schema.errors import WrongSender
 from schema.messages import WorldSpec
 
+from . import arbiter
 from .admission import Presences
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
 from .journal import JournalWriter, read, repair_tail
@@ -316,6 +317,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     that stopped it (None: it ended by itself)."""
     engine = open_game(game, journal, resume, logger)
     engine.verify_env, engine.journaled = verify_env, journal is not None
+    engine.arbiter = timed = arbiter.Timed(engine.arbiter)  # its CPU, reported at the end (benchmarks read it)
     with zenoh.open(conf) as session:
         other = rival(session, keys)
         if other is not None:
@@ -343,6 +345,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.report())
     assert engine.end is not None
+    if timed.calls:
+        logger.info("arbitration: %d turns, %.3f ms of CPU a turn", timed.calls, 1000 * timed.cpu / timed.calls)
     return engine.end, srv.signal
 
 
