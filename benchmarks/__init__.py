@@ -29,16 +29,42 @@ def cli(argv: list[str] | None = None) -> int:
     return int(importlib.import_module(f"{__name__}.{BENCHMARKS[argv[0]]}").main(argv[1:]) or 0)
 
 
-def replace_section(path: Path, title: str, body: str) -> None:
-    """Replace (or append) the section `title` ("## ...") of a Markdown file, leaving the others alone."""
+def replace_section(path: Path, title: str, body: str, keep: str | None = None) -> None:
+    """Replace (or append) the section `title` ("## ...") of a Markdown file, leaving the others alone (and its
+    subsection `keep` ("### ..."), if it has one: another command's)."""
     text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    section = f"{title}\n\n{body.strip()}\n"
+    kept = _subsection(text, title, keep) if keep else None
+    section = f"{title}\n\n{body.strip()}\n" + (f"\n{kept.strip()}\n" if kept else "")
     pattern = re.compile(rf"^{re.escape(title)}[ \t]*\n.*?(?=^## |\Z)", re.S | re.M)
     if pattern.search(text):
         text = pattern.sub(lambda _: section + "\n", text, count=1).rstrip("\n") + "\n"
     else:
         text = text.rstrip("\n") + "\n\n" + section
     path.write_text(text, encoding="utf-8")
+
+
+def _subsection(text: str, title: str, sub: str) -> str | None:
+    """The subsection `sub` ("### ...", up to the next heading of level 2 or 3) of section `title`, if any."""
+    section = re.search(rf"^{re.escape(title)}[ \t]*\n.*?(?=^## |\Z)", text, re.S | re.M)
+    if section is None:
+        return None
+    found = re.search(rf"^{re.escape(sub)}[ \t]*\n.*?(?=^##+ |\Z)", section.group(0), re.S | re.M)
+    return found.group(0) if found else None
+
+
+def replace_subsection(path: Path, title: str, sub: str, body: str) -> None:
+    """Replace (or append at the end of section `title`, made if need be) its subsection `sub` ("### ...")."""
+    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
+    if not re.search(rf"^{re.escape(title)}[ \t]*$", text, re.M):
+        text = text.rstrip("\n") + f"\n\n{title}\n"
+    old = _subsection(text, title, sub)
+    section = re.search(rf"^{re.escape(title)}[ \t]*\n.*?(?=^## |\Z)", text, re.S | re.M)
+    assert section is not None
+    part = section.group(0)
+    new = f"{sub}\n\n{body.strip()}\n\n"
+    part = part.replace(old, new, 1) if old else part.rstrip("\n") + f"\n\n{new}"
+    text = text[:section.start()] + part + text[section.end():]
+    path.write_text(text.rstrip("\n") + "\n", encoding="utf-8")
 
 
 def add_write_args(parser: argparse.ArgumentParser) -> None:

@@ -522,6 +522,9 @@ class Variant:
     shared_memory: bool = False  # every process and the router with shared memory on (shared_memory_configs)
     per_drone: bool = False  # one process per drone (`dronesim drone --id Dnn`) instead of one swarm host
     secured: Secured | None = None  # TLS, user/password and access control (with one swarm host, H01)
+    autopilot: str = "seed"  # the drones' autopilot (`dronesim drone --autopilot`)
+    hosts: int = 1  # swarm hosts H01, H02, ... (processes "swarm", or "swarm1", "swarm2", ...), drones in id order
+    statuses: bool = True  # keep every STATUS (`Game.statuses`; False: only the last, `Game.last_status`)
 
 
 def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path | None = None,
@@ -549,7 +552,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     ids = "D01" if case.drones == 1 else f"D01-{last_drone}"
     router_config, config = shared_memory_configs(logs) if variant.shared_memory else (None, None)
     secured = variant.secured
-    if secured is not None and variant.per_drone:
+    if secured is not None and (variant.per_drone or variant.hosts > 1):
         raise ValueError("a secured game is flown by one swarm host")
     creds = secured.flags if secured is not None else (lambda _entity: [])
     router_flags = [] if secured is None else secured.router_flags(
@@ -564,12 +567,16 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
             procs.start("coordinator", [*base, "coordinator", *common, "--scenario", str(scenario_file),
                                         "--phase-deadline", str(PHASE_DEADLINE), *journal, *creds("SRV")])
             procs.start("env", [*base, "env", *common, "--no-draw", "--connect-timeout", "120", *creds("ENV")])
-            flying = [*base, "drone", *common, "--autopilot", "seed", "--connect-timeout", "120"]
+            flying = [*base, "drone", *common, "--autopilot", variant.autopilot, "--connect-timeout", "120"]
             flying += [] if variant.chart else ["--no-chart"]
             flying += [] if variant.swarm_min is None else ["--swarm-pilot-min", str(variant.swarm_min)]
             if variant.per_drone:
                 for number in range(1, case.drones + 1):
                     procs.start(drone_id(number), [*flying, "--id", drone_id(number)])
+            elif variant.hosts > 1:
+                for h, part in enumerate(np.array_split(np.arange(1, case.drones + 1), variant.hosts), 1):
+                    procs.start(f"swarm{h}", [*flying, "--id", f"{drone_id(int(part[0]))}-{drone_id(int(part[-1]))}",
+                                              "--host", f"H{h:02d}"])
             else:
                 procs.start("swarm", [*flying, "--id", ids, "--host", "H01", *creds("H01")])
             conf = client_config(loc) if secured is None else secured.session(loc, "GCS")
@@ -591,6 +598,14 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                 pids |= {"router": router.pid, "bench": "self"}
                 idle_since = time.monotonic()
                 end: End | None = None
+                measured_to: list[int] = []  # the turn whose GCS phase ended the measure (the game's end, if sooner)
+
+                def measured(turn: int) -> None:
+                    game.cpu = {n: cpu_seconds(pid) - game.cpu.get(n, 0.0) for n, pid in pids.items()}
+                    for name, proc in procs.procs.items():
+                        game.memory[name] = proc_status(proc.pid)
+                    measured_to.append(turn)
+
                 while end is None:
                     event = inbox.get(1.0)
                     now = time.perf_counter()
@@ -607,7 +622,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                         case Received(_, Status() as st):
                             stamps[("STATUS", st.turn)] = now  # turn st.turn + 1 begins
                             game.last_status = st
-                            game.statuses[st.turn] = st
+                            game.statuses[st.turn] = st if variant.statuses else None
                             game.arrived[st.turn] = time.monotonic()  # before on_status, which may start a flood
                             if on_status is not None:
                                 on_status(loc, keys, st.turn)
@@ -615,10 +630,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                                 game.cpu = {n: cpu_seconds(pid) for n, pid in pids.items()}
                         case Received(_, Turn() as turn):
                             stamps[("GCS", turn.turn)] = now
-                            if turn.turn >= case.end_turn:  # ... to here
-                                game.cpu = {n: cpu_seconds(pid) - game.cpu.get(n, 0.0) for n, pid in pids.items()}
-                                for name, proc in procs.procs.items():
-                                    game.memory[name] = proc_status(proc.pid)
+                            if turn.turn >= case.end_turn and not measured_to:  # ... to here
+                                measured(case.end_turn)
                     if isinstance(event, Received):
                         effects = station.receive(event.msg, time.monotonic())
                     if event is not None:
@@ -630,6 +643,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                             stamps[("DONE", effect.msg.turn)] = time.perf_counter()  # not answered ahead
                         elif isinstance(effect, End):
                             end = effect
+                            if not measured_to and case.warmup in game.statuses:  # over before the measure's end
+                                measured(max(game.statuses) + 1)
                 game.over = f"{end.over.reason.value} at turn {end.over.turn}"
                 member.close()
             game.codes = procs.wait(60.0)
@@ -648,17 +663,17 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     if variant.per_drone:
         _as_one_swarm(game)
     if game.error:
-        for n in ROLES:
+        for n in [r for r in procs.procs if r in ROLES or r.startswith("swarm")]:
             game.error += f"\n--- {n} ({logs / (n + '.log')}):\n{procs.tail(n)}"
         return game
-    first, last = case.warmup + 1, case.end_turn
+    first, last = case.warmup + 1, measured_to[0] if measured_to else case.end_turn
     begins = [stamps.get(("STATUS", t - 1)) for t in range(first, last + 1)]  # STATUS(t - 1): turn t begins
     if None in begins:
         game.error = "missing STATUS"
         return game
     game.latencies = [b - a for a, b in zip(begins, begins[1:])]  # type: ignore[operator]
     game.answers = [stamps[("DONE", t)] - stamps[("GCS", t)] for t in range(first, last) if ("DONE", t) in stamps]
-    game.cpu = {n: v / case.turns for n, v in game.cpu.items()}
+    game.cpu = {n: v / (last - first) for n, v in game.cpu.items()}
     game.alive = len(game.last_status.drones.alive()) if game.last_status else 0  # type: ignore[attr-defined]
     return game
 

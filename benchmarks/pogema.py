@@ -103,9 +103,10 @@ print(json.dumps(out))
 """
 
 
-def steps_per_second(agents: list[int], seconds: float = 2.0) -> dict[int, float]:
-    """POGEMA's steps per second with each number of `agents` (random actions, 64x64, in-process)."""
-    return _run(_SCRIPT, agents, seconds)
+def steps_per_second(agents: list[int], seconds: float = 2.0, size: int = SIZE) -> dict[int, float]:
+    """POGEMA's steps per second with each number of `agents` (random actions, `size` x `size` (64 x 64),
+    in-process)."""
+    return _run(_SCRIPT, agents, seconds, size)
 
 
 def parallel_steps_per_second(agents: list[int], seconds: float = 2.0) -> dict[int, float]:
@@ -114,9 +115,9 @@ def parallel_steps_per_second(agents: list[int], seconds: float = 2.0) -> dict[i
     return _run(_PARALLEL_SCRIPT, agents, seconds)
 
 
-def _run(script: str, agents: list[int], seconds: float) -> dict[int, float]:
+def _run(script: str, agents: list[int], seconds: float, size: int = SIZE) -> dict[int, float]:
     exe = python()
-    args = json.dumps([agents, seconds, SIZE, DENSITY, OBS_RADIUS])
+    args = json.dumps([agents, seconds, size, DENSITY, OBS_RADIUS])
     try:
         done = subprocess.run([str(exe), "-c", script, args], capture_output=True, text=True,
                               timeout=60 + 4 * seconds * len(agents), stdin=subprocess.DEVNULL)

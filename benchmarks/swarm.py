@@ -34,11 +34,15 @@ same agent counts in the same run: its steps per second with random actions on i
 from __future__ import annotations
 
 import argparse
+import json
 import logging
+import re
 import sys
+import tempfile
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -47,11 +51,12 @@ from coordinator.engine import DroneSpec, GameConfig
 from dronesim.local import Inputs, simulate
 from entities import movingai
 from entities.gcs import Plan
-from entities.world import World
-from schema import Cell, WorldSpec
-from schema.tables import RANK_STEPS, rank_steps
+from entities.world import World, padded_steps
+from schema import Cell, WorldSpec, drone_id
+from schema.messages import Cause, DroneState
+from schema.tables import MAX_DRONE, RANK_STEPS, rank_steps
 
-from . import add_write_args, command_line, pogema, replace_section
+from . import add_write_args, command_line, pogema, replace_section, replace_subsection
 
 SECTION = "## Swarm benchmark"
 AGENTS = (50, 100, 200, 400)
@@ -268,6 +273,192 @@ def arbiter_alone(counts: Iterable[int], repeats: int = 21) -> dict[int, float]:
     return out
 
 
+# --------------------------------------------------------------------------- distributed city games
+
+#: The distributed city games (`--city-distributed`): world size, drones, swarm hosts (processes). 9,999 drones,
+#: not 10,000: drone ids stop at D9999 (`schema.tables.MAX_DRONE`, a u16 column and 5-character ids).
+CITY_GAMES: tuple[tuple[Cell, int, int], ...] = (((256, 256, 32), 1000, 1), ((256, 256, 32), MAX_DRONE, 2))
+QUICK_CITY_GAMES: tuple[tuple[Cell, int, int], ...] = (((16, 16, 4), 40, 2),)
+#: Their autopilot: LRTA* (entities/autopilots/lrta.py), flown by each host's swarm form.
+CITY_PILOT = "lrta"
+#: Turns played before the measured ones (the swarm hosts chart the map meanwhile).
+CITY_WARMUP = 5
+#: Each game is played this many times (a target must hold over at least three runs).
+CITY_RUNS = 3
+#: POGEMA's side of a 1000- or 9,999-agent game: its 64 x 64 map at density 0.3 has 2,867 free cells, too few for
+#: 9,999 agents (each needs a cell and a target), so both counts are measured on 256 x 256 (45,875 free cells).
+POGEMA_CITY_SIZE = 256
+
+CITY_LEGEND = (
+    "Each game through real processes on loopback (benchmarks/perf.py's `play_distributed`): a `dronesim router`, the "
+    "coordinator, the environment and the swarm hosts (`dronesim drone --autopilot lrta --host Hnn`, the drones "
+    "split in id order, each host flying its own with `LrtaSwarm`), this process the scripted ground station. "
+    "A city of `World.generate` (seed 1), drones at random free cells with random free targets given at turn 1, "
+    "every target reachable; the game runs until every drone has arrived or 4 x the largest side + 64 turns. "
+    "turns/s: 1 / the mean time between consecutive STATUS over the turns after the first "
+    f"{CITY_WARMUP}; ISR/CSR: on their target in the last STATUS; collisions: deaths of VERTEX or SWAP; arbiter "
+    "ms/turn: the coordinator's process time in the arbitration (its log), every turn; CPU: user + system time of "
+    "each process over the measured turns; POGEMA 1.4.0 in process with as many agents, random actions, density "
+    f"0.3, on {POGEMA_CITY_SIZE}x{POGEMA_CITY_SIZE} (its 64x64 cannot hold 9,999 agents), in the same run. "
+    "10,000 drones are played as 9,999: drone ids stop at D9999. The machine: 2 cores, shared with other work.")
+
+
+@dataclass(frozen=True, slots=True)
+class CityGame:
+    """One distributed city game (benchmarks/perf.py's `play_distributed`) and what it gave."""
+
+    size: Cell
+    drones: int
+    hosts: int
+    run: int
+    turns_per_s: float
+    measured: int  # turns measured (after CITY_WARMUP)
+    arrived: int  # on their target at the end
+    collisions: int  # deaths of VERTEX or SWAP
+    alive: int
+    arbiter_ms: float | None  # the coordinator's CPU in the arbitration, per turn (its log)
+    cpu: dict[str, float]  # process -> CPU ms per measured turn
+    over: str
+    error: str
+
+    @property
+    def isr(self) -> float:
+        return self.arrived / self.drones
+
+
+def reachable(grid: np.ndarray, start: Cell) -> np.ndarray:
+    """The free cells (not `grid`) connected to `start` (6-connectivity), as a bool array of grid's shape: a
+    breadth-first search whose frontier is an array (each cell visited once)."""
+    X, Y, Z = grid.shape
+    seen = np.ones((X + 2, Y + 2, Z + 2), bool)
+    seen[1:-1, 1:-1, 1:-1] = grid
+    blocked = seen.copy()
+    flat = seen.reshape(-1)
+    _, _, offsets = padded_steps((X, Y, Z))
+    steps = np.array(offsets, np.int64)
+    frontier = np.array([((start[0] + 1) * (Y + 2) + start[1] + 1) * (Z + 2) + start[2] + 1], np.int64)
+    flat[frontier] = True
+    while len(frontier):
+        nxt = (frontier[:, None] + steps).reshape(-1)
+        nxt = np.unique(nxt[~flat[nxt]])
+        flat[nxt] = True
+        frontier = nxt
+    return (seen & ~blocked)[1:-1, 1:-1, 1:-1]
+
+
+def city_scenario(size: Cell, drones: int, seed: int, folder: Path) -> Path:
+    """A scenario file of a generated city (saved beside it) with `drones` LRTA* drones at random free cells, each
+    with a random free target given at turn 1, starts and targets distinct, every target reachable (all in the
+    free cells connected to the top floor's first free cell); the turn limit as the in-process city's."""
+    rng = np.random.default_rng(seed)
+    world = World.generate(size, rng)
+    grid = np.asarray(world.grid)
+    top = np.argwhere(~grid[:, :, -1])[0]
+    free = np.argwhere(reachable(grid, (int(top[0]), int(top[1]), size[2] - 1)))
+    starts = free[rng.permutation(len(free))[:drones]].tolist()
+    goals = free[rng.permutation(len(free))[:drones]].tolist()
+    world_file = folder / f"city-{seed}.json"
+    world.save(world_file)
+    ids = [drone_id(k + 1) for k in range(drones)]
+    scenario = {"format": "dronesim-scenario", "version": 1, "world": {"file": str(world_file)},
+                "drones": [{"id": d, "start": s, "autopilot": CITY_PILOT} for d, s in zip(ids, starts)],
+                "targets": [f"{d}={x},{y},{z}@1" for d, (x, y, z) in zip(ids, goals)],
+                "max_turns": 4 * max(size) + 64 + 10}
+    path = folder / f"city-{seed}-{drones}.json"
+    path.write_text(json.dumps(scenario), encoding="utf-8")
+    return path
+
+
+def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path) -> CityGame:
+    """One distributed game (coordinator, environment, `hosts` swarm hosts of LRTA* drones, a loopback router,
+    this process as the ground station), played until every drone has arrived or the turn limit."""
+    from . import perf
+
+    scenario = city_scenario(size, drones, 1, folder)
+    logs = folder / f"{drones}-{run}"
+    logs.mkdir(parents=True, exist_ok=True)
+    limit = 4 * max(size) + 64
+    case = perf.Case(drones=drones, size=size, warmup=CITY_WARMUP, turns=limit - CITY_WARMUP - 1)
+    game = perf.play_distributed(case, scenario, logs, variant=perf.Variant(autopilot=CITY_PILOT, hosts=hosts,
+                                                                            statuses=False))
+    found = re.search(r"arbitration: \d+ turns, ([\d.]+) ms", (logs / "coordinator.log").read_text(errors="replace"))
+    status = game.last_status
+    arrived = collisions = alive = 0
+    if status is not None:
+        rows = status.drones.rows  # type: ignore[attr-defined]
+        on = rows["state"] == list(DroneState).index(DroneState.ALIVE)
+        alive = int(on.sum())
+        arrived = int((on & (rows["pos"] == rows["target"]).all(axis=1)).sum())
+        collisions = int(np.isin(rows["cause"], [list(Cause).index(Cause.VERTEX), list(Cause).index(Cause.SWAP)]).sum())
+    mean = sum(game.latencies) / len(game.latencies) if game.latencies else float("nan")
+    return CityGame(size, drones, hosts, run, 1 / mean, len(game.latencies), arrived, collisions, alive,
+                    float(found.group(1)) if found else None, {n: 1000 * v for n, v in game.cpu.items()},
+                    game.over, game.error.splitlines()[0] if game.error else "")
+
+
+def city_table(games: list[CityGame], pogema_sps: dict[int, float]) -> str:
+    """One row per game played, then one per world and drone count: the range over the runs and the verdict."""
+    head = ["city", "drones", "swarm hosts", "run", "turns/s", "turns measured", "ISR", "CSR", "collisions",
+            "arbiter ms/turn", "CPU ms/turn coordinator / env / swarm hosts / router / ground station",
+            f"POGEMA steps/s ({POGEMA_CITY_SIZE}x{POGEMA_CITY_SIZE}, same N)", "game over"]
+    lines = [_row(head), _row(["---"] * len(head))]
+    for g in games:
+        cpu = g.cpu
+        swarms = " + ".join(f"{cpu[n]:.1f}" for n in sorted(cpu) if n.startswith("swarm"))
+        pog = pogema_sps.get(g.drones)
+        lines.append(_row([_size(g.size), g.drones, g.hosts, g.run, f"{g.turns_per_s:.1f}", g.measured,
+                           f"{100 * g.isr:.1f} %", f"{float(g.arrived == g.drones):.0f}", g.collisions,
+                           "-" if g.arbiter_ms is None else f"{g.arbiter_ms:.2f}",
+                           " / ".join([*(f"{cpu.get(n, float('nan')):.1f}" for n in ("coordinator", "env")), swarms,
+                                       *(f"{cpu.get(n, float('nan')):.1f}" for n in ("router", "bench"))]),
+                           "-" if pog is None else f"{pog:.1f}", g.error or g.over]))
+    return "\n".join(lines)
+
+
+def city_verdicts(games: list[CityGame]) -> str:
+    """Each game's turns per second over its runs (the range) against the issue's target."""
+    out = []
+    for size, drones, hosts in dict.fromkeys((g.size, g.drones, g.hosts) for g in games):
+        rates = [g.turns_per_s for g in games if (g.size, g.drones) == (size, drones) and not g.error]
+        target = CITY_TARGETS.get(drones)
+        verdict = "" if target is None or not rates else (
+            f" (target ≥ {target}: {'met in every run' if min(rates) >= target else 'NOT met'})")
+        span = f"{min(rates):.1f}–{max(rates):.1f}" if rates else "no run finished"
+        out.append(f"- {_size(size)}, {drones} drones, {hosts} swarm host{'s' * (hosts > 1)}: {span} turns/s over "
+                   f"{len(rates)} run{'s' * (len(rates) != 1)}{verdict}")
+    return "\n".join(out)
+
+
+#: The issue's targets: drones -> turns per second (10,000 drones: played with 9,999, see CITY_GAMES).
+CITY_TARGETS = {1000: 50.0, MAX_DRONE: 10.0}
+CITY_SECTION = "### Distributed cities (LRTA*)"
+
+
+def _size(size: Cell) -> str:
+    return "x".join(map(str, size))
+
+
+def city_distributed(quick: bool, runs: int, with_pogema: bool) -> tuple[list[CityGame], dict[int, float]]:
+    """Play the distributed city games (`runs` times each, alternated) and POGEMA at the same agent counts."""
+    plan = QUICK_CITY_GAMES if quick else CITY_GAMES
+    games: list[CityGame] = []
+    with tempfile.TemporaryDirectory(prefix="dronesim-city-") as tmp:
+        for run in range(1, runs + 1):
+            for size, drones, hosts in plan:
+                g = play_city(size, drones, hosts, run, Path(tmp))
+                games.append(g)
+                print(f"  city {_size(size)} {drones} drones / {hosts} hosts, run {run}: {g.turns_per_s:.1f} turns/s "
+                      f"over {g.measured} turns, ISR {100 * g.isr:.1f} %, {g.collisions} collisions, arbiter "
+                      f"{g.arbiter_ms} ms/turn, {g.error or g.over}", file=sys.stderr, flush=True)
+    pogema_sps: dict[int, float] = {}
+    if with_pogema:
+        try:
+            pogema_sps = pogema.steps_per_second(sorted({d for _, d, _ in plan}), 2.0, POGEMA_CITY_SIZE)
+        except pogema.Unavailable as err:
+            print(f"POGEMA not measured: {err}", file=sys.stderr)
+    return games, pogema_sps
+
+
 # --------------------------------------------------------------------------- main
 
 
@@ -289,6 +480,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", default=",".join(VARIANTS), help=f"among {', '.join(VARIANTS)}")
     parser.add_argument("--no-city", action="store_true", help="skip the 3D city of 1000 drones")
     parser.add_argument("--no-pogema", action="store_true", help="do not run POGEMA")
+    parser.add_argument("--city-distributed", action=argparse.BooleanOptionalAction, default=None,
+                        help="--city-distributed: only the distributed city games (LRTA*, real processes); "
+                             "--no-city-distributed: skip them (default: play everything)")
+    parser.add_argument("--city-runs", type=int, default=CITY_RUNS, help=f"runs of each distributed city game "
+                                                                          f"(default {CITY_RUNS})")
     add_write_args(parser)
     args = parser.parse_args(argv)
     agents = (10, 20) if args.quick else tuple(int(a) for a in args.agents.split(","))
@@ -299,6 +495,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unknown: {', '.join(bad)}", file=sys.stderr)
         return 2
     t_start = time.perf_counter()
+    city_games: list[CityGame] = []
+    city_pogema: dict[int, float] = {}
+    if args.city_distributed is not False:
+        city_games, city_pogema = city_distributed(args.quick, max(1, args.city_runs), not args.no_pogema)
+        city_body = (f"{city_table(city_games, city_pogema)}\n\n{city_verdicts(city_games)}")
+        print()
+        print(city_body)
+        if args.write:
+            body = (f"{command_line('swarm', argv, time.perf_counter() - t_start)}\n\n{CITY_LEGEND}\n\n{city_body}\n")
+            replace_subsection(args.output, SECTION, CITY_SECTION, body)
+            print(f"\nwrote {CITY_SECTION!r} in {args.output}")
+        if args.city_distributed:
+            return 0 if all(not g.error and g.collisions == 0 for g in city_games) else 1
     todo = instances(args.quick, args.seeds, agents, families, not args.no_city)
     outcomes = []
     for inst in todo:
@@ -341,7 +550,7 @@ def main(argv: list[str] | None = None) -> int:
             f"reached their turn limit, agents off their goal that moved in the last {RECENT} turns.\n\n"
             f"{body_table}\n\n{lines}\n"
         )
-        replace_section(args.output, SECTION, body)
+        replace_section(args.output, SECTION, body, keep=CITY_SECTION)
         print(f"\nwrote {SECTION!r} in {args.output}")
     return 0
 
