@@ -149,11 +149,11 @@ class Cluster:
 
 
 def play_scenario(locator: str, tmp: Path, scenario: Path, layout: str,
-                  *host_args: str) -> tuple[Path, Proc, list[Proc]]:
+                  *host_args: str, hosts: int = 1) -> tuple[Path, Proc, list[Proc]]:
     """A scenario file played to its end by real processes over `locator`: the coordinator (journal), the
-    environment, the drones (`layout` "processes": one process per drone; "swarm": one host per autopilot, with
-    `host_args`) and a scripted ground station; every process must exit 0. The journal, the coordinator's
-    process and every process (their output stays readable)."""
+    environment, the drones (`layout` "processes": one process per drone; "swarm": `hosts` hosts per autopilot
+    (H01, H02, ...), its drones split in id order, with `host_args`) and a scripted ground station; every process
+    must exit 0. The journal, the coordinator's process and every process (their output stays readable)."""
     autopilots = Scenario.load(scenario).autopilots
     journal = tmp / f"{layout}.journal"
     with Cluster(locator, tmp, log_level="WARNING") as c:
@@ -164,9 +164,13 @@ def play_scenario(locator: str, tmp: Path, scenario: Path, layout: str,
         if layout == "processes":  # one process per drone
             for d, pilot in sorted(autopilots.items()):
                 c.start(d, "drone", "--id", d, "--autopilot", pilot)
-        else:  # one swarm host per autopilot
-            for host, (pilot, ids) in swarm_hosts(autopilots).items():
-                c.start(host, "drone", "--id", ",".join(ids), "--host", host, "--autopilot", pilot, *host_args)
+        else:  # `hosts` swarm hosts per autopilot
+            number = 0
+            for pilot, ids in swarm_hosts(autopilots).values():
+                for part in (ids[k * len(ids) // hosts:(k + 1) * len(ids) // hosts] for k in range(hosts)):
+                    number += 1
+                    host = f"H{number:02d}"
+                    c.start(host, "drone", "--id", ",".join(part), "--host", host, "--autopilot", pilot, *host_args)
         c.start("GCS", "gcs", "--scenario", str(scenario), "--quiet")
         codes = c.wait_all(timeout=240)
         assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
