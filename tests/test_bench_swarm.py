@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import pathlib
 
+import numpy as np
+
 from benchmarks import cli, swarm
 
 
 def test_quick_run_writes_the_section(tmp_path: pathlib.Path) -> None:
     out = tmp_path / "BENCHMARKS.md"
     out.write_text("# Benchmarks\n\n## Other\n\nkept\n")
-    assert cli(["swarm", "--quick", "--families", "empty-32-32", "--no-city", "--no-pogema", "--write",
-                "--output", str(out)]) == 0
+    assert cli(["swarm", "--quick", "--families", "empty-32-32", "--no-city", "--no-pogema", "--no-city-distributed",
+                "--write", "--output", str(out)]) == 0
     text = out.read_text()
     assert "## Other\n\nkept" in text and swarm.SECTION in text
     rows = [line for line in text.splitlines() if line.startswith("| empty-32-32 |")]
@@ -19,6 +21,34 @@ def test_quick_run_writes_the_section(tmp_path: pathlib.Path) -> None:
     for r in rows:
         if r.split(" | ")[2] != "fixed":
             assert r.split(" | ")[3:5] == ["1.00", "100.0 %"], r  # every agent arrives on an empty map
+
+
+def test_quick_distributed_cities_play_and_keep_their_subsection(tmp_path: pathlib.Path) -> None:
+    """`--city-distributed --quick`: a small city of LRTA* drones over two swarm hosts through real processes,
+    played to its end without a collision, in a subsection that the MovingAI table's --write keeps."""
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text("# Benchmarks\n\n## Other\n\nkept\n")
+    assert cli(["swarm", "--quick", "--city-distributed", "--city-runs", "1", "--no-pogema", "--write",
+                "--output", str(out)]) == 0
+    text = out.read_text()
+    rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| 16x16x4 |")]
+    assert len(rows) == 1 and rows[0][1:4] == ["40", "2", "1"], rows
+    assert rows[0][5] != "0" and rows[0][8] == "0"  # turns measured, no collision
+    assert swarm.SECTION in text and swarm.CITY_SECTION in text
+    assert cli(["swarm", "--quick", "--families", "empty-32-32", "--no-city", "--no-pogema", "--no-city-distributed",
+                "--write", "--output", str(out)]) == 0
+    again = out.read_text()
+    assert "| empty-32-32 |" in again and swarm.CITY_SECTION in again and "| 16x16x4 | 40 | 2 | 1 |" in again
+    assert again.index(swarm.SECTION) < again.index(swarm.CITY_SECTION) and "## Other\n\nkept" in again
+
+
+def test_reachable_cells_are_one_component() -> None:
+    grid = np.zeros((5, 4, 1), bool)
+    grid[2, :, 0] = True  # a wall cutting the world in two
+    reach = swarm.reachable(grid, (0, 0, 0))
+    assert reach[:2].all() and not reach[2:].any()
+    grid[2, 3, 0] = False  # a door
+    assert swarm.reachable(grid, (0, 0, 0)).sum() == 5 * 4 - 3
 
 
 def test_costs_follow_the_journal() -> None:
