@@ -537,6 +537,38 @@ def test_property_pibt_guarantees(scene, salt: int | None) -> None:
             assert any(e not in coop and cells[e] == cells[d] for e in drones if e != d)
 
 
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(ranked_scenes(), st.one_of(st.none(), st.integers(0, 1 << 40)), st.integers(0, 1 << 30))
+def test_property_drones_alone_settled_first_change_nothing(scene, salt: int | None, seed: int) -> None:
+    """`cooperate` settling the drones `alone` first (in numpy) gives what PIBT's loop over every drone gives,
+    on the random scenes above and on sparse ones (drones far apart in a bigger world, most of them alone)."""
+    drones, priority, targets, blocked = scene
+    ids = sorted(drones)
+    before = np.array([drones[d][0] for d in ids], np.int32).reshape(-1, 3)
+    coop = np.array([len(drones[d]) == 2 for d in ids])
+    ranked = np.array([rank_steps(drones[d][1]) if coop[k] else 0 for k, d in enumerate(ids)], np.uint32)
+    proposed = np.array([np.add(drones[d][0], drones[d][1][0]) if coop[k] and drones[d][1] else
+                         (drones[d][0] if coop[k] else drones[d][1]) for k, d in enumerate(ids)], np.int32)
+    prio = np.array([priority.get(d, 0) for d in ids], np.int64)
+    aims = None if targets is None else np.array([targets.get(d, (-1, -1, -1)) for d in ids], np.int32)
+    world = None if blocked is None else OpenCells(blocked)
+    args = (SIZE, before, proposed.reshape(-1, 3), ranked, coop, prio, aims, world, salt)
+    for a, b in zip(cooperate(*args), cooperate(*args, shortcut=False)):
+        assert a.tolist() == b.tolist()
+    rng = np.random.default_rng(seed)  # sparse: 40 drones in 12 x 12 x 3
+    n, size = 40, (12, 12, 3)
+    flat = rng.choice(size[0] * size[1] * size[2], n, replace=False)
+    before = np.stack(np.unravel_index(flat, size), axis=1).astype(np.int32)
+    ranked = np.array([rank_steps([(AROUND + (STAY,))[k] for k in rng.permutation(7)[:rng.integers(1, 8)]])
+                       for _ in range(n)], np.uint32)
+    coop = rng.random(n) < 0.9
+    proposed = before + np.array(AROUND, np.int32)[rng.integers(0, 6, n)]
+    aims = np.where(rng.random((n, 1)) < 0.8, rng.integers(0, 12, (n, 3)) % np.array(size), -1).astype(np.int32)
+    args = (size, before, proposed, ranked, coop, rng.integers(0, 4, n), aims, OpenCells(np.zeros(size, bool)), salt)
+    for a, b in zip(cooperate(*args), cooperate(*args, shortcut=False)):
+        assert a.tolist() == b.tolist()
+
+
 @pytest.mark.parametrize("shape", [(1, 1, 1), (3, 5, 2), (17, 9, 4), (40, 33, 7)])
 def test_the_open_cells_read_as_the_world_padded_with_blocked_cells(shape) -> None:
     """One bit a cell, made a slab at a time: the same as a padded copy of the world would say."""
