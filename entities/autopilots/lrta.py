@@ -46,7 +46,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from entities.world import inside_rows, linear_rows
+from entities.world import linear_rows
 from schema import Cell, CellInfo, CellKind, Note, UsageError
 from schema.messages import AROUND
 from schema.tables import code_of
@@ -145,6 +145,8 @@ def _empty(info: CellInfo | None) -> bool:
 
 _STEPS = np.array(AROUND, dtype=np.int64)  # (6, 3)
 _AXES = np.array(_AXIS, dtype=np.int64)
+_SIGNS = np.array([sum(d) for d in AROUND], dtype=np.int64)  # +1 or -1: the step's way along its axis
+_COLUMNS = np.arange(6, dtype=np.int64)
 _SHIFTS = np.arange(7, dtype=np.int64) * 3
 _FAR = np.iinfo(np.int64).max
 
@@ -167,6 +169,7 @@ class LrtaSwarm:
         self._trip = np.arange(n, dtype=np.int64)  # each drone's current trip
         self._trips = n  # trips numbered so far
         self._learned: dict[int, int] = {}
+        self._learns = np.zeros(n, dtype=bool)  # learned something on its current trip
 
     def learned(self, drone: int) -> dict[Cell, int]:
         """Drone number `drone`'s learned values for its current target (as `LrtaPilot.learned`)."""
@@ -187,7 +190,11 @@ class LrtaSwarm:
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """This turn's moves of the drones numbered `drones` at `pos` ((n, 3)) towards `target` ((n, 3),
         (-1, -1, -1) for none): yields once the cells it senses, receives their kinds, returns (new cells
-        (n, 3), note codes (n,), rankings (n,) uint32 as `schema.tables.rank_steps` packs them)."""
+        (n, 3), note codes (n,), rankings (n,) uint32 as `schema.tables.rank_steps` packs them).
+
+        The hot path of a swarm host (about 2 µs a drone): the neighbours' Manhattan distances follow from the
+        drone's own (one more or one less, by the side of the target they lie on), and the learned values are
+        looked up only for the drones that learned something on their current trip (`_learns`)."""
         size = self.size
         n = len(drones)
         rows = self._rows(drones)
@@ -200,57 +207,75 @@ class LrtaSwarm:
             self._trip[rows[fresh]] = self._trips + np.arange(len(fresh))
             self._trips += len(fresh)
             self._target[rows[fresh]] = target[fresh]
+            self._learns[rows[fresh]] = False
         # Sense: the six neighbours (inside the world) and the target (inside, not where the drone is).
+        limit = np.array(size, dtype=np.int64)
+        inside = np.empty((n, 6), dtype=bool)
+        inside[:, 0::2] = pos < limit - 1  # +x, +y, +z
+        inside[:, 1::2] = pos > 0  # -x, -y, -z
         around = pos[:, None, :] + _STEPS  # (n, 6, 3)
-        inside = inside_rows(around.reshape(-1, 3), size).reshape(n, 6)
         here = has & (pos == target).all(axis=1)
-        t_in = has & inside_rows(np.where(has[:, None], target, 0), size)
+        t_in = has & ((target >= 0) & (target < limit)).all(axis=1)
         ask_t = t_in & ~here
         asked = np.concatenate([around[inside], target[ask_t]])
         kinds = (yield asked) if len(asked) else np.zeros(0, dtype=np.uint8)
+        m = int(np.count_nonzero(inside))
         free = np.zeros((n, 6), dtype=bool)
-        free[inside] = kinds[:int(inside.sum())] == CellKind.EMPTY
+        free[inside] = kinds[:m] == CellKind.EMPTY
+        told = kinds[m:]
         t_blocked = np.zeros(n, dtype=bool)
-        t_blocked[ask_t] = kinds[int(inside.sum()):] != CellKind.EMPTY
-        t_blocked[ask_t] &= kinds[int(inside.sum()):] != NO_ANSWER  # no answer: not known blocked
+        t_blocked[ask_t] = (told != CellKind.EMPTY) & (told != NO_ANSWER)  # no answer: not known blocked
+        boxed = ~free.any(axis=1)
 
-        rest = ~has | here | ~t_in | t_blocked | ~free.any(axis=1)
+        rest = ~has | here | ~t_in | t_blocked | boxed
         go = np.flatnonzero(~rest)
         # At rest: its own cell, then the free neighbours in AROUND order.
-        keys = np.where(free, np.arange(6), _FAR)
-        keys = np.concatenate([keys, np.full((n, 1), -1, dtype=np.int64)], axis=1)
+        keys = np.full((n, 7), _FAR, dtype=np.int64)
+        keys[:, :6][free] = np.broadcast_to(_COLUMNS, (n, 6))[free]
+        keys[:, 6] = -1
         note = np.full(n, _NONE, dtype=np.uint8)
         note[here] = _REACHED
-        note[has & ~here & (~t_in | t_blocked | ~free.any(axis=1))] = _UNREACHABLE
-        new = pos.copy()
+        note[has & ~here & (~t_in | t_blocked | boxed)] = _UNREACHABLE
         if len(go):
-            p, t, f, trip = pos[go], target[go], free[go], self._trip[rows[go]] * self._cells
-            nb = around[go]
+            p, t, f = pos[go], target[go], free[go]
+            k = len(go)
             gap = np.abs(t - p)  # (k, 3)
-            manh_nb = np.abs(nb - t[:, None, :]).sum(axis=2)  # (k, 6)
             manh_p = gap.sum(axis=1)
-            cell_keys = trip[:, None] + linear_rows(np.concatenate([p[:, None, :], nb], axis=1).reshape(-1, 3),
-                                                    size).reshape(-1, 7)
-            wanted = np.concatenate([np.ones((len(go), 1), dtype=bool), f], axis=1)
-            values = np.concatenate([manh_p[:, None], manh_nb], axis=1)
-            get = self._learned.get
-            found = np.fromiter(map(get, cell_keys[wanted].tolist(), repeat(-1)), dtype=np.int64,
-                                count=int(wanted.sum()))
-            values[wanted] = np.where(found >= 0, found, values[wanted])
+            side = np.sign(t - p)  # each neighbour is one closer if it steps towards the target, else one farther
+            values = np.empty((k, 7), dtype=np.int64)
+            values[:, 0] = manh_p
+            values[:, 1:] = manh_p[:, None] + np.where(side[:, _AXES] == _SIGNS, -1, 1)
+            cell_keys = None
+            learner = self._learns[rows[go]]
+            if learner.any():  # the drones that learned on this trip: their values, where they learned one
+                sub = np.flatnonzero(learner)
+                cell_keys = (self._trip[rows[go[sub]]] * self._cells)[:, None] + linear_rows(
+                    np.concatenate([p[sub, None, :], around[go[sub]]], axis=1).reshape(-1, 3), size).reshape(-1, 7)
+                wanted = np.concatenate([np.ones((len(sub), 1), dtype=bool), f[sub]], axis=1)
+                found = np.fromiter(map(self._learned.get, cell_keys[wanted].tolist(), repeat(-1)), dtype=np.int64,
+                                    count=int(wanted.sum()))
+                part = values[sub]
+                part[wanted] = np.where(found >= 0, found, part[wanted])
+                values[sub] = part
             h_nb = np.where(f, values[:, 1:], _FAR)
             h_here = np.maximum(values[:, 0], 1 + h_nb.min(axis=1))
             learn = h_here > manh_p
             if learn.any():
-                self._learned.update(zip(cell_keys[learn, 0].tolist(), h_here[learn].tolist()))
-            tie = 512 - np.minimum(np.take_along_axis(gap, np.broadcast_to(_AXES, (len(go), 6)), axis=1), 511)
-            ranking = np.where(f, np.where(f, h_nb, 0) * _H + tie * _TIE + np.arange(6), _FAR)
-            keys[go] = np.concatenate([ranking, (h_here * _H + _STAY)[:, None]], axis=1)
+                at = np.flatnonzero(learn)
+                spots = self._trip[rows[go[at]]] * self._cells + linear_rows(p[at], size)
+                self._learned.update(zip(spots.tolist(), h_here[at].tolist()))
+                self._learns[rows[go[at]]] = True
+            tie = 512 - np.minimum(gap[:, _AXES], 511)
+            ranking = np.where(f, np.where(f, h_nb, 0) * _H + tie * _TIE + _COLUMNS, _FAR)
+            keys[go, :6] = ranking
+            keys[go, 6] = h_here * _H + _STAY
             note[go] = np.where(h_here > manh_p + self.slack, _UNREACHABLE, _NONE)
         order = np.argsort(keys, axis=1, kind="stable")
         valid = np.take_along_axis(keys, order, axis=1) != _FAR
         ranked = (np.where(valid, order + 1, 0) << _SHIFTS).sum(axis=1).astype(np.uint32)
+        new = pos.copy()
         if len(go):
             first = order[go, 0]
             moving = first < _STAY
-            new[go[moving]] = pos[go[moving]] + _STEPS[first[moving]]
+            new[go[moving]] += _STEPS[first[moving]]
         return new, note, ranked
