@@ -47,6 +47,8 @@ import numpy as np
 from schema import Cell
 from schema.tables import RANK_STEPS, RANKED_LIMIT
 
+#: Each drone's candidates (flat cells) as PIBT reads them: a list by row, or a mapping of the rows it may read.
+Rows = list[list[int]] | Mapping[int, list[int]]
 #: Most candidates a drone may offer (its 6 neighbours and its own cell).
 MOST = len(RANK_STEPS)
 #: A priority (the engine's `age`) is the turns since the drone was last at rest times TIE_SPAN plus a
@@ -157,6 +159,12 @@ def steps_flat(size: Cell) -> np.ndarray:
     return np.array([0] + [(dx * (Y + 2) + dy) * (Z + 2) + dz for dx, dy, dz in RANK_STEPS], np.int64)
 
 
+def among(cells: np.ndarray, these: np.ndarray) -> np.ndarray:
+    """`np.isin(cells, these)` for flat cells (`these` none negative), by a table over the range of `these` (at most
+    the padded world, a byte a cell, for a moment): 7 times faster than sorting at 10,000 drones."""
+    return np.isin(cells, these, kind="table") if len(these) else np.zeros(cells.shape, bool)
+
+
 def offered(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell) -> np.ndarray:
     """Each drone's candidate cells, flat, in its own order ((n, MOST), -1 after the last): its ranked steps from
     `here` (flat), or, where it ranked none, its `proposed` cell (flat) alone."""
@@ -195,9 +203,9 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     stay = cand == here[:, None]
     ranks_stay = stay.any(axis=1)
     where = np.where(ranks_stay, stay.argmax(axis=1), MOST)[:, None]
-    occupied = np.isin(cand, everyone) & ~stay
+    occupied = among(cand, everyone) & ~stay
     theirs = np.zeros_like(occupied) if targets is None or aims is None else \
-        np.isin(cand, aims[aims >= 0]) & (cand != targets[:, None])
+        among(cand, aims[aims >= 0]) & (cand != targets[:, None])
     major = np.where(ranks_stay[:, None], (col > where) * 32 + (col == where) * 16 + occupied * 8 + theirs * 4, 0)
     minor = np.broadcast_to(col, cand.shape)
     if salt is not None:
@@ -231,12 +239,13 @@ def wants_first(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size
     return np.where(first > 0, here + steps_flat(size)[first], proposed)
 
 
-def pibt(here: list[int], cand: list[list[int]], order: list[int], taken: list[int],
+def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
          world: tuple[OpenCells, list[int], list[int]] | None = None,
          aims: tuple[list[int], Cell] | None = None) -> tuple[list[int], list[int]]:
     """PIBT over flat cells: the next cell of each drone, and the drones that gave way.
 
-    `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them);
+    `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them; only
+    those of the drones in `order` and of those that may be pushed: drones standing in a cell someone offers);
     `order`: the drones that choose (cooperative), highest priority first; `taken[i]`: the next cell of a
     drone that does not choose (non-cooperative: fixed in advance), -1 for those that choose; `world`: the
     world's open cells (`OpenCells`), the flat steps to a neighbour and each drone's target (flat, -1 for
@@ -395,7 +404,7 @@ class Corridors:
             walked.add(b)
 
 
-def _swapped(i: int, mine: list[int], here: list[int], cand: list[list[int]], nxt: list[int], now: dict[int, int],
+def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int], now: dict[int, int],
              corridors: Corridors | None) -> tuple[list[int], int]:
     """Drone i's candidates as it tries them, and the drone it pulls (-1: none). If its best cell holds a drone
     j that has not moved yet, wants i's cell, and can only pass i at a junction behind i (`Corridors`), i
@@ -417,7 +426,7 @@ def _swapped(i: int, mine: list[int], here: list[int], cand: list[list[int]], nx
     return [c for c in mine[cut + 1:] if c >= 0] + [src] + mine[:cut], j
 
 
-def _pull(i: int, j: int, here: list[int], cand: list[list[int]], nxt: list[int], claimed: dict[int, int]) -> None:
+def _pull(i: int, j: int, here: list[int], cand: Rows, nxt: list[int], claimed: dict[int, int]) -> None:
     """i swapped and moved back: j, if it has not moved and i's cell is free, takes it (it offered it)."""
     src = here[i]
     if nxt[j] < 0 and src not in claimed and src in cand[j]:
@@ -477,9 +486,9 @@ def alone(here: np.ndarray, cand: np.ndarray, cooperative: np.ndarray, taken: np
 
     first = cand[:, 0]
     own = (cand == here[:, None]).any(axis=1)
-    occupied = np.isin(first, here) & (first != here)
+    occupied = among(first, here) & (first != here)
     if targets is not None:
-        occupied |= np.isin(first, targets[targets >= 0]) & (first != targets)
+        occupied |= among(first, targets[targets >= 0]) & (first != targets)
     return cooperative & (first >= 0) & (count(first) == 1) & ~occupied & (count(here) == own)
 
 
@@ -505,17 +514,15 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
         settled = alone(here, own, cooperative, taken, goals)
         taken = np.where(settled, own[:, 0], taken)
         coop = np.flatnonzero(cooperative & ~settled)
-        rest = np.flatnonzero(~settled)
-        cand_rows: list[list[int]] = [[c] for c in own[:, 0].tolist()]  # (PIBT never reads the settled ones')
-        for i, row in zip(rest.tolist(), candidates(here, ranked, wants, size, goals, salt, rest).tolist()):
-            cand_rows[i] = row
+        rest = np.flatnonzero(~settled)  # (PIBT never reads the settled drones' candidates)
+        cand_rows: Rows = dict(zip(rest.tolist(), candidates(here, ranked, wants, size, goals, salt, rest).tolist()))
     else:
         coop = np.flatnonzero(cooperative)
         cand_rows = candidates(here, ranked, wants, size, goals, salt).tolist()
     order = coop[np.lexsort((coop, -priority[coop].astype(np.int64)))]
-    world = None if open_ is None or goals is None else \
-        (open_, [d for d in steps_flat(size)[1:].tolist() if d], goals.tolist())
-    aims = None if goals is None else (goals.tolist(), (size[0] + 2, size[1] + 2, size[2] + 2))
+    aimed = None if goals is None else goals.tolist()
+    world = None if open_ is None or aimed is None else (open_, [d for d in steps_flat(size)[1:].tolist() if d], aimed)
+    aims = None if aimed is None else (aimed, (size[0] + 2, size[1] + 2, size[2] + 2))
     chosen, gave = pibt(here.tolist(), cand_rows, order.tolist(), taken.tolist(), world, aims)
     nxt = np.array(chosen, np.int64)
     final = np.where(cooperative[:, None], cells_of(nxt, size), proposed)
