@@ -16,6 +16,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coordinator.engine import DroneSpec, GameConfig
+from coordinator.journal import read
+from dronesim import replay
 from dronesim.local import Inputs, Result, simulate
 from entities.gcs import Plan
 from entities.world import World
@@ -104,10 +106,13 @@ def test_a_city_through_real_processes_on_two_swarm_hosts(tmp_path: pathlib.Path
 
     scenario = city_scenario((12, 12, 3), 12, 3, tmp_path)
     with embedded_router() as locator:
-        journal, _, procs = play_scenario(locator, tmp_path, scenario, "swarm", "--swarm-pilot-min", "1", hosts=2)
+        journal, srv, procs = play_scenario(locator, tmp_path, scenario, "swarm", "--swarm-pilot-min", "1", hosts=2)
     records = journal_records(journal)
     assert records[-1]["reason"] == "ALL_REACHED", records[-1]
     assert not [d for r in records for d in r.get("deaths", {})]
     assert {p.name for p in procs} >= {"H01", "H02"}
-    spec = json.loads(scenario.read_text())
-    assert len(spec["drones"]) == 12
+    assert "arbitration:" in srv.text  # the coordinator's report of its arbitration's CPU (the benchmark reads it)
+    assert len(json.loads(scenario.read_text())["drones"]) == 12
+    config, autopilots = replay.header_config(records[0])
+    assert set(autopilots.values()) == {"lrta"}
+    assert replay.verify(str(journal), list(read(journal)), config, autopilots) is None  # in process: the same

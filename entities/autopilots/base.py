@@ -16,13 +16,13 @@ Autopilots keep their memory in the instance: one instance per drone, for the wh
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator, Iterable, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
-from schema import Cell, CellInfo, Note, StepTable
+from schema import Cell, CellInfo, Note, StepTable, UsageError
 from schema.messages import AROUND
 from schema.tables import code_of, drone_number
 
@@ -80,6 +80,24 @@ class SwarmPilot(Protocol):
         `ranked` column). It may yield once an (m, 3) array of cells, and receives their CellKind codes
         (`NO_ANSWER` for a cell not answered)."""
         ...
+
+
+def swarm_numbers(drones: Sequence[int]) -> np.ndarray:
+    """A swarm pilot's drone numbers, sorted (UsageError if one is given twice)."""
+    numbers = np.array(sorted(drones), dtype=np.int64)
+    if len(np.unique(numbers)) != len(numbers):
+        raise UsageError("a swarm flies each drone once")
+    return numbers
+
+
+def swarm_rows(numbers: np.ndarray, drones: Sequence[int] | np.ndarray) -> np.ndarray:
+    """The rows of `drones` in a swarm's sorted `numbers` (UsageError naming those not in it)."""
+    drones = np.asarray(drones, dtype=np.int64)
+    rows = np.searchsorted(numbers, drones)
+    if len(drones) and (rows.max() >= len(numbers) or (numbers[rows] != drones).any()):
+        strangers = sorted(set(drones.tolist()) - set(numbers.tolist()))
+        raise UsageError(f"drones {strangers} are not in this swarm")
+    return rows
 
 
 def add(a: Cell, b: Cell) -> Cell:

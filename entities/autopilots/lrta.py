@@ -47,11 +47,11 @@ from typing import ClassVar
 import numpy as np
 
 from entities.world import linear_rows
-from schema import Cell, CellInfo, CellKind, Note, UsageError
+from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds
+from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds, swarm_numbers, swarm_rows
 
 #: A ranking key is h * _H + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in AROUND order,
 #: 6 staying); tie is 0 for staying and 512 - (the way left along the step's axis, at most 511) for a neighbour.
@@ -160,9 +160,7 @@ class LrtaSwarm:
     def __init__(self, *, world_size: Cell, drones: Sequence[int], slack: int | None = None) -> None:
         self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
         self.slack = default_slack(self.size) if slack is None else max(0, int(slack))
-        self._drones = np.array(sorted(drones), dtype=np.int64)
-        if len(np.unique(self._drones)) != len(self._drones):
-            raise UsageError("a swarm flies each drone once")
+        self._drones = swarm_numbers(drones)
         n = len(self._drones)
         self._cells = self.size[0] * self.size[1] * self.size[2]
         self._target = np.full((n, 3), -1, dtype=np.int64)
@@ -180,12 +178,7 @@ class LrtaSwarm:
                 if first <= k < first + self._cells for i in (k - first,)}
 
     def _rows(self, drones: Sequence[int] | np.ndarray) -> np.ndarray:
-        drones = np.asarray(drones, dtype=np.int64)
-        rows = np.searchsorted(self._drones, drones)
-        if len(drones) and (rows.max() >= len(self._drones) or (self._drones[rows] != drones).any()):
-            strangers = sorted(set(drones.tolist()) - set(self._drones.tolist()))
-            raise UsageError(f"drones {strangers} are not in this swarm")
-        return rows
+        return swarm_rows(self._drones, drones)
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """This turn's moves of the drones numbered `drones` at `pos` ((n, 3)) towards `target` ((n, 3),

@@ -55,10 +55,10 @@ from typing import ClassVar
 import numpy as np
 
 from entities.world import linear_rows
-from schema import Cell, CellInfo, CellKind, Note, UsageError
+from schema import Cell, CellInfo, CellKind, Note
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds
+from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds, swarm_numbers, swarm_rows
 
 #: The 4 horizontal directions as (dx, dy), in the seed's tie-break order.
 DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
@@ -218,9 +218,7 @@ class SeedSwarm:
     def __init__(self, *, world_size: Cell, drones: Sequence[int]) -> None:
         """`drones`: the numbers of the drones flown (D01 is 1)."""
         self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]
-        self._drones = np.array(sorted(drones), dtype=np.int64)
-        if len(np.unique(self._drones)) != len(self._drones):
-            raise UsageError("a swarm flies each drone once")
+        self._drones = swarm_numbers(drones)
         nx, ny, nz = self.world_size
         self._cells = nx * ny * nz
         self._memory: dict[int, int] = {}
@@ -237,12 +235,7 @@ class SeedSwarm:
         return tuple(((i // (ny * nz), i // nz % ny, i % nz), empty) for _, i, empty in mine)
 
     def _rows(self, drones: Sequence[int] | np.ndarray) -> np.ndarray:
-        drones = np.asarray(drones, dtype=np.int64)
-        rows = np.searchsorted(self._drones, drones)
-        if len(drones) and (rows.max() >= len(self._drones) or (self._drones[rows] != drones).any()):
-            strangers = sorted(set(drones.tolist()) - set(self._drones.tolist()))
-            raise UsageError(f"drones {strangers} are not in this swarm")
-        return rows
+        return swarm_rows(self._drones, drones)
 
     # ------------------------------------------------------------------ one turn
 
