@@ -36,14 +36,15 @@ def test_registered_with_a_swarm_form():
     assert LrtaPilot.cooperative and LrtaPilot.senses
 
 
-def test_ranks_closer_cells_first_the_longer_axis_first_then_staying():
+def test_ranks_closer_cells_first_the_longer_axis_first_then_staying_then_sideways_before_back():
     grid = Grid((9, 9, 3))
     pilot = LrtaPilot(world_size=grid.size)
     d, asks = run_step(pilot, (2, 4, 1), (7, 6, 1), grid.oracle)
     assert asks == 1 and d.note is Note.NONE
-    # +x (5 to go) before +y (2 to go), both closer; then staying; then the others by h, ties by axis gap
-    assert _cells((2, 4, 1), d.ranked) == [(3, 4, 1), (2, 5, 1), (2, 4, 1), (1, 4, 1), (2, 3, 1), (2, 4, 2),
-                                           (2, 4, 0)]
+    # +x (5 to go) before +y (2 to go), both closer; then staying; then the others (all one farther), nearest the
+    # target as the crow flies first: up and down (sideways), then -y, then straight back (-x) last
+    assert _cells((2, 4, 1), d.ranked) == [(3, 4, 1), (2, 5, 1), (2, 4, 1), (2, 4, 2), (2, 4, 0), (2, 3, 1),
+                                           (1, 4, 1)]
     assert d.pos == (3, 4, 1)
     assert pilot.learned == {}  # nothing learned where a neighbour is closer
 

@@ -11,9 +11,11 @@ A cell's value is h(c) = what the drone learned for it, else the Manhattan dista
    distance: the learned values are sparse, a few cells around the buildings it met);
 3. it ranks its own cell and its free neighbours for the coordinator's arbiter (PIBT, coordinator/arbiter.py,
    docs/cooperation.md): by h, smallest first; staying (with the value just learned) before any neighbour of
-   equal h; among neighbours of equal h, the one along the axis with more way left to go first (paths go
-   diagonally, staircase-wise, rather than one axis after the other, which would put crowds in the same
-   lanes), then in AROUND order (+x, -x, +y, -y, +z, -z): a total order. After learning, the best neighbour
+   equal h; among neighbours of equal h, the one nearer the target as the crow flies (squared Euclidean
+   distance) first, then in AROUND order (+x, -x, +y, -y, +z, -z): a total order. Nearer as the crow flies:
+   of two cells that get closer, the one along the axis with more way to go (paths go diagonally,
+   staircase-wise, rather than one axis after the other, which would put crowds in the same lanes); of two
+   that do not, the one to the side rather than straight back (a drone facing a building goes round it). After learning, the best neighbour
    is always strictly below staying, so a drone that gets its first choice always moves. Its move (`pos`, for
    an arbitration that takes one move per drone) is its first choice.
 
@@ -54,9 +56,10 @@ from schema.tables import code_of
 from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds, swarm_numbers, swarm_rows
 
 #: A ranking key is h * _H + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in AROUND order,
-#: 6 staying); tie is 0 for staying and 512 - (the way left along the step's axis, at most 511) for a neighbour.
+#: 6 staying); tie is 0 for staying and 1 + the neighbour's squared Euclidean distance to the target (below 2**36
+#: in a world of sides up to 2**16) for a neighbour.
 _TIE = 8
-_H = 512 * 8 * 2
+_H = 1 << 40
 _STAY = 6
 _AXIS = tuple(next(a for a in range(3) if d[a]) for d in AROUND)
 _NONE, _REACHED, _UNREACHABLE = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE))
@@ -132,8 +135,9 @@ class LrtaPilot:
             self._learned[pos] = here
         keys = [(here * _H + _STAY, _STAY)]
         for k, v in values.items():
-            axis = _AXIS[k]
-            keys.append((v * _H + (512 - min(abs(target[axis] - pos[axis]), 511)) * _TIE + k, k))
+            c = around[k]
+            euclid = (c[0] - target[0]) ** 2 + (c[1] - target[1]) ** 2 + (c[2] - target[2]) ** 2
+            keys.append((v * _H + (1 + euclid) * _TIE + k, k))
         order = [k for _, k in sorted(keys)]
         note = Note.UNREACHABLE if here > base + self.slack else Note.NONE
         return Decision(pos=pos if order[0] == _STAY else around[order[0]], note=note, ranked=_pack(order))
@@ -258,7 +262,7 @@ class LrtaSwarm:
                 spots = self._trip[rows[go[at]]] * self._cells + linear_rows(p[at], size)
                 self._learned.update(zip(spots.tolist(), h_here[at].tolist()))
                 self._learns[rows[go[at]]] = True
-            tie = 512 - np.minimum(gap[:, _AXES], 511)
+            tie = 1 + ((around[go] - t[:, None, :]) ** 2).sum(axis=2)
             ranking = np.where(f, np.where(f, h_nb, 0) * _H + tie * _TIE + _COLUMNS, _FAR)
             keys[go, :6] = ranking
             keys[go, 6] = h_here * _H + _STAY
