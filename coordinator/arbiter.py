@@ -465,31 +465,39 @@ def _manhattan(u: int, v: int, shape: Cell) -> int:
     return abs(ux - vx) + abs(uy - vy) + abs(uz - vz)
 
 
-def alone(here: np.ndarray, cand: np.ndarray, cooperative: np.ndarray, taken: np.ndarray,
-          targets: np.ndarray | None) -> np.ndarray:
-    """The cooperative drones whose turn PIBT settles without looking at any other drone: the first cell it
-    offers (`cand`: the drones' candidates in their own order, `offered`) is free (no drone stands there), is no
-    other drone's target (`targets`, flat, -1 for none; then `candidates` tries it first too), no other drone
-    offers it (nor flies into it: `taken`, the non-cooperative drones' moves, -1 for the others), and no other
-    drone offers the drone's own cell. Whenever PIBT comes to such a drone it takes that cell; no push chain ever
-    reaches it (only a drone standing in a cell someone wants is pushed), no swap or pull involves it, and the
-    cell it takes is one nobody else would try: so it can be settled first, in numpy, and PIBT's loop run over
-    the others alone, with the same result. In a sparse swarm (a city's drones, one in a few hundred cells)
-    that is nearly every drone."""
-    mine = cand[cooperative]
-    wanted = np.concatenate([mine[mine >= 0], taken[taken >= 0]])
-    cells, counts = np.unique(wanted, return_counts=True)
+def alone(here: np.ndarray, cand: np.ndarray, cooperative: np.ndarray, far: np.ndarray, targets: np.ndarray | None,
+          size: Cell) -> np.ndarray:
+    """Cooperative drones whose turn PIBT settles without looking at any other drone: the first cell it offers
+    (`cand`: the drones' candidates in their own order, `offered`) is free, is no other drone's target (`targets`,
+    flat, -1 for none; then `candidates` tries it first too) and no other drone can offer it, nor the drone's own
+    cell. Whenever PIBT comes to such a drone it takes that cell; no push chain ever reaches it (only a drone
+    standing in a cell someone offers is pushed), no swap or pull involves it, and the cell it takes is one
+    nobody else would try: so it can be settled first, in numpy, and PIBT's loop run over the others alone, with
+    the same result. In a sparse swarm (a city's drones, one in a few hundred cells) that is nearly every drone.
 
-    def count(x: np.ndarray) -> np.ndarray:
-        at = np.searchsorted(cells, x).clip(max=max(len(cells) - 1, 0))
-        return np.where(cells[at] == x, counts[at], 0) if len(cells) else np.zeros(len(x), np.int64)
-
-    first = cand[:, 0]
-    own = (cand == here[:, None]).any(axis=1)
-    occupied = among(first, here) & (first != here)
+    "No other drone can offer it": a drone offers its own cell and its neighbours, so no other drone stands
+    within one step of the cell, and it is none of the cells `far` (flat, -1 for none): the moves of the drones
+    that offer a move rather than a ranking, and of the non-cooperative ones. (A few drones that nobody else
+    offers to meet are left to the loop this way, when another stands two steps away: a look-up table of the
+    drones' cells is all it costs.)"""
+    X, Y, Z = size
+    marks = np.zeros((X + 2) * (Y + 2) * (Z + 2), np.uint8)  # 1: a drone stands there, 2: in `far`, 4: a target
+    marks[here] = 1
+    marks[far[far >= 0]] |= 2
     if targets is not None:
-        occupied |= among(first, targets[targets >= 0]) & (first != targets)
-    return cooperative & (first >= 0) & (count(first) == 1) & ~occupied & (count(here) == own)
+        marks[targets[targets >= 0]] |= 4
+    last = len(marks) - 1
+    steps = steps_flat(size)[1:MOST]  # the six neighbours (cells off the padded grid hold no drone)
+    first = cand[:, 0]
+    at_first = marks[first.clip(0, last)]
+    near_first = (first[:, None] + steps).clip(0, last)
+    crowded = ((marks[near_first] & 1).astype(bool) & (near_first != here[:, None])).any(axis=1)
+    crowded |= (marks[(here[:, None] + steps).clip(0, last)] & 1).any(axis=1)
+    crowded |= (at_first & 1).astype(bool) & (first != here)
+    crowded |= ((at_first | marks[here]) & 2).astype(bool)
+    if targets is not None:
+        crowded |= (at_first & 4).astype(bool) & (first != targets)
+    return cooperative & (first >= 0) & ~crowded
 
 
 def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray, cooperative: np.ndarray,
@@ -511,7 +519,7 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
     taken = np.where(cooperative, -1, wants)
     if shortcut and n:
         own = offered(here, ranked, wants, size)
-        settled = alone(here, own, cooperative, taken, goals)
+        settled = alone(here, own, cooperative, np.where(cooperative & (ranked != 0), -1, wants), goals, size)
         taken = np.where(settled, own[:, 0], taken)
         coop = np.flatnonzero(cooperative & ~settled)
         rest = np.flatnonzero(~settled)  # (PIBT never reads the settled drones' candidates)
