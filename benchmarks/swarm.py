@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import re
 import sys
 import tempfile
@@ -320,6 +321,7 @@ class CityGame:
     cpu: dict[str, float]  # process -> CPU ms per measured turn
     over: str
     error: str
+    load: float  # the machine's load average (1 min) when the game started
 
     @property
     def isr(self) -> float:
@@ -378,6 +380,7 @@ def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path) -> Ci
     logs = folder / f"{drones}-{run}"
     logs.mkdir(parents=True, exist_ok=True)
     limit = 4 * max(size) + 64
+    load = os.getloadavg()[0]
     case = perf.Case(drones=drones, size=size, warmup=CITY_WARMUP, turns=limit - CITY_WARMUP - 1)
     game = perf.play_distributed(case, scenario, logs, variant=perf.Variant(autopilot=CITY_PILOT, hosts=hosts,
                                                                             statuses=False))
@@ -393,14 +396,14 @@ def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path) -> Ci
     mean = sum(game.latencies) / len(game.latencies) if game.latencies else float("nan")
     return CityGame(size, drones, hosts, run, 1 / mean, len(game.latencies), arrived, collisions, alive,
                     float(found.group(1)) if found else None, {n: 1000 * v for n, v in game.cpu.items()},
-                    game.over, game.error.splitlines()[0] if game.error else "")
+                    game.over, game.error.splitlines()[0] if game.error else "", load)
 
 
 def city_table(games: list[CityGame], pogema_sps: dict[int, float]) -> str:
     """One row per game played, then one per world and drone count: the range over the runs and the verdict."""
     head = ["city", "drones", "swarm hosts", "run", "turns/s", "turns measured", "ISR", "CSR", "collisions",
             "arbiter ms/turn", "CPU ms/turn coordinator / env / swarm hosts / router / ground station",
-            f"POGEMA steps/s ({POGEMA_CITY_SIZE}x{POGEMA_CITY_SIZE}, same N)", "game over"]
+            f"POGEMA steps/s ({POGEMA_CITY_SIZE}x{POGEMA_CITY_SIZE}, same N)", "load (1 min) at start", "game over"]
     lines = [_row(head), _row(["---"] * len(head))]
     for g in games:
         cpu = g.cpu
@@ -411,7 +414,7 @@ def city_table(games: list[CityGame], pogema_sps: dict[int, float]) -> str:
                            "-" if g.arbiter_ms is None else f"{g.arbiter_ms:.2f}",
                            " / ".join([*(f"{cpu.get(n, float('nan')):.1f}" for n in ("coordinator", "env")), swarms,
                                        *(f"{cpu.get(n, float('nan')):.1f}" for n in ("router", "bench"))]),
-                           "-" if pog is None else f"{pog:.1f}", g.error or g.over]))
+                           "-" if pog is None else f"{pog:.1f}", f"{g.load:.1f}", g.error or g.over]))
     return "\n".join(lines)
 
 

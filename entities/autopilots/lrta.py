@@ -15,9 +15,9 @@ A cell's value is h(c) = what the drone learned for it, else the Manhattan dista
    distance) first, then in AROUND order (+x, -x, +y, -y, +z, -z): a total order. Nearer as the crow flies:
    of two cells that get closer, the one along the axis with more way to go (paths go diagonally,
    staircase-wise, rather than one axis after the other, which would put crowds in the same lanes); of two
-   that do not, the one to the side rather than straight back (a drone facing a building goes round it). After learning, the best neighbour
-   is always strictly below staying, so a drone that gets its first choice always moves. Its move (`pos`, for
-   an arbitration that takes one move per drone) is its first choice.
+   that do not, the one to the side rather than straight back (a drone facing a building goes round it).
+   After learning, the best neighbour is always strictly below staying, so a drone that gets its first choice
+   always moves. Its move (`pos`, for an arbitration that takes one move per drone) is its first choice.
 
 A drone at rest (on its target, without one, or that cannot reach it) offers its own cell first, then its
 free neighbours in AROUND order, so that it can be pushed aside and come back.
