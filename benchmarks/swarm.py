@@ -3,6 +3,8 @@
     dronesim bench swarm                    # the MovingAI families, 50-400 agents, a 3D city of 1000 drones
     dronesim bench swarm --quick            # a few small instances (for tests)
     dronesim bench swarm --write            # ... and updates "## Swarm benchmark" in BENCHMARKS.md
+    dronesim bench swarm --city-distributed # only the distributed LRTA* cities (1000 and 9,999 drones, 3 runs)
+    dronesim bench swarm --no-city-distributed  # everything but them
 
 Every instance is played in process (dronesim/local.py: the same engine, environment and autopilots as a
 distributed run, whose journal is the same) by D* drones, three ways side by side:
@@ -29,6 +31,12 @@ also divided by its lower bound (the sum, resp. the largest, of the single-agent
 in-process game (every drone's planning included); and the arbiter's CPU time per turn (process time inside
 `Engine.arbiter`, the garbage collector held off: see `Timed`). POGEMA (benchmarks/pogema.py) is run at the
 same agent counts in the same run: its steps per second with random actions on its 64 x 64 grid.
+
+The distributed cities (`city_distributed`, its own subsection "Distributed cities (LRTA*)", which the table's
+--write keeps): a 256 x 256 x 32 city of 1000 LRTA* drones in one swarm host and of 9,999 on two, through real
+processes (benchmarks/perf.py's `play_distributed`), each played three times, with turns per second, ISR/CSR,
+collisions, the coordinator's arbitration CPU a turn, every process's CPU, and POGEMA with as many agents on
+256 x 256 (its 64 x 64 cannot hold 9,999) in the same run.
 """
 
 from __future__ import annotations
