@@ -206,12 +206,52 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     occupied = among(cand, everyone) & ~stay
     theirs = np.zeros_like(occupied) if targets is None or aims is None else \
         among(cand, aims[aims >= 0]) & (cand != targets[:, None])
-    major = np.where(ranks_stay[:, None], (col > where) * 32 + (col == where) * 16 + occupied * 8 + theirs * 4, 0)
+    hinders = np.zeros(cand.shape, np.int64) if targets is None else \
+        np.where(col > where, np.minimum(hindrance(here, cand, targets, size), 7), 0)
+    major = np.where(ranks_stay[:, None], (col > where) * 512 + (col == where) * 256 + occupied * 128
+                     + hinders * 8 + theirs * 4, 0)
     minor = np.broadcast_to(col, cand.shape)
     if salt is not None:
         minor = np.where(ranks_stay[:, None] & (col > where), tie_breaks(salt, here, cand), minor)
-    key = np.where(cand < 0, 64 << TIE_BITS, (major << TIE_BITS) + minor)
+    key = np.where(cand < 0, 1024 << TIE_BITS, (major << TIE_BITS) + minor)
     return np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1) if n else cand
+
+
+def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cell) -> np.ndarray:
+    """For each drone i and candidate cell u of it ((n, MOST)), how many drones next to i (not in u) have a
+    target closer to u than to their own cell (Manhattan): entering u, i would stand in their way next turn
+    (Okumura & Nagai's hindrance, SoCS 2025)."""
+    n = len(here)
+    if not n:
+        return np.zeros(cand.shape, np.int64)
+    _, Y, Z = size
+    sy, sx = Z + 2, (Y + 2) * (Z + 2)
+
+    def xyz(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return f // sx, (f // sy) % (Y + 2), f % sy
+
+    order = np.argsort(here, kind="stable")
+    sorted_here = here[order]
+    cx, cy, cz = xyz(cand)
+    out = np.zeros(cand.shape, np.int64)
+    for d in steps_flat(size)[1:].tolist():
+        if not d:
+            continue
+        nb = here + d
+        at = np.minimum(np.searchsorted(sorted_here, nb), n - 1)
+        j = order[at]
+        found = (sorted_here[at] == nb) & (targets[j] >= 0)
+        if not found.any():
+            continue
+        rows = np.flatnonzero(found)
+        j = j[rows]
+        gx, gy, gz = xyz(targets[j])
+        hx, hy, hz = xyz(here[j])
+        now = np.abs(hx - gx) + np.abs(hy - gy) + np.abs(hz - gz)
+        u = cand[rows]
+        then = np.abs(cx[rows] - gx[:, None]) + np.abs(cy[rows] - gy[:, None]) + np.abs(cz[rows] - gz[:, None])
+        out[rows] += (u >= 0) & (u != here[j][:, None]) & (then < now[:, None])
+    return out
 
 
 #: Bits of a tie-break drawn by `tie_breaks` (equal draws keep the drone's order).
@@ -252,9 +292,11 @@ def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
     none), for the swap (None: no swap); `aims`: each drone's target (flat, -1 for none) and the flat cells'
     shape (`flat_cells`: X + 2, Y + 2, Z + 2), for a pushed drone's retreat (`_out_of_the_way`; None: unknown).
 
-    A drone gives way when, choosing first in its push chain, it could not have its first candidate
-    although no drone outside the chain took a cell the chain needed: the drones it tried to push had
-    nowhere to go (a dead end, a drone at rest in a pocket). The engine then puts it behind them for the
+    A drone gives way when, choosing first in its push tree (every drone its call pushed, directly or not,
+    whether that push held or failed), it could not have its first candidate although no drone outside the
+    tree took a cell the tree needed: the drones it tried to push had nowhere to go (a dead end, a drone at
+    rest in a pocket, a full room: a drone whose push failed stays, and its cell is then the tree's own, not
+    one a drone of higher priority took). The engine then puts it behind them for the
     next turn (its priority goes back to zero), so that they push it back instead, towards a place where
     they can pass (docs/cooperation.md). A drone that swapped (`_swapped`) did not give way: it leads.
     """
@@ -270,11 +312,11 @@ def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
         # candidates, the next one to try, the drone it pulls if it swaps (-1: none)]; `ok` is the last
         # finished call's result.
         first, partner = cand[root], -1
-        if corridors is not None and now.get(first[0], root) != root:  # its best cell holds a drone: a swap?
+        if corridors is not None:  # a swap?
             first, partner = _swapped(root, first, here, cand, nxt, now, corridors)
         stack: list[list[Any]] = [[root, first, 0, partner]]
-        chain = {root}
-        contested = False  # a drone outside the chain took a cell the chain wanted
+        tree = {root}  # the drones this call pushed (never removed: one that failed holds its cell for the tree)
+        contested = False  # a drone outside the tree took a cell the tree wanted
         led = partner >= 0  # the root swaps: it leads the other one out of a corridor
         ok = None
         while stack:
@@ -283,7 +325,7 @@ def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
             if ok:  # the drone it pushed moved away: so does it
                 if pull >= 0 and k == 1:
                     _pull(i, pull, here, cand, nxt, claimed)
-                chain.discard(stack.pop()[0])
+                stack.pop()
                 continue
             ok = None
             src = here[i]
@@ -294,21 +336,21 @@ def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
                 if v < 0:
                     break
                 if v in claimed:
-                    contested = contested or claimed[v] not in chain
+                    contested = contested or claimed[v] not in tree
                     continue
                 j = now.get(v)
                 if j is not None and j != i and nxt[j] == src:  # a swap
-                    contested = contested or j not in chain
+                    contested = contested or j not in tree
                     continue
                 nxt[i] = v
                 claimed[v] = i
                 if j is not None and j != i and nxt[j] < 0:  # priority inheritance: j must make room
                     frame[2] = k
                     theirs, pulls = _out_of_the_way(cand[j], here[j], v, src, aims and (aims[0][i], aims[1])), -1
-                    if corridors is not None and now.get(theirs[0], j) != j:
+                    if corridors is not None:
                         theirs, pulls = _swapped(j, theirs, here, cand, nxt, now, corridors)
                     stack.append([j, theirs, 0, pulls])
-                    chain.add(j)
+                    tree.add(j)
                     pushed = True
                     break
                 if pull >= 0 and k == 1:
@@ -321,7 +363,7 @@ def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
                 nxt[i] = src
                 claimed[src] = i
                 ok = False
-            chain.discard(stack.pop()[0])
+            stack.pop()
         if not contested and not led and nxt[root] != cand[root][0]:
             gave_way.append(root)
     return nxt, gave_way
@@ -364,17 +406,25 @@ class Corridors:
                 break  # a junction: its other ways do not matter
         return out
 
-    def required(self, i: int, j: int, vi: int, vj: int) -> bool:
-        """Whether pushing j (at vj, wanting vi) on ahead of i (at vi, wanting vj) cannot let i pass: beyond vj
-        is a corridor up to its end, or to i's target, with no other drone in it, and j's target is neither in it
-        nor vi. (With more drones in the corridor, pulling one at a time brings them back in turn: pushing them
-        to the end, where i gives way, is what lets them all out.)"""
+    def required(self, i: int, j: int, vi: int, vj: int, clear: bool = False) -> bool:
+        """Whether pushing j (at vj) on ahead of i (at vi, wanting vj) cannot let i pass: beyond vj is a corridor
+        up to its end, or up to i's target (i stops there), with no other drone in it, and j, pushed as far as i
+        drives it, wants back out past i:
+
+        - j's target is neither in the corridor nor vi (pulled onto its target, j would park in i's way again);
+        - or j stands on its target vj, which i's way goes through (two targets in a dead end, the deeper one
+          entered last: j must come out to let i in, then go back);
+        - `clear` (the clear operation, `_swapped`): i's target is in the corridor, and j's is neither the
+          last cell i drives it to nor beyond (lacam3's condition: j pushed there would want back).
+
+        (With more drones in the corridor, pulling one at a time brings them back in turn: pushing them to the
+        end, where i gives way, is what lets them all out.)"""
         gi, gj = self.goal[i], self.goal[j]
         if gj < 0:
             return False
         a, b = vi, vj
         walked = {b}
-        while True:
+        while a != gi:  # i goes on
             on = self.ways(b, a, True)
             if len(on) >= 2:
                 return False  # a junction: j can be pushed aside there
@@ -384,9 +434,25 @@ class Corridors:
             if b in walked or b in self.now:
                 return False  # a ring: j goes round; another drone beyond j: pulling j alone lets i by no more
             walked.add(b)
-            if a == gi:
-                break  # i's target: i stops here, j is in the way beyond it
-        return gj != vi and gj not in walked  # (pulled onto its target, j would park in i's way again)
+        if clear:
+            return gi in (a, b) and gj != b and not self.beyond(a, b, gj)
+        if gj == vj:
+            return b != vj and not self.beyond(a, b, gj)
+        return gj != vi and gj not in walked
+
+    def beyond(self, a: int, b: int, g: int) -> bool:
+        """Whether cell g lies beyond b, coming from a, along the corridor (or may: a junction comes first)."""
+        walked = {b}
+        while True:
+            on = self.ways(b, a, True)
+            if len(on) != 1:
+                return len(on) >= 2
+            a, b = b, on[0]
+            if b == g:
+                return True
+            if b in walked:
+                return False
+            walked.add(b)
 
     def possible(self, vj: int, vi: int) -> bool:
         """Whether a junction lies behind vi (away from vj) that the two can reach along the corridor."""
@@ -406,24 +472,44 @@ class Corridors:
 
 def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int], now: dict[int, int],
              corridors: Corridors | None) -> tuple[list[int], int]:
-    """Drone i's candidates as it tries them, and the drone it pulls (-1: none). If its best cell holds a drone
-    j that has not moved yet, wants i's cell, and can only pass i at a junction behind i (`Corridors`), i
-    swaps: it tries its cells in reverse (those it ranks after staying, staying, then the others), and pulls
-    j into its cell if it gets the first of them."""
+    """Drone i's candidates as it tries them, and the drone it pulls (-1: none). i swaps — it tries its cells in
+    reverse (those it ranks after staying, staying, then the others), and pulls the other drone into its cell if
+    it gets the first of them — when (`Corridors`; Okumura's swap, IJCAI 2023, and its clear operation as
+    lacam3 makes it):
+
+    - its best cell v holds a drone j that has not moved yet, offers i's cell, and that pushing on into the
+      corridor beyond v cannot let i pass (`Corridors.required`), and a junction lies behind i;
+    - or (the clear operation) v leads into a corridor holding the target of a neighbour k that wants i's cell
+      (ranks it before staying), where k, following i in, would push i to its end and back: i lets k in first,
+      stepping back to the junction behind it (k is pulled into i's cell if it has not moved yet)."""
     v = mine[0]
     src = here[i]
     if corridors is None or v < 0 or v == src or src not in mine:
         return mine, -1
     j = now.get(v)
-    if j is None or j == i or nxt[j] >= 0:
-        return mine, -1
-    theirs = cand[j]
-    if src not in theirs or v not in theirs or theirs.index(src) > theirs.index(v):
-        return mine, -1  # j does not want i's cell
-    if not (corridors.required(i, j, src, v) and corridors.possible(v, src)):
-        return mine, -1
+    if j is not None and j != i and nxt[j] < 0 and src in cand[j]:
+        theirs = cand[j]
+        wants = v in theirs and theirs.index(src) < theirs.index(v)  # j wants i's cell (or is on its target)
+        if (wants or corridors.goal[j] == v) and corridors.required(i, j, src, v) and corridors.possible(v, src):
+            return _reverse(mine, src), j
+    if len(corridors.ways(v, src, True)) >= 2:
+        return mine, -1  # v is no corridor
+    for d in corridors.steps:
+        k = now.get(src + d)
+        if k is None or k == i or here[k] == v or corridors.goal[k] < 0:
+            continue
+        theirs = cand[k]
+        if src not in theirs or here[k] not in theirs or theirs.index(src) > theirs.index(here[k]):
+            continue  # k does not want i's cell
+        if corridors.required(k, i, src, v, True) and corridors.possible(v, src):
+            return _reverse(mine, src), (k if nxt[k] < 0 else -1)
+    return mine, -1
+
+
+def _reverse(mine: list[int], src: int) -> list[int]:
+    """A drone's candidates (it is at `src`, which it ranks) in reverse: those after staying, staying, the others."""
     cut = mine.index(src)
-    return [c for c in mine[cut + 1:] if c >= 0] + [src] + mine[:cut], j
+    return [c for c in mine[cut + 1:] if c >= 0] + [src] + mine[:cut]
 
 
 def _pull(i: int, j: int, here: list[int], cand: Rows, nxt: list[int], claimed: dict[int, int]) -> None:

@@ -406,6 +406,21 @@ def test_pibt_push_chain_backtracks() -> None:
     assert cells == {"D01": (1, 2, 0), "D02": (2, 1, 0), "D03": (3, 1, 0)} and gave == {"D01"}
 
 
+def test_pibt_gives_way_when_its_own_push_tree_holds_the_cells() -> None:
+    """A drone whose pushes failed stays, and its cell is then taken: by the same push tree, not by a drone of
+    higher priority. D01 pushes D02, which tries D03 (stuck: it stays), then D04, which would have to push D05
+    into D03's cell: every request fails because of drones D01 itself drove to try, so D01 gives way (its
+    priority resets and they push it back next turn), as when the drones it pushed had nowhere to go at all."""
+    drones = {"D01": ((0, 1, 0), [X, STAY]), "D02": ((1, 1, 0), [STAY, X, Y]), "D03": ((2, 1, 0), [STAY]),
+              "D04": ((1, 2, 0), [STAY, X]), "D05": ((2, 2, 0), [STAY, NY])}
+    cells, yielded, gave = coop_arb(drones, {"D01": 9})
+    assert cells == {d: c for d, (c, _) in drones.items()} and yielded == {"D01"} and gave == {"D01"}
+    # ... but not when a drone of higher priority took the cell it needed first
+    drones |= {"D03": ((2, 1, 0), [STAY, X]), "D06": ((2, 0, 0), [Y])}
+    cells, _, gave = coop_arb(drones, {"D01": 9, "D06": 10})
+    assert cells["D06"] == (2, 1, 0) and cells["D01"] == (0, 1, 0) and not gave
+
+
 def test_pibt_a_long_push_chain_moves_as_one() -> None:
     n = 7  # a queue along x, each wanting the cell ahead; the head is free to go on
     drones = {f"D0{k + 1}": ((k, 0, 0), [X, STAY]) for k in range(n)}
@@ -480,6 +495,42 @@ def test_pibt_no_swap_with_a_drone_whose_target_is_in_the_corridor() -> None:
     cells, _, _ = coop_arb(drones, {"D01": 5, "D02": 1}, {"D01": (5, 1, 0), "D02": (4, 1, 0)}, DEAD_END,
                            DEAD_END.shape)
     assert cells == {"D01": (3, 1, 0), "D02": (4, 1, 0)}
+
+
+def test_pibt_swap_pulls_a_drone_off_its_target_that_blocks_a_deeper_one() -> None:
+    """Two targets in a dead end, the shallower one taken first: D02 is parked on (3, 1), D01 wants the end
+    beyond it. Pushing D02 on drives it to the end and back for ever; D01 steps back instead, pulling D02 off
+    its target (it offered that cell) towards the junction, where D02 will let D01 in first."""
+    drones = {"D01": ((2, 1, 0), [X, STAY, NX]), "D02": ((3, 1, 0), [STAY, NX, X])}
+    cells, _, gave = coop_arb(drones, {"D01": 5}, {"D01": (4, 1, 0), "D02": (3, 1, 0)}, DEAD_END, DEAD_END.shape)
+    assert cells == {"D01": (1, 1, 0), "D02": (2, 1, 0)} and not gave
+    # not when the end is D02's own target (then D01 stops short of it: pushing is right)
+    cells, _, _ = coop_arb(drones, {"D01": 5}, {"D01": (4, 1, 0), "D02": (5, 1, 0)}, DEAD_END, DEAD_END.shape)
+    assert cells == {"D01": (3, 1, 0), "D02": (4, 1, 0)}
+
+
+def test_pibt_clear_a_drone_lets_the_one_going_deeper_in_first() -> None:
+    """The clear operation (lacam3): D02, out of the dead end next to its target (3, 1), would enter first; D01,
+    beside it at the junction and wanting its cell, goes to the end (5, 1). Entering first, D02 would park in
+    D01's way: it steps back instead (its cells in reverse) and pulls D01 into its cell."""
+    drones = {"D02": ((2, 1, 0), [X, STAY, NY, Y]), "D01": ((1, 1, 0), [X, STAY, NX])}
+    targets = {"D01": (5, 1, 0), "D02": (3, 1, 0)}
+    cells, _, _ = coop_arb(drones, {"D02": 5}, targets, DEAD_END, DEAD_END.shape)
+    assert cells["D01"] == (2, 1, 0) and cells["D02"] in {(2, 0, 0), (2, 2, 0)}
+    # the other way round (D01's target the shallower one) D02 goes in first: no clear
+    cells, _, _ = coop_arb(drones, {"D02": 5}, {"D01": (3, 1, 0), "D02": (5, 1, 0)}, DEAD_END, DEAD_END.shape)
+    assert cells == {"D02": (3, 1, 0), "D01": (2, 1, 0)}
+
+
+def test_pibt_a_pushed_drone_retreats_out_of_its_neighbours_way() -> None:
+    """Among its retreats, a pushed drone takes first one where it hinders no drone next to it (Okumura & Nagai's
+    hindrance): D03, beside D02, heads for (1, 5), closer to (2, 3) than to its own cell: D02, pushed by D01,
+    steps -y rather than +y, though it ranks +y first."""
+    drones = {"D01": ((1, 2, 0), [X, STAY]), "D02": ((2, 2, 0), [STAY, Y, NY]), "D03": ((3, 2, 0), [STAY])}
+    targets = {"D01": (6, 2, 0), "D02": (2, 2, 0), "D03": (1, 5, 0)}
+    assert coop_arb(drones, {"D01": 3}, {"D01": (6, 2, 0), "D02": (2, 2, 0)})[0]["D02"] == (2, 3, 0)
+    cells, _, _ = coop_arb(drones, {"D01": 3}, targets)
+    assert cells == {"D01": (2, 2, 0), "D02": (2, 1, 0), "D03": (3, 2, 0)}
 
 
 @st.composite

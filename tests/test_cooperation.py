@@ -174,6 +174,23 @@ def test_swap_leads_the_other_drone_to_a_junction(case: str) -> None:
     assert slower.over.turn > 12
 
 
+#: A dead end two cells deep (x = 2, y = 1..2) off an open row: two targets in it.
+POCKET = ["......", "##.###", "##.###"]
+
+
+@pytest.mark.parametrize("start", [(2, 1, 0), (2, 0, 0)])
+def test_two_targets_in_a_dead_end_entered_in_the_wrong_order(start: Cell) -> None:
+    """D02 is home on (2, 1), or just outside, before D01 reaches the dead end's far cell (2, 2) beyond it.
+    PIBT alone pushes D02 to the end, gives way, is pushed back out and pushes again, for ever (D01 ends by
+    saying UNREACHABLE); with the swap pulling a drone off its target that blocks a deeper one, and the clear
+    operation (a drone next to a dead end lets the one going deeper in first), both are home in 6 turns."""
+    drones = {"D01": ((0, 0, 0), (2, 2, 0), "dstar"), "D02": (start, (2, 1, 0), "dstar")}
+    result = play(world_of(POCKET), drones, max_turns=100)
+    arrived(result)
+    assert result.over.turn <= 8
+    assert play(world_of(POCKET), drones, max_turns=100, arbiter=_without_swap).over.reason is EndReason.SETTLED
+
+
 # --------------------------------------------------------------------------- neighbouring targets: going round
 
 #: A ring of one-cell corridors round a block; D01's target (2, 0) and D02's (3, 0) are next to each other on
