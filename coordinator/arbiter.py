@@ -188,7 +188,8 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     stands (going round a drone beats pushing it when both are as short: a drone parked on its target is left
     alone when a way round is as good), then those that are no other drone's target (`targets`, flat, -1 for
     none: a drone pushed aside steps off the way of one going home rather than onto its home), then in the
-    drone's order among the cells before staying, and, among those after (where a pushed drone goes), in an
+    drone's order among the cells before staying, and, among those after (where a pushed drone goes), first
+    those where it hinders fewer of the drones next to it that want its cell (`hindrance`), then in an
     order drawn from `salt` (the turn), the drone's cell and the candidate's (`tie_breaks`; None: the drone's
     order there too). Deterministic, and it changes from turn to turn: the same few drones pushing each other
     round a loop (a 2 x 2 block, a room) do not choose the same sides at every round, and get out of it
@@ -207,7 +208,7 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     theirs = np.zeros_like(occupied) if targets is None or aims is None else \
         among(cand, aims[aims >= 0]) & (cand != targets[:, None])
     hinders = np.zeros(cand.shape, np.int64) if targets is None else \
-        np.where(col > where, np.minimum(hindrance(here, cand, targets, size), 7), 0)
+        np.where(col > where, np.minimum(hindrance(here, cand, targets, size, col < where), 7), 0)
     major = np.where(ranks_stay[:, None], (col > where) * 512 + (col == where) * 256 + occupied * 128
                      + hinders * 8 + theirs * 4, 0)
     minor = np.broadcast_to(col, cand.shape)
@@ -217,13 +218,16 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     return np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1) if n else cand
 
 
-def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cell) -> np.ndarray:
-    """For each drone i and candidate cell u of it ((n, MOST)), how many drones next to i (not in u) have a
-    target closer to u than to their own cell (Manhattan): entering u, i would stand in their way next turn
-    (Okumura & Nagai's hindrance, SoCS 2025)."""
+def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cell, ahead: np.ndarray) -> np.ndarray:
+    """For each drone i and candidate cell u of it ((n, MOST), flat), how many drones next to i want i's cell
+    (`ahead`: (n, MOST), whether each candidate is one its drone ranks before staying) and have a target closer
+    (Manhattan) to u than to i's cell: stepping into u, i would be in their way again next turn (Okumura &
+    Nagai's hindrance, SoCS 2025, with a neighbour's own ranking for its first step and the Manhattan distance
+    for the next, the arbiter knowing no map distances)."""
     n = len(here)
+    out = np.zeros(cand.shape, np.int64)
     if not n:
-        return np.zeros(cand.shape, np.int64)
+        return out
     _, Y, Z = size
     sy, sx = Z + 2, (Y + 2) * (Z + 2)
 
@@ -233,23 +237,22 @@ def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cel
     order = np.argsort(here, kind="stable")
     sorted_here = here[order]
     cx, cy, cz = xyz(cand)
-    out = np.zeros(cand.shape, np.int64)
     for d in steps_flat(size)[1:].tolist():
         if not d:
             continue
         nb = here + d
         at = np.minimum(np.searchsorted(sorted_here, nb), n - 1)
         j = order[at]
-        found = (sorted_here[at] == nb) & (targets[j] >= 0)
+        found = (sorted_here[at] == nb) & (targets[j] >= 0) & ((cand[j] == here[:, None]) & ahead[j]).any(axis=1)
         if not found.any():
             continue
         rows = np.flatnonzero(found)
         j = j[rows]
         gx, gy, gz = xyz(targets[j])
-        hx, hy, hz = xyz(here[j])
-        now = np.abs(hx - gx) + np.abs(hy - gy) + np.abs(hz - gz)
-        u = cand[rows]
+        ix, iy, iz = xyz(here[rows])
+        now = np.abs(ix - gx) + np.abs(iy - gy) + np.abs(iz - gz)
         then = np.abs(cx[rows] - gx[:, None]) + np.abs(cy[rows] - gy[:, None]) + np.abs(cz[rows] - gz[:, None])
+        u = cand[rows]
         out[rows] += (u >= 0) & (u != here[j][:, None]) & (then < now[:, None])
     return out
 

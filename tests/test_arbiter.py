@@ -523,14 +523,16 @@ def test_pibt_clear_a_drone_lets_the_one_going_deeper_in_first() -> None:
 
 
 def test_pibt_a_pushed_drone_retreats_out_of_its_neighbours_way() -> None:
-    """Among its retreats, a pushed drone takes first one where it hinders no drone next to it (Okumura & Nagai's
-    hindrance): D03, beside D02, heads for (1, 5), closer to (2, 3) than to its own cell: D02, pushed by D01,
-    steps -y rather than +y, though it ranks +y first."""
-    drones = {"D01": ((1, 2, 0), [X, STAY]), "D02": ((2, 2, 0), [STAY, Y, NY]), "D03": ((3, 2, 0), [STAY])}
+    """Among its retreats, a pushed drone takes first one where it hinders none of the drones next to it that
+    want its cell (Okumura & Nagai's hindrance): D03, beside D02, wants D02's cell on its way to (1, 5), and
+    from there (2, 3) is closer to it than (2, 1): D02, pushed by D01, steps -y rather than +y, though it ranks
+    +y first. A neighbour that does not want D02's cell does not count."""
+    drones = {"D01": ((1, 2, 0), [X, STAY]), "D02": ((2, 2, 0), [STAY, Y, NY]), "D03": ((3, 2, 0), [NX, STAY])}
     targets = {"D01": (6, 2, 0), "D02": (2, 2, 0), "D03": (1, 5, 0)}
     assert coop_arb(drones, {"D01": 3}, {"D01": (6, 2, 0), "D02": (2, 2, 0)})[0]["D02"] == (2, 3, 0)
     cells, _, _ = coop_arb(drones, {"D01": 3}, targets)
     assert cells == {"D01": (2, 2, 0), "D02": (2, 1, 0), "D03": (3, 2, 0)}
+    assert coop_arb(drones | {"D03": ((3, 2, 0), [STAY, NX])}, {"D01": 3}, targets)[0]["D02"] == (2, 3, 0)
 
 
 @st.composite
