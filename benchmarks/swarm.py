@@ -262,8 +262,9 @@ def summary(outcomes: list[Outcome]) -> str:
 def arbiter_alone(counts: Iterable[int], repeats: int = 21) -> dict[int, float]:
     """The arbiter's process time per turn (ms, median of `repeats`) on its own, for each drone count: a dense
     cube of drones (one in three cells taken), each ranking all 7 of its steps in a random order, random
-    priorities, a salt for the tie-breaks (the turn's, in a game) — a turn of conflicts everywhere, many push
-    chains."""
+    priorities, each drone's target another's cell, the cube's open cells (the swap's and the clear operation's
+    corridor tests, the retreats' hindrance), a salt for the tie-breaks (the turn's, in a game) — a turn of
+    conflicts everywhere, many push chains."""
     rng = np.random.default_rng(1)
     out = {}
     for n in counts:
@@ -273,10 +274,13 @@ def arbiter_alone(counts: Iterable[int], repeats: int = 21) -> dict[int, float]:
         ranked = np.array([rank_steps(RANK_STEPS[k] for k in rng.permutation(len(RANK_STEPS))) for _ in range(n)],
                           np.uint32)
         priority = rng.integers(0, 50, n)
+        targets = before[rng.permutation(n)]
+        size = (side + 2,) * 3
+        world = arbiter.OpenCells(np.zeros(size, bool))
         spent = []
         for turn in range(1, repeats + 1):
             t0 = time.process_time()
-            arbiter.cooperate((side + 2,) * 3, before, before, ranked, np.ones(n, bool), priority, None, None, turn)
+            arbiter.cooperate(size, before, before, ranked, np.ones(n, bool), priority, targets, world, turn)
             spent.append(time.process_time() - t0)
         out[n] = 1000 * sorted(spent)[len(spent) // 2]
     return out

@@ -208,7 +208,7 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     theirs = np.zeros_like(occupied) if targets is None or aims is None else \
         among(cand, aims[aims >= 0]) & (cand != targets[:, None])
     hinders = np.zeros(cand.shape, np.int64) if targets is None else \
-        np.where(col > where, np.minimum(hindrance(here, cand, targets, size, col < where), 7), 0)
+        np.where(col > where, np.minimum(hindrance(here, cand, targets, size, occupied & (col < where)), 7), 0)
     major = np.where(ranks_stay[:, None], (col > where) * 512 + (col == where) * 256 + occupied * 128
                      + hinders * 8 + theirs * 4, 0)
     minor = np.broadcast_to(col, cand.shape)
@@ -218,42 +218,28 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     return np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1) if n else cand
 
 
-def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cell, ahead: np.ndarray) -> np.ndarray:
-    """For each drone i and candidate cell u of it ((n, MOST), flat), how many drones next to i want i's cell
-    (`ahead`: (n, MOST), whether each candidate is one its drone ranks before staying) and have a target closer
-    (Manhattan) to u than to i's cell: stepping into u, i would be in their way again next turn (Okumura &
-    Nagai's hindrance, SoCS 2025, with a neighbour's own ranking for its first step and the Manhattan distance
-    for the next, the arbiter knowing no map distances)."""
-    n = len(here)
+def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cell, wants: np.ndarray) -> np.ndarray:
+    """For each drone i and candidate cell u of it ((n, MOST), flat), how many drones want i's cell (`wants`:
+    (n, MOST), whether a drone ranks that candidate before staying and another drone stands in it) and have a
+    target closer (Manhattan) to u than to i's cell: stepping into u, i would be in their way again next turn
+    (Okumura & Nagai's hindrance, SoCS 2025, with the neighbour's own ranking for its first step and the
+    Manhattan distance for the next, the arbiter knowing no map distances)."""
     out = np.zeros(cand.shape, np.int64)
-    if not n:
+    j, k = np.nonzero(wants & (targets >= 0)[:, None])
+    if not len(j):
         return out
+    order = np.argsort(here, kind="stable")
+    i = order[np.searchsorted(here[order], cand[j, k])]  # the drone j wants to push
     _, Y, Z = size
     sy, sx = Z + 2, (Y + 2) * (Z + 2)
 
-    def xyz(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return f // sx, (f // sy) % (Y + 2), f % sy
+    def man(f: np.ndarray, g: np.ndarray) -> np.ndarray:
+        return np.abs(f // sx - g // sx) + np.abs((f // sy) % (Y + 2) - (g // sy) % (Y + 2)) + np.abs(f % sy - g % sy)
 
-    order = np.argsort(here, kind="stable")
-    sorted_here = here[order]
-    cx, cy, cz = xyz(cand)
-    for d in steps_flat(size)[1:].tolist():
-        if not d:
-            continue
-        nb = here + d
-        at = np.minimum(np.searchsorted(sorted_here, nb), n - 1)
-        j = order[at]
-        found = (sorted_here[at] == nb) & (targets[j] >= 0) & ((cand[j] == here[:, None]) & ahead[j]).any(axis=1)
-        if not found.any():
-            continue
-        rows = np.flatnonzero(found)
-        j = j[rows]
-        gx, gy, gz = xyz(targets[j])
-        ix, iy, iz = xyz(here[rows])
-        now = np.abs(ix - gx) + np.abs(iy - gy) + np.abs(iz - gz)
-        then = np.abs(cx[rows] - gx[:, None]) + np.abs(cy[rows] - gy[:, None]) + np.abs(cz[rows] - gz[:, None])
-        u = cand[rows]
-        out[rows] += (u >= 0) & (u != here[j][:, None]) & (then < now[:, None])
+    goal = targets[j][:, None]
+    u = cand[i]
+    hit = (u >= 0) & (u != here[j][:, None]) & (man(u, goal) < man(here[i][:, None], goal))
+    np.add.at(out, i, hit.astype(np.int64))
     return out
 
 
