@@ -473,8 +473,8 @@ def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int
       stepping back to the junction behind it (k is pulled into i's cell if it has not moved yet)."""
     v = mine[0]
     src = here[i]
-    if corridors is None or v < 0 or v == src or src not in mine:
-        return mine, -1
+    if corridors is None or v < 0 or v == src or src not in mine or not corridors.open[v]:
+        return mine, -1  # (an offered cell outside the world or in a building leads into no corridor)
     j = now.get(v)
     if j is not None and j != i and nxt[j] < 0 and src in cand[j]:
         theirs = cand[j]
