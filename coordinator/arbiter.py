@@ -194,19 +194,17 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     order there too). Deterministic, and it changes from turn to turn: the same few drones pushing each other
     round a loop (a 2 x 2 block, a room) do not choose the same sides at every round, and get out of it
     (PIBT's random tie-breaks, lacam3's way of ending such loops; docs/cooperation.md)."""
-    everyone, aims = here, targets
-    if rows is not None:
-        here, ranked, proposed = here[rows], ranked[rows], proposed[rows]
-        targets = None if targets is None else targets[rows]
+    if rows is not None:  # ranked among everyone (whose hindrance counts every drone that wants a cell), then taken
+        return candidates(here, ranked, proposed, size, targets, salt)[rows]
     n = len(here)
     cand = offered(here, ranked, proposed, size)
     col = np.arange(MOST)
     stay = cand == here[:, None]
     ranks_stay = stay.any(axis=1)
     where = np.where(ranks_stay, stay.argmax(axis=1), MOST)[:, None]
-    occupied = among(cand, everyone) & ~stay
-    theirs = np.zeros_like(occupied) if targets is None or aims is None else \
-        among(cand, aims[aims >= 0]) & (cand != targets[:, None])
+    occupied = among(cand, here) & ~stay
+    theirs = np.zeros_like(occupied) if targets is None else \
+        among(cand, targets[targets >= 0]) & (cand != targets[:, None])
     hinders = np.zeros(cand.shape, np.int64) if targets is None else \
         np.where(col > where, np.minimum(hindrance(here, cand, targets, size, occupied & (col < where)), 7), 0)
     major = np.where(ranks_stay[:, None], (col > where) * 512 + (col == where) * 256 + occupied * 128
