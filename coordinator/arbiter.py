@@ -175,12 +175,11 @@ def offered(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Ce
     return cand
 
 
-def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell,
-               targets: np.ndarray | None = None, salt: int | None = None, rows: np.ndarray | None = None
-               ) -> np.ndarray:
+def candidates(here: np.ndarray, cand: np.ndarray, size: Cell, targets: np.ndarray | None = None,
+               salt: int | None = None) -> np.ndarray:
     """Each drone's candidate cells, flat, in the order the arbiter tries them ((n, MOST), -1 after the last):
-    its ranked steps from `here` (flat), or, where it ranked none, its `proposed` cell (flat) alone (`rows`:
-    only those drones', in that order; the others still count as where they stand and what they aim at).
+    the cells it offered in its own order (`cand`, `offered`'s, left as they are), reordered among every drone's
+    (a drone's order depends on where the others stand, what they aim at and which of them want its cell).
 
     A drone that ranks its own cell says which cells are as good as each other: on a grid every neighbour is
     one step closer to the target or one step farther, so the cells it ranks before staying are equally good,
@@ -194,10 +193,7 @@ def candidates(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size:
     order there too). Deterministic, and it changes from turn to turn: the same few drones pushing each other
     round a loop (a 2 x 2 block, a room) do not choose the same sides at every round, and get out of it
     (PIBT's random tie-breaks, lacam3's way of ending such loops; docs/cooperation.md)."""
-    if rows is not None:  # ranked among everyone (whose hindrance counts every drone that wants a cell), then taken
-        return candidates(here, ranked, proposed, size, targets, salt)[rows]
     n = len(here)
-    cand = offered(here, ranked, proposed, size)
     col = np.arange(MOST)
     stay = cand == here[:, None]
     ranks_stay = stay.any(axis=1)
@@ -590,16 +586,17 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
     wants = flat_cells(proposed, size)
     goals = None if targets is None else np.where(targets[:, 0] >= 0, flat_cells(targets, size), -1)
     taken = np.where(cooperative, -1, wants)
+    own = offered(here, ranked, wants, size)
+    cand = candidates(here, own, size, goals, salt)  # among every drone, settled first or not: the same orders
     if shortcut and n:
-        own = offered(here, ranked, wants, size)
         settled = alone(here, own, cooperative, np.where(cooperative & (ranked != 0), -1, wants), goals, size)
         taken = np.where(settled, own[:, 0], taken)
         coop = np.flatnonzero(cooperative & ~settled)
         rest = np.flatnonzero(~settled)  # (PIBT never reads the settled drones' candidates)
-        cand_rows: Rows = dict(zip(rest.tolist(), candidates(here, ranked, wants, size, goals, salt, rest).tolist()))
+        cand_rows: Rows = dict(zip(rest.tolist(), cand[rest].tolist()))
     else:
         coop = np.flatnonzero(cooperative)
-        cand_rows = candidates(here, ranked, wants, size, goals, salt).tolist()
+        cand_rows = cand.tolist()
     order = coop[np.lexsort((coop, -priority[coop].astype(np.int64)))]
     aimed = None if goals is None else goals.tolist()
     world = None if open_ is None or aimed is None else (open_, [d for d in steps_flat(size)[1:].tolist() if d], aimed)
