@@ -159,12 +159,12 @@ class _Deciding:
     plan: Plan
     round: _Round | None = None
     offline: bool = False  # no more ASKs: what the chart cannot answer gets no answer (patience over, or superseded)
-    question: tuple[object] | None = None  # the plan's next question, held while what was asked ahead is on its way
+    question: object = None  # the plan's next question, held while what was asked ahead is on its way (never None)
 
     def next(self, r: _Round | None) -> object:
         """The plan's next question, `r`'s answers given (StopIteration with the moves at its end)."""
         if self.question is not None:
-            (question,), self.question = self.question, None
+            question, self.question = self.question, None
             return question
         return next(self.plan) if r is None else self.plan.send(r.reply(r.answers))
 
@@ -204,7 +204,6 @@ class DroneProcess:
         self._map_ref: int | None = None  # the MAP query on its way
         self._map_settled = False  # charted, or refused: not asked again
         self._env: set[str] = set()  # the sessions of the environment processes present
-        self._admitted = False  # `start` was called
         self._deciding: _Deciding | None = None
         self._done: tuple[tuple, StepTable | dict[str, Decision]] | None = None  # the last turn decided: key, moves
 
@@ -213,12 +212,12 @@ class DroneProcess:
     def start(self) -> list[Effect]:
         """Once admitted: ask for the map, and for the static world around the starts (the first
         turn's sensing then needs no ASK), now if an environment is present, else when one appears."""
-        self._admitted = True
         return self._ask_before_the_game()
 
     def _ask_before_the_game(self) -> list[Effect]:
-        """`start`'s questions, once admitted with an environment present, if the game has not begun."""
-        if not (self.charting and self._admitted and self._env) or self._map_asked or self._done or self._deciding:
+        """`start`'s questions (this process exists once admitted), with an environment present, if the game has
+        not begun."""
+        if not (self.charting and self._env) or self._map_asked or self._done or self._deciding:
             return []
         starts = self.welcome.starts.cells()
         return self._prefetch(0, sorted({c for d, c in starts.items() if d in self._mine}))
@@ -298,7 +297,7 @@ class DroneProcess:
                 return stop.value
             d.round = r = self._pose(d, question)
             if r.parts and not d.offline and self._asked_ahead():  # the chart cannot answer it yet, but
-                d.question, d.round = (question,), None  # cells asked ahead are on their way: it waits for them
+                d.question, d.round = question, None  # cells asked ahead are on their way: it waits for them
                 return None
             if d.offline:
                 r.answers.update({p: {} for p in r.parts})

@@ -197,4 +197,5 @@ def fly_swarm(swarm: SwarmPilot, rows: np.ndarray) -> Generator[np.ndarray, np.n
     about (at most once), receives their kinds, and returns the MOVES steps (with the rankings of a pilot that
     gives them)."""
     pos, note, *ranked = yield from swarm.step(rows["drone"], rows["pos"], rows["target"])
-    return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note, **dict(zip(["ranked"], ranked)))
+    cooperative = {"ranked": ranked[0]} if ranked else {}  # (a pilot without rankings: 0, none)
+    return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note, **cooperative)
