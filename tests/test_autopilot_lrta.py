@@ -8,7 +8,7 @@ import pytest
 
 from entities.autopilots import make_autopilot, make_swarm, run_step
 from entities.autopilots.base import NO_ANSWER, drive
-from entities.autopilots.lrta import LrtaPilot, LrtaSwarm, default_slack
+from entities.autopilots.lrta import Lookahead, LrtaPilot, LrtaSwarm, default_slack
 from schema import Cell, CellInfo, CellKind, Note, UsageError
 from schema.tables import code_of, ranked_steps
 
@@ -66,6 +66,44 @@ def test_learns_in_a_dead_end_and_backs_out():
     assert pilot.h((2, 1, 0)) >= 4
 
 
+def test_the_cube_is_revalued_by_its_shortest_ways_out():
+    # radius 1 round (1, 1, 0) in a world one floor high: the cube's floor cells x, y in 0..2, its border 1 further
+    look = Lookahead(1)
+    cells = np.array([(1, 1, 0)]) + look.offsets
+    target = np.array([(5, 1, 0)])
+    h = np.abs(cells - target).sum(axis=1)[None, :]  # Manhattan everywhere, no world edge
+    inner = cells[look.inner]
+    wall = (inner[:, 0] == 2) & (inner[:, 1] >= 0) & (inner[:, 1] <= 1)  # (2, 0) and (2, 1) blocked, (2, 2) open
+    free = (~wall & (inner[:, 2] == 0))[None, :]  # the floor only: the cells above and below are not free
+    h[0, look.inner[inner.tolist().index([0, 2, 0])]] = 100  # a value learned before, above any way out
+    new = look.revalue(np.array([(1, 1, 0)]), target, free, h)[0]
+    value = {tuple(c): int(v) for c, v in zip(inner.tolist(), new.tolist())}
+    # (1, 1, 0) goes round the wall by (1, 2), (2, 2) and leaves east to (3, 2, 0) (h 3): 6, Manhattan 4;
+    # (2, 2, 0) is no farther than its Manhattan distance (4) and keeps it; the others through them or their
+    # own border cells: (1, 0, 0) 7, (0, 0, 0) 8
+    assert value[(1, 1, 0)] == 6 and value[(2, 2, 0)] == 4 and value[(1, 0, 0)] == 7 and value[(0, 0, 0)] == 8
+    assert value[(0, 2, 0)] == 100  # never lowered
+    assert value[(2, 1, 0)] == 3  # a wall keeps its value (its Manhattan distance)
+    assert Lookahead(0).extra.size == 0 and Lookahead(2).inner.size == 125
+    with pytest.raises(ValueError):
+        Lookahead(-1)
+
+
+def test_the_cube_fills_a_depression_sooner():
+    # a wall across a floor-high strip, open only at its north end: the drone must fill the depression south
+    wall = {(7, y, 0) for y in range(8)}
+    grid = Grid((15, 9, 1), wall)
+    turns = {}
+    for radius in (0, 1, 2):
+        pilot, pos, seen = LrtaPilot(world_size=grid.size, lookahead=radius), (3, 1, 0), 0
+        while pos != (11, 1, 0) and seen < 2000:
+            d, _ = run_step(pilot, pos, (11, 1, 0), grid.oracle)
+            assert grid.kind(d.pos) is CellKind.EMPTY
+            pos, seen = d.pos, seen + 1
+        turns[radius] = seen
+    assert turns[2] <= turns[1] < turns[0] < 2000, turns
+
+
 def test_a_new_target_forgets_what_was_learned():
     grid = Grid((6, 3, 1), {(3, 1, 0)})
     pilot = LrtaPilot(world_size=grid.size)
@@ -121,11 +159,11 @@ def test_the_swarm_refuses_strangers_and_twins():
         LrtaSwarm(world_size=(4, 4, 1), drones=[3, 3])
 
 
-def _equivalence(seed: int, size: Cell, n: int, turns: int, drop: float) -> None:
+def _equivalence(seed: int, size: Cell, n: int, turns: int, drop: float) -> int:
     """n drones flown by one LrtaSwarm and by one LrtaPilot each over a random world, both given the same
     positions and targets every turn (targets that change, some absent, some in buildings, some drones
-    skipping turns as dead ones do; a share `drop` of the cells unanswered): the same moves, notes, rankings
-    and learned values."""
+    skipping turns as dead ones do; a share `drop` of the cells unanswered; cubes of radius 1 or 2 revalued):
+    the same moves, notes, rankings and learned values. Returns how many cubes the swarm revalued."""
     rng = np.random.default_rng(seed)
     nx, ny, nz = size
     cells = [(x, y, z) for x in range(nx) for y in range(ny) for z in range(nz)]
@@ -136,9 +174,12 @@ def _equivalence(seed: int, size: Cell, n: int, turns: int, drop: float) -> None
     numbers = sorted(rng.choice(np.arange(1, 200), n, replace=False).tolist())
     pos = {d: free[i] for d, i in zip(numbers, rng.choice(len(free), n, replace=False))}
     target: dict[int, Cell | None] = {d: None for d in numbers}
-    slack = int(rng.integers(0, 12))
-    swarm = LrtaSwarm(world_size=size, drones=numbers, slack=slack)
-    pilots = {d: LrtaPilot(world_size=size, slack=slack) for d in numbers}
+    slack, lookahead = int(rng.integers(0, 12)), 1 + seed % 2
+    swarm = LrtaSwarm(world_size=size, drones=numbers, slack=slack, lookahead=lookahead)
+    pilots = {d: LrtaPilot(world_size=size, slack=slack, lookahead=lookahead) for d in numbers}
+    revalued = [0]
+    look = swarm.look.revalue
+    swarm.look.revalue = lambda *a: (revalued.__setitem__(0, revalued[0] + len(a[0])), look(*a))[1]  # type: ignore
     lost: set[Cell] = set()
     calls: list[int] = []
 
@@ -172,9 +213,34 @@ def _equivalence(seed: int, size: Cell, n: int, turns: int, drop: float) -> None
         for d in numbers:
             if pilots[d]._target is not None:
                 assert swarm.learned(d) == pilots[d].learned, (seed, turn, d)
+    return revalued[0]
 
 
 @pytest.mark.parametrize("seed", range(16))
-def test_the_swarm_decides_as_one_pilot_per_drone(seed):
+def test_the_swarm_decides_as_one_pilot_per_drone(seed, monkeypatch):
+    monkeypatch.setattr(LrtaSwarm, "FORGET_AFTER", 4 + seed % 3 * 20)  # former trips' values dropped often
     sizes = [(6, 6, 3), (9, 5, 4), (1, 1, 4), (1, 7, 2), (12, 12, 2), (5, 5, 5)]
     _equivalence(seed, sizes[seed % len(sizes)], n=1 + seed % 9 * 3, turns=60, drop=0.0 if seed % 2 else 0.05)
+
+
+def test_the_swarm_revalues_cubes_as_one_pilot_per_drone():
+    assert _equivalence(99, (12, 12, 2), n=25, turns=60, drop=0.0) > 0  # the equivalence did revalue cubes
+
+
+def test_the_swarm_forgets_former_trips(monkeypatch):
+    # a wall across a strip; one drone sent to and fro across it: each trip learns, and former trips are dropped
+    monkeypatch.setattr(LrtaSwarm, "FORGET_AFTER", 16)
+    grid = Grid((15, 9, 1), {(7, y, 0) for y in range(8)})
+    swarm = LrtaSwarm(world_size=grid.size, drones=[1])
+    pos, sizes = np.array([(3, 1, 0)]), []
+    for trip in range(12):
+        target = np.array([(11, 1, 0)] if trip % 2 == 0 else [(3, 1, 0)])
+        for _ in range(300):
+            if (pos == target).all():
+                break
+            pos, _, _ = drive(swarm.step(np.array([1]), pos, target),
+                              lambda c: np.array([grid.kind(x) for x in map(tuple, c.tolist())], np.uint8))
+        assert (pos == target).all()
+        sizes.append(len(swarm._learned))
+    assert sizes[0] > 16 and max(sizes) <= 2 * sizes[0], sizes  # without forgetting: one trip's values more each time
+    assert len(swarm.learned(1)) == sizes[-1]  # what is kept is the current trip's

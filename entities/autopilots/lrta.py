@@ -19,6 +19,16 @@ A cell's value is h(c) = what the drone learned for it, else the Manhattan dista
    After learning, the best neighbour is always strictly below staying, so a drone that gets its first choice
    always moves. Its move (`pos`, for an arbitration that takes one move per drone) is its first choice.
 
+In a depression (it learned a value where it stood the turn before: a wall across its straight line), a drone
+looks further: it senses the cube of `lookahead` cells around it (Chebyshev radius; 1: the 26 cells around; 0:
+it does not)
+instead of its six neighbours, and revalues every free cell of the cube at once before step 2 (`Lookahead`):
+h(c) = max(h(c), the shortest way inside the cube's free cells from c to the target, if it is in the cube, or
+to a cell just outside the cube, plus that cell's h). The way out of a depression crosses the cube's border
+somewhere, so the values stay admissible; and the depression fills a cube at a time instead of a cell at a
+time (Koenig and Sun's LSS-LRTA*, "Comparing real-time and incremental heuristic search for real-time
+situated agents", JAAMAS 2009, with the sensed cube as the local search space).
+
 A drone at rest (on its target, without one, or that cannot reach it) offers its own cell first, then its
 free neighbours in AROUND order, so that it can be pushed aside and come back.
 
@@ -37,7 +47,7 @@ gets its first choice often enough (the drone of highest priority always does, d
 
 Two forms, the same decisions (a property test flies both over random worlds and compares every move, note
 and ranking): `LrtaPilot`, one per drone in plain Python; `LrtaSwarm`, one for a whole swarm host over
-arrays (`autopilots.SWARMS`), about 2 µs a drone a turn.
+arrays (`autopilots.SWARMS`), about 2 µs a drone a turn. Both revalue a cube with the same `Lookahead`.
 """
 
 from __future__ import annotations
@@ -65,6 +75,15 @@ _AXIS = tuple(next(a for a in range(3) if d[a]) for d in AROUND)
 _NONE, _REACHED, _UNREACHABLE = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE))
 
 
+#: The cube a drone in a depression senses and revalues: its Chebyshev radius (see the module). Single drones
+#: in the 256 x 256 x 32 city of the distributed benchmark (its 1000 trips, no other drone in the way): radius 0
+#: (one-move lookahead only) took up to 1253 turns, 1.164 x the Manhattan distance in all, 3 trips over its
+#: 1088-turn limit, 10,158 values learned; radius 1 up to 743 turns, 1.058 x, 18,148 values; radius 2 up to
+#: 583, 1.035 x, 36,642 values (docs/cooperation.md).
+LOOKAHEAD = 1
+_FAR_H = 1 << 50  # a value no way reaches (outside the world, a cell not yet reached by the revaluation)
+
+
 def default_slack(size: Cell) -> int:
     """Moves beyond the Manhattan distance after which a drone says its target is unreachable."""
     return max(64, 2 * (size[0] + size[1] + size[2]))
@@ -82,6 +101,50 @@ def _pack(order: Sequence[int]) -> int:
     return value
 
 
+class Lookahead:
+    """The cube of Chebyshev radius `radius` a drone in a depression senses, and its revaluation (radius 0: no
+    cube, the one-move lookahead only). Cells are indexed in the *padded* cube (radius + 1, C order over the
+    offsets); `inner` are the cube's own."""
+
+    def __init__(self, radius: int) -> None:
+        self.radius = r = int(radius)
+        if r < 0:
+            raise ValueError(f"a lookahead radius is at least 0 (0: the one-move lookahead only), got {radius!r}")
+        side = 2 * r + 3
+        span = np.arange(-r - 1, r + 2, dtype=np.int64)
+        self.offsets = np.stack(np.meshgrid(span, span, span, indexing="ij"), axis=-1).reshape(-1, 3)
+        self.inner = np.flatnonzero(np.abs(self.offsets).max(axis=1) <= r)
+        strides = np.array([dx * side * side + dy * side + dz for dx, dy, dz in AROUND], dtype=np.int64)
+        self._next = self.inner[:, None] + strides  # (inner, 6): padded indices of each inner cell's neighbours
+        at = {tuple(o): i for i, o in enumerate(self.offsets[self.inner].tolist())}
+        self.center = at[(0, 0, 0)]
+        self.around = np.array([at[d] for d in AROUND if d in at], dtype=np.int64)  # inner indices, AROUND order
+        #: inner indices of the cells sensed besides the six neighbours (the center is where the drone is)
+        self.extra = np.array(sorted(set(range(len(self.inner))) - {self.center, *self.around.tolist()}),
+                              dtype=np.int64)
+
+    def revalue(self, pos: np.ndarray, target: np.ndarray, free: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """The new values of the inner cells of `k` drones' cubes ((k, inner) int64): for a free cell, the
+        greater of its value and its shortest way through free inner cells to the target (0 there) or to a
+        padded border cell (plus that cell's value); an unfree cell, or one with no way out, keeps its value.
+
+        `pos`, `target`: (k, 3); `free`: (k, inner) bool, the drone's own cell free; `h`: (k, padded) the
+        drones' values of every padded cell (`_FAR_H` outside the world)."""
+        cells = pos[:, None, :] + self.offsets[self.inner]
+        goal = free & (cells == target[:, None, :]).all(axis=2)
+        old = h[:, self.inner]
+        way = np.where(goal, 0, _FAR_H)
+        relax = free & ~goal
+        padded = h.copy()
+        for _ in range(len(self.inner)):  # Bellman-Ford over unit steps: a fixed point within `inner` rounds
+            padded[:, self.inner] = way
+            better = np.where(relax, np.minimum(way, padded[:, self._next].min(axis=2) + 1), way)
+            if np.array_equal(better, way):
+                break
+            way = better
+        return np.where(free & (way < _FAR_H), np.maximum(old, way), old)
+
+
 class LrtaPilot:
     """LRTA* for one drone (see the module). Deterministic; its memory is the values it learned for its
     current target."""
@@ -90,13 +153,15 @@ class LrtaPilot:
     cooperative: ClassVar[bool] = True
     senses: ClassVar[bool] = True
 
-    def __init__(self, *, world_size: Cell, slack: int | None = None) -> None:
+    def __init__(self, *, world_size: Cell, slack: int | None = None, lookahead: int = LOOKAHEAD) -> None:
         self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
         if min(self.size) < 1:
             raise ValueError(f"world size must be positive, got {world_size!r}")
         self.slack = default_slack(self.size) if slack is None else max(0, int(slack))
+        self.look = Lookahead(lookahead)
         self._target: Cell | None = None
         self._learned: dict[Cell, int] = {}
+        self._deep = False  # it learned where it stood last turn: it senses and revalues a cube
 
     @property
     def learned(self) -> dict[Cell, int]:
@@ -113,7 +178,11 @@ class LrtaPilot:
         if target is not None:
             target = (int(target[0]), int(target[1]), int(target[2]))
         around = [(pos[0] + dx, pos[1] + dy, pos[2] + dz) for dx, dy, dz in AROUND]
-        asked = [c for c in around if in_bounds(c, self.size)]
+        deep, self._deep = self._deep and target is not None and target == self._target and target != pos, False
+        cube = ([(pos[0] + x, pos[1] + y, pos[2] + z) for x, y, z in self.look.offsets[self.look.inner].tolist()]
+                if deep else [])
+        sensed = [cube[i] for i in self.look.extra.tolist()] if deep else []
+        asked = [c for c in [*around, *sensed] if in_bounds(c, self.size)]
         if target is not None and target != pos and in_bounds(target, self.size) and target not in asked:
             asked.append(target)
         answers: Mapping[Cell, CellInfo] = (yield tuple(asked)) if asked else {}
@@ -128,11 +197,14 @@ class LrtaPilot:
         told = answers.get(target)
         if not in_bounds(target, self.size) or (told is not None and told.kind is not CellKind.EMPTY) or not free:
             return Decision(pos=pos, note=Note.UNREACHABLE, ranked=aside)
+        if deep:
+            self._revalue(pos, target, cube, answers)
         values = {k: self.h(around[k]) for k in free}
         here = max(self.h(pos), 1 + min(values.values()))
         base = _manhattan(pos, target)
         if here > base:
             self._learned[pos] = here
+            self._deep = self.look.radius > 0
         keys = [(here * _H + _STAY, _STAY)]
         for k, v in values.items():
             c = around[k]
@@ -141,6 +213,15 @@ class LrtaPilot:
         order = [k for _, k in sorted(keys)]
         note = Note.UNREACHABLE if here > base + self.slack else Note.NONE
         return Decision(pos=pos if order[0] == _STAY else around[order[0]], note=note, ranked=_pack(order))
+
+    def _revalue(self, pos: Cell, target: Cell, cube: list[Cell], answers: Mapping[Cell, CellInfo]) -> None:
+        """Revalue the cube around `pos` (`Lookahead.revalue`) and keep the values it raised."""
+        look = self.look
+        free = np.array([[c == pos or _empty(answers.get(c)) for c in cube]])
+        padded = [(pos[0] + x, pos[1] + y, pos[2] + z) for x, y, z in look.offsets.tolist()]
+        h = np.array([[self.h(c) if in_bounds(c, self.size) else _FAR_H for c in padded]], dtype=np.int64)
+        old, new = h[0, look.inner].tolist(), look.revalue(np.array([pos]), np.array([target]), free, h)[0].tolist()
+        self._learned.update((c, v) for c, o, v in zip(cube, old, new) if v > o)
 
 
 def _empty(info: CellInfo | None) -> bool:
@@ -159,11 +240,17 @@ class LrtaSwarm:
     """`LrtaPilot` for a whole swarm host's drones at once, over arrays: the same decisions and the same learned
     values. The values of every drone are one dict: (the drone's current trip × world cells + the cell's grid
     index) -> h, where a trip is numbered anew each time the drone's target changes (the values of a former
-    target are never read again)."""
+    target are never read again, and dropped once the dict has doubled since they were last dropped: its size
+    stays within twice the current trips' values, at a constant cost a value, amortised)."""
 
-    def __init__(self, *, world_size: Cell, drones: Sequence[int], slack: int | None = None) -> None:
+    #: Values kept before the first drop of former trips' values (`_forget`).
+    FORGET_AFTER: ClassVar[int] = 1 << 16
+
+    def __init__(self, *, world_size: Cell, drones: Sequence[int], slack: int | None = None,
+                 lookahead: int = LOOKAHEAD) -> None:
         self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
         self.slack = default_slack(self.size) if slack is None else max(0, int(slack))
+        self.look = Lookahead(lookahead)
         self._drones = swarm_numbers(drones)
         n = len(self._drones)
         self._cells = self.size[0] * self.size[1] * self.size[2]
@@ -171,7 +258,9 @@ class LrtaSwarm:
         self._trip = np.arange(n, dtype=np.int64)  # each drone's current trip
         self._trips = n  # trips numbered so far
         self._learned: dict[int, int] = {}
+        self._forget_at = self.FORGET_AFTER  # the dict's size at which former trips' values are dropped
         self._learns = np.zeros(n, dtype=bool)  # learned something on its current trip
+        self._deep = np.zeros(n, dtype=bool)  # learned where it stood last turn: senses and revalues a cube
 
     def learned(self, drone: int) -> dict[Cell, int]:
         """Drone number `drone`'s learned values for its current target (as `LrtaPilot.learned`)."""
@@ -205,6 +294,8 @@ class LrtaSwarm:
             self._trips += len(fresh)
             self._target[rows[fresh]] = target[fresh]
             self._learns[rows[fresh]] = False
+            if len(self._learned) >= self._forget_at:
+                self._forget()
         # Sense: the six neighbours (inside the world) and the target (inside, not where the drone is).
         limit = np.array(size, dtype=np.int64)
         inside = np.empty((n, 6), dtype=bool)
@@ -212,14 +303,25 @@ class LrtaSwarm:
         inside[:, 1::2] = pos > 0  # -x, -y, -z
         around = pos[:, None, :] + _STEPS  # (n, 6, 3)
         here = has & (pos == target).all(axis=1)
+        deep = self._deep[rows] & has & ~changed & ~here
+        self._deep[rows] = False
         t_in = has & ((target >= 0) & (target < limit)).all(axis=1)
         ask_t = t_in & ~here
-        asked = np.concatenate([around[inside], target[ask_t]])
+        extra = pos[deep][:, None, :] + self.look.offsets[self.look.inner[self.look.extra]]  # (d, extra, 3)
+        extra_in = ((extra >= 0) & (extra < limit)).all(axis=2)
+        asked = np.concatenate([around[inside], target[ask_t], extra[extra_in]])
         kinds = (yield asked) if len(asked) else np.zeros(0, dtype=np.uint8)
-        m = int(np.count_nonzero(inside))
+        m, mt = int(np.count_nonzero(inside)), int(np.count_nonzero(inside)) + int(np.count_nonzero(ask_t))
         free = np.zeros((n, 6), dtype=bool)
         free[inside] = kinds[:m] == CellKind.EMPTY
-        told = kinds[m:]
+        told = kinds[m:mt]
+        cube_free = np.zeros((len(extra), len(self.look.inner)), dtype=bool)  # a row for each deep drone
+        if len(extra):
+            cube_free[:, self.look.center] = True
+            cube_free[:, self.look.around] = free[deep]
+            extra_free = np.zeros(extra_in.shape, dtype=bool)
+            extra_free[extra_in] = kinds[mt:] == CellKind.EMPTY
+            cube_free[:, self.look.extra] = extra_free
         t_blocked = np.zeros(n, dtype=bool)
         t_blocked[ask_t] = (told != CellKind.EMPTY) & (told != NO_ANSWER)  # no answer: not known blocked
         boxed = ~free.any(axis=1)
@@ -242,7 +344,9 @@ class LrtaSwarm:
             values = np.empty((k, 7), dtype=np.int64)
             values[:, 0] = manh_p
             values[:, 1:] = manh_p[:, None] + np.where(side[:, _AXES] == _SIGNS, -1, 1)
-            cell_keys = None
+            if deep[go].any():  # cube_free's rows are the deep drones' in order
+                at = go[deep[go]]
+                self._revalue(at, rows, pos, target, cube_free[np.searchsorted(np.flatnonzero(deep), at)])
             learner = self._learns[rows[go]]
             if learner.any():  # the drones that learned on this trip: their values, where they learned one
                 sub = np.flatnonzero(learner)
@@ -262,6 +366,7 @@ class LrtaSwarm:
                 spots = self._trip[rows[go[at]]] * self._cells + linear_rows(p[at], size)
                 self._learned.update(zip(spots.tolist(), h_here[at].tolist()))
                 self._learns[rows[go[at]]] = True
+                self._deep[rows[go[at]]] = self.look.radius > 0
             tie = 1 + ((around[go] - t[:, None, :]) ** 2).sum(axis=2)
             ranking = np.where(f, np.where(f, h_nb, 0) * _H + tie * _TIE + _COLUMNS, _FAR)
             keys[go, :6] = ranking
@@ -276,3 +381,30 @@ class LrtaSwarm:
             moving = first < _STAY
             new[go[moving]] += _STEPS[first[moving]]
         return new, note, ranked
+
+    def _forget(self) -> None:
+        """Drop the values of former trips (see the class)."""
+        keys = np.fromiter(self._learned.keys(), dtype=np.int64, count=len(self._learned))
+        values = np.fromiter(self._learned.values(), dtype=np.int64, count=len(self._learned))
+        keep = np.isin(keys // self._cells, self._trip[self._learns])
+        self._learned = dict(zip(keys[keep].tolist(), values[keep].tolist()))
+        self._forget_at = max(self.FORGET_AFTER, 2 * len(self._learned))
+
+    def _revalue(self, at: np.ndarray, rows: np.ndarray, pos: np.ndarray, target: np.ndarray,
+                 cube_free: np.ndarray) -> None:
+        """Revalue the cubes of the drones at `at` (indices into this step's arrays; each learned on its trip;
+        `cube_free` their cubes' free cells) with `Lookahead.revalue`, and keep the values it raised."""
+        look, size = self.look, self.size
+        p, t = pos[at], target[at]
+        cells = p[:, None, :] + look.offsets  # (k, padded, 3)
+        inside = ((cells >= 0) & (cells < np.array(size))).all(axis=2)
+        keys = (self._trip[rows[at]] * self._cells)[:, None] + linear_rows(
+            np.where(inside[..., None], cells, 0).reshape(-1, 3), size).reshape(inside.shape)
+        found = np.fromiter(map(self._learned.get, keys[inside].tolist(), repeat(-1)), dtype=np.int64,
+                            count=int(inside.sum()))
+        h = np.full(inside.shape, _FAR_H, dtype=np.int64)
+        h[inside] = np.where(found >= 0, found, np.abs(cells - t[:, None, :]).sum(axis=2)[inside])
+        old = h[:, look.inner]
+        new = look.revalue(p, t, cube_free, h)
+        raised = new > old
+        self._learned.update(zip(keys[:, look.inner][raised].tolist(), new[raised].tolist()))
