@@ -36,17 +36,32 @@ def test_registered_with_a_swarm_form():
     assert LrtaPilot.cooperative and LrtaPilot.senses
 
 
-def test_ranks_closer_cells_first_the_longer_axis_first_then_staying_then_sideways_before_back():
+def test_ranks_closer_cells_first_the_longer_axis_first_then_staying_then_sideways_before_back_down_last():
     grid = Grid((9, 9, 3))
     pilot = LrtaPilot(world_size=grid.size)
     d, asks = run_step(pilot, (2, 4, 1), (7, 6, 1), grid.oracle)
     assert asks == 1 and d.note is Note.NONE
     # +x (5 to go) before +y (2 to go), both closer; then staying; then the others (all one farther), nearest the
-    # target as the crow flies first: up and down (sideways), then -y, then straight back (-x) last
-    assert _cells((2, 4, 1), d.ranked) == [(3, 4, 1), (2, 5, 1), (2, 4, 1), (2, 4, 2), (2, 4, 0), (2, 3, 1),
-                                           (1, 4, 1)]
+    # target as the crow flies first: up (sideways), then -y, then straight back (-x); down last (off the cruise:
+    # not in the target's column)
+    assert _cells((2, 4, 1), d.ranked) == [(3, 4, 1), (2, 5, 1), (2, 4, 1), (2, 4, 2), (2, 3, 1), (1, 4, 1),
+                                           (2, 4, 0)]
     assert d.pos == (3, 4, 1)
     assert pilot.learned == {}  # nothing learned where a neighbour is closer
+
+
+def test_climbs_first_and_descends_last():
+    grid = Grid((9, 9, 9))
+    pilot = LrtaPilot(world_size=grid.size)
+    # a target higher up: up first, then the level steps (the longer axis first)
+    d, _ = run_step(pilot, (1, 1, 1), (5, 3, 4), grid.oracle)
+    assert _cells((1, 1, 1), d.ranked)[:3] == [(1, 1, 2), (2, 1, 1), (1, 2, 1)]
+    # a target lower down: level first (down is as close, but not before the target's column), then down
+    d, _ = run_step(pilot, (1, 1, 6), (5, 3, 4), grid.oracle)
+    assert _cells((1, 1, 6), d.ranked)[:3] == [(2, 1, 6), (1, 2, 6), (1, 1, 5)]
+    # in the target's column: straight down
+    d, _ = run_step(pilot, (5, 3, 6), (5, 3, 4), grid.oracle)
+    assert d.pos == (5, 3, 5)
 
 
 def test_learns_in_a_dead_end_and_backs_out():

@@ -11,8 +11,14 @@ A cell's value is h(c) = what the drone learned for it, else the Manhattan dista
    distance: the learned values are sparse, a few cells around the buildings it met);
 3. it ranks its own cell and its free neighbours for the coordinator's arbiter (PIBT, coordinator/arbiter.py,
    docs/cooperation.md): by h, smallest first; staying (with the value just learned) before any neighbour of
-   equal h; among neighbours of equal h, the one nearer the target as the crow flies (squared Euclidean
-   distance) first, then in AROUND order (+x, -x, +y, -y, +z, -z): a total order. Nearer as the crow flies:
+   equal h; among neighbours of equal h, those on its *cruise* first: it climbs first and descends last (a
+   level step while below the target's altitude, and a step down before it is in the target's column, come
+   after the others); then the one nearer the target as the crow flies (squared Euclidean distance), then in
+   AROUND order (+x, -x, +y, -y, +z, -z): a total order. The cruise: a city's buildings are boxes standing on
+   the ground, so the higher of its altitude and its target's meets fewer of them, and the air above the
+   target is free down to it; without it, a drone from high up that went down early met the low streets'
+   dead ends (two of 10,000 single trips in the benchmark's city took over 3000 turns for 211 and 213 moves;
+   the longest now takes 671 turns). Nearer as the crow flies:
    of two cells that get closer, the one along the axis with more way to go (paths go diagonally,
    staircase-wise, rather than one axis after the other, which would put crowds in the same lanes); of two
    that do not, the one to the side rather than straight back (a drone facing a building goes round it).
@@ -65,21 +71,24 @@ from schema.tables import code_of
 
 from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds, swarm_numbers, swarm_rows
 
-#: A ranking key is h * _H + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in AROUND order,
-#: 6 staying); tie is 0 for staying and 1 + the neighbour's squared Euclidean distance to the target (below 2**36
-#: in a world of sides up to 2**16) for a neighbour.
+#: A ranking key is h * _H + off * _OFF + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in
+#: AROUND order, 6 staying); off is 1 for a step off the cruise (see the module), else 0; tie is 0 for staying
+#: and 1 + the neighbour's squared Euclidean distance to the target (below 2**36 in a world of sides up to 2**16)
+#: for a neighbour. Learned values are kept below _CAP, so that keys stay below 2**63.
 _TIE = 8
-_H = 1 << 40
+_OFF = 1 << 40
+_H = 1 << 41
+_CAP = 1 << 21
 _STAY = 6
 _AXIS = tuple(next(a for a in range(3) if d[a]) for d in AROUND)
 _NONE, _REACHED, _UNREACHABLE = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE))
 
 
 #: The cube a drone in a depression senses and revalues: its Chebyshev radius (see the module). Single drones
-#: in the 256 x 256 x 32 city of the distributed benchmark (its 1000 trips, no other drone in the way): radius 0
-#: (one-move lookahead only) took up to 1253 turns, 1.164 x the Manhattan distance in all, 3 trips over its
-#: 1088-turn limit, 10,158 values learned; radius 1 up to 743 turns, 1.058 x, 18,148 values; radius 2 up to
-#: 583, 1.035 x, 36,642 values (docs/cooperation.md).
+#: in the 256 x 256 x 32 city of the distributed benchmark, its 10,000 trips, no other drone in the way, with the
+#: cruise: radius 0 (the one-move lookahead only) took up to 949 turns, 1.092 x the Manhattan distance in all,
+#: 8.0 values learned a drone; radius 1 up to 671 turns, 1.044 x, 14.9 values; radius 2 up to 669, 1.030 x,
+#: 28.9 values (docs/cooperation.md).
 LOOKAHEAD = 1
 _FAR_H = 1 << 50  # a value no way reaches (outside the world, a cell not yet reached by the revaluation)
 
@@ -200,16 +209,18 @@ class LrtaPilot:
         if deep:
             self._revalue(pos, target, cube, answers)
         values = {k: self.h(around[k]) for k in free}
-        here = max(self.h(pos), 1 + min(values.values()))
+        here = min(_CAP, max(self.h(pos), 1 + min(values.values())))
         base = _manhattan(pos, target)
         if here > base:
             self._learned[pos] = here
             self._deep = self.look.radius > 0
         keys = [(here * _H + _STAY, _STAY)]
+        below, column = pos[2] < target[2], pos[:2] == target[:2]
         for k, v in values.items():
             c = around[k]
             euclid = (c[0] - target[0]) ** 2 + (c[1] - target[1]) ** 2 + (c[2] - target[2]) ** 2
-            keys.append((v * _H + (1 + euclid) * _TIE + k, k))
+            off = k < 4 and below or k == 5 and not column  # level before climbing, down before its column
+            keys.append((v * _H + off * _OFF + (1 + euclid) * _TIE + k, k))
         order = [k for _, k in sorted(keys)]
         note = Note.UNREACHABLE if here > base + self.slack else Note.NONE
         return Decision(pos=pos if order[0] == _STAY else around[order[0]], note=note, ranked=_pack(order))
@@ -221,7 +232,7 @@ class LrtaPilot:
         padded = [(pos[0] + x, pos[1] + y, pos[2] + z) for x, y, z in look.offsets.tolist()]
         h = np.array([[self.h(c) if in_bounds(c, self.size) else _FAR_H for c in padded]], dtype=np.int64)
         old, new = h[0, look.inner].tolist(), look.revalue(np.array([pos]), np.array([target]), free, h)[0].tolist()
-        self._learned.update((c, v) for c, o, v in zip(cube, old, new) if v > o)
+        self._learned.update((c, min(_CAP, v)) for c, o, v in zip(cube, old, new) if v > o)
 
 
 def _empty(info: CellInfo | None) -> bool:
@@ -359,7 +370,7 @@ class LrtaSwarm:
                 part[wanted] = np.where(found >= 0, found, part[wanted])
                 values[sub] = part
             h_nb = np.where(f, values[:, 1:], _FAR)
-            h_here = np.maximum(values[:, 0], 1 + h_nb.min(axis=1))
+            h_here = np.minimum(_CAP, np.maximum(values[:, 0], 1 + h_nb.min(axis=1)))
             learn = h_here > manh_p
             if learn.any():
                 at = np.flatnonzero(learn)
@@ -368,7 +379,9 @@ class LrtaSwarm:
                 self._learns[rows[go[at]]] = True
                 self._deep[rows[go[at]]] = self.look.radius > 0
             tie = 1 + ((around[go] - t[:, None, :]) ** 2).sum(axis=2)
-            ranking = np.where(f, np.where(f, h_nb, 0) * _H + tie * _TIE + _COLUMNS, _FAR)
+            off = (p[:, 2] < t[:, 2])[:, None] & (_COLUMNS < 4)  # level steps below the target's altitude
+            off[:, 5] = (p[:, :2] != t[:, :2]).any(axis=1)  # down before the target's column
+            ranking = np.where(f, np.where(f, h_nb, 0) * _H + off * _OFF + tie * _TIE + _COLUMNS, _FAR)
             keys[go, :6] = ranking
             keys[go, 6] = h_here * _H + _STAY
             note[go] = np.where(h_here > manh_p + self.slack, _UNREACHABLE, _NONE)
@@ -407,4 +420,4 @@ class LrtaSwarm:
         old = h[:, look.inner]
         new = look.revalue(p, t, cube_free, h)
         raised = new > old
-        self._learned.update(zip(keys[:, look.inner][raised].tolist(), new[raised].tolist()))
+        self._learned.update(zip(keys[:, look.inner][raised].tolist(), np.minimum(_CAP, new[raised]).tolist()))
