@@ -152,8 +152,7 @@ def city_instance(size: Cell, agents: int, seed: int) -> Instance:
     optimal = [world.shortest_path_length(s, g) for s, g in zip(starts, goals)]
     keep = [k for k, o in enumerate(optimal) if o is not None]
     return Instance(f"city-{size[0]}-{size[1]}-{size[2]}", grid, tuple(starts[k] for k in keep),
-                    tuple(goals[k] for k in keep), tuple(int(optimal[k] or 0) for k in keep),
-                    4 * max(size) + 64)
+                    tuple(goals[k] for k in keep), tuple(int(optimal[k] or 0) for k in keep), city_limit(size))
 
 
 def play(inst: Instance, variant: str) -> Outcome:
@@ -359,24 +358,64 @@ def reachable(grid: np.ndarray, start: Cell) -> np.ndarray:
     return (seen & ~blocked)[1:-1, 1:-1, 1:-1]
 
 
-def city_scenario(size: Cell, drones: int, seed: int, folder: Path) -> Path:
-    """A scenario file of a generated city (saved beside it) with `drones` LRTA* drones at random free cells, each
-    with a random free target given at turn 1, starts and targets distinct, every target reachable (all in the
-    free cells connected to the top floor's first free cell); the turn limit as the in-process city's."""
+def city_limit(size: Cell) -> int:
+    """A city game's turn limit: 4 x its largest side + 64."""
+    return 4 * max(size) + 64
+
+
+def city_trips(size: Cell, drones: int, seed: int) -> tuple[World, np.ndarray, np.ndarray]:
+    """A generated city and `drones` trips in it: starts and targets ((drones, 3) each) at random free cells,
+    starts distinct, targets distinct, every target reachable (all in the free cells connected to the top
+    floor's first free cell)."""
     rng = np.random.default_rng(seed)
     world = World.generate(size, rng)
     grid = np.asarray(world.grid)
     top = np.argwhere(~grid[:, :, -1])[0]
     free = np.argwhere(reachable(grid, (int(top[0]), int(top[1]), size[2] - 1)))
-    starts = free[rng.permutation(len(free))[:drones]].tolist()
-    goals = free[rng.permutation(len(free))[:drones]].tolist()
+    return world, free[rng.permutation(len(free))[:drones]], free[rng.permutation(len(free))[:drones]]
+
+
+def lrta_alone(size: Cell, drones: int, radii: Iterable[int], limit: int) -> str:
+    """The trips of the distributed city flown by `LrtaSwarm` with nobody in the way (each drone alone: the
+    pilot's own quality, without the crowd), for each cube radius: a table in Markdown."""
+    from entities.autopilots.base import drive
+    from entities.autopilots.lrta import LrtaSwarm
+
+    world, starts, goals = city_trips(size, drones, 1)
+    grid = np.asarray(world.grid)
+    manhattan = np.abs(starts - goals).sum(axis=1)
+    rows = []
+    for radius in radii:
+        swarm = LrtaSwarm(world_size=size, drones=range(1, drones + 1), lookahead=radius)
+        pos, home = starts.astype(np.int64), np.full(drones, -1)
+        for turn in range(1, limit + 1):
+            live = np.flatnonzero(home < 0)
+            if not len(live):
+                break
+            pos[live] = drive(swarm.step(live + 1, pos[live], goals[live]),
+                              lambda cells: grid[tuple(cells.T)].astype(np.uint8))[0]
+            home[live[(pos[live] == goals[live]).all(axis=1)]] = turn
+        done, limit_game = home >= 0, city_limit(size)
+        longest = f"{int(home.max())}" if done.all() else f"not home in {limit} turns ({int((~done).sum())})"
+        rows.append([radius, longest, f"{home[done].sum() / manhattan[done].sum():.3f}",
+                     int((~done).sum() + (home > limit_game).sum()), f"{len(swarm._learned) / drones:.1f}"])
+    head = ["cube radius", "longest trip (turns)", "turns ÷ Manhattan (trips home)",
+            f"over {city_limit(size)} turns (the game's limit)", "values learned a drone"]
+    return "\n".join([_row(head), _row(["---"] * len(head)), *(_row(r) for r in rows)])
+
+
+def city_scenario(size: Cell, drones: int, seed: int, folder: Path) -> Path:
+    """A scenario file of a generated city (saved beside it) with `drones` LRTA* drones on `city_trips`, each
+    target given at turn 1; the turn limit as the in-process city's."""
+    world, starts_a, goals_a = city_trips(size, drones, seed)
+    starts, goals = starts_a.tolist(), goals_a.tolist()
     world_file = folder / f"city-{seed}.json"
     world.save(world_file)
     ids = [drone_id(k + 1) for k in range(drones)]
     scenario = {"format": "dronesim-scenario", "version": 1, "world": {"file": str(world_file)},
                 "drones": [{"id": d, "start": s, "autopilot": CITY_PILOT} for d, s in zip(ids, starts)],
                 "targets": [f"{d}={x},{y},{z}@1" for d, (x, y, z) in zip(ids, goals)],
-                "max_turns": 4 * max(size) + 64 + 10}
+                "max_turns": city_limit(size) + 10}
     path = folder / f"city-{seed}-{drones}.json"
     path.write_text(json.dumps(scenario), encoding="utf-8")
     return path
@@ -390,7 +429,7 @@ def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path) -> Ci
     scenario = city_scenario(size, drones, 1, folder)
     logs = folder / f"{drones}-{run}"
     logs.mkdir(parents=True, exist_ok=True)
-    limit = 4 * max(size) + 64
+    limit = city_limit(size)
     load = os.getloadavg()[0]
     case = perf.Case(drones=drones, size=size, warmup=CITY_WARMUP, turns=limit - CITY_WARMUP - 1)
     game = perf.play_distributed(case, scenario, logs, variant=perf.Variant(autopilot=CITY_PILOT, hosts=hosts,
@@ -499,6 +538,9 @@ def main(argv: list[str] | None = None) -> int:
                              "--no-city-distributed: skip them (default: play everything)")
     parser.add_argument("--city-runs", type=int, default=CITY_RUNS, help=f"runs of each distributed city game "
                                                                           f"(default {CITY_RUNS})")
+    parser.add_argument("--lrta-alone", action="store_true",
+                        help="only the distributed city's 10,000 trips flown by LRTA* drones each alone, for cube "
+                             "radii 0-2 (the pilot's own quality, docs/cooperation.md)")
     add_write_args(parser)
     args = parser.parse_args(argv)
     agents = (10, 20) if args.quick else tuple(int(a) for a in args.agents.split(","))
@@ -508,6 +550,10 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         print(f"unknown: {', '.join(bad)}", file=sys.stderr)
         return 2
+    if args.lrta_alone:
+        size, drones = (QUICK_CITY_GAMES if args.quick else CITY_GAMES)[-1][:2]
+        print(lrta_alone(size, drones, (0, 1, 2), limit=6000))
+        return 0
     t_start = time.perf_counter()
     city_games: list[CityGame] = []
     city_pogema: dict[int, float] = {}

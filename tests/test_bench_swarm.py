@@ -74,3 +74,12 @@ def test_isr_at_256_and_the_turn_limit() -> None:
     assert swarm._costs(records, ["D01"], starts, goals) == ([300], 300, 0, 0, [300])
     maze = swarm.movingai_instance("maze-32-32-2", 10, 1)
     assert maze.max_turns == max(swarm.TURNS_32, swarm.LIMIT_PER_MAKESPAN * max(maze.optimal)) > swarm.TURNS_32
+
+
+def test_lrta_alone_flies_the_city_trips(capsys) -> None:
+    """`--lrta-alone --quick`: the small city's trips flown each alone, for cube radii 0-2: every trip home."""
+    assert cli(["swarm", "--quick", "--lrta-alone"]) == 0
+    rows = [line.split(" | ") for line in capsys.readouterr().out.splitlines() if line[:4] in ("| 0 ", "| 1 ", "| 2 ")]
+    assert [r[0] for r in rows] == ["| 0", "| 1", "| 2"], rows
+    for r in rows:
+        assert r[1].isdigit() and r[3] == "0", r  # every trip home, none over the game's limit

@@ -1,9 +1,10 @@
 """LRTA*: a cooperative autopilot cheap enough for ten thousand drones (``--autopilot lrta``).
 
 Korf's Learning Real-Time A* ("Real-time heuristic search", Artificial Intelligence 42, 1990) with a lookahead
-of one move, over the 6-connected grid. A drone keeps no map and no search: only the values it has *learned*.
-A cell's value is h(c) = what the drone learned for it, else the Manhattan distance from c to the target
-(admissible on the grid: no way is shorter). Each turn, from `pos` towards `target`:
+of one move, and of a cube in a depression (below), over the 6-connected grid. A drone keeps no map and no
+search: only the values it has *learned*. A cell's value is h(c) = what the drone learned for it, else the
+Manhattan distance from c to the target (admissible on the grid: no way is shorter). Each turn, from `pos`
+towards `target`:
 
 1. it senses its six neighbours and its target by ASK (a swarm host answers from its chart: no round trip);
    a neighbour is *free* if it is told EMPTY (a building, outside the world or no answer: not free);
