@@ -95,6 +95,11 @@ class Instance:
     optimal: tuple[int, ...]
     max_turns: int
 
+    @property
+    def bridges(self) -> int:
+        """Edges of the free cells that lie on no cycle (`bridges`): 0 where PIBT's condition holds."""
+        return bridges(~self.grid)
+
 
 @dataclass(frozen=True, slots=True)
 class Outcome:
@@ -116,6 +121,7 @@ class Outcome:
     arbiter_cpu: float  # seconds of process time inside the arbiter, over the game
     arbitrated: int  # turns the arbiter ran
     max_turns: int
+    bridges: int  # edges on no cycle in the instance's free cells (0: PIBT's condition holds)
 
     @property
     def csr(self) -> float:
@@ -130,6 +136,42 @@ class Outcome:
         """The game ended at its turn limit (not every agent arrived or said UNREACHABLE)."""
         return self.turns >= self.max_turns
 
+
+
+def bridges(free: np.ndarray) -> int:
+    """How many edges of the graph of `free` cells (6-connected) lie on no cycle: Tarjan's bridges, by an
+    iterative depth-first search. PIBT's condition (every agent reaches its goal) is that there are none."""
+    index = -np.ones(free.shape, np.int64)
+    cells = np.argwhere(free)
+    index[tuple(cells.T)] = np.arange(len(cells))
+    padded = np.pad(index, 1, constant_values=-1)
+    near = [padded[tuple(slice(1 + d[a], padded.shape[a] - 1 + d[a]) for a in range(3))][tuple(cells.T)]
+            for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))]
+    adjacent = [[v for v in row if v >= 0] for row in np.stack(near, axis=1).tolist()]
+    found, low, count, clock = [-1] * len(cells), [0] * len(cells), 0, 0
+    for root in range(len(cells)):
+        if found[root] >= 0:
+            continue
+        found[root] = low[root] = clock
+        clock += 1
+        stack = [(root, -1, iter(adjacent[root]))]
+        while stack:
+            u, parent, rest = stack[-1]
+            for v in rest:
+                if v == parent:
+                    continue
+                if found[v] < 0:
+                    found[v] = low[v] = clock
+                    clock += 1
+                    stack.append((v, u, iter(adjacent[v])))
+                    break
+                low[u] = min(low[u], found[v])
+            else:
+                stack.pop()
+                if parent >= 0:
+                    low[parent] = min(low[parent], low[u])
+                    count += low[u] > found[parent]
+    return count
 
 
 def movingai_instance(family: str, agents: int, seed: int) -> Instance:
@@ -175,7 +217,7 @@ def play(inst: Instance, variant: str) -> Outcome:
     paid = [turns if c is None else c for c in costs]
     moving = sum(c is None and m > turns - RECENT for c, m in zip(costs, last_move))
     return Outcome(inst.name, len(ids), variant, arrived, sum(paid), max(paid), sum(inst.optimal), max(inst.optimal),
-                   collisions, at_256, moving, turns, seconds, timed.cpu, timed.calls, inst.max_turns)
+                   collisions, at_256, moving, turns, seconds, timed.cpu, timed.calls, inst.max_turns, inst.bridges)
 
 
 def _costs(records: list[dict], ids: list[str], starts: dict[str, Cell], goals: dict[str, Cell]
@@ -217,7 +259,8 @@ def _row(cells: Iterable[object]) -> str:
 
 def table(outcomes: list[Outcome], pogema_sps: dict[int, float]) -> str:
     """One row per instance kind, agent count and variant (averaged over instances)."""
-    head = ["instance", "agents", "arbitration", "CSR", "ISR", f"ISR@{TURNS_32}", "turn limit", "moving at limit",
+    head = ["instance", "edges on no cycle", "agents", "arbitration", "CSR", "ISR", f"ISR@{TURNS_32}", "turn limit",
+            "moving at limit",
             "SoC", "SoC/LB", "makespan", "makespan/LB", "collisions", "turns/s", "arbiter ms/turn", "POGEMA steps/s"]
     lines = [_row(head), _row(["---"] * len(head))]
     groups: dict[tuple[str, int, str], list[Outcome]] = {}
@@ -227,7 +270,7 @@ def table(outcomes: list[Outcome], pogema_sps: dict[int, float]) -> str:
         n = len(group)
         pog = pogema_sps.get(agents)
         lines.append(_row([
-            name if n == 1 else f"{name} (x{n})", agents, variant,
+            name if n == 1 else f"{name} (x{n})", "/".join(sorted({str(o.bridges) for o in group})), agents, variant,
             f"{sum(o.csr for o in group) / n:.2f}", f"{100 * sum(o.isr for o in group) / n:.1f} %",
             f"{100 * sum(o.arrived_256 / o.agents for o in group) / n:.1f} %",
             "/".join(sorted({str(o.max_turns) for o in group})),
@@ -250,11 +293,16 @@ def summary(outcomes: list[Outcome]) -> str:
         if not mine:
             continue
         agents = sum(o.agents for o in mine)
+        held = [o for o in mine if o.bridges == 0]
+        worst = min(mine, key=lambda o: o.isr)
         out.append(f"- `{v}`: ISR {100 * sum(o.arrived for o in mine) / agents:.2f} % of {agents} agents (at turn "
-                   f"{TURNS_32}: {100 * sum(o.arrived_256 for o in mine) / agents:.2f} %), CSR "
-                   f"{sum(o.csr for o in mine):.0f} of {len(mine)} instances, {sum(o.collisions for o in mine)} "
-                   f"collisions; {sum(o.limited for o in mine)} games ended at their turn limit, with "
-                   f"{sum(o.moving for o in mine if o.limited)} agents off their goal still moving")
+                   f"{TURNS_32}: {100 * sum(o.arrived_256 for o in mine) / agents:.2f} %), the lowest "
+                   f"{100 * worst.isr:.1f} % ({worst.instance}, {worst.agents} agents); CSR "
+                   f"{sum(o.csr for o in mine):.0f} of {len(mine)} instances, {sum(o.csr for o in held):.0f} of the "
+                   f"{len(held)} where PIBT's condition holds (no edge on no cycle); "
+                   f"{sum(o.collisions for o in mine)} collisions; {sum(o.limited for o in mine)} games ended at "
+                   f"their turn limit, with {sum(o.moving for o in mine if o.limited)} agents off their goal still "
+                   "moving")
     return "\n".join(out)
 
 
@@ -601,7 +649,9 @@ def main(argv: list[str] | None = None) -> int:
             "ways: `fixed` the former arbitration (one move per drone, fixed priority), `pibt` PIBT over the drones' "
             "ranked candidates (in force), `pibt+map` the same with the map known from the start. MovingAI 32x32 "
             "families generated by entities/movingai.py (seeded), the first N agents of one random scenario each; "
-            "a 3D city of World.generate. CSR/ISR: on the goal at the end; SoC and makespan with their ratio to the "
+            "a 3D city of World.generate. Edges on no cycle: the edges of the free cells' graph that lie on no "
+            "cycle (bridges; 0: PIBT's condition holds, where every drone must arrive). CSR/ISR: on the goal at "
+            "the end; SoC and makespan with their ratio to the "
             "lower bound (sum and max of single-agent optimal lengths); turns/s of the whole in-process game "
             "(every drone's D* planning included, one process); arbiter ms/turn: process time inside the "
             "arbitration; POGEMA steps/s: POGEMA 1.4.0 with as many agents, random actions, 64x64, same run. "

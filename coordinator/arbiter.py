@@ -54,6 +54,12 @@ MOST = len(RANK_STEPS)
 #: A priority (the engine's `age`) is the turns since the drone was last at rest times TIE_SPAN plus a
 #: tie-break below TIE_SPAN (its distance to its target when it left rest).
 TIE_SPAN = 1 << 16
+#: The priority of a drone that says UNREACHABLE away from its target: at rest (below every drone on its way,
+#: which has TIE_SPAN or more), but ahead of the drones at home (0). Once every other drone is home, it goes
+#: first and pushes through where a way exists (a drone of priority 0 then had none to lend it: everyone kept
+#: their cell, in id order, and the game settled with it stuck). Where no way exists, the push fails and
+#: nothing moves.
+STUCK = 1
 #: An arbitration as the engine calls it: (world size, before, proposed, ranked, cooperative, priority,
 #: targets, open cells, salt) -> (final cells, yielded, gave way); `cooperate` documents the arguments.
 Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, "OpenCells | None",

@@ -478,9 +478,10 @@ class Engine:
         return final
 
     def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
-        """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target,
-        without one, or saying it cannot reach it) or that gave way this turn (`gave_way` rows, else the
-        arbiter's), arbiter.TIE_SPAN more for each other (PIBT's rule). Among those away from rest for as long,
+        """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target or
+        without one) or that gave way this turn (`gave_way` rows, else the arbiter's), arbiter.STUCK for one
+        that says it cannot reach its target (at rest too, but ahead of those at home: see STUCK),
+        arbiter.TIE_SPAN more for each other (PIBT's rule). Among those away from rest for as long,
         the one that was farther from its target when it left rest goes first (its Manhattan distance then,
         kept below TIE_SPAN until it rests again: PIBT2's tie-break by initial distance, which sends the long
         trips ahead of the short ones), then by id. resume.py replays it turn by turn."""
@@ -488,12 +489,14 @@ class Engine:
         if gave_way is not None:
             self._gave_way[gave_way] = True
         target = fleet.target  # (every row, then the alive ones: fewer operations than selecting first)
-        rest = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1) | (fleet.note == UNREACHABLE) | self._gave_way
+        home = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1)
+        stuck = ~home & (fleet.note == UNREACHABLE) & ~self._gave_way
         prio = self.priority
-        left = prio == 0  # leaving rest now, if not at rest: its tie-break is taken now
+        left = prio < arbiter.TIE_SPAN  # leaving rest now, if not at rest: its tie-break is taken now
         span = arbiter.TIE_SPAN
         far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
-        self.priority[alive] = np.where(rest, 0, np.where(left, span + far, prio + span))[alive]
+        moving = np.where(left, span + far, prio + span)
+        self.priority[alive] = np.where(home | self._gave_way, 0, np.where(stuck, arbiter.STUCK, moving))[alive]
         if np.count_nonzero(self._gave_way):
             self._gave_way[:] = False
 

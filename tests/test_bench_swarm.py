@@ -17,10 +17,11 @@ def test_quick_run_writes_the_section(tmp_path: pathlib.Path) -> None:
     text = out.read_text()
     assert "## Other\n\nkept" in text and swarm.SECTION in text
     rows = [line for line in text.splitlines() if line.startswith("| empty-32-32 |")]
-    assert [r.split(" | ")[2] for r in rows] == ["fixed", "pibt", "pibt+map"] * 2
+    assert [r.split(" | ")[3] for r in rows] == ["fixed", "pibt", "pibt+map"] * 2
     for r in rows:
-        if r.split(" | ")[2] != "fixed":
-            assert r.split(" | ")[3:5] == ["1.00", "100.0 %"], r  # every agent arrives on an empty map
+        assert r.split(" | ")[1] == "0"  # no edge on no cycle: PIBT's condition holds
+        if r.split(" | ")[3] != "fixed":
+            assert r.split(" | ")[4:6] == ["1.00", "100.0 %"], r  # every agent arrives on an empty map
 
 
 def test_quick_distributed_cities_play_and_keep_their_subsection(tmp_path: pathlib.Path) -> None:
@@ -83,3 +84,16 @@ def test_lrta_alone_flies_the_city_trips(capsys) -> None:
     assert [r[0] for r in rows] == ["| 0", "| 1", "| 2"], rows
     for r in rows:
         assert r[1].isdigit() and r[3] == "0", r  # every trip home, none over the game's limit
+
+
+def test_bridges_are_the_edges_on_no_cycle() -> None:
+    ring = np.zeros((3, 3, 1), bool)
+    ring[1, 1, 0] = True  # a ring of 8 cells round a building: every edge on a cycle
+    assert swarm.bridges(~ring) == 0
+    tail = np.ones((5, 3, 1), bool)
+    tail[:3] = ring
+    tail[3:, 1, 0] = False  # the ring and a tail of two cells hanging off it: its two edges lie on no cycle
+    assert swarm.bridges(~tail) == 2
+    assert swarm.bridges(np.ones((1, 4, 1), bool)) == 3  # a corridor: every edge
+    two = np.zeros((2, 2, 2), bool)  # a 2 x 2 x 2 block: every edge on a square
+    assert swarm.bridges(~two) == 0

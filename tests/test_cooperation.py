@@ -19,8 +19,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coordinator import arbiter as arbiter_module
-from coordinator.arbiter import TIE_SPAN, Arbiter, cooperate, fixed
-from coordinator.engine import DroneSpec, GameConfig
+from coordinator.arbiter import STUCK, TIE_SPAN, Arbiter, cooperate, fixed
+from coordinator.engine import DroneSpec, Engine, GameConfig
 from coordinator.journal import dumps, read
 from coordinator.resume import restore
 from dronesim import replay
@@ -29,7 +29,8 @@ from entities import movingai
 from entities.autopilots.dstar import DStarPilot
 from entities.gcs import Plan
 from entities.world import World
-from schema import Cell, EndReason, WorldSpec
+from schema import Cell, EndReason, Note, WorldSpec
+from schema.tables import code_of
 from tests.harness import embedded_router, journal_records, play_scenario
 
 LOG = logging.getLogger("test.cooperation")
@@ -355,23 +356,43 @@ def test_a_cooperative_game_replays_and_resumes(tmp_path: pathlib.Path) -> None:
 
 def _priorities(records: list[dict], cfg: GameConfig) -> list[int]:
     """The priorities after the journal's turns, recomputed here from PIBT's rule and the journal alone: the
-    turns away from rest, then (below TIE_SPAN) the Manhattan distance to the target when the drone left rest."""
+    turns away from rest, then (below TIE_SPAN) the Manhattan distance to the target when the drone left rest;
+    STUCK for a drone that says UNREACHABLE away from its target, 0 at home or for one that gave way."""
     ids = sorted(d.drone for d in cfg.drones)
     pos = {d.drone: tuple(d.start) for d in cfg.drones}
     target: dict[str, tuple] = {}
     note: dict[str, str] = {}
     away = dict.fromkeys(ids, 0)
     tie = dict.fromkeys(ids, 0)
+    stuck = dict.fromkeys(ids, False)
     for r in records[1:]:
         target.update({d: tuple(c) for d, c in r.get("targets", {}).items()})
         pos.update({d: tuple(c) for d, c in r.get("moves", {}).items()})
         note.update(r.get("notes", {}))
         for d in ids:
-            rest = d not in target or pos[d] == target[d] or note.get(d) == "UNREACHABLE" or d in r.get("gave_way", ())
-            if not rest and not away[d]:
+            home = d not in target or pos[d] == target[d] or d in r.get("gave_way", ())
+            stuck[d] = not home and note.get(d) == "UNREACHABLE"
+            if not (home or stuck[d]) and not away[d]:
                 tie[d] = sum(abs(a - b) for a, b in zip(pos[d], target[d]))
-            away[d] = 0 if rest else away[d] + 1
-    return [away[d] * TIE_SPAN + tie[d] if away[d] else 0 for d in ids]
+            away[d] = 0 if home or stuck[d] else away[d] + 1
+    return [away[d] * TIE_SPAN + tie[d] if away[d] else STUCK if stuck[d] else 0 for d in ids]
+
+
+def test_a_drone_that_says_unreachable_away_from_its_target_goes_before_those_at_home() -> None:
+    """PIBT's priorities (`Engine.age`): a drone stuck away from its target (UNREACHABLE) waits behind every
+    drone on its way, but goes before those at home, so that once they all rest it pushes through."""
+    drones = {"D01": ((0, 1, 0), (0, 1, 0), "dstar"), "D02": ((2, 1, 0), (9, 1, 0), "dstar"),
+              "D03": ((4, 1, 0), (8, 1, 0), "dstar"), "D04": ((6, 1, 0), (7, 1, 0), "dstar")}
+    engine = Engine(config(world_of(["..........", ".........."]), drones), LOG)
+    fleet, alive = engine.fleet, engine.fleet.alive_rows()
+    fleet.aim(np.arange(4), np.array([g for _, g, _ in drones.values()]))
+    fleet.note[[2, 3]] = code_of(Note.UNREACHABLE)
+    engine.age(alive)
+    assert engine.priority.tolist() == [0, TIE_SPAN + 7, STUCK, STUCK]  # at home, on its way (7 to go), stuck
+    assert 0 < STUCK < TIE_SPAN
+    fleet.note[2] = code_of(Note.NONE)  # D03 gets closer again: it leaves rest, its tie-break taken now
+    engine.age(alive)
+    assert engine.priority.tolist() == [0, 2 * TIE_SPAN + 7, TIE_SPAN + 4, STUCK]
 
 
 # --------------------------------------------------------------------------- through real processes
