@@ -323,7 +323,8 @@ class LrtaSwarm:
         extra_in = ((extra >= 0) & (extra < limit)).all(axis=2)
         asked = np.concatenate([around[inside], target[ask_t], extra[extra_in]])
         kinds = (yield asked) if len(asked) else np.zeros(0, dtype=np.uint8)
-        m, mt = int(np.count_nonzero(inside)), int(np.count_nonzero(inside)) + int(np.count_nonzero(ask_t))
+        m = int(np.count_nonzero(inside))
+        mt = m + int(np.count_nonzero(ask_t))  # the neighbours', then the targets', then the cubes' answers
         free = np.zeros((n, 6), dtype=bool)
         free[inside] = kinds[:m] == CellKind.EMPTY
         told = kinds[m:mt]
