@@ -94,11 +94,7 @@ class Instance:
     goals: tuple[Cell, ...]
     optimal: tuple[int, ...]
     max_turns: int
-
-    @property
-    def bridges(self) -> int:
-        """Edges of the free cells that lie on no cycle (`bridges`): 0 where PIBT's condition holds."""
-        return bridges(~self.grid)
+    bridges: int  # edges of the free cells that lie on no cycle (`bridges`): 0 where PIBT's condition holds
 
 
 @dataclass(frozen=True, slots=True)
@@ -141,13 +137,12 @@ class Outcome:
 def bridges(free: np.ndarray) -> int:
     """How many edges of the graph of `free` cells (6-connected) lie on no cycle: Tarjan's bridges, by an
     iterative depth-first search. PIBT's condition (every agent reaches its goal) is that there are none."""
-    index = -np.ones(free.shape, np.int64)
-    cells = np.argwhere(free)
-    index[tuple(cells.T)] = np.arange(len(cells))
-    padded = np.pad(index, 1, constant_values=-1)
-    near = [padded[tuple(slice(1 + d[a], padded.shape[a] - 1 + d[a]) for a in range(3))][tuple(cells.T)]
-            for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))]
-    adjacent = [[v for v in row if v >= 0] for row in np.stack(near, axis=1).tolist()]
+    index = np.full(tuple(n + 2 for n in free.shape), -1, np.int64)  # padded: a cell's neighbours need no checks
+    cells = np.flatnonzero(np.pad(free, 1))
+    index.reshape(-1)[cells] = np.arange(len(cells))
+    _, _, offsets = padded_steps(free.shape)
+    near = index.reshape(-1)[cells[:, None] + np.array(offsets, np.int64)]
+    adjacent = [[v for v in row if v >= 0] for row in near.tolist()]
     found, low, count, clock = [-1] * len(cells), [0] * len(cells), 0, 0
     for root in range(len(cells)):
         if found[root] >= 0:
@@ -179,8 +174,9 @@ def movingai_instance(family: str, agents: int, seed: int) -> Instance:
     scen = movingai.scenario(blocked, agents, seed, f"{family}.map")
     cells = movingai.starts_and_goals(scen)
     optimal = tuple(int(a.optimal) for a in scen)
-    return Instance(f"{family}", movingai.world_grid(blocked), tuple(s for s, _ in cells), tuple(g for _, g in cells),
-                    optimal, max(TURNS_32, LIMIT_PER_MAKESPAN * max(optimal)))
+    grid = movingai.world_grid(blocked)
+    return Instance(f"{family}", grid, tuple(s for s, _ in cells), tuple(g for _, g in cells),
+                    optimal, max(TURNS_32, LIMIT_PER_MAKESPAN * max(optimal)), bridges(~grid))
 
 
 def city_instance(size: Cell, agents: int, seed: int) -> Instance:
@@ -194,7 +190,8 @@ def city_instance(size: Cell, agents: int, seed: int) -> Instance:
     optimal = [world.shortest_path_length(s, g) for s, g in zip(starts, goals)]
     keep = [k for k, o in enumerate(optimal) if o is not None]
     return Instance(f"city-{size[0]}-{size[1]}-{size[2]}", grid, tuple(starts[k] for k in keep),
-                    tuple(goals[k] for k in keep), tuple(int(optimal[k] or 0) for k in keep), city_limit(size))
+                    tuple(goals[k] for k in keep), tuple(int(optimal[k] or 0) for k in keep), city_limit(size),
+                    bridges(~grid))
 
 
 def play(inst: Instance, variant: str) -> Outcome:
@@ -446,7 +443,7 @@ def lrta_alone(size: Cell, drones: int, radii: Iterable[int], limit: int) -> str
         done, limit_game = home >= 0, city_limit(size)
         longest = f"{int(home.max())}" if done.all() else f"not home in {limit} turns ({int((~done).sum())})"
         rows.append([radius, longest, f"{home[done].sum() / manhattan[done].sum():.3f}",
-                     int((~done).sum() + (home > limit_game).sum()), f"{len(swarm._learned) / drones:.1f}"])
+                     int((~done).sum() + (home > limit_game).sum()), f"{swarm.kept / drones:.1f}"])
     head = ["cube radius", "longest trip (turns)", "turns ÷ Manhattan (trips home)",
             f"over {city_limit(size)} turns (the game's limit)", "values learned a drone"]
     return "\n".join([_row(head), _row(["---"] * len(head)), *(_row(r) for r in rows)])

@@ -66,7 +66,6 @@ Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nda
                     "int | None"], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
-
 class Timed:
     """An arbiter that counts the process time spent in it (`cpu`, seconds, over `calls` turns): a benchmark's
     in-process games and a coordinator's report at the end of its game (`coordinator/node.py`). The cyclic
@@ -87,6 +86,7 @@ class Timed:
             gc.enable()
         self.calls += 1
         return out
+
 
 def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperative: Set[str]) -> dict[str, Cell]:
     """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers."""

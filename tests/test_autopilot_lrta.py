@@ -256,6 +256,6 @@ def test_the_swarm_forgets_former_trips(monkeypatch):
             pos, _, _ = drive(swarm.step(np.array([1]), pos, target),
                               lambda c: np.array([grid.kind(x) for x in map(tuple, c.tolist())], np.uint8))
         assert (pos == target).all()
-        sizes.append(len(swarm._learned))
+        sizes.append(swarm.kept)
     assert sizes[0] > 16 and max(sizes) <= 2 * sizes[0], sizes  # without forgetting: one trip's values more each time
     assert len(swarm.learned(1)) == sizes[-1]  # what is kept is the current trip's

@@ -126,12 +126,14 @@ class Lookahead:
         self.inner = np.flatnonzero(np.abs(self.offsets).max(axis=1) <= r)
         strides = np.array([dx * side * side + dy * side + dz for dx, dy, dz in AROUND], dtype=np.int64)
         self._next = self.inner[:, None] + strides  # (inner, 6): padded indices of each inner cell's neighbours
-        at = {tuple(o): i for i, o in enumerate(self.offsets[self.inner].tolist())}
+        self.cube = self.offsets[self.inner]  # (inner, 3): the cube's own offsets
+        at = {tuple(o): i for i, o in enumerate(self.cube.tolist())}
         self.center = at[(0, 0, 0)]
         self.around = np.array([at[d] for d in AROUND if d in at], dtype=np.int64)  # inner indices, AROUND order
         #: inner indices of the cells sensed besides the six neighbours (the center is where the drone is)
         self.extra = np.array(sorted(set(range(len(self.inner))) - {self.center, *self.around.tolist()}),
                               dtype=np.int64)
+        self.sensed = self.cube[self.extra]  # (extra, 3): their offsets
 
     def revalue(self, pos: np.ndarray, target: np.ndarray, free: np.ndarray, h: np.ndarray) -> np.ndarray:
         """The new values of the inner cells of `k` drones' cubes ((k, inner) int64): for a free cell, the
@@ -140,7 +142,7 @@ class Lookahead:
 
         `pos`, `target`: (k, 3); `free`: (k, inner) bool, the drone's own cell free; `h`: (k, padded) the
         drones' values of every padded cell (`_FAR_H` outside the world)."""
-        cells = pos[:, None, :] + self.offsets[self.inner]
+        cells = pos[:, None, :] + self.cube
         goal = free & (cells == target[:, None, :]).all(axis=2)
         old = h[:, self.inner]
         way = np.where(goal, 0, _FAR_H)
@@ -189,8 +191,7 @@ class LrtaPilot:
             target = (int(target[0]), int(target[1]), int(target[2]))
         around = [(pos[0] + dx, pos[1] + dy, pos[2] + dz) for dx, dy, dz in AROUND]
         deep, self._deep = self._deep and target is not None and target == self._target and target != pos, False
-        cube = ([(pos[0] + x, pos[1] + y, pos[2] + z) for x, y, z in self.look.offsets[self.look.inner].tolist()]
-                if deep else [])
+        cube = [(pos[0] + x, pos[1] + y, pos[2] + z) for x, y, z in self.look.cube.tolist()] if deep else []
         sensed = [cube[i] for i in self.look.extra.tolist()] if deep else []
         asked = [c for c in [*around, *sensed] if in_bounds(c, self.size)]
         if target is not None and target != pos and in_bounds(target, self.size) and target not in asked:
@@ -274,6 +275,11 @@ class LrtaSwarm:
         self._learns = np.zeros(n, dtype=bool)  # learned something on its current trip
         self._deep = np.zeros(n, dtype=bool)  # learned where it stood last turn: senses and revalues a cube
 
+    @property
+    def kept(self) -> int:
+        """How many learned values the swarm keeps (its drones' current trips', and former trips' not yet dropped)."""
+        return len(self._learned)
+
     def learned(self, drone: int) -> dict[Cell, int]:
         """Drone number `drone`'s learned values for its current target (as `LrtaPilot.learned`)."""
         row = int(self._rows([drone])[0])
@@ -319,7 +325,7 @@ class LrtaSwarm:
         self._deep[rows] = False
         t_in = has & ((target >= 0) & (target < limit)).all(axis=1)
         ask_t = t_in & ~here
-        extra = pos[deep][:, None, :] + self.look.offsets[self.look.inner[self.look.extra]]  # (d, extra, 3)
+        extra = pos[deep][:, None, :] + self.look.sensed  # (d, extra, 3)
         extra_in = ((extra >= 0) & (extra < limit)).all(axis=2)
         asked = np.concatenate([around[inside], target[ask_t], extra[extra_in]])
         kinds = (yield asked) if len(asked) else np.zeros(0, dtype=np.uint8)
