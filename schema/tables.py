@@ -23,12 +23,14 @@ from __future__ import annotations
 import dataclasses
 import enum
 import itertools
+import struct
 import typing
 from typing import ClassVar, Self
 
 import numpy as np
 
 from .errors import MalformedMessage
+from .tuning import CHECK_FEW_ROWS
 
 if typing.TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
@@ -52,6 +54,8 @@ class Col(enum.Enum):
 _DTYPES = {Col.DRONE: ("<u2", ()), Col.CELL: ("<i4", (3,)), Col.SIGNED: ("<i4", (3,)), Col.OPTIONAL: ("<i4", (3,)),
            Col.RANKED: ("<u4", ())}
 _NONE = (-1, -1, -1)
+#: Each column's ints in a row's bytes, for `struct` (an enum column is a u8 code).
+_STRUCT = {Col.DRONE: "H", Col.CELL: "3i", Col.SIGNED: "3i", Col.OPTIONAL: "3i", Col.RANKED: "I"}
 #: The smallest coordinate of each cell column (the largest is MAX_COORD).
 _LOWEST = {Col.CELL: 0, Col.SIGNED: -MAX_COORD, Col.OPTIONAL: 0}
 
@@ -155,6 +159,8 @@ class Table:
     RECORD: ClassVar[type]
     LAYOUT: ClassVar[tuple[tuple[str, Col | type[enum.Enum]], ...]]
     DTYPE: ClassVar[np.dtype]
+    ROW: ClassVar[struct.Struct]  # a row's bytes, unpacked to ints: a cell column gives three (`_why_few`)
+    AT: ClassVar[tuple[int, ...]]  # each column's first int in an unpacked row
     rows: np.ndarray
 
     def __init_subclass__(cls) -> None:
@@ -165,6 +171,10 @@ class Table:
         cls.RECORD.LAYOUT = cls.LAYOUT
         cls.DTYPE = np.dtype([(name, *(_DTYPES[kind] if isinstance(kind, Col) else ("u1", ())))
                               for name, kind in cls.LAYOUT])
+        codes = [_STRUCT[kind] if isinstance(kind, Col) else "B" for _, kind in cls.LAYOUT]
+        cls.ROW = struct.Struct("<" + "".join(codes))
+        cls.AT = tuple(itertools.accumulate((3 if c == "3i" else 1 for c in codes[:-1]), initial=0))
+        assert cls.ROW.size == cls.DTYPE.itemsize, f"{cls.__name__}: rows are packed, little-endian"
 
     def __init__(self, rows: np.ndarray) -> None:
         """`rows`: a 1-d array of `DTYPE` (it is made read-only). MalformedMessage if any row is not valid."""
@@ -238,26 +248,56 @@ class Table:
 
     @classmethod
     def _check(cls, rows: np.ndarray) -> None:
-        """Every row valid: a few array operations per column (about a microsecond each, at any size)."""
-        if not len(rows):
-            return
+        """Every row valid. A few rows are checked one by one in Python (`_why_few`), more with a few array
+        operations per column (`_why_columns`, about a microsecond each at any size): the same rules,
+        which a property test holds to one verdict."""
+        if len(rows):
+            why = cls._why_few(rows) if len(rows) <= CHECK_FEW_ROWS else cls._why_columns(rows)
+            if why is not None:
+                raise MalformedMessage(f"{cls.__name__}: {why}")
+
+    @classmethod
+    def _why_columns(cls, rows: np.ndarray) -> str | None:
+        """Why some row of `rows` (at least one) is not valid, the first column's reason; None if all are."""
         for name, kind in cls.LAYOUT:
             col = rows[name]
             if kind is Col.DRONE:
                 if col.min() < 1 or col.max() > MAX_DRONE:
-                    raise MalformedMessage(f"{cls.__name__}: drone numbers must be in 1..{MAX_DRONE}")
+                    return _WHY_NUMBER
                 ordered = len(col) == 1 or (col[1:] > col[:-1]).all()  # (rows in order: at once)
                 if not ordered and len(np.unique(col)) != len(col):
-                    raise MalformedMessage(f"{cls.__name__}: one row per drone")
+                    return _WHY_ONCE
             elif kind is Col.RANKED:
                 if not _ranked_column_ok(col):
-                    raise MalformedMessage(f"{cls.__name__}: each {name} must be {kind.value}, each code once")
+                    return _why_cell(name, kind)
             elif isinstance(kind, Col):
                 if not _cells_ok(col, kind):
-                    raise MalformedMessage(f"{cls.__name__}: each {name} must be {kind.value}")
+                    return _why_cell(name, kind)
             elif col.max() >= len(kind):
-                raise MalformedMessage(f"{cls.__name__}: {name} codes must be below {len(kind)} "
-                                       f"(members of {kind.__name__})")
+                return _why_code(name, kind)
+        return None
+
+    @classmethod
+    def _why_few(cls, rows: np.ndarray) -> str | None:
+        """`_why_columns`, row by row: each row unpacked to Python ints (`ROW`), checked by the records' rules."""
+        unpacked = list(cls.ROW.iter_unpack(rows.tobytes()))
+        for (name, kind), at in zip(cls.LAYOUT, cls.AT):
+            if kind is Col.DRONE:
+                numbers = [r[at] for r in unpacked]
+                if min(numbers) < 1:  # (a u16 is at most MAX_DRONE)
+                    return _WHY_NUMBER
+                if len(set(numbers)) != len(numbers):
+                    return _WHY_ONCE
+            elif kind is Col.RANKED:
+                if not all(ranked_ok(r[at]) for r in unpacked):
+                    return _why_cell(name, kind)
+            elif isinstance(kind, Col):
+                lo, end = _LOWEST[kind], at + 3
+                if not all(_cell_ok(r[at:end], lo) or kind is Col.OPTIONAL and r[at:end] == _NONE for r in unpacked):
+                    return _why_cell(name, kind)
+            elif max(r[at] for r in unpacked) >= len(kind):
+                return _why_code(name, kind)
+        return None
 
     # ------------------------------------------------------------------ reading
 
@@ -375,6 +415,18 @@ def _cells_ok(col: np.ndarray, kind: Col) -> bool:
         return False
     absent = u == 0
     return bool(((absent[:, 0] == absent[:, 1]) & (absent[:, 1] == absent[:, 2])).all())  # all three or none
+
+
+_WHY_NUMBER = f"drone numbers must be in 1..{MAX_DRONE}"
+_WHY_ONCE = "one row per drone"
+
+
+def _why_cell(name: str, kind: Col) -> str:
+    return f"each {name} must be {kind.value}" + (", each code once" if kind is Col.RANKED else "")
+
+
+def _why_code(name: str, kind: type[enum.Enum]) -> str:
+    return f"{name} codes must be below {len(kind)} (members of {kind.__name__})"
 
 
 _INDEXES: dict[type, dict] = {}

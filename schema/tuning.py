@@ -14,6 +14,16 @@ Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.
 "a vs b" is the best of several runs of a short script (see docs/performance.md).
 """
 
+# --------------------------------------------------------------------------- messages
+
+#: Rows up to which a table is checked row by row in Python (`Table._why_few`) rather than column by column
+#: in numpy (`Table._why_columns`); row by row vs numpy, valid rows: a 1-row STATUS table 10 vs 34 µs,
+#: 8 rows: 11 vs 21, 16: 18 vs 21, 32: 36 vs 23; a MOVES's steps 1: 4 vs 18, 8: 7 vs 19, 16: 11 vs 23, 32: 19
+#: vs 26; a WELCOME's starts 1: 4 vs 8, 8: 8 vs 11, 16: 12 vs 11, 32: 20 vs 11. Measured warm, which
+#: understates it: in a one-drone game (a table or two a message) the numpy checks, run cold on a thread
+#: just woken, cost a turn 5 to 20 % of its time (`dronesim bench perf`, on and off alternated).
+CHECK_FEW_ROWS = 8
+
 # --------------------------------------------------------------------------- coordinator
 
 #: Turns (GCS phases) ahead a ground station's DONE may come and be held by the coordinator. Not measured:

@@ -758,3 +758,39 @@ def test_a_cell_column_is_judged_as_its_rows_are(kind: Col, cells: list) -> None
     one_by_one = all(c == (-1, -1, -1) and kind is Col.OPTIONAL or tables._cell_ok(c, tables._LOWEST[kind])
                      for c in map(tuple, col.tolist()))
     assert tables._cells_ok(col, kind) == one_by_one
+
+
+_BOUNDS = [0, 1, 7, MAX_COORD, MAX_COORD + 1, -1, -2, -MAX_COORD, -MAX_COORD - 1, 2**31 - 1, -2**31]
+
+
+@st.composite
+def _raw_rows(draw: st.DrawFn) -> tuple[type, np.ndarray]:
+    """Rows of a random table class, each column's values drawn around its rule's bounds (many invalid)."""
+    from schema.messages import TABLES
+    cls = draw(st.sampled_from(TABLES))
+    n = draw(st.integers(1, 2 * tables.CHECK_FEW_ROWS + 2))
+    rows = cls.empty(n)
+    for name, kind in cls.LAYOUT:
+        if kind is Col.DRONE:
+            values: object = draw(st.lists(st.sampled_from([0, 1, 2, 3, 40, 65535]), min_size=n, max_size=n))
+        elif kind is Col.RANKED:
+            values = draw(st.lists(st.sampled_from([0, 1, 7, 8, 0o21, 0o12, 0o1234567, 0o7654321, 0o11,
+                                                    tables.RANKED_LIMIT, 2**32 - 1]), min_size=n, max_size=n))
+        elif isinstance(kind, Col):
+            cell = st.one_of(st.just((-1, -1, -1)), st.tuples(*[st.sampled_from(_BOUNDS)] * 3))
+            values = draw(st.lists(cell, min_size=n, max_size=n))
+        else:
+            values = draw(st.lists(st.sampled_from([0, 1, len(kind) - 1, len(kind), 255]), min_size=n, max_size=n))
+        if draw(st.booleans()):  # mostly valid columns, so that a later column's rule is reached too
+            values = rows[name].copy() if kind is not Col.DRONE else np.arange(1, n + 1)
+        rows[name] = values
+    return cls, rows
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_raw_rows())
+def test_a_table_is_judged_row_by_row_as_by_columns(drawn: tuple[type, np.ndarray]) -> None:
+    """A few rows are checked one by one in Python, more by columns with numpy: the same verdict, the same
+    reason (the first column that fails), whatever the rows."""
+    cls, rows = drawn
+    assert cls._why_few(rows) == cls._why_columns(rows)
