@@ -457,8 +457,10 @@ class Station:
         return effects + self._ahead(turn)
 
     def _ahead(self, turn: int) -> list[Effect]:
-        """A script with nothing new in the turns after `turn` answers them now."""
-        if not self.scripted:
+        """A script with nothing new in the turns after `turn` answers them now, in batches: once half of
+        its answers ahead have been used, it answers up to `ahead` turns on again (its DONEs then travel
+        and wake the coordinator together)."""
+        if not self.scripted or self.answered - turn > self.ahead // 2:
             return []
         effects: list[Effect] = []
         for ahead in turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead):

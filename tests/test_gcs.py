@@ -391,9 +391,9 @@ def test_a_script_answers_ahead_up_to_its_next_change() -> None:
     from entities.gcs import Plan, turns_to_answer_ahead
 
     plan = Plan.parse(["D01=1,1,1@1", "D01=2,2,2@5"], (9, 9, 9))
-    assert turns_to_answer_ahead(plan, 1, 1) == [2, 3]
-    assert turns_to_answer_ahead(plan, 2, 3) == [4], "3 was answered already; 5 brings a change"
-    assert turns_to_answer_ahead(plan, 3, 4) == []
+    assert turns_to_answer_ahead(plan, 1, 1, horizon=2) == [2, 3]
+    assert turns_to_answer_ahead(plan, 2, 3, horizon=2) == [4], "3 was answered already; 5 brings a change"
+    assert turns_to_answer_ahead(plan, 3, 4, horizon=2) == []
     assert turns_to_answer_ahead(plan, 5, 5, last=7) == [6]
     assert turns_to_answer_ahead(plan, 5, 5, horizon=4) == [6, 7, 8, 9]
 
@@ -428,7 +428,7 @@ def over(t: int, reason: EndReason) -> Over:
 
 
 def test_a_script_answers_its_phase_at_once_and_the_phases_with_nothing_new_ahead() -> None:
-    station = Station(ground(["D01=1,1,1", "D02=2,2,2@5"]))
+    station = Station(ground(["D01=1,1,1", "D02=2,2,2@5"]), ahead=2)
     assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE),
                                                   (2, {}, Intent.CONTINUE), (3, {}, Intent.CONTINUE)]
     # the coordinator does not announce a phase answered ahead: STATUS(1) says turn 2 has begun
@@ -437,6 +437,17 @@ def test_a_script_answers_its_phase_at_once_and_the_phases_with_nothing_new_ahea
     assert station.receive(gcs(3), 0.0) == []  # (announced all the same: answered already, 5 brings a change)
     assert sent(station.receive(gcs(5), 0.0)) == [(5, {"D02": (2, 2, 2)}, Intent.FINAL),
                                                   (6, {}, Intent.FINAL), (7, {}, Intent.FINAL)]
+
+
+def test_a_script_answers_ahead_in_batches_once_half_of_its_answers_ahead_are_used() -> None:
+    station = Station(ground(["D01=1,1,1", "D02=2,2,2@12"]), ahead=8)
+    assert [t for t, _, _ in sent(station.receive(gcs(1), 0.0))] == list(range(1, 10))  # its phase and 8 ahead
+    for t in (1, 2, 3):  # turns 2, 3, 4 begin: 7, 6, 5 turns still answered ahead
+        assert sent(station.receive(status(t, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) \
+            == []
+    # turn 5 begins: only 4 answered ahead (6 to 9); it answers up to its plan's next change at once
+    assert sent(station.receive(status(4, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) \
+        == [(10, {}, Intent.CONTINUE), (11, {}, Intent.CONTINUE)]
 
 
 def test_a_script_told_to_answer_nothing_ahead_answers_each_phase_in_it() -> None:
@@ -493,7 +504,7 @@ def test_a_held_station_answers_when_told_and_forgets_a_phase_the_coordinator_cl
 
 
 def test_admitted_again_it_answers_again_what_it_had_answered_ahead() -> None:
-    station = Station(ground(["D01=1,1,1"]))
+    station = Station(ground(["D01=1,1,1"]), ahead=2)
     assert len(station.receive(gcs(1), 0.0)) == 3  # 2 and 3 ahead
     station.admitted(None)  # a restarted coordinator does not know what was said ahead
     assert sent(station.receive(gcs(2), 0.0))[0] == (2, {"D01": (1, 1, 1)}, Intent.FINAL)
