@@ -1002,8 +1002,8 @@ MECHANISMS: tuple[Mechanism, ...] = (
         "The UPD report only for a listener (the environment follows the ENV phase only then)",
         ("entities/environment.py::EnvironmentProcess.listened", "entities/environment.py::Follow",
          "entities/environment.py:/_listened/", "entities/env_node.py:/Matching|matching|Follow|watch/",
-         "dronesim/transport.py::Matching", "dronesim/transport.py::Outbox.matching",
-         "dronesim/transport.py::Outbox.watch", "coordinator/node.py:/matching/"),
+         "dronesim/transport.py::Matching", "dronesim/transport.py::Outbox.watch",
+         "coordinator/node.py:/Matching|matching|env_followed/", "coordinator/engine.py:/env_followed/"),
         Variant(upd_listener=True), ((128, (64, 64, 16)), (1000, (64, 64, 16))),
         "a subscriber to ENV/UPD (in this process, a callback that does nothing)"),
     Mechanism(

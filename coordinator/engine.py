@@ -247,6 +247,9 @@ class Engine:
         #: deaths) and the state's hash: the adapter turns it off when it keeps no journal (the records are
         #: then dropped).
         self.journaled = True
+        #: Whether anyone follows the ENV phase (the environment does while someone listens to its UPD): the
+        #: adapter says; nobody following, the phase's TURN is not even made.
+        self.env_followed = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
@@ -450,7 +453,7 @@ class Engine:
         turn, fleet = self.turn, self.fleet
         alive, before, final, moving = self._judge()
         effects: list[Effect] = []
-        if np.count_nonzero(moving):
+        if (self.env_followed or self.verify_env) and np.count_nonzero(moving):
             rows = MoveTable.empty(int(np.count_nonzero(moving)))
             rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
             moves = MoveTable(rows)
@@ -458,7 +461,8 @@ class Engine:
                 self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
                 for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
                     del self._upd_due[old]
-            effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
+            if self.env_followed:
+                effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
         return _drones_first(effects + self._observed())
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:

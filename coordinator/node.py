@@ -24,6 +24,7 @@ from dronesim.signals import Interrupted, exit_status, on_stop, waking
 from dronesim.transport import (
     Asked,
     Inbox,
+    Matching,
     Outbox,
     Presence,
     Received,
@@ -118,8 +119,6 @@ class Executor:
                         continue
                     self._last = self.clock()
                     self.out.put(self.keys.turn_of(turn.phase), turn)
-                case Publish(Turn(phase=Phase.ENV)) if not self.out.matching(self.keys.turn_of(Phase.ENV)):
-                    pass  # nobody follows the ENV phase (the environment does when someone wants its UPD)
                 case Publish(msg, data):
                     self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):
@@ -217,6 +216,8 @@ class Coordinator:
                     run(engine.connect(msg, query))
             case Received(_, msg) if engine.stage is not Stage.OVER:  # after OVER: sent before it was seen
                 run(engine.receive(msg))
+            case Matching(_, matching):  # someone (the environment) follows the ENV phase, or no one now
+                engine.env_followed = matching
             case Presence("SRV", sid, alive) if sid == self.me:
                 if not alive:  # every presence vanishes with the link: nobody has left
                     self._vanishing.clear()
@@ -317,6 +318,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     that stopped it (None: it ended by itself)."""
     engine = open_game(game, journal, resume, logger)
     engine.verify_env, engine.journaled = verify_env, journal is not None
+    engine.env_followed = False  # until a Matching event says someone follows the ENV phase
     engine.arbiter = timed = arbiter.Timed(engine.arbiter)  # its CPU, reported at the end (benchmarks read it)
     with zenoh.open(conf) as session:
         other = rival(session, keys)
@@ -332,7 +334,9 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         inbox.watch_presence()
         token = session.liveliness().declare_token(keys.alive("SRV", me))
         with JournalWriter(journal) as writer:
-            srv = Coordinator(engine, Executor(keys, Outbox(session), writer, inbox.rejects, pace), inbox.rejects,
+            out = Outbox(session)
+            out.watch(keys.turn_of(Phase.ENV), inbox)  # (a Matching event at once if someone follows it)
+            srv = Coordinator(engine, Executor(keys, out, writer, inbox.rejects, pace), inbox.rejects,
                               logger, me, audit=partial(audit_sessions, session, inbox.post))
             logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                         keys.root, ", ".join(d.drone for d in game.drones))

@@ -623,6 +623,19 @@ def test_no_move_turn_skips_the_env_phase() -> None:
     assert g.status("D01").note is Note.REACHED
 
 
+def test_the_env_phase_is_made_only_while_someone_follows_it_or_its_report_is_checked() -> None:
+    """Nobody following the ENV phase (the environment does while someone listens to its UPD) and its
+    report not checked, the turn's moves take effect all the same, but no TURN(ENV) is made."""
+    for followed, verify, announced in ((True, False, True), (False, True, False), (False, False, False)):
+        g = Game()
+        g.engine.env_followed, g.engine.verify_env = followed, verify
+        g.gcs()
+        effects = g.nps("D01", (1, 0, 0))
+        assert any(t.phase is Phase.ENV for t in pubs(effects, Turn)) is announced, (followed, verify)
+        assert g.status("D01").pos == (1, 0, 0) and g.stage is Stage.GCS and g.turn == 2
+        assert (1 in g.engine._upd_due) is verify  # a report checked needs the moves kept
+
+
 def test_upd_disagreeing_with_the_world_refused() -> None:
     g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))))
     g.gcs()

@@ -26,6 +26,7 @@ from schema import (
     Status,
     Target,
     Turn,
+    Upd,
     decode,
     encode,
 )
@@ -268,6 +269,30 @@ def test_a_connect_without_its_presence_token_is_refused(cluster, tmp_path):
     assert gcs.wait() == 0
     assert srv.wait() == 0
 
+
+
+def test_a_listener_to_the_upd_gets_each_env_phase_reported(cluster, tmp_path):
+    """Someone listening to the environment's UPD mid-game (no --verify-env: the coordinator does not), the
+    environment follows the ENV phase from then on, the coordinator announces it, and the UPD reports each
+    drone's move: its old cell empty, its new one with the drone."""
+    start_game(cluster, tmp_path, coord_args=("--pace", "0.1"), gcs_args=("--targets", "9,9,9"), verify_env=False)
+    keys = Keys(cluster.root)
+    import logging
+
+    with zenoh.open(client_config(cluster.locator)) as s:
+        inbox = Inbox(s, keys, logging.getLogger("test-listener"))
+        inbox.subscribe(keys.upd, Upd)
+        inbox.subscribe(keys.over, Over)
+        reports = 0
+        while reports < 3:
+            ev = inbox.get(30)
+            assert ev is not None, "no UPD came"
+            match ev:
+                case Received(_, Over()):
+                    pytest.fail(f"the game ended before 3 UPD:\n{cluster.procs[0].text}")
+                case Received(_, Upd() as upd):
+                    assert any(c.drones == ("D01",) for c in upd.cells), upd
+                    reports += 1
 
 
 def test_environment_answers_about_the_drones_where_the_last_status_has_them(cluster, tmp_path):
