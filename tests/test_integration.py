@@ -271,28 +271,33 @@ def test_a_connect_without_its_presence_token_is_refused(cluster, tmp_path):
 
 
 
+def mid_game(cluster: Cluster, s: zenoh.Session, key: str, kind: type, name: str):
+    """The messages of a paced game on `key` (decoded as `kind`), as a client of its router sees them; the
+    game ending (OVER) or stalling first fails the test."""
+    import logging
+
+    keys = Keys(cluster.root)
+    inbox = Inbox(s, keys, logging.getLogger(name))
+    inbox.subscribe(key, kind)
+    inbox.subscribe(keys.over, Over)
+    while True:
+        ev = inbox.get(30)
+        assert ev is not None, f"nothing on {key}: the game stalled"
+        match ev:
+            case Received(_, Over()):
+                pytest.fail(f"the game ended too soon:\n{cluster.procs[0].text}\n{cluster.procs[1].text}")
+            case Received(_, msg):
+                yield msg
+
+
 def test_a_listener_to_the_upd_gets_each_env_phase_reported(cluster, tmp_path):
     """Someone listening to the environment's UPD mid-game (no --verify-env: the coordinator does not), the
     environment follows the ENV phase from then on, the coordinator announces it, and the UPD reports each
     drone's move: its old cell empty, its new one with the drone."""
     start_game(cluster, tmp_path, coord_args=("--pace", "0.1"), gcs_args=("--targets", "9,9,9"), verify_env=False)
-    keys = Keys(cluster.root)
-    import logging
-
     with zenoh.open(client_config(cluster.locator)) as s:
-        inbox = Inbox(s, keys, logging.getLogger("test-listener"))
-        inbox.subscribe(keys.upd, Upd)
-        inbox.subscribe(keys.over, Over)
-        reports = 0
-        while reports < 3:
-            ev = inbox.get(30)
-            assert ev is not None, "no UPD came"
-            match ev:
-                case Received(_, Over()):
-                    pytest.fail(f"the game ended before 3 UPD:\n{cluster.procs[0].text}")
-                case Received(_, Upd() as upd):
-                    assert any(c.drones == ("D01",) for c in upd.cells), upd
-                    reports += 1
+        for _, upd in zip(range(3), mid_game(cluster, s, Keys(cluster.root).upd, Upd, "test-listener")):
+            assert any(c.drones == ("D01",) for c in upd.cells), upd
 
 
 def test_environment_answers_about_the_drones_where_the_last_status_has_them(cluster, tmp_path):
@@ -302,26 +307,18 @@ def test_environment_answers_about_the_drones_where_the_last_status_has_them(clu
     start_game(cluster, tmp_path, coord_args=("--pace", "0.1"), gcs_args=("--targets", "9,9,9"), verify_env=False)
     env = cluster.procs[1]
     keys = Keys(cluster.root)
-    import logging
-
     with zenoh.open(client_config(cluster.locator)) as s:
-        inbox = Inbox(s, keys, logging.getLogger("test-asker"))
-        inbox.subscribe(keys.status, Status)
-        inbox.subscribe(keys.over, Over)
         answered = 0
-        while answered < 3:
-            ev = inbox.get(30)
-            assert ev is not None, "the game stalled"
-            match ev:
-                case Received(_, Over()):
-                    pytest.fail(f"the game ended too soon:\n{env.text}")
-                case Received(_, Status() as st) if st.turn >= 3:
-                    (d01,) = [r for r in st.drones.records() if r.drone == "D01"]
-                    ask = Ask(turn=st.turn + 1, sender="D01", cells=(d01.pos,))  # (paced: turn + 1 is still on)
-                    replies = list(s.get(keys.ask, payload=encode(ask), timeout=10))
-                    assert len(replies) == 1 and replies[0].ok is not None, replies[0].err.payload.to_bytes()
-                    ans = decode(replies[0].ok.payload.to_bytes(), Ans)
-                    assert ans.turn == st.turn + 1 and ans.drones == ((0, "D01"),)
-                    answered += 1
+        for st in mid_game(cluster, s, keys.status, Status, "test-asker"):
+            if answered == 3:
+                break
+            if st.turn >= 3:
+                (d01,) = [r for r in st.drones.records() if r.drone == "D01"]
+                ask = Ask(turn=st.turn + 1, sender="D01", cells=(d01.pos,))  # (paced: turn + 1 is still on)
+                replies = list(s.get(keys.ask, payload=encode(ask), timeout=10))
+                assert len(replies) == 1 and replies[0].ok is not None, replies[0].err.payload.to_bytes()
+                ans = decode(replies[0].ok.payload.to_bytes(), Ans)
+                assert ans.turn == st.turn + 1 and ans.drones == ((0, "D01"),)
+                answered += 1
     assert set(cluster.wait_all().values()) == {0}
     assert not any("rejected" in line for line in env.err), env.text
