@@ -715,15 +715,10 @@ class Outbox:
         self._listeners.append(self._pub(key).declare_matching_listener(_direct(on_status)))
 
 
-def request(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
-            timeout: float) -> Message:
-    """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none)."""
-    return ask(session, key, msg, expect, timeout)[0]
-
-
 def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
         timeout: float) -> tuple[Message, str]:
-    """`request`, and the session id of the process that answered (as Zenoh says it, "" if it does not)."""
+    """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none), and the
+    session id of the process that answered (as Zenoh says it, "" if it does not)."""
     for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=_EVERY_REPLY):
         replier = reply.replier_id
         return _answer(key, reply, expect), "" if replier is None else str(replier.zid)

@@ -219,14 +219,6 @@ class Tracks:
         return paths
 
 
-def trails(history: Iterable[Status]) -> dict[str, list[Cell]]:
-    """Each drone's path through the STATUS history, without repeats of consecutive cells."""
-    tracks = Tracks()
-    for st in history:
-        tracks.add(st)
-    return tracks.paths
-
-
 def targets_of(status: Status) -> Mapping[str, Cell]:
     """Each drone's target in force, of those that have one (read from the STATUS's columns)."""
     table = status.drones

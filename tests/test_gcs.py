@@ -13,7 +13,6 @@ from entities.gcs import (
     format_status,
     parse_command,
     targets_of,
-    trails,
 )
 from entities.world import Building, World
 from schema import Cause, DroneState, DroneStatus, Intent, Note, Start, Status, UsageError, Welcome, WorldSpec
@@ -266,15 +265,20 @@ def test_format_status_limits_long_swarms() -> None:
     assert len(format_status(Status(turn=7, sender="OBS", drones=drones)).split("\n")) == 1 + 16 + 1
 
 
-def test_trails() -> None:
+def test_tracks_keep_each_drones_path_through_the_status_history() -> None:
+    from entities.gcs import Tracks
+
     history = [
         Status(turn=0, sender="OBS", drones=(st("D01", (0, 0, 0)), st("D02", (5, 5, 0)))),
         Status(turn=1, sender="OBS", drones=(st("D01", (1, 0, 0)), st("D02", (5, 5, 0)))),
         Status(turn=2, sender="OBS", drones=(st("D01", (1, 0, 0)), st("D02", (5, 4, 0)))),
         Status(turn=3, sender="OBS", drones=(st("D01", (0, 0, 0)), st("D02", (5, 4, 0), DroneState.DEAD))),
     ]
-    assert trails(history) == {"D01": [(0, 0, 0), (1, 0, 0), (0, 0, 0)], "D02": [(5, 5, 0), (5, 4, 0)]}
-    assert trails([]) == {}
+    tracks = Tracks()
+    assert tracks.paths == {}
+    for status in history:
+        tracks.add(status)
+    assert tracks.paths == {"D01": [(0, 0, 0), (1, 0, 0), (0, 0, 0)], "D02": [(5, 5, 0), (5, 4, 0)]}
 
 
 def test_targets_of() -> None:
