@@ -670,7 +670,6 @@ class Outbox:
         self.session = session
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._listeners: list[zenoh.MatchingListener] = []
-        self._matching: dict[str, bool] = {}  # key -> whether anyone subscribes to it (see `matching`)
 
     def _pub(self, key: str) -> zenoh.Publisher:
         pub = self._pubs.get(key)
@@ -690,21 +689,7 @@ class Outbox:
             listener.undeclare()
         for pub in self._pubs.values():
             pub.undeclare()
-        self._listeners, self._pubs, self._matching = [], {}, {}
-
-    def matching(self, key: str) -> bool:
-        """Does anyone subscribe to `key` now? (Asked once of Zenoh, then kept by a matching listener: a
-        publisher's matching status is a call into Zenoh each time.)"""
-        known = self._matching.get(key)
-        if known is None:
-            pub = self._pub(key)
-
-            def on_status(status: zenoh.MatchingStatus) -> None:  # (a bool's assignment: safe from any thread)
-                self._matching[key] = status.matching
-
-            self._listeners.append(pub.declare_matching_listener(_direct(on_status)))
-            known = self._matching.setdefault(key, pub.matching_status.matching)  # type: ignore[attr-defined]
-        return known
+        self._listeners, self._pubs = [], {}
 
     def watch(self, key: str, inbox: Inbox) -> None:
         """A `Matching` event in `inbox` each time someone starts or stops subscribing to `key` (the

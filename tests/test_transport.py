@@ -24,6 +24,16 @@ pytestmark = pytest.mark.integration
 LOG = logging.getLogger("test-transport")
 
 
+def subscribed(out: Outbox, inbox: Inbox, *keys: str) -> None:
+    """Until the subscriptions to every key in `keys` have reached `out`'s session (each publisher's matching
+    status), taking `inbox`'s events meanwhile."""
+    pubs = [out.session.declare_publisher(key) for key in keys]
+    while not all(pub.matching_status.matching for pub in pubs):
+        inbox.get(0.01)
+    for pub in pubs:
+        pub.undeclare()
+
+
 @pytest.fixture
 def pair():
     """(inbox of a listening session, outbox of another session, keys)."""
@@ -33,8 +43,7 @@ def pair():
         inbox = Inbox(a, keys, LOG)
         inbox.subscribe(keys.over, Over)
         out = Outbox(b)
-        while not out.matching(keys.over):  # the subscription has reached the publisher's side
-            inbox.get(0.01)
+        subscribed(out, inbox, keys.over)
         yield inbox, out, keys
 
 
@@ -197,8 +206,7 @@ def target(turn: int) -> Target:
 def test_a_message_for_a_turn_before_since_is_refused_before_it_is_queued(pair) -> None:
     inbox, out, keys = pair
     inbox.subscribe(keys.tgt("D01"), Target, since=lambda: 4)
-    while not out.matching(keys.tgt("D01")):
-        inbox.get(0.01)
+    subscribed(out, inbox, keys.tgt("D01"))
     for turn in range(1, 7):
         out.put(keys.tgt("D01"), target(turn))
     got = [inbox.get(10).msg.turn for _ in range(3)]
@@ -212,8 +220,7 @@ def test_an_origin_over_its_budget_in_the_inbox_is_refused_unread(pair) -> None:
     inbox = Inbox(pair[0].session, keys, LOG, budget=2)
     inbox.subscribe(keys.tgt("D01"), Target)
     inbox.subscribe(keys.over, Over)
-    while not (out.matching(keys.tgt("D01")) and out.matching(keys.over)):
-        inbox.get(0.01)
+    subscribed(out, inbox, keys.tgt("D01"), keys.over)
     arrived = threading.Event()  # the OVER, seen by a plain subscriber after the inbox's callbacks ran
     barrier = inbox.session.declare_subscriber(keys.over, _direct(lambda sample: arrived.set()))
     for turn in range(1, 6):
@@ -276,8 +283,7 @@ def bare():
         inbox = Inbox(a, keys, LOG)
         inbox.subscribe(keys.tgt("D01"), Target)
         out = Outbox(b)
-        while not out.matching(keys.tgt("D01")):
-            inbox.get(0.01)
+        subscribed(out, inbox, keys.tgt("D01"))
         yield inbox, out, keys
 
 
@@ -294,8 +300,7 @@ def test_a_payload_above_its_keys_size_limit_is_refused_unread(where, request) -
     inbox, out, keys = request.getfixturevalue(where)
     if where == "pair":
         inbox.subscribe(keys.tgt("D01"), Target)
-        while not out.matching(keys.tgt("D01")):
-            inbox.get(0.01)
+        subscribed(out, inbox, keys.tgt("D01"))
     out.session.put(keys.tgt("D01"), b"\x81" * (size_limit(Target) + 1))
     out.put(keys.tgt("D01"), target(1))  # after it: once this one is here, the big one was dealt with
     assert inbox.get(10).msg == target(1)
