@@ -1,20 +1,14 @@
 """The thin Zenoh adapter shared by every process: flags, session config, and an event inbox.
 
-The threading model, the same in every process and at every fleet size:
-- Zenoh's callbacks (subscribers, queryables, query replies, liveliness, matching listeners) run on
-  Zenoh's threads and swallow exceptions. They only do what is cheap: refuse, unread, what is too big,
-  stale or over its origin's budget (see `Inbox`), and put the payload in the process's `Inbox`; what
-  fails there is counted and logged as a rejection, never raised. (A query's reply, which its asker
-  waits for, is decoded there too.)
-- The process's main thread takes the payloads one at a time (`Inbox.get`, or `Inbox.run` with a
-  handler), in order of arrival but for a bursting origin (`FairQueue`), decodes each and checks it
-  against its key (`check_addressed`) into an `Event`, and does everything else: every change of state,
-  every reply to a query, every publication that follows from a message. (A big payload so costs its origin's turn, not
-  Zenoh's thread, which every other message waits for; and its objects are made by the thread that
-  uses and frees them.)
-So a process's state is touched by one thread only: the cores (engine, environment, pilots) have no
-locks. The only ones are the inbox's queue (`FairQueue`) and its count of rejections (`RejectCounter`),
-the two things Zenoh's threads and the main thread share.
+One threading model, in every process and at every fleet size. Zenoh's callbacks (subscribers, queryables,
+query replies, liveliness, matching listeners) run on Zenoh's threads and swallow exceptions: they only refuse,
+unread, what is too big, stale or over its origin's budget, and queue the payload in the process's `Inbox`
+(what fails there is counted as a rejection, never raised; a query's reply, which its asker waits for, is
+decoded there too). The main thread takes the payloads one at a time (`Inbox.get`, `Inbox.run`), in order
+of arrival but for a bursting origin (`FairQueue`), decodes each and checks it against its key
+(`check_addressed`), and does everything else. So a big payload costs its origin's turn, not Zenoh's thread,
+which every other message waits for; and a process's state is touched by one thread only: the cores have no
+locks, the only ones guard what both sides share, the queue (`FairQueue`) and the rejections (`RejectCounter`).
 """
 
 from __future__ import annotations
@@ -23,6 +17,7 @@ import argparse
 import collections
 import json
 import logging
+import os
 import queue
 import threading
 import time
@@ -96,17 +91,19 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
         except Exception as exc:
             raise UsageError(f"cannot load zenoh config {args.config}: {exc}") from None
     else:
-        conf = _local_defaults()
-    conf.insert_json5("scouting/delay", "0")
-    if args.mode:
-        conf.insert_json5("mode", json.dumps(args.mode))
-    if args.connect:
-        conf.insert_json5("connect/endpoints", json.dumps(args.connect))
-    if args.listen:
-        conf.insert_json5("listen/endpoints", json.dumps(args.listen))
+        conf = _config({})
+    _insert(conf, {"scouting/delay": 0, "mode": args.mode, "connect/endpoints": args.connect,
+                   "listen/endpoints": args.listen})
     apply_lease(conf, args)
     apply_security(conf, args)
     return conf
+
+
+def _insert(conf: zenoh.Config, settings: dict[str, object]) -> None:
+    """Each setting given (not None, not an empty list) into `conf`, as JSON."""
+    for key, value in settings.items():
+        if value not in (None, []):
+            conf.insert_json5(key, json.dumps(value))
 
 
 def apply_lease(conf: zenoh.Config, args: argparse.Namespace) -> None:
@@ -114,8 +111,8 @@ def apply_lease(conf: zenoh.Config, args: argparse.Namespace) -> None:
     if getattr(args, "lease", None) is not None:
         if args.lease <= 0:
             raise UsageError("--lease must be positive")
-        conf.insert_json5("transport/link/tx/lease", str(int(args.lease * 1000)))
-        conf.insert_json5("transport/link/tx/keep_alive", "4")  # keep-alives per lease, zenoh's default
+        # (keep_alive: keep-alives per lease, zenoh's default)
+        _insert(conf, {"transport/link/tx/lease": int(args.lease * 1000), "transport/link/tx/keep_alive": 4})
 
 
 #: The environment variable holding the password of --user when no --password-file is given.
@@ -123,8 +120,6 @@ PASSWORD_ENV = "DRONESIM_PASSWORD"
 
 
 def _existing(path: str, flag: str) -> str:
-    import os
-
     if not os.path.isfile(path):
         if flag == "--password-file":  # never echo it: it may be a password typed as `--password SECRET`
             raise UsageError("--password-file: no such file (it takes the path of a file holding the password)")
@@ -138,23 +133,19 @@ def apply_security(conf: zenoh.Config, args: argparse.Namespace, *, router: bool
     A client's --tls-cert/--tls-key are presented to the router (mutual TLS); a router's are its server
     certificate, and --tls-mtls makes it require clients' ones. `router` defaults to the config's mode."""
     get = lambda name: getattr(args, name, None)  # noqa: E731 -- parsers without these flags
-    tls = "transport/link/tls/"
+    tls, auth = "transport/link/tls/", "transport/auth/usrpwd/"
     if router is None:
-        mode = get("mode") or json.loads(conf.get_json("mode") or "null")
-        router = mode == "router"
+        router = (get("mode") or json.loads(conf.get_json("mode") or "null")) == "router"
     if get("tls_ca"):
-        conf.insert_json5(tls + "root_ca_certificate", json.dumps(_existing(args.tls_ca, "--tls-ca")))
+        _insert(conf, {tls + "root_ca_certificate": _existing(args.tls_ca, "--tls-ca")})
     if bool(get("tls_cert")) != bool(get("tls_key")):
         raise UsageError("--tls-cert and --tls-key go together")
     if get("tls_cert"):
         cert, key = _existing(args.tls_cert, "--tls-cert"), _existing(args.tls_key, "--tls-key")
         for side in ("listen", "connect"):
-            conf.insert_json5(f"{tls}{side}_certificate", json.dumps(cert))
-            conf.insert_json5(f"{tls}{side}_private_key", json.dumps(key))
-        if not router:
-            conf.insert_json5(tls + "enable_mtls", "true")  # a client presents its certificate only then
-    if get("tls_mtls"):
-        conf.insert_json5(tls + "enable_mtls", "true")
+            _insert(conf, {f"{tls}{side}_certificate": cert, f"{tls}{side}_private_key": key})
+    if get("tls_mtls") or (get("tls_cert") and not router):  # a client presents its certificate only then
+        _insert(conf, {tls + "enable_mtls": True})
     password = None
     if get("password_file"):
         with open(_existing(args.password_file, "--password-file"), encoding="utf-8") as f:
@@ -162,20 +153,16 @@ def apply_security(conf: zenoh.Config, args: argparse.Namespace, *, router: bool
         if not password:
             raise UsageError(f"--password-file {args.password_file}: its first line is empty")
     elif get("user"):
-        import os
-
         password = os.environ.get(PASSWORD_ENV) or None
     if get("user"):
         if password is None:
             raise UsageError(f"--user {args.user} needs --password-file FILE or the {PASSWORD_ENV} "
                              "environment variable")
-        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(args.user))
-        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+        _insert(conf, {auth + "user": args.user, auth + "password": password})
     elif get("password_file"):
         raise UsageError("--password-file needs --user NAME")
     if get("users_file"):
-        users = _existing(args.users_file, "--users-file")
-        conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(users))
+        _insert(conf, {auth + "dictionary_file": _existing(args.users_file, "--users-file")})
     if get("acl"):
         try:
             block = zenoh.Config.from_file(_existing(args.acl, "--acl")).get_json("access_control")
@@ -193,34 +180,24 @@ def setup_logging(level: str, name: str) -> logging.Logger:
     return logging.getLogger(f"dronesim.{name}")
 
 
-def _local_defaults() -> zenoh.Config:
-    """A config with this project's defaults (see `zenoh_config`): no multicast scouting, no shared memory."""
+def _config(settings: dict[str, object]) -> zenoh.Config:
+    """A config with this project's defaults (see `zenoh_config`: no multicast scouting, no shared memory)
+    and `settings`."""
     conf = zenoh.Config()
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/shared_memory/enabled", "false")
+    _insert(conf, {"scouting/multicast/enabled": False, "transport/shared_memory/enabled": False, **settings})
     return conf
 
 
 def router_config(listen: str = "tcp/127.0.0.1:0") -> zenoh.Config:
     """An embedded router's config: fast start, no multicast, admin space readable (for its port), and
     the key table's flood filters for any root (`schema.acl.flood_filters`)."""
-    conf = _local_defaults()
-    for name, block in flood_filters(["**"]).items():
-        conf.insert_json5(name, json.dumps(block))
-    conf.insert_json5("mode", '"router"')
-    conf.insert_json5("listen/endpoints", json.dumps([listen]))
-    conf.insert_json5("scouting/delay", "0")
-    conf.insert_json5("adminspace", '{"enabled": true, "permissions": {"read": true, "write": false}}')
-    return conf
+    return _config({**flood_filters(["**"]), "mode": "router", "listen/endpoints": [listen], "scouting/delay": 0,
+                    "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}}})
 
 
 def client_config(locator: str) -> zenoh.Config:
     """A client session's config for one router endpoint: no multicast, fast start."""
-    conf = _local_defaults()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([locator]))
-    conf.insert_json5("scouting/delay", "0")
-    return conf
+    return _config({"mode": "client", "connect/endpoints": [locator], "scouting/delay": 0})
 
 
 def router_locators(session: zenoh.Session) -> list[str]:
@@ -442,31 +419,24 @@ class FairQueue:
         return (False, None) if origin is None else (True, self._take(origin))
 
     def drain(self) -> list[object]:
-        """Every event queued, in the order `take` would give them."""
+        """Every event queued, in the order `take` would give them (for the one consumer: never blocks)."""
         out: list[object] = []
-        while True:
-            try:
-                origin = self._line.get_nowait()
-            except queue.Empty:
-                return out
-            if origin is not None:
-                out.append(self._take(origin))
+        while not self._line.empty():
+            got, event = self.take(None)
+            if got:
+                out.append(event)
+        return out
 
 
 class Inbox:
-    """Events from Zenoh callbacks, decoded by the process's main thread (see the module's docstring);
-    rejections are counted.
-
-    A flood cannot move a game. Each event has an origin: the writer of the key it came on (by the key
-    table: the coordinator for TURN, STATUS and OVER, the ground station for TGT and DONE, the drone or
-    host whose key an NPS or MOVES is on), the sender a query names, the entity of a presence token. A
-    callback refuses, before anything is queued and before the payload is decoded: a payload above its
-    message's size limit (`schema.keys.size_limit`), a message stamped with a turn older than its
-    subscription's `since()` (read from the first bytes alone), one whose sender is not its key's, and one
-    from an origin over its budget (`FairQueue`; the coordinator's messages are never refused for it).
-    The main thread takes the events in order of arrival, except that a bursting origin has at most
-    `share` of its events in line at a time: it delays another origin's next event by at most that many.
-    """
+    """Events from Zenoh callbacks for the process's main thread (see the module's docstring); rejections
+    are counted. A flood cannot move a game. Each event has an origin: the writer of the key it came on (by
+    the key table: SRV for TURN, STATUS and OVER, GCS for TGT and DONE, the drone or host whose key an NPS
+    or MOVES is on), the sender a query names, the entity of a presence token. A callback refuses, unread: a
+    payload above its message's size limit (`schema.keys.size_limit`), a message stamped with a turn before
+    its subscription's `since()` (read from its first bytes alone), and one from an origin over its budget
+    (`FairQueue`, whose `share` bounds how long a burst delays the others; the coordinator's messages are
+    never refused for it). The main thread refuses a message whose sender is not its key's."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, logger: logging.Logger, *,
                  budget: int = ORIGIN_QUEUE, share: int = ORIGIN_SHARE) -> None:
@@ -708,13 +678,3 @@ def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | 
         replier = reply.replier_id
         return _answer(key, reply, expect), "" if replier is None else str(replier.zid)
     raise TimeoutError(f"no answer on {key} within {timeout:.1f} s")
-
-
-def wait_for(what: str, predicate: Callable[[], bool], inbox_get: Callable[[float], object], timeout: float) -> None:
-    """Block on events until `predicate()` holds (no sleeping); UsageError after `timeout`."""
-    end = time.monotonic() + timeout
-    while not predicate():
-        left = end - time.monotonic()
-        if left <= 0:
-            raise UsageError(f"timed out waiting for {what}")
-        inbox_get(left)
