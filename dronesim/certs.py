@@ -48,15 +48,16 @@ LOCAL_NAMES = ("localhost", "127.0.0.1", "::1")
 NEW_KEY = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
 
 
-def openssl(*args: str, cwd: Path) -> None:
-    """Run the openssl command line tool (its output only shows when it fails). Files it creates are
-    private to the user (umask 077); certificates are made world-readable afterwards."""
+def openssl(*args: str, cwd: Path, check: bool = True) -> str:
+    """Run the openssl command line tool and return its output (shown when it fails, if `check`). Files it
+    creates are private to the user (umask 077); certificates are made world-readable afterwards."""
     exe = shutil.which("openssl")
     if exe is None:
         raise UsageError("dronesim certs needs the openssl command (Debian/Ubuntu: apt-get install openssl)")
     done = subprocess.run([exe, *args], cwd=cwd, capture_output=True, text=True, preexec_fn=lambda: os.umask(0o077))
-    if done.returncode != 0:
+    if check and done.returncode != 0:
         raise UsageError(f"openssl {args[0]} failed: {done.stderr.strip() or done.stdout.strip()}")
+    return done.stdout
 
 
 def _san(name: str) -> str:
@@ -121,11 +122,7 @@ class Kit:
 
     def names_of(self, pem: Path) -> set[str]:
         """The subject alternative names of a certificate, as ``DNS:x`` / ``IP:y`` (normalised)."""
-        exe = shutil.which("openssl")
-        if exe is None:
-            raise UsageError("dronesim certs needs the openssl command (Debian/Ubuntu: apt-get install openssl)")
-        text = subprocess.run([exe, "x509", "-in", str(pem), "-noout", "-ext", "subjectAltName"],
-                              capture_output=True, text=True).stdout
+        text = openssl("x509", "-in", str(pem), "-noout", "-ext", "subjectAltName", cwd=self.dir, check=False)
         out: set[str] = set()
         for item in re.findall(r"(DNS:[^,\s]+|IP Address:[^,\s]+)", text):
             kind, _, value = item.partition(":")

@@ -38,14 +38,9 @@ class CoordinatorLost(UsageError):
 
 
 def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Logger, *,
-          timeout: float) -> Welcome:
-    """Send CONNECT, wait for the coordinator's answer (waiting for it to appear, until `timeout`)."""
-    return join(session, keys, hello, logger, timeout=timeout)[0]
-
-
-def join(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Logger, *,
-         timeout: float) -> tuple[Welcome, str]:
-    """`admit`, and the session id of the coordinator that admitted this entity."""
+          timeout: float) -> tuple[Welcome, str]:
+    """Send CONNECT and wait for the coordinator's answer (waiting for it to appear, until `timeout`): its
+    Welcome, and the session id of the coordinator that admitted this entity."""
     end = time.monotonic() + timeout
     while True:
         try:
@@ -57,13 +52,11 @@ def join(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Log
                 raise UsageError(f"no coordinator answered on {keys.connect}: {err}") from None
             # No queryable yet: wait for the coordinator's presence token instead of polling blindly.
             await_presence(session, keys.alive_of("SRV"), end - time.monotonic())
-    match reply:
-        case Refused(text=text):
-            raise Refusal(f"connection refused: {text}")
-        case Welcome():
-            logger.info("%s", reply.text)
-            return reply, coordinator
-    raise AssertionError(reply)
+    if isinstance(reply, Refused):
+        raise Refusal(f"connection refused: {reply.text}")
+    assert isinstance(reply, Welcome)
+    logger.info("%s", reply.text)
+    return reply, coordinator
 
 
 def await_presence(session: zenoh.Session, key: str, timeout: float) -> bool:
@@ -84,18 +77,15 @@ class Membership:
     it has gone, it waits up to `grace` seconds for a coordinator to appear and then connects again (the
     coordinator re-admits the same process, or resumes a game from its journal). Refused then (a drone declared
     LOST meanwhile), the entity takes no further part: it says so and leaves at OVER. Feed it every `Presence`
-    event of the inbox; use `timeout()` for the inbox wait and `check()` when it times out.
-    """
+    event of the inbox; use `timeout()` for the inbox wait and `check()` when it times out."""
 
     def __init__(self, session: zenoh.Session, inbox: Inbox, hello: Connect, logger: logging.Logger, *,
                  connect_timeout: float, grace: float) -> None:
         self.session, self.keys, self.log = session, inbox.keys, logger
-        self.hello = hello
-        self.grace = grace
-        self.connect_timeout = connect_timeout
+        self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
         inbox.watch_presence("SRV")
-        self.welcome, self.coordinator = join(session, self.keys, hello, logger, timeout=connect_timeout)
+        self.welcome, self.coordinator = admit(session, self.keys, hello, logger, timeout=connect_timeout)
         self.clock = TurnClock(game=self.welcome.game)  # the coordinator's messages pass through it (`screen`)
         self._lost_since: float | None = None
 
@@ -108,7 +98,7 @@ class Membership:
                 self._lost_since = None
                 self.log.warning("the coordinator is back: connecting again")
                 try:
-                    self.welcome, self.coordinator = join(self.session, self.keys, self.hello, self.log,
+                    self.welcome, self.coordinator = admit(self.session, self.keys, self.hello, self.log,
                                                           timeout=self.connect_timeout)
                 except Refusal as err:  # e.g. a drone declared LOST while it was away: its part is over
                     self.log.warning("%s: %s takes no further part and leaves at the end of the game",
@@ -123,13 +113,11 @@ class Membership:
 
     def timeout(self) -> float | None:
         """How long the inbox may wait for the next event (None: no limit while the coordinator is there)."""
-        if self._lost_since is None:
-            return None
-        return max(0.0, self._lost_since + self.grace - time.monotonic())
+        return None if self._lost_since is None else max(0.0, self._lost_since + self.grace - time.monotonic())
 
     def check(self) -> None:
         """Raise CoordinatorLost once the grace period is over."""
-        if self._lost_since is not None and time.monotonic() >= self._lost_since + self.grace:
+        if self.timeout() == 0.0:
             raise CoordinatorLost(f"the coordinator vanished and did not come back within {self.grace:g} s")
 
     def close(self) -> None:
@@ -148,15 +136,14 @@ def add_entity_args(parser) -> None:
 class TurnClock:
     """The turn an entity believes the game is at, learnt from the coordinator's TURN, STATUS and OVER.
 
-    Once it has seen one, it refuses those messages when they cannot be current: a TURN for a past turn
-    or one more than a turn ahead, a STATUS for other than the turn just played (or a repeat of the one
-    before), an OVER far from now, or a repeat (same message, phase and turn) that differs from what
-    was received first. TURN(t) and STATUS(t - 1) are current while turn t is played; so is OVER(t - 1)
-    after STATUS(t - 1), and OVER of any later turn (a process that was frozen learns the end late). A
-    replayed or garbled TURN must not make a drone plan, nor a STATUS move the world;
-    a repeat re-sent to a process that connected again is identical and passes. Each must be of this entity's
-    game (`game`, from its WELCOME): one of another game, or of an earlier coordinator, is foreign, whatever
-    its turn. (A forged message for the right turn is spoofing: the router's access control stops it.)"""
+    Once it has seen one, it refuses those messages when they cannot be current (a replayed or garbled TURN
+    must not make a drone plan, nor a STATUS move the world): a TURN for a past turn or one more than a turn
+    ahead, a STATUS for other than the turn just played (or a repeat of the one before), an OVER far from now,
+    or a repeat (same message, phase and turn) that differs from the first (a repeat re-sent to a process that
+    connected again is identical and passes). TURN(t) and STATUS(t - 1) are current while turn t is played; so
+    are OVER(t - 1) after STATUS(t - 1) and OVER of any later turn (a frozen process learns the end late). Each
+    must be of this entity's `game` (from its WELCOME): another game's, or an earlier coordinator's, is foreign,
+    whatever its turn. (A forged message for the right turn is spoofing: the router's access control stops it.)"""
 
     def __init__(self, turn: int | None = None, *, game: str = "") -> None:
         self.turn: int | None = turn or None  # the turn being played (after STATUS(t): t + 1, the next)

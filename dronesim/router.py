@@ -7,7 +7,6 @@ SIGINT or SIGTERM.
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 
@@ -24,13 +23,6 @@ from dronesim.transport import (
 )
 
 
-def main(conf: zenoh.Config) -> int:
-    with zenoh.open(conf) as session:
-        print(f"router {session.info.zid()} listening on {', '.join(router_locators(session))}", flush=True)
-        signal.sigwait({signal.SIGINT, signal.SIGTERM})  # blocked in cli(): delivered here, not as exceptions
-    return 0
-
-
 def cli(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="dronesim router", description=__doc__)
     add_zenoh_args(p)
@@ -39,14 +31,16 @@ def cli(argv: list[str] | None = None) -> int:
     if args.config:
         conf = zenoh_config(args)
     else:
-        conf = router_config(args.listen[0] if args.listen else "tcp/0.0.0.0:7447")
-        if len(args.listen) > 1:
-            conf.insert_json5("listen/endpoints", json.dumps(args.listen))
+        conf = router_config(args.listen or "tcp/0.0.0.0:7447")
         apply_lease(conf, args)
         apply_security(conf, args, router=True)
     conf.insert_json5("mode", '"router"')
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
-    return main(conf)
+    signals = {signal.SIGINT, signal.SIGTERM}
+    signal.pthread_sigmask(signal.SIG_BLOCK, signals)  # delivered to sigwait below, not as exceptions
+    with zenoh.open(conf) as session:
+        print(f"router {session.info.zid()} listening on {', '.join(router_locators(session))}", flush=True)
+        signal.sigwait(signals)
+    return 0
 
 
 if __name__ == "__main__":

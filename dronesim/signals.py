@@ -78,11 +78,10 @@ def until_stopped(run: Callable[[], object], logger: logging.Logger) -> int:
 @contextlib.contextmanager
 def waking(*wake: Callable[[], None]) -> Iterator[None]:
     """While inside (on the main thread): every signal that has a Python handler also calls each `wake`, on
-    a helper thread. A Python handler runs only when the main thread runs Python code: a signal that lands
-    just before that thread blocks in a wait (the C handler has run, the Python one is pending) would wait
-    for the next event, maybe forever (a prompt, a phase held for a person). A `wake` puts something in a
-    queue the main thread waits on, so that the wait returns and the handler runs at once. (Off the main
-    thread, nothing is done: signals are for the main thread.)"""
+    a helper thread. A Python handler runs only when the main thread runs Python code: a signal landing just
+    before that thread blocks in a wait would wait for the next event, maybe forever (a prompt, a phase held
+    for a person). A `wake` puts something in the queue the main thread waits on, so that the handler runs at
+    once. (Off the main thread, nothing is done: signals are for the main thread.)"""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

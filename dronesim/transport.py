@@ -188,10 +188,11 @@ def _config(settings: dict[str, object]) -> zenoh.Config:
     return conf
 
 
-def router_config(listen: str = "tcp/127.0.0.1:0") -> zenoh.Config:
-    """An embedded router's config: fast start, no multicast, admin space readable (for its port), and
-    the key table's flood filters for any root (`schema.acl.flood_filters`)."""
-    return _config({**flood_filters(["**"]), "mode": "router", "listen/endpoints": [listen], "scouting/delay": 0,
+def router_config(listen: str | list[str] = "tcp/127.0.0.1:0") -> zenoh.Config:
+    """A router's config, listening on `listen` (one endpoint or several): fast start, no multicast, admin
+    space readable (for its port), and the key table's flood filters for any root (`schema.acl.flood_filters`)."""
+    endpoints = [listen] if isinstance(listen, str) else listen
+    return _config({**flood_filters(["**"]), "mode": "router", "listen/endpoints": endpoints, "scouting/delay": 0,
                     "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}}})
 
 
@@ -202,8 +203,7 @@ def client_config(locator: str) -> zenoh.Config:
 
 def router_locators(session: zenoh.Session) -> list[str]:
     """The endpoints a router session really listens on (with the port chosen for `:0`)."""
-    zid = str(session.info.zid())
-    for reply in session.get(f"@/{zid}/router", timeout=5.0):
+    for reply in session.get(f"@/{session_id(session)}/router", timeout=5.0):
         if reply.ok is not None:
             return list(json.loads(reply.ok.payload.to_bytes())["locators"])
     raise UsageError("the router did not report its locators")
@@ -468,14 +468,6 @@ class Inbox:
         if why is not None:
             raise RemoteInputError(why, reason="flood")
 
-    def _guard(self, where: str, origin: str, fn: Callable[[], None]) -> None:
-        try:
-            fn()
-        except RemoteInputError as err:
-            self.rejects.reject(where, err, origin)
-        except Exception:  # a bug: log it, never let Zenoh swallow it silently
-            self.log.exception("error handling %s", where)
-
     def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
                   since: Callable[[], int] | None = None) -> zenoh.Subscriber:
         """Decoded messages on `key` become `Received` events (until `unsubscribe`); with `since`, those
@@ -486,8 +478,7 @@ class Inbox:
         def on_sample(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
             origin = self._origin(k)
-
-            def handle() -> None:
+            try:
                 self._admit(origin, len(sample.payload), limit)
                 data = sample.payload.to_bytes()
                 if since is not None:
@@ -495,8 +486,10 @@ class Inbox:
                     if type(turn) is int and turn < since():
                         raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
                 self._put(origin, _Unread(k, origin, None, data, expect), len(data))  # (read by `get`)
-
-            self._guard(k, origin, handle)
+            except RemoteInputError as err:
+                self.rejects.reject(k, err, origin)
+            except Exception:  # a bug: log it, never let Zenoh swallow it silently
+                self.log.exception("error handling %s", k)
 
         sub = self.session.declare_subscriber(key, _direct(on_sample))
         self._handles.append(sub)
@@ -592,12 +585,13 @@ class Inbox:
 
         def on_token(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
-
-            def handle() -> None:
+            try:
                 who, session = self.keys.presence_of(k)
                 self._put(who, Presence(who, session, sample.kind == zenoh.SampleKind.PUT), 0)
-
-            self._guard(k, k, handle)
+            except RemoteInputError as err:
+                self.rejects.reject(k, err, k)
+            except Exception:  # a bug, as above
+                self.log.exception("error handling %s", k)
 
         key = self.keys.any_alive if entity is None else self.keys.alive_of(entity)
         self._handles.append(self.session.liveliness().declare_subscriber(key, _direct(on_token), history=True))

@@ -59,21 +59,26 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _passed(args: argparse.Namespace, *names: str) -> list[str]:
+    """The flags `names` as this command was given them, to pass on: a switch alone if set, a value unless
+    unset (None or empty), a list's items each after its flag."""
+    out: list[str] = []
+    for name in names:
+        value, flag = getattr(args, name), "--" + name.replace("_", "-")
+        for item in value if isinstance(value, list) else [value]:
+            if item is True:
+                out.append(flag)
+            elif item is not None and item is not False and item != "":
+                out += [flag, str(item)]
+    return out
+
+
 def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str]]]:
     """(name, argv) of every entity process, connected as clients to `locator`."""
     base = [sys.executable, "-m", "dronesim"]
-    common = ["--mode", "client", "--connect", locator, "--root", args.root, "--log-level", args.log_level]
-    coord = [*base, "coordinator", *common, "--seed", str(args.seed), "--size", args.size,
-             "--drones", str(args.drones), "--max-turns", str(args.max_turns), "--admit-deadline", "60",
-             "--pace", str(args.pace)]
-    if args.world:
-        coord += ["--world", args.world]
-    if args.starts:
-        coord += ["--starts", args.starts]
-    if args.journal:
-        coord += ["--journal", args.journal]
-    if args.scenario:
-        coord += ["--scenario", args.scenario]
+    common = ["--mode", "client", "--connect", locator, *_passed(args, "root", "log_level")]
+    coord = [*base, "coordinator", *common, "--admit-deadline", "60",
+             *_passed(args, "seed", "size", "drones", "max_turns", "pace", "world", "starts", "journal", "scenario")]
     procs = [("SRV", coord), ("ENV", [*base, "env", *common, "--no-draw"])]
     if args.scenario:
         pilots = Scenario.load(args.scenario).autopilots
@@ -84,18 +89,7 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
             procs.append((host, [*base, "drone", *common, "--id", ",".join(ids), "--host", host, "--autopilot", pilot]))
     else:
         procs += [(d, [*base, "drone", *common, "--id", d, "--autopilot", pilots[d]]) for d in sorted(pilots)]
-    gcs = [*base, "gcs", *common]
-    if args.scenario:
-        gcs += ["--scenario", args.scenario]
-    for t in args.targets:
-        gcs += ["--targets", t]
-    if args.script:
-        gcs += ["--script", args.script]
-    if args.quiet:
-        gcs.append("--quiet")
-    if args.web:
-        gcs += ["--web", args.web]
-    procs.append(("GCS", gcs))
+    procs.append(("GCS", [*base, "gcs", *common, *_passed(args, "scenario", "targets", "script", "quiet", "web")]))
     return procs
 
 
