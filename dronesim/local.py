@@ -109,7 +109,6 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
         before the drones sense, as it does over the network (it answers an ASK for turn t only once
         STATUS(t - 1) is in)."""
         queue.extend(sorted(effects, key=opens_drones_phase))  # stable: only the drones' phase moves
-    welcome: Welcome | None = None
     for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), Connect(turn=0, sender="GCS", role=Role.GCS)):
         push(engine.connect(hello, None))
     # sender -> (autopilot, its drones): a host per autopilot, or a process per drone
@@ -117,32 +116,28 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     for sender, (pilot, drones) in flyers.items():
         push(engine.connect(Connect(turn=0, sender=sender, role=Role.DRONE, drones=drones, autopilot=pilot,
                                     cooperative=pilot_class(pilot).cooperative), None))
+    host_of = {d: sender for sender, (_, drones) in flyers.items() for d in drones}
+    numbers = {sender: [drone_number(d) for d in drones] for sender, (_, drones) in flyers.items()}
+    # host -> its swarm pilot, for the autopilots that have one; the other drones each fly their own
+    swarms = {h: make_swarm(a, world_size=world.size, drones=numbers[h], least=swarm_min)
+              for h, (a, _) in flyers.items()} if swarm else {}
+    options = pilot_options or {}
+    pilots = {d: make_autopilot(a, world_size=world.size, **options.get(a, {}))
+              for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
     env: Environment | None = None
-    pilots: dict = {}
-    swarms: dict = {}  # host -> its swarm pilot, for the autopilots that have one
     current: dict[str, Cell] = {}
     while queue:
         effect = queue.popleft()
         match effect:
-            case Reply(_, Welcome() as w) if welcome is None:
-                welcome = w
+            case Reply(_, Welcome() as w) if env is None:
                 env = Environment(world, w.starts.cells())
-                if swarm:
-                    swarms = {h: make_swarm(a, world_size=world.size, drones=[drone_number(d) for d in ds],
-                                            least=swarm_min) for h, (a, ds) in flyers.items()}
-                host_of = {d: sender for sender, (_, drones) in flyers.items() for d in drones}
-                numbers = {sender: [drone_number(d) for d in drones] for sender, (_, drones) in flyers.items()}
-                options = pilot_options or {}
-                pilots = {d: make_autopilot(a, world_size=world.size, **options.get(a, {}))
-                          for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
             case Record(data):
                 records.append(data)
             case Publish(Turn(phase=Phase.GCS, turn=t)):
                 current.update(inputs.plan.at(t))
                 alive = set(engine.alive())
                 current = {d: c for d, c in current.items() if d in alive}
-                in_force = engine.targets()
-                push(engine.receive(gcs_done(t, current, inputs.intent(t), in_force)))
+                push(engine.receive(gcs_done(t, current, inputs.intent(t), engine.targets())))
             case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
                 assert env is not None
                 for d in sorted(inputs.vanished.get(t, ())):
@@ -154,10 +149,10 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                         flown.setdefault(host_of[order[0]], []).append(order)
                 ask = functools.partial(_answers, env)
                 for sender in flyers:  # each as its process would: a swarm host's MOVES, a drone's NPS
-                    if swarms.get(sender) is not None:
+                    if (host := swarms.get(sender)) is not None:
                         rows = turn.orders.rows
                         mine = rows[np.isin(rows["drone"], numbers[sender])]
-                        moves: StepTable | dict[str, Decision] = drive(fly_swarm(swarms[sender], mine), env.kinds)
+                        moves: StepTable | dict[str, Decision] = drive(fly_swarm(host, mine), env.kinds)
                     elif sender in flown:
                         moves = drive(fly_pilots(pilots, flown[sender], host=sender if swarm else None), ask)
                     else:
@@ -181,8 +176,6 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 env.sync(status)
                 if keep_statuses:
                     statuses.append(status)
-            case Publish(Over()):
-                pass
             case Refusal(what, err):
                 log.warning("rejected %s: %s", what, err)
     assert engine.end is not None

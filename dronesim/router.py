@@ -14,8 +14,7 @@ import zenoh
 
 from dronesim.transport import (
     add_zenoh_args,
-    apply_lease,
-    apply_security,
+    apply_flags,
     router_config,
     router_locators,
     setup_logging,
@@ -32,8 +31,7 @@ def cli(argv: list[str] | None = None) -> int:
         conf = zenoh_config(args)
     else:
         conf = router_config(args.listen or "tcp/0.0.0.0:7447")
-        apply_lease(conf, args)
-        apply_security(conf, args, router=True)
+        apply_flags(conf, args, router=True)
     conf.insert_json5("mode", '"router"')
     signals = {signal.SIGINT, signal.SIGTERM}
     signal.pthread_sigmask(signal.SIG_BLOCK, signals)  # delivered to sigwait below, not as exceptions

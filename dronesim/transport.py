@@ -94,8 +94,7 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
         conf = _config({})
     _insert(conf, {"scouting/delay": 0, "mode": args.mode, "connect/endpoints": args.connect,
                    "listen/endpoints": args.listen})
-    apply_lease(conf, args)
-    apply_security(conf, args)
+    apply_flags(conf, args)
     return conf
 
 
@@ -104,15 +103,6 @@ def _insert(conf: zenoh.Config, settings: dict[str, object]) -> None:
     for key, value in settings.items():
         if value not in (None, []):
             conf.insert_json5(key, json.dumps(value))
-
-
-def apply_lease(conf: zenoh.Config, args: argparse.Namespace) -> None:
-    """--lease into `conf` (transport/link/tx/lease, in milliseconds)."""
-    if getattr(args, "lease", None) is not None:
-        if args.lease <= 0:
-            raise UsageError("--lease must be positive")
-        # (keep_alive: keep-alives per lease, zenoh's default)
-        _insert(conf, {"transport/link/tx/lease": int(args.lease * 1000), "transport/link/tx/keep_alive": 4})
 
 
 #: The environment variable holding the password of --user when no --password-file is given.
@@ -127,13 +117,19 @@ def _existing(path: str, flag: str) -> str:
     return os.path.abspath(path)
 
 
-def apply_security(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | None = None) -> None:
-    """The security flags (TLS, mutual TLS, user/password, a router's dictionary and ACL) into `conf`.
+def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | None = None) -> None:
+    """--lease (transport/link/tx/lease, in milliseconds) and the security flags (TLS, mutual TLS,
+    user/password, a router's dictionary and ACL) into `conf`.
 
     A client's --tls-cert/--tls-key are presented to the router (mutual TLS); a router's are its server
     certificate, and --tls-mtls makes it require clients' ones. `router` defaults to the config's mode."""
     get = lambda name: getattr(args, name, None)  # noqa: E731 -- parsers without these flags
     tls, auth = "transport/link/tls/", "transport/auth/usrpwd/"
+    if get("lease") is not None:
+        if args.lease <= 0:
+            raise UsageError("--lease must be positive")
+        # (keep_alive: keep-alives per lease, zenoh's default)
+        _insert(conf, {"transport/link/tx/lease": int(args.lease * 1000), "transport/link/tx/keep_alive": 4})
     if router is None:
         router = (get("mode") or json.loads(conf.get_json("mode") or "null")) == "router"
     if get("tls_ca"):
@@ -397,7 +393,15 @@ class FairQueue:
         """Make a `take` waiting now return (with nothing)."""
         self._line.put(None)
 
-    def _take(self, origin: str) -> object:
+    def take(self, timeout: float | None) -> tuple[bool, object]:
+        """(True, the next event), or (False, None) once `timeout` seconds (None: no limit) pass first or
+        `wake` is called."""
+        try:
+            origin = self._line.get(timeout=timeout)
+        except queue.Empty:
+            return False, None
+        if origin is None:
+            return False, None
         with self._lock:
             self._lined[origin] -= 1
             waiting = self._queues[origin]
@@ -407,16 +411,7 @@ class FairQueue:
                 self._enter(origin)  # its next event waiting joins the end of the line
             elif not waiting:
                 del self._queues[origin], self._bytes[origin], self._lined[origin]
-            return event
-
-    def take(self, timeout: float | None) -> tuple[bool, object]:
-        """(True, the next event), or (False, None) once `timeout` seconds (None: no limit) pass first or
-        `wake` is called."""
-        try:
-            origin = self._line.get(timeout=timeout)
-        except queue.Empty:
-            return False, None
-        return (False, None) if origin is None else (True, self._take(origin))
+            return True, event
 
     def drain(self) -> list[object]:
         """Every event queued, in the order `take` would give them (for the one consumer: never blocks)."""
@@ -658,10 +653,8 @@ class Outbox:
     def watch(self, key: str, inbox: Inbox) -> None:
         """A `Matching` event in `inbox` each time someone starts or stops subscribing to `key` (the
         first, at once, if someone already does)."""
-        def on_status(status: zenoh.MatchingStatus) -> None:
-            inbox.post(Matching(key, status.matching))
-
-        self._listeners.append(self._pub(key).declare_matching_listener(_direct(on_status)))
+        on_status = _direct(lambda status: inbox.post(Matching(key, status.matching)))
+        self._listeners.append(self._pub(key).declare_matching_listener(on_status))
 
 
 def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
