@@ -40,10 +40,6 @@ from pathlib import Path
 from schema import UsageError, drone_id
 from schema.messages import is_drone_id, is_host_id
 
-CA_NAME = "dronesim development CA"
-ROUTER = "router"
-FIXED = ("SRV", "ENV", "GCS")
-LOCAL_NAMES = ("localhost", "127.0.0.1", "::1")
 #: Elliptic-curve keys (P-256): small, fast, and accepted by Zenoh's TLS (rustls).
 NEW_KEY = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
 
@@ -81,7 +77,7 @@ class Kit:
         if (self.dir / "ca.pem").exists() and (self.dir / "ca.key").exists() and not force_ca:
             return
         openssl("req", "-x509", "-new", *NEW_KEY, "-keyout", "ca.key", "-out", "ca.pem",
-                "-days", str(max(days, 3650)), "-sha256", "-subj", f"/CN={CA_NAME}",
+                "-days", str(max(days, 3650)), "-sha256", "-subj", "/CN=dronesim development CA",
                 "-addext", "basicConstraints=critical,CA:TRUE,pathlen:0",
                 "-addext", "keyUsage=critical,keyCertSign,cRLSign,digitalSignature",
                 "-addext", "subjectKeyIdentifier=hash", cwd=self.dir)
@@ -123,49 +119,41 @@ class Kit:
     def names_of(self, pem: Path) -> set[str]:
         """The subject alternative names of a certificate, as ``DNS:x`` / ``IP:y`` (normalised)."""
         text = openssl("x509", "-in", str(pem), "-noout", "-ext", "subjectAltName", cwd=self.dir, check=False)
-        out: set[str] = set()
-        for item in re.findall(r"(DNS:[^,\s]+|IP Address:[^,\s]+)", text):
-            kind, _, value = item.partition(":")
-            out.add(_san(value) if kind == "IP Address" else f"DNS:{value}")
-        return out
+        found = re.findall(r"(DNS|IP Address):([^,\s]+)", text)
+        return {_san(value) if kind == "IP Address" else f"DNS:{value}" for kind, value in found}
 
     def password(self, entity: str, *, force: bool = False) -> Path:
         """``<entity>.password``: a random password (kept if it exists, unless `force`)."""
         path = self.dir / f"{entity}.password"
-        if not path.exists() or force:
-            _write_private(path, secrets.token_urlsafe(24) + "\n")
-            self.written.append(path)
+        if force or not path.exists():
+            self._write(path, secrets.token_urlsafe(24) + "\n")
         return path
 
     def users(self) -> Path:
         """``users.txt``: the router's ``user:password`` dictionary, from every ``<ID>.password`` here."""
         lines = [f"{p.name[:-len('.password')]}:{p.read_text().splitlines()[0]}"
                  for p in sorted(self.dir.glob("*.password"))]
-        path = self.dir / "users.txt"
-        _write_private(path, "\n".join(lines) + "\n")
+        return self._write(self.dir / "users.txt", "\n".join(lines) + "\n")
+
+    def _write(self, path: Path, text: str) -> Path:
+        """`text` into `path`, readable by the user alone (mode 0600), in one step."""
+        tmp = path.with_name(path.name + ".tmp")
+        with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
         self.written.append(path)
         return path
 
 
-def _write_private(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        f.write(text)
-    os.replace(tmp, path)
-
-
 def entities(drones: Iterable[str] = (), hosts: Iterable[str] = ()) -> list[str]:
     """SRV, ENV, GCS, the drones and the swarm hosts, checked."""
-    out = list(FIXED)
-    for d in drones:
-        if not is_drone_id(d):
-            raise UsageError(f"bad drone id {d!r}")
-        out.append(d)
-    for h in hosts:
-        if not is_host_id(h):
-            raise UsageError(f"bad swarm host id {h!r}: expected H01, H02...")
-        out.append(h)
+    out = ["SRV", "ENV", "GCS"]
+    for ids, valid, bad in ((drones, is_drone_id, "bad drone id {!r}"),
+                            (hosts, is_host_id, "bad swarm host id {!r}: expected H01, H02...")):
+        for e in ids:
+            if not valid(e):
+                raise UsageError(bad.format(e))
+            out.append(e)
     return list(dict.fromkeys(out))
 
 
@@ -175,7 +163,7 @@ def make(folder: str | Path, *, drones: Iterable[str] = (), hosts: Iterable[str]
     """The whole kit: CA, router certificate, one client certificate (and password) per entity."""
     kit = Kit(folder, days=days, force_ca=force_ca)
     force = force or kit.new_ca
-    kit.issue(ROUTER, names=[*LOCAL_NAMES, *router_hosts], server=True, force=force)
+    kit.issue("router", names=["localhost", "127.0.0.1", "::1", *router_hosts], server=True, force=force)
     for e in entities(drones, hosts):
         kit.issue(e, force=force)
         if passwords:

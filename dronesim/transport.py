@@ -239,8 +239,7 @@ def audit_sessions(session: zenoh.Session, post: Callable[[object], None], timeo
         except ValueError:
             pass  # not a router's answer: the listing stays incomplete only if a router is missing
 
-    session.get("@/*/router", zenoh.handlers.Callback(on_reply, lambda: post(Sessions(sessions_listed(answers))),
-                                                      indirect=False), timeout=timeout)
+    session.get("@/*/router", _direct(on_reply, lambda: post(Sessions(sessions_listed(answers)))), timeout=timeout)
 
 
 # --------------------------------------------------------------------------- inbox
@@ -309,14 +308,12 @@ def check_addressed(keys: Keys, key: str, msg: Message) -> None:
         raise WrongSender(f"a {msg.TAG}{'(' + phase + ')' if phase else ''} on key {key}")
 
 
-def _direct(callback: Callable[[Any], None]) -> zenoh.handlers.Callback:
-    """Run `callback` on Zenoh's receiving thread itself. By default zenoh-python hands each Python
-    callback to a thread of its own, and then messages on different keys overtake each other on their
-    way into the inbox; our callbacks only check and enqueue, so they run in place, in order."""
-    return zenoh.handlers.Callback(callback, indirect=False)
-
-
-_EVERY_REPLY = zenoh.ConsolidationMode.NONE
+def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = None) -> zenoh.handlers.Callback:
+    """Run `callback` (and `drop`, once it is done) on Zenoh's receiving thread itself. By default
+    zenoh-python hands each Python callback to a thread of its own, and then messages on different keys
+    overtake each other on their way into the inbox; our callbacks only check and enqueue, so they run in
+    place, in order."""
+    return zenoh.handlers.Callback(callback, drop, indirect=False)
 
 
 #: The origin of the events a process queues itself (`Inbox.post`).
@@ -435,9 +432,7 @@ class Inbox:
 
     def __init__(self, session: zenoh.Session, keys: Keys, logger: logging.Logger, *,
                  budget: int = ORIGIN_QUEUE, share: int = ORIGIN_SHARE) -> None:
-        self.session = session
-        self.keys = keys
-        self.log = logger
+        self.session, self.keys, self.log = session, keys, logger
         self._handles: list[Any] = []  # subscribers, queryables: undeclared by `close`
         self._events = FairQueue(budget, share=share)
         self.rejects = RejectCounter(logger, wake=self._events.wake)  # (its summaries are logged by `get`)
@@ -502,8 +497,7 @@ class Inbox:
 
     def serve(self, key: str, expect: type[Message]) -> None:
         """Declare a queryable; valid queries become `Asked` events, refused ones get an error reply (their
-        origin is the sender they name). Zenoh's thread only checks a query's size, sender and budget; its
-        payload is decoded on the main thread when its turn comes (`get`)."""
+        origin is the sender they name)."""
         limit = size_limit(expect)
 
         def on_query(query: zenoh.Query) -> None:
@@ -532,9 +526,8 @@ class Inbox:
         query.drop()
 
     def _read(self, event: object) -> Event | None:
-        """A payload, decoded on the main thread (the thread that handles it: its caches are warm then, and
-        a big one costs its origin's turn, not Zenoh's thread, which every other message waits for); None
-        if it is malformed or not its key's (counted as a rejection; a query gets an error reply)."""
+        """A payload, decoded; None if it is malformed or not its key's (counted as a rejection; a query
+        gets an error reply)."""
         if not isinstance(event, _Unread):
             return event  # type: ignore[return-value]
         try:
@@ -572,8 +565,8 @@ class Inbox:
         def on_done() -> None:  # zenoh calls it once the query is finished, after its last reply
             self._events.put(LOCAL, then(tuple(replies)), budgeted=False)
 
-        self.session.get(key, zenoh.handlers.Callback(on_reply, on_done, indirect=False),
-                         payload=encode(msg), timeout=timeout, consolidation=_EVERY_REPLY)
+        self.session.get(key, _direct(on_reply, on_done), payload=encode(msg), timeout=timeout,
+                         consolidation=zenoh.ConsolidationMode.NONE)
 
     def watch_presence(self, entity: str | None = None) -> None:
         """Presence events for every process (or only `entity`'s), starting with those already there."""
@@ -661,7 +654,7 @@ def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | 
         timeout: float) -> tuple[Message, str]:
     """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none), and the
     session id of the process that answered (as Zenoh says it, "" if it does not)."""
-    for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=_EVERY_REPLY):
+    for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE):
         replier = reply.replier_id
         return _answer(key, reply, expect), "" if replier is None else str(replier.zid)
     raise TimeoutError(f"no answer on {key} within {timeout:.1f} s")
