@@ -96,15 +96,10 @@ class Kit:
             if not force and set(wanted) <= had:
                 return pem
             wanted += sorted(had - set(wanted))  # a re-issued certificate keeps the names it had
-        sans = ",".join(wanted)
-        ext = "\n".join([
-            "basicConstraints=critical,CA:FALSE",
-            "keyUsage=critical,digitalSignature,keyAgreement",
+        ext = "".join(f"{line}\n" for line in (
+            "basicConstraints=critical,CA:FALSE", "keyUsage=critical,digitalSignature,keyAgreement",
             f"extendedKeyUsage={'serverAuth,clientAuth' if server else 'clientAuth'}",
-            f"subjectAltName={sans}",
-            "subjectKeyIdentifier=hash",
-            "authorityKeyIdentifier=keyid",
-        ]) + "\n"
+            f"subjectAltName={','.join(wanted)}", "subjectKeyIdentifier=hash", "authorityKeyIdentifier=keyid"))
         with tempfile.TemporaryDirectory(dir=self.dir) as tmp:
             (Path(tmp) / "ext.cnf").write_text(ext)
             openssl("req", "-new", *NEW_KEY, "-keyout", key.name, "-out", f"{tmp}/{common_name}.csr",

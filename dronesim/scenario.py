@@ -126,7 +126,7 @@ def movingai_scenario(map_path: str | pathlib.Path, scen_path: str | pathlib.Pat
         entries = read_scen(pathlib.Path(scen_path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as exc:
         raise UsageError(f"cannot read {scen_path}: {exc}") from None
-    entries = entries[:agents] if agents is not None else entries
+    entries = entries[:agents]  # (all of them: None)
     if agents is not None and len(entries) < agents:
         raise UsageError(f"{scen_path} has {len(entries)} agents, {agents} asked")
     if not entries:

@@ -12,9 +12,6 @@ import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
-#: The signals that ask a process to stop.
-STOPPING = (signal.SIGINT, signal.SIGTERM)
-
 
 @dataclass(frozen=True, slots=True)
 class Interrupted:
@@ -53,7 +50,8 @@ def on_stop(post: Callable[[Interrupted], None]) -> Iterator[None]:
     raising KeyboardInterrupt or ending the process; the previous handlers come back on leaving. `post`
     runs on the main thread between two bytecodes: it hands the event over (e.g. `Inbox.post`), or raises
     `Stop` to unwind what the main thread is waiting in."""
-    previous = {s: signal.signal(s, lambda signum, _frame: post(Interrupted(signum))) for s in STOPPING}
+    previous = {s: signal.signal(s, lambda signum, _frame: post(Interrupted(signum)))
+                for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
