@@ -142,21 +142,20 @@ def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | 
             _insert(conf, {f"{tls}{side}_certificate": cert, f"{tls}{side}_private_key": key})
     if get("tls_mtls") or (get("tls_cert") and not router):  # a client presents its certificate only then
         _insert(conf, {tls + "enable_mtls": True})
-    password = None
     if get("password_file"):
         with open(_existing(args.password_file, "--password-file"), encoding="utf-8") as f:
-            password = f.readline().rstrip("\r\n")
+            password: str | None = f.readline().rstrip("\r\n")
         if not password:
             raise UsageError(f"--password-file {args.password_file}: its first line is empty")
-    elif get("user"):
+        if not get("user"):
+            raise UsageError("--password-file needs --user NAME")
+    else:
         password = os.environ.get(PASSWORD_ENV) or None
     if get("user"):
         if password is None:
             raise UsageError(f"--user {args.user} needs --password-file FILE or the {PASSWORD_ENV} "
                              "environment variable")
         _insert(conf, {auth + "user": args.user, auth + "password": password})
-    elif get("password_file"):
-        raise UsageError("--password-file needs --user NAME")
     if get("users_file"):
         _insert(conf, {auth + "dictionary_file": _existing(args.users_file, "--users-file")})
     if get("acl"):
@@ -520,10 +519,11 @@ class Inbox:
 
         self._handles.append(self.session.declare_queryable(key, _direct(on_query), complete=True))
 
-    def _refuse(self, key: str, origin: str, query: zenoh.Query, err: RemoteInputError) -> None:
+    def _refuse(self, key: str, origin: str, query: zenoh.Query | None, err: RemoteInputError) -> None:
         self.rejects.reject(key, err, origin)
-        query.reply_err(excerpt(str(err)).encode())
-        query.drop()
+        if query is not None:  # (a query gets an error reply)
+            query.reply_err(excerpt(str(err)).encode())
+            query.drop()
 
     def _read(self, event: object) -> Event | None:
         """A payload, decoded; None if it is malformed or not its key's (counted as a rejection; a query
@@ -537,10 +537,7 @@ class Inbox:
             check_addressed(self.keys, event.key, msg)
             return Received(event.key, msg)
         except RemoteInputError as err:
-            if event.query is not None:
-                self._refuse(event.key, event.origin, event.query, err)
-            else:
-                self.rejects.reject(event.key, err, event.origin)
+            self._refuse(event.key, event.origin, event.query, err)
             return None
 
     def query(self, key: str, msg: Message, expect: type[Message], *, timeout: float,
@@ -562,11 +559,8 @@ class Inbox:
             except Exception:  # a bug: log it, never let Zenoh swallow it silently
                 self.log.exception("error handling a reply on %s", key)
 
-        def on_done() -> None:  # zenoh calls it once the query is finished, after its last reply
-            self._events.put(LOCAL, then(tuple(replies)), budgeted=False)
-
-        self.session.get(key, _direct(on_reply, on_done), payload=encode(msg), timeout=timeout,
-                         consolidation=zenoh.ConsolidationMode.NONE)
+        done = _direct(on_reply, lambda: self.post(then(tuple(replies))))  # (after the last reply)
+        self.session.get(key, done, payload=encode(msg), timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE)
 
     def watch_presence(self, entity: str | None = None) -> None:
         """Presence events for every process (or only `entity`'s), starting with those already there."""
