@@ -60,25 +60,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _passed(args: argparse.Namespace, *names: str) -> list[str]:
-    """The flags `names` as this command was given them, to pass on: a switch alone if set, a value unless
-    unset (None or empty), a list's items each after its flag."""
+    """Those of the flags `names` that this command was given, to pass on: a switch alone, a value after its
+    flag, a list's items each after its flag."""
     out: list[str] = []
     for name in names:
-        value, flag = getattr(args, name), "--" + name.replace("_", "-")
-        for item in value if isinstance(value, list) else [value]:
-            if item is True:
-                out.append(flag)
-            elif item is not None and item is not False and item != "":
-                out += [flag, str(item)]
+        flag, value = "--" + name.replace("_", "-"), getattr(args, name)
+        if value is True:
+            out.append(flag)
+        elif value:
+            out += [x for item in (value if isinstance(value, list) else [value]) for x in (flag, item)]
     return out
 
 
 def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str]]]:
     """(name, argv) of every entity process, connected as clients to `locator`."""
     base = [sys.executable, "-m", "dronesim"]
-    common = ["--mode", "client", "--connect", locator, *_passed(args, "root", "log_level")]
-    coord = [*base, "coordinator", *common, "--admit-deadline", "60",
-             *_passed(args, "seed", "size", "drones", "max_turns", "pace", "world", "starts", "journal", "scenario")]
+    common = ["--mode", "client", "--connect", locator, "--root", args.root, "--log-level", args.log_level]
+    coord = [*base, "coordinator", *common, "--seed", str(args.seed), "--size", args.size,
+             "--drones", str(args.drones), "--max-turns", str(args.max_turns), "--admit-deadline", "60",
+             "--pace", str(args.pace), *_passed(args, "world", "starts", "journal", "scenario")]
     procs = [("SRV", coord), ("ENV", [*base, "env", *common, "--no-draw"])]
     if args.scenario:
         pilots = Scenario.load(args.scenario).autopilots
