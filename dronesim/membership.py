@@ -156,10 +156,9 @@ class TurnClock:
             raise StaleTurn(f"a {msg.TAG} of game {msg.game or '(none)'}, not this one ({self.game or '(none)'})",
                             reason="foreign-game")
         now = msg.turn + 1 if isinstance(msg, Status) else msg.turn
-        if self.turn is not None:
-            lo = self.turn - 1 if isinstance(msg, Over) else self.turn  # STATUS(t) makes t + 1 "now"
-            hi = None if isinstance(msg, Over) else self.turn + 1  # the end may come at any turn
-            if now < lo or (hi is not None and now > hi):
+        if self.turn is not None:  # (STATUS(t) makes t + 1 "now"; the end may come at any turn)
+            lo, hi = (self.turn - 1, float("inf")) if isinstance(msg, Over) else (self.turn, self.turn + 1)
+            if not lo <= now <= hi:
                 raise StaleTurn(f"{msg.TAG} for turn {msg.turn} while the game is at turn {self.turn}")
         key = (msg.TAG, getattr(msg, "phase", None), msg.turn)
         first = self._seen.get(key)
