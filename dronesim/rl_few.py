@@ -1,18 +1,13 @@
 """Episodes of a few drones, drone by drone: the local backend's fast path (docs/performance.md).
 
-An `Episode` over `LocalTurns` plays a step in array operations: the engine's turn (`Engine.play`: the
-input checks, the targets, the observer's judgement, notes, priorities, deadlines, the end), then the
-episode's rules, the observations and the infos; some 80 numpy calls, whose fixed cost (~0.5-1 µs each)
-is the whole step when there are a few drones. `FewEpisode` plays the same step over Python lists, with
-the engine's turn reduced to what a policy's turn does in it: the targets the ground station sends (the
-episode's own), every alive drone's move (no deadline is missed, so nobody hovers by rule or is LOST),
-no arbitration (the policy's drones are not cooperative), the observer's rules drone by drone
-(`observer.deaths`, the reference `observer.judge` is held to), each alive drone's note as it said it,
-and the end of the game with the episode's (no drone alive, or the turn limit: every agent has ended then).
-
-The same semantics: tests/test_pettingzoo.py plays random worlds and actions with both and compares every
-step's observations, rewards, terminations, truncations and infos (a property test). Rows are drone number
-- 1, which is the id order (the observer's priority order) up to 99 drones: `FEW_MAX`.
+An `Episode` over `LocalTurns` plays a step in some 80 numpy calls, whose fixed cost (~0.5-1 µs each) is
+the whole step when there are a few drones. `FewEpisode` plays the same step over Python lists, with the
+engine's turn reduced to what a policy's turn does in it: the episode's targets, every alive drone's move
+(no deadline is missed, so nobody hovers by rule or is LOST), no arbitration (the policy's drones are not
+cooperative), the observer's rules drone by drone (`observer.deaths`), each alive drone's note as it said
+it, and the end of the game with the episode's (no drone alive, or the turn limit: every agent has ended).
+tests/test_pettingzoo.py holds both to the same steps on random worlds and actions (a property test).
+Rows are drone number - 1, which is the id order (the observer's priority order) up to `FEW_MAX` drones.
 """
 
 from __future__ import annotations
@@ -71,12 +66,7 @@ class FewEpisode(Drawing):
         n = config.num_drones
         if n > FEW_MAX:
             raise ValueError(f"a FewEpisode plays up to {FEW_MAX} drones, not {n}")
-        self.config, self.layout, self.max_cycles = config, layout, max_cycles
-        self.world = layout.world
-        self.eyes = eyes if eyes is not None and eyes.fits(self.world, config.obs_radius) \
-            else Eyes(self.world, config.obs_radius)
-        self.n = n
-        self.cycle = 0
+        super().__init__(config, layout, max_cycles, eyes)
         self._pos: list[Cell] = list(map(tuple, layout.starts.tolist()))
         self._targets: list[Cell] = list(map(tuple, layout.targets.tolist()))
         self._reachable: list[bool] = layout.reachable.tolist()
@@ -89,17 +79,10 @@ class FewEpisode(Drawing):
         self._alive = list(range(n))  # the rows alive, ascending
         self._say = [_NONE_NOTE if r else _UNREACHABLE for r in self._reachable]  # each row's note to the engine
         self.left = n
-        cfg = config
-        self._finish, self._new = cfg.on_target == "finish", cfg.on_target == "new"
-        # a step's reward: nothing, arrived, dead (as Episode's, the same sums)
-        self._reward = (0.0 + 0.0 - cfg.step_cost, cfg.reward_target + 0.0 - cfg.step_cost,
-                        0.0 + cfg.reward_death - cfg.step_cost)
+        self._finish, self._new = config.on_target == "finish", config.on_target == "new"
         self._solid = self.world.grid.tobytes()  # a building cell: solid[(x * ny + y) * nz + z] == 1
 
     # ------------------------------------------------------------------ columns (as Episode's)
-
-    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return self.pos, self.state, self.targets, self.acting
 
     @property
     def pos(self) -> np.ndarray:
@@ -116,10 +99,6 @@ class FewEpisode(Drawing):
     @property
     def acting(self) -> np.ndarray:
         return np.array(self._acting, bool)
-
-    @property
-    def ended(self) -> bool:
-        return not self.left
 
     # ------------------------------------------------------------------ reading
 
@@ -156,10 +135,8 @@ class FewEpisode(Drawing):
         # hover), the observer judges, each alive drone's note is the one it said
         (nx, ny, nz), solid = self.world.size, self._solid
         alive = self._alive
-        after = {}
-        moved = []
-        buildings = set()
-        left_world = False
+        after: dict[int, Cell] = {}
+        moved, buildings, left_world = [], set(), False
         for i in alive:
             a = action.get(i, 0)
             if a:
@@ -188,19 +165,15 @@ class FewEpisode(Drawing):
         # the episode's rules, for the rows acting
         rows_out = self._rows
         targets, was_on, finish = self._targets, self._on, self._finish
-        nothing, arrived, died = self._reward
+        nothing, arrived, died = self.rewards
         rewards, terminated, arrivals = [], [], []
         for i in rows_out:
-            if i in dead:
+            gone = i in dead
+            if gone or pos[i] != targets[i]:
                 was_on[i] = False
                 shown[i] = say[i]
-                rewards.append(died)
-                terminated.append(True)
-            elif pos[i] != targets[i]:
-                was_on[i] = False
-                shown[i] = say[i]
-                rewards.append(nothing)
-                terminated.append(False)
+                rewards.append(died if gone else nothing)
+                terminated.append(gone)
             else:
                 shown[i] = _REACHED
                 if was_on[i]:

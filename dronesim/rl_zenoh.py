@@ -45,7 +45,7 @@ from entities.world import World
 from schema import Done, Intent, Keys, Message, Moves, Over, Phase, Status, Turn, UsageError
 
 #: The processes of a game, by the name their presence token has.
-ROLES = ("SRV", "ENV")
+ROLES = {"SRV": "coordinator", "ENV": "environment"}
 
 
 class ZenohTurns:
@@ -81,10 +81,8 @@ class ZenohTurns:
     def start(self, game: GameConfig, world: World) -> Board:
         self.stop()
         self._games += 1
-        assert self._session is not None
         self._children[:] = [p for p in self._children if p.poll() is None]
-        self._game = _Game(self._session, f"rl{self._tag}g{self._games}", Path(self._logs.name), self.locator,
-                           game, world, self.deadline, self._log, self._children, self._files, self.moves_ahead)
+        self._game = _Game(self, f"rl{self._tag}g{self._games}", game, world)
         return Board.of_status(self._game.begin(), len(game.drones))
 
     def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
@@ -114,38 +112,33 @@ class ZenohTurns:
 class _Game:
     """One game: its processes, this process's presence and subscriptions, and the turn being played."""
 
-    def __init__(self, session: zenoh.Session, root: str, logs: Path, locator: str, game: GameConfig, world: World,
-                 deadline: float, logger: logging.Logger, children: list[subprocess.Popen], files: list,
-                 moves_ahead: bool = True) -> None:
-        self.session, self.keys, self.deadline, self.log = session, Keys(root), deadline, logger
-        self.moves_ahead = moves_ahead
-        self.game = game
+    def __init__(self, turns: ZenohTurns, root: str, game: GameConfig, world: World) -> None:
+        assert turns._session is not None
+        self.session, self.keys, self.deadline, self.log = turns._session, Keys(root), turns.deadline, turns._log
+        self.moves_ahead, self.game, self.root = turns.moves_ahead, game, root
         self.turn = 0  # the last turn whose STATUS arrived
         self.over: Over | None = None
         self.procs: dict[str, subprocess.Popen] = {}
-        self.children = children
-        self.logs = logs
-        self.root = root
-        self._files = files
-        self.inbox = Inbox(session, self.keys, logger)
-        self.out = Outbox(session)
+        self.children, self._files, self.logs = turns._children, turns._files, Path(turns._logs.name)
+        self.inbox = Inbox(self.session, self.keys, self.log)
+        self.out = Outbox(self.session)
         self.tokens: list = []
-        world_file = logs / f"{root}.world.json"
+        world_file = self.logs / f"{root}.world.json"
         world.save(world_file)
-        base = [sys.executable, "-m", "dronesim"]
-        common = ["--mode", "client", "--connect", locator, "--root", root, "--log-level", "WARNING"]
+        base, deadline = [sys.executable, "-m", "dronesim"], str(self.deadline)
+        common = ["--mode", "client", "--connect", turns.locator, "--root", root, "--log-level", "WARNING"]
         starts = ";".join(f"{x},{y},{z}" for x, y, z in (d.start for d in game.drones))
         try:
             for key, typ in ((self.keys.status, Status), (self.keys.over, Over)):
                 self.inbox.subscribe(key, typ)
-            if not moves_ahead:
+            if not self.moves_ahead:
                 self.inbox.subscribe(self.keys.turn_of(Phase.DRONES), Turn)
             self.inbox.watch_presence()
             self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
                                 "--drones", str(len(game.drones)), "--starts", starts,
-                                "--max-turns", str(game.max_turns), "--phase-deadline", str(deadline),
-                                "--admit-deadline", str(deadline)])
-            self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", str(deadline)])
+                                "--max-turns", str(game.max_turns), "--phase-deadline", deadline,
+                                "--admit-deadline", deadline])
+            self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", deadline])
         except BaseException:
             self.end()
             raise
@@ -170,8 +163,8 @@ class _Game:
         for name, proc in self.procs.items():
             code = proc.poll()
             if code is not None and self.over is None:
-                raise BackendError(f"the {'coordinator' if name == 'SRV' else 'environment'} process exited "
-                                   f"with {code} during the game: {self._tail(name)}")
+                raise BackendError(f"the {ROLES[name]} process exited with {code} during the game: "
+                                   f"{self._tail(name)}")
 
     def _event(self, end: float, waiting_for: str):
         """The next event, checking the processes while none comes; BackendError past `end`."""
@@ -186,8 +179,7 @@ class _Game:
                 continue
             if isinstance(event, Presence) and not event.alive and event.entity in ROLES and self.over is None:
                 self._check()
-                raise BackendError(f"the {'coordinator' if event.entity == 'SRV' else 'environment'} left the "
-                                   "game (its presence token vanished)")
+                raise BackendError(f"the {ROLES[event.entity]} left the game (its presence token vanished)")
             return event
 
     # ------------------------------------------------------------------ the game
@@ -248,12 +240,11 @@ class _Game:
         return status, (self._over(end) if last else None)
 
     def _over(self, end: float) -> Over:
-        while True:
-            if self.over is not None:
-                return self.over
+        while self.over is None:
             match self._event(end, "OVER"):
                 case Received(_, Over() as over):
                     self.over = over
+        return self.over
 
     def end(self) -> None:
         """End the game if it runs (the ground station quits), then its processes, subscriptions and presence."""
