@@ -1,13 +1,5 @@
 """The game as a PettingZoo environment (``pip install 'dronesim[rl]'``): `parallel_env(**config)` and its
-AEC form `env(**config)`, as PettingZoo's own environments expose them.
-
-    from dronesim.pettingzoo import parallel_env
-    env = parallel_env(num_drones=16, seed=3, on_target="new", backend="local")
-    observations, infos = env.reset()
-    while env.agents:
-        observations, rewards, terminations, truncations, infos = env.step(
-            {a: env.action_space(a).sample() for a in env.agents})
-    env.close()
+AEC form `env(**config)`, as PettingZoo's own environments expose them (an example: docs/rl.md).
 
 Agents are the drones (``drone_1`` flies D01); actions `Discrete(7)` (0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z,
 6 -z); observations a `Box` of int32: the cells around the drone (`dronesim.rl.Seen` codes) then the offset

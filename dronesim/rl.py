@@ -243,33 +243,29 @@ class Layout:
         order_label = label[order]
         targets = np.empty((n, 3), np.int32)
         reachable = np.ones(n, bool)
-        pointer: dict[int, int] = {}  # component -> how far its cells in `order` are used
+        pointer: dict[int, int] = {}  # component (-2: any) -> how far its cells in `order` are used
+
+        def take(comp: int) -> int:
+            """The next cell of `order` in component `comp` (-2: any) not taken yet, or -1."""
+            at = pointer.get(comp, 0)
+            while at < len(order):
+                block = order[at:at + 256]
+                ok = ~taken[block] if comp == -2 else (order_label[at:at + 256] == comp) & ~taken[block]
+                hit = np.flatnonzero(ok)
+                if hit.size:
+                    pointer[comp] = at + int(hit[0]) + 1
+                    return int(block[hit[0]])
+                at += len(block)
+            pointer[comp] = at
+            return -1
+
         for i, s in enumerate(start_lin.tolist()):
-            comp = int(label[s])
-            cell = cls._next(order, order_label, taken, comp, pointer)
+            cell = take(int(label[s]))
             if cell < 0:
-                cell = cls._next(order, order_label, taken, None, pointer)  # any free cell: unreachable
-                reachable[i] = False
+                cell, reachable[i] = take(-2), False  # any free cell: unreachable
             taken[cell] = True
             targets[i] = np.unravel_index(cell, world.size)
         return cls(world=world, starts=starts, targets=targets, reachable=reachable, label=label, rng=rng)
-
-    @staticmethod
-    def _next(order: np.ndarray, order_label: np.ndarray, taken: np.ndarray, comp: int | None,
-              pointer: dict) -> int:
-        """The next cell of `order` in component `comp` (None: any) not taken yet, or -1."""
-        key = -2 if comp is None else comp
-        at = pointer.get(key, 0)
-        while at < len(order):
-            block = order[at:at + 256]
-            ok = ~taken[block] if comp is None else (order_label[at:at + 256] == comp) & ~taken[block]
-            hit = np.flatnonzero(ok)
-            if hit.size:
-                pointer[key] = at + int(hit[0]) + 1
-                return int(block[hit[0]])
-            at += len(block)
-        pointer[key] = at
-        return -1
 
     def new_target(self, i: int, here: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, bool]:
         """A new target for drone row `i` at `here` (the lifelong variant): a free cell of its start's
@@ -525,11 +521,9 @@ def floors_image(world: World, drones: np.ndarray, colours: np.ndarray, targets:
     across = math.ceil(math.sqrt(nz))
     down = math.ceil(nz / across)
     scale = max(1, min(16, max_pixels // max(across * (ny + 1), down * (nx + 1))))
-    image = np.empty((down * (nx + 1) * scale + scale, across * (ny + 1) * scale + scale, 3), np.uint8)
-    image[:] = _GRID_RGB
+    image = np.full((down * (nx + 1) * scale + scale, across * (ny + 1) * scale + scale, 3), _GRID_RGB, np.uint8)
     for z in range(nz):
-        floor = np.empty((nx, ny, 3), np.uint8)
-        floor[:] = _FREE_RGB
+        floor = np.full((nx, ny, 3), _FREE_RGB, np.uint8)
         floor[world.grid[:, :, z]] = _BUILDING_RGB
         for cells, colour in ((targets, None), (drones, colours)):
             on = (cells[:, 2] == z) & inside_rows(cells, world.size) if len(cells) else np.zeros(0, bool)
@@ -554,7 +548,7 @@ class Outcome(NamedTuple):
     infos: list[dict]
 
 
-class Drawing:
+class EpisodeBase:
     """What `Episode` and `FewEpisode` share: the configuration, the eyes, the step's rewards, the end and the
     drawings, from the world and the columns `pos`, `state`, `targets`, `acting` (`columns`)."""
 
@@ -606,7 +600,7 @@ def done_agents(rows: list[int]) -> ConfigError:
     return ConfigError("actions for agents that are done: " + ", ".join(f"drone_{r + 1}" for r in rows))
 
 
-class Episode(Drawing):
+class Episode(EpisodeBase):
     """One episode's state and rules over a backend's turns; rows are drone number - 1."""
 
     def __init__(self, config: Config, layout: Layout, turns: Turns, max_cycles: int, eyes: Eyes | None = None) -> None:
@@ -653,20 +647,17 @@ class Episode(Drawing):
 
     # ------------------------------------------------------------------ acting
 
-    def act(self, rows: list[int], values: list) -> Outcome:
-        """One turn: the action `values[k]` for row `rows[k]` (the other acting rows hover); ConfigError (and no
+    def act(self, given: list[int], values: list) -> Outcome:
+        """One turn: the action `values[k]` for row `given[k]` (the other acting rows hover); ConfigError (and no
         turn played) after the end, for a row no longer acting or an action outside the space."""
         if self.ended:
             raise ConfigError("step() after the end of the episode: call reset()")
-        at = np.array(rows, np.intp)
+        at = np.array(given, np.intp)
         if not self.everyone:
             done = at[~self.acting[at]]
             if len(done):
                 raise done_agents(done.tolist())
-        return self.step(actions_array(self.n, at, values))
-
-    def step(self, actions: np.ndarray) -> Outcome:
-        """One turn (`act` checks it): an action (0..6) for every row in `actions` (ignored for rows not acting)."""
+        actions = actions_array(self.n, at, values)
         t = self.cycle + 1
         aim = self.aim_next
         everyone = self.everyone
@@ -730,11 +721,9 @@ _CAUSE_TEXT = tuple(c.value.lower() for c in CAUSES)
 
 
 class Expert:
-    """One of the project's autopilots per drone (the D* planner by default) choosing each acting drone's
-    action: an expert for imitation learning, or a baseline. It senses as a drone process does, by asking
-    the environment (here answered from the episode's world and the drones' cells, as the environment
-    answers an ASK), and its drones give way to each other by the coordinator's arbitration rule
-    (coordinator/arbiter.py), which a cooperative autopilot's drones get in a game."""
+    """One of the project's autopilots per drone (D* by default) choosing each acting drone's action: an expert
+    for imitation learning, or a baseline. It senses as a drone process does (the episode's world answers its
+    ASK), and a cooperative autopilot's drones give way to each other as in a game (coordinator/arbiter.py)."""
 
     def __init__(self, autopilot: str = "dstar") -> None:
         from entities.autopilots import pilot_class

@@ -27,7 +27,7 @@ from dronesim.rl import (
     ACTIONS,
     Config,
     ConfigError,
-    Drawing,
+    EpisodeBase,
     Eyes,
     Layout,
     Outcome,
@@ -49,14 +49,10 @@ def _meet(pos: list[Cell], after: dict[int, Cell], moved: list[int]) -> bool:
     if len(set(after.values())) < len(after):
         return True
     entering = {after[i]: i for i in moved}  # (one drone per cell)
-    for i in moved:
-        j = entering.get(pos[i])
-        if j is not None and pos[j] == after[i]:
-            return True
-    return False
+    return any(pos[j] == after[i] for i in moved if (j := entering.get(pos[i])) is not None)
 
 
-class FewEpisode(Drawing):
+class FewEpisode(EpisodeBase):
     """An episode of up to FEW_MAX drones on the local backend, drone by drone (see the module's docstring):
     `Episode`'s surface (`act`, `observe`, `infos`, `ended`, the columns `pos`, `state`, `targets`, `acting`
     as arrays, the drawings) over Python lists. The columns are made from the lists at each read: writing
@@ -69,7 +65,6 @@ class FewEpisode(Drawing):
         super().__init__(config, layout, max_cycles, eyes)
         self._pos: list[Cell] = list(map(tuple, layout.starts.tolist()))
         self._targets: list[Cell] = list(map(tuple, layout.targets.tolist()))
-        self._reachable: list[bool] = layout.reachable.tolist()
         self._state = [ALIVE] * n
         self._cause = [0] * n
         self._shown = [_NONE_NOTE] * n  # each drone's note as the last STATUS says it (REACHED on its target)
@@ -77,7 +72,7 @@ class FewEpisode(Drawing):
         self._acting = [True] * n
         self._rows = list(range(n))  # the rows acting, ascending
         self._alive = list(range(n))  # the rows alive, ascending
-        self._say = [_NONE_NOTE if r else _UNREACHABLE for r in self._reachable]  # each row's note to the engine
+        self._say = [_NONE_NOTE if r else _UNREACHABLE for r in layout.reachable.tolist()]  # notes to the engine
         self.left = n
         self._finish, self._new = config.on_target == "finish", config.on_target == "new"
         self._solid = self.world.grid.tobytes()  # a building cell: solid[(x * ny + y) * nz + z] == 1
@@ -195,7 +190,7 @@ class FewEpisode(Drawing):
             for i in arrivals:
                 new, ok = self.layout.new_target(i, np.array(pos[i], np.int32), others)
                 others[i] = new
-                targets[i], self._reachable[i] = (int(new[0]), int(new[1]), int(new[2])), ok
+                targets[i] = int(new[0]), int(new[1]), int(new[2])
                 say[i] = _NONE_NOTE if ok else _UNREACHABLE
                 was_on[i] = False
         observations = self.observe(rows_out)
