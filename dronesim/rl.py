@@ -175,10 +175,8 @@ def _choice(value: object, choices: tuple[str, ...], what: str) -> None:
 def components(grid: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     """The label of every cell (C order, -1: a building or a free cell reached from no seed): the free cells
     6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component."""
-    nx, ny, nz = grid.shape
-    free = np.zeros((nx + 2, ny + 2, nz + 2), bool)  # a blocked border: flat neighbours need no bounds checks
-    free[1:-1, 1:-1, 1:-1] = ~grid
-    sx, sy, offsets = padded_steps((nx, ny, nz))
+    free = np.pad(~grid, 1)  # a blocked border: flat neighbours need no bounds checks
+    sx, sy, offsets = padded_steps(grid.shape)
     steps = np.array(offsets, np.int64)
     label = np.full(free.size, -1, np.int64)
     open_ = free.ravel().copy()
@@ -200,8 +198,7 @@ def components(grid: np.ndarray, seeds: np.ndarray) -> np.ndarray:
 
 def clear_cells(grid: np.ndarray) -> np.ndarray:
     """Which cells are free with their 6 neighbours free and inside the world (bool, the grid's shape)."""
-    free = np.zeros(tuple(s + 2 for s in grid.shape), bool)
-    free[1:-1, 1:-1, 1:-1] = ~grid
+    free = np.pad(~grid, 1)
     clear = free[1:-1, 1:-1, 1:-1].copy()
     for axis in range(3):
         for shift in (1, -1):
@@ -417,9 +414,8 @@ class Eyes:
     def __init__(self, world: World, radius: int) -> None:
         self.radius = r = radius
         pad = r + 1  # a dead drone may stand one cell outside the world
-        nx, ny, nz = world.size
-        static = np.full((nx + 2 * pad, ny + 2 * pad, nz + 2 * pad), Seen.OUTSIDE, np.int8)
-        static[pad:pad + nx, pad:pad + ny, pad:pad + nz] = np.where(world.grid, Seen.BUILDING, Seen.FREE)
+        static = np.pad(np.where(world.grid, Seen.BUILDING, Seen.FREE).astype(np.int8), pad,
+                        constant_values=Seen.OUTSIDE)
         self._static = static.ravel()
         self._sx, self._sy = static.shape[1] * static.shape[2], static.shape[2]
         self._strides = np.array([self._sx, self._sy, 1], np.int64)
@@ -657,7 +653,8 @@ class Episode(EpisodeBase):
             done = at[~self.acting[at]]
             if len(done):
                 raise done_agents(done.tolist())
-        actions = actions_array(self.n, at, values)
+        actions = np.zeros(self.n, np.intp)
+        actions[at] = checked_actions(given, values)
         t = self.cycle + 1
         aim = self.aim_next
         everyone = self.everyone
@@ -764,15 +761,14 @@ _INTEGERS = frozenset({int, np.int8, np.int16, np.int32, np.int64, np.uint8, np.
 _VALID = frozenset(range(len(ACTIONS)))
 
 
-def actions_array(n: int, rows: np.ndarray, values: list) -> np.ndarray:
-    """An (n,) int array of actions, `values[k]` at row `rows[k]` (the other rows hover); ConfigError for an
-    action that is not an integer in 0..6 (a Python or numpy integer, or a 0-d integer array)."""
-    if not (set(map(type, values)) <= _INTEGERS and set(values) <= _VALID):  # (the usual case: plain integers)
-        for row, a in zip(rows.tolist(), values):
-            if type(a) in _BOOLS or not isinstance(a, (int, np.integer, np.ndarray)) or np.ndim(a) != 0 \
-                    or not np.issubdtype(np.asarray(a).dtype, np.integer) or not 0 <= int(a) < len(ACTIONS):
-                raise ConfigError(f"action {a!r} for drone_{row + 1} is outside Discrete({len(ACTIONS)}): "
-                                  "0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z, 6 -z")
-    out = np.zeros(n, np.intp)
-    out[rows] = values
-    return out
+def checked_actions(rows: list[int], values: list) -> list:
+    """The actions `values` (`values[k]` for row `rows[k]`) as integers, if each is an integer in 0..6 (a Python
+    or numpy integer, or a 0-d integer array); else ConfigError for the first that is not."""
+    if set(map(type, values)) <= _INTEGERS and set(values) <= _VALID:  # (the usual case: plain integers)
+        return values
+    for row, a in zip(rows, values):
+        if type(a) in _BOOLS or not isinstance(a, (int, np.integer, np.ndarray)) or np.ndim(a) != 0 \
+                or not np.issubdtype(np.asarray(a).dtype, np.integer) or not 0 <= int(a) < len(ACTIONS):
+            raise ConfigError(f"action {a!r} for drone_{row + 1} is outside Discrete({len(ACTIONS)}): "
+                              "0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z, 6 -z")
+    return [int(a) for a in values]

@@ -18,12 +18,10 @@ from coordinator.fleet import ALIVE, DEAD
 from coordinator.observer import deaths
 from dronesim.rl import (
     _CAUSE_TEXT,
-    _INTEGERS,
     _NONE_NOTE,
     _NOTE_TEXT,
     _STATE_TEXT,
     _UNREACHABLE,
-    _VALID,
     ACTIONS,
     Config,
     ConfigError,
@@ -31,7 +29,7 @@ from dronesim.rl import (
     Eyes,
     Layout,
     Outcome,
-    actions_array,
+    checked_actions,
     done_agents,
 )
 from schema import Cause, Cell, Note
@@ -121,9 +119,7 @@ class FewEpisode(EpisodeBase):
             done = [i for i in rows if not acting[i]]
             if done:
                 raise done_agents(done)
-        if not (set(map(type, values)) <= _INTEGERS and set(values) <= _VALID):
-            values = actions_array(n, np.array(rows, np.intp), values)[rows].tolist()  # (or why not)
-        action = dict(zip(rows, values))
+        action = dict(zip(rows, checked_actions(rows, values)))
         t = self.cycle + 1
         pos, state, say, shown = self._pos, self._state, self._say, self._shown
         # the engine's turn: every alive drone moves (the acting ones as told, hover by default; the parked ones
