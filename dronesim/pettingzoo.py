@@ -91,7 +91,7 @@ class DroneParallelEnv(ParallelEnv):
             from dronesim.rl_zenoh import ZenohTurns
 
             self._turns = ZenohTurns(connect=self.config.connect, deadline=self.config.deadline,
-                                     logger=logging.getLogger("dronesim.rl"), moves_ahead=self.moves_ahead)
+                                     moves_ahead=self.moves_ahead)
         elif self._turns is None:
             self._turns = LocalTurns()
         return self._turns
@@ -153,12 +153,9 @@ class DroneParallelEnv(ParallelEnv):
             return None
         if self.episode is None:
             raise ConfigError("render() before reset()")
-        if self.render_mode == "rgb_array":
-            return self.episode.rgb()
-        text = self.episode.ansi()
-        if self.render_mode == "ansi":
-            return text
-        print(text, flush=True)
+        if self.render_mode != "human":
+            return self.episode.rgb() if self.render_mode == "rgb_array" else self.episode.ansi()
+        print(self.episode.ansi(), flush=True)
         return None
 
     def state(self) -> np.ndarray:

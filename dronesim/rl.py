@@ -353,18 +353,17 @@ class LocalTurns:
     messages the processes would send, none of them built) and read from its fleet. No environment process:
     the engine judges the moves from its own copy of the world, as the coordinator does."""
 
-    def __init__(self, logger: logging.Logger | None = None) -> None:
+    def __init__(self) -> None:
         # Deaths are the engine's warnings, and an episode's everyday business: only its errors are said.
-        self._log = logger or logging.Logger("dronesim.rl.engine", logging.ERROR)
+        self._log = logging.Logger("dronesim.rl.engine", logging.ERROR)
         self.engine: Engine | None = None
         self._rows: np.ndarray | None = None  # the engine's row of each of ours (None: the same)
 
     def start(self, game: GameConfig, world: World) -> Board:
         engine = Engine(game, self._log, world)
         engine.verify_env, engine.journaled = False, False
-        effects = engine.connect(Connect(turn=0, sender="ENV", role=Role.ENV), None)
-        for hello in hellos(game):
-            effects += engine.connect(hello, None)
+        effects = [e for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), *hellos(game))
+                   for e in engine.connect(hello, None)]
         if engine.stage is not Stage.GCS or not any(isinstance(e, Publish) and isinstance(e.msg, Status)
                                                     for e in effects):
             raise BackendError("the engine did not start the game")

@@ -1,13 +1,11 @@
 """The Zenoh backend of an RL episode (`dronesim.rl.Turns`): each step is one lockstep turn of the real
 coordinator and environment processes, on a router this process starts (or joins: `connect`).
 
-This process plays the ground station and one swarm host (H01, flying every drone) from one Zenoh
-session: per turn it sends the DONE and the policy's moves as the host's MOVES at once (the coordinator
-holds MOVES that come before their drones' phase opens) and waits for the observer's STATUS: one round
-trip a turn (`moves_ahead=False`: the MOVES once the drones' phase is announced, a second round trip, for
-the benchmark's side-by-side measure). Every wait has a deadline and watches the processes:
-a game whose coordinator or environment dies raises `BackendError` at once, and one that stops answering
-raises it when the deadline passes; `close()` ends the game, the processes, the session and the router.
+This process plays the ground station and the swarm host H01 (every drone) from one Zenoh session: per turn
+it sends the DONE and the host's MOVES at once (the coordinator holds MOVES that come before their drones'
+phase opens; `moves_ahead=False`: once it opens, a second round trip) and waits for the observer's STATUS.
+Every wait has a deadline and watches the processes: one that dies raises `BackendError` at once, a game
+that stops answering when the deadline passes.
 """
 
 from __future__ import annotations
@@ -51,11 +49,10 @@ ROLES = {"SRV": "coordinator", "ENV": "environment"}
 class ZenohTurns:
     """Games on real processes over Zenoh, one per episode (see the module's docstring)."""
 
-    def __init__(self, *, connect: str | None = None, deadline: float = 30.0,
-                 logger: logging.Logger | None = None, moves_ahead: bool = True) -> None:
+    def __init__(self, *, connect: str | None = None, deadline: float = 30.0, moves_ahead: bool = True) -> None:
         self.deadline = deadline
         self.moves_ahead = moves_ahead  # False: each MOVES waits for its drones' phase (a second round trip)
-        self._log = logger or logging.getLogger("dronesim.rl")
+        self._log = logging.getLogger("dronesim.rl")
         self._logs = tempfile.TemporaryDirectory(prefix="dronesim-rl-")
         self._tag = uuid.uuid4().hex[:8]
         self._games = 0
@@ -161,8 +158,7 @@ class _Game:
     def _check(self) -> None:
         """BackendError if a process of the game has exited before the game's end."""
         for name, proc in self.procs.items():
-            code = proc.poll()
-            if code is not None and self.over is None:
+            if (code := proc.poll()) is not None and self.over is None:
                 raise BackendError(f"the {ROLES[name]} process exited with {code} during the game: "
                                    f"{self._tail(name)}")
 
