@@ -672,17 +672,13 @@ class Episode(EpisodeBase):
         else:
             rows = np.flatnonzero(self.acting)
             state, pos, targets, was_on = self.state[rows], self.pos[rows], self.targets[rows], self.on[rows]
-        died = np.count_nonzero(state != ALIVE)
+        dead = state != ALIVE
+        died = np.count_nonzero(dead)
+        on = (pos == targets).all(axis=1)
         if died:
-            dead = state != ALIVE
-            on = (pos == targets).all(axis=1) & ~dead
-            arrived = on > was_on
-            rewards = self._reward[arrived + 2 * dead]
-        else:  # (most steps: nobody died)
-            dead = np.zeros(len(rows), bool)
-            on = (pos == targets).all(axis=1)
-            arrived = on > was_on
-            rewards = self._reward[arrived.view(np.uint8)]
+            on &= ~dead
+        arrived = on > was_on
+        rewards = self._reward[arrived + 2 * dead] if died else self._reward[arrived.view(np.uint8)]  # (most: none)
         terminated = dead | arrived if cfg.on_target == "finish" else dead
         truncated = ~terminated if t >= self.max_cycles else np.zeros(len(rows), bool)
         ended = terminated | truncated

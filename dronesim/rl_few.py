@@ -44,10 +44,9 @@ _REACHED = code_of(Note.REACHED)
 def _meet(pos: list[Cell], after: dict[int, Cell], moved: list[int]) -> bool:
     """Whether two drones end in one cell or two movers swap cells (from `pos` to `after`; `moved`: the rows
     whose cell changes): whether the observer could find a collision."""
-    if len(set(after.values())) < len(after):
-        return True
-    entering = {after[i]: i for i in moved}  # (one drone per cell)
-    return any(pos[j] == after[i] for i in moved if (j := entering.get(pos[i])) is not None)
+    entering = {after[i]: i for i in moved}  # (used only if every drone ends in a cell of its own)
+    return len(set(after.values())) < len(after) \
+        or any(pos[j] == after[i] for i in moved if (j := entering.get(pos[i])) is not None)
 
 
 class FewEpisode(EpisodeBase):

@@ -79,8 +79,8 @@ class ZenohTurns:
         self.stop()
         self._games += 1
         self._children[:] = [p for p in self._children if p.poll() is None]
-        self._game = _Game(self, f"rl{self._tag}g{self._games}", game, world)
-        return Board.of_status(self._game.begin(), len(game.drones))
+        self._game = _Game(self, f"rl{self._tag}g{self._games}", game)
+        return Board.of_status(self._game.begin(world), len(game.drones))
 
     def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
              notes: np.ndarray) -> tuple[Board, Over | None]:
@@ -109,10 +109,10 @@ class ZenohTurns:
 class _Game:
     """One game: its processes, this process's presence and subscriptions, and the turn being played."""
 
-    def __init__(self, turns: ZenohTurns, root: str, game: GameConfig, world: World) -> None:
+    def __init__(self, turns: ZenohTurns, root: str, game: GameConfig) -> None:
         assert turns._session is not None
         self.session, self.keys, self.deadline, self.log = turns._session, Keys(root), turns.deadline, turns._log
-        self.moves_ahead, self.game, self.root = turns.moves_ahead, game, root
+        self.moves_ahead, self.game, self.root, self.locator = turns.moves_ahead, game, root, turns.locator
         self.turn = 0  # the last turn whose STATUS arrived
         self.over: Over | None = None
         self.procs: dict[str, subprocess.Popen] = {}
@@ -120,25 +120,6 @@ class _Game:
         self.inbox = Inbox(self.session, self.keys, self.log)
         self.out = Outbox(self.session)
         self.tokens: list = []
-        world_file = self.logs / f"{root}.world.json"
-        world.save(world_file)
-        base, deadline = [sys.executable, "-m", "dronesim"], str(self.deadline)
-        common = ["--mode", "client", "--connect", turns.locator, "--root", root, "--log-level", "WARNING"]
-        starts = ";".join(f"{x},{y},{z}" for x, y, z in (d.start for d in game.drones))
-        try:
-            for key, typ in ((self.keys.status, Status), (self.keys.over, Over)):
-                self.inbox.subscribe(key, typ)
-            if not self.moves_ahead:
-                self.inbox.subscribe(self.keys.turn_of(Phase.DRONES), Turn)
-            self.inbox.watch_presence()
-            self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
-                                "--drones", str(len(game.drones)), "--starts", starts,
-                                "--max-turns", str(game.max_turns), "--phase-deadline", deadline,
-                                "--admit-deadline", deadline])
-            self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", deadline])
-        except BaseException:
-            self.end()
-            raise
 
     def _start(self, name: str, argv: list[str]) -> None:
         log = open(self.logs / f"{self.root}.{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed in end()
@@ -180,11 +161,28 @@ class _Game:
 
     # ------------------------------------------------------------------ the game
 
-    def begin(self) -> Status:
-        """Connect as the ground station and the swarm host, then wait for the STATUS of turn 0."""
-        sid = session_id(self.session)
-        end = time.monotonic() + self.deadline
+    def begin(self, world: World) -> Status:
+        """Start the game's processes, connect as the ground station and the swarm host, then wait for the
+        STATUS of turn 0."""
+        game, root = self.game, self.root
         try:
+            for key, typ in ((self.keys.status, Status), (self.keys.over, Over)):
+                self.inbox.subscribe(key, typ)
+            if not self.moves_ahead:
+                self.inbox.subscribe(self.keys.turn_of(Phase.DRONES), Turn)
+            self.inbox.watch_presence()
+            world_file = self.logs / f"{root}.world.json"
+            world.save(world_file)
+            base, deadline = [sys.executable, "-m", "dronesim"], str(self.deadline)
+            common = ["--mode", "client", "--connect", self.locator, "--root", root, "--log-level", "WARNING"]
+            starts = ";".join(f"{x},{y},{z}" for x, y, z in (d.start for d in game.drones))
+            self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
+                                "--drones", str(len(game.drones)), "--starts", starts,
+                                "--max-turns", str(game.max_turns), "--phase-deadline", deadline,
+                                "--admit-deadline", deadline])
+            self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", deadline])
+            sid = session_id(self.session)
+            end = time.monotonic() + self.deadline
             for hello in hellos(self.game, sid):
                 self.tokens.append(self.session.liveliness().declare_token(self.keys.alive(hello.sender, sid)))
                 while True:  # in slices, to notice a process that died instead of waiting for the deadline
