@@ -219,10 +219,8 @@ class Layout:
 
     @classmethod
     def draw(cls, config: Config, seed: int) -> Layout:
-        """The layout of an episode: the world (given, or generated from `seed`), starts drawn among its clear
-        cells (free, their 6 neighbours free and inside; among all free cells if too few are clear), each target
-        among the free cells of its start's component (none on a start or on another target; if the component
-        has none left, any free cell, and the drone says it is unreachable)."""
+        """The layout of an episode (docs/rl.md, "Layout and seeds"): starts among the clear cells if there are
+        enough; a target with no free cell left in its start's component is any free cell, and unreachable."""
         rng = np.random.default_rng(seed)
         world = config.world if config.world is not None else World.generate(config.size, rng, keep_free=())
         n = config.num_drones

@@ -7,7 +7,6 @@ engine's turn reduced to what a policy's turn does in it: the episode's targets,
 cooperative), the observer's rules drone by drone (`observer.deaths`), each alive drone's note as it said
 it, and the end of the game with the episode's (no drone alive, or the turn limit: every agent has ended).
 tests/test_pettingzoo.py holds both to the same steps on random worlds and actions (a property test).
-Rows are drone number - 1, which is the id order (the observer's priority order) up to `FEW_MAX` drones.
 """
 
 from __future__ import annotations
@@ -50,10 +49,8 @@ def _meet(pos: list[Cell], after: dict[int, Cell], moved: list[int]) -> bool:
 
 
 class FewEpisode(EpisodeBase):
-    """An episode of up to FEW_MAX drones on the local backend, drone by drone (see the module's docstring):
-    `Episode`'s surface (`act`, `observe`, `infos`, `ended`, the columns `pos`, `state`, `targets`, `acting`
-    as arrays, the drawings) over Python lists. The columns are made from the lists at each read: writing
-    into them changes nothing."""
+    """`Episode`'s surface over Python lists, for up to FEW_MAX drones: their rows (drone number - 1) are then
+    the id order (the observer's priority order). The columns (arrays) are made from the lists at each read."""
 
     def __init__(self, config: Config, layout: Layout, max_cycles: int, eyes: Eyes | None = None) -> None:
         n = config.num_drones
@@ -113,8 +110,8 @@ class FewEpisode(EpisodeBase):
         """As `Episode.act`."""
         if not self.left:
             raise ConfigError("step() after the end of the episode: call reset()")
-        n, acting = self.n, self._acting
-        if self.left < n:
+        acting = self._acting
+        if self.left < self.n:
             done = [i for i in rows if not acting[i]]
             if done:
                 raise done_agents(done)
@@ -188,12 +185,10 @@ class FewEpisode(EpisodeBase):
                 targets[i] = int(new[0]), int(new[1]), int(new[2])
                 say[i] = _NONE_NOTE if ok else _UNREACHABLE
                 was_on[i] = False
-        observations = self.observe(rows_out)
-        infos = self.infos(rows_out)
         if stops:
             for i, end, cut in zip(rows_out, terminated, truncated):
                 if end or cut:
                     acting[i] = False
             self._rows = [i for i in rows_out if acting[i]]
             self.left -= stops
-        return Outcome(rows_out, observations, rewards, terminated, truncated, infos)
+        return Outcome(rows_out, self.observe(rows_out), rewards, terminated, truncated, self.infos(rows_out))
