@@ -622,10 +622,9 @@ class Episode(EpisodeBase):
 
     # ------------------------------------------------------------------ reading
 
-    def observe(self, rows: np.ndarray, whole: bool | None = None) -> np.ndarray:
-        """The observations of `rows`; `whole`: whether they are every drone, all alive (by default, whether
-        no agent has ended yet: not so in the step where the first drones die)."""
-        if self.everyone if whole is None else whole:
+    def observe(self, rows: np.ndarray, whole: bool = True) -> np.ndarray:
+        """The observations of `rows`; `whole`: whether they are every drone, all alive (as at the start)."""
+        if whole:
             return self.eyes.see(self.pos, self.targets)
         return self.eyes.see(self.pos[rows], self.targets[rows], self.pos[self.state == ALIVE])
 
