@@ -1,13 +1,5 @@
 """The game as a PettingZoo environment (``pip install 'dronesim[rl]'``): `parallel_env(**config)` and its
-AEC form `env(**config)`, as PettingZoo's own environments expose them.
-
-    from dronesim.pettingzoo import parallel_env
-    env = parallel_env(num_drones=16, seed=3, on_target="new", backend="local")
-    observations, infos = env.reset()
-    while env.agents:
-        observations, rewards, terminations, truncations, infos = env.step(
-            {a: env.action_space(a).sample() for a in env.agents})
-    env.close()
+AEC form `env(**config)`, as PettingZoo's own environments expose them (an example: docs/rl.md).
 
 Agents are the drones (``drone_1`` flies D01); actions `Discrete(7)` (0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z,
 6 -z); observations a `Box` of int32: the cells around the drone (`dronesim.rl.Seen` codes) then the offset
@@ -36,9 +28,9 @@ from dronesim.rl import (
     LocalTurns,
     Seen,
     Turns,
+    int_in,
 )
 from dronesim.rl_few import FEW_MAX, FewEpisode
-from entities.world import checked_int
 from schema.tuning import EPISODE_FEW_DRONES
 
 __all__ = ["DroneParallelEnv", "Expert", "env", "expert_policy", "parallel_env"]
@@ -50,18 +42,16 @@ class DroneParallelEnv(ParallelEnv):
     metadata = {"render_modes": list(RENDER_MODES), "name": "dronesim_v0", "is_parallelizable": True}
 
     def __init__(self, **config: object) -> None:
-        self.config = Config.of(**config)
-        cfg = self.config
+        self.config = cfg = Config.of(**config)
         self.render_mode = cfg.render_mode
         #: Steps before truncation; read at each reset (PettingZoo's tests set it).
         self.max_cycles = cfg.max_cycles
         self.possible_agents = [f"drone_{i}" for i in range(1, cfg.num_drones + 1)]
         self._row = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
-        world_size = cfg.world.size if cfg.world is not None else cfg.size
-        self._obs_bounds = Eyes.bounds_for(world_size, cfg.obs_radius)
+        self._obs_bounds = Eyes.bounds_for(cfg.size, cfg.obs_radius)  # (a given world's size is the size)
         #: The space of `state()`: the whole world as observation codes.
-        self.state_space = spaces.Box(0, max(Seen), shape=tuple(world_size), dtype=np.int8)
+        self.state_space = spaces.Box(0, max(Seen), shape=cfg.size, dtype=np.int8)
         # Action spaces are seeded from the configuration's seed, so sampled actions are reproducible too.
         self._action_spaces = {a: spaces.Discrete(len(ACTIONS), seed=cfg.seed + i)
                                for i, a in enumerate(self.possible_agents)}
@@ -83,43 +73,33 @@ class DroneParallelEnv(ParallelEnv):
     def observation_space(self, agent: str) -> spaces.Box:
         space = self._observation_spaces.get(agent)
         if space is None:
-            self._check_agent(agent)
-            low, high = self._obs_bounds
-            space = self._observation_spaces[agent] = spaces.Box(low, high, dtype=np.int32)
+            self.action_space(agent)  # (an unknown agent's error)
+            space = self._observation_spaces[agent] = spaces.Box(*self._obs_bounds, dtype=np.int32)
         return space
 
     def action_space(self, agent: str) -> spaces.Discrete:
         space = self._action_spaces.get(agent)
         if space is None:
-            self._check_agent(agent)
-        return space  # type: ignore[return-value]
-
-    def _check_agent(self, agent: object) -> None:
-        if agent not in self._row:
             raise ConfigError(f"unknown agent {agent!r}: this environment's agents are drone_1 .. "
                               f"drone_{len(self.possible_agents)}")
+        return space
 
     # ------------------------------------------------------------------ episodes
 
     def _backend(self) -> Turns:
-        if self._turns is None:
-            if self.config.backend == "zenoh":
-                from dronesim.rl_zenoh import ZenohTurns
+        if self._turns is None and self.config.backend == "zenoh":
+            from dronesim.rl_zenoh import ZenohTurns
 
-                self._turns = ZenohTurns(connect=self.config.connect, deadline=self.config.deadline,
-                                         logger=logging.getLogger("dronesim.rl"), moves_ahead=self.moves_ahead)
-            else:
-                self._turns = LocalTurns()
+            self._turns = ZenohTurns(connect=self.config.connect, deadline=self.config.deadline,
+                                     moves_ahead=self.moves_ahead)
+        elif self._turns is None:
+            self._turns = LocalTurns()
         return self._turns
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        max_cycles = checked_int(self.max_cycles, "max_cycles", ConfigError)
-        if max_cycles < 1:
-            raise ConfigError(f"max_cycles must be >= 1, got {self.max_cycles}")
+        max_cycles = int_in(self.max_cycles, "max_cycles", 1)
         if seed is not None:
-            episode_seed = checked_int(seed, "seed", ConfigError)
-            if episode_seed < 0:
-                raise ConfigError(f"seed must be >= 0, got {seed}")
+            episode_seed = int_in(seed, "seed", 0)
             self._episodes = np.random.default_rng(episode_seed)
         elif not self._seeded:
             episode_seed = self.config.seed
@@ -158,15 +138,11 @@ class DroneParallelEnv(ParallelEnv):
         out = episode.act(rows, list(actions.values()))
         names = self.possible_agents if len(out.rows) == episode.n else [self.possible_agents[i] for i in out.rows]
         terminated, truncated = out.terminated, out.truncated
-        observations = dict(zip(names, out.observations))
-        rewards = dict(zip(names, out.rewards))
-        terminations = dict(zip(names, terminated))
-        truncations = dict(zip(names, truncated))
-        infos = dict(zip(names, out.infos))
         self.agents = [a for a, end, cut in zip(names, terminated, truncated) if not (end or cut)] \
             if True in terminated or True in truncated else names[:]
         if self.render_mode == "human":
             self.render()
+        observations, rewards, terminations, truncations, infos = (dict(zip(names, column)) for column in out[1:])
         return observations, rewards, terminations, truncations, infos
 
     # ------------------------------------------------------------------ the rest
@@ -177,12 +153,9 @@ class DroneParallelEnv(ParallelEnv):
             return None
         if self.episode is None:
             raise ConfigError("render() before reset()")
-        if self.render_mode == "rgb_array":
-            return self.episode.rgb()
-        text = self.episode.ansi()
-        if self.render_mode == "ansi":
-            return text
-        print(text, flush=True)
+        if self.render_mode != "human":
+            return self.episode.rgb() if self.render_mode == "rgb_array" else self.episode.ansi()
+        print(self.episode.ansi(), flush=True)
         return None
 
     def state(self) -> np.ndarray:

@@ -1,20 +1,13 @@
 """Multi-agent reinforcement learning on the game, with no RL library: the episode's rules as arrays.
 
-`dronesim.pettingzoo` wraps this in PettingZoo's API; this module needs numpy and the project alone.
-
-An episode is a game of the project's own engine (coordinator/engine.py): the agents are its drones, the
-policy plays both the ground station (the targets) and one swarm host flying every drone (their moves).
-Each step is one turn: a DONE with the targets that change, a MOVES with every alive drone's move, then
-the observer's STATUS, from which the observations, rewards and terminations are read. Where the turn is
-played is the backend's business (`Turns`): `LocalTurns` feeds the engine in this process; the Zenoh
-backend (dronesim/rl_zenoh.py) sends the same messages to the real coordinator and environment
-processes. Both get the same STATUS for the same messages, so an episode does not depend on the backend.
-
-The rules are the seed's observer's: a drone that enters a building, leaves the world, shares a cell with
-another drone or swaps cells with one dies. A drone on its target has arrived; what follows depends on
-`on_target`: "finish" (the agent is done; its drone stays parked on the target, in the way of others),
-"stay" (it goes on acting; a reward each time it arrives again) or "new" (a new target at once, drawn from
-the episode's generator: the lifelong variant).
+`dronesim.pettingzoo` wraps this in PettingZoo's API; this module needs numpy and the project alone. An
+episode is a game of the project's own engine (coordinator/engine.py), the policy playing the ground station
+(the targets) and one swarm host flying every drone (their moves); each step is one turn: a DONE with the
+targets that change, a MOVES with every alive drone's move, then the observer's STATUS, from which the
+observations, rewards and terminations are read. Where the turn is played is the backend's business
+(`Turns`): `LocalTurns` feeds the engine in this process, `dronesim.rl_zenoh` sends the same messages to
+the real processes; both get the same STATUS, so an episode does not depend on the backend. The rules
+(the seed's observer's, and `on_target`: "finish", "stay" or "new") are in docs/rl.md.
 """
 
 from __future__ import annotations
@@ -58,7 +51,7 @@ if TYPE_CHECKING:
 #: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
 ACTIONS: tuple[Cell, ...] = ((0, 0, 0), *AROUND)
 _DELTAS = np.array(ACTIONS, np.int32)
-#: What happens when a drone reaches its target (see the module's docstring).
+#: What happens when a drone reaches its target (docs/rl.md).
 ON_TARGET = ("finish", "stay", "new")
 BACKENDS = ("local", "zenoh")
 RENDER_MODES = ("human", "ansi", "rgb_array")
@@ -130,9 +123,7 @@ class Config:
         return cls(**config)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
-        n = checked_int(self.num_drones, "num_drones", ConfigError)
-        if not 1 <= n <= MAX_DRONE:
-            raise ConfigError(f"num_drones must be in 1..{MAX_DRONE}, got {n}")
+        n = int_in(self.num_drones, "num_drones", 1, MAX_DRONE)
         if self.world is not None and not isinstance(self.world, World):
             raise ConfigError(f"world must be a World or a world file's path, got {self.world!r}")
         given: object = self.world.size if self.world is not None else self.size
@@ -146,12 +137,9 @@ class Config:
         cells = math.prod(size) if self.world is None else int(np.count_nonzero(~self.world.grid))
         if cells < 2 * n:
             raise ConfigError(f"the world has {cells} free cells, too few for {n} drones (a start and a target each)")
-        if checked_int(self.seed, "seed", ConfigError) < 0:
-            raise ConfigError(f"seed must be >= 0, got {self.seed}")
-        if checked_int(self.max_cycles, "max_cycles", ConfigError) < 1:
-            raise ConfigError(f"max_cycles must be >= 1, got {self.max_cycles}")
-        if not 0 <= checked_int(self.obs_radius, "obs_radius", ConfigError) <= 8:
-            raise ConfigError(f"obs_radius must be in 0..8, got {self.obs_radius}")
+        int_in(self.seed, "seed", 0)
+        int_in(self.max_cycles, "max_cycles", 1)
+        int_in(self.obs_radius, "obs_radius", 0, 8)
         for name in ("reward_target", "reward_death", "step_cost"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
@@ -168,6 +156,14 @@ class Config:
             raise ConfigError(f"deadline must be a positive number of seconds, got {self.deadline!r}")
 
 
+def int_in(value: object, name: str, low: int, high: int | None = None) -> int:
+    """`value` as an int in low..high (None: no bound above); ConfigError if it is not."""
+    v = checked_int(value, name, ConfigError)
+    if v < low or high is not None and v > high:
+        raise ConfigError(f"{name} must be {f'>= {low}' if high is None else f'in {low}..{high}'}, got {value}")
+    return v
+
+
 def _choice(value: object, choices: tuple[str, ...], what: str) -> None:
     if value not in choices:
         raise ConfigError(f"{what} must be one of {', '.join(map(repr, choices))}, got {value!r}")
@@ -179,10 +175,8 @@ def _choice(value: object, choices: tuple[str, ...], what: str) -> None:
 def components(grid: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     """The label of every cell (C order, -1: a building or a free cell reached from no seed): the free cells
     6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component."""
-    nx, ny, nz = grid.shape
-    free = np.zeros((nx + 2, ny + 2, nz + 2), bool)  # a blocked border: flat neighbours need no bounds checks
-    free[1:-1, 1:-1, 1:-1] = ~grid
-    sx, sy, offsets = padded_steps((nx, ny, nz))
+    free = np.pad(~grid, 1)  # a blocked border: flat neighbours need no bounds checks
+    sx, sy, offsets = padded_steps(grid.shape)
     steps = np.array(offsets, np.int64)
     label = np.full(free.size, -1, np.int64)
     open_ = free.ravel().copy()
@@ -204,8 +198,7 @@ def components(grid: np.ndarray, seeds: np.ndarray) -> np.ndarray:
 
 def clear_cells(grid: np.ndarray) -> np.ndarray:
     """Which cells are free with their 6 neighbours free and inside the world (bool, the grid's shape)."""
-    free = np.zeros(tuple(s + 2 for s in grid.shape), bool)
-    free[1:-1, 1:-1, 1:-1] = ~grid
+    free = np.pad(~grid, 1)
     clear = free[1:-1, 1:-1, 1:-1].copy()
     for axis in range(3):
         for shift in (1, -1):
@@ -226,10 +219,8 @@ class Layout:
 
     @classmethod
     def draw(cls, config: Config, seed: int) -> Layout:
-        """The layout of an episode: the world (given, or generated from `seed`), starts drawn among its clear
-        cells (free, their 6 neighbours free and inside; among all free cells if too few are clear), each target
-        among the free cells of its start's component (none on a start or on another target; if the component
-        has none left, any free cell, and the drone says it is unreachable)."""
+        """The layout of an episode (docs/rl.md, "Layout and seeds"): starts among the clear cells if there are
+        enough; a target with no free cell left in its start's component is any free cell, and unreachable."""
         rng = np.random.default_rng(seed)
         world = config.world if config.world is not None else World.generate(config.size, rng, keep_free=())
         n = config.num_drones
@@ -247,33 +238,29 @@ class Layout:
         order_label = label[order]
         targets = np.empty((n, 3), np.int32)
         reachable = np.ones(n, bool)
-        pointer: dict[int, int] = {}  # component -> how far its cells in `order` are used
+        pointer: dict[int, int] = {}  # component (-2: any) -> how far its cells in `order` are used
+
+        def take(comp: int) -> int:
+            """The next cell of `order` in component `comp` (-2: any) not taken yet, or -1."""
+            at = pointer.get(comp, 0)
+            while at < len(order):
+                block = order[at:at + 256]
+                ok = ~taken[block] if comp == -2 else (order_label[at:at + 256] == comp) & ~taken[block]
+                hit = np.flatnonzero(ok)
+                if hit.size:
+                    pointer[comp] = at + int(hit[0]) + 1
+                    return int(block[hit[0]])
+                at += len(block)
+            pointer[comp] = at
+            return -1
+
         for i, s in enumerate(start_lin.tolist()):
-            comp = int(label[s])
-            cell = cls._next(order, order_label, taken, comp, pointer)
+            cell = take(int(label[s]))
             if cell < 0:
-                cell = cls._next(order, order_label, taken, None, pointer)  # any free cell: unreachable
-                reachable[i] = False
+                cell, reachable[i] = take(-2), False  # any free cell: unreachable
             taken[cell] = True
             targets[i] = np.unravel_index(cell, world.size)
         return cls(world=world, starts=starts, targets=targets, reachable=reachable, label=label, rng=rng)
-
-    @staticmethod
-    def _next(order: np.ndarray, order_label: np.ndarray, taken: np.ndarray, comp: int | None,
-              pointer: dict) -> int:
-        """The next cell of `order` in component `comp` (None: any) not taken yet, or -1."""
-        key = -2 if comp is None else comp
-        at = pointer.get(key, 0)
-        while at < len(order):
-            block = order[at:at + 256]
-            ok = ~taken[block] if comp is None else (order_label[at:at + 256] == comp) & ~taken[block]
-            hit = np.flatnonzero(ok)
-            if hit.size:
-                pointer[key] = at + int(hit[0]) + 1
-                return int(block[hit[0]])
-            at += len(block)
-        pointer[key] = at
-        return -1
 
     def new_target(self, i: int, here: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, bool]:
         """A new target for drone row `i` at `here` (the lifelong variant): a free cell of its start's
@@ -320,30 +307,24 @@ class Board(NamedTuple):
         rows = rows[np.argsort(rows["drone"], kind="stable")]
         if not np.array_equal(rows["drone"], np.arange(1, n + 1)):
             raise BackendError("the STATUS does not hold this episode's drones")
-        return cls(pos=rows["pos"].astype(np.int32), state=rows["state"].copy(), note=rows["note"].copy(),
-                   cause=rows["cause"].copy())
+        return cls(rows["pos"].astype(np.int32), *(rows[k].copy() for k in ("state", "note", "cause")))
 
 
 class Turns(Protocol):
-    """Where an episode's turns are played. Rows are drone number - 1."""
+    """Where an episode's turns are played (rows are drone number - 1): `start` a game (ending any running
+    one: the board of turn 0), `play` its turns, `stop` it (the ground station quits), `close` the backend."""
 
-    def start(self, game: GameConfig, world: World) -> Board:
-        """Start a game (ending any running one): the board of turn 0."""
-        ...
+    def start(self, game: GameConfig, world: World) -> Board: ...
 
     def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
              notes: np.ndarray) -> tuple[Board, Over | None]:
         """Turn `turn`: the ground station sets the targets `aims` of `aim_rows`, then the swarm host moves
         `move_rows` (every alive drone, ascending) to `moves` with `notes` (Note codes); the turn's board and,
         if the game ended with it, the OVER."""
-        ...
 
-    def stop(self) -> None:
-        """End the running game, if any (the ground station quits)."""
-        ...
+    def stop(self) -> None: ...
 
-    def close(self) -> None:
-        ...
+    def close(self) -> None: ...
 
 
 def hellos(game: GameConfig, session: str = "") -> tuple[Connect, ...]:
@@ -370,18 +351,17 @@ class LocalTurns:
     messages the processes would send, none of them built) and read from its fleet. No environment process:
     the engine judges the moves from its own copy of the world, as the coordinator does."""
 
-    def __init__(self, logger: logging.Logger | None = None) -> None:
+    def __init__(self) -> None:
         # Deaths are the engine's warnings, and an episode's everyday business: only its errors are said.
-        self._log = logger or logging.Logger("dronesim.rl.engine", logging.ERROR)
+        self._log = logging.Logger("dronesim.rl.engine", logging.ERROR)
         self.engine: Engine | None = None
         self._rows: np.ndarray | None = None  # the engine's row of each of ours (None: the same)
 
     def start(self, game: GameConfig, world: World) -> Board:
         engine = Engine(game, self._log, world)
         engine.verify_env, engine.journaled = False, False
-        effects = engine.connect(Connect(turn=0, sender="ENV", role=Role.ENV), None)
-        for hello in hellos(game):
-            effects += engine.connect(hello, None)
+        effects = [e for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), *hellos(game))
+                   for e in engine.connect(hello, None)]
         if engine.stage is not Stage.GCS or not any(isinstance(e, Publish) and isinstance(e.msg, Status)
                                                     for e in effects):
             raise BackendError("the engine did not start the game")
@@ -395,9 +375,8 @@ class LocalTurns:
         """The fleet's columns (in our row order): with the engine's order ours, its columns themselves, valid
         until the next turn changes them (the episode reads a board before it plays the next turn)."""
         fleet, rows = self.engine.fleet, self._rows  # type: ignore[union-attr]
-        if rows is None:
-            return Board(pos=fleet.pos, state=fleet.state, note=fleet.notes(), cause=fleet.cause)
-        return Board(pos=fleet.pos[rows], state=fleet.state[rows], note=fleet.notes()[rows], cause=fleet.cause[rows])
+        board = Board(fleet.pos, fleet.state, fleet.notes(), fleet.cause)
+        return board if rows is None else Board(*(column[rows] for column in board))
 
     def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
              notes: np.ndarray) -> tuple[Board, Over | None]:
@@ -418,8 +397,7 @@ class LocalTurns:
     def stop(self) -> None:
         self.engine = None
 
-    def close(self) -> None:
-        self.engine = None
+    close = stop
 
 
 # --------------------------------------------------------------------------- observations and rendering
@@ -432,10 +410,9 @@ class Eyes:
 
     def __init__(self, world: World, radius: int) -> None:
         self.radius = r = radius
-        self.pad = pad = r + 1  # a dead drone may stand one cell outside the world
-        nx, ny, nz = world.size
-        static = np.full((nx + 2 * pad, ny + 2 * pad, nz + 2 * pad), Seen.OUTSIDE, np.int8)
-        static[pad:pad + nx, pad:pad + ny, pad:pad + nz] = np.where(world.grid, Seen.BUILDING, Seen.FREE)
+        pad = r + 1  # a dead drone may stand one cell outside the world
+        static = np.pad(np.where(world.grid, Seen.BUILDING, Seen.FREE).astype(np.int8), pad,
+                        constant_values=Seen.OUTSIDE)
         self._static = static.ravel()
         self._sx, self._sy = static.shape[1] * static.shape[2], static.shape[2]
         self._strides = np.array([self._sx, self._sy, 1], np.int64)
@@ -537,11 +514,9 @@ def floors_image(world: World, drones: np.ndarray, colours: np.ndarray, targets:
     across = math.ceil(math.sqrt(nz))
     down = math.ceil(nz / across)
     scale = max(1, min(16, max_pixels // max(across * (ny + 1), down * (nx + 1))))
-    image = np.empty((down * (nx + 1) * scale + scale, across * (ny + 1) * scale + scale, 3), np.uint8)
-    image[:] = _GRID_RGB
+    image = np.full((down * (nx + 1) * scale + scale, across * (ny + 1) * scale + scale, 3), _GRID_RGB, np.uint8)
     for z in range(nz):
-        floor = np.empty((nx, ny, 3), np.uint8)
-        floor[:] = _FREE_RGB
+        floor = np.full((nx, ny, 3), _FREE_RGB, np.uint8)
         floor[world.grid[:, :, z]] = _BUILDING_RGB
         for cells, colour in ((targets, None), (drones, colours)):
             on = (cells[:, 2] == z) & inside_rows(cells, world.size) if len(cells) else np.zeros(0, bool)
@@ -566,16 +541,30 @@ class Outcome(NamedTuple):
     infos: list[dict]
 
 
-class Drawing:
-    """An episode's drawings, from its world and columns (`columns`)."""
+class EpisodeBase:
+    """What `Episode` and `FewEpisode` share: the configuration, the eyes, the step's rewards, the end and the
+    drawings, from the world and the columns `pos`, `state`, `targets`, `acting` (`columns`)."""
 
-    world: World
-    n: int
-    cycle: int
+    left: int  # the rows still acting
+
+    def __init__(self, config: Config, layout: Layout, max_cycles: int, eyes: Eyes | None) -> None:
+        self.config, self.layout, self.max_cycles = config, layout, max_cycles
+        self.world = layout.world
+        self.eyes = eyes if eyes is not None and eyes.fits(self.world, config.obs_radius) \
+            else Eyes(self.world, config.obs_radius)
+        self.n = config.num_drones
+        self.cycle = 0
+        # a step's reward by (arrived, dead): nothing, arrived, dead (each a sum, as written: 0.0 - 0.0 is not -0.0)
+        cost = config.step_cost
+        self.rewards = (0.0 + 0.0 - cost, config.reward_target + 0.0 - cost, 0.0 + config.reward_death - cost)
+
+    @property
+    def ended(self) -> bool:
+        return not self.left
 
     def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Every drone's cell ((n, 3) int32), state (uint8), target ((n, 3) int32) and whether it acts (bool)."""
-        raise NotImplementedError
+        return self.pos, self.state, self.targets, self.acting  # type: ignore[attr-defined]
 
     def ansi(self) -> str:
         pos, state, targets_, acting_ = self.columns()
@@ -604,22 +593,17 @@ def done_agents(rows: list[int]) -> ConfigError:
     return ConfigError("actions for agents that are done: " + ", ".join(f"drone_{r + 1}" for r in rows))
 
 
-class Episode(Drawing):
+class Episode(EpisodeBase):
     """One episode's state and rules over a backend's turns; rows are drone number - 1."""
 
     def __init__(self, config: Config, layout: Layout, turns: Turns, max_cycles: int, eyes: Eyes | None = None) -> None:
-        self.config, self.layout, self.turns = config, layout, turns
-        self.max_cycles = max_cycles
-        self.world = layout.world
-        self.eyes = eyes if eyes is not None and eyes.fits(self.world, config.obs_radius) \
-            else Eyes(self.world, config.obs_radius)
-        n = config.num_drones
-        self.n = n
+        super().__init__(config, layout, max_cycles, eyes)
+        self.turns, n = turns, self.n
         self.targets = layout.targets.copy()
         self.reachable = layout.reachable.copy()
-        self.cycle = 0
         self.over: Over | None = None
-        self._read(turns.start(layout.game(max_cycles, phase_deadline=config.deadline), self.world))
+        board = turns.start(layout.game(max_cycles, phase_deadline=config.deadline), self.world)
+        self.pos, self.state, self.note, self.cause = board  # (the fleet's columns, as the STATUS says them)
         if not (self.state == ALIVE).all():
             raise BackendError("a drone was not alive at the start")
         self.acting = np.ones(n, bool)  # rows still acting (PettingZoo's agents)
@@ -631,26 +615,16 @@ class Episode(Drawing):
         self.on = np.zeros(n, bool)  # rows on their target at the last STATUS
         self.aim_next = self._all  # rows whose target the next DONE carries (all, at turn 1)
         self._say = self._notes()  # each row's note to the engine (whether its target is reachable)
-        cfg = self.config
-        # a step's reward by (arrived, dead): 0 + 0 - step_cost, target + 0 - cost, 0 + death - cost
-        self._reward = np.array([0.0 + 0.0 - cfg.step_cost, cfg.reward_target + 0.0 - cfg.step_cost,
-                                 0.0 + cfg.reward_death - cfg.step_cost], np.float64)
-
-    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return self.pos, self.state, self.targets, self.acting
-
-    def _read(self, board: Board) -> None:
-        self.pos, self.state, self.note, self.cause = board.pos, board.state, board.note, board.cause
+        self._reward = np.array(self.rewards, np.float64)
 
     def _notes(self) -> np.ndarray:
         return np.where(self.reachable, _NONE_NOTE, _UNREACHABLE).astype(np.uint8)
 
     # ------------------------------------------------------------------ reading
 
-    def observe(self, rows: np.ndarray, whole: bool | None = None) -> np.ndarray:
-        """The observations of `rows`; `whole`: whether they are every drone, all alive (by default, whether
-        no agent has ended yet: not so in the step where the first drones die)."""
-        if self.everyone if whole is None else whole:
+    def observe(self, rows: np.ndarray, whole: bool = True) -> np.ndarray:
+        """The observations of `rows`; `whole`: whether they are every drone, all alive (as at the start)."""
+        if whole:
             return self.eyes.see(self.pos, self.targets)
         return self.eyes.see(self.pos[rows], self.targets[rows], self.pos[self.state == ALIVE])
 
@@ -660,36 +634,23 @@ class Episode(Drawing):
         columns = (self.pos, self.targets, self.note, self.state, self.cause)
         if len(rows) < self.n:
             columns = tuple(c[rows] for c in columns)
-        pos, tgt, note, state, cause = (c.tolist() for c in columns)
-        pos, tgt = map(tuple, pos), map(tuple, tgt)
-        notes = [_NOTE_TEXT[c] for c in note]
-        states = [_STATE_TEXT[c] for c in state]
-        causes = [_CAUSE_TEXT[c] for c in cause]
-        return [{"cell": p, "target": t, "note": nt, "state": s, "cause": c}
-                for p, t, nt, s, c in zip(pos, tgt, notes, states, causes)]
-
-    @property
-    def ended(self) -> bool:
-        return not self.left
+        return [{"cell": tuple(p), "target": tuple(t), "note": _NOTE_TEXT[nt], "state": _STATE_TEXT[s],
+                 "cause": _CAUSE_TEXT[c]} for p, t, nt, s, c in zip(*(c.tolist() for c in columns))]
 
     # ------------------------------------------------------------------ acting
 
-    def act(self, rows: list[int], values: list) -> Outcome:
-        """One turn: the action `values[k]` for row `rows[k]` (the other acting rows hover); ConfigError (and no
+    def act(self, given: list[int], values: list) -> Outcome:
+        """One turn: the action `values[k]` for row `given[k]` (the other acting rows hover); ConfigError (and no
         turn played) after the end, for a row no longer acting or an action outside the space."""
         if self.ended:
             raise ConfigError("step() after the end of the episode: call reset()")
-        at = np.array(rows, np.intp)
+        at = np.array(given, np.intp)
         if not self.everyone:
             done = at[~self.acting[at]]
             if len(done):
                 raise done_agents(done.tolist())
-        return self.step(actions_array(self.n, at, values))
-
-    def step(self, actions: np.ndarray) -> Outcome:
-        """One turn: `actions` holds an action (0..6) for every row (those of rows not acting are ignored)."""
-        if self.ended:
-            raise ConfigError("step() after the end of the episode: call reset()")
+        actions = np.zeros(self.n, np.intp)
+        actions[at] = checked_actions(given, values)
         t = self.cycle + 1
         aim = self.aim_next
         everyone = self.everyone
@@ -700,26 +661,21 @@ class Episode(Drawing):
             dest = self.pos[alive] + np.where(self.acting[alive, None], _DELTAS[actions[alive]], 0)
             note = self._say[alive]
         board, over = self.turns.play(t, aim, self.targets[aim] if len(aim) else _NO_CELLS, alive, dest, note)
-        self.cycle = t
-        self.over = over
-        self._read(board)
+        self.cycle, self.over = t, over
+        self.pos, self.state, self.note, self.cause = board
         cfg = self.config
         if everyone:
             rows, state, pos, targets, was_on = self._all, self.state, self.pos, self.targets, self.on
         else:
             rows = np.flatnonzero(self.acting)
             state, pos, targets, was_on = self.state[rows], self.pos[rows], self.targets[rows], self.on[rows]
-        died = np.count_nonzero(state != ALIVE)
+        dead = state != ALIVE
+        died = np.count_nonzero(dead)
+        on = (pos == targets).all(axis=1)
         if died:
-            dead = state != ALIVE
-            on = (pos == targets).all(axis=1) & ~dead
-            arrived = on > was_on
-            rewards = self._reward[arrived + 2 * dead]
-        else:  # (most steps: nobody died)
-            dead = np.zeros(len(rows), bool)
-            on = (pos == targets).all(axis=1)
-            arrived = on > was_on
-            rewards = self._reward[arrived.view(np.uint8)]
+            on &= ~dead
+        arrived = on > was_on
+        rewards = self._reward[arrived + 2 * dead] if died else self._reward[arrived.view(np.uint8)]  # (most: none)
         terminated = dead | arrived if cfg.on_target == "finish" else dead
         truncated = ~terminated if t >= self.max_cycles else np.zeros(len(rows), bool)
         ended = terminated | truncated
@@ -754,11 +710,9 @@ _CAUSE_TEXT = tuple(c.value.lower() for c in CAUSES)
 
 
 class Expert:
-    """One of the project's autopilots per drone (the D* planner by default) choosing each acting drone's
-    action: an expert for imitation learning, or a baseline. It senses as a drone process does, by asking
-    the environment (here answered from the episode's world and the drones' cells, as the environment
-    answers an ASK), and its drones give way to each other by the coordinator's arbitration rule
-    (coordinator/arbiter.py), which a cooperative autopilot's drones get in a game."""
+    """One of the project's autopilots per drone (D* by default) choosing each acting drone's action: an expert
+    for imitation learning, or a baseline. It senses as a drone process does (the episode's world answers its
+    ASK), and a cooperative autopilot's drones give way to each other as in a game (coordinator/arbiter.py)."""
 
     def __init__(self, autopilot: str = "dstar") -> None:
         from entities.autopilots import pilot_class
@@ -777,56 +731,36 @@ class Expert:
 
         if episode is not self._episode:  # a new episode: fresh pilots (they remember the world they saw)
             self._episode, self._pilots = episode, {}
-        alive = np.flatnonzero(episode.state == ALIVE)
-        ids = [drone_name(i + 1) for i in alive.tolist()]
-        here = dict(zip(ids, map(tuple, episode.pos[alive].tolist())))
+        alive = np.flatnonzero(episode.state == ALIVE).tolist()
+        here = {drone_name(i + 1): c for i, c in zip(alive, map(tuple, episode.pos[alive].tolist()))}
         env = Environment(episode.world, here)
-        acting = [i for i in alive.tolist() if episode.acting[i]]
+        acting = {i: drone_name(i + 1) for i in alive if episode.acting[i]}
         steps = {}
-        for i in acting:
-            d = drone_name(i + 1)
-            pilot = self._pilots.get(d)
-            if pilot is None:
-                pilot = self._pilots[d] = make_autopilot(self.autopilot, world_size=episode.world.size)
-            steps[d] = pilot.step(here[d], tuple(episode.targets[i].tolist()))  # type: ignore[attr-defined]
+        for i, d in acting.items():
+            if d not in self._pilots:
+                self._pilots[d] = make_autopilot(self.autopilot, world_size=episode.world.size)
+            steps[d] = self._pilots[d].step(here[d], tuple(episode.targets[i].tolist()))  # type: ignore[attr-defined]
         decided = drive(fly_round(steps), lambda pending: {d: dict(zip(c, env.answer(c))) for d, c in pending.items()})
         wants = {d: decided[d].pos if d in decided else c for d, c in here.items()}
         if self.cooperative:
             wants = arbitrate(here, wants, set(decided))
-        index: dict[tuple[int, ...], int] = {a: k for k, a in enumerate(ACTIONS)}
-        out = {}
-        for i in acting:
-            d = drone_name(i + 1)
-            out[i] = index[tuple(w - h for w, h in zip(wants[d], here[d]))]
-        return out
+        return {i: _ACTION_OF[tuple(w - h for w, h in zip(wants[d], here[d]))] for i, d in acting.items()}
 
 
+_ACTION_OF = {a: k for k, a in enumerate(ACTIONS)}
 _BOOLS = frozenset({bool, np.bool_})
 _INTEGERS = frozenset({int, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64})
 _VALID = frozenset(range(len(ACTIONS)))
 
 
-def actions_array(n: int, rows: np.ndarray, values: list) -> np.ndarray:
-    """An (n,) int array of actions, `values[k]` at row `rows[k]` (the other rows hover); ConfigError for an
-    action that is not an integer in 0..6 (a Python or numpy integer, or a 0-d integer array)."""
-    out = np.zeros(n, np.intp)
-    if not values:
-        return out
-    if set(map(type, values)) <= _INTEGERS and set(values) <= _VALID:  # (the usual case, without an array)
-        out[rows] = values
-        return out
-    try:
-        taken = np.array(values)
-    except (TypeError, ValueError):
-        taken = None
-    if taken is not None and taken.ndim == 1 and taken.dtype.kind in "iu" \
-            and not any(type(v) in _BOOLS for v in values) and ((taken >= 0) & (taken < len(ACTIONS))).all():
-        out[rows] = taken
-        return out
-    for row, a in zip(rows.tolist(), values):  # which is wrong, and why
-        ok = type(a) not in _BOOLS and isinstance(a, (int, np.integer, np.ndarray)) and np.ndim(a) == 0 \
-            and np.issubdtype(np.asarray(a).dtype, np.integer) and 0 <= int(a) < len(ACTIONS)
-        if not ok:
+def checked_actions(rows: list[int], values: list) -> list:
+    """The actions `values` (`values[k]` for row `rows[k]`) as integers, if each is an integer in 0..6 (a Python
+    or numpy integer, or a 0-d integer array); else ConfigError for the first that is not."""
+    if set(map(type, values)) <= _INTEGERS and set(values) <= _VALID:  # (the usual case: plain integers)
+        return values
+    for row, a in zip(rows, values):
+        if type(a) in _BOOLS or not isinstance(a, (int, np.integer, np.ndarray)) or np.ndim(a) != 0 \
+                or not np.issubdtype(np.asarray(a).dtype, np.integer) or not 0 <= int(a) < len(ACTIONS):
             raise ConfigError(f"action {a!r} for drone_{row + 1} is outside Discrete({len(ACTIONS)}): "
                               "0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z, 6 -z")
-    raise AssertionError("unreachable: every action was valid")
+    return [int(a) for a in values]

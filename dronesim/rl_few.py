@@ -1,18 +1,12 @@
 """Episodes of a few drones, drone by drone: the local backend's fast path (docs/performance.md).
 
-An `Episode` over `LocalTurns` plays a step in array operations: the engine's turn (`Engine.play`: the
-input checks, the targets, the observer's judgement, notes, priorities, deadlines, the end), then the
-episode's rules, the observations and the infos; some 80 numpy calls, whose fixed cost (~0.5-1 µs each)
-is the whole step when there are a few drones. `FewEpisode` plays the same step over Python lists, with
-the engine's turn reduced to what a policy's turn does in it: the targets the ground station sends (the
-episode's own), every alive drone's move (no deadline is missed, so nobody hovers by rule or is LOST),
-no arbitration (the policy's drones are not cooperative), the observer's rules drone by drone
-(`observer.deaths`, the reference `observer.judge` is held to), each alive drone's note as it said it,
-and the end of the game with the episode's (no drone alive, or the turn limit: every agent has ended then).
-
-The same semantics: tests/test_pettingzoo.py plays random worlds and actions with both and compares every
-step's observations, rewards, terminations, truncations and infos (a property test). Rows are drone number
-- 1, which is the id order (the observer's priority order) up to 99 drones: `FEW_MAX`.
+An `Episode` over `LocalTurns` plays a step in some 80 numpy calls, whose fixed cost (~0.5-1 µs each) is
+the whole step when there are a few drones. `FewEpisode` plays the same step over Python lists, with the
+engine's turn reduced to what a policy's turn does in it: the episode's targets, every alive drone's move
+(no deadline is missed, so nobody hovers by rule or is LOST), no arbitration (the policy's drones are not
+cooperative), the observer's rules drone by drone (`observer.deaths`), each alive drone's note as it said
+it, and the end of the game with the episode's (no drone alive, or the turn limit: every agent has ended).
+tests/test_pettingzoo.py holds both to the same steps on random worlds and actions (a property test).
 """
 
 from __future__ import annotations
@@ -23,20 +17,18 @@ from coordinator.fleet import ALIVE, DEAD
 from coordinator.observer import deaths
 from dronesim.rl import (
     _CAUSE_TEXT,
-    _INTEGERS,
     _NONE_NOTE,
     _NOTE_TEXT,
     _STATE_TEXT,
     _UNREACHABLE,
-    _VALID,
     ACTIONS,
     Config,
     ConfigError,
-    Drawing,
+    EpisodeBase,
     Eyes,
     Layout,
     Outcome,
-    actions_array,
+    checked_actions,
     done_agents,
 )
 from schema import Cause, Cell, Note
@@ -51,35 +43,22 @@ _REACHED = code_of(Note.REACHED)
 def _meet(pos: list[Cell], after: dict[int, Cell], moved: list[int]) -> bool:
     """Whether two drones end in one cell or two movers swap cells (from `pos` to `after`; `moved`: the rows
     whose cell changes): whether the observer could find a collision."""
-    if len(set(after.values())) < len(after):
-        return True
-    entering = {after[i]: i for i in moved}  # (one drone per cell)
-    for i in moved:
-        j = entering.get(pos[i])
-        if j is not None and pos[j] == after[i]:
-            return True
-    return False
+    entering = {after[i]: i for i in moved}  # (used only if every drone ends in a cell of its own)
+    return len(set(after.values())) < len(after) \
+        or any(pos[j] == after[i] for i in moved if (j := entering.get(pos[i])) is not None)
 
 
-class FewEpisode(Drawing):
-    """An episode of up to FEW_MAX drones on the local backend, drone by drone (see the module's docstring):
-    `Episode`'s surface (`act`, `observe`, `infos`, `ended`, the columns `pos`, `state`, `targets`, `acting`
-    as arrays, the drawings) over Python lists. The columns are made from the lists at each read: writing
-    into them changes nothing."""
+class FewEpisode(EpisodeBase):
+    """`Episode`'s surface over Python lists, for up to FEW_MAX drones: their rows (drone number - 1) are then
+    the id order (the observer's priority order). The columns (arrays) are made from the lists at each read."""
 
     def __init__(self, config: Config, layout: Layout, max_cycles: int, eyes: Eyes | None = None) -> None:
         n = config.num_drones
         if n > FEW_MAX:
             raise ValueError(f"a FewEpisode plays up to {FEW_MAX} drones, not {n}")
-        self.config, self.layout, self.max_cycles = config, layout, max_cycles
-        self.world = layout.world
-        self.eyes = eyes if eyes is not None and eyes.fits(self.world, config.obs_radius) \
-            else Eyes(self.world, config.obs_radius)
-        self.n = n
-        self.cycle = 0
+        super().__init__(config, layout, max_cycles, eyes)
         self._pos: list[Cell] = list(map(tuple, layout.starts.tolist()))
         self._targets: list[Cell] = list(map(tuple, layout.targets.tolist()))
-        self._reachable: list[bool] = layout.reachable.tolist()
         self._state = [ALIVE] * n
         self._cause = [0] * n
         self._shown = [_NONE_NOTE] * n  # each drone's note as the last STATUS says it (REACHED on its target)
@@ -87,19 +66,12 @@ class FewEpisode(Drawing):
         self._acting = [True] * n
         self._rows = list(range(n))  # the rows acting, ascending
         self._alive = list(range(n))  # the rows alive, ascending
-        self._say = [_NONE_NOTE if r else _UNREACHABLE for r in self._reachable]  # each row's note to the engine
+        self._say = [_NONE_NOTE if r else _UNREACHABLE for r in layout.reachable.tolist()]  # notes to the engine
         self.left = n
-        cfg = config
-        self._finish, self._new = cfg.on_target == "finish", cfg.on_target == "new"
-        # a step's reward: nothing, arrived, dead (as Episode's, the same sums)
-        self._reward = (0.0 + 0.0 - cfg.step_cost, cfg.reward_target + 0.0 - cfg.step_cost,
-                        0.0 + cfg.reward_death - cfg.step_cost)
+        self._finish, self._new = config.on_target == "finish", config.on_target == "new"
         self._solid = self.world.grid.tobytes()  # a building cell: solid[(x * ny + y) * nz + z] == 1
 
     # ------------------------------------------------------------------ columns (as Episode's)
-
-    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return self.pos, self.state, self.targets, self.acting
 
     @property
     def pos(self) -> np.ndarray:
@@ -116,10 +88,6 @@ class FewEpisode(Drawing):
     @property
     def acting(self) -> np.ndarray:
         return np.array(self._acting, bool)
-
-    @property
-    def ended(self) -> bool:
-        return not self.left
 
     # ------------------------------------------------------------------ reading
 
@@ -142,24 +110,20 @@ class FewEpisode(Drawing):
         """As `Episode.act`."""
         if not self.left:
             raise ConfigError("step() after the end of the episode: call reset()")
-        n, acting = self.n, self._acting
-        if self.left < n:
+        acting = self._acting
+        if self.left < self.n:
             done = [i for i in rows if not acting[i]]
             if done:
                 raise done_agents(done)
-        if not (set(map(type, values)) <= _INTEGERS and set(values) <= _VALID):
-            values = actions_array(n, np.array(rows, np.intp), values)[rows].tolist()  # (or why not)
-        action = dict(zip(rows, values))
+        action = dict(zip(rows, checked_actions(rows, values)))
         t = self.cycle + 1
         pos, state, say, shown = self._pos, self._state, self._say, self._shown
         # the engine's turn: every alive drone moves (the acting ones as told, hover by default; the parked ones
         # hover), the observer judges, each alive drone's note is the one it said
         (nx, ny, nz), solid = self.world.size, self._solid
         alive = self._alive
-        after = {}
-        moved = []
-        buildings = set()
-        left_world = False
+        after: dict[int, Cell] = {}
+        moved, buildings, left_world = [], set(), False
         for i in alive:
             a = action.get(i, 0)
             if a:
@@ -188,19 +152,15 @@ class FewEpisode(Drawing):
         # the episode's rules, for the rows acting
         rows_out = self._rows
         targets, was_on, finish = self._targets, self._on, self._finish
-        nothing, arrived, died = self._reward
+        nothing, arrived, died = self.rewards
         rewards, terminated, arrivals = [], [], []
         for i in rows_out:
-            if i in dead:
+            gone = i in dead
+            if gone or pos[i] != targets[i]:
                 was_on[i] = False
                 shown[i] = say[i]
-                rewards.append(died)
-                terminated.append(True)
-            elif pos[i] != targets[i]:
-                was_on[i] = False
-                shown[i] = say[i]
-                rewards.append(nothing)
-                terminated.append(False)
+                rewards.append(died if gone else nothing)
+                terminated.append(gone)
             else:
                 shown[i] = _REACHED
                 if was_on[i]:
@@ -222,15 +182,13 @@ class FewEpisode(Drawing):
             for i in arrivals:
                 new, ok = self.layout.new_target(i, np.array(pos[i], np.int32), others)
                 others[i] = new
-                targets[i], self._reachable[i] = (int(new[0]), int(new[1]), int(new[2])), ok
+                targets[i] = int(new[0]), int(new[1]), int(new[2])
                 say[i] = _NONE_NOTE if ok else _UNREACHABLE
                 was_on[i] = False
-        observations = self.observe(rows_out)
-        infos = self.infos(rows_out)
         if stops:
             for i, end, cut in zip(rows_out, terminated, truncated):
                 if end or cut:
                     acting[i] = False
             self._rows = [i for i in rows_out if acting[i]]
             self.left -= stops
-        return Outcome(rows_out, observations, rewards, terminated, truncated, infos)
+        return Outcome(rows_out, self.observe(rows_out), rewards, terminated, truncated, self.infos(rows_out))

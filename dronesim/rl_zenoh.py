@@ -1,13 +1,11 @@
 """The Zenoh backend of an RL episode (`dronesim.rl.Turns`): each step is one lockstep turn of the real
 coordinator and environment processes, on a router this process starts (or joins: `connect`).
 
-This process plays the ground station and one swarm host (H01, flying every drone) from one Zenoh
-session: per turn it sends the DONE and the policy's moves as the host's MOVES at once (the coordinator
-holds MOVES that come before their drones' phase opens) and waits for the observer's STATUS: one round
-trip a turn (`moves_ahead=False`: the MOVES once the drones' phase is announced, a second round trip, for
-the benchmark's side-by-side measure). Every wait has a deadline and watches the processes:
-a game whose coordinator or environment dies raises `BackendError` at once, and one that stops answering
-raises it when the deadline passes; `close()` ends the game, the processes, the session and the router.
+This process plays the ground station and the swarm host H01 (every drone) from one Zenoh session: per turn
+it sends the DONE and the host's MOVES at once (the coordinator holds MOVES that come before their drones'
+phase opens; `moves_ahead=False`: once it opens, a second round trip) and waits for the observer's STATUS.
+Every wait has a deadline and watches the processes: one that dies raises `BackendError` at once, a game
+that stops answering when the deadline passes.
 """
 
 from __future__ import annotations
@@ -45,17 +43,16 @@ from entities.world import World
 from schema import Done, Intent, Keys, Message, Moves, Over, Phase, Status, Turn, UsageError
 
 #: The processes of a game, by the name their presence token has.
-ROLES = ("SRV", "ENV")
+ROLES = {"SRV": "coordinator", "ENV": "environment"}
 
 
 class ZenohTurns:
     """Games on real processes over Zenoh, one per episode (see the module's docstring)."""
 
-    def __init__(self, *, connect: str | None = None, deadline: float = 30.0,
-                 logger: logging.Logger | None = None, moves_ahead: bool = True) -> None:
+    def __init__(self, *, connect: str | None = None, deadline: float = 30.0, moves_ahead: bool = True) -> None:
         self.deadline = deadline
         self.moves_ahead = moves_ahead  # False: each MOVES waits for its drones' phase (a second round trip)
-        self._log = logger or logging.getLogger("dronesim.rl")
+        self._log = logging.getLogger("dronesim.rl")
         self._logs = tempfile.TemporaryDirectory(prefix="dronesim-rl-")
         self._tag = uuid.uuid4().hex[:8]
         self._games = 0
@@ -81,11 +78,9 @@ class ZenohTurns:
     def start(self, game: GameConfig, world: World) -> Board:
         self.stop()
         self._games += 1
-        assert self._session is not None
         self._children[:] = [p for p in self._children if p.poll() is None]
-        self._game = _Game(self._session, f"rl{self._tag}g{self._games}", Path(self._logs.name), self.locator,
-                           game, world, self.deadline, self._log, self._children, self._files, self.moves_ahead)
-        return Board.of_status(self._game.begin(), len(game.drones))
+        self._game = _Game(self, f"rl{self._tag}g{self._games}", game)
+        return Board.of_status(self._game.begin(world), len(game.drones))
 
     def play(self, turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
              notes: np.ndarray) -> tuple[Board, Over | None]:
@@ -114,41 +109,17 @@ class ZenohTurns:
 class _Game:
     """One game: its processes, this process's presence and subscriptions, and the turn being played."""
 
-    def __init__(self, session: zenoh.Session, root: str, logs: Path, locator: str, game: GameConfig, world: World,
-                 deadline: float, logger: logging.Logger, children: list[subprocess.Popen], files: list,
-                 moves_ahead: bool = True) -> None:
-        self.session, self.keys, self.deadline, self.log = session, Keys(root), deadline, logger
-        self.moves_ahead = moves_ahead
-        self.game = game
+    def __init__(self, turns: ZenohTurns, root: str, game: GameConfig) -> None:
+        assert turns._session is not None
+        self.session, self.keys, self.deadline, self.log = turns._session, Keys(root), turns.deadline, turns._log
+        self.moves_ahead, self.game, self.root, self.locator = turns.moves_ahead, game, root, turns.locator
         self.turn = 0  # the last turn whose STATUS arrived
         self.over: Over | None = None
         self.procs: dict[str, subprocess.Popen] = {}
-        self.children = children
-        self.logs = logs
-        self.root = root
-        self._files = files
-        self.inbox = Inbox(session, self.keys, logger)
-        self.out = Outbox(session)
+        self.children, self._files, self.logs = turns._children, turns._files, Path(turns._logs.name)
+        self.inbox = Inbox(self.session, self.keys, self.log)
+        self.out = Outbox(self.session)
         self.tokens: list = []
-        world_file = logs / f"{root}.world.json"
-        world.save(world_file)
-        base = [sys.executable, "-m", "dronesim"]
-        common = ["--mode", "client", "--connect", locator, "--root", root, "--log-level", "WARNING"]
-        starts = ";".join(f"{x},{y},{z}" for x, y, z in (d.start for d in game.drones))
-        try:
-            for key, typ in ((self.keys.status, Status), (self.keys.over, Over)):
-                self.inbox.subscribe(key, typ)
-            if not moves_ahead:
-                self.inbox.subscribe(self.keys.turn_of(Phase.DRONES), Turn)
-            self.inbox.watch_presence()
-            self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
-                                "--drones", str(len(game.drones)), "--starts", starts,
-                                "--max-turns", str(game.max_turns), "--phase-deadline", str(deadline),
-                                "--admit-deadline", str(deadline)])
-            self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", str(deadline)])
-        except BaseException:
-            self.end()
-            raise
 
     def _start(self, name: str, argv: list[str]) -> None:
         log = open(self.logs / f"{self.root}.{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed in end()
@@ -168,10 +139,9 @@ class _Game:
     def _check(self) -> None:
         """BackendError if a process of the game has exited before the game's end."""
         for name, proc in self.procs.items():
-            code = proc.poll()
-            if code is not None and self.over is None:
-                raise BackendError(f"the {'coordinator' if name == 'SRV' else 'environment'} process exited "
-                                   f"with {code} during the game: {self._tail(name)}")
+            if (code := proc.poll()) is not None and self.over is None:
+                raise BackendError(f"the {ROLES[name]} process exited with {code} during the game: "
+                                   f"{self._tail(name)}")
 
     def _event(self, end: float, waiting_for: str):
         """The next event, checking the processes while none comes; BackendError past `end`."""
@@ -186,17 +156,33 @@ class _Game:
                 continue
             if isinstance(event, Presence) and not event.alive and event.entity in ROLES and self.over is None:
                 self._check()
-                raise BackendError(f"the {'coordinator' if event.entity == 'SRV' else 'environment'} left the "
-                                   "game (its presence token vanished)")
+                raise BackendError(f"the {ROLES[event.entity]} left the game (its presence token vanished)")
             return event
 
     # ------------------------------------------------------------------ the game
 
-    def begin(self) -> Status:
-        """Connect as the ground station and the swarm host, then wait for the STATUS of turn 0."""
-        sid = session_id(self.session)
-        end = time.monotonic() + self.deadline
+    def begin(self, world: World) -> Status:
+        """Start the game's processes, connect as the ground station and the swarm host, then wait for the
+        STATUS of turn 0."""
+        game, root = self.game, self.root
         try:
+            for key, typ in ((self.keys.status, Status), (self.keys.over, Over)):
+                self.inbox.subscribe(key, typ)
+            if not self.moves_ahead:
+                self.inbox.subscribe(self.keys.turn_of(Phase.DRONES), Turn)
+            self.inbox.watch_presence()
+            world_file = self.logs / f"{root}.world.json"
+            world.save(world_file)
+            base, deadline = [sys.executable, "-m", "dronesim"], str(self.deadline)
+            common = ["--mode", "client", "--connect", self.locator, "--root", root, "--log-level", "WARNING"]
+            starts = ";".join(f"{x},{y},{z}" for x, y, z in (d.start for d in game.drones))
+            self._start("SRV", [*base, "coordinator", *common, "--world", str(world_file),
+                                "--drones", str(len(game.drones)), "--starts", starts,
+                                "--max-turns", str(game.max_turns), "--phase-deadline", deadline,
+                                "--admit-deadline", deadline])
+            self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", deadline])
+            sid = session_id(self.session)
+            end = time.monotonic() + self.deadline
             for hello in hellos(self.game, sid):
                 self.tokens.append(self.session.liveliness().declare_token(self.keys.alive(hello.sender, sid)))
                 while True:  # in slices, to notice a process that died instead of waiting for the deadline
@@ -248,12 +234,11 @@ class _Game:
         return status, (self._over(end) if last else None)
 
     def _over(self, end: float) -> Over:
-        while True:
-            if self.over is not None:
-                return self.over
+        while self.over is None:
             match self._event(end, "OVER"):
                 case Received(_, Over() as over):
                     self.over = over
+        return self.over
 
     def end(self) -> None:
         """End the game if it runs (the ground station quits), then its processes, subscriptions and presence."""
