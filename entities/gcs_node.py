@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any, Protocol, TextIO
+from typing import Any, TextIO
 
 import zenoh
 
@@ -34,18 +34,10 @@ from dronesim.transport import (
     setup_logging,
     zenoh_config,
 )
-from schema import Connect, Keys, Message, Over, Phase, Role, Status, Turn, UsageError, Welcome
+from schema import Connect, Keys, Over, Phase, Role, Status, Turn, UsageError
 
 from .gcs import Console, Effect, End, Ground, Send, Show, Station
-
-
-class Core(Protocol):
-    """What `play` drives: a `Station`, or the web page's `GroundState` around one."""
-
-    def receive(self, msg: Message, now: float) -> Sequence[object]: ...
-    def admitted(self, welcome: Welcome) -> Sequence[object]: ...
-    def wake(self, now: float) -> float | None: ...
-    def tick(self, now: float) -> Sequence[object]: ...
+from .web.model import GroundState
 
 
 def listen(session: zenoh.Session, keys: Keys, logger: logging.Logger, *, every_phase: bool = False) -> Inbox:
@@ -78,7 +70,7 @@ def publisher(out: Outbox, keys: Keys, logger: logging.Logger,
     return perform
 
 
-def play(core: Core, inbox: Inbox, member: Membership, perform: Callable[[Any], None],
+def play(core: Station | GroundState, inbox: Inbox, member: Membership, perform: Callable[[Any], None],
          other: Callable[[object], None] = lambda event: None) -> Over:
     """Feed `core` every event, on this thread, until it ends; `other` takes the events posted by this
     process (the web page's commands). Returns the game's OVER."""

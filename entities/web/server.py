@@ -155,31 +155,17 @@ class _Handler(BaseHTTPRequestHandler):
 
     # ------------------------------------------------------------------ methods
 
-    def do_GET(self) -> None:  # noqa: N802
-        self._dispatch("GET")
-
-    def do_POST(self) -> None:  # noqa: N802
-        self._dispatch("POST")
-
-    def do_PUT(self) -> None:  # noqa: N802
-        self._dispatch("PUT")
-
-    def do_DELETE(self) -> None:  # noqa: N802
-        self._dispatch("DELETE")
-
-    def do_PATCH(self) -> None:  # noqa: N802
-        self._dispatch("PATCH")
-
     ROUTES = {
-        "/": ("GET", "_index"), "/index.html": ("GET", "_index"),
-        "/app.js": ("GET", "_static"), "/style.css": ("GET", "_static"),
+        "/": ("GET", "_file"), "/index.html": ("GET", "_file"), "/app.js": ("GET", "_file"),
+        "/style.css": ("GET", "_file"),
         "/api/world": ("GET", "_world"), "/api/state": ("GET", "_state"), "/api/events": ("GET", "_events"),
         "/api/replay": ("GET", "_replay"),
         "/api/target": ("POST", "_target"), "/api/control": ("POST", "_control"),
     }
 
-    def _dispatch(self, method: str) -> None:
-        route = self.ROUTES.get(self._route())
+    def _dispatch(self) -> None:
+        """Every method's handler (the base class calls ``do_<METHOD>``)."""
+        method, route = self.command, self.ROUTES.get(self._route())
         try:
             if route is None:
                 raise Rejected(f"no such resource: {self._route()}", 404)
@@ -198,15 +184,12 @@ class _Handler(BaseHTTPRequestHandler):
             except OSError:
                 pass
 
+    do_GET = do_POST = do_PUT = do_DELETE = do_PATCH = _dispatch
+
     # ------------------------------------------------------------------ resources
 
-    def _index(self) -> None:
-        self._file("index.html")
-
-    def _static(self) -> None:
-        self._file(self._route().lstrip("/"))
-
-    def _file(self, name: str) -> None:
+    def _file(self) -> None:
+        name = self._route().lstrip("/") or "index.html"
         data = resources.files(__package__).joinpath("static", name).read_bytes()
         self._send(200, data, STATIC[name])
 
@@ -246,23 +229,19 @@ class _Handler(BaseHTTPRequestHandler):
                     self.wfile.write(b": keepalive\n\n")
                     self.wfile.flush()
                     continue
-                end = item is _END
-                while not end:  # only the newest state matters: skip those a slow page had no time for
-                    try:
-                        newer = q.get_nowait()
-                    except queue.Empty:
+                state = None
+                while item is not _END:  # only the newest state matters: skip those a slow page had no time for
+                    state = item
+                    if q.empty():
                         break
-                    if newer is _END:
-                        end = True
-                    else:
-                        item = newer
-                if item is not _END:
-                    self.wfile.write(b"event: state\ndata: " + item.encode() + b"\n\n")
-                if end:
+                    item = q.get_nowait()
+                if state is not None:
+                    self.wfile.write(b"event: state\ndata: " + state.encode() + b"\n\n")
+                if item is _END:
                     self.wfile.write(b"event: end\ndata: {}\n\n")
-                self.wfile.flush()
-                if end:
+                    self.wfile.flush()
                     return
+                self.wfile.flush()
         finally:
             hub.unsubscribe(q)
 
@@ -279,11 +258,10 @@ class _Handler(BaseHTTPRequestHandler):
         if length is None:
             raise Rejected("a Content-Length is required", 411)
         try:
-            n = int(length)
+            if (n := int(length)) < 0:
+                raise ValueError
         except ValueError:
             raise Rejected(f"bad Content-Length {length!r}", 400) from None
-        if n < 0:
-            raise Rejected(f"bad Content-Length {length!r}", 400)
         if n > MAX_BODY:
             self.close_connection = True
             raise Rejected(f"body of {n} bytes is larger than {MAX_BODY}", 413)
