@@ -69,10 +69,8 @@ class Rejected(Exception):
 
 def view_of(s: DroneStatus) -> str:
     """alive / reached / unreachable / dead / lost."""
-    if s.state is DroneState.DEAD:
-        return DEAD
-    if s.state is DroneState.LOST:
-        return LOST
+    if s.state is not DroneState.ALIVE:
+        return s.state.value.lower()  # DEAD, LOST
     return {Note.REACHED: REACHED, Note.UNREACHABLE: UNREACHABLE}.get(s.note, ALIVE)
 
 
@@ -294,12 +292,9 @@ class GroundState:
         if self.over is not None:
             raise Rejected("the game is over", 409)
         match action:
-            case "pause":
-                self.paused = True
-                text = "paused: the ground station holds its phase"
-            case "resume":
-                self.paused = False
-                text = "resumed"
+            case "pause" | "resume":
+                self.paused = action == "pause"
+                text = "paused: the ground station holds its phase" if self.paused else "resumed"
             case "step":
                 self.step_requested = True
                 text = "one turn"

@@ -22,10 +22,8 @@ from .model import ALIVE, DEAD, LOST, REACHED, change_entry, drone_json, entry, 
 
 
 def _status(track) -> str:
-    if track.state == "DEAD":
-        return DEAD
-    if track.state == "LOST":
-        return LOST
+    if track.state in ("DEAD", "LOST"):
+        return track.state.lower()
     return REACHED if track.target is not None and tuple(track.pos) == tuple(track.target) else ALIVE
 
 

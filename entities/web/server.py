@@ -21,7 +21,6 @@ import json
 import logging
 import queue
 import threading
-from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import Protocol
@@ -131,11 +130,7 @@ class _Handler(BaseHTTPRequestHandler):
         """Every error as JSON, including those the base class raises (bad request line, 501...)."""
         self.request_version = "HTTP/1.0"  # a garbled request line leaves it at HTTP/0.9: no status line
         self.close_connection = True
-        try:
-            text = message or HTTPStatus(code).phrase
-        except ValueError:
-            text = message or "error"
-        self._json(code, {"error": text})
+        self._json(code, {"error": message or self.responses.get(code, ("error",))[0]})
 
     def _json(self, code: int, body: dict | str) -> None:
         data = (body if isinstance(body, str) else json.dumps(body)).encode()
@@ -247,7 +242,8 @@ class _Handler(BaseHTTPRequestHandler):
 
     # ------------------------------------------------------------------ commands
 
-    def _body(self) -> dict:
+    def _body(self, fields: set[str], hint: str) -> dict:
+        """The request's JSON object, of some of `fields` (`hint` says which to send)."""
         ctype = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
         if ctype != "application/json":
             raise Rejected("send JSON (Content-Type: application/json)", 415)
@@ -272,13 +268,12 @@ class _Handler(BaseHTTPRequestHandler):
             raise Rejected(f"the body is not JSON: {exc}", 400) from None
         if not isinstance(body, dict):
             raise Rejected("the body must be a JSON object", 400)
+        if unknown := set(body) - fields:
+            raise Rejected(f"unknown fields {sorted(unknown)}: {hint}", 400)
         return body
 
     def _target(self) -> None:
-        body = self._body()
-        unknown = set(body) - {"drone", "cell"}
-        if unknown:
-            raise Rejected(f"unknown fields {sorted(unknown)}: send drone and cell", 400)
+        body = self._body({"drone", "cell"}, "send drone and cell")
         if "drone" not in body or "cell" not in body:
             raise Rejected('send {"drone": "D01", "cell": [x, y, z]}', 400)
         if not isinstance(body["drone"], str):
@@ -287,10 +282,7 @@ class _Handler(BaseHTTPRequestHandler):
         self._json(200, self.server.backend.command("target", {"drone": body["drone"], "cell": cell}))
 
     def _control(self) -> None:
-        body = self._body()
-        unknown = set(body) - {"action", "value"}
-        if unknown:
-            raise Rejected(f"unknown fields {sorted(unknown)}: send action (and value for pace)", 400)
+        body = self._body({"action", "value"}, "send action (and value for pace)")
         action = body.get("action")
         if action not in ("pause", "resume", "step", "quit", "pace"):
             raise Rejected(f"unknown action {action!r}: use pause, resume, step, pace or quit", 400)
