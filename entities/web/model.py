@@ -83,7 +83,7 @@ _CELL_TEXT = re.compile(r"\s*\(?\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*\
 
 def parse_cell(value: object) -> Cell:
     """A cell given as ``[x, y, z]`` (three integers) or ``"x,y,z"`` / ``"x y z"``; `Rejected` (400) if
-    it is neither. Bounds are checked against the world by `GroundState.check_target`."""
+    it is neither. Bounds are checked against the world by `GroundState.set_target`."""
     if isinstance(value, str):
         m = _CELL_TEXT.match(value)
         if not m:
@@ -262,8 +262,8 @@ class GroundState:
 
     # ------------------------------------------------------------------ from the human
 
-    def check_target(self, drone: object, cell: Cell) -> str:
-        """The seed's correctForm and more: a known, alive drone and a cell inside the world, not a building's."""
+    def set_target(self, drone: object, cell: Cell) -> dict:
+        """Checked: a known, alive drone, a cell inside the world and not a building's (the seed's correctForm)."""
         if self.over is not None:
             raise Rejected("the game is over: no more targets", 409)
         if not isinstance(drone, str) or not is_drone_id(drone):
@@ -277,15 +277,11 @@ class GroundState:
             check_cell(cell, self.world.size, self.world)
         except UsageError as err:
             raise Rejected(str(err)) from None
-        return drone
-
-    def set_target(self, drone: object, cell: Cell) -> dict:
-        d = self.check_target(drone, cell)
-        self.station.want({d: cell})
+        self.station.want({drone: cell})
         self.step_requested = False
-        self._event("target", f"target of {d} set to {fmt(cell)}")
+        self._event("target", f"target of {drone} set to {fmt(cell)}")
         self.seq += 1
-        return {"ok": True, "text": f"target of {d} set to {fmt(cell)}; sent at the next GCS phase"}
+        return {"ok": True, "text": f"target of {drone} set to {fmt(cell)}; sent at the next GCS phase"}
 
     def control(self, action: object, value: object = None) -> dict:
         """pause, resume, step, quit, or pace (with `value` seconds)."""
