@@ -151,8 +151,7 @@ class _Handler(BaseHTTPRequestHandler):
     # ------------------------------------------------------------------ methods
 
     ROUTES = {
-        "/": ("GET", "_file"), "/index.html": ("GET", "_file"), "/app.js": ("GET", "_file"),
-        "/style.css": ("GET", "_file"),
+        "/": ("GET", "_file"), **{f"/{name}": ("GET", "_file") for name in STATIC},
         "/api/world": ("GET", "_world"), "/api/state": ("GET", "_state"), "/api/events": ("GET", "_events"),
         "/api/replay": ("GET", "_replay"),
         "/api/target": ("POST", "_target"), "/api/control": ("POST", "_control"),
