@@ -63,8 +63,7 @@ class Rejected(Exception):
 
     def __init__(self, text: str, status: int = 422) -> None:
         super().__init__(text)
-        self.text = text
-        self.status = status
+        self.text, self.status = text, status
 
 
 def view_of(s: DroneStatus) -> str:
@@ -165,11 +164,8 @@ class GroundState:
         self.phase: str | None = None
         self.pending_since = 0.0
         self.last_answer: float | None = None
-        self.paused = False
         self.pace = self._check_pace(pace)
-        self.step_requested = False
-        self.quit_requested = False
-        self.quit_sent = False
+        self.paused = self.step_requested = self.quit_requested = self.quit_sent = False
         self.log: deque[dict] = deque(maxlen=LOG_LIMIT)
         self.seq = 0  # bumped on every change the page should see
         self._shown = 0  # the `seq` the page was last sent
