@@ -242,8 +242,7 @@ class Ground:
         drones = list(starts)
         world = build_world(welcome.world, starts.values())
         plan = Plan.load(script, size, world) if script else Plan.parse(plan_texts, size, drones[0], world)
-        unknown = plan.drones() - set(drones)
-        if unknown:
+        if unknown := plan.drones() - set(drones):
             raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
         return cls(world, starts, plan)
 

@@ -54,9 +54,7 @@ class Backend(Protocol):
 
 def parse_address(text: str) -> tuple[str, int]:
     """``PORT``, ``HOST:PORT`` or ``[V6]:PORT`` -> (host, port); the host defaults to 127.0.0.1."""
-    host, sep, port = text.rpartition(":")
-    if not sep:
-        host, port = "127.0.0.1", text
+    host, _, port = text.rpartition(":")  # (no colon: no host)
     host = host.strip("[]") or "127.0.0.1"
     try:
         number = int(port)
