@@ -296,16 +296,13 @@ class EnvironmentProcess:
         self._unsynced = status
         self._ready, self._applied = status.turn + 1, False
         out: list[Effect] = []
-        still = []
-        for query, ask in self._waiting:
-            if ask.turn == self._ready:
-                out.append(self._answer(query, ask))
-            elif ask.turn > self._ready:
-                still.append((query, ask))
-            else:
+        waiting, self._waiting = self._waiting, []
+        for query, ask in waiting:  # taken as if they came now, but for the turns the world went past
+            if ask.turn < self._ready:
                 out += self._refuse(query, StaleTurn(f"ASK for turn {ask.turn} from {ask.sender}: the world "
                                                      f"went on to turn {self._ready}"))
-        self._waiting = still
+            else:
+                out += self.asked(query, ask)
         early, self._early = self._early, None
         if early is not None and early.turn == self._ready:
             out += self._apply(early)

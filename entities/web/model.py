@@ -195,9 +195,6 @@ class GroundState:
 
     # ------------------------------------------------------------------ helpers
 
-    def _event(self, kind: str, text: str) -> None:
-        self.log.append(entry(self.turn, kind, text))
-
     @staticmethod
     def _check_pace(value: object) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
@@ -207,8 +204,8 @@ class GroundState:
         return float(value)
 
     def note(self, kind: str, text: str) -> None:
-        """An event from outside the game's messages (connection, refusals by the coordinator...)."""
-        self._event(kind, text)
+        """An event from outside the game's messages (connection, the human's commands...)."""
+        self.log.append(entry(self.turn, kind, text))
         self.seq += 1
 
     # ------------------------------------------------------------------ from the coordinator
@@ -225,7 +222,7 @@ class GroundState:
                     self.pending_since = now
                 for d, c in self.wanted.items():
                     if before.get(d) != c:
-                        self._event("target", f"scripted target of {d}: {fmt(c)}")
+                        self.log.append(entry(self.turn, "target", f"scripted target of {d}: {fmt(c)}"))
             case Status() if msg.turn >= self.status_turn:
                 self._show_status(msg)
                 effects = self.station.receive(msg, now)
@@ -275,8 +272,7 @@ class GroundState:
             raise Rejected(str(err)) from None
         self.station.want({drone: cell})
         self.step_requested = False
-        self._event("target", f"target of {drone} set to {fmt(cell)}")
-        self.seq += 1
+        self.note("target", f"target of {drone} set to {fmt(cell)}")
         return {"ok": True, "text": f"target of {drone} set to {fmt(cell)}; sent at the next GCS phase"}
 
     def control(self, action: object, value: object = None) -> dict:
@@ -298,8 +294,7 @@ class GroundState:
                 text = "ending the game"
             case _:
                 raise Rejected(f"unknown action {action!r}: use pause, resume, step, pace or quit", 400)
-        self._event("control", text)
-        self.seq += 1
+        self.note("control", text)
         return {"ok": True, "text": text}
 
     # ------------------------------------------------------------------ the GCS phase

@@ -72,15 +72,12 @@ class LiveBackend:
         self._post = post
         self._lock = threading.Lock()
         self._closed = False
-        self._world: dict | None = None
-
-    def set_world(self, world: dict) -> None:
-        self._world = world
+        self.static_world: dict | None = None  # set once admitted
 
     def world(self) -> dict:
-        if self._world is None:
+        if self.static_world is None:
             raise Rejected("the ground station is still connecting", 503)
-        return self._world
+        return self.static_world
 
     def replay(self) -> dict:
         raise Rejected("this ground station is live: GET /api/state or /api/events", 404)
@@ -139,7 +136,7 @@ def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[st
                 member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)
                 ground = Ground.from_welcome(member.welcome, args.targets, args.script)
                 state = GroundState(ground, pace=pace, title=f"root {keys.root}", intro=member.welcome.text)
-                backend.set_world(world_json(ground.world, mode="live", title=state.title))
+                backend.static_world = world_json(ground.world, mode="live", title=state.title)
                 hub.publish(state.snapshot())
                 server.start()
                 print(f"web ground station: {server.url} ({state.describe()})", flush=True)
