@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import zenoh
 
@@ -37,7 +37,9 @@ from dronesim.transport import (
 from schema import Connect, Keys, Over, Phase, Role, Status, Turn, UsageError
 
 from .gcs import Console, Effect, End, Ground, Send, Show, Station
-from .web.model import GroundState
+
+if TYPE_CHECKING:  # (the terminal's ground station does not load the web page's)
+    from .web.model import GroundState
 
 
 def listen(session: zenoh.Session, keys: Keys, logger: logging.Logger, *, every_phase: bool = False) -> Inbox:
