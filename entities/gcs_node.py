@@ -166,7 +166,7 @@ def cli(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "GCS")
 
-    def run() -> int:
+    def run() -> object:
         interactive = not args.targets and not args.script and not args.scenario
         if args.scenario:
             from dronesim.scenario import Scenario
@@ -174,10 +174,9 @@ def cli(argv: list[str] | None = None) -> int:
             args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
         if wants_web(args):  # the browser ground station (entities/web/, docs/web-gcs.md)
             return run_web(args, logger)
-        main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets, script=args.script,
-             interactive=interactive, quiet=args.quiet, draw=not args.no_draw, connect_timeout=args.connect_timeout,
-             grace=args.grace)
-        return 0
+        return main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets,
+                    script=args.script, interactive=interactive, quiet=args.quiet, draw=not args.no_draw,
+                    connect_timeout=args.connect_timeout, grace=args.grace)
 
     try:
         return until_stopped(run, logger)  # Ctrl-C, SIGTERM: wherever the main thread waits (a prompt too)
