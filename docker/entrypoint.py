@@ -43,10 +43,6 @@ UNKNOWN = re.compile(r"connection refused: (unknown drone .*)")
 MAX_ID = 65535
 
 
-def state_path() -> Path:
-    return Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
-
-
 def flags(argv: list[str]) -> argparse.Namespace:
     """The few flags the entrypoint and the health check need; the rest is dronesim's business."""
     p = argparse.ArgumentParser(add_help=False)
@@ -67,7 +63,7 @@ def drone_entity(args: argparse.Namespace) -> str | None:
 
 
 def write_state(role: str, entity: str | None, argv: list[str], pid: int) -> None:
-    path = state_path()
+    path = Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps({"role": role, "entity": entity, "argv": argv, "pid": pid}))

@@ -29,10 +29,6 @@ from pathlib import Path
 TIMEOUT_S = float(os.environ.get("DRONESIM_HEALTH_TIMEOUT", "5"))
 
 
-def state_path() -> Path:
-    return Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
-
-
 def zenoh_args(argv: list[str]) -> argparse.Namespace:
     """The entity's Zenoh flags, parsed by dronesim's own flag definitions."""
     from dronesim.transport import add_zenoh_args
@@ -62,11 +58,6 @@ def connect_endpoints(conf) -> list[str]:
     return [str(e) for e in value or []]
 
 
-def local(endpoint: str) -> str:
-    """A listen endpoint as seen from inside the container (tcp/0.0.0.0:7447 -> tcp/127.0.0.1:7447)."""
-    return endpoint.replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
-
-
 def check(state: dict) -> tuple[bool, str]:
     import zenoh
 
@@ -76,7 +67,9 @@ def check(state: dict) -> tuple[bool, str]:
     args = zenoh_args(list(state.get("argv", [])))
     role, entity = state.get("role"), state.get("entity")
     if role == "router":
-        endpoints = [local(e) for e in args.listen] or ["tcp/127.0.0.1:7447"]
+        # its listen endpoints as seen from inside the container (tcp/0.0.0.0:7447 -> tcp/127.0.0.1:7447)
+        endpoints = [e.replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]") for e in args.listen]
+        endpoints = endpoints or ["tcp/127.0.0.1:7447"]
         try:
             with zenoh.open(probe_config(args, endpoints)):
                 return True, f"router accepts sessions on {', '.join(endpoints)}"
@@ -103,7 +96,7 @@ def check(state: dict) -> tuple[bool, str]:
 
 
 def main() -> int:
-    path = state_path()
+    path = Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
     try:
         state = json.loads(path.read_text())
     except FileNotFoundError:

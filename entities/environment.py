@@ -3,9 +3,7 @@
 `Environment` is its state, the static world plus where each drone is: `answer` is the seed's
 whatInside for an ASK; `apply` is moveDrone, returning the changed cells (the UPD); `sync` sets the
 drones from the observer's STATUS at the end of a turn (the dead and lost are removed from the grid).
-
-`EnvironmentProcess` is its protocol, driven by messages and returning effects, which the Zenoh
-adapter (entities/env_node.py) carries out.
+`EnvironmentProcess` is its protocol.
 """
 
 from __future__ import annotations
@@ -212,11 +210,10 @@ Effect = Reply | Fail | Report | Follow | Refusal
 
 
 class EnvironmentProcess:
-    """The environment process's protocol (the seed's ENV), a pure state machine: no network, no clock.
-    Its Zenoh adapter (entities/env_node.py) feeds it, one at a time, the queries it serves (`asked`:
-    ASK and MAPREQ, each with an opaque handle to answer it by), the coordinator's messages it hears
-    (`receive`: STATUS, TURN of the ENV phase, OVER) and whether anyone listens to its UPD (`listened`),
-    and carries out the effects they return.
+    """The environment's protocol. Its Zenoh adapter (entities/env_node.py) feeds it, one at a time, the
+    queries it serves (`asked`: ASK and MAPREQ, each with an opaque handle to answer it by), the
+    coordinator's messages it hears (`receive`: STATUS, TURN of the ENV phase, OVER) and whether anyone
+    listens to its UPD (`listened`), and carries out the effects they return.
 
     It answers an ASK from the world as it stands at the start of the ASK's turn: an ASK for turn t once
     STATUS(t - 1) has been taken; one that arrives earlier (messages take different routes) waits for
@@ -299,16 +296,13 @@ class EnvironmentProcess:
         self._unsynced = status
         self._ready, self._applied = status.turn + 1, False
         out: list[Effect] = []
-        still = []
-        for query, ask in self._waiting:
-            if ask.turn == self._ready:
-                out.append(self._answer(query, ask))
-            elif ask.turn > self._ready:
-                still.append((query, ask))
-            else:
+        waiting, self._waiting = self._waiting, []
+        for query, ask in waiting:  # taken as if they came now, but for the turns the world went past
+            if ask.turn < self._ready:
                 out += self._refuse(query, StaleTurn(f"ASK for turn {ask.turn} from {ask.sender}: the world "
                                                      f"went on to turn {self._ready}"))
-        self._waiting = still
+            else:
+                out += self.asked(query, ask)
         early, self._early = self._early, None
         if early is not None and early.turn == self._ready:
             out += self._apply(early)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import bisect
 import pathlib
 import re
+from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass
 
@@ -48,12 +49,15 @@ def correct_form(text: str, size: Cell, world: World | None = None) -> Cell:
     """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed) must name a cell inside the world (of `size`), and,
     given the `world`, not a building cell (no drone can get there: a seed drone would wander to the turn
     limit looking for a way in)."""
-    parts = [p.strip() for p in text.replace(" ", ",").split(",") if p.strip()]
     try:
-        x, y, z = (int(p) for p in parts)
+        x, y, z = (int(p) for p in text.replace(" ", ",").split(",") if p.strip())
     except ValueError:
         raise UsageError(f"{text!r} is not x,y,z") from None
-    cell = (x, y, z)
+    return check_cell((x, y, z), size, world)
+
+
+def check_cell(cell: Cell, size: Cell, world: World | None = None) -> Cell:
+    """`cell` if it is inside the world (of `size`) and, given the `world`, not a building cell."""
     if not all(0 <= c < s for c, s in zip(cell, size)):
         raise UsageError(f"{cell} is outside the world: 0 <= x < {size[0]}, 0 <= y < {size[1]}, 0 <= z < {size[2]}")
     if world is not None and world.is_building(cell):
@@ -90,20 +94,19 @@ def _plan_items(texts: Iterable[str], size: Cell, default_drone: str,
     """(turn, drone, cell) of each target item in `texts`, in the order written; UsageError on a bad one
     (`correct_form`'s checks, with the `world`'s buildings if given)."""
     for text in texts:
-        for chunk in text.split(";"):
-            if not chunk.strip() or chunk.strip().startswith("#"):
+        for item in map(str.strip, text.split(";")):
+            if not item or item.startswith("#"):
                 continue
-            m = _ITEM.match(chunk)
-            if not m:
-                raise UsageError(f"bad target {chunk.strip()!r}: expected [Dnn=]x,y,z[@turn]")
-            turn = int(m["turn"] or 1)
-            if turn < 1:
-                raise UsageError(f"bad target {chunk.strip()!r}: turns start at 1")
+            m = _ITEM.match(item)
             try:
-                cell = correct_form(m["cell"], size, world)
+                if not m:
+                    raise UsageError("expected [Dnn=]x,y,z[@turn]")
+                turn = int(m["turn"] or 1)
+                if turn < 1:
+                    raise UsageError("turns start at 1")
+                yield turn, m["drone"] or default_drone, correct_form(m["cell"], size, world)
             except UsageError as err:
-                raise UsageError(f"bad target {chunk.strip()!r}: {err}") from None
-            yield turn, m["drone"] or default_drone, cell
+                raise UsageError(f"bad target {item!r}: {err}") from None
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,13 +176,9 @@ def describe(s: DroneStatus) -> str:
 
 
 def format_status(status: Status, limit: int = 16) -> str:
-    lines = [f"turn {status.turn}:"]
-    shown = status.drones[:limit]
-    lines += [f"  {describe(s)}" for s in shown]
+    lines = [f"turn {status.turn}:", *(f"  {describe(s)}" for s in status.drones[:limit])]
     if len(status.drones) > limit:
-        counts: dict[str, int] = {}
-        for s in status.drones:
-            counts[s.state.value] = counts.get(s.state.value, 0) + 1
+        counts = dict(Counter(s.state.value for s in status.drones))
         lines.append(f"  ... {len(status.drones) - limit} more; totals: {counts}")
     return "\n".join(lines)
 
@@ -195,11 +194,8 @@ class Tracks:
         self._moves: list[tuple[np.ndarray, np.ndarray]] = []  # (drone numbers, their cells) per STATUS
 
     def add(self, status: Status) -> None:
-        """Extend the paths with `status` (read from its columns: after the first STATUS, only the drones
-        that moved since the last one are kept)."""
         last, self.last = self.last, status
-        table = status.drones
-        numbers, pos = table.numbers, table.column("pos")
+        numbers, pos = status.drones.numbers, status.drones.column("pos")
         if last is not None and np.array_equal(last.drones.numbers, numbers):
             moved = np.flatnonzero((pos != last.drones.column("pos")).any(axis=1))
             if len(moved):
@@ -221,9 +217,7 @@ class Tracks:
 
 def targets_of(status: Status) -> Mapping[str, Cell]:
     """Each drone's target in force, of those that have one (read from the STATUS's columns)."""
-    table = status.drones
-    targets = table.column("target")
-    ids = table.ids()
+    targets, ids = status.drones.column("target"), status.drones.ids()
     has = np.flatnonzero(targets[:, 0] >= 0)
     return {ids[i]: (x, y, z) for i, (x, y, z) in zip(has.tolist(), targets[has].tolist())}
 
@@ -248,8 +242,7 @@ class Ground:
         drones = list(starts)
         world = build_world(welcome.world, starts.values())
         plan = Plan.load(script, size, world) if script else Plan.parse(plan_texts, size, drones[0], world)
-        unknown = plan.drones() - set(drones)
-        if unknown:
+        if unknown := plan.drones() - set(drones):
             raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
         return cls(world, starts, plan)
 
@@ -268,30 +261,25 @@ class Console:
         new: dict[str, Cell] = {}
         while True:
             missing = [d for d in self.drones if d not in current and d not in new and d not in gone]
-            if missing:
-                prompt = f"turn {turn}: target for {missing[0]} (x,y,z): "
-            else:
-                prompt = f"turn {turn}: new target ([Dnn] x,y,z; ...), Enter to keep, q to quit: "
             try:
-                line = self.read(prompt).strip()
+                line = self.read(f"turn {turn}: target for {missing[0]} (x,y,z): " if missing else
+                                 f"turn {turn}: new target ([Dnn] x,y,z; ...), Enter to keep, q to quit: ").strip()
             except EOFError:
                 return new, Intent.QUIT
             if line.lower() in ("q", "quit", "exit"):
                 return new, Intent.QUIT
+            if not line and missing:
+                self.write(f"a first target is required for {missing[0]}")
+                continue
             if not line:
-                if missing:
-                    self.write(f"a first target is required for {missing[0]}")
-                    continue
                 return new, Intent.CONTINUE
             given: dict[str, Cell] = {}
             try:  # all or nothing: one bad item rejects the line
-                for part in line.split(";"):
-                    part = part.strip()
+                for part in map(str.strip, line.split(";")):
                     if missing and not part.startswith("D"):
                         part = f"{missing[0]} {part}"
                     given.update(parse_command(part, self.world.size, self.drones, self.world))
-                    missing = [d for d in self.drones
-                               if d not in current and d not in new and d not in given and d not in gone]
+                    missing = [d for d in missing if d not in given]
             except UsageError as err:
                 self.write(f"invalid: {err}")
                 continue

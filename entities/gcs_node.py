@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any, Protocol, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import zenoh
 
@@ -34,18 +34,12 @@ from dronesim.transport import (
     setup_logging,
     zenoh_config,
 )
-from schema import Connect, Keys, Message, Over, Phase, Role, Status, Turn, UsageError, Welcome
+from schema import Connect, Keys, Over, Phase, Role, Status, Turn, UsageError
 
 from .gcs import Console, Effect, End, Ground, Send, Show, Station
 
-
-class Core(Protocol):
-    """What `play` drives: a `Station`, or the web page's `GroundState` around one."""
-
-    def receive(self, msg: Message, now: float) -> Sequence[object]: ...
-    def admitted(self, welcome: Welcome) -> Sequence[object]: ...
-    def wake(self, now: float) -> float | None: ...
-    def tick(self, now: float) -> Sequence[object]: ...
+if TYPE_CHECKING:  # (the terminal's ground station does not load the web page's)
+    from .web.model import GroundState
 
 
 def listen(session: zenoh.Session, keys: Keys, logger: logging.Logger, *, every_phase: bool = False) -> Inbox:
@@ -78,7 +72,7 @@ def publisher(out: Outbox, keys: Keys, logger: logging.Logger,
     return perform
 
 
-def play(core: Core, inbox: Inbox, member: Membership, perform: Callable[[Any], None],
+def play(core: Station | GroundState, inbox: Inbox, member: Membership, perform: Callable[[Any], None],
          other: Callable[[object], None] = lambda event: None) -> Over:
     """Feed `core` every event, on this thread, until it ends; `other` takes the events posted by this
     process (the web page's commands). Returns the game's OVER."""
@@ -172,7 +166,7 @@ def cli(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "GCS")
 
-    def run() -> int:
+    def run() -> object:
         interactive = not args.targets and not args.script and not args.scenario
         if args.scenario:
             from dronesim.scenario import Scenario
@@ -180,10 +174,9 @@ def cli(argv: list[str] | None = None) -> int:
             args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
         if wants_web(args):  # the browser ground station (entities/web/, docs/web-gcs.md)
             return run_web(args, logger)
-        main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets, script=args.script,
-             interactive=interactive, quiet=args.quiet, draw=not args.no_draw, connect_timeout=args.connect_timeout,
-             grace=args.grace)
-        return 0
+        return main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets,
+                    script=args.script, interactive=interactive, quiet=args.quiet, draw=not args.no_draw,
+                    connect_timeout=args.connect_timeout, grace=args.grace)
 
     try:
         return until_stopped(run, logger)  # Ctrl-C, SIGTERM: wherever the main thread waits (a prompt too)

@@ -36,7 +36,7 @@ from schema import (
     is_drone_id,
 )
 
-from ..gcs import Effect, Ground, Station
+from ..gcs import Effect, Ground, Station, check_cell
 from ..world import World
 
 #: How the page names a drone's state.
@@ -63,16 +63,13 @@ class Rejected(Exception):
 
     def __init__(self, text: str, status: int = 422) -> None:
         super().__init__(text)
-        self.text = text
-        self.status = status
+        self.text, self.status = text, status
 
 
 def view_of(s: DroneStatus) -> str:
     """alive / reached / unreachable / dead / lost."""
-    if s.state is DroneState.DEAD:
-        return DEAD
-    if s.state is DroneState.LOST:
-        return LOST
+    if s.state is not DroneState.ALIVE:
+        return s.state.value.lower()  # DEAD, LOST
     return {Note.REACHED: REACHED, Note.UNREACHABLE: UNREACHABLE}.get(s.note, ALIVE)
 
 
@@ -85,7 +82,7 @@ _CELL_TEXT = re.compile(r"\s*\(?\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*\
 
 def parse_cell(value: object) -> Cell:
     """A cell given as ``[x, y, z]`` (three integers) or ``"x,y,z"`` / ``"x y z"``; `Rejected` (400) if
-    it is neither. Bounds are checked against the world by `GroundState.check_target`."""
+    it is neither. Bounds are checked against the world by `GroundState.set_target`."""
     if isinstance(value, str):
         m = _CELL_TEXT.match(value)
         if not m:
@@ -98,13 +95,40 @@ def parse_cell(value: object) -> Cell:
 
 def world_json(world: World, *, mode: str, title: str = "") -> dict:
     """The static world for the page: size and, per floor z, one string per row x ('#' building, '.' empty)."""
-    nx, ny, nz = world.size
-    floors = []
-    for z in range(nz):
-        layer = world.grid[:, :, z]
-        floors.append(["".join("#" if b else "." for b in row) for row in layer.tolist()])
+    floors = [["".join("#" if b else "." for b in row) for row in world.grid[:, :, z].tolist()]
+              for z in range(world.size[2])]
     return {"mode": mode, "title": title, "size": list(world.size), "floors": floors,
             "building_cells": int(world.grid.sum())}
+
+
+def drone_json(drone: str, pos: Cell, status: str, cause: Cause, target: Cell | None) -> dict:
+    """A drone as the page shows it, live or replayed."""
+    return {"id": drone, "pos": list(pos), "status": status,
+            "cause": None if cause is Cause.NONE else cause.value.lower(), "cause_text": CAUSE_TEXT.get(cause, ""),
+            "target": None if target is None else list(target)}
+
+
+def entry(turn: int, kind: str, text: str) -> dict:
+    """A line of the page's log."""
+    return {"turn": turn, "kind": kind, "text": text}
+
+
+def change_entry(turn: int, drone: str, status: str, cause: Cause, pos: Cell, target: Cell | None) -> dict:
+    """The log's line for a drone that became `status` at `pos`."""
+    where = fmt(pos)
+    if status == DEAD:
+        return entry(turn, "death", f"{drone} died at {where}: {CAUSE_TEXT.get(cause, cause.value)}")
+    if status == LOST:
+        return entry(turn, "lost", f"{drone} is LOST at {where}: {CAUSE_TEXT[Cause.LOST]}")
+    if status == REACHED:
+        return entry(turn, "reached", f"{drone} reached its target {where}")
+    if status == UNREACHABLE:
+        return entry(turn, "unreachable", f"{drone} reports its target {fmt(target)} unreachable; hovering at {where}")
+    return entry(turn, "info", f"{drone} is on its way again from {where}")
+
+
+def over_entry(turn: int, reason: str, text: str) -> dict:
+    return entry(turn, "over", f"GAME OVER at turn {turn}: {reason}" + (f" - {text}" if text else ""))
 
 
 @dataclass(slots=True)
@@ -140,11 +164,8 @@ class GroundState:
         self.phase: str | None = None
         self.pending_since = 0.0
         self.last_answer: float | None = None
-        self.paused = False
         self.pace = self._check_pace(pace)
-        self.step_requested = False
-        self.quit_requested = False
-        self.quit_sent = False
+        self.paused = self.step_requested = self.quit_requested = self.quit_sent = False
         self.log: deque[dict] = deque(maxlen=LOG_LIMIT)
         self.seq = 0  # bumped on every change the page should see
         self._shown = 0  # the `seq` the page was last sent
@@ -158,7 +179,6 @@ class GroundState:
 
     @property
     def wanted(self) -> dict[str, Cell]:
-        """The targets this GCS wants (sent when they differ from those in force)."""
         return self.station.wanted
 
     @property
@@ -175,12 +195,6 @@ class GroundState:
 
     # ------------------------------------------------------------------ helpers
 
-    def _event(self, kind: str, text: str, turn: int | None = None) -> None:
-        self.log.append({"turn": self.turn if turn is None else turn, "kind": kind, "text": text})
-
-    def _changed(self) -> None:
-        self.seq += 1
-
     @staticmethod
     def _check_pace(value: object) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
@@ -190,9 +204,9 @@ class GroundState:
         return float(value)
 
     def note(self, kind: str, text: str) -> None:
-        """An event from outside the game's messages (connection, refusals by the coordinator...)."""
-        self._event(kind, text)
-        self._changed()
+        """An event from outside the game's messages (connection, the human's commands...)."""
+        self.log.append(entry(self.turn, kind, text))
+        self.seq += 1
 
     # ------------------------------------------------------------------ from the coordinator
 
@@ -208,17 +222,16 @@ class GroundState:
                     self.pending_since = now
                 for d, c in self.wanted.items():
                     if before.get(d) != c:
-                        self._event("target", f"scripted target of {d}: {fmt(c)}")
+                        self.log.append(entry(self.turn, "target", f"scripted target of {d}: {fmt(c)}"))
             case Status() if msg.turn >= self.status_turn:
                 self._show_status(msg)
                 effects = self.station.receive(msg, now)
             case Over() if self.over is None:
                 effects = self.station.receive(msg, now)
-                self._event("over", f"GAME OVER at turn {msg.turn}: {msg.reason.value}"
-                                    + (f" - {msg.text}" if msg.text else ""), msg.turn)
+                self.log.append(over_entry(msg.turn, msg.reason.value, msg.text))
             case _:
                 return []
-        self._changed()
+        self.seq += 1
         return effects
 
     def admitted(self, welcome: Welcome) -> list[Effect]:
@@ -233,31 +246,17 @@ class GroundState:
                 view = self.drones[s.drone] = DroneView(pos=s.pos, trail=[s.pos])
             was = view.status
             view.status, view.cause, view.target = view_of(s), s.cause, s.target
-            if view.pos != s.pos:
+            if view.pos != s.pos:  # (the trail ends where the drone is)
                 view.pos = s.pos
-                if not view.trail or view.trail[-1] != s.pos:
-                    view.trail.append(s.pos)
-                    del view.trail[:-TRAIL_LIMIT]
-            if view.status != was:
-                self._transition(s.drone, view, msg.turn)
-
-    def _transition(self, drone: str, view: DroneView, turn: int) -> None:
-        where = fmt(view.pos)
-        match view.status:
-            case "dead":
-                self._event("death", f"{drone} died at {where}: {CAUSE_TEXT.get(view.cause, view.cause.value)}", turn)
-            case "lost":
-                self._event("lost", f"{drone} is LOST at {where}: {CAUSE_TEXT[Cause.LOST]}", turn)
-            case "reached":
-                self._event("reached", f"{drone} reached its target {where}", turn)
-            case "unreachable":
-                self._event("unreachable", f"{drone} reports its target {fmt(view.target)} unreachable; "
-                                           f"hovering at {where}", turn)
+                view.trail.append(s.pos)
+                del view.trail[:-TRAIL_LIMIT]
+            if view.status not in (was, ALIVE):
+                self.log.append(change_entry(msg.turn, s.drone, view.status, view.cause, view.pos, view.target))
 
     # ------------------------------------------------------------------ from the human
 
-    def check_target(self, drone: object, cell: Cell) -> str:
-        """The seed's correctForm and more: a known, alive drone and a cell inside the world, not a building's."""
+    def set_target(self, drone: object, cell: Cell) -> dict:
+        """Checked: a known, alive drone, a cell inside the world and not a building's (the seed's correctForm)."""
         if self.over is not None:
             raise Rejected("the game is over: no more targets", 409)
         if not isinstance(drone, str) or not is_drone_id(drone):
@@ -267,32 +266,23 @@ class GroundState:
             raise Rejected(f"unknown drone {drone}: this game flies {', '.join(self.drones)}")
         if not view.alive:
             raise Rejected(f"{drone} is {view.status}: it takes no more targets")
-        nx, ny, nz = self.world.size
-        if not self.world.contains(cell):
-            raise Rejected(f"{fmt(cell)} is outside the world: 0 <= x < {nx}, 0 <= y < {ny}, 0 <= z < {nz}")
-        if self.world.is_building(cell):
-            raise Rejected(f"{fmt(cell)} is inside a building: no drone can get there")
-        return drone
-
-    def set_target(self, drone: object, cell: Cell) -> dict:
-        d = self.check_target(drone, cell)
-        self.station.want({d: cell})
+        try:
+            check_cell(cell, self.world.size, self.world)
+        except UsageError as err:
+            raise Rejected(str(err)) from None
+        self.station.want({drone: cell})
         self.step_requested = False
-        self._event("target", f"target of {d} set to {fmt(cell)}")
-        self._changed()
-        return {"ok": True, "text": f"target of {d} set to {fmt(cell)}; sent at the next GCS phase"}
+        self.note("target", f"target of {drone} set to {fmt(cell)}")
+        return {"ok": True, "text": f"target of {drone} set to {fmt(cell)}; sent at the next GCS phase"}
 
     def control(self, action: object, value: object = None) -> dict:
         """pause, resume, step, quit, or pace (with `value` seconds)."""
         if self.over is not None:
             raise Rejected("the game is over", 409)
         match action:
-            case "pause":
-                self.paused = True
-                text = "paused: the ground station holds its phase"
-            case "resume":
-                self.paused = False
-                text = "resumed"
+            case "pause" | "resume":
+                self.paused = action == "pause"
+                text = "paused: the ground station holds its phase" if self.paused else "resumed"
             case "step":
                 self.step_requested = True
                 text = "one turn"
@@ -304,8 +294,7 @@ class GroundState:
                 text = "ending the game"
             case _:
                 raise Rejected(f"unknown action {action!r}: use pause, resume, step, pace or quit", 400)
-        self._event("control", text)
-        self._changed()
+        self.note("control", text)
         return {"ok": True, "text": text}
 
     # ------------------------------------------------------------------ the GCS phase
@@ -315,13 +304,8 @@ class GroundState:
         unreachable), or a scripted target is still to come."""
         if self.pending is not None and self.station.plan.last_turn >= self.pending:
             return True
-        for d, cell in self.wanted.items():
-            view = self.drones.get(d)
-            if view is None or not view.alive:
-                continue
-            if view.target != cell or view.status == ALIVE:
-                return True
-        return False
+        views = ((self.drones.get(d), cell) for d, cell in self.wanted.items())
+        return any(v is not None and v.alive and (v.target != cell or v.status == ALIVE) for v, cell in views)
 
     def waiting(self) -> tuple[str, str]:
         """(code, text) of what the game is waiting for, for the page."""
@@ -349,9 +333,7 @@ class GroundState:
             return 0.0
         if self.paused or not self.busy():
             return None
-        wait = 0.0
-        if self.last_answer is not None:
-            wait = self.last_answer + self.pace - now
+        wait = 0.0 if self.last_answer is None else self.last_answer + self.pace - now
         if self.status_turn < self.pending - 1:  # its STATUS is on the way (another key): decide on it
             wait = max(wait, self.pending_since + STATUS_GRACE - now)
         return max(0.0, wait)
@@ -373,29 +355,17 @@ class GroundState:
     def answer(self, now: float) -> list[Effect]:
         """Answer the pending phase (call when `due` says 0): the DONE to send."""
         assert self.pending is not None
-        intent = Intent.QUIT if self.quit_requested else Intent.CONTINUE
-        self.last_answer = now
-        self.step_requested = False
-        if intent is Intent.QUIT:
-            self.quit_sent = True
-        self._changed()
-        return self.station.answer(self.pending, intent)
+        self.last_answer, self.step_requested, self.quit_sent = now, False, self.quit_requested
+        self.seq += 1
+        return self.station.answer(self.pending, Intent.QUIT if self.quit_requested else Intent.CONTINUE)
 
     # ------------------------------------------------------------------ for the page
 
     def snapshot(self) -> dict:
         code, text = self.waiting()
-        drones = []
-        for d, v in self.drones.items():
-            wanted = self.wanted.get(d)
-            drones.append({
-                "id": d, "pos": list(v.pos), "status": v.status,
-                "cause": None if v.cause is Cause.NONE else v.cause.value.lower(),
-                "cause_text": CAUSE_TEXT.get(v.cause, "") if v.cause is not Cause.NONE else "",
-                "target": None if v.target is None else list(v.target),
-                "wanted": None if wanted is None else list(wanted),
-                "trail": [list(c) for c in v.trail],
-            })
+        drones = [{**drone_json(d, v.pos, v.status, v.cause, v.target),
+                   "wanted": None if (wanted := self.wanted.get(d)) is None else list(wanted),
+                   "trail": [list(c) for c in v.trail]} for d, v in self.drones.items()]
         over = None if self.over is None else {"turn": self.over.turn, "reason": self.over.reason.value,
                                                "text": self.over.text}
         return {

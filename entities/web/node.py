@@ -72,15 +72,12 @@ class LiveBackend:
         self._post = post
         self._lock = threading.Lock()
         self._closed = False
-        self._world: dict | None = None
-
-    def set_world(self, world: dict) -> None:
-        self._world = world
+        self.static_world: dict | None = None  # set once admitted
 
     def world(self) -> dict:
-        if self._world is None:
+        if self.static_world is None:
             raise Rejected("the ground station is still connecting", 503)
-        return self._world
+        return self.static_world
 
     def replay(self) -> dict:
         raise Rejected("this ground station is live: GET /api/state or /api/events", 404)
@@ -107,8 +104,9 @@ class LiveBackend:
 
 def carry_out(state: GroundState, cmd: object) -> None:
     """Carry out a command posted by an HTTP thread (anything else in the queue is a bug: logged)."""
+    log = logging.getLogger("dronesim.GCS")
     if not isinstance(cmd, Command):
-        logging.getLogger("dronesim.GCS").error("unexpected event %r", cmd)
+        log.error("unexpected event %r", cmd)
         return
     try:
         if cmd.action == "target":
@@ -118,7 +116,7 @@ def carry_out(state: GroundState, cmd: object) -> None:
     except Rejected as err:
         cmd.reply.put(err)
     except Exception as exc:  # a bug must not leave the page waiting, nor stop the game
-        logging.getLogger("dronesim.GCS").exception("command %s failed", cmd.action)
+        log.exception("command %s failed", cmd.action)
         cmd.reply.put(Rejected(f"internal error: {exc}", 500))
     else:
         cmd.reply.put(result)
@@ -127,20 +125,18 @@ def carry_out(state: GroundState, cmd: object) -> None:
 # --------------------------------------------------------------------------- live mode: the loop
 
 
-def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address: tuple[str, int],
-             plan_texts: list[str], script: str | None, pace: float, linger: float,
-             connect_timeout: float, grace: float) -> Over:
-    hub = Hub()
+def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[str, int]) -> Over:
+    conf, keys, pace, hub = zenoh_config(args), Keys(args.root), check_pace_arg(args.pace), Hub()
     with zenoh.open(conf) as session:
         inbox = listen(session, keys, logger, every_phase=True)
         backend = LiveBackend(inbox.post)
         server = WebServer(address, backend, hub, logger)  # binds now: a taken port fails before admission
         try:
             with waking(partial(inbox.post, None)):  # a signal ends any wait (a phase held for the human)
-                member = join(session, inbox, logger, connect_timeout=connect_timeout, grace=grace)
-                ground = Ground.from_welcome(member.welcome, plan_texts, script)
+                member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)
+                ground = Ground.from_welcome(member.welcome, args.targets, args.script)
                 state = GroundState(ground, pace=pace, title=f"root {keys.root}", intro=member.welcome.text)
-                backend.set_world(world_json(ground.world, mode="live", title=state.title))
+                backend.static_world = world_json(ground.world, mode="live", title=state.title)
                 hub.publish(state.snapshot())
                 server.start()
                 print(f"web ground station: {server.url} ({state.describe()})", flush=True)
@@ -160,9 +156,9 @@ def run_live(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, address:
             raise
     print(state.station.report(draw=False), flush=True)
     try:
-        if linger > 0:
-            print(f"web ground station: serving the final state on {server.url} for {linger:g} s", flush=True)
-            threading.Event().wait(linger)
+        if args.linger > 0:
+            print(f"web ground station: serving the final state on {server.url} for {args.linger:g} s", flush=True)
+            threading.Event().wait(args.linger)
     finally:
         server.stop()
     return over
@@ -216,9 +212,7 @@ def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
     if args.replay is not None:
         run_replay(args.replay, address=address, linger=args.linger, logger=logger)
         return 0
-    run_live(zenoh_config(args), keys=Keys(args.root), logger=logger, address=address, plan_texts=args.targets,
-             script=args.script, pace=check_pace_arg(args.pace), linger=args.linger,
-             connect_timeout=args.connect_timeout, grace=args.grace)
+    run_live(args, logger, address)
     return 0
 
 

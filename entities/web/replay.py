@@ -18,14 +18,12 @@ from schema import Cause, UsageError
 
 from ..environment import build_world
 from ..world import World
-from .model import ALIVE, CAUSE_TEXT, DEAD, LOST, REACHED, fmt, world_json
+from .model import ALIVE, DEAD, LOST, REACHED, change_entry, drone_json, entry, fmt, over_entry, world_json
 
 
 def _status(track) -> str:
-    if track.state == "DEAD":
-        return DEAD
-    if track.state == "LOST":
-        return LOST
+    if track.state in ("DEAD", "LOST"):
+        return track.state.lower()
     return REACHED if track.target is not None and tuple(track.pos) == tuple(track.target) else ALIVE
 
 
@@ -54,51 +52,31 @@ class Replay:
         turns = [r for r in records if r.get("record") == "turn"]
         try:
             frames = []
-            before: dict[str, tuple[str, object]] = {}
+            before: dict[str, str] = {}
             for k, until in enumerate([0, *(r["turn"] for r in turns)]):
                 tr, _ = tracks(self.config, records, until=until)
-                events = []
-                record = turns[k - 1] if k else None
-                if record is not None:
-                    for d, p in sorted(record.get("targets", {}).items()):
-                        events.append({"turn": until, "kind": "target", "text": f"target of {d} set to {fmt(p)}"})
-                    if record.get("hovered"):
-                        events.append({"turn": until, "kind": "info",
-                                       "text": f"no move in time from {', '.join(record['hovered'])}: hovering"})
+                record = turns[k - 1] if k else {}
+                events = [entry(until, "target", f"target of {d} set to {fmt(p)}")
+                          for d, p in sorted(record.get("targets", {}).items())]
+                if hovered := record.get("hovered"):
+                    events.append(entry(until, "info", f"no move in time from {', '.join(hovered)}: hovering"))
                 drones = []
                 for d, t in tr.items():
                     status = _status(t)
                     cause = _cause(t.cause) if status in (DEAD, LOST) else Cause.NONE
-                    if k and before.get(d, (ALIVE, None))[0] != status:
-                        events.append(self._event(d, status, cause, t, until))
-                    before[d] = (status, t.target)
-                    drones.append({"id": d, "pos": list(t.pos), "status": status,
-                                   "cause": None if cause is Cause.NONE else cause.value.lower(),
-                                   "cause_text": CAUSE_TEXT.get(cause, ""),
-                                   "target": None if t.target is None else list(t.target),
+                    if k and before.get(d, ALIVE) != status:
+                        events.append(change_entry(until, d, status, cause, t.pos, t.target))
+                    before[d] = status
+                    drones.append({**drone_json(d, t.pos, status, cause, t.target),
                                    "autopilot": self.autopilots.get(d, "")})
-                if record is not None and record.get("intent") == "QUIT":
-                    events.append({"turn": until, "kind": "control", "text": "the ground station ended the game"})
+                if record.get("intent") == "QUIT":
+                    events.append(entry(until, "control", "the ground station ended the game"))
                 frames.append({"turn": until, "drones": drones, "events": events})
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise UsageError(f"{self.path}: bad journal record: {exc!r}") from None
         if self.over is not None:
-            text = f"GAME OVER at turn {self.over['turn']}: {self.over['reason']}"
-            if self.over["text"]:
-                text += f" - {self.over['text']}"
-            frames[-1]["events"].append({"turn": self.over["turn"], "kind": "over", "text": text})
+            frames[-1]["events"].append(over_entry(self.over["turn"], self.over["reason"], self.over["text"]))
         return frames
-
-    @staticmethod
-    def _event(d: str, status: str, cause: Cause, t, turn: int) -> dict:
-        where = fmt(t.pos)
-        if status == DEAD:
-            return {"turn": turn, "kind": "death", "text": f"{d} died at {where}: {CAUSE_TEXT.get(cause, cause.value)}"}
-        if status == LOST:
-            return {"turn": turn, "kind": "lost", "text": f"{d} is LOST at {where}: {CAUSE_TEXT[Cause.LOST]}"}
-        if status == REACHED:
-            return {"turn": turn, "kind": "reached", "text": f"{d} reached its target {where}"}
-        return {"turn": turn, "kind": "info", "text": f"{d} is on its way again from {where}"}
 
     def world_json(self) -> dict:
         return world_json(self.world, mode="replay", title=self.path.name)

@@ -21,7 +21,6 @@ import json
 import logging
 import queue
 import threading
-from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import Protocol
@@ -55,9 +54,7 @@ class Backend(Protocol):
 
 def parse_address(text: str) -> tuple[str, int]:
     """``PORT``, ``HOST:PORT`` or ``[V6]:PORT`` -> (host, port); the host defaults to 127.0.0.1."""
-    host, sep, port = text.rpartition(":")
-    if not sep:
-        host, port = "127.0.0.1", text
+    host, _, port = text.rpartition(":")  # (no colon: no host)
     host = host.strip("[]") or "127.0.0.1"
     try:
         number = int(port)
@@ -131,11 +128,7 @@ class _Handler(BaseHTTPRequestHandler):
         """Every error as JSON, including those the base class raises (bad request line, 501...)."""
         self.request_version = "HTTP/1.0"  # a garbled request line leaves it at HTTP/0.9: no status line
         self.close_connection = True
-        try:
-            text = message or HTTPStatus(code).phrase
-        except ValueError:
-            text = message or "error"
-        self._json(code, {"error": text})
+        self._json(code, {"error": message or self.responses.get(code, ("error",))[0]})
 
     def _json(self, code: int, body: dict | str) -> None:
         data = (body if isinstance(body, str) else json.dumps(body)).encode()
@@ -155,31 +148,16 @@ class _Handler(BaseHTTPRequestHandler):
 
     # ------------------------------------------------------------------ methods
 
-    def do_GET(self) -> None:  # noqa: N802
-        self._dispatch("GET")
-
-    def do_POST(self) -> None:  # noqa: N802
-        self._dispatch("POST")
-
-    def do_PUT(self) -> None:  # noqa: N802
-        self._dispatch("PUT")
-
-    def do_DELETE(self) -> None:  # noqa: N802
-        self._dispatch("DELETE")
-
-    def do_PATCH(self) -> None:  # noqa: N802
-        self._dispatch("PATCH")
-
     ROUTES = {
-        "/": ("GET", "_index"), "/index.html": ("GET", "_index"),
-        "/app.js": ("GET", "_static"), "/style.css": ("GET", "_static"),
+        "/": ("GET", "_file"), **{f"/{name}": ("GET", "_file") for name in STATIC},
         "/api/world": ("GET", "_world"), "/api/state": ("GET", "_state"), "/api/events": ("GET", "_events"),
         "/api/replay": ("GET", "_replay"),
         "/api/target": ("POST", "_target"), "/api/control": ("POST", "_control"),
     }
 
-    def _dispatch(self, method: str) -> None:
-        route = self.ROUTES.get(self._route())
+    def _dispatch(self) -> None:
+        """Every method's handler (the base class calls ``do_<METHOD>``)."""
+        method, route = self.command, self.ROUTES.get(self._route())
         try:
             if route is None:
                 raise Rejected(f"no such resource: {self._route()}", 404)
@@ -198,15 +176,12 @@ class _Handler(BaseHTTPRequestHandler):
             except OSError:
                 pass
 
+    do_GET = do_POST = do_PUT = do_DELETE = do_PATCH = _dispatch
+
     # ------------------------------------------------------------------ resources
 
-    def _index(self) -> None:
-        self._file("index.html")
-
-    def _static(self) -> None:
-        self._file(self._route().lstrip("/"))
-
-    def _file(self, name: str) -> None:
+    def _file(self) -> None:
+        name = self._route().lstrip("/") or "index.html"
         data = resources.files(__package__).joinpath("static", name).read_bytes()
         self._send(200, data, STATIC[name])
 
@@ -246,29 +221,26 @@ class _Handler(BaseHTTPRequestHandler):
                     self.wfile.write(b": keepalive\n\n")
                     self.wfile.flush()
                     continue
-                end = item is _END
-                while not end:  # only the newest state matters: skip those a slow page had no time for
-                    try:
-                        newer = q.get_nowait()
-                    except queue.Empty:
+                state = None
+                while item is not _END:  # only the newest state matters: skip those a slow page had no time for
+                    state = item
+                    if q.empty():
                         break
-                    if newer is _END:
-                        end = True
-                    else:
-                        item = newer
-                if item is not _END:
-                    self.wfile.write(b"event: state\ndata: " + item.encode() + b"\n\n")
-                if end:
+                    item = q.get_nowait()
+                if state is not None:
+                    self.wfile.write(b"event: state\ndata: " + state.encode() + b"\n\n")
+                if item is _END:
                     self.wfile.write(b"event: end\ndata: {}\n\n")
-                self.wfile.flush()
-                if end:
+                    self.wfile.flush()
                     return
+                self.wfile.flush()
         finally:
             hub.unsubscribe(q)
 
     # ------------------------------------------------------------------ commands
 
-    def _body(self) -> dict:
+    def _body(self, fields: set[str], hint: str) -> dict:
+        """The request's JSON object, of some of `fields` (`hint` says which to send)."""
         ctype = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
         if ctype != "application/json":
             raise Rejected("send JSON (Content-Type: application/json)", 415)
@@ -279,11 +251,10 @@ class _Handler(BaseHTTPRequestHandler):
         if length is None:
             raise Rejected("a Content-Length is required", 411)
         try:
-            n = int(length)
+            if (n := int(length)) < 0:
+                raise ValueError
         except ValueError:
             raise Rejected(f"bad Content-Length {length!r}", 400) from None
-        if n < 0:
-            raise Rejected(f"bad Content-Length {length!r}", 400)
         if n > MAX_BODY:
             self.close_connection = True
             raise Rejected(f"body of {n} bytes is larger than {MAX_BODY}", 413)
@@ -294,13 +265,12 @@ class _Handler(BaseHTTPRequestHandler):
             raise Rejected(f"the body is not JSON: {exc}", 400) from None
         if not isinstance(body, dict):
             raise Rejected("the body must be a JSON object", 400)
+        if unknown := set(body) - fields:
+            raise Rejected(f"unknown fields {sorted(unknown)}: {hint}", 400)
         return body
 
     def _target(self) -> None:
-        body = self._body()
-        unknown = set(body) - {"drone", "cell"}
-        if unknown:
-            raise Rejected(f"unknown fields {sorted(unknown)}: send drone and cell", 400)
+        body = self._body({"drone", "cell"}, "send drone and cell")
         if "drone" not in body or "cell" not in body:
             raise Rejected('send {"drone": "D01", "cell": [x, y, z]}', 400)
         if not isinstance(body["drone"], str):
@@ -309,10 +279,7 @@ class _Handler(BaseHTTPRequestHandler):
         self._json(200, self.server.backend.command("target", {"drone": body["drone"], "cell": cell}))
 
     def _control(self) -> None:
-        body = self._body()
-        unknown = set(body) - {"action", "value"}
-        if unknown:
-            raise Rejected(f"unknown fields {sorted(unknown)}: send action (and value for pace)", 400)
+        body = self._body({"action", "value"}, "send action (and value for pace)")
         action = body.get("action")
         if action not in ("pause", "resume", "step", "quit", "pace"):
             raise Rejected(f"unknown action {action!r}: use pause, resume, step, pace or quit", 400)
