@@ -1,37 +1,19 @@
 """Move arbitration for drones that avoid each other: cooperative drones never collide with each other.
 
-Every drone proposes its move in the DRONES phase (all in parallel, one round trip); the coordinator, where
-every proposal meets, settles the cooperative drones' moves alone before applying them (no extra round trip).
-
-The arbitration in force is `cooperate`, PIBT (Okumura et al., "Priority Inheritance with Backtracking for
-Iterative Multi-agent Path Finding", IJCAI 2019 / AIJ 2022) over the cells each drone offers
-(docs/cooperation.md has the design and what it guarantees):
-
-- each cooperative drone offers a ranked list of candidate cells (its NPS's `ranked`: steps from its cell,
-  best first, staying among them), from its own planner's distances; one that offers none offers its move;
-- non-cooperative drones (the seed's V1 and smart drones) move as they said, and may still collide: their
-  destinations are taken first, and no cooperative drone enters one or swaps cells with them;
-- cooperative drones then choose in priority order (the engine's: higher first, ties by id): each takes its
-  best candidate that no one has taken and that is no swap; if another cooperative drone that has not chosen
-  yet stands there, that drone inherits the priority and must move to one of ITS candidates first (not back
-  into the cell of the one that pushes it, and, if it can, not straight on ahead of it: out of its way);
-  if it cannot, the request fails and the pusher tries its next candidate (backtracking);
-- a drone whose every candidate fails stays where it is. Staying is always allowed: PIBT only takes a
-  drone's cell once that drone has been moved out of it (only a non-cooperative drone's move can force
-  one out, and then it may die with it).
-
-So a cooperative drone only ever moves to a cell it offered (or stays), no two cooperative drones share a
-cell or swap cells, and the result is a function of the inputs (a total order on ties), whatever the order
-in which proposals arrived.
+Every drone proposes its move in the DRONES phase; the coordinator, where every proposal meets, settles the
+cooperative drones' moves before applying them (no extra round trip). The arbitration in force is `cooperate`,
+PIBT (Okumura et al., "Priority Inheritance with Backtracking for Iterative Multi-agent Path Finding", IJCAI
+2019 / AIJ 2022) over the candidate cells each drone offers (its NPS's `ranked`; one that offers none offers its
+move). docs/cooperation.md has the design and what it guarantees: non-cooperative drones move as they said and
+are reserved first; cooperative ones choose in priority order, push (priority inheritance) and backtrack; one
+whose every candidate fails stays. A cooperative drone only ever moves to a cell it offered (or stays), no two
+cooperative drones share or swap cells, and the result is a function of the inputs, whatever the order in
+which the proposals arrived.
 
 `arbitrate` is the former rule, kept for the benchmark (`dronesim bench swarm` compares them): a fixed
-priority (the id) over one proposed move per drone.
-
-- a cooperative drone whose destination is claimed by a drone that does not give way (a non-cooperative
-  drone, a hovering drone, or a cooperative one with a smaller id) hovers instead;
-- so does one whose move would swap cells with such a drone;
-- hovering can in turn block a drone that was following it, so the rule is applied until nothing changes
-  (moves only ever turn into hovers, so this ends after at most N passes).
+priority (the id) over one proposed move per drone. A cooperative drone whose destination is claimed by a
+drone that does not give way (a non-cooperative drone, a hovering one, or a cooperative one with a smaller
+id), or whose move would swap cells with such a drone, hovers instead, until nothing changes.
 """
 
 from __future__ import annotations
@@ -230,15 +212,10 @@ def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cel
         return out
     order = np.argsort(here, kind="stable")
     i = order[np.searchsorted(here[order], cand[j, k])]  # the drone j wants to push
-    _, Y, Z = size
-    sy, sx = Z + 2, (Y + 2) * (Z + 2)
-
-    def man(f: np.ndarray, g: np.ndarray) -> np.ndarray:
-        return np.abs(f // sx - g // sx) + np.abs((f // sy) % (Y + 2) - (g // sy) % (Y + 2)) + np.abs(f % sy - g % sy)
-
+    shape = (size[0] + 2, size[1] + 2, size[2] + 2)
     goal = targets[j][:, None]
     u = cand[i]
-    hit = (u >= 0) & (u != here[j][:, None]) & (man(u, goal) < man(here[i][:, None], goal))
+    hit = (u >= 0) & (u != here[j][:, None]) & (_manhattan(u, goal, shape) < _manhattan(here[i][:, None], goal, shape))
     np.add.at(out, i, hit.astype(np.int64))
     return out
 
@@ -431,30 +408,24 @@ class Corridors:
 
     def beyond(self, a: int, b: int, g: int) -> bool:
         """Whether cell g lies beyond b, coming from a, along the corridor (or may: a junction comes first)."""
-        walked = {b}
-        while True:
-            on = self.ways(b, a, True)
-            if len(on) != 1:
-                return len(on) >= 2
-            a, b = b, on[0]
-            if b == g:
-                return True
-            if b in walked:
-                return False
-            walked.add(b)
+        return self._walk(a, b, True, stop=g)
 
     def possible(self, vj: int, vi: int) -> bool:
         """Whether a junction lies behind vi (away from vj) that the two can reach along the corridor."""
-        a, b = vj, vi
+        return self._walk(vj, vi, False, dead=vj)
+
+    def _walk(self, a: int, b: int, parked: bool, stop: int = -1, dead: int = -1) -> bool:
+        """Along the corridor from b (coming from a): True at a junction or at `stop`, False at its end, at
+        `dead` or round a ring."""
         walked = {b}
         while True:
-            on = self.ways(b, a, False)
-            if len(on) >= 2:
-                return True
-            if not on:
-                return False
+            on = self.ways(b, a, parked)
+            if len(on) != 1:
+                return len(on) >= 2
             a, b = b, on[0]
-            if b in walked or b == vj:
+            if b == stop:
+                return True
+            if b in walked or b == dead:
                 return False
             walked.add(b)
 
@@ -532,8 +503,9 @@ def _out_of_the_way(mine: list[int], src: int, enters: int, leaves: int, aim: tu
     return [c for c in mine if c >= 0 and c not in later] + later
 
 
-def _manhattan(u: int, v: int, shape: Cell) -> int:
-    """The Manhattan distance between two flat cells (`flat_cells`) of a world padded to `shape`."""
+def _manhattan(u: Any, v: Any, shape: Cell) -> Any:
+    """The Manhattan distance between two flat cells (`flat_cells`, or arrays of them) of a world padded to
+    `shape`."""
     _, Y, Z = shape
     (uxy, uz), (vxy, vz) = divmod(u, Z), divmod(v, Z)
     (ux, uy), (vx, vy) = divmod(uxy, Y), divmod(vxy, Y)

@@ -76,7 +76,7 @@ from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
 
 from . import arbiter, observer
 from .admission import Roster
-from .fleet import ALIVE, CAUSES, NOTES, REACHED, UNREACHABLE, Drones, Fleet, cell_of
+from .fleet import ALIVE, CAUSES, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
 
 
 class Stage(enum.Enum):
@@ -230,26 +230,18 @@ class Engine:
         self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
         self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
-        #: Each drone's priority for the arbitration (PIBT): the turns since it was last at rest (on its
-        #: target, without one, or unable to reach it) or gave way, times arbiter.TIE_SPAN, plus its tie-break
-        #: (`age`). A function of the journaled turns.
+        #: Each drone's priority for the arbitration (PIBT; see `age`): a function of the journaled turns.
         self.priority = np.zeros(n, np.int64)
         self._gave_way = np.zeros(n, bool)  # who gave way this turn (arbiter.pibt)
-        #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule), which the benchmark
-        #: compares with it (its signature and results are cooperate's).
+        #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule, for the benchmark).
         self.arbiter: arbiter.Arbiter = arbiter.cooperate
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log: dict = {}
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
-        #: Whether the environment's UPD reports are checked (kept for a few turns): the adapter says.
-        self.verify_env = True
-        #: Whether the turn records say what each drone was told and did (targets, moves, notes, hovers,
-        #: deaths) and the state's hash: the adapter turns it off when it keeps no journal (the records are
-        #: then dropped).
-        self.journaled = True
-        #: Whether anyone follows the ENV phase (the environment does while someone listens to its UPD): the
-        #: adapter says; nobody following, the phase's TURN is not even made.
-        self.env_followed = True
+        # The adapter's switches: whether the environment's UPD reports are checked; whether the turn records
+        # say what each drone was told and did (off without a journal: they are dropped); whether anyone
+        # follows the ENV phase (nobody following, its TURN is not even made).
+        self.verify_env = self.journaled = self.env_followed = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
@@ -267,7 +259,8 @@ class Engine:
         return self.config.world.size
 
     def alive(self) -> list[str]:
-        return self.fleet.alive()
+        ids = self.fleet.ids
+        return [ids[i] for i in self.fleet.alive_rows().tolist()]
 
     def targets(self) -> dict[str, Cell]:
         """The targets in force, of every drone that has one."""
@@ -286,11 +279,6 @@ class Engine:
         ids = self.fleet.ids
         return {ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
 
-    def _hosted(self, rows: np.ndarray) -> bool:
-        """Whether every drone of `rows` has a process flying it."""
-        host = self.fleet.host
-        return all(host[i] for i in rows.tolist())
-
     def _playing(self) -> bool:
         return self.stage in (Stage.GCS, Stage.DRONES)
 
@@ -304,9 +292,9 @@ class Engine:
 
     def _back_but_gcs(self) -> bool:
         """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
-        roster = self.roster
+        roster, host = self.roster, self.fleet.host
         return (self.stage is Stage.RESUMING and roster.has(Role.ENV) and not roster.has(Role.GCS)
-                and self._hosted(self.fleet.alive_rows()))
+                and all(host[i] for i in self.fleet.alive_rows().tolist()))
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
@@ -372,10 +360,10 @@ class Engine:
         return effects
 
     def _everyone_here(self) -> bool:
-        if self.stage is Stage.RESUMING:  # the alive drones, the environment and the ground station (which
-            # gets `gcs_grace` seconds once the others are back: it may have left the game for good)
-            return self.roster.everyone_here(self.fleet, self.fleet.alive_rows().tolist())
-        return self.roster.everyone_here(self.fleet)
+        """Resuming, only the alive drones count (and the ground station gets `gcs_grace` seconds once the
+        others are back: it may have left the game for good)."""
+        rows = self.fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
+        return self.roster.everyone_here(self.fleet, rows)
 
     def header(self) -> dict:
         """The journal's first record: what identifies the game (see resume.py). Without a journal
@@ -551,7 +539,7 @@ class Engine:
         if i is None:
             raise UnknownEntity(f"target for unknown drone {d}")
         if self.fleet.state[i] != ALIVE:
-            raise UnknownEntity(f"target for {d}, which is {self.fleet.view(i).state.value}")
+            raise UnknownEntity(f"target for {d}, which is {STATES[self.fleet.state[i]].value}")
         if not observer.inside(pos, self.size):
             raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
         self._aimed[i] = True
@@ -615,10 +603,14 @@ class Engine:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
         if self._done is None or self._tgt_seen < self._done.count:
             return []
-        return self._gcs_finish(self._done)
+        return self._gcs_finish()
 
-    def _gcs_finish(self, msg: Done) -> list[Effect]:
-        if not self._targets_set(msg.intent):
+    def _gcs_finish(self) -> list[Effect]:
+        """The GCS phase ends (also cut short): what arrived of its targets holds if its DONE is in, else none."""
+        if self._done is None:
+            self._aimed[:] = False
+            return self._enter(Stage.DRONES, self.turn)
+        if not self._targets_set(self._done.intent):
             return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
         return self._enter(Stage.DRONES, self.turn)
 
@@ -890,10 +882,9 @@ class Engine:
                 if self._done is not None:
                     self._log.warning("turn %d: %d of the GCS's %d targets arrived in time", turn,
                                       self._tgt_seen, self._done.count)
-                    return self._gcs_finish(self._done)
-                self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
-                self._aimed[:] = False
-                return self._enter(Stage.DRONES, turn)
+                else:
+                    self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
+                return self._gcs_finish()
             case Stage.DRONES:
                 alive = self.fleet.alive_rows()
                 late = [self.fleet.ids[i] for i in alive[~self._moved[alive]].tolist()]
@@ -953,11 +944,8 @@ class Engine:
         match role:
             case Role.GCS:
                 self._early.clear()  # what it said ahead goes with it
-                if self.stage is Stage.GCS and self._done is not None:
-                    return self._gcs_finish(self._done)  # its DONE is in: what arrived of its targets holds
                 if self.stage is Stage.GCS:
-                    self._aimed[:] = False
-                    return self._enter(Stage.DRONES, self.turn)
+                    return self._gcs_finish()
             case Role.ENV:
                 pass  # the game waits for it (deadline: env_grace); a returning one resyncs from STATUS
             case Role.DRONE:
