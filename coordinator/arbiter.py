@@ -37,10 +37,8 @@ MOST = len(RANK_STEPS)
 #: tie-break below TIE_SPAN (its distance to its target when it left rest).
 TIE_SPAN = 1 << 16
 #: The priority of a drone that says UNREACHABLE away from its target: at rest (below every drone on its way,
-#: which has TIE_SPAN or more), but ahead of the drones at home (0). Once every other drone is home, it goes
-#: first and pushes through where a way exists (a drone of priority 0 then had none to lend it: everyone kept
-#: their cell, in id order, and the game settled with it stuck). Where no way exists, the push fails and
-#: nothing moves.
+#: TIE_SPAN or more), but ahead of the drones at home (0): once every other drone is home, it pushes through
+#: where a way exists (with priority 0, nobody would lend it one and the game settled with it stuck).
 STUCK = 1
 #: An arbitration as the engine calls it: (world size, before, proposed, ranked, cooperative, priority,
 #: targets, open cells, salt) -> (final cells, yielded, gave way); `cooperate` documents the arguments.
@@ -49,11 +47,9 @@ Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nda
 
 
 class Timed:
-    """An arbiter that counts the process time spent in it (`cpu`, seconds, over `calls` turns): a benchmark's
-    in-process games and a coordinator's report at the end of its game (`coordinator/node.py`). The cyclic
-    garbage collector is held off meanwhile: in process, the drones' pilots make most of the garbage (their ASK
-    answers), and a collection that the arbiter's allocations happen to trigger would bill it their cost (a
-    coordinator has no pilots)."""
+    """An arbiter that counts the process time spent in it (`cpu`, seconds, over `calls` turns), for the
+    benchmarks and the coordinator's report. The cyclic garbage collector is held off meanwhile: in process,
+    a collection the arbiter happened to trigger would bill it the pilots' garbage."""
 
     def __init__(self, inner: Arbiter) -> None:
         self.inner, self.cpu, self.calls = inner, 0.0, 0
@@ -105,10 +101,9 @@ def flat_cells(cells: np.ndarray, size: Cell) -> np.ndarray:
 
 
 class OpenCells:
-    """The world's open cells (not a building) as the arbiter reads them: `open[u]` is 1 where the cell of flat
-    number u (`flat_cells`: the world padded by one blocked cell each side) is open, else 0. One bit a cell, an
-    eighth of the world's own array, made a slab at a time (never a padded copy of the world, even for a moment:
-    the coordinator's peak memory counts it). The buildings are static: the engine makes it once."""
+    """The world's open cells as the arbiter reads them: `open[u]` is 1 where the cell of flat number u
+    (`flat_cells`: padded by one blocked cell each side) is no building, else 0. One bit a cell, made a slab at a
+    time (never a padded copy of the world, even for a moment: the coordinator's peak memory counts it)."""
 
     __slots__ = ("_bits",)
 
@@ -166,21 +161,15 @@ def offered(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Ce
 def candidates(here: np.ndarray, cand: np.ndarray, size: Cell, targets: np.ndarray | None = None,
                salt: int | None = None) -> np.ndarray:
     """Each drone's candidate cells, flat, in the order the arbiter tries them ((n, MOST), -1 after the last):
-    the cells it offered in its own order (`cand`, `offered`'s, left as they are), reordered among every drone's
-    (a drone's order depends on where the others stand, what they aim at and which of them want its cell).
+    `cand` (`offered`'s) reordered by where the other drones stand and what they aim at (docs/cooperation.md).
 
-    A drone that ranks its own cell says which cells are as good as each other: on a grid every neighbour is
-    one step closer to the target or one step farther, so the cells it ranks before staying are equally good,
-    and so are those after. Within each of those two groups the arbiter tries first the cells where no drone
-    stands (going round a drone beats pushing it when both are as short: a drone parked on its target is left
-    alone when a way round is as good), then those that are no other drone's target (`targets`, flat, -1 for
-    none: a drone pushed aside steps off the way of one going home rather than onto its home), then in the
-    drone's order among the cells before staying, and, among those after (where a pushed drone goes), first
-    those where it hinders fewer of the drones next to it that want its cell (`hindrance`), then in an
-    order drawn from `salt` (the turn), the drone's cell and the candidate's (`tie_breaks`; None: the drone's
-    order there too). Deterministic, and it changes from turn to turn: the same few drones pushing each other
-    round a loop (a 2 x 2 block, a room) do not choose the same sides at every round, and get out of it
-    (PIBT's random tie-breaks, lacam3's way of ending such loops; docs/cooperation.md)."""
+    A drone that ranks its own cell says which cells are as good as each other (on a grid, those it ranks
+    before staying are one step closer each, those after one step farther). Within each group it tries first
+    the cells where no drone stands (going round beats pushing), then those that are no other drone's target
+    (`targets`, flat, -1 for none), then, before staying, its own order; after staying (where a pushed drone
+    goes), first where it hinders fewer neighbours that want its cell (`hindrance`), then in an order drawn
+    from `salt` (the turn; `tie_breaks`; None: its own order): deterministic, yet changing from turn to turn,
+    so drones pushing each other round a loop do not choose the same sides at every round."""
     n = len(here)
     col = np.arange(MOST)
     stay = cand == here[:, None]
@@ -202,10 +191,9 @@ def candidates(here: np.ndarray, cand: np.ndarray, size: Cell, targets: np.ndarr
 
 def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cell, wants: np.ndarray) -> np.ndarray:
     """For each drone i and candidate cell u of it ((n, MOST), flat), how many drones want i's cell (`wants`:
-    (n, MOST), whether a drone ranks that candidate before staying and another drone stands in it) and have a
-    target closer (Manhattan) to u than to i's cell: stepping into u, i would be in their way again next turn
-    (Okumura & Nagai's hindrance, SoCS 2025, with the neighbour's own ranking for its first step and the
-    Manhattan distance for the next, the arbiter knowing no map distances)."""
+    whether a drone ranks that candidate before staying and another drone stands in it) and have a target
+    closer (Manhattan) to u than to i's cell: stepping into u, i would be in their way again next turn
+    (Okumura & Nagai's hindrance, SoCS 2025, the arbiter knowing no map distances)."""
     out = np.zeros(cand.shape, np.int64)
     j, k = np.nonzero(wants & (targets >= 0)[:, None])
     if not len(j):
@@ -258,13 +246,10 @@ def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
     none), for the swap (None: no swap); `aims`: each drone's target (flat, -1 for none) and the flat cells'
     shape (`flat_cells`: X + 2, Y + 2, Z + 2), for a pushed drone's retreat (`_out_of_the_way`; None: unknown).
 
-    A drone gives way when, choosing first in its push tree (every drone its call pushed, directly or not,
-    whether that push held or failed), it could not have its first candidate although no drone outside the
-    tree took a cell the tree needed: the drones it tried to push had nowhere to go (a dead end, a drone at
-    rest in a pocket, a full room: a drone whose push failed stays, and its cell is then the tree's own, not
-    one a drone of higher priority took). The engine then puts it behind them for the
-    next turn (its priority goes back to zero), so that they push it back instead, towards a place where
-    they can pass (docs/cooperation.md). A drone that swapped (`_swapped`) did not give way: it leads.
+    A drone gives way when, choosing first in its push tree (every drone its call pushed, directly or not), it
+    could not have its first candidate although no drone outside the tree took a cell the tree needed: the
+    drones it tried to push had nowhere to go. The engine then resets its priority, so that they push it back
+    instead, towards a place where they can pass (docs/cooperation.md). A drone that swapped did not give way.
     """
     nxt = list(taken)
     now = {c: i for i, c in enumerate(here)}
@@ -339,15 +324,11 @@ class Corridors:
     """What PIBT's swap needs to know of the world (Okumura, "Improving LaCAM for Scalable Eventually Optimal
     Multi-Agent Pathfinding", IJCAI 2023): which cells are open, and the drones' targets.
 
-    PIBT pushes: a drone that wants the cell of another makes it move on ahead. In a corridor one cell wide
-    that ends (a dead end) or that holds the pusher's target, with the other drone wanting out the way the
-    pusher comes, pushing only drives the other drone to the end and back, for ever. The swap: the pusher
-    walks back instead, to the nearest junction behind it, pulling the other drone after it (the other one
-    takes the cell it leaves, which it wanted); at the junction the other one steps aside, and both go on.
-    Whether it is needed and possible is read from the world's open cells along the corridor (a cell of
-    which the way on is one cell: a corridor; none: its end; two or more: a junction), a dead end held by a
-    drone on its own target counting as closed (and, for the junction where they pass, one held by any drone:
-    a drone in a pocket cannot make room there). The arbiter still moves a drone only to a cell it offered."""
+    In a corridor one cell wide that ends or that holds the pusher's target, with the other drone wanting out
+    the way the pusher comes, pushing only drives the other drone to the end and back, for ever. The swap: the
+    pusher walks back to the nearest junction behind it, pulling the other drone after it; there the other one
+    steps aside. A cell whose way on is one cell is a corridor, none its end, two or more a junction; a dead end
+    held by a drone on its own target counts as closed (`ways`)."""
 
     __slots__ = ("open", "steps", "now", "goal")
 
@@ -432,10 +413,9 @@ class Corridors:
 
 def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int], now: dict[int, int],
              corridors: Corridors | None) -> tuple[list[int], int]:
-    """Drone i's candidates as it tries them, and the drone it pulls (-1: none). i swaps — it tries its cells in
-    reverse (those it ranks after staying, staying, then the others), and pulls the other drone into its cell if
-    it gets the first of them — when (`Corridors`; Okumura's swap, IJCAI 2023, and its clear operation as
-    lacam3 makes it):
+    """Drone i's candidates as it tries them, and the drone it pulls (-1: none). i swaps (tries its cells in
+    reverse, `_reverse`, and pulls the other drone into its cell if it gets the first of them) when (Okumura's
+    swap, IJCAI 2023, and its clear operation as lacam3 makes it):
 
     - its best cell v holds a drone j that has not moved yet, offers i's cell, and that pushing on into the
       corridor beyond v cannot let i pass (`Corridors.required`), and a junction lies behind i;
@@ -482,12 +462,10 @@ def _pull(i: int, j: int, here: list[int], cand: Rows, nxt: list[int], claimed: 
 
 def _out_of_the_way(mine: list[int], src: int, enters: int, leaves: int, aim: tuple[int, Cell] | None) -> list[int]:
     """A pushed drone's candidates (it is at `src`, which its pusher `enters` from `leaves`): its own order,
-    but, among the cells it ranks below staying (its retreats), those its pusher will want next go after the
-    others — a side step (a bay, another floor) gets it out of the way for good instead of being pushed again
-    next turn. Those cells: the one straight ahead of the pusher and, if the pusher's move brings it closer to
-    its target (`aim`: the target, flat, -1 for none, and the flat cells' shape), every one closer to that
-    target than `enters` (Manhattan distance: any way the pusher may take from there). A pusher that is itself
-    being pushed away from its target goes where the chain drives it: straight on, as far as is known."""
+    but, among its retreats (ranked below staying), those its pusher will want next go last, so that a side
+    step gets it out of the way for good: the cell straight ahead of the pusher and, if the pusher heads for
+    its target (`aim`: the target, flat, -1 for none, and the flat cells' shape), every one closer (Manhattan)
+    to that target than `enters`."""
     if src not in mine:
         return mine
     cut = mine.index(src)
@@ -515,18 +493,12 @@ def _manhattan(u: Any, v: Any, shape: Cell) -> Any:
 def alone(here: np.ndarray, cand: np.ndarray, cooperative: np.ndarray, far: np.ndarray, targets: np.ndarray | None,
           size: Cell) -> np.ndarray:
     """Cooperative drones whose turn PIBT settles without looking at any other drone: the first cell it offers
-    (`cand`: the drones' candidates in their own order, `offered`) is free, is no other drone's target (`targets`,
-    flat, -1 for none; then `candidates` tries it first too) and no other drone can offer it, nor the drone's own
-    cell. Whenever PIBT comes to such a drone it takes that cell; no push chain ever reaches it (only a drone
-    standing in a cell someone offers is pushed), no swap or pull involves it, and the cell it takes is one
-    nobody else would try: so it can be settled first, in numpy, and PIBT's loop run over the others alone, with
-    the same result. In a sparse swarm (a city's drones, one in a few hundred cells) that is nearly every drone.
-
-    "No other drone can offer it": a drone offers its own cell and its neighbours, so no other drone stands
-    within one step of the cell, and it is none of the cells `far` (flat, -1 for none): the moves of the drones
-    that offer a move rather than a ranking, and of the non-cooperative ones. (A few drones that nobody else
-    offers to meet are left to the loop this way, when another stands two steps away: a look-up table of the
-    drones' cells is all it costs.)"""
+    (`cand`, `offered`'s) is free, is no other drone's target (`targets`, flat, -1 for none) and no other drone
+    can offer it, nor the drone's own cell. PIBT would give such a drone that cell, no push, swap or pull
+    reaching it: so it is settled first, in numpy, and PIBT's loop runs over the others (in a sparse swarm,
+    nearly every drone is alone). "No other drone can offer it": no other drone stands within one step of the
+    cell, and it is none of the cells `far` (flat, -1 for none: the moves of the drones that offer a move
+    rather than a ranking, and of the non-cooperative ones)."""
     X, Y, Z = size
     marks = np.zeros((X + 2) * (Y + 2) * (Z + 2), np.uint8)  # 1: a drone stands there, 2: in `far`, 4: a target
     marks[here] = 1
@@ -552,12 +524,11 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
               salt: int | None = None, *, shortcut: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The drones' cells after the turn's moves, arbitrated by PIBT; which cooperative drones did not get
     their first candidate (yielded); which gave way (see `pibt`). Row i is one alive drone (rows in id
-    order): where it is (`before`, (n, 3)), the move it proposed (`proposed`), its ranked steps (`ranked`,
-    (n,) as in an NPS, 0: none), whether it cooperates, its priority (higher first; ties: the smaller row) and
-    its target (`targets`, (n, 3), (-1, -1, -1) for none; None: nobody's known); the world's open cells
-    (`OpenCells`; None: unknown, then no swap); the tie-breaks' salt (the engine's turn; None: the drones'
-    order, see `candidates`). `shortcut`: settle the drones `alone` first, in numpy (the same result; False:
-    every drone through PIBT's loop, for the test that holds the two equal)."""
+    order): `before` (n, 3), its `proposed` move, its `ranked` steps (as in an NPS, 0: none), whether it
+    cooperates, its priority (higher first; ties: the smaller row), its target (`targets`, (-1, -1, -1) for
+    none; None: nobody's known); the world's `OpenCells` (None: no swap); the tie-breaks' salt (the turn;
+    None: see `candidates`). `shortcut`: settle the drones `alone` first (False: every drone through PIBT's
+    loop, for the test that holds the two equal)."""
     n = len(before)
     assert not n or int(ranked.max()) < RANKED_LIMIT
     here = flat_cells(before, size)
