@@ -94,9 +94,8 @@ class DroneSpec:
 
 
 class DroneTable(Sequence[DroneSpec]):
-    """A game's drones as columns, as a scenario of a swarm holds them: their ids and an (n, 3) array of
-    their start cells (a `DroneSpec` with its cell's tuple costs over a hundred bytes a drone, all kept for
-    the whole game). It reads as the sequence of `DroneSpec`s it stands for, each made when read."""
+    """A game's drones as columns (a swarm's scenario): their ids and an (n, 3) array of their start cells,
+    read as the sequence of `DroneSpec`s it stands for (each made when read: they cost a hundred bytes each)."""
 
     __slots__ = ("ids", "starts")
 
@@ -366,9 +365,8 @@ class Engine:
         return self.roster.everyone_here(self.fleet, rows)
 
     def header(self) -> dict:
-        """The journal's first record: what identifies the game (see resume.py). Without a journal
-        (`journaled` off) it leaves out its drones and the world's cells, which would only be dropped (a
-        record a drone: a swarm's would be the coordinator's biggest burst of objects)."""
+        """The journal's first record: what identifies the game (see resume.py). Without a journal it leaves
+        out the drones and the world's cells, which would only be dropped (a swarm's: a burst of objects)."""
         fleet, config = self.fleet, self.config
         world: dict[str, Any] = {"size": list(self.size), "seed": config.world.seed}
         header: dict[str, Any] = {"record": "header", "format": "dronesim-journal", "version": 1, "world": world,
@@ -437,7 +435,7 @@ class Engine:
         return alive
 
     def _drones_finish(self) -> list[Effect]:
-        """The drones' phase is over: arbitrate, announce the ENV phase (the accepted moves), observe."""
+        """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), observe."""
         turn, fleet = self.turn, self.fleet
         alive, before, final, moving = self._judge()
         effects: list[Effect] = []
@@ -454,8 +452,8 @@ class Engine:
         return _drones_first(effects + self._observed())
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
-        """`proposed` after the cooperative drones' arbitration (arbiter.py); those that did not get their first
-        choice are journaled ("yielded"), and those that gave way ("gave_way": their priority resets)."""
+        """`proposed` after the cooperative drones' arbitration; journaled: who did not get its first choice
+        ("yielded") and who gave way ("gave_way": their priority resets)."""
         fleet = self.fleet
         ranked = np.where(self._moved[alive], self._ranked[alive], 0)
         if self._open is None:
@@ -472,11 +470,9 @@ class Engine:
     def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
         """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target or
         without one) or that gave way this turn (`gave_way` rows, else the arbiter's), arbiter.STUCK for one
-        that says it cannot reach its target (at rest too, but ahead of those at home: see STUCK),
-        arbiter.TIE_SPAN more for each other (PIBT's rule). Among those away from rest for as long,
-        the one that was farther from its target when it left rest goes first (its Manhattan distance then,
-        kept below TIE_SPAN until it rests again: PIBT2's tie-break by initial distance, which sends the long
-        trips ahead of the short ones), then by id. resume.py replays it turn by turn."""
+        that says UNREACHABLE, arbiter.TIE_SPAN more for each other (PIBT's rule), plus a tie-break below
+        TIE_SPAN: its Manhattan distance to its target when it left rest (PIBT2's, the long trips first).
+        resume.py replays it turn by turn."""
         fleet = self.fleet
         if gave_way is not None:
             self._gave_way[gave_way] = True
@@ -492,15 +488,10 @@ class Engine:
         if np.count_nonzero(self._gave_way):
             self._gave_way[:] = False
 
-    def _kind(self, cell: Cell) -> CellKind:
-        if not self.world.contains(cell):
-            return CellKind.OUTSIDE
-        return CellKind.BUILDING if self.world.is_building(cell) else CellKind.EMPTY
-
     def receive(self, msg: Message) -> list[Effect]:
         """A message from the network, decoded and addressed correctly: its effects. One that cannot be
-        accepted now changes nothing and gives a `Refusal` (followed by what goes on all the same: a
-        refused target still counts towards its DONE, a batch's other items are taken)."""
+        accepted changes nothing and gives a `Refusal` (then what goes on all the same: a refused target still
+        counts towards its DONE, a batch's other items are taken)."""
         now = msg.turn == self.turn
         try:
             match msg:
@@ -513,7 +504,8 @@ class Engine:
                 case Done() if self.stage is Stage.GCS and now:
                     return self._gcs_done(msg)
                 case Nps() if self.stage is Stage.DRONES and now:
-                    return self._nps(msg)
+                    self._move(msg.sender, msg.pos, msg.note, msg.ranked)
+                    return self._drones_check()
                 case Moves() if self.stage is Stage.DRONES and now:
                     return self._moves_of_host(msg)
                 case Moves() if self.stage is Stage.GCS and now:
@@ -546,9 +538,8 @@ class Engine:
         self._aims[i] = pos
 
     def _hold(self, msg: Done) -> list[Effect]:
-        """The GCS's answer to a coming GCS phase (up to AHEAD_MAX turns on), sent ahead because it had
-        nothing new to say: kept, and taken as that phase opens, checked then like any DONE (no round
-        trip to the ground station)."""
+        """The GCS's DONE for a coming GCS phase (up to AHEAD_MAX turns on; it had nothing new to say): kept,
+        and taken as that phase opens, checked then like any DONE (no round trip to the ground station)."""
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
             raise WrongSender(f"DONE({msg.phase.value}) ahead from {msg.sender}")
         if msg.count:
@@ -559,9 +550,8 @@ class Engine:
         return []
 
     def _hold_moves(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves for this turn, sent before its drones' phase opened (by a host that decides
-        from the STATUS alone, as the RL environment does, sending its DONE and MOVES at once: one round trip a
-        turn): kept, one MOVES per host, and taken as the drones' phase opens, checked then like any MOVES."""
+        """A swarm host's MOVES for this turn, sent before its drones' phase opened (a host that decides from
+        the STATUS alone sends its DONE and MOVES at once): kept, one per host, taken as the phase opens."""
         if msg.sender not in self.fleet.hosts:
             raise WrongSender(f"MOVES ahead from {msg.sender}, which flies no drone of this game")
         if msg.sender in self._early_moves:
@@ -570,8 +560,8 @@ class Engine:
         return []
 
     def _take_early_moves(self) -> list[Effect]:
-        """The drones' phase is announced: the MOVES held for it are taken (in the order they came; one that
-        comes after an earlier one closed the phase is refused as stale by `receive`, as it would be sent then)."""
+        """The drones' phase is announced: the MOVES held for it are taken, in the order they came (one after an
+        earlier one closed the phase is refused as stale, as it would be if sent then)."""
         held, self._early_moves = self._early_moves, {}
         return [e for msg in held.values() for e in self.receive(msg)]
 
@@ -584,9 +574,8 @@ class Engine:
         return _with_refusals(msg, self._take_aims(msg.targets), self._gcs_check())
 
     def _take_aims(self, aims: AimTable) -> list[RemoteInputError]:
-        """Keep a DONE's targets: each is kept or refused on its own, as if sent as a TGT. A big batch is
-        checked as a whole first (the checks of `_aim`, in array operations); what that refuses, and a
-        batch of a few, goes through `_aim` row by row, which says why."""
+        """Keep a DONE's targets, each on its own as if sent as a TGT (`_in_batch`: `whole` makes `_aim`'s
+        checks in array operations)."""
         fleet, numbers, pos = self.fleet, aims.numbers, aims.column("pos")
 
         def whole() -> np.ndarray:
@@ -616,7 +605,7 @@ class Engine:
 
     def _targets_set(self, intent: Intent) -> bool:
         """The GCS phase closes: the targets it received take force and its intent is noted; whether the game
-        goes on (not QUIT). From messages (`_gcs_finish`) or from arrays (`play`)."""
+        goes on (not QUIT)."""
         fleet = self.fleet
         if np.count_nonzero(self._aimed):  # (most GCS phases bring no target)
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
@@ -636,13 +625,11 @@ class Engine:
              notes: np.ndarray) -> Over | None:
         """One whole turn from arrays, for a caller in this process that is both the ground station and the
         host of every drone (the RL environment, dronesim/rl.py): as if the ground station's DONE (CONTINUE)
-        carried the targets `aims` of the rows `aim_rows` and a MOVES then the moves `moves` (cells) and
-        `notes` (Note codes) of the rows `move_rows` (each row once; the other alive drones hover, as at the
-        deadline), through the same steps (`_targets_set`, `_judge`) without a message built: the caller
-        reads the fleet's columns, as the STATUS would say them (`Fleet.notes`); the turn's journal record is
-        not returned (the caller keeps no journal). The turn's OVER if the game ended with it. UsageError, and
-        nothing changed, if the turn is not the ground station's (or a DONE or MOVES came ahead) or an input would
-        be refused: a target outside the world or a move of more than one cell, for a drone not alive."""
+        carried the targets `aims` of the rows `aim_rows`, then a MOVES the `moves` (cells) and `notes` (Note
+        codes) of the rows `move_rows` (each once; the other alive drones hover), through the same steps
+        without a message built (the caller reads the fleet's columns; no journal record). The turn's OVER if
+        the game ended with it. UsageError, and nothing changed, if the turn is not the ground station's (or a
+        DONE or MOVES came ahead) or an input would be refused."""
         fleet = self.fleet
         if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
@@ -674,14 +661,9 @@ class Engine:
         self._open_gcs(self.turn + 1)
         return None
 
-    def _nps(self, msg: Nps) -> list[Effect]:
-        self._move(msg.sender, msg.pos, msg.note, msg.ranked)
-        return self._drones_check()
-
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves: each is taken or refused on its own, as if sent as an NPS. A big batch is
-        checked as a whole first (the checks of `_move`, in array operations); what that refuses, and a
-        batch of a few moves, goes through `_host_move` row by row, which says why."""
+        """A swarm host's moves, each on its own as if sent as an NPS (`_in_batch`: `whole` makes
+        `_host_move`'s checks in array operations)."""
         fleet, steps = self.fleet, msg.moves
         numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
 
@@ -709,7 +691,7 @@ class Engine:
             raise WrongSender(f"MOVES from {sender} for {d}, which {host or 'nobody'} flies")
         self._move(d, pos, note, ranked)
 
-    def _move(self, d: str, pos: Cell, note: Note, ranked: int = 0) -> None:
+    def _move(self, d: str, pos: Cell, note: Note, ranked: int) -> None:
         """Take a drone's move for this phase, or raise (and take nothing)."""
         fleet = self.fleet
         i = fleet.index.get(d)
@@ -737,7 +719,9 @@ class Engine:
         turn, moves = msg.turn, self._upd_due.get(msg.turn)
         if moves is None:
             raise StaleTurn(f"UPD for turn {msg.turn}, which had no ENV phase awaiting its report")
-        expected = {c: self._kind(c) for m in moves for c in (m.src, m.dst) if self.world.contains(c)}
+        world = self.world
+        expected = {c: CellKind.BUILDING if world.is_building(c) else CellKind.EMPTY
+                    for m in moves for c in (m.src, m.dst) if world.contains(c)}
         reported = {c.pos: c.kind for c in msg.cells}
         if reported != expected:
             wrong = sorted(c for c in expected.keys() | reported.keys() if reported.get(c) != expected.get(c))
@@ -747,11 +731,10 @@ class Engine:
         return []
 
     def _judge(self, alive: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The turn's moves take effect, as the drones' phase closes: the moves taken (the others hover) after
-        the arbitration, then the observer's judgement (who dies), the notes, priorities, missed deadlines and
-        the turn's journal record. The alive rows of the phase (`alive`, if the caller has them), their cells
-        before and after, and which moved. Every turn goes through here, from messages (`_drones_finish`) or
-        from arrays (`play`)."""
+        """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
+        the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
+        deadlines and the turn's journal record. The alive rows of the phase (`alive`, if the caller has them),
+        their cells before and after, and which moved."""
         fleet, ids = self.fleet, self.fleet.ids
         if alive is None:
             alive = fleet.alive_rows()
@@ -899,9 +882,9 @@ class Engine:
         return self._over(EndReason.INTERRUPTED, why, self.status().turn)  # the last turn played (and STATUS sent)
 
     def link_lost(self) -> list[Effect]:
-        """The coordinator's link to the others is down (its own presence vanished, as every other's does
-        when the router restarts): nobody has left, the game holds (no deadline runs) until every admitted
-        entity is back (`present`) or `link_grace` has passed (`expire`: those still away have vanished)."""
+        """The coordinator's link is down (its own presence vanished, as every other's does when the router
+        restarts): nobody has left, the game holds until every admitted entity is back (`present`) or
+        `link_grace` has passed (`expire`: those still away have vanished)."""
         if self.stage is Stage.OVER or self._away is not None:
             return []
         self._away = set(self.entities)
@@ -910,9 +893,8 @@ class Engine:
         return []
 
     def present(self, entity: str, session: str) -> list[Effect]:
-        """An entity's presence token is there (again). The last admitted one back after a lost link
-        ends the hold: the current STATUS and phase go out again (what was sent during the outage was
-        lost; a repeated TURN is answered with the same moves, a second answer is refused)."""
+        """An entity's presence token is there (again). The last admitted one back after a lost link ends the
+        hold: the current STATUS and phase go out again (what was sent during the outage was lost)."""
         if self._away is None or entity not in self._away or self.roster.sessions.get(entity) not in ("", session):
             return []
         self._away.discard(entity)
@@ -932,9 +914,8 @@ class Engine:
         return effects
 
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
-        """An admitted entity's presence token disappeared (its process died or was cut off).
-
-        Only the admitted process's own token counts: another process's (a refused impostor's) does not."""
+        """An admitted entity's presence token disappeared (its process died or was cut off); only the
+        admitted process's own token counts, not a refused impostor's."""
         if self._away is not None and entity in self._away:
             return []  # the link is down: it is away, not gone (until `link_grace` has passed)
         role = self.roster.leave(entity, session)
@@ -984,10 +965,9 @@ def _drones_first(effects: list[Effect]) -> list[Effect]:
 
 
 def _in_batch(n: int, whole: Callable[[], np.ndarray], one: Callable[[int], None]) -> list[RemoteInputError]:
-    """Take a batch of `n` items (a MOVES's moves, a DONE's targets), each on its own: `one(j)` takes item j
-    or raises why not. Up to FEW_ROWS items go one by one; a bigger batch is taken as a whole first (`whole()`
-    takes, in array operations, every item `one` would take, and says which), then the others one by one,
-    which gives the reason of each refusal. The refusals, in order."""
+    """Take a batch of `n` items (a MOVES's moves, a DONE's targets), each on its own (`one(j)` takes item j
+    or raises why not); the refusals, in order. A batch of more than FEW_ROWS is taken as a whole first
+    (`whole()` takes, in array operations, every item `one` would take, and says which), the rest one by one."""
     return _each(range(n) if n <= FEW_ROWS else np.flatnonzero(~whole()).tolist(), one)
 
 
