@@ -22,13 +22,14 @@ import gc
 import time
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Set
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from schema import Cell
 from schema.tables import RANK_STEPS, RANKED_LIMIT
 
+K = TypeVar("K", str, int)  # what `arbitrate` knows a drone by: its id, or its row
 #: Each drone's candidates (flat cells) as PIBT reads them: a list by row, or a mapping of the rows it may read.
 Rows = list[list[int]] | Mapping[int, list[int]]
 #: Most candidates a drone may offer (its 6 neighbours and its own cell).
@@ -66,14 +67,15 @@ class Timed:
         return out
 
 
-def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperative: Set[str]) -> dict[str, Cell]:
-    """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers."""
+def arbitrate(before: Mapping[K, Cell], proposed: Mapping[K, Cell], cooperative: Set[K]) -> dict[K, Cell]:
+    """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers (drones
+    known by their ids, or their rows: sorted, as the ids)."""
     final = dict(proposed)
     coop = sorted(d for d in cooperative if d in final)
     changed = bool(coop)  # nobody gives way: nothing to do
     while changed:
         changed = False
-        claims: dict[Cell, list[str]] = defaultdict(list)
+        claims: dict[Cell, list[K]] = defaultdict(list)
         for d, cell in final.items():
             claims[cell].append(d)
         for d in coop:
@@ -566,9 +568,9 @@ def fixed(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarr
     """The former arbitration (`arbitrate`: one proposed move per drone, a fixed priority, the id) with
     `cooperate`'s signature and results, for the benchmark: rankings, priorities, targets, the world and the salt
     are ignored, nobody gives way."""
-    ids = [f"{i:08d}" for i in range(len(before))]  # rows as names that sort as the rows (the id order)
-    wants: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, proposed.tolist())}
-    was: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, before.tolist())}
-    done = arbitrate(was, wants, {ids[i] for i in np.flatnonzero(cooperative).tolist()})
-    final = np.array([done[i] for i in ids], np.int32).reshape(len(ids), 3)
-    return final, (final != proposed).any(axis=1), np.zeros(len(ids), bool)
+    n = len(before)
+    wants: dict[int, Cell] = {i: (x, y, z) for i, (x, y, z) in enumerate(proposed.tolist())}
+    was: dict[int, Cell] = {i: (x, y, z) for i, (x, y, z) in enumerate(before.tolist())}
+    done = arbitrate(was, wants, set(np.flatnonzero(cooperative).tolist()))
+    final = np.array([done[i] for i in range(n)], np.int32).reshape(n, 3)
+    return final, (final != proposed).any(axis=1), np.zeros(n, bool)

@@ -71,12 +71,6 @@ class Fleet:
     def alive_rows(self) -> np.ndarray:
         return (self.state == ALIVE).nonzero()[0]
 
-    def view(self, i: int) -> DroneView:
-        target = None if self.target[i, 0] < 0 else cell_of(self.target[i])
-        return DroneView(pos=cell_of(self.pos[i]), state=STATES[self.state[i]], target=target,
-                         note=NOTES[self.note[i]], cause=CAUSES[self.cause[i]], misses=int(self.misses[i]),
-                         host=self.host[i], autopilot=self.autopilot[i], cooperative=bool(self.cooperative[i]))
-
     def notes(self) -> np.ndarray:
         """Each drone's note as the STATUS says it: REACHED whenever an alive drone is on its target."""
         on = (self.state == ALIVE) & (self.pos == self.target).all(axis=1)
@@ -120,7 +114,11 @@ class Drones(Mapping[str, DroneView]):
         self._fleet = fleet
 
     def __getitem__(self, d: str) -> DroneView:
-        return self._fleet.view(self._fleet.index[d])
+        f, i = self._fleet, self._fleet.index[d]
+        target = None if f.target[i, 0] < 0 else cell_of(f.target[i])
+        return DroneView(pos=cell_of(f.pos[i]), state=STATES[f.state[i]], target=target, note=NOTES[f.note[i]],
+                         cause=CAUSES[f.cause[i]], misses=int(f.misses[i]), host=f.host[i], autopilot=f.autopilot[i],
+                         cooperative=bool(f.cooperative[i]))
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._fleet.ids)
