@@ -229,12 +229,6 @@ def tie_breaks(salt: int, here: np.ndarray, cand: np.ndarray) -> np.ndarray:
     return (x >> np.uint64(64 - TIE_BITS)).astype(np.int64)
 
 
-def wants_first(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell) -> np.ndarray:
-    """Each drone's first choice, flat: its first ranked step's cell, or its proposed cell."""
-    first = (ranked.astype(np.int64) & 7)
-    return np.where(first > 0, here + steps_flat(size)[first], proposed)
-
-
 def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
          world: tuple[OpenCells, list[int], list[int]] | None = None,
          aims: tuple[list[int], Cell] | None = None) -> tuple[list[int], list[int]]:
@@ -555,7 +549,8 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
     chosen, gave = pibt(here.tolist(), cand_rows, order.tolist(), taken.tolist(), world, aims)
     nxt = np.array(chosen, np.int64)
     final = np.where(cooperative[:, None], cells_of(nxt, size), proposed)
-    yielded = cooperative & (nxt != wants_first(here, ranked, wants, size))
+    first = ranked.astype(np.int64) & 7  # each drone's first choice: its first ranked step, or its move
+    yielded = cooperative & (nxt != np.where(first > 0, here + steps_flat(size)[first], wants))
     gave_way = np.zeros(n, bool)
     gave_way[gave] = True
     gave_way &= yielded  # one that got the cell it ranked first (not its first to try) did not give way

@@ -41,7 +41,6 @@ import numpy as np
 from entities.environment import build_world
 from entities.world import World, inside_rows, linear_rows
 from schema import (
-    AimTable,
     Cause,
     Cell,
     CellKind,
@@ -346,7 +345,9 @@ class Engine:
                           world=self.config.world, starts=StartTable(starts), game=self.game)
         effects: list[Effect] = [Reply(token, welcome)]
         if self.stage in (Stage.ADMITTING, Stage.RESUMING):
-            if self._everyone_here():
+            # resuming, only the alive drones count (the ground station then gets `gcs_grace` seconds once the
+            # others are back: it may have left the game for good)
+            if self.roster.everyone_here(fleet, fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None):
                 effects += self._start() if self.stage is Stage.ADMITTING else self._resume()
             return effects
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
@@ -357,12 +358,6 @@ class Engine:
         elif self._phase_msg is not None and (msg.role, self.stage) == (Role.GCS, Stage.GCS):
             effects.append(Publish(self._phase_msg))
         return effects
-
-    def _everyone_here(self) -> bool:
-        """Resuming, only the alive drones count (and the ground station gets `gcs_grace` seconds once the
-        others are back: it may have left the game for good)."""
-        rows = self.fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
-        return self.roster.everyone_here(self.fleet, rows)
 
     def header(self) -> dict:
         """The journal's first record: what identifies the game (see resume.py). Without a journal it leaves
@@ -571,14 +566,9 @@ class Engine:
         if self._done is not None:
             raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
         self._done = msg
-        return _with_refusals(msg, self._take_aims(msg.targets), self._gcs_check())
+        fleet, numbers, pos = self.fleet, msg.targets.numbers, msg.targets.column("pos")
 
-    def _take_aims(self, aims: AimTable) -> list[RemoteInputError]:
-        """Keep a DONE's targets, each on its own as if sent as a TGT (`_in_batch`: `whole` makes `_aim`'s
-        checks in array operations)."""
-        fleet, numbers, pos = self.fleet, aims.numbers, aims.column("pos")
-
-        def whole() -> np.ndarray:
+        def whole() -> np.ndarray:  # its targets, each on its own as if sent as a TGT: `_aim`'s checks, as arrays
             rows = fleet.row_of_number[numbers]
             ok = (rows >= 0) & inside_rows(pos, self.size)
             ok[ok] = fleet.state[rows[ok]] == ALIVE
@@ -586,7 +576,8 @@ class Engine:
             self._aims[rows[ok]] = pos[ok]
             return ok
 
-        return _in_batch(len(aims), whole, lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
+        refused = _in_batch(len(msg.targets), whole, lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
+        return _with_refusals(msg, refused, self._gcs_check())
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
