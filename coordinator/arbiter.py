@@ -234,13 +234,12 @@ def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
          aims: tuple[list[int], Cell] | None = None) -> tuple[list[int], list[int]]:
     """PIBT over flat cells: the next cell of each drone, and the drones that gave way.
 
-    `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them; only
-    those of the drones in `order` and of those that may be pushed: drones standing in a cell someone offers);
-    `order`: the drones that choose (cooperative), highest priority first; `taken[i]`: the next cell of a
-    drone that does not choose (non-cooperative: fixed in advance), -1 for those that choose; `world`: the
-    world's open cells (`OpenCells`), the flat steps to a neighbour and each drone's target (flat, -1 for
-    none), for the swap (None: no swap); `aims`: each drone's target (flat, -1 for none) and the flat cells'
-    shape (`flat_cells`: X + 2, Y + 2, Z + 2), for a pushed drone's retreat (`_out_of_the_way`; None: unknown).
+    `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them; needed
+    for the drones in `order` and those standing in a cell someone offers); `order`: the drones that choose
+    (cooperative), highest priority first; `taken[i]`: the next cell of a drone that does not choose, -1 for
+    those that choose; `world`: the `OpenCells`, the flat steps to a neighbour and each drone's target (flat,
+    -1 for none), for the swap (None: no swap); `aims`: each drone's target and the flat cells' shape, for a
+    pushed drone's retreat (`_out_of_the_way`; None: unknown).
 
     A drone gives way when, choosing first in its push tree (every drone its call pushed, directly or not), it
     could not have its first candidate although no drone outside the tree took a cell the tree needed: the
@@ -351,17 +350,10 @@ class Corridors:
 
     def required(self, i: int, j: int, vi: int, vj: int, clear: bool = False) -> bool:
         """Whether pushing j (at vj) on ahead of i (at vi, wanting vj) cannot let i pass: beyond vj is a corridor
-        up to its end, or up to i's target (i stops there), with no other drone in it, and j, pushed as far as i
-        drives it, wants back out past i:
-
-        - j's target is neither in the corridor nor vi (pulled onto its target, j would park in i's way again);
-        - or j stands on its target vj, which i's way goes through (two targets in a dead end, the deeper one
-          entered last: j must come out to let i in, then go back);
-        - `clear` (the clear operation, `_swapped`): i's target is in the corridor, and j's is neither the
-          last cell i drives it to nor beyond (lacam3's condition: j pushed there would want back).
-
-        (With more drones in the corridor, pulling one at a time brings them back in turn: pushing them to the
-        end, where i gives way, is what lets them all out.)"""
+        up to its end, or up to i's target, with no other drone in it, and j, pushed as far as i drives it,
+        wants back out past i: j's target is neither in the corridor nor vi; or j stands on its target vj,
+        which i's way goes through (j must come out to let i in, then go back); or, with `clear` (the clear
+        operation), i's target is in the corridor, and j's is neither the last cell i drives it to nor beyond."""
         gi, gj = self.goal[i], self.goal[j]
         if gj < 0:
             return False

@@ -305,11 +305,9 @@ class Engine:
         match self.stage:
             case Stage.ADMITTING | Stage.RESUMING:
                 return self.config.admit_deadline
-            case Stage.GCS:
-                if self._done is not None:  # DONE is in, some of its TGT are not: they get a drone's time
-                    return self.config.phase_deadline
+            case Stage.GCS if self._done is None:
                 return self.config.gcs_deadline
-            case Stage.DRONES:
+            case Stage.GCS | Stage.DRONES:  # (GCS: DONE is in, some of its TGT are not: they get a drone's time)
                 return self.config.phase_deadline
         return None
 
@@ -380,10 +378,6 @@ class Engine:
     def _resume(self) -> list[Effect]:
         self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
         return [Publish(self.status()), *self._enter(Stage.GCS, self.turn + 1)]
-
-    def restored(self, turn: int) -> None:
-        """The state is the journal's up to `turn` (see resume.py): wait for the entities to connect again."""
-        self.turn, self.stage = turn, Stage.RESUMING
 
     # ------------------------------------------------------------------ stages
 
@@ -906,7 +900,8 @@ class Engine:
 
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
         """An admitted entity's presence token disappeared (its process died or was cut off); only the
-        admitted process's own token counts, not a refused impostor's."""
+        admitted process's own token counts, not a refused impostor's. A vanished environment is waited
+        for (`env_grace`; a returning one resyncs from STATUS)."""
         if self._away is not None and entity in self._away:
             return []  # the link is down: it is away, not gone (until `link_grace` has passed)
         role = self.roster.leave(entity, session)
@@ -918,18 +913,13 @@ class Engine:
                 self._early.clear()  # what it said ahead goes with it
                 if self.stage is Stage.GCS:
                     return self._gcs_finish()
-            case Role.ENV:
-                pass  # the game waits for it (deadline: env_grace); a returning one resyncs from STATUS
             case Role.DRONE:
                 fleet = self.fleet
                 self._early_moves.pop(entity, None)
-                gone = [i for i, host in enumerate(fleet.host) if host == entity]
-                if self.stage in (Stage.ADMITTING, Stage.RESUMING):
-                    for i in gone:
+                for i in [i for i, host in enumerate(fleet.host) if host == entity]:
+                    if self.stage in (Stage.ADMITTING, Stage.RESUMING):
                         fleet.unhost(i)
-                    return []
-                for i in gone:
-                    if fleet.state[i] == ALIVE:
+                    elif fleet.state[i] == ALIVE:
                         self._lose(fleet.ids[i])
                 if self.stage is Stage.DRONES:
                     return self._drones_check()
