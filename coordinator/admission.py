@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Generic, TypeVar
 
 from schema import Connect, Role
@@ -123,6 +123,6 @@ class Presences(Generic[Q]):
         self._waiting = [w for w in self._waiting if w[0] > now]
         return gone
 
-    def others(self, me: Iterable[str] = ("SRV",)) -> set[str]:
-        """The entities with a token, but `me`."""
-        return {e for e, _ in self.present} - set(me)
+    def others(self) -> set[str]:
+        """The entities with a token, but the coordinator."""
+        return {e for e, _ in self.present} - {"SRV"}

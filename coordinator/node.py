@@ -351,11 +351,14 @@ def parse_starts(text: str, count: int, size: Cell | None = None,
                  blocked: Callable[[Cell], bool] | None = None) -> tuple[DroneSpec, ...]:
     """``--starts "0,0,0;0,2,0"`` or, by default, every other cell along y from (0,0,0), then the next row
     of them (x + 2), then the next layer (z + 2), skipping `blocked` cells: as many as fit in `size` (a
-    UsageError beyond; without `size`, one row as long as needed)."""
+    UsageError beyond; without `size`, one row as long as needed). A given cell that is `blocked`: UsageError."""
     if text:
         cells = [tuple(int(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
         if len(cells) != count or any(len(c) != 3 for c in cells):
             raise UsageError(f"--starts needs {count} cells x,y,z separated by ';'")
+        for i, c in enumerate(cells):
+            if blocked is not None and blocked(c):  # type: ignore[arg-type]
+                raise UsageError(f"{drone_id(i + 1)} would start inside a building at {c}")
     else:
         nx, ny, nz = size or (1, 2 * count, 1)
         spots = ((x, y, z) for z in range(0, nz, 2) for x in range(0, nx, 2) for y in range(0, ny, 2))
@@ -429,10 +432,6 @@ def game_config(args: argparse.Namespace) -> GameConfig:
     else:
         spec = WorldSpec(size=parse_size(args.size), seed=args.seed)
     drones = parse_starts(args.starts, args.drones, spec.size, world.is_building if args.world else None)
-    if args.world:
-        for d in drones:
-            if world.is_building(d.start):
-                raise UsageError(f"{d.drone} would start inside a building at {d.start}")
     return GameConfig(world=spec, drones=drones, max_turns=args.max_turns, **deadlines)
 
 
