@@ -159,8 +159,7 @@ class GameConfig:
                 raise UsageError(f"{d!r} is not a drone id (D01 ... D65535)")
         if len(set(ids)) != len(ids):
             raise UsageError(f"duplicate drone ids in {list(ids)}")
-        ordered = starts[np.lexsort(starts.T)]
-        if np.count_nonzero((ordered[1:] == ordered[:-1]).all(axis=1)):
+        if len(np.unique(starts, axis=0)) != len(starts):
             raise UsageError("two drones cannot start in the same cell")
         outside = ~((starts >= 0) & (starts < self.world.size)).all(axis=1)
         if np.count_nonzero(outside):
@@ -199,9 +198,8 @@ class Engine:
     """The coordinator's game: feed it events, carry out the effects it returns."""
 
     def __init__(self, config: GameConfig, logger: logging.Logger, world: World | None = None, game: str = "") -> None:
-        """`world` is the game's world if the caller has already built it (else built here from the spec);
-        `game` the game's identity, which its WELCOME, TURN, STATUS and OVER carry (the adapter draws one
-        per coordinator: a message of another game, or of an earlier coordinator, is then foreign)."""
+        """`world`: the game's world if the caller has built it already; `game`: the game's identity, which its
+        WELCOME, TURN, STATUS and OVER carry (one per coordinator: an earlier one's messages are foreign)."""
         self.config = config
         self.game = game
         self._log = logger
@@ -939,9 +937,8 @@ def opens_drones_phase(effect: Effect) -> bool:
 
 
 def _drones_first(effects: list[Effect]) -> list[Effect]:
-    """The next turn's drones' phase first, when a turn ends and the next one's GCS phase was answered
-    ahead: it is what the next turn waits for. The rest keeps its order (STATUS before the GCS phase
-    it informs; the ENV phase before its STATUS)."""
+    """The next turn's drones' phase first (when the next turn's GCS phase was answered ahead): it is what
+    the next turn waits for. The rest keeps its order (the ENV phase, STATUS, the GCS phase it informs)."""
     return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves
 
 
