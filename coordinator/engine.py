@@ -475,6 +475,11 @@ class Engine:
         if np.count_nonzero(self._gave_way):
             self._gave_way[:] = False
 
+    def _kind(self, cell: Cell) -> CellKind:
+        if not self.world.contains(cell):
+            return CellKind.OUTSIDE
+        return CellKind.BUILDING if self.world.is_building(cell) else CellKind.EMPTY
+
     def receive(self, msg: Message) -> list[Effect]:
         """A message from the network, decoded and addressed correctly: its effects. One that cannot be
         accepted changes nothing and gives a `Refusal` (then what goes on all the same: a refused target still
@@ -702,9 +707,7 @@ class Engine:
         turn, moves = msg.turn, self._upd_due.get(msg.turn)
         if moves is None:
             raise StaleTurn(f"UPD for turn {msg.turn}, which had no ENV phase awaiting its report")
-        world = self.world
-        expected = {c: CellKind.BUILDING if world.is_building(c) else CellKind.EMPTY
-                    for m in moves for c in (m.src, m.dst) if world.contains(c)}
+        expected = {c: self._kind(c) for m in moves for c in (m.src, m.dst) if self.world.contains(c)}
         reported = {c.pos: c.kind for c in msg.cells}
         if reported != expected:
             wrong = sorted(c for c in expected.keys() | reported.keys() if reported.get(c) != expected.get(c))

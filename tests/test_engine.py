@@ -172,7 +172,7 @@ class Game:
             cells.add(m.src)
             if all(0 <= c < s for c, s in zip(m.dst, SIZE)) and m.dst not in skip:
                 cells.add(m.dst)
-        kinds = {c: self.engine.world.what_inside(c).kind for c in cells}
+        kinds = {c: self.engine._kind(c) for c in cells}
         for c in wrong:
             kinds[c] = CellKind.EMPTY if kinds.get(c) is CellKind.BUILDING else CellKind.BUILDING
         upd = Upd(turn=env.turn, sender=sender, cells=tuple(CellInfo(pos=c, kind=kinds[c]) for c in sorted(kinds)))
