@@ -34,7 +34,7 @@ import hashlib
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any, overload
+from typing import Any
 
 import numpy as np
 
@@ -109,13 +109,7 @@ class DroneTable(Sequence[DroneSpec]):
     def __len__(self) -> int:
         return len(self.ids)
 
-    @overload
-    def __getitem__(self, i: int) -> DroneSpec: ...
-
-    @overload
-    def __getitem__(self, i: slice) -> tuple[DroneSpec, ...]: ...
-
-    def __getitem__(self, i: int | slice) -> DroneSpec | tuple[DroneSpec, ...]:
+    def __getitem__(self, i: Any) -> Any:  # (Sequence's: a DroneSpec, or a tuple of them for a slice)
         if isinstance(i, slice):
             return tuple(self)[i]
         return DroneSpec(drone=self.ids[i], start=cell_of(self.starts[i]))
@@ -466,9 +460,8 @@ class Engine:
         target = fleet.target  # (every row, then the alive ones: fewer operations than selecting first)
         home = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1)
         stuck = ~home & (fleet.note == UNREACHABLE) & ~self._gave_way
-        prio = self.priority
-        left = prio < arbiter.TIE_SPAN  # leaving rest now, if not at rest: its tie-break is taken now
-        span = arbiter.TIE_SPAN
+        prio, span = self.priority, arbiter.TIE_SPAN
+        left = prio < span  # leaving rest now, if not at rest: its tie-break is taken now
         far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
         moving = np.where(left, span + far, prio + span)
         self.priority[alive] = np.where(home | self._gave_way, 0, np.where(stuck, arbiter.STUCK, moving))[alive]
