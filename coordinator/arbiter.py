@@ -375,28 +375,24 @@ class Corridors:
             return b != vj and not self.beyond(a, b, gj)
         return gj != vi and gj not in walked
 
-    def beyond(self, a: int, b: int, g: int) -> bool:
-        """Whether cell g lies beyond b, coming from a, along the corridor (or may: a junction comes first)."""
-        return self._walk(a, b, True, stop=g)
-
-    def possible(self, vj: int, vi: int) -> bool:
-        """Whether a junction lies behind vi (away from vj) that the two can reach along the corridor."""
-        return self._walk(vj, vi, False, dead=vj)
-
-    def _walk(self, a: int, b: int, parked: bool, stop: int = -1, dead: int = -1) -> bool:
-        """Along the corridor from b (coming from a): True at a junction or at `stop`, False at its end, at
-        `dead` or round a ring."""
+    def beyond(self, a: int, b: int, g: int, parked: bool = True, dead: int = -1) -> bool:
+        """Whether cell g lies beyond b, coming from a, along the corridor (or may: a junction comes first),
+        neither round a ring nor through cell `dead` (`parked`: see `ways`)."""
         walked = {b}
         while True:
             on = self.ways(b, a, parked)
             if len(on) != 1:
                 return len(on) >= 2
             a, b = b, on[0]
-            if b == stop:
+            if b == g:
                 return True
             if b in walked or b == dead:
                 return False
             walked.add(b)
+
+    def possible(self, vj: int, vi: int) -> bool:
+        """Whether a junction lies behind vi (away from vj) that the two can reach along the corridor."""
+        return self.beyond(vj, vi, -1, False, vj)
 
 
 def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int], now: dict[int, int],

@@ -66,7 +66,7 @@ def read(path: str | os.PathLike[str]) -> Iterator[dict]:
         except json.JSONDecodeError:
             if n == len(lines):  # the last line, without its newline: torn by a crash
                 return
-            raise UsageError(f"{path}:{n}: not a journal record") from None
+            record = None
         if not isinstance(record, dict) or "record" not in record:
             raise UsageError(f"{path}:{n}: not a journal record")
         yield record
