@@ -635,8 +635,7 @@ class Engine:
         if np.count_nonzero(fleet.cooperative):  # (only the arbitration reads them)
             self._ranked[move_rows] = 0
         self._judge(alive)
-        end = self._end_reason()
-        if end:
+        if end := self._end_reason():
             self._over(*end)
             return self.end
         self._open_gcs(self.turn + 1)
@@ -688,9 +687,8 @@ class Engine:
         self._awaiting -= 1
 
     def _drones_check(self) -> list[Effect]:
-        if self._awaiting <= 0:  # every alive drone has moved (also when none is left alive)
-            return self._drones_finish()
-        return []
+        """The drones' phase ends once every alive drone has moved (also when none is left alive)."""
+        return self._drones_finish() if self._awaiting <= 0 else []
 
     def _upd(self, msg: Upd) -> list[Effect]:
         """The environment's report of a recent ENV phase: checked against the engine's world; it
@@ -779,9 +777,7 @@ class Engine:
         self._log.debug("turn %d observed: %s", self.turn, log)
         effects: list[Effect] = [Record(log), Publish(status, data)]
         end = self._end_reason()
-        if end:
-            return effects + self._over(*end)
-        return effects + self._enter(Stage.GCS, self.turn + 1)
+        return effects + (self._over(*end) if end else self._enter(Stage.GCS, self.turn + 1))
 
     def _lose(self, d: str) -> None:
         i = self.fleet.index[d]

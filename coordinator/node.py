@@ -314,8 +314,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     engine.env_followed = False  # until a Matching event says someone follows the ENV phase
     engine.arbiter = timed = arbiter.Timed(engine.arbiter)  # its CPU, reported at the end (benchmarks read it)
     with zenoh.open(conf) as session:
-        other = rival(session, keys)
-        if other is not None:
+        if (other := rival(session, keys)) is not None:
             raise UsageError(f"another coordinator (session {other}) runs on {keys.root}: one game per root")
         me, inbox = session_id(session), Inbox(session, keys, logger)
         inbox.serve(keys.connect, Connect)
