@@ -206,11 +206,9 @@ class Engine:
         self.stage = Stage.ADMITTING
         self.turn = 0
         self.fleet = Fleet((d.drone, d.start) for d in config.drones)
-        #: The drones one by one (a read-only view of the fleet).
-        self.drones = Drones(self.fleet)
+        self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
         self.roster = Roster()
-        #: The admitted entities: id -> role (the roster's).
-        self.entities = self.roster.roles
+        self.entities = self.roster.roles  # the admitted entities: id -> role
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
         n = len(self.fleet)
@@ -220,8 +218,7 @@ class Engine:
         self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
         self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
-        #: Each drone's priority for the arbitration (PIBT; see `age`): a function of the journaled turns.
-        self.priority = np.zeros(n, np.int64)
+        self.priority = np.zeros(n, np.int64)  # each drone's for the arbitration (`age`): from the journaled turns
         self._gave_way = np.zeros(n, bool)  # who gave way this turn (arbiter.pibt)
         #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule, for the benchmark).
         self.arbiter: arbiter.Arbiter = arbiter.cooperate
@@ -239,8 +236,7 @@ class Engine:
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
-        #: While the coordinator's link is down (`link_lost`): the admitted entities not seen back yet.
-        self._away: set[str] | None = None
+        self._away: set[str] | None = None  # while the link is down (`link_lost`): the entities not back yet
 
     # ------------------------------------------------------------------ queries
 
