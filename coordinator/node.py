@@ -140,14 +140,12 @@ class Executor:
 
 class Coordinator:
     """The coordinator's loop around the engine, without Zenoh: feed it the inbox's events (None when
-    `timeout()` passed), until `finished()`.
-
-    It admits a CONNECT once its sender's presence token is seen (`Presences`), keeps the phase deadline,
-    holds a vanished presence SETTLE_S before it counts (its own vanishing too means the link is down: the
-    engine holds the game), refuses to share its root with another coordinator, ends the game on a signal,
-    and after OVER waits (up to LINGER_S) for the entities to leave. When an admitted session's token
-    vanishes or a phase's deadline passes, it asks the routers which sessions they connect (`audit`): an
-    admitted entity whose session is not among them has gone, whoever holds a copy of its presence token."""
+    `timeout()` passed), until `finished()`. It admits a CONNECT once its sender's presence token is seen
+    (`Presences`), keeps the phase deadline, holds a vanished presence SETTLE_S before it counts (its own
+    vanishing too means the link is down: the engine holds the game), refuses to share its root with another
+    coordinator, ends the game on a signal, and after OVER waits (up to LINGER_S) for the entities to leave.
+    When an admitted session's token vanishes or a phase's deadline passes, it asks the routers which
+    sessions they connect (`audit`): an admitted entity whose session is not among them has gone."""
 
     def __init__(self, engine: Engine, effects: Executor, rejects: RejectCounter, logger: logging.Logger, me: str,
                  clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None) -> None:
