@@ -331,9 +331,9 @@ class Engine:
                           world=self.config.world, starts=StartTable(starts), game=self.game)
         effects: list[Effect] = [Reply(token, welcome)]
         if self.stage in (Stage.ADMITTING, Stage.RESUMING):
-            # resuming, only the alive drones count (the ground station then gets `gcs_grace` seconds once the
-            # others are back: it may have left the game for good)
-            if self.roster.everyone_here(fleet, fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None):
+            # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
+            awaited = fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
+            if self.roster.everyone_here(fleet, awaited):
                 effects += self._start() if self.stage is Stage.ADMITTING else self._resume()
             return effects
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
