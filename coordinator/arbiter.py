@@ -6,9 +6,10 @@ PIBT (Okumura et al., "Priority Inheritance with Backtracking for Iterative Mult
 2019 / AIJ 2022) over the candidate cells each drone offers (its NPS's `ranked`; one that offers none offers its
 move). docs/cooperation.md has the design and what it guarantees: non-cooperative drones move as they said and
 are reserved first; cooperative ones choose in priority order, push (priority inheritance) and backtrack; one
-whose every candidate fails stays. A cooperative drone only ever moves to a cell it offered (or stays), no two
-cooperative drones share or swap cells, and the result is a function of the inputs, whatever the order in
-which the proposals arrived.
+whose every candidate fails stays. Staying is always allowed: PIBT only gives a drone's cell to another once that
+drone has moved out of it (only a non-cooperative drone's move can force one out, and then it may die with it).
+A cooperative drone only ever moves to a cell it offered (or stays), no two cooperative drones share or swap
+cells, and the result is a function of the inputs, whatever the order in which the proposals arrived.
 
 `arbitrate` is the former rule, kept for the benchmark (`dronesim bench swarm` compares them): a fixed
 priority (the id) over one proposed move per drone. A cooperative drone whose destination is claimed by a
