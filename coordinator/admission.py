@@ -1,20 +1,10 @@
-"""Admission: who may join the game, who is there, and the presence a CONNECT must show first.
-
-Pure, like the engine: no network and no clock of its own (the time is passed in).
-
-- `Roster`: the admitted entities (id -> role and Zenoh session) and the rules that refuse a CONNECT;
-  the engine asks it and starts (or resumes) the game once everyone is there.
-- `Presences`: the presence tokens seen, and the CONNECTs waiting for theirs. A CONNECT names its sender
-  and session; it is admitted only once the presence token of that same (sender, session) is seen. Under
-  the router's access control only the real principal may declare that token, so a process cannot take
-  another's seat by writing its name in a CONNECT (defence in depth: the coordinator cannot see who sent a
-  query). The token may arrive just after the query (another path), hence a short wait; a CONNECT without
-  one is refused.
+"""Admission: who may join the game (`Roster`), who is there, and the presence a CONNECT must show first
+(`Presences`). Pure, like the engine: no network and no clock of its own (the time is passed in).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Generic, TypeVar
 
 from schema import Connect, Role
@@ -96,7 +86,11 @@ class Roster:
 
 
 class Presences(Generic[Q]):
-    """The presence tokens seen, and the CONNECTs waiting for theirs (see the module)."""
+    """The presence tokens seen, and the CONNECTs waiting for theirs. A CONNECT names its sender and session;
+    it is admitted only once the presence token of that same (sender, session) is seen. Under the router's
+    access control only the real principal may declare that token, so a process cannot take another's seat
+    by writing its name in a CONNECT (the coordinator cannot see who sent a query). The token may arrive just
+    after the query (another path), hence a short wait; a CONNECT without one is refused."""
 
     def __init__(self) -> None:
         self.present: set[tuple[str, str]] = set()
@@ -129,6 +123,6 @@ class Presences(Generic[Q]):
         self._waiting = [w for w in self._waiting if w[0] > now]
         return gone
 
-    def others(self, me: Iterable[str] = ("SRV",)) -> set[str]:
-        """The entities with a token, but `me`."""
-        return {e for e, _ in self.present} - set(me)
+    def others(self) -> set[str]:
+        """The entities with a token, but the coordinator."""
+        return {e for e, _ in self.present} - {"SRV"}

@@ -1,37 +1,20 @@
 """Move arbitration for drones that avoid each other: cooperative drones never collide with each other.
 
-Every drone proposes its move in the DRONES phase (all in parallel, one round trip); the coordinator, where
-every proposal meets, settles the cooperative drones' moves alone before applying them (no extra round trip).
-
-The arbitration in force is `cooperate`, PIBT (Okumura et al., "Priority Inheritance with Backtracking for
-Iterative Multi-agent Path Finding", IJCAI 2019 / AIJ 2022) over the cells each drone offers
-(docs/cooperation.md has the design and what it guarantees):
-
-- each cooperative drone offers a ranked list of candidate cells (its NPS's `ranked`: steps from its cell,
-  best first, staying among them), from its own planner's distances; one that offers none offers its move;
-- non-cooperative drones (the seed's V1 and smart drones) move as they said, and may still collide: their
-  destinations are taken first, and no cooperative drone enters one or swaps cells with them;
-- cooperative drones then choose in priority order (the engine's: higher first, ties by id): each takes its
-  best candidate that no one has taken and that is no swap; if another cooperative drone that has not chosen
-  yet stands there, that drone inherits the priority and must move to one of ITS candidates first (not back
-  into the cell of the one that pushes it, and, if it can, not straight on ahead of it: out of its way);
-  if it cannot, the request fails and the pusher tries its next candidate (backtracking);
-- a drone whose every candidate fails stays where it is. Staying is always allowed: PIBT only takes a
-  drone's cell once that drone has been moved out of it (only a non-cooperative drone's move can force
-  one out, and then it may die with it).
-
-So a cooperative drone only ever moves to a cell it offered (or stays), no two cooperative drones share a
-cell or swap cells, and the result is a function of the inputs (a total order on ties), whatever the order
-in which proposals arrived.
+Every drone proposes its move in the DRONES phase; the coordinator, where every proposal meets, settles the
+cooperative drones' moves before applying them (no extra round trip). The arbitration in force is `cooperate`,
+PIBT (Okumura et al., "Priority Inheritance with Backtracking for Iterative Multi-agent Path Finding", IJCAI
+2019 / AIJ 2022) over the candidate cells each drone offers (its NPS's `ranked`; one that offers none offers its
+move). docs/cooperation.md has the design and what it guarantees: non-cooperative drones move as they said and
+are reserved first; cooperative ones choose in priority order, push (priority inheritance) and backtrack; one
+whose every candidate fails stays. Staying is always allowed: PIBT only gives a drone's cell to another once that
+drone has moved out of it (only a non-cooperative drone's move can force one out, and then it may die with it).
+A cooperative drone only ever moves to a cell it offered (or stays), no two cooperative drones share or swap
+cells, and the result is a function of the inputs, whatever the order in which the proposals arrived.
 
 `arbitrate` is the former rule, kept for the benchmark (`dronesim bench swarm` compares them): a fixed
-priority (the id) over one proposed move per drone.
-
-- a cooperative drone whose destination is claimed by a drone that does not give way (a non-cooperative
-  drone, a hovering drone, or a cooperative one with a smaller id) hovers instead;
-- so does one whose move would swap cells with such a drone;
-- hovering can in turn block a drone that was following it, so the rule is applied until nothing changes
-  (moves only ever turn into hovers, so this ends after at most N passes).
+priority (the id) over one proposed move per drone. A cooperative drone whose destination is claimed by a
+drone that does not give way (a non-cooperative drone, a hovering one, or a cooperative one with a smaller
+id), or whose move would swap cells with such a drone, hovers instead, until nothing changes.
 """
 
 from __future__ import annotations
@@ -40,13 +23,14 @@ import gc
 import time
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Set
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from schema import Cell
 from schema.tables import RANK_STEPS, RANKED_LIMIT
 
+K = TypeVar("K", str, int)  # what `arbitrate` knows a drone by: its id, or its row
 #: Each drone's candidates (flat cells) as PIBT reads them: a list by row, or a mapping of the rows it may read.
 Rows = list[list[int]] | Mapping[int, list[int]]
 #: Most candidates a drone may offer (its 6 neighbours and its own cell).
@@ -55,10 +39,8 @@ MOST = len(RANK_STEPS)
 #: tie-break below TIE_SPAN (its distance to its target when it left rest).
 TIE_SPAN = 1 << 16
 #: The priority of a drone that says UNREACHABLE away from its target: at rest (below every drone on its way,
-#: which has TIE_SPAN or more), but ahead of the drones at home (0). Once every other drone is home, it goes
-#: first and pushes through where a way exists (a drone of priority 0 then had none to lend it: everyone kept
-#: their cell, in id order, and the game settled with it stuck). Where no way exists, the push fails and
-#: nothing moves.
+#: TIE_SPAN or more), but ahead of the drones at home (0): once every other drone is home, it pushes through
+#: where a way exists (with priority 0, nobody would lend it one and the game settled with it stuck).
 STUCK = 1
 #: An arbitration as the engine calls it: (world size, before, proposed, ranked, cooperative, priority,
 #: targets, open cells, salt) -> (final cells, yielded, gave way); `cooperate` documents the arguments.
@@ -67,11 +49,9 @@ Arbiter = Callable[[Cell, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nda
 
 
 class Timed:
-    """An arbiter that counts the process time spent in it (`cpu`, seconds, over `calls` turns): a benchmark's
-    in-process games and a coordinator's report at the end of its game (`coordinator/node.py`). The cyclic
-    garbage collector is held off meanwhile: in process, the drones' pilots make most of the garbage (their ASK
-    answers), and a collection that the arbiter's allocations happen to trigger would bill it their cost (a
-    coordinator has no pilots)."""
+    """An arbiter that counts the process time spent in it (`cpu`, seconds, over `calls` turns), for the
+    benchmarks and the coordinator's report. The cyclic garbage collector is held off meanwhile: in process,
+    a collection the arbiter happened to trigger would bill it the pilots' garbage."""
 
     def __init__(self, inner: Arbiter) -> None:
         self.inner, self.cpu, self.calls = inner, 0.0, 0
@@ -88,14 +68,15 @@ class Timed:
         return out
 
 
-def arbitrate(before: Mapping[str, Cell], proposed: Mapping[str, Cell], cooperative: Set[str]) -> dict[str, Cell]:
-    """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers."""
+def arbitrate(before: Mapping[K, Cell], proposed: Mapping[K, Cell], cooperative: Set[K]) -> dict[K, Cell]:
+    """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers (drones
+    known by their ids, or their rows: sorted, as the ids)."""
     final = dict(proposed)
     coop = sorted(d for d in cooperative if d in final)
     changed = bool(coop)  # nobody gives way: nothing to do
     while changed:
         changed = False
-        claims: dict[Cell, list[str]] = defaultdict(list)
+        claims: dict[Cell, list[K]] = defaultdict(list)
         for d, cell in final.items():
             claims[cell].append(d)
         for d in coop:
@@ -123,10 +104,9 @@ def flat_cells(cells: np.ndarray, size: Cell) -> np.ndarray:
 
 
 class OpenCells:
-    """The world's open cells (not a building) as the arbiter reads them: `open[u]` is 1 where the cell of flat
-    number u (`flat_cells`: the world padded by one blocked cell each side) is open, else 0. One bit a cell, an
-    eighth of the world's own array, made a slab at a time (never a padded copy of the world, even for a moment:
-    the coordinator's peak memory counts it). The buildings are static: the engine makes it once."""
+    """The world's open cells as the arbiter reads them: `open[u]` is 1 where the cell of flat number u
+    (`flat_cells`: padded by one blocked cell each side) is no building, else 0. One bit a cell, made a slab at a
+    time (never a padded copy of the world, even for a moment: the coordinator's peak memory counts it)."""
 
     __slots__ = ("_bits",)
 
@@ -184,21 +164,15 @@ def offered(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Ce
 def candidates(here: np.ndarray, cand: np.ndarray, size: Cell, targets: np.ndarray | None = None,
                salt: int | None = None) -> np.ndarray:
     """Each drone's candidate cells, flat, in the order the arbiter tries them ((n, MOST), -1 after the last):
-    the cells it offered in its own order (`cand`, `offered`'s, left as they are), reordered among every drone's
-    (a drone's order depends on where the others stand, what they aim at and which of them want its cell).
+    `cand` (`offered`'s) reordered by where the other drones stand and what they aim at (docs/cooperation.md).
 
-    A drone that ranks its own cell says which cells are as good as each other: on a grid every neighbour is
-    one step closer to the target or one step farther, so the cells it ranks before staying are equally good,
-    and so are those after. Within each of those two groups the arbiter tries first the cells where no drone
-    stands (going round a drone beats pushing it when both are as short: a drone parked on its target is left
-    alone when a way round is as good), then those that are no other drone's target (`targets`, flat, -1 for
-    none: a drone pushed aside steps off the way of one going home rather than onto its home), then in the
-    drone's order among the cells before staying, and, among those after (where a pushed drone goes), first
-    those where it hinders fewer of the drones next to it that want its cell (`hindrance`), then in an
-    order drawn from `salt` (the turn), the drone's cell and the candidate's (`tie_breaks`; None: the drone's
-    order there too). Deterministic, and it changes from turn to turn: the same few drones pushing each other
-    round a loop (a 2 x 2 block, a room) do not choose the same sides at every round, and get out of it
-    (PIBT's random tie-breaks, lacam3's way of ending such loops; docs/cooperation.md)."""
+    A drone that ranks its own cell says which cells are as good as each other (on a grid, those it ranks
+    before staying are one step closer each, those after one step farther). Within each group it tries first
+    the cells where no drone stands (going round beats pushing), then those that are no other drone's target
+    (`targets`, flat, -1 for none), then, before staying, its own order; after staying (where a pushed drone
+    goes), first where it hinders fewer neighbours that want its cell (`hindrance`), then in an order drawn
+    from `salt` (the turn; `tie_breaks`; None: its own order): deterministic, yet changing from turn to turn,
+    so drones pushing each other round a loop do not choose the same sides at every round."""
     n = len(here)
     col = np.arange(MOST)
     stay = cand == here[:, None]
@@ -220,25 +194,19 @@ def candidates(here: np.ndarray, cand: np.ndarray, size: Cell, targets: np.ndarr
 
 def hindrance(here: np.ndarray, cand: np.ndarray, targets: np.ndarray, size: Cell, wants: np.ndarray) -> np.ndarray:
     """For each drone i and candidate cell u of it ((n, MOST), flat), how many drones want i's cell (`wants`:
-    (n, MOST), whether a drone ranks that candidate before staying and another drone stands in it) and have a
-    target closer (Manhattan) to u than to i's cell: stepping into u, i would be in their way again next turn
-    (Okumura & Nagai's hindrance, SoCS 2025, with the neighbour's own ranking for its first step and the
-    Manhattan distance for the next, the arbiter knowing no map distances)."""
+    whether a drone ranks that candidate before staying and another drone stands in it) and have a target
+    closer (Manhattan) to u than to i's cell: stepping into u, i would be in their way again next turn
+    (Okumura & Nagai's hindrance, SoCS 2025, the arbiter knowing no map distances)."""
     out = np.zeros(cand.shape, np.int64)
     j, k = np.nonzero(wants & (targets >= 0)[:, None])
     if not len(j):
         return out
     order = np.argsort(here, kind="stable")
     i = order[np.searchsorted(here[order], cand[j, k])]  # the drone j wants to push
-    _, Y, Z = size
-    sy, sx = Z + 2, (Y + 2) * (Z + 2)
-
-    def man(f: np.ndarray, g: np.ndarray) -> np.ndarray:
-        return np.abs(f // sx - g // sx) + np.abs((f // sy) % (Y + 2) - (g // sy) % (Y + 2)) + np.abs(f % sy - g % sy)
-
+    shape = (size[0] + 2, size[1] + 2, size[2] + 2)
     goal = targets[j][:, None]
     u = cand[i]
-    hit = (u >= 0) & (u != here[j][:, None]) & (man(u, goal) < man(here[i][:, None], goal))
+    hit = (u >= 0) & (u != here[j][:, None]) & (_manhattan(u, goal, shape) < _manhattan(here[i][:, None], goal, shape))
     np.add.at(out, i, hit.astype(np.int64))
     return out
 
@@ -262,32 +230,22 @@ def tie_breaks(salt: int, here: np.ndarray, cand: np.ndarray) -> np.ndarray:
     return (x >> np.uint64(64 - TIE_BITS)).astype(np.int64)
 
 
-def wants_first(here: np.ndarray, ranked: np.ndarray, proposed: np.ndarray, size: Cell) -> np.ndarray:
-    """Each drone's first choice, flat: its first ranked step's cell, or its proposed cell."""
-    first = (ranked.astype(np.int64) & 7)
-    return np.where(first > 0, here + steps_flat(size)[first], proposed)
-
-
 def pibt(here: list[int], cand: Rows, order: list[int], taken: list[int],
          world: tuple[OpenCells, list[int], list[int]] | None = None,
          aims: tuple[list[int], Cell] | None = None) -> tuple[list[int], list[int]]:
     """PIBT over flat cells: the next cell of each drone, and the drones that gave way.
 
-    `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them; only
-    those of the drones in `order` and of those that may be pushed: drones standing in a cell someone offers);
-    `order`: the drones that choose (cooperative), highest priority first; `taken[i]`: the next cell of a
-    drone that does not choose (non-cooperative: fixed in advance), -1 for those that choose; `world`: the
-    world's open cells (`OpenCells`), the flat steps to a neighbour and each drone's target (flat, -1 for
-    none), for the swap (None: no swap); `aims`: each drone's target (flat, -1 for none) and the flat cells'
-    shape (`flat_cells`: X + 2, Y + 2, Z + 2), for a pushed drone's retreat (`_out_of_the_way`; None: unknown).
+    `here[i]`: where drone i is (distinct cells); `cand[i]`: its candidates, best first (-1 ends them; needed
+    for the drones in `order` and those standing in a cell someone offers); `order`: the drones that choose
+    (cooperative), highest priority first; `taken[i]`: the next cell of a drone that does not choose, -1 for
+    those that choose; `world`: the `OpenCells`, the flat steps to a neighbour and each drone's target (flat,
+    -1 for none), for the swap (None: no swap); `aims`: each drone's target and the flat cells' shape, for a
+    pushed drone's retreat (`_out_of_the_way`; None: unknown).
 
-    A drone gives way when, choosing first in its push tree (every drone its call pushed, directly or not,
-    whether that push held or failed), it could not have its first candidate although no drone outside the
-    tree took a cell the tree needed: the drones it tried to push had nowhere to go (a dead end, a drone at
-    rest in a pocket, a full room: a drone whose push failed stays, and its cell is then the tree's own, not
-    one a drone of higher priority took). The engine then puts it behind them for the
-    next turn (its priority goes back to zero), so that they push it back instead, towards a place where
-    they can pass (docs/cooperation.md). A drone that swapped (`_swapped`) did not give way: it leads.
+    A drone gives way when, choosing first in its push tree (every drone its call pushed, directly or not), it
+    could not have its first candidate although no drone outside the tree took a cell the tree needed: the
+    drones it tried to push had nowhere to go. The engine then resets its priority, so that they push it back
+    instead, towards a place where they can pass (docs/cooperation.md). A drone that swapped did not give way.
     """
     nxt = list(taken)
     now = {c: i for i, c in enumerate(here)}
@@ -362,15 +320,11 @@ class Corridors:
     """What PIBT's swap needs to know of the world (Okumura, "Improving LaCAM for Scalable Eventually Optimal
     Multi-Agent Pathfinding", IJCAI 2023): which cells are open, and the drones' targets.
 
-    PIBT pushes: a drone that wants the cell of another makes it move on ahead. In a corridor one cell wide
-    that ends (a dead end) or that holds the pusher's target, with the other drone wanting out the way the
-    pusher comes, pushing only drives the other drone to the end and back, for ever. The swap: the pusher
-    walks back instead, to the nearest junction behind it, pulling the other drone after it (the other one
-    takes the cell it leaves, which it wanted); at the junction the other one steps aside, and both go on.
-    Whether it is needed and possible is read from the world's open cells along the corridor (a cell of
-    which the way on is one cell: a corridor; none: its end; two or more: a junction), a dead end held by a
-    drone on its own target counting as closed (and, for the junction where they pass, one held by any drone:
-    a drone in a pocket cannot make room there). The arbiter still moves a drone only to a cell it offered."""
+    In a corridor one cell wide that ends or that holds the pusher's target, with the other drone wanting out
+    the way the pusher comes, pushing only drives the other drone to the end and back, for ever. The swap: the
+    pusher walks back to the nearest junction behind it, pulling the other drone after it; there the other one
+    steps aside. A cell whose way on is one cell is a corridor, none its end, two or more a junction; a dead end
+    held by a drone on its own target counts as closed (`ways`)."""
 
     __slots__ = ("open", "steps", "now", "goal")
 
@@ -397,17 +351,10 @@ class Corridors:
 
     def required(self, i: int, j: int, vi: int, vj: int, clear: bool = False) -> bool:
         """Whether pushing j (at vj) on ahead of i (at vi, wanting vj) cannot let i pass: beyond vj is a corridor
-        up to its end, or up to i's target (i stops there), with no other drone in it, and j, pushed as far as i
-        drives it, wants back out past i:
-
-        - j's target is neither in the corridor nor vi (pulled onto its target, j would park in i's way again);
-        - or j stands on its target vj, which i's way goes through (two targets in a dead end, the deeper one
-          entered last: j must come out to let i in, then go back);
-        - `clear` (the clear operation, `_swapped`): i's target is in the corridor, and j's is neither the
-          last cell i drives it to nor beyond (lacam3's condition: j pushed there would want back).
-
-        (With more drones in the corridor, pulling one at a time brings them back in turn: pushing them to the
-        end, where i gives way, is what lets them all out.)"""
+        up to its end, or up to i's target, with no other drone in it, and j, pushed as far as i drives it,
+        wants back out past i: j's target is neither in the corridor nor vi; or j stands on its target vj,
+        which i's way goes through (j must come out to let i in, then go back); or, with `clear` (the clear
+        operation), i's target is in the corridor, and j's is neither the last cell i drives it to nor beyond."""
         gi, gj = self.goal[i], self.goal[j]
         if gj < 0:
             return False
@@ -429,42 +376,31 @@ class Corridors:
             return b != vj and not self.beyond(a, b, gj)
         return gj != vi and gj not in walked
 
-    def beyond(self, a: int, b: int, g: int) -> bool:
-        """Whether cell g lies beyond b, coming from a, along the corridor (or may: a junction comes first)."""
+    def beyond(self, a: int, b: int, g: int, parked: bool = True, dead: int = -1) -> bool:
+        """Whether cell g lies beyond b, coming from a, along the corridor (or may: a junction comes first),
+        neither round a ring nor through cell `dead` (`parked`: see `ways`)."""
         walked = {b}
         while True:
-            on = self.ways(b, a, True)
+            on = self.ways(b, a, parked)
             if len(on) != 1:
                 return len(on) >= 2
             a, b = b, on[0]
             if b == g:
                 return True
-            if b in walked:
+            if b in walked or b == dead:
                 return False
             walked.add(b)
 
     def possible(self, vj: int, vi: int) -> bool:
         """Whether a junction lies behind vi (away from vj) that the two can reach along the corridor."""
-        a, b = vj, vi
-        walked = {b}
-        while True:
-            on = self.ways(b, a, False)
-            if len(on) >= 2:
-                return True
-            if not on:
-                return False
-            a, b = b, on[0]
-            if b in walked or b == vj:
-                return False
-            walked.add(b)
+        return self.beyond(vj, vi, -1, False, vj)
 
 
 def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int], now: dict[int, int],
              corridors: Corridors | None) -> tuple[list[int], int]:
-    """Drone i's candidates as it tries them, and the drone it pulls (-1: none). i swaps — it tries its cells in
-    reverse (those it ranks after staying, staying, then the others), and pulls the other drone into its cell if
-    it gets the first of them — when (`Corridors`; Okumura's swap, IJCAI 2023, and its clear operation as
-    lacam3 makes it):
+    """Drone i's candidates as it tries them, and the drone it pulls (-1: none). i swaps (tries its cells in
+    reverse, `_reverse`, and pulls the other drone into its cell if it gets the first of them) when (Okumura's
+    swap, IJCAI 2023, and its clear operation as lacam3 makes it):
 
     - its best cell v holds a drone j that has not moved yet, offers i's cell, and that pushing on into the
       corridor beyond v cannot let i pass (`Corridors.required`), and a junction lies behind i;
@@ -511,12 +447,10 @@ def _pull(i: int, j: int, here: list[int], cand: Rows, nxt: list[int], claimed: 
 
 def _out_of_the_way(mine: list[int], src: int, enters: int, leaves: int, aim: tuple[int, Cell] | None) -> list[int]:
     """A pushed drone's candidates (it is at `src`, which its pusher `enters` from `leaves`): its own order,
-    but, among the cells it ranks below staying (its retreats), those its pusher will want next go after the
-    others — a side step (a bay, another floor) gets it out of the way for good instead of being pushed again
-    next turn. Those cells: the one straight ahead of the pusher and, if the pusher's move brings it closer to
-    its target (`aim`: the target, flat, -1 for none, and the flat cells' shape), every one closer to that
-    target than `enters` (Manhattan distance: any way the pusher may take from there). A pusher that is itself
-    being pushed away from its target goes where the chain drives it: straight on, as far as is known."""
+    but, among its retreats (ranked below staying), those its pusher will want next go last, so that a side
+    step gets it out of the way for good: the cell straight ahead of the pusher and, if the pusher heads for
+    its target (`aim`: the target, flat, -1 for none, and the flat cells' shape), every one closer (Manhattan)
+    to that target than `enters`."""
     if src not in mine:
         return mine
     cut = mine.index(src)
@@ -532,8 +466,9 @@ def _out_of_the_way(mine: list[int], src: int, enters: int, leaves: int, aim: tu
     return [c for c in mine if c >= 0 and c not in later] + later
 
 
-def _manhattan(u: int, v: int, shape: Cell) -> int:
-    """The Manhattan distance between two flat cells (`flat_cells`) of a world padded to `shape`."""
+def _manhattan(u: Any, v: Any, shape: Cell) -> Any:
+    """The Manhattan distance between two flat cells (`flat_cells`, or arrays of them) of a world padded to
+    `shape`."""
     _, Y, Z = shape
     (uxy, uz), (vxy, vz) = divmod(u, Z), divmod(v, Z)
     (ux, uy), (vx, vy) = divmod(uxy, Y), divmod(vxy, Y)
@@ -543,18 +478,12 @@ def _manhattan(u: int, v: int, shape: Cell) -> int:
 def alone(here: np.ndarray, cand: np.ndarray, cooperative: np.ndarray, far: np.ndarray, targets: np.ndarray | None,
           size: Cell) -> np.ndarray:
     """Cooperative drones whose turn PIBT settles without looking at any other drone: the first cell it offers
-    (`cand`: the drones' candidates in their own order, `offered`) is free, is no other drone's target (`targets`,
-    flat, -1 for none; then `candidates` tries it first too) and no other drone can offer it, nor the drone's own
-    cell. Whenever PIBT comes to such a drone it takes that cell; no push chain ever reaches it (only a drone
-    standing in a cell someone offers is pushed), no swap or pull involves it, and the cell it takes is one
-    nobody else would try: so it can be settled first, in numpy, and PIBT's loop run over the others alone, with
-    the same result. In a sparse swarm (a city's drones, one in a few hundred cells) that is nearly every drone.
-
-    "No other drone can offer it": a drone offers its own cell and its neighbours, so no other drone stands
-    within one step of the cell, and it is none of the cells `far` (flat, -1 for none): the moves of the drones
-    that offer a move rather than a ranking, and of the non-cooperative ones. (A few drones that nobody else
-    offers to meet are left to the loop this way, when another stands two steps away: a look-up table of the
-    drones' cells is all it costs.)"""
+    (`cand`, `offered`'s) is free, is no other drone's target (`targets`, flat, -1 for none) and no other drone
+    can offer it, nor the drone's own cell. PIBT would give such a drone that cell, no push, swap or pull
+    reaching it: so it is settled first, in numpy, and PIBT's loop runs over the others (in a sparse swarm,
+    nearly every drone is alone). "No other drone can offer it": no other drone stands within one step of the
+    cell, and it is none of the cells `far` (flat, -1 for none: the moves of the drones that offer a move
+    rather than a ranking, and of the non-cooperative ones)."""
     X, Y, Z = size
     marks = np.zeros((X + 2) * (Y + 2) * (Z + 2), np.uint8)  # 1: a drone stands there, 2: in `far`, 4: a target
     marks[here] = 1
@@ -580,12 +509,11 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
               salt: int | None = None, *, shortcut: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The drones' cells after the turn's moves, arbitrated by PIBT; which cooperative drones did not get
     their first candidate (yielded); which gave way (see `pibt`). Row i is one alive drone (rows in id
-    order): where it is (`before`, (n, 3)), the move it proposed (`proposed`), its ranked steps (`ranked`,
-    (n,) as in an NPS, 0: none), whether it cooperates, its priority (higher first; ties: the smaller row) and
-    its target (`targets`, (n, 3), (-1, -1, -1) for none; None: nobody's known); the world's open cells
-    (`OpenCells`; None: unknown, then no swap); the tie-breaks' salt (the engine's turn; None: the drones'
-    order, see `candidates`). `shortcut`: settle the drones `alone` first, in numpy (the same result; False:
-    every drone through PIBT's loop, for the test that holds the two equal)."""
+    order): `before` (n, 3), its `proposed` move, its `ranked` steps (as in an NPS, 0: none), whether it
+    cooperates, its priority (higher first; ties: the smaller row), its target (`targets`, (-1, -1, -1) for
+    none; None: nobody's known); the world's `OpenCells` (None: no swap); the tie-breaks' salt (the turn;
+    None: see `candidates`). `shortcut`: settle the drones `alone` first (False: every drone through PIBT's
+    loop, for the test that holds the two equal)."""
     n = len(before)
     assert not n or int(ranked.max()) < RANKED_LIMIT
     here = flat_cells(before, size)
@@ -610,7 +538,8 @@ def cooperate(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.n
     chosen, gave = pibt(here.tolist(), cand_rows, order.tolist(), taken.tolist(), world, aims)
     nxt = np.array(chosen, np.int64)
     final = np.where(cooperative[:, None], cells_of(nxt, size), proposed)
-    yielded = cooperative & (nxt != wants_first(here, ranked, wants, size))
+    first = ranked.astype(np.int64) & 7  # each drone's first choice: its first ranked step, or its move
+    yielded = cooperative & (nxt != np.where(first > 0, here + steps_flat(size)[first], wants))
     gave_way = np.zeros(n, bool)
     gave_way[gave] = True
     gave_way &= yielded  # one that got the cell it ranked first (not its first to try) did not give way
@@ -623,9 +552,9 @@ def fixed(size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarr
     """The former arbitration (`arbitrate`: one proposed move per drone, a fixed priority, the id) with
     `cooperate`'s signature and results, for the benchmark: rankings, priorities, targets, the world and the salt
     are ignored, nobody gives way."""
-    ids = [f"{i:08d}" for i in range(len(before))]  # rows as names that sort as the rows (the id order)
-    wants: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, proposed.tolist())}
-    was: dict[str, Cell] = {d: (x, y, z) for d, (x, y, z) in zip(ids, before.tolist())}
-    done = arbitrate(was, wants, {ids[i] for i in np.flatnonzero(cooperative).tolist()})
-    final = np.array([done[i] for i in ids], np.int32).reshape(len(ids), 3)
-    return final, (final != proposed).any(axis=1), np.zeros(len(ids), bool)
+    n = len(before)
+    wants: dict[int, Cell] = {i: (x, y, z) for i, (x, y, z) in enumerate(proposed.tolist())}
+    was: dict[int, Cell] = {i: (x, y, z) for i, (x, y, z) in enumerate(before.tolist())}
+    done = arbitrate(was, wants, set(np.flatnonzero(cooperative).tolist()))
+    final = np.array([done[i] for i in range(n)], np.int32).reshape(n, 3)
+    return final, (final != proposed).any(axis=1), np.zeros(n, bool)

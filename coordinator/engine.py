@@ -34,14 +34,13 @@ import hashlib
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any, overload
+from typing import Any
 
 import numpy as np
 
 from entities.environment import build_world
 from entities.world import World, inside_rows, linear_rows
 from schema import (
-    AimTable,
     Cause,
     Cell,
     CellKind,
@@ -76,7 +75,7 @@ from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
 
 from . import arbiter, observer
 from .admission import Roster
-from .fleet import ALIVE, CAUSES, NOTES, REACHED, UNREACHABLE, Drones, Fleet, cell_of
+from .fleet import ALIVE, CAUSES, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
 
 
 class Stage(enum.Enum):
@@ -94,9 +93,8 @@ class DroneSpec:
 
 
 class DroneTable(Sequence[DroneSpec]):
-    """A game's drones as columns, as a scenario of a swarm holds them: their ids and an (n, 3) array of
-    their start cells (a `DroneSpec` with its cell's tuple costs over a hundred bytes a drone, all kept for
-    the whole game). It reads as the sequence of `DroneSpec`s it stands for, each made when read."""
+    """A game's drones as columns (a swarm's scenario): their ids and an (n, 3) array of their start cells,
+    read as the sequence of `DroneSpec`s it stands for (each made when read: they cost a hundred bytes each)."""
 
     __slots__ = ("ids", "starts")
 
@@ -111,13 +109,7 @@ class DroneTable(Sequence[DroneSpec]):
     def __len__(self) -> int:
         return len(self.ids)
 
-    @overload
-    def __getitem__(self, i: int) -> DroneSpec: ...
-
-    @overload
-    def __getitem__(self, i: slice) -> tuple[DroneSpec, ...]: ...
-
-    def __getitem__(self, i: int | slice) -> DroneSpec | tuple[DroneSpec, ...]:
+    def __getitem__(self, i: Any) -> Any:  # (Sequence's: a DroneSpec, or a tuple of them for a slice)
         if isinstance(i, slice):
             return tuple(self)[i]
         return DroneSpec(drone=self.ids[i], start=cell_of(self.starts[i]))
@@ -161,8 +153,7 @@ class GameConfig:
                 raise UsageError(f"{d!r} is not a drone id (D01 ... D65535)")
         if len(set(ids)) != len(ids):
             raise UsageError(f"duplicate drone ids in {list(ids)}")
-        ordered = starts[np.lexsort(starts.T)]
-        if np.count_nonzero((ordered[1:] == ordered[:-1]).all(axis=1)):
+        if len(np.unique(starts, axis=0)) != len(starts):
             raise UsageError("two drones cannot start in the same cell")
         outside = ~((starts >= 0) & (starts < self.world.size)).all(axis=1)
         if np.count_nonzero(outside):
@@ -201,9 +192,8 @@ class Engine:
     """The coordinator's game: feed it events, carry out the effects it returns."""
 
     def __init__(self, config: GameConfig, logger: logging.Logger, world: World | None = None, game: str = "") -> None:
-        """`world` is the game's world if the caller has already built it (else built here from the spec);
-        `game` the game's identity, which its WELCOME, TURN, STATUS and OVER carry (the adapter draws one
-        per coordinator: a message of another game, or of an earlier coordinator, is then foreign)."""
+        """`world`: the game's world if the caller has built it already; `game`: the game's identity, which its
+        WELCOME, TURN, STATUS and OVER carry (one per coordinator: an earlier one's messages are foreign)."""
         self.config = config
         self.game = game
         self._log = logger
@@ -216,11 +206,9 @@ class Engine:
         self.stage = Stage.ADMITTING
         self.turn = 0
         self.fleet = Fleet((d.drone, d.start) for d in config.drones)
-        #: The drones one by one (a read-only view of the fleet).
-        self.drones = Drones(self.fleet)
+        self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
         self.roster = Roster()
-        #: The admitted entities: id -> role (the roster's).
-        self.entities = self.roster.roles
+        self.entities = self.roster.roles  # the admitted entities: id -> role
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
         n = len(self.fleet)
@@ -230,26 +218,17 @@ class Engine:
         self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
         self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
-        #: Each drone's priority for the arbitration (PIBT): the turns since it was last at rest (on its
-        #: target, without one, or unable to reach it) or gave way, times arbiter.TIE_SPAN, plus its tie-break
-        #: (`age`). A function of the journaled turns.
-        self.priority = np.zeros(n, np.int64)
+        self.priority = np.zeros(n, np.int64)  # each drone's for the arbitration (`age`): from the journaled turns
         self._gave_way = np.zeros(n, bool)  # who gave way this turn (arbiter.pibt)
-        #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule), which the benchmark
-        #: compares with it (its signature and results are cooperate's).
+        #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule, for the benchmark).
         self.arbiter: arbiter.Arbiter = arbiter.cooperate
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log: dict = {}
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
-        #: Whether the environment's UPD reports are checked (kept for a few turns): the adapter says.
-        self.verify_env = True
-        #: Whether the turn records say what each drone was told and did (targets, moves, notes, hovers,
-        #: deaths) and the state's hash: the adapter turns it off when it keeps no journal (the records are
-        #: then dropped).
-        self.journaled = True
-        #: Whether anyone follows the ENV phase (the environment does while someone listens to its UPD): the
-        #: adapter says; nobody following, the phase's TURN is not even made.
-        self.env_followed = True
+        # The adapter's switches: whether the environment's UPD reports are checked; whether the turn records
+        # say what each drone was told and did (off without a journal: they are dropped); whether anyone
+        # follows the ENV phase (nobody following, its TURN is not even made).
+        self.verify_env = self.journaled = self.env_followed = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
@@ -257,8 +236,7 @@ class Engine:
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
-        #: While the coordinator's link is down (`link_lost`): the admitted entities not seen back yet.
-        self._away: set[str] | None = None
+        self._away: set[str] | None = None  # while the link is down (`link_lost`): the entities not back yet
 
     # ------------------------------------------------------------------ queries
 
@@ -267,7 +245,8 @@ class Engine:
         return self.config.world.size
 
     def alive(self) -> list[str]:
-        return self.fleet.alive()
+        ids = self.fleet.ids
+        return [ids[i] for i in self.fleet.alive_rows().tolist()]
 
     def targets(self) -> dict[str, Cell]:
         """The targets in force, of every drone that has one."""
@@ -286,11 +265,6 @@ class Engine:
         ids = self.fleet.ids
         return {ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
 
-    def _hosted(self, rows: np.ndarray) -> bool:
-        """Whether every drone of `rows` has a process flying it."""
-        host = self.fleet.host
-        return all(host[i] for i in rows.tolist())
-
     def _playing(self) -> bool:
         return self.stage in (Stage.GCS, Stage.DRONES)
 
@@ -304,9 +278,9 @@ class Engine:
 
     def _back_but_gcs(self) -> bool:
         """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
-        roster = self.roster
+        roster, host = self.roster, self.fleet.host
         return (self.stage is Stage.RESUMING and roster.has(Role.ENV) and not roster.has(Role.GCS)
-                and self._hosted(self.fleet.alive_rows()))
+                and all(host[i] for i in self.fleet.alive_rows().tolist()))
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
@@ -319,11 +293,9 @@ class Engine:
         match self.stage:
             case Stage.ADMITTING | Stage.RESUMING:
                 return self.config.admit_deadline
-            case Stage.GCS:
-                if self._done is not None:  # DONE is in, some of its TGT are not: they get a drone's time
-                    return self.config.phase_deadline
+            case Stage.GCS if self._done is None:
                 return self.config.gcs_deadline
-            case Stage.DRONES:
+            case Stage.GCS | Stage.DRONES:  # (GCS: DONE is in, some of its TGT are not: they get a drone's time)
                 return self.config.phase_deadline
         return None
 
@@ -359,7 +331,9 @@ class Engine:
                           world=self.config.world, starts=StartTable(starts), game=self.game)
         effects: list[Effect] = [Reply(token, welcome)]
         if self.stage in (Stage.ADMITTING, Stage.RESUMING):
-            if self._everyone_here():
+            # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
+            awaited = fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
+            if self.roster.everyone_here(fleet, awaited):
                 effects += self._start() if self.stage is Stage.ADMITTING else self._resume()
             return effects
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
@@ -371,16 +345,9 @@ class Engine:
             effects.append(Publish(self._phase_msg))
         return effects
 
-    def _everyone_here(self) -> bool:
-        if self.stage is Stage.RESUMING:  # the alive drones, the environment and the ground station (which
-            # gets `gcs_grace` seconds once the others are back: it may have left the game for good)
-            return self.roster.everyone_here(self.fleet, self.fleet.alive_rows().tolist())
-        return self.roster.everyone_here(self.fleet)
-
     def header(self) -> dict:
-        """The journal's first record: what identifies the game (see resume.py). Without a journal
-        (`journaled` off) it leaves out its drones and the world's cells, which would only be dropped (a
-        record a drone: a swarm's would be the coordinator's biggest burst of objects)."""
+        """The journal's first record: what identifies the game (see resume.py). Without a journal it leaves
+        out the drones and the world's cells, which would only be dropped (a swarm's: a burst of objects)."""
         fleet, config = self.fleet, self.config
         world: dict[str, Any] = {"size": list(self.size), "seed": config.world.seed}
         header: dict[str, Any] = {"record": "header", "format": "dronesim-journal", "version": 1, "world": world,
@@ -399,10 +366,6 @@ class Engine:
     def _resume(self) -> list[Effect]:
         self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
         return [Publish(self.status()), *self._enter(Stage.GCS, self.turn + 1)]
-
-    def restored(self, turn: int) -> None:
-        """The state is the journal's up to `turn` (see resume.py): wait for the entities to connect again."""
-        self.turn, self.stage = turn, Stage.RESUMING
 
     # ------------------------------------------------------------------ stages
 
@@ -449,7 +412,7 @@ class Engine:
         return alive
 
     def _drones_finish(self) -> list[Effect]:
-        """The drones' phase is over: arbitrate, announce the ENV phase (the accepted moves), observe."""
+        """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), observe."""
         turn, fleet = self.turn, self.fleet
         alive, before, final, moving = self._judge()
         effects: list[Effect] = []
@@ -466,8 +429,8 @@ class Engine:
         return _drones_first(effects + self._observed())
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
-        """`proposed` after the cooperative drones' arbitration (arbiter.py); those that did not get their first
-        choice are journaled ("yielded"), and those that gave way ("gave_way": their priority resets)."""
+        """`proposed` after the cooperative drones' arbitration; journaled: who did not get its first choice
+        ("yielded") and who gave way ("gave_way": their priority resets)."""
         fleet = self.fleet
         ranked = np.where(self._moved[alive], self._ranked[alive], 0)
         if self._open is None:
@@ -484,20 +447,17 @@ class Engine:
     def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
         """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target or
         without one) or that gave way this turn (`gave_way` rows, else the arbiter's), arbiter.STUCK for one
-        that says it cannot reach its target (at rest too, but ahead of those at home: see STUCK),
-        arbiter.TIE_SPAN more for each other (PIBT's rule). Among those away from rest for as long,
-        the one that was farther from its target when it left rest goes first (its Manhattan distance then,
-        kept below TIE_SPAN until it rests again: PIBT2's tie-break by initial distance, which sends the long
-        trips ahead of the short ones), then by id. resume.py replays it turn by turn."""
+        that says UNREACHABLE, arbiter.TIE_SPAN more for each other (PIBT's rule), plus a tie-break below
+        TIE_SPAN: its Manhattan distance to its target when it left rest (PIBT2's, the long trips first).
+        resume.py replays it turn by turn."""
         fleet = self.fleet
         if gave_way is not None:
             self._gave_way[gave_way] = True
         target = fleet.target  # (every row, then the alive ones: fewer operations than selecting first)
         home = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1)
         stuck = ~home & (fleet.note == UNREACHABLE) & ~self._gave_way
-        prio = self.priority
-        left = prio < arbiter.TIE_SPAN  # leaving rest now, if not at rest: its tie-break is taken now
-        span = arbiter.TIE_SPAN
+        prio, span = self.priority, arbiter.TIE_SPAN
+        left = prio < span  # leaving rest now, if not at rest: its tie-break is taken now
         far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
         moving = np.where(left, span + far, prio + span)
         self.priority[alive] = np.where(home | self._gave_way, 0, np.where(stuck, arbiter.STUCK, moving))[alive]
@@ -511,8 +471,8 @@ class Engine:
 
     def receive(self, msg: Message) -> list[Effect]:
         """A message from the network, decoded and addressed correctly: its effects. One that cannot be
-        accepted now changes nothing and gives a `Refusal` (followed by what goes on all the same: a
-        refused target still counts towards its DONE, a batch's other items are taken)."""
+        accepted changes nothing and gives a `Refusal` (then what goes on all the same: a refused target still
+        counts towards its DONE, a batch's other items are taken)."""
         now = msg.turn == self.turn
         try:
             match msg:
@@ -525,7 +485,8 @@ class Engine:
                 case Done() if self.stage is Stage.GCS and now:
                     return self._gcs_done(msg)
                 case Nps() if self.stage is Stage.DRONES and now:
-                    return self._nps(msg)
+                    self._move(msg.sender, msg.pos, msg.note, msg.ranked)
+                    return self._drones_check()
                 case Moves() if self.stage is Stage.DRONES and now:
                     return self._moves_of_host(msg)
                 case Moves() if self.stage is Stage.GCS and now:
@@ -551,16 +512,15 @@ class Engine:
         if i is None:
             raise UnknownEntity(f"target for unknown drone {d}")
         if self.fleet.state[i] != ALIVE:
-            raise UnknownEntity(f"target for {d}, which is {self.fleet.view(i).state.value}")
+            raise UnknownEntity(f"target for {d}, which is {STATES[self.fleet.state[i]].value}")
         if not observer.inside(pos, self.size):
             raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
         self._aimed[i] = True
         self._aims[i] = pos
 
     def _hold(self, msg: Done) -> list[Effect]:
-        """The GCS's answer to a coming GCS phase (up to AHEAD_MAX turns on), sent ahead because it had
-        nothing new to say: kept, and taken as that phase opens, checked then like any DONE (no round
-        trip to the ground station)."""
+        """The GCS's DONE for a coming GCS phase (up to AHEAD_MAX turns on; it had nothing new to say): kept,
+        and taken as that phase opens, checked then like any DONE (no round trip to the ground station)."""
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
             raise WrongSender(f"DONE({msg.phase.value}) ahead from {msg.sender}")
         if msg.count:
@@ -571,9 +531,8 @@ class Engine:
         return []
 
     def _hold_moves(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves for this turn, sent before its drones' phase opened (by a host that decides
-        from the STATUS alone, as the RL environment does, sending its DONE and MOVES at once: one round trip a
-        turn): kept, one MOVES per host, and taken as the drones' phase opens, checked then like any MOVES."""
+        """A swarm host's MOVES for this turn, sent before its drones' phase opened (a host that decides from
+        the STATUS alone sends its DONE and MOVES at once): kept, one per host, taken as the phase opens."""
         if msg.sender not in self.fleet.hosts:
             raise WrongSender(f"MOVES ahead from {msg.sender}, which flies no drone of this game")
         if msg.sender in self._early_moves:
@@ -582,8 +541,8 @@ class Engine:
         return []
 
     def _take_early_moves(self) -> list[Effect]:
-        """The drones' phase is announced: the MOVES held for it are taken (in the order they came; one that
-        comes after an earlier one closed the phase is refused as stale by `receive`, as it would be sent then)."""
+        """The drones' phase is announced: the MOVES held for it are taken, in the order they came (one after an
+        earlier one closed the phase is refused as stale, as it would be if sent then)."""
         held, self._early_moves = self._early_moves, {}
         return [e for msg in held.values() for e in self.receive(msg)]
 
@@ -593,15 +552,9 @@ class Engine:
         if self._done is not None:
             raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
         self._done = msg
-        return _with_refusals(msg, self._take_aims(msg.targets), self._gcs_check())
+        fleet, numbers, pos = self.fleet, msg.targets.numbers, msg.targets.column("pos")
 
-    def _take_aims(self, aims: AimTable) -> list[RemoteInputError]:
-        """Keep a DONE's targets: each is kept or refused on its own, as if sent as a TGT. A big batch is
-        checked as a whole first (the checks of `_aim`, in array operations); what that refuses, and a
-        batch of a few, goes through `_aim` row by row, which says why."""
-        fleet, numbers, pos = self.fleet, aims.numbers, aims.column("pos")
-
-        def whole() -> np.ndarray:
+        def whole() -> np.ndarray:  # its targets, each on its own as if sent as a TGT: `_aim`'s checks, as arrays
             rows = fleet.row_of_number[numbers]
             ok = (rows >= 0) & inside_rows(pos, self.size)
             ok[ok] = fleet.state[rows[ok]] == ALIVE
@@ -609,22 +562,27 @@ class Engine:
             self._aims[rows[ok]] = pos[ok]
             return ok
 
-        return _in_batch(len(aims), whole, lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
+        refused = _in_batch(len(msg.targets), whole, lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
+        return _with_refusals(msg, refused, self._gcs_check())
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
         if self._done is None or self._tgt_seen < self._done.count:
             return []
-        return self._gcs_finish(self._done)
+        return self._gcs_finish()
 
-    def _gcs_finish(self, msg: Done) -> list[Effect]:
-        if not self._targets_set(msg.intent):
+    def _gcs_finish(self) -> list[Effect]:
+        """The GCS phase ends (also cut short): what arrived of its targets holds if its DONE is in, else none."""
+        if self._done is None:
+            self._aimed[:] = False
+            return self._enter(Stage.DRONES, self.turn)
+        if not self._targets_set(self._done.intent):
             return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
         return self._enter(Stage.DRONES, self.turn)
 
     def _targets_set(self, intent: Intent) -> bool:
         """The GCS phase closes: the targets it received take force and its intent is noted; whether the game
-        goes on (not QUIT). From messages (`_gcs_finish`) or from arrays (`play`)."""
+        goes on (not QUIT)."""
         fleet = self.fleet
         if np.count_nonzero(self._aimed):  # (most GCS phases bring no target)
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
@@ -644,13 +602,11 @@ class Engine:
              notes: np.ndarray) -> Over | None:
         """One whole turn from arrays, for a caller in this process that is both the ground station and the
         host of every drone (the RL environment, dronesim/rl.py): as if the ground station's DONE (CONTINUE)
-        carried the targets `aims` of the rows `aim_rows` and a MOVES then the moves `moves` (cells) and
-        `notes` (Note codes) of the rows `move_rows` (each row once; the other alive drones hover, as at the
-        deadline), through the same steps (`_targets_set`, `_judge`) without a message built: the caller
-        reads the fleet's columns, as the STATUS would say them (`Fleet.notes`); the turn's journal record is
-        not returned (the caller keeps no journal). The turn's OVER if the game ended with it. UsageError, and
-        nothing changed, if the turn is not the ground station's (or a DONE or MOVES came ahead) or an input would
-        be refused: a target outside the world or a move of more than one cell, for a drone not alive."""
+        carried the targets `aims` of the rows `aim_rows`, then a MOVES the `moves` (cells) and `notes` (Note
+        codes) of the rows `move_rows` (each once; the other alive drones hover), through the same steps
+        without a message built (the caller reads the fleet's columns; no journal record). The turn's OVER if
+        the game ended with it. UsageError, and nothing changed, if the turn is not the ground station's (or a
+        DONE or MOVES came ahead) or an input would be refused."""
         fleet = self.fleet
         if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
@@ -675,21 +631,15 @@ class Engine:
         if np.count_nonzero(fleet.cooperative):  # (only the arbitration reads them)
             self._ranked[move_rows] = 0
         self._judge(alive)
-        end = self._end_reason()
-        if end:
+        if end := self._end_reason():
             self._over(*end)
             return self.end
         self._open_gcs(self.turn + 1)
         return None
 
-    def _nps(self, msg: Nps) -> list[Effect]:
-        self._move(msg.sender, msg.pos, msg.note, msg.ranked)
-        return self._drones_check()
-
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves: each is taken or refused on its own, as if sent as an NPS. A big batch is
-        checked as a whole first (the checks of `_move`, in array operations); what that refuses, and a
-        batch of a few moves, goes through `_host_move` row by row, which says why."""
+        """A swarm host's moves, each on its own as if sent as an NPS (`_in_batch`: `whole` makes
+        `_host_move`'s checks in array operations)."""
         fleet, steps = self.fleet, msg.moves
         numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
 
@@ -717,7 +667,7 @@ class Engine:
             raise WrongSender(f"MOVES from {sender} for {d}, which {host or 'nobody'} flies")
         self._move(d, pos, note, ranked)
 
-    def _move(self, d: str, pos: Cell, note: Note, ranked: int = 0) -> None:
+    def _move(self, d: str, pos: Cell, note: Note, ranked: int) -> None:
         """Take a drone's move for this phase, or raise (and take nothing)."""
         fleet = self.fleet
         i = fleet.index.get(d)
@@ -733,9 +683,8 @@ class Engine:
         self._awaiting -= 1
 
     def _drones_check(self) -> list[Effect]:
-        if self._awaiting <= 0:  # every alive drone has moved (also when none is left alive)
-            return self._drones_finish()
-        return []
+        """The drones' phase ends once every alive drone has moved (also when none is left alive)."""
+        return self._drones_finish() if self._awaiting <= 0 else []
 
     def _upd(self, msg: Upd) -> list[Effect]:
         """The environment's report of a recent ENV phase: checked against the engine's world; it
@@ -755,11 +704,10 @@ class Engine:
         return []
 
     def _judge(self, alive: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The turn's moves take effect, as the drones' phase closes: the moves taken (the others hover) after
-        the arbitration, then the observer's judgement (who dies), the notes, priorities, missed deadlines and
-        the turn's journal record. The alive rows of the phase (`alive`, if the caller has them), their cells
-        before and after, and which moved. Every turn goes through here, from messages (`_drones_finish`) or
-        from arrays (`play`)."""
+        """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
+        the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
+        deadlines and the turn's journal record. The alive rows of the phase (`alive`, if the caller has them),
+        their cells before and after, and which moved."""
         fleet, ids = self.fleet, self.fleet.ids
         if alive is None:
             alive = fleet.alive_rows()
@@ -825,9 +773,7 @@ class Engine:
         self._log.debug("turn %d observed: %s", self.turn, log)
         effects: list[Effect] = [Record(log), Publish(status, data)]
         end = self._end_reason()
-        if end:
-            return effects + self._over(*end)
-        return effects + self._enter(Stage.GCS, self.turn + 1)
+        return effects + (self._over(*end) if end else self._enter(Stage.GCS, self.turn + 1))
 
     def _lose(self, d: str) -> None:
         i = self.fleet.index[d]
@@ -890,10 +836,9 @@ class Engine:
                 if self._done is not None:
                     self._log.warning("turn %d: %d of the GCS's %d targets arrived in time", turn,
                                       self._tgt_seen, self._done.count)
-                    return self._gcs_finish(self._done)
-                self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
-                self._aimed[:] = False
-                return self._enter(Stage.DRONES, turn)
+                else:
+                    self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
+                return self._gcs_finish()
             case Stage.DRONES:
                 alive = self.fleet.alive_rows()
                 late = [self.fleet.ids[i] for i in alive[~self._moved[alive]].tolist()]
@@ -908,9 +853,9 @@ class Engine:
         return self._over(EndReason.INTERRUPTED, why, self.status().turn)  # the last turn played (and STATUS sent)
 
     def link_lost(self) -> list[Effect]:
-        """The coordinator's link to the others is down (its own presence vanished, as every other's does
-        when the router restarts): nobody has left, the game holds (no deadline runs) until every admitted
-        entity is back (`present`) or `link_grace` has passed (`expire`: those still away have vanished)."""
+        """The coordinator's link is down (its own presence vanished, as every other's does when the router
+        restarts): nobody has left, the game holds until every admitted entity is back (`present`) or
+        `link_grace` has passed (`expire`: those still away have vanished)."""
         if self.stage is Stage.OVER or self._away is not None:
             return []
         self._away = set(self.entities)
@@ -919,9 +864,8 @@ class Engine:
         return []
 
     def present(self, entity: str, session: str) -> list[Effect]:
-        """An entity's presence token is there (again). The last admitted one back after a lost link
-        ends the hold: the current STATUS and phase go out again (what was sent during the outage was
-        lost; a repeated TURN is answered with the same moves, a second answer is refused)."""
+        """An entity's presence token is there (again). The last admitted one back after a lost link ends the
+        hold: the current STATUS and phase go out again (what was sent during the outage was lost)."""
         if self._away is None or entity not in self._away or self.roster.sessions.get(entity) not in ("", session):
             return []
         self._away.discard(entity)
@@ -941,9 +885,9 @@ class Engine:
         return effects
 
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
-        """An admitted entity's presence token disappeared (its process died or was cut off).
-
-        Only the admitted process's own token counts: another process's (a refused impostor's) does not."""
+        """An admitted entity's presence token disappeared (its process died or was cut off); only the
+        admitted process's own token counts, not a refused impostor's. A vanished environment is waited
+        for (`env_grace`; a returning one resyncs from STATUS)."""
         if self._away is not None and entity in self._away:
             return []  # the link is down: it is away, not gone (until `link_grace` has passed)
         role = self.roster.leave(entity, session)
@@ -953,23 +897,15 @@ class Engine:
         match role:
             case Role.GCS:
                 self._early.clear()  # what it said ahead goes with it
-                if self.stage is Stage.GCS and self._done is not None:
-                    return self._gcs_finish(self._done)  # its DONE is in: what arrived of its targets holds
                 if self.stage is Stage.GCS:
-                    self._aimed[:] = False
-                    return self._enter(Stage.DRONES, self.turn)
-            case Role.ENV:
-                pass  # the game waits for it (deadline: env_grace); a returning one resyncs from STATUS
+                    return self._gcs_finish()
             case Role.DRONE:
                 fleet = self.fleet
                 self._early_moves.pop(entity, None)
-                gone = [i for i, host in enumerate(fleet.host) if host == entity]
-                if self.stage in (Stage.ADMITTING, Stage.RESUMING):
-                    for i in gone:
+                for i in [i for i, host in enumerate(fleet.host) if host == entity]:
+                    if self.stage in (Stage.ADMITTING, Stage.RESUMING):
                         fleet.unhost(i)
-                    return []
-                for i in gone:
-                    if fleet.state[i] == ALIVE:
+                    elif fleet.state[i] == ALIVE:
                         self._lose(fleet.ids[i])
                 if self.stage is Stage.DRONES:
                     return self._drones_check()
@@ -989,17 +925,15 @@ def opens_drones_phase(effect: Effect) -> bool:
 
 
 def _drones_first(effects: list[Effect]) -> list[Effect]:
-    """The next turn's drones' phase first, when a turn ends and the next one's GCS phase was answered
-    ahead: it is what the next turn waits for. The rest keeps its order (STATUS before the GCS phase
-    it informs; the ENV phase before its STATUS)."""
+    """The next turn's drones' phase first (when the next turn's GCS phase was answered ahead): it is what
+    the next turn waits for. The rest keeps its order (the ENV phase, STATUS, the GCS phase it informs)."""
     return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves
 
 
 def _in_batch(n: int, whole: Callable[[], np.ndarray], one: Callable[[int], None]) -> list[RemoteInputError]:
-    """Take a batch of `n` items (a MOVES's moves, a DONE's targets), each on its own: `one(j)` takes item j
-    or raises why not. Up to FEW_ROWS items go one by one; a bigger batch is taken as a whole first (`whole()`
-    takes, in array operations, every item `one` would take, and says which), then the others one by one,
-    which gives the reason of each refusal. The refusals, in order."""
+    """Take a batch of `n` items (a MOVES's moves, a DONE's targets), each on its own (`one(j)` takes item j
+    or raises why not); the refusals, in order. A batch of more than FEW_ROWS is taken as a whole first
+    (`whole()` takes, in array operations, every item `one` would take, and says which), the rest one by one."""
     return _each(range(n) if n <= FEW_ROWS else np.flatnonzero(~whole()).tolist(), one)
 
 

@@ -1,9 +1,8 @@
 """The drones of a game as columns: the turn engine's state, one row per drone, rows in id order.
 
-A swarm's turn touches every drone a few times (its move is checked, arbitrated, judged by the observer,
-written into the orders and the STATUS). Held as numpy columns this is a handful of array operations per
-turn and a few dozen bytes per drone, where a record per drone cost microseconds and hundreds of bytes
-each. The row order is the drones' id order, which is also their priority order (arbitration, observer).
+A swarm's turn touches every drone a few times: as numpy columns that is a handful of array operations per
+turn and a few dozen bytes per drone (a record per drone cost microseconds and hundreds of bytes each). The
+row order is the drones' id order, which is also their priority order (arbitration, observer).
 """
 
 from __future__ import annotations
@@ -13,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable, UsageError, is_drone_id
+from schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable
 from schema.tables import MAX_DRONE, code_of, drone_number
 
 ALIVE, DEAD, LOST = (code_of(s) for s in (DroneState.ALIVE, DroneState.DEAD, DroneState.LOST))
@@ -43,17 +42,13 @@ class DroneView:
 
 class Fleet:
     """Every drone of a game: where it is, its state, target, note and cause (as in a STATUS), how many
-    DRONES deadlines in a row it missed, and who flies it with which autopilot."""
+    DRONES deadlines in a row it missed, and who flies it with which autopilot. `starts`: (id, start cell)
+    pairs, the ids checked already (`GameConfig`)."""
 
     def __init__(self, starts: Iterable[tuple[str, Cell]]) -> None:
         pairs = sorted(starts)
-        for d, _ in pairs:
-            if not is_drone_id(d):
-                raise UsageError(f"{d!r} is not a drone id (D01 ... D65535)")
         self.ids: tuple[str, ...] = tuple(d for d, _ in pairs)
         self.index: dict[str, int] = {d: i for i, d in enumerate(self.ids)}
-        if len(self.index) != len(self.ids):
-            raise UsageError(f"duplicate drone ids in {list(self.ids)}")
         n = len(self.ids)
         self.numbers = np.array([drone_number(d) for d in self.ids], np.uint16)
         self.row_of_number = np.full(MAX_DRONE + 1, -1, np.int32)  # drone number -> row
@@ -73,22 +68,8 @@ class Fleet:
     def __len__(self) -> int:
         return len(self.ids)
 
-    # ------------------------------------------------------------------ reading
-
     def alive_rows(self) -> np.ndarray:
         return (self.state == ALIVE).nonzero()[0]
-
-    def alive(self) -> list[str]:
-        ids = self.ids
-        return [ids[i] for i in self.alive_rows().tolist()]
-
-    def target_of(self, i: int) -> Cell | None:
-        return None if self.target[i, 0] < 0 else cell_of(self.target[i])
-
-    def view(self, i: int) -> DroneView:
-        return DroneView(pos=cell_of(self.pos[i]), state=STATES[self.state[i]], target=self.target_of(i),
-                         note=NOTES[self.note[i]], cause=CAUSES[self.cause[i]], misses=int(self.misses[i]),
-                         host=self.host[i], autopilot=self.autopilot[i], cooperative=bool(self.cooperative[i]))
 
     def notes(self) -> np.ndarray:
         """Each drone's note as the STATUS says it: REACHED whenever an alive drone is on its target."""
@@ -106,8 +87,6 @@ class Fleet:
         table = OrderTable.empty(len(rows))
         table["drone"], table["pos"], table["target"] = self.numbers[rows], self.pos[rows], self.target[rows]
         return OrderTable(table)
-
-    # ------------------------------------------------------------------ writing
 
     def fly(self, i: int, host: str, autopilot: str, cooperative: bool) -> None:
         self.host[i] = host
@@ -135,7 +114,11 @@ class Drones(Mapping[str, DroneView]):
         self._fleet = fleet
 
     def __getitem__(self, d: str) -> DroneView:
-        return self._fleet.view(self._fleet.index[d])
+        f, i = self._fleet, self._fleet.index[d]
+        target = None if f.target[i, 0] < 0 else cell_of(f.target[i])
+        return DroneView(pos=cell_of(f.pos[i]), state=STATES[f.state[i]], target=target, note=NOTES[f.note[i]],
+                         cause=CAUSES[f.cause[i]], misses=int(f.misses[i]), host=f.host[i], autopilot=f.autopilot[i],
+                         cooperative=bool(f.cooperative[i]))
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._fleet.ids)

@@ -22,8 +22,7 @@ class JournalWriter:
     """Appends records to a file, flushed line by line (a crash loses at most the line being written)."""
 
     def __init__(self, path: str | os.PathLike[str] | None) -> None:
-        self.path = pathlib.Path(path) if path else None
-        self._f = open(self.path, "a", encoding="utf-8") if self.path else None  # noqa: SIM115
+        self._f = open(path, "a", encoding="utf-8") if path else None  # noqa: SIM115
 
     def append(self, record: dict) -> None:
         if self._f is not None:
@@ -44,13 +43,12 @@ class JournalWriter:
 
 def repair_tail(path: str | os.PathLike[str]) -> None:
     """Cut a torn last line (a crash mid-write) so that appending goes on from a whole record."""
-    p = pathlib.Path(path)
     try:
-        data = p.read_bytes()
+        data = pathlib.Path(path).read_bytes()
     except OSError as exc:
         raise UsageError(f"cannot read journal {path}: {exc}") from None
     if data and not data.endswith(b"\n"):
-        with open(p, "r+b") as f:
+        with open(path, "r+b") as f:
             f.truncate(data.rfind(b"\n") + 1)
 
 
@@ -68,7 +66,7 @@ def read(path: str | os.PathLike[str]) -> Iterator[dict]:
         except json.JSONDecodeError:
             if n == len(lines):  # the last line, without its newline: torn by a crash
                 return
-            raise UsageError(f"{path}:{n}: not a journal record") from None
+            record = None
         if not isinstance(record, dict) or "record" not in record:
             raise UsageError(f"{path}:{n}: not a journal record")
         yield record

@@ -84,11 +84,6 @@ def _key_of(keys: Keys, msg: Message) -> str:
     raise AssertionError(f"the coordinator does not publish {msg.TAG}")
 
 
-def _soonest(*delays: float | None) -> float | None:
-    known = [d for d in delays if d is not None]
-    return min(known) if known else None
-
-
 class Executor:
     """Carries out the engine's effects in order; with `pace`, a new turn starts at most every `pace`
     seconds (the effects from its TURN on are held until then: a watchable speed, not a synchronisation).
@@ -113,12 +108,10 @@ class Executor:
             match eff:
                 case Publish(Turn() as turn) if self.pace and turn.turn > self._turn:
                     self._turn = turn.turn
-                    due = self._last + self.pace
-                    if self.clock() < due:
-                        self._held, self._due = [eff], due
-                        continue
-                    self._last = self.clock()
-                    self.out.put(self.keys.turn_of(turn.phase), turn)
+                    if self.clock() < self._last + self.pace:
+                        self._held, self._due = [eff], self._last + self.pace
+                    else:
+                        self.release([eff])
                 case Publish(msg, data):
                     self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):
@@ -137,25 +130,22 @@ class Executor:
         """Seconds until held effects are due (None: nothing held)."""
         return max(0.0, self._due - self.clock()) if self._held else None
 
-    def release(self) -> None:
-        held, self._held = self._held, []
+    def release(self, held: list | None = None) -> None:
+        """Send the held effects (or `held`, a new turn's TURN) now: a new turn starts."""
+        held, self._held = held or self._held, []
         self._last = self.clock()
-        first, rest = held[0], held[1:]
-        self.out.put(self.keys.turn_of(first.msg.phase), first.msg)
-        self.run(rest)
+        self.out.put(_key_of(self.keys, held[0].msg), held[0].msg)
+        self.run(held[1:])
 
 
 class Coordinator:
     """The coordinator's loop around the engine, without Zenoh: feed it the inbox's events (None when
-    `timeout()` passed), until `finished()`.
-
-    It admits a CONNECT once its sender's presence token is seen (`Presences`), keeps the phase deadline,
-    holds a vanished presence SETTLE_S before it counts (its own vanishing too means the link is down: the
-    engine holds the game) unless the routers, asked at once (`audit`), no longer connect that session,
-    refuses to share its root with another coordinator, ends the game on a signal,
-    and after OVER waits (up to LINGER_S) for the entities to leave. When a phase's deadline passes it asks
-    (`audit`) which sessions the routers connect: an admitted entity whose session is not among them has
-    gone, whoever holds a copy of its presence token."""
+    `timeout()` passed), until `finished()`. It admits a CONNECT once its sender's presence token is seen
+    (`Presences`), keeps the phase deadline, holds a vanished presence SETTLE_S before it counts (its own
+    vanishing too means the link is down: the engine holds the game), refuses to share its root with another
+    coordinator, ends the game on a signal, and after OVER waits (up to LINGER_S) for the entities to leave.
+    When an admitted session's token vanishes or a phase's deadline passes, it asks the routers which
+    sessions they connect (`audit`): an admitted entity whose session is not among them has gone."""
 
     def __init__(self, engine: Engine, effects: Executor, rejects: RejectCounter, logger: logging.Logger, me: str,
                  clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None) -> None:
@@ -192,7 +182,8 @@ class Coordinator:
         limit = self.engine.deadline()
         left = None if limit is None else max(0.0, self._started + limit - now)
         vanish = max(0.0, min(self._vanishing.values()) - now) if self._vanishing else None
-        return _soonest(left, self.effects.due_in(), self.presences.due_in(now), vanish)
+        delays = (left, self.effects.due_in(), self.presences.due_in(now), vanish)
+        return min((d for d in delays if d is not None), default=None)
 
     def finished(self) -> bool:
         if self.rival is not None:
@@ -321,8 +312,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     engine.env_followed = False  # until a Matching event says someone follows the ENV phase
     engine.arbiter = timed = arbiter.Timed(engine.arbiter)  # its CPU, reported at the end (benchmarks read it)
     with zenoh.open(conf) as session:
-        other = rival(session, keys)
-        if other is not None:
+        if (other := rival(session, keys)) is not None:
             raise UsageError(f"another coordinator (session {other}) runs on {keys.root}: one game per root")
         me, inbox = session_id(session), Inbox(session, keys, logger)
         inbox.serve(keys.connect, Connect)
@@ -358,11 +348,14 @@ def parse_starts(text: str, count: int, size: Cell | None = None,
                  blocked: Callable[[Cell], bool] | None = None) -> tuple[DroneSpec, ...]:
     """``--starts "0,0,0;0,2,0"`` or, by default, every other cell along y from (0,0,0), then the next row
     of them (x + 2), then the next layer (z + 2), skipping `blocked` cells: as many as fit in `size` (a
-    UsageError beyond; without `size`, one row as long as needed)."""
+    UsageError beyond; without `size`, one row as long as needed). A given cell that is `blocked`: UsageError."""
     if text:
         cells = [tuple(int(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
         if len(cells) != count or any(len(c) != 3 for c in cells):
             raise UsageError(f"--starts needs {count} cells x,y,z separated by ';'")
+        for i, c in enumerate(cells):
+            if blocked is not None and blocked(c):  # type: ignore[arg-type]
+                raise UsageError(f"{drone_id(i + 1)} would start inside a building at {c}")
     else:
         nx, ny, nz = size or (1, 2 * count, 1)
         spots = ((x, y, z) for z in range(0, nz, 2) for x in range(0, nx, 2) for y in range(0, ny, 2))
@@ -436,10 +429,6 @@ def game_config(args: argparse.Namespace) -> GameConfig:
     else:
         spec = WorldSpec(size=parse_size(args.size), seed=args.seed)
     drones = parse_starts(args.starts, args.drones, spec.size, world.is_building if args.world else None)
-    if args.world:
-        for d in drones:
-            if world.is_building(d.start):
-                raise UsageError(f"{d.drone} would start inside a building at {d.start}")
     return GameConfig(world=spec, drones=drones, max_turns=args.max_turns, **deadlines)
 
 

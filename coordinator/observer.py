@@ -2,11 +2,11 @@
 
 A drone dies when it leaves the world, enters a building cell, shares a cell with another drone
 (vertex conflict) or swaps cells with another drone (swap conflict). Causes are checked in that
-order and the first that applies is the one recorded.
+order and the first that applies is the one recorded. Priority is the id order: when several drones enter
+one cell, the last in id order is the one remembered as entering it, for the swap rule.
 
-`judge` decides for a whole swarm at once, over columns (numpy arrays, one row per alive drone, in id
-order): the engine's observer. `deaths` is the same rules written drone by drone, over mappings from drone
-ids to cells: the reference that tests/test_observer.py holds `judge` to (a property test).
+`judge` decides for a whole swarm at once, over columns: the engine's observer. `deaths` is the same rules
+drone by drone, over mappings: the reference that tests/test_observer.py holds `judge` to (a property test).
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ from schema.tables import code_of
 from schema.tuning import JUDGE_FEW_DRONES
 
 _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause.BUILDING, Cause.VERTEX, Cause.SWAP))
-_CODE = {c: code_of(c) for c in Cause}
 K = TypeVar("K", str, int)  # what `deaths` knows a drone by: its id, or its row
 
 
@@ -36,10 +35,8 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE).
 
     `before` and `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered
-    integers, rows in id order (the priority order: when several drones enter one cell, the last in id
-    order is the one remembered as entering it, for the swap rule); `building`: whether its `after` cell is
-    a building. Up to `few` drones, judged drone by drone (`deaths`: an array operation's fixed cost is
-    more than a few drones' Python), else in array operations.
+    integers, rows in id order; `building`: whether its `after` cell is a building. Up to `few` drones,
+    judged drone by drone (`deaths`: an array operation's fixed cost is more than a few drones' Python).
     """
     n = len(after)
     if n <= few:
@@ -85,7 +82,7 @@ def _judge_few(size: Cell, before: np.ndarray, after: np.ndarray, building: np.n
     dead = deaths(size, dict(enumerate(map(tuple, before.tolist()))), dict(enumerate(cells)), buildings)
     cause = np.zeros(len(cells), np.uint8)
     if dead:
-        cause[list(dead)] = [_CODE[c] for c in dead.values()]
+        cause[list(dead)] = [code_of(c) for c in dead.values()]
     return cause
 
 
@@ -99,8 +96,6 @@ def deaths(
 
     `before` and `after` hold every alive drone's cell at the start and end of the turn (a hovering
     drone has the same cell in both); `buildings` holds the building cells among the `after` cells.
-    Priority is the id order: when several drones enter one cell, the last in id order is the one
-    remembered as entering it, for the swap rule.
     """
     dead: dict[K, Cause] = {}
     order = sorted(after)

@@ -14,7 +14,7 @@ import numpy as np
 from schema import Cause, DroneState, Intent, Note, UsageError
 from schema.tables import code_of
 
-from .engine import Engine, GameConfig, state_hash
+from .engine import Engine, GameConfig, Stage, state_hash
 
 
 def restore(config: GameConfig, records: list[dict], logger: logging.Logger, game: str = "") -> Engine:
@@ -40,7 +40,7 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
                 turn = _restore_turn(engine, r)
             case "over":
                 raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
-    engine.restored(turn)
+    engine.turn, engine.stage = turn, Stage.RESUMING
     logger.info("restored turn %d from the journal", turn)
     return engine
 
