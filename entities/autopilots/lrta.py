@@ -60,7 +60,6 @@ arrays (`autopilots.SWARMS`), about 2 µs a drone a turn. Both revalue a cube wi
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from itertools import repeat
 from typing import ClassVar
 
 import numpy as np
@@ -70,7 +69,7 @@ from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds, swarm_numbers, swarm_rows
+from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing, in_bounds
 
 #: A ranking key is h * _H + off * _OFF + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in
 #: AROUND order, 6 staying); off is 1 for a step off the cruise (see the module), else 0; tie is 0 for staying
@@ -249,7 +248,7 @@ _SHIFTS = np.arange(7, dtype=np.int64) * 3
 _FAR = np.iinfo(np.int64).max
 
 
-class LrtaSwarm:
+class LrtaSwarm(SwarmBase):
     """`LrtaPilot` for a whole swarm host's drones at once, over arrays: the same decisions and the same learned
     values. The values of every drone are one dict: (the drone's current trip × world cells + the cell's grid
     index) -> h, where a trip is numbered anew each time the drone's target changes (the values of a former
@@ -261,12 +260,10 @@ class LrtaSwarm:
 
     def __init__(self, *, world_size: Cell, drones: Sequence[int], slack: int | None = None,
                  lookahead: int = LOOKAHEAD) -> None:
-        self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
+        super().__init__(world_size=world_size, drones=drones)
         self.slack = default_slack(self.size) if slack is None else max(0, int(slack))
         self.look = Lookahead(lookahead)
-        self._drones = swarm_numbers(drones)
         n = len(self._drones)
-        self._cells = self.size[0] * self.size[1] * self.size[2]
         self._target = np.full((n, 3), -1, dtype=np.int64)
         self._trip = np.arange(n, dtype=np.int64)  # each drone's current trip
         self._trips = n  # trips numbered so far
@@ -282,14 +279,8 @@ class LrtaSwarm:
 
     def learned(self, drone: int) -> dict[Cell, int]:
         """Drone number `drone`'s learned values for its current target (as `LrtaPilot.learned`)."""
-        row = int(self._rows([drone])[0])
-        first = int(self._trip[row]) * self._cells
-        _, ny, nz = self.size
-        return {(i // (ny * nz), i // nz % ny, i % nz): v for k, v in self._learned.items()
-                if first <= k < first + self._cells for i in (k - first,)}
-
-    def _rows(self, drones: Sequence[int] | np.ndarray) -> np.ndarray:
-        return swarm_rows(self._drones, drones)
+        first = int(self._trip[int(self._rows([drone])[0])]) * self._cells
+        return {self._cell(k - first): v for k, v in self._learned.items() if first <= k < first + self._cells}
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """This turn's moves of the drones numbered `drones` at `pos` ((n, 3)) towards `target` ((n, 3),
@@ -301,9 +292,7 @@ class LrtaSwarm:
         looked up only for the drones that learned something on their current trip (`_learns`)."""
         size = self.size
         n = len(drones)
-        rows = self._rows(drones)
-        pos = np.asarray(pos, dtype=np.int64).reshape(n, 3)
-        target = np.asarray(target, dtype=np.int64).reshape(n, 3)
+        rows, pos, target = self._orders(drones, pos, target)
         has = target[:, 0] >= 0
         changed = has & (self._target[rows] != target).any(axis=1)
         if changed.any():  # a new trip: the values learned for the former target are left behind
@@ -369,11 +358,10 @@ class LrtaSwarm:
             learner = self._learns[rows[go]]
             if learner.any():  # the drones that learned on this trip: their values, where they learned one
                 sub = np.flatnonzero(learner)
-                cell_keys = (self._trip[rows[go[sub]]] * self._cells)[:, None] + linear_rows(
-                    np.concatenate([p[sub, None, :], around[go[sub]]], axis=1).reshape(-1, 3), size).reshape(-1, 7)
+                cells = np.concatenate([p[sub, None, :], around[go[sub]]], axis=1)  # (sub, 7, 3)
+                cell_keys = self._keys(self._trip[rows[go[sub]]], cells)
                 wanted = np.concatenate([np.ones((len(sub), 1), dtype=bool), f[sub]], axis=1)
-                found = np.fromiter(map(self._learned.get, cell_keys[wanted].tolist(), repeat(-1)), dtype=np.int64,
-                                    count=int(wanted.sum()))
+                found = self._lookup(self._learned, cell_keys[wanted])
                 part = values[sub]
                 part[wanted] = np.where(found >= 0, found, part[wanted])
                 values[sub] = part
@@ -419,10 +407,8 @@ class LrtaSwarm:
         p, t = pos[at], target[at]
         cells = p[:, None, :] + look.offsets  # (k, padded, 3)
         inside = ((cells >= 0) & (cells < np.array(size))).all(axis=2)
-        keys = (self._trip[rows[at]] * self._cells)[:, None] + linear_rows(
-            np.where(inside[..., None], cells, 0).reshape(-1, 3), size).reshape(inside.shape)
-        found = np.fromiter(map(self._learned.get, keys[inside].tolist(), repeat(-1)), dtype=np.int64,
-                            count=int(inside.sum()))
+        keys = self._keys(self._trip[rows[at]], np.where(inside[..., None], cells, 0))
+        found = self._lookup(self._learned, keys[inside])
         h = np.full(inside.shape, _FAR_H, dtype=np.int64)
         h[inside] = np.where(found >= 0, found, np.abs(cells - t[:, None, :]).sum(axis=2)[inside])
         old = h[:, look.inner]
