@@ -71,7 +71,7 @@ from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import rank_steps
 
-from .base import Decision, Sensing
+from .base import Decision, Sensing, in_bounds
 
 UNKNOWN, FREE, BLOCKED = 0, 1, 2
 INF = 1 << 30
@@ -128,29 +128,22 @@ class DStarPilot:
         self._ys = array(code, ((flat // sy) % (Y + 2)).astype(dtype).tobytes())
         self._zs = array(code, (flat % sy).astype(dtype).tobytes())
         self._K = X + Y + Z + 8  # > any h + 1: tb fits under one unit of k1
-        # Per-target search state (reset by _reset).
-        self._goal = -1
-        self._target: Cell | None = None
-        self._g: list[int] = []
-        self._rhs: list[int] = []
-        self._heap: list[int] = []
-        self._km = 0
-        self._last = -1
-        self._unreachable = False
-        self._waited = 0
-        self._orders: dict[tuple[int, int, int, bool], tuple[int, ...]] = {}
         self.stuck_after = max(64, 2 * (X + Y + Z)) if stuck_after is None else max(1, int(stuck_after))
-        self._low = INF  # the smallest distance since the count below started
-        self._since = 0  # turns since then
+        # The search state of the current target (set by _reset).
+        self._goal, self._last = -1, -1
+        self._target: Cell | None = None
+        self._home = False  # the last step was on the target
+        self._restart()
+
+    def _restart(self) -> None:
+        """Start the count of turns without getting closer again (a new target, or on it)."""
+        self._waited = 0  # turns waited behind a drone
+        self._low, self._since = INF, 0  # the smallest distance since the count started, turns since then
         #: While going round a drone (`_detour`): the cell it avoids, and each cell's distance to the target
         #: without it (those the search reached); -1 / None otherwise.
         self._avoid = -1
         self._round: dict[int, int] | None = None
         self._tried = False  # a detour was looked for since the drone last got closer
-        self._home = False  # the last step was on the target
-        self._pushed = 0  # times it was pushed off its target (this target)
-        #: Statistics for benchmarks: cells expanded by the search, over the pilot's life.
-        self.expansions = 0
 
     @property
     def distance(self) -> int | None:
@@ -169,29 +162,23 @@ class DStarPilot:
     def _cell(self, i: int) -> Cell:
         return (self._xs[i] - 1, self._ys[i] - 1, self._zs[i] - 1)
 
-    def _inside(self, c: Cell) -> bool:
-        X, Y, Z = self.size
-        return 0 <= c[0] < X and 0 <= c[1] < Y and 0 <= c[2] < Z
-
     # ------------------------------------------------------------------ D* Lite core
 
     def _reset(self, target: Cell, start: int) -> None:
         n = self._n
         self._target = target
         self._goal = goal = self._index(target)
-        self._g = [INF] * n
-        self._rhs = rhs = [INF] * n
+        self._g: list[int] = [INF] * n
+        self._rhs: list[int] = [INF] * n
         self._km = 0
         self._last = start
         self._unreachable = False
-        self._waited = 0
-        self._orders = {}
-        self._low, self._since = INF, 0
-        self._avoid, self._round, self._tried = -1, None, False
-        self._home, self._pushed = False, 0
-        rhs[goal] = 0
+        self._orders: dict[tuple[int, int, int, bool], tuple[int, ...]] = {}
+        self._home, self._pushed = False, 0  # _pushed: times it was pushed off its target
+        self._restart()
+        self._rhs[goal] = 0
         h = self._h(start, goal)
-        self._heap = [((h + 0) * self._K + h + 1) * n + goal]
+        self._heap: list[int] = [((h + 0) * self._K + h + 1) * n + goal]
 
     def _h(self, a: int, b: int) -> int:
         xs, ys, zs = self._xs, self._ys, self._zs
@@ -259,7 +246,6 @@ class DStarPilot:
         if t < 0:
             t = s
         ht = hx[xs[t]] + hy[ys[t]] + hz[zs[t]]
-        expanded = 0
         while heap:
             top = heap[0]
             gt = g[t]
@@ -279,7 +265,6 @@ class DStarPilot:
             if k < knew:
                 heappush(heap, knew * NP + u)
                 continue
-            expanded += 1
             if gu > ru:  # over-consistent: settle it, relax its neighbours
                 g[u] = ru
                 nv = ru + 1
@@ -314,7 +299,6 @@ class DStarPilot:
                             heappush(heap, ((gp + hp + km) * K) * NP + p)
                         else:
                             heappush(heap, ((r + hp + km) * K + hp + 1) * NP + p)
-        self.expansions += expanded
         if len(heap) > 2 * NP:  # compact: drop entries of cells that are consistent now
             heap[:] = [e for e in heap if g[e % NP] != rhs[e % NP]]
             heapify(heap)
@@ -336,22 +320,10 @@ class DStarPilot:
             sx, sy = self._sx, self._sy
             fx = sx if dx >= 0 else -sx
             fy = sy if dy >= 0 else -sy
-            first, second = (fx, fy) if key[3] else (fy, fx)
-            ranked: list[int] = []
-            if dz > 0:
-                ranked.append(1)
-            if key[3]:
-                ranked += [fx] if dx else []
-                ranked += [fy] if dy else []
-            else:
-                ranked += [fy] if dy else []
-                ranked += [fx] if dx else []
-            if dz < 0:
-                ranked.append(-1)
-            for d in (1, first, second, -first, -second, -1):
-                if d not in ranked:
-                    ranked.append(d)
-            order = tuple(ranked)
+            (first, a), (second, b) = ((fx, dx), (fy, dy)) if key[3] else ((fy, dy), (fx, dx))
+            ranked = ([1] if dz > 0 else []) + [d for d, way in ((first, a), (second, b)) if way]
+            ranked += [-1] if dz < 0 else []
+            order = (*ranked, *(d for d in (1, first, second, -first, -second, -1) if d not in ranked))
             self._orders[key] = order
         return order
 
@@ -383,42 +355,42 @@ class DStarPilot:
 
     # ------------------------------------------------------------------ the step
 
-    def _learn(self, answers: Mapping[Cell, CellInfo], s: int, drones: set[int] | None) -> bool:
-        """Record ASK answers; collect cells holding another drone. True if something got blocked."""
+    def _learn(self, answers: Mapping[Cell, CellInfo], s: int, seen: tuple[set[int], set[int]] | None = None) -> bool:
+        """Record ASK answers; collect in `seen` the cells told empty and those holding another drone. True if
+        something got blocked."""
         changed = False
-        state = self._state
-        index, inside = self._index, self._inside
+        state, index, size = self._state, self._index, self.size
         for cell, info in answers.items():
-            if not inside(cell):
+            if not in_bounds(cell, size):
                 continue
             i = index(cell)
             if info.kind is CellKind.EMPTY:
                 if state[i] == UNKNOWN:
                     state[i] = FREE
-                if drones is not None and info.drones and i != s:
-                    drones.add(i)
+                if seen is not None:
+                    seen[0].add(i)
+                    if info.drones and i != s:
+                        seen[1].add(i)
             elif self._block(i, s):
                 changed = True
         return changed
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         pos = (int(pos[0]), int(pos[1]), int(pos[2]))
-        if not self._inside(pos):
+        if not in_bounds(pos, self.size):
             return Decision(pos=pos, note=Note.NONE if target is None else Note.UNREACHABLE)
         if target is None:
             return Decision(pos=pos, ranked=self._aside(self._index(pos)))
         target = (int(target[0]), int(target[1]), int(target[2]))
         if pos == target:  # parked: it may be pushed aside, to its free neighbours (asked once)
-            self._waited = 0
-            self._low, self._since = INF, 0
-            self._avoid, self._round, self._tried = -1, None, False
+            self._restart()
             self._home = target == self._target
             s = self._index(pos)
             unknown = [s + d for d in self._offs if self._state[s + d] == UNKNOWN]
             if unknown:
-                self._learn((yield tuple(self._cell(i) for i in unknown)), s, None)
+                self._learn((yield tuple(self._cell(i) for i in unknown)), s)
             return Decision(pos=pos, note=Note.REACHED, ranked=self._aside(s))
-        if not self._inside(target):
+        if not in_bounds(target, self.size):
             return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(self._index(pos)))
         s = self._index(pos)
         if target != self._target:
@@ -426,40 +398,23 @@ class DStarPilot:
         elif self._home:
             self._pushed += 1
         self._home = False
-        if self._unreachable:  # static world: nothing new can be learnt by hovering
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
-        goal = self._goal
-        state = self._state
-        if state[goal] == BLOCKED:
-            self._unreachable = True
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
+        goal, state = self._goal, self._state
+        if self._unreachable or state[goal] == BLOCKED:
+            return self._give_up(pos, s)
         self._move_start(s)
         self._compute(s)
 
         # Round 1: neighbours (drones), the target if unknown, unknown cells along the path ahead.
         neigh = [s + d for d in self._offs if state[s + d] != BLOCKED]
-        asked = set(neigh)
-        extra = []
-        if state[goal] == UNKNOWN and goal not in asked:
-            extra.append(goal)
-            asked.add(goal)
+        extra = [goal] if state[goal] == UNKNOWN else []
         if self._g[s] < INF:
-            for p in self._ahead(s, self.lookahead):
-                if state[p] == UNKNOWN and p not in asked:
-                    extra.append(p)
-                    asked.add(p)
-        cells = tuple(self._cell(i) for i in neigh + extra)
+            extra += [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
+        cells = tuple(self._cell(i) for i in dict.fromkeys(neigh + extra))  # each once, the neighbours first
+        sensed: set[int] = set()  # the cells told empty, and those holding another drone
         drones: set[int] = set()
-        if cells:
-            answers = yield cells
-            changed = self._learn(answers, s, drones)
-            sensed = {self._index(c) for c, info in answers.items()
-                      if info.kind is CellKind.EMPTY and self._inside(c)}
-        else:
-            changed, sensed = False, set()
+        changed = self._learn((yield cells), s, (sensed, drones)) if cells else False
         if state[goal] == BLOCKED:
-            self._unreachable = True
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
+            return self._give_up(pos, s)
         learnt = changed
         if changed:
             self._compute(s)
@@ -468,12 +423,11 @@ class DStarPilot:
                 more = [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
                 if more:
                     answers = yield tuple(self._cell(i) for i in more)
-                    if self._learn(answers, s, None):
+                    if self._learn(answers, s):
                         self._compute(s)
         g = self._g
         if g[s] >= INF:
-            self._unreachable = True
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
+            return self._give_up(pos, s)
         if g[s] < self._low:
             self._low, self._since = g[s], 0
             self._avoid, self._round, self._tried = -1, None, False
@@ -516,6 +470,11 @@ class DStarPilot:
             if move != s:
                 self._waited = 0
         return Decision(pos=self._cell(move), note=note, ranked=self._ranking(s, neigh, sensed))
+
+    def _give_up(self, pos: Cell, s: int) -> Decision:
+        """The target is unreachable, for good: the world is static, nothing new can be learnt by hovering."""
+        self._unreachable = True
+        return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
 
     # ------------------------------------------------------------------ candidates for the arbiter
 
