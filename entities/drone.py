@@ -210,13 +210,9 @@ class DroneProcess:
     # ------------------------------------------------------------------ inputs
 
     def start(self) -> list[Effect]:
-        """Once admitted: ask for the map, and for the static world around the starts (the first
-        turn's sensing then needs no ASK), now if an environment is present, else when one appears."""
-        return self._ask_before_the_game()
-
-    def _ask_before_the_game(self) -> list[Effect]:
-        """`start`'s questions (this process exists once admitted), with an environment present, if the game has
-        not begun."""
+        """Once admitted (this process exists once admitted), if the game has not begun: ask for the map, and for
+        the static world around the starts (the first turn's sensing then needs no ASK), now if an environment
+        is present, else when one appears (`receive` calls it again)."""
         if not (self.charting and self._env) or self._map_asked or self._done or self._deciding:
             return []
         starts = self.welcome.starts.cells()
@@ -238,7 +234,7 @@ class DroneProcess:
                     effects += self._answered(ref, replies)
                 case EnvPresence(session, alive):
                     (self._env.add if alive else self._env.discard)(session)
-                    effects += self._ask_before_the_game() if alive else []
+                    effects += self.start() if alive else []
                 case Expired(ref):
                     self._expired(ref)
         if self.over is not None:
@@ -350,15 +346,12 @@ class DroneProcess:
         answers: dict[str, Answers] = {}
         asking: dict[str, tuple[Cell, ...]] = {}
         for drone, wanted in question.items():
-            infos: dict[Cell, CellInfo] = {}
-            for c in wanted:
-                k = kind(c)
-                if k is None:
-                    asking[drone] = wanted
-                    break
-                infos[c] = CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))
+            known = [kind(c) for c in wanted]
+            if None in known:
+                asking[drone] = wanted
             else:
-                answers[drone] = infos
+                answers[drone] = {c: CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))  # type: ignore[arg-type]
+                                  for c, k in zip(wanted, known)}
         return _Round(asking, answers, lambda got: got)
 
     def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Effect]:
@@ -421,8 +414,7 @@ class DroneProcess:
         got: dict[Cell, CellInfo] | None = None  # None: nobody answered
         for reply in replies:
             try:
-                if isinstance(reply, RemoteInputError):
-                    raise reply
+                reply = _reply(reply)
                 reply.check_fits(cells)
                 if self.charting:
                     self.chart.learn(cells, reply.kinds)
@@ -457,17 +449,15 @@ class DroneProcess:
 
     def _map_answered(self, replies: tuple) -> list[Effect]:
         self._map_ref = None
-        for reply in replies:
-            self._map_settled = True
-            try:
-                if isinstance(reply, RemoteInputError):
-                    raise reply
-                self.chart.learn_map(reply)
-                self.log.info("charted the environment's map: %d cells", len(self.chart))
-                return []
-            except RemoteInputError as err:
-                return [Refusal("MAP", err)]
-        return []  # nobody answered: asked again in a later turn
+        if not replies:
+            return []  # nobody answered: asked again in a later turn
+        self._map_settled = True
+        try:
+            self.chart.learn_map(_reply(replies[0]))
+        except RemoteInputError as err:
+            return [Refusal("MAP", err)]
+        self.log.info("charted the environment's map: %d cells", len(self.chart))
+        return []
 
     def _prefetch(self, turn: int, around: list[Cell]) -> list[Effect]:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
@@ -483,6 +473,13 @@ class DroneProcess:
         for i in range(0, len(cells), chunk):
             effects.append(self._query(Ask(turn=0, sender=self.sender, cells=cells[i:i + chunk])))
         return effects
+
+
+def _reply(reply: Ans | WorldMap | RemoteInputError) -> Any:
+    """A query's reply: the message, or the RemoteInputError of an error reply or a malformed one raised."""
+    if isinstance(reply, RemoteInputError):
+        raise reply
+    return reply
 
 
 def _cells_of(moves: StepTable | dict[str, Decision]) -> Iterable[Cell]:

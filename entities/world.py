@@ -42,13 +42,13 @@ _DEFAULT_GROUND_COVER = 0.25  # expected fraction of ground cells under a buildi
 _ATTEMPTS_PER_BUILDING = 4
 _CHUNK = 4096
 
-# Drawing labels.
-_EMPTY, _BLOCK, _TARGET, _TRAIL, _CROWD = "EPT", "BLK", "TGT", "+++", "!!!"
-_C_EMPTY, _C_BLOCK, _C_TARGET, _C_TRAIL, _C_CROWD = ".", "#", "X", "*", "!"
-_LEGEND = ("legend: EPT empty, BLK building, TGT target, +++ trail, Dnn drone, !!! several drones;"
-           " row = x, column = y, (0,0) top-left")
-_C_LEGEND = ("legend: . empty, # building, X target, * trail, digit = drone (last character of its id),"
-             " ! several drones; row = x, column = y, (0,0) top-left")
+#: Drawing labels (empty, building, target, trail, several drones, legend), by `compact`.
+_LABELS = {
+    False: ("EPT", "BLK", "TGT", "+++", "!!!", "legend: EPT empty, BLK building, TGT target, +++ trail, Dnn drone, "
+            "!!! several drones; row = x, column = y, (0,0) top-left"),
+    True: (".", "#", "X", "*", "!", "legend: . empty, # building, X target, * trail, digit = drone (last character "
+           "of its id), ! several drones; row = x, column = y, (0,0) top-left"),
+}
 
 
 # --------------------------------------------------------------------------- validation helpers
@@ -83,6 +83,14 @@ def checked_int(value: object, what: str, error: type[UsageError] = UsageError) 
         return operator.index(value)  # type: ignore[arg-type]
     except TypeError:
         raise error(f"{what} must be an integer, got {value!r}") from None
+
+
+def _at_least(value: object, what: str, least: int) -> int:
+    """`value` as a plain int of at least `least` (UsageError otherwise)."""
+    number = checked_int(value, what)
+    if number < least:
+        raise UsageError(f"{what} must be >= {least}, got {number}")
+    return number
 
 
 def _cell(value: object, what: str = "cell") -> Cell:
@@ -256,20 +264,13 @@ class World:
             rng = np.random.default_rng(0)
         elif not isinstance(rng, np.random.Generator):
             rng = np.random.default_rng(checked_int(rng, "seed"))
-        footprint = _DEFAULT_FOOTPRINT if max_footprint is None else checked_int(max_footprint, "max_footprint")
-        if footprint < 1:
-            raise UsageError(f"max_footprint must be >= 1, got {footprint}")
-        top = nz if max_height is None else checked_int(max_height, "max_height")
-        if top < 1:
-            raise UsageError(f"max_height must be >= 1, got {top}")
+        footprint = _at_least(_DEFAULT_FOOTPRINT if max_footprint is None else max_footprint, "max_footprint", 1)
+        top = _at_least(nz if max_height is None else max_height, "max_height", 1)
         max_len, max_wid, top = min(footprint, nx), min(footprint, ny), min(top, nz)
         if count is None:
             mean_area = (max_len + 1) / 2 * (max_wid + 1) / 2
             count = max(1, round(_DEFAULT_GROUND_COVER * nx * ny / mean_area))
-        count = checked_int(count, "count")
-        if count < 0:
-            raise UsageError(f"count must be >= 0, got {count}")
-        count = min(count, nx * ny)  # every building needs at least one ground cell
+        count = min(_at_least(count, "count", 0), nx * ny)  # every building needs at least one ground cell
 
         # limit[x, y]: the tallest building allowed on that ground cell; 0 once a building stands
         # there, and at most kz for a keep_free cell (x, y, kz), so that a building stops below it.
@@ -394,17 +395,13 @@ class World:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read world file {str(path)!r}: {exc}") from None
-        if Path(path).suffix == ".map":
-            try:
-                return cls.from_grid(world_grid(read_map(text)))
-            except UsageError as exc:
-                raise UsageError(f"world file {str(path)!r}: {exc}") from None
+        movingai = Path(path).suffix == ".map"
         try:
-            data = json.loads(text)
+            data = {} if movingai else json.loads(text)
         except json.JSONDecodeError as exc:
             raise UsageError(f"world file {str(path)!r} is not valid JSON: {exc}") from None
         try:
-            return cls.from_json(data)
+            return cls.from_grid(world_grid(read_map(text))) if movingai else cls.from_json(data)
         except UsageError as exc:
             raise UsageError(f"world file {str(path)!r}: {exc}") from None
 
@@ -447,12 +444,8 @@ class World:
     def free_neighbours(self, cell: Cell) -> tuple[Cell, ...]:
         """The in-bounds, non-building 6-neighbours of `cell`, in the order +x, -x, +y, -y, +z, -z."""
         x, y, z = _cell(cell)
-        out = []
-        for dx, dy, dz in AROUND:
-            n = (x + dx, y + dy, z + dz)
-            if self.contains(n) and not self.grid[n]:
-                out.append(n)
-        return tuple(out)
+        around = ((x + dx, y + dy, z + dz) for dx, dy, dz in AROUND)
+        return tuple(n for n in around if self.contains(n) and not self.grid[n])
 
     def shortest_path_length(self, start: Cell, goal: Cell) -> int | None:
         """The number of 6-connected moves from `start` to `goal` through non-building cells,
@@ -470,8 +463,7 @@ class World:
         sx, sy, steps = padded_steps(self.size)
         offsets = np.array(steps, dtype=np.int64)
         unseen = free.ravel()
-        s = (start[0] + 1) * sx + (start[1] + 1) * sy + start[2] + 1
-        g = (goal[0] + 1) * sx + (goal[1] + 1) * sy + goal[2] + 1
+        s, g = ((c[0] + 1) * sx + (c[1] + 1) * sy + c[2] + 1 for c in (start, goal))
         unseen[s] = False
         frontier = np.array([s], dtype=np.int64)
         distance = 0
@@ -532,36 +524,28 @@ class World:
                 if self.contains((x, y, z)):
                     marks.setdefault(z, {})[(x, y)] = label
 
-        mark(trail, _C_TRAIL if compact else _TRAIL)
-        mark(targets.values(), _C_TARGET if compact else _TARGET)
+        empty, block, target, trailed, several, legend = _LABELS[compact]
+        mark(trail, trailed)
+        mark(targets.values(), target)
         crowd: dict[Cell, list[str]] = {}
         for name, c in drones.items():
             crowd.setdefault(_cell(c, f"position of {name}"), []).append(str(name))
         for c, names in crowd.items():
-            if len(names) > 1:
-                label = _C_CROWD if compact else _CROWD
-            else:
-                label = (names[0][-1:] or "?") if compact else names[0]
-            mark((c,), label)
+            alone = (names[0][-1:] or "?") if compact else names[0]
+            mark((c,), several if len(names) > 1 else alone)
 
         width = max([3, *(len(v) for m in marks.values() for v in m.values())])
         blocks = []
         for z in zs:
-            floor = marks.get(z, {})
+            cells = np.where(self.grid[:, :, z], block, empty).astype(f"<U{width}")
+            for (x, y), label in marks.get(z, {}).items():
+                cells[x, y] = label
             if compact:
-                cells = np.where(self.grid[:, :, z], _C_BLOCK, _C_EMPTY).astype("<U1")
-                for (x, y), label in floor.items():
-                    cells[x, y] = label
-                text = "".join(cells.ravel().tolist())
-                rows = [text[i * ny:(i + 1) * ny] for i in range(nx)]
+                rows = ["".join(row) for row in cells.tolist()]
             else:
-                cells = np.where(self.grid[:, :, z], _BLOCK, _EMPTY).astype(f"<U{width}")
-                for (x, y), label in floor.items():
-                    cells[x, y] = label
                 rows = [" ".join(s.ljust(width) for s in row).rstrip() for row in cells.tolist()]
             blocks.append("\n".join([f"z = {z}", *rows]))
-        blocks.append(_C_LEGEND if compact else _LEGEND)
-        return "\n\n".join(blocks)
+        return "\n\n".join([*blocks, legend])
 
 
 def _json_list(value: object, what: str) -> list:
