@@ -114,7 +114,7 @@ class Agent:
 def read_scen(text: str) -> list[Agent]:
     """A .scen's agents, in order. UsageError if malformed."""
     lines = [ln for ln in text.splitlines() if ln.strip()]
-    if not lines or lines[0].split() != ["version", "1"] and lines[0].split() != ["version", "1.0"]:
+    if not lines or lines[0].split() not in (["version", "1"], ["version", "1.0"]):
         raise UsageError(".scen: the first line must be 'version 1'")
     agents = []
     for n, line in enumerate(lines[1:], 2):
@@ -224,11 +224,7 @@ def maze(width: int) -> Callable[[int, np.random.Generator], np.ndarray]:
         seen = np.zeros((n, n), bool)
         stack = [(0, 0)]
         seen[0, 0] = True
-
-        def open_cell(cx: int, cy: int) -> None:
-            blocked[1 + cx * pitch:1 + cx * pitch + width, 1 + cy * pitch:1 + cy * pitch + width] = False
-
-        open_cell(0, 0)
+        blocked[1:1 + width, 1:1 + width] = False
         while stack:
             cx, cy = stack[-1]
             options = [(cx + dx, cy + dy) for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1))
@@ -238,10 +234,9 @@ def maze(width: int) -> Callable[[int, np.random.Generator], np.ndarray]:
                 continue
             nx, ny = options[int(rng.integers(len(options)))]
             seen[nx, ny] = True
-            open_cell(nx, ny)
             x0, x1 = sorted((1 + cx * pitch, 1 + nx * pitch))
             y0, y1 = sorted((1 + cy * pitch, 1 + ny * pitch))
-            blocked[x0:x1 + width, y0:y1 + width] = False  # the wall between them
+            blocked[x0:x1 + width, y0:y1 + width] = False  # the new cell and the wall between them
             stack.append((nx, ny))
         return blocked
     return make
@@ -291,10 +286,8 @@ def warehouse(size: int, rng: np.random.Generator) -> np.ndarray:
     and a cross aisle every 7 cells: a warehouse floor (the random draw only shifts the cross aisles)."""
     blocked = np.zeros((size, size), bool)
     shift = int(rng.integers(3))
-    for y in range(3, size - 3, 3):
-        for x in range(3, size - 3):
-            if (x - 3 - shift) % 7 != 6:
-                blocked[x, y] = True
+    xs = np.arange(3, size - 3)
+    blocked[np.ix_(xs[(xs - 3 - shift) % 7 != 6], np.arange(3, size - 3, 3))] = True
     return _connected(blocked)
 
 
