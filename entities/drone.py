@@ -181,7 +181,6 @@ class DroneProcess:
                  chart: bool = True) -> None:
         self.sender = host or drones[0]
         self.host = host
-        self.drones = tuple(drones)
         self.log = logger
         self.patience = patience
         self.welcome = welcome
@@ -192,9 +191,9 @@ class DroneProcess:
         self.pilots = {} if self.swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
         if self.swarm:
             logger.info("flying %d drones with the %s autopilot's swarm form", len(drones), autopilot)
-        self.senses = pilot_class(autopilot).senses
         self.chart = Chart(size)
-        self.charting = chart and self.senses  # False: every question goes to the environment (a benchmark's switch)
+        # False: every question goes to the environment (a benchmark's switch), or the autopilot asks none
+        self.charting = chart and pilot_class(autopilot).senses
         self.over: Over | None = None
         self._numbers = np.array(sorted(drone_number(d) for d in drones))
         self._mine = set(drones)
@@ -309,11 +308,9 @@ class DroneProcess:
         """Let a superseded plan end (the autopilots' memory stays as it would be): the questions the chart
         cannot answer get no answer, nothing more is asked, and its moves are not sent."""
         d.offline = True
-        r = d.round
-        if r is not None:
+        if (r := d.round) is not None:  # what it waits for gets no answer (`_settle_unanswered`)
             r.asking.clear()
-            r.unanswered = []
-            r.answers.update({p: {} for p in r.parts if p not in r.answers})
+            r.unanswered = [p for p in r.parts if p not in r.answers]
         self._run(d, [])
 
     def _messages(self, turn: Turn, moves: StepTable | dict[str, Decision]) -> list[Effect]:

@@ -28,12 +28,11 @@ towards `target`:
 
 In a depression (it learned a value where it stood the turn before: a wall across its straight line), a drone
 looks further: it senses the cube of `lookahead` cells around it (Chebyshev radius; 1: the 26 cells around; 0:
-it does not)
-instead of its six neighbours, and revalues every free cell of the cube at once before step 2 (`Lookahead`):
-h(c) = max(h(c), the shortest way inside the cube's free cells from c to the target, if it is in the cube, or
-to a cell just outside the cube, plus that cell's h). The way out of a depression crosses the cube's border
-somewhere, so the values stay admissible; and the depression fills a cube at a time instead of a cell at a
-time (Koenig and Sun's LSS-LRTA*, "Comparing real-time and incremental heuristic search for real-time
+it does not) instead of its six neighbours, and revalues every free cell of the cube at once before step 2
+(`Lookahead`): h(c) = max(h(c), the shortest way inside the cube's free cells from c to the target, if it is in
+the cube, or to a cell just outside the cube, plus that cell's h). The way out of a depression crosses the
+cube's border somewhere, so the values stay admissible; and the depression fills a cube at a time instead of a
+cell at a time (Koenig and Sun's LSS-LRTA*, "Comparing real-time and incremental heuristic search for real-time
 situated agents", JAAMAS 2009, with the sensed cube as the local search space).
 
 A drone at rest (on its target, without one, or that cannot reach it) offers its own cell first, then its
@@ -104,10 +103,7 @@ def _manhattan(a: Cell, b: Cell) -> int:
 
 def _pack(order: Sequence[int]) -> int:
     """Step indices (into RANK_STEPS) as `schema.tables.rank_steps` packs them (code = index + 1)."""
-    value = 0
-    for i, k in enumerate(order):
-        value |= (k + 1) << 3 * i
-    return value
+    return sum((k + 1) << 3 * i for i, k in enumerate(order))
 
 
 class Lookahead:
@@ -283,13 +279,10 @@ class LrtaSwarm(SwarmBase):
         return {self._cell(k - first): v for k, v in self._learned.items() if first <= k < first + self._cells}
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
-        """This turn's moves of the drones numbered `drones` at `pos` ((n, 3)) towards `target` ((n, 3),
-        (-1, -1, -1) for none): yields once the cells it senses, receives their kinds, returns (new cells
-        (n, 3), note codes (n,), rankings (n,) uint32 as `schema.tables.rank_steps` packs them).
-
-        The hot path of a swarm host (about 2 µs a drone): the neighbours' Manhattan distances follow from the
-        drone's own (one more or one less, by the side of the target they lie on), and the learned values are
-        looked up only for the drones that learned something on their current trip (`_learns`)."""
+        """`SwarmPilot.step`, with the rankings. The hot path of a swarm host (about 2 µs a drone): the neighbours'
+        Manhattan distances follow from the drone's own (one more or one less, by the side of the target they lie
+        on), and the learned values are looked up only for the drones that learned something on their current trip
+        (`_learns`)."""
         size = self.size
         n = len(drones)
         rows, pos, target = self._orders(drones, pos, target)
