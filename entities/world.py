@@ -1,17 +1,9 @@
 """The simulator's 3D world: a boolean numpy grid of building cells, pure and network-free.
 
 Coordinates are ``(x, y, z)``; the grid is indexed ``grid[x, y, z]`` and ``True`` means building.
-Worlds are immutable: the grid is a read-only array and every constructor validates its input, so a
-`World` that exists is well formed. Bad local input (arguments, files) raises `UsageError`.
-
-Ways to make one:
-
-* `World.generate` -- the seed's random city of non-intersecting box buildings, seeded and total
-  (it always succeeds, in bounded time, unlike the seed's segfaulting generator);
-* `World.from_buildings` -- an explicit list of `Building` boxes;
-* `World.from_grid` -- any obstacle grid (enclosures, overhangs: benchmark mazes);
-* `World.load` / `World.from_json` -- the JSON file format, see `World.to_json`;
-* `World.from_packed` -- the bit-packed grid carried by the ``MAP`` message.
+Worlds are immutable: the grid is a read-only array and every constructor (`World.generate`, the seed's random
+city; `from_buildings`, `from_grid`, `load` / `from_json`, `from_packed`: the MAP message's bits) validates its
+input, so a `World` that exists is well formed. Bad local input (arguments, files) raises `UsageError`.
 """
 
 from __future__ import annotations
