@@ -230,16 +230,9 @@ class World:
     # ----------------------------------------------------------------------- constructors
 
     @classmethod
-    def generate(
-        cls,
-        size: Cell = (10, 10, 10),
-        rng: np.random.Generator | int | None = None,
-        *,
-        count: int | None = None,
-        max_footprint: int | None = None,
-        max_height: int | None = None,
-        keep_free: Iterable[Cell] = ((0, 0, 0),),
-    ) -> World:
+    def generate(cls, size: Cell = (10, 10, 10), rng: np.random.Generator | int | None = None, *,
+                 count: int | None = None, max_footprint: int | None = None, max_height: int | None = None,
+                 keep_free: Iterable[Cell] = ((0, 0, 0),)) -> World:
         """A random city of non-intersecting box buildings; always succeeds, in bounded time.
 
         Draws only from `rng` (a Generator, or an int seed; default ``default_rng(0)``), so equal
@@ -252,10 +245,8 @@ class World:
         """
         size = _size(size)
         nx, ny, nz = size
-        if rng is None:
-            rng = np.random.default_rng(0)
-        elif not isinstance(rng, np.random.Generator):
-            rng = np.random.default_rng(checked_int(rng, "seed"))
+        if not isinstance(rng, np.random.Generator):
+            rng = np.random.default_rng(0 if rng is None else checked_int(rng, "seed"))
         footprint = _at_least(_DEFAULT_FOOTPRINT if max_footprint is None else max_footprint, "max_footprint", 1)
         top = _at_least(nz if max_height is None else max_height, "max_height", 1)
         max_len, max_wid, top = min(footprint, nx), min(footprint, ny), min(top, nz)
@@ -475,15 +466,8 @@ class World:
 
     # ----------------------------------------------------------------------- drawing
 
-    def draw(
-        self,
-        drones: Mapping[str, Cell] = {},
-        *,
-        targets: Mapping[str, Cell] = {},
-        trail: Iterable[Cell] = (),
-        floors: Iterable[int] | None = None,
-        compact: bool | None = None,
-    ) -> str:
+    def draw(self, drones: Mapping[str, Cell] = {}, *, targets: Mapping[str, Cell] = {}, trail: Iterable[Cell] = (),
+             floors: Iterable[int] | None = None, compact: bool | None = None) -> str:
         """The seed's ``drawEnv``: the world floor by floor, bottom-up (``z = 0`` first), each floor
         a block headed ``z = k`` with one row per x and one column per y, (0,0) top-left; blocks are
         separated by a blank line and a one-line legend ends the text (no trailing newline).
