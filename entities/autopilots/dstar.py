@@ -92,13 +92,8 @@ class DStarPilot:
     #: the way round that drone's cell (`_detour`) ...
     DETOUR_AFTER: ClassVar[int] = 32
     #: ... or, once pushed off its target this many times, as soon as it does not get closer, if it is at most
-    #: DETOUR_NEAR moves from its target and the way round is at most DETOUR_LONGER moves longer. Measured with
-    #: `dronesim bench swarm` (ISR, pibt, the cell avoided still offered last): without the pushed-off rule,
-    #: random-32-32-10/50 98 %, room-32-32-4/200 99 %, warehouse-32-32/400 97.8 %; with it, unbounded, 100 %,
-    #: 93 %, 99.5 %; bounded by 8 moves 100 %, 100 %, 99.2 %, but room-32-32-4/400 89.5 % (91.8 % without
-    #: detours); only near the target (2 moves) 100 %, 100 %, 99.2 % and room-32-32-4/400 91.8 %. (Not offering
-    #: the avoided cell at all, room-32-32-4/400 fell to 70 %: a drone that cannot be pushed through a door
-    #: jams a room.)
+    #: DETOUR_NEAR moves from its target and the way round is at most DETOUR_LONGER moves longer (the bounds
+    #: measured with `dronesim bench swarm`: docs/cooperation.md).
     PUSHED_OFF: ClassVar[int] = 3
     DETOUR_LONGER: ClassVar[int] = 8
     DETOUR_NEAR: ClassVar[int] = 2

@@ -12,19 +12,17 @@ towards `target`:
    distance: the learned values are sparse, a few cells around the buildings it met);
 3. it ranks its own cell and its free neighbours for the coordinator's arbiter (PIBT, coordinator/arbiter.py,
    docs/cooperation.md): by h, smallest first; staying (with the value just learned) before any neighbour of
-   equal h; among neighbours of equal h, those on its *cruise* first: it climbs first and descends last (a
-   level step while below the target's altitude, and a step down before it is in the target's column, come
-   after the others); then the one nearer the target as the crow flies (squared Euclidean distance), then in
-   AROUND order (+x, -x, +y, -y, +z, -z): a total order. The cruise: a city's buildings are boxes standing on
-   the ground, so the higher of its altitude and its target's meets fewer of them, and the air above the
-   target is free down to it; without it, a drone from high up that went down early met the low streets'
-   dead ends (two of 10,000 single trips in the benchmark's city took over 3000 turns for 211 and 213 moves;
-   the longest now takes 671 turns). Nearer as the crow flies:
-   of two cells that get closer, the one along the axis with more way to go (paths go diagonally,
-   staircase-wise, rather than one axis after the other, which would put crowds in the same lanes); of two
-   that do not, the one to the side rather than straight back (a drone facing a building goes round it).
-   After learning, the best neighbour is always strictly below staying, so a drone that gets its first choice
-   always moves. Its move (`pos`, for an arbitration that takes one move per drone) is its first choice.
+   equal h; among neighbours of equal h, those on its *cruise* first: it climbs first and descends last (a level
+   step while below the target's altitude, and a step down before it is in the target's column, come after the
+   others); then the one nearer the target as the crow flies (squared Euclidean distance), then in AROUND order
+   (+x, -x, +y, -y, +z, -z): a total order. The cruise: a city's buildings are boxes standing on the ground, so
+   the higher of its altitude and its target's meets fewer of them, and the air above the target is free down to
+   it; without it, a drone from high up that went down early met the low streets' dead ends (docs/cooperation.md
+   measures it). Nearer as the crow flies: of two cells that get closer, the one along the axis with more way to
+   go (paths go diagonally, staircase-wise, rather than one axis after the other, which would put crowds in the
+   same lanes); of two that do not, the one to the side rather than straight back (a drone facing a building goes
+   round it). After learning, the best neighbour is always strictly below staying, so a drone that gets its first
+   choice always moves. Its move (`pos`, for an arbitration that takes one move per drone) is its first choice.
 
 In a depression (it learned a value where it stood the turn before: a wall across its straight line), a drone
 looks further: it senses the cube of `lookahead` cells around it (Chebyshev radius; 1: the 26 cells around; 0:
@@ -83,11 +81,8 @@ _AXIS = tuple(next(a for a in range(3) if d[a]) for d in AROUND)
 _NONE, _REACHED, _UNREACHABLE = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE))
 
 
-#: The cube a drone in a depression senses and revalues: its Chebyshev radius (see the module). Single drones
-#: in the 256 x 256 x 32 city of the distributed benchmark, its 10,000 trips, no other drone in the way, with the
-#: cruise: radius 0 (the one-move lookahead only) took up to 949 turns, 1.092 x the Manhattan distance in all,
-#: 8.0 values learned a drone; radius 1 up to 671 turns, 1.044 x, 14.9 values; radius 2 up to 669, 1.030 x,
-#: 28.9 values (docs/cooperation.md).
+#: The cube a drone in a depression senses and revalues: its Chebyshev radius (see the module; each radius
+#: measured in docs/cooperation.md).
 LOOKAHEAD = 1
 _FAR_H = 1 << 50  # a value no way reaches (outside the world, a cell not yet reached by the revaluation)
 
