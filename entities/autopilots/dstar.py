@@ -410,7 +410,6 @@ class DStarPilot:
         changed = self._learn((yield cells), s, (sensed, drones)) if cells else False
         if state[goal] == BLOCKED:
             return self._give_up(pos, s)
-        learnt = changed
         if changed:
             self._compute(s)
             # Round 2: the repaired path's unknown cells ahead.
@@ -426,7 +425,7 @@ class DStarPilot:
         if g[s] < self._low:
             self._low, self._since = g[s], 0
             self._avoid, self._round, self._tried = -1, None, False
-        elif learnt:
+        elif changed:
             self._low, self._since = g[s], 0
         else:
             self._since += 1
@@ -436,8 +435,7 @@ class DStarPilot:
                 self._avoid = -1
         note = Note.UNREACHABLE if self._since >= self.stuck_after else Note.NONE
         stuck = self._since >= self.DETOUR_AFTER
-        near = g[s] <= self.DETOUR_NEAR
-        if not self._tried and (stuck or self._pushed >= self.PUSHED_OFF and self._since and near):
+        if not self._tried and (stuck or self._pushed >= self.PUSHED_OFF and self._since and g[s] <= self.DETOUR_NEAR):
             self._tried = True
             blocker = next((p for p in sorted(drones, key=lambda p: g[p]) if g[p] < g[s]), -1)
             if blocker >= 0:
