@@ -15,23 +15,18 @@ the same moves again. A later TURN or an OVER received while a turn is being dec
 decision without publishing it, and a batch acts only on its latest TURN: a process that was frozen or
 slow catches up instead of planning turns that are long gone.
 
-Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings
-never move, so a cell's kind holds for the whole game). As soon as it is admitted and an environment is
-present (a query sent before any environment serves goes unanswered: a host admitted before the
-environment started asks when its presence appears) it asks the environment for its static map (ENV/MAP,
-the query a ground station draws with; asked again in a later turn, up to `MAP_TRIES` times, while nobody
-answers it, as the environment may still be building its world) and the static world around its drones'
-starts. Until the map comes, once it has sent its moves, it asks, for the static world (an ASK for turn 0,
-answered at once), the never-told cells around where its drones are going (within `ASK_AHEAD_REACH` steps
-for a few drones, so that it asks only every few turns; the next ring for a swarm). A question about cells
-whose kinds are all charted is answered from the chart plus the drones in them, which the turn's orders
-list (every alive drone's cell at the start of the turn): exactly the CellInfo the environment would
-give for that turn. A question the chart cannot answer yet waits while cells asked ahead are on their way
-(they usually answer it: the first turn's sensing then asks nothing, and a swarm's environment never
-decodes a turn's thousands of cells) and is asked once none is. The autopilots see only the cells they
-ask for, so decisions, and journals, do not change. Without a chart (`chart=False`, `dronesim drone
---no-chart`: the benchmark switches the chart off to measure it) nothing is asked ahead or charted, and
-every question goes to the environment.
+Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings never
+move, so a cell's kind holds for the whole game). Once admitted, with an environment present (a query sent
+before one serves goes unanswered), it asks for the environment's static map (ENV/MAP, `_poll_map`) and the
+static world around its drones' starts; until the map comes, once it has sent its moves, it asks ahead (an ASK
+for turn 0, answered at once) for the never-told cells around where its drones are going (`_prefetch`). A
+question about charted cells is answered from the chart plus the drones in them, which the turn's orders list
+(every alive drone's cell at the start of the turn): exactly the CellInfo the environment would give for that
+turn. A question the chart cannot answer yet waits while cells asked ahead are on their way (they usually answer
+it: the first turn's sensing then asks nothing, and a swarm's environment never decodes a turn's thousands of
+cells) and is asked once none is. The autopilots see only the cells they ask for, so decisions, and journals, do
+not change. Without a chart (`chart=False`, `dronesim drone --no-chart`, to measure it) nothing is asked ahead
+or charted: every question goes to the environment.
 
 The environment away. An ASK nobody answered is asked again as soon as an environment is present (at
 once if one is), for up to `patience` seconds from the first miss; after that, or once the turn is
@@ -433,8 +428,9 @@ class DroneProcess:
     # ------------------------------------------------------------------ the chart
 
     def _poll_map(self, turn: int) -> list[Effect]:
-        """Ask for the environment's map if it was never asked, or if nobody answered it in an earlier
-        turn (up to MAP_TRIES times); `turn`: the turn being played (0 before the game)."""
+        """Ask for the environment's map if it was never asked, or if nobody answered it in an earlier turn (up to
+        MAP_TRIES times: the environment may still be building its world); `turn`: the turn being played (0 before
+        the game)."""
         if self._map_settled or self._map_ref is not None or len(self._map_asked) >= MAP_TRIES:
             return []
         if self._map_asked and turn <= self._map_asked[-1]:
