@@ -111,7 +111,7 @@ class SeedPilot:
         return tuple(DIRECTIONS[rank][0] for rank in self._ranks(pos, target))
 
     def _ranks(self, pos: Cell, target: Cell) -> list[int]:
-        """`direction_order` as indices into DIRECTIONS (the hot path of a swarm: plain arithmetic)."""
+        """`direction_order` as indices into DIRECTIONS."""
         x, y, z = pos
         nx, ny, nz = self.world_size
         tx, ty = target[0], target[1]
@@ -162,10 +162,8 @@ class SeedPilot:
                 if cell not in pending:
                     if asks >= self.MAX_ASKS:
                         continue  # cannot happen: the last round trip asks every remaining one
-                    if asks == self.MAX_ASKS - 1:
-                        batch = tuple(dict.fromkeys(c for c in order[i:] if c not in self._index))
-                    else:
-                        batch = (cell,)
+                    last = asks == self.MAX_ASKS - 1  # the last round trip: every remaining one
+                    batch = tuple(dict.fromkeys(c for c in order[i:] if c not in self._index)) if last else (cell,)
                     answers = yield batch
                     asks += 1
                     pending = {c: answers[c] for c in batch if c in answers}
