@@ -356,13 +356,10 @@ class DroneProcess:
                 size = 0
             batches[-1].append(name)
             size += len(r.parts[name])
-        effects: list[Effect] = []
-        for batch in batches:
-            query = self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
-                                tuple(batch))
-            r.asking.add(query.ref)
-            effects.append(query)
-        return effects
+        queries = [self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
+                               tuple(batch)) for batch in batches]
+        r.asking.update(q.ref for q in queries)
+        return [*queries]
 
     def _settle_unanswered(self, d: _Deciding, r: _Round, effects: list[Effect]) -> bool:
         """Parts of `r` nobody answered: given no answer once `d` is offline (True: the plan goes on), else
