@@ -320,16 +320,16 @@ class DroneProcess:
     def _pose(self, d: _Deciding, question: Any) -> _Round:
         """A plan's question as a round: what the chart answers, and the parts left to ask."""
         if isinstance(question, np.ndarray):  # a swarm pilot's cells: their kinds
-            cells = question
-            kinds = self.chart.kinds(cells)
+            kinds = self.chart.kinds(question)
             missing = np.flatnonzero(kinds == Chart.UNKNOWN)
-            asked = list(dict.fromkeys(map(tuple, cells[missing].tolist())))
+            wanted = list(map(tuple, question[missing].tolist()))
+            asked = list(dict.fromkeys(wanted))
             parts = {f"{self.sender}#{i}": tuple(asked[i:i + Ask.MAX_CELLS])
                      for i in range(0, len(asked), Ask.MAX_CELLS)}
 
             def kinds_of(answers: dict[str, Answers]) -> np.ndarray:
                 told = {c: info.kind for got in answers.values() for c, info in got.items()}
-                kinds[missing] = [told.get(c, NO_ANSWER) for c in map(tuple, cells[missing].tolist())]
+                kinds[missing] = [told.get(c, NO_ANSWER) for c in wanted]
                 return kinds
 
             return _Round(parts, {}, kinds_of)
@@ -412,14 +412,12 @@ class DroneProcess:
                 effects.append(Refusal(f"ANS for {', '.join(parts) or 'cells asked ahead'}", err))
                 got = got or {}
         d = self._deciding
-        if d is not None and d.round is not None and ref in d.round.asking:
-            r = d.round
+        if d is not None and (r := d.round) is not None and ref in r.asking:
             r.asking.discard(ref)
-            for part in parts:
-                if got is None:
-                    r.unanswered.append(part)
-                else:
-                    r.answers[part] = {c: got[c] for c in r.parts[part] if c in got}
+            if got is None:
+                r.unanswered += parts
+            else:
+                r.answers.update({part: {c: got[c] for c in r.parts[part] if c in got} for part in parts})
         return effects
 
     # ------------------------------------------------------------------ the chart
@@ -484,9 +482,8 @@ def _ball(reach: int) -> np.ndarray:
     """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first (the
     neighbours in AROUND order)."""
     r = range(-reach, reach + 1)
-    farther = [(dx, dy, dz) for dx in r for dy in r for dz in r if 1 < abs(dx) + abs(dy) + abs(dz) <= reach]
-    return np.asarray([*AROUND, *sorted(farther, key=lambda o: abs(o[0]) + abs(o[1]) + abs(o[2]))],
-                      dtype=np.int64)
+    farther = [o for n in range(2, reach + 1) for o in itertools.product(r, r, r) if sum(map(abs, o)) == n]
+    return np.asarray([*AROUND, *farther], dtype=np.int64)
 
 
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
