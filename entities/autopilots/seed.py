@@ -82,8 +82,6 @@ class SeedPilot:
         self._cases: list[tuple[Cell, bool]] = []  # the seed's `cases` array: (cell, empty)
         self._index: dict[Cell, int] = {}  # cell -> index in _cases
 
-    # ------------------------------------------------------------------ memory
-
     @property
     def memory(self) -> tuple[tuple[Cell, bool], ...]:
         """Every learned cell with its empty flag, in the order learned (the seed's `cases`)."""
@@ -102,8 +100,6 @@ class SeedPilot:
             return False
         self._learn(cell, empty := info.kind is CellKind.EMPTY)
         return empty
-
-    # ------------------------------------------------------------------ direction order
 
     def direction_order(self, pos: Cell, target: Cell) -> tuple[str, ...]:
         """The seed's directionOrder: 4 direction names, best first; invalid directions (leading
@@ -126,8 +122,6 @@ class SeedPilot:
         valid.sort()
         ranks = [rank for _, rank in valid]
         return ranks + [ranks[0]] * (len(DIRECTIONS) - len(ranks))
-
-    # ------------------------------------------------------------------ one turn
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         if target is None:
