@@ -119,9 +119,8 @@ class DStarPilot:
         # Padded coordinates (x+1, y+1, z+1) of every index, for the heuristic.
         dtype, code = (np.uint8, "B") if max(X, Y, Z) < 250 else (np.uint32, "I")
         flat = np.arange(n, dtype=np.int64)
-        self._xs = array(code, (flat // sx).astype(dtype).tobytes())
-        self._ys = array(code, ((flat // sy) % (Y + 2)).astype(dtype).tobytes())
-        self._zs = array(code, (flat % sy).astype(dtype).tobytes())
+        self._xs, self._ys, self._zs = (array(code, c.astype(dtype).tobytes())
+                                        for c in (flat // sx, flat // sy % (Y + 2), flat % sy))
         self._K = X + Y + Z + 8  # > any h + 1: tb fits under one unit of k1
         self.stuck_after = max(64, 2 * (X + Y + Z)) if stuck_after is None else max(1, int(stuck_after))
         # The search state of the current target (set by _reset).
