@@ -178,21 +178,6 @@ class DStarPilot:
         xs, ys, zs = self._xs, self._ys, self._zs
         return abs(xs[a] - xs[b]) + abs(ys[a] - ys[b]) + abs(zs[a] - zs[b])
 
-    def _push(self, p: int, gp: int, rp: int, s: int) -> None:
-        """Queue inconsistent cell p (g=gp, rhs=rp) with its key relative to start s."""
-        xs, ys, zs = self._xs, self._ys, self._zs
-        h = abs(xs[p] - xs[s]) + abs(ys[p] - ys[s]) + abs(zs[p] - zs[s])
-        if gp < rp:
-            key = (gp + h + self._km) * self._K
-        else:
-            key = (rp + h + self._km) * self._K + h + 1
-        heappush(self._heap, key * self._n + p)
-
-    def _move_start(self, s: int) -> None:
-        if s != self._last:
-            self._km += self._h(self._last, s)
-            self._last = s
-
     def _block(self, c: int, s: int) -> bool:
         """Learn that index c is a building/outside. True if the search may have to change."""
         state = self._state
@@ -213,15 +198,12 @@ class DStarPilot:
         for d in offs:
             p = c + d
             if rhs[p] == want and p != goal and state[p] != BLOCKED:
-                m = INF
-                for e in offs:
-                    v = g[p + e]
-                    if v < m:
-                        m = v
-                r = m + 1 if m < INF else INF
-                rhs[p] = r
-                if g[p] != r:
-                    self._push(p, g[p], r, s)
+                m = min(g[p + e] for e in offs)
+                rhs[p] = r = m + 1 if m < INF else INF
+                if g[p] != r:  # inconsistent: queued with its key relative to s
+                    h = self._h(p, s)
+                    key = (g[p] + h + self._km) * self._K if g[p] < r else (r + h + self._km) * self._K + h + 1
+                    heappush(self._heap, key * self._n + p)
         return True
 
     def _compute(self, s: int, t: int = -1) -> None:
@@ -395,7 +377,9 @@ class DStarPilot:
         goal, state = self._goal, self._state
         if self._unreachable or state[goal] == BLOCKED:
             return self._give_up(pos, s)
-        self._move_start(s)
+        if s != self._last:  # the drone moved: the heuristic's origin shifts
+            self._km += self._h(self._last, s)
+            self._last = s
         self._compute(s)
 
         # Round 1: neighbours (drones), the target if unknown, unknown cells along the path ahead.
@@ -481,7 +465,7 @@ class DStarPilot:
         get = self._g.__getitem__ if known is None else (lambda i: known.get(i, INF))
         ranked = sorted([(get(s), -1, 0)] + [(get(s + d), k, d) for k, d in enumerate(order)
                                              if s + d in sensed and state[s + d] != BLOCKED])
-        return rank_steps(self._step_of(d) for _, _, d in ranked)
+        return rank_steps((0, 0, 0) if d == 0 else AROUND[self._offs.index(d)] for _, _, d in ranked)
 
     def _detour(self, avoid: int, s: int) -> dict[int, int] | None:
         """Each cell's distance to the target on the known map (unknown cells free) with cell `avoid` taken
@@ -517,6 +501,3 @@ class DStarPilot:
         """The candidates of a drone at rest (parked, without a target, or unable to reach it): its own cell,
         then the neighbours it knows are free, in the fixed order +x, -x, +y, -y, +z, -z."""
         return rank_steps([(0, 0, 0)] + [AROUND[k] for k, d in enumerate(self._offs) if self._state[s + d] == FREE])
-
-    def _step_of(self, d: int) -> Cell:
-        return (0, 0, 0) if d == 0 else AROUND[self._offs.index(d)]
