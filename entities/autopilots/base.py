@@ -102,10 +102,12 @@ class SwarmBase:
             raise UsageError(f"drones {strangers} are not in this swarm")
         return rows
 
-    def _cell(self, i: int) -> Cell:
-        """The cell of grid index `i`."""
+    def _memory_of(self, memory: dict[int, int], first: int) -> dict[Cell, int]:
+        """The entries of `memory` keyed from `first` × `_cells` (a drone's row or trip), by cell."""
         _, ny, nz = self.size
-        return (i // (ny * nz), i // nz % ny, i % nz)
+        low = first * self._cells
+        return {(i // (ny * nz), i // nz % ny, i % nz): v for k, v in memory.items()
+                if low <= k < low + self._cells for i in (k - low,)}
 
     def _keys(self, first: np.ndarray, cells: np.ndarray) -> np.ndarray:
         """The memory keys ((k, m)) of `k` drones' `cells` ((k, m, 3); meaningful for inside cells), the drones'

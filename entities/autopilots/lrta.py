@@ -270,8 +270,7 @@ class LrtaSwarm(SwarmBase):
 
     def learned(self, drone: int) -> dict[Cell, int]:
         """Drone number `drone`'s learned values for its current target (as `LrtaPilot.learned`)."""
-        first = int(self._trip[int(self._rows([drone])[0])]) * self._cells
-        return {self._cell(k - first): v for k, v in self._learned.items() if first <= k < first + self._cells}
+        return self._memory_of(self._learned, int(self._trip[int(self._rows([drone])[0])]))
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """`SwarmPilot.step`, with the rankings. The hot path of a swarm host (about 2 µs a drone): the neighbours'

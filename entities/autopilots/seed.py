@@ -207,10 +207,8 @@ class SeedSwarm(SwarmBase):
 
     def memory(self, drone: int) -> tuple[tuple[Cell, bool], ...]:
         """Drone number `drone`'s learned cells with their empty flag, in the order learned (as `SeedPilot.memory`)."""
-        row = int(self._rows([drone])[0])
-        mine = sorted((v >> 1, k - row * self._cells, bool(v & 1)) for k, v in self._memory.items()
-                      if k // self._cells == row)
-        return tuple((self._cell(i), empty) for _, i, empty in mine)
+        mine = self._memory_of(self._memory, int(self._rows([drone])[0]))  # cell -> index learned × 2 + empty
+        return tuple((cell, bool(v & 1)) for cell, v in sorted(mine.items(), key=lambda item: item[1]))
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """`SwarmPilot.step`: returns (new cells (n, 3) int64, note codes (n,) uint8)."""
