@@ -121,8 +121,7 @@ class Lookahead:
         self.center = at[(0, 0, 0)]
         self.around = np.array([at[d] for d in AROUND if d in at], dtype=np.int64)  # inner indices, AROUND order
         #: inner indices of the cells sensed besides the six neighbours (the center is where the drone is)
-        self.extra = np.array(sorted(set(range(len(self.inner))) - {self.center, *self.around.tolist()}),
-                              dtype=np.int64)
+        self.extra = np.setdiff1d(np.arange(len(self.inner)), [self.center, *self.around.tolist()])
         self.sensed = self.cube[self.extra]  # (extra, 3): their offsets
 
     def revalue(self, pos: np.ndarray, target: np.ndarray, free: np.ndarray, h: np.ndarray) -> np.ndarray:
