@@ -137,9 +137,8 @@ class SeedPilot:
             if in_bounds(up, self.world_size):
                 idx = self._index.get(up)
                 if idx is None:
-                    answers = yield (up,)
-                    asks += 1
-                    empty = self._record(up, answers)
+                    asks = 1
+                    empty = self._record(up, (yield (up,)))
                 else:
                     empty = self._cases[idx][1]
                 if empty:
