@@ -483,13 +483,10 @@ class World:
         nx, ny, nz = self.size
         if compact is None:
             compact = nx > 16 or ny > 16
-        if floors is None:
-            zs = list(range(nz))
-        else:
-            zs = sorted({checked_int(z, "floor") for z in floors})
-            bad = [z for z in zs if not 0 <= z < nz]
-            if bad:
-                raise UsageError(f"floors {bad} are outside 0..{nz - 1}")
+        zs = list(range(nz)) if floors is None else sorted({checked_int(z, "floor") for z in floors})
+        bad = [z for z in zs if not 0 <= z < nz]
+        if bad:
+            raise UsageError(f"floors {bad} are outside 0..{nz - 1}")
 
         # marks[z][(x, y)] = label, written in increasing priority.
         marks: dict[int, dict[tuple[int, int], str]] = {}
