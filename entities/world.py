@@ -439,13 +439,10 @@ class World:
             return None
         if start == goal:
             return 0
-        nx, ny, nz = self.size
-        # Pad the free map with a blocked border, so flat-index neighbours need no bounds checks.
-        free = np.zeros((nx + 2, ny + 2, nz + 2), dtype=bool)
-        free[1:-1, 1:-1, 1:-1] = ~self.grid
+        # The free map padded with a blocked border, so flat-index neighbours need no bounds checks.
+        unseen = np.pad(~self.grid, 1).ravel()
         sx, sy, steps = padded_steps(self.size)
         offsets = np.array(steps, dtype=np.int64)
-        unseen = free.ravel()
         s, g = ((c[0] + 1) * sx + (c[1] + 1) * sy + c[2] + 1 for c in (start, goal))
         unseen[s] = False
         frontier = np.array([s], dtype=np.int64)
