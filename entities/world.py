@@ -504,7 +504,7 @@ class World:
             alone = (names[0][-1:] or "?") if compact else names[0]
             mark((c,), several if len(names) > 1 else alone)
 
-        width = max([3, *(len(v) for m in marks.values() for v in m.values())])
+        width = 1 if compact else max([3, *(len(v) for m in marks.values() for v in m.values())])
         blocks = []
         for z in zs:
             cells = np.where(self.grid[:, :, z], block, empty).astype(f"<U{width}")
