@@ -355,20 +355,19 @@ class DStarPilot:
         pos = (int(pos[0]), int(pos[1]), int(pos[2]))
         if not in_bounds(pos, self.size):
             return Decision(pos=pos, note=Note.NONE if target is None else Note.UNREACHABLE)
+        s = self._index(pos)
         if target is None:
-            return Decision(pos=pos, ranked=self._aside(self._index(pos)))
+            return Decision(pos=pos, ranked=self._aside(s))
         target = (int(target[0]), int(target[1]), int(target[2]))
         if pos == target:  # parked: it may be pushed aside, to its free neighbours (asked once)
             self._restart()
             self._home = target == self._target
-            s = self._index(pos)
             unknown = [s + d for d in self._offs if self._state[s + d] == UNKNOWN]
             if unknown:
                 self._learn((yield tuple(self._cell(i) for i in unknown)), s)
             return Decision(pos=pos, note=Note.REACHED, ranked=self._aside(s))
         if not in_bounds(target, self.size):
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(self._index(pos)))
-        s = self._index(pos)
+            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
         if target != self._target:
             self._reset(target, s)
         elif self._home:
