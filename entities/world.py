@@ -351,19 +351,19 @@ class World:
         if type(data["version"]) is not int or data["version"] != FORMAT_VERSION:
             raise UsageError(f"unsupported world version {data['version']!r} (this build reads {FORMAT_VERSION})")
         size = _size(_json_ints(data["size"], 3, "size"))
-        has_b, has_c = "buildings" in data, "cells" in data
-        if has_b == has_c:
+        if ("buildings" in data) == ("cells" in data):
             raise UsageError("a world needs exactly one of the keys 'buildings' and 'cells'")
-        if has_b:
-            items = _json_list(data["buildings"], "buildings")
+        key = "buildings" if "buildings" in data else "cells"
+        if not isinstance(data[key], list):
+            raise UsageError(f"{key} must be a list, got {type(data[key]).__name__}")
+        if key == "buildings":
             buildings = []
-            for i, item in enumerate(items):
+            for i, item in enumerate(data[key]):
                 x, y, ln, wd, h = _json_ints(item, 5, f"buildings[{i}]")
                 buildings.append(Building(x=x, y=y, length=ln, width=wd, height=h))
             return cls.from_buildings(size, buildings)
-        items = _json_list(data["cells"], "cells")
         grid = np.zeros(size, dtype=bool)
-        for i, item in enumerate(items):
+        for i, item in enumerate(data[key]):
             x, y, z = _json_ints(item, 3, f"cells[{i}]")
             if not (0 <= x < size[0] and 0 <= y < size[1] and 0 <= z < size[2]):
                 raise UsageError(f"cells[{i}] {[x, y, z]} is outside the world of size {list(size)}")
@@ -516,12 +516,6 @@ class World:
                 rows = [" ".join(s.ljust(width) for s in row).rstrip() for row in cells.tolist()]
             blocks.append("\n".join([f"z = {z}", *rows]))
         return "\n\n".join([*blocks, legend])
-
-
-def _json_list(value: object, what: str) -> list:
-    if not isinstance(value, list):
-        raise UsageError(f"{what} must be a list, got {type(value).__name__}")
-    return value
 
 
 def _json_ints(value: object, n: int, what: str) -> list[int]:
