@@ -444,7 +444,7 @@ class DStarPilot:
             move = nxt if nxt >= 0 and g[nxt] < INF and self._waited > self.PATIENCE else s
             if move != s:
                 self._waited = 0
-        return Decision(pos=self._cell(move), note=note, ranked=self._ranking(s, neigh, sensed))
+        return Decision(pos=self._cell(move), note=note, ranked=self._ranking(s, sensed))
 
     def _give_up(self, pos: Cell, s: int) -> Decision:
         """The target is unreachable, for good: the world is static, nothing new can be learnt by hovering."""
@@ -453,16 +453,14 @@ class DStarPilot:
 
     # ------------------------------------------------------------------ candidates for the arbiter
 
-    def _ranking(self, s: int, neigh: list[int], sensed: set[int]) -> int:
+    def _ranking(self, s: int, sensed: set[int]) -> int:
         """The candidates offered to the arbiter (packed): s and its neighbours sensed free this step, by
         distance (g) on the known map, ties in tie-break order. The search settles g(s) and the best
         neighbour's; the others' may still be estimates: settling them all would cost a search each and
         steer the next steps' sensing elsewhere, for an order that the next step corrects anyway."""
-        state = self._state
-        order = self._order(s)
-        known = self._round
+        known, state = self._round, self._state
         get = self._g.__getitem__ if known is None else (lambda i: known.get(i, INF))
-        ranked = sorted([(get(s), -1, 0)] + [(get(s + d), k, d) for k, d in enumerate(order)
+        ranked = sorted([(get(s), -1, 0)] + [(get(s + d), k, d) for k, d in enumerate(self._order(s))
                                              if s + d in sensed and state[s + d] != BLOCKED])
         return rank_steps((0, 0, 0) if d == 0 else AROUND[self._offs.index(d)] for _, _, d in ranked)
 
