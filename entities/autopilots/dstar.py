@@ -234,10 +234,7 @@ class DStarPilot:
             if gu == ru:
                 continue  # stale entry
             h = hx[xs[u]] + hy[ys[u]] + hz[zs[u]]
-            if gu > ru:
-                knew = (ru + h + km) * K + h + 1
-            else:
-                knew = (gu + h + km) * K
+            knew = (ru + h + km) * K + h + 1 if gu > ru else (gu + h + km) * K
             if k < knew:
                 heappush(heap, knew * NP + u)
                 continue
@@ -251,10 +248,8 @@ class DStarPilot:
                         gp = g[p]
                         if gp != nv:
                             hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
-                            if gp < nv:
-                                heappush(heap, ((gp + hp + km) * K) * NP + p)
-                            else:
-                                heappush(heap, ((nv + hp + km) * K + hp + 1) * NP + p)
+                            key = (gp + hp + km) * K if gp < nv else (nv + hp + km) * K + hp + 1
+                            heappush(heap, key * NP + p)
             else:  # under-consistent: raise it to infinity, re-derive it and its dependants
                 g[u] = INF
                 want = gu + 1
@@ -271,10 +266,8 @@ class DStarPilot:
                     gp = g[p]
                     if gp != r:
                         hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
-                        if gp < r:
-                            heappush(heap, ((gp + hp + km) * K) * NP + p)
-                        else:
-                            heappush(heap, ((r + hp + km) * K + hp + 1) * NP + p)
+                        key = (gp + hp + km) * K if gp < r else (r + hp + km) * K + hp + 1
+                        heappush(heap, key * NP + p)
         if len(heap) > 2 * NP:  # compact: drop entries of cells that are consistent now
             heap[:] = [e for e in heap if g[e % NP] != rhs[e % NP]]
             heapify(heap)
