@@ -332,8 +332,7 @@ class LrtaSwarm(SwarmBase):
         if len(go):
             p, t, f = pos[go], target[go], free[go]
             k = len(go)
-            gap = np.abs(t - p)  # (k, 3)
-            manh_p = gap.sum(axis=1)
+            manh_p = np.abs(t - p).sum(axis=1)
             side = np.sign(t - p)  # each neighbour is one closer if it steps towards the target, else one farther
             values = np.empty((k, 7), dtype=np.int64)
             values[:, 0] = manh_p
@@ -363,8 +362,7 @@ class LrtaSwarm(SwarmBase):
             tie = 1 + ((around[go] - t[:, None, :]) ** 2).sum(axis=2)
             off = (p[:, 2] < t[:, 2])[:, None] & (_COLUMNS < 4)  # level steps below the target's altitude
             off[:, 5] = (p[:, :2] != t[:, :2]).any(axis=1)  # down before the target's column
-            ranking = np.where(f, np.where(f, h_nb, 0) * _H + off * _OFF + tie * _TIE + _COLUMNS, _FAR)
-            keys[go, :6] = ranking
+            keys[go, :6] = np.where(f, np.where(f, h_nb, 0) * _H + off * _OFF + tie * _TIE + _COLUMNS, _FAR)
             keys[go, 6] = h_here * _H + _STAY
             note[go] = np.where(h_here > manh_p + self.slack, _UNREACHABLE, _NONE)
         order = np.argsort(keys, axis=1, kind="stable")
