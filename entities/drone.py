@@ -342,8 +342,8 @@ class DroneProcess:
             if None in known:
                 asking[drone] = wanted
             else:
-                answers[drone] = {c: CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))  # type: ignore[arg-type]
-                                  for c, k in zip(wanted, known)}
+                answers[drone] = {c: CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))
+                                  for c, k in zip(wanted, known) if k is not None}  # (all are)
         return _Round(asking, answers, lambda got: got)
 
     def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Effect]:
