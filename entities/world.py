@@ -127,8 +127,7 @@ class Building:
     def is_inside(self, cell: Cell) -> bool:
         """The seed's ``isInside``: whether `cell` is one of this building's cells."""
         cx, cy, cz = cell
-        return (self.x <= cx < self.x + self.length and self.y <= cy < self.y + self.width
-                and 0 <= cz < self.height)
+        return self.x <= cx < self.x + self.length and self.y <= cy < self.y + self.width and 0 <= cz < self.height
 
     def intersects(self, other: Building) -> bool:
         """The seed's ``intersect``: whether the two boxes share at least one cell (touching faces
@@ -138,8 +137,7 @@ class Building:
 
     def fits_in(self, size: Cell) -> bool:
         """Whether the whole box lies inside a world of `size`."""
-        return (self.x + self.length <= size[0] and self.y + self.width <= size[1]
-                and self.height <= size[2])
+        return self.x + self.length <= size[0] and self.y + self.width <= size[1] and self.height <= size[2]
 
     def as_list(self) -> list[int]:
         """``[x, y, length, width, height]``, the JSON form."""
@@ -217,15 +215,13 @@ class World:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, World):
             return NotImplemented
-        return (self.size == other.size and self.buildings == other.buildings
-                and np.array_equal(self.grid, other.grid))
+        return self.size == other.size and self.buildings == other.buildings and np.array_equal(self.grid, other.grid)
 
     def __hash__(self) -> int:
         return hash((self.size, self.buildings, self.packed()))
 
     def __repr__(self) -> str:
-        return (f"World(size={self.size}, buildings={len(self.buildings)}, "
-                f"building_cells={int(self.grid.sum())})")
+        return f"World(size={self.size}, buildings={len(self.buildings)}, building_cells={int(self.grid.sum())})"
 
     # ----------------------------------------------------------------------- constructors
 
@@ -275,8 +271,7 @@ class World:
             tops = rng.integers(1, top + 1, size=n)
             xs = rng.integers(0, nx - lengths + 1)
             ys = rng.integers(0, ny - widths + 1)
-            for x, y, ln, wd, h in zip(xs.tolist(), ys.tolist(), lengths.tolist(), widths.tolist(),
-                                       tops.tolist()):
+            for x, y, ln, wd, h in zip(xs.tolist(), ys.tolist(), lengths.tolist(), widths.tolist(), tops.tolist()):
                 area = limit[x:x + ln, y:y + wd]
                 if area.min() < h:
                     continue
