@@ -15,23 +15,18 @@ the same moves again. A later TURN or an OVER received while a turn is being dec
 decision without publishing it, and a batch acts only on its latest TURN: a process that was frozen or
 slow catches up instead of planning turns that are long gone.
 
-Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings
-never move, so a cell's kind holds for the whole game). As soon as it is admitted and an environment is
-present (a query sent before any environment serves goes unanswered: a host admitted before the
-environment started asks when its presence appears) it asks the environment for its static map (ENV/MAP,
-the query a ground station draws with; asked again in a later turn, up to `MAP_TRIES` times, while nobody
-answers it, as the environment may still be building its world) and the static world around its drones'
-starts. Until the map comes, once it has sent its moves, it asks, for the static world (an ASK for turn 0,
-answered at once), the never-told cells around where its drones are going (within `ASK_AHEAD_REACH` steps
-for a few drones, so that it asks only every few turns; the next ring for a swarm). A question about cells
-whose kinds are all charted is answered from the chart plus the drones in them, which the turn's orders
-list (every alive drone's cell at the start of the turn): exactly the CellInfo the environment would
-give for that turn. A question the chart cannot answer yet waits while cells asked ahead are on their way
-(they usually answer it: the first turn's sensing then asks nothing, and a swarm's environment never
-decodes a turn's thousands of cells) and is asked once none is. The autopilots see only the cells they
-ask for, so decisions, and journals, do not change. Without a chart (`chart=False`, `dronesim drone
---no-chart`: the benchmark switches the chart off to measure it) nothing is asked ahead or charted, and
-every question goes to the environment.
+Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings never
+move, so a cell's kind holds for the whole game). Once admitted, with an environment present (a query sent
+before one serves goes unanswered), it asks for the environment's static map (ENV/MAP, `_poll_map`) and the
+static world around its drones' starts; until the map comes, once it has sent its moves, it asks ahead (an ASK
+for turn 0, answered at once) for the never-told cells around where its drones are going (`_prefetch`). A
+question about charted cells is answered from the chart plus the drones in them, which the turn's orders list
+(every alive drone's cell at the start of the turn): exactly the CellInfo the environment would give for that
+turn. A question the chart cannot answer yet waits while cells asked ahead are on their way (they usually answer
+it: the first turn's sensing then asks nothing, and a swarm's environment never decodes a turn's thousands of
+cells) and is asked once none is. The autopilots see only the cells they ask for, so decisions, and journals, do
+not change. Without a chart (`chart=False`, `dronesim drone --no-chart`, to measure it) nothing is asked ahead
+or charted: every question goes to the environment.
 
 The environment away. An ASK nobody answered is asked again as soon as an environment is present (at
 once if one is), for up to `patience` seconds from the first miss; after that, or once the turn is
@@ -181,7 +176,6 @@ class DroneProcess:
                  chart: bool = True) -> None:
         self.sender = host or drones[0]
         self.host = host
-        self.drones = tuple(drones)
         self.log = logger
         self.patience = patience
         self.welcome = welcome
@@ -192,9 +186,9 @@ class DroneProcess:
         self.pilots = {} if self.swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
         if self.swarm:
             logger.info("flying %d drones with the %s autopilot's swarm form", len(drones), autopilot)
-        self.senses = pilot_class(autopilot).senses
         self.chart = Chart(size)
-        self.charting = chart and self.senses  # False: every question goes to the environment (a benchmark's switch)
+        # False: every question goes to the environment (a benchmark's switch), or the autopilot asks none
+        self.charting = chart and pilot_class(autopilot).senses
         self.over: Over | None = None
         self._numbers = np.array(sorted(drone_number(d) for d in drones))
         self._mine = set(drones)
@@ -210,13 +204,9 @@ class DroneProcess:
     # ------------------------------------------------------------------ inputs
 
     def start(self) -> list[Effect]:
-        """Once admitted: ask for the map, and for the static world around the starts (the first
-        turn's sensing then needs no ASK), now if an environment is present, else when one appears."""
-        return self._ask_before_the_game()
-
-    def _ask_before_the_game(self) -> list[Effect]:
-        """`start`'s questions (this process exists once admitted), with an environment present, if the game has
-        not begun."""
+        """Once admitted (this process exists once admitted), if the game has not begun: ask for the map, and for
+        the static world around the starts (the first turn's sensing then needs no ASK), now if an environment
+        is present, else when one appears (`receive` calls it again)."""
         if not (self.charting and self._env) or self._map_asked or self._done or self._deciding:
             return []
         starts = self.welcome.starts.cells()
@@ -238,7 +228,7 @@ class DroneProcess:
                     effects += self._answered(ref, replies)
                 case EnvPresence(session, alive):
                     (self._env.add if alive else self._env.discard)(session)
-                    effects += self._ask_before_the_game() if alive else []
+                    effects += self.start() if alive else []
                 case Expired(ref):
                     self._expired(ref)
         if self.over is not None:
@@ -313,11 +303,9 @@ class DroneProcess:
         """Let a superseded plan end (the autopilots' memory stays as it would be): the questions the chart
         cannot answer get no answer, nothing more is asked, and its moves are not sent."""
         d.offline = True
-        r = d.round
-        if r is not None:
+        if (r := d.round) is not None:  # what it waits for gets no answer (`_settle_unanswered`)
             r.asking.clear()
-            r.unanswered = []
-            r.answers.update({p: {} for p in r.parts if p not in r.answers})
+            r.unanswered = [p for p in r.parts if p not in r.answers]
         self._run(d, [])
 
     def _messages(self, turn: Turn, moves: StepTable | dict[str, Decision]) -> list[Effect]:
@@ -332,16 +320,16 @@ class DroneProcess:
     def _pose(self, d: _Deciding, question: Any) -> _Round:
         """A plan's question as a round: what the chart answers, and the parts left to ask."""
         if isinstance(question, np.ndarray):  # a swarm pilot's cells: their kinds
-            cells = question
-            kinds = self.chart.kinds(cells)
+            kinds = self.chart.kinds(question)
             missing = np.flatnonzero(kinds == Chart.UNKNOWN)
-            asked = list(dict.fromkeys(map(tuple, cells[missing].tolist())))
+            wanted = list(map(tuple, question[missing].tolist()))
+            asked = list(dict.fromkeys(wanted))
             parts = {f"{self.sender}#{i}": tuple(asked[i:i + Ask.MAX_CELLS])
                      for i in range(0, len(asked), Ask.MAX_CELLS)}
 
             def kinds_of(answers: dict[str, Answers]) -> np.ndarray:
                 told = {c: info.kind for got in answers.values() for c, info in got.items()}
-                kinds[missing] = [told.get(c, NO_ANSWER) for c in map(tuple, cells[missing].tolist())]
+                kinds[missing] = [told.get(c, NO_ANSWER) for c in wanted]
                 return kinds
 
             return _Round(parts, {}, kinds_of)
@@ -350,15 +338,12 @@ class DroneProcess:
         answers: dict[str, Answers] = {}
         asking: dict[str, tuple[Cell, ...]] = {}
         for drone, wanted in question.items():
-            infos: dict[Cell, CellInfo] = {}
-            for c in wanted:
-                k = kind(c)
-                if k is None:
-                    asking[drone] = wanted
-                    break
-                infos[c] = CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))
+            known = [kind(c) for c in wanted]
+            if None in known:
+                asking[drone] = wanted
             else:
-                answers[drone] = infos
+                answers[drone] = {c: CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))
+                                  for c, k in zip(wanted, known) if k is not None}  # (all are)
         return _Round(asking, answers, lambda got: got)
 
     def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Effect]:
@@ -371,13 +356,10 @@ class DroneProcess:
                 size = 0
             batches[-1].append(name)
             size += len(r.parts[name])
-        effects: list[Effect] = []
-        for batch in batches:
-            query = self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
-                                tuple(batch))
-            r.asking.add(query.ref)
-            effects.append(query)
-        return effects
+        queries = [self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
+                               tuple(batch)) for batch in batches]
+        r.asking.update(q.ref for q in queries)
+        return [*queries]
 
     def _settle_unanswered(self, d: _Deciding, r: _Round, effects: list[Effect]) -> bool:
         """Parts of `r` nobody answered: given no answer once `d` is offline (True: the plan goes on), else
@@ -421,8 +403,7 @@ class DroneProcess:
         got: dict[Cell, CellInfo] | None = None  # None: nobody answered
         for reply in replies:
             try:
-                if isinstance(reply, RemoteInputError):
-                    raise reply
+                reply = _reply(reply)
                 reply.check_fits(cells)
                 if self.charting:
                     self.chart.learn(cells, reply.kinds)
@@ -431,21 +412,20 @@ class DroneProcess:
                 effects.append(Refusal(f"ANS for {', '.join(parts) or 'cells asked ahead'}", err))
                 got = got or {}
         d = self._deciding
-        if d is not None and d.round is not None and ref in d.round.asking:
-            r = d.round
+        if d is not None and (r := d.round) is not None and ref in r.asking:
             r.asking.discard(ref)
-            for part in parts:
-                if got is None:
-                    r.unanswered.append(part)
-                else:
-                    r.answers[part] = {c: got[c] for c in r.parts[part] if c in got}
+            if got is None:
+                r.unanswered += parts
+            else:
+                r.answers.update({part: {c: got[c] for c in r.parts[part] if c in got} for part in parts})
         return effects
 
     # ------------------------------------------------------------------ the chart
 
     def _poll_map(self, turn: int) -> list[Effect]:
-        """Ask for the environment's map if it was never asked, or if nobody answered it in an earlier
-        turn (up to MAP_TRIES times); `turn`: the turn being played (0 before the game)."""
+        """Ask for the environment's map if it was never asked, or if nobody answered it in an earlier turn (up to
+        MAP_TRIES times: the environment may still be building its world); `turn`: the turn being played (0 before
+        the game)."""
         if self._map_settled or self._map_ref is not None or len(self._map_asked) >= MAP_TRIES:
             return []
         if self._map_asked and turn <= self._map_asked[-1]:
@@ -457,17 +437,15 @@ class DroneProcess:
 
     def _map_answered(self, replies: tuple) -> list[Effect]:
         self._map_ref = None
-        for reply in replies:
-            self._map_settled = True
-            try:
-                if isinstance(reply, RemoteInputError):
-                    raise reply
-                self.chart.learn_map(reply)
-                self.log.info("charted the environment's map: %d cells", len(self.chart))
-                return []
-            except RemoteInputError as err:
-                return [Refusal("MAP", err)]
-        return []  # nobody answered: asked again in a later turn
+        if not replies:
+            return []  # nobody answered: asked again in a later turn
+        self._map_settled = True
+        try:
+            self.chart.learn_map(_reply(replies[0]))
+        except RemoteInputError as err:
+            return [Refusal("MAP", err)]
+        self.log.info("charted the environment's map: %d cells", len(self.chart))
+        return []
 
     def _prefetch(self, turn: int, around: list[Cell]) -> list[Effect]:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
@@ -485,6 +463,13 @@ class DroneProcess:
         return effects
 
 
+def _reply(reply: Ans | WorldMap | RemoteInputError) -> Any:
+    """A query's reply: the message, or the RemoteInputError of an error reply or a malformed one raised."""
+    if isinstance(reply, RemoteInputError):
+        raise reply
+    return reply
+
+
 def _cells_of(moves: StepTable | dict[str, Decision]) -> Iterable[Cell]:
     """Where a turn's moves take the drones."""
     if isinstance(moves, StepTable):
@@ -497,9 +482,8 @@ def _ball(reach: int) -> np.ndarray:
     """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first (the
     neighbours in AROUND order)."""
     r = range(-reach, reach + 1)
-    farther = [(dx, dy, dz) for dx in r for dy in r for dz in r if 1 < abs(dx) + abs(dy) + abs(dz) <= reach]
-    return np.asarray([*AROUND, *sorted(farther, key=lambda o: abs(o[0]) + abs(o[1]) + abs(o[2]))],
-                      dtype=np.int64)
+    farther = [o for n in range(2, reach + 1) for o in itertools.product(r, r, r) if sum(map(abs, o)) == n]
+    return np.asarray([*AROUND, *farther], dtype=np.int64)
 
 
 def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:

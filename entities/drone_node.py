@@ -90,16 +90,12 @@ class Effects:
     def run(self, effects: list[Effect]) -> None:
         for eff in effects:
             match eff:
-                case Send(Moves() as msg):
-                    self.out.put(self.keys.moves(msg.sender), msg)
-                case Send(msg):
-                    self.out.put(self.keys.nps(msg.sender), msg)
-                case Query(ref, Ask() as msg):
-                    self.inbox.query(self.keys.ask, msg, Ans, timeout=self.ask_timeout,
-                                     then=functools.partial(Answer, ref))
-                case Query(ref, msg):
-                    self.inbox.query(self.keys.map, msg, WorldMap, timeout=self.map_timeout,
-                                     then=functools.partial(Answer, ref))
+                case Send(msg):  # a swarm host's MOVES, a lone drone's NPS
+                    self.out.put((self.keys.moves if isinstance(msg, Moves) else self.keys.nps)(msg.sender), msg)
+                case Query(ref, msg):  # an ASK, or the map
+                    key, reply, timeout = ((self.keys.ask, Ans, self.ask_timeout) if isinstance(msg, Ask)
+                                           else (self.keys.map, WorldMap, self.map_timeout))
+                    self.inbox.query(key, msg, reply, timeout=timeout, then=functools.partial(Answer, ref))
                 case Timer(ref, seconds):
                     self._timer = (time.monotonic() + seconds, ref)
                 case Refusal(what, err):

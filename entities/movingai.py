@@ -33,6 +33,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -114,7 +115,7 @@ class Agent:
 def read_scen(text: str) -> list[Agent]:
     """A .scen's agents, in order. UsageError if malformed."""
     lines = [ln for ln in text.splitlines() if ln.strip()]
-    if not lines or lines[0].split() != ["version", "1"] and lines[0].split() != ["version", "1.0"]:
+    if not lines or lines[0].split() not in (["version", "1"], ["version", "1.0"]):
         raise UsageError(".scen: the first line must be 'version 1'")
     agents = []
     for n, line in enumerate(lines[1:], 2):
@@ -207,83 +208,72 @@ def empty(size: int, rng: np.random.Generator) -> np.ndarray:
     return np.zeros((size, size), bool)
 
 
-def random_map(share: float) -> Callable[[int, np.random.Generator], np.ndarray]:
-    def make(size: int, rng: np.random.Generator) -> np.ndarray:
-        blocked = np.zeros(size * size, bool)
-        blocked[rng.permutation(size * size)[:round(share * size * size)]] = True
-        return _connected(blocked.reshape(size, size))
-    return make
+def random_map(share: float, size: int, rng: np.random.Generator) -> np.ndarray:
+    blocked = np.zeros(size * size, bool)
+    blocked[rng.permutation(size * size)[:round(share * size * size)]] = True
+    return _connected(blocked.reshape(size, size))
 
 
-def maze(width: int) -> Callable[[int, np.random.Generator], np.ndarray]:
+def maze(width: int, size: int, rng: np.random.Generator) -> np.ndarray:
     """Corridors `width` cells wide between walls 1 cell thick (a depth-first maze: a spanning tree)."""
-    def make(size: int, rng: np.random.Generator) -> np.ndarray:
-        pitch = width + 1
-        n = (size - 1) // pitch  # maze cells per side
-        blocked = np.ones((size, size), bool)
-        seen = np.zeros((n, n), bool)
-        stack = [(0, 0)]
-        seen[0, 0] = True
-
-        def open_cell(cx: int, cy: int) -> None:
-            blocked[1 + cx * pitch:1 + cx * pitch + width, 1 + cy * pitch:1 + cy * pitch + width] = False
-
-        open_cell(0, 0)
-        while stack:
-            cx, cy = stack[-1]
-            options = [(cx + dx, cy + dy) for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1))
-                       if 0 <= cx + dx < n and 0 <= cy + dy < n and not seen[cx + dx, cy + dy]]
-            if not options:
-                stack.pop()
-                continue
-            nx, ny = options[int(rng.integers(len(options)))]
-            seen[nx, ny] = True
-            open_cell(nx, ny)
-            x0, x1 = sorted((1 + cx * pitch, 1 + nx * pitch))
-            y0, y1 = sorted((1 + cy * pitch, 1 + ny * pitch))
-            blocked[x0:x1 + width, y0:y1 + width] = False  # the wall between them
-            stack.append((nx, ny))
-        return blocked
-    return make
+    pitch = width + 1
+    n = (size - 1) // pitch  # maze cells per side
+    blocked = np.ones((size, size), bool)
+    seen = np.zeros((n, n), bool)
+    stack = [(0, 0)]
+    seen[0, 0] = True
+    blocked[1:1 + width, 1:1 + width] = False
+    while stack:
+        cx, cy = stack[-1]
+        options = [(cx + dx, cy + dy) for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1))
+                   if 0 <= cx + dx < n and 0 <= cy + dy < n and not seen[cx + dx, cy + dy]]
+        if not options:
+            stack.pop()
+            continue
+        nx, ny = options[int(rng.integers(len(options)))]
+        seen[nx, ny] = True
+        x0, x1 = sorted((1 + cx * pitch, 1 + nx * pitch))
+        y0, y1 = sorted((1 + cy * pitch, 1 + ny * pitch))
+        blocked[x0:x1 + width, y0:y1 + width] = False  # the new cell and the wall between them
+        stack.append((nx, ny))
+    return blocked
 
 
-def rooms(room: int) -> Callable[[int, np.random.Generator], np.ndarray]:
+def rooms(room: int, size: int, rng: np.random.Generator) -> np.ndarray:
     """Rooms of (room - 1) x (room - 1) free cells behind walls 1 cell thick, a door (one cell) between each
     pair of rooms of a random spanning tree, plus doors between a fifth of the other neighbouring pairs."""
-    def make(size: int, rng: np.random.Generator) -> np.ndarray:
-        n = size // room  # rooms per side
-        blocked = np.zeros((size, size), bool)
-        for k in range(1, n):
-            blocked[k * room - 1, :] = True
-            blocked[:, k * room - 1] = True
-        walls = [((cx, cy), (cx + dx, cy + dy)) for cx in range(n) for cy in range(n)
-                 for dx, dy in ((1, 0), (0, 1)) if cx + dx < n and cy + dy < n]
-        order = rng.permutation(len(walls)).tolist()
-        parent = list(range(n * n))
+    n = size // room  # rooms per side
+    blocked = np.zeros((size, size), bool)
+    for k in range(1, n):
+        blocked[k * room - 1, :] = True
+        blocked[:, k * room - 1] = True
+    walls = [((cx, cy), (cx + dx, cy + dy)) for cx in range(n) for cy in range(n)
+             for dx, dy in ((1, 0), (0, 1)) if cx + dx < n and cy + dy < n]
+    order = rng.permutation(len(walls)).tolist()
+    parent = list(range(n * n))
 
-        def find(a: int) -> int:
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            return a
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
 
-        extra: list[int] = []
-        for k in order:
-            (ax, ay), (bx, by) = walls[k]
-            ra, rb = find(ax * n + ay), find(bx * n + by)
-            if ra != rb:
-                parent[ra] = rb
-            elif len(extra) < len(walls) // 5:
-                extra.append(k)
-            else:
-                continue
-            door = int(rng.integers(room - 1))
-            if bx > ax:  # the wall at x = bx * room - 1, a door somewhere along room ay's side
-                blocked[bx * room - 1, ay * room + door] = False
-            else:
-                blocked[ax * room + door, by * room - 1] = False
-        return _connected(blocked)
-    return make
+    extra: list[int] = []
+    for k in order:
+        (ax, ay), (bx, by) = walls[k]
+        ra, rb = find(ax * n + ay), find(bx * n + by)
+        if ra != rb:
+            parent[ra] = rb
+        elif len(extra) < len(walls) // 5:
+            extra.append(k)
+        else:
+            continue
+        door = int(rng.integers(room - 1))
+        if bx > ax:  # the wall at x = bx * room - 1, a door somewhere along room ay's side
+            blocked[bx * room - 1, ay * room + door] = False
+        else:
+            blocked[ax * room + door, by * room - 1] = False
+    return _connected(blocked)
 
 
 def warehouse(size: int, rng: np.random.Generator) -> np.ndarray:
@@ -291,20 +281,18 @@ def warehouse(size: int, rng: np.random.Generator) -> np.ndarray:
     and a cross aisle every 7 cells: a warehouse floor (the random draw only shifts the cross aisles)."""
     blocked = np.zeros((size, size), bool)
     shift = int(rng.integers(3))
-    for y in range(3, size - 3, 3):
-        for x in range(3, size - 3):
-            if (x - 3 - shift) % 7 != 6:
-                blocked[x, y] = True
+    xs = np.arange(3, size - 3)
+    blocked[np.ix_(xs[(xs - 3 - shift) % 7 != 6], np.arange(3, size - 3, 3))] = True
     return _connected(blocked)
 
 
 #: name -> (side, generator): the families `dronesim bench swarm` plays.
 FAMILIES: dict[str, tuple[int, Callable[[int, np.random.Generator], np.ndarray]]] = {
     "empty-32-32": (32, empty),
-    "random-32-32-10": (32, random_map(0.10)),
-    "random-32-32-20": (32, random_map(0.20)),
-    "maze-32-32-2": (32, maze(2)),
-    "room-32-32-4": (32, rooms(4)),
+    "random-32-32-10": (32, partial(random_map, 0.10)),
+    "random-32-32-20": (32, partial(random_map, 0.20)),
+    "maze-32-32-2": (32, partial(maze, 2)),
+    "room-32-32-4": (32, partial(rooms, 4)),
     "warehouse-32-32": (32, warehouse),
 }
 

@@ -1,17 +1,9 @@
 """The simulator's 3D world: a boolean numpy grid of building cells, pure and network-free.
 
 Coordinates are ``(x, y, z)``; the grid is indexed ``grid[x, y, z]`` and ``True`` means building.
-Worlds are immutable: the grid is a read-only array and every constructor validates its input, so a
-`World` that exists is well formed. Bad local input (arguments, files) raises `UsageError`.
-
-Ways to make one:
-
-* `World.generate` -- the seed's random city of non-intersecting box buildings, seeded and total
-  (it always succeeds, in bounded time, unlike the seed's segfaulting generator);
-* `World.from_buildings` -- an explicit list of `Building` boxes;
-* `World.from_grid` -- any obstacle grid (enclosures, overhangs: benchmark mazes);
-* `World.load` / `World.from_json` -- the JSON file format, see `World.to_json`;
-* `World.from_packed` -- the bit-packed grid carried by the ``MAP`` message.
+Worlds are immutable: the grid is a read-only array and every constructor (`World.generate`, the seed's random
+city; `from_buildings`, `from_grid`, `load` / `from_json`, `from_packed`: the MAP message's bits) validates its
+input, so a `World` that exists is well formed. Bad local input (arguments, files) raises `UsageError`.
 """
 
 from __future__ import annotations
@@ -42,13 +34,13 @@ _DEFAULT_GROUND_COVER = 0.25  # expected fraction of ground cells under a buildi
 _ATTEMPTS_PER_BUILDING = 4
 _CHUNK = 4096
 
-# Drawing labels.
-_EMPTY, _BLOCK, _TARGET, _TRAIL, _CROWD = "EPT", "BLK", "TGT", "+++", "!!!"
-_C_EMPTY, _C_BLOCK, _C_TARGET, _C_TRAIL, _C_CROWD = ".", "#", "X", "*", "!"
-_LEGEND = ("legend: EPT empty, BLK building, TGT target, +++ trail, Dnn drone, !!! several drones;"
-           " row = x, column = y, (0,0) top-left")
-_C_LEGEND = ("legend: . empty, # building, X target, * trail, digit = drone (last character of its id),"
-             " ! several drones; row = x, column = y, (0,0) top-left")
+#: Drawing labels (empty, building, target, trail, several drones, legend), by `compact`.
+_LABELS = {
+    False: ("EPT", "BLK", "TGT", "+++", "!!!", "legend: EPT empty, BLK building, TGT target, +++ trail, Dnn drone, "
+            "!!! several drones; row = x, column = y, (0,0) top-left"),
+    True: (".", "#", "X", "*", "!", "legend: . empty, # building, X target, * trail, digit = drone (last character "
+           "of its id), ! several drones; row = x, column = y, (0,0) top-left"),
+}
 
 
 # --------------------------------------------------------------------------- validation helpers
@@ -83,6 +75,14 @@ def checked_int(value: object, what: str, error: type[UsageError] = UsageError) 
         return operator.index(value)  # type: ignore[arg-type]
     except TypeError:
         raise error(f"{what} must be an integer, got {value!r}") from None
+
+
+def _at_least(value: object, what: str, least: int) -> int:
+    """`value` as a plain int of at least `least` (UsageError otherwise)."""
+    number = checked_int(value, what)
+    if number < least:
+        raise UsageError(f"{what} must be >= {least}, got {number}")
+    return number
 
 
 def _cell(value: object, what: str = "cell") -> Cell:
@@ -127,8 +127,7 @@ class Building:
     def is_inside(self, cell: Cell) -> bool:
         """The seed's ``isInside``: whether `cell` is one of this building's cells."""
         cx, cy, cz = cell
-        return (self.x <= cx < self.x + self.length and self.y <= cy < self.y + self.width
-                and 0 <= cz < self.height)
+        return self.x <= cx < self.x + self.length and self.y <= cy < self.y + self.width and 0 <= cz < self.height
 
     def intersects(self, other: Building) -> bool:
         """The seed's ``intersect``: whether the two boxes share at least one cell (touching faces
@@ -138,8 +137,7 @@ class Building:
 
     def fits_in(self, size: Cell) -> bool:
         """Whether the whole box lies inside a world of `size`."""
-        return (self.x + self.length <= size[0] and self.y + self.width <= size[1]
-                and self.height <= size[2])
+        return self.x + self.length <= size[0] and self.y + self.width <= size[1] and self.height <= size[2]
 
     def as_list(self) -> list[int]:
         """``[x, y, length, width, height]``, the JSON form."""
@@ -217,29 +215,20 @@ class World:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, World):
             return NotImplemented
-        return (self.size == other.size and self.buildings == other.buildings
-                and np.array_equal(self.grid, other.grid))
+        return self.size == other.size and self.buildings == other.buildings and np.array_equal(self.grid, other.grid)
 
     def __hash__(self) -> int:
         return hash((self.size, self.buildings, self.packed()))
 
     def __repr__(self) -> str:
-        return (f"World(size={self.size}, buildings={len(self.buildings)}, "
-                f"building_cells={int(self.grid.sum())})")
+        return f"World(size={self.size}, buildings={len(self.buildings)}, building_cells={int(self.grid.sum())})"
 
     # ----------------------------------------------------------------------- constructors
 
     @classmethod
-    def generate(
-        cls,
-        size: Cell = (10, 10, 10),
-        rng: np.random.Generator | int | None = None,
-        *,
-        count: int | None = None,
-        max_footprint: int | None = None,
-        max_height: int | None = None,
-        keep_free: Iterable[Cell] = ((0, 0, 0),),
-    ) -> World:
+    def generate(cls, size: Cell = (10, 10, 10), rng: np.random.Generator | int | None = None, *,
+                 count: int | None = None, max_footprint: int | None = None, max_height: int | None = None,
+                 keep_free: Iterable[Cell] = ((0, 0, 0),)) -> World:
         """A random city of non-intersecting box buildings; always succeeds, in bounded time.
 
         Draws only from `rng` (a Generator, or an int seed; default ``default_rng(0)``), so equal
@@ -252,24 +241,15 @@ class World:
         """
         size = _size(size)
         nx, ny, nz = size
-        if rng is None:
-            rng = np.random.default_rng(0)
-        elif not isinstance(rng, np.random.Generator):
-            rng = np.random.default_rng(checked_int(rng, "seed"))
-        footprint = _DEFAULT_FOOTPRINT if max_footprint is None else checked_int(max_footprint, "max_footprint")
-        if footprint < 1:
-            raise UsageError(f"max_footprint must be >= 1, got {footprint}")
-        top = nz if max_height is None else checked_int(max_height, "max_height")
-        if top < 1:
-            raise UsageError(f"max_height must be >= 1, got {top}")
+        if not isinstance(rng, np.random.Generator):
+            rng = np.random.default_rng(0 if rng is None else checked_int(rng, "seed"))
+        footprint = _at_least(_DEFAULT_FOOTPRINT if max_footprint is None else max_footprint, "max_footprint", 1)
+        top = _at_least(nz if max_height is None else max_height, "max_height", 1)
         max_len, max_wid, top = min(footprint, nx), min(footprint, ny), min(top, nz)
         if count is None:
             mean_area = (max_len + 1) / 2 * (max_wid + 1) / 2
             count = max(1, round(_DEFAULT_GROUND_COVER * nx * ny / mean_area))
-        count = checked_int(count, "count")
-        if count < 0:
-            raise UsageError(f"count must be >= 0, got {count}")
-        count = min(count, nx * ny)  # every building needs at least one ground cell
+        count = min(_at_least(count, "count", 0), nx * ny)  # every building needs at least one ground cell
 
         # limit[x, y]: the tallest building allowed on that ground cell; 0 once a building stands
         # there, and at most kz for a keep_free cell (x, y, kz), so that a building stops below it.
@@ -291,8 +271,7 @@ class World:
             tops = rng.integers(1, top + 1, size=n)
             xs = rng.integers(0, nx - lengths + 1)
             ys = rng.integers(0, ny - widths + 1)
-            for x, y, ln, wd, h in zip(xs.tolist(), ys.tolist(), lengths.tolist(), widths.tolist(),
-                                       tops.tolist()):
+            for x, y, ln, wd, h in zip(xs.tolist(), ys.tolist(), lengths.tolist(), widths.tolist(), tops.tolist()):
                 area = limit[x:x + ln, y:y + wd]
                 if area.min() < h:
                     continue
@@ -367,19 +346,19 @@ class World:
         if type(data["version"]) is not int or data["version"] != FORMAT_VERSION:
             raise UsageError(f"unsupported world version {data['version']!r} (this build reads {FORMAT_VERSION})")
         size = _size(_json_ints(data["size"], 3, "size"))
-        has_b, has_c = "buildings" in data, "cells" in data
-        if has_b == has_c:
+        if ("buildings" in data) == ("cells" in data):
             raise UsageError("a world needs exactly one of the keys 'buildings' and 'cells'")
-        if has_b:
-            items = _json_list(data["buildings"], "buildings")
+        key = "buildings" if "buildings" in data else "cells"
+        if not isinstance(data[key], list):
+            raise UsageError(f"{key} must be a list, got {type(data[key]).__name__}")
+        if key == "buildings":
             buildings = []
-            for i, item in enumerate(items):
+            for i, item in enumerate(data[key]):
                 x, y, ln, wd, h = _json_ints(item, 5, f"buildings[{i}]")
                 buildings.append(Building(x=x, y=y, length=ln, width=wd, height=h))
             return cls.from_buildings(size, buildings)
-        items = _json_list(data["cells"], "cells")
         grid = np.zeros(size, dtype=bool)
-        for i, item in enumerate(items):
+        for i, item in enumerate(data[key]):
             x, y, z = _json_ints(item, 3, f"cells[{i}]")
             if not (0 <= x < size[0] and 0 <= y < size[1] and 0 <= z < size[2]):
                 raise UsageError(f"cells[{i}] {[x, y, z]} is outside the world of size {list(size)}")
@@ -394,17 +373,13 @@ class World:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read world file {str(path)!r}: {exc}") from None
-        if Path(path).suffix == ".map":
-            try:
-                return cls.from_grid(world_grid(read_map(text)))
-            except UsageError as exc:
-                raise UsageError(f"world file {str(path)!r}: {exc}") from None
+        movingai = Path(path).suffix == ".map"
         try:
-            data = json.loads(text)
+            data = {} if movingai else json.loads(text)
         except json.JSONDecodeError as exc:
             raise UsageError(f"world file {str(path)!r} is not valid JSON: {exc}") from None
         try:
-            return cls.from_json(data)
+            return cls.from_grid(world_grid(read_map(text))) if movingai else cls.from_json(data)
         except UsageError as exc:
             raise UsageError(f"world file {str(path)!r}: {exc}") from None
 
@@ -447,12 +422,8 @@ class World:
     def free_neighbours(self, cell: Cell) -> tuple[Cell, ...]:
         """The in-bounds, non-building 6-neighbours of `cell`, in the order +x, -x, +y, -y, +z, -z."""
         x, y, z = _cell(cell)
-        out = []
-        for dx, dy, dz in AROUND:
-            n = (x + dx, y + dy, z + dz)
-            if self.contains(n) and not self.grid[n]:
-                out.append(n)
-        return tuple(out)
+        around = ((x + dx, y + dy, z + dz) for dx, dy, dz in AROUND)
+        return tuple(n for n in around if self.contains(n) and not self.grid[n])
 
     def shortest_path_length(self, start: Cell, goal: Cell) -> int | None:
         """The number of 6-connected moves from `start` to `goal` through non-building cells,
@@ -463,15 +434,11 @@ class World:
             return None
         if start == goal:
             return 0
-        nx, ny, nz = self.size
-        # Pad the free map with a blocked border, so flat-index neighbours need no bounds checks.
-        free = np.zeros((nx + 2, ny + 2, nz + 2), dtype=bool)
-        free[1:-1, 1:-1, 1:-1] = ~self.grid
+        # The free map padded with a blocked border, so flat-index neighbours need no bounds checks.
+        unseen = np.pad(~self.grid, 1).ravel()
         sx, sy, steps = padded_steps(self.size)
         offsets = np.array(steps, dtype=np.int64)
-        unseen = free.ravel()
-        s = (start[0] + 1) * sx + (start[1] + 1) * sy + start[2] + 1
-        g = (goal[0] + 1) * sx + (goal[1] + 1) * sy + goal[2] + 1
+        s, g = ((c[0] + 1) * sx + (c[1] + 1) * sy + c[2] + 1 for c in (start, goal))
         unseen[s] = False
         frontier = np.array([s], dtype=np.int64)
         distance = 0
@@ -491,15 +458,8 @@ class World:
 
     # ----------------------------------------------------------------------- drawing
 
-    def draw(
-        self,
-        drones: Mapping[str, Cell] = {},
-        *,
-        targets: Mapping[str, Cell] = {},
-        trail: Iterable[Cell] = (),
-        floors: Iterable[int] | None = None,
-        compact: bool | None = None,
-    ) -> str:
+    def draw(self, drones: Mapping[str, Cell] = {}, *, targets: Mapping[str, Cell] = {}, trail: Iterable[Cell] = (),
+             floors: Iterable[int] | None = None, compact: bool | None = None) -> str:
         """The seed's ``drawEnv``: the world floor by floor, bottom-up (``z = 0`` first), each floor
         a block headed ``z = k`` with one row per x and one column per y, (0,0) top-left; blocks are
         separated by a blank line and a one-line legend ends the text (no trailing newline).
@@ -515,13 +475,10 @@ class World:
         nx, ny, nz = self.size
         if compact is None:
             compact = nx > 16 or ny > 16
-        if floors is None:
-            zs = list(range(nz))
-        else:
-            zs = sorted({checked_int(z, "floor") for z in floors})
-            bad = [z for z in zs if not 0 <= z < nz]
-            if bad:
-                raise UsageError(f"floors {bad} are outside 0..{nz - 1}")
+        zs = list(range(nz)) if floors is None else sorted({checked_int(z, "floor") for z in floors})
+        bad = [z for z in zs if not 0 <= z < nz]
+        if bad:
+            raise UsageError(f"floors {bad} are outside 0..{nz - 1}")
 
         # marks[z][(x, y)] = label, written in increasing priority.
         marks: dict[int, dict[tuple[int, int], str]] = {}
@@ -532,42 +489,28 @@ class World:
                 if self.contains((x, y, z)):
                     marks.setdefault(z, {})[(x, y)] = label
 
-        mark(trail, _C_TRAIL if compact else _TRAIL)
-        mark(targets.values(), _C_TARGET if compact else _TARGET)
+        empty, block, target, trailed, several, legend = _LABELS[compact]
+        mark(trail, trailed)
+        mark(targets.values(), target)
         crowd: dict[Cell, list[str]] = {}
         for name, c in drones.items():
             crowd.setdefault(_cell(c, f"position of {name}"), []).append(str(name))
         for c, names in crowd.items():
-            if len(names) > 1:
-                label = _C_CROWD if compact else _CROWD
-            else:
-                label = (names[0][-1:] or "?") if compact else names[0]
-            mark((c,), label)
+            alone = (names[0][-1:] or "?") if compact else names[0]
+            mark((c,), several if len(names) > 1 else alone)
 
-        width = max([3, *(len(v) for m in marks.values() for v in m.values())])
+        width = 1 if compact else max([3, *(len(v) for m in marks.values() for v in m.values())])
         blocks = []
         for z in zs:
-            floor = marks.get(z, {})
+            cells = np.where(self.grid[:, :, z], block, empty).astype(f"<U{width}")
+            for (x, y), label in marks.get(z, {}).items():
+                cells[x, y] = label
             if compact:
-                cells = np.where(self.grid[:, :, z], _C_BLOCK, _C_EMPTY).astype("<U1")
-                for (x, y), label in floor.items():
-                    cells[x, y] = label
-                text = "".join(cells.ravel().tolist())
-                rows = [text[i * ny:(i + 1) * ny] for i in range(nx)]
+                rows = ["".join(row) for row in cells.tolist()]
             else:
-                cells = np.where(self.grid[:, :, z], _BLOCK, _EMPTY).astype(f"<U{width}")
-                for (x, y), label in floor.items():
-                    cells[x, y] = label
                 rows = [" ".join(s.ljust(width) for s in row).rstrip() for row in cells.tolist()]
             blocks.append("\n".join([f"z = {z}", *rows]))
-        blocks.append(_C_LEGEND if compact else _LEGEND)
-        return "\n\n".join(blocks)
-
-
-def _json_list(value: object, what: str) -> list:
-    if not isinstance(value, list):
-        raise UsageError(f"{what} must be a list, got {type(value).__name__}")
-    return value
+        return "\n\n".join([*blocks, legend])
 
 
 def _json_ints(value: object, n: int, what: str) -> list[int]:

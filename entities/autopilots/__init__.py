@@ -1,4 +1,4 @@
-"""Autopilots, selectable by name (``--autopilot v1|seed|dstar``)."""
+"""Autopilots, selectable by name (``--autopilot NAME``, a `REGISTRY` key)."""
 
 from __future__ import annotations
 
@@ -10,30 +10,21 @@ from schema.tuning import SWARM_MIN
 
 from .base import Autopilot, Decision, Oracle, Sensing, SwarmPilot, drive, fly_round, run_step
 
-#: name -> (module, class). Modules are imported on first use.
-REGISTRY: dict[str, tuple[str, str]] = {
-    "v1": ("v1", "V1Pilot"),
-    "seed": ("seed", "SeedPilot"),
-    "dstar": ("dstar", "DStarPilot"),
-    "lrta": ("lrta", "LrtaPilot"),
-}
-#: name -> (module, class) of the autopilots that also come as one pilot for a whole swarm, over arrays
-#: (same decisions as one instance per drone; a swarm host flies its drones with it).
-SWARMS: dict[str, tuple[str, str]] = {
-    "seed": ("seed", "SeedSwarm"),
-    "lrta": ("lrta", "LrtaSwarm"),
-}
+#: name -> class, in the module of that name (imported on first use).
+REGISTRY: dict[str, str] = {"v1": "V1Pilot", "seed": "SeedPilot", "dstar": "DStarPilot", "lrta": "LrtaPilot"}
+#: name -> class of the autopilots that also come as one pilot for a whole swarm, over arrays (same decisions as
+#: one instance per drone; a swarm host flies its drones with it).
+SWARMS: dict[str, str] = {"seed": "SeedSwarm", "lrta": "LrtaSwarm"}
 
 
-def _load(entry: tuple[str, str]) -> type:
-    module, cls = entry
-    return getattr(importlib.import_module(f"{__name__}.{module}"), cls)
+def _load(name: str, cls: str) -> type:
+    return getattr(importlib.import_module(f"{__name__}.{name}"), cls)
 
 
 def pilot_class(name: str) -> type[Autopilot]:
     """The autopilot class registered as `name` (UsageError if there is none)."""
     try:
-        return _load(REGISTRY[name])
+        return _load(name, REGISTRY[name])
     except KeyError:
         raise UsageError(f"unknown autopilot {name!r}; choose one of {', '.join(REGISTRY)}") from None
 
@@ -49,7 +40,7 @@ def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int], least: int
     pilot_class(name)  # UsageError if there is no such autopilot
     if name not in SWARMS or len(drones) < least:
         return None
-    return _load(SWARMS[name])(world_size=world_size, drones=drones)
+    return _load(name, SWARMS[name])(world_size=world_size, drones=drones)
 
 
 __all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "SwarmPilot", "REGISTRY", "SWARMS", "SWARM_MIN", "drive",

@@ -18,12 +18,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from itertools import repeat
 from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
+from entities.world import linear_rows
 from schema import Cell, CellInfo, Note, StepTable, UsageError
-from schema.messages import AROUND
 from schema.tables import code_of, drone_number
 
 Answers = Mapping[Cell, CellInfo]
@@ -31,13 +32,11 @@ Answers = Mapping[Cell, CellInfo]
 NO_ANSWER = 255
 Sensing = Generator[tuple[Cell, ...], Answers, "Decision"]
 Oracle = Callable[[tuple[Cell, ...]], Answers]
-#: A process's turn for drones flown one pilot each (`fly_pilots`): each round yields every drone's
-#: pending question ({drone: cells}) and receives {drone: answers}; it returns the turn's moves.
+#: A process's turn for drones flown one pilot each (`fly_pilots`, `fly_round`).
 PilotsPlan = Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers], "StepTable | dict[str, Decision]"]
-#: A swarm pilot's turn (`SwarmPilot.step`): it yields an (m, 3) array of cells (at most once) and receives
-#: their CellKind codes ((m,) uint8, `NO_ANSWER` for a cell nobody answered); it returns the new cells and the
-#: note codes, and, for a cooperative pilot, the rankings (`schema.tables.rank_steps`, uint32).
+#: A swarm pilot's turn (`SwarmPilot.step`).
 SwarmSensing = Generator[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Decision:
@@ -75,37 +74,56 @@ class SwarmPilot(Protocol):
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
         """The moves of the drones numbered `drones`, standing at `pos` ((n, 3)) with `target` ((n, 3),
-        (-1, -1, -1) for none): returns (new cells (n, 3), note codes (n,) as in a StepTable), and a
-        cooperative pilot its drones' rankings too ((n,) packed as `schema.tables.rank_steps`: a MOVES's
+        (-1, -1, -1) for none): returns (new cells (n, 3), note codes (n,) uint8 as in a StepTable), and a
+        cooperative pilot its drones' rankings too ((n,) uint32 packed as `schema.tables.rank_steps`: a MOVES's
         `ranked` column). It may yield once an (m, 3) array of cells, and receives their CellKind codes
-        (`NO_ANSWER` for a cell not answered)."""
+        ((m,) uint8, `NO_ANSWER` for a cell not answered)."""
         ...
 
 
-def swarm_numbers(drones: Sequence[int]) -> np.ndarray:
-    """A swarm pilot's drone numbers, sorted (UsageError if one is given twice)."""
-    numbers = np.array(sorted(drones), dtype=np.int64)
-    if len(np.unique(numbers)) != len(numbers):
-        raise UsageError("a swarm flies each drone once")
-    return numbers
+class SwarmBase:
+    """What the swarm forms share: the world's `size`, their drones' numbers (sorted, `_drones`) and the number
+    of cells of the world (`_cells`: a drone's memory is keyed by its row or trip × `_cells` + a cell's index)."""
 
+    def __init__(self, *, world_size: Cell, drones: Sequence[int]) -> None:
+        """`drones`: the numbers of the drones flown (D01 is 1); UsageError if one is given twice."""
+        self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
+        self._drones = np.array(sorted(drones), dtype=np.int64)
+        if len(np.unique(self._drones)) != len(self._drones):
+            raise UsageError("a swarm flies each drone once")
+        self._cells = self.size[0] * self.size[1] * self.size[2]
 
-def swarm_rows(numbers: np.ndarray, drones: Sequence[int] | np.ndarray) -> np.ndarray:
-    """The rows of `drones` in a swarm's sorted `numbers` (UsageError naming those not in it)."""
-    drones = np.asarray(drones, dtype=np.int64)
-    rows = np.searchsorted(numbers, drones)
-    if len(drones) and (rows.max() >= len(numbers) or (numbers[rows] != drones).any()):
-        strangers = sorted(set(drones.tolist()) - set(numbers.tolist()))
-        raise UsageError(f"drones {strangers} are not in this swarm")
-    return rows
+    def _rows(self, drones: Sequence[int] | np.ndarray) -> np.ndarray:
+        """The rows of `drones` in `_drones` (UsageError naming those not in the swarm)."""
+        numbers, drones = self._drones, np.asarray(drones, dtype=np.int64)
+        rows = np.searchsorted(numbers, drones)
+        if len(drones) and (rows.max() >= len(numbers) or (numbers[rows] != drones).any()):
+            strangers = sorted(set(drones.tolist()) - set(numbers.tolist()))
+            raise UsageError(f"drones {strangers} are not in this swarm")
+        return rows
 
+    def _memory_of(self, memory: dict[int, int], first: int) -> dict[Cell, int]:
+        """The entries of `memory` keyed from `first` × `_cells` (a drone's row or trip), by cell."""
+        _, ny, nz = self.size
+        low = first * self._cells
+        return {(i // (ny * nz), i // nz % ny, i % nz): v for k, v in memory.items()
+                if low <= k < low + self._cells for i in (k - low,)}
 
-def add(a: Cell, b: Cell) -> Cell:
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+    def _keys(self, first: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """The memory keys ((k, m)) of `k` drones' `cells` ((k, m, 3); meaningful for inside cells), the drones'
+        keys starting at `first` × `_cells` ((k,): their rows or trips)."""
+        return (first * self._cells)[:, None] + linear_rows(cells.reshape(-1, 3), self.size).reshape(cells.shape[:2])
 
+    @staticmethod
+    def _lookup(memory: dict[int, int], keys: np.ndarray) -> np.ndarray:
+        """The values of `keys` in `memory` (-1 for those not in it), as int64."""
+        return np.fromiter(map(memory.get, keys.tolist(), repeat(-1)), dtype=np.int64, count=len(keys))
 
-def neighbours6(pos: Cell) -> tuple[Cell, ...]:
-    return tuple(add(pos, d) for d in AROUND)
+    def _orders(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, ...]:
+        """A step's arguments as arrays: the drones' rows, and `pos` and `target` as (n, 3) int64."""
+        n = len(drones)
+        return (self._rows(drones), np.asarray(pos, dtype=np.int64).reshape(n, 3),
+                np.asarray(target, dtype=np.int64).reshape(n, 3))
 
 
 def in_bounds(cell: Cell, size: Cell) -> bool:
@@ -152,21 +170,18 @@ def fly_round(steps: Mapping[str, Sensing]) -> Generator[dict[str, tuple[Cell, .
     so a turn takes as many sequential ASK round trips as the most inquisitive drone, not the sum over
     drones. Returns each drone's decision."""
     decisions: dict[str, Decision] = {}
-    pending: dict[str, tuple[Cell, ...]] = {}
-    for d, gen in steps.items():
-        try:
-            pending[d] = next(gen)
-        except StopIteration as stop:
-            decisions[d] = stop.value
+    pending: Mapping[str, tuple[Cell, ...] | None] = dict.fromkeys(steps)  # each drone's question (None: to start)
+    answers: Mapping[str, Answers] = {}
     while pending:
-        answers = yield pending
-        nxt: dict[str, tuple[Cell, ...]] = {}
-        for d in pending:
+        asking: dict[str, tuple[Cell, ...]] = {}
+        for d, question in pending.items():
             try:
-                nxt[d] = steps[d].send(answers[d])
+                asking[d] = next(steps[d]) if question is None else steps[d].send(answers[d])
             except StopIteration as stop:
                 decisions[d] = stop.value
-        pending = nxt
+        if asking:
+            answers = yield asking
+        pending = asking
     for d, dec in decisions.items():
         if not isinstance(dec, Decision):
             raise TypeError(f"the autopilot of {d} returned {dec!r}, not a Decision")

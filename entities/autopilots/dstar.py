@@ -71,7 +71,7 @@ from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import rank_steps
 
-from .base import Decision, Sensing
+from .base import Decision, Sensing, in_bounds
 
 UNKNOWN, FREE, BLOCKED = 0, 1, 2
 INF = 1 << 30
@@ -92,13 +92,8 @@ class DStarPilot:
     #: the way round that drone's cell (`_detour`) ...
     DETOUR_AFTER: ClassVar[int] = 32
     #: ... or, once pushed off its target this many times, as soon as it does not get closer, if it is at most
-    #: DETOUR_NEAR moves from its target and the way round is at most DETOUR_LONGER moves longer. Measured with
-    #: `dronesim bench swarm` (ISR, pibt, the cell avoided still offered last): without the pushed-off rule,
-    #: random-32-32-10/50 98 %, room-32-32-4/200 99 %, warehouse-32-32/400 97.8 %; with it, unbounded, 100 %,
-    #: 93 %, 99.5 %; bounded by 8 moves 100 %, 100 %, 99.2 %, but room-32-32-4/400 89.5 % (91.8 % without
-    #: detours); only near the target (2 moves) 100 %, 100 %, 99.2 % and room-32-32-4/400 91.8 %. (Not offering
-    #: the avoided cell at all, room-32-32-4/400 fell to 70 %: a drone that cannot be pushed through a door
-    #: jams a room.)
+    #: DETOUR_NEAR moves from its target and the way round is at most DETOUR_LONGER moves longer (the bounds
+    #: measured with `dronesim bench swarm`: docs/cooperation.md).
     PUSHED_OFF: ClassVar[int] = 3
     DETOUR_LONGER: ClassVar[int] = 8
     DETOUR_NEAR: ClassVar[int] = 2
@@ -124,33 +119,25 @@ class DStarPilot:
         # Padded coordinates (x+1, y+1, z+1) of every index, for the heuristic.
         dtype, code = (np.uint8, "B") if max(X, Y, Z) < 250 else (np.uint32, "I")
         flat = np.arange(n, dtype=np.int64)
-        self._xs = array(code, (flat // sx).astype(dtype).tobytes())
-        self._ys = array(code, ((flat // sy) % (Y + 2)).astype(dtype).tobytes())
-        self._zs = array(code, (flat % sy).astype(dtype).tobytes())
+        self._xs, self._ys, self._zs = (array(code, c.astype(dtype).tobytes())
+                                        for c in (flat // sx, flat // sy % (Y + 2), flat % sy))
         self._K = X + Y + Z + 8  # > any h + 1: tb fits under one unit of k1
-        # Per-target search state (reset by _reset).
-        self._goal = -1
-        self._target: Cell | None = None
-        self._g: list[int] = []
-        self._rhs: list[int] = []
-        self._heap: list[int] = []
-        self._km = 0
-        self._last = -1
-        self._unreachable = False
-        self._waited = 0
-        self._orders: dict[tuple[int, int, int, bool], tuple[int, ...]] = {}
         self.stuck_after = max(64, 2 * (X + Y + Z)) if stuck_after is None else max(1, int(stuck_after))
-        self._low = INF  # the smallest distance since the count below started
-        self._since = 0  # turns since then
+        # The search state of the current target (set by _reset).
+        self._goal, self._last = -1, -1
+        self._target: Cell | None = None
+        self._home = False  # the last step was on the target
+        self._restart()
+
+    def _restart(self) -> None:
+        """Start the count of turns without getting closer again (a new target, or on it)."""
+        self._waited = 0  # turns waited behind a drone
+        self._low, self._since = INF, 0  # the smallest distance since the count started, turns since then
         #: While going round a drone (`_detour`): the cell it avoids, and each cell's distance to the target
         #: without it (those the search reached); -1 / None otherwise.
         self._avoid = -1
         self._round: dict[int, int] | None = None
         self._tried = False  # a detour was looked for since the drone last got closer
-        self._home = False  # the last step was on the target
-        self._pushed = 0  # times it was pushed off its target (this target)
-        #: Statistics for benchmarks: cells expanded by the search, over the pilot's life.
-        self.expansions = 0
 
     @property
     def distance(self) -> int | None:
@@ -169,48 +156,27 @@ class DStarPilot:
     def _cell(self, i: int) -> Cell:
         return (self._xs[i] - 1, self._ys[i] - 1, self._zs[i] - 1)
 
-    def _inside(self, c: Cell) -> bool:
-        X, Y, Z = self.size
-        return 0 <= c[0] < X and 0 <= c[1] < Y and 0 <= c[2] < Z
-
     # ------------------------------------------------------------------ D* Lite core
 
     def _reset(self, target: Cell, start: int) -> None:
         n = self._n
         self._target = target
         self._goal = goal = self._index(target)
-        self._g = [INF] * n
-        self._rhs = rhs = [INF] * n
+        self._g: list[int] = [INF] * n
+        self._rhs: list[int] = [INF] * n
         self._km = 0
         self._last = start
         self._unreachable = False
-        self._waited = 0
-        self._orders = {}
-        self._low, self._since = INF, 0
-        self._avoid, self._round, self._tried = -1, None, False
-        self._home, self._pushed = False, 0
-        rhs[goal] = 0
+        self._orders: dict[tuple[int, int, int, bool], tuple[int, ...]] = {}
+        self._home, self._pushed = False, 0  # _pushed: times it was pushed off its target
+        self._restart()
+        self._rhs[goal] = 0
         h = self._h(start, goal)
-        self._heap = [((h + 0) * self._K + h + 1) * n + goal]
+        self._heap: list[int] = [((h + 0) * self._K + h + 1) * n + goal]
 
     def _h(self, a: int, b: int) -> int:
         xs, ys, zs = self._xs, self._ys, self._zs
         return abs(xs[a] - xs[b]) + abs(ys[a] - ys[b]) + abs(zs[a] - zs[b])
-
-    def _push(self, p: int, gp: int, rp: int, s: int) -> None:
-        """Queue inconsistent cell p (g=gp, rhs=rp) with its key relative to start s."""
-        xs, ys, zs = self._xs, self._ys, self._zs
-        h = abs(xs[p] - xs[s]) + abs(ys[p] - ys[s]) + abs(zs[p] - zs[s])
-        if gp < rp:
-            key = (gp + h + self._km) * self._K
-        else:
-            key = (rp + h + self._km) * self._K + h + 1
-        heappush(self._heap, key * self._n + p)
-
-    def _move_start(self, s: int) -> None:
-        if s != self._last:
-            self._km += self._h(self._last, s)
-            self._last = s
 
     def _block(self, c: int, s: int) -> bool:
         """Learn that index c is a building/outside. True if the search may have to change."""
@@ -232,15 +198,12 @@ class DStarPilot:
         for d in offs:
             p = c + d
             if rhs[p] == want and p != goal and state[p] != BLOCKED:
-                m = INF
-                for e in offs:
-                    v = g[p + e]
-                    if v < m:
-                        m = v
-                r = m + 1 if m < INF else INF
-                rhs[p] = r
-                if g[p] != r:
-                    self._push(p, g[p], r, s)
+                m = min(g[p + e] for e in offs)
+                rhs[p] = r = m + 1 if m < INF else INF
+                if g[p] != r:  # inconsistent: queued with its key relative to s
+                    h = self._h(p, s)
+                    key = (g[p] + h + self._km) * self._K if g[p] < r else (r + h + self._km) * self._K + h + 1
+                    heappush(self._heap, key * self._n + p)
         return True
 
     def _compute(self, s: int, t: int = -1) -> None:
@@ -259,7 +222,6 @@ class DStarPilot:
         if t < 0:
             t = s
         ht = hx[xs[t]] + hy[ys[t]] + hz[zs[t]]
-        expanded = 0
         while heap:
             top = heap[0]
             gt = g[t]
@@ -272,14 +234,10 @@ class DStarPilot:
             if gu == ru:
                 continue  # stale entry
             h = hx[xs[u]] + hy[ys[u]] + hz[zs[u]]
-            if gu > ru:
-                knew = (ru + h + km) * K + h + 1
-            else:
-                knew = (gu + h + km) * K
+            knew = (ru + h + km) * K + h + 1 if gu > ru else (gu + h + km) * K
             if k < knew:
                 heappush(heap, knew * NP + u)
                 continue
-            expanded += 1
             if gu > ru:  # over-consistent: settle it, relax its neighbours
                 g[u] = ru
                 nv = ru + 1
@@ -290,10 +248,8 @@ class DStarPilot:
                         gp = g[p]
                         if gp != nv:
                             hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
-                            if gp < nv:
-                                heappush(heap, ((gp + hp + km) * K) * NP + p)
-                            else:
-                                heappush(heap, ((nv + hp + km) * K + hp + 1) * NP + p)
+                            key = (gp + hp + km) * K if gp < nv else (nv + hp + km) * K + hp + 1
+                            heappush(heap, key * NP + p)
             else:  # under-consistent: raise it to infinity, re-derive it and its dependants
                 g[u] = INF
                 want = gu + 1
@@ -310,11 +266,8 @@ class DStarPilot:
                     gp = g[p]
                     if gp != r:
                         hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
-                        if gp < r:
-                            heappush(heap, ((gp + hp + km) * K) * NP + p)
-                        else:
-                            heappush(heap, ((r + hp + km) * K + hp + 1) * NP + p)
-        self.expansions += expanded
+                        key = (gp + hp + km) * K if gp < r else (r + hp + km) * K + hp + 1
+                        heappush(heap, key * NP + p)
         if len(heap) > 2 * NP:  # compact: drop entries of cells that are consistent now
             heap[:] = [e for e in heap if g[e % NP] != rhs[e % NP]]
             heapify(heap)
@@ -336,22 +289,10 @@ class DStarPilot:
             sx, sy = self._sx, self._sy
             fx = sx if dx >= 0 else -sx
             fy = sy if dy >= 0 else -sy
-            first, second = (fx, fy) if key[3] else (fy, fx)
-            ranked: list[int] = []
-            if dz > 0:
-                ranked.append(1)
-            if key[3]:
-                ranked += [fx] if dx else []
-                ranked += [fy] if dy else []
-            else:
-                ranked += [fy] if dy else []
-                ranked += [fx] if dx else []
-            if dz < 0:
-                ranked.append(-1)
-            for d in (1, first, second, -first, -second, -1):
-                if d not in ranked:
-                    ranked.append(d)
-            order = tuple(ranked)
+            (first, a), (second, b) = ((fx, dx), (fy, dy)) if key[3] else ((fy, dy), (fx, dx))
+            ranked = ([1] if dz > 0 else []) + [d for d, way in ((first, a), (second, b)) if way]
+            ranked += [-1] if dz < 0 else []
+            order = (*ranked, *(d for d in (1, first, second, -first, -second, -1) if d not in ranked))
             self._orders[key] = order
         return order
 
@@ -383,84 +324,67 @@ class DStarPilot:
 
     # ------------------------------------------------------------------ the step
 
-    def _learn(self, answers: Mapping[Cell, CellInfo], s: int, drones: set[int] | None) -> bool:
-        """Record ASK answers; collect cells holding another drone. True if something got blocked."""
+    def _learn(self, answers: Mapping[Cell, CellInfo], s: int, seen: tuple[set[int], set[int]] | None = None) -> bool:
+        """Record ASK answers; collect in `seen` the cells told empty and those holding another drone. True if
+        something got blocked."""
         changed = False
-        state = self._state
-        index, inside = self._index, self._inside
+        state, index, size = self._state, self._index, self.size
         for cell, info in answers.items():
-            if not inside(cell):
+            if not in_bounds(cell, size):
                 continue
             i = index(cell)
             if info.kind is CellKind.EMPTY:
                 if state[i] == UNKNOWN:
                     state[i] = FREE
-                if drones is not None and info.drones and i != s:
-                    drones.add(i)
+                if seen is not None:
+                    seen[0].add(i)
+                    if info.drones and i != s:
+                        seen[1].add(i)
             elif self._block(i, s):
                 changed = True
         return changed
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         pos = (int(pos[0]), int(pos[1]), int(pos[2]))
-        if not self._inside(pos):
+        if not in_bounds(pos, self.size):
             return Decision(pos=pos, note=Note.NONE if target is None else Note.UNREACHABLE)
+        s = self._index(pos)
         if target is None:
-            return Decision(pos=pos, ranked=self._aside(self._index(pos)))
+            return Decision(pos=pos, ranked=self._aside(s))
         target = (int(target[0]), int(target[1]), int(target[2]))
         if pos == target:  # parked: it may be pushed aside, to its free neighbours (asked once)
-            self._waited = 0
-            self._low, self._since = INF, 0
-            self._avoid, self._round, self._tried = -1, None, False
+            self._restart()
             self._home = target == self._target
-            s = self._index(pos)
             unknown = [s + d for d in self._offs if self._state[s + d] == UNKNOWN]
             if unknown:
-                self._learn((yield tuple(self._cell(i) for i in unknown)), s, None)
+                self._learn((yield tuple(self._cell(i) for i in unknown)), s)
             return Decision(pos=pos, note=Note.REACHED, ranked=self._aside(s))
-        if not self._inside(target):
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(self._index(pos)))
-        s = self._index(pos)
+        if not in_bounds(target, self.size):
+            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
         if target != self._target:
             self._reset(target, s)
         elif self._home:
             self._pushed += 1
         self._home = False
-        if self._unreachable:  # static world: nothing new can be learnt by hovering
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
-        goal = self._goal
-        state = self._state
-        if state[goal] == BLOCKED:
-            self._unreachable = True
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
-        self._move_start(s)
+        goal, state = self._goal, self._state
+        if self._unreachable or state[goal] == BLOCKED:
+            return self._give_up(pos, s)
+        if s != self._last:  # the drone moved: the heuristic's origin shifts
+            self._km += self._h(self._last, s)
+            self._last = s
         self._compute(s)
 
         # Round 1: neighbours (drones), the target if unknown, unknown cells along the path ahead.
         neigh = [s + d for d in self._offs if state[s + d] != BLOCKED]
-        asked = set(neigh)
-        extra = []
-        if state[goal] == UNKNOWN and goal not in asked:
-            extra.append(goal)
-            asked.add(goal)
+        extra = [goal] if state[goal] == UNKNOWN else []
         if self._g[s] < INF:
-            for p in self._ahead(s, self.lookahead):
-                if state[p] == UNKNOWN and p not in asked:
-                    extra.append(p)
-                    asked.add(p)
-        cells = tuple(self._cell(i) for i in neigh + extra)
+            extra += [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
+        cells = tuple(self._cell(i) for i in dict.fromkeys(neigh + extra))  # each once, the neighbours first
+        sensed: set[int] = set()  # the cells told empty, and those holding another drone
         drones: set[int] = set()
-        if cells:
-            answers = yield cells
-            changed = self._learn(answers, s, drones)
-            sensed = {self._index(c) for c, info in answers.items()
-                      if info.kind is CellKind.EMPTY and self._inside(c)}
-        else:
-            changed, sensed = False, set()
+        changed = self._learn((yield cells), s, (sensed, drones)) if cells else False
         if state[goal] == BLOCKED:
-            self._unreachable = True
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
-        learnt = changed
+            return self._give_up(pos, s)
         if changed:
             self._compute(s)
             # Round 2: the repaired path's unknown cells ahead.
@@ -468,16 +392,15 @@ class DStarPilot:
                 more = [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
                 if more:
                     answers = yield tuple(self._cell(i) for i in more)
-                    if self._learn(answers, s, None):
+                    if self._learn(answers, s):
                         self._compute(s)
         g = self._g
         if g[s] >= INF:
-            self._unreachable = True
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
+            return self._give_up(pos, s)
         if g[s] < self._low:
             self._low, self._since = g[s], 0
             self._avoid, self._round, self._tried = -1, None, False
-        elif learnt:
+        elif changed:
             self._low, self._since = g[s], 0
         else:
             self._since += 1
@@ -487,8 +410,7 @@ class DStarPilot:
                 self._avoid = -1
         note = Note.UNREACHABLE if self._since >= self.stuck_after else Note.NONE
         stuck = self._since >= self.DETOUR_AFTER
-        near = g[s] <= self.DETOUR_NEAR
-        if not self._tried and (stuck or self._pushed >= self.PUSHED_OFF and self._since and near):
+        if not self._tried and (stuck or self._pushed >= self.PUSHED_OFF and self._since and g[s] <= self.DETOUR_NEAR):
             self._tried = True
             blocker = next((p for p in sorted(drones, key=lambda p: g[p]) if g[p] < g[s]), -1)
             if blocker >= 0:
@@ -515,22 +437,25 @@ class DStarPilot:
             move = nxt if nxt >= 0 and g[nxt] < INF and self._waited > self.PATIENCE else s
             if move != s:
                 self._waited = 0
-        return Decision(pos=self._cell(move), note=note, ranked=self._ranking(s, neigh, sensed))
+        return Decision(pos=self._cell(move), note=note, ranked=self._ranking(s, sensed))
+
+    def _give_up(self, pos: Cell, s: int) -> Decision:
+        """The target is unreachable, for good: the world is static, nothing new can be learnt by hovering."""
+        self._unreachable = True
+        return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
 
     # ------------------------------------------------------------------ candidates for the arbiter
 
-    def _ranking(self, s: int, neigh: list[int], sensed: set[int]) -> int:
+    def _ranking(self, s: int, sensed: set[int]) -> int:
         """The candidates offered to the arbiter (packed): s and its neighbours sensed free this step, by
         distance (g) on the known map, ties in tie-break order. The search settles g(s) and the best
         neighbour's; the others' may still be estimates: settling them all would cost a search each and
         steer the next steps' sensing elsewhere, for an order that the next step corrects anyway."""
-        state = self._state
-        order = self._order(s)
-        known = self._round
+        known, state = self._round, self._state
         get = self._g.__getitem__ if known is None else (lambda i: known.get(i, INF))
-        ranked = sorted([(get(s), -1, 0)] + [(get(s + d), k, d) for k, d in enumerate(order)
+        ranked = sorted([(get(s), -1, 0)] + [(get(s + d), k, d) for k, d in enumerate(self._order(s))
                                              if s + d in sensed and state[s + d] != BLOCKED])
-        return rank_steps(self._step_of(d) for _, _, d in ranked)
+        return rank_steps((0, 0, 0) if d == 0 else AROUND[self._offs.index(d)] for _, _, d in ranked)
 
     def _detour(self, avoid: int, s: int) -> dict[int, int] | None:
         """Each cell's distance to the target on the known map (unknown cells free) with cell `avoid` taken
@@ -566,6 +491,3 @@ class DStarPilot:
         """The candidates of a drone at rest (parked, without a target, or unable to reach it): its own cell,
         then the neighbours it knows are free, in the fixed order +x, -x, +y, -y, +z, -z."""
         return rank_steps([(0, 0, 0)] + [AROUND[k] for k, d in enumerate(self._offs) if self._state[s + d] == FREE])
-
-    def _step_of(self, d: int) -> Cell:
-        return (0, 0, 0) if d == 0 else AROUND[self._offs.index(d)]

@@ -12,28 +12,25 @@ towards `target`:
    distance: the learned values are sparse, a few cells around the buildings it met);
 3. it ranks its own cell and its free neighbours for the coordinator's arbiter (PIBT, coordinator/arbiter.py,
    docs/cooperation.md): by h, smallest first; staying (with the value just learned) before any neighbour of
-   equal h; among neighbours of equal h, those on its *cruise* first: it climbs first and descends last (a
-   level step while below the target's altitude, and a step down before it is in the target's column, come
-   after the others); then the one nearer the target as the crow flies (squared Euclidean distance), then in
-   AROUND order (+x, -x, +y, -y, +z, -z): a total order. The cruise: a city's buildings are boxes standing on
-   the ground, so the higher of its altitude and its target's meets fewer of them, and the air above the
-   target is free down to it; without it, a drone from high up that went down early met the low streets'
-   dead ends (two of 10,000 single trips in the benchmark's city took over 3000 turns for 211 and 213 moves;
-   the longest now takes 671 turns). Nearer as the crow flies:
-   of two cells that get closer, the one along the axis with more way to go (paths go diagonally,
-   staircase-wise, rather than one axis after the other, which would put crowds in the same lanes); of two
-   that do not, the one to the side rather than straight back (a drone facing a building goes round it).
-   After learning, the best neighbour is always strictly below staying, so a drone that gets its first choice
-   always moves. Its move (`pos`, for an arbitration that takes one move per drone) is its first choice.
+   equal h; among neighbours of equal h, those on its *cruise* first: it climbs first and descends last (a level
+   step while below the target's altitude, and a step down before it is in the target's column, come after the
+   others); then the one nearer the target as the crow flies (squared Euclidean distance), then in AROUND order
+   (+x, -x, +y, -y, +z, -z): a total order. The cruise: a city's buildings are boxes standing on the ground, so
+   the higher of its altitude and its target's meets fewer of them, and the air above the target is free down to
+   it; without it, a drone from high up that went down early met the low streets' dead ends (docs/cooperation.md
+   measures it). Nearer as the crow flies: of two cells that get closer, the one along the axis with more way to
+   go (paths go diagonally, staircase-wise, rather than one axis after the other, which would put crowds in the
+   same lanes); of two that do not, the one to the side rather than straight back (a drone facing a building goes
+   round it). After learning, the best neighbour is always strictly below staying, so a drone that gets its first
+   choice always moves. Its move (`pos`, for an arbitration that takes one move per drone) is its first choice.
 
 In a depression (it learned a value where it stood the turn before: a wall across its straight line), a drone
 looks further: it senses the cube of `lookahead` cells around it (Chebyshev radius; 1: the 26 cells around; 0:
-it does not)
-instead of its six neighbours, and revalues every free cell of the cube at once before step 2 (`Lookahead`):
-h(c) = max(h(c), the shortest way inside the cube's free cells from c to the target, if it is in the cube, or
-to a cell just outside the cube, plus that cell's h). The way out of a depression crosses the cube's border
-somewhere, so the values stay admissible; and the depression fills a cube at a time instead of a cell at a
-time (Koenig and Sun's LSS-LRTA*, "Comparing real-time and incremental heuristic search for real-time
+it does not) instead of its six neighbours, and revalues every free cell of the cube at once before step 2
+(`Lookahead`): h(c) = max(h(c), the shortest way inside the cube's free cells from c to the target, if it is in
+the cube, or to a cell just outside the cube, plus that cell's h). The way out of a depression crosses the
+cube's border somewhere, so the values stay admissible; and the depression fills a cube at a time instead of a
+cell at a time (Koenig and Sun's LSS-LRTA*, "Comparing real-time and incremental heuristic search for real-time
 situated agents", JAAMAS 2009, with the sensed cube as the local search space).
 
 A drone at rest (on its target, without one, or that cannot reach it) offers its own cell first, then its
@@ -60,7 +57,6 @@ arrays (`autopilots.SWARMS`), about 2 µs a drone a turn. Both revalue a cube wi
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from itertools import repeat
 from typing import ClassVar
 
 import numpy as np
@@ -70,7 +66,7 @@ from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds, swarm_numbers, swarm_rows
+from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing, in_bounds
 
 #: A ranking key is h * _H + off * _OFF + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in
 #: AROUND order, 6 staying); off is 1 for a step off the cruise (see the module), else 0; tie is 0 for staying
@@ -85,11 +81,8 @@ _AXIS = tuple(next(a for a in range(3) if d[a]) for d in AROUND)
 _NONE, _REACHED, _UNREACHABLE = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE))
 
 
-#: The cube a drone in a depression senses and revalues: its Chebyshev radius (see the module). Single drones
-#: in the 256 x 256 x 32 city of the distributed benchmark, its 10,000 trips, no other drone in the way, with the
-#: cruise: radius 0 (the one-move lookahead only) took up to 949 turns, 1.092 x the Manhattan distance in all,
-#: 8.0 values learned a drone; radius 1 up to 671 turns, 1.044 x, 14.9 values; radius 2 up to 669, 1.030 x,
-#: 28.9 values (docs/cooperation.md).
+#: The cube a drone in a depression senses and revalues: its Chebyshev radius (see the module; each radius
+#: measured in docs/cooperation.md).
 LOOKAHEAD = 1
 _FAR_H = 1 << 50  # a value no way reaches (outside the world, a cell not yet reached by the revaluation)
 
@@ -105,10 +98,7 @@ def _manhattan(a: Cell, b: Cell) -> int:
 
 def _pack(order: Sequence[int]) -> int:
     """Step indices (into RANK_STEPS) as `schema.tables.rank_steps` packs them (code = index + 1)."""
-    value = 0
-    for i, k in enumerate(order):
-        value |= (k + 1) << 3 * i
-    return value
+    return sum((k + 1) << 3 * i for i, k in enumerate(order))
 
 
 class Lookahead:
@@ -131,8 +121,7 @@ class Lookahead:
         self.center = at[(0, 0, 0)]
         self.around = np.array([at[d] for d in AROUND if d in at], dtype=np.int64)  # inner indices, AROUND order
         #: inner indices of the cells sensed besides the six neighbours (the center is where the drone is)
-        self.extra = np.array(sorted(set(range(len(self.inner))) - {self.center, *self.around.tolist()}),
-                              dtype=np.int64)
+        self.extra = np.setdiff1d(np.arange(len(self.inner)), [self.center, *self.around.tolist()])
         self.sensed = self.cube[self.extra]  # (extra, 3): their offsets
 
     def revalue(self, pos: np.ndarray, target: np.ndarray, free: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -249,7 +238,7 @@ _SHIFTS = np.arange(7, dtype=np.int64) * 3
 _FAR = np.iinfo(np.int64).max
 
 
-class LrtaSwarm:
+class LrtaSwarm(SwarmBase):
     """`LrtaPilot` for a whole swarm host's drones at once, over arrays: the same decisions and the same learned
     values. The values of every drone are one dict: (the drone's current trip × world cells + the cell's grid
     index) -> h, where a trip is numbered anew each time the drone's target changes (the values of a former
@@ -261,12 +250,10 @@ class LrtaSwarm:
 
     def __init__(self, *, world_size: Cell, drones: Sequence[int], slack: int | None = None,
                  lookahead: int = LOOKAHEAD) -> None:
-        self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
+        super().__init__(world_size=world_size, drones=drones)
         self.slack = default_slack(self.size) if slack is None else max(0, int(slack))
         self.look = Lookahead(lookahead)
-        self._drones = swarm_numbers(drones)
         n = len(self._drones)
-        self._cells = self.size[0] * self.size[1] * self.size[2]
         self._target = np.full((n, 3), -1, dtype=np.int64)
         self._trip = np.arange(n, dtype=np.int64)  # each drone's current trip
         self._trips = n  # trips numbered so far
@@ -282,28 +269,16 @@ class LrtaSwarm:
 
     def learned(self, drone: int) -> dict[Cell, int]:
         """Drone number `drone`'s learned values for its current target (as `LrtaPilot.learned`)."""
-        row = int(self._rows([drone])[0])
-        first = int(self._trip[row]) * self._cells
-        _, ny, nz = self.size
-        return {(i // (ny * nz), i // nz % ny, i % nz): v for k, v in self._learned.items()
-                if first <= k < first + self._cells for i in (k - first,)}
-
-    def _rows(self, drones: Sequence[int] | np.ndarray) -> np.ndarray:
-        return swarm_rows(self._drones, drones)
+        return self._memory_of(self._learned, int(self._trip[int(self._rows([drone])[0])]))
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
-        """This turn's moves of the drones numbered `drones` at `pos` ((n, 3)) towards `target` ((n, 3),
-        (-1, -1, -1) for none): yields once the cells it senses, receives their kinds, returns (new cells
-        (n, 3), note codes (n,), rankings (n,) uint32 as `schema.tables.rank_steps` packs them).
-
-        The hot path of a swarm host (about 2 µs a drone): the neighbours' Manhattan distances follow from the
-        drone's own (one more or one less, by the side of the target they lie on), and the learned values are
-        looked up only for the drones that learned something on their current trip (`_learns`)."""
+        """`SwarmPilot.step`, with the rankings. The hot path of a swarm host (about 2 µs a drone): the neighbours'
+        Manhattan distances follow from the drone's own (one more or one less, by the side of the target they lie
+        on), and the learned values are looked up only for the drones that learned something on their current trip
+        (`_learns`)."""
         size = self.size
         n = len(drones)
-        rows = self._rows(drones)
-        pos = np.asarray(pos, dtype=np.int64).reshape(n, 3)
-        target = np.asarray(target, dtype=np.int64).reshape(n, 3)
+        rows, pos, target = self._orders(drones, pos, target)
         has = target[:, 0] >= 0
         changed = has & (self._target[rows] != target).any(axis=1)
         if changed.any():  # a new trip: the values learned for the former target are left behind
@@ -357,8 +332,7 @@ class LrtaSwarm:
         if len(go):
             p, t, f = pos[go], target[go], free[go]
             k = len(go)
-            gap = np.abs(t - p)  # (k, 3)
-            manh_p = gap.sum(axis=1)
+            manh_p = np.abs(t - p).sum(axis=1)
             side = np.sign(t - p)  # each neighbour is one closer if it steps towards the target, else one farther
             values = np.empty((k, 7), dtype=np.int64)
             values[:, 0] = manh_p
@@ -369,11 +343,10 @@ class LrtaSwarm:
             learner = self._learns[rows[go]]
             if learner.any():  # the drones that learned on this trip: their values, where they learned one
                 sub = np.flatnonzero(learner)
-                cell_keys = (self._trip[rows[go[sub]]] * self._cells)[:, None] + linear_rows(
-                    np.concatenate([p[sub, None, :], around[go[sub]]], axis=1).reshape(-1, 3), size).reshape(-1, 7)
+                cells = np.concatenate([p[sub, None, :], around[go[sub]]], axis=1)  # (sub, 7, 3)
+                cell_keys = self._keys(self._trip[rows[go[sub]]], cells)
                 wanted = np.concatenate([np.ones((len(sub), 1), dtype=bool), f[sub]], axis=1)
-                found = np.fromiter(map(self._learned.get, cell_keys[wanted].tolist(), repeat(-1)), dtype=np.int64,
-                                    count=int(wanted.sum()))
+                found = self._lookup(self._learned, cell_keys[wanted])
                 part = values[sub]
                 part[wanted] = np.where(found >= 0, found, part[wanted])
                 values[sub] = part
@@ -389,8 +362,7 @@ class LrtaSwarm:
             tie = 1 + ((around[go] - t[:, None, :]) ** 2).sum(axis=2)
             off = (p[:, 2] < t[:, 2])[:, None] & (_COLUMNS < 4)  # level steps below the target's altitude
             off[:, 5] = (p[:, :2] != t[:, :2]).any(axis=1)  # down before the target's column
-            ranking = np.where(f, np.where(f, h_nb, 0) * _H + off * _OFF + tie * _TIE + _COLUMNS, _FAR)
-            keys[go, :6] = ranking
+            keys[go, :6] = np.where(f, np.where(f, h_nb, 0) * _H + off * _OFF + tie * _TIE + _COLUMNS, _FAR)
             keys[go, 6] = h_here * _H + _STAY
             note[go] = np.where(h_here > manh_p + self.slack, _UNREACHABLE, _NONE)
         order = np.argsort(keys, axis=1, kind="stable")
@@ -419,10 +391,8 @@ class LrtaSwarm:
         p, t = pos[at], target[at]
         cells = p[:, None, :] + look.offsets  # (k, padded, 3)
         inside = ((cells >= 0) & (cells < np.array(size))).all(axis=2)
-        keys = (self._trip[rows[at]] * self._cells)[:, None] + linear_rows(
-            np.where(inside[..., None], cells, 0).reshape(-1, 3), size).reshape(inside.shape)
-        found = np.fromiter(map(self._learned.get, keys[inside].tolist(), repeat(-1)), dtype=np.int64,
-                            count=int(inside.sum()))
+        keys = self._keys(self._trip[rows[at]], np.where(inside[..., None], cells, 0))
+        found = self._lookup(self._learned, keys[inside])
         h = np.full(inside.shape, _FAR_H, dtype=np.int64)
         h[inside] = np.where(found >= 0, found, np.abs(cells - t[:, None, :]).sum(axis=2)[inside])
         old = h[:, look.inner]

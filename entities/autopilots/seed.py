@@ -49,16 +49,14 @@ identical to the one-by-one seed.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from itertools import repeat
 from typing import ClassVar
 
 import numpy as np
 
-from entities.world import linear_rows
 from schema import Cell, CellInfo, CellKind, Note
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmSensing, in_bounds, swarm_numbers, swarm_rows
+from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing, in_bounds
 
 #: The 4 horizontal directions as (dx, dy), in the seed's tie-break order.
 DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
@@ -68,10 +66,6 @@ DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
     ("WEST", (0, -1)),
 )
 _RANKED = tuple((rank, dx, dy) for rank, (_, (dx, dy)) in enumerate(DIRECTIONS))
-
-
-def _is_empty(info: CellInfo) -> bool:
-    return info.kind is CellKind.EMPTY
 
 
 class SeedPilot:
@@ -87,8 +81,6 @@ class SeedPilot:
         self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]
         self._cases: list[tuple[Cell, bool]] = []  # the seed's `cases` array: (cell, empty)
         self._index: dict[Cell, int] = {}  # cell -> index in _cases
-
-    # ------------------------------------------------------------------ memory
 
     @property
     def memory(self) -> tuple[tuple[Cell, bool], ...]:
@@ -106,11 +98,8 @@ class SeedPilot:
         info = answers.get(cell)
         if info is None:
             return False
-        empty = _is_empty(info)
-        self._learn(cell, empty)
+        self._learn(cell, empty := info.kind is CellKind.EMPTY)
         return empty
-
-    # ------------------------------------------------------------------ direction order
 
     def direction_order(self, pos: Cell, target: Cell) -> tuple[str, ...]:
         """The seed's directionOrder: 4 direction names, best first; invalid directions (leading
@@ -118,7 +107,7 @@ class SeedPilot:
         return tuple(DIRECTIONS[rank][0] for rank in self._ranks(pos, target))
 
     def _ranks(self, pos: Cell, target: Cell) -> list[int]:
-        """`direction_order` as indices into DIRECTIONS (the hot path of a swarm: plain arithmetic)."""
+        """`direction_order` as indices into DIRECTIONS."""
         x, y, z = pos
         nx, ny, nz = self.world_size
         tx, ty = target[0], target[1]
@@ -134,8 +123,6 @@ class SeedPilot:
         ranks = [rank for _, rank in valid]
         return ranks + [ranks[0]] * (len(DIRECTIONS) - len(ranks))
 
-    # ------------------------------------------------------------------ one turn
-
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         if target is None:
             return Decision(pos=pos)
@@ -150,9 +137,8 @@ class SeedPilot:
             if in_bounds(up, self.world_size):
                 idx = self._index.get(up)
                 if idx is None:
-                    answers = yield (up,)
-                    asks += 1
-                    empty = self._record(up, answers)
+                    asks = 1
+                    empty = self._record(up, (yield (up,)))
                 else:
                     empty = self._cases[idx][1]
                 if empty:
@@ -169,10 +155,8 @@ class SeedPilot:
                 if cell not in pending:
                     if asks >= self.MAX_ASKS:
                         continue  # cannot happen: the last round trip asks every remaining one
-                    if asks == self.MAX_ASKS - 1:
-                        batch = tuple(dict.fromkeys(c for c in order[i:] if c not in self._index))
-                    else:
-                        batch = (cell,)
+                    last = asks == self.MAX_ASKS - 1  # the last round trip: every remaining one
+                    batch = tuple(dict.fromkeys(c for c in order[i:] if c not in self._index)) if last else (cell,)
                     answers = yield batch
                     asks += 1
                     pending = {c: answers[c] for c in batch if c in answers}
@@ -193,7 +177,7 @@ _RANK = np.arange(4)
 _COLUMNS = np.arange(6)
 
 
-class SeedSwarm:
+class SeedSwarm(SwarmBase):
     """`SeedPilot` for many drones at once (a swarm host's), over arrays: the same decisions and the same
     memory, in the same order, as one `SeedPilot` per drone (a property test holds the two to it).
 
@@ -216,39 +200,20 @@ class SeedSwarm:
     """
 
     def __init__(self, *, world_size: Cell, drones: Sequence[int]) -> None:
-        """`drones`: the numbers of the drones flown (D01 is 1)."""
-        self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]
-        self._drones = swarm_numbers(drones)
-        nx, ny, nz = self.world_size
-        self._cells = nx * ny * nz
+        super().__init__(world_size=world_size, drones=drones)
         self._memory: dict[int, int] = {}
         self._count = np.zeros(len(self._drones), dtype=np.int64)  # cells learned, per drone
 
-    # ------------------------------------------------------------------ memory
-
     def memory(self, drone: int) -> tuple[tuple[Cell, bool], ...]:
         """Drone number `drone`'s learned cells with their empty flag, in the order learned (as `SeedPilot.memory`)."""
-        row = int(self._rows([drone])[0])
-        nx, ny, nz = self.world_size
-        mine = sorted((v >> 1, k - row * self._cells, bool(v & 1)) for k, v in self._memory.items()
-                      if k // self._cells == row)
-        return tuple(((i // (ny * nz), i // nz % ny, i % nz), empty) for _, i, empty in mine)
-
-    def _rows(self, drones: Sequence[int] | np.ndarray) -> np.ndarray:
-        return swarm_rows(self._drones, drones)
-
-    # ------------------------------------------------------------------ one turn
+        mine = self._memory_of(self._memory, int(self._rows([drone])[0]))  # cell -> index learned × 2 + empty
+        return tuple((cell, bool(v & 1)) for cell, v in sorted(mine.items(), key=lambda item: item[1]))
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
-        """This turn's moves of the drones numbered `drones` (distinct), standing at `pos` ((n, 3)) with
-        `target` ((n, 3), (-1, -1, -1) for none). It yields at most once an (m, 3) array of cells and
-        receives their CellKind codes ((m,) uint8, `NO_ANSWER` for a cell not answered). Returns (new
-        cells (n, 3) int64, note codes (n,) uint8 as in a StepTable)."""
-        nx, ny, nz = size = self.world_size
+        """`SwarmPilot.step`: returns (new cells (n, 3) int64, note codes (n,) uint8)."""
+        nx, ny, nz = self.size
         n = len(drones)
-        rows = self._rows(drones)
-        pos = np.asarray(pos, dtype=np.int64).reshape(n, 3)
-        target = np.asarray(target, dtype=np.int64).reshape(n, 3)
+        rows, pos, target = self._orders(drones, pos, target)
         new = pos.copy()
         note = np.full(n, _NONE, dtype=np.uint8)
         has = target[:, 0] >= 0
@@ -274,12 +239,9 @@ class SeedSwarm:
         usable[:, 0] = True
         usable[:, 1] = moving & (t[:, 2] != p[:, 2]) & (cand[:, 1, 2] >= 0) & (cand[:, 1, 2] < nz)
         usable[:, 2:] = moving[:, None] & (_RANK < valid[:, None])  # the valid directions, no repeats
-        keys = (rows[go] * self._cells)[:, None] + linear_rows(cand.reshape(-1, 3), size).reshape(k, 6)
-
-        get = self._memory.get
+        keys = self._keys(rows[go], cand)
         entry = np.full((k, 6), -1, dtype=np.int64)
-        entry[usable] = np.fromiter(map(get, keys[usable].tolist(), repeat(-1)), dtype=np.int64,
-                                    count=int(usable.sum()))
+        entry[usable] = self._lookup(self._memory, keys[usable])
         unknown = usable & (entry < 0)
         told = np.full((k, 6), NO_ANSWER, dtype=np.uint8)
         told[:, 0] = CellKind.EMPTY  # standing in it: visited and empty, nothing asked

@@ -18,13 +18,9 @@ from __future__ import annotations
 from typing import ClassVar
 
 from schema import Cell, Note
+from schema.messages import AROUND
 
-from .base import Decision, Sensing, in_bounds, neighbours6
-
-
-def _dist2(a: Cell, b: Cell) -> int:
-    """Squared Euclidean distance: same ordering as the distance, exact in integers."""
-    return (a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2
+from .base import Decision, Sensing, in_bounds
 
 
 class V1Pilot:
@@ -37,19 +33,17 @@ class V1Pilot:
     def __init__(self, *, world_size: Cell) -> None:
         self.world_size: Cell = tuple(world_size)  # type: ignore[assignment]
 
-    def decide(self, pos: Cell, target: Cell | None) -> Decision:
-        """This turn's decision, computed without sensing."""
+    def step(self, pos: Cell, target: Cell | None) -> Sensing:
+        """A generator that returns its decision before any yield: zero ASK round trips."""
         if target is None:
             return Decision(pos=pos)
         if pos == target:
             return Decision(pos=pos, note=Note.REACHED)
-        candidates = [c for c in neighbours6(pos) if in_bounds(c, self.world_size)]
+        x, y, z = pos
+        candidates = [c for c in ((x + dx, y + dy, z + dz) for dx, dy, dz in AROUND) if in_bounds(c, self.world_size)]
         if not candidates:
             return Decision(pos=pos)
-        # min() keeps the first of equal keys, i.e. the AROUND order breaks ties.
-        return Decision(pos=min(candidates, key=lambda c: _dist2(c, target)))
-
-    def step(self, pos: Cell, target: Cell | None) -> Sensing:
-        """A generator that returns its decision before any yield: zero ASK round trips."""
-        return self.decide(pos, target)
+        # min() keeps the first of equal keys, i.e. the AROUND order breaks ties. Squared Euclidean distance:
+        # the same order as the distance, exact in integers.
+        return Decision(pos=min(candidates, key=lambda c: sum((a - b) ** 2 for a, b in zip(c, target))))
         yield  # unreachable; makes `step` a generator function, as the interface requires
