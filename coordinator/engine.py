@@ -34,7 +34,7 @@ import hashlib
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -109,7 +109,13 @@ class DroneTable(Sequence[DroneSpec]):
     def __len__(self) -> int:
         return len(self.ids)
 
-    def __getitem__(self, i: Any) -> Any:  # (Sequence's: a DroneSpec, or a tuple of them for a slice)
+    @overload
+    def __getitem__(self, i: int) -> DroneSpec: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> tuple[DroneSpec, ...]: ...
+
+    def __getitem__(self, i: int | slice) -> DroneSpec | tuple[DroneSpec, ...]:
         if isinstance(i, slice):
             return tuple(self)[i]
         return DroneSpec(drone=self.ids[i], start=cell_of(self.starts[i]))
