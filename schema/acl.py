@@ -120,6 +120,21 @@ def _expand(template: str, p: Principal, *, own: bool) -> list[str]:
     return [_PLACEHOLDER.sub("*", t) for t in out]
 
 
+#: What a principal is granted on a key of each kind (``KeySpec.how``) as its writer, and as one of its readers:
+#: (flow, messages, whether the key is expanded as the principal's own, `_expand`).
+_GRANTS: dict[str, tuple[list[tuple[str, tuple[str, ...], bool]], list[tuple[str, tuple[str, ...], bool]]]] = {
+    "put": ([("ingress", ("put",), True)],
+            [("ingress", ("declare_subscriber",), False), ("egress", ("put",), False)]),
+    # A placeholder in a queryable's key names the *asker* (e.g. a per-entity admission key
+    # SRV/CONNECT/{entity}): the owner serves them all, each asker may ask only as itself.
+    "query": ([("ingress", ("declare_queryable", "reply"), False), ("egress", ("query",), False)],
+              [("ingress", ("query",), True), ("egress", ("reply",), True)]),
+    "liveliness": ([("ingress", ("liveliness_token",), True)],
+                   [("ingress", ("declare_liveliness_subscriber", "liveliness_query"), False),
+                    ("egress", ("liveliness_token",), False)]),
+}
+
+
 def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str]]:
     """(flow, message) -> key expressions this principal is allowed, derived from KEY_TABLE."""
     g: dict[tuple[str, str], list[str]] = {}
@@ -134,33 +149,12 @@ def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str
                         keys.append(k)
 
     for spec in KEY_TABLE:
-        mine = _writes(spec, p)
-        reads = p.role in readers_of(spec)
-        match spec.how:
-            case "put":
-                if mine:
-                    add("ingress", ["put"], _expand(spec.template, p, own=True))
-                if reads:
-                    add("ingress", ["declare_subscriber"], _expand(spec.template, p, own=False))
-                    add("egress", ["put"], _expand(spec.template, p, own=False))
-            case "query":
-                # A placeholder in a queryable's key names the *asker* (e.g. a per-entity admission key
-                # SRV/CONNECT/{entity}): the owner serves them all, each asker may ask only as itself.
-                if mine:
-                    add("ingress", ["declare_queryable", "reply"], _expand(spec.template, p, own=False))
-                    add("egress", ["query"], _expand(spec.template, p, own=False))
-                if reads:
-                    add("ingress", ["query"], _expand(spec.template, p, own=True))
-                    add("egress", ["reply"], _expand(spec.template, p, own=True))
-            case "liveliness":
-                if mine:
-                    add("ingress", ["liveliness_token"], _expand(spec.template, p, own=True))
-                if reads:
-                    add("ingress", ["declare_liveliness_subscriber", "liveliness_query"],
-                        _expand(spec.template, p, own=False))
-                    add("egress", ["liveliness_token"], _expand(spec.template, p, own=False))
-            case other:
-                raise ValueError(f"unknown key kind {other!r} in the key table row {spec.template}")
+        mine, reads = _writes(spec, p), p.role in readers_of(spec)
+        if spec.how not in _GRANTS:
+            raise ValueError(f"unknown key kind {spec.how!r} in the key table row {spec.template}")
+        as_writer, as_reader = _GRANTS[spec.how]
+        for flow, messages, own in (as_writer if mine else []) + (as_reader if reads else []):
+            add(flow, messages, _expand(spec.template, p, own=own))
     add("egress", ANNOUNCEMENTS, ["**"])
     return g
 
@@ -252,8 +246,7 @@ def parse_drone_list(text: str) -> tuple[str, ...]:
 
 def render(block: dict, header: str = "") -> str:
     """A JSON5 document holding the block (itself a valid partial zenoh config)."""
-    lines = [f"// {line}".rstrip() for line in header.strip().splitlines()] if header else []
-    return "\n".join([*lines, json.dumps({"access_control": block}, indent=2), ""])
+    return _json5({"access_control": block}, header)
 
 
 def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
@@ -325,7 +318,7 @@ def examples() -> dict[str, str]:
     gen = f"Generated from schema/keys.py KEY_TABLE by `{cmd}`: do not edit by hand."
     usrpwd = access_control(drones, roots=[EXAMPLE_ROOT], identity="usrpwd")
     cert = access_control(drones, roots=[EXAMPLE_ROOT], identity="cert")
-    files = {
+    return {
         "router-acl-usrpwd.json5": render(usrpwd, f"""
 {gen}
 Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by user (user/password auth).
@@ -361,7 +354,6 @@ Run: dronesim gcs --config config/gcs-remote-mtls.json5
 Same without a config file: dronesim gcs -m client -e tls/ROUTER_HOST:7447 --tls-ca certs/ca.pem
      --tls-cert certs/GCS.pem --tls-key certs/GCS.key"""),
     }
-    return files
 
 
 def _json5(conf: dict, header: str) -> str:
@@ -398,13 +390,12 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         print(f"acl: {err}", file=sys.stderr)
         return 2
+    conf = {"access_control": block}
     if args.router_config:
         users = f"{args.certs}/users.txt" if args.identity in ("usrpwd", "both") else None
         conf = router_config(block, listen=args.listen, certs=args.certs, roots=args.root or ["sim"],
                              mtls=args.identity in ("cert", "both"), users=users)
-        sys.stdout.write(_json5(conf, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
-    else:
-        sys.stdout.write(render(block, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
+    sys.stdout.write(_json5(conf, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
     return 0
 
 

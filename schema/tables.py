@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import itertools
 import struct
 import typing
@@ -51,11 +52,12 @@ class Col(enum.Enum):
     RANKED = "u32 ranked steps: 3 bits each, lowest first, codes 1..7 (see `ranked_steps`), 0 for none"
 
 
-_DTYPES = {Col.DRONE: ("<u2", ()), Col.CELL: ("<i4", (3,)), Col.SIGNED: ("<i4", (3,)), Col.OPTIONAL: ("<i4", (3,)),
-           Col.RANKED: ("<u4", ())}
+#: Each column's numpy type and shape, and its ints in a row's bytes for `struct` (an enum column: a u8 code).
+_CELL = ("<i4", (3,), "3i")
+_DTYPES: dict[object, tuple[str, tuple, str]] = {Col.DRONE: ("<u2", (), "H"), Col.RANKED: ("<u4", (), "I"),
+                                                  Col.CELL: _CELL, Col.SIGNED: _CELL, Col.OPTIONAL: _CELL}
+_ENUM_DTYPE = ("u1", (), "B")
 _NONE = (-1, -1, -1)
-#: Each column's ints in a row's bytes, for `struct` (an enum column is a u8 code).
-_STRUCT = {Col.DRONE: "H", Col.CELL: "3i", Col.SIGNED: "3i", Col.OPTIONAL: "3i", Col.RANKED: "I"}
 #: The smallest coordinate of each cell column (the largest is MAX_COORD).
 _LOWEST = {Col.CELL: 0, Col.SIGNED: -MAX_COORD, Col.OPTIONAL: 0}
 
@@ -127,17 +129,9 @@ def ranked_ok(value: object) -> bool:
     return True
 
 
-def _every_ranking() -> np.ndarray:
-    """Every valid ranking (`ranked_ok`), sorted: each ordered choice of distinct codes, packed (13,700;
-    54 KiB)."""
-    codes = range(1, len(RANK_STEPS) + 1)
-    choices = itertools.chain.from_iterable(itertools.permutations(codes, k) for k in range(len(RANK_STEPS) + 1))
-    values = np.fromiter((sum(c << 3 * i for i, c in enumerate(p)) for p in choices), np.int32)
-    values.sort()
-    return values
-
-
-_RANKINGS = _every_ranking()
+#: Every valid ranking (`ranked_ok`), sorted: each ordered choice of distinct steps, packed (13,700; 54 KiB).
+_RANKINGS = np.sort(np.fromiter((rank_steps(p) for k in range(len(RANK_STEPS) + 1)
+                                 for p in itertools.permutations(RANK_STEPS, k)), np.int32))
 
 
 def _ranked_column_ok(col: np.ndarray) -> bool:
@@ -149,6 +143,13 @@ def _ranked_column_ok(col: np.ndarray) -> bool:
 def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
     """An optional cell as a table holds it ((-1, -1, -1): none), read as a Python list."""
     return None if c[0] == -1 else (c[0], c[1], c[2])
+
+
+#: A record's value -> a row's, for the columns not stored as they are (an enum's member: its code, `code_of`).
+_TO_ROW: dict[Col, typing.Callable] = {Col.DRONE: drone_number, Col.OPTIONAL: lambda v: _NONE if v is None else v}
+#: A row's value (read as a Python list) -> a record's, for the columns not read as they are (an enum: its member).
+_FROM_ROW: dict[Col, typing.Callable] = {Col.DRONE: drone_name, Col.OPTIONAL: optional_cell, Col.CELL: tuple,
+                                         Col.SIGNED: tuple}
 
 
 class Table:
@@ -169,9 +170,9 @@ class Table:
             f"{cls.__name__}: LAYOUT must name {cls.RECORD.__name__}'s fields in order"
         assert issubclass(cls.RECORD, Row) and "LAYOUT" not in vars(cls.RECORD), f"{cls.__name__}: one table per Row"
         cls.RECORD.LAYOUT = cls.LAYOUT
-        cls.DTYPE = np.dtype([(name, *(_DTYPES[kind] if isinstance(kind, Col) else ("u1", ())))
-                              for name, kind in cls.LAYOUT])
-        codes = [_STRUCT[kind] if isinstance(kind, Col) else "B" for _, kind in cls.LAYOUT]
+        dtypes = [_DTYPES.get(kind, _ENUM_DTYPE) for _, kind in cls.LAYOUT]
+        cls.DTYPE = np.dtype([(name, dt, shape) for (name, _), (dt, shape, _) in zip(cls.LAYOUT, dtypes)])
+        codes = [code for _, _, code in dtypes]
         cls.ROW = struct.Struct("<" + "".join(codes))
         cls.AT = tuple(itertools.accumulate((3 if c == "3i" else 1 for c in codes[:-1]), initial=0))
         assert cls.ROW.size == cls.DTYPE.itemsize, f"{cls.__name__}: rows are packed, little-endian"
@@ -202,19 +203,10 @@ class Table:
             if type(r) is not cls.RECORD:
                 raise MalformedMessage(f"{cls.__name__} holds {cls.RECORD.__name__} records, got {type(r).__name__}")
         rows = cls.empty(len(records))
-        for name, kind in cls.LAYOUT:
+        for name, kind in cls.LAYOUT if records else ():
             values = [getattr(r, name) for r in records]
-            if not values:
-                continue
-            if kind is Col.DRONE:
-                rows[name] = [drone_number(v) for v in values]
-            elif kind is Col.OPTIONAL:
-                rows[name] = [_NONE if v is None else v for v in values]
-            elif isinstance(kind, Col):
-                rows[name] = values
-            else:
-                index = _index_of(kind)
-                rows[name] = [index[v] for v in values]
+            to_row = _TO_ROW.get(kind) if isinstance(kind, Col) else _index_of(kind).__getitem__
+            rows[name] = values if to_row is None else list(map(to_row, values))
         return cls(rows)
 
     @classmethod
@@ -267,11 +259,8 @@ class Table:
                 ordered = len(col) == 1 or (col[1:] > col[:-1]).all()  # (rows in order: at once)
                 if not ordered and len(np.unique(col)) != len(col):
                     return _WHY_ONCE
-            elif kind is Col.RANKED:
-                if not _ranked_column_ok(col):
-                    return _why_cell(name, kind)
             elif isinstance(kind, Col):
-                if not _cells_ok(col, kind):
+                if not (_ranked_column_ok(col) if kind is Col.RANKED else _cells_ok(col, kind)):
                     return _why_cell(name, kind)
             elif col.max() >= len(kind):
                 return _why_code(name, kind)
@@ -319,19 +308,24 @@ class Table:
 
     def records(self) -> tuple:
         """The rows as records, for people (each checked as it is built: a few microseconds a row)."""
-        return _records(self.RECORD, self.LAYOUT, self.rows)
+        return self._records(self.rows)
+
+    @classmethod
+    def _records(cls, rows: np.ndarray) -> tuple:
+        columns = []
+        for name, kind in cls.LAYOUT:
+            values = rows[name].tolist()
+            from_row = _FROM_ROW.get(kind) if isinstance(kind, Col) else tuple(kind).__getitem__
+            columns.append(values if from_row is None else list(map(from_row, values)))
+        names = [name for name, _ in cls.LAYOUT]
+        return tuple(cls.RECORD(**dict(zip(names, r))) for r in zip(*columns))
 
     def __iter__(self) -> Iterator:
         return iter(self.records())
 
     def __getitem__(self, i: int | slice):
         """A row's record (a slice: a tuple of them), built from that row alone."""
-        if isinstance(i, slice):
-            return _records(self.RECORD, self.LAYOUT, self.rows[i])
-        return _records(self.RECORD, self.LAYOUT, self.rows[[i]])[0]
-
-    def __bool__(self) -> bool:
-        return len(self.rows) > 0
+        return self._records(self.rows[i]) if isinstance(i, slice) else self._records(self.rows[[i]])[0]
 
     def __eq__(self, other: object) -> bool:
         if type(other) is type(self):
@@ -348,26 +342,6 @@ class Table:
 
     def __reduce__(self):
         return (type(self).from_wire, (self.to_wire(),))
-
-
-def _records(cls: type, layout: tuple[tuple[str, Col | type[enum.Enum]], ...], rows: np.ndarray) -> tuple:
-    """Rows as `cls` records (each checked by its constructor)."""
-    columns: list[list[object]] = []
-    for name, kind in layout:
-        values = rows[name].tolist()
-        if kind is Col.DRONE:
-            columns.append([drone_name(n) for n in values])
-        elif kind is Col.OPTIONAL:
-            columns.append([optional_cell(c) for c in values])
-        elif kind is Col.RANKED:
-            columns.append(values)
-        elif isinstance(kind, Col):
-            columns.append([tuple(c) for c in values])
-        else:
-            members = tuple(kind)
-            columns.append([members[c] for c in values])
-    names = [name for name, _ in layout]
-    return tuple(cls(**dict(zip(names, r))) for r in zip(*columns))
 
 
 class Row:
@@ -429,14 +403,9 @@ def _why_code(name: str, kind: type[enum.Enum]) -> str:
     return f"{name} codes must be below {len(kind)} (members of {kind.__name__})"
 
 
-_INDEXES: dict[type, dict] = {}
-
-
+@functools.cache
 def _index_of(kind: type[enum.Enum]) -> dict:
-    index = _INDEXES.get(kind)
-    if index is None:
-        index = _INDEXES[kind] = {m: i for i, m in enumerate(kind)}
-    return index
+    return {m: i for i, m in enumerate(kind)}
 
 
 def code_of(member: enum.Enum) -> int:
