@@ -300,32 +300,26 @@ class WorldSpec:
 _ALIVE_CODE = code_of(DroneState.ALIVE)
 
 
-class StartTable(Table):
+class StartTable(Table, record=Start, layout=(("drone", Col.DRONE), ("pos", Col.CELL))):
     """A WELCOME's starts, one row per drone admitted."""
 
     __slots__ = ()
-    RECORD = Start
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL))
 
     def cells(self) -> dict[str, Cell]:
         """Each drone's start cell, read from the columns."""
         return dict(zip(self.ids(), map(tuple, self.rows["pos"].tolist())))
 
 
-class AimTable(Table):
+class AimTable(Table, record=Aim, layout=(("drone", Col.DRONE), ("pos", Col.CELL))):
     """A ground station's DONE's targets, one row per drone."""
 
     __slots__ = ()
-    RECORD = Aim
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL))
 
 
-class OrderTable(Table):
+class OrderTable(Table, record=Order, layout=(("drone", Col.DRONE), ("pos", Col.CELL), ("target", Col.OPTIONAL))):
     """A TURN(DRONES)'s orders, one row per alive drone."""
 
     __slots__ = ()
-    RECORD = Order
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL), ("target", Col.OPTIONAL))
 
     def orders(self, mine: typing.Container[str] | None = None) -> tuple[tuple[str, Cell, Cell | None], ...]:
         """(drone, where it is, its target) of each row (of the drones in `mine`), read from the columns."""
@@ -335,29 +329,25 @@ class OrderTable(Table):
                      if mine is None or d in mine)
 
 
-class MoveTable(Table):
+class MoveTable(Table, record=Move, layout=(("drone", Col.DRONE), ("src", Col.CELL), ("dst", Col.SIGNED))):
     """A TURN(ENV)'s accepted moves, one row per moving drone."""
 
     __slots__ = ()
-    RECORD = Move
-    LAYOUT = (("drone", Col.DRONE), ("src", Col.CELL), ("dst", Col.SIGNED))
 
 
-class StepTable(Table):
+class StepTable(Table, record=Step, layout=(
+        ("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note), ("ranked", Col.RANKED))):
     """A MOVES's steps, one row per hosted drone."""
 
     __slots__ = ()
-    RECORD = Step
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note), ("ranked", Col.RANKED))
 
 
-class StatusTable(Table):
+class StatusTable(Table, record=DroneStatus, layout=(
+        ("drone", Col.DRONE), ("pos", Col.SIGNED), ("state", DroneState), ("target", Col.OPTIONAL), ("note", Note),
+        ("cause", Cause))):
     """A STATUS's drone states, one row per drone."""
 
     __slots__ = ()
-    RECORD = DroneStatus
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("state", DroneState), ("target", Col.OPTIONAL),
-              ("note", Note), ("cause", Cause))
 
     def alive_mask(self) -> np.ndarray:
         """Which rows are alive drones."""
