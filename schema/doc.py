@@ -5,14 +5,13 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import pathlib
 import typing
 
 from .keys import KEY_TABLE
 from .messages import MESSAGE_TYPES, SCHEMA_VERSION, TABLES
-from .samples import SAMPLES, golden
+from .samples import SAMPLES, golden, write_or_print
 from .tables import MAX_DRONE, Col
 
 README = pathlib.Path(__file__).with_name("README.md")
@@ -80,15 +79,5 @@ def render() -> str:
     return "\n".join(out) + "\n"
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--write", action="store_true")
-    args = ap.parse_args()
-    if args.write:
-        README.write_text(render())
-    else:
-        print(render(), end="")
-
-
 if __name__ == "__main__":
-    main()
+    write_or_print(README, render(), __doc__)

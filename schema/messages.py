@@ -5,13 +5,10 @@ instance that exists is well formed. On the wire each message is a MessagePack m
 
     {"v": SCHEMA_VERSION, "t": "<TRIGRAM>", "turn": int, "from": "<sender id>", ...fields}
 
-Fields are written in declaration order, so encoding is byte-for-byte deterministic
-(see ``schema/vectors.json`` for the golden bytes). Nested records (cells, cell infos, the world spec)
-travel as MessagePack arrays in their declaration order; enums as their value; the swarm-sized fields
-as tables (tables.py), whose rows people read and write as records (`Order`, `DroneStatus`, ...).
-
-World bounds are context, not syntax: a message can only check that a cell is three
-non-negative integers; receivers check it against the world (``OutOfRange``).
+Fields are written in declaration order, so encoding is byte-for-byte deterministic (golden bytes:
+``schema/vectors.json``). Nested records (cells, cell infos, the world spec) travel as arrays of their fields,
+enums as their value, the swarm-sized fields as tables (tables.py). World bounds are context, not syntax: a
+message only checks that a cell is three integers in range; receivers check it against the world (``OutOfRange``).
 """
 
 from __future__ import annotations

@@ -69,16 +69,15 @@ def golden() -> dict[str, str]:
     return {name: m.encode(msg).hex() for name, msg in SAMPLES.items()}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--write", action="store_true", help="rewrite schema/vectors.json")
-    args = ap.parse_args()
-    text = json.dumps(golden(), indent=1, sort_keys=True) + "\n"
-    if args.write:
-        VECTORS_PATH.write_text(text)
+def write_or_print(path: pathlib.Path, text: str, description: str | None) -> None:
+    """The command line of a generated file: ``--write`` rewrites `path`, else `text` is printed."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--write", action="store_true", help=f"rewrite schema/{path.name}")
+    if ap.parse_args().write:
+        path.write_text(text)
     else:
         print(text, end="")
 
 
 if __name__ == "__main__":
-    main()
+    write_or_print(VECTORS_PATH, json.dumps(golden(), indent=1, sort_keys=True) + "\n", __doc__)

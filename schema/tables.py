@@ -1,21 +1,15 @@
 """Columns for the swarm-sized parts of messages: a STATUS's drone states, a TURN's orders and moves, a
 MOVES's steps, a WELCOME's starts and a ground station's DONE's targets.
 
-A swarm of 1000 drones puts 1000 records in each of the first four every turn (and in the last, every turn
-its targets change). As Python records they cost every
-process that reads or writes them about a microsecond and a few hundred bytes per drone; as columns they
-cost a few bytes per drone and are checked, read and written by numpy at once. On the wire a table is one
-MessagePack ``bin``: its rows back to back, each row the fields of the record in declaration order, in the
-fixed little-endian layout its class declares (``LAYOUT``, documented in schema/README.md):
+A swarm of 1000 drones puts 1000 records in most of them every turn. As Python records they cost every
+process that reads or writes them about a microsecond and a few hundred bytes per drone; as columns, a few
+bytes per drone, checked, read and written by numpy at once. On the wire a table is one MessagePack ``bin``:
+its rows back to back, each the fields of the record in order, in the fixed little-endian layout its class
+declares (a drone is its number, a cell three ints, an enum its member's index: `Col`, schema/README.md).
 
-- a drone is its number, ``u16`` (D01 is 1, D1000 is 1000: ids are canonical, see ``is_drone_id``);
-- a cell is three ``i32`` (x, y, z); an optional cell that is absent is (-1, -1, -1);
-- an enum is the ``u8`` index of its member in declaration order.
-
-A table is immutable and validates on construction, like a message: an instance that exists is well
-formed. Its rows can be read as records (``DroneStatus``, ``Order``, ...: a `Row` each, checked by the
-same rules as the table's columns), for people (samples, tests, a console); code that handles a swarm reads
-the columns (``numbers``, ``column(name)``).
+A table is immutable and validates on construction, like a message. Its rows read as records (``Order``,
+``DroneStatus``...: a `Row` each, checked by the same rules as the columns) for people (samples, tests, a
+console); code that handles a swarm reads the columns (``numbers``, ``column(name)``).
 """
 
 from __future__ import annotations
