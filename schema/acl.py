@@ -88,19 +88,17 @@ def principals(drones: Iterable[str], hosts: Mapping[str, Sequence[str]] | None 
     return out
 
 
+#: The roles each word of the key table's ``readers`` column stands for.
+_READERS = {"all": ROLES, "entities": ROLES, "drones": ("DRONE",), **{role: (role,) for role in ROLES}}
+
+
 def readers_of(spec: KeySpec) -> set[str]:
     """The roles that read a key, from its ``readers`` column ("all", "drones", "ENV, GCS"...)."""
-    out: set[str] = set()
-    for word in (w.strip() for w in spec.readers.split(",")):
-        if word in ("all", "entities"):
-            out.update(ROLES)
-        elif word == "drones":
-            out.add("DRONE")
-        elif word in ROLES:
-            out.add(word)
-        else:
+    words = [w.strip() for w in spec.readers.split(",")]
+    for word in words:
+        if word not in _READERS:
             raise ValueError(f"unknown reader {word!r} in the key table row {spec.template}")
-    return out
+    return {role for word in words for role in _READERS[word]}
 
 
 def _writes(spec: KeySpec, p: Principal) -> bool:

@@ -255,7 +255,7 @@ class Table:
                     return _WHY_ONCE
             elif isinstance(kind, Col):
                 if not (_ranked_column_ok(col) if kind is Col.RANKED else _cells_ok(col, kind)):
-                    return _why_cell(name, kind)
+                    return f"each {name} must be {_must_be(kind)}"
             elif col.max() >= len(kind):
                 return _why_code(name, kind)
         return None
@@ -273,11 +273,11 @@ class Table:
                     return _WHY_ONCE
             elif kind is Col.RANKED:
                 if not all(ranked_ok(r[at]) for r in unpacked):
-                    return _why_cell(name, kind)
+                    return f"each {name} must be {_must_be(kind)}"
             elif isinstance(kind, Col):
                 lo, end = _LOWEST[kind], at + 3
                 if not all(_cell_ok(r[at:end], lo) or kind is Col.OPTIONAL and r[at:end] == _NONE for r in unpacked):
-                    return _why_cell(name, kind)
+                    return f"each {name} must be {_must_be(kind)}"
             elif max(r[at] for r in unpacked) >= len(kind):
                 return _why_code(name, kind)
         return None
@@ -352,13 +352,10 @@ class Row:
             if kind is Col.DRONE:
                 if not is_drone_id(value):
                     raise MalformedMessage(f"{name} must be a drone id like D01, got {value!r}")
-            elif kind is Col.RANKED:
-                if not ranked_ok(value):
-                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {kind.value}, each code once, "
-                                           f"got {value!r:.60}")
             elif isinstance(kind, Col):
-                if not (value is None and kind is Col.OPTIONAL or _cell_ok(value, _LOWEST[kind])):
-                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {kind.value}, got {value!r:.60}")
+                if not (ranked_ok(value) if kind is Col.RANKED
+                        else value is None and kind is Col.OPTIONAL or _cell_ok(value, _LOWEST[kind])):
+                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {_must_be(kind)}, got {value!r:.60}")
             elif type(value) is not kind:
                 raise MalformedMessage(f"{type(self).__name__}: {name} must be a {kind.__name__}, got {value!r:.60}")
 
@@ -389,8 +386,8 @@ _WHY_NUMBER = f"drone numbers must be in 1..{MAX_DRONE}"
 _WHY_ONCE = "one row per drone"
 
 
-def _why_cell(name: str, kind: Col) -> str:
-    return f"each {name} must be {kind.value}" + (", each code once" if kind is Col.RANKED else "")
+def _must_be(kind: Col) -> str:
+    return kind.value + (", each code once" if kind is Col.RANKED else "")
 
 
 def _why_code(name: str, kind: type[enum.Enum]) -> str:

@@ -1,14 +1,10 @@
 """Every tuning constant of the simulator, with its unit and the measurement that chose it.
 
 A tuning constant changes how fast something is done (or how long a process waits or holds), never what
-is decided: journals are the same whatever their values (the tests compare layouts and runs). Not here:
-limits of the wire contract (`MAX_COORD`, `MAX_PAYLOAD`, ...), which stay with the contract; the timeouts
-of a process's life (how long it waits for its peers, lingers after OVER), which stay with the adapter
-that waits; and the world generator's parameters (`entities/world.py`), which decide the world.
-
-This module is in `schema` because every package imports `schema` and `schema` imports none of ours, so
-the coordinator, the entities, the CLI and the benchmarks can all read it without an import cycle; it
-imports nothing itself.
+is decided: journals are the same whatever their values. Not here: the wire contract's limits (`MAX_COORD`,
+`MAX_PAYLOAD`...), a process's life timeouts (with the adapter that waits) and the world generator's
+parameters (entities/world.py), which decide the world. It lives in `schema`, which every package imports and
+which imports none of ours, so all can read it without an import cycle; it imports nothing itself.
 
 Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.7, numpy 2.4; each
 "a vs b" is the best of several runs of a short script (see docs/performance.md).
@@ -20,8 +16,8 @@ Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.
 #: in numpy (`Table._why_columns`); row by row vs numpy, valid rows: a 1-row STATUS table 10 vs 34 µs,
 #: 8 rows: 11 vs 21, 16: 18 vs 21, 32: 36 vs 23; a MOVES's steps 1: 4 vs 18, 8: 7 vs 19, 16: 11 vs 23, 32: 19
 #: vs 26; a WELCOME's starts 1: 4 vs 8, 8: 8 vs 11, 16: 12 vs 11, 32: 20 vs 11. Measured warm, which
-#: understates it: in a one-drone game (a table or two a message) the numpy checks, run cold on a thread
-#: just woken, cost a turn 5 to 20 % of its time (`dronesim bench perf`, on and off alternated).
+#: understates it: in a one-drone game the numpy checks, run cold on a thread just woken, cost a turn 5 to
+#: 20 % of its time (`dronesim bench perf`, on and off alternated).
 CHECK_FEW_ROWS = 8
 
 # --------------------------------------------------------------------------- coordinator
@@ -30,10 +26,9 @@ CHECK_FEW_ROWS = 8
 #: a bound on what a station may make the coordinator hold, twice `ANSWER_AHEAD`.
 AHEAD_MAX = 16
 
-#: Rows (moves of a MOVES, targets of a DONE) up to which the engine takes a batch row by row, through the
-#: checks of an NPS or a TGT, rather than in array operations. The whole `receive` of a MOVES that closes
-#: the drones' phase, row by row vs arrays: 2 moves 171 vs 184 µs, 8: 186 vs 194, 16: 199 vs 194,
-#: 32: 277 vs 225.
+#: Rows (moves of a MOVES, targets of a DONE) up to which the engine takes a batch row by row, through an
+#: NPS's or a TGT's checks, rather than in array operations; the whole `receive` of a MOVES that closes the
+#: drones' phase, row by row vs arrays: 2 moves 171 vs 184 µs, 8: 186 vs 194, 16: 199 vs 194, 32: 277 vs 225.
 FEW_ROWS = 8
 
 #: Alive drones up to which the observer judges a turn drone by drone (`observer.deaths`) rather than in
@@ -47,12 +42,11 @@ UPD_WINDOW = 8
 
 # --------------------------------------------------------------------------- ground station
 
-#: GCS phases a scripted ground station answers ahead when its plan has nothing new for them, in batches
-#: (half of them at a time: `Station._ahead`). Answering ahead keeps the station off a turn's critical path
-#: (one hop saved a turn: docs/performance.md, "Answers ahead"); the batches spare the coordinator a DONE to
-#: take, and the station one to send, in most turns. A one-drone turn on 64x64x16, 2 ahead one at a time
-#: vs 8 four at a time, alternated over 5 pairs: 1.16-1.53 vs 1.12-1.26 ms (median), coordinator CPU 0.7
-#: vs 0.6 ms a turn.
+#: GCS phases a scripted ground station answers ahead when its plan has nothing new for them, half of them
+#: at a time (`Station._ahead`): it keeps off a turn's critical path (one hop saved a turn: docs/performance.md,
+#: "Answers ahead"), and the batches spare a DONE in most turns. A one-drone turn on 64x64x16, 2 ahead one at
+#: a time vs 8 four at a time, alternated over 5 pairs: 1.16-1.53 vs 1.12-1.26 ms (median), coordinator CPU
+#: 0.7 vs 0.6 ms a turn.
 ANSWER_AHEAD = 8
 
 # --------------------------------------------------------------------------- environment
@@ -70,10 +64,9 @@ SURVEY_FEW_CELLS = 32
 #: 192: 92 vs 87.
 CHART_FEW_CELLS = 128
 
-#: Steps around its drones within which a process flying a few drones asks the environment ahead for the
-#: never-told cells (before the map comes), so that it asks again only every few turns; and the most
-#: drones it does so for (a swarm asks the next ring each turn). Not measured: the map makes it moot
-#: once the environment answers ENV/MAP, usually in the first turn.
+#: Steps around its drones within which a process flying a few drones (at most `ASK_AHEAD_MAX_DRONES`) asks
+#: ahead for the never-told cells before the map comes, so that it asks again only every few turns (a swarm
+#: asks the next ring each turn). Not measured: the map, usually there from the first turn, makes it moot.
 ASK_AHEAD_REACH = 3
 ASK_AHEAD_MAX_DRONES = 32
 
@@ -92,34 +85,29 @@ SWARM_MIN = 32
 
 # --------------------------------------------------------------------------- every process's inbox
 
-#: Events from one origin (a drone, a host, the coordinator, ...) a process may hold queued; more from it
-#: are refused unread until it handles some (dronesim/transport.py). Not measured: a bound on what one
-#: peer may make a process hold, far above what a game sends (a few events a turn per origin; a process
-#: that falls behind by hundreds of turns resyncs from the next TURN and STATUS anyway).
+#: Events from one origin (a drone, a host, the coordinator...) a process may hold queued; more are refused
+#: unread until it handles some (dronesim/transport.py). Not measured: far above what a game sends (a few
+#: events a turn per origin; a process hundreds of turns behind resyncs from the next TURN and STATUS).
 ORIGIN_QUEUE = 1024
 #: Events of one origin in line at a time, the rest waiting to join it (dronesim/transport.py `FairQueue`):
-#: a burst from one origin delays another's next event by at most this many of its own; below it, events
-#: are taken in order of arrival. Not measured: above what one origin sends a process in a turn (a
-#: ground station's DONE and the two it answers ahead, a host's MOVES and its presence).
+#: a burst from one origin delays another's next event by at most this many; below it, events are taken in
+#: order of arrival. Not measured: above what one origin sends a process in a turn (a ground station's DONE
+#: and the two it answers ahead, a host's MOVES and its presence).
 ORIGIN_SHARE = 8
-#: Bytes (the payloads they came as) of the events from one origin a process may hold queued, beyond its
-#: first one (which its key's size limit bounds). Not measured: about 13 of the largest ASKs a drone may
-#: send (525 KB each, `schema.keys.size_limit`), far above a swarm host's asking ahead (512-cell ASKs of
-#: about 5 KB); a flood of big ASKs is refused unread past it.
+#: Bytes (as payloads) of the events from one origin a process may hold queued beyond its first (which its
+#: key's size limit bounds). Not measured: about 13 of the largest ASKs (525 KB, `schema.keys.size_limit`),
+#: far above a host's asking ahead (512-cell ASKs of about 5 KB); a flood of big ASKs is refused unread past it.
 ORIGIN_BYTES = 8 << 20
 
-#: Puts a second a router forwards from one session on drone keys (a drone's NPS, a host's MOVES; the
-#: router's `downsampling`, schema/acl.py `flood_filters`): a process sends one a turn per key, and a turn
-#: takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor), so 10,000 never drops a
-#: real one (messages closer than 0.1 ms are dropped), while a flood reaches the coordinator at a rate
-#: its refusal of stale messages keeps up with.
+#: Puts a second a router forwards from one session on drone keys (NPS, MOVES: the router's `downsampling`,
+#: schema/acl.py `flood_filters`): a process sends one a turn per key, and a turn takes at least a pub/sub
+#: round trip (about 0.3 ms, BENCHMARKS.md's floor), so 10,000 never drops a real one (messages closer than
+#: 0.1 ms are dropped), while a flood reaches the coordinator at a rate its refusal of stale messages keeps up with.
 DRONE_PUT_RATE = 10_000.0
 
-#: Rejections logged in full per origin and reason in each `REJECT_LOG_WINDOW`; the rest of the window's
-#: are summarised in one line when it closes (schema/errors.py `RejectCounter`). Not measured: a flood's
-#: log stays a few lines a second.
+#: Rejections logged in full per origin and reason in each `REJECT_LOG_WINDOW` seconds, the rest summed up in
+#: one line when it closes (schema/errors.py `RejectCounter`). Not measured: a flood logs a few lines a second.
 REJECT_LOG_FIRST = 3
-#: Seconds of one rejection log window (see `REJECT_LOG_FIRST`).
 REJECT_LOG_WINDOW = 1.0
 #: Characters of a rejection's text logged (an excerpt of a payload's bytes in it, not the payload).
 REJECT_EXCERPT = 200
