@@ -135,16 +135,11 @@ _GRANTS: dict[str, tuple[list[tuple[str, tuple[str, ...], bool]], list[tuple[str
 
 def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str]]:
     """(flow, message) -> key expressions this principal is allowed, derived from KEY_TABLE."""
-    g: dict[tuple[str, str], list[str]] = {}
+    g: dict[tuple[str, str], dict[str, None]] = {}  # (each key once, in order)
 
-    def add(flow: str, messages: Iterable[str], templates: Iterable[str]) -> None:
+    def add(flow: str, messages: Iterable[str], templates: Sequence[str]) -> None:
         for msg in messages:
-            keys = g.setdefault((flow, msg), [])
-            for t in templates:
-                for root in roots:
-                    k = f"{root}/{t}"
-                    if k not in keys:
-                        keys.append(k)
+            g.setdefault((flow, msg), {}).update(dict.fromkeys(f"{root}/{t}" for t in templates for root in roots))
 
     for spec in KEY_TABLE:
         mine, reads = _writes(spec, p), p.role in readers_of(spec)
@@ -154,7 +149,7 @@ def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str
         for flow, messages, own in (as_writer if mine else []) + (as_reader if reads else []):
             add(flow, messages, _expand(spec.template, p, own=own))
     add("egress", ANNOUNCEMENTS, ["**"])
-    return g
+    return {key: list(exprs) for key, exprs in g.items()}
 
 
 def _subject(p: Principal, identity: str) -> dict:

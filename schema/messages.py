@@ -685,10 +685,11 @@ _RECORDS = (CellInfo, WorldSpec)
 
 # --------------------------------------------------------------------------- codec
 #
-# Conversion is driven by each dataclass's type hints, resolved once. Supported field types:
-# int, str, bytes, Cell, Optional[Cell], enums, nested records, tables, tuple[X, ...] of those.
+# Conversion is driven by each dataclass's type hints, resolved once (`_codec`): int, str, bytes, Cell, enums,
+# nested records, tables, and X | None or tuple[X, ...] of those.
 
 Encoder = typing.Callable[[object], object]
+_enum_value: Encoder = operator.attrgetter("value")
 
 
 def _identity(v: object) -> object:
@@ -700,10 +701,6 @@ def _as_seq(v: object) -> tuple:
     if type(v) is not tuple:
         raise MalformedMessage(f"expected an array, got {type(v).__name__}")
     return v
-
-
-def _enum_value(member: object) -> object:
-    return typing.cast(enum.Enum, member).value
 
 
 def _codec(hint: object) -> tuple[Encoder, Encoder]:
