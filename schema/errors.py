@@ -1,10 +1,7 @@
-"""The error hierarchy: local misuse versus bad remote input.
-
-`UsageError` means *this* process was called wrongly (bad flag, bad file, a programming error):
-it is raised to the caller and usually ends the command with a clear message.
-
-`RemoteInputError` means a message from the network was unacceptable. Adapters catch it, log the
-reason, count it (see `RejectCounter`) and change nothing: a remote peer can never crash a process.
+"""The error hierarchy: local misuse (`UsageError`: this process was called wrongly) is raised to the caller,
+and usually ends the command with a clear message; bad remote input (`RemoteInputError`) is caught by the
+adapters, which log its reason, count it (`RejectCounter`) and change nothing: a remote peer never crashes a
+process.
 """
 
 from __future__ import annotations

@@ -756,7 +756,8 @@ def _record_codec(cls: type) -> tuple[Encoder, Encoder]:
     """A record's encoder (the array of its fields, in declaration order) and decoder (from that array, built
     by its constructor, which checks the fields)."""
     fields, decoders, _ = _codec_of(cls)
-    n, values, encoders = len(fields), operator.attrgetter(*(name for name, _, _ in fields)), [e for *_, e in fields]
+    n, values = len(fields), operator.attrgetter(*(name for name, _, _ in fields))
+    encoders = [enc for _, _, enc in fields]
 
     def convert(v: object) -> object:
         if type(v) is not tuple or len(v) != n:

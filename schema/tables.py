@@ -213,9 +213,8 @@ class Table:
             raise MalformedMessage(f"{cls.__name__} needs the columns {[name for name, _ in cls.LAYOUT]}")
         n = len(columns[cls.LAYOUT[0][0]])  # type: ignore[arg-type]
         rows = cls.empty(n)
-        if n:
-            for name, values in columns.items():
-                rows[name] = values
+        for name, values in columns.items() if n else ():
+            rows[name] = values
         return cls(rows)
 
     @classmethod
