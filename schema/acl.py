@@ -101,10 +101,6 @@ def readers_of(spec: KeySpec) -> set[str]:
     return {role for word in words for role in _READERS[word]}
 
 
-def _writes(spec: KeySpec, p: Principal) -> bool:
-    return spec.writer == p.role or (spec.writer == "each entity" and "{entity}" in spec.template)
-
-
 def _expand(template: str, p: Principal, *, own: bool) -> list[str]:
     """Concrete templates (relative to the root) for a principal: `own` keys name the principal
     (``{entity}``) or its drones (``{drone}``); the others, and any other placeholder (``{session}``),
@@ -142,7 +138,8 @@ def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str
             g.setdefault((flow, msg), {}).update(dict.fromkeys(f"{root}/{t}" for t in templates for root in roots))
 
     for spec in KEY_TABLE:
-        mine, reads = _writes(spec, p), p.role in readers_of(spec)
+        mine = spec.writer == p.role or (spec.writer == "each entity" and "{entity}" in spec.template)
+        reads = p.role in readers_of(spec)
         if spec.how not in _GRANTS:
             raise ValueError(f"unknown key kind {spec.how!r} in the key table row {spec.template}")
         as_writer, as_reader = _GRANTS[spec.how]
@@ -150,15 +147,6 @@ def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str
             add(flow, messages, _expand(spec.template, p, own=own))
     add("egress", ANNOUNCEMENTS, ["**"])
     return {key: list(exprs) for key, exprs in g.items()}
-
-
-def _subject(p: Principal, identity: str) -> dict:
-    s: dict = {"id": p.name}
-    if identity in ("usrpwd", "both"):
-        s["usernames"] = [p.name]
-    if identity in ("cert", "both"):
-        s["cert_common_names"] = [p.name]
-    return s
 
 
 def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), identity: str = "usrpwd",
@@ -178,7 +166,12 @@ def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), id
             rid = f"{p.name} {flow} {msg}"
             rules.append({"id": rid, "permission": "allow", "flows": [flow], "messages": [msg], "key_exprs": keys})
             ids.append(rid)
-        subjects.append(_subject(p, identity))
+        subject: dict = {"id": p.name}
+        if identity in ("usrpwd", "both"):
+            subject["usernames"] = [p.name]
+        if identity in ("cert", "both"):
+            subject["cert_common_names"] = [p.name]
+        subjects.append(subject)
         policies.append({"id": f"{p.name} policy", "rules": ids, "subjects": [p.name]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
@@ -254,25 +247,21 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
 
     sizes: dict[tuple[str, int], list[str]] = {}
     drone_keys = []
+    granted = None if acl is None else sorted(  # every key expression `acl` lets some subject put on
+        {k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
+         and "ingress" in rule["flows"] for k in rule["key_exprs"]})
     for spec in KEY_TABLE:
         if spec.message is None:
             continue
         exprs = [str(zenoh.KeyExpr.autocanonize(f"{root}/{_PLACEHOLDER.sub('*', spec.template)}")) for root in roots]
         sizes.setdefault((spec.how, size_limit(spec.message)), []).extend(exprs)
         if spec.how == "put" and spec.writer == "DRONE":
-            granted = exprs if acl is None else _granted_puts(acl)
-            drone_keys += [k for k in granted if any(_includes(x, k) for x in exprs)]
+            drone_keys += [k for k in (exprs if granted is None else granted) if any(_includes(x, k) for x in exprs)]
     low_pass = [{"id": f"{how}-{limit}", "messages": [how], "flows": ["ingress"], "key_exprs": exprs,
                  "size_limit": limit} for (how, limit), exprs in sorted(sizes.items())]
     rate = {"id": "drone-puts", "messages": ["put"], "flows": ["ingress"],
             "rules": [{"key_expr": expr, "freq": DRONE_PUT_RATE} for expr in drone_keys]}
     return {"low_pass_filter": low_pass, "downsampling": [rate]}
-
-
-def _granted_puts(acl: dict) -> list[str]:
-    """Every key expression `acl` lets some subject put on (ingress)."""
-    return sorted({k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
-                   and "ingress" in rule["flows"] for k in rule["key_exprs"]})
 
 
 def router_config(block: dict, *, listen: str = "tls/0.0.0.0:7447", certs: str = "certs", mtls: bool = False,
