@@ -111,7 +111,7 @@ def ranked_steps(value: int) -> tuple[tuple[int, int, int], ...]:
 
 def ranked_ok(value: object) -> bool:
     """Is `value` steps packed by `rank_steps`: an int below RANKED_LIMIT whose 3-bit codes are nonzero up to
-    the last and distinct (0: none)? `_ranked_column_ok` is the same rule on a column."""
+    the last and distinct (0: none)? `_column_ok` is the same rule on a column."""
     if type(value) is not int or not 0 <= value < RANKED_LIMIT:
         return False
     seen = 0
@@ -126,12 +126,6 @@ def ranked_ok(value: object) -> bool:
 #: Every valid ranking (`ranked_ok`), sorted: each ordered choice of distinct steps, packed (13,700; 54 KiB).
 _RANKINGS = np.sort(np.fromiter((rank_steps(p) for k in range(len(RANK_STEPS) + 1)
                                  for p in itertools.permutations(RANK_STEPS, k)), np.int32))
-
-
-def _ranked_column_ok(col: np.ndarray) -> bool:
-    """`ranked_ok` for every value of a column: each one among the valid rankings (a bisection each)."""
-    at = np.searchsorted(_RANKINGS, col).clip(max=len(_RANKINGS) - 1)
-    return bool((_RANKINGS[at] == col).all())
 
 
 def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
@@ -253,7 +247,7 @@ class Table:
                 if not ordered and len(np.unique(col)) != len(col):
                     return _WHY_ONCE
             elif isinstance(kind, Col):
-                if not (_ranked_column_ok(col) if kind is Col.RANKED else _cells_ok(col, kind)):
+                if not _column_ok(col, kind):
                     return f"each {name} must be {_must_be(kind)}"
             elif col.max() >= len(kind):
                 return _why_code(name, kind)
@@ -368,9 +362,12 @@ def _cell_ok(value: object, lo: int) -> bool:
     return False
 
 
-def _cells_ok(col: np.ndarray, kind: Col) -> bool:
-    """A cell column valid, with numpy: a u32 view of an i32 turns negative values into huge ones, so one
-    maximum checks both bounds."""
+def _column_ok(col: np.ndarray, kind: Col) -> bool:
+    """A cell or ranking column valid, with numpy. A ranking: each value among the valid rankings (a bisection
+    each). A cell: a u32 view of an i32 turns negative values into huge ones, so one maximum checks both bounds."""
+    if kind is Col.RANKED:
+        at = np.searchsorted(_RANKINGS, col).clip(max=len(_RANKINGS) - 1)
+        return bool((_RANKINGS[at] == col).all())
     lo = _LOWEST[kind]
     if kind is not Col.OPTIONAL:
         return bool((col - lo if lo else col).view(np.uint32).max() <= MAX_COORD - lo)
