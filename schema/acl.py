@@ -1,27 +1,25 @@
 """Zenoh access-control rules for a router, generated from the key table (`KEY_TABLE`), the one source.
 
-Every key has exactly one writer role (``KeySpec.writer``) and a list of reader roles
-(``KeySpec.readers``); this module turns that into a Zenoh ``access_control`` block with
-``default_permission: "deny"``, one subject per *principal* (an authenticated process: SRV, ENV,
-GCS, each drone Dnn, each swarm host Hnn) and one policy per principal:
+Every key has exactly one writer role (``KeySpec.writer``) and a list of reader roles (``KeySpec.readers``);
+this module turns that into a Zenoh ``access_control`` block with ``default_permission: "deny"``, one subject
+and one policy per *principal* (an authenticated process: SRV, ENV, GCS, each drone Dnn, each swarm host Hnn):
 
-* the writer side (``ingress``: what the router accepts from it) -- ``put`` on the keys it writes
-  (a drone: only ``<root>/<itself>/NPS``; a swarm host: the NPS of each drone it flies; the GCS:
-  ``<root>/*/TGT`` and ``<root>/GCS/DONE``), ``declare_queryable`` and ``reply`` on the queryables it
-  owns (ENV: ENV/ASK, ENV/MAP; SRV: SRV/CONNECT);
-* the reader side -- ``declare_subscriber`` (ingress) and ``put`` (egress) on the keys it reads,
-  ``query`` (ingress) and ``reply`` (egress) on the queryables it asks, ``query`` (egress) on those
-  it owns;
-* presence -- a principal declares liveliness tokens only under its own ``<root>/<id>/ALIVE/*``, and
-  the readers of that row watch ``<root>/*/ALIVE/*``;
-* discovery, which carries no payload -- the router may tell everyone about subscribers and
-  queryables under the root (a publisher learns that someone listens).
+* the writer side (``ingress``: what the router accepts from it) -- ``put`` on the keys it writes (a drone:
+  only ``<root>/<itself>/NPS``; a swarm host: the NPS of each drone it flies; the GCS: ``<root>/*/TGT`` and
+  ``<root>/GCS/DONE``), ``declare_queryable`` and ``reply`` on the queryables it owns (ENV: ENV/ASK,
+  ENV/MAP; SRV: SRV/CONNECT);
+* the reader side -- ``declare_subscriber`` (ingress) and ``put`` (egress) on the keys it reads, ``query``
+  (ingress) and ``reply`` (egress) on the queryables it asks, ``query`` (egress) on those it owns;
+* presence -- a principal declares liveliness tokens only under its own ``<root>/<id>/ALIVE/*``, and the
+  readers of that row watch ``<root>/*/ALIVE/*``;
+* discovery, which carries no payload -- the router may tell everyone about subscribers and queryables
+  under the root (a publisher learns that someone listens).
 
-Anything else is denied: a key outside the table, a ``delete``, a second writer. A principal is
-matched by its user name (``--identity usrpwd``: the router's user/password dictionary), by its TLS
-client certificate's common name (``--identity cert``: mutual TLS) or by both (``both``); the name
-is the entity id (``D01``, ``H01``, ``GCS``...). Subjects never overlap (each has one distinct name):
-with Zenoh, rules of overlapping subjects were seen not to hold.
+Anything else is denied: a key outside the table, a ``delete``, a second writer. A principal is matched by
+its user name (``--identity usrpwd``: the router's user/password dictionary), by its TLS client
+certificate's common name (``--identity cert``: mutual TLS) or by both (``both``); the name is the entity id
+(``D01``, ``H01``, ``GCS``...). Subjects never overlap (each has one distinct name): with Zenoh, rules of
+overlapping subjects were seen not to hold.
 
     python -m schema.acl --drones 16 --root sim --identity usrpwd > config/router-acl.json5
     python -m schema.acl --drones 16 --host H01=D01-D08 --identity cert
@@ -114,8 +112,8 @@ def _expand(template: str, p: Principal, *, own: bool) -> list[str]:
     return [_PLACEHOLDER.sub("*", t) for t in out]
 
 
-#: What a principal is granted on a key of each kind (``KeySpec.how``) as its writer, and as one of its readers:
-#: (flow, messages, whether the key is expanded as the principal's own, `_expand`).
+#: A principal's grants on a key of each kind (``KeySpec.how``) as its writer, and as one of its readers
+#: (the module's doc): (flow, messages, whether the key is expanded as the principal's own, `_expand`).
 _GRANTS: dict[str, tuple[list[tuple[str, tuple[str, ...], bool]], list[tuple[str, tuple[str, ...], bool]]]] = {
     "put": ([("ingress", ("put",), True)],
             [("ingress", ("declare_subscriber",), False), ("egress", ("put",), False)]),

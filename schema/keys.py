@@ -128,8 +128,7 @@ class Keys:
         drone's TGT), or the key's entity for keys each drone or host writes (NPS, MOVES). ValueError if
         the key is not one of ours."""
         entity, action = self.parts_of(key)[:2]
-        writer = _WRITERS.get(action)
-        return entity if writer is None else writer
+        return _WRITERS.get(action) or entity
 
     def entity_of(self, key: str) -> str:
         """The ENTITY part of ``<root>/<ENTITY>/<ACTION>[/<PHASE>]`` (ValueError if not under root)."""

@@ -213,9 +213,6 @@ AROUND: tuple[Cell, ...] = RANK_STEPS[:6]
 MAX_ASKED = 1 << 15
 
 
-# Rows of the tables below: each is checked by its table's column rules (`Row`), on the wire only as a row.
-
-
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Order(Row):
     """Coordinator -> drone, in the DRONES phase: where the drone is and where it must go."""
@@ -352,8 +349,7 @@ class StatusTable(Table, record=DroneStatus, layout=(
 
     def alive(self) -> list[str]:
         """The ids of the alive drones, in row order."""
-        ids = self.ids()
-        return [ids[i] for i in self.alive_mask().nonzero()[0].tolist()]
+        return [drone_name(n) for n in self.rows["drone"][self.alive_mask()].tolist()]
 
 
 TABLES: tuple[type[Table], ...] = (StartTable, AimTable, OrderTable, MoveTable, StepTable, StatusTable)

@@ -20,15 +20,13 @@ import functools
 import itertools
 import struct
 import typing
+from collections.abc import Iterable, Iterator
 from typing import ClassVar, Self
 
 import numpy as np
 
 from .errors import MalformedMessage
 from .tuning import CHECK_FEW_ROWS
-
-if typing.TYPE_CHECKING:
-    from collections.abc import Iterable, Iterator
 
 #: Largest coordinate a cell may have, in a table or any message (worlds are far smaller; this bounds garbage).
 MAX_COORD = 1 << 16
