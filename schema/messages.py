@@ -825,7 +825,5 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
             if wire in body:
                 kwargs[name] = dec(body[wire])
         return cls(**kwargs)
-    except MalformedMessage:
-        raise
     except TypeError as exc:  # missing required field, wrong arity
         raise MalformedMessage(f"bad {tag}: {exc}") from None
