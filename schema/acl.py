@@ -80,10 +80,9 @@ def principals(drones: Iterable[str], hosts: Mapping[str, Sequence[str]] | None 
     for d in drones:
         if not is_drone_id(d):
             raise ValueError(f"bad drone id {d!r}")
-    out = [Principal("SRV", "SRV"), Principal("ENV", "ENV"), Principal("GCS", "GCS")]
-    out += [Principal(d, "DRONE", (d,)) for d in drones if d not in hosted]
-    out += [Principal(h, "DRONE", tuple(flown)) for h, flown in sorted(hosts.items())]
-    return out
+    return [Principal("SRV", "SRV"), Principal("ENV", "ENV"), Principal("GCS", "GCS"),
+            *(Principal(d, "DRONE", (d,)) for d in drones if d not in hosted),
+            *(Principal(h, "DRONE", tuple(flown)) for h, flown in sorted(hosts.items()))]
 
 
 #: The roles each word of the key table's ``readers`` column stands for.
@@ -159,18 +158,16 @@ def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), id
     subjects: list[dict] = []
     policies: list[dict] = []
     for p in principals(drones, hosts):
-        ids = []
-        for (flow, msg), keys in grants(p, roots).items():
-            rid = f"{p.name} {flow} {msg}"
-            rules.append({"id": rid, "permission": "allow", "flows": [flow], "messages": [msg], "key_exprs": keys})
-            ids.append(rid)
+        mine = [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
+                 "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
+        rules += mine
         subject: dict = {"id": p.name}
         if identity in ("usrpwd", "both"):
             subject["usernames"] = [p.name]
         if identity in ("cert", "both"):
             subject["cert_common_names"] = [p.name]
         subjects.append(subject)
-        policies.append({"id": f"{p.name} policy", "rules": ids, "subjects": [p.name]})
+        policies.append({"id": f"{p.name} policy", "rules": [r["id"] for r in mine], "subjects": [p.name]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
 

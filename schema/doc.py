@@ -63,11 +63,9 @@ def render() -> str:
     carried = {hint: f"{cls.TAG}.{name}" for cls in MESSAGE_TYPES
                for name, hint in typing.get_type_hints(cls).items() if hint in TABLES}
     for table in TABLES:
-        cols = []
-        for name, kind in table.LAYOUT:
-            what = kind.value if isinstance(kind, Col) else "u8: " + ", ".join(
-                f"{i} {m.name}" for i, m in enumerate(kind))
-            cols.append(f"`{name}` ({what})")
+        cols = [f"`{name}` ({kind.value})" if isinstance(kind, Col)
+                else f"`{name}` (u8: {', '.join(f'{i} {m.name}' for i, m in enumerate(kind))})"
+                for name, kind in table.LAYOUT]
         out.append(f"| `{table.__name__}` | {carried[table]} | {table.DTYPE.itemsize} | {'; '.join(cols)} |")
     out += ["", "## Test vectors\n",
             "The canonical sample of each message and its bytes (hex), also in `vectors.json`. A client in any",
