@@ -225,9 +225,8 @@ class Table:
 
     @classmethod
     def _check(cls, rows: np.ndarray) -> None:
-        """Every row valid. A few rows are checked one by one in Python (`_why_few`), more with a few array
-        operations per column (`_why_columns`, about a microsecond each at any size): the same rules,
-        which a property test holds to one verdict."""
+        """Every row valid: a few checked one by one in Python (`_why_few`), more by numpy columns (`_why_columns`,
+        about a microsecond each at any size): the same rules, which a property test holds to one verdict."""
         if len(rows):
             why = cls._why_few(rows) if len(rows) <= CHECK_FEW_ROWS else cls._why_columns(rows)
             if why is not None:
