@@ -131,9 +131,7 @@ def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
     return None if c[0] == -1 else (c[0], c[1], c[2])
 
 
-#: A record's value -> a row's, for the columns not stored as they are (an enum's member: its code, `code_of`).
-_TO_ROW: dict[Col, typing.Callable] = {Col.DRONE: drone_number, Col.OPTIONAL: lambda v: _NONE if v is None else v}
-#: A row's value (read as a Python list) -> a record's, for the columns not read as they are (an enum: its member).
+#: A row's value (read as a Python list) -> a record's, for the cell and drone columns.
 _FROM_ROW: dict[Col, typing.Callable] = {Col.DRONE: drone_name, Col.OPTIONAL: optional_cell, Col.CELL: tuple,
                                          Col.SIGNED: tuple}
 
@@ -191,8 +189,13 @@ class Table:
         rows = cls.empty(len(records))
         for name, kind in cls.LAYOUT if records else ():
             values = [getattr(r, name) for r in records]
-            to_row = _TO_ROW.get(kind) if isinstance(kind, Col) else _index_of(kind).__getitem__
-            rows[name] = values if to_row is None else list(map(to_row, values))
+            if kind is Col.DRONE:
+                values = [drone_number(v) for v in values]
+            elif kind is Col.OPTIONAL:
+                values = [_NONE if v is None else v for v in values]
+            elif not isinstance(kind, Col):
+                values = list(map(_index_of(kind).__getitem__, values))
+            rows[name] = values
         return cls(rows)
 
     @classmethod
@@ -299,8 +302,12 @@ class Table:
         columns = []
         for name, kind in cls.LAYOUT:
             values = rows[name].tolist()
-            from_row = _FROM_ROW.get(kind) if isinstance(kind, Col) else tuple(kind).__getitem__
-            columns.append(values if from_row is None else list(map(from_row, values)))
+            if not isinstance(kind, Col):
+                members = tuple(kind)
+                values = [members[c] for c in values]
+            elif kind in _FROM_ROW:
+                values = list(map(_FROM_ROW[kind], values))
+            columns.append(values)
         names = [name for name, _ in cls.LAYOUT]
         return tuple(cls.RECORD(**dict(zip(names, r))) for r in zip(*columns))
 
