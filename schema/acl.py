@@ -187,16 +187,12 @@ def allowed(acl: dict, subject: str, flow: str, message: str, key: str) -> bool:
     (and no deny rule does; this generator writes none), else ``default_permission`` applies."""
     by_id = {r["id"]: r for r in acl["rules"]}
     verdict = acl["default_permission"] == "allow"
-    for pol in acl["policies"]:
-        if subject not in pol["subjects"]:
-            continue
-        for rid in pol["rules"]:
-            r = by_id[rid]
-            if flow in r.get("flows", ["ingress", "egress"]) and message in r["messages"] and \
-                    any(_includes(k, key) for k in r["key_exprs"]):
-                if r["permission"] == "deny":
-                    return False
-                verdict = True
+    for r in (by_id[rid] for pol in acl["policies"] if subject in pol["subjects"] for rid in pol["rules"]):
+        if flow in r.get("flows", ["ingress", "egress"]) and message in r["messages"] and \
+                any(_includes(k, key) for k in r["key_exprs"]):
+            if r["permission"] == "deny":
+                return False
+            verdict = True
     return verdict
 
 

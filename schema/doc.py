@@ -72,8 +72,7 @@ def render() -> str:
             "language must decode each to the same fields and encode the same fields to the same bytes.\n",
             "| name | message | bytes (hex) |", "|---|---|---|"]
     vectors = golden()
-    for name, msg in SAMPLES.items():
-        out.append(f"| {name} | `{msg!r}` | `{vectors[name]}` |")
+    out += [f"| {name} | `{msg!r}` | `{vectors[name]}` |" for name, msg in SAMPLES.items()]
     return "\n".join(out) + "\n"
 
 

@@ -105,12 +105,11 @@ class RejectCounter:
             if window is None or now >= window.start + REJECT_LOG_WINDOW and not window.held:
                 window = self._windows[(who, err.reason)] = _Window(now)
             window.logged += 1
+            first = None  # (None: logged now)
             if window.logged > REJECT_LOG_FIRST:
                 window.held += 1
                 window.last = f"{where}: {err}"
                 first = window.held == 1
-            else:
-                first = None
         if first is None:
             self._log.warning("rejected %s: %s (%s)", where, excerpt(str(err)), err.reason)
         elif first and self._wake is not None:
