@@ -1,27 +1,25 @@
 """Zenoh access-control rules for a router, generated from the key table (`KEY_TABLE`), the one source.
 
-Every key has exactly one writer role (``KeySpec.writer``) and a list of reader roles
-(``KeySpec.readers``); this module turns that into a Zenoh ``access_control`` block with
-``default_permission: "deny"``, one subject per *principal* (an authenticated process: SRV, ENV,
-GCS, each drone Dnn, each swarm host Hnn) and one policy per principal:
+Every key has exactly one writer role (``KeySpec.writer``) and a list of reader roles (``KeySpec.readers``);
+this module turns that into a Zenoh ``access_control`` block with ``default_permission: "deny"``, one subject
+and one policy per *principal* (an authenticated process: SRV, ENV, GCS, each drone Dnn, each swarm host Hnn):
 
-* the writer side (``ingress``: what the router accepts from it) -- ``put`` on the keys it writes
-  (a drone: only ``<root>/<itself>/NPS``; a swarm host: the NPS of each drone it flies; the GCS:
-  ``<root>/*/TGT`` and ``<root>/GCS/DONE``), ``declare_queryable`` and ``reply`` on the queryables it
-  owns (ENV: ENV/ASK, ENV/MAP; SRV: SRV/CONNECT);
-* the reader side -- ``declare_subscriber`` (ingress) and ``put`` (egress) on the keys it reads,
-  ``query`` (ingress) and ``reply`` (egress) on the queryables it asks, ``query`` (egress) on those
-  it owns;
-* presence -- a principal declares liveliness tokens only under its own ``<root>/<id>/ALIVE/*``, and
-  the readers of that row watch ``<root>/*/ALIVE/*``;
-* discovery, which carries no payload -- the router may tell everyone about subscribers and
-  queryables under the root (a publisher learns that someone listens).
+* the writer side (``ingress``: what the router accepts from it) -- ``put`` on the keys it writes (a drone:
+  only ``<root>/<itself>/NPS``; a swarm host: the NPS of each drone it flies; the GCS: ``<root>/*/TGT`` and
+  ``<root>/GCS/DONE``), ``declare_queryable`` and ``reply`` on the queryables it owns (ENV: ENV/ASK,
+  ENV/MAP; SRV: SRV/CONNECT);
+* the reader side -- ``declare_subscriber`` (ingress) and ``put`` (egress) on the keys it reads, ``query``
+  (ingress) and ``reply`` (egress) on the queryables it asks, ``query`` (egress) on those it owns;
+* presence -- a principal declares liveliness tokens only under its own ``<root>/<id>/ALIVE/*``, and the
+  readers of that row watch ``<root>/*/ALIVE/*``;
+* discovery, which carries no payload -- the router may tell everyone about subscribers and queryables
+  under the root (a publisher learns that someone listens).
 
-Anything else is denied: a key outside the table, a ``delete``, a second writer. A principal is
-matched by its user name (``--identity usrpwd``: the router's user/password dictionary), by its TLS
-client certificate's common name (``--identity cert``: mutual TLS) or by both (``both``); the name
-is the entity id (``D01``, ``H01``, ``GCS``...). Subjects never overlap (each has one distinct name):
-with Zenoh, rules of overlapping subjects were seen not to hold.
+Anything else is denied: a key outside the table, a ``delete``, a second writer. A principal is matched by
+its user name (``--identity usrpwd``: the router's user/password dictionary), by its TLS client
+certificate's common name (``--identity cert``: mutual TLS) or by both (``both``); the name is the entity id
+(``D01``, ``H01``, ``GCS``...). Subjects never overlap (each has one distinct name): with Zenoh, rules of
+overlapping subjects were seen not to hold.
 
     python -m schema.acl --drones 16 --root sim --identity usrpwd > config/router-acl.json5
     python -m schema.acl --drones 16 --host H01=D01-D08 --identity cert
@@ -82,29 +80,22 @@ def principals(drones: Iterable[str], hosts: Mapping[str, Sequence[str]] | None 
     for d in drones:
         if not is_drone_id(d):
             raise ValueError(f"bad drone id {d!r}")
-    out = [Principal("SRV", "SRV"), Principal("ENV", "ENV"), Principal("GCS", "GCS")]
-    out += [Principal(d, "DRONE", (d,)) for d in drones if d not in hosted]
-    out += [Principal(h, "DRONE", tuple(flown)) for h, flown in sorted(hosts.items())]
-    return out
+    return [Principal("SRV", "SRV"), Principal("ENV", "ENV"), Principal("GCS", "GCS"),
+            *(Principal(d, "DRONE", (d,)) for d in drones if d not in hosted),
+            *(Principal(h, "DRONE", tuple(flown)) for h, flown in sorted(hosts.items()))]
+
+
+#: The roles each word of the key table's ``readers`` column stands for.
+_READERS = {"all": ROLES, "entities": ROLES, "drones": ("DRONE",), **{role: (role,) for role in ROLES}}
 
 
 def readers_of(spec: KeySpec) -> set[str]:
     """The roles that read a key, from its ``readers`` column ("all", "drones", "ENV, GCS"...)."""
-    out: set[str] = set()
-    for word in (w.strip() for w in spec.readers.split(",")):
-        if word in ("all", "entities"):
-            out.update(ROLES)
-        elif word == "drones":
-            out.add("DRONE")
-        elif word in ROLES:
-            out.add(word)
-        else:
+    words = [w.strip() for w in spec.readers.split(",")]
+    for word in words:
+        if word not in _READERS:
             raise ValueError(f"unknown reader {word!r} in the key table row {spec.template}")
-    return out
-
-
-def _writes(spec: KeySpec, p: Principal) -> bool:
-    return spec.writer == p.role or (spec.writer == "each entity" and "{entity}" in spec.template)
+    return {role for word in words for role in _READERS[word]}
 
 
 def _expand(template: str, p: Principal, *, own: bool) -> list[str]:
@@ -120,58 +111,39 @@ def _expand(template: str, p: Principal, *, own: bool) -> list[str]:
     return [_PLACEHOLDER.sub("*", t) for t in out]
 
 
+#: A principal's grants on a key of each kind (``KeySpec.how``) as its writer, and as one of its readers
+#: (the module's doc): (flow, messages, whether the key is expanded as the principal's own, `_expand`).
+_GRANTS: dict[str, tuple[list[tuple[str, tuple[str, ...], bool]], list[tuple[str, tuple[str, ...], bool]]]] = {
+    "put": ([("ingress", ("put",), True)],
+            [("ingress", ("declare_subscriber",), False), ("egress", ("put",), False)]),
+    # A placeholder in a queryable's key names the *asker* (e.g. a per-entity admission key
+    # SRV/CONNECT/{entity}): the owner serves them all, each asker may ask only as itself.
+    "query": ([("ingress", ("declare_queryable", "reply"), False), ("egress", ("query",), False)],
+              [("ingress", ("query",), True), ("egress", ("reply",), True)]),
+    "liveliness": ([("ingress", ("liveliness_token",), True)],
+                   [("ingress", ("declare_liveliness_subscriber", "liveliness_query"), False),
+                    ("egress", ("liveliness_token",), False)]),
+}
+
+
 def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str]]:
     """(flow, message) -> key expressions this principal is allowed, derived from KEY_TABLE."""
-    g: dict[tuple[str, str], list[str]] = {}
+    g: dict[tuple[str, str], dict[str, None]] = {}  # (each key once, in order)
 
-    def add(flow: str, messages: Iterable[str], templates: Iterable[str]) -> None:
+    def add(flow: str, messages: Iterable[str], templates: Sequence[str]) -> None:
         for msg in messages:
-            keys = g.setdefault((flow, msg), [])
-            for t in templates:
-                for root in roots:
-                    k = f"{root}/{t}"
-                    if k not in keys:
-                        keys.append(k)
+            g.setdefault((flow, msg), {}).update(dict.fromkeys(f"{root}/{t}" for t in templates for root in roots))
 
     for spec in KEY_TABLE:
-        mine = _writes(spec, p)
+        mine = spec.writer == p.role or (spec.writer == "each entity" and "{entity}" in spec.template)
         reads = p.role in readers_of(spec)
-        match spec.how:
-            case "put":
-                if mine:
-                    add("ingress", ["put"], _expand(spec.template, p, own=True))
-                if reads:
-                    add("ingress", ["declare_subscriber"], _expand(spec.template, p, own=False))
-                    add("egress", ["put"], _expand(spec.template, p, own=False))
-            case "query":
-                # A placeholder in a queryable's key names the *asker* (e.g. a per-entity admission key
-                # SRV/CONNECT/{entity}): the owner serves them all, each asker may ask only as itself.
-                if mine:
-                    add("ingress", ["declare_queryable", "reply"], _expand(spec.template, p, own=False))
-                    add("egress", ["query"], _expand(spec.template, p, own=False))
-                if reads:
-                    add("ingress", ["query"], _expand(spec.template, p, own=True))
-                    add("egress", ["reply"], _expand(spec.template, p, own=True))
-            case "liveliness":
-                if mine:
-                    add("ingress", ["liveliness_token"], _expand(spec.template, p, own=True))
-                if reads:
-                    add("ingress", ["declare_liveliness_subscriber", "liveliness_query"],
-                        _expand(spec.template, p, own=False))
-                    add("egress", ["liveliness_token"], _expand(spec.template, p, own=False))
-            case other:
-                raise ValueError(f"unknown key kind {other!r} in the key table row {spec.template}")
+        if spec.how not in _GRANTS:
+            raise ValueError(f"unknown key kind {spec.how!r} in the key table row {spec.template}")
+        as_writer, as_reader = _GRANTS[spec.how]
+        for flow, messages, own in (as_writer if mine else []) + (as_reader if reads else []):
+            add(flow, messages, _expand(spec.template, p, own=own))
     add("egress", ANNOUNCEMENTS, ["**"])
-    return g
-
-
-def _subject(p: Principal, identity: str) -> dict:
-    s: dict = {"id": p.name}
-    if identity in ("usrpwd", "both"):
-        s["usernames"] = [p.name]
-    if identity in ("cert", "both"):
-        s["cert_common_names"] = [p.name]
-    return s
+    return {key: list(exprs) for key, exprs in g.items()}
 
 
 def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), identity: str = "usrpwd",
@@ -186,13 +158,16 @@ def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), id
     subjects: list[dict] = []
     policies: list[dict] = []
     for p in principals(drones, hosts):
-        ids = []
-        for (flow, msg), keys in grants(p, roots).items():
-            rid = f"{p.name} {flow} {msg}"
-            rules.append({"id": rid, "permission": "allow", "flows": [flow], "messages": [msg], "key_exprs": keys})
-            ids.append(rid)
-        subjects.append(_subject(p, identity))
-        policies.append({"id": f"{p.name} policy", "rules": ids, "subjects": [p.name]})
+        mine = [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
+                 "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
+        rules += mine
+        subject: dict = {"id": p.name}
+        if identity in ("usrpwd", "both"):
+            subject["usernames"] = [p.name]
+        if identity in ("cert", "both"):
+            subject["cert_common_names"] = [p.name]
+        subjects.append(subject)
+        policies.append({"id": f"{p.name} policy", "rules": [r["id"] for r in mine], "subjects": [p.name]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
 
@@ -212,16 +187,12 @@ def allowed(acl: dict, subject: str, flow: str, message: str, key: str) -> bool:
     (and no deny rule does; this generator writes none), else ``default_permission`` applies."""
     by_id = {r["id"]: r for r in acl["rules"]}
     verdict = acl["default_permission"] == "allow"
-    for pol in acl["policies"]:
-        if subject not in pol["subjects"]:
-            continue
-        for rid in pol["rules"]:
-            r = by_id[rid]
-            if flow in r.get("flows", ["ingress", "egress"]) and message in r["messages"] and \
-                    any(_includes(k, key) for k in r["key_exprs"]):
-                if r["permission"] == "deny":
-                    return False
-                verdict = True
+    for r in (by_id[rid] for pol in acl["policies"] if subject in pol["subjects"] for rid in pol["rules"]):
+        if flow in r.get("flows", ["ingress", "egress"]) and message in r["messages"] and \
+                any(_includes(k, key) for k in r["key_exprs"]):
+            if r["permission"] == "deny":
+                return False
+            verdict = True
     return verdict
 
 
@@ -252,8 +223,7 @@ def parse_drone_list(text: str) -> tuple[str, ...]:
 
 def render(block: dict, header: str = "") -> str:
     """A JSON5 document holding the block (itself a valid partial zenoh config)."""
-    lines = [f"// {line}".rstrip() for line in header.strip().splitlines()] if header else []
-    return "\n".join([*lines, json.dumps({"access_control": block}, indent=2), ""])
+    return _json5({"access_control": block}, header)
 
 
 def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
@@ -268,25 +238,21 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
 
     sizes: dict[tuple[str, int], list[str]] = {}
     drone_keys = []
+    granted = None if acl is None else sorted(  # every key expression `acl` lets some subject put on
+        {k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
+         and "ingress" in rule["flows"] for k in rule["key_exprs"]})
     for spec in KEY_TABLE:
         if spec.message is None:
             continue
         exprs = [str(zenoh.KeyExpr.autocanonize(f"{root}/{_PLACEHOLDER.sub('*', spec.template)}")) for root in roots]
         sizes.setdefault((spec.how, size_limit(spec.message)), []).extend(exprs)
         if spec.how == "put" and spec.writer == "DRONE":
-            granted = exprs if acl is None else _granted_puts(acl)
-            drone_keys += [k for k in granted if any(_includes(x, k) for x in exprs)]
+            drone_keys += [k for k in (exprs if granted is None else granted) if any(_includes(x, k) for x in exprs)]
     low_pass = [{"id": f"{how}-{limit}", "messages": [how], "flows": ["ingress"], "key_exprs": exprs,
                  "size_limit": limit} for (how, limit), exprs in sorted(sizes.items())]
     rate = {"id": "drone-puts", "messages": ["put"], "flows": ["ingress"],
             "rules": [{"key_expr": expr, "freq": DRONE_PUT_RATE} for expr in drone_keys]}
     return {"low_pass_filter": low_pass, "downsampling": [rate]}
-
-
-def _granted_puts(acl: dict) -> list[str]:
-    """Every key expression `acl` lets some subject put on (ingress)."""
-    return sorted({k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
-                   and "ingress" in rule["flows"] for k in rule["key_exprs"]})
 
 
 def router_config(block: dict, *, listen: str = "tls/0.0.0.0:7447", certs: str = "certs", mtls: bool = False,
@@ -325,7 +291,7 @@ def examples() -> dict[str, str]:
     gen = f"Generated from schema/keys.py KEY_TABLE by `{cmd}`: do not edit by hand."
     usrpwd = access_control(drones, roots=[EXAMPLE_ROOT], identity="usrpwd")
     cert = access_control(drones, roots=[EXAMPLE_ROOT], identity="cert")
-    files = {
+    return {
         "router-acl-usrpwd.json5": render(usrpwd, f"""
 {gen}
 Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by user (user/password auth).
@@ -361,7 +327,6 @@ Run: dronesim gcs --config config/gcs-remote-mtls.json5
 Same without a config file: dronesim gcs -m client -e tls/ROUTER_HOST:7447 --tls-ca certs/ca.pem
      --tls-cert certs/GCS.pem --tls-key certs/GCS.key"""),
     }
-    return files
 
 
 def _json5(conf: dict, header: str) -> str:
@@ -398,13 +363,12 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         print(f"acl: {err}", file=sys.stderr)
         return 2
+    conf = {"access_control": block}
     if args.router_config:
         users = f"{args.certs}/users.txt" if args.identity in ("usrpwd", "both") else None
         conf = router_config(block, listen=args.listen, certs=args.certs, roots=args.root or ["sim"],
                              mtls=args.identity in ("cert", "both"), users=users)
-        sys.stdout.write(_json5(conf, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
-    else:
-        sys.stdout.write(render(block, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
+    sys.stdout.write(_json5(conf, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
     return 0
 
 

@@ -5,14 +5,13 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import pathlib
 import typing
 
 from .keys import KEY_TABLE
 from .messages import MESSAGE_TYPES, SCHEMA_VERSION, TABLES
-from .samples import SAMPLES, golden
+from .samples import SAMPLES, golden, write_or_print
 from .tables import MAX_DRONE, Col
 
 README = pathlib.Path(__file__).with_name("README.md")
@@ -64,31 +63,18 @@ def render() -> str:
     carried = {hint: f"{cls.TAG}.{name}" for cls in MESSAGE_TYPES
                for name, hint in typing.get_type_hints(cls).items() if hint in TABLES}
     for table in TABLES:
-        cols = []
-        for name, kind in table.LAYOUT:
-            what = kind.value if isinstance(kind, Col) else "u8: " + ", ".join(
-                f"{i} {m.name}" for i, m in enumerate(kind))
-            cols.append(f"`{name}` ({what})")
+        cols = [f"`{name}` ({kind.value})" if isinstance(kind, Col)
+                else f"`{name}` (u8: {', '.join(f'{i} {m.name}' for i, m in enumerate(kind))})"
+                for name, kind in table.LAYOUT]
         out.append(f"| `{table.__name__}` | {carried[table]} | {table.DTYPE.itemsize} | {'; '.join(cols)} |")
     out += ["", "## Test vectors\n",
             "The canonical sample of each message and its bytes (hex), also in `vectors.json`. A client in any",
             "language must decode each to the same fields and encode the same fields to the same bytes.\n",
             "| name | message | bytes (hex) |", "|---|---|---|"]
     vectors = golden()
-    for name, msg in SAMPLES.items():
-        out.append(f"| {name} | `{msg!r}` | `{vectors[name]}` |")
+    out += [f"| {name} | `{msg!r}` | `{vectors[name]}` |" for name, msg in SAMPLES.items()]
     return "\n".join(out) + "\n"
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--write", action="store_true")
-    args = ap.parse_args()
-    if args.write:
-        README.write_text(render())
-    else:
-        print(render(), end="")
-
-
 if __name__ == "__main__":
-    main()
+    write_or_print(README, render(), __doc__)

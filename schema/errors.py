@@ -1,10 +1,7 @@
-"""The error hierarchy: local misuse versus bad remote input.
-
-`UsageError` means *this* process was called wrongly (bad flag, bad file, a programming error):
-it is raised to the caller and usually ends the command with a clear message.
-
-`RemoteInputError` means a message from the network was unacceptable. Adapters catch it, log the
-reason, count it (see `RejectCounter`) and change nothing: a remote peer can never crash a process.
+"""The error hierarchy: local misuse (`UsageError`: this process was called wrongly) is raised to the caller,
+and usually ends the command with a clear message; bad remote input (`RemoteInputError`) is caught by the
+adapters, which log its reason, count it (`RejectCounter`) and change nothing: a remote peer never crashes a
+process.
 """
 
 from __future__ import annotations
@@ -28,10 +25,8 @@ class UsageError(DronesimError):
 
 
 class RemoteInputError(DronesimError):
-    """A message received from the network that cannot be accepted.
-
-    `reason` is a short stable slug used as the counter key (e.g. ``malformed``, ``stale-turn``).
-    """
+    """A message received from the network that cannot be accepted; `reason`, a short stable slug, is the
+    counter key (e.g. ``malformed``, ``stale-turn``)."""
 
     reason = "rejected"
 
@@ -82,19 +77,15 @@ class UnknownEntity(RemoteInputError):
 
 
 class RejectCounter:
-    """Thread-safe count of rejected remote inputs, by reason and by origin, with a bounded log.
-
-    Per origin (the sender, or the key it came on) and reason, the first `REJECT_LOG_FIRST` rejections
-    of each `REJECT_LOG_WINDOW` seconds are logged, each as a short excerpt; the rest are counted and
-    summarised in one line (how many, the last one's excerpt) by `flush` once the window is over. A flood
-    thus writes a few lines a second, not one per message. Zenoh callbacks reject on their own threads,
-    hence the lock.
+    """Thread-safe count of rejected remote inputs, by reason and by origin, with a bounded log: per origin
+    (the sender, or the key it came on) and reason, the first `REJECT_LOG_FIRST` rejections of each
+    `REJECT_LOG_WINDOW` seconds are logged, each as a short excerpt; `flush` sums up the rest in one line
+    once the window is over. Zenoh callbacks reject on their own threads, hence the lock. `wake` is called
+    when a window starts holding rejections (the thread that calls `flush` may be waiting for something else).
     """
 
     def __init__(self, logger: logging.Logger, clock: Callable[[], float] = time.monotonic, *,
                  wake: Callable[[], None] | None = None) -> None:
-        """`wake`: called when a window starts holding rejections (its summary will be due: the thread
-        that calls `flush` may be waiting for something else)."""
         self._log = logger
         self._clock = clock
         self._wake = wake
@@ -114,12 +105,11 @@ class RejectCounter:
             if window is None or now >= window.start + REJECT_LOG_WINDOW and not window.held:
                 window = self._windows[(who, err.reason)] = _Window(now)
             window.logged += 1
+            first = None  # (None: logged now)
             if window.logged > REJECT_LOG_FIRST:
                 window.held += 1
                 window.last = f"{where}: {err}"
                 first = window.held == 1
-            else:
-                first = None
         if first is None:
             self._log.warning("rejected %s: %s (%s)", where, excerpt(str(err)), err.reason)
         elif first and self._wake is not None:
@@ -145,8 +135,7 @@ class RejectCounter:
 
     @property
     def total(self) -> int:
-        with self._lock:
-            return sum(self._counts.values())
+        return sum(self.snapshot().values())
 
     def snapshot(self) -> dict[str, int]:
         with self._lock:

@@ -61,77 +61,58 @@ CELL_BYTES = 16
 ID_BYTES = 7
 
 
+#: Bytes a payload may take beyond its tables and `ENVELOPE`: an ASK's `MAX_ASKED` cells, an ANS's kinds and
+#: drones, a UPD's cells (two per drone) and drone ids, a CONNECT's drone ids (a swarm host's, up to `MAX_DRONE`).
+_BEYOND: dict[type[m.Message], int] = {
+    m.Ask: CELL_BYTES * m.MAX_ASKED, m.Ans: m.MAX_ASKED + MAX_DRONE * 12,
+    m.Upd: 2 * MAX_DRONE * (CELL_BYTES + 3) + MAX_DRONE * ID_BYTES, m.Connect: MAX_DRONE * ID_BYTES,
+}
+
+
 def size_limit(message: type[m.Message]) -> int:
-    """The most bytes a valid `message` can take on the wire: its tables at `MAX_DRONE` rows, an ASK's
-    `MAX_ASKED` cells, a UPD's cells (two per drone) and drone ids, an ANS's kinds and drones, a CONNECT's
-    drone ids (a swarm host's, up to `MAX_DRONE` canonical ones), plus
-    `ENVELOPE`; a world's map (MAP, WELCOME) is bounded by `MAX_PAYLOAD` alone. Every receiver refuses a
+    """The most bytes a valid `message` can take on the wire: its tables at `MAX_DRONE` rows, plus `_BEYOND`
+    and `ENVELOPE`; a world's map (MAP, WELCOME) is bounded by `MAX_PAYLOAD` alone. Every receiver refuses a
     bigger payload before reading it, and the secured router's `low_pass_filter` (schema/acl.py) drops it
     on the way."""
     if message in (m.WorldMap, m.Welcome):
         return m.MAX_PAYLOAD
-    size = ENVELOPE
-    for hint in typing.get_type_hints(message).values():
-        if isinstance(hint, type) and issubclass(hint, Table):
-            size += hint.DTYPE.itemsize * MAX_DRONE
-    if message is m.Ask:
-        size += CELL_BYTES * m.MAX_ASKED
-    elif message is m.Ans:
-        size += m.MAX_ASKED + MAX_DRONE * 12
-    elif message is m.Upd:
-        size += 2 * MAX_DRONE * (CELL_BYTES + 3) + MAX_DRONE * ID_BYTES
-    elif message is m.Connect:
-        size += MAX_DRONE * ID_BYTES
-    return size
+    hints = typing.get_type_hints(message).values()
+    tables = [h for h in hints if isinstance(h, type) and issubclass(h, Table)]
+    return ENVELOPE + _BEYOND.get(message, 0) + sum(h.DTYPE.itemsize * MAX_DRONE for h in tables)
 
 
 class Keys:
     """Concrete key expressions under one root (several simulations can share one router)."""
 
-    __slots__ = ("root",)
-
     def __init__(self, root: str = "sim") -> None:
         if not _ROOT.match(root):
             raise ValueError(f"bad key root {root!r}: use letters, digits, '_', '-' and '/'")
         self.root = root
+        # fixed keys
+        self.connect = self._k("SRV", "CONNECT")
+        self.turn = self._k("SRV", "TURN", "*")  # every phase (viewers)
+        self.over = self._k("SRV", "OVER")
+        self.status = self._k("OBS", "STATUS")
+        self.gcs_done = self._k("GCS", "DONE")
+        self.ask = self._k("ENV", "ASK")
+        self.map = self._k("ENV", "MAP")
+        self.upd = self._k("ENV", "UPD")
+        # wildcards of the per-drone and per-host keys, and of the presence tokens
+        self.any_moves = self._k("*", "MOVES")
+        self.any_tgt = self._k("*", "TGT")
+        self.any_nps = self._k("*", "NPS")
+        self.any_alive = self._k("*", "ALIVE", "*")
 
     def _k(self, *parts: str) -> str:
         return "/".join((self.root, *parts))
 
-    # fixed keys
-    @property
-    def connect(self) -> str: return self._k("SRV", "CONNECT")
-    @property
-    def turn(self) -> str: return self._k("SRV", "TURN", "*")  # every phase (viewers)
     def turn_of(self, phase: m.Phase) -> str: return self._k("SRV", "TURN", phase.value)
-    @property
-    def over(self) -> str: return self._k("SRV", "OVER")
-    @property
-    def status(self) -> str: return self._k("OBS", "STATUS")
-    @property
-    def gcs_done(self) -> str: return self._k("GCS", "DONE")
-    @property
-    def ask(self) -> str: return self._k("ENV", "ASK")
-    @property
-    def map(self) -> str: return self._k("ENV", "MAP")
-    @property
-    def upd(self) -> str: return self._k("ENV", "UPD")
-
-    # per-drone keys and their wildcards
     def tgt(self, drone: str) -> str: return self._k(drone, "TGT")
     def nps(self, drone: str) -> str: return self._k(drone, "NPS")
     def moves(self, host: str) -> str: return self._k(host, "MOVES")
-    @property
-    def any_moves(self) -> str: return self._k("*", "MOVES")
-    @property
-    def any_tgt(self) -> str: return self._k("*", "TGT")
-    @property
-    def any_nps(self) -> str: return self._k("*", "NPS")
 
     # presence: one liveliness token per process, <root>/<ENTITY>/ALIVE/<session id>
     def alive(self, entity: str, session: str) -> str: return self._k(entity, "ALIVE", session)
-    @property
-    def any_alive(self) -> str: return self._k("*", "ALIVE", "*")
     def alive_of(self, entity: str) -> str: return self._k(entity, "ALIVE", "*")
 
     def presence_of(self, key: str) -> tuple[str, str]:
@@ -147,8 +128,7 @@ class Keys:
         drone's TGT), or the key's entity for keys each drone or host writes (NPS, MOVES). ValueError if
         the key is not one of ours."""
         entity, action = self.parts_of(key)[:2]
-        writer = _WRITERS.get(action)
-        return entity if writer is None else writer
+        return _WRITERS.get(action) or entity
 
     def entity_of(self, key: str) -> str:
         """The ENTITY part of ``<root>/<ENTITY>/<ACTION>[/<PHASE>]`` (ValueError if not under root)."""

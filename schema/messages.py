@@ -5,13 +5,10 @@ instance that exists is well formed. On the wire each message is a MessagePack m
 
     {"v": SCHEMA_VERSION, "t": "<TRIGRAM>", "turn": int, "from": "<sender id>", ...fields}
 
-Fields are written in declaration order, so encoding is byte-for-byte deterministic
-(see ``schema/vectors.json`` for the golden bytes). Nested records (cells, cell infos, the world spec)
-travel as MessagePack arrays in their declaration order; enums as their value; the swarm-sized fields
-as tables (tables.py), whose rows people read and write as records (`Order`, `DroneStatus`, ...).
-
-World bounds are context, not syntax: a message can only check that a cell is three
-non-negative integers; receivers check it against the world (``OutOfRange``).
+Fields are written in declaration order, so encoding is byte-for-byte deterministic (golden bytes:
+``schema/vectors.json``). Nested records (cells, cell infos, the world spec) travel as arrays of their fields,
+enums as their value, the swarm-sized fields as tables (tables.py). World bounds are context, not syntax: a
+message only checks that a cell is three integers in range; receivers check it against the world (``OutOfRange``).
 """
 
 from __future__ import annotations
@@ -180,9 +177,13 @@ def _check_sender(value: object) -> None:
         raise MalformedMessage(f"sender must be ENV, GCS, SRV, OBS, Dnn or Hnn, got {value!r}")
 
 
-def _check_records(value: object, cls: type, name: str) -> None:
-    if not (isinstance(value, tuple) and all(type(v) is cls for v in value)):
-        raise MalformedMessage(f"{name} must be a tuple of {cls.__name__} records")
+def _check_world(size: Cell, bits: bytes, name: str, *, optional: bool = False) -> None:
+    """A world's size and its building cells, one bit each (packed; `optional`: or none)."""
+    _check_cell(size, "size")
+    _check(all(s >= 1 for s in size), "world sizes must be >= 1")
+    _check(isinstance(bits, bytes), f"{name} must be bytes")
+    n = size[0] * size[1] * size[2]
+    _check(optional and not bits or len(bits) == (n + 7) // 8, f"{name} must hold one bit per cell")
 
 
 # --------------------------------------------------------------------------- nested records
@@ -210,9 +211,6 @@ class CellInfo:
 AROUND: tuple[Cell, ...] = RANK_STEPS[:6]
 #: Most cells one ASK may ask (its cells plus 6 per `around` cell).
 MAX_ASKED = 1 << 15
-
-
-# Rows of the tables below: each is checked by its table's column rules (`Row`), on the wire only as a row.
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -286,12 +284,8 @@ class WorldSpec:
     cells: bytes = b""
 
     def __post_init__(self) -> None:
-        _check_cell(self.size, "size")
-        _check(all(s >= 1 for s in self.size), "world sizes must be >= 1")
+        _check_world(self.size, self.cells, "cells", optional=True)
         _check_int(self.seed, "seed", 0, (1 << 63) - 1)
-        _check(isinstance(self.cells, bytes), "cells must be bytes")
-        n = self.size[0] * self.size[1] * self.size[2]
-        _check(not self.cells or len(self.cells) == (n + 7) // 8, "cells must hold one bit per cell")
 
 
 # --------------------------------------------------------------------------- tables (see tables.py)
@@ -300,32 +294,26 @@ class WorldSpec:
 _ALIVE_CODE = code_of(DroneState.ALIVE)
 
 
-class StartTable(Table):
+class StartTable(Table, record=Start, layout=(("drone", Col.DRONE), ("pos", Col.CELL))):
     """A WELCOME's starts, one row per drone admitted."""
 
     __slots__ = ()
-    RECORD = Start
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL))
 
     def cells(self) -> dict[str, Cell]:
         """Each drone's start cell, read from the columns."""
         return dict(zip(self.ids(), map(tuple, self.rows["pos"].tolist())))
 
 
-class AimTable(Table):
+class AimTable(Table, record=Aim, layout=(("drone", Col.DRONE), ("pos", Col.CELL))):
     """A ground station's DONE's targets, one row per drone."""
 
     __slots__ = ()
-    RECORD = Aim
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL))
 
 
-class OrderTable(Table):
+class OrderTable(Table, record=Order, layout=(("drone", Col.DRONE), ("pos", Col.CELL), ("target", Col.OPTIONAL))):
     """A TURN(DRONES)'s orders, one row per alive drone."""
 
     __slots__ = ()
-    RECORD = Order
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.CELL), ("target", Col.OPTIONAL))
 
     def orders(self, mine: typing.Container[str] | None = None) -> tuple[tuple[str, Cell, Cell | None], ...]:
         """(drone, where it is, its target) of each row (of the drones in `mine`), read from the columns."""
@@ -335,29 +323,25 @@ class OrderTable(Table):
                      if mine is None or d in mine)
 
 
-class MoveTable(Table):
+class MoveTable(Table, record=Move, layout=(("drone", Col.DRONE), ("src", Col.CELL), ("dst", Col.SIGNED))):
     """A TURN(ENV)'s accepted moves, one row per moving drone."""
 
     __slots__ = ()
-    RECORD = Move
-    LAYOUT = (("drone", Col.DRONE), ("src", Col.CELL), ("dst", Col.SIGNED))
 
 
-class StepTable(Table):
+class StepTable(Table, record=Step, layout=(
+        ("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note), ("ranked", Col.RANKED))):
     """A MOVES's steps, one row per hosted drone."""
 
     __slots__ = ()
-    RECORD = Step
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note), ("ranked", Col.RANKED))
 
 
-class StatusTable(Table):
+class StatusTable(Table, record=DroneStatus, layout=(
+        ("drone", Col.DRONE), ("pos", Col.SIGNED), ("state", DroneState), ("target", Col.OPTIONAL), ("note", Note),
+        ("cause", Cause))):
     """A STATUS's drone states, one row per drone."""
 
     __slots__ = ()
-    RECORD = DroneStatus
-    LAYOUT = (("drone", Col.DRONE), ("pos", Col.SIGNED), ("state", DroneState), ("target", Col.OPTIONAL),
-              ("note", Note), ("cause", Cause))
 
     def alive_mask(self) -> np.ndarray:
         """Which rows are alive drones."""
@@ -365,8 +349,7 @@ class StatusTable(Table):
 
     def alive(self) -> list[str]:
         """The ids of the alive drones, in row order."""
-        ids = self.ids()
-        return [ids[i] for i in self.alive_mask().nonzero()[0].tolist()]
+        return [drone_name(n) for n in self.rows["drone"][self.alive_mask()].tolist()]
 
 
 TABLES: tuple[type[Table], ...] = (StartTable, AimTable, OrderTable, MoveTable, StepTable, StatusTable)
@@ -629,7 +612,8 @@ class Upd(Message):
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check_records(self.cells, CellInfo, "cells")
+        _check(isinstance(self.cells, tuple) and all(type(c) is CellInfo for c in self.cells),
+               "cells must be a tuple of CellInfo records")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -681,11 +665,7 @@ class WorldMap(Message):
 
     def __post_init__(self) -> None:
         Message.__post_init__(self)
-        _check_cell(self.size, "size")
-        _check(all(s >= 1 for s in self.size), "world sizes must be >= 1")
-        _check(isinstance(self.buildings, bytes), "buildings must be bytes")
-        n = self.size[0] * self.size[1] * self.size[2]
-        _check(len(self.buildings) == (n + 7) // 8, "buildings must hold one bit per cell")
+        _check_world(self.size, self.buildings, "buildings")
 
 
 _KINDS = tuple(CellKind)
@@ -701,87 +681,15 @@ _RECORDS = (CellInfo, WorldSpec)
 
 # --------------------------------------------------------------------------- codec
 #
-# Conversion is driven by each dataclass's type hints, resolved once. Supported field types:
-# int, str, bytes, Cell, Optional[Cell], enums, nested records, tuple[X, ...] of those.
+# Conversion is driven by each dataclass's type hints, resolved once (`_codec`): int, str, bytes, Cell, enums,
+# nested records, tables, and X | None or tuple[X, ...] of those.
+
+Encoder = typing.Callable[[object], object]
+_enum_value: Encoder = operator.attrgetter("value")
 
 
 def _identity(v: object) -> object:
     return v
-
-
-def _optional(hint: object) -> object | None:
-    """X of an `X | None` hint (None for any other hint)."""
-    if typing.get_origin(hint) in (Union, types.UnionType):
-        return next(a for a in typing.get_args(hint) if a is not type(None))
-    return None
-
-
-def _wire_encoder(hint: object) -> typing.Callable[[object], object]:
-    """How a field of type `hint` goes on the wire; msgpack packs ints, strings, bytes and tuples itself."""
-    inner = _optional(hint)
-    if inner is not None:
-        enc = _wire_encoder(inner)
-        return _identity if enc is _identity else (lambda v: None if v is None else enc(v))
-    args = typing.get_args(hint)
-    if typing.get_origin(hint) is tuple and len(args) == 2 and args[1] is Ellipsis:
-        item = _wire_encoder(args[0])
-        return _identity if item is _identity else (lambda v: [item(x) for x in typing.cast(tuple, v)])
-    if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        return _enum_value
-    if hint in _RECORDS:
-        return _record_encoder(hint)
-    if hint in TABLES:
-        return Table.to_wire  # type: ignore[return-value]
-    return _identity
-
-
-def _enum_value(member: object) -> object:
-    return typing.cast(enum.Enum, member).value
-
-
-def _record_encoder(cls: type) -> typing.Callable[[object], list]:
-    """A record's encoder: the array of its fields, in declaration order."""
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    values, encoders = operator.attrgetter(*names), [_wire_encoder(hints[name]) for name in names]
-    return lambda record: [enc(v) for enc, v in zip(encoders, values(record))]
-
-
-_ENCODERS: dict[type, list[tuple[str, str, typing.Callable[[object], object]]]] = {}
-
-
-def _encoders_of(cls: type) -> list[tuple[str, str, typing.Callable[[object], object]]]:
-    """(attribute, wire name, encoder) of each field of `cls`, in order; computed once per class."""
-    enc = _ENCODERS.get(cls)
-    if enc is None:
-        hints = typing.get_type_hints(cls)
-        enc = _ENCODERS[cls] = [(f.name, "from" if f.name == "sender" else f.name, _wire_encoder(hints[f.name]))
-                                for f in dataclasses.fields(cls)]
-    return enc
-
-
-def _converter(hint: object) -> typing.Callable[[object], object]:
-    """How a field of type `hint` is read from the wire (the types only: the values are checked by the
-    message or record that receives them)."""
-    inner = _optional(hint)
-    if inner is not None:
-        conv = _converter(inner)
-        return lambda v: None if v is None else conv(v)
-    args = typing.get_args(hint)
-    if typing.get_origin(hint) is tuple:
-        if len(args) == 2 and args[1] is Ellipsis:
-            item = _converter(args[0])
-            if item is _as_seq or item is _identity:
-                return _as_seq
-            return lambda v: tuple(map(item, _as_seq(v)))
-        return _as_seq  # Cell: validated by the record itself
-    if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        return _enum_converter(hint)
-    if hint in _RECORDS:
-        return _record_converter(hint)
-    if hint in TABLES:
-        return hint.from_wire
-    return _identity  # int, str, bytes: checked by __post_init__
 
 
 def _as_seq(v: object) -> tuple:
@@ -791,7 +699,30 @@ def _as_seq(v: object) -> tuple:
     return v
 
 
-def _enum_converter(cls: type[enum.Enum]) -> typing.Callable[[object], enum.Enum]:
+def _codec(hint: object) -> tuple[Encoder, Encoder]:
+    """How a field of type `hint` goes on the wire (msgpack packs ints, strings, bytes and tuples itself) and
+    is read from it (the types only: the values are checked by the message or record that receives them)."""
+    args = typing.get_args(hint)
+    if typing.get_origin(hint) in (Union, types.UnionType):  # X | None
+        enc, dec = _codec(next(a for a in args if a is not type(None)))
+        return (_identity if enc is _identity else lambda v: None if v is None else enc(v),
+                lambda v: None if v is None else dec(v))
+    if typing.get_origin(hint) is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            item, dec = _codec(args[0])
+            return (_identity if item is _identity else lambda v: [item(x) for x in typing.cast(tuple, v)],
+                    _as_seq if dec is _as_seq or dec is _identity else lambda v: tuple(map(dec, _as_seq(v))))
+        return _identity, _as_seq  # Cell: validated by the record itself
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        return _enum_value, _enum_converter(hint)
+    if hint in _RECORDS:
+        return _record_codec(hint)
+    if hint in TABLES:
+        return Table.to_wire, hint.from_wire  # type: ignore[return-value]
+    return _identity, _identity  # int, str, bytes: checked by __post_init__
+
+
+def _enum_converter(cls: type[enum.Enum]) -> Encoder:
     """The member of `cls` whose value is v, of the members' type (an IntEnum takes an int, not True or 1.0)."""
     members = {m.value: m for m in cls}
     value_type, = {type(v) for v in members}
@@ -804,34 +735,40 @@ def _enum_converter(cls: type[enum.Enum]) -> typing.Callable[[object], enum.Enum
     return convert
 
 
-_FIELD_CONVERTERS: dict[type, list[tuple[str, typing.Callable[[object], object]]]] = {}
+Fields = tuple[tuple[str, str, Encoder], ...]
 
 
-def _fields_of(cls: type) -> list[tuple[str, typing.Callable[[object], object]]]:
-    conv = _FIELD_CONVERTERS.get(cls)
-    if conv is None:
-        hints = typing.get_type_hints(cls)
-        conv = [(f.name, _converter(hints[f.name])) for f in dataclasses.fields(cls)]
-        _FIELD_CONVERTERS[cls] = conv
-    return conv
+def _codec_of(cls: type) -> tuple[Fields, Fields, frozenset[str]]:
+    """(attribute, wire name, encoder) and (attribute, wire name, decoder) of each field of `cls`, in order, and
+    the wire names."""
+    hints = typing.get_type_hints(cls)
+    fields = [(f.name, "from" if f.name == "sender" else f.name, *_codec(hints[f.name]))
+              for f in dataclasses.fields(cls)]
+    return (tuple((name, wire, enc) for name, wire, enc, _ in fields),
+            tuple((name, wire, dec) for name, wire, _, dec in fields), frozenset(wire for _, wire, _, _ in fields))
 
 
-def _record_converter(cls: type) -> typing.Callable[[object], object]:
-    """A record's decoder: from the array of its fields, built by its constructor (which checks them)."""
-    fields = _fields_of(cls)
-    n = len(fields)
+def _record_codec(cls: type) -> tuple[Encoder, Encoder]:
+    """A record's encoder (the array of its fields, in declaration order) and decoder (from that array, built
+    by its constructor, which checks the fields)."""
+    fields, decoders, _ = _codec_of(cls)
+    n, values = len(fields), operator.attrgetter(*(name for name, _, _ in fields))
+    encoders = [enc for _, _, enc in fields]
 
     def convert(v: object) -> object:
         if type(v) is not tuple or len(v) != n:
             raise MalformedMessage(f"{cls.__name__} needs {n} items, got {v!r:.80}")
-        return cls(**{name: conv(x) for (name, conv), x in zip(fields, v)})
-    return convert
+        return cls(**{name: dec(x) for (name, _, dec), x in zip(decoders, v)})
+    return lambda record: [enc(v) for enc, v in zip(encoders, values(record))], convert
+
+
+_CODECS = {cls: _codec_of(cls) for cls in MESSAGE_TYPES}
 
 
 def encode(msg: Message) -> bytes:
     """The MessagePack bytes of a message (deterministic: same message, same bytes): a map of the
     header ("v", "t") and the fields, in order."""
-    fields = _encoders_of(type(msg))
+    fields, _, _ = _CODECS[type(msg)]
     packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=PACK_BUFFER)  # it grows as needed
     pack = packer.pack
     packer.pack_map_header(2 + len(fields))
@@ -879,18 +816,14 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
             names = "/".join(a.TAG for a in allowed)
             raise MalformedMessage(f"a {tag} message on a key that carries {names}", reason="wrong-type")
     _check("sender" not in body, f"unknown fields ['sender'] in {tag} (the wire name is 'from')")
-    if "from" in body:
-        body["sender"] = body.pop("from")
-    fields = _fields_of(cls)
-    extra = set(body) - {n for n, _ in fields}
+    _, fields, wires = _CODECS[cls]
+    extra = body.keys() - wires
     _check(not extra, f"unknown fields {sorted(map(str, extra))} in {tag}")
     kwargs: dict[str, typing.Any] = {}
     try:
-        for name, conv in fields:
-            if name in body:
-                kwargs[name] = conv(body[name])
+        for name, wire, dec in fields:
+            if wire in body:
+                kwargs[name] = dec(body[wire])
         return cls(**kwargs)
-    except MalformedMessage:
-        raise
     except TypeError as exc:  # missing required field, wrong arity
         raise MalformedMessage(f"bad {tag}: {exc}") from None

@@ -1,39 +1,32 @@
 """Columns for the swarm-sized parts of messages: a STATUS's drone states, a TURN's orders and moves, a
 MOVES's steps, a WELCOME's starts and a ground station's DONE's targets.
 
-A swarm of 1000 drones puts 1000 records in each of the first four every turn (and in the last, every turn
-its targets change). As Python records they cost every
-process that reads or writes them about a microsecond and a few hundred bytes per drone; as columns they
-cost a few bytes per drone and are checked, read and written by numpy at once. On the wire a table is one
-MessagePack ``bin``: its rows back to back, each row the fields of the record in declaration order, in the
-fixed little-endian layout its class declares (``LAYOUT``, documented in schema/README.md):
+A swarm of 1000 drones puts 1000 records in most of them every turn. As Python records they cost every
+process that reads or writes them about a microsecond and a few hundred bytes per drone; as columns, a few
+bytes per drone, checked, read and written by numpy at once. On the wire a table is one MessagePack ``bin``:
+its rows back to back, each the fields of the record in order, in the fixed little-endian layout its class
+declares (a drone is its number, a cell three ints, an enum its member's index: `Col`, schema/README.md).
 
-- a drone is its number, ``u16`` (D01 is 1, D1000 is 1000: ids are canonical, see ``is_drone_id``);
-- a cell is three ``i32`` (x, y, z); an optional cell that is absent is (-1, -1, -1);
-- an enum is the ``u8`` index of its member in declaration order.
-
-A table is immutable and validates on construction, like a message: an instance that exists is well
-formed. Its rows can be read as records (``DroneStatus``, ``Order``, ...: a `Row` each, checked by the
-same rules as the table's columns), for people (samples, tests, a console); code that handles a swarm reads
-the columns (``numbers``, ``column(name)``).
+A table is immutable and validates on construction, like a message. Its rows read as records (``Order``,
+``DroneStatus``...: a `Row` each, checked by the same rules as the columns) for people (samples, tests, a
+console); code that handles a swarm reads the columns (``numbers``, ``column(name)``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import itertools
 import struct
 import typing
+from collections.abc import Iterable, Iterator
 from typing import ClassVar, Self
 
 import numpy as np
 
 from .errors import MalformedMessage
 from .tuning import CHECK_FEW_ROWS
-
-if typing.TYPE_CHECKING:
-    from collections.abc import Iterable, Iterator
 
 #: Largest coordinate a cell may have, in a table or any message (worlds are far smaller; this bounds garbage).
 MAX_COORD = 1 << 16
@@ -51,11 +44,12 @@ class Col(enum.Enum):
     RANKED = "u32 ranked steps: 3 bits each, lowest first, codes 1..7 (see `ranked_steps`), 0 for none"
 
 
-_DTYPES = {Col.DRONE: ("<u2", ()), Col.CELL: ("<i4", (3,)), Col.SIGNED: ("<i4", (3,)), Col.OPTIONAL: ("<i4", (3,)),
-           Col.RANKED: ("<u4", ())}
+#: Each column's numpy type and shape, and its ints in a row's bytes for `struct` (an enum column: a u8 code).
+_CELL = ("<i4", (3,), "3i")
+_DTYPES: dict[object, tuple[str, tuple, str]] = {Col.DRONE: ("<u2", (), "H"), Col.RANKED: ("<u4", (), "I"),
+                                                  Col.CELL: _CELL, Col.SIGNED: _CELL, Col.OPTIONAL: _CELL}
+_ENUM_DTYPE = ("u1", (), "B")
 _NONE = (-1, -1, -1)
-#: Each column's ints in a row's bytes, for `struct` (an enum column is a u8 code).
-_STRUCT = {Col.DRONE: "H", Col.CELL: "3i", Col.SIGNED: "3i", Col.OPTIONAL: "3i", Col.RANKED: "I"}
 #: The smallest coordinate of each cell column (the largest is MAX_COORD).
 _LOWEST = {Col.CELL: 0, Col.SIGNED: -MAX_COORD, Col.OPTIONAL: 0}
 
@@ -115,7 +109,7 @@ def ranked_steps(value: int) -> tuple[tuple[int, int, int], ...]:
 
 def ranked_ok(value: object) -> bool:
     """Is `value` steps packed by `rank_steps`: an int below RANKED_LIMIT whose 3-bit codes are nonzero up to
-    the last and distinct (0: none)? `_ranked_column_ok` is the same rule on a column."""
+    the last and distinct (0: none)? `_column_ok` is the same rule on a column."""
     if type(value) is not int or not 0 <= value < RANKED_LIMIT:
         return False
     seen = 0
@@ -127,23 +121,9 @@ def ranked_ok(value: object) -> bool:
     return True
 
 
-def _every_ranking() -> np.ndarray:
-    """Every valid ranking (`ranked_ok`), sorted: each ordered choice of distinct codes, packed (13,700;
-    54 KiB)."""
-    codes = range(1, len(RANK_STEPS) + 1)
-    choices = itertools.chain.from_iterable(itertools.permutations(codes, k) for k in range(len(RANK_STEPS) + 1))
-    values = np.fromiter((sum(c << 3 * i for i, c in enumerate(p)) for p in choices), np.int32)
-    values.sort()
-    return values
-
-
-_RANKINGS = _every_ranking()
-
-
-def _ranked_column_ok(col: np.ndarray) -> bool:
-    """`ranked_ok` for every value of a column: each one among the valid rankings (a bisection each)."""
-    at = np.searchsorted(_RANKINGS, col).clip(max=len(_RANKINGS) - 1)
-    return bool((_RANKINGS[at] == col).all())
+#: Every valid ranking (`ranked_ok`), sorted: each ordered choice of distinct steps, packed (13,700; 54 KiB).
+_RANKINGS = np.sort(np.fromiter((rank_steps(p) for k in range(len(RANK_STEPS) + 1)
+                                 for p in itertools.permutations(RANK_STEPS, k)), np.int32))
 
 
 def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
@@ -151,9 +131,14 @@ def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
     return None if c[0] == -1 else (c[0], c[1], c[2])
 
 
+#: A row's value (read as a Python list) -> a record's, for the cell and drone columns.
+_FROM_ROW: dict[Col, typing.Callable] = {Col.DRONE: drone_name, Col.OPTIONAL: optional_cell, Col.CELL: tuple,
+                                         Col.SIGNED: tuple}
+
+
 class Table:
-    """Rows of one record type, held as a structured numpy array (read-only). Subclasses declare the
-    record type and each field's column (a `Col`, or an enum class)."""
+    """Rows of one record type, held as a structured numpy array (read-only). A subclass names the record
+    type and each field's column (a `Col`, or an enum class): ``class T(Table, record=R, layout=(...))``."""
 
     __slots__ = ("rows",)
     RECORD: ClassVar[type]
@@ -163,15 +148,15 @@ class Table:
     AT: ClassVar[tuple[int, ...]]  # each column's first int in an unpacked row
     rows: np.ndarray
 
-    def __init_subclass__(cls) -> None:
-        names = tuple(name for name, _ in cls.LAYOUT)
-        assert names == tuple(f.name for f in dataclasses.fields(cls.RECORD)), \
-            f"{cls.__name__}: LAYOUT must name {cls.RECORD.__name__}'s fields in order"
-        assert issubclass(cls.RECORD, Row) and "LAYOUT" not in vars(cls.RECORD), f"{cls.__name__}: one table per Row"
-        cls.RECORD.LAYOUT = cls.LAYOUT
-        cls.DTYPE = np.dtype([(name, *(_DTYPES[kind] if isinstance(kind, Col) else ("u1", ())))
-                              for name, kind in cls.LAYOUT])
-        codes = [_STRUCT[kind] if isinstance(kind, Col) else "B" for _, kind in cls.LAYOUT]
+    def __init_subclass__(cls, *, record: type, layout: tuple[tuple[str, Col | type[enum.Enum]], ...]) -> None:
+        cls.RECORD, cls.LAYOUT = record, layout
+        assert tuple(name for name, _ in layout) == tuple(f.name for f in dataclasses.fields(record)), \
+            f"{cls.__name__}: LAYOUT must name {record.__name__}'s fields in order"
+        assert issubclass(record, Row) and "LAYOUT" not in vars(record), f"{cls.__name__}: one table per Row"
+        record.LAYOUT = layout
+        dtypes = [_DTYPES.get(kind, _ENUM_DTYPE) for _, kind in cls.LAYOUT]
+        cls.DTYPE = np.dtype([(name, dt, shape) for (name, _), (dt, shape, _) in zip(cls.LAYOUT, dtypes)])
+        codes = [code for _, _, code in dtypes]
         cls.ROW = struct.Struct("<" + "".join(codes))
         cls.AT = tuple(itertools.accumulate((3 if c == "3i" else 1 for c in codes[:-1]), initial=0))
         assert cls.ROW.size == cls.DTYPE.itemsize, f"{cls.__name__}: rows are packed, little-endian"
@@ -202,19 +187,15 @@ class Table:
             if type(r) is not cls.RECORD:
                 raise MalformedMessage(f"{cls.__name__} holds {cls.RECORD.__name__} records, got {type(r).__name__}")
         rows = cls.empty(len(records))
-        for name, kind in cls.LAYOUT:
+        for name, kind in cls.LAYOUT if records else ():
             values = [getattr(r, name) for r in records]
-            if not values:
-                continue
             if kind is Col.DRONE:
-                rows[name] = [drone_number(v) for v in values]
+                values = [drone_number(v) for v in values]
             elif kind is Col.OPTIONAL:
-                rows[name] = [_NONE if v is None else v for v in values]
-            elif isinstance(kind, Col):
-                rows[name] = values
-            else:
-                index = _index_of(kind)
-                rows[name] = [index[v] for v in values]
+                values = [_NONE if v is None else v for v in values]
+            elif not isinstance(kind, Col):
+                values = list(map(_index_of(kind).__getitem__, values))
+            rows[name] = values
         return cls(rows)
 
     @classmethod
@@ -227,9 +208,8 @@ class Table:
             raise MalformedMessage(f"{cls.__name__} needs the columns {[name for name, _ in cls.LAYOUT]}")
         n = len(columns[cls.LAYOUT[0][0]])  # type: ignore[arg-type]
         rows = cls.empty(n)
-        if n:
-            for name, values in columns.items():
-                rows[name] = values
+        for name, values in columns.items() if n else ():
+            rows[name] = values
         return cls(rows)
 
     @classmethod
@@ -248,9 +228,8 @@ class Table:
 
     @classmethod
     def _check(cls, rows: np.ndarray) -> None:
-        """Every row valid. A few rows are checked one by one in Python (`_why_few`), more with a few array
-        operations per column (`_why_columns`, about a microsecond each at any size): the same rules,
-        which a property test holds to one verdict."""
+        """Every row valid: a few checked one by one in Python (`_why_few`), more by numpy columns (`_why_columns`,
+        about a microsecond each at any size): the same rules, which a property test holds to one verdict."""
         if len(rows):
             why = cls._why_few(rows) if len(rows) <= CHECK_FEW_ROWS else cls._why_columns(rows)
             if why is not None:
@@ -267,12 +246,9 @@ class Table:
                 ordered = len(col) == 1 or (col[1:] > col[:-1]).all()  # (rows in order: at once)
                 if not ordered and len(np.unique(col)) != len(col):
                     return _WHY_ONCE
-            elif kind is Col.RANKED:
-                if not _ranked_column_ok(col):
-                    return _why_cell(name, kind)
             elif isinstance(kind, Col):
-                if not _cells_ok(col, kind):
-                    return _why_cell(name, kind)
+                if not _column_ok(col, kind):
+                    return f"each {name} must be {_must_be(kind)}"
             elif col.max() >= len(kind):
                 return _why_code(name, kind)
         return None
@@ -290,11 +266,11 @@ class Table:
                     return _WHY_ONCE
             elif kind is Col.RANKED:
                 if not all(ranked_ok(r[at]) for r in unpacked):
-                    return _why_cell(name, kind)
+                    return f"each {name} must be {_must_be(kind)}"
             elif isinstance(kind, Col):
                 lo, end = _LOWEST[kind], at + 3
                 if not all(_cell_ok(r[at:end], lo) or kind is Col.OPTIONAL and r[at:end] == _NONE for r in unpacked):
-                    return _why_cell(name, kind)
+                    return f"each {name} must be {_must_be(kind)}"
             elif max(r[at] for r in unpacked) >= len(kind):
                 return _why_code(name, kind)
         return None
@@ -319,19 +295,28 @@ class Table:
 
     def records(self) -> tuple:
         """The rows as records, for people (each checked as it is built: a few microseconds a row)."""
-        return _records(self.RECORD, self.LAYOUT, self.rows)
+        return self._records(self.rows)
+
+    @classmethod
+    def _records(cls, rows: np.ndarray) -> tuple:
+        columns = []
+        for name, kind in cls.LAYOUT:
+            values = rows[name].tolist()
+            if not isinstance(kind, Col):
+                members = tuple(kind)
+                values = [members[c] for c in values]
+            elif kind in _FROM_ROW:
+                values = list(map(_FROM_ROW[kind], values))
+            columns.append(values)
+        names = [name for name, _ in cls.LAYOUT]
+        return tuple(cls.RECORD(**dict(zip(names, r))) for r in zip(*columns))
 
     def __iter__(self) -> Iterator:
         return iter(self.records())
 
     def __getitem__(self, i: int | slice):
         """A row's record (a slice: a tuple of them), built from that row alone."""
-        if isinstance(i, slice):
-            return _records(self.RECORD, self.LAYOUT, self.rows[i])
-        return _records(self.RECORD, self.LAYOUT, self.rows[[i]])[0]
-
-    def __bool__(self) -> bool:
-        return len(self.rows) > 0
+        return self._records(self.rows[i]) if isinstance(i, slice) else self._records(self.rows[[i]])[0]
 
     def __eq__(self, other: object) -> bool:
         if type(other) is type(self):
@@ -350,26 +335,6 @@ class Table:
         return (type(self).from_wire, (self.to_wire(),))
 
 
-def _records(cls: type, layout: tuple[tuple[str, Col | type[enum.Enum]], ...], rows: np.ndarray) -> tuple:
-    """Rows as `cls` records (each checked by its constructor)."""
-    columns: list[list[object]] = []
-    for name, kind in layout:
-        values = rows[name].tolist()
-        if kind is Col.DRONE:
-            columns.append([drone_name(n) for n in values])
-        elif kind is Col.OPTIONAL:
-            columns.append([optional_cell(c) for c in values])
-        elif kind is Col.RANKED:
-            columns.append(values)
-        elif isinstance(kind, Col):
-            columns.append([tuple(c) for c in values])
-        else:
-            members = tuple(kind)
-            columns.append([members[c] for c in values])
-    names = [name for name, _ in layout]
-    return tuple(cls(**dict(zip(names, r))) for r in zip(*columns))
-
-
 class Row:
     """A table's row as a record (a frozen dataclass deriving from this, named as a `Table`'s RECORD): how
     people write and read swarm-sized data (samples, tests, a console). It is checked on construction by
@@ -384,13 +349,10 @@ class Row:
             if kind is Col.DRONE:
                 if not is_drone_id(value):
                     raise MalformedMessage(f"{name} must be a drone id like D01, got {value!r}")
-            elif kind is Col.RANKED:
-                if not ranked_ok(value):
-                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {kind.value}, each code once, "
-                                           f"got {value!r:.60}")
             elif isinstance(kind, Col):
-                if not (value is None and kind is Col.OPTIONAL or _cell_ok(value, _LOWEST[kind])):
-                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {kind.value}, got {value!r:.60}")
+                if not (ranked_ok(value) if kind is Col.RANKED
+                        else value is None and kind is Col.OPTIONAL or _cell_ok(value, _LOWEST[kind])):
+                    raise MalformedMessage(f"{type(self).__name__}: {name} must be {_must_be(kind)}, got {value!r:.60}")
             elif type(value) is not kind:
                 raise MalformedMessage(f"{type(self).__name__}: {name} must be a {kind.__name__}, got {value!r:.60}")
 
@@ -404,9 +366,12 @@ def _cell_ok(value: object, lo: int) -> bool:
     return False
 
 
-def _cells_ok(col: np.ndarray, kind: Col) -> bool:
-    """A cell column valid, with numpy: a u32 view of an i32 turns negative values into huge ones, so one
-    maximum checks both bounds."""
+def _column_ok(col: np.ndarray, kind: Col) -> bool:
+    """A cell or ranking column valid, with numpy. A ranking: each value among the valid rankings (a bisection
+    each). A cell: a u32 view of an i32 turns negative values into huge ones, so one maximum checks both bounds."""
+    if kind is Col.RANKED:
+        at = np.searchsorted(_RANKINGS, col).clip(max=len(_RANKINGS) - 1)
+        return bool((_RANKINGS[at] == col).all())
     lo = _LOWEST[kind]
     if kind is not Col.OPTIONAL:
         return bool((col - lo if lo else col).view(np.uint32).max() <= MAX_COORD - lo)
@@ -421,22 +386,17 @@ _WHY_NUMBER = f"drone numbers must be in 1..{MAX_DRONE}"
 _WHY_ONCE = "one row per drone"
 
 
-def _why_cell(name: str, kind: Col) -> str:
-    return f"each {name} must be {kind.value}" + (", each code once" if kind is Col.RANKED else "")
+def _must_be(kind: Col) -> str:
+    return kind.value + (", each code once" if kind is Col.RANKED else "")
 
 
 def _why_code(name: str, kind: type[enum.Enum]) -> str:
     return f"{name} codes must be below {len(kind)} (members of {kind.__name__})"
 
 
-_INDEXES: dict[type, dict] = {}
-
-
+@functools.cache
 def _index_of(kind: type[enum.Enum]) -> dict:
-    index = _INDEXES.get(kind)
-    if index is None:
-        index = _INDEXES[kind] = {m: i for i, m in enumerate(kind)}
-    return index
+    return {m: i for i, m in enumerate(kind)}
 
 
 def code_of(member: enum.Enum) -> int:

@@ -757,7 +757,7 @@ def test_a_cell_column_is_judged_as_its_rows_are(kind: Col, cells: list) -> None
     col = np.array(cells, np.int32).reshape(-1, 3)
     one_by_one = all(c == (-1, -1, -1) and kind is Col.OPTIONAL or tables._cell_ok(c, tables._LOWEST[kind])
                      for c in map(tuple, col.tolist()))
-    assert tables._cells_ok(col, kind) == one_by_one
+    assert tables._column_ok(col, kind) == one_by_one
 
 
 _BOUNDS = [0, 1, 7, MAX_COORD, MAX_COORD + 1, -1, -2, -MAX_COORD, -MAX_COORD - 1, 2**31 - 1, -2**31]
