@@ -338,12 +338,14 @@ class DroneProcess:
         answers: dict[str, Answers] = {}
         asking: dict[str, tuple[Cell, ...]] = {}
         for drone, wanted in question.items():
-            known = [kind(c) for c in wanted]
-            if None in known:
-                asking[drone] = wanted
+            infos: dict[Cell, CellInfo] = {}
+            for c in wanted:
+                if (k := kind(c)) is None:  # the chart cannot answer it: the drone's cells are asked
+                    asking[drone] = wanted
+                    break
+                infos[c] = CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))
             else:
-                answers[drone] = {c: CellInfo(pos=c, kind=k, drones=d.occupancy.get(c, ()))
-                                  for c, k in zip(wanted, known) if k is not None}  # (all are)
+                answers[drone] = infos
         return _Round(asking, answers, lambda got: got)
 
     def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Effect]:
@@ -356,10 +358,13 @@ class DroneProcess:
                 size = 0
             batches[-1].append(name)
             size += len(r.parts[name])
-        queries = [self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
-                               tuple(batch)) for batch in batches]
-        r.asking.update(q.ref for q in queries)
-        return [*queries]
+        queries: list[Effect] = []
+        for batch in batches:
+            query = self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
+                                tuple(batch))
+            r.asking.add(query.ref)
+            queries.append(query)
+        return queries
 
     def _settle_unanswered(self, d: _Deciding, r: _Round, effects: list[Effect]) -> bool:
         """Parts of `r` nobody answered: given no answer once `d` is offline (True: the plan goes on), else

@@ -373,13 +373,17 @@ class World:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read world file {str(path)!r}: {exc}") from None
-        movingai = Path(path).suffix == ".map"
+        if Path(path).suffix == ".map":
+            try:
+                return cls.from_grid(world_grid(read_map(text)))
+            except UsageError as exc:
+                raise UsageError(f"world file {str(path)!r}: {exc}") from None
         try:
-            data = {} if movingai else json.loads(text)
+            data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise UsageError(f"world file {str(path)!r} is not valid JSON: {exc}") from None
         try:
-            return cls.from_grid(world_grid(read_map(text))) if movingai else cls.from_json(data)
+            return cls.from_json(data)
         except UsageError as exc:
             raise UsageError(f"world file {str(path)!r}: {exc}") from None
 
