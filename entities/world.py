@@ -1,9 +1,8 @@
-"""The simulator's 3D world: a boolean numpy grid of building cells, pure and network-free.
+"""The simulator's 3D world, pure: a read-only boolean numpy grid indexed ``grid[x, y, z]``, True on building cells.
 
-Coordinates are ``(x, y, z)``; the grid is indexed ``grid[x, y, z]`` and ``True`` means building.
-Worlds are immutable: the grid is a read-only array and every constructor (`World.generate`, the seed's random
-city; `from_buildings`, `from_grid`, `load` / `from_json`, `from_packed`: the MAP message's bits) validates its
-input, so a `World` that exists is well formed. Bad local input (arguments, files) raises `UsageError`.
+Every constructor (`World.generate`, the seed's random city; `from_buildings`, `from_grid`, `load` / `from_json`,
+`from_packed`: the MAP message's bits) validates its input, so a `World` that exists is well formed. Bad local
+input (arguments, files) raises `UsageError`.
 """
 
 from __future__ import annotations
@@ -22,13 +21,11 @@ from schema.messages import AROUND, MAX_COORD
 
 from .movingai import read_map, world_grid
 
-__all__ = ["Building", "World", "FORMAT", "FORMAT_VERSION"]
-
 #: The JSON file's ``format`` and ``version`` values.
 FORMAT = "dronesim-world"
 FORMAT_VERSION = 1
 
-#: Default generation parameters (the seed: a size-10 cube with a handful of small buildings).
+#: Default generation parameters (they decide the world: not tuning constants).
 _DEFAULT_FOOTPRINT = 3
 _DEFAULT_GROUND_COVER = 0.25  # expected fraction of ground cells under a building, before rejections
 _ATTEMPTS_PER_BUILDING = 4
@@ -41,9 +38,6 @@ _LABELS = {
     True: (".", "#", "X", "*", "!", "legend: . empty, # building, X target, * trail, digit = drone (last character "
            "of its id), ! several drones; row = x, column = y, (0,0) top-left"),
 }
-
-
-# --------------------------------------------------------------------------- validation helpers
 
 
 def inside_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
@@ -78,7 +72,6 @@ def checked_int(value: object, what: str, error: type[UsageError] = UsageError) 
 
 
 def _at_least(value: object, what: str, least: int) -> int:
-    """`value` as a plain int of at least `least` (UsageError otherwise)."""
     number = checked_int(value, what)
     if number < least:
         raise UsageError(f"{what} must be >= {least}, got {number}")
@@ -88,12 +81,10 @@ def _at_least(value: object, what: str, least: int) -> int:
 def _cell(value: object, what: str = "cell") -> Cell:
     """`value` as a Cell of three plain ints."""
     try:
-        items = tuple(typing.cast(Iterable[object], value))
-    except TypeError:
+        x, y, z = typing.cast(Iterable[object], value)
+    except (TypeError, ValueError):  # not iterable, or not 3 items
         raise UsageError(f"{what} must be 3 integers, got {value!r}") from None
-    if len(items) != 3:
-        raise UsageError(f"{what} must be 3 integers, got {value!r}")
-    return (checked_int(items[0], what), checked_int(items[1], what), checked_int(items[2], what))
+    return (checked_int(x, what), checked_int(y, what), checked_int(z, what))
 
 
 def _size(value: object) -> Cell:
@@ -101,9 +92,6 @@ def _size(value: object) -> Cell:
     if not all(1 <= s <= MAX_COORD for s in size):
         raise UsageError(f"world sizes must be in 1..{MAX_COORD}, got {size}")
     return size
-
-
-# --------------------------------------------------------------------------- Building
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -136,7 +124,6 @@ class Building:
                 and self.y < other.y + other.width and other.y < self.y + self.width)
 
     def fits_in(self, size: Cell) -> bool:
-        """Whether the whole box lies inside a world of `size`."""
         return self.x + self.length <= size[0] and self.y + self.width <= size[1] and self.height <= size[2]
 
     def as_list(self) -> list[int]:
@@ -145,10 +132,8 @@ class Building:
 
 
 def _heightmap(size: Cell, buildings: tuple[Building, ...]) -> np.ndarray:
-    """The (nx, ny) height of the building standing on each ground cell (0: none).
-
-    Raises `UsageError` if a building leaves the world or two buildings intersect.
-    """
+    """The (nx, ny) height of the building standing on each ground cell (0: none); `UsageError` if a building
+    leaves the world or two intersect."""
     nx, ny, _ = size
     heights = np.zeros((nx, ny), dtype=np.int64)
     owner = np.full((nx, ny), -1, dtype=np.int64)
@@ -158,8 +143,7 @@ def _heightmap(size: Cell, buildings: tuple[Building, ...]) -> np.ndarray:
         if not b.fits_in(size):
             raise UsageError(f"building #{i} {b.as_list()} does not fit in a world of size {list(size)}")
         fp = owner[b.x:b.x + b.length, b.y:b.y + b.width]
-        taken = fp[fp >= 0]
-        if taken.size:
+        if (taken := fp[fp >= 0]).size:
             j = int(taken[0])
             raise UsageError(f"building #{i} {b.as_list()} intersects building #{j} {buildings[j].as_list()}")
         fp[...] = i
@@ -181,17 +165,10 @@ def _frozen(grid: np.ndarray, *, fresh: bool = False) -> np.ndarray:
     return grid
 
 
-# --------------------------------------------------------------------------- World
-
-
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False, repr=False)
 class World:
-    """A 3D grid world of size ``(nx, ny, nz)``; `grid[x, y, z]` is True on building cells.
-
-    `buildings` lists the boxes the world was made of, or is empty for a world made from a raw
-    grid. Prefer the class-method constructors; direct construction validates everything too.
-    Worlds compare equal when size, grid and buildings are equal.
-    """
+    """A 3D grid world of size ``(nx, ny, nz)``; `buildings` lists the boxes it was made of (none for a
+    world made from a raw grid)."""
 
     size: Cell
     grid: np.ndarray
@@ -222,8 +199,6 @@ class World:
 
     def __repr__(self) -> str:
         return f"World(size={self.size}, buildings={len(self.buildings)}, building_cells={int(self.grid.sum())})"
-
-    # ----------------------------------------------------------------------- constructors
 
     @classmethod
     def generate(cls, size: Cell = (10, 10, 10), rng: np.random.Generator | int | None = None, *,
@@ -295,9 +270,8 @@ class World:
         arr = np.asarray(grid)
         if arr.ndim != 3:
             raise UsageError(f"a world grid must be 3-dimensional, got shape {arr.shape}")
-        if arr.dtype != np.bool_:
-            if not np.issubdtype(arr.dtype, np.integer) or not np.isin(arr, (0, 1)).all():
-                raise UsageError(f"a world grid must be boolean or 0/1 integers, got dtype {arr.dtype}")
+        if arr.dtype != np.bool_ and not (np.issubdtype(arr.dtype, np.integer) and np.isin(arr, (0, 1)).all()):
+            raise UsageError(f"a world grid must be boolean or 0/1 integers, got dtype {arr.dtype}")
         return cls(size=_size(arr.shape), grid=_frozen(arr))
 
     @classmethod
@@ -312,35 +286,28 @@ class World:
 
     @classmethod
     def _trusted(cls, size: Cell, grid: np.ndarray, buildings: tuple[Building, ...]) -> World:
-        """Build without re-validating what the caller already guarantees."""
+        """Without re-validating what the caller guarantees."""
         world = object.__new__(cls)
         object.__setattr__(world, "size", size)
         object.__setattr__(world, "grid", _frozen(grid, fresh=True))
         object.__setattr__(world, "buildings", buildings)
         return world
 
-    # ----------------------------------------------------------------------- files
-
     def to_json(self) -> dict:
         """The JSON form: ``{"format": "dronesim-world", "version": 1, "size": [nx, ny, nz], ...}``
         with ``"buildings": [[x, y, length, width, height], ...]``, or, for a raw-grid world,
         ``"cells": [[x, y, z], ...]`` listing every building cell (C order)."""
-        data: dict = {"format": FORMAT, "version": FORMAT_VERSION, "size": list(self.size)}
-        if self.buildings:
-            data["buildings"] = [b.as_list() for b in self.buildings]
-        else:
-            data["cells"] = np.argwhere(self.grid).tolist()
-        return data
+        listed = ({"buildings": [b.as_list() for b in self.buildings]} if self.buildings
+                  else {"cells": np.argwhere(self.grid).tolist()})
+        return {"format": FORMAT, "version": FORMAT_VERSION, "size": list(self.size), **listed}
 
     @classmethod
     def from_json(cls, data: dict) -> World:
-        """The inverse of `to_json`; `UsageError` naming the problem on any bad input.
-        Unknown extra keys (e.g. a comment) are ignored."""
+        """The inverse of `to_json`; `UsageError` naming the problem. Unknown extra keys (a comment) are ignored."""
         if not isinstance(data, dict):
             raise UsageError(f"a world must be a JSON object, got {type(data).__name__}")
-        for key in ("format", "version", "size"):
-            if key not in data:
-                raise UsageError(f"a world needs the key {key!r}")
+        if missing := [key for key in ("format", "version", "size") if key not in data]:
+            raise UsageError(f"a world needs the key {missing[0]!r}")
         if data["format"] != FORMAT:
             raise UsageError(f"format must be {FORMAT!r}, got {data['format']!r}")
         if type(data["version"]) is not int or data["version"] != FORMAT_VERSION:
@@ -389,20 +356,16 @@ class World:
 
     def save(self, path: str | Path) -> None:
         """Write the world file, one building (or cell) per line; `UsageError` if unwritable."""
-        data = self.to_json()
-        key = "buildings" if "buildings" in data else "cells"
-        head = ", ".join(f"{json.dumps(k)}: {json.dumps(v)}" for k, v in data.items() if k != key)
-        rows = ",\n".join("  " + json.dumps(item) for item in data[key])
-        text = f"{{{head}, {json.dumps(key)}: [\n{rows}\n]}}\n" if rows else f"{{{head}, {json.dumps(key)}: []}}\n"
+        *head, (key, items) = self.to_json().items()  # (the list comes last)
+        rows = ",\n".join(f"  {json.dumps(item)}" for item in items)
+        body = f"[\n{rows}\n]" if rows else "[]"
+        text = f'{json.dumps(dict(head))[:-1]}, "{key}": {body}}}\n'
         try:
             Path(path).write_text(text, encoding="utf-8")
         except OSError as exc:
             raise UsageError(f"cannot write world file {str(path)!r}: {exc}") from None
 
-    # ----------------------------------------------------------------------- queries
-
     def contains(self, cell: Cell) -> bool:
-        """Whether `cell` is inside the world's bounds."""
         x, y, z = cell
         nx, ny, nz = self.size
         return 0 <= x < nx and 0 <= y < ny and 0 <= z < nz
@@ -415,12 +378,7 @@ class World:
         """The seed's ``whatInside``: OUTSIDE beyond the bounds, else BUILDING or EMPTY, with the
         drones `occupants` places in that cell (sorted), whatever the kind."""
         cell = _cell(cell)
-        if not self.contains(cell):
-            kind = CellKind.OUTSIDE
-        elif self.grid[cell]:
-            kind = CellKind.BUILDING
-        else:
-            kind = CellKind.EMPTY
+        kind = CellKind.OUTSIDE if not self.contains(cell) else CellKind.BUILDING if self.grid[cell] else CellKind.EMPTY
         return CellInfo(pos=cell, kind=kind, drones=tuple(sorted(occupants.get(cell, ()))))
 
     def free_neighbours(self, cell: Cell) -> tuple[Cell, ...]:
@@ -436,52 +394,36 @@ class World:
         start, goal = _cell(start, "start"), _cell(goal, "goal")
         if not self.contains(start) or not self.contains(goal) or self.grid[start] or self.grid[goal]:
             return None
-        if start == goal:
-            return 0
         # The free map padded with a blocked border, so flat-index neighbours need no bounds checks.
         unseen = np.pad(~self.grid, 1).ravel()
         sx, sy, steps = padded_steps(self.size)
         offsets = np.array(steps, dtype=np.int64)
         s, g = ((c[0] + 1) * sx + (c[1] + 1) * sy + c[2] + 1 for c in (start, goal))
         unseen[s] = False
-        frontier = np.array([s], dtype=np.int64)
-        distance = 0
-        while frontier.size:
-            distance += 1
+        frontier, distance = np.array([s], dtype=np.int64), 0
+        while unseen[g] and frontier.size:
             nxt = (frontier[:, None] + offsets).ravel()
-            nxt = np.unique(nxt[unseen[nxt]])
-            unseen[nxt] = False
-            if not unseen[g]:
-                return distance
-            frontier = nxt
-        return None
+            frontier = np.unique(nxt[unseen[nxt]])
+            unseen[frontier] = False
+            distance += 1
+        return None if unseen[g] else distance
 
     def packed(self) -> bytes:
-        """The grid as packed bits, as in the MAP message: ``np.packbits(grid.ravel(order="C"))``."""
+        """The grid as the MAP message's packed bits."""
         return np.packbits(self.grid.ravel(order="C")).tobytes()
-
-    # ----------------------------------------------------------------------- drawing
 
     def draw(self, drones: Mapping[str, Cell] = {}, *, targets: Mapping[str, Cell] = {}, trail: Iterable[Cell] = (),
              floors: Iterable[int] | None = None, compact: bool | None = None) -> str:
-        """The seed's ``drawEnv``: the world floor by floor, bottom-up (``z = 0`` first), each floor
-        a block headed ``z = k`` with one row per x and one column per y, (0,0) top-left; blocks are
-        separated by a blank line and a one-line legend ends the text (no trailing newline).
-
-        Full mode (default when nx and ny are <= 16): the seed's trigrams separated by spaces,
-        ``EPT`` empty, ``BLK`` building, ``TGT`` target, ``+++`` trail, the drone's id (``D01``),
-        ``!!!`` for several drones (columns widen for ids longer than 3 characters). Compact mode
-        (default for larger worlds): one character per cell, ``.`` ``#`` ``X`` ``*``, a drone's
-        last id character, ``!`` for several drones. Drones hide targets, which hide trails,
-        which hide buildings. `floors` restricts the drawn floors; cells outside the world are
-        not drawn.
+        """The seed's ``drawEnv``: the `floors` (default all), bottom-up, each a block headed ``z = k`` with
+        one row per x and one column per y, blocks separated by a blank line, then the legend (`_LABELS`).
+        Full mode (default when nx and ny are <= 16): the seed's trigrams, a drone's id (columns widen for
+        ids longer than 3 characters); compact mode: one character per cell, a drone's last id character.
+        Drones hide targets, which hide trails, which hide buildings; cells outside the world are not drawn.
         """
         nx, ny, nz = self.size
-        if compact is None:
-            compact = nx > 16 or ny > 16
+        compact = nx > 16 or ny > 16 if compact is None else compact
         zs = list(range(nz)) if floors is None else sorted({checked_int(z, "floor") for z in floors})
-        bad = [z for z in zs if not 0 <= z < nz]
-        if bad:
+        if bad := [z for z in zs if not 0 <= z < nz]:
             raise UsageError(f"floors {bad} are outside 0..{nz - 1}")
 
         # marks[z][(x, y)] = label, written in increasing priority.
@@ -509,10 +451,7 @@ class World:
             cells = np.where(self.grid[:, :, z], block, empty).astype(f"<U{width}")
             for (x, y), label in marks.get(z, {}).items():
                 cells[x, y] = label
-            if compact:
-                rows = ["".join(row) for row in cells.tolist()]
-            else:
-                rows = [" ".join(s.ljust(width) for s in row).rstrip() for row in cells.tolist()]
+            rows = [("" if compact else " ").join(s.ljust(width) for s in row).rstrip() for row in cells.tolist()]
             blocks.append("\n".join([f"z = {z}", *rows]))
         return "\n\n".join([*blocks, legend])
 
