@@ -1,9 +1,7 @@
-"""The environment (the seed's ENV), pure: no network, no clock.
-
-`Environment` is its state, the static world plus where each drone is: `answer` is the seed's
-whatInside for an ASK; `apply` is moveDrone, returning the changed cells (the UPD); `sync` sets the
-drones from the observer's STATUS at the end of a turn (the dead and lost are removed from the grid).
-`EnvironmentProcess` is its protocol.
+"""The environment (the seed's ENV), pure: no network, no clock. `Environment` is its state, the static world
+plus where each drone is: `answer` is the seed's whatInside for an ASK; `apply` is moveDrone, returning the
+changed cells (the UPD); `sync` sets the drones from the observer's STATUS at the end of a turn (the dead and
+lost are removed). `EnvironmentProcess` is its protocol.
 """
 
 from __future__ import annotations
@@ -83,8 +81,7 @@ class Environment:
         """The drones in each cell of `linear` (grid indexes of inside cells), each sorted by id."""
         lo = np.searchsorted(self._linear, linear, "left").tolist()
         hi = np.searchsorted(self._linear, linear, "right").tolist()
-        numbers = self._numbers
-        return [tuple(sorted(drone_name(n) for n in numbers[a:b].tolist())) if b > a else () for a, b in zip(lo, hi)]
+        return [tuple(sorted(map(drone_name, self._numbers[a:b].tolist()))) if b > a else () for a, b in zip(lo, hi)]
 
     def _at(self, cells: Sequence[Cell]) -> dict[Cell, tuple[str, ...]]:
         """The occupied cells among `cells` and their drones (as `World.what_inside` takes them)."""
@@ -123,10 +120,8 @@ class Environment:
             infos = self.answer(asked_cells(cells, around))
             pairs = tuple((n, d) for n, info in enumerate(infos) for d in info.drones) if drones else ()
             return bytes(info.kind for info in infos), pairs
-        a = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
-        if len(around):
-            ring = np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + np.asarray(AROUND, dtype=np.int64)
-            a = np.concatenate([a, ring.reshape(-1, 3)])
+        ring = np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + np.asarray(AROUND, dtype=np.int64)
+        a = np.concatenate([np.asarray(cells, dtype=np.int64).reshape(-1, 3), ring.reshape(-1, 3)])
         inside = inside_rows(a, self.world.size)
         kinds = self.kinds(a, inside)
         if not drones or not len(self._linear):
@@ -137,15 +132,13 @@ class Environment:
         return kinds.tobytes(), pairs
 
     def apply(self, moves: MoveTable) -> tuple[CellInfo, ...]:
-        """Move the drones; return what is now in every changed cell (the UPD): see `move`."""
+        """`move`, then what is now in every changed cell (the UPD)."""
         return self.answer(self.move(moves))
 
     def move(self, moves: MoveTable) -> list[Cell]:
-        """Move the drones; return every changed cell (sources and in-world destinations), sorted.
-
-        All moves are checked before any is applied: a move whose source is not where this
-        environment has the drone is refused whole (`UnknownEntity` / `OutOfRange`).
-        """
+        """Move the drones; return every changed cell (sources and in-world destinations), sorted. All moves
+        are checked first: one whose source is not where the drone is refuses them all (`UnknownEntity` /
+        `OutOfRange`)."""
         numbers, moved = self._numbers, moves.numbers.astype(np.int64)
         src, dst = moves.column("src").astype(np.int64), moves.column("dst").astype(np.int64)
         by_number = np.argsort(numbers)  # (numbers are distinct)
@@ -168,12 +161,8 @@ class Environment:
 
     def sync(self, status: Status) -> None:
         """Take the drones' positions from the observer's STATUS: alive ones in the world, others removed."""
-        table = status.drones
-        alive = table.alive_mask()
-        self._set(table.numbers[alive].astype(np.int64), table.column("pos")[alive].astype(np.int64))
-
-
-# --------------------------------------------------------------------------- the environment's protocol
+        alive = status.drones.alive_mask()
+        self._set(status.drones.numbers[alive].astype(np.int64), status.drones.column("pos")[alive].astype(np.int64))
 
 
 @dataclass(frozen=True, slots=True)
@@ -245,8 +234,6 @@ class EnvironmentProcess:
         return (f"World {world.size} seed {self.spec.seed}, {len(world.buildings)} buildings, "
                 f"{int(world.grid.sum())} building cells:\n{world.draw(self.env.drones)}")
 
-    # inputs
-
     def asked(self, query: object, msg: Ask | MapRequest) -> list[Effect]:
         """A query to answer (through `Reply` or `Fail` with `query`)."""
         match msg:
@@ -289,8 +276,6 @@ class EnvironmentProcess:
         """Whether someone subscribes to the UPD now: the environment follows the ENV phase's moves then."""
         changed, self._listened = matching != self._listened, matching
         return [Follow(moves=matching)] if changed else []
-
-    # the protocol
 
     def _status(self, status: Status) -> list[Effect]:
         self._unsynced = status

@@ -13,6 +13,7 @@ import re
 from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass
+from itertools import takewhile
 
 import numpy as np
 
@@ -80,13 +81,8 @@ def turns_to_answer_ahead(plan: Plan, turn: int, answered: int, *, last: int | N
                           horizon: int = ANSWER_AHEAD) -> list[int]:
     """The turns after `turn` a scripted station can answer now: up to `horizon` of them, before the
     plan's next change (and before `last`), except those already answered (up to `answered`)."""
-    out = []
-    for u in range(turn + 1, turn + horizon + 1):
-        if plan.at(u) or (last is not None and u >= last):
-            break
-        if u > answered:
-            out.append(u)
-    return out
+    quiet = takewhile(lambda u: not plan.at(u) and (last is None or u < last), range(turn + 1, turn + horizon + 1))
+    return [u for u in quiet if u > answered]
 
 
 def _plan_items(texts: Iterable[str], size: Cell, default_drone: str,
@@ -231,19 +227,13 @@ class Ground:
     starts: dict[str, Cell]
     plan: Plan
 
-    @property
-    def drones(self) -> list[str]:
-        return list(self.starts)
-
     @classmethod
     def from_welcome(cls, welcome: Welcome, plan_texts: Iterable[str], script: str | None) -> Ground:
-        size = welcome.world.size
-        starts = welcome.starts.cells()
-        drones = list(starts)
+        size, starts = welcome.world.size, welcome.starts.cells()
         world = build_world(welcome.world, starts.values())
-        plan = Plan.load(script, size, world) if script else Plan.parse(plan_texts, size, drones[0], world)
-        if unknown := plan.drones() - set(drones):
-            raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
+        plan = Plan.load(script, size, world) if script else Plan.parse(plan_texts, size, next(iter(starts)), world)
+        if unknown := plan.drones() - starts.keys():
+            raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(starts)}")
         return cls(world, starts, plan)
 
 
@@ -288,9 +278,6 @@ class Console:
                 return new, Intent.CONTINUE
 
 
-# --------------------------------------------------------------------------- the protocol
-
-
 #: Seconds a station waits after OVER for the last STATUS (published before OVER, but on another key).
 FINAL_STATUS_WAIT = 5.0
 #: End reasons whose last turn produced a STATUS (the others end a turn before its STATUS).
@@ -323,21 +310,18 @@ Effect = Send | Show | End
 
 
 class Station:
-    """The ground station's side of the protocol, shared by the scripted, the interactive and the web
-    station (and the benchmark's): fed the coordinator's messages, it returns what to do. No network,
-    no clock (times are given: seconds of any monotonic clock).
-
-    Each GCS phase it answers with a DONE carrying the targets that change (`gcs_done`): those of its plan
-    taking effect that turn and the person's. Who decides, and when:
-    - a script (neither `console` nor `hold`) answers at once from its plan, with intent FINAL from the
-      plan's last turn (or, given `quit_at`, CONTINUE until that turn, then QUIT: the benchmark), and
-      answers ahead the coming phases in which its plan has nothing new (`turns_to_answer_ahead`): the
-      coordinator takes them without a round trip, and without announcing them, so it goes by STATUS;
-    - a console (`console`) asks its person at once, in the phase;
-    - a held station (`hold`: the web page) keeps the phase `pending` until `answer` is called.
-    It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the
-    targets in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last
-    turn is in, or `FINAL_STATUS_WAIT` seconds after OVER.
+    """The ground station's side of the protocol, shared by the scripted, the interactive, the web and the
+    benchmark's station: fed the coordinator's messages, it returns what to do. No network, no clock (times
+    are seconds of any monotonic clock). Each GCS phase it answers with a DONE carrying the targets that
+    change (`gcs_done`), its plan's of that turn and the person's. Who decides, and when:
+    - a script (neither `console` nor `hold`) answers at once from its plan, intent FINAL from the plan's
+      last turn (given `quit_at`: CONTINUE until that turn, then QUIT), and answers ahead the coming phases
+      in which its plan has nothing new (`turns_to_answer_ahead`): the coordinator takes them without a
+      round trip and without announcing them, so the station goes by STATUS;
+    - a console asks its person, in the phase; a held station (`hold`: the web page) keeps the phase
+      `pending` until `answer` is called.
+    It forgets the drones that died or were lost, takes over the targets in force of a game it joins late,
+    and ends (`End`) after OVER once the STATUS of the last turn is in, or `FINAL_STATUS_WAIT` s after OVER.
     """
 
     def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
@@ -363,8 +347,6 @@ class Station:
     def status_turn(self) -> int:
         """The turn of the last STATUS (-1 before the first)."""
         return -1 if self.tracks.last is None else self.tracks.last.turn
-
-    # ------------------------------------------------------------------ events
 
     def receive(self, msg: Message, now: float) -> list[Effect]:
         """A message from the coordinator (TURN, STATUS or OVER), already screened by its turn clock."""
@@ -410,8 +392,6 @@ class Station:
         self.answered, self.pending = max(self.answered, turn), None
         return [Send(gcs_done(turn, self.wanted, intent, in_force))]
 
-    # ------------------------------------------------------------------ inside
-
     def intent(self, turn: int) -> Intent:
         """A script's intent at `turn`."""
         if self.quit_at is not None:
@@ -428,11 +408,9 @@ class Station:
             if self.hold:
                 self.pending = turn
                 return []
-            if self.console is not None:
-                new, intent = self.console.ask(turn, self.wanted, self.gone)
-                effects = self.answer(turn, intent, new)
-            else:
-                effects = self.answer(turn, self.intent(turn))
+            new, intent = (self.console.ask(turn, self.wanted, self.gone) if self.console is not None
+                           else ({}, self.intent(turn)))
+            effects = self.answer(turn, intent, new)
         self.answered = max(self.answered, turn)
         return effects + self._ahead(turn)
 
@@ -454,13 +432,10 @@ class Station:
         # the coming turn was answered ahead: no TURN(GCS) comes for it, its STATUS says it has begun
         effects = self._ahead(status.turn + 1) if status.turn + 1 <= self.answered else []
         self.tracks.add(status)
-        table = status.drones
-        alive = table.alive_mask()
+        alive = status.drones.alive_mask()
         if not alive.all():
-            ended = {drone_name(n) for n in table.numbers[~alive].tolist()}
-            self.gone.update(ended)
-            for d in ended & self.wanted.keys():
-                del self.wanted[d]
+            self.gone.update(drone_name(n) for n in status.drones.numbers[~alive].tolist())
+            self.wanted = {d: c for d, c in self.wanted.items() if d not in self.gone}
         if self._joining:  # a late joiner takes over the targets in force (after that, they are its own)
             self._joining = False
             for d, c in targets_of(status).items():
@@ -485,8 +460,6 @@ class Station:
         assert self.over is not None
         self.ended, self._over_since = True, None
         return End(self.over)
-
-    # ------------------------------------------------------------------ for people
 
     def opening(self) -> str:
         """The world and the drones' floors at the start."""

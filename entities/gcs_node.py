@@ -137,7 +137,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
         with waking(partial(inbox.post, None), *([lines.wake] if lines else [])):  # a signal ends any wait
             member = join(session, inbox, logger, connect_timeout=connect_timeout, grace=grace)
             ground = Ground.from_welcome(member.welcome, plan_texts, script)
-            console = Console(ground.world, ground.drones, read=lines.read) if lines else None
+            console = Console(ground.world, list(ground.starts), read=lines.read) if lines else None
             station = Station(ground, console=console, verbose=not quiet)
             if draw:
                 print(station.opening(), flush=True)
