@@ -1,10 +1,9 @@
 """What the browser ground station knows and shows, and what it decides. Pure: no network, no clock.
 
-`GroundState` is owned by one thread (the Zenoh main loop). It is fed the coordinator's TURN, STATUS
-and OVER, and the human's commands (set a target, pause, resume, step, pace, quit), and it says when
-the ground station answers its GCS phase; what it answers is the protocol's (`entities.gcs.Station`, as
-every ground station): one DONE carrying the alive drones' targets that differ from those in force (the
-last STATUS's). `snapshot()` is the JSON the page renders.
+`GroundState`, owned by one thread (the Zenoh main loop), is fed the coordinator's TURN, STATUS and OVER
+and the human's commands (set a target, pause, resume, step, pace, quit), and says when the ground station
+answers its GCS phase; what it answers is the protocol's (`entities.gcs.Station`). `snapshot()` is the JSON
+the page renders.
 
 Pacing: a human cannot click between turns that take milliseconds, so the GCS phase is answered at most
 every `pace` seconds, and is *held* (not answered) while there is nothing to do -- no alive drone has a
@@ -67,7 +66,6 @@ class Rejected(Exception):
 
 
 def view_of(s: DroneStatus) -> str:
-    """alive / reached / unreachable / dead / lost."""
     if s.state is not DroneState.ALIVE:
         return s.state.value.lower()  # DEAD, LOST
     return {Note.REACHED: REACHED, Note.UNREACHABLE: UNREACHABLE}.get(s.note, ALIVE)
@@ -108,8 +106,7 @@ def drone_json(drone: str, pos: Cell, status: str, cause: Cause, target: Cell | 
             "target": None if target is None else list(target)}
 
 
-def entry(turn: int, kind: str, text: str) -> dict:
-    """A line of the page's log."""
+def entry(turn: int, kind: str, text: str) -> dict:  # a line of the page's log
     return {"turn": turn, "kind": kind, "text": text}
 
 
@@ -150,16 +147,14 @@ class Refresh:
 
 
 class GroundState:
-    """The live ground station's state (see the module doc) around the protocol's `Station` (held: the
-    page's pacing says when it answers). Times are seconds of any monotonic clock."""
+    """The live ground station's state around the protocol's `Station` (held: the page's pacing says when it
+    answers). `intro` (the coordinator's welcome) starts the page's log. Times are seconds of any monotonic clock."""
 
     def __init__(self, ground: Ground, *, pace: float = 0.5, title: str = "", intro: str = "") -> None:
-        """`intro`: the first line of the page's log (the coordinator's welcome), with the game's `describe`."""
         self.station = Station(ground, hold=True)
         self.world = ground.world
         self.title = title
-        self.drones: dict[str, DroneView] = {d: DroneView(pos=c, trail=[c])
-                                             for d, c in sorted(ground.starts.items())}
+        self.drones: dict[str, DroneView] = {d: DroneView(pos=c, trail=[c]) for d, c in sorted(ground.starts.items())}
         self.turn = 0  # the turn in progress (the latest TURN seen)
         self.phase: str | None = None
         self.pending_since = 0.0
@@ -173,7 +168,6 @@ class GroundState:
             self.note("info", f"{intro}; {self.describe()}")
 
     def describe(self) -> str:
-        """The world and the drones of the game, in a line."""
         return (f"world {'x'.join(map(str, self.world.size))} with {int(self.world.grid.sum())} building cells; "
                 f"drones {', '.join(self.drones)}")
 
@@ -193,22 +187,17 @@ class GroundState:
     def status_turn(self) -> int:
         return self.station.status_turn
 
-    # ------------------------------------------------------------------ helpers
-
     @staticmethod
     def _check_pace(value: object) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not PACE_RANGE[0] <= float(value) <= PACE_RANGE[1]:
-            raise Rejected(f"pace must be a number of seconds in {PACE_RANGE[0]:g}..{PACE_RANGE[1]:g}, got {value!r}",
-                           400)
+        lo, hi = PACE_RANGE
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= float(value) <= hi:
+            raise Rejected(f"pace must be a number of seconds in {lo:g}..{hi:g}, got {value!r}", 400)
         return float(value)
 
     def note(self, kind: str, text: str) -> None:
         """An event from outside the game's messages (connection, the human's commands...)."""
         self.log.append(entry(self.turn, kind, text))
         self.seq += 1
-
-    # ------------------------------------------------------------------ from the coordinator
 
     def receive(self, msg: Message, now: float) -> list[Effect]:
         """A message from the coordinator (TURN of any phase, STATUS, OVER)."""
@@ -220,9 +209,8 @@ class GroundState:
                 effects = self.station.receive(msg, now)
                 if self.pending is not None and self.pending != was:
                     self.pending_since = now
-                for d, c in self.wanted.items():
-                    if before.get(d) != c:
-                        self.log.append(entry(self.turn, "target", f"scripted target of {d}: {fmt(c)}"))
+                self.log.extend(entry(self.turn, "target", f"scripted target of {d}: {fmt(c)}")
+                                for d, c in self.wanted.items() if before.get(d) != c)
             case Status() if msg.turn >= self.status_turn:
                 self._show_status(msg)
                 effects = self.station.receive(msg, now)
@@ -235,7 +223,6 @@ class GroundState:
         return effects
 
     def admitted(self, welcome: Welcome) -> list[Effect]:
-        """Admitted again: the coordinator came back."""
         self.note("info", "the coordinator came back: connected again")
         return self.station.admitted(welcome)
 
@@ -252,8 +239,6 @@ class GroundState:
                 del view.trail[:-TRAIL_LIMIT]
             if view.status not in (was, ALIVE):
                 self.log.append(change_entry(msg.turn, s.drone, view.status, view.cause, view.pos, view.target))
-
-    # ------------------------------------------------------------------ from the human
 
     def set_target(self, drone: object, cell: Cell) -> dict:
         """Checked: a known, alive drone, a cell inside the world and not a building's (the seed's correctForm)."""
@@ -296,8 +281,6 @@ class GroundState:
                 raise Rejected(f"unknown action {action!r}: use pause, resume, step, pace or quit", 400)
         self.note("control", text)
         return {"ok": True, "text": text}
-
-    # ------------------------------------------------------------------ the GCS phase
 
     def busy(self) -> bool:
         """Whether turns must go on by themselves: a drone has a target it has not reached (or found
@@ -358,8 +341,6 @@ class GroundState:
         self.last_answer, self.step_requested, self.quit_sent = now, False, self.quit_requested
         self.seq += 1
         return self.station.answer(self.pending, Intent.QUIT if self.quit_requested else Intent.CONTINUE)
-
-    # ------------------------------------------------------------------ for the page
 
     def snapshot(self) -> dict:
         code, text = self.waiting()

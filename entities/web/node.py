@@ -1,12 +1,9 @@
 """``dronesim gcs --web [HOST:]PORT``: the ground station as a web page; ``--replay JOURNAL`` plays a journal.
 
-Live mode holds a Zenoh session like the terminal ground station (same admission, same protocol,
-`entities.gcs.Station`: each GCS phase one DONE carrying the targets that change, intent CONTINUE, or QUIT
-from the page's button). One main thread owns the `GroundState` (`gcs_node.play`): it drains one queue fed
-by the Zenoh callbacks (TURN, STATUS, OVER, presence) and by the HTTP threads (the human's commands, each
-answered through its own reply queue). After every change it publishes the state to the `Hub`, which
-streams it to every page (Server-Sent Events). After OVER it serves the final state, then exits 0 (or keeps
-the page up for ``--linger`` seconds).
+Live mode is the terminal ground station's admission and protocol (`gcs_node.play`, `entities.gcs.Station`)
+on one main thread that owns the `GroundState`: it drains one queue fed by the Zenoh callbacks and by the
+HTTP threads (the human's commands, each answered through its own reply queue), and publishes the state to
+the `Hub` after every change. After OVER it serves the final state, then exits 0 (after ``--linger`` seconds).
 """
 
 from __future__ import annotations
@@ -49,9 +46,6 @@ def add_web_args(parser: argparse.ArgumentParser) -> None:
 
 def wants_web(args: argparse.Namespace) -> bool:
     return getattr(args, "web", None) is not None or getattr(args, "replay", None) is not None
-
-
-# --------------------------------------------------------------------------- live mode: the bridge
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,9 +116,6 @@ def carry_out(state: GroundState, cmd: object) -> None:
         cmd.reply.put(result)
 
 
-# --------------------------------------------------------------------------- live mode: the loop
-
-
 def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[str, int]) -> Over:
     conf, keys, pace, hub = zenoh_config(args), Keys(args.root), check_pace_arg(args.pace), Hub()
     with zenoh.open(conf) as session:
@@ -164,9 +155,6 @@ def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[st
     return over
 
 
-# --------------------------------------------------------------------------- replay mode
-
-
 class ReplayBackend:
     mode = "replay"
 
@@ -197,9 +185,6 @@ def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: lo
         server.stop(drain=1.0)
 
 
-# --------------------------------------------------------------------------- command line
-
-
 def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
     """`dronesim gcs --web ...` (its targets, scenario's included, in `args.targets`): 0 after OVER or at the
     end of a replay's `--linger`; a UsageError for bad flags. Stopped by a signal (gcs_node.cli), it exits
@@ -211,8 +196,8 @@ def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
         raise UsageError(f"--linger must be >= 0, got {args.linger:g}")
     if args.replay is not None:
         run_replay(args.replay, address=address, linger=args.linger, logger=logger)
-        return 0
-    run_live(args, logger, address)
+    else:
+        run_live(args, logger, address)
     return 0
 
 

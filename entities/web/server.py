@@ -1,18 +1,7 @@
-"""The web ground station's HTTP side: standard library only (ThreadingHTTPServer), no Zenoh here.
-
-Routes (every error is a JSON ``{"error": "..."}`` with a 4xx/5xx status, never a crash):
-
-  GET  /                 the page (static/index.html); /app.js, /style.css: its assets
-  GET  /api/world        the static world: size, floors ('#' building, '.' empty), mode
-  GET  /api/state        the latest full state (live mode)
-  GET  /api/events       Server-Sent Events: the full state at once, then every new state (``event: state``)
-  GET  /api/replay       the journal's frames (replay mode)
-  POST /api/target       {"drone": "D01", "cell": [x, y, z] | "x,y,z"}
-  POST /api/control      {"action": "pause" | "resume" | "step" | "quit" | "pace", "value": seconds}
-
-A `Backend` does the work: in live mode it hands each command to the Zenoh main thread through a queue
-and waits for its answer (web/node.py); the HTTP threads never touch the game state. The `Hub` keeps the
-latest state and feeds every SSE client; a reconnecting page gets the full state at once.
+"""The web ground station's HTTP side (`ROUTES`; the API in docs/web-gcs.md): standard library only, no Zenoh.
+Every error is a JSON ``{"error": "..."}`` with a 4xx/5xx status, never a crash. A `Backend` does the work (in
+live mode it hands each command to the Zenoh main thread and waits for its answer: the HTTP threads never touch
+the game state); the `Hub` keeps the latest state and feeds every SSE client, a reconnecting page at once.
 """
 
 from __future__ import annotations
@@ -119,8 +108,6 @@ class _Handler(BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.0"  # one request per connection: simple, and an SSE stream ends with it
     server: WebServer
 
-    # ------------------------------------------------------------------ plumbing
-
     def log_message(self, format: str, *args: object) -> None:  # noqa: A002 (the base class's name)
         self.server.log.debug("%s %s", self.address_string(), format % args)
 
@@ -131,8 +118,7 @@ class _Handler(BaseHTTPRequestHandler):
         self._json(code, {"error": message or self.responses.get(code, ("error",))[0]})
 
     def _json(self, code: int, body: dict | str) -> None:
-        data = (body if isinstance(body, str) else json.dumps(body)).encode()
-        self._send(code, data, "application/json")
+        self._send(code, (body if isinstance(body, str) else json.dumps(body)).encode(), "application/json")
 
     def _send(self, code: int, data: bytes, ctype: str) -> None:
         self.send_response(code)
@@ -146,12 +132,9 @@ class _Handler(BaseHTTPRequestHandler):
     def _route(self) -> str:
         return urlsplit(self.path).path
 
-    # ------------------------------------------------------------------ methods
-
-    ROUTES = {
-        "/": ("GET", "_file"), **{f"/{name}": ("GET", "_file") for name in STATIC},
-        "/api/world": ("GET", "_world"), "/api/state": ("GET", "_state"), "/api/events": ("GET", "_events"),
-        "/api/replay": ("GET", "_replay"),
+    ROUTES = {  # path -> (method, handler)
+        "/": ("GET", "_file"), **{f"/{name}": ("GET", "_file") for name in STATIC}, "/api/world": ("GET", "_world"),
+        "/api/state": ("GET", "_state"), "/api/events": ("GET", "_events"), "/api/replay": ("GET", "_replay"),
         "/api/target": ("POST", "_target"), "/api/control": ("POST", "_control"),
     }
 
@@ -177,8 +160,6 @@ class _Handler(BaseHTTPRequestHandler):
                 pass
 
     do_GET = do_POST = do_PUT = do_DELETE = do_PATCH = _dispatch
-
-    # ------------------------------------------------------------------ resources
 
     def _file(self) -> None:
         name = self._route().lstrip("/") or "index.html"
@@ -236,8 +217,6 @@ class _Handler(BaseHTTPRequestHandler):
                 self.wfile.flush()
         finally:
             hub.unsubscribe(q)
-
-    # ------------------------------------------------------------------ commands
 
     def _body(self, fields: set[str], hint: str) -> dict:
         """The request's JSON object, of some of `fields` (`hint` says which to send)."""
