@@ -17,7 +17,7 @@ from __future__ import annotations
 import re
 from collections import deque
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from schema import (
     Cause,
@@ -128,19 +128,6 @@ def over_entry(turn: int, reason: str, text: str) -> dict:
     return entry(turn, "over", f"GAME OVER at turn {turn}: {reason}" + (f" - {text}" if text else ""))
 
 
-@dataclass(slots=True)
-class DroneView:
-    pos: Cell
-    status: str = ALIVE
-    cause: Cause = Cause.NONE
-    target: Cell | None = None  # in force (the coordinator's, from STATUS)
-    trail: list[Cell] = field(default_factory=list)
-
-    @property
-    def alive(self) -> bool:
-        return self.status not in (DEAD, LOST)
-
-
 @dataclass(frozen=True, slots=True)
 class Refresh:
     """The state the page shows has changed: send it the new snapshot."""
@@ -154,7 +141,8 @@ class GroundState:
         self.station = Station(ground, hold=True)
         self.world = ground.world
         self.title = title
-        self.drones: dict[str, DroneView] = {d: DroneView(pos=c, trail=[c]) for d, c in sorted(ground.starts.items())}
+        self.drones = {d: DroneStatus(drone=d, pos=c, state=DroneState.ALIVE) for d, c in sorted(ground.starts.items())}
+        self.trails = {d: [c] for d, c in sorted(ground.starts.items())}  # each drone's cells, the last where it is
         self.turn = 0  # the turn in progress (the latest TURN seen)
         self.phase: str | None = None
         self.pending_since = 0.0
@@ -227,18 +215,15 @@ class GroundState:
         return self.station.admitted(welcome)
 
     def _show_status(self, msg: Status) -> None:
-        for s in msg.drones:
-            view = self.drones.get(s.drone)
-            if view is None:  # not in our Welcome (cannot happen with a correct coordinator): show it anyway
-                view = self.drones[s.drone] = DroneView(pos=s.pos, trail=[s.pos])
-            was = view.status
-            view.status, view.cause, view.target = view_of(s), s.cause, s.target
-            if view.pos != s.pos:  # (the trail ends where the drone is)
-                view.pos = s.pos
-                view.trail.append(s.pos)
-                del view.trail[:-TRAIL_LIMIT]
-            if view.status not in (was, ALIVE):
-                self.log.append(change_entry(msg.turn, s.drone, view.status, view.cause, view.pos, view.target))
+        for s in msg.drones:  # (one not in our Welcome, which a correct coordinator never sends, is shown too)
+            was = self.drones.get(s.drone)
+            self.drones[s.drone] = s
+            trail = self.trails.setdefault(s.drone, [s.pos])
+            if trail[-1] != s.pos:
+                trail.append(s.pos)
+                del trail[:-TRAIL_LIMIT]
+            if (status := view_of(s)) not in (ALIVE if was is None else view_of(was), ALIVE):
+                self.log.append(change_entry(msg.turn, s.drone, status, s.cause, s.pos, s.target))
 
     def set_target(self, drone: object, cell: Cell) -> dict:
         """Checked: a known, alive drone, a cell inside the world and not a building's (the seed's correctForm)."""
@@ -250,7 +235,7 @@ class GroundState:
         if view is None:
             raise Rejected(f"unknown drone {drone}: this game flies {', '.join(self.drones)}")
         if not view.alive:
-            raise Rejected(f"{drone} is {view.status}: it takes no more targets")
+            raise Rejected(f"{drone} is {view_of(view)}: it takes no more targets")
         try:
             check_cell(cell, self.world.size, self.world)
         except UsageError as err:
@@ -288,7 +273,7 @@ class GroundState:
         if self.pending is not None and self.station.plan.last_turn >= self.pending:
             return True
         views = ((self.drones.get(d), cell) for d, cell in self.wanted.items())
-        return any(v is not None and v.alive and (v.target != cell or v.status == ALIVE) for v, cell in views)
+        return any(v is not None and v.alive and (v.target != cell or view_of(v) == ALIVE) for v, cell in views)
 
     def waiting(self) -> tuple[str, str]:
         """(code, text) of what the game is waiting for, for the page."""
@@ -344,9 +329,9 @@ class GroundState:
 
     def snapshot(self) -> dict:
         code, text = self.waiting()
-        drones = [{**drone_json(d, v.pos, v.status, v.cause, v.target),
+        drones = [{**drone_json(d, s.pos, view_of(s), s.cause, s.target),
                    "wanted": None if (wanted := self.wanted.get(d)) is None else list(wanted),
-                   "trail": [list(c) for c in v.trail]} for d, v in self.drones.items()]
+                   "trail": [list(c) for c in self.trails[d]]} for d, s in self.drones.items()]
         over = None if self.over is None else {"turn": self.over.turn, "reason": self.over.reason.value,
                                                "text": self.over.text}
         return {
