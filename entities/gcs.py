@@ -328,6 +328,7 @@ class Station:
                  quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD) -> None:
         self.ground, self.plan = ground, ground.plan
         self.console, self.hold, self.quit_at, self.verbose = console, hold, quit_at, verbose
+        self.scripted = console is None and not hold
         self.ahead = ahead  # phases a script answers ahead at most (0: none; the benchmark's switch)
         self.wanted: dict[str, Cell] = {}  # the targets this station wants, of drones alive
         self.gone: set[str] = set()  # drones dead or lost: nothing more to say to them
@@ -338,10 +339,6 @@ class Station:
         self._over_since: float | None = None  # when OVER came, while its turn's STATUS is awaited
         self._joining = True  # until the first STATUS since admission: it tells the targets in force
         self.ended = False
-
-    @property
-    def scripted(self) -> bool:
-        return self.console is None and not self.hold
 
     @property
     def status_turn(self) -> int:

@@ -1,11 +1,8 @@
 """A journal as frames the page plays (``dronesim gcs --web PORT --replay JOURNAL``). Pure, no network.
 
-The world comes from the journal's header through `build_world` (the environment's own recipe), each
-drone's state after each turn from `dronesim.replay.tracks`. Frame 0 is the start; frame k the state
-after the k-th turn record. A frame lists every drone's cell, state, cause and target; trails are the
-page's to accumulate (so the data grows with turns x drones, not with its square). The journal does not
-record the drones' notes, so a replayed drone is "reached" when it stands on its target, and never
-"unreachable".
+Frame 0 is the start, frame k the state after the k-th turn record (`dronesim.replay.tracks`): every drone's
+cell, state, cause and target; trails are the page's to accumulate (so the data grows with turns x drones,
+not with its square).
 """
 
 from __future__ import annotations
@@ -22,6 +19,7 @@ from .model import ALIVE, DEAD, LOST, REACHED, change_entry, drone_json, entry, 
 
 
 def _status(track) -> str:
+    """The journal does not record the drones' notes: "reached" is standing on the target, never "unreachable"."""
     if track.state in ("DEAD", "LOST"):
         return track.state.lower()
     return REACHED if track.target is not None and tuple(track.pos) == tuple(track.target) else ALIVE
