@@ -56,13 +56,6 @@ class Environment:
         self._set(np.array([drone_number(d) for d in drones], np.int64),
                   np.array(list(drones.values()), np.int64).reshape(-1, 3))
 
-    @classmethod
-    def of_rows(cls, world: World, numbers: np.ndarray, cells: np.ndarray) -> Environment:
-        """The drones numbered `numbers` at `cells` ((n, 3)), as a table holds them."""
-        env = cls(world, {})
-        env._set(numbers.astype(np.int64), cells.astype(np.int64))
-        return env
-
     def _set(self, numbers: np.ndarray, cells: np.ndarray) -> None:
         """The drones: `numbers` and their `cells` ((n, 3)); only those inside the world are kept."""
         inside = inside_rows(cells, self.world.size)
@@ -216,10 +209,9 @@ class EnvironmentProcess:
     """
 
     def __init__(self, welcome: Welcome) -> None:
-        numbers, cells = welcome.starts.numbers, welcome.starts.column("pos")
-        self.spec = welcome.world
-        self.world = build_world(welcome.world, map(tuple, cells.tolist()))
-        self.env = Environment.of_rows(self.world, numbers, cells)
+        starts, self.spec = welcome.starts.cells(), welcome.world
+        self.world = build_world(welcome.world, starts.values())
+        self.env = Environment(self.world, starts)
         self.over: Over | None = None
         self._ready = 1  # the turn whose ASKs can be answered now (STATUS(ready - 1) is the last one taken)
         self._applied = False  # the ENV phase of turn `ready` is done
@@ -250,7 +242,6 @@ class EnvironmentProcess:
             case Ask(turn=turn, sender=who):
                 return self._refuse(query, StaleTurn(f"ASK for past turn {turn} from {who}, "
                                                      f"the world is at turn {self._ready}"))
-        raise TypeError(f"not a query the environment serves: {msg!r}")
 
     def receive(self, msg: Status | Turn | Over) -> list[Effect]:
         """A message of the coordinator (already screened by the entity's `TurnClock`)."""

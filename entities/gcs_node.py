@@ -151,7 +151,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: 
 
 
 def cli(argv: list[str] | None = None) -> int:
-    from .web.node import add_web_args, run_web, wants_web
+    from .web.node import add_web_args, run_web
 
     p = argparse.ArgumentParser(prog="dronesim gcs", description=__doc__)
     add_zenoh_args(p)
@@ -172,7 +172,7 @@ def cli(argv: list[str] | None = None) -> int:
             from dronesim.scenario import Scenario
 
             args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
-        if wants_web(args):  # the browser ground station (entities/web/, docs/web-gcs.md)
+        if args.web is not None or args.replay is not None:  # the browser ground station (docs/web-gcs.md)
             return run_web(args, logger)
         return main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets,
                     script=args.script, interactive=interactive, quiet=args.quiet, draw=not args.no_draw,

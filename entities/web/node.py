@@ -44,10 +44,6 @@ def add_web_args(parser: argparse.ArgumentParser) -> None:
                         "with --replay: serve this long (default: until interrupted)")
 
 
-def wants_web(args: argparse.Namespace) -> bool:
-    return getattr(args, "web", None) is not None or getattr(args, "replay", None) is not None
-
-
 @dataclass(frozen=True, slots=True)
 class Command:
     """A human's command from an HTTP thread, answered on `reply` (a dict, or the `Rejected` error)."""
