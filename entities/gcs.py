@@ -383,14 +383,12 @@ class Station:
         return changed
 
     def answer(self, turn: int, intent: Intent, new: Mapping[str, Cell] = {}) -> list[Effect]:
-        """Answer the GCS phase of `turn` now, with `new` targets and `intent`."""
         self.want(new)
         in_force = targets_of(self.tracks.last) if self.tracks.last is not None else None
         self.answered, self.pending = max(self.answered, turn), None
         return [Send(gcs_done(turn, self.wanted, intent, in_force))]
 
     def intent(self, turn: int) -> Intent:
-        """A script's intent at `turn`."""
         if self.quit_at is not None:
             return Intent.QUIT if turn >= self.quit_at else Intent.CONTINUE
         return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE

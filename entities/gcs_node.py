@@ -53,7 +53,6 @@ def listen(session: zenoh.Session, keys: Keys, logger: logging.Logger, *, every_
 
 def join(session: zenoh.Session, inbox: Inbox, logger: logging.Logger, *, connect_timeout: float,
          grace: float) -> Membership:
-    """Admission as the ground station."""
     hello = Connect(turn=0, sender="GCS", role=Role.GCS, session=session_id(session))
     return Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
 

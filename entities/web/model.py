@@ -306,8 +306,7 @@ class GroundState:
             wait = max(wait, self.pending_since + STATUS_GRACE - now)
         return max(0.0, wait)
 
-    def wake(self, now: float) -> float | None:
-        """Seconds until `tick` has something to do (None: nothing, whatever the time)."""
+    def wake(self, now: float) -> float | None:  # (as Station.wake)
         waits = [w for w in (self.due(now), self.station.wake(now)) if w is not None]
         return min(waits) if waits else None
 
