@@ -320,8 +320,9 @@ class Station:
       round trip and without announcing them, so the station goes by STATUS;
     - a console asks its person, in the phase; a held station (`hold`: the web page) keeps the phase
       `pending` until `answer` is called.
-    It forgets the drones that died or were lost, takes over the targets in force of a game it joins late,
-    and ends (`End`) after OVER once the STATUS of the last turn is in, or `FINAL_STATUS_WAIT` s after OVER.
+    It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the targets
+    in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last turn is in, or
+    `FINAL_STATUS_WAIT` s after OVER.
     """
 
     def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
