@@ -74,14 +74,9 @@ class Roster:
         self.sessions.pop(entity, None)
         return self.roles.pop(entity)
 
-    def everyone_here(self, fleet: Fleet, rows: Sequence[int] | None = None) -> bool:
-        """The environment, the ground station and a process flying each drone (of `rows`, or all)."""
-        drones = fleet.host if rows is None else [fleet.host[i] for i in rows]
-        return self.has(Role.ENV) and self.has(Role.GCS) and all(drones)
-
-    def missing(self, fleet: Fleet) -> list[str]:
-        """Who never connected: the drones nobody flies, then the environment and the ground station."""
-        return ([d for d, host in zip(fleet.ids, fleet.host) if host is None]
+    def missing(self, fleet: Fleet, rows: Sequence[int] | None = None) -> list[str]:
+        """Who is not there: the drones (of `rows`, or all) nobody flies, then the environment and the GCS."""
+        return ([fleet.ids[i] for i in (range(len(fleet)) if rows is None else rows) if fleet.host[i] is None]
                 + [r.value for r in (Role.ENV, Role.GCS) if not self.has(r)])
 
 
