@@ -196,17 +196,13 @@ class Engine:
     def __init__(self, config: GameConfig, logger: logging.Logger, world: World | None = None, game: str = "") -> None:
         """`world`: the game's world if the caller has built it already; `game`: the game's identity, which its
         WELCOME, TURN, STATUS and OVER carry (one per coordinator: an earlier one's messages are foreign)."""
-        self.config = config
-        self.game = game
-        self._log = logger
+        self.config, self.game, self._log, self.size = config, game, logger, config.world.size
         self.world = world if world is not None else build_world(config.world, (d.start for d in config.drones))
-        if self.world.size != config.world.size:
-            raise UsageError(f"the world is {self.world.size}, the game's is {config.world.size}")
-        # The buildings, flat (a view of the world's grid, not a copy: the coordinator holds the world once).
-        self._solid = self.world.grid.reshape(-1)
+        if self.world.size != self.size:
+            raise UsageError(f"the world is {self.world.size}, the game's is {self.size}")
+        self._solid = self.world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
         self._open: arbiter.OpenCells | None = None  # the same, as the arbiter reads it (PIBT's swap; made once needed)
-        self.stage = Stage.ADMITTING
-        self.turn = 0
+        self.stage, self.turn = Stage.ADMITTING, 0
         self.fleet = Fleet((d.drone, d.start) for d in config.drones)
         self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
         self.roster = Roster()
@@ -242,13 +238,8 @@ class Engine:
 
     # ------------------------------------------------------------------ queries
 
-    @property
-    def size(self) -> Cell:
-        return self.config.world.size
-
     def alive(self) -> list[str]:
-        ids = self.fleet.ids
-        return [ids[i] for i in self.fleet.alive_rows().tolist()]
+        return [self.fleet.ids[i] for i in self.fleet.alive_rows().tolist()]
 
     def targets(self) -> dict[str, Cell]:
         """The targets in force, of every drone that has one."""
@@ -264,8 +255,7 @@ class Engine:
 
     def _by_id(self, rows: np.ndarray, cells: np.ndarray) -> dict[str, Cell]:
         """The `cells` of the drones where `rows` holds, by id."""
-        ids = self.fleet.ids
-        return {ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
+        return {self.fleet.ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
 
     def _playing(self) -> bool:
         return self.stage in (Stage.GCS, Stage.DRONES)
@@ -283,9 +273,8 @@ class Engine:
 
     def _back_but_gcs(self) -> bool:
         """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
-        roster, host = self.roster, self.fleet.host
-        return (self.stage is Stage.RESUMING and roster.has(Role.ENV) and not roster.has(Role.GCS)
-                and all(host[i] for i in self.fleet.alive_rows().tolist()))
+        return (self.stage is Stage.RESUMING
+                and self.roster.missing(self.fleet, self.fleet.alive_rows().tolist()) == [Role.GCS.value])
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
@@ -596,13 +585,12 @@ class Engine:
 
     def play(self, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
              notes: np.ndarray) -> Over | None:
-        """One whole turn from arrays, for a caller in this process that is both the ground station and the
-        host of every drone (the RL environment, dronesim/rl.py): as if the ground station's DONE (CONTINUE)
-        carried the targets `aims` of the rows `aim_rows`, then a MOVES the `moves` (cells) and `notes` (Note
-        codes) of the rows `move_rows` (each once; the other alive drones hover), through the same steps
-        without a message built (the caller reads the fleet's columns; no journal record). The turn's OVER if
-        the game ended with it. UsageError, and nothing changed, if the turn is not the ground station's (or a
-        DONE or MOVES came ahead) or an input would be refused."""
+        """One whole turn from arrays, for a caller in this process that is the ground station and every drone's
+        host (dronesim/rl.py): as if a DONE (CONTINUE) carried the targets `aims` of the rows `aim_rows`, then a
+        MOVES the `moves` (cells) and `notes` (Note codes) of the rows `move_rows` (each once; the other alive
+        drones hover), with no message built and no journal record. The turn's OVER if the game ended with it.
+        UsageError, nothing changed, if the turn is not the GCS's (or a DONE or MOVES came ahead) or an input
+        would be refused."""
         fleet = self.fleet
         if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
