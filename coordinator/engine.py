@@ -305,9 +305,9 @@ class Engine:
         refusal = self.roster.refusal(msg, self.fleet, over=self.stage is Stage.OVER, admitting=self._admitting())
         if refusal:
             self._log.warning("refused %s: %s", msg.sender, refusal)
-            refused: list[Effect] = [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
             # one that comes back after the end (its link was down when OVER went out) is told the end again
-            return refused + ([Publish(self.end)] if self.end is not None else [])
+            over: list[Effect] = [Publish(self.end)] if self.end is not None else []
+            return [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal)), *over]
         again = self.roster.admit(msg)  # the same process connecting again (its session says so)
         fleet = self.fleet
         for d in msg.drones:
@@ -324,9 +324,7 @@ class Engine:
         if self._admitting():
             # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
             awaited = fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
-            if not self.roster.missing(fleet, awaited):
-                effects += self._start()
-            return effects
+            return effects + ([] if self.roster.missing(fleet, awaited) else self._start())
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
         # A returning environment or ground station takes up the phase in progress.
         if msg.role is Role.ENV and self._held and self._phase_msg is not None:
@@ -346,8 +344,7 @@ class Engine:
         if self.journaled:  # (the journal's lines sort their keys: the order here is not the written one)
             world["cells"] = config.world.cells.hex()
             rows = zip(fleet.ids, fleet.pos.tolist(), fleet.autopilot, fleet.cooperative.tolist())
-            header["drones"] = [{"drone": d, "start": start, "autopilot": autopilot, "cooperative": cooperative}
-                                for d, start, autopilot, cooperative in rows]
+            header["drones"] = [dict(zip(("drone", "start", "autopilot", "cooperative"), row)) for row in rows]
         return header
 
     def _start(self) -> list[Effect]:
@@ -385,31 +382,35 @@ class Engine:
     def _open_gcs(self, turn: int) -> Done | None:
         """The GCS phase of `turn` begins: nothing received yet; the DONE sent ahead for it, if any."""
         self.stage, self.turn = Stage.GCS, turn
-        if np.count_nonzero(self._aimed):
-            self._aimed[:] = False
+        self._aimed[:] = False
         self._tgt_seen, self._done = 0, None
         self._turn_log = {"record": "turn", "turn": turn}
         early = self._early.pop(turn, None)
-        if self._early:
-            self._early = {t: d for t, d in self._early.items() if t > turn}
+        self._early = {t: d for t, d in self._early.items() if t > turn}
         return early
 
     def _drones_finish(self) -> list[Effect]:
-        """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), observe."""
-        turn, fleet = self.turn, self.fleet
+        """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), then the observer's
+        STATUS and the turn's journal record, and the next turn or the end."""
+        turn, fleet, log = self.turn, self.fleet, self._turn_log
         alive, before, final, moving = self._judge()
         effects: list[Effect] = []
         if (self.env_followed or self.verify_env) and np.count_nonzero(moving):
             rows = MoveTable.empty(int(np.count_nonzero(moving)))
             rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
             moves = MoveTable(rows)
-            if self.verify_env:
-                self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
-                for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
-                    del self._upd_due[old]
+            if self.verify_env:  # its report may come turns later (nothing waits for it): keep a few
+                self._upd_due = {t: m for t, m in self._upd_due.items() if t > turn - UPD_WINDOW} | {turn: moves}
             if self.env_followed:
                 effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
-        return _drones_first(effects + self._observed())
+        status = self.status(turn)
+        data = encode(status)
+        if self.journaled:
+            log["state"] = state_hash(status, data)
+        self._log.debug("turn %d observed: %s", turn, log)
+        end = self._end_reason()
+        effects += [Record(log), Publish(status, data), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
+        return _drones_first(effects)
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """`proposed` after the cooperative drones' arbitration; journaled: who did not get its first choice
@@ -713,15 +714,10 @@ class Engine:
         if len(said):
             fleet.note[said] = self._said[said]
         self.age(alive)
-        if hovering:
-            hovered = alive[~took]
-            fleet.misses[alive[took]] = 0
-            fleet.misses[hovered] += 1
-            lost = hovered[fleet.misses[hovered] >= self.config.lost_after]
-        else:
-            hovered = lost = alive[:0]
-            if np.count_nonzero(fleet.misses):
-                fleet.misses[alive] = 0
+        hovered = alive[~took] if hovering else alive[:0]
+        if hovering or np.count_nonzero(fleet.misses):  # misses in a row: a move starts the count again
+            fleet.misses[alive] = np.where(took, 0, fleet.misses[alive] + 1)
+        lost = hovered[fleet.misses[hovered] >= self.config.lost_after]
         dead = alive[cause != 0] if np.count_nonzero(cause) else alive[:0]
         if len(dead):
             fleet.state[dead], fleet.cause[dead] = DEAD, cause[cause != 0]
@@ -742,16 +738,6 @@ class Engine:
             if len(dead):
                 log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
         return alive, before, after, moved
-
-    def _observed(self) -> list[Effect]:
-        """The observer's STATUS of the turn just judged, its journal record, then the next turn or the end."""
-        log, status = self._turn_log, self.status(self.turn)
-        data = encode(status)
-        if self.journaled:
-            log["state"] = state_hash(status, data)
-        self._log.debug("turn %d observed: %s", self.turn, log)
-        end = self._end_reason()
-        return [Record(log), Publish(status, data), *(self._over(*end) if end else self._gcs_phase(self.turn + 1))]
 
     def _lose(self, i: int) -> None:
         d = self.fleet.ids[i]

@@ -19,26 +19,22 @@ def dumps(record: dict) -> str:
 
 
 class JournalWriter:
-    """Appends records to a file, flushed line by line (a crash loses at most the line being written)."""
+    """Appends records to a file (none without a path), flushed line by line (a crash loses at most the line
+    being written)."""
 
     def __init__(self, path: str | os.PathLike[str] | None) -> None:
-        self._f = open(path, "a", encoding="utf-8") if path else None  # noqa: SIM115
+        self._f = open(path, "a", buffering=1, encoding="utf-8") if path else None  # noqa: SIM115
 
     def append(self, record: dict) -> None:
         if self._f is not None:
             self._f.write(dumps(record) + "\n")
-            self._f.flush()
-
-    def close(self) -> None:
-        if self._f is not None:
-            self._f.close()
-            self._f = None
 
     def __enter__(self) -> JournalWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.close()
+        if self._f is not None:
+            self._f.close()
 
 
 def repair_tail(path: str | os.PathLike[str]) -> None:

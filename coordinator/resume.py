@@ -24,7 +24,7 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
     engine = Engine(config, logger, game=game)
     if not records or records[0].get("record") != "header":
         raise UsageError("the journal has no header: nothing to resume")
-    theirs = dict(records[0])
+    theirs = records[0]
     fleet = engine.fleet
     for d in theirs.get("drones", []):  # autopilots are learnt at admission, not configured
         i = fleet.index.get(d.get("drone"))
@@ -35,11 +35,10 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
         raise UsageError("the journal is of another game (world, drones or limits differ)")
     turn = 0
     for r in records[1:]:
-        match r.get("record"):
-            case "turn":
-                turn = _restore_turn(engine, r)
-            case "over":
-                raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
+        if r.get("record") == "over":
+            raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
+        if r.get("record") == "turn":
+            turn = _restore_turn(engine, r)
     engine.turn, engine.stage = turn, Stage.RESUMING
     logger.info("restored turn %d from the journal", turn)
     return engine
