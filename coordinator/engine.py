@@ -486,12 +486,8 @@ class Engine:
             raise WrongSender(f"target for {msg.drone} from {msg.sender}: only the GCS sets targets")
         if self.stage is not Stage.GCS or msg.turn != self.turn:
             raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
-        self._tgt_seen += 1  # counted against the DONE's count even if refused below
-        try:
-            self._aim(msg.drone, msg.pos)
-        except RemoteInputError as err:  # a refused target: the phase goes on
-            return [Refusal(f"{msg.TAG} from {msg.sender}", err), *self._gcs_check()]
-        return self._gcs_check()
+        self._tgt_seen += 1  # counted against the DONE's count even if refused: the phase goes on
+        return [*_in_batch(msg, 1, None, lambda _: self._aim(msg.drone, msg.pos)), *self._gcs_check()]
 
     def _aim(self, d: str, pos: Cell) -> None:
         """Keep a target for this GCS phase, or raise (and keep nothing)."""
@@ -891,13 +887,13 @@ def _drones_first(effects: list[Effect]) -> list[Effect]:
     return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves
 
 
-def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray], one: Callable[[int], None]) -> list[Effect]:
-    """Take the `n` items of a batch (a MOVES's moves, a DONE's targets) each on its own (`one(j)` takes item j
-    or raises why not, changing nothing): a `Refusal` of `msg` if some were refused, the first one's error naming
-    the others. A batch of more than FEW_ROWS is taken as a whole first (`whole()` takes, in array operations,
-    every item `one` would take, and says which), the rest one by one."""
+def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one: Callable[[int], None]) -> list[Effect]:
+    """Take the `n` items of `msg` (a MOVES's moves, a DONE's targets, a TGT's one) each on its own (`one(j)`
+    takes item j or raises why not, changing nothing): a `Refusal` of `msg` if some were refused, the first one's
+    error naming the others. A batch of more than FEW_ROWS is taken as a whole first (`whole()` takes, in array
+    operations, every item `one` would take, and says which), the rest one by one."""
     refused = []
-    for j in range(n) if n <= FEW_ROWS else np.flatnonzero(~whole()).tolist():
+    for j in range(n) if n <= FEW_ROWS or whole is None else np.flatnonzero(~whole()).tolist():
         try:
             one(j)
         except RemoteInputError as err:
