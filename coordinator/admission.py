@@ -62,8 +62,7 @@ class Roster:
         """Admit `msg`'s sender (checked by `refusal`); True if it was admitted already (the same process
         connecting again)."""
         again = msg.sender in self.roles
-        self.roles[msg.sender] = msg.role
-        self.sessions[msg.sender] = msg.session
+        self.roles[msg.sender], self.sessions[msg.sender] = msg.role, msg.session
         return again
 
     def leave(self, entity: str, session: str = "") -> Role | None:

@@ -223,9 +223,8 @@ class Engine:
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log: dict = {}
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
-        # The adapter's switches: whether the environment's UPD reports are checked; whether the turn records
-        # say what each drone was told and did (off without a journal: they are dropped); whether anyone
-        # follows the ENV phase (nobody following, its TURN is not even made).
+        # The adapter's switches: the environment's UPD reports are checked; the turn records say what each drone
+        # was told and did (off without a journal); someone follows the ENV phase (else its TURN is not made).
         self.verify_env = self.journaled = self.env_followed = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
@@ -254,7 +253,6 @@ class Engine:
         return self._by_id(self._moved, self._proposed)
 
     def _by_id(self, rows: np.ndarray, cells: np.ndarray) -> dict[str, Cell]:
-        """The `cells` of the drones where `rows` holds, by id."""
         return {self.fleet.ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
 
     def _playing(self) -> bool:
@@ -454,9 +452,8 @@ class Engine:
         return CellKind.BUILDING if self.world.is_building(cell) else CellKind.EMPTY
 
     def receive(self, msg: Message) -> list[Effect]:
-        """A message from the network, decoded and addressed correctly: its effects. One that cannot be
-        accepted changes nothing and gives a `Refusal` (then what goes on all the same: a refused target still
-        counts towards its DONE, a batch's other items are taken)."""
+        """A message from the network, decoded and addressed correctly: its effects. One that cannot be accepted
+        changes nothing but gives a `Refusal` (a refused TGT still counts towards its DONE, a batch's others go on)."""
         now = msg.turn == self.turn
         try:
             match msg:
@@ -563,8 +560,7 @@ class Engine:
         return self._drones_phase()
 
     def _targets_set(self, intent: Intent) -> bool:
-        """The GCS phase closes: the targets it received take force and its intent is noted; whether the game
-        goes on (not QUIT)."""
+        """The GCS phase closes: its targets take force, its intent is noted; whether the game goes on (not QUIT)."""
         fleet = self.fleet
         if np.count_nonzero(self._aimed):  # (most GCS phases bring no target)
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
@@ -619,8 +615,7 @@ class Engine:
         return None
 
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves, each on its own as if sent as an NPS (`_in_batch`: `whole` makes
-        `_host_move`'s checks in array operations)."""
+        """A swarm host's moves, each taken as if sent as an NPS (`whole`: `_host_move`'s checks, as arrays)."""
         fleet, steps = self.fleet, msg.moves
         numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
 
@@ -668,8 +663,7 @@ class Engine:
         return self._drones_finish() if self._awaiting <= 0 else []
 
     def _upd(self, msg: Upd) -> list[Effect]:
-        """The environment's report of a recent ENV phase: checked against the engine's world; it
-        changes nothing (the observer has already judged the turn)."""
+        """The environment's report of a recent ENV phase, checked against the engine's world (the turn is judged)."""
         if msg.sender != "ENV":
             raise WrongSender(f"UPD from {msg.sender}")
         turn, moves = msg.turn, self._upd_due.get(msg.turn)
@@ -843,9 +837,8 @@ class Engine:
         return effects
 
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
-        """An admitted entity's presence token disappeared (its process died or was cut off); only the
-        admitted process's own token counts, not a refused impostor's. A vanished environment is waited
-        for (`env_grace`; a returning one resyncs from STATUS)."""
+        """An admitted entity's presence token disappeared (its process died or was cut off; a refused impostor's
+        token does not count). A vanished environment is waited for (`env_grace`; back, it resyncs from STATUS)."""
         if self._away is not None and entity in self._away:
             return []  # the link is down: it is away, not gone (until `link_grace` has passed)
         role = self.roster.leave(entity, session)

@@ -89,14 +89,11 @@ class Fleet:
         return OrderTable(table)
 
     def fly(self, i: int, host: str, autopilot: str, cooperative: bool) -> None:
-        self.host[i] = host
-        self.host_code[i] = self.hosts.setdefault(host, len(self.hosts))
-        self.autopilot[i] = autopilot
-        self.cooperative[i] = cooperative
+        self.host[i], self.host_code[i] = host, self.hosts.setdefault(host, len(self.hosts))
+        self.autopilot[i], self.cooperative[i] = autopilot, cooperative
 
     def unhost(self, i: int) -> None:
-        self.host[i] = None
-        self.host_code[i] = -1
+        self.host[i], self.host_code[i] = None, -1
 
     def aim(self, rows: int | np.ndarray, targets: Cell | np.ndarray) -> None:
         """New targets for a drone (a row and a cell) or several (rows and an (n, 3) array of cells)."""
