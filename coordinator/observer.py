@@ -32,12 +32,10 @@ def inside(cell: Cell, size: Cell) -> bool:
 
 def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
           few: int = JUDGE_FEW_DRONES) -> np.ndarray:
-    """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE).
-
-    `before` and `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered
-    integers, rows in id order; `building`: whether its `after` cell is a building. Up to `few` drones,
-    judged drone by drone (`deaths`: an array operation's fixed cost is more than a few drones' Python).
-    """
+    """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE). `before` and
+    `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered integers, rows in id
+    order; `building`: whether its `after` cell is a building. Up to `few` drones, judged drone by drone
+    (`deaths`: an array operation's fixed cost is more than a few drones' Python)."""
     n = len(after)
     if n <= few:
         return _judge_few(size, before, after, building)
@@ -86,17 +84,10 @@ def _judge_few(size: Cell, before: np.ndarray, after: np.ndarray, building: np.n
     return cause
 
 
-def deaths(
-    size: Cell,
-    before: Mapping[K, Cell],
-    after: Mapping[K, Cell],
-    buildings: Set[Cell],
-) -> dict[K, Cause]:
-    """Which of the drones alive at the start of the turn die, and why: the rules drone by drone.
-
-    `before` and `after` hold every alive drone's cell at the start and end of the turn (a hovering
-    drone has the same cell in both); `buildings` holds the building cells among the `after` cells.
-    """
+def deaths(size: Cell, before: Mapping[K, Cell], after: Mapping[K, Cell], buildings: Set[Cell]) -> dict[K, Cause]:
+    """Which of the drones alive at the start of the turn die, and why: the rules drone by drone. `before` and
+    `after`: every alive drone's cell at the start and end of the turn (a hovering drone's are the same);
+    `buildings`: the building cells among the `after` cells."""
     dead: dict[K, Cause] = {}
     order = sorted(after)
     by_cell: dict[Cell, list[K]] = defaultdict(list)
