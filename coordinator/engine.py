@@ -537,8 +537,7 @@ class Engine:
             rows = fleet.row_of_number[numbers]
             ok = (rows >= 0) & inside_rows(pos, self.size)
             ok[ok] = fleet.state[rows[ok]] == ALIVE
-            self._aimed[rows[ok]] = True
-            self._aims[rows[ok]] = pos[ok]
+            self._aimed[rows[ok]], self._aims[rows[ok]] = True, pos[ok]
             return ok
 
         refused = _in_batch(msg, len(msg.targets), whole,
@@ -547,9 +546,7 @@ class Engine:
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
-        if self._done is None or self._tgt_seen < self._done.count:
-            return []
-        return self._gcs_finish()
+        return [] if self._done is None or self._tgt_seen < self._done.count else self._gcs_finish()
 
     def _gcs_finish(self) -> list[Effect]:
         """The GCS phase ends (also cut short): what arrived of its targets holds if its DONE is in, else none."""

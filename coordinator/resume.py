@@ -29,8 +29,7 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
     for d in theirs.get("drones", []):  # autopilots are learnt at admission, not configured
         i = fleet.index.get(d.get("drone"))
         if i is not None:
-            fleet.autopilot[i] = d.get("autopilot", "")
-            fleet.cooperative[i] = d.get("cooperative", False)
+            fleet.autopilot[i], fleet.cooperative[i] = d.get("autopilot", ""), d.get("cooperative", False)
     if engine.header() != theirs:
         raise UsageError("the journal is of another game (world, drones or limits differ)")
     turn = 0
@@ -58,15 +57,13 @@ def _restore_turn(engine: Engine, r: dict) -> int:
     for d, n in r.get("notes", {}).items():
         fleet.note[row[d]] = code_of(Note(n))
     engine.age(alive, [row[d] for d in r.get("gave_way", ())])  # the arbitration's priorities
-    hovered = np.zeros(len(fleet), bool)
-    hovered[[row[d] for d in r.get("hovered", ())]] = True
-    fleet.misses[alive] = np.where(hovered[alive], fleet.misses[alive] + 1, 0)
+    hovered = np.isin(alive, [row[d] for d in r.get("hovered", ())])
+    fleet.misses[alive] = np.where(hovered, fleet.misses[alive] + 1, 0)
     for d, cause in r.get("deaths", {}).items():
         fleet.end(row[d], DroneState.DEAD, Cause(cause))
     for d in r.get("lost", ()):
         fleet.end(row[d], DroneState.LOST, Cause.LOST)
     turn = r["turn"]
-    state = state_hash(engine.status(turn))
-    if state != r.get("state"):
+    if state_hash(engine.status(turn)) != r.get("state"):
         raise UsageError(f"the journal's turn {turn} does not replay to its recorded state")
     return turn
