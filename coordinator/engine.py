@@ -704,7 +704,7 @@ class Engine:
         hovered = alive[~took] if hovering else alive[:0]
         if hovering or np.count_nonzero(fleet.misses):  # misses in a row: a move starts the count again
             fleet.misses[alive] = np.where(took, 0, fleet.misses[alive] + 1)
-        lost = hovered[fleet.misses[hovered] >= self.config.lost_after]
+        lost = hovered[fleet.misses[hovered] >= self.config.lost_after] if hovering else hovered
         dead = alive[cause != 0] if np.count_nonzero(cause) else alive[:0]
         if len(dead):
             fleet.state[dead], fleet.cause[dead] = DEAD, cause[cause != 0]

@@ -44,8 +44,7 @@ def repair_tail(path: str | os.PathLike[str]) -> None:
     except OSError as exc:
         raise UsageError(f"cannot read journal {path}: {exc}") from None
     if data and not data.endswith(b"\n"):
-        with open(path, "r+b") as f:
-            f.truncate(data.rfind(b"\n") + 1)
+        os.truncate(path, data.rfind(b"\n") + 1)
 
 
 def read(path: str | os.PathLike[str]) -> Iterator[dict]:
