@@ -311,13 +311,12 @@ class Engine:
         for d in msg.drones:
             fleet.fly(fleet.index[d], msg.sender, msg.autopilot, msg.cooperative)
         rows = sorted(range(len(fleet)) if msg.role is not Role.DRONE else [fleet.index[d] for d in msg.drones])
-        starts = StartTable.empty(len(rows))
-        starts["drone"], starts["pos"] = fleet.numbers[rows], fleet.pos[rows]
+        starts = StartTable.build(drone=fleet.numbers[rows], pos=fleet.pos[rows])
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
             f"{msg.sender} flying {id_ranges(msg.drones)}"
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
         welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
-                          world=self.config.world, starts=StartTable(starts), game=self.game)
+                          world=self.config.world, starts=starts, game=self.game)
         effects: list[Effect] = [Reply(token, welcome)]
         if self._admitting():
             # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
