@@ -56,7 +56,6 @@ from schema import (
     Over,
     Phase,
     Refused,
-    RemoteInputError,
     Role,
     StartTable,
     Status,
@@ -67,7 +66,7 @@ from schema import (
     WorldSpec,
     encode,
 )
-from schema.errors import OutOfRange, Refusal, StaleTurn, UnknownEntity, UsageError, WrongSender
+from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
 from schema.messages import drone_id, is_drone_id
 from schema.tables import code_of, drone_name, drone_number
 from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
@@ -182,9 +181,7 @@ class Reply:
 
 @dataclass(frozen=True, slots=True)
 class Record:
-    """One journal record (a JSON-able dict, written as one line)."""
-
-    data: dict
+    data: dict  # one journal record (a JSON-able dict, written as one line)
 
 
 Effect = Publish | Reply | Record | Refusal
@@ -753,7 +750,6 @@ class Engine:
         return None
 
     def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
-        """The game ends with `turn` (by default the current one)."""
         turn = self.turn if turn is None else turn
         self.stage = Stage.OVER
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
