@@ -52,17 +52,15 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     order = np.argsort(alone, kind="stable")
     same = alone[order[1:]] == alone[order[:-1]]
     if np.count_nonzero(same):
-        cause[order[1:][same]] = _VERTEX
-        cause[order[:-1][same]] = _VERTEX
+        cause[order[1:][same]] = cause[order[:-1][same]] = _VERTEX
     moved = (after != before).any(axis=1).nonzero()[0]
     if len(moved) < 2:
         return cause  # a swap takes two movers
     src = linear_rows(before[moved], size)
     entering = np.where(out[moved], -1 - moved, key[moved])  # outside: a cell no drone comes from
     # the drone remembered as entering each cell: the last mover (in id order) whose `after` it is
-    rev = moved[::-1]
     entered, first = np.unique(entering[::-1], return_index=True)
-    enterer = rev[first]
+    enterer = moved[::-1][first]
     at = np.minimum(np.searchsorted(entered, src), len(entered) - 1)
     other = np.where(entered[at] == src, enterer[at], -1)
     swap = (other >= 0) & (other != moved)
@@ -99,10 +97,7 @@ def deaths(size: Cell, before: Mapping[K, Cell], after: Mapping[K, Cell], buildi
             dead[d] = Cause.BUILDING
         else:
             by_cell[cell].append(d)
-    for ds in by_cell.values():
-        if len(ds) > 1:
-            for d in ds:
-                dead[d] = Cause.VERTEX
+    dead.update((d, Cause.VERTEX) for ds in by_cell.values() if len(ds) > 1 for d in ds)
     arriving = {after[d]: d for d in order if after[d] != before[d]}
     for d in order:
         src, dst = before[d], after[d]
