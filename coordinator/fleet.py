@@ -1,9 +1,7 @@
-"""The drones of a game as columns: the turn engine's state, one row per drone, rows in id order.
-
-A swarm's turn touches every drone a few times: as numpy columns that is a handful of array operations per
-turn and a few dozen bytes per drone (a record per drone cost microseconds and hundreds of bytes each). The
-row order is the drones' id order, which is also their priority order (arbitration, observer).
-"""
+"""The drones of a game as columns: the turn engine's state, one row per drone, in id order (also their
+priority order: arbitration, observer). A swarm's turn touches every drone a few times: as numpy columns that
+is a handful of array operations and a few dozen bytes per drone (as records: microseconds and hundreds of
+bytes each)."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""The append-only journal: one JSON line per record (header, one per turn, over).
-
-Lines are canonical JSON (sorted keys, no spaces, no timestamps) so two runs of the same scenario
-give byte-identical journals, whatever the process layout.
-"""
+"""The append-only journal: one JSON line per record (header, one per turn, over). Lines are canonical JSON
+(sorted keys, no spaces, no timestamps) so two runs of the same scenario give byte-identical journals,
+whatever the process layout."""
 
 from __future__ import annotations
 

@@ -1,9 +1,8 @@
 """The observer's rules (the seed's OBS): pure functions deciding which drones die in a turn.
 
-A drone dies when it leaves the world, enters a building cell, shares a cell with another drone
-(vertex conflict) or swaps cells with another drone (swap conflict). Causes are checked in that
-order and the first that applies is the one recorded. Priority is the id order: when several drones enter
-one cell, the last in id order is the one remembered as entering it, for the swap rule.
+A drone dies when it leaves the world, enters a building cell, shares a cell with another drone (vertex
+conflict) or swaps cells with another drone (swap conflict), the first of these that applies being its cause.
+When several drones enter one cell, the last in id order is the one remembered as entering it (swap rule).
 
 `judge` decides for a whole swarm at once, over columns: the engine's observer. `deaths` is the same rules
 drone by drone, over mappings: the reference that tests/test_observer.py holds `judge` to (a property test).

@@ -1,9 +1,5 @@
-"""Resuming a game from its journal: a restarted coordinator's engine, in the state of the last whole turn.
-
-Each journaled turn is applied to the state as the engine's observer did when it was played, and the
-state's hash is checked against the one recorded; the engine then waits (RESUMING) for the entities to
-connect again and plays the turn after the journal's last.
-"""
+"""Resuming a game from its journal: a restarted coordinator's engine in the state of the last whole turn,
+each journaled turn replayed as the observer played it and checked against the state hash it recorded."""
 
 from __future__ import annotations
 
@@ -18,9 +14,9 @@ from .engine import Engine, GameConfig, Stage, state_hash
 
 
 def restore(config: GameConfig, records: list[dict], logger: logging.Logger, game: str = "") -> Engine:
-    """An engine restored from a journal's records, waiting (RESUMING) for the entities to connect again
-    (`game`: its new identity, see `Engine`). UsageError if the journal is not this game's, is over, or does
-    not replay to its recorded states."""
+    """An engine restored from a journal's records, waiting (RESUMING) for the entities to connect again, then
+    playing the turn after the journal's last (`game`: its new identity, see `Engine`). UsageError if the
+    journal is not this game's, is over, or does not replay to its recorded states."""
     engine = Engine(config, logger, game=game)
     if not records or records[0].get("record") != "header":
         raise UsageError("the journal has no header: nothing to resume")
@@ -44,7 +40,7 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
 
 
 def _restore_turn(engine: Engine, r: dict) -> int:
-    """Apply one journaled turn to the engine's state, as its observer did when it was played; its turn."""
+    """Apply one journaled turn to the engine's state; its turn."""
     fleet, row = engine.fleet, engine.fleet.index
     alive = fleet.alive_rows()
     for d, p in r.get("targets", {}).items():
