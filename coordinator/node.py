@@ -258,10 +258,9 @@ class Coordinator:
                    "a process connects under its own name only")
             self.rejects.reject(f"CONNECT from {msg.sender}", WrongSender(why))
             self.effects.answer(query, encode(Refused(turn=self.engine.turn, sender="SRV", text=why)))
-        for (entity, sid), due in sorted(self._vanishing.items()):
-            if due <= now:
-                del self._vanishing[(entity, sid)]
-                self.effects.run(self.engine.vanished(entity, sid))
+        for entity, sid in sorted(key for key, due in self._vanishing.items() if due <= now):
+            del self._vanishing[(entity, sid)]
+            self.effects.run(self.engine.vanished(entity, sid))
         self._tick()  # (a departure may have changed what the deadline is measured from)
         limit = self.engine.deadline()
         if limit is not None and now >= self._started + limit and self._linger_until is None:
