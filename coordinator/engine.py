@@ -300,9 +300,9 @@ class Engine:
         refusal = self.roster.refusal(msg, self.fleet, over=self.stage is Stage.OVER, admitting=self._admitting())
         if refusal:
             self._log.warning("refused %s: %s", msg.sender, refusal)
+            refused: list[Effect] = [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
             # one that comes back after the end (its link was down when OVER went out) is told the end again
-            over: list[Effect] = [Publish(self.end)] if self.end is not None else []
-            return [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal)), *over]
+            return refused + ([Publish(self.end)] if self.end is not None else [])
         again = self.roster.admit(msg)  # the same process connecting again (its session says so)
         fleet = self.fleet
         for d in msg.drones:
