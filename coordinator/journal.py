@@ -17,8 +17,7 @@ def dumps(record: dict) -> str:
 
 
 class JournalWriter:
-    """Appends records to a file (none without a path), flushed line by line (a crash loses at most the line
-    being written)."""
+    """Appends records to a file, flushed line by line (a crash loses at most the line being written)."""
 
     def __init__(self, path: str | os.PathLike[str] | None) -> None:
         self._f = open(path, "a", buffering=1, encoding="utf-8") if path else None  # noqa: SIM115
