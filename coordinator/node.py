@@ -35,6 +35,7 @@ from dronesim.transport import (
     setup_logging,
     zenoh_config,
 )
+from entities.world import World
 from schema import (
     Cell,
     Connect,
@@ -409,8 +410,6 @@ def parse_size(text: str) -> tuple[int, int, int]:
 
 
 def game_config(args: argparse.Namespace) -> GameConfig:
-    from entities.world import World
-
     deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
                      admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace,
                      link_grace=args.link_grace)
