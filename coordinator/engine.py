@@ -435,9 +435,8 @@ class Engine:
         home = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1)
         stuck = ~home & (fleet.note == UNREACHABLE) & ~self._gave_way
         prio, span = self.priority, arbiter.TIE_SPAN
-        left = prio < span  # leaving rest now, if not at rest: its tie-break is taken now
         far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
-        moving = np.where(left, span + far, prio + span)
+        moving = np.where(prio < span, span + far, prio + span)  # leaving rest now: its tie-break is taken now
         self.priority[alive] = np.where(home | self._gave_way, 0, np.where(stuck, arbiter.STUCK, moving))[alive]
         if np.count_nonzero(self._gave_way):
             self._gave_way[:] = False
