@@ -151,8 +151,8 @@ class GameConfig:
         table = self.drones if isinstance(self.drones, DroneTable) else \
             DroneTable([d.drone for d in self.drones], [d.start for d in self.drones])
         ids, starts = table.ids, table.starts
-        if (bad := next((d for d in ids if not is_drone_id(d)), None)) is not None:
-            raise UsageError(f"{bad!r} is not a drone id (D01 ... D65535)")
+        if bad := [d for d in ids if not is_drone_id(d)]:
+            raise UsageError(f"{bad[0]!r} is not a drone id (D01 ... D65535)")
         if len(set(ids)) != len(ids):
             raise UsageError(f"duplicate drone ids in {list(ids)}")
         if len(np.unique(starts, axis=0)) != len(starts):
