@@ -37,33 +37,29 @@ class Roster:
             if msg.session and self.sessions.get(msg.sender) == msg.session and self.roles[msg.sender] is msg.role:
                 return ""  # the same process again (e.g. after a cut link): welcome it back
             return f"{msg.sender} is already connected"
-        match msg.role:
-            case Role.ENV | Role.GCS:
-                if msg.sender != msg.role.value:
-                    return f"the {msg.role.value} must connect as {msg.role.value}, not {msg.sender}"
-            case Role.DRONE:
-                if not is_host_id(msg.sender) and msg.drones != (msg.sender,):
-                    return (f"{msg.sender} cannot connect for {', '.join(msg.drones)}: a drone flies itself, "
-                            "a swarm host connects as Hnn")
-                if not admitting:  # (a LOST drone that comes back included: it stays LOST)
-                    ended = [f"{d} is {STATES[fleet.state[fleet.index[d]]].value}" for d in msg.drones
-                             if d in fleet.index and fleet.state[fleet.index[d]] != ALIVE]
-                    return f"{', '.join(ended)}: drones cannot join a running game" if ended else \
-                        "drones cannot join a running game"
-                for d in msg.drones:
-                    if d not in fleet.index:
-                        return f"unknown drone {d}: this game flies {', '.join(fleet.ids)}"
-                    host = fleet.host[fleet.index[d]]
-                    if host is not None:
-                        return f"drone {d} is already taken by {host}"
+        if msg.role is not Role.DRONE:  # the environment or the ground station
+            return "" if msg.sender == msg.role.value else \
+                f"the {msg.role.value} must connect as {msg.role.value}, not {msg.sender}"
+        if not is_host_id(msg.sender) and msg.drones != (msg.sender,):
+            return (f"{msg.sender} cannot connect for {', '.join(msg.drones)}: a drone flies itself, "
+                    "a swarm host connects as Hnn")
+        if not admitting:  # (a LOST drone that comes back included: it stays LOST)
+            ended = [f"{d} is {STATES[fleet.state[fleet.index[d]]].value}" for d in msg.drones
+                     if d in fleet.index and fleet.state[fleet.index[d]] != ALIVE]
+            return f"{', '.join(ended)}: drones cannot join a running game" if ended else \
+                "drones cannot join a running game"
+        for d in msg.drones:
+            if d not in fleet.index:
+                return f"unknown drone {d}: this game flies {', '.join(fleet.ids)}"
+            if (host := fleet.host[fleet.index[d]]) is not None:
+                return f"drone {d} is already taken by {host}"
         return ""
 
     def admit(self, msg: Connect) -> bool:
         """Admit `msg`'s sender (checked by `refusal`); True if it was admitted already (the same process
         connecting again)."""
         again = msg.sender in self.roles
-        self.roles[msg.sender] = msg.role
-        self.sessions[msg.sender] = msg.session
+        self.roles[msg.sender], self.sessions[msg.sender] = msg.role, msg.session
         return again
 
     def leave(self, entity: str, session: str = "") -> Role | None:
@@ -74,14 +70,9 @@ class Roster:
         self.sessions.pop(entity, None)
         return self.roles.pop(entity)
 
-    def everyone_here(self, fleet: Fleet, rows: Sequence[int] | None = None) -> bool:
-        """The environment, the ground station and a process flying each drone (of `rows`, or all)."""
-        drones = fleet.host if rows is None else [fleet.host[i] for i in rows]
-        return self.has(Role.ENV) and self.has(Role.GCS) and all(drones)
-
-    def missing(self, fleet: Fleet) -> list[str]:
-        """Who never connected: the drones nobody flies, then the environment and the ground station."""
-        return ([d for d, host in zip(fleet.ids, fleet.host) if host is None]
+    def missing(self, fleet: Fleet, rows: Sequence[int] | None = None) -> list[str]:
+        """Who is not there: the drones (of `rows`, or all) nobody flies, then the environment and the GCS."""
+        return ([fleet.ids[i] for i in (range(len(fleet)) if rows is None else rows) if fleet.host[i] is None]
                 + [r.value for r in (Role.ENV, Role.GCS) if not self.has(r)])
 
 

@@ -1,11 +1,9 @@
 """The turn engine: the lockstep turn cycle and the observer, as a pure state machine.
 
-No network and no clock here. The Zenoh adapter (coordinator/node.py) feeds it validated messages,
-expired deadlines and vanished entities, one at a time from one thread, and carries out the effects
-it returns (publish, reply to a CONNECT query, append to the journal, count a refused input: input
-that cannot be accepted changes nothing and comes back as a `Refusal`, never as an exception). Who may
-join is admission.py's (the engine starts the game once everyone is there); a game restarted from its
-journal is resume.py's.
+No network and no clock here: the Zenoh adapter (node.py) feeds it validated messages, expired deadlines
+and vanished entities, one at a time, and carries out the effects it returns (publish, reply to a CONNECT,
+journal, count a `Refusal`: an input that cannot be accepted changes nothing). Who may join: admission.py;
+a game restarted from its journal: resume.py.
 
 One turn (the seed's cycle GCS -> D01 -> ENV -> OBS -> GCS):
 
@@ -31,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import hashlib
+import itertools
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -57,7 +56,6 @@ from schema import (
     Over,
     Phase,
     Refused,
-    RemoteInputError,
     Role,
     StartTable,
     Status,
@@ -68,14 +66,14 @@ from schema import (
     WorldSpec,
     encode,
 )
-from schema.errors import OutOfRange, Refusal, StaleTurn, UnknownEntity, UsageError, WrongSender
+from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
 from schema.messages import drone_id, is_drone_id
 from schema.tables import code_of, drone_name, drone_number
 from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
 
 from . import arbiter, observer
 from .admission import Roster
-from .fleet import ALIVE, CAUSES, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
+from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
 
 
 class Stage(enum.Enum):
@@ -121,8 +119,7 @@ class DroneTable(Sequence[DroneSpec]):
         return DroneSpec(drone=self.ids[i], start=cell_of(self.starts[i]))
 
     def __iter__(self) -> Iterator[DroneSpec]:
-        for d, start in zip(self.ids, self.starts.tolist()):
-            yield DroneSpec(drone=d, start=(start[0], start[1], start[2]))
+        return (DroneSpec(drone=d, start=(x, y, z)) for d, (x, y, z) in zip(self.ids, self.starts.tolist()))
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Sequence) and len(other) == len(self) and all(a == b for a, b in zip(self, other))
@@ -154,16 +151,14 @@ class GameConfig:
         table = self.drones if isinstance(self.drones, DroneTable) else \
             DroneTable([d.drone for d in self.drones], [d.start for d in self.drones])
         ids, starts = table.ids, table.starts
-        for d in ids:
-            if not is_drone_id(d):
-                raise UsageError(f"{d!r} is not a drone id (D01 ... D65535)")
+        if bad := [d for d in ids if not is_drone_id(d)]:
+            raise UsageError(f"{bad[0]!r} is not a drone id (D01 ... D65535)")
         if len(set(ids)) != len(ids):
             raise UsageError(f"duplicate drone ids in {list(ids)}")
         if len(np.unique(starts, axis=0)) != len(starts):
             raise UsageError("two drones cannot start in the same cell")
-        outside = ~((starts >= 0) & (starts < self.world.size)).all(axis=1)
-        if np.count_nonzero(outside):
-            i = int(outside.argmax())
+        if not (inside := inside_rows(starts, self.world.size)).all():
+            i = int(inside.argmin())
             raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
@@ -186,9 +181,7 @@ class Reply:
 
 @dataclass(frozen=True, slots=True)
 class Record:
-    """One journal record (a JSON-able dict, written as one line)."""
-
-    data: dict
+    data: dict  # one journal record (a JSON-able dict, written as one line)
 
 
 Effect = Publish | Reply | Record | Refusal
@@ -200,17 +193,13 @@ class Engine:
     def __init__(self, config: GameConfig, logger: logging.Logger, world: World | None = None, game: str = "") -> None:
         """`world`: the game's world if the caller has built it already; `game`: the game's identity, which its
         WELCOME, TURN, STATUS and OVER carry (one per coordinator: an earlier one's messages are foreign)."""
-        self.config = config
-        self.game = game
-        self._log = logger
+        self.config, self.game, self._log, self.size = config, game, logger, config.world.size
         self.world = world if world is not None else build_world(config.world, (d.start for d in config.drones))
-        if self.world.size != config.world.size:
-            raise UsageError(f"the world is {self.world.size}, the game's is {config.world.size}")
-        # The buildings, flat (a view of the world's grid, not a copy: the coordinator holds the world once).
-        self._solid = self.world.grid.reshape(-1)
+        if self.world.size != self.size:
+            raise UsageError(f"the world is {self.world.size}, the game's is {self.size}")
+        self._solid = self.world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
         self._open: arbiter.OpenCells | None = None  # the same, as the arbiter reads it (PIBT's swap; made once needed)
-        self.stage = Stage.ADMITTING
-        self.turn = 0
+        self.stage, self.turn = Stage.ADMITTING, 0
         self.fleet = Fleet((d.drone, d.start) for d in config.drones)
         self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
         self.roster = Roster()
@@ -231,9 +220,8 @@ class Engine:
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log: dict = {}
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
-        # The adapter's switches: whether the environment's UPD reports are checked; whether the turn records
-        # say what each drone was told and did (off without a journal: they are dropped); whether anyone
-        # follows the ENV phase (nobody following, its TURN is not even made).
+        # The adapter's switches: the environment's UPD reports are checked; the turn records say what each drone
+        # was told and did (off without a journal); someone follows the ENV phase (else its TURN is not made).
         self.verify_env = self.journaled = self.env_followed = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
@@ -246,13 +234,8 @@ class Engine:
 
     # ------------------------------------------------------------------ queries
 
-    @property
-    def size(self) -> Cell:
-        return self.config.world.size
-
     def alive(self) -> list[str]:
-        ids = self.fleet.ids
-        return [ids[i] for i in self.fleet.alive_rows().tolist()]
+        return [self.fleet.ids[i] for i in self.fleet.alive_rows().tolist()]
 
     def targets(self) -> dict[str, Cell]:
         """The targets in force, of every drone that has one."""
@@ -267,12 +250,13 @@ class Engine:
         return self._by_id(self._moved, self._proposed)
 
     def _by_id(self, rows: np.ndarray, cells: np.ndarray) -> dict[str, Cell]:
-        """The `cells` of the drones where `rows` holds, by id."""
-        ids = self.fleet.ids
-        return {ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
+        return {self.fleet.ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
 
     def _playing(self) -> bool:
         return self.stage in (Stage.GCS, Stage.DRONES)
+
+    def _admitting(self) -> bool:
+        return self.stage in (Stage.ADMITTING, Stage.RESUMING)
 
     def _env_missing(self) -> bool:
         return self._playing() and not self.roster.has(Role.ENV)
@@ -284,9 +268,8 @@ class Engine:
 
     def _back_but_gcs(self) -> bool:
         """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
-        roster, host = self.roster, self.fleet.host
-        return (self.stage is Stage.RESUMING and roster.has(Role.ENV) and not roster.has(Role.GCS)
-                and all(host[i] for i in self.fleet.alive_rows().tolist()))
+        return (self.stage is Stage.RESUMING
+                and self.roster.missing(self.fleet, self.fleet.alive_rows().tolist()) == [Role.GCS.value])
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
@@ -296,14 +279,12 @@ class Engine:
             return self.config.env_grace
         if self._back_but_gcs():
             return self.config.gcs_grace
-        match self.stage:
-            case Stage.ADMITTING | Stage.RESUMING:
-                return self.config.admit_deadline
-            case Stage.GCS if self._done is None:
-                return self.config.gcs_deadline
-            case Stage.GCS | Stage.DRONES:  # (GCS: DONE is in, some of its TGT are not: they get a drone's time)
-                return self.config.phase_deadline
-        return None
+        if self._admitting():
+            return self.config.admit_deadline
+        if self.stage is Stage.GCS and self._done is None:
+            return self.config.gcs_deadline
+        # (the GCS phase once its DONE is in: the TGTs it counts that have not arrived get a drone's time)
+        return self.config.phase_deadline if self._playing() else None
 
     def status(self, turn: int | None = None) -> Status:
         """Every drone's state at the end of `turn`; by default now, i.e. during a turn, as it stood at
@@ -316,8 +297,7 @@ class Engine:
 
     def connect(self, msg: Connect, token: object) -> list[Effect]:
         """Admit an entity or refuse it; start the game when everyone is there."""
-        refusal = self.roster.refusal(msg, self.fleet, over=self.stage is Stage.OVER,
-                                      admitting=self.stage in (Stage.ADMITTING, Stage.RESUMING))
+        refusal = self.roster.refusal(msg, self.fleet, over=self.stage is Stage.OVER, admitting=self._admitting())
         if refusal:
             self._log.warning("refused %s: %s", msg.sender, refusal)
             refused: list[Effect] = [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
@@ -328,20 +308,17 @@ class Engine:
         for d in msg.drones:
             fleet.fly(fleet.index[d], msg.sender, msg.autopilot, msg.cooperative)
         rows = sorted(range(len(fleet)) if msg.role is not Role.DRONE else [fleet.index[d] for d in msg.drones])
-        starts = StartTable.empty(len(rows))
-        starts["drone"], starts["pos"] = fleet.numbers[rows], fleet.pos[rows]
+        starts = StartTable.build(drone=fleet.numbers[rows], pos=fleet.pos[rows])
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
             f"{msg.sender} flying {id_ranges(msg.drones)}"
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
         welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
-                          world=self.config.world, starts=StartTable(starts), game=self.game)
+                          world=self.config.world, starts=starts, game=self.game)
         effects: list[Effect] = [Reply(token, welcome)]
-        if self.stage in (Stage.ADMITTING, Stage.RESUMING):
+        if self._admitting():
             # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
             awaited = fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
-            if self.roster.everyone_here(fleet, awaited):
-                effects += self._start() if self.stage is Stage.ADMITTING else self._resume()
-            return effects
+            return effects + ([] if self.roster.missing(fleet, awaited) else self._start())
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
         # A returning environment or ground station takes up the phase in progress.
         if msg.role is Role.ENV and self._held and self._phase_msg is not None:
@@ -361,78 +338,73 @@ class Engine:
         if self.journaled:  # (the journal's lines sort their keys: the order here is not the written one)
             world["cells"] = config.world.cells.hex()
             rows = zip(fleet.ids, fleet.pos.tolist(), fleet.autopilot, fleet.cooperative.tolist())
-            header["drones"] = [{"drone": d, "start": start, "autopilot": autopilot, "cooperative": cooperative}
-                                for d, start, autopilot, cooperative in rows]
+            header["drones"] = [dict(zip(("drone", "start", "autopilot", "cooperative"), row)) for row in rows]
         return header
 
     def _start(self) -> list[Effect]:
+        """Everyone is there: the game starts (its header opens the journal), or a resumed one goes on."""
+        if self.stage is Stage.RESUMING:
+            self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
+            return [Publish(self.status()), *self._gcs_phase(self.turn + 1)]
         self._log.info("all entities connected: the game starts")
-        return [Record(self.header()), Publish(self.status()), *self._enter(Stage.GCS, 1)]
-
-    def _resume(self) -> list[Effect]:
-        self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
-        return [Publish(self.status()), *self._enter(Stage.GCS, self.turn + 1)]
+        return [Record(self.header()), Publish(self.status()), *self._gcs_phase(1)]
 
     # ------------------------------------------------------------------ stages
 
-    def _enter(self, stage: Stage, turn: int) -> list[Effect]:
-        match stage:
-            case Stage.GCS:
-                early = self._open_gcs(turn)
-                if not self.roster.has(Role.GCS):  # no ground station: the drones keep their targets
-                    return self._enter(Stage.DRONES, turn)
-                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS, game=self.game)
-                if early is None:
-                    return [Publish(self._phase_msg)]
-                # the ground station answered this phase ahead: it opens and closes at once, unannounced
-                return self._gcs_done(early)  # (the station goes by STATUS: it knows the turn began)
-            case Stage.DRONES:
-                alive = self._open_drones(turn)
-                orders = self.fleet.orders(alive)
-                self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.DRONES, orders=orders, game=self.game)
-                if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
-                    self._held = True
-                    self._log.warning("turn %d waits for the environment to come back", turn)
-                    return []
-                return [Publish(self._phase_msg), *self._take_early_moves()]
-        raise AssertionError(stage)
+    def _gcs_phase(self, turn: int) -> list[Effect]:
+        early = self._open_gcs(turn)
+        if not self.roster.has(Role.GCS):  # no ground station: the drones keep their targets
+            return self._drones_phase()
+        self._phase_msg = Turn(turn=turn, sender="SRV", phase=Phase.GCS, game=self.game)
+        # answered ahead, the phase opens and closes at once, unannounced (the station goes by STATUS)
+        return [Publish(self._phase_msg)] if early is None else self._gcs_done(early)
+
+    def _drones_phase(self) -> list[Effect]:
+        """The drones' phase of this turn opens: no move taken yet, every alive drone's awaited."""
+        self.stage = Stage.DRONES
+        self._moved[:] = False
+        alive = self.fleet.alive_rows()
+        self._awaiting = len(alive)
+        orders = self.fleet.orders(alive)
+        self._phase_msg = Turn(turn=self.turn, sender="SRV", phase=Phase.DRONES, orders=orders, game=self.game)
+        if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
+            self._held = True
+            self._log.warning("turn %d waits for the environment to come back", self.turn)
+            return []
+        return [Publish(self._phase_msg), *self._take_early_moves()]
 
     def _open_gcs(self, turn: int) -> Done | None:
         """The GCS phase of `turn` begins: nothing received yet; the DONE sent ahead for it, if any."""
         self.stage, self.turn = Stage.GCS, turn
-        if np.count_nonzero(self._aimed):
-            self._aimed[:] = False
+        self._aimed[:] = False
         self._tgt_seen, self._done = 0, None
         self._turn_log = {"record": "turn", "turn": turn}
         early = self._early.pop(turn, None)
-        if self._early:
-            self._early = {t: d for t, d in self._early.items() if t > turn}
+        self._early = {t: d for t, d in self._early.items() if t > turn}
         return early
 
-    def _open_drones(self, turn: int) -> np.ndarray:
-        """The drones' phase of `turn` begins: no move taken yet; the alive rows, whose moves it awaits."""
-        self.stage, self.turn = Stage.DRONES, turn
-        self._moved[:] = False
-        alive = self.fleet.alive_rows()
-        self._awaiting = len(alive)
-        return alive
-
     def _drones_finish(self) -> list[Effect]:
-        """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), observe."""
-        turn, fleet = self.turn, self.fleet
+        """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), then the observer's
+        STATUS and the turn's journal record, and the next turn or the end."""
+        turn, fleet, log = self.turn, self.fleet, self._turn_log
         alive, before, final, moving = self._judge()
         effects: list[Effect] = []
         if (self.env_followed or self.verify_env) and np.count_nonzero(moving):
             rows = MoveTable.empty(int(np.count_nonzero(moving)))
             rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
             moves = MoveTable(rows)
-            if self.verify_env:
-                self._upd_due[turn] = moves  # its report may come turns later (nothing waits for it): keep a few
-                for old in [t for t in self._upd_due if t <= turn - UPD_WINDOW]:
-                    del self._upd_due[old]
+            if self.verify_env:  # its report may come turns later (nothing waits for it): keep a few
+                self._upd_due = {t: m for t, m in self._upd_due.items() if t > turn - UPD_WINDOW} | {turn: moves}
             if self.env_followed:
                 effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
-        return _drones_first(effects + self._observed())
+        status = self.status(turn)
+        data = encode(status)
+        if self.journaled:
+            log["state"] = state_hash(status, data)
+        self._log.debug("turn %d observed: %s", turn, log)
+        end = self._end_reason()
+        effects += [Record(log), Publish(status, data), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
+        return _drones_first(effects)
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """`proposed` after the cooperative drones' arbitration; journaled: who did not get its first choice
@@ -463,9 +435,8 @@ class Engine:
         home = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1)
         stuck = ~home & (fleet.note == UNREACHABLE) & ~self._gave_way
         prio, span = self.priority, arbiter.TIE_SPAN
-        left = prio < span  # leaving rest now, if not at rest: its tie-break is taken now
         far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
-        moving = np.where(left, span + far, prio + span)
+        moving = np.where(prio < span, span + far, prio + span)  # leaving rest now: its tie-break is taken now
         self.priority[alive] = np.where(home | self._gave_way, 0, np.where(stuck, arbiter.STUCK, moving))[alive]
         if np.count_nonzero(self._gave_way):
             self._gave_way[:] = False
@@ -476,9 +447,8 @@ class Engine:
         return CellKind.BUILDING if self.world.is_building(cell) else CellKind.EMPTY
 
     def receive(self, msg: Message) -> list[Effect]:
-        """A message from the network, decoded and addressed correctly: its effects. One that cannot be
-        accepted changes nothing and gives a `Refusal` (then what goes on all the same: a refused target still
-        counts towards its DONE, a batch's other items are taken)."""
+        """A message from the network, decoded and addressed correctly: its effects. One that cannot be accepted
+        changes nothing but gives a `Refusal` (a refused TGT still counts towards its DONE, a batch's others go on)."""
         now = msg.turn == self.turn
         try:
             match msg:
@@ -508,9 +478,8 @@ class Engine:
             raise WrongSender(f"target for {msg.drone} from {msg.sender}: only the GCS sets targets")
         if self.stage is not Stage.GCS or msg.turn != self.turn:
             raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
-        self._tgt_seen += 1  # counted against the DONE's count even if refused below
-        refused = _each([msg], lambda m: self._aim(m.drone, m.pos))
-        return _with_refusals(msg, refused, self._gcs_check())  # a refused target: the phase goes on
+        self._tgt_seen += 1  # counted against the DONE's count even if refused: the phase goes on
+        return [*_in_batch(msg, 1, None, lambda _: self._aim(msg.drone, msg.pos)), *self._gcs_check()]
 
     def _aim(self, d: str, pos: Cell) -> None:
         """Keep a target for this GCS phase, or raise (and keep nothing)."""
@@ -521,8 +490,7 @@ class Engine:
             raise UnknownEntity(f"target for {d}, which is {STATES[self.fleet.state[i]].value}")
         if not observer.inside(pos, self.size):
             raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
-        self._aimed[i] = True
-        self._aims[i] = pos
+        self._aimed[i], self._aims[i] = True, pos
 
     def _hold(self, msg: Done) -> list[Effect]:
         """The GCS's DONE for a coming GCS phase (up to AHEAD_MAX turns on; it had nothing new to say): kept,
@@ -564,31 +532,27 @@ class Engine:
             rows = fleet.row_of_number[numbers]
             ok = (rows >= 0) & inside_rows(pos, self.size)
             ok[ok] = fleet.state[rows[ok]] == ALIVE
-            self._aimed[rows[ok]] = True
-            self._aims[rows[ok]] = pos[ok]
+            self._aimed[rows[ok]], self._aims[rows[ok]] = True, pos[ok]
             return ok
 
-        refused = _in_batch(len(msg.targets), whole, lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
-        return _with_refusals(msg, refused, self._gcs_check())
+        refused = _in_batch(msg, len(msg.targets), whole,
+                            lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
+        return [*refused, *self._gcs_check()]
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
-        if self._done is None or self._tgt_seen < self._done.count:
-            return []
-        return self._gcs_finish()
+        return [] if self._done is None or self._tgt_seen < self._done.count else self._gcs_finish()
 
     def _gcs_finish(self) -> list[Effect]:
         """The GCS phase ends (also cut short): what arrived of its targets holds if its DONE is in, else none."""
         if self._done is None:
             self._aimed[:] = False
-            return self._enter(Stage.DRONES, self.turn)
-        if not self._targets_set(self._done.intent):
+        elif not self._targets_set(self._done.intent):
             return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
-        return self._enter(Stage.DRONES, self.turn)
+        return self._drones_phase()
 
     def _targets_set(self, intent: Intent) -> bool:
-        """The GCS phase closes: the targets it received take force and its intent is noted; whether the game
-        goes on (not QUIT)."""
+        """The GCS phase closes: its targets take force, its intent is noted; whether the game goes on (not QUIT)."""
         fleet = self.fleet
         if np.count_nonzero(self._aimed):  # (most GCS phases bring no target)
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
@@ -606,13 +570,12 @@ class Engine:
 
     def play(self, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
              notes: np.ndarray) -> Over | None:
-        """One whole turn from arrays, for a caller in this process that is both the ground station and the
-        host of every drone (the RL environment, dronesim/rl.py): as if the ground station's DONE (CONTINUE)
-        carried the targets `aims` of the rows `aim_rows`, then a MOVES the `moves` (cells) and `notes` (Note
-        codes) of the rows `move_rows` (each once; the other alive drones hover), through the same steps
-        without a message built (the caller reads the fleet's columns; no journal record). The turn's OVER if
-        the game ended with it. UsageError, and nothing changed, if the turn is not the ground station's (or a
-        DONE or MOVES came ahead) or an input would be refused."""
+        """One whole turn from arrays, for a caller in this process that is the ground station and every drone's
+        host (dronesim/rl.py): as if a DONE (CONTINUE) carried the targets `aims` of the rows `aim_rows`, then a
+        MOVES the `moves` (cells) and `notes` (Note codes) of the rows `move_rows` (each once; the other alive
+        drones hover), with no message built and no journal record. The turn's OVER if the game ended with it.
+        UsageError, nothing changed, if the turn is not the GCS's (or a DONE or MOVES came ahead) or an input
+        would be refused."""
         fleet = self.fleet
         if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
@@ -632,11 +595,11 @@ class Engine:
         if len(aim_rows):
             self._aimed[aim_rows], self._aims[aim_rows] = True, aims
         self._targets_set(Intent.CONTINUE)
-        alive = self._open_drones(self.turn)
+        self._moved[:] = False  # (the drones' phase, opened and closed at once)
         self._proposed[move_rows], self._said[move_rows], self._moved[move_rows] = moves, notes, True
         if np.count_nonzero(fleet.cooperative):  # (only the arbitration reads them)
             self._ranked[move_rows] = 0
-        self._judge(alive)
+        self._judge()
         if end := self._end_reason():
             self._over(*end)
             return self.end
@@ -644,8 +607,7 @@ class Engine:
         return None
 
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves, each on its own as if sent as an NPS (`_in_batch`: `whole` makes
-        `_host_move`'s checks in array operations)."""
+        """A swarm host's moves, each taken as if sent as an NPS (`whole`: `_host_move`'s checks, as arrays)."""
         fleet, steps = self.fleet, msg.moves
         numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
 
@@ -661,9 +623,9 @@ class Engine:
             self._awaiting -= len(take)
             return ok
 
-        refused = _in_batch(len(steps), whole, lambda j: self._host_move(
+        refused = _in_batch(msg, len(steps), whole, lambda j: self._host_move(
             msg.sender, drone_name(int(numbers[j])), cell_of(pos[j]), NOTES[notes[j]], int(steps.column("ranked")[j])))
-        return _with_refusals(msg, refused, self._drones_check())
+        return [*refused, *self._drones_check()]
 
     def _host_move(self, sender: str, d: str, pos: Cell, note: Note, ranked: int) -> None:
         """Take a move a swarm host sent for one of its drones, or raise (and take nothing)."""
@@ -693,8 +655,7 @@ class Engine:
         return self._drones_finish() if self._awaiting <= 0 else []
 
     def _upd(self, msg: Upd) -> list[Effect]:
-        """The environment's report of a recent ENV phase: checked against the engine's world; it
-        changes nothing (the observer has already judged the turn)."""
+        """The environment's report of a recent ENV phase, checked against the engine's world (the turn is judged)."""
         if msg.sender != "ENV":
             raise WrongSender(f"UPD from {msg.sender}")
         turn, moves = msg.turn, self._upd_due.get(msg.turn)
@@ -709,14 +670,12 @@ class Engine:
         del self._upd_due[turn]
         return []
 
-    def _judge(self, alive: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _judge(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
         the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
-        deadlines and the turn's journal record. The alive rows of the phase (`alive`, if the caller has them),
-        their cells before and after, and which moved."""
+        deadlines and the turn's journal record. The alive rows, their cells before and after, and which moved."""
         fleet, ids = self.fleet, self.fleet.ids
-        if alive is None:
-            alive = fleet.alive_rows()
+        alive = fleet.alive_rows()
         before = fleet.pos[alive]
         took = self._moved[alive]
         hovering = len(alive) - np.count_nonzero(took)  # (most turns: none, whose bookkeeping is skipped)
@@ -737,26 +696,19 @@ class Engine:
         if len(said):
             fleet.note[said] = self._said[said]
         self.age(alive)
-        if hovering:
-            hovered = alive[~took]
-            fleet.misses[alive[took]] = 0
-            fleet.misses[hovered] += 1
-            lost = hovered[fleet.misses[hovered] >= self.config.lost_after]
-        else:
-            hovered = lost = alive[:0]
-            if np.count_nonzero(fleet.misses):
-                fleet.misses[alive] = 0
-        dead = alive[:0]
-        if np.count_nonzero(cause):
-            dying = cause != 0
-            dead = alive[dying]
-            fleet.state[dead], fleet.cause[dead] = code_of(DroneState.DEAD), cause[dying]
+        hovered = alive[~took] if hovering else alive[:0]
+        if hovering or np.count_nonzero(fleet.misses):  # misses in a row: a move starts the count again
+            fleet.misses[alive] = np.where(took, 0, fleet.misses[alive] + 1)
+        lost = hovered[fleet.misses[hovered] >= self.config.lost_after] if hovering else hovered
+        dead = alive[cause != 0] if np.count_nonzero(cause) else alive[:0]
+        if len(dead):
+            fleet.state[dead], fleet.cause[dead] = DEAD, cause[cause != 0]
         for i in dead.tolist():
             self._log.warning("turn %d: %s died (%s) at %s", self.turn, ids[i], CAUSES[fleet.cause[i]].value,
                               cell_of(fleet.pos[i]))
         for i in lost.tolist():
             if fleet.state[i] == ALIVE:
-                self._lose(ids[i])
+                self._lose(i)
         log = self._turn_log
         if self.journaled:  # what the turn did, drone by drone
             if any_moved:
@@ -769,20 +721,8 @@ class Engine:
                 log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
         return alive, before, after, moved
 
-    def _observed(self) -> list[Effect]:
-        """The observer's STATUS of the turn just judged, its journal record, then the next turn or the end."""
-        log = self._turn_log
-        status = self.status(self.turn)
-        data = encode(status)
-        if self.journaled:
-            log["state"] = state_hash(status, data)
-        self._log.debug("turn %d observed: %s", self.turn, log)
-        effects: list[Effect] = [Record(log), Publish(status, data)]
-        end = self._end_reason()
-        return effects + (self._over(*end) if end else self._enter(Stage.GCS, self.turn + 1))
-
-    def _lose(self, d: str) -> None:
-        i = self.fleet.index[d]
+    def _lose(self, i: int) -> None:
+        d = self.fleet.ids[i]
         self.fleet.end(i, DroneState.LOST, Cause.LOST)
         if self.stage is Stage.DRONES and not self._moved[i]:
             self._awaiting -= 1
@@ -809,7 +749,6 @@ class Engine:
         return None
 
     def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
-        """The game ends with `turn` (by default the current one)."""
         turn = self.turn if turn is None else turn
         self.stage = Stage.OVER
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
@@ -825,31 +764,29 @@ class Engine:
         if self._away is not None:  # who is not back after a lost link has vanished
             gone, self._away = sorted(self._away), None
             self._log.warning("%s did not come back within %g s", ", ".join(gone), self.config.link_grace)
-            effects = [e for entity in gone for e in self.vanished(entity)]
-            return effects + (self._go_on() if self.stage is not Stage.OVER else [])
+            return [e for entity in gone for e in self.vanished(entity)] + self._go_on()
         if self._env_missing():
             return self._over(EndReason.ABORTED,
                               f"the environment vanished and did not come back within {self.config.env_grace:g} s")
-        match stage:
-            case Stage.RESUMING if self._back_but_gcs():
-                self._log.warning("the ground station did not come back within %g s: the game resumes without it",
-                                  self.config.gcs_grace)
-                return self._resume()
-            case Stage.ADMITTING | Stage.RESUMING:
-                missing = self.roster.missing(self.fleet)
-                return self._over(EndReason.ABORTED, f"entities never connected: {', '.join(missing)}")
-            case Stage.GCS:
-                if self._done is not None:
-                    self._log.warning("turn %d: %d of the GCS's %d targets arrived in time", turn,
-                                      self._tgt_seen, self._done.count)
-                else:
-                    self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
-                return self._gcs_finish()
-            case Stage.DRONES:
-                alive = self.fleet.alive_rows()
-                late = [self.fleet.ids[i] for i in alive[~self._moved[alive]].tolist()]
-                self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
-                return self._drones_finish()
+        if self._back_but_gcs():
+            self._log.warning("the ground station did not come back within %g s: the game resumes without it",
+                              self.config.gcs_grace)
+            return self._start()
+        if self._admitting():
+            missing = ", ".join(self.roster.missing(self.fleet))
+            return self._over(EndReason.ABORTED, f"entities never connected: {missing}")
+        if stage is Stage.GCS:
+            if self._done is None:
+                self._log.warning("turn %d: the GCS did not finish in time; targets unchanged", turn)
+            else:
+                self._log.warning("turn %d: %d of the GCS's %d targets arrived in time", turn, self._tgt_seen,
+                                  self._done.count)
+            return self._gcs_finish()
+        if stage is Stage.DRONES:
+            alive = self.fleet.alive_rows()
+            late = [self.fleet.ids[i] for i in alive[~self._moved[alive]].tolist()]
+            self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
+            return self._drones_finish()
         return []
 
     def interrupt(self, why: str) -> list[Effect]:
@@ -891,30 +828,28 @@ class Engine:
         return effects
 
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
-        """An admitted entity's presence token disappeared (its process died or was cut off); only the
-        admitted process's own token counts, not a refused impostor's. A vanished environment is waited
-        for (`env_grace`; a returning one resyncs from STATUS)."""
+        """An admitted entity's presence token disappeared (its process died or was cut off; a refused impostor's
+        token does not count). A vanished environment is waited for (`env_grace`; back, it resyncs from STATUS)."""
         if self._away is not None and entity in self._away:
             return []  # the link is down: it is away, not gone (until `link_grace` has passed)
         role = self.roster.leave(entity, session)
         if role is None or self.stage is Stage.OVER:
             return []
         self._log.warning("%s vanished", entity)
-        match role:
-            case Role.GCS:
-                self._early.clear()  # what it said ahead goes with it
-                if self.stage is Stage.GCS:
-                    return self._gcs_finish()
-            case Role.DRONE:
-                fleet = self.fleet
-                self._early_moves.pop(entity, None)
-                for i in [i for i, host in enumerate(fleet.host) if host == entity]:
-                    if self.stage in (Stage.ADMITTING, Stage.RESUMING):
-                        fleet.unhost(i)
-                    elif fleet.state[i] == ALIVE:
-                        self._lose(fleet.ids[i])
-                if self.stage is Stage.DRONES:
-                    return self._drones_check()
+        if role is Role.GCS:
+            self._early.clear()  # what it said ahead goes with it
+            if self.stage is Stage.GCS:
+                return self._gcs_finish()
+        elif role is Role.DRONE:
+            fleet = self.fleet
+            self._early_moves.pop(entity, None)
+            for i in [i for i, host in enumerate(fleet.host) if host == entity]:
+                if self._admitting():
+                    fleet.unhost(i)
+                elif fleet.state[i] == ALIVE:
+                    self._lose(i)
+            if self.stage is Stage.DRONES:
+                return self._drones_check()
         return []
 
 
@@ -936,31 +871,22 @@ def _drones_first(effects: list[Effect]) -> list[Effect]:
     return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves
 
 
-def _in_batch(n: int, whole: Callable[[], np.ndarray], one: Callable[[int], None]) -> list[RemoteInputError]:
-    """Take a batch of `n` items (a MOVES's moves, a DONE's targets), each on its own (`one(j)` takes item j
-    or raises why not); the refusals, in order. A batch of more than FEW_ROWS is taken as a whole first
-    (`whole()` takes, in array operations, every item `one` would take, and says which), the rest one by one."""
-    return _each(range(n) if n <= FEW_ROWS else np.flatnonzero(~whole()).tolist(), one)
-
-
-def _each(items, take) -> list[RemoteInputError]:
-    """`take` each item of a batch; the refusals (each changed nothing), in order."""
+def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one: Callable[[int], None]) -> list[Effect]:
+    """Take the `n` items of `msg` (a MOVES's moves, a DONE's targets, a TGT's one) each on its own (`one(j)`
+    takes item j or raises why not, changing nothing): a `Refusal` of `msg` if some were refused, the first one's
+    error naming the others. A batch of more than FEW_ROWS is taken as a whole first (`whole()` takes, in array
+    operations, every item `one` would take, and says which), the rest one by one."""
     refused = []
-    for item in items:
+    for j in range(n) if n <= FEW_ROWS or whole is None else np.flatnonzero(~whole()).tolist():
         try:
-            take(item)
+            one(j)
         except RemoteInputError as err:
             refused.append(err)
-    return refused
-
-
-def _with_refusals(msg: Message, refused: list[RemoteInputError], effects: list[Effect]) -> list[Effect]:
-    """The effects of `msg`, a batch some items of which were `refused` (the first error names the others)."""
     if not refused:
-        return effects
+        return []
     first = refused[0]
     more = f" (and {len(refused) - 1} more: {'; '.join(map(str, refused[1:4]))})" if len(refused) > 1 else ""
-    return [Refusal(f"{msg.TAG} from {msg.sender}", type(first)(f"{first}{more}")), *effects]
+    return [Refusal(f"{msg.TAG} from {msg.sender}", type(first)(f"{first}{more}"))]
 
 
 def replace_config(config: GameConfig, **changes: Any) -> GameConfig:
@@ -969,11 +895,6 @@ def replace_config(config: GameConfig, **changes: Any) -> GameConfig:
 
 def id_ranges(drones: Iterable[str]) -> str:
     """Drone ids as runs of consecutive numbers, as `dronesim drone --id` reads them: "D01-D03, D07"."""
-    numbers = sorted(map(drone_number, drones))
-    runs: list[list[int]] = []
-    for n in numbers:
-        if runs and n == runs[-1][1] + 1:
-            runs[-1][1] = n
-        else:
-            runs.append([n, n])
-    return ", ".join(drone_id(a) if a == b else f"{drone_id(a)}-{drone_id(b)}" for a, b in runs)
+    runs = itertools.groupby(enumerate(sorted(map(drone_number, drones))), lambda item: item[1] - item[0])
+    ends = [(run[0][1], run[-1][1]) for run in (list(items) for _, items in runs)]
+    return ", ".join(drone_id(a) if a == b else f"{drone_id(a)}-{drone_id(b)}" for a, b in ends)

@@ -1,9 +1,7 @@
-"""The drones of a game as columns: the turn engine's state, one row per drone, rows in id order.
-
-A swarm's turn touches every drone a few times: as numpy columns that is a handful of array operations per
-turn and a few dozen bytes per drone (a record per drone cost microseconds and hundreds of bytes each). The
-row order is the drones' id order, which is also their priority order (arbitration, observer).
-"""
+"""The drones of a game as columns: the turn engine's state, one row per drone, in id order (also their
+priority order: arbitration, observer). A swarm's turn touches every drone a few times: as numpy columns that
+is a handful of array operations and a few dozen bytes per drone (as records: microseconds and hundreds of
+bytes each)."""
 
 from __future__ import annotations
 
@@ -89,14 +87,11 @@ class Fleet:
         return OrderTable(table)
 
     def fly(self, i: int, host: str, autopilot: str, cooperative: bool) -> None:
-        self.host[i] = host
-        self.host_code[i] = self.hosts.setdefault(host, len(self.hosts))
-        self.autopilot[i] = autopilot
-        self.cooperative[i] = cooperative
+        self.host[i], self.host_code[i] = host, self.hosts.setdefault(host, len(self.hosts))
+        self.autopilot[i], self.cooperative[i] = autopilot, cooperative
 
     def unhost(self, i: int) -> None:
-        self.host[i] = None
-        self.host_code[i] = -1
+        self.host[i], self.host_code[i] = None, -1
 
     def aim(self, rows: int | np.ndarray, targets: Cell | np.ndarray) -> None:
         """New targets for a drone (a row and a cell) or several (rows and an (n, 3) array of cells)."""

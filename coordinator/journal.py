@@ -1,8 +1,6 @@
-"""The append-only journal: one JSON line per record (header, one per turn, over).
-
-Lines are canonical JSON (sorted keys, no spaces, no timestamps) so two runs of the same scenario
-give byte-identical journals, whatever the process layout.
-"""
+"""The append-only journal: one JSON line per record (header, one per turn, over). Lines are canonical JSON
+(sorted keys, no spaces, no timestamps) so two runs of the same scenario give byte-identical journals,
+whatever the process layout."""
 
 from __future__ import annotations
 
@@ -22,23 +20,18 @@ class JournalWriter:
     """Appends records to a file, flushed line by line (a crash loses at most the line being written)."""
 
     def __init__(self, path: str | os.PathLike[str] | None) -> None:
-        self._f = open(path, "a", encoding="utf-8") if path else None  # noqa: SIM115
+        self._f = open(path, "a", buffering=1, encoding="utf-8") if path else None  # noqa: SIM115
 
     def append(self, record: dict) -> None:
         if self._f is not None:
             self._f.write(dumps(record) + "\n")
-            self._f.flush()
-
-    def close(self) -> None:
-        if self._f is not None:
-            self._f.close()
-            self._f = None
 
     def __enter__(self) -> JournalWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.close()
+        if self._f is not None:
+            self._f.close()
 
 
 def repair_tail(path: str | os.PathLike[str]) -> None:
@@ -48,8 +41,7 @@ def repair_tail(path: str | os.PathLike[str]) -> None:
     except OSError as exc:
         raise UsageError(f"cannot read journal {path}: {exc}") from None
     if data and not data.endswith(b"\n"):
-        with open(path, "r+b") as f:
-            f.truncate(data.rfind(b"\n") + 1)
+        os.truncate(path, data.rfind(b"\n") + 1)
 
 
 def read(path: str | os.PathLike[str]) -> Iterator[dict]:

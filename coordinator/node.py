@@ -35,6 +35,7 @@ from dronesim.transport import (
     setup_logging,
     zenoh_config,
 )
+from entities.world import World
 from schema import (
     Cell,
     Connect,
@@ -92,8 +93,7 @@ class Executor:
     def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, rejects: RejectCounter,
                  pace: float = 0.0, clock: Callable[[], float] = time.monotonic) -> None:
         self.keys, self.out, self.writer, self.rejects, self.pace, self.clock = keys, out, writer, rejects, pace, clock
-        self._held: list = []
-        self._due = 0.0
+        self._held: list = []  # a new turn's TURN, held until `pace` has passed, and the effects after it
         self._turn = 0  # the last turn whose first TURN went out
         self._last = float("-inf")  # when it went out
 
@@ -109,7 +109,7 @@ class Executor:
                 case Publish(Turn() as turn) if self.pace and turn.turn > self._turn:
                     self._turn = turn.turn
                     if self.clock() < self._last + self.pace:
-                        self._held, self._due = [eff], self._last + self.pace
+                        self._held = [eff]
                     else:
                         self.release([eff])
                 case Publish(msg, data):
@@ -128,7 +128,7 @@ class Executor:
 
     def due_in(self) -> float | None:
         """Seconds until held effects are due (None: nothing held)."""
-        return max(0.0, self._due - self.clock()) if self._held else None
+        return max(0.0, self._last + self.pace - self.clock()) if self._held else None
 
     def release(self, held: list | None = None) -> None:
         """Send the held effects (or `held`, a new turn's TURN) now: a new turn starts."""
@@ -141,11 +141,10 @@ class Executor:
 class Coordinator:
     """The coordinator's loop around the engine, without Zenoh: feed it the inbox's events (None when
     `timeout()` passed), until `finished()`. It admits a CONNECT once its sender's presence token is seen
-    (`Presences`), keeps the phase deadline, holds a vanished presence SETTLE_S before it counts (its own
-    vanishing too means the link is down: the engine holds the game), refuses to share its root with another
-    coordinator, ends the game on a signal, and after OVER waits (up to LINGER_S) for the entities to leave.
-    When an admitted session's token vanishes or a phase's deadline passes, it asks the routers which
-    sessions they connect (`audit`): an admitted entity whose session is not among them has gone."""
+    (`Presences`), keeps the deadlines, holds a vanished presence SETTLE_S before it counts (its own vanishing
+    means the link is down), yields to a rival coordinator, ends the game on a signal, and after OVER waits up
+    to LINGER_S for the entities to leave. When an admitted session's token vanishes or a phase's deadline
+    passes, it asks the routers which sessions they connect (`audit`): one not among them has gone."""
 
     def __init__(self, engine: Engine, effects: Executor, rejects: RejectCounter, logger: logging.Logger, me: str,
                  clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None) -> None:
@@ -186,9 +185,8 @@ class Coordinator:
         return min((d for d in delays if d is not None), default=None)
 
     def finished(self) -> bool:
-        if self.rival is not None:
-            return True
-        return self._linger_until is not None and (not self.presences.others() or self.clock() >= self._linger_until)
+        return self.rival is not None or (self._linger_until is not None
+                                          and (not self.presences.others() or self.clock() >= self._linger_until))
 
     def handle(self, event: object) -> None:
         run, engine, now = self.effects.run, self.engine, self.clock()
@@ -249,8 +247,8 @@ class Coordinator:
 
     def _tick(self) -> None:
         """The deadline restarts whenever what it is measured from changes (`Engine.clock`)."""
-        if self.engine.clock() != self._phase:
-            self._phase, self._started = self.engine.clock(), self.clock()
+        if (phase := self.engine.clock()) != self._phase:
+            self._phase, self._started = phase, self.clock()
 
     def _due(self, now: float) -> None:
         """Whatever is due: held turns, CONNECTs without a token, vanished presences, the phase deadline."""
@@ -261,10 +259,9 @@ class Coordinator:
                    "a process connects under its own name only")
             self.rejects.reject(f"CONNECT from {msg.sender}", WrongSender(why))
             self.effects.answer(query, encode(Refused(turn=self.engine.turn, sender="SRV", text=why)))
-        for (entity, sid), due in sorted(self._vanishing.items()):
-            if due <= now:
-                del self._vanishing[(entity, sid)]
-                self.effects.run(self.engine.vanished(entity, sid))
+        for entity, sid in sorted(key for key, due in self._vanishing.items() if due <= now):
+            del self._vanishing[(entity, sid)]
+            self.effects.run(self.engine.vanished(entity, sid))
         self._tick()  # (a departure may have changed what the deadline is measured from)
         limit = self.engine.deadline()
         if limit is not None and now >= self._started + limit and self._linger_until is None:
@@ -413,8 +410,6 @@ def parse_size(text: str) -> tuple[int, int, int]:
 
 
 def game_config(args: argparse.Namespace) -> GameConfig:
-    from entities.world import World
-
     deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
                      admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace,
                      link_grace=args.link_grace)

@@ -1,9 +1,8 @@
 """The observer's rules (the seed's OBS): pure functions deciding which drones die in a turn.
 
-A drone dies when it leaves the world, enters a building cell, shares a cell with another drone
-(vertex conflict) or swaps cells with another drone (swap conflict). Causes are checked in that
-order and the first that applies is the one recorded. Priority is the id order: when several drones enter
-one cell, the last in id order is the one remembered as entering it, for the swap rule.
+A drone dies when it leaves the world, enters a building cell, shares a cell with another drone (vertex
+conflict) or swaps cells with another drone (swap conflict), the first of these that applies being its cause.
+When several drones enter one cell, the last in id order is the one remembered as entering it (swap rule).
 
 `judge` decides for a whole swarm at once, over columns: the engine's observer. `deaths` is the same rules
 drone by drone, over mappings: the reference that tests/test_observer.py holds `judge` to (a property test).
@@ -32,12 +31,10 @@ def inside(cell: Cell, size: Cell) -> bool:
 
 def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
           few: int = JUDGE_FEW_DRONES) -> np.ndarray:
-    """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE).
-
-    `before` and `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered
-    integers, rows in id order; `building`: whether its `after` cell is a building. Up to `few` drones,
-    judged drone by drone (`deaths`: an array operation's fixed cost is more than a few drones' Python).
-    """
+    """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE). `before` and
+    `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered integers, rows in id
+    order; `building`: whether its `after` cell is a building. Up to `few` drones, judged drone by drone
+    (`deaths`: an array operation's fixed cost is more than a few drones' Python)."""
     n = len(after)
     if n <= few:
         return _judge_few(size, before, after, building)
@@ -54,17 +51,15 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     order = np.argsort(alone, kind="stable")
     same = alone[order[1:]] == alone[order[:-1]]
     if np.count_nonzero(same):
-        cause[order[1:][same]] = _VERTEX
-        cause[order[:-1][same]] = _VERTEX
+        cause[order[1:][same]] = cause[order[:-1][same]] = _VERTEX
     moved = (after != before).any(axis=1).nonzero()[0]
     if len(moved) < 2:
         return cause  # a swap takes two movers
     src = linear_rows(before[moved], size)
     entering = np.where(out[moved], -1 - moved, key[moved])  # outside: a cell no drone comes from
     # the drone remembered as entering each cell: the last mover (in id order) whose `after` it is
-    rev = moved[::-1]
     entered, first = np.unique(entering[::-1], return_index=True)
-    enterer = rev[first]
+    enterer = moved[::-1][first]
     at = np.minimum(np.searchsorted(entered, src), len(entered) - 1)
     other = np.where(entered[at] == src, enterer[at], -1)
     swap = (other >= 0) & (other != moved)
@@ -86,17 +81,10 @@ def _judge_few(size: Cell, before: np.ndarray, after: np.ndarray, building: np.n
     return cause
 
 
-def deaths(
-    size: Cell,
-    before: Mapping[K, Cell],
-    after: Mapping[K, Cell],
-    buildings: Set[Cell],
-) -> dict[K, Cause]:
-    """Which of the drones alive at the start of the turn die, and why: the rules drone by drone.
-
-    `before` and `after` hold every alive drone's cell at the start and end of the turn (a hovering
-    drone has the same cell in both); `buildings` holds the building cells among the `after` cells.
-    """
+def deaths(size: Cell, before: Mapping[K, Cell], after: Mapping[K, Cell], buildings: Set[Cell]) -> dict[K, Cause]:
+    """Which of the drones alive at the start of the turn die, and why: the rules drone by drone. `before` and
+    `after`: every alive drone's cell at the start and end of the turn (a hovering drone's are the same);
+    `buildings`: the building cells among the `after` cells."""
     dead: dict[K, Cause] = {}
     order = sorted(after)
     by_cell: dict[Cell, list[K]] = defaultdict(list)
@@ -108,10 +96,7 @@ def deaths(
             dead[d] = Cause.BUILDING
         else:
             by_cell[cell].append(d)
-    for ds in by_cell.values():
-        if len(ds) > 1:
-            for d in ds:
-                dead[d] = Cause.VERTEX
+    dead.update((d, Cause.VERTEX) for ds in by_cell.values() if len(ds) > 1 for d in ds)
     arriving = {after[d]: d for d in order if after[d] != before[d]}
     for d in order:
         src, dst = before[d], after[d]

@@ -1,9 +1,5 @@
-"""Resuming a game from its journal: a restarted coordinator's engine, in the state of the last whole turn.
-
-Each journaled turn is applied to the state as the engine's observer did when it was played, and the
-state's hash is checked against the one recorded; the engine then waits (RESUMING) for the entities to
-connect again and plays the turn after the journal's last.
-"""
+"""Resuming a game from its journal: a restarted coordinator's engine in the state of the last whole turn,
+each journaled turn replayed as the observer played it and checked against the state hash it recorded."""
 
 from __future__ import annotations
 
@@ -18,35 +14,33 @@ from .engine import Engine, GameConfig, Stage, state_hash
 
 
 def restore(config: GameConfig, records: list[dict], logger: logging.Logger, game: str = "") -> Engine:
-    """An engine restored from a journal's records, waiting (RESUMING) for the entities to connect again
-    (`game`: its new identity, see `Engine`). UsageError if the journal is not this game's, is over, or does
-    not replay to its recorded states."""
+    """An engine restored from a journal's records, waiting (RESUMING) for the entities to connect again, then
+    playing the turn after the journal's last (`game`: its new identity, see `Engine`). UsageError if the
+    journal is not this game's, is over, or does not replay to its recorded states."""
     engine = Engine(config, logger, game=game)
     if not records or records[0].get("record") != "header":
         raise UsageError("the journal has no header: nothing to resume")
-    theirs = dict(records[0])
+    theirs = records[0]
     fleet = engine.fleet
     for d in theirs.get("drones", []):  # autopilots are learnt at admission, not configured
         i = fleet.index.get(d.get("drone"))
         if i is not None:
-            fleet.autopilot[i] = d.get("autopilot", "")
-            fleet.cooperative[i] = d.get("cooperative", False)
+            fleet.autopilot[i], fleet.cooperative[i] = d.get("autopilot", ""), d.get("cooperative", False)
     if engine.header() != theirs:
         raise UsageError("the journal is of another game (world, drones or limits differ)")
     turn = 0
     for r in records[1:]:
-        match r.get("record"):
-            case "turn":
-                turn = _restore_turn(engine, r)
-            case "over":
-                raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
+        if r.get("record") == "over":
+            raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
+        if r.get("record") == "turn":
+            turn = _restore_turn(engine, r)
     engine.turn, engine.stage = turn, Stage.RESUMING
     logger.info("restored turn %d from the journal", turn)
     return engine
 
 
 def _restore_turn(engine: Engine, r: dict) -> int:
-    """Apply one journaled turn to the engine's state, as its observer did when it was played; its turn."""
+    """Apply one journaled turn to the engine's state; its turn."""
     fleet, row = engine.fleet, engine.fleet.index
     alive = fleet.alive_rows()
     for d, p in r.get("targets", {}).items():
@@ -59,15 +53,13 @@ def _restore_turn(engine: Engine, r: dict) -> int:
     for d, n in r.get("notes", {}).items():
         fleet.note[row[d]] = code_of(Note(n))
     engine.age(alive, [row[d] for d in r.get("gave_way", ())])  # the arbitration's priorities
-    hovered = np.zeros(len(fleet), bool)
-    hovered[[row[d] for d in r.get("hovered", ())]] = True
-    fleet.misses[alive] = np.where(hovered[alive], fleet.misses[alive] + 1, 0)
+    hovered = np.isin(alive, [row[d] for d in r.get("hovered", ())])
+    fleet.misses[alive] = np.where(hovered, fleet.misses[alive] + 1, 0)
     for d, cause in r.get("deaths", {}).items():
         fleet.end(row[d], DroneState.DEAD, Cause(cause))
     for d in r.get("lost", ()):
         fleet.end(row[d], DroneState.LOST, Cause.LOST)
     turn = r["turn"]
-    state = state_hash(engine.status(turn))
-    if state != r.get("state"):
+    if state_hash(engine.status(turn)) != r.get("state"):
         raise UsageError(f"the journal's turn {turn} does not replay to its recorded state")
     return turn
