@@ -496,7 +496,7 @@ class Ask(Message):
                 _check(False, f"around cells must be 3 integers with neighbours in range, got {c!r}")
 
     def asked(self) -> tuple[Cell, ...]:
-        """Every asked cell, in answer order: `cells`, then the neighbours of each `around` cell."""
+        """Every asked cell, in answer order (`asked_cells`)."""
         return asked_cells(self.cells, self.around)
 
 
@@ -726,10 +726,9 @@ _WIRE_NAMES = {cls: frozenset(wire for _, wire, _, _ in fields) for cls, fields 
 
 
 def encode(msg: Message) -> bytes:
-    """The MessagePack bytes of a message (deterministic: same message, same bytes): a map of the
-    header ("v", "t") and the fields, in order."""
+    """The MessagePack bytes of a message: a map of the header ("v", "t") and the fields, in order."""
     fields = _FIELDS[type(msg)]
-    packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=PACK_BUFFER)  # it grows as needed
+    packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=PACK_BUFFER)
     pack = packer.pack
     packer.pack_map_header(2 + len(fields))
     pack("v"), pack(SCHEMA_VERSION), pack("t"), pack(msg.TAG)
@@ -749,11 +748,8 @@ def decode(data: bytes, expect: tuple[type[Message], ...] | None = None) -> Mess
 
 
 def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None = None) -> Message:
-    """Decode and validate bytes; raise `MalformedMessage` with a clear reason on anything wrong.
-
-    `expect` is the type (or types) the key it arrived on carries: any other is rejected as
-    wrongly addressed.
-    """
+    """Decode and validate bytes; raise `MalformedMessage` with a clear reason on anything wrong. `expect`: the
+    type (or types) the key it arrived on carries, any other is rejected as wrongly addressed."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise MalformedMessage(f"payload must be bytes, got {type(data).__name__}")
     if len(data) > MAX_PAYLOAD:

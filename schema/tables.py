@@ -298,8 +298,7 @@ class Table:
         for name, kind in cls.LAYOUT:
             values = rows[name].tolist()
             if not isinstance(kind, Col):
-                members = tuple(kind)
-                values = [members[c] for c in values]
+                values = list(map(tuple(kind).__getitem__, values))
             elif kind in _FROM_ROW:
                 values = list(map(_FROM_ROW[kind], values))
             columns.append(values)
