@@ -1,8 +1,7 @@
 """Key expressions: the only module that builds or parses them.
 
-Keys follow the design card, ``<root>/<ENTITY>/<ACTION>``, the entity being the one the key is about (``sim/D01/TGT``
-is D01's target, which only the GCS may write). `KEY_TABLE` gives each key's message type and writer role; the
-access-control rules and README.md are generated from it.
+`KEY_TABLE` gives each key (``<root>/<ENTITY>/<ACTION>``, the design card's form: README.md) its message type,
+writer role and readers; the access-control rules and README.md are generated from it.
 """
 
 from __future__ import annotations

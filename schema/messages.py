@@ -327,7 +327,6 @@ class StatusTable(Table, record=DroneStatus, layout=(
     __slots__ = ()
 
     def alive_mask(self) -> np.ndarray:
-        """Which rows are alive drones."""
         return self.rows["state"] == _ALIVE_CODE
 
     def alive(self) -> list[str]:
@@ -764,8 +763,8 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
            f"schema version {version!r}, this build speaks {SCHEMA_VERSION}")
     tag = body.pop("t", None)
     cls = _BY_TAG.get(tag) if isinstance(tag, str) else None
-    _check(cls is not None, f"unknown message type {tag!r}")
-    assert cls is not None
+    if cls is None:
+        raise MalformedMessage(f"unknown message type {tag!r}")
     if expect is not None:
         allowed = expect if isinstance(expect, tuple) else (expect,)
         if cls not in allowed:
