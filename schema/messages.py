@@ -398,7 +398,7 @@ class Welcome(Message):
     entity: str
     text: str
     world: WorldSpec
-    starts: StartTable = ()  # type: ignore[assignment]
+    starts: StartTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table (`_as_table`)
     game: str = ""  # the game's identity: its TURN, STATUS and OVER carry it, the entity takes no other
 
     def _validate(self) -> None:
