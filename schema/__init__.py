@@ -1,7 +1,6 @@
 """The wire contract: key expressions, message types, codec, errors. See schema/README.md."""
 
 from .errors import (
-    DronesimError,
     MalformedMessage,
     OutOfRange,
     RejectCounter,
@@ -15,7 +14,6 @@ from .keys import KEY_TABLE, Keys, KeySpec
 from .messages import (
     MESSAGE_TYPES,
     SCHEMA_VERSION,
-    TABLES,
     Aim,
     AimTable,
     Ans,
@@ -60,14 +58,13 @@ from .messages import (
     encode,
     is_drone_id,
 )
-from .tables import Col, Table
+from .tables import Table
 
 __all__ = [
-    "DronesimError", "MalformedMessage", "OutOfRange", "RejectCounter", "RemoteInputError", "StaleTurn",
-    "UnknownEntity", "UsageError", "WrongSender", "KEY_TABLE", "Keys", "KeySpec", "MESSAGE_TYPES", "SCHEMA_VERSION",
-    "Ans", "Ask", "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done", "DroneState", "DroneStatus",
-    "EndReason", "MapRequest", "Message", "Move", "Moves", "Note", "Nps", "Order", "Over", "Phase", "Intent",
-    "WorldSpec", "Refused", "Role", "Aim", "Step", "Start", "Status", "Target", "Turn", "Upd", "Welcome", "WorldMap",
-    "decode", "drone_id", "encode", "is_drone_id", "AimTable", "MoveTable", "OrderTable", "StartTable", "StatusTable",
-    "StepTable", "TABLES", "Col", "Table",
+    "MalformedMessage", "OutOfRange", "RejectCounter", "RemoteInputError", "StaleTurn", "UnknownEntity", "UsageError",
+    "WrongSender", "KEY_TABLE", "Keys", "KeySpec", "MESSAGE_TYPES", "SCHEMA_VERSION", "Aim", "AimTable", "Ans", "Ask",
+    "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done", "DroneState", "DroneStatus", "EndReason", "Intent",
+    "MapRequest", "Message", "Move", "MoveTable", "Moves", "Note", "Nps", "Order", "OrderTable", "Over", "Phase",
+    "Refused", "Role", "Start", "StartTable", "Status", "StatusTable", "Step", "StepTable", "Target", "Turn", "Upd",
+    "Welcome", "WorldMap", "WorldSpec", "decode", "drone_id", "encode", "is_drone_id", "Table",
 ]

@@ -1,29 +1,12 @@
-"""Zenoh access-control rules for a router, generated from the key table (`KEY_TABLE`), the one source.
+"""Zenoh access-control rules for a router, generated from the key table (`KEY_TABLE`), the one source
+(what they grant, and the command line: docs/security.md).
 
-Every key has exactly one writer role (``KeySpec.writer``) and a list of reader roles (``KeySpec.readers``);
-this module turns that into a Zenoh ``access_control`` block with ``default_permission: "deny"``, one subject
-and one policy per *principal* (an authenticated process: SRV, ENV, GCS, each drone Dnn, each swarm host Hnn):
-
-* the writer side (``ingress``: what the router accepts from it) -- ``put`` on the keys it writes (a drone:
-  only ``<root>/<itself>/NPS``; a swarm host: the NPS of each drone it flies; the GCS: ``<root>/*/TGT`` and
-  ``<root>/GCS/DONE``), ``declare_queryable`` and ``reply`` on the queryables it owns (ENV: ENV/ASK,
-  ENV/MAP; SRV: SRV/CONNECT);
-* the reader side -- ``declare_subscriber`` (ingress) and ``put`` (egress) on the keys it reads, ``query``
-  (ingress) and ``reply`` (egress) on the queryables it asks, ``query`` (egress) on those it owns;
-* presence -- a principal declares liveliness tokens only under its own ``<root>/<id>/ALIVE/*``, and the
-  readers of that row watch ``<root>/*/ALIVE/*``;
-* discovery, which carries no payload -- the router may tell everyone about subscribers and queryables
-  under the root (a publisher learns that someone listens).
-
-Anything else is denied: a key outside the table, a ``delete``, a second writer. A principal is matched by
-its user name (``--identity usrpwd``: the router's user/password dictionary), by its TLS client
-certificate's common name (``--identity cert``: mutual TLS) or by both (``both``); the name is the entity id
-(``D01``, ``H01``, ``GCS``...). Subjects never overlap (each has one distinct name): with Zenoh, rules of
-overlapping subjects were seen not to hold.
-
-    python -m schema.acl --drones 16 --root sim --identity usrpwd > config/router-acl.json5
-    python -m schema.acl --drones 16 --host H01=D01-D08 --identity cert
-    python -m schema.acl --write-examples config/    # regenerate the examples in config/
+Each key's one writer role (``KeySpec.writer``) and reader roles (``KeySpec.readers``) become a Zenoh
+``access_control`` block with ``default_permission: "deny"`` and one subject and one policy per *principal*
+(an authenticated process: SRV, ENV, GCS, each drone Dnn, each swarm host Hnn, named by its user name, its TLS
+client certificate's common name, or both). A principal's grants on each kind of key are `_GRANTS`; discovery
+(no payload: who listens where) is granted to all. Subjects never overlap (each has one distinct name): with
+Zenoh, rules of overlapping subjects were seen not to hold.
 """
 
 from __future__ import annotations
@@ -43,7 +26,8 @@ from .tuning import DRONE_PUT_RATE
 #: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
 ROLES = ("SRV", "ENV", "GCS", "DRONE")
 _PLACEHOLDER = re.compile(r"\{[a-z_]+\}")
-IDENTITIES = ("usrpwd", "cert", "both")
+#: The fields of a Zenoh ACL subject that name a principal, by `--identity`.
+IDENTITIES = {"usrpwd": ("usernames",), "cert": ("cert_common_names",), "both": ("usernames", "cert_common_names")}
 #: Zenoh's ACL message kinds (zenoh 1.x ``AclMessage``).
 MESSAGES = ("put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
             "liveliness_token", "liveliness_query", "declare_liveliness_subscriber")
@@ -111,8 +95,8 @@ def _expand(template: str, p: Principal, *, own: bool) -> list[str]:
     return [_PLACEHOLDER.sub("*", t) for t in out]
 
 
-#: A principal's grants on a key of each kind (``KeySpec.how``) as its writer, and as one of its readers
-#: (the module's doc): (flow, messages, whether the key is expanded as the principal's own, `_expand`).
+#: A principal's grants on a key of each kind (``KeySpec.how``) as its writer, and as one of its readers: (flow
+#: -- ingress: what the router takes from it --, messages, whether the key is expanded as its own, `_expand`).
 _GRANTS: dict[str, tuple[list[tuple[str, tuple[str, ...], bool]], list[tuple[str, tuple[str, ...], bool]]]] = {
     "put": ([("ingress", ("put",), True)],
             [("ingress", ("declare_subscriber",), False), ("egress", ("put",), False)]),
@@ -161,12 +145,7 @@ def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), id
         mine = [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
                  "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
         rules += mine
-        subject: dict = {"id": p.name}
-        if identity in ("usrpwd", "both"):
-            subject["usernames"] = [p.name]
-        if identity in ("cert", "both"):
-            subject["cert_common_names"] = [p.name]
-        subjects.append(subject)
+        subjects.append({"id": p.name, **{field: [p.name] for field in IDENTITIES[identity]}})
         policies.append({"id": f"{p.name} policy", "rules": [r["id"] for r in mine], "subjects": [p.name]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
@@ -206,19 +185,15 @@ def parse_hosts(items: Iterable[str]) -> dict[str, tuple[str, ...]]:
         host, _, spec = item.partition("=")
         if not spec:
             raise ValueError(f"bad --host {item!r}: expected Hnn=Dnn-Dmm or Hnn=Dnn,Dmm")
-        hosts[host.strip()] = parse_drone_list(spec)
+        ids: list[str] = []
+        for part in (p.strip() for p in spec.split(",")):
+            m = re.fullmatch(r"D?(\d+)\s*-\s*D?(\d+)", part)
+            if m:
+                ids += [drone_id(n) for n in range(int(m[1]), int(m[2]) + 1)]
+            elif part:
+                ids.append(part if is_drone_id(part) else drone_id(int(part.lstrip("D"))))
+        hosts[host.strip()] = tuple(ids)
     return hosts
-
-
-def parse_drone_list(text: str) -> tuple[str, ...]:
-    ids: list[str] = []
-    for part in (p.strip() for p in text.split(",")):
-        m = re.fullmatch(r"D?(\d+)\s*-\s*D?(\d+)", part)
-        if m:
-            ids += [drone_id(n) for n in range(int(m[1]), int(m[2]) + 1)]
-        elif part:
-            ids.append(part if is_drone_id(part) else drone_id(int(part.lstrip("D"))))
-    return tuple(ids)
 
 
 def render(block: dict, header: str = "") -> str:
@@ -227,13 +202,11 @@ def render(block: dict, header: str = "") -> str:
 
 
 def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
-    """A router's `low_pass_filter` and `downsampling` blocks, from the key table: each key's payloads
-    (a put's, a query's) above its message's largest valid size (`schema.keys.size_limit`) are dropped,
-    and each session's puts on a drone key (NPS, MOVES) beyond `DRONE_PUT_RATE` a second. Both act on
-    what the router receives from each session (ingress): one peer's flood costs the others nothing.
-    With `acl` (an `access_control` block) the rate is kept key by key for the drone keys it grants (a
-    session's puts on another drone's key, refused, do not count against its own); without, for all the
-    drone keys of a session at once."""
+    """A router's `low_pass_filter` and `downsampling` blocks, from the key table: on what the router receives
+    from each session, the payloads (a put's, a query's) above their key's message's largest valid size
+    (`schema.keys.size_limit`) are dropped, and the puts on a drone key (NPS, MOVES) beyond `DRONE_PUT_RATE` a
+    second. With `acl` (an `access_control` block) the rate is kept key by key for the drone keys it grants (a
+    session's refused puts on another drone's key do not count against its own); without, for all at once."""
     import zenoh
 
     sizes: dict[tuple[str, int], list[str]] = {}

@@ -1,7 +1,6 @@
-"""The error hierarchy: local misuse (`UsageError`: this process was called wrongly) is raised to the caller,
-and usually ends the command with a clear message; bad remote input (`RemoteInputError`) is caught by the
-adapters, which log its reason, count it (`RejectCounter`) and change nothing: a remote peer never crashes a
-process.
+"""The error hierarchy: local misuse (`UsageError`) is raised to the caller, and usually ends the command with a
+clear message; bad remote input (`RemoteInputError`) is caught by the adapters, which log its reason, count it
+(`RejectCounter`) and change nothing: a remote peer never crashes a process.
 """
 
 from __future__ import annotations
@@ -77,12 +76,11 @@ class UnknownEntity(RemoteInputError):
 
 
 class RejectCounter:
-    """Thread-safe count of rejected remote inputs, by reason and by origin, with a bounded log: per origin
-    (the sender, or the key it came on) and reason, the first `REJECT_LOG_FIRST` rejections of each
-    `REJECT_LOG_WINDOW` seconds are logged, each as a short excerpt; `flush` sums up the rest in one line
-    once the window is over. Zenoh callbacks reject on their own threads, hence the lock. `wake` is called
-    when a window starts holding rejections (the thread that calls `flush` may be waiting for something else).
-    """
+    """Thread-safe count of rejected remote inputs, by reason and by origin, with a bounded log: per origin (the
+    sender, or the key it came on) and reason, the first `REJECT_LOG_FIRST` rejections of each `REJECT_LOG_WINDOW`
+    seconds are logged, each as a short excerpt; `flush` sums up the rest in one line once the window is over.
+    Zenoh callbacks reject on their own threads, hence the lock. `wake` is called when a window starts holding
+    rejections (the thread that calls `flush` may be waiting for something else)."""
 
     def __init__(self, logger: logging.Logger, clock: Callable[[], float] = time.monotonic, *,
                  wake: Callable[[], None] | None = None) -> None:
@@ -96,8 +94,7 @@ class RejectCounter:
 
     def reject(self, where: str, err: RemoteInputError, origin: str | None = None) -> None:
         """Count `err`, refused at `where` (a key, or what was refused), from `origin` (default: `where`)."""
-        who = origin or where
-        now = self._clock()
+        who, now = origin or where, self._clock()
         with self._lock:
             self._counts[err.reason] += 1
             self._origins[who] += 1

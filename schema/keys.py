@@ -1,9 +1,7 @@
 """Key expressions: the only module that builds or parses them.
 
-Keys follow the design card, ``<root>/<ENTITY>/<ACTION>``: the entity is the one the key is
-about (``sim/D01/NPS`` is D01's new position, ``sim/D01/TGT`` is D01's target, which only the
-GCS may write). `KEY_TABLE` says, for each key, its message type and which role may write it;
-the access-control rules and schema/README.md are generated from it.
+`KEY_TABLE` gives each key (``<root>/<ENTITY>/<ACTION>``, the design card's form: README.md) its message type,
+writer role and readers; the access-control rules and README.md are generated from it.
 """
 
 from __future__ import annotations
@@ -76,8 +74,7 @@ def size_limit(message: type[m.Message]) -> int:
     on the way."""
     if message in (m.WorldMap, m.Welcome):
         return m.MAX_PAYLOAD
-    hints = typing.get_type_hints(message).values()
-    tables = [h for h in hints if isinstance(h, type) and issubclass(h, Table)]
+    tables = [h for h in typing.get_type_hints(message).values() if isinstance(h, type) and issubclass(h, Table)]
     return ENVELOPE + _BEYOND.get(message, 0) + sum(h.DTYPE.itemsize * MAX_DRONE for h in tables)
 
 

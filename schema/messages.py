@@ -1,14 +1,9 @@
-"""Every message of the wire contract, defined once, with MessagePack encode/decode and validation.
+"""Every message of the wire contract, defined once, with its MessagePack codec (the wire form: README.md).
 
-Messages are frozen, slotted, keyword-only dataclasses that validate on construction, so an
-instance that exists is well formed. On the wire each message is a MessagePack map::
-
-    {"v": SCHEMA_VERSION, "t": "<TRIGRAM>", "turn": int, "from": "<sender id>", ...fields}
-
-Fields are written in declaration order, so encoding is byte-for-byte deterministic (golden bytes:
-``schema/vectors.json``). Nested records (cells, cell infos, the world spec) travel as arrays of their fields,
-enums as their value, the swarm-sized fields as tables (tables.py). World bounds are context, not syntax: a
-message only checks that a cell is three integers in range; receivers check it against the world (``OutOfRange``).
+Messages are frozen, slotted, keyword-only dataclasses that validate on construction, so an instance that
+exists is well formed. Fields go on the wire in declaration order, so encoding is deterministic (golden bytes:
+vectors.json). World bounds are context, not syntax: a message only checks that a cell is three integers in
+range; receivers check it against the world (``OutOfRange``).
 """
 
 from __future__ import annotations
@@ -42,19 +37,14 @@ from .tables import (
 )
 from .tuning import PACK_BUFFER
 
-#: 2: swarm-sized record tuples travel as tables (tables.py); 3: also WELCOME's starts, DONE's targets;
-#: 4: NPS and a MOVES's steps carry the drone's ranked candidate steps (`ranked`, for cooperative arbitration);
-#: 5: WELCOME, TURN, STATUS and OVER carry the game's identity.
 SCHEMA_VERSION = 5
 
-#: Largest turn a message may carry (MAX_COORD, the largest coordinate, is in tables.py).
+#: Largest turn a message may carry.
 MAX_TURN = 1 << 40
 #: Largest payload any receiver decodes; bigger ones are rejected before parsing.
 MAX_PAYLOAD = 1 << 22
 
 Cell = tuple[int, int, int]
-
-FIXED_IDS = ("ENV", "GCS", "SRV", "OBS")
 
 
 def is_host_id(value: object) -> bool:
@@ -134,9 +124,6 @@ class Intent(enum.Enum):
     QUIT = "QUIT"
 
 
-# --------------------------------------------------------------------------- validation helpers
-
-
 def _check(cond: bool, what: str) -> None:
     if not cond:
         raise MalformedMessage(what)
@@ -169,7 +156,7 @@ def _check_game(value: object) -> None:
 
 def is_entity_id(value: object) -> bool:
     """ENV, GCS, SRV, OBS, a drone's id or a host's."""
-    return isinstance(value, str) and (value in FIXED_IDS or is_drone_id(value) or is_host_id(value))
+    return isinstance(value, str) and (value in ("ENV", "GCS", "SRV", "OBS") or is_drone_id(value) or is_host_id(value))
 
 
 def _check_sender(value: object) -> None:
@@ -184,9 +171,6 @@ def _check_world(size: Cell, bits: bytes, name: str, *, optional: bool = False) 
     _check(isinstance(bits, bytes), f"{name} must be bytes")
     n = size[0] * size[1] * size[2]
     _check(optional and not bits or len(bits) == (n + 7) // 8, f"{name} must hold one bit per cell")
-
-
-# --------------------------------------------------------------------------- nested records
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -317,9 +301,8 @@ class OrderTable(Table, record=Order, layout=(("drone", Col.DRONE), ("pos", Col.
 
     def orders(self, mine: typing.Container[str] | None = None) -> tuple[tuple[str, Cell, Cell | None], ...]:
         """(drone, where it is, its target) of each row (of the drones in `mine`), read from the columns."""
-        targets = self.rows["target"].tolist()
         return tuple((d, (x, y, z), optional_cell(t))
-                     for d, (x, y, z), t in zip(self.ids(), self.rows["pos"].tolist(), targets)
+                     for d, (x, y, z), t in zip(self.ids(), self.rows["pos"].tolist(), self.rows["target"].tolist())
                      if mine is None or d in mine)
 
 
@@ -344,7 +327,6 @@ class StatusTable(Table, record=DroneStatus, layout=(
     __slots__ = ()
 
     def alive_mask(self) -> np.ndarray:
-        """Which rows are alive drones."""
         return self.rows["state"] == _ALIVE_CODE
 
     def alive(self) -> list[str]:
@@ -353,7 +335,7 @@ class StatusTable(Table, record=DroneStatus, layout=(
 
 
 TABLES: tuple[type[Table], ...] = (StartTable, AimTable, OrderTable, MoveTable, StepTable, StatusTable)
-_EMPTY: dict[type[Table], Table] = {cls: cls(cls.empty(0)) for cls in TABLES}  # immutable: one of each is enough
+_EMPTY: dict[type[Table], Table] = {cls: cls(cls.empty(0)) for cls in TABLES}  # (immutable: one of each)
 
 
 def _as_table(msg: Message, name: str, cls: type[Table]) -> None:
@@ -362,9 +344,6 @@ def _as_table(msg: Message, name: str, cls: type[Table]) -> None:
     if type(value) is not cls:
         _check(isinstance(value, tuple), f"{name} must be a {cls.__name__} or a tuple of {cls.RECORD.__name__}")
         object.__setattr__(msg, name, _EMPTY[cls] if not value else cls.of(value))
-
-
-# --------------------------------------------------------------------------- messages
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -378,6 +357,10 @@ class Message:
     def __post_init__(self) -> None:
         _check_int(self.turn, "turn", 0, MAX_TURN)
         _check_sender(self.sender)
+        self._validate()
+
+    def _validate(self) -> None:
+        """A message type's checks of its own fields, after the header's."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -392,8 +375,7 @@ class Connect(Message):
     cooperative: bool = False  # its drones give way to others when moves conflict (arbitration)
     session: str = ""  # the sender's Zenoh session id: tells a reconnection from an impostor
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check(isinstance(self.role, Role), "role must be a Role")
         _check(isinstance(self.drones, tuple), "drones must be a tuple")
         for d in self.drones:
@@ -416,11 +398,10 @@ class Welcome(Message):
     entity: str
     text: str
     world: WorldSpec
-    starts: StartTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table
+    starts: StartTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table (`_as_table`)
     game: str = ""  # the game's identity: its TURN, STATUS and OVER carry it, the entity takes no other
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check_game(self.game)
         _check_sender(self.entity)
         _check(isinstance(self.text, str), "text must be a string")
@@ -435,8 +416,7 @@ class Refused(Message):
     TAG: ClassVar[str] = "REFUSED"
     text: str
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check(isinstance(self.text, str), "text must be a string")
 
 
@@ -446,12 +426,11 @@ class Turn(Message):
 
     TAG: ClassVar[str] = "TURN"
     phase: Phase
-    orders: OrderTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table
+    orders: OrderTable = ()  # type: ignore[assignment]
     moves: MoveTable = ()  # type: ignore[assignment]
     game: str = ""  # the game's identity (its WELCOME's)
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check_game(self.game)
         _as_table(self, "orders", OrderTable)
         _as_table(self, "moves", MoveTable)
@@ -469,8 +448,7 @@ class Target(Message):
     drone: str
     pos: Cell
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check_drone(self.drone)
         _check_cell(self.pos, "target")
 
@@ -484,11 +462,10 @@ class Done(Message):
     TAG: ClassVar[str] = "DONE"
     phase: Phase
     intent: Intent = Intent.CONTINUE
-    count: int = 0  # how many TGT the GCS sent in this phase (messages on different keys may overtake)
-    targets: AimTable = ()  # type: ignore[assignment]  # a tuple of records becomes the table (one row per drone)
+    count: int = 0  # (TGTs and the DONE travel on different keys: a DONE may overtake them)
+    targets: AimTable = ()  # type: ignore[assignment]
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check(isinstance(self.phase, Phase), "phase must be a Phase")
         _check(isinstance(self.intent, Intent), "intent must be an Intent")
         _check_int(self.count, "count", 0, 1 << 20)
@@ -506,8 +483,7 @@ class Ask(Message):
 
     MAX_CELLS: ClassVar[int] = MAX_ASKED
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check(isinstance(self.cells, tuple) and isinstance(self.around, tuple), "cells and around are arrays")
         _check(1 <= len(self.cells) + 6 * len(self.around) <= self.MAX_CELLS,
                f"an ASK asks for 1..{self.MAX_CELLS} cells")
@@ -519,7 +495,7 @@ class Ask(Message):
                 _check(False, f"around cells must be 3 integers with neighbours in range, got {c!r}")
 
     def asked(self) -> tuple[Cell, ...]:
-        """Every asked cell, in answer order: `cells`, then the neighbours of each `around` cell."""
+        """Every asked cell, in answer order (`asked_cells`)."""
         return asked_cells(self.cells, self.around)
 
 
@@ -537,8 +513,7 @@ class Ans(Message):
     kinds: bytes
     drones: tuple[tuple[int, str], ...] = ()
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check(isinstance(self.kinds, bytes) and len(self.kinds) <= MAX_ASKED, "kinds must be bytes")
         _check(max(self.kinds, default=0) <= max(CellKind), "kinds must be CellKind values")
         _check(type(self.drones) is tuple, "drones must be an array")
@@ -580,8 +555,7 @@ class Nps(Message):
     #: `tables.rank_steps`; 0: none, it takes `pos` or hovers): a cooperative drone may be given any of them.
     ranked: int = 0
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check_drone(self.sender, "sender")
         _check_cell(self.pos, "pos", signed=True)
         _check(isinstance(self.note, Note), "note must be a Note")
@@ -595,10 +569,9 @@ class Moves(Message):
     drones' phase opens."""
 
     TAG: ClassVar[str] = "MOVES"
-    moves: StepTable  # a tuple of records becomes the table (which holds one row per drone)
+    moves: StepTable
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _as_table(self, "moves", StepTable)
         _check(len(self.moves) >= 1, "MOVES carries at least one move")
 
@@ -610,8 +583,7 @@ class Upd(Message):
     TAG: ClassVar[str] = "UPD"
     cells: tuple[CellInfo, ...]
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check(isinstance(self.cells, tuple) and all(type(c) is CellInfo for c in self.cells),
                "cells must be a tuple of CellInfo records")
 
@@ -621,11 +593,10 @@ class Status(Message):
     """OBS -> all (key ``OBS/STATUS``): every drone's state at the end of the turn (turn 0: the starts)."""
 
     TAG: ClassVar[str] = "STATUS"
-    drones: StatusTable  # a tuple of records becomes the table (which holds one row per drone)
+    drones: StatusTable
     game: str = ""  # the game's identity (its WELCOME's)
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check_game(self.game)
         _as_table(self, "drones", StatusTable)
 
@@ -639,8 +610,7 @@ class Over(Message):
     text: str = ""
     game: str = ""  # the game's identity (its WELCOME's)
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check_game(self.game)
         _check(isinstance(self.reason, EndReason), "reason must be an EndReason")
         _check(isinstance(self.text, str), "text must be a string")
@@ -648,8 +618,7 @@ class Over(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class MapRequest(Message):
-    """GCS or drone process -> ENV (query on ENV/MAP): the static world, for drawing or for a drone
-    process's chart."""
+    """GCS or drone process -> ENV (query on ENV/MAP): the static world."""
 
     TAG: ClassVar[str] = "MAPREQ"
 
@@ -663,28 +632,23 @@ class WorldMap(Message):
     size: Cell
     buildings: bytes
 
-    def __post_init__(self) -> None:
-        Message.__post_init__(self)
+    def _validate(self) -> None:
         _check_world(self.size, self.buildings, "buildings")
 
 
 _KINDS = tuple(CellKind)
-
-
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Connect, Welcome, Refused, Turn, Target, Done, Ask, Ans, Nps, Moves, Upd, Status, Over, MapRequest, WorldMap,
 )
 _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
-#: The records that travel as records (the rows of tables travel in their tables).
-_RECORDS = (CellInfo, WorldSpec)
 
 
 # --------------------------------------------------------------------------- codec
 #
-# Conversion is driven by each dataclass's type hints, resolved once (`_codec`): int, str, bytes, Cell, enums,
-# nested records, tables, and X | None or tuple[X, ...] of those.
+# Driven by each dataclass's type hints, resolved once (`_codec`): int, str, bytes, Cell, enums, the records
+# that travel as records (`CellInfo`, `WorldSpec`), tables, and X | None or tuple[X, ...] of those.
 
-Encoder = typing.Callable[[object], object]
+Encoder = typing.Callable[[object], typing.Any]
 _enum_value: Encoder = operator.attrgetter("value")
 
 
@@ -715,7 +679,7 @@ def _codec(hint: object) -> tuple[Encoder, Encoder]:
         return _identity, _as_seq  # Cell: validated by the record itself
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
         return _enum_value, _enum_converter(hint)
-    if hint in _RECORDS:
+    if hint in (CellInfo, WorldSpec):
         return _record_codec(hint)
     if hint in TABLES:
         return Table.to_wire, hint.from_wire  # type: ignore[return-value]
@@ -735,45 +699,39 @@ def _enum_converter(cls: type[enum.Enum]) -> Encoder:
     return convert
 
 
-Fields = tuple[tuple[str, str, Encoder], ...]
-
-
-def _codec_of(cls: type) -> tuple[Fields, Fields, frozenset[str]]:
-    """(attribute, wire name, encoder) and (attribute, wire name, decoder) of each field of `cls`, in order, and
-    the wire names."""
+def _fields(cls: type) -> tuple[tuple[str, str, Encoder, Encoder], ...]:
+    """(attribute, wire name, encoder, decoder) of each field of `cls`, in order."""
     hints = typing.get_type_hints(cls)
-    fields = [(f.name, "from" if f.name == "sender" else f.name, *_codec(hints[f.name]))
-              for f in dataclasses.fields(cls)]
-    return (tuple((name, wire, enc) for name, wire, enc, _ in fields),
-            tuple((name, wire, dec) for name, wire, _, dec in fields), frozenset(wire for _, wire, _, _ in fields))
+    return tuple((f.name, "from" if f.name == "sender" else f.name, *_codec(hints[f.name]))
+                 for f in dataclasses.fields(cls))
 
 
 def _record_codec(cls: type) -> tuple[Encoder, Encoder]:
     """A record's encoder (the array of its fields, in declaration order) and decoder (from that array, built
     by its constructor, which checks the fields)."""
-    fields, decoders, _ = _codec_of(cls)
-    n, values = len(fields), operator.attrgetter(*(name for name, _, _ in fields))
-    encoders = [enc for _, _, enc in fields]
+    fields = _fields(cls)
+    n, values = len(fields), operator.attrgetter(*(name for name, *_ in fields))
+    encoders = [enc for _, _, enc, _ in fields]
 
     def convert(v: object) -> object:
         if type(v) is not tuple or len(v) != n:
             raise MalformedMessage(f"{cls.__name__} needs {n} items, got {v!r:.80}")
-        return cls(**{name: dec(x) for (name, _, dec), x in zip(decoders, v)})
+        return cls(**{name: dec(x) for (name, _, _, dec), x in zip(fields, v)})
     return lambda record: [enc(v) for enc, v in zip(encoders, values(record))], convert
 
 
-_CODECS = {cls: _codec_of(cls) for cls in MESSAGE_TYPES}
+_FIELDS = {cls: _fields(cls) for cls in MESSAGE_TYPES}
+_WIRE_NAMES = {cls: frozenset(wire for _, wire, _, _ in fields) for cls, fields in _FIELDS.items()}
 
 
 def encode(msg: Message) -> bytes:
-    """The MessagePack bytes of a message (deterministic: same message, same bytes): a map of the
-    header ("v", "t") and the fields, in order."""
-    fields, _, _ = _CODECS[type(msg)]
-    packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=PACK_BUFFER)  # it grows as needed
+    """The MessagePack bytes of a message: a map of the header ("v", "t") and the fields, in order."""
+    fields = _FIELDS[type(msg)]
+    packer = msgpack.Packer(use_bin_type=True, autoreset=False, buf_size=PACK_BUFFER)
     pack = packer.pack
     packer.pack_map_header(2 + len(fields))
     pack("v"), pack(SCHEMA_VERSION), pack("t"), pack(msg.TAG)
-    for name, wire, enc in fields:
+    for name, wire, enc, _ in fields:
         pack(wire)
         pack(enc(getattr(msg, name)))
     return packer.bytes()
@@ -789,11 +747,8 @@ def decode(data: bytes, expect: tuple[type[Message], ...] | None = None) -> Mess
 
 
 def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None = None) -> Message:
-    """Decode and validate bytes; raise `MalformedMessage` with a clear reason on anything wrong.
-
-    `expect` is the type (or types) the key it arrived on carries: any other is rejected as
-    wrongly addressed.
-    """
+    """Decode and validate bytes; raise `MalformedMessage` with a clear reason on anything wrong. `expect`: the
+    type (or types) the key it arrived on carries, any other is rejected as wrongly addressed."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise MalformedMessage(f"payload must be bytes, got {type(data).__name__}")
     if len(data) > MAX_PAYLOAD:
@@ -808,22 +763,17 @@ def decode(data: bytes, expect: type[Message] | tuple[type[Message], ...] | None
            f"schema version {version!r}, this build speaks {SCHEMA_VERSION}")
     tag = body.pop("t", None)
     cls = _BY_TAG.get(tag) if isinstance(tag, str) else None
-    _check(cls is not None, f"unknown message type {tag!r}")
-    assert cls is not None
+    if cls is None:
+        raise MalformedMessage(f"unknown message type {tag!r}")
     if expect is not None:
         allowed = expect if isinstance(expect, tuple) else (expect,)
         if cls not in allowed:
             names = "/".join(a.TAG for a in allowed)
             raise MalformedMessage(f"a {tag} message on a key that carries {names}", reason="wrong-type")
     _check("sender" not in body, f"unknown fields ['sender'] in {tag} (the wire name is 'from')")
-    _, fields, wires = _CODECS[cls]
-    extra = body.keys() - wires
+    extra = body.keys() - _WIRE_NAMES[cls]
     _check(not extra, f"unknown fields {sorted(map(str, extra))} in {tag}")
-    kwargs: dict[str, typing.Any] = {}
     try:
-        for name, wire, dec in fields:
-            if wire in body:
-                kwargs[name] = dec(body[wire])
-        return cls(**kwargs)
+        return cls(**{name: dec(body[wire]) for name, wire, _, dec in _FIELDS[cls] if wire in body})
     except TypeError as exc:  # missing required field, wrong arity
         raise MalformedMessage(f"bad {tag}: {exc}") from None

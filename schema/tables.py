@@ -1,15 +1,10 @@
 """Columns for the swarm-sized parts of messages: a STATUS's drone states, a TURN's orders and moves, a
 MOVES's steps, a WELCOME's starts and a ground station's DONE's targets.
 
-A swarm of 1000 drones puts 1000 records in most of them every turn. As Python records they cost every
-process that reads or writes them about a microsecond and a few hundred bytes per drone; as columns, a few
-bytes per drone, checked, read and written by numpy at once. On the wire a table is one MessagePack ``bin``:
-its rows back to back, each the fields of the record in order, in the fixed little-endian layout its class
-declares (a drone is its number, a cell three ints, an enum its member's index: `Col`, schema/README.md).
-
-A table is immutable and validates on construction, like a message. Its rows read as records (``Order``,
-``DroneStatus``...: a `Row` each, checked by the same rules as the columns) for people (samples, tests, a
-console); code that handles a swarm reads the columns (``numbers``, ``column(name)``).
+A swarm of 1000 drones puts 1000 records in most of them every turn: as Python records, about a microsecond and
+a few hundred bytes per drone for every process that reads or writes them; as columns, a few bytes per drone,
+checked, read and written by numpy at once. On the wire a table is one MessagePack ``bin`` of fixed-size
+little-endian rows (`Col`, README.md). A table is immutable and validates on construction, like a message.
 """
 
 from __future__ import annotations
@@ -303,8 +298,7 @@ class Table:
         for name, kind in cls.LAYOUT:
             values = rows[name].tolist()
             if not isinstance(kind, Col):
-                members = tuple(kind)
-                values = [members[c] for c in values]
+                values = list(map(tuple(kind).__getitem__, values))
             elif kind in _FROM_ROW:
                 values = list(map(_FROM_ROW[kind], values))
             columns.append(values)

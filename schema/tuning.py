@@ -1,130 +1,113 @@
 """Every tuning constant of the simulator, with its unit and the measurement that chose it.
 
-A tuning constant changes how fast something is done (or how long a process waits or holds), never what
-is decided: journals are the same whatever their values. Not here: the wire contract's limits (`MAX_COORD`,
-`MAX_PAYLOAD`...), a process's life timeouts (with the adapter that waits) and the world generator's
-parameters (entities/world.py), which decide the world. It lives in `schema`, which every package imports and
-which imports none of ours, so all can read it without an import cycle; it imports nothing itself.
+A tuning constant changes how fast something is done (or how long a process waits or holds), never what is
+decided: journals are the same whatever their values. Not here: the wire contract's limits (`MAX_COORD`,
+`MAX_PAYLOAD`...), a process's life timeouts (with the adapter that waits) and the world generator's parameters
+(entities/world.py), which decide the world. It is in `schema`, which imports none of our packages: all can read it.
 
-Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.7, numpy 2.4; each
-"a vs b" is the best of several runs of a short script (see docs/performance.md).
+Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.7, numpy 2.4; each "a vs b" is
+the best of several runs of a short script (see docs/performance.md).
 """
 
-# --------------------------------------------------------------------------- messages
-
-#: Rows up to which a table is checked row by row in Python (`Table._why_few`) rather than column by column in numpy
-#: (`Table._why_columns`); row by row vs numpy, valid rows: a 1-row STATUS table 10 vs 34 µs, 8 rows: 11 vs 21, 16: 18
-#: vs 21, 32: 36 vs 23; a MOVES's steps 1: 4 vs 18, 8: 7 vs 19, 16: 11 vs 23, 32: 19 vs 26; a WELCOME's starts 1: 4 vs
-#: 8, 8: 8 vs 11, 16: 12 vs 11, 32: 20 vs 11. Measured warm, which understates it: in a one-drone game the numpy checks,
-#: run cold on a thread just woken, cost a turn 5 to 20 % of its time (`dronesim bench perf`, on and off alternated).
+#: Rows up to which a table is checked row by row in Python (`Table._why_few`), not by numpy columns
+#: (`Table._why_columns`). Valid rows, row by row vs numpy: a STATUS 1 row 10 vs 34 µs, 8: 11 vs 21, 16: 18 vs 21,
+#: 32: 36 vs 23; a MOVES's steps 1: 4 vs 18, 8: 7 vs 19, 16: 11 vs 23, 32: 19 vs 26; a WELCOME's starts 1: 4 vs 8, 8:
+#: 8 vs 11, 16: 12 vs 11, 32: 20 vs 11. Warm, which understates it: cold, on a thread just woken, the numpy checks
+#: cost a one-drone game's turn 5 to 20 % of its time (`dronesim bench perf`, on and off alternated).
 CHECK_FEW_ROWS = 8
 
-# --------------------------------------------------------------------------- coordinator
-
-#: Turns (GCS phases) ahead a ground station's DONE may come and be held by the coordinator. Not measured: a bound on
-#: what a station may make the coordinator hold, twice `ANSWER_AHEAD`.
+#: Turns (GCS phases) ahead a ground station's DONE may come and be held by the coordinator. Not measured: a bound
+#: on what a station may make the coordinator hold, twice `ANSWER_AHEAD`.
 AHEAD_MAX = 16
 
-#: Rows (moves of a MOVES, targets of a DONE) up to which the engine takes a batch row by row, through an NPS's or a
-#: TGT's checks, rather than in array operations; the whole `receive` of a MOVES that closes the drones' phase, row by
-#: row vs arrays: 2 moves 171 vs 184 µs, 8: 186 vs 194, 16: 199 vs 194, 32: 277 vs 225.
+#: Rows (moves of a MOVES, targets of a DONE) up to which the engine takes a batch row by row, through an NPS's or
+#: a TGT's checks, not in array operations. The `receive` of a MOVES that closes the drones' phase, row by row vs
+#: arrays: 2 moves 171 vs 184 µs, 8: 186 vs 194, 16: 199 vs 194, 32: 277 vs 225.
 FEW_ROWS = 8
 
-#: Alive drones up to which the observer judges a turn drone by drone (`observer.deaths`) rather than in array
-#: operations (`observer.judge`); random moves on 64x64x16, drone by drone vs arrays: 1 drone 7 vs 9 µs, 8: 28 vs 62,
-#: 16: 47 vs 106, 32: 110 vs 124, 48: 133 vs 101, 64: 217 vs 115.
+#: Alive drones up to which the observer judges a turn drone by drone (`observer.deaths`), not in array operations
+#: (`observer.judge`). Random moves on 64x64x16, drone by drone vs arrays: 1 drone 7 vs 9 µs, 8: 28 vs 62, 16: 47
+#: vs 106, 32: 110 vs 124, 48: 133 vs 101, 64: 217 vs 115.
 JUDGE_FEW_DRONES = 32
 
-#: Turns an ENV phase's report (UPD) may lag behind its turn and still be checked (`--verify-env`). Not measured: a
-#: bound on the moves kept for it.
+#: Turns an ENV phase's report (UPD) may lag behind its turn and still be checked (`--verify-env`). Not measured:
+#: a bound on the moves kept for it.
 UPD_WINDOW = 8
 
-# --------------------------------------------------------------------------- ground station
-
-#: GCS phases a scripted ground station answers ahead when its plan has nothing new for them, half of them at a time
-#: (`Station._ahead`): it keeps off a turn's critical path (one hop saved a turn: docs/performance.md, "Answers ahead"),
-#: and the batches spare a DONE in most turns. A one-drone turn on 64x64x16, 2 ahead one at a time vs 8 four at a time,
-#: alternated over 5 pairs: 1.16-1.53 vs 1.12-1.26 ms (median), coordinator CPU 0.7 vs 0.6 ms a turn.
+#: GCS phases a scripted ground station answers ahead when its plan has nothing new for them, half of them at a
+#: time (`Station._ahead`): off a turn's critical path (one hop saved a turn: docs/performance.md, "Answers
+#: ahead"), and most turns carry no DONE. A one-drone turn on 64x64x16, 2 ahead one at a time vs 8 four at a time,
+#: 5 pairs alternated: 1.16-1.53 vs 1.12-1.26 ms (median), coordinator CPU 0.7 vs 0.6 ms a turn.
 ANSWER_AHEAD = 8
 
-# --------------------------------------------------------------------------- environment
-
-#: Cells (asked, neighbours included) up to which the environment answers an ASK cell by cell in Python rather than in
-#: numpy over the grid (`Environment.survey`; 39 drones on 64x64x16), cell by cell vs numpy: 6 cells 12 vs 46 µs, 12: 23
-#: vs 47, 24: 45 vs 50, 48: 91 vs 64, 96: 170 vs 65.
+#: Cells (asked, neighbours included) up to which the environment answers an ASK cell by cell in Python, not in
+#: numpy over the grid (`Environment.survey`). 39 drones on 64x64x16, cell by cell vs numpy: 6 cells 12 vs 46 µs,
+#: 12: 23 vs 47, 24: 45 vs 50, 48: 91 vs 64, 96: 170 vs 65.
 SURVEY_FEW_CELLS = 32
 
-# --------------------------------------------------------------------------- drone processes
-
-#: Cells up to which a drone process's chart learns kinds, or lists the never-told neighbours of a few cells, cell by
-#: cell in Python rather than in numpy (`Chart.learn`, `Chart.unknown`), cell by cell vs numpy: learn 48 cells 8 vs 17
+#: Cells up to which a drone process's chart learns kinds, or lists the never-told neighbours of a few cells, cell
+#: by cell in Python, not in numpy (`Chart.learn`, `Chart.unknown`). Cell by cell vs numpy: learn 48 cells 8 vs 17
 #: µs, 96: 15 vs 25, 192: 56 vs 42; unknown 48 cells 13 vs 22 µs, 96: 26 vs 32, 192: 92 vs 87.
 CHART_FEW_CELLS = 128
 
-#: Steps around its drones within which a process flying a few drones (at most `ASK_AHEAD_MAX_DRONES`) asks ahead for
-#: the never-told cells before the map comes, so that it asks again only every few turns (a swarm asks the next ring
-#: each turn). Not measured: the map, usually there from the first turn, makes it moot.
+#: Steps around its drones within which a process flying a few drones (at most `ASK_AHEAD_MAX_DRONES`) asks ahead
+#: for the never-told cells before the map comes, so that it asks again only every few turns (a swarm asks the
+#: next ring each turn). Not measured: the map, usually there from the first turn, makes it moot.
 ASK_AHEAD_REACH = 3
 ASK_AHEAD_MAX_DRONES = 32
 
-#: MAP queries a drone process sends (at most one a turn while none is answered) before it gives up on the map and keeps
-#: asking cells. Not measured: a bound on a query nobody answers.
+#: MAP queries a drone process sends (at most one a turn while none is answered) before it gives up on the map and
+#: keeps asking cells. Not measured: a bound on a query nobody answers.
 MAP_TRIES = 10
 
-#: Cells per ASK sent ahead: nothing waits for these answers, so a swarm's thousands of cells go in several concurrent
-#: queries and the environment never holds one huge request (or answer) at once. Not measured.
+#: Cells per ASK sent ahead: nothing waits for these answers, so a swarm's thousands of cells go in several
+#: concurrent queries and the environment never holds one huge request (or answer) at once. Not measured.
 PREFETCH_CHUNK = 512
 
-#: Drones from which a host flies them with an autopilot's swarm form (`SeedSwarm`) rather than one pilot per drone
-#: (`--swarm-pilot-min`). In-process seed turn, one pilot per drone vs the swarm form (64x64x16): 16 drones 527 vs 612
-#: µs, 24: 606 vs 658, 32: 699 vs 692, 48: 883 vs 776, 64: 1228 vs 975.
+#: Drones from which a host flies them with an autopilot's swarm form (`SeedSwarm`), not one pilot per drone
+#: (`--swarm-pilot-min`). In-process seed turn on 64x64x16, one pilot per drone vs the swarm form: 16 drones 527 vs
+#: 612 µs, 24: 606 vs 658, 32: 699 vs 692, 48: 883 vs 776, 64: 1228 vs 975.
 SWARM_MIN = 32
 
-# --------------------------------------------------------------------------- every process's inbox
-
-#: Events from one origin (a drone, a host, the coordinator...) a process may hold queued; more are refused unread until
-#: it handles some (dronesim/transport.py). Not measured: far above what a game sends (a few events a turn per origin; a
-#: process hundreds of turns behind resyncs from the next TURN and STATUS).
+#: Events from one origin (a drone, a host, the coordinator...) a process may hold queued, more are refused unread
+#: (dronesim/transport.py). Not measured: far above a game's few events a turn per origin (a process hundreds of
+#: turns behind resyncs from the next TURN and STATUS).
 ORIGIN_QUEUE = 1024
-#: Events of one origin in line at a time, the rest waiting to join it (dronesim/transport.py `FairQueue`): a burst from
-#: one origin delays another's next event by at most this many; below it, events are taken in order of arrival. Not
-#: measured: above what one origin sends a process in a turn (a ground station's DONE and the two it answers ahead, a
-#: host's MOVES and its presence).
+#: Events of one origin in line at a time, the rest waiting to join it (dronesim/transport.py `FairQueue`): a burst
+#: from one origin delays another's next event by at most this many; below it, events are taken in order of
+#: arrival. Not measured: above what one origin sends a process in a turn (a ground station's DONE and the two it
+#: answers ahead, a host's MOVES and its presence).
 ORIGIN_SHARE = 8
-#: Bytes (as payloads) of the events from one origin a process may hold queued beyond its first (which its key's size
-#: limit bounds). Not measured: about 13 of the largest ASKs (525 KB, `schema.keys.size_limit`), far above a host's
-#: asking ahead (512-cell ASKs of about 5 KB); a flood of big ASKs is refused unread past it.
+#: Bytes (as payloads) of the events from one origin a process may hold queued beyond its first (which its key's
+#: size limit bounds). Not measured: about 13 of the largest ASKs (525 KB, `schema.keys.size_limit`), far above a
+#: host's asking ahead (512-cell ASKs of about 5 KB); a flood of big ASKs is refused unread past it.
 ORIGIN_BYTES = 8 << 20
 
-#: Puts a second a router forwards from one session on drone keys (NPS, MOVES: the router's `downsampling`,
-#: schema/acl.py `flood_filters`): a process sends one a turn per key, and a turn takes at least a pub/sub round trip
-#: (about 0.3 ms, BENCHMARKS.md's floor), so 10,000 never drops a real one (messages closer than 0.1 ms are dropped),
-#: while a flood reaches the coordinator at a rate its refusal of stale messages keeps up with.
+#: Puts a second a router forwards from one session on drone keys (NPS, MOVES: its `downsampling`, schema/acl.py
+#: `flood_filters`): a process sends one a turn per key, and a turn takes at least a pub/sub round trip (about 0.3
+#: ms, BENCHMARKS.md's floor), so 10,000 never drops a real one (messages closer than 0.1 ms are dropped), while a
+#: flood reaches the coordinator at a rate its refusal of stale messages keeps up with.
 DRONE_PUT_RATE = 10_000.0
 
-#: Rejections logged in full per origin and reason in each `REJECT_LOG_WINDOW` seconds, the rest summed up in one line
-#: when it closes (schema/errors.py `RejectCounter`). Not measured: a flood logs a few lines a second.
+#: Rejections logged in full per origin and reason in each window of `REJECT_LOG_WINDOW` seconds (schema/errors.py
+#: `RejectCounter`). Not measured: a flood logs a few lines a second.
 REJECT_LOG_FIRST = 3
 REJECT_LOG_WINDOW = 1.0
 #: Characters of a rejection's text logged (an excerpt of a payload's bytes in it, not the payload).
 REJECT_EXCERPT = 200
 
-# --------------------------------------------------------------------------- codec
-
-#: Bytes of the MessagePack packer's first buffer (it grows as needed): msgpack's default allocates 256 KiB for every
-#: message packed, most of which are a few dozen bytes.
+#: Bytes of the MessagePack packer's first buffer (it grows as needed): msgpack's default allocates 256 KiB for
+#: every message packed, most of which are a few dozen bytes.
 PACK_BUFFER = 1024
 
-# --------------------------------------------------------------------------- RL environment (dronesim/rl.py)
-
-#: Observations up to which `Eyes.see_few` reads the drones' cells one drone at a time rather than in one gather; radius
-#: 2 on 64x64x16, one by one vs one gather (CPU time, best of 7, load 5): 1 drone 5.4 vs 8.0 µs, 2: 8.4 vs 10.7, 3: 7.9
-#: vs 10.4, 4: 15.4 vs 12.5, 6: 22.9 vs 15.0, 8: 31.6 vs 17.2.
+#: Observations up to which the RL environment's `Eyes.see_few` reads the drones' cells one drone at a time, not in
+#: one gather. Radius 2 on 64x64x16, one by one vs one gather (CPU time, best of 7, load 5): 1 drone 5.4 vs 8.0 µs,
+#: 2: 8.4 vs 10.7, 3: 7.9 vs 10.4, 4: 15.4 vs 12.5, 6: 22.9 vs 15.0, 8: 31.6 vs 17.2.
 EYES_ONE_BY_ONE = 3
 
-#: Drones up to which a local episode is played drone by drone (`dronesim.rl_few.FewEpisode`, at most 99) rather than in
-#: array operations (`Episode` over the engine); a step of `dronesim bench rl`'s (CPU time, best of 5 passes of 1500
-#: steps, load 4), drone by drone vs the engine's path: 1 drone 11 vs 97 µs, 16: 43 vs 110, 32: 77 vs 167, 64: 181 vs
-#: 412, 80: 203 vs 389, 99: 250 vs 485 (an earlier run: 241 vs 273 at 99, and the policy here kills no drone, where the
-#: drone-by-drone judgement costs most: 64 keeps a margin).
+#: Drones up to which a local RL episode is played drone by drone (`dronesim.rl_few.FewEpisode`, at most 99), not
+#: in array operations (`Episode` over the engine). A step of `dronesim bench rl`'s (CPU time, best of 5 passes of
+#: 1500 steps, load 4), drone by drone vs the engine's path: 1 drone 11 vs 97 µs, 16: 43 vs 110, 32: 77 vs 167,
+#: 64: 181 vs 412, 80: 203 vs 389, 99: 250 vs 485 (an earlier run: 241 vs 273 at 99, and the policy here kills no
+#: drone, where the drone-by-drone judgement costs most: 64 keeps a margin).
 EPISODE_FEW_DRONES = 64
