@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
+import re
 import typing
 
 from .keys import KEY_TABLE
@@ -36,7 +37,7 @@ phase.
 
 def _type_name(hint: object) -> str:
     text = str(hint).replace("typing.", "").replace("schema.messages.", "")
-    return text.replace("<class '", "").replace("'>", "").replace("tuple[int, int, int]", "Cell")
+    return re.sub(r"<(?:class|enum) '([^']*)'>", r"\1", text).replace("tuple[int, int, int]", "Cell")
 
 
 def render() -> str:
