@@ -17,38 +17,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from coordinator.arbiter import Arbiter
-from coordinator.engine import (
-    Engine,
-    GameConfig,
-    Publish,
-    Record,
-    Refusal,
-    Reply,
-    Stage,
-    opens_drones_phase,
-)
+from coordinator.engine import Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase
 from dronesim.scenario import swarm_hosts
 from entities.autopilots import make_autopilot, make_swarm, pilot_class
 from entities.autopilots.base import Decision, drive, fly_pilots, fly_swarm
 from entities.environment import Environment, build_world
 from entities.gcs import Plan, gcs_done
-from schema import (
-    Cell,
-    CellInfo,
-    Connect,
-    Intent,
-    Moves,
-    Nps,
-    Over,
-    Phase,
-    Role,
-    Status,
-    StepTable,
-    Turn,
-    Upd,
-    UsageError,
-    Welcome,
-)
+from schema import Cell, CellInfo, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd, Welcome
+from schema.errors import UsageError
 from schema.tables import drone_number
 from schema.tuning import SWARM_MIN
 

@@ -13,20 +13,8 @@ import time
 import zenoh
 
 from dronesim.transport import Inbox, Presence, Received, ask
-from schema import (
-    Connect,
-    Keys,
-    Message,
-    Over,
-    Refused,
-    RejectCounter,
-    RemoteInputError,
-    Status,
-    Turn,
-    UsageError,
-    Welcome,
-)
-from schema.errors import StaleTurn
+from schema import Connect, Keys, Message, Over, Refused, Status, Turn, Welcome
+from schema.errors import RejectCounter, RemoteInputError, StaleTurn, UsageError
 
 
 class Refusal(UsageError):

@@ -97,12 +97,10 @@ def check_game(args: argparse.Namespace) -> None:
     """The game the coordinator will play, built from the flags it will be given: one it would refuse (a
     UsageError: drones that do not fit, a start in a building, a bad world file...) is refused here, before
     any process starts."""
-    from coordinator.node import build_parser as coordinator_parser
-    from coordinator.node import game_config
+    from coordinator import node as coordinator
 
-    (name, argv), *_ = commands(args, "tcp/127.0.0.1:0")
-    assert name == "SRV" and argv[3] == "coordinator"
-    game_config(coordinator_parser().parse_args(argv[4:]))
+    argv = commands(args, "tcp/127.0.0.1:0")[0][1]  # the coordinator's: python -m dronesim coordinator ...
+    coordinator.game_config(coordinator.build_parser().parse_args(argv[4:]))
 
 
 #: Seconds the entities have, once the coordinator is told to stop, to see its OVER and exit by themselves.
