@@ -124,8 +124,7 @@ def claim(argv: list[str], first: int = 1) -> int:
 
 
 def main(argv: list[str]) -> int:
-    if not argv:
-        argv = ["dronesim", "--help"]
+    argv = argv or ["dronesim", "--help"]
     if argv[0] != "dronesim":
         os.execvp(argv[0], argv)
     if len(argv) < 2 or argv[1] not in ROLES:  # --help, replay, bench, up: no entity to watch

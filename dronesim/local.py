@@ -8,7 +8,6 @@ deadline or vanished), it writes the same journal, byte for byte, as a run over 
 
 from __future__ import annotations
 
-import functools
 import logging
 from collections import deque
 from collections.abc import Mapping
@@ -51,11 +50,6 @@ class Result:
     records: list[dict]
     over: Over
     statuses: list[Status]
-
-
-def _answers(env: Environment, pending: Mapping[str, tuple[Cell, ...]]) -> dict[str, dict[Cell, CellInfo]]:
-    """What the environment answers about each drone's cells (the oracle of pilots flown in-process)."""
-    return {d: dict(zip(c, env.answer(c))) for d, c in pending.items()}
 
 
 def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
@@ -102,6 +96,11 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
               for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
     env: Environment | None = None
     current: dict[str, Cell] = {}
+
+    def ask(pending: Mapping[str, tuple[Cell, ...]]) -> dict[str, dict[Cell, CellInfo]]:
+        """What the environment answers about each drone's cells (the oracle of pilots flown in-process)."""
+        assert env is not None
+        return {d: dict(zip(c, env.answer(c))) for d, c in pending.items()}
     while queue:
         effect = queue.popleft()
         match effect:
@@ -123,7 +122,6 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 for order in turn.orders.orders(pilots):
                     if order[0] not in skip:
                         flown.setdefault(host_of[order[0]], []).append(order)
-                ask = functools.partial(_answers, env)
                 for sender in flyers:  # each as its process would: a swarm host's MOVES, a drone's NPS
                     if (host := swarms.get(sender)) is not None:
                         rows = turn.orders.rows

@@ -104,16 +104,14 @@ def _existing(path: str, flag: str) -> str:
 
 
 def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | None = None) -> None:
-    """--lease (transport/link/tx/lease, in milliseconds) and the security flags (TLS, mutual TLS,
-    user/password, a router's dictionary and ACL) into `conf`.
-
-    A client's --tls-cert/--tls-key are presented to the router (mutual TLS); a router's are its server
-    certificate, and --tls-mtls makes it require clients' ones. `router` defaults to the config's mode."""
+    """--lease and the security flags into `conf`. A client's --tls-cert/--tls-key are presented to the
+    router (mutual TLS); a router's are its server certificate, and --tls-mtls makes it require clients'
+    ones. `router` defaults to the config's mode."""
     tls, auth = "transport/link/tls/", "transport/auth/usrpwd/"
     if args.lease is not None:
         if args.lease <= 0:
             raise UsageError("--lease must be positive")
-        # (keep_alive: keep-alives per lease, zenoh's default)
+        # (in milliseconds; keep_alive: keep-alives per lease, zenoh's default)
         _insert(conf, {"transport/link/tx/lease": int(args.lease * 1000), "transport/link/tx/keep_alive": 4})
     if router is None:
         router = (args.mode or json.loads(conf.get_json("mode") or "null")) == "router"
@@ -210,9 +208,8 @@ def sessions_listed(answers: list[dict[str, Any]]) -> frozenset[str] | None:
 
 
 def audit_sessions(session: zenoh.Session, post: Callable[[object], None], timeout: float = 2.0) -> None:
-    """Ask every router which sessions it connects (its admin space), without waiting: `post(Sessions(...))`
-    once the query is finished. A presence token says nothing of who declared it; this tells a token held by
-    a copy (on a plain router) from the admitted session's own."""
+    """Ask every router which sessions it connects, without waiting: `post(Sessions(...))` once answered. A
+    presence token says nothing of who declared it: this tells a copy's (on a plain router) from its own."""
     answers: list[dict[str, Any]] = []
 
     def on_reply(reply: zenoh.Reply) -> None:
@@ -262,8 +259,7 @@ Event = Received | Asked | Presence | Matching
 
 @dataclass(frozen=True, slots=True)
 class _Unread:
-    """A message or query that passed the cheap checks, its payload not decoded yet (`Inbox._read` does);
-    `query`: None for a published message."""
+    """A message (`query` None) or query that passed the cheap checks, not decoded yet (`Inbox._read` does)."""
 
     key: str
     origin: str
@@ -288,10 +284,9 @@ def check_addressed(keys: Keys, key: str, msg: Message) -> None:
 
 
 def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = None) -> zenoh.handlers.Callback:
-    """Run `callback` (and `drop`, once it is done) on Zenoh's receiving thread itself. By default
-    zenoh-python hands each Python callback to a thread of its own, and then messages on different keys
-    overtake each other on their way into the inbox; our callbacks only check and enqueue, so they run in
-    place, in order."""
+    """Run `callback` (and `drop`, once it is done) on Zenoh's receiving thread itself, in order: by default
+    zenoh-python hands each one to a thread of its own, and messages on different keys overtake each other
+    on their way into the inbox."""
     return zenoh.handlers.Callback(callback, drop, indirect=False)
 
 
@@ -370,8 +365,7 @@ class FairQueue:
         self._line.put(None)
 
     def take(self, timeout: float | None) -> tuple[bool, object]:
-        """(True, the next event), or (False, None) once `timeout` seconds (None: no limit) pass first or
-        `wake` is called."""
+        """(True, the next event), or (False, None) after `timeout` seconds (None: no limit) or a `wake`."""
         try:
             origin = self._line.get(timeout=timeout)
         except queue.Empty:
@@ -434,8 +428,8 @@ class Inbox:
 
     def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
                   since: Callable[[], int] | None = None) -> zenoh.Subscriber:
-        """Decoded messages on `key` become `Received` events (until `unsubscribe`); with `since`, those
-        stamped with a turn before `since()` are refused as stale."""
+        """Messages on `key` become `Received` events (until `unsubscribe`); with `since`, those stamped with
+        a turn before `since()` are refused as stale."""
         types = expect if isinstance(expect, tuple) else (expect,)
         limit = max(size_limit(t) for t in types)
 
@@ -498,8 +492,7 @@ class Inbox:
             query.drop()
 
     def _read(self, event: object) -> Event | None:
-        """A payload, decoded; None if it is malformed or not its key's (counted as a rejection; a query
-        gets an error reply)."""
+        """A payload, decoded; None if it is malformed or not its key's (refused: `_refuse`)."""
         if not isinstance(event, _Unread):
             return event  # type: ignore[return-value]
         try:
