@@ -56,11 +56,11 @@ def drone_entity(args: argparse.Namespace) -> str | None:
     return ident if re.fullmatch(r"D\d{2,5}", ident) else None
 
 
-def write_state(role: str, entity: str | None, argv: list[str], pid: int) -> None:
+def write_state(role: str, entity: str | None, argv: list[str]) -> None:
     path = Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"role": role, "entity": entity, "argv": argv, "pid": pid}))
+    tmp.write_text(json.dumps({"role": role, "entity": entity, "argv": argv, "pid": os.getpid()}))
     tmp.replace(path)
 
 
@@ -84,7 +84,7 @@ def dronesim(*args: str) -> list[str]:
     return [sys.executable, "-m", "dronesim", *args]
 
 
-def claim(argv: list[str], first: int = 1) -> int:
+def claim(argv: list[str]) -> int:
     """Fly the first drone id the coordinator admits (see the module's doc); the drone's exit code."""
     current: list[subprocess.Popen] = []
     stopping = threading.Event()
@@ -97,10 +97,10 @@ def claim(argv: list[str], first: int = 1) -> int:
 
     for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
         signal.signal(sig, forward)
-    for n in range(first, MAX_ID + 1):
+    for n in range(1, MAX_ID + 1):
         ident = f"D{n:02d}"
         args = fill(with_id(argv, ident), ident)
-        write_state("drone", ident, args, os.getpid())
+        write_state("drone", ident, args)
         proc = subprocess.Popen(dronesim("drone", *args), stderr=subprocess.PIPE, text=True, bufsize=1)
         current[:] = [proc]
         refusal = ""
@@ -138,7 +138,7 @@ def main(argv: list[str]) -> int:
         return claim(rest)
     entity = ROLES[role] or (drone_entity(args) if role == "drone" else None)
     rest = fill(rest, entity)
-    write_state(role, entity, rest, os.getpid())
+    write_state(role, entity, rest)
     os.execv(sys.executable, dronesim(role, *rest))  # this process becomes the entity: same pid
     return 127  # not reached
 

@@ -1,9 +1,7 @@
 """The whole game in one process, no network: the same Engine, Environment and autopilots as the
-distributed run, wired by function calls. Used to verify journals (replay --verify), by benchmarks
-(the in-process baseline) and by tests.
-
-Given the same scenario and the same inputs (GCS targets and intents per turn, drones that missed a
-deadline or vanished), it writes the same journal, byte for byte, as a run over Zenoh.
+distributed run, wired by function calls. Given the same scenario and inputs (GCS targets and intents per
+turn, drones that missed a deadline or vanished), it writes the same journal, byte for byte, as a run over
+Zenoh. Used to verify journals (replay --verify), by benchmarks (the in-process baseline) and by tests.
 """
 
 from __future__ import annotations
@@ -91,8 +89,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     # host -> its swarm pilot, for the autopilots that have one; the other drones each fly their own
     swarms = {h: make_swarm(a, world_size=world.size, drones=numbers[h], least=swarm_min)
               for h, (a, _) in flyers.items()} if swarm else {}
-    options = pilot_options or {}
-    pilots = {d: make_autopilot(a, world_size=world.size, **options.get(a, {}))
+    pilots = {d: make_autopilot(a, world_size=world.size, **(pilot_options or {}).get(a, {}))
               for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
     env: Environment | None = None
     current: dict[str, Cell] = {}
@@ -124,19 +121,17 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                         flown.setdefault(host_of[order[0]], []).append(order)
                 for sender in flyers:  # each as its process would: a swarm host's MOVES, a drone's NPS
                     if (host := swarms.get(sender)) is not None:
-                        rows = turn.orders.rows
-                        mine = rows[np.isin(rows["drone"], numbers[sender])]
+                        mine = turn.orders.rows[np.isin(turn.orders.rows["drone"], numbers[sender])]
                         moves: StepTable | dict[str, Decision] = drive(fly_swarm(host, mine), env.kinds)
                     elif sender in flown:
                         moves = drive(fly_pilots(pilots, flown[sender], host=sender if swarm else None), ask)
                     else:
                         continue
-                    if isinstance(moves, StepTable):
-                        if moves:
-                            push(engine.receive(Moves(turn=t, sender=sender, moves=moves)))
-                    else:
+                    if not isinstance(moves, StepTable):
                         for d, dec in sorted(moves.items()):
                             push(engine.receive(Nps(turn=t, sender=d, pos=dec.pos, note=dec.note, ranked=dec.ranked)))
+                    elif moves:
+                        push(engine.receive(Moves(turn=t, sender=sender, moves=moves)))
                 if skip:
                     push(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):

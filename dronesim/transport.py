@@ -1,13 +1,11 @@
 """The thin Zenoh adapter shared by every process: flags, session config, and an event inbox.
 
-One threading model, in every process and at every fleet size. Zenoh's callbacks run on Zenoh's threads and
-swallow exceptions: they only refuse, unread, what is too big, stale or over its origin's budget, and queue the
-payload in the process's `Inbox` (what fails there is counted as a rejection, never raised; a query's reply,
-which its asker waits for, is decoded there too). The main thread takes the payloads one at a time, in order
-of arrival but for a bursting origin (`FairQueue`), decodes each, checks it against its key
-(`check_addressed`), and does everything else. So a big payload costs its origin's turn, not Zenoh's thread,
-which every other message waits for; and a process's state is touched by one thread only: the only locks
-guard what both sides share, the queue (`FairQueue`) and the rejections (`RejectCounter`).
+One threading model, in every process and at every fleet size. Zenoh's callbacks, on Zenoh's threads, only
+refuse (unread) what is too big, stale or over its origin's budget and queue the rest in the process's `Inbox`;
+what fails there is counted as a rejection, never raised (Zenoh would swallow it). The main thread takes the
+payloads one at a time, in order of arrival but for a bursting origin (`FairQueue`), decodes and checks each
+(`check_addressed`), and does everything else: a big payload costs its origin's turn, not Zenoh's thread,
+which every other message waits for, and the only locks guard the queue and the rejections (`RejectCounter`).
 """
 
 from __future__ import annotations
@@ -125,15 +123,14 @@ def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | 
             _insert(conf, {f"{tls}{side}_certificate": cert, f"{tls}{side}_private_key": key})
     if args.tls_mtls or (args.tls_cert and not router):  # a client presents its certificate only then
         _insert(conf, {tls + "enable_mtls": True})
+    password = os.environ.get(PASSWORD_ENV) or None
     if args.password_file:
         with open(_existing(args.password_file, "--password-file"), encoding="utf-8") as f:
-            password: str | None = f.readline().rstrip("\r\n")
+            password = f.readline().rstrip("\r\n")
         if not password:
             raise UsageError(f"--password-file {args.password_file}: its first line is empty")
         if not args.user:
             raise UsageError("--password-file needs --user NAME")
-    else:
-        password = os.environ.get(PASSWORD_ENV) or None
     if args.user:
         if password is None:
             raise UsageError(f"--user {args.user} needs --password-file FILE or the {PASSWORD_ENV} "
@@ -394,12 +391,10 @@ class FairQueue:
 
 
 class Inbox:
-    """Events from Zenoh callbacks for the process's main thread (see the module's docstring); rejections
-    are counted. A flood cannot move a game. Each event has an origin, whose budget it counts against
-    (`FairQueue`): the writer of the key it came on (by the key table: SRV for TURN, STATUS and OVER, GCS
-    for TGT and DONE, the drone or host whose key an NPS or MOVES is on), the sender a query names, the
-    entity of a presence token. A payload is refused unread above its message's size limit
-    (`schema.keys.size_limit`); a message whose sender is not its key's, once decoded."""
+    """Events from Zenoh callbacks for the process's main thread (the module's docstring); a flood cannot move
+    a game. Each event counts against the budget (`FairQueue`) of its origin: the writer of the key it came on
+    (by the key table: SRV for TURN, STATUS and OVER, GCS for TGT and DONE, the drone or host whose key an NPS
+    or MOVES is on), the sender a query names, the entity of a presence token."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, logger: logging.Logger, *,
                  budget: int = ORIGIN_QUEUE, share: int = ORIGIN_SHARE) -> None:
@@ -418,8 +413,8 @@ class Inbox:
     # callbacks (Zenoh threads): check, enqueue; never raise
 
     def _admit(self, origin: str, size: int, limit: int) -> None:
-        """Refuse, unread, a payload that is too big or comes from an origin over its budget (the
-        coordinator's messages never are: a process that lags behind must not lose the game's end)."""
+        """Refuse, unread, a payload above its key's size limit (`schema.keys.size_limit`) or from an origin
+        over its budget (never the coordinator's: a process that lags behind must not lose the game's end)."""
         if size > limit:
             raise MalformedMessage(f"a payload of {size} bytes, above the key's limit of {limit}", reason="too-large")
         why = None if origin == "SRV" else self._events.full(origin, size)

@@ -80,10 +80,8 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
              "--drones", str(args.drones), "--max-turns", str(args.max_turns), "--admit-deadline", "60",
              "--pace", str(args.pace), *_passed(args, "world", "starts", "journal", "scenario")]
     procs = [("SRV", coord), ("ENV", [*base, "env", *common, "--no-draw"])]
-    if args.scenario:
-        pilots = Scenario.load(args.scenario).autopilots
-    else:
-        pilots = {drone_id(n): args.autopilot for n in range(1, args.drones + 1)}
+    pilots = (Scenario.load(args.scenario).autopilots if args.scenario
+              else {drone_id(n): args.autopilot for n in range(1, args.drones + 1)})
     if args.swarm:  # one swarm host per autopilot
         for host, (pilot, ids) in swarm_hosts(pilots).items():
             procs.append((host, [*base, "drone", *common, "--id", ",".join(ids), "--host", host, "--autopilot", pilot]))
