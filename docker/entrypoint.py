@@ -115,8 +115,7 @@ def claim(argv: list[str]) -> int:
         if TAKEN.search(refusal):
             print(f"dronesim-entrypoint: {ident} is taken, trying the next id", file=sys.stderr, flush=True)
             continue
-        unknown = UNKNOWN.search(refusal)
-        if unknown:
+        if unknown := UNKNOWN.search(refusal):
             print(f"dronesim-entrypoint: no free drone id ({unknown.group(1)}): this replica is one too many; "
                   "start as many drone replicas as the coordinator's --drones (DRONES)", file=sys.stderr, flush=True)
         return code

@@ -20,15 +20,6 @@ from pathlib import Path
 TIMEOUT_S = float(os.environ.get("DRONESIM_HEALTH_TIMEOUT", "5"))
 
 
-def zenoh_args(argv: list[str]) -> argparse.Namespace:
-    """The entity's Zenoh flags, parsed by dronesim's own flag definitions."""
-    from dronesim.transport import add_zenoh_args
-
-    p = argparse.ArgumentParser(add_help=False)
-    add_zenoh_args(p)
-    return p.parse_known_args(argv)[0]
-
-
 def probe_config(args: argparse.Namespace, connect: list[str]):
     """A client config reaching `connect`, with the entity's config file (TLS, credentials) if any."""
     from dronesim.transport import zenoh_config
@@ -41,10 +32,14 @@ def probe_config(args: argparse.Namespace, connect: list[str]):
 def check(state: dict) -> tuple[bool, str]:
     import zenoh
 
+    from dronesim.transport import add_zenoh_args
+
     pid = state.get("pid")
     if pid and Path("/proc").is_dir() and not Path(f"/proc/{pid}").exists():
         return False, f"process {pid} is gone"
-    args = zenoh_args(list(state.get("argv", [])))
+    parser = argparse.ArgumentParser(add_help=False)
+    add_zenoh_args(parser)  # the entity's Zenoh flags, parsed by dronesim's own flag definitions
+    args = parser.parse_known_args(list(state.get("argv", [])))[0]
     role, entity = state.get("role"), state.get("entity")
     if role == "router":
         # its listen endpoints as seen from inside the container (tcp/0.0.0.0:7447 -> tcp/127.0.0.1:7447)

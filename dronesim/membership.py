@@ -144,8 +144,7 @@ class TurnClock:
             if not lo <= now <= hi:
                 raise StaleTurn(f"{msg.TAG} for turn {msg.turn} while the game is at turn {self.turn}")
         key = (msg.TAG, getattr(msg, "phase", None), msg.turn)
-        first = self._seen.get(key)
-        if first is not None and first != msg:
+        if self._seen.get(key, msg) != msg:
             raise StaleTurn(f"a {msg.TAG} for turn {msg.turn} that contradicts the one received before",
                             reason="contradiction")
         self._seen = {k: m for k, m in self._seen.items() if k[2] >= now - 1}  # keep this turn and the last

@@ -92,9 +92,8 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
 
 
 def check_game(args: argparse.Namespace) -> None:
-    """The game the coordinator will play, built from the flags it will be given: one it would refuse (a
-    UsageError: drones that do not fit, a start in a building, a bad world file...) is refused here, before
-    any process starts."""
+    """Refuse here, before any process starts, a game the coordinator would refuse with the flags it will be
+    given (a UsageError: drones that do not fit, a start in a building, a bad world file...)."""
     from coordinator import node as coordinator
 
     argv = commands(args, "tcp/127.0.0.1:0")[0][1]  # the coordinator's: python -m dronesim coordinator ...
@@ -166,8 +165,7 @@ def supervise(running: list[tuple[str, subprocess.Popen]]) -> dict[str, int]:
     codes: dict[str, int] = {}
     with waking(lambda: done.put(None)):  # a signal's handler runs at once, even while blocked in get()
         while len(codes) < len(running):
-            item = done.get()
-            if item is None:
+            if (item := done.get()) is None:
                 continue
             name, code = item
             codes[name] = code
