@@ -72,10 +72,9 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     queue: deque = deque()
 
     def push(effects: list) -> None:
-        """Queue a batch of effects, a drones' phase after the rest: the coordinator sends it first (the
-        next turn waits for it), but here the environment must see the turn's ENV phase and STATUS
-        before the drones sense, as it does over the network (it answers an ASK for turn t only once
-        STATUS(t - 1) is in)."""
+        """Queue a batch of effects, a drones' phase after the rest: the coordinator sends it first (the next
+        turn waits for it), but here the environment must see the turn's ENV phase and STATUS before the drones
+        sense, as it does over the network (it answers an ASK for turn t only once STATUS(t - 1) is in)."""
         queue.extend(sorted(effects, key=opens_drones_phase))  # stable: only the drones' phase moves
     for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), Connect(turn=0, sender="GCS", role=Role.GCS)):
         push(engine.connect(hello, None))

@@ -317,11 +317,11 @@ def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Mes
 class FairQueue:
     """Events by origin, for one consuming thread, with a bound per origin and turns under pressure.
 
-    Events are taken in order of arrival, except that an origin has at most `share` of its events in
-    line at a time: the rest wait and join the end of the line one by one, as its events are taken. So
-    one origin's burst delays another origin's next event by at most `share` of its own, and below that
-    nothing is reordered. At most `budget` events and `budget_bytes` bytes (the payloads they came as)
-    are queued per origin: `put` raises a `flood` RemoteInputError beyond. Thread-safe."""
+    Events are taken in order of arrival, except that an origin has at most `share` of its events in line at a
+    time: the rest wait and join the end of the line one by one, as its events are taken. So one origin's burst
+    delays another origin's next event by at most `share` of its own, and below that nothing is reordered. At
+    most `budget` events and `budget_bytes` bytes (the payloads they came as) are queued per origin: `put`
+    raises a `flood` RemoteInputError beyond. Thread-safe."""
 
     def __init__(self, budget: int = ORIGIN_QUEUE, budget_bytes: int = ORIGIN_BYTES, share: int = ORIGIN_SHARE) -> None:
         self.budget, self.budget_bytes, self.share = budget, budget_bytes, share
