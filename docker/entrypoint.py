@@ -9,17 +9,11 @@ For an entity role (coordinator, env, drone, gcs) and for `dronesim router`, it 
 entity this container runs, and with which Zenoh flags, to $DRONESIM_STATE (a small JSON file), for the
 health check (docker/healthcheck.py).
 
-``--id auto`` is how `docker compose up --scale drone=N` gives every replica its own drone id. The
-replica tries D01, D02, ... in turn, running `dronesim drone --id Dnn` for each: the coordinator admits
-one process per drone id and refuses a taken one with a clear message ("D01 is already connected",
-"drone D01 is already taken by H01"), so the first id it admits is this replica's. Replicas racing for
-one id are serialized by the coordinator: one wins, the others move on. It stops at "unknown drone Dnn":
-every drone of the game already flies, so this replica is one too many (exit 2, with that message).
-A refused attempt leaves no trace: presence tokens are per Zenoh session.
-
-``{id}`` in any argument becomes the entity id (SRV, ENV, GCS, the claimed Dnn, or Hnn), so one
-command line fits every replica: ``--tls-cert /certs/{id}.pem --tls-key /certs/{id}.key`` gives each
-claimed drone the certificate whose name the router's access control grants that drone's keys.
+``--id auto`` (docs/docker.md) tries D01, D02, ... in turn, running `dronesim drone --id Dnn` for each,
+until the coordinator admits one: a taken id is refused ("D01 is already connected", "drone D01 is
+already taken by H01"); "unknown drone Dnn" means every drone of the game already flies (exit 2). A
+refused attempt leaves no trace: presence tokens are per Zenoh session. ``{id}`` in any argument becomes
+the entity id (SRV, ENV, GCS, the claimed Dnn, or Hnn): ``--tls-cert /certs/{id}.pem``.
 """
 
 from __future__ import annotations
@@ -62,24 +56,22 @@ def drone_entity(args: argparse.Namespace) -> str | None:
     return ident if re.fullmatch(r"D\d{2,5}", ident) else None
 
 
-def write_state(role: str, entity: str | None, argv: list[str], pid: int) -> None:
+def write_state(role: str, entity: str | None, argv: list[str]) -> None:
     path = Path(os.environ.get("DRONESIM_STATE", "/tmp/dronesim-entity.json"))
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"role": role, "entity": entity, "argv": argv, "pid": pid}))
+    tmp.write_text(json.dumps({"role": role, "entity": entity, "argv": argv, "pid": os.getpid()}))
     tmp.replace(path)
 
 
 def with_id(argv: list[str], ident: str) -> list[str]:
-    """`argv` with its --id value replaced."""
-    out, i = [], 0
-    while i < len(argv):
-        if argv[i] == "--id" and i + 1 < len(argv):
-            out += ["--id", ident]
-            i += 2
-            continue
-        out.append(f"--id={ident}" if argv[i].startswith("--id=") else argv[i])
-        i += 1
+    """`argv` with its --id value replaced (it parsed: a value never starts with "--")."""
+    out = list(argv)
+    for i, arg in enumerate(argv):
+        if arg == "--id" and i + 1 < len(argv):
+            out[i + 1] = ident
+        elif arg.startswith("--id="):
+            out[i] = f"--id={ident}"
     return out
 
 
@@ -92,57 +84,38 @@ def dronesim(*args: str) -> list[str]:
     return [sys.executable, "-m", "dronesim", *args]
 
 
-class Attempt:
-    """One `dronesim drone --id Dnn` run; its stderr is passed through and scanned for a refusal."""
-
-    def __init__(self, argv: list[str]) -> None:
-        self.refusal: str | None = None
-        self.proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True, bufsize=1)
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            sys.stderr.write(line)
-            sys.stderr.flush()
-            if "connection refused:" in line and self.refusal is None:
-                self.refusal = line.strip()
-
-    def wait(self) -> int:
-        code = self.proc.wait()
-        self._reader.join()
-        return code
-
-
-def claim(argv: list[str], first: int = 1) -> int:
+def claim(argv: list[str]) -> int:
     """Fly the first drone id the coordinator admits (see the module's doc); the drone's exit code."""
-    current: list[Attempt] = []
+    current: list[subprocess.Popen] = []
     stopping = threading.Event()
 
     def forward(signum: int, _frame: object) -> None:  # docker stop: pass it on, try no further id
         stopping.set()
-        for attempt in current:
-            if attempt.proc.poll() is None:
-                attempt.proc.send_signal(signum)
+        for proc in current:
+            if proc.poll() is None:
+                proc.send_signal(signum)
 
     for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
         signal.signal(sig, forward)
-    for n in range(first, MAX_ID + 1):
+    for n in range(1, MAX_ID + 1):
         ident = f"D{n:02d}"
         args = fill(with_id(argv, ident), ident)
-        write_state("drone", ident, args, os.getpid())
-        attempt = Attempt(dronesim("drone", *args))
-        current[:] = [attempt]
-        code = attempt.wait()
-        refusal = attempt.refusal or ""
+        write_state("drone", ident, args)
+        proc = subprocess.Popen(dronesim("drone", *args), stderr=subprocess.PIPE, text=True, bufsize=1)
+        current[:] = [proc]
+        refusal = ""
+        for line in proc.stderr:  # passed through, and scanned for a refusal
+            sys.stderr.write(line)
+            sys.stderr.flush()
+            if "connection refused:" in line and not refusal:
+                refusal = line.strip()
+        code = proc.wait()
         if code == 0 or stopping.is_set() or not refusal:
             return code
         if TAKEN.search(refusal):
             print(f"dronesim-entrypoint: {ident} is taken, trying the next id", file=sys.stderr, flush=True)
             continue
-        unknown = UNKNOWN.search(refusal)
-        if unknown:
+        if unknown := UNKNOWN.search(refusal):
             print(f"dronesim-entrypoint: no free drone id ({unknown.group(1)}): this replica is one too many; "
                   "start as many drone replicas as the coordinator's --drones (DRONES)", file=sys.stderr, flush=True)
         return code
@@ -150,8 +123,7 @@ def claim(argv: list[str], first: int = 1) -> int:
 
 
 def main(argv: list[str]) -> int:
-    if not argv:
-        argv = ["dronesim", "--help"]
+    argv = argv or ["dronesim", "--help"]
     if argv[0] != "dronesim":
         os.execvp(argv[0], argv)
     if len(argv) < 2 or argv[1] not in ROLES:  # --help, replay, bench, up: no entity to watch
@@ -165,7 +137,7 @@ def main(argv: list[str]) -> int:
         return claim(rest)
     entity = ROLES[role] or (drone_entity(args) if role == "drone" else None)
     rest = fill(rest, entity)
-    write_state(role, entity, rest, os.getpid())
+    write_state(role, entity, rest)
     os.execv(sys.executable, dronesim(role, *rest))  # this process becomes the entity: same pid
     return 127  # not reached
 

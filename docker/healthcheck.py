@@ -1,21 +1,12 @@
 #!/usr/bin/env python3
-"""The dronesim image's HEALTHCHECK (installed as /usr/local/bin/dronesim-health).
+"""The dronesim image's HEALTHCHECK (installed as /usr/local/bin/dronesim-health; docs/docker.md).
 
-"The process is alive" is what Docker already knows. What matters for a cluster of Zenoh clients is
-whether this container's entity is *present on the network*: every entity process holds a liveliness
-token ``<root>/<ENTITY>/ALIVE/<session>`` for as long as its Zenoh session is up, and the coordinator
-watches these tokens to notice a dead or cut-off process. So the check opens a short-lived client
-session with the entity's own Zenoh flags (same --connect endpoints, same --config: TLS and credentials
-included) and asks the router for that token. Healthy means, at once: the process runs, its session
-reached the router, and the coordinator can see it. A hung start, a lost router or a dead session all
-show as unhealthy; the line printed says which.
-
-For `dronesim router` (a Python router in this image), healthy means the router accepts a Zenoh session
-on its listen endpoint. A container running anything else (replay, bench, a shell) has nothing to check
-and is reported healthy.
-
-The entrypoint (docker/entrypoint.py) records which entity the container runs in $DRONESIM_STATE.
-Exit status 0: healthy, 1: unhealthy (Docker's convention).
+Healthy: this container's entity is *present on the network*. Its liveliness token
+``<root>/<ENTITY>/ALIVE/<session>``, which the coordinator watches, is asked of the router by a short-lived
+client session with the entity's own Zenoh flags (--connect, --config: TLS and credentials included). For
+`dronesim router`, healthy means it accepts a Zenoh session on its listen endpoint; a container running
+anything else (replay, bench, a shell) has nothing to check. The entrypoint (docker/entrypoint.py) records
+which entity the container runs in $DRONESIM_STATE. Exit status 0: healthy, 1: unhealthy.
 """
 
 from __future__ import annotations
@@ -29,42 +20,26 @@ from pathlib import Path
 TIMEOUT_S = float(os.environ.get("DRONESIM_HEALTH_TIMEOUT", "5"))
 
 
-def zenoh_args(argv: list[str]) -> argparse.Namespace:
-    """The entity's Zenoh flags, parsed by dronesim's own flag definitions."""
-    from dronesim.transport import add_zenoh_args
-
-    p = argparse.ArgumentParser(add_help=False)
-    add_zenoh_args(p)
-    return p.parse_known_args(argv)[0]
-
-
 def probe_config(args: argparse.Namespace, connect: list[str]):
     """A client config reaching `connect`, with the entity's config file (TLS, credentials) if any."""
-    import zenoh
-
     from dronesim.transport import zenoh_config
 
-    args = argparse.Namespace(**vars(args))
-    args.mode, args.connect, args.listen = "client", connect, []
-    conf: zenoh.Config = zenoh_config(args)
+    conf = zenoh_config(argparse.Namespace(**{**vars(args), "mode": "client", "connect": connect, "listen": []}))
     conf.insert_json5("listen/endpoints", "[]")  # never take the entity's port
     return conf
-
-
-def connect_endpoints(conf) -> list[str]:
-    value = json.loads(conf.get_json("connect/endpoints"))
-    if isinstance(value, dict):  # per-mode endpoints
-        value = value.get("client", [])
-    return [str(e) for e in value or []]
 
 
 def check(state: dict) -> tuple[bool, str]:
     import zenoh
 
+    from dronesim.transport import add_zenoh_args
+
     pid = state.get("pid")
     if pid and Path("/proc").is_dir() and not Path(f"/proc/{pid}").exists():
         return False, f"process {pid} is gone"
-    args = zenoh_args(list(state.get("argv", [])))
+    parser = argparse.ArgumentParser(add_help=False)
+    add_zenoh_args(parser)  # the entity's Zenoh flags, parsed by dronesim's own flag definitions
+    args = parser.parse_known_args(list(state.get("argv", [])))[0]
     role, entity = state.get("role"), state.get("entity")
     if role == "router":
         # its listen endpoints as seen from inside the container (tcp/0.0.0.0:7447 -> tcp/127.0.0.1:7447)
@@ -80,7 +55,10 @@ def check(state: dict) -> tuple[bool, str]:
     from schema import Keys
 
     conf = probe_config(args, list(args.connect))
-    endpoints = connect_endpoints(conf)  # --connect, or the entity's config file
+    endpoints = json.loads(conf.get_json("connect/endpoints"))  # --connect, or the entity's config file
+    if isinstance(endpoints, dict):  # per-mode endpoints
+        endpoints = endpoints.get("client", [])
+    endpoints = [str(e) for e in endpoints or []]
     if not endpoints:
         return True, f"{entity}: no connect endpoint, nothing to check through"
     key = Keys(args.root).alive_of(entity)

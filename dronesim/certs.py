@@ -73,17 +73,15 @@ class Kit:
         self.dir.mkdir(parents=True, exist_ok=True)
         self.days = days
         self.written: list[Path] = []
-        self.new_ca = False
-        if (self.dir / "ca.pem").exists() and (self.dir / "ca.key").exists() and not force_ca:
-            return
-        openssl("req", "-x509", "-new", *NEW_KEY, "-keyout", "ca.key", "-out", "ca.pem",
-                "-days", str(max(days, 3650)), "-sha256", "-subj", "/CN=dronesim development CA",
-                "-addext", "basicConstraints=critical,CA:TRUE,pathlen:0",
-                "-addext", "keyUsage=critical,keyCertSign,cRLSign,digitalSignature",
-                "-addext", "subjectKeyIdentifier=hash", cwd=self.dir)
-        (self.dir / "ca.pem").chmod(0o644)
-        self.written += [self.dir / "ca.pem", self.dir / "ca.key"]
-        self.new_ca = True  # what an earlier CA signed is re-issued
+        self.new_ca = force_ca or not ((self.dir / "ca.pem").exists() and (self.dir / "ca.key").exists())
+        if self.new_ca:  # (what an earlier CA signed is re-issued: `make`)
+            openssl("req", "-x509", "-new", *NEW_KEY, "-keyout", "ca.key", "-out", "ca.pem",
+                    "-days", str(max(days, 3650)), "-sha256", "-subj", "/CN=dronesim development CA",
+                    "-addext", "basicConstraints=critical,CA:TRUE,pathlen:0",
+                    "-addext", "keyUsage=critical,keyCertSign,cRLSign,digitalSignature",
+                    "-addext", "subjectKeyIdentifier=hash", cwd=self.dir)
+            (self.dir / "ca.pem").chmod(0o644)
+            self.written += [self.dir / "ca.pem", self.dir / "ca.key"]
 
     def issue(self, common_name: str, *, names: Sequence[str] = (), server: bool = False, force: bool = False) -> Path:
         """``<common_name>.pem`` / ``.key`` signed by the CA (kept if it exists, unless `force`)."""
@@ -126,8 +124,7 @@ class Kit:
 
     def users(self) -> Path:
         """``users.txt``: the router's ``user:password`` dictionary, from every ``<ID>.password`` here."""
-        lines = [f"{p.name[:-len('.password')]}:{p.read_text().splitlines()[0]}"
-                 for p in sorted(self.dir.glob("*.password"))]
+        lines = [f"{p.stem}:{p.read_text().splitlines()[0]}" for p in sorted(self.dir.glob("*.password"))]
         return self._write(self.dir / "users.txt", "\n".join(lines) + "\n")
 
     def _write(self, path: Path, text: str) -> Path:

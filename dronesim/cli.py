@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import sys
 
-#: subcommand -> (module, function taking argv), imported on use.
+#: subcommand -> (module, function taking argv, help line); the module is imported on use.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "up": ("dronesim.up", "cli", "run everything on one machine (embedded router + every entity)"),
     "coordinator": ("coordinator.node", "cli", "the coordinator (SRV + observer)"),

@@ -1,14 +1,11 @@
 """The whole game in one process, no network: the same Engine, Environment and autopilots as the
-distributed run, wired by function calls. Used to verify journals (replay --verify), by benchmarks
-(the in-process baseline) and by tests.
-
-Given the same scenario and the same inputs (GCS targets and intents per turn, drones that missed a
-deadline or vanished), it writes the same journal, byte for byte, as a run over Zenoh.
+distributed run, wired by function calls. Given the same scenario and inputs (GCS targets and intents per
+turn, drones that missed a deadline or vanished), it writes the same journal, byte for byte, as a run over
+Zenoh. Used to verify journals (replay --verify), by benchmarks (the in-process baseline) and by tests.
 """
 
 from __future__ import annotations
 
-import functools
 import logging
 from collections import deque
 from collections.abc import Mapping
@@ -17,38 +14,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from coordinator.arbiter import Arbiter
-from coordinator.engine import (
-    Engine,
-    GameConfig,
-    Publish,
-    Record,
-    Refusal,
-    Reply,
-    Stage,
-    opens_drones_phase,
-)
+from coordinator.engine import Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase
 from dronesim.scenario import swarm_hosts
 from entities.autopilots import make_autopilot, make_swarm, pilot_class
 from entities.autopilots.base import Decision, drive, fly_pilots, fly_swarm
 from entities.environment import Environment, build_world
 from entities.gcs import Plan, gcs_done
-from schema import (
-    Cell,
-    CellInfo,
-    Connect,
-    Intent,
-    Moves,
-    Nps,
-    Over,
-    Phase,
-    Role,
-    Status,
-    StepTable,
-    Turn,
-    Upd,
-    UsageError,
-    Welcome,
-)
+from schema import Cell, CellInfo, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd, Welcome
+from schema.errors import UsageError
 from schema.tables import drone_number
 from schema.tuning import SWARM_MIN
 
@@ -77,11 +50,6 @@ class Result:
     statuses: list[Status]
 
 
-def _answers(env: Environment, pending: Mapping[str, tuple[Cell, ...]]) -> dict[str, dict[Cell, CellInfo]]:
-    """What the environment answers about each drone's cells (the oracle of pilots flown in-process)."""
-    return {d: dict(zip(c, env.answer(c))) for d, c in pending.items()}
-
-
 def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
              logger: logging.Logger | None = None, *, keep_statuses: bool = False, verify_env: bool = True,
              swarm: bool = False, swarm_min: int = SWARM_MIN, arbiter: Arbiter | None = None,
@@ -104,10 +72,9 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     queue: deque = deque()
 
     def push(effects: list) -> None:
-        """Queue a batch of effects, a drones' phase after the rest: the coordinator sends it first (the
-        next turn waits for it), but here the environment must see the turn's ENV phase and STATUS
-        before the drones sense, as it does over the network (it answers an ASK for turn t only once
-        STATUS(t - 1) is in)."""
+        """Queue a batch of effects, a drones' phase after the rest: the coordinator sends it first (the next
+        turn waits for it), but here the environment must see the turn's ENV phase and STATUS before the drones
+        sense, as it does over the network (it answers an ASK for turn t only once STATUS(t - 1) is in)."""
         queue.extend(sorted(effects, key=opens_drones_phase))  # stable: only the drones' phase moves
     for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), Connect(turn=0, sender="GCS", role=Role.GCS)):
         push(engine.connect(hello, None))
@@ -121,11 +88,15 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     # host -> its swarm pilot, for the autopilots that have one; the other drones each fly their own
     swarms = {h: make_swarm(a, world_size=world.size, drones=numbers[h], least=swarm_min)
               for h, (a, _) in flyers.items()} if swarm else {}
-    options = pilot_options or {}
-    pilots = {d: make_autopilot(a, world_size=world.size, **options.get(a, {}))
+    pilots = {d: make_autopilot(a, world_size=world.size, **(pilot_options or {}).get(a, {}))
               for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
     env: Environment | None = None
     current: dict[str, Cell] = {}
+
+    def ask(pending: Mapping[str, tuple[Cell, ...]]) -> dict[str, dict[Cell, CellInfo]]:
+        """What the environment answers about each drone's cells (the oracle of pilots flown in-process)."""
+        assert env is not None
+        return {d: dict(zip(c, env.answer(c))) for d, c in pending.items()}
     while queue:
         effect = queue.popleft()
         match effect:
@@ -147,22 +118,19 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 for order in turn.orders.orders(pilots):
                     if order[0] not in skip:
                         flown.setdefault(host_of[order[0]], []).append(order)
-                ask = functools.partial(_answers, env)
                 for sender in flyers:  # each as its process would: a swarm host's MOVES, a drone's NPS
                     if (host := swarms.get(sender)) is not None:
-                        rows = turn.orders.rows
-                        mine = rows[np.isin(rows["drone"], numbers[sender])]
+                        mine = turn.orders.rows[np.isin(turn.orders.rows["drone"], numbers[sender])]
                         moves: StepTable | dict[str, Decision] = drive(fly_swarm(host, mine), env.kinds)
                     elif sender in flown:
                         moves = drive(fly_pilots(pilots, flown[sender], host=sender if swarm else None), ask)
                     else:
                         continue
-                    if isinstance(moves, StepTable):
-                        if moves:
-                            push(engine.receive(Moves(turn=t, sender=sender, moves=moves)))
-                    else:
+                    if not isinstance(moves, StepTable):
                         for d, dec in sorted(moves.items()):
                             push(engine.receive(Nps(turn=t, sender=d, pos=dec.pos, note=dec.note, ranked=dec.ranked)))
+                    elif moves:
+                        push(engine.receive(Moves(turn=t, sender=sender, moves=moves)))
                 if skip:
                     push(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):

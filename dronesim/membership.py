@@ -13,28 +13,12 @@ import time
 import zenoh
 
 from dronesim.transport import Inbox, Presence, Received, ask
-from schema import (
-    Connect,
-    Keys,
-    Message,
-    Over,
-    Refused,
-    RejectCounter,
-    RemoteInputError,
-    Status,
-    Turn,
-    UsageError,
-    Welcome,
-)
-from schema.errors import StaleTurn
+from schema import Connect, Keys, Message, Over, Refused, Status, Turn, Welcome
+from schema.errors import RejectCounter, RemoteInputError, StaleTurn, UsageError
 
 
 class Refusal(UsageError):
     """The coordinator refused this entity (e.g. its role is already taken)."""
-
-
-class CoordinatorLost(UsageError):
-    """The coordinator vanished and did not come back in time."""
 
 
 def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Logger, *,
@@ -70,14 +54,13 @@ def await_presence(session: zenoh.Session, key: str, timeout: float) -> bool:
 
 
 class Membership:
-    """An entity's admission, kept through a coordinator restart or a cut link.
-
-    It declares the entity's presence token, connects, and watches the token of the coordinator that admitted
-    it (the session that answered its CONNECT: another token under the coordinator's name holds nothing): when
-    it has gone, it waits up to `grace` seconds for a coordinator to appear and then connects again (the
-    coordinator re-admits the same process, or resumes a game from its journal). Refused then (a drone declared
-    LOST meanwhile), the entity takes no further part: it says so and leaves at OVER. Feed it every `Presence`
-    event of the inbox; use `timeout()` for the inbox wait and `check()` when it times out."""
+    """An entity's admission, kept through a coordinator restart or a cut link. It declares the entity's
+    presence token, connects, and watches the token of the coordinator that admitted it (the session that
+    answered its CONNECT: another token under the coordinator's name holds nothing): when it has gone, it
+    waits up to `grace` seconds for a coordinator to appear and then connects again (the coordinator re-admits
+    the same process, or resumes a game from its journal). Refused then (a drone declared LOST meanwhile), the
+    entity takes no further part: it says so and leaves at OVER. Feed it every `Presence` event of the inbox;
+    use `timeout()` for the inbox wait and `check()` when it times out."""
 
     def __init__(self, session: zenoh.Session, inbox: Inbox, hello: Connect, logger: logging.Logger, *,
                  connect_timeout: float, grace: float) -> None:
@@ -100,7 +83,7 @@ class Membership:
                 try:
                     self.welcome, self.coordinator = admit(self.session, self.keys, self.hello, self.log,
                                                           timeout=self.connect_timeout)
-                except Refusal as err:  # e.g. a drone declared LOST while it was away: its part is over
+                except Refusal as err:
                     self.log.warning("%s: %s takes no further part and leaves at the end of the game",
                                      err, self.hello.sender)
                     return None
@@ -116,9 +99,9 @@ class Membership:
         return None if self._lost_since is None else max(0.0, self._lost_since + self.grace - time.monotonic())
 
     def check(self) -> None:
-        """Raise CoordinatorLost once the grace period is over."""
+        """Raise a UsageError once the grace period is over."""
         if self.timeout() == 0.0:
-            raise CoordinatorLost(f"the coordinator vanished and did not come back within {self.grace:g} s")
+            raise UsageError(f"the coordinator vanished and did not come back within {self.grace:g} s")
 
     def close(self) -> None:
         self.token.undeclare()
@@ -161,8 +144,7 @@ class TurnClock:
             if not lo <= now <= hi:
                 raise StaleTurn(f"{msg.TAG} for turn {msg.turn} while the game is at turn {self.turn}")
         key = (msg.TAG, getattr(msg, "phase", None), msg.turn)
-        first = self._seen.get(key)
-        if first is not None and first != msg:
+        if self._seen.get(key, msg) != msg:
             raise StaleTurn(f"a {msg.TAG} for turn {msg.turn} that contradicts the one received before",
                             reason="contradiction")
         self._seen = {k: m for k, m in self._seen.items() if k[2] >= now - 1}  # keep this turn and the last

@@ -60,8 +60,7 @@ def inputs_of(records: Iterable[dict], size: Cell) -> Inputs:
             intents[t] = Intent(r["intent"])
         if r.get("hovered"):
             hovered[t] = set(r["hovered"])
-        gone = set(r.get("lost", ())) - set(r.get("hovered", ()))
-        if gone:
+        if gone := set(r.get("lost", ())) - set(r.get("hovered", ())):
             vanished[t] = gone
     return Inputs(plan=Plan(tuple(sorted(items))), intents=intents, hovered=hovered, vanished=vanished,
                   scripted=False)
@@ -95,9 +94,7 @@ def render(world: World, tr: dict[str, Track], turn: int, *, compact: bool | Non
 
 
 def summary(tr: dict[str, Track], over: dict | None) -> str:
-    lines = []
-    if over:
-        lines.append(f"OVER at turn {over['turn']}: {over['reason']} - {over['text']}")
+    lines = [f"OVER at turn {over['turn']}: {over['reason']} - {over['text']}"] if over else []
     for d, t in tr.items():
         end = t.state if not t.cause else f"{t.state} ({t.cause.lower()})"
         lines.append(f"  {d}: {end} at {t.pos}, {len(t.path) - 1} moves, target {t.target}")
@@ -141,8 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         over = next((r for r in records if r.get("record") == "over"), None)
         print(summary(tr, over if args.at is None else None))
         if args.verify:
-            diff = verify(args.journal, records, config, autopilots)
-            if diff:
+            if diff := verify(args.journal, records, config, autopilots):
                 print(f"VERIFY FAILED: {diff}")
                 return 1
             print(f"verified: a fresh re-simulation writes this journal byte for byte ({len(records)} records)")

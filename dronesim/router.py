@@ -12,14 +12,7 @@ import sys
 
 import zenoh
 
-from dronesim.transport import (
-    add_zenoh_args,
-    apply_flags,
-    router_config,
-    router_locators,
-    setup_logging,
-    zenoh_config,
-)
+from dronesim.transport import add_zenoh_args, apply_flags, router_config, router_locators, setup_logging, zenoh_config
 
 
 def cli(argv: list[str] | None = None) -> int:

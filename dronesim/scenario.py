@@ -11,10 +11,8 @@
 The game ends when every drone has reached its last target (or said it is unreachable), when no drone
 is alive, or at ``max_turns``.
 
-A MovingAI instance (a ``.map`` and its ``.scen``, entities/movingai.py) becomes a scenario with
-`movingai_scenario`: the map as the world (1 cell high), the first N agents as drones D01..DN starting at
-their starts with their goals as targets from turn 1 (``dronesim up --world room.map --scen room.scen
---agents 200``).
+A MovingAI instance (entities/movingai.py) becomes a scenario with `movingai_scenario` (``dronesim up
+--world room.map --scen room.scen --agents 200``).
 """
 
 from __future__ import annotations

@@ -1,20 +1,18 @@
 """The thin Zenoh adapter shared by every process: flags, session config, and an event inbox.
 
-One threading model, in every process and at every fleet size. Zenoh's callbacks (subscribers, queryables,
-query replies, liveliness, matching listeners) run on Zenoh's threads and swallow exceptions: they only refuse,
-unread, what is too big, stale or over its origin's budget, and queue the payload in the process's `Inbox`
-(what fails there is counted as a rejection, never raised; a query's reply, which its asker waits for, is
-decoded there too). The main thread takes the payloads one at a time (`Inbox.get`, `Inbox.run`), in order
-of arrival but for a bursting origin (`FairQueue`), decodes each and checks it against its key
-(`check_addressed`), and does everything else. So a big payload costs its origin's turn, not Zenoh's thread,
-which every other message waits for; and a process's state is touched by one thread only: the cores have no
-locks, the only ones guard what both sides share, the queue (`FairQueue`) and the rejections (`RejectCounter`).
+One threading model, in every process and at every fleet size. Zenoh's callbacks, on Zenoh's threads, only
+refuse (unread) what is too big, stale or over its origin's budget and queue the rest in the process's `Inbox`;
+what fails there is counted as a rejection, never raised (Zenoh would swallow it). The main thread takes the
+payloads one at a time, in order of arrival but for a bursting origin (`FairQueue`), decodes and checks each
+(`check_addressed`), and does everything else: a big payload costs its origin's turn, not Zenoh's thread,
+which every other message waits for, and the only locks guard the queue and the rejections (`RejectCounter`).
 """
 
 from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
 import json
 import logging
 import os
@@ -28,26 +26,12 @@ from typing import Any
 import msgpack
 import zenoh
 
-from schema import (
-    Keys,
-    MalformedMessage,
-    Message,
-    RejectCounter,
-    RemoteInputError,
-    StaleTurn,
-    Target,
-    Turn,
-    UsageError,
-    decode,
-    encode,
-)
+from schema import Keys, Message, Target, Turn, decode, encode
 from schema.acl import flood_filters
-from schema.errors import WrongSender, excerpt
+from schema.errors import MalformedMessage, RejectCounter, RemoteInputError, StaleTurn, UsageError, WrongSender, excerpt
 from schema.keys import size_limit
 from schema.messages import is_entity_id
 from schema.tuning import ORIGIN_BYTES, ORIGIN_QUEUE, ORIGIN_SHARE
-
-# --------------------------------------------------------------------------- flags and config
 
 
 def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
@@ -118,47 +102,43 @@ def _existing(path: str, flag: str) -> str:
 
 
 def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | None = None) -> None:
-    """--lease (transport/link/tx/lease, in milliseconds) and the security flags (TLS, mutual TLS,
-    user/password, a router's dictionary and ACL) into `conf`.
-
-    A client's --tls-cert/--tls-key are presented to the router (mutual TLS); a router's are its server
-    certificate, and --tls-mtls makes it require clients' ones. `router` defaults to the config's mode."""
-    get = lambda name: getattr(args, name, None)  # noqa: E731 -- parsers without these flags
+    """--lease and the security flags into `conf`. A client's --tls-cert/--tls-key are presented to the
+    router (mutual TLS); a router's are its server certificate, and --tls-mtls makes it require clients'
+    ones. `router` defaults to the config's mode."""
     tls, auth = "transport/link/tls/", "transport/auth/usrpwd/"
-    if get("lease") is not None:
+    if args.lease is not None:
         if args.lease <= 0:
             raise UsageError("--lease must be positive")
-        # (keep_alive: keep-alives per lease, zenoh's default)
+        # (in milliseconds; keep_alive: keep-alives per lease, zenoh's default)
         _insert(conf, {"transport/link/tx/lease": int(args.lease * 1000), "transport/link/tx/keep_alive": 4})
     if router is None:
-        router = (get("mode") or json.loads(conf.get_json("mode") or "null")) == "router"
-    if get("tls_ca"):
+        router = (args.mode or json.loads(conf.get_json("mode") or "null")) == "router"
+    if args.tls_ca:
         _insert(conf, {tls + "root_ca_certificate": _existing(args.tls_ca, "--tls-ca")})
-    if bool(get("tls_cert")) != bool(get("tls_key")):
+    if bool(args.tls_cert) != bool(args.tls_key):
         raise UsageError("--tls-cert and --tls-key go together")
-    if get("tls_cert"):
+    if args.tls_cert:
         cert, key = _existing(args.tls_cert, "--tls-cert"), _existing(args.tls_key, "--tls-key")
         for side in ("listen", "connect"):
             _insert(conf, {f"{tls}{side}_certificate": cert, f"{tls}{side}_private_key": key})
-    if get("tls_mtls") or (get("tls_cert") and not router):  # a client presents its certificate only then
+    if args.tls_mtls or (args.tls_cert and not router):  # a client presents its certificate only then
         _insert(conf, {tls + "enable_mtls": True})
-    if get("password_file"):
+    password = os.environ.get(PASSWORD_ENV) or None
+    if args.password_file:
         with open(_existing(args.password_file, "--password-file"), encoding="utf-8") as f:
-            password: str | None = f.readline().rstrip("\r\n")
+            password = f.readline().rstrip("\r\n")
         if not password:
             raise UsageError(f"--password-file {args.password_file}: its first line is empty")
-        if not get("user"):
+        if not args.user:
             raise UsageError("--password-file needs --user NAME")
-    else:
-        password = os.environ.get(PASSWORD_ENV) or None
-    if get("user"):
+    if args.user:
         if password is None:
             raise UsageError(f"--user {args.user} needs --password-file FILE or the {PASSWORD_ENV} "
                              "environment variable")
         _insert(conf, {auth + "user": args.user, auth + "password": password})
-    if get("users_file"):
+    if args.users_file:
         _insert(conf, {auth + "dictionary_file": _existing(args.users_file, "--users-file")})
-    if get("acl"):
+    if args.acl:
         try:
             block = zenoh.Config.from_file(_existing(args.acl, "--acl")).get_json("access_control")
         except Exception as exc:
@@ -176,8 +156,7 @@ def setup_logging(level: str, name: str) -> logging.Logger:
 
 
 def _config(settings: dict[str, object]) -> zenoh.Config:
-    """A config with this project's defaults (see `zenoh_config`: no multicast scouting, no shared memory)
-    and `settings`."""
+    """`settings` over this project's defaults (`zenoh_config` says why)."""
     conf = zenoh.Config()
     _insert(conf, {"scouting/multicast/enabled": False, "transport/shared_memory/enabled": False, **settings})
     return conf
@@ -226,22 +205,17 @@ def sessions_listed(answers: list[dict[str, Any]]) -> frozenset[str] | None:
 
 
 def audit_sessions(session: zenoh.Session, post: Callable[[object], None], timeout: float = 2.0) -> None:
-    """Ask every router which sessions it connects (its admin space), without waiting: `post(Sessions(...))`
-    once the query is finished. A presence token says nothing of who declared it; this tells a token held by
-    a copy (on a plain router) from the admitted session's own."""
+    """Ask every router which sessions it connects, without waiting: `post(Sessions(...))` once answered. A
+    presence token says nothing of who declared it: this tells a copy's (on a plain router) from its own."""
     answers: list[dict[str, Any]] = []
 
     def on_reply(reply: zenoh.Reply) -> None:
-        try:
+        # (not a router's answer: skipped; the listing stays incomplete only if a router is missing)
+        with contextlib.suppress(ValueError):
             if reply.ok is not None:
                 answers.append(json.loads(reply.ok.payload.to_bytes()))
-        except ValueError:
-            pass  # not a router's answer: the listing stays incomplete only if a router is missing
 
     session.get("@/*/router", _direct(on_reply, lambda: post(Sessions(sessions_listed(answers)))), timeout=timeout)
-
-
-# --------------------------------------------------------------------------- inbox
 
 
 @dataclass(frozen=True, slots=True)
@@ -282,8 +256,7 @@ Event = Received | Asked | Presence | Matching
 
 @dataclass(frozen=True, slots=True)
 class _Unread:
-    """A message or query that passed the cheap checks, its payload not decoded yet (`Inbox._read` does);
-    `query`: None for a published message."""
+    """A message (`query` None) or query that passed the cheap checks, not decoded yet (`Inbox._read` does)."""
 
     key: str
     origin: str
@@ -308,10 +281,9 @@ def check_addressed(keys: Keys, key: str, msg: Message) -> None:
 
 
 def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = None) -> zenoh.handlers.Callback:
-    """Run `callback` (and `drop`, once it is done) on Zenoh's receiving thread itself. By default
-    zenoh-python hands each Python callback to a thread of its own, and then messages on different keys
-    overtake each other on their way into the inbox; our callbacks only check and enqueue, so they run in
-    place, in order."""
+    """Run `callback` (and `drop`, once it is done) on Zenoh's receiving thread itself, in order: by default
+    zenoh-python hands each one to a thread of its own, and messages on different keys overtake each other
+    on their way into the inbox."""
     return zenoh.handlers.Callback(callback, drop, indirect=False)
 
 
@@ -345,11 +317,11 @@ def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Mes
 class FairQueue:
     """Events by origin, for one consuming thread, with a bound per origin and turns under pressure.
 
-    Events are taken in order of arrival, except that an origin has at most `share` of its events in
-    line at a time: the rest wait and join the end of the line one by one, as its events are taken. So
-    one origin's burst delays another origin's next event by at most `share` of its own, and below that
-    nothing is reordered. At most `budget` events and `budget_bytes` bytes (the payloads they came as)
-    are queued per origin: `put` raises a `flood` RemoteInputError beyond. Thread-safe."""
+    Events are taken in order of arrival, except that an origin has at most `share` of its events in line at a
+    time: the rest wait and join the end of the line one by one, as its events are taken. So one origin's burst
+    delays another origin's next event by at most `share` of its own, and below that nothing is reordered. At
+    most `budget` events and `budget_bytes` bytes (the payloads they came as) are queued per origin: `put`
+    raises a `flood` RemoteInputError beyond. Thread-safe."""
 
     def __init__(self, budget: int = ORIGIN_QUEUE, budget_bytes: int = ORIGIN_BYTES, share: int = ORIGIN_SHARE) -> None:
         self.budget, self.budget_bytes, self.share = budget, budget_bytes, share
@@ -390,8 +362,7 @@ class FairQueue:
         self._line.put(None)
 
     def take(self, timeout: float | None) -> tuple[bool, object]:
-        """(True, the next event), or (False, None) once `timeout` seconds (None: no limit) pass first or
-        `wake` is called."""
+        """(True, the next event), or (False, None) after `timeout` seconds (None: no limit) or a `wake`."""
         try:
             origin = self._line.get(timeout=timeout)
         except queue.Empty:
@@ -420,14 +391,10 @@ class FairQueue:
 
 
 class Inbox:
-    """Events from Zenoh callbacks for the process's main thread (see the module's docstring); rejections
-    are counted. A flood cannot move a game. Each event has an origin: the writer of the key it came on (by
-    the key table: SRV for TURN, STATUS and OVER, GCS for TGT and DONE, the drone or host whose key an NPS
-    or MOVES is on), the sender a query names, the entity of a presence token. A callback refuses, unread: a
-    payload above its message's size limit (`schema.keys.size_limit`), a message stamped with a turn before
-    its subscription's `since()` (read from its first bytes alone), and one from an origin over its budget
-    (`FairQueue`, whose `share` bounds how long a burst delays the others; the coordinator's messages are
-    never refused for it). The main thread refuses a message whose sender is not its key's."""
+    """Events from Zenoh callbacks for the process's main thread (the module's docstring); a flood cannot move
+    a game. Each event counts against the budget (`FairQueue`) of its origin: the writer of the key it came on
+    (by the key table: SRV for TURN, STATUS and OVER, GCS for TGT and DONE, the drone or host whose key an NPS
+    or MOVES is on), the sender a query names, the entity of a presence token."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, logger: logging.Logger, *,
                  budget: int = ORIGIN_QUEUE, share: int = ORIGIN_SHARE) -> None:
@@ -445,12 +412,9 @@ class Inbox:
 
     # callbacks (Zenoh threads): check, enqueue; never raise
 
-    def _put(self, origin: str, event: Event | _Unread, size: int) -> None:
-        self._events.put(origin, event, size, budgeted=origin != "SRV")
-
     def _admit(self, origin: str, size: int, limit: int) -> None:
-        """Refuse, unread, a payload that is too big or comes from an origin over its budget (the
-        coordinator's messages never are: a process that lags behind must not lose the game's end)."""
+        """Refuse, unread, a payload above its key's size limit (`schema.keys.size_limit`) or from an origin
+        over its budget (never the coordinator's: a process that lags behind must not lose the game's end)."""
         if size > limit:
             raise MalformedMessage(f"a payload of {size} bytes, above the key's limit of {limit}", reason="too-large")
         why = None if origin == "SRV" else self._events.full(origin, size)
@@ -459,14 +423,17 @@ class Inbox:
 
     def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
                   since: Callable[[], int] | None = None) -> zenoh.Subscriber:
-        """Decoded messages on `key` become `Received` events (until `unsubscribe`); with `since`, those
-        stamped with a turn before `since()` are refused as stale."""
+        """Messages on `key` become `Received` events (until `unsubscribe`); with `since`, those stamped with
+        a turn before `since()` are refused as stale."""
         types = expect if isinstance(expect, tuple) else (expect,)
         limit = max(size_limit(t) for t in types)
 
         def on_sample(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
-            origin = self._origin(k)
+            try:
+                origin = self.keys.origin_of(k)
+            except ValueError:
+                origin = k
             try:
                 self._admit(origin, len(sample.payload), limit)
                 data = sample.payload.to_bytes()
@@ -474,7 +441,7 @@ class Inbox:
                     turn = _stamp(data)[1]
                     if type(turn) is int and turn < since():
                         raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
-                self._put(origin, _Unread(k, origin, None, data, expect), len(data))  # (read by `get`)
+                self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=origin != "SRV")
             except RemoteInputError as err:
                 self.rejects.reject(k, err, origin)
             except Exception:  # a bug: log it, never let Zenoh swallow it silently
@@ -483,12 +450,6 @@ class Inbox:
         sub = self.session.declare_subscriber(key, _direct(on_sample))
         self._handles.append(sub)
         return sub
-
-    def _origin(self, key: str) -> str:
-        try:
-            return self.keys.origin_of(key)
-        except ValueError:
-            return key
 
     def unsubscribe(self, sub: zenoh.Subscriber) -> None:
         sub.undeclare()
@@ -509,7 +470,7 @@ class Inbox:
                 sender = _stamp(data)[2]
                 origin = sender if isinstance(sender, str) and is_entity_id(sender) else key
                 self._admit(origin, len(payload), limit)
-                self._put(origin, _Unread(key, origin, query, data, expect), len(data))  # (read by `get`)
+                self._events.put(origin, _Unread(key, origin, query, data, expect), len(data), budgeted=origin != "SRV")
             except RemoteInputError as err:
                 self._refuse(key, origin, query, err)
             except Exception:
@@ -526,8 +487,7 @@ class Inbox:
             query.drop()
 
     def _read(self, event: object) -> Event | None:
-        """A payload, decoded; None if it is malformed or not its key's (counted as a rejection; a query
-        gets an error reply)."""
+        """A payload, decoded; None if it is malformed or not its key's (refused: `_refuse`)."""
         if not isinstance(event, _Unread):
             return event  # type: ignore[return-value]
         try:
@@ -569,7 +529,8 @@ class Inbox:
             k = str(sample.key_expr)
             try:
                 who, session = self.keys.presence_of(k)
-                self._put(who, Presence(who, session, sample.kind == zenoh.SampleKind.PUT), 0)
+                self._events.put(who, Presence(who, session, sample.kind == zenoh.SampleKind.PUT),
+                                 budgeted=who != "SRV")
             except RemoteInputError as err:
                 self.rejects.reject(k, err, k)
             except Exception:  # a bug, as above
@@ -618,12 +579,10 @@ class Outbox:
         self._listeners: list[zenoh.MatchingListener] = []
 
     def _pub(self, key: str) -> zenoh.Publisher:
-        pub = self._pubs.get(key)
-        if pub is None:
-            pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
-                                                 reliability=zenoh.Reliability.RELIABLE)
-            self._pubs[key] = pub
-        return pub
+        if key not in self._pubs:
+            self._pubs[key] = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                             reliability=zenoh.Reliability.RELIABLE)
+        return self._pubs[key]
 
     def put(self, key: str, msg: Message, data: bytes | None = None) -> None:
         """Publish `msg` (`data`: its encoding, if the caller already has it)."""

@@ -80,10 +80,8 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
              "--drones", str(args.drones), "--max-turns", str(args.max_turns), "--admit-deadline", "60",
              "--pace", str(args.pace), *_passed(args, "world", "starts", "journal", "scenario")]
     procs = [("SRV", coord), ("ENV", [*base, "env", *common, "--no-draw"])]
-    if args.scenario:
-        pilots = Scenario.load(args.scenario).autopilots
-    else:
-        pilots = {drone_id(n): args.autopilot for n in range(1, args.drones + 1)}
+    pilots = (Scenario.load(args.scenario).autopilots if args.scenario
+              else {drone_id(n): args.autopilot for n in range(1, args.drones + 1)})
     if args.swarm:  # one swarm host per autopilot
         for host, (pilot, ids) in swarm_hosts(pilots).items():
             procs.append((host, [*base, "drone", *common, "--id", ",".join(ids), "--host", host, "--autopilot", pilot]))
@@ -94,15 +92,12 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
 
 
 def check_game(args: argparse.Namespace) -> None:
-    """The game the coordinator will play, built from the flags it will be given: one it would refuse (a
-    UsageError: drones that do not fit, a start in a building, a bad world file...) is refused here, before
-    any process starts."""
-    from coordinator.node import build_parser as coordinator_parser
-    from coordinator.node import game_config
+    """Refuse here, before any process starts, a game the coordinator would refuse with the flags it will be
+    given (a UsageError: drones that do not fit, a start in a building, a bad world file...)."""
+    from coordinator import node as coordinator
 
-    (name, argv), *_ = commands(args, "tcp/127.0.0.1:0")
-    assert name == "SRV" and argv[3] == "coordinator"
-    game_config(coordinator_parser().parse_args(argv[4:]))
+    argv = commands(args, "tcp/127.0.0.1:0")[0][1]  # the coordinator's: python -m dronesim coordinator ...
+    coordinator.game_config(coordinator.build_parser().parse_args(argv[4:]))
 
 
 #: Seconds the entities have, once the coordinator is told to stop, to see its OVER and exit by themselves.
@@ -170,8 +165,7 @@ def supervise(running: list[tuple[str, subprocess.Popen]]) -> dict[str, int]:
     codes: dict[str, int] = {}
     with waking(lambda: done.put(None)):  # a signal's handler runs at once, even while blocked in get()
         while len(codes) < len(running):
-            item = done.get()
-            if item is None:
+            if (item := done.get()) is None:
                 continue
             name, code = item
             codes[name] = code
