@@ -1,19 +1,15 @@
 """The drone process's protocol (a lone drone, the seed's D01, or a swarm host flying several): a pure
-state machine, no network and no clock. Its Zenoh adapter (entities/drone_node.py) feeds it, in
-batches of everything queued (`DroneProcess.receive`), the coordinator's TURN and OVER, the outcome
-of every query it asked for (`Answer`), the environment's presence (`EnvPresence`) and its expired
-timer (`Expired`), and carries out the effects it returns: publish an NPS or a MOVES (`Send`), send
-an ASK or a MAP query (`Query`), set its one timer (`Timer`), count a refused input (`Refusal`).
+state machine, no network and no clock. Its Zenoh adapter (entities/drone_node.py) feeds it its `Input`s,
+in batches of everything queued (`DroneProcess.receive`), and carries out the `Effect`s it returns.
 
-Deciding. Each DRONES phase it flies every hosted drone's autopilot together (`fly_pilots`: every
-drone's questions of a round at once), or a swarm host's drones with the autopilot's one pilot over
-arrays (`fly_swarm`, when it has that form). Each round of questions is answered from the chart where
-it can; the rest goes out in ASKs (one per Ask.MAX_CELLS cells, together), and the plan goes on when
-every answer is in. Then a lone drone publishes its NPS, a swarm host the MOVES of all its drones in
-one message (`_messages`, the one place moves become messages). A TURN that repeats the last one gets
-the same moves again. A later TURN or an OVER received while a turn is being decided ends that turn's
-decision without publishing it, and a batch acts only on its latest TURN: a process that was frozen or
-slow catches up instead of planning turns that are long gone.
+Deciding. Each DRONES phase it flies every hosted drone's autopilot together (`fly_pilots`: every drone's
+questions of a round at once), or a swarm host's drones with the autopilot's one pilot over arrays (`fly_swarm`,
+when it has that form). Each round of questions is answered from the chart where it can; the rest goes out in
+ASKs (one per Ask.MAX_CELLS cells, together), and the plan goes on when every answer is in. Then a lone drone
+publishes its NPS, a swarm host the MOVES of all its drones in one message. A TURN that repeats the last one gets
+the same moves again. A later TURN or an OVER received while a turn is being decided ends that turn's decision
+without publishing it, and a batch acts only on its latest TURN: a process that was frozen or slow catches up
+instead of planning turns that are long gone.
 
 Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings never
 move, so a cell's kind holds for the whole game). Once admitted, with an environment present (a query sent
@@ -195,7 +191,6 @@ class DroneProcess:
         self._refs = itertools.count(1)
         self._queries: dict[int, tuple[Ask | MapRequest, tuple[str, ...]]] = {}  # ref -> (query, parts asked)
         self._map_asked: list[int] = []  # the turns in which the map was asked
-        self._map_ref: int | None = None  # the MAP query on its way
         self._map_settled = False  # charted, or refused: not asked again
         self._env: set[str] = set()  # the sessions of the environment processes present
         self._deciding: _Deciding | None = None
@@ -209,8 +204,7 @@ class DroneProcess:
         is present, else when one appears (`receive` calls it again)."""
         if not (self.charting and self._env) or self._map_asked or self._done or self._deciding:
             return []
-        starts = self.welcome.starts.cells()
-        return self._prefetch(0, sorted({c for d, c in starts.items() if d in self._mine}))
+        return self._prefetch(0, sorted({c for d, c in self.welcome.starts.cells().items() if d in self._mine}))
 
     def receive(self, inputs: Iterable[Input]) -> list[Effect]:
         """Everything queued, in order of arrival: it acts only on the latest DRONES TURN among them."""
@@ -348,7 +342,7 @@ class DroneProcess:
                 answers[drone] = infos
         return _Round(asking, answers, lambda got: got)
 
-    def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Effect]:
+    def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Query]:
         """ASKs for the parts `names` of round `r`, batched up to Ask.MAX_CELLS cells (a part whole)."""
         batches: list[list[str]] = []
         size = Ask.MAX_CELLS
@@ -358,12 +352,9 @@ class DroneProcess:
                 size = 0
             batches[-1].append(name)
             size += len(r.parts[name])
-        queries: list[Effect] = []
-        for batch in batches:
-            query = self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
-                                tuple(batch))
-            r.asking.add(query.ref)
-            queries.append(query)
+        queries = [self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in b for c in r.parts[p])),
+                               tuple(b)) for b in batches]
+        r.asking.update(q.ref for q in queries)
         return queries
 
     def _settle_unanswered(self, d: _Deciding, r: _Round, effects: list[Effect]) -> bool:
@@ -431,17 +422,14 @@ class DroneProcess:
         """Ask for the environment's map if it was never asked, or if nobody answered it in an earlier turn (up to
         MAP_TRIES times: the environment may still be building its world); `turn`: the turn being played (0 before
         the game)."""
-        if self._map_settled or self._map_ref is not None or len(self._map_asked) >= MAP_TRIES:
+        asked = self._map_asked
+        if (self._map_settled or len(asked) >= MAP_TRIES or asked and turn <= asked[-1]
+                or any(isinstance(q, MapRequest) for q, _ in self._queries.values())):  # (or it is on its way)
             return []
-        if self._map_asked and turn <= self._map_asked[-1]:
-            return []
-        self._map_asked.append(turn)
-        query = self._query(MapRequest(turn=0, sender=self.sender))
-        self._map_ref = query.ref
-        return [query]
+        asked.append(turn)
+        return [self._query(MapRequest(turn=0, sender=self.sender))]
 
     def _map_answered(self, replies: tuple) -> list[Effect]:
-        self._map_ref = None
         if not replies:
             return []  # nobody answered: asked again in a later turn
         self._map_settled = True
@@ -463,9 +451,8 @@ class DroneProcess:
         if cells and len(around) <= ASK_AHEAD_MAX_DRONES:  # a few drones: ask farther at once, and again only
             cells = self.chart.unknown(around, reach=ASK_AHEAD_REACH)  # every few turns (a swarm: its next ring)
         chunk = min(PREFETCH_CHUNK, Ask.MAX_CELLS)
-        for i in range(0, len(cells), chunk):
-            effects.append(self._query(Ask(turn=0, sender=self.sender, cells=cells[i:i + chunk])))
-        return effects
+        return effects + [self._query(Ask(turn=0, sender=self.sender, cells=cells[i:i + chunk]))
+                          for i in range(0, len(cells), chunk)]
 
 
 def _reply(reply: Ans | WorldMap | RemoteInputError) -> Any:
@@ -562,14 +549,8 @@ class Chart:
         """The cells within `reach` steps (6-connectivity) of the `around` cells whose kind was never
         told, once each, in order (by default their neighbours, in AROUND order)."""
         if reach == 1 and len(around) * 6 <= CHART_FEW_CELLS:  # a few: cell by cell
-            out: dict[Cell, None] = {}
-            for x, y, z in around:
-                for dx, dy, dz in AROUND:
-                    c = (x + dx, y + dy, z + dz)
-                    i = self._at(c)
-                    if i is not None and self._kinds[i] == self.UNKNOWN:
-                        out[c] = None
-            return tuple(out)
+            near = ((x + dx, y + dy, z + dz) for x, y, z in around for dx, dy, dz in AROUND)
+            return tuple(dict.fromkeys(c for c in near if self.kind(c) is None))
         ball = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _ball(reach)).reshape(-1, 3)
         inside, at = self._linear(ball)
         fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN

@@ -1,17 +1,14 @@
 """The autopilot interface: a pure, network-free decision procedure for one drone.
 
-An autopilot's `step` is a generator. It yields the cells it wants to sense (one or more cells),
-receives a mapping cell -> CellInfo in return, may ask again, and finally returns a `Decision`. The
-same generator is driven by an in-process oracle over a `World` (`drive`: tests, benchmarks, the
-in-process game) or by the drone process's core (entities/drone.py: each yield is answered from its
-chart of the environment's map, or by an ASK to the environment). Because the world is frozen during a
-turn's DRONES phase, both give identical decisions.
+An autopilot's `step` is a generator: it yields the cells it wants to sense, receives a mapping cell ->
+CellInfo, may ask again, and returns a `Decision`. An oracle over a `World` drives it (`drive`: tests,
+benchmarks, the in-process game), or the drone process's core (entities/drone.py: from its chart of the
+environment's map, or by ASK); the world is frozen during a turn's DRONES phase, so both decide the same.
 
-A process's drones are flown together as one plan, itself a generator of the same kind: `fly_pilots`
-(one pilot per drone, a round of every drone's questions at a time) or `fly_swarm` (a swarm pilot over
-arrays). Whoever drives a plan answers its questions; the plan returns the turn's moves.
-
-Autopilots keep their memory in the instance: one instance per drone, for the whole game.
+A process's drones are flown together as one plan, a generator of the same kind whose driver answers its
+questions and which returns the turn's moves: `fly_pilots` (one pilot per drone, a round of every drone's
+questions at a time) or `fly_swarm` (a swarm pilot over arrays). An autopilot keeps its memory in the
+instance: one instance per drone, for the whole game.
 """
 
 from __future__ import annotations
@@ -146,10 +143,8 @@ def drive(plan: Generator[Q, A, R], oracle: Callable[[Q], A]) -> R:
 
 
 def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -> tuple[Decision, int]:
-    """Drive one `step` to its decision with `oracle` answering every ASK.
-
-    Returns the decision and the number of ASK round trips it took.
-    """
+    """Drive one `step` to its decision with `oracle` answering every ASK: the decision, and the number of ASK
+    round trips it took."""
     asks = 0
 
     def counted(cells: tuple[Cell, ...]) -> Answers:
@@ -157,10 +152,7 @@ def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -
         asks += 1
         return oracle(cells)
 
-    decision = drive(pilot.step(pos, target), counted)
-    if not isinstance(decision, Decision):
-        raise TypeError(f"{type(pilot).__name__}.step returned {decision!r}, not a Decision")
-    return decision, asks
+    return drive(pilot.step(pos, target), counted), asks
 
 
 def fly_round(steps: Mapping[str, Sensing]) -> Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers],
@@ -170,21 +162,16 @@ def fly_round(steps: Mapping[str, Sensing]) -> Generator[dict[str, tuple[Cell, .
     so a turn takes as many sequential ASK round trips as the most inquisitive drone, not the sum over
     drones. Returns each drone's decision."""
     decisions: dict[str, Decision] = {}
-    pending: Mapping[str, tuple[Cell, ...] | None] = dict.fromkeys(steps)  # each drone's question (None: to start)
-    answers: Mapping[str, Answers] = {}
+    pending: Mapping[str, Answers | None] = dict.fromkeys(steps)  # what each drone is told (None: it starts)
     while pending:
         asking: dict[str, tuple[Cell, ...]] = {}
-        for d, question in pending.items():
+        for d, told in pending.items():
             try:
-                asking[d] = next(steps[d]) if question is None else steps[d].send(answers[d])
+                asking[d] = next(steps[d]) if told is None else steps[d].send(told)
             except StopIteration as stop:
                 decisions[d] = stop.value
-        if asking:
-            answers = yield asking
-        pending = asking
-    for d, dec in decisions.items():
-        if not isinstance(dec, Decision):
-            raise TypeError(f"the autopilot of {d} returned {dec!r}, not a Decision")
+        answers = (yield asking) if asking else {}
+        pending = {d: answers[d] for d in asking}
     return decisions
 
 

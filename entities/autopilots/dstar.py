@@ -19,9 +19,8 @@ early (often at no cost in a Manhattan world) instead of walking into dead ends.
 suite (BENCHMARKS.md) this takes the mean path from 1.34x to 1.11x the optimum (p90 1.98x to
 1.28x) for about 12 cells asked per step, 6 of them the neighbours.
 
-Incremental, measured: on the benchmark's 64x64x16 cities a step takes 0.04 ms median (0.34 ms
-p90); the same code searching from scratch every step (map kept) takes 0.26 ms median (0.74 ms
-p90), so the repair is kept.
+Incremental, measured on the benchmark's 64x64x16 cities: 0.04 ms a step median (0.34 ms p90), against
+0.26 ms (0.74 ms p90) for the same code searching from scratch every step (map kept).
 
 Implementation notes (speed in pure Python):
 
@@ -104,8 +103,6 @@ class DStarPilot:
         benchmark's upper bound), else it learns them by ASK. `stuck_after`: see the module's doc
         (default: twice the world's X + Y + Z, at least 64 turns)."""
         X, Y, Z = (int(v) for v in world_size)
-        if min(X, Y, Z) < 1:
-            raise ValueError(f"world size must be positive, got {world_size!r}")
         self.size: Cell = (X, Y, Z)
         self.lookahead = self.LOOKAHEAD if lookahead is None else max(0, int(lookahead))
         self.rounds = max(1, min(2, int(rounds)))
@@ -172,7 +169,7 @@ class DStarPilot:
         self._restart()
         self._rhs[goal] = 0
         h = self._h(start, goal)
-        self._heap: list[int] = [((h + 0) * self._K + h + 1) * n + goal]
+        self._heap: list[int] = [(h * self._K + h + 1) * n + goal]
 
     def _h(self, a: int, b: int) -> int:
         xs, ys, zs = self._xs, self._ys, self._zs
@@ -187,24 +184,24 @@ class DStarPilot:
         if self._goal < 0:
             return False
         g, rhs = self._g, self._rhs
-        gold = g[c]
-        g[c] = INF
-        rhs[c] = INF
-        if gold >= INF:
+        want = g[c] + 1
+        g[c] = rhs[c] = INF
+        if want > INF:  # the search never reached it: nothing depends on it
             return False
-        want = gold + 1
-        goal = self._goal
-        offs = self._offs
-        for d in offs:
-            p = c + d
-            if rhs[p] == want and p != goal and state[p] != BLOCKED:
-                m = min(g[p + e] for e in offs)
-                rhs[p] = r = m + 1 if m < INF else INF
-                if g[p] != r:  # inconsistent: queued with its key relative to s
-                    h = self._h(p, s)
-                    key = (g[p] + h + self._km) * self._K if g[p] < r else (r + h + self._km) * self._K + h + 1
-                    heappush(self._heap, key * self._n + p)
+        for p in (c + d for d in self._offs):
+            if rhs[p] == want and p != self._goal and state[p] != BLOCKED:
+                self._update(p, s)
         return True
+
+    def _update(self, p: int, s: int) -> None:
+        """Re-derive rhs(p) from its neighbours' g; queue p if it is inconsistent (its key relative to s)."""
+        g = self._g
+        m = min([g[p + e] for e in self._offs])
+        self._rhs[p] = r = m + 1 if m < INF else INF
+        if g[p] != r:
+            h = self._h(p, s)
+            key = (g[p] + h + self._km) * self._K if g[p] < r else (r + h + self._km) * self._K + h + 1
+            heappush(self._heap, key * self._n + p)
 
     def _compute(self, s: int, t: int = -1) -> None:
         """ComputeShortestPath: make g(t) (default: g(s)) the true distance to the goal on the
@@ -254,20 +251,8 @@ class DStarPilot:
                 g[u] = INF
                 want = gu + 1
                 for p in (u, u + offs[0], u + offs[1], u + offs[2], u + offs[3], u + offs[4], u + offs[5]):
-                    if p == goal or state[p] == BLOCKED or (p != u and rhs[p] != want):
-                        continue
-                    m = INF
-                    for e in offs:
-                        v = g[p + e]
-                        if v < m:
-                            m = v
-                    r = m + 1 if m < INF else INF
-                    rhs[p] = r
-                    gp = g[p]
-                    if gp != r:
-                        hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
-                        key = (gp + hp + km) * K if gp < r else (r + hp + km) * K + hp + 1
-                        heappush(heap, key * NP + p)
+                    if p != goal and state[p] != BLOCKED and (p == u or rhs[p] == want):
+                        self._update(p, s)
         if len(heap) > 2 * NP:  # compact: drop entries of cells that are consistent now
             heap[:] = [e for e in heap if g[e % NP] != rhs[e % NP]]
             heapify(heap)
@@ -278,11 +263,8 @@ class DStarPilot:
         """Neighbour offsets of cell i in tie-break order, a fixed function of (cell, target):
         climb first when the target is higher, then the horizontal axis with more way to go,
         then the other one, descend last (flying high meets fewer buildings)."""
-        t = self._target
-        assert t is not None
-        dx = t[0] + 1 - self._xs[i]
-        dy = t[1] + 1 - self._ys[i]
-        dz = t[2] + 1 - self._zs[i]
+        goal, xs, ys, zs = self._goal, self._xs, self._ys, self._zs
+        dx, dy, dz = xs[goal] - xs[i], ys[goal] - ys[i], zs[goal] - zs[i]
         key = ((dx > 0) - (dx < 0), (dy > 0) - (dy < 0), (dz > 0) - (dz < 0), abs(dx) >= abs(dy))
         order = self._orders.get(key)
         if order is None:
@@ -309,18 +291,18 @@ class DStarPilot:
                 best, bg = p, v
         return best
 
-    def _ahead(self, s: int, limit: int) -> list[int]:
-        """The planned path's next `limit` cells after s (fewer at the goal or a dead end)."""
+    def _unknown_ahead(self, s: int) -> list[int]:
+        """The unknown cells among the planned path's next `lookahead` cells after s (fewer at the goal or a dead
+        end; none if the search found no path)."""
         path: list[int] = []
-        g, goal = self._g, self._goal
-        cur = s
-        while len(path) < limit and cur != goal:
+        g, cur = self._g, s
+        while g[s] < INF and len(path) < self.lookahead and cur != self._goal:
             nxt = self._best(cur)
             if nxt < 0 or g[nxt] >= g[cur]:
                 break
             path.append(nxt)
             cur = nxt
-        return path
+        return [p for p in path if self._state[p] == UNKNOWN]
 
     # ------------------------------------------------------------------ the step
 
@@ -355,9 +337,8 @@ class DStarPilot:
         if pos == target:  # parked: it may be pushed aside, to its free neighbours (asked once)
             self._restart()
             self._home = target == self._target
-            unknown = [s + d for d in self._offs if self._state[s + d] == UNKNOWN]
-            if unknown:
-                self._learn((yield tuple(self._cell(i) for i in unknown)), s)
+            if unknown := tuple(self._cell(s + d) for d in self._offs if self._state[s + d] == UNKNOWN):
+                self._learn((yield unknown), s)
             return Decision(pos=pos, note=Note.REACHED, ranked=self._aside(s))
         if not in_bounds(target, self.size):
             return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
@@ -377,9 +358,7 @@ class DStarPilot:
         # Round 1: neighbours (drones), the target if unknown, unknown cells along the path ahead.
         neigh = [s + d for d in self._offs if state[s + d] != BLOCKED]
         extra = [goal] if state[goal] == UNKNOWN else []
-        if self._g[s] < INF:
-            extra += [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
-        cells = tuple(self._cell(i) for i in dict.fromkeys(neigh + extra))  # each once, the neighbours first
+        cells = tuple(map(self._cell, dict.fromkeys(neigh + extra + self._unknown_ahead(s))))  # each once
         sensed: set[int] = set()  # the cells told empty, and those holding another drone
         drones: set[int] = set()
         changed = self._learn((yield cells), s, (sensed, drones)) if cells else False
@@ -387,13 +366,9 @@ class DStarPilot:
             return self._give_up(pos, s)
         if changed:
             self._compute(s)
-            # Round 2: the repaired path's unknown cells ahead.
-            if self.rounds > 1 and self._g[s] < INF:
-                more = [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
-                if more:
-                    answers = yield tuple(self._cell(i) for i in more)
-                    if self._learn(answers, s):
-                        self._compute(s)
+            more = self._unknown_ahead(s) if self.rounds > 1 else []  # round 2: the repaired path's
+            if more and self._learn((yield tuple(map(self._cell, more))), s):
+                self._compute(s)
         g = self._g
         if g[s] >= INF:
             return self._give_up(pos, s)
@@ -429,15 +404,13 @@ class DStarPilot:
                 if p not in avoid and state[p] != BLOCKED:
                     self._compute(s, p)
             nxt = self._best(s, avoid)
-        if nxt >= 0 and g[nxt] < g[s]:
-            self._waited = 0
-            move = nxt
-        else:  # every progressing move is taken by a drone: wait, then side-step
+        if nxt < 0 or g[nxt] >= g[s]:  # every progressing move is taken by a drone: wait, then side-step
             self._waited += 1
-            move = nxt if nxt >= 0 and g[nxt] < INF and self._waited > self.PATIENCE else s
-            if move != s:
-                self._waited = 0
-        return Decision(pos=self._cell(move), note=note, ranked=self._ranking(s, sensed))
+            if nxt < 0 or g[nxt] >= INF or self._waited <= self.PATIENCE:
+                nxt = s
+        if nxt != s:
+            self._waited = 0
+        return Decision(pos=self._cell(nxt), note=note, ranked=self._ranking(s, sensed))
 
     def _give_up(self, pos: Cell, s: int) -> Decision:
         """The target is unreachable, for good: the world is static, nothing new can be learnt by hovering."""

@@ -59,12 +59,8 @@ from schema.tables import code_of
 from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing, in_bounds
 
 #: The 4 horizontal directions as (dx, dy), in the seed's tie-break order.
-DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (
-    ("NORTH", (-1, 0)),
-    ("SOUTH", (1, 0)),
-    ("EAST", (0, 1)),
-    ("WEST", (0, -1)),
-)
+DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (("NORTH", (-1, 0)), ("SOUTH", (1, 0)), ("EAST", (0, 1)),
+                                                        ("WEST", (0, -1)))
 _RANKED = tuple((rank, dx, dy) for rank, (_, (dx, dy)) in enumerate(DIRECTIONS))
 
 
@@ -109,19 +105,10 @@ class SeedPilot:
     def _ranks(self, pos: Cell, target: Cell) -> list[int]:
         """`direction_order` as indices into DIRECTIONS."""
         x, y, z = pos
-        nx, ny, nz = self.world_size
-        tx, ty = target[0], target[1]
-        valid = []
-        if 0 <= z < nz:
-            for rank, dx, dy in _RANKED:
-                cx, cy = x + dx, y + dy
-                if 0 <= cx < nx and 0 <= cy < ny:
-                    valid.append(((cx - tx) ** 2 + (cy - ty) ** 2, rank))
-        if not valid:
-            return []
-        valid.sort()
+        valid = sorted(((x + dx - target[0]) ** 2 + (y + dy - target[1]) ** 2, rank) for rank, dx, dy in _RANKED
+                       if in_bounds((x + dx, y + dy, z), self.world_size))
         ranks = [rank for _, rank in valid]
-        return ranks + [ranks[0]] * (len(DIRECTIONS) - len(ranks))
+        return ranks + ranks[:1] * (len(DIRECTIONS) - len(ranks))
 
     def step(self, pos: Cell, target: Cell | None) -> Sensing:
         if target is None:

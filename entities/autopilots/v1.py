@@ -41,9 +41,7 @@ class V1Pilot:
             return Decision(pos=pos, note=Note.REACHED)
         x, y, z = pos
         candidates = [c for c in ((x + dx, y + dy, z + dz) for dx, dy, dz in AROUND) if in_bounds(c, self.world_size)]
-        if not candidates:
-            return Decision(pos=pos)
         # min() keeps the first of equal keys, i.e. the AROUND order breaks ties. Squared Euclidean distance:
         # the same order as the distance, exact in integers.
-        return Decision(pos=min(candidates, key=lambda c: sum((a - b) ** 2 for a, b in zip(c, target))))
+        return Decision(pos=min(candidates, key=lambda c: sum((a - b) ** 2 for a, b in zip(c, target)), default=pos))
         yield  # unreachable; makes `step` a generator function, as the interface requires
