@@ -35,8 +35,8 @@ def make_autopilot(name: str, *, world_size: Cell, **options: object) -> Autopil
 
 
 def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int], least: int = SWARM_MIN) -> SwarmPilot | None:
-    """One pilot for the drones numbered `drones` (a swarm's), or None if autopilot `name` has no swarm
-    form or they are fewer than `least`."""
+    """One pilot for the drones numbered `drones` (a swarm's), or None if autopilot `name` has no swarm form or they
+    are fewer than `least`."""
     pilot_class(name)  # UsageError if there is no such autopilot
     if name not in SWARMS or len(drones) < least:
         return None

@@ -1,59 +1,57 @@
 """D* Lite over the 6-connected 3D grid, with sensing by ASK: an autopilot that always arrives.
 
-The world is unknown at first. Unknown cells are assumed free ("freespace assumption"); a cell the
-drone learns is a building (or outside) is blocked for good. The planner is D* Lite (Koenig &
-Likhachev): a backward incremental search rooted at the target, so when the drone moves only the
-heuristic's origin shifts (the ``km`` offset) and when it learns a blocked cell only the affected
-part of the search is repaired, never a search from scratch (a new target is the only restart).
+The world is unknown at first. Unknown cells are assumed free ("freespace assumption"); a cell the drone learns is a
+building (or outside) is blocked for good. The planner is D* Lite (Koenig & Likhachev): a backward incremental
+search rooted at the target, so when the drone moves only the heuristic's origin shifts (the ``km`` offset) and when
+it learns a blocked cell only the affected part of the search is repaired, never a search from scratch (a new target
+is the only restart).
 
 Sensing, each step (at most two ASK round trips):
 
-1. the in-world, not-known-blocked neighbours (needed anyway: another drone may be in one), the
-   target if still unknown (a target inside a building is seen at once), and the still-unknown
-   cells of the next ``lookahead`` cells of the planned path;
-2. only if the first answers revealed a building the search relied on: the still-unknown cells of
-   the repaired path's next ``lookahead`` cells.
+1. the in-world, not-known-blocked neighbours (needed anyway: another drone may be in one), the target if still
+   unknown (a target inside a building is seen at once), and the still-unknown cells of the next ``lookahead`` cells
+   of the planned path;
+2. only if the first answers revealed a building the search relied on: the still-unknown cells of the repaired
+   path's next ``lookahead`` cells.
 
-Sensing along the path ahead finds walls while there is still room to turn, so the drone veers
-early (often at no cost in a Manhattan world) instead of walking into dead ends. On the benchmark
-suite (BENCHMARKS.md) this takes the mean path from 1.34x to 1.11x the optimum (p90 1.98x to
-1.28x) for about 12 cells asked per step, 6 of them the neighbours.
+Sensing along the path ahead finds walls while there is still room to turn, so the drone veers early (often at no
+cost in a Manhattan world) instead of walking into dead ends. On the benchmark suite (BENCHMARKS.md) this takes the
+mean path from 1.34x to 1.11x the optimum (p90 1.98x to 1.28x) for about 12 cells asked per step, 6 of them the
+neighbours.
 
-Incremental, measured on the benchmark's 64x64x16 cities: 0.04 ms a step median (0.34 ms p90), against
-0.26 ms (0.74 ms p90) for the same code searching from scratch every step (map kept).
+Incremental, measured on the benchmark's 64x64x16 cities: 0.04 ms a step median (0.34 ms p90), against 0.26 ms
+(0.74 ms p90) for the same code searching from scratch every step (map kept).
 
 Implementation notes (speed in pure Python):
 
-* cells are flat indices into a grid padded by one layer of permanently blocked cells, so a
-  neighbour is ``i + offset`` with no bounds test and the world's edge is just a wall;
-* heap entries are single integers ``key * NP + cell`` (lazy deletion: stale entries are skipped
-  when popped; the heap is compacted when it grows large);
-* keys are ``(k1, tb)`` packed into one integer, with k1 = min(g, rhs) + h + km as in D* Lite. The
-  tie-break differs from the paper's (smaller g first): among equal k1, *under*-consistent cells
-  come first (tb = 0), then over-consistent cells nearest the drone (tb = h + 1). Diving towards
-  the drone on ties expands about a path's worth of cells in open space instead of the whole box
-  between drone and target. Correctness still holds: an over-consistent cell with a wrong rhs
-  always has an inconsistent cell with a strictly smaller k1 on its true shortest path (consistent
-  heuristic, integer costs), and a g that is too small always has an under-consistent cell with
-  k1 <= k1(start) behind it, which the tie-break pops before the search stops.
+* cells are flat indices into a grid padded by one layer of permanently blocked cells, so a neighbour is
+  ``i + offset`` with no bounds test and the world's edge is just a wall;
+* heap entries are single integers ``key * NP + cell`` (lazy deletion: stale entries are skipped when popped; the
+  heap is compacted when it grows large);
+* keys are ``(k1, tb)`` packed into one integer, with k1 = min(g, rhs) + h + km as in D* Lite. The tie-break differs
+  from the paper's (smaller g first): among equal k1, *under*-consistent cells come first (tb = 0), then
+  over-consistent cells nearest the drone (tb = h + 1). Diving towards the drone on ties expands about a path's
+  worth of cells in open space instead of the whole box between drone and target. Correctness still holds: an
+  over-consistent cell with a wrong rhs always has an inconsistent cell with a strictly smaller k1 on its true
+  shortest path (consistent heuristic, integer costs), and a g that is too small always has an under-consistent cell
+  with k1 <= k1(start) behind it, which the tie-break pops before the search stops.
   ``tests/test_autopilot_dstar.py`` checks the result against breadth-first search.
 
-Cooperation (docs/cooperation.md): besides its move, each step offers the coordinator's arbiter a ranked
-list of candidate cells (the decision's ``ranked``): its own cell and the neighbours it knows are free,
-by their distance to the target on the known map (closer first; staying ranks between the cells that
-get closer and those that do not), ties in the tie-break order below. The arbiter (PIBT) picks one of
-them for it, pushing other cooperative drones aside or pushed aside itself; on its target it offers its
-cell first and its free neighbours after, so that it can be pushed out of the way and come back.
+Cooperation (docs/cooperation.md): besides its move, each step offers the coordinator's arbiter a ranked list of
+candidate cells (the decision's ``ranked``): its own cell and the neighbours it knows are free, by their distance to
+the target on the known map (closer first; staying ranks between the cells that get closer and those that do not),
+ties in the tie-break order below. The arbiter (PIBT) picks one of them for it, pushing other cooperative drones
+aside or pushed aside itself; on its target it offers its cell first and its free neighbours after, so that it can
+be pushed out of the way and come back.
 
-A drone whose distance has not reached a new low for ``stuck_after`` turns (learning a wall starts the
-count again) says UNREACHABLE while it lasts: nothing it knows is in the way, so other drones are, and
-they have not let it pass in all that time (a dead-end corridor, a drone that never moves). It keeps
-offering its candidates and says NONE again once it gets closer.
+A drone whose distance has not reached a new low for ``stuck_after`` turns (learning a wall starts the count again)
+says UNREACHABLE while it lasts: nothing it knows is in the way, so other drones are, and they have not let it pass
+in all that time (a dead-end corridor, a drone that never moves). It keeps offering its candidates and says NONE
+again once it gets closer.
 
-The move it proposes (``pos``, for an arbitration that takes one move per drone) skips the other drones
-seen in this step's answers: another equally short move if there is one, else the drone waits
-``PATIENCE`` turns, then side-steps. Other drones block their cell for this step only: they never enter
-the search and are never remembered.
+The move it proposes (``pos``, for an arbitration that takes one move per drone) skips the other drones seen in this
+step's answers: another equally short move if there is one, else the drone waits ``PATIENCE`` turns, then
+side-steps. Other drones block their cell for this step only: they never enter the search and are never remembered.
 """
 
 from __future__ import annotations
@@ -99,9 +97,9 @@ class DStarPilot:
 
     def __init__(self, *, world_size: Cell, lookahead: int | None = None, rounds: int = 2,
                  known: np.ndarray | None = None, stuck_after: int | None = None) -> None:
-        """`known`: the world's buildings (a bool array of `world_size`) if the drone is given the map (the
-        benchmark's upper bound), else it learns them by ASK. `stuck_after`: see the module's doc
-        (default: twice the world's X + Y + Z, at least 64 turns)."""
+        """`known`: the world's buildings (a bool array of `world_size`) if the drone is given the map (the benchmark's
+        upper bound), else it learns them by ASK. `stuck_after`: see the module's doc (default: twice the world's
+        X + Y + Z, at least 64 turns)."""
         X, Y, Z = (int(v) for v in world_size)
         self.size: Cell = (X, Y, Z)
         self.lookahead = self.LOOKAHEAD if lookahead is None else max(0, int(lookahead))
@@ -138,8 +136,8 @@ class DStarPilot:
 
     @property
     def distance(self) -> int | None:
-        """The planned number of moves from the last step's position to the target on the known map
-        (unknown cells counted free); None before any target or when it is unreachable."""
+        """The planned number of moves from the last step's position to the target on the known map (unknown cells
+        counted free); None before any target or when it is unreachable."""
         if self._goal < 0 or self._last < 0 or self._unreachable:
             return None
         g = self._g[self._last]
@@ -161,9 +159,7 @@ class DStarPilot:
         self._goal = goal = self._index(target)
         self._g: list[int] = [INF] * n
         self._rhs: list[int] = [INF] * n
-        self._km = 0
-        self._last = start
-        self._unreachable = False
+        self._km, self._last, self._unreachable = 0, start, False
         self._orders: dict[tuple[int, int, int, bool], tuple[int, ...]] = {}
         self._home, self._pushed = False, 0  # _pushed: times it was pushed off its target
         self._restart()
@@ -189,35 +185,25 @@ class DStarPilot:
         if want > INF:  # the search never reached it: nothing depends on it
             return False
         for p in (c + d for d in self._offs):
-            if rhs[p] == want and p != self._goal and state[p] != BLOCKED:
-                self._update(p, s)
+            if rhs[p] == want and p != self._goal and state[p] != BLOCKED:  # re-derive rhs(p) from its neighbours
+                m = min(g[p + e] for e in self._offs)
+                rhs[p] = r = m + 1 if m < INF else INF
+                if g[p] != r:  # inconsistent: queued with its key relative to s
+                    h = self._h(p, s)
+                    key = (g[p] + h + self._km) * self._K if g[p] < r else (r + h + self._km) * self._K + h + 1
+                    heappush(self._heap, key * self._n + p)
         return True
 
-    def _update(self, p: int, s: int) -> None:
-        """Re-derive rhs(p) from its neighbours' g; queue p if it is inconsistent (its key relative to s)."""
-        g = self._g
-        m = min([g[p + e] for e in self._offs])
-        self._rhs[p] = r = m + 1 if m < INF else INF
-        if g[p] != r:
-            h = self._h(p, s)
-            key = (g[p] + h + self._km) * self._K if g[p] < r else (r + h + self._km) * self._K + h + 1
-            heappush(self._heap, key * self._n + p)
-
     def _compute(self, s: int, t: int = -1) -> None:
-        """ComputeShortestPath: make g(t) (default: g(s)) the true distance to the goal on the
-        known map, with keys relative to the drone's cell s."""
-        heap = self._heap
-        g, rhs, state = self._g, self._rhs, self._state
+        """ComputeShortestPath: make g(t) (default: g(s)) the true distance to the goal on the known map, with keys
+        relative to the drone's cell s."""
+        heap, g, rhs, state = self._heap, self._g, self._rhs, self._state
         xs, ys, zs = self._xs, self._ys, self._zs
-        X, Y, Z = self.size
         # Heuristic by table look-up: h(u) = hx[xs[u]] + hy[ys[u]] + hz[zs[u]].
-        hx = [abs(c - xs[s]) for c in range(X + 2)]
-        hy = [abs(c - ys[s]) for c in range(Y + 2)]
-        hz = [abs(c - zs[s]) for c in range(Z + 2)]
-        km, K, NP, goal = self._km, self._K, self._n, self._goal
-        offs = self._offs
-        if t < 0:
-            t = s
+        hx, hy, hz = ([abs(c - axis[s]) for c in range(n + 2)] for axis, n in zip((xs, ys, zs), self.size))
+        km, K, NP, goal, offs = self._km, self._K, self._n, self._goal, self._offs
+        o0, o1, o2, o3, o4, o5 = offs
+        t = s if t < 0 else t
         ht = hx[xs[t]] + hy[ys[t]] + hz[zs[t]]
         while heap:
             top = heap[0]
@@ -250,9 +236,17 @@ class DStarPilot:
             else:  # under-consistent: raise it to infinity, re-derive it and its dependants
                 g[u] = INF
                 want = gu + 1
-                for p in (u, u + offs[0], u + offs[1], u + offs[2], u + offs[3], u + offs[4], u + offs[5]):
-                    if p != goal and state[p] != BLOCKED and (p == u or rhs[p] == want):
-                        self._update(p, s)
+                for p in (u, u + o0, u + o1, u + o2, u + o3, u + o4, u + o5):
+                    if p == goal or state[p] == BLOCKED or (p != u and rhs[p] != want):
+                        continue
+                    m = min(g[p + o0], g[p + o1], g[p + o2], g[p + o3], g[p + o4], g[p + o5])
+                    r = m + 1 if m < INF else INF
+                    rhs[p] = r
+                    gp = g[p]
+                    if gp != r:
+                        hp = hx[xs[p]] + hy[ys[p]] + hz[zs[p]]
+                        key = (gp + hp + km) * K if gp < r else (r + hp + km) * K + hp + 1
+                        heappush(heap, key * NP + p)
         if len(heap) > 2 * NP:  # compact: drop entries of cells that are consistent now
             heap[:] = [e for e in heap if g[e % NP] != rhs[e % NP]]
             heapify(heap)
@@ -260,9 +254,9 @@ class DStarPilot:
     # ------------------------------------------------------------------ paths and tie-breaks
 
     def _order(self, i: int) -> tuple[int, ...]:
-        """Neighbour offsets of cell i in tie-break order, a fixed function of (cell, target):
-        climb first when the target is higher, then the horizontal axis with more way to go,
-        then the other one, descend last (flying high meets fewer buildings)."""
+        """Neighbour offsets of cell i in tie-break order, a fixed function of (cell, target): climb first when the
+        target is higher, then the horizontal axis with more way to go, then the other one, descend last (flying
+        high meets fewer buildings)."""
         goal, xs, ys, zs = self._goal, self._xs, self._ys, self._zs
         dx, dy, dz = xs[goal] - xs[i], ys[goal] - ys[i], zs[goal] - zs[i]
         key = ((dx > 0) - (dx < 0), (dy > 0) - (dy < 0), (dz > 0) - (dz < 0), abs(dx) >= abs(dy))
@@ -284,16 +278,13 @@ class DStarPilot:
         best, bg = -1, INF
         for d in self._order(i):
             p = i + d
-            if p in skip or state[p] == BLOCKED:
-                continue
-            v = g[p]
-            if v < bg:
-                best, bg = p, v
+            if g[p] < bg and state[p] != BLOCKED and p not in skip:
+                best, bg = p, g[p]
         return best
 
     def _unknown_ahead(self, s: int) -> list[int]:
-        """The unknown cells among the planned path's next `lookahead` cells after s (fewer at the goal or a dead
-        end; none if the search found no path)."""
+        """The unknown cells among the planned path's next `lookahead` cells after s (fewer at the goal or a dead end;
+        none if the search found no path)."""
         path: list[int] = []
         g, cur = self._g, s
         while g[s] < INF and len(path) < self.lookahead and cur != self._goal:
@@ -420,10 +411,10 @@ class DStarPilot:
     # ------------------------------------------------------------------ candidates for the arbiter
 
     def _ranking(self, s: int, sensed: set[int]) -> int:
-        """The candidates offered to the arbiter (packed): s and its neighbours sensed free this step, by
-        distance (g) on the known map, ties in tie-break order. The search settles g(s) and the best
-        neighbour's; the others' may still be estimates: settling them all would cost a search each and
-        steer the next steps' sensing elsewhere, for an order that the next step corrects anyway."""
+        """The candidates offered to the arbiter (packed): s and its neighbours sensed free this step, by distance (g)
+        on the known map, ties in tie-break order. The search settles g(s) and the best neighbour's; the others' may
+        still be estimates: settling them all would cost a search each and steer the next steps' sensing elsewhere,
+        for an order that the next step corrects anyway."""
         known, state = self._round, self._state
         get = self._g.__getitem__ if known is None else (lambda i: known.get(i, INF))
         ranked = sorted([(get(s), -1, 0)] + [(get(s + d), k, d) for k, d in enumerate(self._order(s))
@@ -431,15 +422,15 @@ class DStarPilot:
         return rank_steps((0, 0, 0) if d == 0 else AROUND[self._offs.index(d)] for _, _, d in ranked)
 
     def _detour(self, avoid: int, s: int) -> dict[int, int] | None:
-        """Each cell's distance to the target on the known map (unknown cells free) with cell `avoid` taken
-        out, by a breadth-first search from the target that stops once s and its neighbours are reached; None
-        if s cannot reach the target without `avoid` (no way round).
+        """Each cell's distance to the target on the known map (unknown cells free) with cell `avoid` taken out, by a
+        breadth-first search from the target that stops once s and its neighbours are reached; None if s cannot
+        reach the target without `avoid` (no way round).
 
-        Why: two drones whose targets are next to each other in a corridor, each coming from the end where
-        the other's target is, push each other off in turn for ever (PIBT's steps are greedy; the arbiter
-        can only choose among the cells offered). A drone that has not got closer for DETOUR_AFTER turns and
-        has a drone in its way ranks its cells by the way round that drone's cell instead, until it gets
-        closer than it ever was (docs/cooperation.md)."""
+        Why: two drones whose targets are next to each other in a corridor, each coming from the end where the
+        other's target is, push each other off in turn for ever (PIBT's steps are greedy; the arbiter can only
+        choose among the cells offered). A drone that has not got closer for DETOUR_AFTER turns and has a drone in
+        its way ranks its cells by the way round that drone's cell instead, until it gets closer than it ever was
+        (docs/cooperation.md)."""
         state, offs, goal = self._state, self._offs, self._goal
         if avoid == goal:
             return None
@@ -461,6 +452,6 @@ class DStarPilot:
         return dist if s in dist else None
 
     def _aside(self, s: int) -> int:
-        """The candidates of a drone at rest (parked, without a target, or unable to reach it): its own cell,
-        then the neighbours it knows are free, in the fixed order +x, -x, +y, -y, +z, -z."""
+        """The candidates of a drone at rest (parked, without a target, or unable to reach it): its own cell, then the
+        neighbours it knows are free, in the fixed order +x, -x, +y, -y, +z, -z."""
         return rank_steps([(0, 0, 0)] + [AROUND[k] for k, d in enumerate(self._offs) if self._state[s + d] == FREE])

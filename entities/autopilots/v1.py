@@ -1,15 +1,15 @@
 """The seed's V1 "dumb" drone (seed spec, section 3.4).
 
-Every turn it steps to the 6-connected neighbour closest (Euclidean) to its target and never
-senses anything: it can fly straight into a building and die, exactly like the seed's C drone.
+Every turn it steps to the 6-connected neighbour closest (Euclidean) to its target and never senses anything: it can
+fly straight into a building and die, exactly like the seed's C drone.
 
 Choices the seed leaves open, fixed here:
 
-* Ties between equally close neighbours are broken by `AROUND` order (schema.messages):
-  +x, -x, +y, -y, +z, -z (the first one in that order wins).
-* Only in-bounds neighbours are candidates, so the drone never leaves the world. Since the target
-  lies inside the world, the closest in-bounds neighbour is always strictly closer than the
-  current cell; a world of a single cell leaves no candidate and the drone hovers.
+* Ties between equally close neighbours are broken by `AROUND` order (schema.messages): +x, -x, +y, -y, +z, -z (the
+  first one in that order wins).
+* Only in-bounds neighbours are candidates, so the drone never leaves the world. Since the target lies inside the
+  world, the closest in-bounds neighbour is always strictly closer than the current cell; a world of a single cell
+  leaves no candidate and the drone hovers.
 * No target: hover. On the target: stay and report ``Note.REACHED``.
 """
 
