@@ -158,7 +158,6 @@ class DroneProcess:
         self.patience = patience
         self.welcome = welcome
         size = welcome.world.size
-        # A swarm host flies its drones with one pilot over arrays when the autopilot has that form.
         self.swarm = make_swarm(autopilot, world_size=size, drones=[drone_number(d) for d in drones],
                                 least=swarm_min) if host else None
         self.pilots = {} if self.swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
@@ -181,9 +180,8 @@ class DroneProcess:
     # ------------------------------------------------------------------ inputs
 
     def start(self) -> list[Effect]:
-        """Once admitted (this process exists once admitted), if the game has not begun: ask for the map, and for the
-        static world around the starts (the first turn's sensing then needs no ASK), now if an environment is
-        present, else when one appears (`receive` calls it again)."""
+        """Once admitted (this process exists once admitted), before the game: ask for the map and the static world
+        around the starts, now if an environment is present, else when one appears (`receive` calls it again)."""
         if not (self.charting and self._env) or self._map_asked or self._done or self._deciding:
             return []
         return self._prefetch(0, sorted({c for d, c in self.welcome.starts.cells().items() if d in self._mine}))
@@ -423,8 +421,7 @@ class DroneProcess:
 
     def _prefetch(self, turn: int, around: list[Cell]) -> list[Effect]:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around `around` that this
-        process has not been told yet (nothing once the whole map is charted); `turn`: the turn being played (0
-        before the game)."""
+        process has not been told yet (nothing once the whole map is charted); `turn`: as for `_poll_map`."""
         effects = self._poll_map(turn)
         if self.chart.complete:
             return effects
@@ -468,9 +465,8 @@ def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
 
 
 class Chart:
-    """The kinds of the cells this process has been told by the environment (buildings never move, so what it is told
-    once holds for the whole game): one byte per cell of the world, 255 until told. Cells outside the world are
-    OUTSIDE (their kind follows from the world's size)."""
+    """The kinds of the cells the environment told this process: one byte per cell of the world, 255 until told.
+    Cells outside the world are OUTSIDE (their kind follows from the world's size)."""
 
     UNKNOWN = 255
 

@@ -24,13 +24,16 @@ from entities.world import linear_rows
 from schema import Cell, CellInfo, Note, StepTable, UsageError
 from schema.tables import code_of, drone_number
 
+Q = TypeVar("Q")
+A = TypeVar("A")
+R = TypeVar("R")
 Answers = Mapping[Cell, CellInfo]
 #: The kind a swarm pilot is given for a cell nobody answered (see `fly_swarm`).
 NO_ANSWER = 255
 Sensing = Generator[tuple[Cell, ...], Answers, "Decision"]
 Oracle = Callable[[tuple[Cell, ...]], Answers]
-#: A process's turn for drones flown one pilot each (`fly_pilots`, `fly_round`).
-PilotsPlan = Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers], "StepTable | dict[str, Decision]"]
+#: A process's turn for drones flown one pilot each (`fly_round`, `fly_pilots`): their questions, then the moves (R).
+PilotsPlan = Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers], R]
 #: A swarm pilot's turn (`SwarmPilot.step`).
 SwarmSensing = Generator[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]
 
@@ -52,9 +55,8 @@ class Autopilot(Protocol):
     name: ClassVar[str]
     #: True if the drone gives way to other drones when the coordinator arbitrates moves.
     cooperative: ClassVar[bool]
-    #: True if its `step` asks about cells (yields). Its process then charts the environment's static map
-    #: (ENV/MAP) and, until that comes, asks ahead for the cells around its drones; each question is
-    #: answered from that chart, or by an ASK to the environment. False: it flies blind, asking nothing.
+    #: True if its `step` asks about cells (yields): its process then answers them from a chart of the environment's
+    #: map, or by ASK (entities/drone.py). False: it flies blind, asking nothing.
     senses: ClassVar[bool]
 
     def __init__(self, *, world_size: Cell, **options: Any) -> None:
@@ -127,11 +129,6 @@ def in_bounds(cell: Cell, size: Cell) -> bool:
     return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
 
 
-Q = TypeVar("Q")
-A = TypeVar("A")
-R = TypeVar("R")
-
-
 def drive(plan: Generator[Q, A, R], oracle: Callable[[Q], A]) -> R:
     """Run a sensing generator (an autopilot's step, a plan) to its end, `oracle` answering every question."""
     try:
@@ -155,8 +152,7 @@ def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -
     return drive(pilot.step(pos, target), counted), asks
 
 
-def fly_round(steps: Mapping[str, Sensing]) -> Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers],
-                                                          dict[str, Decision]]:
+def fly_round(steps: Mapping[str, Sensing]) -> PilotsPlan[dict[str, Decision]]:
     """Drive several drones' `step` generators together: each round yields every pending question at once ({drone:
     cells}) and receives every answer ({drone: answers}, asked concurrently on the network), so a turn takes as many
     sequential ASK round trips as the most inquisitive drone, not the sum over drones. Returns each drone's
@@ -187,7 +183,7 @@ def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
 
 
 def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell, Cell | None]], *,
-               host: str | None) -> PilotsPlan:
+               host: str | None) -> PilotsPlan[StepTable | dict[str, Decision]]:
     """The plan of one autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell, target)
     orders: returns a swarm host's MOVES steps, or a lone drone's decision."""
     decisions = yield from fly_round({d: pilots[d].step(pos, target) for d, pos, target in orders})
@@ -195,8 +191,8 @@ def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell
 
 
 def fly_swarm(swarm: SwarmPilot, rows: np.ndarray) -> Generator[np.ndarray, np.ndarray, StepTable]:
-    """The plan of a swarm pilot for the orders `rows` (an OrderTable's): it yields the cells it asks about (at most
-    once), receives their kinds, and returns the MOVES steps (with the rankings of a pilot that gives them)."""
+    """The plan of a swarm pilot for the orders `rows` (an OrderTable's): its question, then the MOVES steps (with the
+    rankings of a pilot that gives them)."""
     pos, note, *ranked = yield from swarm.step(rows["drone"], rows["pos"], rows["target"])
     cooperative = {"ranked": ranked[0]} if ranked else {}  # (a pilot without rankings: 0, none)
     return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note, **cooperative)

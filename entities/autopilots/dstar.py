@@ -138,9 +138,7 @@ class DStarPilot:
     def distance(self) -> int | None:
         """The planned number of moves from the last step's position to the target on the known map (unknown cells
         counted free); None before any target or when it is unreachable."""
-        if self._goal < 0 or self._last < 0 or self._unreachable:
-            return None
-        g = self._g[self._last]
+        g = INF if self._goal < 0 or self._unreachable else self._g[self._last]
         return None if g >= INF else g
 
     # ------------------------------------------------------------------ indices
