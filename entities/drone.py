@@ -1,36 +1,31 @@
-"""The drone process's protocol (a lone drone, the seed's D01, or a swarm host flying several): a pure
-state machine, no network and no clock. Its Zenoh adapter (entities/drone_node.py) feeds it, in
-batches of everything queued (`DroneProcess.receive`), the coordinator's TURN and OVER, the outcome
-of every query it asked for (`Answer`), the environment's presence (`EnvPresence`) and its expired
-timer (`Expired`), and carries out the effects it returns: publish an NPS or a MOVES (`Send`), send
-an ASK or a MAP query (`Query`), set its one timer (`Timer`), count a refused input (`Refusal`).
+"""The drone process's protocol (a lone drone, the seed's D01, or a swarm host flying several): a pure state machine,
+no network and no clock. Its Zenoh adapter (entities/drone_node.py) feeds it its `Input`s, in batches of everything
+queued (`DroneProcess.receive`), and carries out the `Effect`s it returns.
 
-Deciding. Each DRONES phase it flies every hosted drone's autopilot together (`fly_pilots`: every
-drone's questions of a round at once), or a swarm host's drones with the autopilot's one pilot over
-arrays (`fly_swarm`, when it has that form). Each round of questions is answered from the chart where
-it can; the rest goes out in ASKs (one per Ask.MAX_CELLS cells, together), and the plan goes on when
-every answer is in. Then a lone drone publishes its NPS, a swarm host the MOVES of all its drones in
-one message (`_messages`, the one place moves become messages). A TURN that repeats the last one gets
-the same moves again. A later TURN or an OVER received while a turn is being decided ends that turn's
-decision without publishing it, and a batch acts only on its latest TURN: a process that was frozen or
-slow catches up instead of planning turns that are long gone.
+Deciding. Each DRONES phase it flies every hosted drone's autopilot together (`fly_pilots`: every drone's questions
+of a round at once), or a swarm host's drones with the autopilot's one pilot over arrays (`fly_swarm`, when it has
+that form). Each round of questions is answered from the chart where it can; the rest goes out in ASKs (one per
+Ask.MAX_CELLS cells, together), and the plan goes on when every answer is in. Then a lone drone publishes its NPS, a
+swarm host the MOVES of all its drones in one message. A TURN that repeats the last one gets the same moves again. A
+later TURN or an OVER received while a turn is being decided ends that turn's decision without publishing it, and a
+batch acts only on its latest TURN: a process that was frozen or slow catches up instead of planning turns that are
+long gone.
 
-Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings never
-move, so a cell's kind holds for the whole game). Once admitted, with an environment present (a query sent
-before one serves goes unanswered), it asks for the environment's static map (ENV/MAP, `_poll_map`) and the
-static world around its drones' starts; until the map comes, once it has sent its moves, it asks ahead (an ASK
-for turn 0, answered at once) for the never-told cells around where its drones are going (`_prefetch`). A
-question about charted cells is answered from the chart plus the drones in them, which the turn's orders list
-(every alive drone's cell at the start of the turn): exactly the CellInfo the environment would give for that
-turn. A question the chart cannot answer yet waits while cells asked ahead are on their way (they usually answer
-it: the first turn's sensing then asks nothing, and a swarm's environment never decodes a turn's thousands of
-cells) and is asked once none is. The autopilots see only the cells they ask for, so decisions, and journals, do
-not change. Without a chart (`chart=False`, `dronesim drone --no-chart`, to measure it) nothing is asked ahead
-or charted: every question goes to the environment.
+Sensing without a round trip. The process keeps a chart of the kinds the environment told it (buildings never move,
+so a cell's kind holds for the whole game). Once admitted, with an environment present (a query sent before one
+serves goes unanswered), it asks for the environment's static map (ENV/MAP, `_poll_map`) and the static world around
+its drones' starts; until the map comes, once it has sent its moves, it asks ahead (an ASK for turn 0, answered at
+once) for the never-told cells around where its drones are going (`_prefetch`). A question about charted cells is
+answered from the chart plus the drones in them, which the turn's orders list (every alive drone's cell at the start
+of the turn): exactly the CellInfo the environment would give for that turn. A question the chart cannot answer yet
+waits while cells asked ahead are on their way (they usually answer it: the first turn's sensing then asks nothing,
+and a swarm's environment never decodes a turn's thousands of cells) and is asked once none is. The autopilots see
+only the cells they ask for, so decisions, and journals, do not change. Without a chart (`chart=False`,
+`dronesim drone --no-chart`, to measure it) nothing is asked ahead or charted: every question goes to the environment.
 
-The environment away. An ASK nobody answered is asked again as soon as an environment is present (at
-once if one is), for up to `patience` seconds from the first miss; after that, or once the turn is
-superseded, the drones decide without those answers.
+The environment away. An ASK nobody answered is asked again as soon as an environment is present (at once if one
+is), for up to `patience` seconds from the first miss; after that, or once the turn is superseded, the drones decide
+without those answers.
 """
 
 from __future__ import annotations
@@ -44,26 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from schema import (
-    Ans,
-    Ask,
-    Cell,
-    CellInfo,
-    CellKind,
-    MapRequest,
-    Moves,
-    Nps,
-    OrderTable,
-    Over,
-    Phase,
-    RemoteInputError,
-    StepTable,
-    Turn,
-    Welcome,
-    WorldMap,
-)
-from schema.errors import OutOfRange, Refusal
-from schema.messages import _KINDS, AROUND
+from schema import Ans, Ask, Cell, CellInfo, CellKind, MapRequest, Moves, Nps, Over, Phase, StepTable, Turn, WorldMap
+from schema.errors import OutOfRange, Refusal, RemoteInputError
+from schema.messages import _KINDS, AROUND, OrderTable, Welcome
 from schema.tables import drone_number
 from schema.tuning import ASK_AHEAD_MAX_DRONES, ASK_AHEAD_REACH, CHART_FEW_CELLS, MAP_TRIES, PREFETCH_CHUNK, SWARM_MIN
 
@@ -102,8 +80,8 @@ Effect = Send | Query | Timer | Refusal
 
 @dataclass(frozen=True, slots=True)
 class Answer:
-    """`Query(ref)` is finished: its replies, each the decoded message or the RemoteInputError of an
-    error reply or a malformed one; none if nobody answered in time."""
+    """`Query(ref)` is finished: its replies, each the decoded message or the RemoteInputError of an error reply or a
+    malformed one; none if nobody answered in time."""
 
     ref: int
     replies: tuple[Ans | WorldMap | RemoteInputError, ...]
@@ -134,8 +112,8 @@ Plan = Generator[Any, Any, "StepTable | dict[str, Decision]"]
 
 @dataclass(slots=True, eq=False)
 class _Round:
-    """One round of a plan's questions: its parts (a drone's cells, or a chunk of a swarm's) asked by
-    ASK, the answers so far, and how the answers become the plan's reply."""
+    """One round of a plan's questions: its parts (a drone's cells, or a chunk of a swarm's) asked by ASK, the answers
+    so far, and how the answers become the plan's reply."""
 
     parts: dict[str, tuple[Cell, ...]]
     answers: dict[str, Answers]
@@ -180,7 +158,6 @@ class DroneProcess:
         self.patience = patience
         self.welcome = welcome
         size = welcome.world.size
-        # A swarm host flies its drones with one pilot over arrays when the autopilot has that form.
         self.swarm = make_swarm(autopilot, world_size=size, drones=[drone_number(d) for d in drones],
                                 least=swarm_min) if host else None
         self.pilots = {} if self.swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
@@ -195,7 +172,6 @@ class DroneProcess:
         self._refs = itertools.count(1)
         self._queries: dict[int, tuple[Ask | MapRequest, tuple[str, ...]]] = {}  # ref -> (query, parts asked)
         self._map_asked: list[int] = []  # the turns in which the map was asked
-        self._map_ref: int | None = None  # the MAP query on its way
         self._map_settled = False  # charted, or refused: not asked again
         self._env: set[str] = set()  # the sessions of the environment processes present
         self._deciding: _Deciding | None = None
@@ -204,13 +180,11 @@ class DroneProcess:
     # ------------------------------------------------------------------ inputs
 
     def start(self) -> list[Effect]:
-        """Once admitted (this process exists once admitted), if the game has not begun: ask for the map, and for
-        the static world around the starts (the first turn's sensing then needs no ASK), now if an environment
-        is present, else when one appears (`receive` calls it again)."""
+        """Once admitted (this process exists once admitted), before the game: ask for the map and the static world
+        around the starts, now if an environment is present, else when one appears (`receive` calls it again)."""
         if not (self.charting and self._env) or self._map_asked or self._done or self._deciding:
             return []
-        starts = self.welcome.starts.cells()
-        return self._prefetch(0, sorted({c for d, c in starts.items() if d in self._mine}))
+        return self._prefetch(0, sorted({c for d, c in self.welcome.starts.cells().items() if d in self._mine}))
 
     def receive(self, inputs: Iterable[Input]) -> list[Effect]:
         """Everything queued, in order of arrival: it acts only on the latest DRONES TURN among them."""
@@ -275,8 +249,7 @@ class DroneProcess:
         return effects
 
     def _run(self, d: _Deciding, effects: list[Effect]) -> StepTable | dict[str, Decision] | None:
-        """Drive `d`'s plan with the answers in hand (asking for the others): its moves, or None while
-        it waits."""
+        """Drive `d`'s plan with the answers in hand (asking for the others): its moves, or None while it waits."""
         while True:
             r = d.round
             if r is not None and (r.asking or (r.unanswered and not self._settle_unanswered(d, r, effects))):
@@ -295,13 +268,13 @@ class DroneProcess:
                 effects += self._ask(d.turn.turn, r, list(r.parts))
 
     def _asked_ahead(self) -> bool:
-        """Is an ASK sent ahead (for the static world, answered at once) on its way while an environment is
-        present? (Not the map: nobody may serve it, and it is not waited for.)"""
+        """Is an ASK sent ahead (for the static world, answered at once) on its way while an environment is present?
+        (Not the map: nobody may serve it, and it is not waited for.)"""
         return bool(self._env) and any(not parts and isinstance(q, Ask) for q, parts in self._queries.values())
 
     def _finish_offline(self, d: _Deciding) -> None:
-        """Let a superseded plan end (the autopilots' memory stays as it would be): the questions the chart
-        cannot answer get no answer, nothing more is asked, and its moves are not sent."""
+        """Let a superseded plan end (the autopilots' memory stays as it would be): the questions the chart cannot
+        answer get no answer, nothing more is asked, and its moves are not sent."""
         d.offline = True
         if (r := d.round) is not None:  # what it waits for gets no answer (`_settle_unanswered`)
             r.asking.clear()
@@ -348,7 +321,7 @@ class DroneProcess:
                 answers[drone] = infos
         return _Round(asking, answers, lambda got: got)
 
-    def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Effect]:
+    def _ask(self, turn: int, r: _Round, names: list[str]) -> list[Query]:
         """ASKs for the parts `names` of round `r`, batched up to Ask.MAX_CELLS cells (a part whole)."""
         batches: list[list[str]] = []
         size = Ask.MAX_CELLS
@@ -358,17 +331,14 @@ class DroneProcess:
                 size = 0
             batches[-1].append(name)
             size += len(r.parts[name])
-        queries: list[Effect] = []
-        for batch in batches:
-            query = self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in batch for c in r.parts[p])),
-                                tuple(batch))
-            r.asking.add(query.ref)
-            queries.append(query)
+        queries = [self._query(Ask(turn=turn, sender=self.sender, cells=tuple(c for p in b for c in r.parts[p])),
+                               tuple(b)) for b in batches]
+        r.asking.update(q.ref for q in queries)
         return queries
 
     def _settle_unanswered(self, d: _Deciding, r: _Round, effects: list[Effect]) -> bool:
-        """Parts of `r` nobody answered: given no answer once `d` is offline (True: the plan goes on), else
-        asked again now that an environment is present, or left until one is (False)."""
+        """Parts of `r` nobody answered: given no answer once `d` is offline (True: the plan goes on), else asked again
+        now that an environment is present, or left until one is (False)."""
         if d.offline:
             r.answers.update({p: {} for p in r.unanswered})
             r.unanswered = []
@@ -431,17 +401,14 @@ class DroneProcess:
         """Ask for the environment's map if it was never asked, or if nobody answered it in an earlier turn (up to
         MAP_TRIES times: the environment may still be building its world); `turn`: the turn being played (0 before
         the game)."""
-        if self._map_settled or self._map_ref is not None or len(self._map_asked) >= MAP_TRIES:
+        asked = self._map_asked
+        if (self._map_settled or len(asked) >= MAP_TRIES or asked and turn <= asked[-1]
+                or any(isinstance(q, MapRequest) for q, _ in self._queries.values())):  # (or it is on its way)
             return []
-        if self._map_asked and turn <= self._map_asked[-1]:
-            return []
-        self._map_asked.append(turn)
-        query = self._query(MapRequest(turn=0, sender=self.sender))
-        self._map_ref = query.ref
-        return [query]
+        asked.append(turn)
+        return [self._query(MapRequest(turn=0, sender=self.sender))]
 
     def _map_answered(self, replies: tuple) -> list[Effect]:
-        self._map_ref = None
         if not replies:
             return []  # nobody answered: asked again in a later turn
         self._map_settled = True
@@ -453,9 +420,8 @@ class DroneProcess:
         return []
 
     def _prefetch(self, turn: int, around: list[Cell]) -> list[Effect]:
-        """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around
-        `around` that this process has not been told yet (nothing once the whole map is charted);
-        `turn`: the turn being played (0 before the game)."""
+        """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around `around` that this
+        process has not been told yet (nothing once the whole map is charted); `turn`: as for `_poll_map`."""
         effects = self._poll_map(turn)
         if self.chart.complete:
             return effects
@@ -463,9 +429,8 @@ class DroneProcess:
         if cells and len(around) <= ASK_AHEAD_MAX_DRONES:  # a few drones: ask farther at once, and again only
             cells = self.chart.unknown(around, reach=ASK_AHEAD_REACH)  # every few turns (a swarm: its next ring)
         chunk = min(PREFETCH_CHUNK, Ask.MAX_CELLS)
-        for i in range(0, len(cells), chunk):
-            effects.append(self._query(Ask(turn=0, sender=self.sender, cells=cells[i:i + chunk])))
-        return effects
+        return effects + [self._query(Ask(turn=0, sender=self.sender, cells=cells[i:i + chunk]))
+                          for i in range(0, len(cells), chunk)]
 
 
 def _reply(reply: Ans | WorldMap | RemoteInputError) -> Any:
@@ -484,8 +449,8 @@ def _cells_of(moves: StepTable | dict[str, Decision]) -> Iterable[Cell]:
 
 @functools.cache
 def _ball(reach: int) -> np.ndarray:
-    """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first (the
-    neighbours in AROUND order)."""
+    """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first (the neighbours in
+    AROUND order)."""
     r = range(-reach, reach + 1)
     farther = [o for n in range(2, reach + 1) for o in itertools.product(r, r, r) if sum(map(abs, o)) == n]
     return np.asarray([*AROUND, *farther], dtype=np.int64)
@@ -500,8 +465,7 @@ def occupancy_of(orders: OrderTable) -> dict[Cell, tuple[str, ...]]:
 
 
 class Chart:
-    """The kinds of the cells this process has been told by the environment (buildings never move,
-    so what it is told once holds for the whole game): one byte per cell of the world, 255 until told.
+    """The kinds of the cells the environment told this process: one byte per cell of the world, 255 until told.
     Cells outside the world are OUTSIDE (their kind follows from the world's size)."""
 
     UNKNOWN = 255
@@ -530,8 +494,7 @@ class Chart:
 
     def kind(self, cell: Cell) -> CellKind | None:
         """The cell's kind, None if never told."""
-        i = self._at(cell)
-        if i is None:
+        if (i := self._at(cell)) is None:
             return CellKind.OUTSIDE
         k = self._kinds[i]
         return None if k == self.UNKNOWN else _KINDS[k]
@@ -551,25 +514,18 @@ class Chart:
     def learn(self, cells: Sequence[Cell], kinds: bytes) -> None:
         if len(cells) <= CHART_FEW_CELLS:  # a few: cell by cell (numpy's fixed cost dominates)
             for cell, k in zip(cells, kinds):
-                i = self._at(cell)
-                if i is not None:
+                if (i := self._at(cell)) is not None:
                     self._kinds[i] = k
             return
         inside, at = self._linear(np.asarray(cells, dtype=np.int64).reshape(-1, 3))
         np.frombuffer(self._kinds, dtype=np.uint8)[at] = np.frombuffer(kinds, dtype=np.uint8)[inside]
 
     def unknown(self, around: Sequence[Cell], reach: int = 1) -> tuple[Cell, ...]:
-        """The cells within `reach` steps (6-connectivity) of the `around` cells whose kind was never
-        told, once each, in order (by default their neighbours, in AROUND order)."""
+        """The cells within `reach` steps (6-connectivity) of the `around` cells whose kind was never told, once each,
+        in order (by default their neighbours, in AROUND order)."""
         if reach == 1 and len(around) * 6 <= CHART_FEW_CELLS:  # a few: cell by cell
-            out: dict[Cell, None] = {}
-            for x, y, z in around:
-                for dx, dy, dz in AROUND:
-                    c = (x + dx, y + dy, z + dz)
-                    i = self._at(c)
-                    if i is not None and self._kinds[i] == self.UNKNOWN:
-                        out[c] = None
-            return tuple(out)
+            near = ((x + dx, y + dy, z + dz) for x, y, z in around for dx, dy, dz in AROUND)
+            return tuple(dict.fromkeys(c for c in near if self.kind(c) is None))
         ball = (np.asarray(around, dtype=np.int64).reshape(-1, 1, 3) + _ball(reach)).reshape(-1, 3)
         inside, at = self._linear(ball)
         fresh = np.frombuffer(self._kinds, dtype=np.uint8)[at] == self.UNKNOWN

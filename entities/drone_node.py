@@ -1,11 +1,10 @@
-"""A drone process (the seed's D01), or a swarm host flying several drones in one process: the Zenoh
-adapter of `DroneProcess` (entities/drone.py, where its protocol, sensing and chart are described).
+"""A drone process (the seed's D01), or a swarm host flying several drones in one process: the Zenoh adapter of
+`DroneProcess` (entities/drone.py, where its protocol, sensing and chart are described).
 
-It subscribes to the DRONES phase's TURN and to OVER, watches the coordinator's presence (`Membership`:
-admission, kept through a coordinator restart) and the environment's, and hands every event to the core
-in batches of everything queued. It carries out the core's effects: publishes NPS or MOVES, sends ASK
-and MAP queries whose outcome comes back to the core as one event each, and keeps the core's one timer.
-It exits on OVER.
+It subscribes to the DRONES phase's TURN and to OVER, watches the coordinator's presence (`Membership`: admission,
+kept through a coordinator restart) and the environment's, and hands every event to the core in batches of
+everything queued. It carries out the core's effects: publishes NPS or MOVES, sends ASK and MAP queries whose
+outcome comes back to the core as one event each, and keeps the core's one timer. It exits on OVER.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from schema import Cell, UsageError
 from schema.tuning import SWARM_MIN
 
-from .base import Autopilot, Decision, Oracle, Sensing, SwarmPilot, drive, fly_round, run_step
+from .base import Autopilot, SwarmPilot, run_step
 
 #: name -> class, in the module of that name (imported on first use).
 REGISTRY: dict[str, str] = {"v1": "V1Pilot", "seed": "SeedPilot", "dstar": "DStarPilot", "lrta": "LrtaPilot"}
@@ -35,13 +35,12 @@ def make_autopilot(name: str, *, world_size: Cell, **options: object) -> Autopil
 
 
 def make_swarm(name: str, *, world_size: Cell, drones: Sequence[int], least: int = SWARM_MIN) -> SwarmPilot | None:
-    """One pilot for the drones numbered `drones` (a swarm's), or None if autopilot `name` has no swarm
-    form or they are fewer than `least`."""
+    """One pilot for the drones numbered `drones` (a swarm's), or None if autopilot `name` has no swarm form or they
+    are fewer than `least`."""
     pilot_class(name)  # UsageError if there is no such autopilot
     if name not in SWARMS or len(drones) < least:
         return None
     return _load(name, SWARMS[name])(world_size=world_size, drones=drones)
 
 
-__all__ = ["Autopilot", "Decision", "Oracle", "Sensing", "SwarmPilot", "REGISTRY", "SWARMS", "SWARM_MIN", "drive",
-           "fly_round", "make_autopilot", "make_swarm", "pilot_class", "run_step"]
+__all__ = ["REGISTRY", "SWARMS", "SWARM_MIN", "make_autopilot", "make_swarm", "pilot_class", "run_step"]

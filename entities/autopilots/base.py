@@ -1,17 +1,14 @@
 """The autopilot interface: a pure, network-free decision procedure for one drone.
 
-An autopilot's `step` is a generator. It yields the cells it wants to sense (one or more cells),
-receives a mapping cell -> CellInfo in return, may ask again, and finally returns a `Decision`. The
-same generator is driven by an in-process oracle over a `World` (`drive`: tests, benchmarks, the
-in-process game) or by the drone process's core (entities/drone.py: each yield is answered from its
-chart of the environment's map, or by an ASK to the environment). Because the world is frozen during a
-turn's DRONES phase, both give identical decisions.
+An autopilot's `step` is a generator: it yields the cells it wants to sense, receives a mapping cell -> CellInfo,
+may ask again, and returns a `Decision`. An oracle over a `World` drives it (`drive`: tests, benchmarks, the
+in-process game), or the drone process's core (entities/drone.py: from its chart of the environment's map, or by
+ASK); the world is frozen during a turn's DRONES phase, so both decide the same.
 
-A process's drones are flown together as one plan, itself a generator of the same kind: `fly_pilots`
-(one pilot per drone, a round of every drone's questions at a time) or `fly_swarm` (a swarm pilot over
-arrays). Whoever drives a plan answers its questions; the plan returns the turn's moves.
-
-Autopilots keep their memory in the instance: one instance per drone, for the whole game.
+A process's drones are flown together as one plan, a generator of the same kind whose driver answers its questions
+and which returns the turn's moves: `fly_pilots` (one pilot per drone, a round of every drone's questions at a time)
+or `fly_swarm` (a swarm pilot over arrays). An autopilot keeps its memory in the instance: one instance per drone,
+for the whole game.
 """
 
 from __future__ import annotations
@@ -27,13 +24,16 @@ from entities.world import linear_rows
 from schema import Cell, CellInfo, Note, StepTable, UsageError
 from schema.tables import code_of, drone_number
 
+Q = TypeVar("Q")
+A = TypeVar("A")
+R = TypeVar("R")
 Answers = Mapping[Cell, CellInfo]
 #: The kind a swarm pilot is given for a cell nobody answered (see `fly_swarm`).
 NO_ANSWER = 255
 Sensing = Generator[tuple[Cell, ...], Answers, "Decision"]
 Oracle = Callable[[tuple[Cell, ...]], Answers]
-#: A process's turn for drones flown one pilot each (`fly_pilots`, `fly_round`).
-PilotsPlan = Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers], "StepTable | dict[str, Decision]"]
+#: A process's turn for drones flown one pilot each (`fly_round`, `fly_pilots`): their questions, then the moves (R).
+PilotsPlan = Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers], R]
 #: A swarm pilot's turn (`SwarmPilot.step`).
 SwarmSensing = Generator[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]
 
@@ -55,9 +55,8 @@ class Autopilot(Protocol):
     name: ClassVar[str]
     #: True if the drone gives way to other drones when the coordinator arbitrates moves.
     cooperative: ClassVar[bool]
-    #: True if its `step` asks about cells (yields). Its process then charts the environment's static map
-    #: (ENV/MAP) and, until that comes, asks ahead for the cells around its drones; each question is
-    #: answered from that chart, or by an ASK to the environment. False: it flies blind, asking nothing.
+    #: True if its `step` asks about cells (yields): its process then answers them from a chart of the environment's
+    #: map, or by ASK (entities/drone.py). False: it flies blind, asking nothing.
     senses: ClassVar[bool]
 
     def __init__(self, *, world_size: Cell, **options: Any) -> None:
@@ -69,21 +68,21 @@ class Autopilot(Protocol):
 
 
 class SwarmPilot(Protocol):
-    """One pilot for all the drones of a swarm host, over arrays (`autopilots.SWARMS`): the same
-    decisions as one autopilot per drone."""
+    """One pilot for all the drones of a swarm host, over arrays (`autopilots.SWARMS`): the same decisions as one
+    autopilot per drone."""
 
     def step(self, drones: np.ndarray, pos: np.ndarray, target: np.ndarray) -> SwarmSensing:
-        """The moves of the drones numbered `drones`, standing at `pos` ((n, 3)) with `target` ((n, 3),
-        (-1, -1, -1) for none): returns (new cells (n, 3), note codes (n,) uint8 as in a StepTable), and a
-        cooperative pilot its drones' rankings too ((n,) uint32 packed as `schema.tables.rank_steps`: a MOVES's
-        `ranked` column). It may yield once an (m, 3) array of cells, and receives their CellKind codes
-        ((m,) uint8, `NO_ANSWER` for a cell not answered)."""
+        """The moves of the drones numbered `drones`, standing at `pos` ((n, 3)) with `target` ((n, 3), (-1, -1, -1)
+        for none): returns (new cells (n, 3), note codes (n,) uint8 as in a StepTable), and a cooperative pilot its
+        drones' rankings too ((n,) uint32 packed as `schema.tables.rank_steps`: a MOVES's `ranked` column). It may
+        yield once an (m, 3) array of cells, and receives their CellKind codes ((m,) uint8, `NO_ANSWER` for a cell
+        not answered)."""
         ...
 
 
 class SwarmBase:
-    """What the swarm forms share: the world's `size`, their drones' numbers (sorted, `_drones`) and the number
-    of cells of the world (`_cells`: a drone's memory is keyed by its row or trip × `_cells` + a cell's index)."""
+    """What the swarm forms share: the world's `size`, their drones' numbers (sorted, `_drones`) and the number of
+    cells of the world (`_cells`: a drone's memory is keyed by its row or trip × `_cells` + a cell's index)."""
 
     def __init__(self, *, world_size: Cell, drones: Sequence[int]) -> None:
         """`drones`: the numbers of the drones flown (D01 is 1); UsageError if one is given twice."""
@@ -110,8 +109,8 @@ class SwarmBase:
                 if low <= k < low + self._cells for i in (k - low,)}
 
     def _keys(self, first: np.ndarray, cells: np.ndarray) -> np.ndarray:
-        """The memory keys ((k, m)) of `k` drones' `cells` ((k, m, 3); meaningful for inside cells), the drones'
-        keys starting at `first` × `_cells` ((k,): their rows or trips)."""
+        """The memory keys ((k, m)) of `k` drones' `cells` ((k, m, 3); meaningful for inside cells), the drones' keys
+        starting at `first` × `_cells` ((k,): their rows or trips)."""
         return (first * self._cells)[:, None] + linear_rows(cells.reshape(-1, 3), self.size).reshape(cells.shape[:2])
 
     @staticmethod
@@ -130,11 +129,6 @@ def in_bounds(cell: Cell, size: Cell) -> bool:
     return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
 
 
-Q = TypeVar("Q")
-A = TypeVar("A")
-R = TypeVar("R")
-
-
 def drive(plan: Generator[Q, A, R], oracle: Callable[[Q], A]) -> R:
     """Run a sensing generator (an autopilot's step, a plan) to its end, `oracle` answering every question."""
     try:
@@ -146,10 +140,8 @@ def drive(plan: Generator[Q, A, R], oracle: Callable[[Q], A]) -> R:
 
 
 def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -> tuple[Decision, int]:
-    """Drive one `step` to its decision with `oracle` answering every ASK.
-
-    Returns the decision and the number of ASK round trips it took.
-    """
+    """Drive one `step` to its decision with `oracle` answering every ASK: the decision, and the number of ASK round
+    trips it took."""
     asks = 0
 
     def counted(cells: tuple[Cell, ...]) -> Answers:
@@ -157,34 +149,25 @@ def run_step(pilot: Autopilot, pos: Cell, target: Cell | None, oracle: Oracle) -
         asks += 1
         return oracle(cells)
 
-    decision = drive(pilot.step(pos, target), counted)
-    if not isinstance(decision, Decision):
-        raise TypeError(f"{type(pilot).__name__}.step returned {decision!r}, not a Decision")
-    return decision, asks
+    return drive(pilot.step(pos, target), counted), asks
 
 
-def fly_round(steps: Mapping[str, Sensing]) -> Generator[dict[str, tuple[Cell, ...]], Mapping[str, Answers],
-                                                          dict[str, Decision]]:
-    """Drive several drones' `step` generators together: each round yields every pending question at
-    once ({drone: cells}) and receives every answer ({drone: answers}, asked concurrently on the network),
-    so a turn takes as many sequential ASK round trips as the most inquisitive drone, not the sum over
-    drones. Returns each drone's decision."""
+def fly_round(steps: Mapping[str, Sensing]) -> PilotsPlan[dict[str, Decision]]:
+    """Drive several drones' `step` generators together: each round yields every pending question at once ({drone:
+    cells}) and receives every answer ({drone: answers}, asked concurrently on the network), so a turn takes as many
+    sequential ASK round trips as the most inquisitive drone, not the sum over drones. Returns each drone's
+    decision."""
     decisions: dict[str, Decision] = {}
-    pending: Mapping[str, tuple[Cell, ...] | None] = dict.fromkeys(steps)  # each drone's question (None: to start)
-    answers: Mapping[str, Answers] = {}
+    pending: Mapping[str, Answers | None] = dict.fromkeys(steps)  # what each drone is told (None: it starts)
     while pending:
         asking: dict[str, tuple[Cell, ...]] = {}
-        for d, question in pending.items():
+        for d, told in pending.items():
             try:
-                asking[d] = next(steps[d]) if question is None else steps[d].send(answers[d])
+                asking[d] = next(steps[d]) if told is None else steps[d].send(told)
             except StopIteration as stop:
                 decisions[d] = stop.value
-        if asking:
-            answers = yield asking
-        pending = asking
-    for d, dec in decisions.items():
-        if not isinstance(dec, Decision):
-            raise TypeError(f"the autopilot of {d} returned {dec!r}, not a Decision")
+        answers = (yield asking) if asking else {}
+        pending = {d: answers[d] for d in asking}
     return decisions
 
 
@@ -200,17 +183,16 @@ def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
 
 
 def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell, Cell | None]], *,
-               host: str | None) -> PilotsPlan:
-    """The plan of one autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell,
-    target) orders: returns a swarm host's MOVES steps, or a lone drone's decision."""
+               host: str | None) -> PilotsPlan[StepTable | dict[str, Decision]]:
+    """The plan of one autopilot per drone (`pilots`), flown together (`fly_round`) on its (drone, cell, target)
+    orders: returns a swarm host's MOVES steps, or a lone drone's decision."""
     decisions = yield from fly_round({d: pilots[d].step(pos, target) for d, pos, target in orders})
     return steps_of(decisions) if host else decisions
 
 
 def fly_swarm(swarm: SwarmPilot, rows: np.ndarray) -> Generator[np.ndarray, np.ndarray, StepTable]:
-    """The plan of a swarm pilot for the orders `rows` (an OrderTable's): it yields the cells it asks
-    about (at most once), receives their kinds, and returns the MOVES steps (with the rankings of a pilot that
-    gives them)."""
+    """The plan of a swarm pilot for the orders `rows` (an OrderTable's): its question, then the MOVES steps (with the
+    rankings of a pilot that gives them)."""
     pos, note, *ranked = yield from swarm.step(rows["drone"], rows["pos"], rows["target"])
     cooperative = {"ranked": ranked[0]} if ranked else {}  # (a pilot without rankings: 0, none)
     return StepTable.build(drone=rows["drone"], pos=pos.astype(np.int32), note=note, **cooperative)

@@ -1,60 +1,57 @@
 """D* Lite over the 6-connected 3D grid, with sensing by ASK: an autopilot that always arrives.
 
-The world is unknown at first. Unknown cells are assumed free ("freespace assumption"); a cell the
-drone learns is a building (or outside) is blocked for good. The planner is D* Lite (Koenig &
-Likhachev): a backward incremental search rooted at the target, so when the drone moves only the
-heuristic's origin shifts (the ``km`` offset) and when it learns a blocked cell only the affected
-part of the search is repaired, never a search from scratch (a new target is the only restart).
+The world is unknown at first. Unknown cells are assumed free ("freespace assumption"); a cell the drone learns is a
+building (or outside) is blocked for good. The planner is D* Lite (Koenig & Likhachev): a backward incremental
+search rooted at the target, so when the drone moves only the heuristic's origin shifts (the ``km`` offset) and when
+it learns a blocked cell only the affected part of the search is repaired, never a search from scratch (a new target
+is the only restart).
 
 Sensing, each step (at most two ASK round trips):
 
-1. the in-world, not-known-blocked neighbours (needed anyway: another drone may be in one), the
-   target if still unknown (a target inside a building is seen at once), and the still-unknown
-   cells of the next ``lookahead`` cells of the planned path;
-2. only if the first answers revealed a building the search relied on: the still-unknown cells of
-   the repaired path's next ``lookahead`` cells.
+1. the in-world, not-known-blocked neighbours (needed anyway: another drone may be in one), the target if still
+   unknown (a target inside a building is seen at once), and the still-unknown cells of the next ``lookahead`` cells
+   of the planned path;
+2. only if the first answers revealed a building the search relied on: the still-unknown cells of the repaired
+   path's next ``lookahead`` cells.
 
-Sensing along the path ahead finds walls while there is still room to turn, so the drone veers
-early (often at no cost in a Manhattan world) instead of walking into dead ends. On the benchmark
-suite (BENCHMARKS.md) this takes the mean path from 1.34x to 1.11x the optimum (p90 1.98x to
-1.28x) for about 12 cells asked per step, 6 of them the neighbours.
+Sensing along the path ahead finds walls while there is still room to turn, so the drone veers early (often at no
+cost in a Manhattan world) instead of walking into dead ends. On the benchmark suite (BENCHMARKS.md) this takes the
+mean path from 1.34x to 1.11x the optimum (p90 1.98x to 1.28x) for about 12 cells asked per step, 6 of them the
+neighbours.
 
-Incremental, measured: on the benchmark's 64x64x16 cities a step takes 0.04 ms median (0.34 ms
-p90); the same code searching from scratch every step (map kept) takes 0.26 ms median (0.74 ms
-p90), so the repair is kept.
+Incremental, measured on the benchmark's 64x64x16 cities: 0.04 ms a step median (0.34 ms p90), against 0.26 ms
+(0.74 ms p90) for the same code searching from scratch every step (map kept).
 
 Implementation notes (speed in pure Python):
 
-* cells are flat indices into a grid padded by one layer of permanently blocked cells, so a
-  neighbour is ``i + offset`` with no bounds test and the world's edge is just a wall;
-* heap entries are single integers ``key * NP + cell`` (lazy deletion: stale entries are skipped
-  when popped; the heap is compacted when it grows large);
-* keys are ``(k1, tb)`` packed into one integer, with k1 = min(g, rhs) + h + km as in D* Lite. The
-  tie-break differs from the paper's (smaller g first): among equal k1, *under*-consistent cells
-  come first (tb = 0), then over-consistent cells nearest the drone (tb = h + 1). Diving towards
-  the drone on ties expands about a path's worth of cells in open space instead of the whole box
-  between drone and target. Correctness still holds: an over-consistent cell with a wrong rhs
-  always has an inconsistent cell with a strictly smaller k1 on its true shortest path (consistent
-  heuristic, integer costs), and a g that is too small always has an under-consistent cell with
-  k1 <= k1(start) behind it, which the tie-break pops before the search stops.
+* cells are flat indices into a grid padded by one layer of permanently blocked cells, so a neighbour is
+  ``i + offset`` with no bounds test and the world's edge is just a wall;
+* heap entries are single integers ``key * NP + cell`` (lazy deletion: stale entries are skipped when popped; the
+  heap is compacted when it grows large);
+* keys are ``(k1, tb)`` packed into one integer, with k1 = min(g, rhs) + h + km as in D* Lite. The tie-break differs
+  from the paper's (smaller g first): among equal k1, *under*-consistent cells come first (tb = 0), then
+  over-consistent cells nearest the drone (tb = h + 1). Diving towards the drone on ties expands about a path's
+  worth of cells in open space instead of the whole box between drone and target. Correctness still holds: an
+  over-consistent cell with a wrong rhs always has an inconsistent cell with a strictly smaller k1 on its true
+  shortest path (consistent heuristic, integer costs), and a g that is too small always has an under-consistent cell
+  with k1 <= k1(start) behind it, which the tie-break pops before the search stops.
   ``tests/test_autopilot_dstar.py`` checks the result against breadth-first search.
 
-Cooperation (docs/cooperation.md): besides its move, each step offers the coordinator's arbiter a ranked
-list of candidate cells (the decision's ``ranked``): its own cell and the neighbours it knows are free,
-by their distance to the target on the known map (closer first; staying ranks between the cells that
-get closer and those that do not), ties in the tie-break order below. The arbiter (PIBT) picks one of
-them for it, pushing other cooperative drones aside or pushed aside itself; on its target it offers its
-cell first and its free neighbours after, so that it can be pushed out of the way and come back.
+Cooperation (docs/cooperation.md): besides its move, each step offers the coordinator's arbiter a ranked list of
+candidate cells (the decision's ``ranked``): its own cell and the neighbours it knows are free, by their distance to
+the target on the known map (closer first; staying ranks between the cells that get closer and those that do not),
+ties in the tie-break order below. The arbiter (PIBT) picks one of them for it, pushing other cooperative drones
+aside or pushed aside itself; on its target it offers its cell first and its free neighbours after, so that it can
+be pushed out of the way and come back.
 
-A drone whose distance has not reached a new low for ``stuck_after`` turns (learning a wall starts the
-count again) says UNREACHABLE while it lasts: nothing it knows is in the way, so other drones are, and
-they have not let it pass in all that time (a dead-end corridor, a drone that never moves). It keeps
-offering its candidates and says NONE again once it gets closer.
+A drone whose distance has not reached a new low for ``stuck_after`` turns (learning a wall starts the count again)
+says UNREACHABLE while it lasts: nothing it knows is in the way, so other drones are, and they have not let it pass
+in all that time (a dead-end corridor, a drone that never moves). It keeps offering its candidates and says NONE
+again once it gets closer.
 
-The move it proposes (``pos``, for an arbitration that takes one move per drone) skips the other drones
-seen in this step's answers: another equally short move if there is one, else the drone waits
-``PATIENCE`` turns, then side-steps. Other drones block their cell for this step only: they never enter
-the search and are never remembered.
+The move it proposes (``pos``, for an arbitration that takes one move per drone) skips the other drones seen in this
+step's answers: another equally short move if there is one, else the drone waits ``PATIENCE`` turns, then
+side-steps. Other drones block their cell for this step only: they never enter the search and are never remembered.
 """
 
 from __future__ import annotations
@@ -100,12 +97,10 @@ class DStarPilot:
 
     def __init__(self, *, world_size: Cell, lookahead: int | None = None, rounds: int = 2,
                  known: np.ndarray | None = None, stuck_after: int | None = None) -> None:
-        """`known`: the world's buildings (a bool array of `world_size`) if the drone is given the map (the
-        benchmark's upper bound), else it learns them by ASK. `stuck_after`: see the module's doc
-        (default: twice the world's X + Y + Z, at least 64 turns)."""
+        """`known`: the world's buildings (a bool array of `world_size`) if the drone is given the map (the benchmark's
+        upper bound), else it learns them by ASK. `stuck_after`: see the module's doc (default: twice the world's
+        X + Y + Z, at least 64 turns)."""
         X, Y, Z = (int(v) for v in world_size)
-        if min(X, Y, Z) < 1:
-            raise ValueError(f"world size must be positive, got {world_size!r}")
         self.size: Cell = (X, Y, Z)
         self.lookahead = self.LOOKAHEAD if lookahead is None else max(0, int(lookahead))
         self.rounds = max(1, min(2, int(rounds)))
@@ -141,11 +136,9 @@ class DStarPilot:
 
     @property
     def distance(self) -> int | None:
-        """The planned number of moves from the last step's position to the target on the known map
-        (unknown cells counted free); None before any target or when it is unreachable."""
-        if self._goal < 0 or self._last < 0 or self._unreachable:
-            return None
-        g = self._g[self._last]
+        """The planned number of moves from the last step's position to the target on the known map (unknown cells
+        counted free); None before any target or when it is unreachable."""
+        g = INF if self._goal < 0 or self._unreachable else self._g[self._last]
         return None if g >= INF else g
 
     # ------------------------------------------------------------------ indices
@@ -164,15 +157,13 @@ class DStarPilot:
         self._goal = goal = self._index(target)
         self._g: list[int] = [INF] * n
         self._rhs: list[int] = [INF] * n
-        self._km = 0
-        self._last = start
-        self._unreachable = False
+        self._km, self._last, self._unreachable = 0, start, False
         self._orders: dict[tuple[int, int, int, bool], tuple[int, ...]] = {}
         self._home, self._pushed = False, 0  # _pushed: times it was pushed off its target
         self._restart()
         self._rhs[goal] = 0
         h = self._h(start, goal)
-        self._heap: list[int] = [((h + 0) * self._K + h + 1) * n + goal]
+        self._heap: list[int] = [(h * self._K + h + 1) * n + goal]
 
     def _h(self, a: int, b: int) -> int:
         xs, ys, zs = self._xs, self._ys, self._zs
@@ -187,18 +178,13 @@ class DStarPilot:
         if self._goal < 0:
             return False
         g, rhs = self._g, self._rhs
-        gold = g[c]
-        g[c] = INF
-        rhs[c] = INF
-        if gold >= INF:
+        want = g[c] + 1
+        g[c] = rhs[c] = INF
+        if want > INF:  # the search never reached it: nothing depends on it
             return False
-        want = gold + 1
-        goal = self._goal
-        offs = self._offs
-        for d in offs:
-            p = c + d
-            if rhs[p] == want and p != goal and state[p] != BLOCKED:
-                m = min(g[p + e] for e in offs)
+        for p in (c + d for d in self._offs):
+            if rhs[p] == want and p != self._goal and state[p] != BLOCKED:  # re-derive rhs(p) from its neighbours
+                m = min(g[p + e] for e in self._offs)
                 rhs[p] = r = m + 1 if m < INF else INF
                 if g[p] != r:  # inconsistent: queued with its key relative to s
                     h = self._h(p, s)
@@ -207,20 +193,15 @@ class DStarPilot:
         return True
 
     def _compute(self, s: int, t: int = -1) -> None:
-        """ComputeShortestPath: make g(t) (default: g(s)) the true distance to the goal on the
-        known map, with keys relative to the drone's cell s."""
-        heap = self._heap
-        g, rhs, state = self._g, self._rhs, self._state
+        """ComputeShortestPath: make g(t) (default: g(s)) the true distance to the goal on the known map, with keys
+        relative to the drone's cell s."""
+        heap, g, rhs, state = self._heap, self._g, self._rhs, self._state
         xs, ys, zs = self._xs, self._ys, self._zs
-        X, Y, Z = self.size
         # Heuristic by table look-up: h(u) = hx[xs[u]] + hy[ys[u]] + hz[zs[u]].
-        hx = [abs(c - xs[s]) for c in range(X + 2)]
-        hy = [abs(c - ys[s]) for c in range(Y + 2)]
-        hz = [abs(c - zs[s]) for c in range(Z + 2)]
-        km, K, NP, goal = self._km, self._K, self._n, self._goal
-        offs = self._offs
-        if t < 0:
-            t = s
+        hx, hy, hz = ([abs(c - axis[s]) for c in range(n + 2)] for axis, n in zip((xs, ys, zs), self.size))
+        km, K, NP, goal, offs = self._km, self._K, self._n, self._goal, self._offs
+        o0, o1, o2, o3, o4, o5 = offs
+        t = s if t < 0 else t
         ht = hx[xs[t]] + hy[ys[t]] + hz[zs[t]]
         while heap:
             top = heap[0]
@@ -253,14 +234,10 @@ class DStarPilot:
             else:  # under-consistent: raise it to infinity, re-derive it and its dependants
                 g[u] = INF
                 want = gu + 1
-                for p in (u, u + offs[0], u + offs[1], u + offs[2], u + offs[3], u + offs[4], u + offs[5]):
+                for p in (u, u + o0, u + o1, u + o2, u + o3, u + o4, u + o5):
                     if p == goal or state[p] == BLOCKED or (p != u and rhs[p] != want):
                         continue
-                    m = INF
-                    for e in offs:
-                        v = g[p + e]
-                        if v < m:
-                            m = v
+                    m = min(g[p + o0], g[p + o1], g[p + o2], g[p + o3], g[p + o4], g[p + o5])
                     r = m + 1 if m < INF else INF
                     rhs[p] = r
                     gp = g[p]
@@ -275,14 +252,11 @@ class DStarPilot:
     # ------------------------------------------------------------------ paths and tie-breaks
 
     def _order(self, i: int) -> tuple[int, ...]:
-        """Neighbour offsets of cell i in tie-break order, a fixed function of (cell, target):
-        climb first when the target is higher, then the horizontal axis with more way to go,
-        then the other one, descend last (flying high meets fewer buildings)."""
-        t = self._target
-        assert t is not None
-        dx = t[0] + 1 - self._xs[i]
-        dy = t[1] + 1 - self._ys[i]
-        dz = t[2] + 1 - self._zs[i]
+        """Neighbour offsets of cell i in tie-break order, a fixed function of (cell, target): climb first when the
+        target is higher, then the horizontal axis with more way to go, then the other one, descend last (flying
+        high meets fewer buildings)."""
+        goal, xs, ys, zs = self._goal, self._xs, self._ys, self._zs
+        dx, dy, dz = xs[goal] - xs[i], ys[goal] - ys[i], zs[goal] - zs[i]
         key = ((dx > 0) - (dx < 0), (dy > 0) - (dy < 0), (dz > 0) - (dz < 0), abs(dx) >= abs(dy))
         order = self._orders.get(key)
         if order is None:
@@ -302,25 +276,22 @@ class DStarPilot:
         best, bg = -1, INF
         for d in self._order(i):
             p = i + d
-            if p in skip or state[p] == BLOCKED:
-                continue
-            v = g[p]
-            if v < bg:
-                best, bg = p, v
+            if g[p] < bg and state[p] != BLOCKED and p not in skip:
+                best, bg = p, g[p]
         return best
 
-    def _ahead(self, s: int, limit: int) -> list[int]:
-        """The planned path's next `limit` cells after s (fewer at the goal or a dead end)."""
+    def _unknown_ahead(self, s: int) -> list[int]:
+        """The unknown cells among the planned path's next `lookahead` cells after s (fewer at the goal or a dead end;
+        none if the search found no path)."""
         path: list[int] = []
-        g, goal = self._g, self._goal
-        cur = s
-        while len(path) < limit and cur != goal:
+        g, cur = self._g, s
+        while g[s] < INF and len(path) < self.lookahead and cur != self._goal:
             nxt = self._best(cur)
             if nxt < 0 or g[nxt] >= g[cur]:
                 break
             path.append(nxt)
             cur = nxt
-        return path
+        return [p for p in path if self._state[p] == UNKNOWN]
 
     # ------------------------------------------------------------------ the step
 
@@ -355,9 +326,8 @@ class DStarPilot:
         if pos == target:  # parked: it may be pushed aside, to its free neighbours (asked once)
             self._restart()
             self._home = target == self._target
-            unknown = [s + d for d in self._offs if self._state[s + d] == UNKNOWN]
-            if unknown:
-                self._learn((yield tuple(self._cell(i) for i in unknown)), s)
+            if unknown := tuple(self._cell(s + d) for d in self._offs if self._state[s + d] == UNKNOWN):
+                self._learn((yield unknown), s)
             return Decision(pos=pos, note=Note.REACHED, ranked=self._aside(s))
         if not in_bounds(target, self.size):
             return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
@@ -377,9 +347,7 @@ class DStarPilot:
         # Round 1: neighbours (drones), the target if unknown, unknown cells along the path ahead.
         neigh = [s + d for d in self._offs if state[s + d] != BLOCKED]
         extra = [goal] if state[goal] == UNKNOWN else []
-        if self._g[s] < INF:
-            extra += [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
-        cells = tuple(self._cell(i) for i in dict.fromkeys(neigh + extra))  # each once, the neighbours first
+        cells = tuple(map(self._cell, dict.fromkeys(neigh + extra + self._unknown_ahead(s))))  # each once
         sensed: set[int] = set()  # the cells told empty, and those holding another drone
         drones: set[int] = set()
         changed = self._learn((yield cells), s, (sensed, drones)) if cells else False
@@ -387,13 +355,9 @@ class DStarPilot:
             return self._give_up(pos, s)
         if changed:
             self._compute(s)
-            # Round 2: the repaired path's unknown cells ahead.
-            if self.rounds > 1 and self._g[s] < INF:
-                more = [p for p in self._ahead(s, self.lookahead) if state[p] == UNKNOWN]
-                if more:
-                    answers = yield tuple(self._cell(i) for i in more)
-                    if self._learn(answers, s):
-                        self._compute(s)
+            more = self._unknown_ahead(s) if self.rounds > 1 else []  # round 2: the repaired path's
+            if more and self._learn((yield tuple(map(self._cell, more))), s):
+                self._compute(s)
         g = self._g
         if g[s] >= INF:
             return self._give_up(pos, s)
@@ -429,15 +393,13 @@ class DStarPilot:
                 if p not in avoid and state[p] != BLOCKED:
                     self._compute(s, p)
             nxt = self._best(s, avoid)
-        if nxt >= 0 and g[nxt] < g[s]:
-            self._waited = 0
-            move = nxt
-        else:  # every progressing move is taken by a drone: wait, then side-step
+        if nxt < 0 or g[nxt] >= g[s]:  # every progressing move is taken by a drone: wait, then side-step
             self._waited += 1
-            move = nxt if nxt >= 0 and g[nxt] < INF and self._waited > self.PATIENCE else s
-            if move != s:
-                self._waited = 0
-        return Decision(pos=self._cell(move), note=note, ranked=self._ranking(s, sensed))
+            if nxt < 0 or g[nxt] >= INF or self._waited <= self.PATIENCE:
+                nxt = s
+        if nxt != s:
+            self._waited = 0
+        return Decision(pos=self._cell(nxt), note=note, ranked=self._ranking(s, sensed))
 
     def _give_up(self, pos: Cell, s: int) -> Decision:
         """The target is unreachable, for good: the world is static, nothing new can be learnt by hovering."""
@@ -447,10 +409,10 @@ class DStarPilot:
     # ------------------------------------------------------------------ candidates for the arbiter
 
     def _ranking(self, s: int, sensed: set[int]) -> int:
-        """The candidates offered to the arbiter (packed): s and its neighbours sensed free this step, by
-        distance (g) on the known map, ties in tie-break order. The search settles g(s) and the best
-        neighbour's; the others' may still be estimates: settling them all would cost a search each and
-        steer the next steps' sensing elsewhere, for an order that the next step corrects anyway."""
+        """The candidates offered to the arbiter (packed): s and its neighbours sensed free this step, by distance (g)
+        on the known map, ties in tie-break order. The search settles g(s) and the best neighbour's; the others' may
+        still be estimates: settling them all would cost a search each and steer the next steps' sensing elsewhere,
+        for an order that the next step corrects anyway."""
         known, state = self._round, self._state
         get = self._g.__getitem__ if known is None else (lambda i: known.get(i, INF))
         ranked = sorted([(get(s), -1, 0)] + [(get(s + d), k, d) for k, d in enumerate(self._order(s))
@@ -458,15 +420,15 @@ class DStarPilot:
         return rank_steps((0, 0, 0) if d == 0 else AROUND[self._offs.index(d)] for _, _, d in ranked)
 
     def _detour(self, avoid: int, s: int) -> dict[int, int] | None:
-        """Each cell's distance to the target on the known map (unknown cells free) with cell `avoid` taken
-        out, by a breadth-first search from the target that stops once s and its neighbours are reached; None
-        if s cannot reach the target without `avoid` (no way round).
+        """Each cell's distance to the target on the known map (unknown cells free) with cell `avoid` taken out, by a
+        breadth-first search from the target that stops once s and its neighbours are reached; None if s cannot
+        reach the target without `avoid` (no way round).
 
-        Why: two drones whose targets are next to each other in a corridor, each coming from the end where
-        the other's target is, push each other off in turn for ever (PIBT's steps are greedy; the arbiter
-        can only choose among the cells offered). A drone that has not got closer for DETOUR_AFTER turns and
-        has a drone in its way ranks its cells by the way round that drone's cell instead, until it gets
-        closer than it ever was (docs/cooperation.md)."""
+        Why: two drones whose targets are next to each other in a corridor, each coming from the end where the
+        other's target is, push each other off in turn for ever (PIBT's steps are greedy; the arbiter can only
+        choose among the cells offered). A drone that has not got closer for DETOUR_AFTER turns and has a drone in
+        its way ranks its cells by the way round that drone's cell instead, until it gets closer than it ever was
+        (docs/cooperation.md)."""
         state, offs, goal = self._state, self._offs, self._goal
         if avoid == goal:
             return None
@@ -488,6 +450,6 @@ class DStarPilot:
         return dist if s in dist else None
 
     def _aside(self, s: int) -> int:
-        """The candidates of a drone at rest (parked, without a target, or unable to reach it): its own cell,
-        then the neighbours it knows are free, in the fixed order +x, -x, +y, -y, +z, -z."""
+        """The candidates of a drone at rest (parked, without a target, or unable to reach it): its own cell, then the
+        neighbours it knows are free, in the fixed order +x, -x, +y, -y, +z, -z."""
         return rank_steps([(0, 0, 0)] + [AROUND[k] for k, d in enumerate(self._offs) if self._state[s + d] == FREE])
