@@ -59,12 +59,3 @@ from .messages import (
     is_drone_id,
 )
 from .tables import Table
-
-__all__ = [
-    "MalformedMessage", "OutOfRange", "RejectCounter", "RemoteInputError", "StaleTurn", "UnknownEntity", "UsageError",
-    "WrongSender", "KEY_TABLE", "Keys", "KeySpec", "MESSAGE_TYPES", "SCHEMA_VERSION", "Aim", "AimTable", "Ans", "Ask",
-    "Cause", "Cell", "CellInfo", "CellKind", "Connect", "Done", "DroneState", "DroneStatus", "EndReason", "Intent",
-    "MapRequest", "Message", "Move", "MoveTable", "Moves", "Note", "Nps", "Order", "OrderTable", "Over", "Phase",
-    "Refused", "Role", "Start", "StartTable", "Status", "StatusTable", "Step", "StepTable", "Target", "Turn", "Upd",
-    "Welcome", "WorldMap", "WorldSpec", "decode", "drone_id", "encode", "is_drone_id", "Table",
-]

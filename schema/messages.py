@@ -11,10 +11,9 @@ from __future__ import annotations
 import dataclasses
 import enum
 import operator
-import types
 import typing
 from dataclasses import dataclass
-from typing import ClassVar, Union
+from typing import ClassVar
 
 import msgpack
 import numpy as np
@@ -278,7 +277,7 @@ class WorldSpec:
 _ALIVE_CODE = code_of(DroneState.ALIVE)
 
 
-class StartTable(Table, record=Start, layout=(("drone", Col.DRONE), ("pos", Col.CELL))):
+class StartTable(Table, record=Start, layout=(Col.DRONE, Col.CELL)):
     """A WELCOME's starts, one row per drone admitted."""
 
     __slots__ = ()
@@ -288,13 +287,13 @@ class StartTable(Table, record=Start, layout=(("drone", Col.DRONE), ("pos", Col.
         return dict(zip(self.ids(), map(tuple, self.rows["pos"].tolist())))
 
 
-class AimTable(Table, record=Aim, layout=(("drone", Col.DRONE), ("pos", Col.CELL))):
+class AimTable(Table, record=Aim, layout=(Col.DRONE, Col.CELL)):
     """A ground station's DONE's targets, one row per drone."""
 
     __slots__ = ()
 
 
-class OrderTable(Table, record=Order, layout=(("drone", Col.DRONE), ("pos", Col.CELL), ("target", Col.OPTIONAL))):
+class OrderTable(Table, record=Order, layout=(Col.DRONE, Col.CELL, Col.OPTIONAL)):
     """A TURN(DRONES)'s orders, one row per alive drone."""
 
     __slots__ = ()
@@ -306,22 +305,19 @@ class OrderTable(Table, record=Order, layout=(("drone", Col.DRONE), ("pos", Col.
                      if mine is None or d in mine)
 
 
-class MoveTable(Table, record=Move, layout=(("drone", Col.DRONE), ("src", Col.CELL), ("dst", Col.SIGNED))):
+class MoveTable(Table, record=Move, layout=(Col.DRONE, Col.CELL, Col.SIGNED)):
     """A TURN(ENV)'s accepted moves, one row per moving drone."""
 
     __slots__ = ()
 
 
-class StepTable(Table, record=Step, layout=(
-        ("drone", Col.DRONE), ("pos", Col.SIGNED), ("note", Note), ("ranked", Col.RANKED))):
+class StepTable(Table, record=Step, layout=(Col.DRONE, Col.SIGNED, Note, Col.RANKED)):
     """A MOVES's steps, one row per hosted drone."""
 
     __slots__ = ()
 
 
-class StatusTable(Table, record=DroneStatus, layout=(
-        ("drone", Col.DRONE), ("pos", Col.SIGNED), ("state", DroneState), ("target", Col.OPTIONAL), ("note", Note),
-        ("cause", Cause))):
+class StatusTable(Table, record=DroneStatus, layout=(Col.DRONE, Col.SIGNED, DroneState, Col.OPTIONAL, Note, Cause)):
     """A STATUS's drone states, one row per drone."""
 
     __slots__ = ()
@@ -525,13 +521,6 @@ class Ans(Message):
                                        f"order, got {p!r:.60} after {last!r}")
             last = p
 
-    def occupants(self) -> dict[int, tuple[str, ...]]:
-        """Asked cell index -> the drones in it (only the occupied ones)."""
-        out: dict[int, tuple[str, ...]] = {}
-        for i, d in self.drones:
-            out[i] = out.get(i, ()) + (d,)
-        return out
-
     def check_fits(self, cells: tuple[Cell, ...]) -> None:
         """MalformedMessage if this is not an answer to a question about `cells` (one kind each)."""
         _check(len(cells) == len(self.kinds), f"{len(self.kinds)} answers for {len(cells)} asked cells")
@@ -539,7 +528,9 @@ class Ans(Message):
     def infos(self, cells: tuple[Cell, ...]) -> tuple[CellInfo, ...]:
         """One CellInfo per asked cell; MalformedMessage if the answer does not fit the question."""
         self.check_fits(cells)
-        drones = self.occupants()
+        drones: dict[int, tuple[str, ...]] = {}  # asked cell index -> the drones in it
+        for i, d in self.drones:
+            drones[i] = drones.get(i, ()) + (d,)
         return tuple(CellInfo(pos=c, kind=_KINDS[k], drones=drones.get(i, ())) for i, (c, k) in
                      enumerate(zip(cells, self.kinds)))
 
@@ -646,7 +637,7 @@ _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
 # --------------------------------------------------------------------------- codec
 #
 # Driven by each dataclass's type hints, resolved once (`_codec`): int, str, bytes, Cell, enums, the records
-# that travel as records (`CellInfo`, `WorldSpec`), tables, and X | None or tuple[X, ...] of those.
+# that travel as records (`CellInfo`, `WorldSpec`), tables, and tuple[X, ...] of those.
 
 Encoder = typing.Callable[[object], typing.Any]
 _enum_value: Encoder = operator.attrgetter("value")
@@ -667,10 +658,6 @@ def _codec(hint: object) -> tuple[Encoder, Encoder]:
     """How a field of type `hint` goes on the wire (msgpack packs ints, strings, bytes and tuples itself) and
     is read from it (the types only: the values are checked by the message or record that receives them)."""
     args = typing.get_args(hint)
-    if typing.get_origin(hint) in (Union, types.UnionType):  # X | None
-        enc, dec = _codec(next(a for a in args if a is not type(None)))
-        return (_identity if enc is _identity else lambda v: None if v is None else enc(v),
-                lambda v: None if v is None else dec(v))
     if typing.get_origin(hint) is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
             item, dec = _codec(args[0])

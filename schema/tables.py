@@ -133,7 +133,8 @@ _FROM_ROW: dict[Col, typing.Callable] = {Col.DRONE: drone_name, Col.OPTIONAL: op
 
 class Table:
     """Rows of one record type, held as a structured numpy array (read-only). A subclass names the record
-    type and each field's column (a `Col`, or an enum class): ``class T(Table, record=R, layout=(...))``."""
+    type and the column of each of its fields, in order (a `Col`, or an enum class):
+    ``class T(Table, record=R, layout=(Col.DRONE, ...))``."""
 
     __slots__ = ("rows",)
     RECORD: ClassVar[type]
@@ -143,12 +144,10 @@ class Table:
     AT: ClassVar[tuple[int, ...]]  # each column's first int in an unpacked row
     rows: np.ndarray
 
-    def __init_subclass__(cls, *, record: type, layout: tuple[tuple[str, Col | type[enum.Enum]], ...]) -> None:
-        cls.RECORD, cls.LAYOUT = record, layout
-        assert tuple(name for name, _ in layout) == tuple(f.name for f in dataclasses.fields(record)), \
-            f"{cls.__name__}: LAYOUT must name {record.__name__}'s fields in order"
+    def __init_subclass__(cls, *, record: type, layout: tuple[Col | type[enum.Enum], ...]) -> None:
         assert issubclass(record, Row) and "LAYOUT" not in vars(record), f"{cls.__name__}: one table per Row"
-        record.LAYOUT = layout
+        cls.RECORD = record
+        cls.LAYOUT = record.LAYOUT = tuple(zip((f.name for f in dataclasses.fields(record)), layout, strict=True))
         dtypes = [_DTYPES.get(kind, _ENUM_DTYPE) for _, kind in cls.LAYOUT]
         cls.DTYPE = np.dtype([(name, dt, shape) for (name, _), (dt, shape, _) in zip(cls.LAYOUT, dtypes)])
         codes = [code for _, _, code in dtypes]
