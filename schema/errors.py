@@ -15,15 +15,11 @@ from collections.abc import Callable
 from .tuning import REJECT_EXCERPT, REJECT_LOG_FIRST, REJECT_LOG_WINDOW
 
 
-class DronesimError(Exception):
-    """Base class of every error this project raises on purpose."""
-
-
-class UsageError(DronesimError):
+class UsageError(Exception):
     """Local misuse: a wrong argument, an unreadable file, an impossible configuration."""
 
 
-class RemoteInputError(DronesimError):
+class RemoteInputError(Exception):
     """A message received from the network that cannot be accepted; `reason`, a short stable slug, is the
     counter key (e.g. ``malformed``, ``stale-turn``)."""
 
