@@ -132,17 +132,13 @@ def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), id
     roots = [Keys(r).root for r in roots]  # validates each root
     if not roots:
         raise ValueError("at least one key root is needed")
-    rules: list[dict] = []
-    subjects: list[dict] = []
-    policies: list[dict] = []
-    for p in principals(drones, hosts):
-        mine = [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
-                 "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
-        rules += mine
-        subjects.append({"id": p.name, **{field: [p.name] for field in IDENTITIES[identity]}})
-        policies.append({"id": f"{p.name} policy", "rules": [r["id"] for r in mine], "subjects": [p.name]})
-    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
-            "policies": policies}
+    rules = {p: [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
+                  "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
+             for p in principals(drones, hosts)}  # (its policy's, for each principal)
+    return {"enabled": True, "default_permission": "deny", "rules": [r for mine in rules.values() for r in mine],
+            "subjects": [{"id": p.name, **{field: [p.name] for field in IDENTITIES[identity]}} for p in rules],
+            "policies": [{"id": f"{p.name} policy", "rules": [r["id"] for r in mine], "subjects": [p.name]}
+                         for p, mine in rules.items()]}
 
 
 # --------------------------------------------------------------------------- evaluation
