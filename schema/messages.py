@@ -640,7 +640,6 @@ _BY_TAG: dict[str, type[Message]] = {cls.TAG: cls for cls in MESSAGE_TYPES}
 # that travel as records (`CellInfo`, `WorldSpec`), tables, and tuple[X, ...] of those.
 
 Encoder = typing.Callable[[object], typing.Any]
-_enum_value: Encoder = operator.attrgetter("value")
 
 
 def _identity(v: object) -> object:
@@ -665,7 +664,7 @@ def _codec(hint: object) -> tuple[Encoder, Encoder]:
                     _as_seq if dec is _as_seq or dec is _identity else lambda v: tuple(map(dec, _as_seq(v))))
         return _identity, _as_seq  # Cell: validated by the record itself
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        return _enum_value, _enum_converter(hint)
+        return operator.attrgetter("value"), _enum_converter(hint)
     if hint in (CellInfo, WorldSpec):
         return _record_codec(hint)
     if hint in TABLES:

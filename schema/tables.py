@@ -39,11 +39,10 @@ class Col(enum.Enum):
     RANKED = "u32 ranked steps: 3 bits each, lowest first, codes 1..7 (see `ranked_steps`), 0 for none"
 
 
-#: Each column's numpy type and shape, and its ints in a row's bytes for `struct` (an enum column: a u8 code).
+#: Each `Col`'s numpy type and shape, and its ints in a row's bytes for `struct`.
 _CELL = ("<i4", (3,), "3i")
 _DTYPES: dict[object, tuple[str, tuple, str]] = {Col.DRONE: ("<u2", (), "H"), Col.RANKED: ("<u4", (), "I"),
                                                   Col.CELL: _CELL, Col.SIGNED: _CELL, Col.OPTIONAL: _CELL}
-_ENUM_DTYPE = ("u1", (), "B")
 _NONE = (-1, -1, -1)
 #: The smallest coordinate of each cell column (the largest is MAX_COORD).
 _LOWEST = {Col.CELL: 0, Col.SIGNED: -MAX_COORD, Col.OPTIONAL: 0}
@@ -148,7 +147,7 @@ class Table:
         assert issubclass(record, Row) and "LAYOUT" not in vars(record), f"{cls.__name__}: one table per Row"
         cls.RECORD = record
         cls.LAYOUT = record.LAYOUT = tuple(zip((f.name for f in dataclasses.fields(record)), layout, strict=True))
-        dtypes = [_DTYPES.get(kind, _ENUM_DTYPE) for _, kind in cls.LAYOUT]
+        dtypes = [_DTYPES.get(kind, ("u1", (), "B")) for _, kind in cls.LAYOUT]  # an enum column: a u8 code
         cls.DTYPE = np.dtype([(name, dt, shape) for (name, _), (dt, shape, _) in zip(cls.LAYOUT, dtypes)])
         codes = [code for _, _, code in dtypes]
         cls.ROW = struct.Struct("<" + "".join(codes))
