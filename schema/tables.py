@@ -144,9 +144,9 @@ class Table:
     rows: np.ndarray
 
     def __init_subclass__(cls, *, record: type, layout: tuple[Col | type[enum.Enum], ...]) -> None:
+        cls.RECORD, cls.LAYOUT = record, tuple(zip((f.name for f in dataclasses.fields(record)), layout, strict=True))
         assert issubclass(record, Row) and "LAYOUT" not in vars(record), f"{cls.__name__}: one table per Row"
-        cls.RECORD = record
-        cls.LAYOUT = record.LAYOUT = tuple(zip((f.name for f in dataclasses.fields(record)), layout, strict=True))
+        record.LAYOUT = cls.LAYOUT
         dtypes = [_DTYPES.get(kind, ("u1", (), "B")) for _, kind in cls.LAYOUT]  # an enum column: a u8 code
         cls.DTYPE = np.dtype([(name, dt, shape) for (name, _), (dt, shape, _) in zip(cls.LAYOUT, dtypes)])
         codes = [code for _, _, code in dtypes]
