@@ -132,13 +132,13 @@ def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), id
     roots = [Keys(r).root for r in roots]  # validates each root
     if not roots:
         raise ValueError("at least one key root is needed")
-    rules = {p: [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
-                  "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
-             for p in principals(drones, hosts)}  # (its policy's, for each principal)
-    return {"enabled": True, "default_permission": "deny", "rules": [r for mine in rules.values() for r in mine],
-            "subjects": [{"id": p.name, **{field: [p.name] for field in IDENTITIES[identity]}} for p in rules],
-            "policies": [{"id": f"{p.name} policy", "rules": [r["id"] for r in mine], "subjects": [p.name]}
-                         for p, mine in rules.items()]}
+    rules_of = {p: [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
+                     "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
+                for p in principals(drones, hosts)}
+    return {"enabled": True, "default_permission": "deny", "rules": [r for rules in rules_of.values() for r in rules],
+            "subjects": [{"id": p.name, **{field: [p.name] for field in IDENTITIES[identity]}} for p in rules_of],
+            "policies": [{"id": f"{p.name} policy", "rules": [r["id"] for r in rules], "subjects": [p.name]}
+                         for p, rules in rules_of.items()]}
 
 
 # --------------------------------------------------------------------------- evaluation
