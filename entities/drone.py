@@ -134,13 +134,6 @@ class _Deciding:
     offline: bool = False  # no more ASKs: what the chart cannot answer gets no answer (patience over, or superseded)
     question: object = None  # the plan's next question, held while what was asked ahead is on its way (never None)
 
-    def next(self, r: _Round | None) -> object:
-        """The plan's next question, `r`'s answers given (StopIteration with the moves at its end)."""
-        if self.question is not None:
-            question, self.question = self.question, None
-            return question
-        return next(self.plan) if r is None else self.plan.send(r.reply(r.answers))
-
     @functools.cached_property
     def occupancy(self) -> dict[Cell, tuple[str, ...]]:
         return occupancy_of(self.turn.orders)
@@ -244,8 +237,10 @@ class DroneProcess:
         self._deciding = None
         self._done = (d.key, moves)
         effects += self._messages(d.turn, moves)
-        if self.charting and not self.chart.complete:  # around where its drones mean to be: their next
-            effects += self._prefetch(d.turn.turn, sorted(set(_cells_of(moves))))  # sensing, asked ahead
+        if self.charting and not self.chart.complete:  # around where its drones mean to be: their next sensing
+            cells = (map(tuple, moves.column("pos").tolist()) if isinstance(moves, StepTable)
+                     else (dec.pos for dec in moves.values()))
+            effects += self._prefetch(d.turn.turn, sorted(set(cells)))  # asked ahead
         return effects
 
     def _run(self, d: _Deciding, effects: list[Effect]) -> StepTable | dict[str, Decision] | None:
@@ -254,8 +249,11 @@ class DroneProcess:
             r = d.round
             if r is not None and (r.asking or (r.unanswered and not self._settle_unanswered(d, r, effects))):
                 return None  # answers on their way, or an environment awaited
-            try:
-                question = d.next(r)
+            try:  # the plan's next question (`r`'s answers given), or its moves
+                if d.question is not None:
+                    question, d.question = d.question, None
+                else:
+                    question = next(d.plan) if r is None else d.plan.send(r.reply(r.answers))
             except StopIteration as stop:
                 return stop.value
             d.round = r = self._pose(d, question)
@@ -440,13 +438,6 @@ def _reply(reply: Ans | WorldMap | RemoteInputError) -> Any:
     return reply
 
 
-def _cells_of(moves: StepTable | dict[str, Decision]) -> Iterable[Cell]:
-    """Where a turn's moves take the drones."""
-    if isinstance(moves, StepTable):
-        return map(tuple, moves.column("pos").tolist())
-    return (dec.pos for dec in moves.values())
-
-
 @functools.cache
 def _ball(reach: int) -> np.ndarray:
     """The offsets within `reach` steps of a cell (6-connectivity), itself excluded, nearest first (the neighbours in
@@ -483,8 +474,7 @@ class Chart:
         if world_map.size != self.size:
             raise OutOfRange(f"a MAP of a {world_map.size} world, this game's is {self.size}")
         grid = World.from_packed(world_map.size, world_map.buildings).grid  # the format's one reader
-        kinds = np.where(grid.ravel(), np.uint8(CellKind.BUILDING), np.uint8(CellKind.EMPTY))
-        np.frombuffer(self._kinds, dtype=np.uint8)[:] = kinds
+        np.frombuffer(self._kinds, dtype=np.uint8)[:] = np.where(grid.ravel(), CellKind.BUILDING, CellKind.EMPTY)
         self.complete = True
 
     def _at(self, cell: Cell) -> int | None:

@@ -61,12 +61,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from entities.world import linear_rows
+from entities.world import in_bounds, linear_rows
 from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing, in_bounds
+from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing
 
 #: A ranking key is h * _H + off * _OFF + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in
 #: AROUND order, 6 staying); off is 1 for a step off the cruise (see the module), else 0; tie is 0 for staying
