@@ -156,8 +156,6 @@ class LrtaPilot:
 
     def __init__(self, *, world_size: Cell, slack: int | None = None, lookahead: int = LOOKAHEAD) -> None:
         self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
-        if min(self.size) < 1:
-            raise ValueError(f"world size must be positive, got {world_size!r}")
         self.slack = default_slack(self.size) if slack is None else max(0, int(slack))
         self.look = Lookahead(lookahead)
         self._target: Cell | None = None
