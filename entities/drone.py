@@ -217,11 +217,10 @@ class DroneProcess:
 
     def _turn(self, turn: Turn) -> list[Effect]:
         key, plan = self._plan(turn)
-        deciding = self._deciding
-        if deciding is not None and deciding.key == key:
-            return []  # a repeat of the TURN being decided: its moves go out when decided
-        if deciding is not None:  # superseded: decided without asking anything more, and not sent
-            self._finish_offline(deciding)
+        if (deciding := self._deciding) is not None:
+            if deciding.key == key:
+                return []  # a repeat of the TURN being decided: its moves go out when decided
+            self._finish_offline(deciding)  # superseded: decided without asking anything more, and not sent
         if self._done is not None and self._done[0] == key:  # a repeat of the last TURN: the same moves
             self._deciding = None
             return self._messages(turn, self._done[1])
