@@ -142,6 +142,8 @@ def _heightmap(size: Cell, buildings: tuple[Building, ...]) -> np.ndarray:
     heights = np.zeros((nx, ny), dtype=np.int64)
     owner = np.full((nx, ny), -1, dtype=np.int64)
     for i, b in enumerate(buildings):
+        if not isinstance(b, Building):
+            raise UsageError(f"building #{i} must be a Building, got {b!r}")
         if not b.fits_in(size):
             raise UsageError(f"building #{i} {b.as_list()} does not fit in a world of size {list(size)}")
         fp = owner[b.x:b.x + b.length, b.y:b.y + b.width]
