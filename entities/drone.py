@@ -236,10 +236,8 @@ class DroneProcess:
         self._deciding = None
         self._done = (d.key, moves)
         effects += self._messages(d.turn, moves)
-        if self.charting and not self.chart.complete:  # around where its drones mean to be: their next sensing
-            cells = (map(tuple, moves.column("pos").tolist()) if isinstance(moves, StepTable)
-                     else (dec.pos for dec in moves.values()))
-            effects += self._prefetch(d.turn.turn, sorted(set(cells)))  # asked ahead
+        if self.charting and not self.chart.complete:  # around where its drones mean to be: their next
+            effects += self._prefetch(d.turn.turn, sorted(set(_cells_of(moves))))  # sensing, asked ahead
         return effects
 
     def _run(self, d: _Deciding, effects: list[Effect]) -> StepTable | dict[str, Decision] | None:
@@ -420,8 +418,6 @@ class DroneProcess:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around `around` that this
         process has not been told yet (nothing once the whole map is charted); `turn`: as for `_poll_map`."""
         effects = self._poll_map(turn)
-        if self.chart.complete:
-            return effects
         cells = self.chart.unknown(around)
         if cells and len(around) <= ASK_AHEAD_MAX_DRONES:  # a few drones: ask farther at once, and again only
             cells = self.chart.unknown(around, reach=ASK_AHEAD_REACH)  # every few turns (a swarm: its next ring)
@@ -435,6 +431,13 @@ def _reply(reply: Ans | WorldMap | RemoteInputError) -> Any:
     if isinstance(reply, RemoteInputError):
         raise reply
     return reply
+
+
+def _cells_of(moves: StepTable | dict[str, Decision]) -> Iterable[Cell]:
+    """Where a turn's moves take the drones."""
+    if isinstance(moves, StepTable):
+        return map(tuple, moves.column("pos").tolist())
+    return (dec.pos for dec in moves.values())
 
 
 @functools.cache
