@@ -134,13 +134,6 @@ class _Deciding:
     offline: bool = False  # no more ASKs: what the chart cannot answer gets no answer (patience over, or superseded)
     question: object = None  # the plan's next question, held while what was asked ahead is on its way (never None)
 
-    def next(self, r: _Round | None) -> object:
-        """The plan's next question, `r`'s answers given (StopIteration with the moves at its end)."""
-        if self.question is not None:
-            question, self.question = self.question, None
-            return question
-        return next(self.plan) if r is None else self.plan.send(r.reply(r.answers))
-
     @functools.cached_property
     def occupancy(self) -> dict[Cell, tuple[str, ...]]:
         return occupancy_of(self.turn.orders)
@@ -224,11 +217,10 @@ class DroneProcess:
 
     def _turn(self, turn: Turn) -> list[Effect]:
         key, plan = self._plan(turn)
-        deciding = self._deciding
-        if deciding is not None and deciding.key == key:
-            return []  # a repeat of the TURN being decided: its moves go out when decided
-        if deciding is not None:  # superseded: decided without asking anything more, and not sent
-            self._finish_offline(deciding)
+        if (deciding := self._deciding) is not None:
+            if deciding.key == key:
+                return []  # a repeat of the TURN being decided: its moves go out when decided
+            self._finish_offline(deciding)  # superseded: decided without asking anything more, and not sent
         if self._done is not None and self._done[0] == key:  # a repeat of the last TURN: the same moves
             self._deciding = None
             return self._messages(turn, self._done[1])
@@ -254,8 +246,11 @@ class DroneProcess:
             r = d.round
             if r is not None and (r.asking or (r.unanswered and not self._settle_unanswered(d, r, effects))):
                 return None  # answers on their way, or an environment awaited
-            try:
-                question = d.next(r)
+            try:  # the plan's next question (`r`'s answers given), or its moves
+                if d.question is not None:
+                    question, d.question = d.question, None
+                else:
+                    question = next(d.plan) if r is None else d.plan.send(r.reply(r.answers))
             except StopIteration as stop:
                 return stop.value
             d.round = r = self._pose(d, question)
@@ -423,8 +418,6 @@ class DroneProcess:
         """Ask now, for the static world (turn 0: answered at once), the kinds of the cells around `around` that this
         process has not been told yet (nothing once the whole map is charted); `turn`: as for `_poll_map`."""
         effects = self._poll_map(turn)
-        if self.chart.complete:
-            return effects
         cells = self.chart.unknown(around)
         if cells and len(around) <= ASK_AHEAD_MAX_DRONES:  # a few drones: ask farther at once, and again only
             cells = self.chart.unknown(around, reach=ASK_AHEAD_REACH)  # every few turns (a swarm: its next ring)
@@ -483,8 +476,7 @@ class Chart:
         if world_map.size != self.size:
             raise OutOfRange(f"a MAP of a {world_map.size} world, this game's is {self.size}")
         grid = World.from_packed(world_map.size, world_map.buildings).grid  # the format's one reader
-        kinds = np.where(grid.ravel(), np.uint8(CellKind.BUILDING), np.uint8(CellKind.EMPTY))
-        np.frombuffer(self._kinds, dtype=np.uint8)[:] = kinds
+        np.frombuffer(self._kinds, dtype=np.uint8)[:] = np.where(grid.ravel(), CellKind.BUILDING, CellKind.EMPTY)
         self.complete = True
 
     def _at(self, cell: Cell) -> int | None:

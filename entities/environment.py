@@ -12,28 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from schema import (
-    Ans,
-    Ask,
-    Cell,
-    CellInfo,
-    CellKind,
-    MapRequest,
-    MoveTable,
-    Over,
-    Phase,
-    RemoteInputError,
-    Status,
-    Turn,
-    Upd,
-    Welcome,
-    WorldMap,
-    WorldSpec,
-    is_drone_id,
-)
-from schema.errors import OutOfRange, Refusal, StaleTurn, UnknownEntity, WrongSender
-from schema.messages import AROUND, asked_cells, is_host_id
-from schema.tables import drone_name, drone_number
+from schema import Ans, Ask, Cell, CellInfo, CellKind, MapRequest, MoveTable, Over, Phase
+from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, WrongSender
+from schema.messages import AROUND, Status, Turn, Upd, Welcome, WorldMap, WorldSpec, asked_cells, is_host_id
+from schema.tables import drone_name, drone_number, is_drone_id
 from schema.tuning import SURVEY_FEW_CELLS
 
 from .world import World, inside_rows, linear_rows

@@ -77,8 +77,7 @@ def read_map(text: str) -> np.ndarray:
         row = row.rstrip("\r")
         if len(row) != width:
             raise UsageError(f".map row {y}: {len(row)} characters, width is {width}")
-        bad = set(row) - FREE_CHARS - BLOCKED_CHARS
-        if bad:
+        if bad := set(row) - FREE_CHARS - BLOCKED_CHARS:
             raise UsageError(f".map row {y}: unknown characters {''.join(sorted(bad))!r}")
         grid[:, y] = [c in BLOCKED_CHARS for c in row]
     return grid

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import operator
 import typing
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,6 +51,10 @@ def linear_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
     """The index in the C-ordered grid of each row's cell, as int64 (meaningful for inside cells)."""
     _, ny, nz = size
     return (cells[:, 0].astype(np.int64) * ny + cells[:, 1]) * nz + cells[:, 2]
+
+
+def in_bounds(cell: Sequence[int], size: Cell) -> bool:
+    return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
 
 
 def padded_steps(size: Cell) -> tuple[int, int, tuple[int, ...]]:
@@ -230,9 +234,9 @@ class World:
         # there, and at most kz for a keep_free cell (x, y, kz), so that a building stops below it.
         limit = np.full((nx, ny), nz, dtype=np.int32)  # sizes are at most 65536
         for i, kf in enumerate(keep_free):
-            kx, ky, kz = _cell(kf, f"keep_free[{i}]")
-            if not (0 <= kx < nx and 0 <= ky < ny and 0 <= kz < nz):
-                raise UsageError(f"keep_free cell {(kx, ky, kz)} is outside the world {size}")
+            kx, ky, kz = kept = _cell(kf, f"keep_free[{i}]")
+            if not in_bounds(kept, size):
+                raise UsageError(f"keep_free cell {kept} is outside the world {size}")
             limit[kx, ky] = min(limit[kx, ky], kz)
 
         placed: list[Building] = []
@@ -326,10 +330,10 @@ class World:
             return cls.from_buildings(size, buildings)
         grid = np.zeros(size, dtype=bool)
         for i, item in enumerate(data[key]):
-            x, y, z = _json_ints(item, 3, f"cells[{i}]")
-            if not (0 <= x < size[0] and 0 <= y < size[1] and 0 <= z < size[2]):
-                raise UsageError(f"cells[{i}] {[x, y, z]} is outside the world of size {list(size)}")
-            grid[x, y, z] = True
+            cell = _json_ints(item, 3, f"cells[{i}]")
+            if not in_bounds(cell, size):
+                raise UsageError(f"cells[{i}] {cell} is outside the world of size {list(size)}")
+            grid[tuple(cell)] = True
         return cls._trusted(size, grid, ())
 
     @classmethod
@@ -340,17 +344,12 @@ class World:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read world file {str(path)!r}: {exc}") from None
-        if Path(path).suffix == ".map":
-            try:
-                return cls.from_grid(world_grid(read_map(text)))
-            except UsageError as exc:
-                raise UsageError(f"world file {str(path)!r}: {exc}") from None
         try:
-            data = json.loads(text)
+            if Path(path).suffix == ".map":
+                return cls.from_grid(world_grid(read_map(text)))
+            return cls.from_json(json.loads(text))
         except json.JSONDecodeError as exc:
             raise UsageError(f"world file {str(path)!r} is not valid JSON: {exc}") from None
-        try:
-            return cls.from_json(data)
         except UsageError as exc:
             raise UsageError(f"world file {str(path)!r}: {exc}") from None
 
@@ -366,9 +365,7 @@ class World:
             raise UsageError(f"cannot write world file {str(path)!r}: {exc}") from None
 
     def contains(self, cell: Cell) -> bool:
-        x, y, z = cell
-        nx, ny, nz = self.size
-        return 0 <= x < nx and 0 <= y < ny and 0 <= z < nz
+        return in_bounds(cell, self.size)
 
     def is_building(self, cell: Cell) -> bool:
         """Whether `cell` is a building cell (False outside the world)."""

@@ -125,10 +125,6 @@ class SwarmBase:
                 np.asarray(target, dtype=np.int64).reshape(n, 3))
 
 
-def in_bounds(cell: Cell, size: Cell) -> bool:
-    return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
-
-
 def drive(plan: Generator[Q, A, R], oracle: Callable[[Q], A]) -> R:
     """Run a sensing generator (an autopilot's step, a plan) to its end, `oracle` answering every question."""
     try:

@@ -63,12 +63,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from entities.world import padded_steps
+from entities.world import in_bounds, padded_steps
 from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import rank_steps
 
-from .base import Decision, Sensing, in_bounds
+from .base import Decision, Sensing
 
 UNKNOWN, FREE, BLOCKED = 0, 1, 2
 INF = 1 << 30

@@ -61,12 +61,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from entities.world import linear_rows
+from entities.world import in_bounds, linear_rows
 from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing, in_bounds
+from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing
 
 #: A ranking key is h * _H + off * _OFF + tie * _TIE + the step's index in RANK_STEPS (0-5 the neighbours in
 #: AROUND order, 6 staying); off is 1 for a step off the cruise (see the module), else 0; tie is 0 for staying
@@ -156,8 +156,6 @@ class LrtaPilot:
 
     def __init__(self, *, world_size: Cell, slack: int | None = None, lookahead: int = LOOKAHEAD) -> None:
         self.size: Cell = (int(world_size[0]), int(world_size[1]), int(world_size[2]))
-        if min(self.size) < 1:
-            raise ValueError(f"world size must be positive, got {world_size!r}")
         self.slack = default_slack(self.size) if slack is None else max(0, int(slack))
         self.look = Lookahead(lookahead)
         self._target: Cell | None = None

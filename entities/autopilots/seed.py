@@ -49,10 +49,11 @@ from typing import ClassVar
 
 import numpy as np
 
+from entities.world import in_bounds
 from schema import Cell, CellInfo, CellKind, Note
 from schema.tables import code_of
 
-from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing, in_bounds
+from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing
 
 #: The 4 horizontal directions as (dx, dy), in the seed's tie-break order.
 DIRECTIONS: tuple[tuple[str, tuple[int, int]], ...] = (("NORTH", (-1, 0)), ("SOUTH", (1, 0)), ("EAST", (0, 1)),

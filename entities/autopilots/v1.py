@@ -17,10 +17,11 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+from entities.world import in_bounds
 from schema import Cell, Note
 from schema.messages import AROUND
 
-from .base import Decision, Sensing, in_bounds
+from .base import Decision, Sensing
 
 
 class V1Pilot:
