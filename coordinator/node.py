@@ -107,11 +107,9 @@ class Executor:
                 continue
             match eff:
                 case Publish(Turn() as turn) if self.pace and turn.turn > self._turn:
-                    self._turn = turn.turn
-                    if self.clock() < self._last + self.pace:
-                        self._held = [eff]
-                    else:
-                        self.release([eff])
+                    self._turn, self._held = turn.turn, [eff]
+                    if self.clock() >= self._last + self.pace:
+                        self.release()
                 case Publish(msg, data):
                     self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):
@@ -130,9 +128,9 @@ class Executor:
         """Seconds until held effects are due (None: nothing held)."""
         return max(0.0, self._last + self.pace - self.clock()) if self._held else None
 
-    def release(self, held: list | None = None) -> None:
-        """Send the held effects (or `held`, a new turn's TURN) now: a new turn starts."""
-        held, self._held = held or self._held, []
+    def release(self) -> None:
+        """Send the held effects now: a new turn starts."""
+        held, self._held = self._held, []
         self._last = self.clock()
         self.out.put(_key_of(self.keys, held[0].msg), held[0].msg)
         self.run(held[1:])
