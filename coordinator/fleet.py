@@ -35,7 +35,6 @@ class DroneView:
     misses: int
     host: str | None
     autopilot: str
-    cooperative: bool
 
 
 class Fleet:
@@ -112,8 +111,8 @@ class Drones(Mapping[str, DroneView]):
         f, i = self._fleet, self._fleet.index[d]
         target = None if f.target[i, 0] < 0 else cell_of(f.target[i])
         return DroneView(pos=cell_of(f.pos[i]), state=STATES[f.state[i]], target=target, note=NOTES[f.note[i]],
-                         cause=CAUSES[f.cause[i]], misses=int(f.misses[i]), host=f.host[i], autopilot=f.autopilot[i],
-                         cooperative=bool(f.cooperative[i]))
+                         cause=CAUSES[f.cause[i]], misses=int(f.misses[i]), host=f.host[i],
+                         autopilot=f.autopilot[i])
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._fleet.ids)

@@ -107,11 +107,9 @@ class Executor:
                 continue
             match eff:
                 case Publish(Turn() as turn) if self.pace and turn.turn > self._turn:
-                    self._turn = turn.turn
-                    if self.clock() < self._last + self.pace:
-                        self._held = [eff]
-                    else:
-                        self.release([eff])
+                    self._turn, self._held = turn.turn, [eff]
+                    if self.clock() >= self._last + self.pace:
+                        self.release()
                 case Publish(msg, data):
                     self.out.put(_key_of(self.keys, msg), msg, data)
                 case Reply(query, msg):
@@ -130,9 +128,9 @@ class Executor:
         """Seconds until held effects are due (None: nothing held)."""
         return max(0.0, self._last + self.pace - self.clock()) if self._held else None
 
-    def release(self, held: list | None = None) -> None:
-        """Send the held effects (or `held`, a new turn's TURN) now: a new turn starts."""
-        held, self._held = held or self._held, []
+    def release(self) -> None:
+        """Send the held effects now: a new turn starts."""
+        held, self._held = self._held, []
         self._last = self.clock()
         self.out.put(_key_of(self.keys, held[0].msg), held[0].msg)
         self.run(held[1:])
@@ -166,12 +164,6 @@ class Coordinator:
         loop, woken, acts on it (`timeout` is 0 then)."""
         self._stops.append(event)
 
-    def _interrupted(self, event: Interrupted, now: float) -> None:
-        if self.signal is not None:  # a second one: stop waiting for the entities to leave
-            self._linger_until = now
-        self.signal = event.signum
-        self.effects.run(self.engine.interrupt(f"the coordinator was stopped ({event.name})"))
-
     def timeout(self) -> float | None:
         now = self.clock()
         if self._stops:
@@ -190,13 +182,17 @@ class Coordinator:
 
     def handle(self, event: object) -> None:
         run, engine, now = self.effects.run, self.engine, self.clock()
-        while self._stops:
-            self._interrupted(self._stops.pop(0), now)
+        if isinstance(event, Interrupted):
+            self.stop(event)
+        while self._stops:  # a signal ends the game
+            sig = self._stops.pop(0)
+            if self.signal is not None:  # a second one: stop waiting for the entities to leave
+                self._linger_until = now
+            self.signal = sig.signum
+            run(engine.interrupt(f"the coordinator was stopped ({sig.name})"))
         match event:
             case None:
                 self._due(now)
-            case Interrupted():
-                self._interrupted(event, now)
             case Asked(asked, Connect() as hello):
                 for gone in [k for k in self._vanishing if k[0] == hello.sender]:  # a process that replaces a
                     del self._vanishing[gone]  # vanished one: the departure counts now, not after SETTLE_S
