@@ -11,7 +11,7 @@ import bisect
 import pathlib
 import re
 from collections import Counter
-from collections.abc import Callable, Collection, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import takewhile
 
@@ -34,7 +34,6 @@ from schema import (
     Turn,
     UsageError,
     Welcome,
-    is_drone_id,
 )
 from schema.tables import drone_name
 from schema.tuning import ANSWER_AHEAD
@@ -47,9 +46,7 @@ _ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,5})\s*[= ]\s*)?"
 
 
 def correct_form(text: str, size: Cell, world: World | None = None) -> Cell:
-    """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed) must name a cell inside the world (of `size`), and,
-    given the `world`, not a building cell (no drone can get there: a seed drone would wander to the turn
-    limit looking for a way in)."""
+    """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed), a cell `check_cell` accepts."""
     try:
         x, y, z = (int(p) for p in text.replace(" ", ",").split(",") if p.strip())
     except ValueError:
@@ -58,7 +55,8 @@ def correct_form(text: str, size: Cell, world: World | None = None) -> Cell:
 
 
 def check_cell(cell: Cell, size: Cell, world: World | None = None) -> Cell:
-    """`cell` if it is inside the world (of `size`) and, given the `world`, not a building cell."""
+    """`cell` if it is inside the world (of `size`) and, given the `world`, not a building cell (no drone can
+    get there: a seed drone would wander to the turn limit looking for a way in)."""
     if not all(0 <= c < s for c, s in zip(cell, size)):
         raise UsageError(f"{cell} is outside the world: 0 <= x < {size[0]}, 0 <= y < {size[1]}, 0 <= z < {size[2]}")
     if world is not None and world.is_building(cell):
@@ -113,8 +111,8 @@ class Plan:
 
     @classmethod
     def parse(cls, texts: Iterable[str], size: Cell, default_drone: str = "D01", world: World | None = None) -> Plan:
-        items = sorted(_plan_items(texts, size, default_drone, world), key=lambda item: item[0])
-        return cls(tuple(items))  # a stable sort: within a turn, the last written wins
+        # a stable sort: within a turn, the last written wins
+        return cls(tuple(sorted(_plan_items(texts, size, default_drone, world), key=lambda item: item[0])))
 
     @staticmethod
     def drones_of(texts: Iterable[str], size: Cell, default_drone: str = "D01", world: World | None = None) -> set[str]:
@@ -144,18 +142,16 @@ class Plan:
         return {d for _, d, _ in self.items}
 
 
-def parse_command(line: str, size: Cell, drones: Iterable[str], world: World | None = None) -> dict[str, Cell]:
+def parse_command(line: str, size: Cell, drones: Sequence[str], world: World | None = None) -> dict[str, Cell]:
     """One interactive line: ``x,y,z`` (the only or first drone) or ``Dnn x,y,z``."""
-    drones = list(drones)
     head = re.match(r"\s*(D\d{2,5})(?:\s*=\s*|\s+)(.*)\Z", line)  # "D02 1 2 3", "D02=1,2,3"
-    drone_part, cell_part = (head[1], head[2]) if head else ("", line)
-    cell_part = re.sub(r"(?<=\d)[\s,]+(?=-?\d)", ",", cell_part.strip())  # "1 2 3" -> "1,2,3"
-    line = f"{drone_part}={cell_part}" if drone_part else cell_part
+    drone_part, cell_part = (f"{head[1]}=", head[2]) if head else ("", line)
+    line = drone_part + re.sub(r"(?<=\d)[\s,]+(?=-?\d)", ",", cell_part.strip())  # "1 2 3" -> "1,2,3"
     m = _ITEM.match(line)
     if not m or m["turn"]:
         raise UsageError(f"{line.strip()!r}: type x,y,z or Dnn x,y,z")
     drone = m["drone"] or drones[0]
-    if not is_drone_id(drone) or drone not in drones:
+    if drone not in drones:
         raise UsageError(f"unknown drone {drone}: this game flies {', '.join(drones)}")
     return {drone: correct_form(m["cell"], size, world)}
 
