@@ -100,16 +100,15 @@ def carry_out(state: GroundState, cmd: object) -> None:
         return
     try:
         if cmd.action == "target":
-            result = state.set_target(cmd.args.get("drone"), cmd.args["cell"])
+            result: dict | Rejected = state.set_target(cmd.args.get("drone"), cmd.args["cell"])
         else:
             result = state.control(cmd.action, cmd.args.get("value"))
     except Rejected as err:
-        cmd.reply.put(err)
+        result = err
     except Exception as exc:  # a bug must not leave the page waiting, nor stop the game
         log.exception("command %s failed", cmd.action)
-        cmd.reply.put(Rejected(f"internal error: {exc}", 500))
-    else:
-        cmd.reply.put(result)
+        result = Rejected(f"internal error: {exc}", 500)
+    cmd.reply.put(result)
 
 
 def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[str, int]) -> Over:
