@@ -306,10 +306,9 @@ Effect = Send | Show | End
 
 
 class Station:
-    """The ground station's side of the protocol, shared by the scripted, the interactive, the web and the
-    benchmark's station: fed the coordinator's messages, it returns what to do. No network, no clock (times
-    are seconds of any monotonic clock). Each GCS phase it answers with a DONE carrying the targets that
-    change (`gcs_done`), its plan's of that turn and the person's. Who decides, and when:
+    """The ground station's side of the protocol: fed the coordinator's messages, it returns what to do. No
+    network, no clock (times are seconds of any monotonic clock). Each GCS phase it answers with a DONE
+    carrying the targets that change (`gcs_done`), its plan's of that turn and the person's. Who decides, and when:
     - a script (neither `console` nor `hold`) answers at once from its plan, intent FINAL from the plan's
       last turn (given `quit_at`: CONTINUE until that turn, then QUIT), and answers ahead the coming phases
       in which its plan has nothing new (`turns_to_answer_ahead`): the coordinator takes them without a

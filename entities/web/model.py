@@ -328,12 +328,10 @@ class GroundState:
                    "trail": [list(c) for c in self.trails[d]]} for d, s in self.drones.items()]
         end = self.station.over
         over = None if end is None else {"turn": end.turn, "reason": end.reason.value, "text": end.text}
-        return {
-            "mode": "live", "seq": self.seq, "turn": self.turn, "phase": self.phase,
-            "status_turn": max(self.status_turn, 0), "drones": drones, "log": list(self.log), "over": over,
-            "control": {"paused": self.paused, "pace": self.pace, "waiting": code, "text": text,
-                        "pending": self.pending},
-        }
+        return {"mode": "live", "seq": self.seq, "turn": self.turn, "phase": self.phase,
+                "status_turn": max(self.status_turn, 0), "drones": drones, "log": list(self.log), "over": over,
+                "control": {"paused": self.paused, "pace": self.pace, "waiting": code, "text": text,
+                            "pending": self.pending}}
 
 
 def check_pace_arg(value: float) -> float:
