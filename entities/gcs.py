@@ -317,8 +317,7 @@ class Station:
       `pending` until `answer` is called.
     It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the targets
     in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last turn is in, or
-    `FINAL_STATUS_WAIT` s after OVER.
-    """
+    `FINAL_STATUS_WAIT` s after OVER."""
 
     def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
                  quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD) -> None:
