@@ -363,9 +363,8 @@ class Station:
 
     def wake(self, now: float) -> float | None:
         """Seconds until `tick` has something to do (None: nothing, whatever the time)."""
-        if self._over_since is None or self.ended:
-            return None
-        return max(0.0, self._over_since + FINAL_STATUS_WAIT - now)
+        since = self._over_since  # (None once it has ended)
+        return None if since is None else max(0.0, since + FINAL_STATUS_WAIT - now)
 
     def tick(self, now: float) -> list[Effect]:
         """What is due at `now` without a message: the end, once the last STATUS is given up."""
