@@ -388,20 +388,19 @@ class Station:
         return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
 
     def _gcs_phase(self, turn: int) -> list[Effect]:
-        effects: list[Effect] = []
-        if turn > self.answered and turn != self.pending:
-            if self.scripted and self.quit_at is not None and turn >= self.quit_at:
-                self.answered = turn
-                return [Send(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
-            self.want(self.plan.at(turn))
-            if self.hold:
-                self.pending = turn
-                return []
-            new, intent = (self.console.ask(turn, self.wanted, self.gone) if self.console is not None
-                           else ({}, self.intent(turn)))
-            effects = self.answer(turn, intent, new)
-        self.answered = max(self.answered, turn)
-        return effects + self._ahead(turn)
+        if turn <= self.answered or turn == self.pending:  # answered (maybe ahead), or held
+            self.answered = max(self.answered, turn)
+            return self._ahead(turn)
+        if self.scripted and self.quit_at is not None and turn >= self.quit_at:
+            self.answered = turn
+            return [Send(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
+        self.want(self.plan.at(turn))
+        if self.hold:
+            self.pending = turn
+            return []
+        new, intent = (self.console.ask(turn, self.wanted, self.gone) if self.console is not None
+                       else ({}, self.intent(turn)))
+        return self.answer(turn, intent, new) + self._ahead(turn)
 
     def _ahead(self, turn: int) -> list[Effect]:
         """A script with nothing new in the turns after `turn` answers them now, in batches: once half of
