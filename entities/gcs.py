@@ -408,11 +408,9 @@ class Station:
         and wake the coordinator together)."""
         if not self.scripted or self.answered - turn > self.ahead // 2:
             return []
-        effects: list[Effect] = []
-        for ahead in turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead):
-            effects.append(Send(gcs_done(ahead, {}, self.intent(ahead)), ahead=True))
-            self.answered = ahead
-        return effects
+        turns = turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead)
+        self.answered = max([self.answered, *turns])
+        return [Send(gcs_done(ahead, {}, self.intent(ahead)), ahead=True) for ahead in turns]
 
     def _status(self, status: Status) -> list[Effect]:
         if status.turn < self.status_turn:
