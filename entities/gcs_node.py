@@ -127,11 +127,11 @@ class Lines:
         return line.rstrip("\n")
 
 
-def main(args: argparse.Namespace, logger: logging.Logger, interactive: bool) -> Over:
+def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
     conf, keys, draw = zenoh_config(args), Keys(args.root), not args.no_draw
     with zenoh.open(conf) as session:
         inbox = listen(session, keys, logger)
-        lines = Lines(sys.stdin) if interactive else None
+        lines = None if args.targets or args.script or args.scenario else Lines(sys.stdin)  # no plan: a person
         with waking(partial(inbox.post, None), *([lines.wake] if lines else [])):  # a signal ends any wait
             member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)
             ground = Ground.from_welcome(member.welcome, args.targets, args.script)
@@ -165,14 +165,13 @@ def cli(argv: list[str] | None = None) -> int:
     logger = setup_logging(args.log_level, "GCS")
 
     def run() -> object:
-        interactive = not args.targets and not args.script and not args.scenario
         if args.scenario:
             from dronesim.scenario import Scenario
 
             args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
         if args.web is not None or args.replay is not None:  # the browser ground station (docs/web-gcs.md)
             return run_web(args, logger)
-        return main(args, logger, interactive)
+        return main(args, logger)
 
     try:
         return until_stopped(run, logger)  # Ctrl-C, SIGTERM: wherever the main thread waits (a prompt too)
