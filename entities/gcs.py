@@ -11,7 +11,7 @@ import bisect
 import pathlib
 import re
 from collections import Counter
-from collections.abc import Callable, Collection, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import takewhile
 
@@ -34,7 +34,6 @@ from schema import (
     Turn,
     UsageError,
     Welcome,
-    is_drone_id,
 )
 from schema.tables import drone_name
 from schema.tuning import ANSWER_AHEAD
@@ -47,9 +46,7 @@ _ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,5})\s*[= ]\s*)?"
 
 
 def correct_form(text: str, size: Cell, world: World | None = None) -> Cell:
-    """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed) must name a cell inside the world (of `size`), and,
-    given the `world`, not a building cell (no drone can get there: a seed drone would wander to the turn
-    limit looking for a way in)."""
+    """The seed's CORRECTFORM: ``x,y,z`` (spaces allowed), a cell `check_cell` accepts."""
     try:
         x, y, z = (int(p) for p in text.replace(" ", ",").split(",") if p.strip())
     except ValueError:
@@ -58,7 +55,8 @@ def correct_form(text: str, size: Cell, world: World | None = None) -> Cell:
 
 
 def check_cell(cell: Cell, size: Cell, world: World | None = None) -> Cell:
-    """`cell` if it is inside the world (of `size`) and, given the `world`, not a building cell."""
+    """`cell` if it is inside the world (of `size`) and, given the `world`, not a building cell (no drone can
+    get there: a seed drone would wander to the turn limit looking for a way in)."""
     if not all(0 <= c < s for c, s in zip(cell, size)):
         raise UsageError(f"{cell} is outside the world: 0 <= x < {size[0]}, 0 <= y < {size[1]}, 0 <= z < {size[2]}")
     if world is not None and world.is_building(cell):
@@ -113,8 +111,8 @@ class Plan:
 
     @classmethod
     def parse(cls, texts: Iterable[str], size: Cell, default_drone: str = "D01", world: World | None = None) -> Plan:
-        items = sorted(_plan_items(texts, size, default_drone, world), key=lambda item: item[0])
-        return cls(tuple(items))  # a stable sort: within a turn, the last written wins
+        # a stable sort: within a turn, the last written wins
+        return cls(tuple(sorted(_plan_items(texts, size, default_drone, world), key=lambda item: item[0])))
 
     @staticmethod
     def drones_of(texts: Iterable[str], size: Cell, default_drone: str = "D01", world: World | None = None) -> set[str]:
@@ -144,18 +142,16 @@ class Plan:
         return {d for _, d, _ in self.items}
 
 
-def parse_command(line: str, size: Cell, drones: Iterable[str], world: World | None = None) -> dict[str, Cell]:
+def parse_command(line: str, size: Cell, drones: Sequence[str], world: World | None = None) -> dict[str, Cell]:
     """One interactive line: ``x,y,z`` (the only or first drone) or ``Dnn x,y,z``."""
-    drones = list(drones)
     head = re.match(r"\s*(D\d{2,5})(?:\s*=\s*|\s+)(.*)\Z", line)  # "D02 1 2 3", "D02=1,2,3"
-    drone_part, cell_part = (head[1], head[2]) if head else ("", line)
-    cell_part = re.sub(r"(?<=\d)[\s,]+(?=-?\d)", ",", cell_part.strip())  # "1 2 3" -> "1,2,3"
-    line = f"{drone_part}={cell_part}" if drone_part else cell_part
+    drone_part, cell_part = (f"{head[1]}=", head[2]) if head else ("", line)
+    line = drone_part + re.sub(r"(?<=\d)[\s,]+(?=-?\d)", ",", cell_part.strip())  # "1 2 3" -> "1,2,3"
     m = _ITEM.match(line)
     if not m or m["turn"]:
         raise UsageError(f"{line.strip()!r}: type x,y,z or Dnn x,y,z")
     drone = m["drone"] or drones[0]
-    if not is_drone_id(drone) or drone not in drones:
+    if drone not in drones:
         raise UsageError(f"unknown drone {drone}: this game flies {', '.join(drones)}")
     return {drone: correct_form(m["cell"], size, world)}
 
@@ -310,10 +306,9 @@ Effect = Send | Show | End
 
 
 class Station:
-    """The ground station's side of the protocol, shared by the scripted, the interactive, the web and the
-    benchmark's station: fed the coordinator's messages, it returns what to do. No network, no clock (times
-    are seconds of any monotonic clock). Each GCS phase it answers with a DONE carrying the targets that
-    change (`gcs_done`), its plan's of that turn and the person's. Who decides, and when:
+    """The ground station's side of the protocol: fed the coordinator's messages, it returns what to do. No
+    network, no clock (times are seconds of any monotonic clock). Each GCS phase it answers with a DONE
+    carrying the targets that change (`gcs_done`), its plan's of that turn and the person's. Who decides, and when:
     - a script (neither `console` nor `hold`) answers at once from its plan, intent FINAL from the plan's
       last turn (given `quit_at`: CONTINUE until that turn, then QUIT), and answers ahead the coming phases
       in which its plan has nothing new (`turns_to_answer_ahead`): the coordinator takes them without a
@@ -322,8 +317,7 @@ class Station:
       `pending` until `answer` is called.
     It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the targets
     in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last turn is in, or
-    `FINAL_STATUS_WAIT` s after OVER.
-    """
+    `FINAL_STATUS_WAIT` s after OVER."""
 
     def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
                  quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD) -> None:
@@ -369,9 +363,8 @@ class Station:
 
     def wake(self, now: float) -> float | None:
         """Seconds until `tick` has something to do (None: nothing, whatever the time)."""
-        if self._over_since is None or self.ended:
-            return None
-        return max(0.0, self._over_since + FINAL_STATUS_WAIT - now)
+        since = self._over_since  # (None once it has ended)
+        return None if since is None else max(0.0, since + FINAL_STATUS_WAIT - now)
 
     def tick(self, now: float) -> list[Effect]:
         """What is due at `now` without a message: the end, once the last STATUS is given up."""
@@ -395,20 +388,19 @@ class Station:
         return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
 
     def _gcs_phase(self, turn: int) -> list[Effect]:
-        effects: list[Effect] = []
-        if turn > self.answered and turn != self.pending:
-            if self.scripted and self.quit_at is not None and turn >= self.quit_at:
-                self.answered = turn
-                return [Send(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
-            self.want(self.plan.at(turn))
-            if self.hold:
-                self.pending = turn
-                return []
-            new, intent = (self.console.ask(turn, self.wanted, self.gone) if self.console is not None
-                           else ({}, self.intent(turn)))
-            effects = self.answer(turn, intent, new)
-        self.answered = max(self.answered, turn)
-        return effects + self._ahead(turn)
+        if turn <= self.answered or turn == self.pending:  # answered (maybe ahead), or held
+            self.answered = max(self.answered, turn)
+            return self._ahead(turn)
+        if self.scripted and self.quit_at is not None and turn >= self.quit_at:
+            self.answered = turn
+            return [Send(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
+        self.want(self.plan.at(turn))
+        if self.hold:
+            self.pending = turn
+            return []
+        new, intent = (self.console.ask(turn, self.wanted, self.gone) if self.console is not None
+                       else ({}, self.intent(turn)))
+        return self.answer(turn, intent, new) + self._ahead(turn)
 
     def _ahead(self, turn: int) -> list[Effect]:
         """A script with nothing new in the turns after `turn` answers them now, in batches: once half of
@@ -416,11 +408,9 @@ class Station:
         and wake the coordinator together)."""
         if not self.scripted or self.answered - turn > self.ahead // 2:
             return []
-        effects: list[Effect] = []
-        for ahead in turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead):
-            effects.append(Send(gcs_done(ahead, {}, self.intent(ahead)), ahead=True))
-            self.answered = ahead
-        return effects
+        turns = turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead)
+        self.answered = max([self.answered, *turns])
+        return [Send(gcs_done(ahead, {}, self.intent(ahead)), ahead=True) for ahead in turns]
 
     def _status(self, status: Status) -> list[Effect]:
         if status.turn < self.status_turn:

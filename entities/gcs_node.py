@@ -127,17 +127,16 @@ class Lines:
         return line.rstrip("\n")
 
 
-def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, plan_texts: list[str], script: str | None,
-         interactive: bool, quiet: bool = False, draw: bool = True, connect_timeout: float = 30.0,
-         grace: float = 30.0) -> Over:
+def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
+    conf, keys, draw = zenoh_config(args), Keys(args.root), not args.no_draw
     with zenoh.open(conf) as session:
         inbox = listen(session, keys, logger)
-        lines = Lines(sys.stdin) if interactive else None
+        lines = None if args.targets or args.script or args.scenario else Lines(sys.stdin)  # no plan: a person
         with waking(partial(inbox.post, None), *([lines.wake] if lines else [])):  # a signal ends any wait
-            member = join(session, inbox, logger, connect_timeout=connect_timeout, grace=grace)
-            ground = Ground.from_welcome(member.welcome, plan_texts, script)
+            member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)
+            ground = Ground.from_welcome(member.welcome, args.targets, args.script)
             console = Console(ground.world, list(ground.starts), read=lines.read) if lines else None
-            station = Station(ground, console=console, verbose=not quiet)
+            station = Station(ground, console=console, verbose=not args.quiet)
             if draw:
                 print(station.opening(), flush=True)
             show = publisher(Outbox(session), keys, logger, lambda text: print(text, flush=True))
@@ -166,16 +165,13 @@ def cli(argv: list[str] | None = None) -> int:
     logger = setup_logging(args.log_level, "GCS")
 
     def run() -> object:
-        interactive = not args.targets and not args.script and not args.scenario
         if args.scenario:
             from dronesim.scenario import Scenario
 
             args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
         if args.web is not None or args.replay is not None:  # the browser ground station (docs/web-gcs.md)
             return run_web(args, logger)
-        return main(zenoh_config(args), keys=Keys(args.root), logger=logger, plan_texts=args.targets,
-                    script=args.script, interactive=interactive, quiet=args.quiet, draw=not args.no_draw,
-                    connect_timeout=args.connect_timeout, grace=args.grace)
+        return main(args, logger)
 
     try:
         return until_stopped(run, logger)  # Ctrl-C, SIGTERM: wherever the main thread waits (a prompt too)

@@ -168,10 +168,6 @@ class GroundState:
         return self.station.pending
 
     @property
-    def over(self) -> Over | None:
-        return self.station.over
-
-    @property
     def status_turn(self) -> int:
         return self.station.status_turn
 
@@ -202,7 +198,7 @@ class GroundState:
             case Status() if msg.turn >= self.status_turn:
                 self._show_status(msg)
                 effects = self.station.receive(msg, now)
-            case Over() if self.over is None:
+            case Over() if self.station.over is None:
                 effects = self.station.receive(msg, now)
                 self.log.append(over_entry(msg.turn, msg.reason.value, msg.text))
             case _:
@@ -227,7 +223,7 @@ class GroundState:
 
     def set_target(self, drone: object, cell: Cell) -> dict:
         """Checked: a known, alive drone, a cell inside the world and not a building's (the seed's correctForm)."""
-        if self.over is not None:
+        if self.station.over is not None:
             raise Rejected("the game is over: no more targets", 409)
         if not isinstance(drone, str) or not is_drone_id(drone):
             raise Rejected(f"{drone!r} is not a drone id (like D01)", 400)
@@ -247,7 +243,7 @@ class GroundState:
 
     def control(self, action: object, value: object = None) -> dict:
         """pause, resume, step, quit, or pace (with `value` seconds)."""
-        if self.over is not None:
+        if self.station.over is not None:
             raise Rejected("the game is over", 409)
         match action:
             case "pause" | "resume":
@@ -277,8 +273,8 @@ class GroundState:
 
     def waiting(self) -> tuple[str, str]:
         """(code, text) of what the game is waiting for, for the page."""
-        if self.over is not None:
-            return "over", f"game over: {self.over.reason.value}"
+        if self.station.over is not None:
+            return "over", f"game over: {self.station.over.reason.value}"
         if self.quit_requested:
             return "quitting", "ending the game at the next GCS phase"
         if self.turn == 0:
@@ -295,7 +291,7 @@ class GroundState:
 
     def due(self, now: float) -> float | None:
         """Seconds until the pending GCS phase should be answered (0: now), or None: held, no timer."""
-        if self.pending is None or self.over is not None or self.quit_sent:
+        if self.pending is None or self.station.over is not None or self.quit_sent:
             return None
         if self.quit_requested or self.step_requested:
             return 0.0
@@ -307,8 +303,7 @@ class GroundState:
         return max(0.0, wait)
 
     def wake(self, now: float) -> float | None:  # (as Station.wake)
-        waits = [w for w in (self.due(now), self.station.wake(now)) if w is not None]
-        return min(waits) if waits else None
+        return min((w for w in (self.due(now), self.station.wake(now)) if w is not None), default=None)
 
     def tick(self, now: float) -> list[Effect | Refresh]:
         """What is due at `now`: the pending phase's answer, the end, the page's new state."""
@@ -331,14 +326,12 @@ class GroundState:
         drones = [{**drone_json(d, s.pos, view_of(s), s.cause, s.target),
                    "wanted": None if (wanted := self.wanted.get(d)) is None else list(wanted),
                    "trail": [list(c) for c in self.trails[d]]} for d, s in self.drones.items()]
-        over = None if self.over is None else {"turn": self.over.turn, "reason": self.over.reason.value,
-                                               "text": self.over.text}
-        return {
-            "mode": "live", "seq": self.seq, "turn": self.turn, "phase": self.phase,
-            "status_turn": max(self.status_turn, 0), "drones": drones, "log": list(self.log), "over": over,
-            "control": {"paused": self.paused, "pace": self.pace, "waiting": code, "text": text,
-                        "pending": self.pending},
-        }
+        end = self.station.over
+        over = None if end is None else {"turn": end.turn, "reason": end.reason.value, "text": end.text}
+        return {"mode": "live", "seq": self.seq, "turn": self.turn, "phase": self.phase,
+                "status_turn": max(self.status_turn, 0), "drones": drones, "log": list(self.log), "over": over,
+                "control": {"paused": self.paused, "pace": self.pace, "waiting": code, "text": text,
+                            "pending": self.pending}}
 
 
 def check_pace_arg(value: float) -> float:

@@ -100,16 +100,15 @@ def carry_out(state: GroundState, cmd: object) -> None:
         return
     try:
         if cmd.action == "target":
-            result = state.set_target(cmd.args.get("drone"), cmd.args["cell"])
+            result: dict | Rejected = state.set_target(cmd.args.get("drone"), cmd.args["cell"])
         else:
             result = state.control(cmd.action, cmd.args.get("value"))
     except Rejected as err:
-        cmd.reply.put(err)
+        result = err
     except Exception as exc:  # a bug must not leave the page waiting, nor stop the game
         log.exception("command %s failed", cmd.action)
-        cmd.reply.put(Rejected(f"internal error: {exc}", 500))
-    else:
-        cmd.reply.put(result)
+        result = Rejected(f"internal error: {exc}", 500)
+    cmd.reply.put(result)
 
 
 def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[str, int]) -> Over:
@@ -168,15 +167,15 @@ class ReplayBackend:
         raise Rejected("this is a replay: it takes no targets nor commands", 409)
 
 
-def run_replay(path: str, *, address: tuple[str, int], linger: float, logger: logging.Logger) -> None:
+def run_replay(args: argparse.Namespace, logger: logging.Logger, address: tuple[str, int]) -> None:
     from .replay import Replay
 
-    replay = Replay(path)
+    replay = Replay(args.replay)
     server = WebServer(address, ReplayBackend(replay), Hub(), logger)
     server.start()
-    print(f"web ground station: {server.url} (replay of {path}: {len(replay.frames) - 1} turns)", flush=True)
+    print(f"web ground station: {server.url} (replay of {args.replay}: {len(replay.frames) - 1} turns)", flush=True)
     try:
-        threading.Event().wait(linger if linger > 0 else None)
+        threading.Event().wait(args.linger if args.linger > 0 else None)
     finally:
         server.stop(drain=1.0)
 
@@ -190,10 +189,8 @@ def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
     address = parse_address(args.web)
     if args.linger < 0:
         raise UsageError(f"--linger must be >= 0, got {args.linger:g}")
-    if args.replay is not None:
-        run_replay(args.replay, address=address, linger=args.linger, logger=logger)
-    else:
-        run_live(args, logger, address)
+    run = run_live if args.replay is None else run_replay
+    run(args, logger, address)
     return 0
 
 

@@ -14,7 +14,6 @@ from dronesim.replay import header_config, tracks
 from schema import Cause, UsageError
 
 from ..environment import build_world
-from ..world import World
 from .model import ALIVE, DEAD, LOST, REACHED, change_entry, drone_json, entry, fmt, over_entry, world_json
 
 
@@ -41,7 +40,7 @@ class Replay:
         if not records:
             raise UsageError(f"{self.path} is empty: not a journal")
         self.config, self.autopilots = header_config(records[0])
-        self.world: World = build_world(self.config.world, (d.start for d in self.config.drones))
+        self.world = build_world(self.config.world, (d.start for d in self.config.drones))
         self.over = next(({"turn": r["turn"], "reason": r["reason"], "text": r.get("text", "")}
                           for r in records if r.get("record") == "over"), None)
         self.frames = self._frames(records)

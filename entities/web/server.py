@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 import queue
+import socket
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
@@ -274,8 +275,6 @@ class WebServer(ThreadingHTTPServer):
     def __init__(self, address: tuple[str, int], backend: Backend, hub: Hub, logger: logging.Logger) -> None:
         self.backend, self.hub, self.log = backend, hub, logger
         if ":" in address[0]:
-            import socket
-
             self.address_family = socket.AF_INET6
         try:
             super().__init__(address, _Handler)
