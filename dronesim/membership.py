@@ -1,8 +1,7 @@
-"""What every entity process does the same way: connect (admission), stay admitted when the coordinator
-restarts or a link is cut, and wait for another entity's presence. Each role's protocol is a pure class
-(coordinator/engine.py, entities/environment.py, entities/drone.py, entities/gcs.py); its Zenoh adapter
-(coordinator/node.py, entities/*_node.py) connects with this module and screens the coordinator's messages
-with its `TurnClock`."""
+"""What every entity process does the same way: connect (admission), stay admitted when the coordinator restarts or a
+link is cut, and wait for another entity's presence. Each role's protocol is a pure class (coordinator/engine.py,
+entities/environment.py, entities/drone.py, entities/gcs.py); its Zenoh adapter (coordinator/node.py,
+entities/*_node.py) connects with this module and screens the coordinator's messages with its `TurnClock`."""
 
 from __future__ import annotations
 

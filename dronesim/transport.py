@@ -1,11 +1,11 @@
 """The thin Zenoh adapter shared by every process: flags, session config, and an event inbox.
 
-One threading model, in every process and at every fleet size. Zenoh's callbacks, on Zenoh's threads, only
-refuse (unread) what is too big, stale or over its origin's budget and queue the rest in the process's `Inbox`;
-what fails there is counted as a rejection, never raised (Zenoh would swallow it). The main thread takes the
-payloads one at a time, in order of arrival but for a bursting origin (`FairQueue`), decodes and checks each
-(`check_addressed`), and does everything else: a big payload costs its origin's turn, not Zenoh's thread,
-which every other message waits for, and the only locks guard the queue and the rejections (`RejectCounter`).
+One threading model, in every process and at every fleet size. Zenoh's callbacks, on Zenoh's threads, only refuse
+(unread) what is too big, stale or over its origin's budget and queue the rest in the process's `Inbox`; what fails
+there is counted as a rejection, never raised (Zenoh would swallow it). The main thread takes the payloads one at a
+time, in order of arrival but for a bursting origin (`FairQueue`), decodes and checks each (`check_addressed`), and does
+everything else: a big payload costs its origin's turn, not Zenoh's thread, which every other message waits for, and the
+only locks guard the queue and the rejections (`RejectCounter`).
 """
 
 from __future__ import annotations
@@ -150,8 +150,7 @@ def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | 
 
 def setup_logging(level: str, name: str) -> logging.Logger:
     """Entry points only: configure logging to stderr, prefixed with the process's role."""
-    logging.basicConfig(level=level.upper(), format=f"%(asctime)s {name} %(levelname)s %(message)s",
-                        datefmt="%H:%M:%S")
+    logging.basicConfig(level=level.upper(), format=f"%(asctime)s {name} %(levelname)s %(message)s", datefmt="%H:%M:%S")
     return logging.getLogger(f"dronesim.{name}")
 
 
@@ -563,8 +562,7 @@ class Inbox:
             left = None if end is None else max(0.0, end - time.monotonic())
             summary = self.rejects.due_in()  # (a summary of rejections is logged when due)
             got, event = self._events.take(left if summary is None else summary if left is None else min(left, summary))
-            read = self._read(event) if got else None
-            if read is not None:
+            if got and (read := self._read(event)) is not None:
                 return read
             if left is not None and time.monotonic() >= end:  # type: ignore[operator]
                 return None
@@ -590,10 +588,8 @@ class Outbox:
 
     def close(self) -> None:
         """Undeclare this outbox's publishers and matching listeners (the session stays open)."""
-        for listener in self._listeners:
-            listener.undeclare()
-        for pub in self._pubs.values():
-            pub.undeclare()
+        for handle in [*self._listeners, *self._pubs.values()]:
+            handle.undeclare()
         self._listeners, self._pubs = [], {}
 
     def watch(self, key: str, inbox: Inbox) -> None:

@@ -1,10 +1,9 @@
 """``dronesim up``: the whole simulation on one machine with one command.
 
-An embedded Zenoh router runs in this process; the coordinator, the environment, the drones (one
-process each, or one swarm host) and the ground station run as separate processes connected to it
-in client mode, exactly as they would across hosts. The ground station's output (the world, each
-turn, the final paths and summary) is this command's output; the exit status is 0 only if every
-process exited 0.
+An embedded Zenoh router runs in this process; the coordinator, the environment, the drones (one process each, or one
+swarm host) and the ground station run as separate processes connected to it in client mode, exactly as they would
+across hosts. The ground station's output (the world, each turn, the final paths and summary) is this command's output;
+the exit status is 0 only if every process exited 0.
 """
 
 from __future__ import annotations
