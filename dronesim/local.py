@@ -1,8 +1,7 @@
 """The whole game in one process, no network: the same Engine, Environment and autopilots as the distributed run, wired
 by function calls. Given the same scenario and inputs (GCS targets and intents per turn, drones that missed a deadline
 or vanished), it writes the same journal, byte for byte, as a run over Zenoh. Used to verify journals (replay --verify),
-by benchmarks (the in-process baseline) and by tests.
-"""
+by benchmarks (the in-process baseline) and by tests."""
 
 from __future__ import annotations
 

@@ -1,9 +1,9 @@
 """``dronesim replay JOURNAL``: re-render a run from its journal, with no network.
 
-Prints the world floor by floor with every drone's path, and a summary (each drone's end state, moves, deaths).
-``--turns`` prints every turn's state too; ``--at N`` renders the state after turn N. ``--verify`` re-simulates the run
-in-process from the journal's header and inputs (GCS targets and intents, missed deadlines, vanished drones) and checks
-the result is the journal, byte for byte.
+Prints the world floor by floor with every drone's path, and a summary (each drone's end state, moves,
+deaths). ``--turns`` prints every turn's state too; ``--at N`` renders the state after turn N.
+``--verify`` re-simulates the run in-process from the journal's header and inputs (GCS targets and
+intents, missed deadlines, vanished drones) and checks the result is the journal, byte for byte.
 """
 
 from __future__ import annotations
