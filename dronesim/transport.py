@@ -436,10 +436,8 @@ class Inbox:
             try:
                 self._admit(origin, len(sample.payload), limit)
                 data = sample.payload.to_bytes()
-                if since is not None:
-                    turn = _stamp(data)[1]
-                    if type(turn) is int and turn < since():
-                        raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
+                if since is not None and type(turn := _stamp(data)[1]) is int and turn < since():
+                    raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
                 self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=origin != "SRV")
             except RemoteInputError as err:
                 self.rejects.reject(k, err, origin)
@@ -588,8 +586,10 @@ class Outbox:
 
     def close(self) -> None:
         """Undeclare this outbox's publishers and matching listeners (the session stays open)."""
-        for handle in [*self._listeners, *self._pubs.values()]:
-            handle.undeclare()
+        for listener in self._listeners:
+            listener.undeclare()
+        for pub in self._pubs.values():
+            pub.undeclare()
         self._listeners, self._pubs = [], {}
 
     def watch(self, key: str, inbox: Inbox) -> None:
@@ -604,6 +604,5 @@ def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | 
     """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none), and the
     session id of the process that answered (as Zenoh says it, "" if it does not)."""
     for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE):
-        replier = reply.replier_id
-        return _answer(key, reply, expect), "" if replier is None else str(replier.zid)
+        return _answer(key, reply, expect), "" if reply.replier_id is None else str(reply.replier_id.zid)
     raise TimeoutError(f"no answer on {key} within {timeout:.1f} s")

@@ -140,8 +140,7 @@ def main(args: argparse.Namespace) -> int:
                     proc.kill()
                     proc.wait()
             return exit_status(sig.signum)
-        failed = {n: c for n, c in codes.items() if c != 0}
-        if failed:
+        if failed := {n: c for n, c in codes.items() if c != 0}:
             print(f"dronesim up: processes failed: {failed}", file=sys.stderr)
             return 1
         print(f"dronesim up: all {len(codes)} processes exited 0", flush=True)
