@@ -64,8 +64,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     world = build_world(config.world, (d.start for d in config.drones))
     engine = Engine(config, log, world)
     engine.verify_env = verify_env
-    if arbiter is not None:
-        engine.arbiter = arbiter
+    engine.arbiter = arbiter or engine.arbiter  # (the benchmark's; by default the engine's own)
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()

@@ -109,8 +109,7 @@ class Scenario:
         # targets are checked against the world's buildings too: built here (as every process builds it) only
         # when there are targets and the world is generated
         world = world_file or (build_world(spec, (d.start for d in drones)) if targets else None)
-        unknown = Plan.drones_of(scenario.targets, spec.size, scenario.drones[0].drone, world) - set(autopilots)
-        if unknown:
+        if unknown := Plan.drones_of(scenario.targets, spec.size, scenario.drones[0].drone, world) - set(autopilots):
             raise UsageError(f"targets for drones not in the scenario: {', '.join(sorted(unknown))}")
         return scenario
 
