@@ -290,8 +290,8 @@ def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = N
 LOCAL = "local"
 
 
-def _stamp(data: bytes) -> tuple[object, object, object]:
-    """(type, turn, sender) as the first bytes of a payload say them, without decoding the rest (a
+def _stamp(data: bytes) -> tuple[object, object]:
+    """(turn, sender) as the first bytes of a payload say them, without decoding the rest (a
     payload's map starts with them: schema/README.md); None for what they do not say."""
     head = msgpack.Unpacker(raw=False)
     head.feed(data[:64])
@@ -302,7 +302,7 @@ def _stamp(data: bytes) -> tuple[object, object, object]:
             found[name] = head.unpack()
     except Exception:  # noqa: BLE001 - not MessagePack, or cut short: decode says why
         pass
-    return found.get("t"), found.get("turn"), found.get("from")
+    return found.get("turn"), found.get("from")
 
 
 def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Message], ...]) -> Message:
@@ -344,8 +344,7 @@ class FairQueue:
 
     def put(self, origin: str, event: object, size: int = 0, *, budgeted: bool = True) -> None:
         with self._lock:
-            why = self.full(origin, size) if budgeted else None
-            if why is not None:
+            if budgeted and (why := self.full(origin, size)) is not None:
                 raise RemoteInputError(why, reason="flood")
             self._queues.setdefault(origin, collections.deque()).append((event, size))
             self._bytes[origin] = self._bytes.get(origin, 0) + size
@@ -416,8 +415,7 @@ class Inbox:
         over its budget (never the coordinator's: a process that lags behind must not lose the game's end)."""
         if size > limit:
             raise MalformedMessage(f"a payload of {size} bytes, above the key's limit of {limit}", reason="too-large")
-        why = None if origin == "SRV" else self._events.full(origin, size)
-        if why is not None:
+        if origin != "SRV" and (why := self._events.full(origin, size)) is not None:
             raise RemoteInputError(why, reason="flood")
 
     def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
@@ -436,7 +434,7 @@ class Inbox:
             try:
                 self._admit(origin, len(sample.payload), limit)
                 data = sample.payload.to_bytes()
-                if since is not None and type(turn := _stamp(data)[1]) is int and turn < since():
+                if since is not None and type(turn := _stamp(data)[0]) is int and turn < since():
                     raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
                 self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=origin != "SRV")
             except RemoteInputError as err:
@@ -464,7 +462,7 @@ class Inbox:
                 if payload is None:
                     raise MalformedMessage(f"query on {key} without payload")
                 data = payload.to_bytes() if len(payload) <= limit else b""
-                sender = _stamp(data)[2]
+                sender = _stamp(data)[1]
                 origin = sender if isinstance(sender, str) and is_entity_id(sender) else key
                 self._admit(origin, len(payload), limit)
                 self._events.put(origin, _Unread(key, origin, query, data, expect), len(data), budgeted=origin != "SRV")
