@@ -286,10 +286,6 @@ def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = N
     return zenoh.handlers.Callback(callback, drop, indirect=False)
 
 
-#: The origin of the events a process queues itself (`Inbox.post`).
-LOCAL = "local"
-
-
 def _stamp(data: bytes) -> tuple[object, object]:
     """(turn, sender) as the first bytes of a payload say them, without decoding the rest (a
     payload's map starts with them: schema/README.md); None for what they do not say."""
@@ -499,7 +495,7 @@ class Inbox:
               then: Callable[[tuple[Message | RemoteInputError, ...]], object]) -> None:
         """One query, not waited for: once it is finished, the event `then(replies)` is queued, with every
         reply decoded, or the RemoteInputError of an error reply or a malformed one (none: nobody answered
-        within `timeout`). This process asked: its answer is never refused for the budget (`LOCAL`)."""
+        within `timeout`). This process asked: its answer is never refused for the budget (`post`)."""
         replies: list[Message | RemoteInputError] = []
 
         def on_reply(reply: zenoh.Reply) -> None:
@@ -542,7 +538,7 @@ class Inbox:
 
     def post(self, event: object) -> None:
         """Queue an event from another thread of this process (e.g. a web request for the main loop)."""
-        self._events.put(LOCAL, event, budgeted=False)  # (never refused: this process's own)
+        self._events.put("local", event, budgeted=False)  # (this process's own origin: never refused)
 
     # the main thread
 
