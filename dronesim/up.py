@@ -153,9 +153,8 @@ VITAL = ("SRV", "GCS")
 
 
 def supervise(running: list[tuple[str, subprocess.Popen]]) -> dict[str, int]:
-    """Wait for every process to exit and return their exit codes. If a vital one fails while others still
-    run, the game is stopped at once (the coordinator ends it INTERRUPTED, as on Ctrl-C) instead of running
-    on without it to its turn limit."""
+    """Wait for every process to exit and return their exit codes. If a vital one fails while others still run, the
+    game is stopped at once (`stop_all`, as on Ctrl-C) instead of running on without it to its turn limit."""
     done: queue.SimpleQueue[tuple[str, int] | None] = queue.SimpleQueue()
     for name, proc in running:
         threading.Thread(target=lambda n=name, p=proc: done.put((n, p.wait())), name=f"wait-{name}",
