@@ -418,8 +418,7 @@ class Inbox:
                   since: Callable[[], int] | None = None) -> zenoh.Subscriber:
         """Messages on `key` become `Received` events (until `unsubscribe`); with `since`, those stamped with
         a turn before `since()` are refused as stale."""
-        types = expect if isinstance(expect, tuple) else (expect,)
-        limit = max(size_limit(t) for t in types)
+        limit = max(size_limit(t) for t in (expect if isinstance(expect, tuple) else (expect,)))
 
         def on_sample(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
