@@ -82,8 +82,8 @@ class Membership:
                 self.welcome, self.coordinator = admit(self.session, self.keys, self.hello, self.log,
                                                       timeout=self.connect_timeout)
             except Refusal as err:
-                self.log.warning("%s: %s takes no further part and leaves at the end of the game", err,
-                                 self.hello.sender)
+                self.log.warning("%s: %s takes no further part and leaves at the end of the game",
+                                 err, self.hello.sender)
                 return None
             self.clock = TurnClock(self.welcome.turn, game=self.welcome.game)  # turns went by meanwhile
             return self.welcome
