@@ -5,9 +5,8 @@
     dronesim-entrypoint dronesim drone --id auto --connect tcp/router:7447 ... # claim the first free Dnn
     dronesim-entrypoint bash                                                  # anything else: exec'd
 
-For an entity role (coordinator, env, drone, gcs) and for `dronesim router`, it first writes which
-entity this container runs, and with which Zenoh flags, to $DRONESIM_STATE (a small JSON file), for the
-health check (docker/healthcheck.py).
+For an entity role (coordinator, env, drone, gcs) and for `dronesim router`, it first writes which entity this container
+runs, and with which Zenoh flags, to $DRONESIM_STATE (a small JSON file), for the health check (docker/healthcheck.py).
 
 ``--id auto`` (docs/docker.md) tries D01, D02, ... in turn, running `dronesim drone --id Dnn` for each,
 until the coordinator admits one: a taken id is refused ("D01 is already connected", "drone D01 is

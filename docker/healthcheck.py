@@ -1,12 +1,11 @@
 #!/usr/bin/env python3
 """The dronesim image's HEALTHCHECK (installed as /usr/local/bin/dronesim-health; docs/docker.md).
 
-Healthy: this container's entity is *present on the network*. Its liveliness token
-``<root>/<ENTITY>/ALIVE/<session>``, which the coordinator watches, is asked of the router by a short-lived
-client session with the entity's own Zenoh flags (--connect, --config: TLS and credentials included). For
-`dronesim router`, healthy means it accepts a Zenoh session on its listen endpoint; a container running
-anything else (replay, bench, a shell) has nothing to check. The entrypoint (docker/entrypoint.py) records
-which entity the container runs in $DRONESIM_STATE. Exit status 0: healthy, 1: unhealthy.
+Healthy: this container's entity is *present on the network*. Its liveliness token ``<root>/<ENTITY>/ALIVE/<session>``,
+which the coordinator watches, is asked of the router by a short-lived client session with the entity's own Zenoh flags
+(--connect, --config: TLS and credentials included). For `dronesim router`, healthy means it accepts a Zenoh session on
+its listen endpoint; a container running anything else (replay, bench, a shell) has nothing to check. The entrypoint
+(docker/entrypoint.py) records which entity the container runs in $DRONESIM_STATE. Exit status 0: healthy, 1: unhealthy.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
-"""The whole game in one process, no network: the same Engine, Environment and autopilots as the
-distributed run, wired by function calls. Given the same scenario and inputs (GCS targets and intents per
-turn, drones that missed a deadline or vanished), it writes the same journal, byte for byte, as a run over
-Zenoh. Used to verify journals (replay --verify), by benchmarks (the in-process baseline) and by tests.
-"""
+"""The whole game in one process, no network: the same Engine, Environment and autopilots as the distributed run, wired
+by function calls. Given the same scenario and inputs (GCS targets and intents per turn, drones that missed a deadline
+or vanished), it writes the same journal, byte for byte, as a run over Zenoh. Used to verify journals (replay --verify),
+by benchmarks (the in-process baseline) and by tests."""
 
 from __future__ import annotations
 
@@ -14,13 +13,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from coordinator.arbiter import Arbiter
-from coordinator.engine import Engine, GameConfig, Publish, Record, Refusal, Reply, Stage, opens_drones_phase
+from coordinator.engine import Engine, GameConfig, Publish, Record, Refusal, Stage, opens_drones_phase
 from dronesim.scenario import swarm_hosts
 from entities.autopilots import make_autopilot, make_swarm, pilot_class
 from entities.autopilots.base import Decision, drive, fly_pilots, fly_swarm
 from entities.environment import Environment, build_world
 from entities.gcs import Plan, gcs_done
-from schema import Cell, CellInfo, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd, Welcome
+from schema import Cell, CellInfo, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd
 from schema.errors import UsageError
 from schema.tables import drone_number
 from schema.tuning import SWARM_MIN
@@ -65,8 +64,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     world = build_world(config.world, (d.start for d in config.drones))
     engine = Engine(config, log, world)
     engine.verify_env = verify_env
-    if arbiter is not None:
-        engine.arbiter = arbiter
+    engine.arbiter = arbiter or engine.arbiter  # (the benchmark's; by default the engine's own)
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()
@@ -90,18 +88,15 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
               for h, (a, _) in flyers.items()} if swarm else {}
     pilots = {d: make_autopilot(a, world_size=world.size, **(pilot_options or {}).get(a, {}))
               for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
-    env: Environment | None = None
+    env = Environment(world, {d.drone: d.start for d in config.drones})  # (as its WELCOME says: each at its start)
     current: dict[str, Cell] = {}
 
     def ask(pending: Mapping[str, tuple[Cell, ...]]) -> dict[str, dict[Cell, CellInfo]]:
         """What the environment answers about each drone's cells (the oracle of pilots flown in-process)."""
-        assert env is not None
         return {d: dict(zip(c, env.answer(c))) for d, c in pending.items()}
     while queue:
         effect = queue.popleft()
         match effect:
-            case Reply(_, Welcome() as w) if env is None:
-                env = Environment(world, w.starts.cells())
             case Record(data):
                 records.append(data)
             case Publish(Turn(phase=Phase.GCS, turn=t)):
@@ -110,7 +105,6 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 current = {d: c for d, c in current.items() if d in alive}
                 push(engine.receive(gcs_done(t, current, inputs.intent(t), engine.targets())))
             case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
-                assert env is not None
                 for d in sorted(inputs.vanished.get(t, ())):
                     push(engine.vanished(d))
                 skip = inputs.hovered.get(t, set()) | inputs.vanished.get(t, set())
@@ -134,13 +128,11 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                 if skip:
                     push(engine.expire(Stage.DRONES, t))  # ignored if the phase already ended
             case Publish(Turn(phase=Phase.ENV, turn=t) as turn):
-                assert env is not None
                 if verify_env:
                     push(engine.receive(Upd(turn=t, sender="ENV", cells=env.apply(turn.moves))))
                 else:
                     env.move(turn.moves)
             case Publish(Status() as status):
-                assert env is not None
                 env.sync(status)
                 if keep_statuses:
                     statuses.append(status)

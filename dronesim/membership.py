@@ -1,8 +1,7 @@
-"""What every entity process does the same way: connect (admission), stay admitted when the coordinator
-restarts or a link is cut, and wait for another entity's presence. Each role's protocol is a pure class
-(coordinator/engine.py, entities/environment.py, entities/drone.py, entities/gcs.py); its Zenoh adapter
-(coordinator/node.py, entities/*_node.py) connects with this module and screens the coordinator's messages
-with its `TurnClock`."""
+"""What every entity process does the same way: connect (admission), stay admitted when the coordinator restarts or a
+link is cut, and wait for another entity's presence. Each role's protocol is a pure class (coordinator/engine.py,
+entities/environment.py, entities/drone.py, entities/gcs.py); its Zenoh adapter (coordinator/node.py,
+entities/*_node.py) connects with this module and screens the coordinator's messages with its `TurnClock`."""
 
 from __future__ import annotations
 
@@ -76,20 +75,19 @@ class Membership:
         """Track the coordinator; returns the new Welcome when this entity was admitted again."""
         if event.entity != "SRV":
             return None
-        if event.alive:
-            if self._lost_since is not None:
-                self._lost_since = None
-                self.log.warning("the coordinator is back: connecting again")
-                try:
-                    self.welcome, self.coordinator = admit(self.session, self.keys, self.hello, self.log,
-                                                          timeout=self.connect_timeout)
-                except Refusal as err:
-                    self.log.warning("%s: %s takes no further part and leaves at the end of the game",
-                                     err, self.hello.sender)
-                    return None
-                self.clock = TurnClock(self.welcome.turn, game=self.welcome.game)  # turns went by meanwhile
-                return self.welcome
-        elif event.session == (self.coordinator or event.session) and self._lost_since is None:
+        if event.alive and self._lost_since is not None:
+            self._lost_since = None
+            self.log.warning("the coordinator is back: connecting again")
+            try:
+                self.welcome, self.coordinator = admit(self.session, self.keys, self.hello, self.log,
+                                                      timeout=self.connect_timeout)
+            except Refusal as err:
+                self.log.warning("%s: %s takes no further part and leaves at the end of the game",
+                                 err, self.hello.sender)
+                return None
+            self.clock = TurnClock(self.welcome.turn, game=self.welcome.game)  # turns went by meanwhile
+            return self.welcome
+        if not event.alive and event.session == (self.coordinator or event.session) and self._lost_since is None:
             self._lost_since = time.monotonic()  # (the one that admitted it; any, if Zenoh did not say which)
             self.log.warning("the coordinator vanished: waiting up to %g s for it to come back", self.grace)
         return None

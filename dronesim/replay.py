@@ -62,8 +62,7 @@ def inputs_of(records: Iterable[dict], size: Cell) -> Inputs:
             hovered[t] = set(r["hovered"])
         if gone := set(r.get("lost", ())) - set(r.get("hovered", ())):
             vanished[t] = gone
-    return Inputs(plan=Plan(tuple(sorted(items))), intents=intents, hovered=hovered, vanished=vanished,
-                  scripted=False)
+    return Inputs(plan=Plan(tuple(sorted(items))), intents=intents, hovered=hovered, vanished=vanished, scripted=False)
 
 
 def tracks(config: GameConfig, records: Iterable[dict], until: int | None = None) -> tuple[dict[str, Track], int]:

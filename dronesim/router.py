@@ -1,7 +1,6 @@
 """``dronesim router``: a standalone Zenoh router in Python, for multi-host runs without zenohd.
 
-It listens on the given endpoints (default tcp/0.0.0.0:7447), prints where, and runs until
-SIGINT or SIGTERM.
+It listens on the given endpoints (default tcp/0.0.0.0:7447), prints where, and runs until SIGINT or SIGTERM.
 """
 
 from __future__ import annotations

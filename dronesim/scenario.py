@@ -109,8 +109,7 @@ class Scenario:
         # targets are checked against the world's buildings too: built here (as every process builds it) only
         # when there are targets and the world is generated
         world = world_file or (build_world(spec, (d.start for d in drones)) if targets else None)
-        unknown = Plan.drones_of(scenario.targets, spec.size, scenario.drones[0].drone, world) - set(autopilots)
-        if unknown:
+        if unknown := Plan.drones_of(scenario.targets, spec.size, scenario.drones[0].drone, world) - set(autopilots):
             raise UsageError(f"targets for drones not in the scenario: {', '.join(sorted(unknown))}")
         return scenario
 
@@ -121,10 +120,9 @@ def movingai_scenario(map_path: str | pathlib.Path, scen_path: str | pathlib.Pat
     MovingAI .scen (all of them: None) on its .map. UsageError if either is unreadable or they disagree."""
     world = World.load(map_path)
     try:
-        entries = read_scen(pathlib.Path(scen_path).read_text(encoding="utf-8"))
+        entries = read_scen(pathlib.Path(scen_path).read_text(encoding="utf-8"))[:agents]  # (all of them: None)
     except (OSError, UnicodeDecodeError) as exc:
         raise UsageError(f"cannot read {scen_path}: {exc}") from None
-    entries = entries[:agents]  # (all of them: None)
     if agents is not None and len(entries) < agents:
         raise UsageError(f"{scen_path} has {len(entries)} agents, {agents} asked")
     if not entries:

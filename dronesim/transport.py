@@ -1,11 +1,11 @@
 """The thin Zenoh adapter shared by every process: flags, session config, and an event inbox.
 
-One threading model, in every process and at every fleet size. Zenoh's callbacks, on Zenoh's threads, only
-refuse (unread) what is too big, stale or over its origin's budget and queue the rest in the process's `Inbox`;
-what fails there is counted as a rejection, never raised (Zenoh would swallow it). The main thread takes the
-payloads one at a time, in order of arrival but for a bursting origin (`FairQueue`), decodes and checks each
-(`check_addressed`), and does everything else: a big payload costs its origin's turn, not Zenoh's thread,
-which every other message waits for, and the only locks guard the queue and the rejections (`RejectCounter`).
+One threading model, in every process and at every fleet size. Zenoh's callbacks, on Zenoh's threads, only refuse
+(unread) what is too big, stale or over its origin's budget and queue the rest in the process's `Inbox`; what fails
+there is counted as a rejection, never raised (Zenoh would swallow it). The main thread takes the payloads one at a
+time, in order of arrival but for a bursting origin (`FairQueue`), decodes and checks each (`check_addressed`), and does
+everything else: a big payload costs its origin's turn, not Zenoh's thread, which every other message waits for, and the
+only locks guard the queue and the rejections (`RejectCounter`).
 """
 
 from __future__ import annotations
@@ -150,8 +150,7 @@ def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | 
 
 def setup_logging(level: str, name: str) -> logging.Logger:
     """Entry points only: configure logging to stderr, prefixed with the process's role."""
-    logging.basicConfig(level=level.upper(), format=f"%(asctime)s {name} %(levelname)s %(message)s",
-                        datefmt="%H:%M:%S")
+    logging.basicConfig(level=level.upper(), format=f"%(asctime)s {name} %(levelname)s %(message)s", datefmt="%H:%M:%S")
     return logging.getLogger(f"dronesim.{name}")
 
 
@@ -287,12 +286,8 @@ def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = N
     return zenoh.handlers.Callback(callback, drop, indirect=False)
 
 
-#: The origin of the events a process queues itself (`Inbox.post`).
-LOCAL = "local"
-
-
-def _stamp(data: bytes) -> tuple[object, object, object]:
-    """(type, turn, sender) as the first bytes of a payload say them, without decoding the rest (a
+def _stamp(data: bytes) -> tuple[object, object]:
+    """(turn, sender) as the first bytes of a payload say them, without decoding the rest (a
     payload's map starts with them: schema/README.md); None for what they do not say."""
     head = msgpack.Unpacker(raw=False)
     head.feed(data[:64])
@@ -303,7 +298,7 @@ def _stamp(data: bytes) -> tuple[object, object, object]:
             found[name] = head.unpack()
     except Exception:  # noqa: BLE001 - not MessagePack, or cut short: decode says why
         pass
-    return found.get("t"), found.get("turn"), found.get("from")
+    return found.get("turn"), found.get("from")
 
 
 def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Message], ...]) -> Message:
@@ -345,8 +340,7 @@ class FairQueue:
 
     def put(self, origin: str, event: object, size: int = 0, *, budgeted: bool = True) -> None:
         with self._lock:
-            why = self.full(origin, size) if budgeted else None
-            if why is not None:
+            if budgeted and (why := self.full(origin, size)) is not None:
                 raise RemoteInputError(why, reason="flood")
             self._queues.setdefault(origin, collections.deque()).append((event, size))
             self._bytes[origin] = self._bytes.get(origin, 0) + size
@@ -417,16 +411,14 @@ class Inbox:
         over its budget (never the coordinator's: a process that lags behind must not lose the game's end)."""
         if size > limit:
             raise MalformedMessage(f"a payload of {size} bytes, above the key's limit of {limit}", reason="too-large")
-        why = None if origin == "SRV" else self._events.full(origin, size)
-        if why is not None:
+        if origin != "SRV" and (why := self._events.full(origin, size)) is not None:
             raise RemoteInputError(why, reason="flood")
 
     def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
                   since: Callable[[], int] | None = None) -> zenoh.Subscriber:
         """Messages on `key` become `Received` events (until `unsubscribe`); with `since`, those stamped with
         a turn before `since()` are refused as stale."""
-        types = expect if isinstance(expect, tuple) else (expect,)
-        limit = max(size_limit(t) for t in types)
+        limit = max(size_limit(t) for t in (expect if isinstance(expect, tuple) else (expect,)))
 
         def on_sample(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
@@ -437,10 +429,8 @@ class Inbox:
             try:
                 self._admit(origin, len(sample.payload), limit)
                 data = sample.payload.to_bytes()
-                if since is not None:
-                    turn = _stamp(data)[1]
-                    if type(turn) is int and turn < since():
-                        raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
+                if since is not None and type(turn := _stamp(data)[0]) is int and turn < since():
+                    raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
                 self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=origin != "SRV")
             except RemoteInputError as err:
                 self.rejects.reject(k, err, origin)
@@ -467,7 +457,7 @@ class Inbox:
                 if payload is None:
                     raise MalformedMessage(f"query on {key} without payload")
                 data = payload.to_bytes() if len(payload) <= limit else b""
-                sender = _stamp(data)[2]
+                sender = _stamp(data)[1]
                 origin = sender if isinstance(sender, str) and is_entity_id(sender) else key
                 self._admit(origin, len(payload), limit)
                 self._events.put(origin, _Unread(key, origin, query, data, expect), len(data), budgeted=origin != "SRV")
@@ -504,7 +494,7 @@ class Inbox:
               then: Callable[[tuple[Message | RemoteInputError, ...]], object]) -> None:
         """One query, not waited for: once it is finished, the event `then(replies)` is queued, with every
         reply decoded, or the RemoteInputError of an error reply or a malformed one (none: nobody answered
-        within `timeout`). This process asked: its answer is never refused for the budget (`LOCAL`)."""
+        within `timeout`). This process asked: its answer is never refused for the budget (`post`)."""
         replies: list[Message | RemoteInputError] = []
 
         def on_reply(reply: zenoh.Reply) -> None:
@@ -547,7 +537,7 @@ class Inbox:
 
     def post(self, event: object) -> None:
         """Queue an event from another thread of this process (e.g. a web request for the main loop)."""
-        self._events.put(LOCAL, event, budgeted=False)  # (never refused: this process's own)
+        self._events.put("local", event, budgeted=False)  # (this process's own origin: never refused)
 
     # the main thread
 
@@ -563,8 +553,7 @@ class Inbox:
             left = None if end is None else max(0.0, end - time.monotonic())
             summary = self.rejects.due_in()  # (a summary of rejections is logged when due)
             got, event = self._events.take(left if summary is None else summary if left is None else min(left, summary))
-            read = self._read(event) if got else None
-            if read is not None:
+            if got and (read := self._read(event)) is not None:
                 return read
             if left is not None and time.monotonic() >= end:  # type: ignore[operator]
                 return None
@@ -608,6 +597,5 @@ def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | 
     """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none), and the
     session id of the process that answered (as Zenoh says it, "" if it does not)."""
     for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE):
-        replier = reply.replier_id
-        return _answer(key, reply, expect), "" if replier is None else str(replier.zid)
+        return _answer(key, reply, expect), "" if reply.replier_id is None else str(reply.replier_id.zid)
     raise TimeoutError(f"no answer on {key} within {timeout:.1f} s")

@@ -1,10 +1,9 @@
 """``dronesim up``: the whole simulation on one machine with one command.
 
-An embedded Zenoh router runs in this process; the coordinator, the environment, the drones (one
-process each, or one swarm host) and the ground station run as separate processes connected to it
-in client mode, exactly as they would across hosts. The ground station's output (the world, each
-turn, the final paths and summary) is this command's output; the exit status is 0 only if every
-process exited 0.
+An embedded Zenoh router runs in this process; the coordinator, the environment, the drones (one process each, or one
+swarm host) and the ground station run as separate processes connected to it in client mode, exactly as they would
+across hosts. The ground station's output (the world, each turn, the final paths and summary) is this command's output;
+the exit status is 0 only if every process exited 0.
 """
 
 from __future__ import annotations
@@ -141,8 +140,7 @@ def main(args: argparse.Namespace) -> int:
                     proc.kill()
                     proc.wait()
             return exit_status(sig.signum)
-        failed = {n: c for n, c in codes.items() if c != 0}
-        if failed:
+        if failed := {n: c for n, c in codes.items() if c != 0}:
             print(f"dronesim up: processes failed: {failed}", file=sys.stderr)
             return 1
         print(f"dronesim up: all {len(codes)} processes exited 0", flush=True)
@@ -155,9 +153,8 @@ VITAL = ("SRV", "GCS")
 
 
 def supervise(running: list[tuple[str, subprocess.Popen]]) -> dict[str, int]:
-    """Wait for every process to exit and return their exit codes. If a vital one fails while others still
-    run, the game is stopped at once (the coordinator ends it INTERRUPTED, as on Ctrl-C) instead of running
-    on without it to its turn limit."""
+    """Wait for every process to exit and return their exit codes. If a vital one fails while others still run, the
+    game is stopped at once (`stop_all`, as on Ctrl-C) instead of running on without it to its turn limit."""
     done: queue.SimpleQueue[tuple[str, int] | None] = queue.SimpleQueue()
     for name, proc in running:
         threading.Thread(target=lambda n=name, p=proc: done.put((n, p.wait())), name=f"wait-{name}",
