@@ -229,6 +229,41 @@ def test_errors_are_usage_errors(name: str) -> None:
         Scenario.from_json(copy.deepcopy(data))
 
 
+def _paths(value: object, path: tuple = ()) -> list[tuple]:
+    """Every place in a JSON document: the paths of its dict values and list items, the root excluded."""
+    if isinstance(value, dict):
+        items = list(value.items())
+    elif isinstance(value, list):
+        items = list(enumerate(value))
+    else:
+        return []
+    return [p for k, v in items for p in [(*path, k), *_paths(v, (*path, k))]]
+
+
+JSON_KINDS = (None, True, 0, -1, 2.5, 1 << 70, "", "D01", [], [1, 2, 3], ["D01"], {}, {"id": "D01"})
+
+
+@pytest.mark.parametrize("kind", JSON_KINDS, ids=repr)
+def test_any_value_of_any_json_type_anywhere_is_a_usage_error_or_a_scenario(kind: object,
+                                                                           tmp_path: pathlib.Path) -> None:
+    """A hand-written scenario can hold anything: whatever value of whatever type replaces any part of it, reading
+    it (as JSON or from a file, which parses drone entries its own way) either gives a scenario or refuses it with
+    a UsageError (e.g. an unhashable drone id once raised TypeError)."""
+    file = tmp_path / "s.json"
+    for path in _paths(base()):
+        data = base()
+        node = data
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = copy.deepcopy(kind)
+        file.write_text(json.dumps(data))
+        for source in (data, file):
+            try:
+                Scenario.load(file) if source is file else Scenario.from_json(data)
+            except UsageError:
+                pass
+
+
 @pytest.mark.parametrize("name", sorted(BAD))
 def test_a_file_gives_the_errors_its_json_gives(name: str, tmp_path: pathlib.Path) -> None:
     """Loading compacts drone entries while parsing: the errors, and their order, stay from_json's."""
