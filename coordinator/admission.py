@@ -9,11 +9,9 @@ from typing import Generic, TypeVar
 
 from schema import Connect, Role
 from schema.messages import is_host_id
+from schema.tuning import PRESENCE_WAIT_S
 
 from .fleet import ALIVE, STATES, Fleet
-
-#: Seconds a CONNECT may wait for its sender's presence token to be seen.
-PRESENCE_WAIT_S = 5.0
 
 Q = TypeVar("Q")  # what a CONNECT is answered through (a Zenoh query in the adapter)
 

@@ -58,20 +58,13 @@ from schema import (
 )
 from schema.errors import WrongSender
 from schema.messages import WorldSpec
+from schema.tuning import LINGER_S, PEER_CHECK_S, SETTLE_S
 
 from . import arbiter
 from .admission import Presences
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
 from .journal import JournalWriter, read, repair_tail
 from .resume import restore
-
-#: How long the coordinator waits, after OVER, for entities to leave before it closes anyway.
-LINGER_S = 5.0
-#: Seconds a vanished presence is held before it counts: when the router goes away, every token vanishes,
-#: the others' sometimes just before the coordinator's own (which tells a lost link from departures).
-SETTLE_S = 0.5
-#: Seconds a starting coordinator looks for another one on its root.
-PEER_CHECK_S = 2.0
 
 
 def _key_of(keys: Keys, msg: Message) -> str:

@@ -27,6 +27,7 @@ from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
 from dronesim.signals import Stop, exit_status, on_stop, stop, waking
 from dronesim.transport import router_config, router_locators
 from schema import UsageError, drone_id
+from schema.tuning import KILL_S, STOP_S
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -99,10 +100,6 @@ def check_game(args: argparse.Namespace) -> None:
     coordinator.game_config(coordinator.build_parser().parse_args(argv[4:]))
 
 
-#: Seconds the entities have, once the coordinator is told to stop, to see its OVER and exit by themselves.
-STOP_S = 3.0
-#: Seconds a process still running after that has to end on SIGTERM before it is killed.
-KILL_S = 1.0
 
 
 def main(args: argparse.Namespace) -> int:

@@ -36,7 +36,7 @@ from schema import (
     Welcome,
 )
 from schema.tables import drone_name
-from schema.tuning import ANSWER_AHEAD
+from schema.tuning import ANSWER_AHEAD, FINAL_STATUS_WAIT
 
 from .environment import build_world
 from .world import World
@@ -275,7 +275,6 @@ class Console:
 
 
 #: Seconds a station waits after OVER for the last STATUS (published before OVER, but on another key).
-FINAL_STATUS_WAIT = 5.0
 #: End reasons whose last turn produced a STATUS (the others end a turn before its STATUS).
 OBSERVED_ENDS = frozenset({EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndReason.SETTLED, EndReason.TURN_LIMIT})
 

@@ -2,7 +2,7 @@
 
 A tuning constant changes how fast something is done (or how long a process waits or holds), never what is
 decided: journals are the same whatever their values. Not here: the wire contract's limits (`MAX_COORD`,
-`MAX_PAYLOAD`...), a process's life timeouts (with the adapter that waits) and the world generator's parameters
+`MAX_PAYLOAD`...), the bounds on what a display keeps (entities/web/) and the world generator's parameters
 (entities/world.py), which decide the world. It is in `schema`, which imports none of our packages: all can read it.
 
 Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.7, numpy 2.4; each "a vs b" is
@@ -111,3 +111,33 @@ EYES_ONE_BY_ONE = 3
 #: 64: 181 vs 412, 80: 203 vs 389, 99: 250 vs 485 (an earlier run: 241 vs 273 at 99, and the policy here kills no
 #: drone, where the drone-by-drone judgement costs most: 64 keeps a margin).
 EPISODE_FEW_DRONES = 64
+
+
+# ----------------------------------------------------------------------------- waits (seconds)
+# How long a process waits for another before it goes on without it. None decides a game that goes well; each
+# bounds what a crashed, hung or unreachable peer costs. Not measured: each is far above what it waits for (a
+# round trip through a router is about 0.5 ms, a token's disappearance a few ms: BENCHMARKS.md, docs/reliability.md)
+# and short enough that a person waiting does not give up.
+
+#: How long the coordinator waits, after OVER, for entities to leave before it closes anyway (coordinator/node.py).
+LINGER_S = 5.0
+#: How long the coordinator holds a vanished presence before it counts: when the router goes away, every token
+#: vanishes, the others' sometimes just before the coordinator's own (which tells a lost link from departures).
+SETTLE_S = 0.5
+#: How long a starting coordinator looks for another one on its root.
+PEER_CHECK_S = 2.0
+#: How long a CONNECT may wait for its sender's presence token to be seen (coordinator/admission.py).
+PRESENCE_WAIT_S = 5.0
+#: How long `dronesim up`'s entities have, once the coordinator is told to stop, to see its OVER and exit.
+STOP_S = 3.0
+#: How long a process still running after `STOP_S` has to end on SIGTERM before it is killed.
+KILL_S = 1.0
+#: How long a ground station waits, after OVER, for the last turn's STATUS (entities/gcs.py).
+FINAL_STATUS_WAIT = 5.0
+#: How long the web ground station's GCS phase waits for the STATUS of the turn before it (they travel on
+#: different keys; entities/web/model.py).
+STATUS_GRACE = 2.0
+#: How long an HTTP thread of the web ground station waits for its main thread to carry out a command.
+COMMAND_TIMEOUT = 10.0
+#: Seconds between the web ground station's keep-alive comments on an event stream, so a vanished page is noticed.
+KEEPALIVE = 15.0

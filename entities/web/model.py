@@ -34,6 +34,7 @@ from schema import (
     Welcome,
     is_drone_id,
 )
+from schema.tuning import STATUS_GRACE
 
 from ..gcs import Effect, Ground, Station, check_cell
 from ..world import World
@@ -53,8 +54,6 @@ CAUSE_TEXT = {
 LOG_LIMIT = 300
 TRAIL_LIMIT = 2000
 PACE_RANGE = (0.0, 10.0)
-#: Seconds a GCS phase waits for the STATUS of the turn before it (they travel on different keys).
-STATUS_GRACE = 2.0
 
 
 class Rejected(Exception):

@@ -21,14 +21,12 @@ import zenoh
 from dronesim.signals import waking
 from dronesim.transport import Outbox, zenoh_config
 from schema import Keys, Over, UsageError
+from schema.tuning import COMMAND_TIMEOUT
 
 from ..gcs import Ground
 from ..gcs_node import join, listen, play, publisher
 from .model import GroundState, Refresh, Rejected, check_pace_arg, world_json
 from .server import Hub, WebServer, parse_address
-
-#: Seconds an HTTP thread waits for the main thread to carry out a command.
-COMMAND_TIMEOUT = 10.0
 
 
 def add_web_args(parser: argparse.ArgumentParser) -> None:

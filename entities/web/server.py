@@ -17,11 +17,11 @@ from typing import Protocol
 from urllib.parse import urlsplit
 
 from schema import UsageError
+from schema.tuning import KEEPALIVE
 
 from .model import Rejected, parse_cell
 
 MAX_BODY = 16 * 1024
-KEEPALIVE = 15.0  # seconds between SSE comments, so a vanished page is noticed
 STATIC = {  # the only files served: name -> content type
     "index.html": "text/html; charset=utf-8",
     "app.js": "text/javascript; charset=utf-8",
