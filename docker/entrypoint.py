@@ -37,11 +37,10 @@ MAX_ID = 65535
 
 
 def flags(argv: list[str]) -> argparse.Namespace:
-    """The few flags the entrypoint and the health check need; the rest is dronesim's business."""
+    """The flags that tell which entity a drone process runs as; the rest is dronesim's business."""
     p = argparse.ArgumentParser(add_help=False)
     p.add_argument("--id")
     p.add_argument("--host")
-    p.add_argument("--root", default="sim")
     return p.parse_known_args(argv)[0]
 
 
