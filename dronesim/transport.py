@@ -2,10 +2,11 @@
 
 One threading model, in every process and at every fleet size. Zenoh's callbacks, on Zenoh's threads, only refuse
 (unread) what is too big, stale or over its origin's budget and queue the rest in the process's `Inbox`; what fails
-there is counted as a rejection, never raised (Zenoh would swallow it). The main thread takes the payloads one at a
-time, in order of arrival but for a bursting origin (`FairQueue`), decodes and checks each (`check_addressed`), and does
-everything else: a big payload costs its origin's turn, not Zenoh's thread, which every other message waits for, and the
-only locks guard the queue and the rejections (`RejectCounter`).
+there is counted as a rejection, never raised (Zenoh would swallow it). A query's reply, which its asker waits for, is
+decoded there too. The main thread takes the payloads one at a time, in order of arrival but for a bursting origin
+(`FairQueue`), decodes and checks each (`check_addressed`), and does everything else: a big payload costs its origin's
+turn, not Zenoh's thread, which every other message waits for, and the only locks guard the queue and the rejections
+(`RejectCounter`).
 """
 
 from __future__ import annotations
@@ -301,6 +302,12 @@ def _stamp(data: bytes) -> tuple[object, object]:
     return found.get("turn"), found.get("from")
 
 
+def _budgeted(origin: str) -> bool:
+    """Whether the events of an origin proven by the key they came on count against its budget: all but the
+    coordinator's (a process that lags behind must not lose the game's end)."""
+    return origin != "SRV"
+
+
 def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Message], ...]) -> Message:
     """A query's reply, decoded (RemoteInputError on an error reply or a malformed one)."""
     if reply.ok is None:
@@ -406,12 +413,12 @@ class Inbox:
 
     # callbacks (Zenoh threads): check, enqueue; never raise
 
-    def _admit(self, origin: str, size: int, limit: int) -> None:
-        """Refuse, unread, a payload above its key's size limit (`schema.keys.size_limit`) or from an origin
-        over its budget (never the coordinator's: a process that lags behind must not lose the game's end)."""
+    def _admit(self, origin: str, size: int, limit: int, budgeted: bool) -> None:
+        """Refuse, unread, a payload above its key's size limit (`schema.keys.size_limit`) or, if `budgeted`, from
+        an origin over its budget."""
         if size > limit:
             raise MalformedMessage(f"a payload of {size} bytes, above the key's limit of {limit}", reason="too-large")
-        if origin != "SRV" and (why := self._events.full(origin, size)) is not None:
+        if budgeted and (why := self._events.full(origin, size)) is not None:
             raise RemoteInputError(why, reason="flood")
 
     def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
@@ -427,11 +434,11 @@ class Inbox:
             except ValueError:
                 origin = k
             try:
-                self._admit(origin, len(sample.payload), limit)
+                self._admit(origin, len(sample.payload), limit, _budgeted(origin))
                 data = sample.payload.to_bytes()
                 if since is not None and type(turn := _stamp(data)[0]) is int and turn < since():
                     raise StaleTurn(f"a message for turn {turn}, before turn {since()}")
-                self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=origin != "SRV")
+                self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=_budgeted(origin))
             except RemoteInputError as err:
                 self.rejects.reject(k, err, origin)
             except Exception:  # a bug: log it, never let Zenoh swallow it silently
@@ -459,8 +466,9 @@ class Inbox:
                 data = payload.to_bytes() if len(payload) <= limit else b""
                 sender = _stamp(data)[1]
                 origin = sender if isinstance(sender, str) and is_entity_id(sender) else key
-                self._admit(origin, len(payload), limit)
-                self._events.put(origin, _Unread(key, origin, query, data, expect), len(data), budgeted=origin != "SRV")
+                # (the sender a query names is its payload's claim, not its key's: a query claiming SRV is budgeted)
+                self._admit(origin, len(payload), limit, True)
+                self._events.put(origin, _Unread(key, origin, query, data, expect), len(data))
             except RemoteInputError as err:
                 self._refuse(key, origin, query, err)
             except Exception:
@@ -520,7 +528,7 @@ class Inbox:
             try:
                 who, session = self.keys.presence_of(k)
                 self._events.put(who, Presence(who, session, sample.kind == zenoh.SampleKind.PUT),
-                                 budgeted=who != "SRV")
+                                 budgeted=_budgeted(who))
             except RemoteInputError as err:
                 self.rejects.reject(k, err, k)
             except Exception:  # a bug, as above

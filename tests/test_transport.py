@@ -235,7 +235,10 @@ def test_an_origin_over_its_budget_in_the_inbox_is_refused_unread(pair) -> None:
     inbox.close()
 
 
-def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_another(pair) -> None:
+@pytest.mark.parametrize("flooder", ["D01", "SRV"])
+def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_another(pair, flooder: str) -> None:
+    """Also when the flooder names itself SRV: a query's sender is its payload's claim, and only a key proves the
+    coordinator, whose published messages alone are never budgeted."""
     inbox, _, keys = pair
     inbox = Inbox(inbox.session, keys, LOG, budget=3, share=1)
     inbox.serve(keys.ask, Ask)
@@ -253,19 +256,19 @@ def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_ano
         arrived.wait(0.01)
     querier.undeclare()
     for n in range(8):
-        ask("D01", n)
+        ask(flooder, n)
     ask("D02", 0)
     asker.put(keys.over, encode(over(1)))
     assert arrived.wait(10)
     barrier.undeclare()
     asked: list[Any] = [inbox.get(10) for _ in range(4)]
-    assert [(e.msg.sender, e.msg.cells[0][0]) for e in asked] == [("D01", 0), ("D02", 0), ("D01", 1), ("D01", 2)]
+    assert [(e.msg.sender, e.msg.cells[0][0]) for e in asked] == [(flooder, 0), ("D02", 0), (flooder, 1), (flooder, 2)]
     for e in asked:
         e.query.reply(e.query.key_expr, b"ok")
         e.query.drop()
-    refused = [r for n in range(3, 8) for r in replies[("D01", n)] if r.err is not None]
+    refused = [r for n in range(3, 8) for r in replies[(flooder, n)] if r.err is not None]
     assert len(refused) == 5 and b"already waiting" in refused[0].err.payload.to_bytes()
-    assert inbox.rejects.report() == "{'flood': 5}, from {'D01': 5}"
+    assert inbox.rejects.report() == f"{{'flood': 5}}, from {{'{flooder}': 5}}"
     inbox.close()
 
 
