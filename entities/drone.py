@@ -476,7 +476,9 @@ class Chart:
         if world_map.size != self.size:
             raise OutOfRange(f"a MAP of a {world_map.size} world, this game's is {self.size}")
         grid = World.from_packed(world_map.size, world_map.buildings).grid  # the format's one reader
-        np.frombuffer(self._kinds, dtype=np.uint8)[:] = np.where(grid.ravel(), CellKind.BUILDING, CellKind.EMPTY)
+        kinds = np.frombuffer(self._kinds, dtype=np.uint8)
+        kinds[:] = CellKind.EMPTY  # in place: no temporary array of the world's size (an np.where of the enum is int64)
+        kinds[grid.ravel()] = CellKind.BUILDING
         self.complete = True
 
     def _at(self, cell: Cell) -> int | None:
