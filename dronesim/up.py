@@ -72,14 +72,23 @@ def _passed(args: argparse.Namespace, *names: str) -> list[str]:
     return out
 
 
+def _common(args: argparse.Namespace, locator: str) -> list[str]:
+    """Every entity's flags: a client of `locator`, on the game's root."""
+    return ["--mode", "client", "--connect", locator, "--root", args.root, "--log-level", args.log_level]
+
+
+def coordinator_flags(args: argparse.Namespace, locator: str) -> list[str]:
+    """The coordinator's flags (after `dronesim coordinator`): the game it plays."""
+    return [*_common(args, locator), "--seed", str(args.seed), "--size", args.size, "--drones", str(args.drones),
+            "--max-turns", str(args.max_turns), "--admit-deadline", "60", "--pace", str(args.pace),
+            *_passed(args, "world", "starts", "journal", "scenario")]
+
+
 def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str]]]:
     """(name, argv) of every entity process, connected as clients to `locator`."""
-    base = [sys.executable, "-m", "dronesim"]
-    common = ["--mode", "client", "--connect", locator, "--root", args.root, "--log-level", args.log_level]
-    coord = [*base, "coordinator", *common, "--seed", str(args.seed), "--size", args.size,
-             "--drones", str(args.drones), "--max-turns", str(args.max_turns), "--admit-deadline", "60",
-             "--pace", str(args.pace), *_passed(args, "world", "starts", "journal", "scenario")]
-    procs = [("SRV", coord), ("ENV", [*base, "env", *common, "--no-draw"])]
+    base, common = [sys.executable, "-m", "dronesim"], _common(args, locator)
+    procs = [("SRV", [*base, "coordinator", *coordinator_flags(args, locator)]),
+             ("ENV", [*base, "env", *common, "--no-draw"])]
     pilots = (Scenario.load(args.scenario).autopilots if args.scenario
               else {drone_id(n): args.autopilot for n in range(1, args.drones + 1)})
     if args.swarm:  # one swarm host per autopilot
@@ -96,10 +105,7 @@ def check_game(args: argparse.Namespace) -> None:
     given (a UsageError: drones that do not fit, a start in a building, a bad world file...)."""
     from coordinator import node as coordinator
 
-    argv = commands(args, "tcp/127.0.0.1:0")[0][1]  # the coordinator's: python -m dronesim coordinator ...
-    coordinator.game_config(coordinator.build_parser().parse_args(argv[4:]))
-
-
+    coordinator.game_config(coordinator.build_parser().parse_args(coordinator_flags(args, "tcp/127.0.0.1:0")))
 
 
 def main(args: argparse.Namespace) -> int:

@@ -274,7 +274,6 @@ class Console:
                 return new, Intent.CONTINUE
 
 
-#: Seconds a station waits after OVER for the last STATUS (published before OVER, but on another key).
 #: End reasons whose last turn produced a STATUS (the others end a turn before its STATUS).
 OBSERVED_ENDS = frozenset({EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndReason.SETTLED, EndReason.TURN_LIMIT})
 

@@ -132,7 +132,8 @@ PRESENCE_WAIT_S = 5.0
 STOP_S = 3.0
 #: How long a process still running after `STOP_S` has to end on SIGTERM before it is killed.
 KILL_S = 1.0
-#: How long a ground station waits, after OVER, for the last turn's STATUS (entities/gcs.py).
+#: How long a ground station waits, after OVER, for the last turn's STATUS (sent before OVER, but on another key;
+#: entities/gcs.py).
 FINAL_STATUS_WAIT = 5.0
 #: How long the web ground station's GCS phase waits for the STATUS of the turn before it (they travel on
 #: different keys; entities/web/model.py).
