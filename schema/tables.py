@@ -57,8 +57,8 @@ def _numbered(value: object, letter: str) -> bool:
 def is_drone_id(value: object) -> bool:
     """A drone's id: D01, D02, ... D65535 (`MAX_DRONE`), canonical (`drone_name(n)`: no D00, D001 or D0100), so
     that it is one number in a table's drone column."""
-    return (_numbered(value, "D") and value[1] != "0" and int(value[1:]) <= MAX_DRONE  # type: ignore[index]
-            or isinstance(value, str) and value in _TWO_DIGITS)
+    return _numbered(value, "D") and (value in _TWO_DIGITS  # (a string: _numbered checks the type first)
+                                      or value[1] != "0" and int(value[1:]) <= MAX_DRONE)  # type: ignore[index]
 
 
 _TWO_DIGITS = frozenset(f"D0{n}" for n in range(1, 10))

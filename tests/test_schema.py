@@ -594,7 +594,7 @@ def test_drone_ids() -> None:
         with pytest.raises(ValueError):
             drone_id(bad)
     assert is_drone_id("D01") and is_drone_id("D1234") and is_drone_id("D12345") and is_drone_id("D65535")
-    for bad in ("D1", "D65536", "D123456", "D012345", "d01", "H01", 1, None, "D01 "):
+    for bad in ("D1", "D65536", "D123456", "D012345", "d01", "H01", 1, None, "D01 ", [], {}, ["D01"], {"D01": 1}):
         assert not is_drone_id(bad)
 
 
