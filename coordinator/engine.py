@@ -38,7 +38,7 @@ from typing import Any, overload
 import numpy as np
 
 from entities.environment import build_world
-from entities.world import World, inside_rows, linear_rows
+from entities.world import World, in_bounds, inside_rows, linear_rows
 from schema import (
     Cause,
     Cell,
@@ -488,7 +488,7 @@ class Engine:
             raise UnknownEntity(f"target for unknown drone {d}")
         if self.fleet.state[i] != ALIVE:
             raise UnknownEntity(f"target for {d}, which is {STATES[self.fleet.state[i]].value}")
-        if not observer.inside(pos, self.size):
+        if not in_bounds(pos, self.size):
             raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
         self._aimed[i], self._aims[i] = True, pos
 

@@ -16,17 +16,13 @@ from typing import TypeVar
 
 import numpy as np
 
-from entities.world import inside_rows, linear_rows
+from entities.world import in_bounds, inside_rows, linear_rows
 from schema import Cause, Cell
 from schema.tables import code_of
 from schema.tuning import JUDGE_FEW_DRONES
 
 _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause.BUILDING, Cause.VERTEX, Cause.SWAP))
 K = TypeVar("K", str, int)  # what `deaths` knows a drone by: its id, or its row
-
-
-def inside(cell: Cell, size: Cell) -> bool:
-    return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
 
 
 def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
@@ -90,7 +86,7 @@ def deaths(size: Cell, before: Mapping[K, Cell], after: Mapping[K, Cell], buildi
     by_cell: dict[Cell, list[K]] = defaultdict(list)
     for d in order:
         cell = after[d]
-        if not inside(cell, size):
+        if not in_bounds(cell, size):
             dead[d] = Cause.OUTSIDE
         elif cell in buildings:
             dead[d] = Cause.BUILDING

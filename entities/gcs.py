@@ -39,7 +39,7 @@ from schema.tables import drone_name
 from schema.tuning import ANSWER_AHEAD, FINAL_STATUS_WAIT
 
 from .environment import build_world
-from .world import World
+from .world import World, in_bounds
 
 _ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,5})\s*[= ]\s*)?"
                    r"(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")
@@ -57,7 +57,7 @@ def correct_form(text: str, size: Cell, world: World | None = None) -> Cell:
 def check_cell(cell: Cell, size: Cell, world: World | None = None) -> Cell:
     """`cell` if it is inside the world (of `size`) and, given the `world`, not a building cell (no drone can
     get there: a seed drone would wander to the turn limit looking for a way in)."""
-    if not all(0 <= c < s for c, s in zip(cell, size)):
+    if not in_bounds(cell, size):
         raise UsageError(f"{cell} is outside the world: 0 <= x < {size[0]}, 0 <= y < {size[1]}, 0 <= z < {size[2]}")
     if world is not None and world.is_building(cell):
         raise UsageError(f"{cell} is inside a building: no drone can get there")

@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from coordinator.fleet import CAUSES
-from coordinator.observer import deaths, inside, judge
+from coordinator.observer import deaths, judge
+from entities.world import in_bounds
 from schema import Cause
 
 SIZE = (5, 5, 5)
@@ -45,10 +46,10 @@ def die(request):
 
 
 def test_inside() -> None:
-    assert inside((0, 0, 0), SIZE)
-    assert inside((4, 4, 4), SIZE)
+    assert in_bounds((0, 0, 0), SIZE)
+    assert in_bounds((4, 4, 4), SIZE)
     for c in [(-1, 0, 0), (0, -1, 0), (0, 0, -1), (5, 0, 0), (0, 5, 0), (0, 0, 5)]:
-        assert not inside(c, SIZE)
+        assert not in_bounds(c, SIZE)
 
 
 def test_nobody_dies_on_free_moves(die) -> None:
