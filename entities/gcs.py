@@ -418,8 +418,10 @@ class Station:
         self.tracks.add(status)
         alive = status.drones.alive_mask()
         if not alive.all():
-            self.gone.update(drone_name(n) for n in status.drones.numbers[~alive].tolist())
-            self.wanted = {d: c for d, c in self.wanted.items() if d not in self.gone}
+            ended = {drone_name(n) for n in status.drones.numbers[~alive].tolist()}
+            self.gone |= ended
+            for d in ended & self.wanted.keys():  # (not the whole dict rebuilt at every STATUS after a death)
+                del self.wanted[d]
         if self._joining:  # a late joiner takes over the targets in force (after that, they are its own)
             self._joining = False
             for d, c in targets_of(status).items():

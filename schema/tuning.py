@@ -1,9 +1,11 @@
 """Every tuning constant of the simulator, with its unit and the measurement that chose it.
 
 A tuning constant changes how fast something is done (or how long a process waits or holds), never what is
-decided: journals are the same whatever their values. Not here: the wire contract's limits (`MAX_COORD`,
-`MAX_PAYLOAD`...), the bounds on what a display keeps (entities/web/) and the world generator's parameters
-(entities/world.py), which decide the world. It is in `schema`, which imports none of our packages: all can read it.
+decided while every process keeps up: journals are the same whatever their values. The waits (the last section)
+also bound what a crashed, hung or cut-off peer costs, so they decide when such a peer counts as gone. Not here: the
+wire contract's limits (`MAX_COORD`, `MAX_PAYLOAD`...), the bounds on what a display keeps (entities/web/) and the
+world generator's parameters (entities/world.py), which decide the world. It is in `schema`, which imports none of
+our packages: all can read it.
 
 Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.7, numpy 2.4; each "a vs b" is
 the best of several runs of a short script (see docs/performance.md).
