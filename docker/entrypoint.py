@@ -24,7 +24,6 @@ import re
 import signal
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 #: dronesim subcommand -> the entity id it runs as (None: read from --id/--host, or a router).
@@ -84,14 +83,14 @@ def dronesim(*args: str) -> list[str]:
 
 def claim(argv: list[str]) -> int:
     """Fly the first drone id the coordinator admits (see the module's doc); the drone's exit code."""
-    current: list[subprocess.Popen] = []
-    stopping = threading.Event()
+    proc: subprocess.Popen | None = None
+    stopping, code = False, 0
 
     def forward(signum: int, _frame: object) -> None:  # docker stop: pass it on, try no further id
-        stopping.set()
-        for proc in current:
-            if proc.poll() is None:
-                proc.send_signal(signum)
+        nonlocal stopping
+        stopping = True  # (the handler runs on this thread, between two steps of the loop below)
+        if proc is not None and proc.poll() is None:
+            proc.send_signal(signum)
 
     for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
         signal.signal(sig, forward)
@@ -99,8 +98,9 @@ def claim(argv: list[str]) -> int:
         ident = f"D{n:02d}"
         args = fill(with_id(argv, ident), ident)
         write_state("drone", ident, args)
+        if stopping:  # stopped between two attempts: start no other
+            return code
         proc = subprocess.Popen(dronesim("drone", *args), stderr=subprocess.PIPE, text=True, bufsize=1)
-        current[:] = [proc]
         refusal = ""
         for line in proc.stderr:  # passed through, and scanned for a refusal
             sys.stderr.write(line)
@@ -108,7 +108,7 @@ def claim(argv: list[str]) -> int:
             if "connection refused:" in line and not refusal:
                 refusal = line.strip()
         code = proc.wait()
-        if code == 0 or stopping.is_set() or not refusal:
+        if code == 0 or stopping or not refusal:
             return code
         if TAKEN.search(refusal):
             print(f"dronesim-entrypoint: {ident} is taken, trying the next id", file=sys.stderr, flush=True)
