@@ -19,7 +19,7 @@ from entities.autopilots import make_autopilot, make_swarm, pilot_class
 from entities.autopilots.base import Decision, drive, fly_pilots, fly_swarm
 from entities.environment import Environment, build_world
 from entities.gcs import Plan, gcs_done
-from schema import Cell, CellInfo, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd
+from schema import Cell, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd
 from schema.errors import UsageError
 from schema.tables import drone_number
 from schema.tuning import SWARM_MIN
@@ -64,7 +64,8 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     world = build_world(config.world, (d.start for d in config.drones))
     engine = Engine(config, log, world)
     engine.verify_env = verify_env
-    engine.arbiter = arbiter or engine.arbiter  # (the benchmark's; by default the engine's own)
+    if arbiter is not None:  # (the benchmark's; by default the engine's own)
+        engine.arbiter = arbiter
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()
@@ -90,10 +91,6 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
               for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
     env = Environment(world, {d.drone: d.start for d in config.drones})  # (as its WELCOME says: each at its start)
     current: dict[str, Cell] = {}
-
-    def ask(pending: Mapping[str, tuple[Cell, ...]]) -> dict[str, dict[Cell, CellInfo]]:
-        """What the environment answers about each drone's cells (the oracle of pilots flown in-process)."""
-        return {d: dict(zip(c, env.answer(c))) for d, c in pending.items()}
     while queue:
         effect = queue.popleft()
         match effect:
@@ -117,7 +114,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                         mine = turn.orders.rows[np.isin(turn.orders.rows["drone"], numbers[sender])]
                         moves: StepTable | dict[str, Decision] = drive(fly_swarm(host, mine), env.kinds)
                     elif sender in flown:
-                        moves = drive(fly_pilots(pilots, flown[sender], host=sender if swarm else None), ask)
+                        moves = drive(fly_pilots(pilots, flown[sender], host=sender if swarm else None), env.oracle)
                     else:
                         continue
                     if not isinstance(moves, StepTable):

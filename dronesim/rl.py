@@ -740,7 +740,7 @@ class Expert:
             if d not in self._pilots:
                 self._pilots[d] = make_autopilot(self.autopilot, world_size=episode.world.size)
             steps[d] = self._pilots[d].step(here[d], tuple(episode.targets[i].tolist()))  # type: ignore[attr-defined]
-        decided = drive(fly_round(steps), lambda pending: {d: dict(zip(c, env.answer(c))) for d, c in pending.items()})
+        decided = drive(fly_round(steps), env.oracle)
         wants = {d: decided[d].pos if d in decided else c for d, c in here.items()}
         if self.cooperative:
             wants = arbitrate(here, wants, set(decided))

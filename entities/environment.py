@@ -76,6 +76,10 @@ class Environment:
         at = self._at(cells)
         return tuple(self.world.what_inside(c, at) for c in cells)
 
+    def oracle(self, pending: Mapping[str, Sequence[Cell]]) -> dict[str, dict[Cell, CellInfo]]:
+        """What it answers about each drone's cells: the oracle of pilots flown in-process (`drive`)."""
+        return {d: dict(zip(cells, self.answer(cells))) for d, cells in pending.items()}
+
     def kinds(self, cells: np.ndarray, inside: np.ndarray | None = None) -> np.ndarray:
         """The CellKind code of each cell of an (n, 3) integer array (uint8): the static world, no drones
         (`inside`: `inside_rows` of the cells, when the caller has it)."""
