@@ -36,6 +36,9 @@ from .tables import (
 )
 from .tuning import PACK_BUFFER
 
+#: 2: swarm-sized record tuples travel as tables (tables.py); 3: also WELCOME's starts, DONE's targets;
+#: 4: NPS and a MOVES's steps carry the drone's ranked candidate steps (`ranked`, for cooperative arbitration);
+#: 5: WELCOME, TURN, STATUS and OVER carry the game's identity.
 SCHEMA_VERSION = 5
 
 #: Largest turn a message may carry.
