@@ -247,8 +247,8 @@ JSON_KINDS = (None, True, 0, -1, 2.5, 1 << 70, "", "D01", [], [1, 2, 3], ["D01"]
 def test_any_value_of_any_json_type_anywhere_is_a_usage_error_or_a_scenario(kind: object,
                                                                            tmp_path: pathlib.Path) -> None:
     """A hand-written scenario can hold anything: whatever value of whatever type replaces any part of it, reading
-    it (as JSON or from a file, which parses drone entries its own way) either gives a scenario or refuses it with
-    a UsageError (e.g. an unhashable drone id once raised TypeError)."""
+    it (as JSON, or from a file, which parses drone entries its own way, with or without the plan) either gives a
+    scenario or refuses it with a UsageError (e.g. an unhashable drone id once raised TypeError)."""
     file = tmp_path / "s.json"
     for path in _paths(base()):
         data = base()
@@ -257,11 +257,16 @@ def test_any_value_of_any_json_type_anywhere_is_a_usage_error_or_a_scenario(kind
             node = node[k]
         node[path[-1]] = copy.deepcopy(kind)
         file.write_text(json.dumps(data))
-        for source in (data, file):
+        for how in ("from_json", "load", "load without the plan"):
             try:
-                Scenario.load(file) if source is file else Scenario.from_json(data)
+                if how == "from_json":
+                    Scenario.from_json(data)
+                else:
+                    Scenario.load(file, plan=how == "load")
             except UsageError:
                 pass
+            except Exception as exc:  # named with where the value was put
+                pytest.fail(f"{how}, {'/'.join(map(str, path))} = {kind!r}: {exc!r}")
 
 
 @pytest.mark.parametrize("name", sorted(BAD))
