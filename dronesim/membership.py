@@ -62,13 +62,15 @@ class Membership:
     use `timeout()` for the inbox wait and `check()` when it times out."""
 
     def __init__(self, session: zenoh.Session, inbox: Inbox, hello: Connect, logger: logging.Logger, *,
-                 connect_timeout: float, grace: float) -> None:
+                 connect_timeout: float, grace: float, skips_status: bool = False) -> None:
         self.session, self.keys, self.log = session, inbox.keys, logger
         self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
+        self.skips_status = skips_status  # (its clock's: `TurnClock`)
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
         inbox.watch_presence("SRV")
         self.welcome, self.coordinator = admit(session, self.keys, hello, logger, timeout=connect_timeout)
-        self.clock = TurnClock(game=self.welcome.game)  # the coordinator's messages pass through it (`screen`)
+        # the coordinator's messages pass through its clock (`screen`)
+        self.clock = TurnClock(game=self.welcome.game, skips_status=skips_status)
         self._lost_since: float | None = None
 
     def on_presence(self, event: Presence) -> Welcome | None:
@@ -85,7 +87,7 @@ class Membership:
                 self.log.warning("%s: %s takes no further part and leaves at the end of the game",
                                  err, self.hello.sender)
                 return None
-            self.clock = TurnClock(self.welcome.turn, game=self.welcome.game)  # turns went by meanwhile
+            self.clock = TurnClock(self.welcome.turn, game=self.welcome.game, skips_status=self.skips_status)
             return self.welcome
         if not event.alive and event.session == (self.coordinator or event.session) and self._lost_since is None:
             self._lost_since = time.monotonic()  # (the one that admitted it; any, if Zenoh did not say which)
@@ -124,11 +126,13 @@ class TurnClock:
     connected again is identical and passes). TURN(t) and STATUS(t - 1) are current while turn t is played; so
     are OVER(t - 1) after STATUS(t - 1) and OVER of any later turn (a frozen process learns the end late). Each
     must be of this entity's `game` (from its WELCOME): another game's, or an earlier coordinator's, is foreign,
-    whatever its turn. (A forged message for the right turn is spoofing: the router's access control stops it.)"""
+    whatever its turn. (A forged message for the right turn is spoofing: the router's access control stops it.)
+    With `skips_status` (the environment, which reads only the newest STATUS, when it needs one), a STATUS of any
+    later turn is current too."""
 
-    def __init__(self, turn: int | None = None, *, game: str = "") -> None:
+    def __init__(self, turn: int | None = None, *, game: str = "", skips_status: bool = False) -> None:
         self.turn: int | None = turn or None  # the turn being played (after STATUS(t): t + 1, the next)
-        self.game = game
+        self.game, self.skips_status = game, skips_status
         self._seen: dict[tuple[str, object, int], Message] = {}
 
     def admit(self, msg: Turn | Status | Over) -> None:
@@ -139,6 +143,8 @@ class TurnClock:
         now = msg.turn + 1 if isinstance(msg, Status) else msg.turn
         if self.turn is not None:  # (STATUS(t) makes t + 1 "now"; the end may come at any turn)
             lo, hi = (self.turn - 1, float("inf")) if isinstance(msg, Over) else (self.turn, self.turn + 1)
+            if self.skips_status and isinstance(msg, Status):
+                hi = float("inf")
             if not lo <= now <= hi:
                 raise StaleTurn(f"{msg.TAG} for turn {msg.turn} while the game is at turn {self.turn}")
         key = (msg.TAG, getattr(msg, "phase", None), msg.turn)

@@ -6,7 +6,8 @@ there is counted as a rejection, never raised (Zenoh would swallow it). A query'
 decoded there too. The main thread takes the payloads one at a time, in order of arrival but for a bursting origin
 (`FairQueue`), decodes and checks each (`check_addressed`), and does everything else: a big payload costs its origin's
 turn, not Zenoh's thread, which every other message waits for, and the only locks guard the queue and the rejections
-(`RejectCounter`).
+(`RejectCounter`). A key whose newest message alone matters, read only when needed (`Inbox.newest`), has no callback:
+Zenoh keeps that message, and the main thread reads and checks it when it wants it.
 """
 
 from __future__ import annotations
@@ -447,6 +448,26 @@ class Inbox:
         sub = self.session.declare_subscriber(key, _direct(on_sample))
         self._handles.append(sub)
         return sub
+
+    def newest(self, key: str, expect: type[Message]) -> Callable[[], Received | None]:
+        """The newest message on `key`, read only when wanted: Zenoh keeps the last one that came (a ring of one,
+        no callback), so none wakes this process. Each call reads the one that came since the last call, checked
+        as `subscribe` checks them (None: none came, or it was refused and counted)."""
+        origin, limit = self.keys.origin_of(key), size_limit(expect)
+        ring = self.session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
+        self._handles.append(ring)
+
+        def read() -> Received | None:
+            if (sample := ring.try_recv()) is None:
+                return None
+            try:
+                self._admit(origin, len(sample.payload), limit, False)
+            except RemoteInputError as err:
+                self._refuse(key, origin, None, err)
+                return None
+            return self._read(_Unread(key, origin, None, sample.payload.to_bytes(), expect))  # type: ignore[return-value]
+
+        return read
 
     def unsubscribe(self, sub: zenoh.Subscriber) -> None:
         sub.undeclare()

@@ -1,16 +1,17 @@
 """The environment process (the seed's ENV): the Zenoh adapter of `EnvironmentProcess`
 (entities/environment.py, which says what it does).
 
-It serves ASK (ENV/ASK) and the static map (ENV/MAP), hears STATUS and OVER, the ENV phase's TURN while
-someone listens to its UPD (a matching listener says when), and publishes the UPD.
+It serves ASK (ENV/ASK) and the static map (ENV/MAP) and hears OVER. It reads the newest STATUS before each query
+(Zenoh keeps it: nothing wakes the process for one), or takes every STATUS once the core follows them, and the ENV
+phase's TURN while someone listens to its UPD (a matching listener says when); it publishes the UPD.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import logging
 import sys
+from collections.abc import Callable
 
 import zenoh
 
@@ -37,17 +38,17 @@ from .environment import Effect, EnvironmentProcess, Fail, Follow, Refusal, Repl
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
          connect_timeout: float = 30.0, grace: float = 30.0) -> Over:
     with zenoh.open(conf) as session:
-        inbox, out = Inbox(session, keys, logger), Outbox(session)
-        inbox.subscribe(keys.status, Status)
+        inbox = Inbox(session, keys, logger)
+        newest = inbox.newest(keys.status, Status)  # (handed to the core before each query, unless followed)
         inbox.subscribe(keys.over, Over)
         inbox.serve(keys.ask, Ask)
         inbox.serve(keys.map, MapRequest)
         member = Membership(session, inbox, Connect(turn=0, sender="ENV", role=Role.ENV, session=session_id(session)),
-                            logger, connect_timeout=connect_timeout, grace=grace)
+                            logger, connect_timeout=connect_timeout, grace=grace, skips_status=True)
         env = EnvironmentProcess(member.welcome)
         if draw:
             print(env.drawing(), flush=True)
-        out.watch(keys.upd, inbox)  # (a first Matching event at once if someone already listens)
+        effects = Effects(inbox, Outbox(session), newest)
 
         def handle(event: Event | None) -> None:
             if not member.clock.screen(event, inbox.rejects):
@@ -58,13 +59,15 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
                 case Presence() as presence:
                     member.on_presence(presence)  # the world stays; the next STATUS resyncs the drones
                 case Matching(matching=matching):
-                    carry_out(env.listened(matching))
+                    effects.run(env.listened(matching))
                 case Asked(query, Ask() | MapRequest() as msg):  # the queryables serve these alone
-                    carry_out(env.asked(query, msg))
+                    if not effects.follows(keys.status) and (status := newest()) is not None:
+                        handle(status)  # the newest STATUS, if one came since the last query
+                    effects.run(env.asked(query, msg))
                 case Received(_, Status() | Turn() | Over() as msg):  # the subscriptions take these alone
-                    carry_out(env.receive(msg))
+                    effects.run(env.receive(msg))
 
-        carry_out = functools.partial(_carry_out, keys=keys, inbox=inbox, out=out, moves=[])
+        effects.out.watch(keys.upd, inbox)  # (a first Matching event at once if someone already listens)
         inbox.run(handle, timeout=member.timeout, until=lambda: env.over is not None)
         member.close()
         inbox.rejects.flush(everything=True)
@@ -75,24 +78,44 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
     return env.over
 
 
-def _carry_out(effects: list[Effect], *, keys: Keys, inbox: Inbox, out: Outbox, moves: list[zenoh.Subscriber]) -> None:
-    """Carry out the environment's effects (`moves`: the subscription to the ENV phase, while held)."""
-    for eff in effects:
-        match eff:
-            case Reply(zenoh.Query() as query, msg):  # the core holds the query it was given: a zenoh.Query
-                query.reply(query.key_expr, encode(msg))
-                query.drop()
-            case Fail(zenoh.Query() as query, why):
-                query.reply_err(why.encode())
-                query.drop()
-            case Report(msg):
-                out.put(keys.upd, msg)
-            case Follow(moves=True):
-                moves.append(inbox.subscribe(keys.turn_of(Phase.ENV), Turn))
-            case Follow(moves=False):
-                inbox.unsubscribe(moves.pop())
-            case Refusal(what, err):
-                inbox.rejects.reject(what, err)
+class Effects:
+    """Carries out the environment's effects. As it starts following STATUS, the newest one (`newest`: one that came
+    before the subscription) is queued first."""
+
+    def __init__(self, inbox: Inbox, out: Outbox, newest: Callable[[], Received | None]) -> None:
+        self.inbox, self.out, self.keys, self.newest = inbox, out, inbox.keys, newest
+        self._subs: dict[str, zenoh.Subscriber] = {}  # the keys followed: STATUS, the ENV phase's TURN
+
+    def follows(self, key: str) -> bool:
+        return key in self._subs
+
+    def run(self, effects: list[Effect]) -> None:
+        for eff in effects:
+            match eff:
+                case Reply(zenoh.Query() as query, msg):  # the core holds the query it was given: a zenoh.Query
+                    query.reply(query.key_expr, encode(msg))
+                    query.drop()
+                case Fail(zenoh.Query() as query, why):
+                    query.reply_err(why.encode())
+                    query.drop()
+                case Report(msg):
+                    self.out.put(self.keys.upd, msg)
+                case Follow(moves, status):
+                    self._follow(self.keys.turn_of(Phase.ENV), Turn, moves)
+                    if self._follow(self.keys.status, Status, status) and (newest := self.newest()) is not None:
+                        self.inbox.post(newest)
+                case Refusal(what, err):
+                    self.inbox.rejects.reject(what, err)
+
+    def _follow(self, key: str, kind: type[Status] | type[Turn], on: bool) -> bool:
+        """Subscribe to `key` (`on`) or stop, if not done already; whether it subscribed now."""
+        if on == self.follows(key):
+            return False
+        if on:
+            self._subs[key] = self.inbox.subscribe(key, kind)
+        else:
+            self.inbox.unsubscribe(self._subs.pop(key))
+        return on
 
 
 def cli(argv: list[str] | None = None) -> int:

@@ -169,9 +169,11 @@ class Report:
 
 @dataclass(frozen=True, slots=True)
 class Follow:
-    """Subscribe to the ENV phase's TURN (`moves` True) or stop (False)."""
+    """Take every STATUS (`status` True) and every ENV phase's TURN (`moves` True), or stop (False): subscribe to
+    them. Not following STATUS, the adapter hands the newest one (if one came since) before each query."""
 
     moves: bool
+    status: bool
 
 
 Effect = Reply | Fail | Report | Follow | Refusal
@@ -186,8 +188,13 @@ class EnvironmentProcess:
     It answers an ASK from the world as it stands at the start of the ASK's turn: an ASK for turn t once
     STATUS(t - 1) has been taken; one that arrives earlier (messages take different routes) waits for
     it, one for a past turn is refused. An ASK for turn 0 asks the static world (the kinds of the cells,
-    buildings never move; no drones) and is answered at once. The drones' positions come from each
+    buildings never move; no drones) and is answered at once. The drones' positions come from the last
     STATUS, put on the map only when needed (for an ASK of the turn, or to apply the ENV phase's moves).
+
+    It takes a STATUS only when it needs one: the adapter hands it the newest before each query (drones that
+    chart the map ask nothing once a game runs, and the environment then sleeps through the turns). From the
+    first ASK that has to wait for its STATUS, or while someone listens to the UPD, it follows every STATUS
+    (`Follow`). A STATUS that is not newer than the last one taken changes nothing.
 
     The ENV phase's moves make the UPD report. Nobody listening, the environment does not even follow
     that phase (the coordinator then publishes none): the drones' cells come from STATUS alone (the same
@@ -205,6 +212,7 @@ class EnvironmentProcess:
         self._waiting: list[tuple[object, Ask]] = []  # ASKs for a turn after `ready`
         self._unsynced: Status | None = None  # the last STATUS, until the drones' positions are needed
         self._listened = False  # someone subscribes to the UPD
+        self._waited = False  # an ASK waited for its STATUS: every STATUS is followed from then on
 
     def drawing(self) -> str:
         """The world and the drones in it, floor by floor, under a line saying what it is."""
@@ -224,7 +232,8 @@ class EnvironmentProcess:
                 return [self._answer(query, msg)]
             case Ask(turn=turn) if turn > self._ready:
                 self._waiting.append((query, msg))
-                return []
+                following, self._waited = self._following(), True
+                return self._follow(following)
             case Ask(turn=turn, sender=who):
                 return self._refuse(query, StaleTurn(f"ASK for past turn {turn} from {who}, "
                                                      f"the world is at turn {self._ready}"))
@@ -251,10 +260,18 @@ class EnvironmentProcess:
 
     def listened(self, matching: bool) -> list[Effect]:
         """Whether someone subscribes to the UPD now: the environment follows the ENV phase's moves then."""
-        changed, self._listened = matching != self._listened, matching
-        return [Follow(moves=matching)] if changed else []
+        following, self._listened = self._following(), matching
+        return self._follow(following)
+
+    def _following(self) -> Follow:
+        return Follow(moves=self._listened, status=self._listened or self._waited)
+
+    def _follow(self, before: Follow) -> list[Effect]:
+        return [] if (now := self._following()) == before else [now]
 
     def _status(self, status: Status) -> list[Effect]:
+        if status.turn < self._ready:
+            return []  # taken already (handed again as the newest), one before it, or the starts' (turn 0)
         self._unsynced = status
         self._ready, self._applied = status.turn + 1, False
         out: list[Effect] = []

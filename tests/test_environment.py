@@ -296,7 +296,8 @@ def test_an_ask_for_turn_0_asks_the_static_world_and_is_answered_at_once() -> No
 
 def test_an_early_ask_waits_for_the_status_of_the_turn_before() -> None:
     p = process()
-    assert p.asked("q2", ask(2, (1, 0, 0))) == [], "turn 2's world is not known yet"
+    assert p.asked("q2", ask(2, (1, 0, 0))) == [Follow(moves=False, status=True)], \
+        "turn 2's world is not known yet: every STATUS is followed from now on"
     assert p.asked("q3", ask(3, (1, 0, 0))) == []
     effects = p.receive(status_of(1, D01=(1, 0, 0), D02=(3, 3, 0)))
     assert replied(effects, "q2").drones == ((0, "D01"),), "answered from STATUS(1)"
@@ -333,11 +334,11 @@ def test_the_map_is_the_static_world() -> None:
 def test_the_env_phase_is_followed_and_reported_only_while_someone_listens_to_the_upd() -> None:
     p = process()
     assert p.listened(False) == [], "nobody listened before either"
-    assert p.listened(True) == [Follow(moves=True)]
+    assert p.listened(True) == [Follow(moves=True, status=True)]
     assert p.listened(True) == []
     (report,) = p.receive(env_phase(1, move("D01", (0, 0, 0), (1, 0, 0))))
     assert report == Report(Upd(turn=1, sender="ENV", cells=(info((0, 0, 0)), info((1, 0, 0), CellKind.EMPTY, "D01"))))
-    assert p.listened(False) == [Follow(moves=False)]
+    assert p.listened(False) == [Follow(moves=False, status=False)]
     p.receive(status_of(1, D01=(1, 0, 0), D02=(3, 3, 0)))
     assert p.receive(env_phase(2, move("D01", (1, 0, 0), (2, 0, 0)))) == [], "moved, reported to nobody"
     p.receive(status_of(2, D01=(2, 0, 0), D02=(3, 3, 0)))
@@ -363,6 +364,30 @@ def test_an_env_phase_of_another_turn_or_with_bad_moves_is_refused_and_changes_n
     (refusal,) = p.receive(env_phase(1, move("D01", (2, 2, 0), (2, 2, 1))))
     assert isinstance(refusal, Refusal) and isinstance(refusal.err, OutOfRange)
     assert replied(p.asked("q", ask(1)), "q").drones == ((0, "D01"),)
+
+
+def test_status_is_taken_when_handed_and_followed_from_the_first_ask_that_waits_for_it() -> None:
+    """Drones that chart the map ask nothing: the environment takes only the STATUS handed to it (the newest, before
+    a query), skips the others, and follows every one once an ASK had to wait, whoever listens to the UPD."""
+    p = process()
+    assert p.receive(status_of(6, D01=(2, 0, 0), D02=(3, 3, 0))) == [], "turns 1 to 6 skipped"
+    assert replied(p.asked("q", ask(7, (2, 0, 0))), "q").drones == ((0, "D01"),)
+    assert p.asked("q9", ask(9, (2, 0, 0))) == [Follow(moves=False, status=True)]
+    assert p.listened(True) == [Follow(moves=True, status=True)]
+    assert p.listened(False) == [Follow(moves=False, status=True)], "still followed: an ASK waited"
+    assert replied(p.receive(status_of(8, D01=(1, 0, 0), D02=(3, 3, 0))), "q9").drones == ()
+
+
+def test_a_status_not_newer_than_the_last_taken_changes_nothing() -> None:
+    """The newest STATUS is handed again when none came since (or after one taken from the subscription): nothing
+    changes, not even an ENV phase applied since."""
+    p = process()
+    p.listened(True)
+    p.receive(status_of(1, D01=(0, 0, 0), D02=(3, 3, 0)))
+    assert p.receive(env_phase(2, move("D01", (0, 0, 0), (1, 0, 0)))) != []
+    for old in (status_of(1, D01=(0, 0, 0), D02=(3, 3, 0)), status_of(0, D01=(2, 2, 0), D02=(3, 3, 0))):
+        assert p.receive(old) == []
+    assert replied(p.asked("q", ask(2, (1, 0, 0))), "q").drones == ((0, "D01"),), "where the ENV phase moved it"
 
 
 def test_over_ends_the_game_and_refuses_the_asks_still_waiting() -> None:

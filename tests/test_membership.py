@@ -30,3 +30,18 @@ def test_the_games_own_messages_pass() -> None:
     clock.admit(Turn(turn=3, sender="SRV", phase=Phase.GCS, game=GAME))
     clock.admit(Over(turn=3, sender="SRV", reason=EndReason.ALL_REACHED, game=GAME))
     assert clock.turn == 3
+
+
+def test_a_clock_that_skips_status_takes_a_later_one_but_never_an_earlier_one() -> None:
+    """The environment reads only the newest STATUS, when it needs one: it may be many turns on."""
+    status = lambda turn: Status(turn=turn, sender="OBS", drones=StatusTable.of([]), game=GAME)  # noqa: E731
+    strict, skipping = TurnClock(3, game=GAME), TurnClock(3, game=GAME, skips_status=True)
+    with pytest.raises(StaleTurn, match="while the game is at turn 3"):
+        strict.admit(status(9))
+    skipping.admit(status(9))
+    assert skipping.turn == 10
+    for clock, turn in ((strict, 3), (skipping, 10)):
+        with pytest.raises(StaleTurn):
+            clock.admit(status(turn - 3))
+        with pytest.raises(StaleTurn):
+            clock.admit(Turn(turn=turn + 5, sender="SRV", phase=Phase.GCS, game=GAME))

@@ -15,7 +15,7 @@ import pytest
 import zenoh
 
 from dronesim.transport import FairQueue, Inbox, Outbox, Received, _direct, router_locators
-from schema import Ask, Connect, EndReason, Keys, Over, RemoteInputError, Role, Target, encode
+from schema import Ask, Connect, EndReason, Keys, Over, RemoteInputError, Role, Status, StatusTable, Target, encode
 from schema.keys import size_limit
 from schema.tables import MAX_DRONE, drone_name
 from tests.harness import client_config, embedded_router, unique_root
@@ -270,6 +270,26 @@ def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_ano
     assert len(refused) == 5 and b"already waiting" in refused[0].err.payload.to_bytes()
     assert inbox.rejects.report() == f"{{'flood': 5}}, from {{'{flooder}': 5}}"
     inbox.close()
+
+
+def test_newest_keeps_the_last_message_queues_no_event_and_checks_it_when_read(pair) -> None:
+    """A key read with `Inbox.newest` (the environment's STATUS): nothing is queued for it; each read gives the
+    message that came since the last read, checked as a subscription's are."""
+    inbox, out, keys = pair
+    read = inbox.newest(keys.status, Status)
+    subscribed(out, inbox, keys.status)
+    assert read() is None, "nothing came yet"
+    for turn in range(1, 4):
+        out.put(keys.status, Status(turn=turn, sender="OBS", drones=StatusTable.of([])))
+    out.put(keys.over, over(9))  # after them on the same session: once it is here, so are they
+    assert inbox.get(10).msg == over(9) and inbox.drain() == [], "no event for a STATUS"
+    got = read()
+    assert isinstance(got, Received) and got.key == keys.status and got.msg.turn == 3, "the last one only"
+    assert read() is None, "each one is read once"
+    out.session.put(keys.status, b"\x81\xa1v\x05")  # a map, but no message
+    out.put(keys.over, over(10))
+    assert inbox.get(10).msg == over(10)
+    assert read() is None and sum(inbox.rejects.snapshot().values()) == 1, "refused and counted"
 
 
 @pytest.fixture
