@@ -397,13 +397,12 @@ class Engine:
                 self._upd_due = {t: m for t, m in self._upd_due.items() if t > turn - UPD_WINDOW} | {turn: moves}
             if self.env_followed:
                 effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
-        status = self.status(turn)
-        data = encode(status)
+        status = self.status(turn)  # (encoded as it goes out, after the next turn's drones' phase)
         if self.journaled:
-            log["state"] = state_hash(status, data)
+            log["state"] = state_hash(status)
         self._log.debug("turn %d observed: %s", turn, log)
         end = self._end_reason()
-        effects += [Record(log), Publish(status, data), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
+        effects += [Record(log), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
         return _drones_first(effects)
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
@@ -853,12 +852,10 @@ class Engine:
         return []
 
 
-def state_hash(status: Status, data: bytes | None = None) -> str:
-    """The journal's digest of a turn's state: its STATUS as the wire says it (`data`, if encoded already),
-    the game's identity left out: a journal depends on the seed, the scenario and the inputs only."""
-    if status.game:
-        data = encode(Status(turn=status.turn, sender=status.sender, drones=status.drones))
-    return hashlib.sha256(encode(status) if data is None else data).hexdigest()[:16]
+def state_hash(status: Status) -> str:
+    """The journal's digest of a turn's state: its STATUS as the wire says it, the game's identity left out: a
+    journal depends on the seed, the scenario and the inputs only."""
+    return hashlib.sha256(encode(Status(turn=status.turn, sender=status.sender, drones=status.drones))).hexdigest()[:16]
 
 
 def opens_drones_phase(effect: Effect) -> bool:

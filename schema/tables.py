@@ -192,6 +192,14 @@ class Table:
         return cls(rows)
 
     @classmethod
+    def pack(cls, rows: Iterable[tuple[int, ...]]) -> Self:
+        """The table of raw rows, each the values of `ROW` (a cell's three ints in place of the cell), checked."""
+        try:
+            return cls(np.frombuffer(b"".join(cls.ROW.pack(*row) for row in rows), cls.DTYPE))
+        except struct.error as exc:
+            raise MalformedMessage(f"{cls.__name__}: {exc}") from None
+
+    @classmethod
     def build(cls, **columns: object) -> Self:
         """The table of the given columns, each a sequence of raw values (drone numbers, cells, enum codes),
         one per row; every column of `LAYOUT` must be given (an absent optional cell is (-1, -1, -1)), but a

@@ -169,13 +169,8 @@ def fly_round(steps: Mapping[str, Sensing]) -> PilotsPlan[dict[str, Decision]]:
 
 def steps_of(decisions: Mapping[str, Decision]) -> StepTable:
     """A MOVES's steps: each decision's cell and note, in drone order."""
-    ids = sorted(decisions)
-    decided = [decisions[d] for d in ids]
-    n = len(ids)
-    return StepTable.build(drone=np.fromiter(map(drone_number, ids), np.uint16, n),
-                           pos=np.array([d.pos for d in decided], np.int32).reshape(n, 3),
-                           note=np.fromiter((code_of(d.note) for d in decided), np.uint8, n),
-                           ranked=np.fromiter((d.ranked for d in decided), np.uint32, n))
+    return StepTable.pack((drone_number(d), *decisions[d].pos, code_of(decisions[d].note), decisions[d].ranked)
+                          for d in sorted(decisions))
 
 
 def fly_pilots(pilots: Mapping[str, Autopilot], orders: Iterable[tuple[str, Cell, Cell | None]], *,
