@@ -525,6 +525,7 @@ class Variant:
     autopilot: str = "seed"  # the drones' autopilot (`dronesim drone --autopilot`)
     hosts: int = 1  # swarm hosts H01, H02, ... (processes "swarm", or "swarm1", "swarm2", ...), drones in id order
     statuses: bool = True  # keep every STATUS (`Game.statuses`; False: only the last, `Game.last_status`)
+    env_follows: bool = False  # the environment takes every STATUS (`dronesim env --follow-status`)
 
 
 def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path | None = None,
@@ -566,7 +567,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
             journal = ["--journal", str(logs / "journal.jsonl")] if variant.journal else []
             procs.start("coordinator", [*base, "coordinator", *common, "--scenario", str(scenario_file),
                                         "--phase-deadline", str(PHASE_DEADLINE), *journal, *creds("SRV")])
-            procs.start("env", [*base, "env", *common, "--no-draw", "--connect-timeout", "120", *creds("ENV")])
+            procs.start("env", [*base, "env", *common, "--no-draw", "--connect-timeout", "120", *creds("ENV"),
+                                *["--follow-status"] * variant.env_follows])
             flying = [*base, "drone", *common, "--autopilot", variant.autopilot, "--connect-timeout", "120"]
             flying += [] if variant.chart else ["--no-chart"]
             flying += [] if variant.swarm_min is None else ["--swarm-pilot-min", str(variant.swarm_min)]
@@ -1006,6 +1008,15 @@ MECHANISMS: tuple[Mechanism, ...] = (
          "coordinator/node.py:/Matching|matching|env_followed/", "coordinator/engine.py:/env_followed/"),
         Variant(upd_listener=True), ((128, (64, 64, 16)), (1000, (64, 64, 16))),
         "a subscriber to ENV/UPD (in this process, a callback that does nothing)"),
+    Mechanism(
+        "The environment takes the newest STATUS when a query needs it, not every one",
+        ("dronesim/transport.py::Inbox.newest", "dronesim/membership.py:/skips_status/",
+         "entities/environment.py::EnvironmentProcess.start", "entities/environment.py::EnvironmentProcess._follow",
+         "entities/environment.py::EnvironmentProcess._following",
+         "entities/environment.py:/self\\._all|taken already/", "entities/env_node.py::Effects._follow",
+         "entities/env_node.py:/newest|follow/"),
+        Variant(env_follows=True), ((1, (64, 64, 16)), (128, (64, 64, 16))),
+        "`dronesim env --follow-status`: it takes every STATUS as it comes"),
     Mechanism(
         "Turn records without a journal skip what they would only drop",
         ("coordinator/engine.py:/journaled/",),

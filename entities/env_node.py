@@ -36,7 +36,7 @@ from .environment import Effect, EnvironmentProcess, Fail, Follow, Refusal, Repl
 
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
-         connect_timeout: float = 30.0, grace: float = 30.0) -> Over:
+         connect_timeout: float = 30.0, grace: float = 30.0, follow: bool = False) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
         newest = inbox.newest(keys.status, Status)  # (handed to the core before each query, unless followed)
@@ -45,10 +45,11 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         inbox.serve(keys.map, MapRequest)
         member = Membership(session, inbox, Connect(turn=0, sender="ENV", role=Role.ENV, session=session_id(session)),
                             logger, connect_timeout=connect_timeout, grace=grace, skips_status=True)
-        env = EnvironmentProcess(member.welcome)
+        env = EnvironmentProcess(member.welcome, follow=follow)
         if draw:
             print(env.drawing(), flush=True)
         effects = Effects(inbox, Outbox(session), newest)
+        effects.run(env.start())
 
         def handle(event: Event | None) -> None:
             if not member.clock.screen(event, inbox.rejects):
@@ -122,13 +123,15 @@ def cli(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="dronesim env", description=__doc__)
     add_zenoh_args(p)
     p.add_argument("--no-draw", action="store_true", help="do not print the world at start")
+    p.add_argument("--follow-status", action="store_true",
+                   help="take every STATUS as it comes, not only the newest when a query needs it (to measure that)")
     add_entity_args(p)
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "ENV")
     try:
         return until_stopped(lambda: main(zenoh_config(args), keys=Keys(args.root), logger=logger,
                                           draw=not args.no_draw, connect_timeout=args.connect_timeout,
-                                          grace=args.grace), logger)
+                                          grace=args.grace, follow=args.follow_status), logger)
     except UsageError as err:
         logger.error("%s", err)
         return 2

@@ -194,14 +194,14 @@ class EnvironmentProcess:
     It takes a STATUS only when it needs one: the adapter hands it the newest before each query (drones that
     chart the map ask nothing once a game runs, and the environment then sleeps through the turns). From the
     first ASK that has to wait for its STATUS, or while someone listens to the UPD, it follows every STATUS
-    (`Follow`). A STATUS that is not newer than the last one taken changes nothing.
+    (`Follow`; with `follow`, from the start). A STATUS that is not newer than the last one taken changes nothing.
 
     The ENV phase's moves make the UPD report. Nobody listening, the environment does not even follow
     that phase (the coordinator then publishes none): the drones' cells come from STATUS alone (the same
     cells), and a swarm's thousands of moves a turn go nowhere.
     """
 
-    def __init__(self, welcome: Welcome) -> None:
+    def __init__(self, welcome: Welcome, *, follow: bool = False) -> None:
         starts, self.spec = welcome.starts.cells(), welcome.world
         self.world = build_world(welcome.world, starts.values())
         self.env = Environment(self.world, starts)
@@ -212,7 +212,7 @@ class EnvironmentProcess:
         self._waiting: list[tuple[object, Ask]] = []  # ASKs for a turn after `ready`
         self._unsynced: Status | None = None  # the last STATUS, until the drones' positions are needed
         self._listened = False  # someone subscribes to the UPD
-        self._waited = False  # an ASK waited for its STATUS: every STATUS is followed from then on
+        self._all = follow  # every STATUS followed: from the start (`follow`) or since an ASK waited for its STATUS
 
     def drawing(self) -> str:
         """The world and the drones in it, floor by floor, under a line saying what it is."""
@@ -232,7 +232,7 @@ class EnvironmentProcess:
                 return [self._answer(query, msg)]
             case Ask(turn=turn) if turn > self._ready:
                 self._waiting.append((query, msg))
-                following, self._waited = self._following(), True
+                following, self._all = self._following(), True
                 return self._follow(following)
             case Ask(turn=turn, sender=who):
                 return self._refuse(query, StaleTurn(f"ASK for past turn {turn} from {who}, "
@@ -258,13 +258,17 @@ class EnvironmentProcess:
                 return [Fail(query, "the game is over") for query, _ in waiting]
         raise TypeError(f"not a message the environment takes: {msg!r}")
 
+    def start(self) -> list[Effect]:
+        """What it follows from the start (every STATUS with `follow`: to measure what taking the newest saves)."""
+        return self._follow(Follow(moves=False, status=False))
+
     def listened(self, matching: bool) -> list[Effect]:
         """Whether someone subscribes to the UPD now: the environment follows the ENV phase's moves then."""
         following, self._listened = self._following(), matching
         return self._follow(following)
 
     def _following(self) -> Follow:
-        return Follow(moves=self._listened, status=self._listened or self._waited)
+        return Follow(moves=self._listened, status=self._listened or self._all)
 
     def _follow(self, before: Follow) -> list[Effect]:
         return [] if (now := self._following()) == before else [now]

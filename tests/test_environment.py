@@ -246,11 +246,11 @@ def test_survey_answers_as_answer_does() -> None:
 # --------------------------------------------------------------------------- the protocol (EnvironmentProcess)
 
 
-def process(**drones) -> EnvironmentProcess:
+def process(follow: bool = False) -> EnvironmentProcess:
     """An environment process welcomed into a game on `world()` (drones D01 at (0,0,0), D02 at (3,3,0))."""
-    starts = StartTable.of([Start(drone=d, pos=c) for d, c in (drones or {"D01": (0, 0, 0), "D02": (3, 3, 0)}).items()])
+    starts = StartTable.of([Start(drone=d, pos=c) for d, c in {"D01": (0, 0, 0), "D02": (3, 3, 0)}.items()])
     return EnvironmentProcess(Welcome(turn=0, sender="SRV", entity="ENV", text="", starts=starts,
-                                      world=WorldSpec(size=SIZE, cells=world().packed())))
+                                      world=WorldSpec(size=SIZE, cells=world().packed())), follow=follow)
 
 
 def ask(turn: int, *cells, sender: str = "D01") -> Ask:
@@ -376,6 +376,14 @@ def test_status_is_taken_when_handed_and_followed_from_the_first_ask_that_waits_
     assert p.listened(True) == [Follow(moves=True, status=True)]
     assert p.listened(False) == [Follow(moves=False, status=True)], "still followed: an ASK waited"
     assert replied(p.receive(status_of(8, D01=(1, 0, 0), D02=(3, 3, 0))), "q9").drones == ()
+
+
+def test_with_follow_it_takes_every_status_from_the_start() -> None:
+    assert process().start() == [], "by default it follows nothing at first"
+    p = process(follow=True)
+    assert p.start() == [Follow(moves=False, status=True)]
+    assert p.listened(True) == [Follow(moves=True, status=True)]
+    assert p.listened(False) == [Follow(moves=False, status=True)]
 
 
 def test_a_status_not_newer_than_the_last_taken_changes_nothing() -> None:
