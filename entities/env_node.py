@@ -70,6 +70,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
 
         effects.out.watch(keys.upd, inbox)  # (a first Matching event at once if someone already listens)
         inbox.run(handle, timeout=member.timeout, until=lambda: env.over is not None)
+        for event in inbox.drain():  # the queries still queued at the end get their answer
+            handle(event)
         member.close()
         inbox.rejects.flush(everything=True)
         if inbox.rejects.total:

@@ -230,6 +230,8 @@ class EnvironmentProcess:
                 return self._refuse(query, WrongSender(f"ASK from {who}: only drones ask"))
             case Ask(turn=turn) if turn == self._ready or turn == 0:
                 return [self._answer(query, msg)]
+            case Ask(turn=turn) if turn > self._ready and self.over is not None:
+                return [Fail(query, "the game is over")]
             case Ask(turn=turn) if turn > self._ready:
                 self._waiting.append((query, msg))
                 following, self._all = self._following(), True

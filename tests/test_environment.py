@@ -404,3 +404,5 @@ def test_over_ends_the_game_and_refuses_the_asks_still_waiting() -> None:
     over = Over(turn=2, sender="SRV", reason=EndReason.TURN_LIMIT)
     assert p.receive(over) == [Fail("q", "the game is over")]
     assert p.over == over
+    assert p.asked("q4", ask(4)) == [Fail("q4", "the game is over")], "after the end, one for a later turn too"
+    assert replied(p.asked("q0", ask(0, (1, 1, 0))), "q0").kinds == bytes([CellKind.BUILDING]), "the static world"
