@@ -89,6 +89,23 @@ def test_crash_into_building_ends_the_game_with_over_everywhere(cluster, tmp_pat
         assert any("OVER" in line for line in p.out + p.err), p.text
 
 
+def test_drones_that_ask_every_turn_play_the_game_of_drones_that_chart(router, tmp_path):
+    """Without a chart (`dronesim drone --no-chart`) every drone asks the environment each turn, and the environment
+    answers from the newest STATUS, read as the ASK comes (it sleeps through the turns otherwise): the drones in the
+    cells asked are those of the turn's start, which D* steps round, so the game is the charted one, turn for turn."""
+    world = tmp_path / "open.json"
+    World.from_buildings((10, 10, 3), [Building(x=3, y=1, length=1, width=3, height=2)]).save(world)
+    played = {}
+    for chart in ((), ("--no-chart",)):
+        with Cluster(router, tmp_path) as c:  # (D01 and D03 head-on past D02; D* steps round the drones it is told)
+            journal = start_game(c, tmp_path, coord_args=("--world", str(world), "--drones", "3", "--max-turns", "40"),
+                                 drone_args=("--autopilot", "dstar", *chart), drones=("D01", "D02", "D03"),
+                                 gcs_args=("--targets", "D01=0,4,0;D02=6,2,0;D03=0,0,0"))
+            assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+            played[chart] = [r for r in journal_records(journal) if r["record"] == "turn"]
+    assert len(played[()]) >= 5 and played[()] == played[("--no-chart",)]
+
+
 def test_duplicate_roles_are_refused_with_a_clear_message(cluster, tmp_path):
     srv = cluster.start("SRV", "coordinator", "--admit-deadline", "60")
     first = cluster.start("GCS", "gcs", "--targets", "9,9,0")
