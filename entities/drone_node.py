@@ -29,7 +29,8 @@ from dronesim.transport import (
     setup_logging,
     zenoh_config,
 )
-from schema import Ans, Ask, Connect, Keys, Moves, Over, Phase, Role, Turn, UsageError, WorldMap, drone_id, is_drone_id
+from schema import Ans, Ask, Connect, Keys, Moves, Over, Phase, Role, Turn, UsageError, WorldMap
+from schema.messages import drone_list
 
 from .autopilots import REGISTRY, SWARM_MIN, pilot_class
 from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, Send, Timer
@@ -111,21 +112,6 @@ class Effects:
         return [Expired(ref)]
 
 
-def parse_drones(text: str) -> tuple[str, ...]:
-    """``D01`` / ``D01,D02`` / ``D01-D08`` / ``1-8``."""
-    ids: list[str] = []
-    for part in text.split(","):
-        part = part.strip()
-        if "-" in part:
-            a, b = (int(p.strip().lstrip("D")) for p in part.split("-", 1))
-            ids += [drone_id(n) for n in range(a, b + 1)]
-        elif part:
-            ids.append(part if is_drone_id(part) else drone_id(int(part)))
-    if not ids or len(set(ids)) != len(ids):
-        raise UsageError(f"bad drone list {text!r}")
-    return tuple(ids)
-
-
 def cli(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="dronesim drone", description=__doc__)
     add_zenoh_args(p)
@@ -140,7 +126,7 @@ def cli(argv: list[str] | None = None) -> int:
     add_entity_args(p)
     args = p.parse_args(argv)
     try:
-        drones = parse_drones(args.id)
+        drones = drone_list(args.id)
         if len(drones) > 1 and not args.host:
             raise UsageError("several drones in one process need --host Hnn")
         logger = setup_logging(args.log_level, args.host or drones[0])

@@ -19,8 +19,9 @@ import re
 import sys
 from collections.abc import Iterable, Mapping, Sequence
 
+from .errors import UsageError
 from .keys import KEY_TABLE, Keys, KeySpec, size_limit
-from .messages import drone_id, is_drone_id, is_host_id
+from .messages import drone_id, drone_list, is_drone_id, is_host_id
 from .tuning import DRONE_PUT_RATE
 
 #: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
@@ -175,14 +176,7 @@ def parse_hosts(items: Iterable[str]) -> dict[str, tuple[str, ...]]:
         host, _, spec = item.partition("=")
         if not spec:
             raise ValueError(f"bad --host {item!r}: expected Hnn=Dnn-Dmm or Hnn=Dnn,Dmm")
-        ids: list[str] = []
-        for part in (p.strip() for p in spec.split(",")):
-            m = re.fullmatch(r"D?(\d+)\s*-\s*D?(\d+)", part)
-            if m:
-                ids += [drone_id(n) for n in range(int(m[1]), int(m[2]) + 1)]
-            elif part:
-                ids.append(part if is_drone_id(part) else drone_id(int(part.lstrip("D"))))
-        hosts[host.strip()] = tuple(ids)
+        hosts[host.strip()] = drone_list(spec)
     return hosts
 
 
@@ -323,7 +317,7 @@ def main(argv: list[str] | None = None) -> int:
         hosts = parse_hosts(args.host)
         block = access_control([drone_id(n) for n in range(1, args.drones + 1)], roots=args.root or ["sim"],
                                identity=args.identity, hosts=hosts)
-    except ValueError as err:
+    except (ValueError, UsageError) as err:
         print(f"acl: {err}", file=sys.stderr)
         return 2
     conf = {"access_control": block}

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import operator
+import re
 import typing
 from dataclasses import dataclass
 from typing import ClassVar
@@ -18,7 +19,7 @@ from typing import ClassVar
 import msgpack
 import numpy as np
 
-from .errors import MalformedMessage
+from .errors import MalformedMessage, UsageError
 from .tables import (
     MAX_COORD,
     MAX_DRONE,
@@ -59,6 +60,21 @@ def drone_id(n: int) -> str:
     if not 1 <= n <= MAX_DRONE:
         raise ValueError(f"drone number {n} out of 1..{MAX_DRONE}")
     return drone_name(n)
+
+
+def drone_list(text: str) -> tuple[str, ...]:
+    """``D01`` / ``D01,D02`` / ``D01-D08`` / ``1-8`` -> the drone ids, in that order (a UsageError saying why, for
+    anything else: a drone twice, a range backwards, a number out of 1..MAX_DRONE)."""
+    ids: list[str] = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        m = re.fullmatch(r"D?(\d{1,6})(?:\s*-\s*D?(\d{1,6}))?", part)
+        first, last = (int(m[1]), int(m[2] or m[1])) if m else (0, 0)
+        if not 1 <= first <= last <= MAX_DRONE:
+            raise UsageError(f"bad drone list {text!r}: {part!r} is not D01, D01-D08 or 1-8 (drones 1 to {MAX_DRONE})")
+        ids += map(drone_name, range(first, last + 1))
+    if not ids or len(set(ids)) != len(ids):
+        raise UsageError(f"bad drone list {text!r}: {'no drone' if not ids else 'a drone listed twice'}")
+    return tuple(ids)
 
 
 class Role(enum.Enum):

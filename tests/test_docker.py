@@ -356,9 +356,9 @@ def test_every_compose_command_parses_with_the_roles_own_parser(path):
             game = game_config(args)
             assert len(game.drones) == int(flag_values(argv, "--drones")[0])
         if role == "drone":
-            from entities.drone_node import parse_drones
+            from schema.messages import drone_list
 
-            assert parse_drones(args.id)
+            assert drone_list(args.id)
 
 
 def documented_commands() -> list[list[str]]:

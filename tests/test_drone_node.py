@@ -6,6 +6,7 @@ import functools
 import logging
 
 import numpy as np
+import pytest
 import zenoh
 
 from dronesim.transport import Inbox, client_config
@@ -69,3 +70,11 @@ def test_a_query_comes_back_as_one_answer_event_whatever_its_outcome() -> None:
         finally:
             queryable.undeclare()
             querier.undeclare()
+
+
+@pytest.mark.parametrize("ids", ["foo", "D01-Dx", "0", "99999", "3-1", "D01,D01"])
+def test_a_bad_drone_list_is_refused_with_exit_2_and_why(ids: str, capsys) -> None:
+    from entities.drone_node import cli
+
+    assert cli(["--id", ids, "--host", "H01"]) == 2
+    assert "bad drone list" in capsys.readouterr().err

@@ -56,7 +56,8 @@ from schema import (
     is_drone_id,
     tables,
 )
-from schema.messages import MAX_COORD, MAX_PAYLOAD, MAX_TURN
+from schema.errors import UsageError
+from schema.messages import MAX_COORD, MAX_PAYLOAD, MAX_TURN, drone_list
 from schema.samples import SAMPLES, VECTORS_PATH, golden
 from schema.tables import Col
 
@@ -596,6 +597,21 @@ def test_drone_ids() -> None:
     assert is_drone_id("D01") and is_drone_id("D1234") and is_drone_id("D12345") and is_drone_id("D65535")
     for bad in ("D1", "D65536", "D123456", "D012345", "d01", "H01", 1, None, "D01 ", [], {}, ["D01"], {"D01": 1}):
         assert not is_drone_id(bad)
+
+
+@pytest.mark.parametrize(("text", "ids"), [
+    ("D01", ("D01",)), ("D01,D03", ("D01", "D03")), ("D01-D03", ("D01", "D02", "D03")),
+    ("1-3, 7", ("D01", "D02", "D03", "D07")), ("D9 - D10,", ("D09", "D10")), ("65535", ("D65535",)),
+])
+def test_a_drone_list_gives_the_ids_in_order(text: str, ids: tuple[str, ...]) -> None:
+    assert drone_list(text) == ids
+
+
+@pytest.mark.parametrize("text", ["", " , ", "foo", "D01-Dx", "0", "65536", "D01,D01", "1-3,2", "3-1", "D01;D02",
+                                  "1-99999999", "H01", "-1", "D-1"])
+def test_anything_else_is_a_usage_error_saying_why(text: str) -> None:
+    with pytest.raises(UsageError, match="bad drone list"):
+        drone_list(text)
 
 
 # --------------------------------------------------------------------------- keys

@@ -194,6 +194,8 @@ def test_acl_swarm_hosts_fly_their_drones_only():
     with pytest.raises(ValueError, match="flown by both"):
         acl.access_control(["D01"], hosts={"H01": ("D01",), "H02": ("D01",)})
     assert acl.parse_hosts(["H01=D01-D03", "H02=D05,D07"]) == {"H01": ("D01", "D02", "D03"), "H02": ("D05", "D07")}
+    for bad in ("H01=foo", "H01=3-1", "H01=D01,D01", "H01"):
+        assert acl.main(["--drones", "4", "--host", bad, "--identity", "usrpwd"]) == 2, bad
 
 
 def test_acl_binds_a_per_entity_query_key_to_its_asker(monkeypatch):
