@@ -32,7 +32,7 @@ import hashlib
 import itertools
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, overload
 
 import numpy as np
@@ -162,6 +162,9 @@ class GameConfig:
             raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
+        if not (self.phase_deadline > 0 and all(d is None or d > 0 for d in (self.gcs_deadline, self.admit_deadline))
+                and min(self.env_grace, self.link_grace, self.gcs_grace) >= 0):
+            raise UsageError("deadlines must be positive (the GCS's and admission's: or none) and graces >= 0")
 
 
 # --------------------------------------------------------------------------- effects
@@ -170,7 +173,6 @@ class GameConfig:
 @dataclass(frozen=True, slots=True)
 class Publish:
     msg: Message
-    data: bytes | None = field(default=None, compare=False)  # its encoding, when the engine has it already
 
 
 @dataclass(frozen=True, slots=True)

@@ -103,8 +103,8 @@ class Executor:
                     self._turn, self._held = turn.turn, [eff]
                     if self.clock() >= self._last + self.pace:
                         self.release()
-                case Publish(msg, data):
-                    self.out.put(_key_of(self.keys, msg), msg, data)
+                case Publish(msg):
+                    self.out.put(_key_of(self.keys, msg), msg)
                 case Reply(query, msg):
                     self.answer(query, encode(msg))
                 case Record(data):
@@ -335,10 +335,15 @@ def parse_starts(text: str, count: int, size: Cell | None = None,
     """``--starts "0,0,0;0,2,0"`` or, by default, every other cell along y from (0,0,0), then the next row
     of them (x + 2), then the next layer (z + 2), skipping `blocked` cells: as many as fit in `size` (a
     UsageError beyond; without `size`, one row as long as needed). A given cell that is `blocked`: UsageError."""
+    if count < 1:
+        raise UsageError("a game needs at least one drone")
     if text:
-        cells = [tuple(int(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
+        try:
+            cells = [tuple(int(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
+        except ValueError:
+            cells = []
         if len(cells) != count or any(len(c) != 3 for c in cells):
-            raise UsageError(f"--starts needs {count} cells x,y,z separated by ';'")
+            raise UsageError(f"--starts needs {count} cells x,y,z of integers separated by ';', got {text!r}")
         for i, c in enumerate(cells):
             if blocked is not None and blocked(c):  # type: ignore[arg-type]
                 raise UsageError(f"{drone_id(i + 1)} would start inside a building at {c}")

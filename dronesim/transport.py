@@ -602,9 +602,9 @@ class Outbox:
                                                              reliability=zenoh.Reliability.RELIABLE)
         return self._pubs[key]
 
-    def put(self, key: str, msg: Message, data: bytes | None = None) -> None:
-        """Publish `msg` (`data`: its encoding, if the caller already has it)."""
-        self._pub(key).put(encode(msg) if data is None else data)
+    def put(self, key: str, msg: Message) -> None:
+        """Publish `msg`."""
+        self._pub(key).put(encode(msg))
 
     def close(self) -> None:
         """Undeclare this outbox's publishers and matching listeners (the session stays open)."""

@@ -367,3 +367,18 @@ def test_default_starts_fill_the_world_row_after_row_and_refuse_what_does_not_fi
     assert [d.start for d in parse_starts("1,1,1;2,2,2", 2, (4, 4, 1))] == [(1, 1, 1), (2, 2, 2)]
     assert up(["--size", "4,4,1", "--drones", "30", "--quiet"]) == 2
     assert "30 drones do not fit" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("flags", "why"), [
+    (["--starts", "x,y,z"], "--starts needs 1 cells"), (["--starts", "1,2,3;4,5", "--drones", "2"], "--starts needs 2"),
+    (["--drones", "-3"], "at least one drone"), (["--drones", "0"], "at least one drone"),
+    (["--phase-deadline", "-1"], "deadlines must be positive"), (["--phase-deadline", "nan"], "deadlines must be"),
+    (["--gcs-deadline", "-2"], "deadlines must be"), (["--admit-deadline", "-5"], "deadlines must be"),
+    (["--link-grace", "-1"], "graces >= 0"), (["--gcs-grace", "-1"], "graces >= 0"),
+])
+def test_a_bad_game_flag_is_a_usage_error_before_anything_starts(flags, why) -> None:
+    """(`--starts x,y,z` and `--drones -3` crashed with a ValueError; a negative deadline started a game.)"""
+    from coordinator.node import build_parser, game_config
+
+    with pytest.raises(UsageError, match=why):
+        game_config(build_parser().parse_args(flags))
