@@ -12,6 +12,7 @@ import sys
 import zenoh
 
 from dronesim.transport import add_zenoh_args, apply_flags, router_config, router_locators, setup_logging, zenoh_config
+from schema import UsageError
 
 
 def cli(argv: list[str] | None = None) -> int:
@@ -19,15 +20,20 @@ def cli(argv: list[str] | None = None) -> int:
     add_zenoh_args(p)
     args = p.parse_args(argv)
     setup_logging(args.log_level, "ROUTER")
-    if args.config:
-        conf = zenoh_config(args)
-    else:
-        conf = router_config(args.listen or "tcp/0.0.0.0:7447")
-        apply_flags(conf, args, router=True)
-    conf.insert_json5("mode", '"router"')
+    try:
+        if args.config:
+            conf = zenoh_config(args)
+        else:
+            conf = router_config(args.listen or "tcp/0.0.0.0:7447")
+            apply_flags(conf, args, router=True)
+        conf.insert_json5("mode", '"router"')
+        session = zenoh.open(conf)
+    except (UsageError, zenoh.ZError) as err:  # (a bad endpoint, or one it cannot listen on)
+        print(f"dronesim router: {err}", file=sys.stderr)
+        return 2
     signals = {signal.SIGINT, signal.SIGTERM}
     signal.pthread_sigmask(signal.SIG_BLOCK, signals)  # delivered to sigwait below, not as exceptions
-    with zenoh.open(conf) as session:
+    with session:
         print(f"router {session.info.zid()} listening on {', '.join(router_locators(session))}", flush=True)
         signal.sigwait(signals)
     return 0

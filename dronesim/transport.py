@@ -85,10 +85,14 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
 
 
 def _insert(conf: zenoh.Config, settings: dict[str, object]) -> None:
-    """Each setting given (not None, not an empty list) into `conf`, as JSON."""
+    """Each setting given (not None, not an empty list) into `conf`, as JSON (UsageError if Zenoh refuses one, e.g.
+    an endpoint that is not <protocol>/<address>)."""
     for key, value in settings.items():
         if value not in (None, []):
-            conf.insert_json5(key, json.dumps(value))
+            try:
+                conf.insert_json5(key, json.dumps(value))
+            except zenoh.ZError as exc:
+                raise UsageError(f"bad zenoh setting {key} = {json.dumps(value)}: {exc}") from None
 
 
 #: The environment variable holding the password of --user when no --password-file is given.

@@ -30,7 +30,7 @@ from dronesim.transport import (
     zenoh_config,
 )
 from schema import Ans, Ask, Connect, Keys, Moves, Over, Phase, Role, Turn, UsageError, WorldMap
-from schema.messages import drone_list
+from schema.messages import drone_list, is_host_id
 
 from .autopilots import REGISTRY, SWARM_MIN, pilot_class
 from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, Send, Timer
@@ -129,6 +129,8 @@ def cli(argv: list[str] | None = None) -> int:
         drones = drone_list(args.id)
         if len(drones) > 1 and not args.host:
             raise UsageError("several drones in one process need --host Hnn")
+        if args.host is not None and not is_host_id(args.host):
+            raise UsageError(f"--host {args.host!r} is not a host id (H01, H02, ...)")
         logger = setup_logging(args.log_level, args.host or drones[0])
         return until_stopped(lambda: main(zenoh_config(args), drones=drones, autopilot=args.autopilot,
                                           keys=Keys(args.root), logger=logger, host=args.host,

@@ -78,3 +78,22 @@ def test_a_bad_drone_list_is_refused_with_exit_2_and_why(ids: str, capsys) -> No
 
     assert cli(["--id", ids, "--host", "H01"]) == 2
     assert "bad drone list" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("flags", "why"), [
+    (["--id", "D01", "--host", "X1"], "is not a host id"), (["--id", "D01", "--connect", "foo"], "bad zenoh setting"),
+    (["--id", "D01", "--listen", "nonsense"], "bad zenoh setting"),
+])
+def test_a_bad_host_or_endpoint_is_refused_with_exit_2_and_why(flags: list[str], why: str, capsys) -> None:
+    """(Both crashed with a traceback: a MalformedMessage for the host, a zenoh.ZError for the endpoint.)"""
+    from entities.drone_node import cli
+
+    assert cli(flags) == 2
+    assert why in capsys.readouterr().err
+
+
+def test_the_router_refuses_an_endpoint_that_is_not_one_with_exit_2(capsys) -> None:
+    from dronesim.router import cli
+
+    assert cli(["--listen", "foo"]) == 2
+    assert "bad zenoh setting listen/endpoints" in capsys.readouterr().err
