@@ -335,8 +335,6 @@ def parse_starts(text: str, count: int, size: Cell | None = None,
     """``--starts "0,0,0;0,2,0"`` or, by default, every other cell along y from (0,0,0), then the next row
     of them (x + 2), then the next layer (z + 2), skipping `blocked` cells: as many as fit in `size` (a
     UsageError beyond; without `size`, one row as long as needed). A given cell that is `blocked`: UsageError."""
-    if count < 1:
-        raise UsageError("a game needs at least one drone")
     if text:
         try:
             cells = [tuple(int(v) for v in part.split(",")) for part in text.split(";") if part.strip()]
@@ -350,7 +348,7 @@ def parse_starts(text: str, count: int, size: Cell | None = None,
     else:
         nx, ny, nz = size or (1, 2 * count, 1)
         spots = ((x, y, z) for z in range(0, nz, 2) for x in range(0, nx, 2) for y in range(0, ny, 2))
-        cells = list(itertools.islice((c for c in spots if blocked is None or not blocked(c)), count))
+        cells = list(itertools.islice((c for c in spots if blocked is None or not blocked(c)), max(count, 0)))
         if len(cells) < count:
             raise UsageError(f"{count} drones do not fit in a {nx}x{ny}x{nz} world one cell apart ({len(cells)} "
                              f"do): give their cells with --starts, or a bigger --size")

@@ -65,7 +65,6 @@ class Membership:
                  connect_timeout: float, grace: float, skips_status: bool = False) -> None:
         self.session, self.keys, self.log = session, inbox.keys, logger
         self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
-        self.skips_status = skips_status  # (its clock's: `TurnClock`)
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
         inbox.watch_presence("SRV")
         self.welcome, self.coordinator = admit(session, self.keys, hello, logger, timeout=connect_timeout)
@@ -87,7 +86,7 @@ class Membership:
                 self.log.warning("%s: %s takes no further part and leaves at the end of the game",
                                  err, self.hello.sender)
                 return None
-            self.clock = TurnClock(self.welcome.turn, game=self.welcome.game, skips_status=self.skips_status)
+            self.clock = TurnClock(self.welcome.turn, game=self.welcome.game, skips_status=self.clock.skips_status)
             return self.welcome
         if not event.alive and event.session == (self.coordinator or event.session) and self._lost_since is None:
             self._lost_since = time.monotonic()  # (the one that admitted it; any, if Zenoh did not say which)
