@@ -389,11 +389,11 @@ class Engine:
         """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), then the observer's
         STATUS and the turn's journal record, and the next turn or the end."""
         turn, fleet, log = self.turn, self.fleet, self._turn_log
-        alive, before, final, moving = self._judge()
+        before, final, moving = self._judge()
         effects: list[Effect] = []
         if (self.env_followed or self.verify_env) and np.count_nonzero(moving):
             rows = MoveTable.empty(int(np.count_nonzero(moving)))
-            rows["drone"], rows["src"], rows["dst"] = fleet.numbers[alive[moving]], before[moving], final[moving]
+            rows["drone"], rows["src"], rows["dst"] = fleet.numbers[moving], before[moving], final[moving]
             moves = MoveTable(rows)
             if self.verify_env:  # its report may come turns later (nothing waits for it): keep a few
                 self._upd_due = {t: m for t, m in self._upd_due.items() if t > turn - UPD_WINDOW} | {turn: moves}
@@ -534,7 +534,7 @@ class Engine:
             ok = (rows >= 0) & inside_rows(pos, self.size)
             ok[ok] = fleet.state[rows[ok]] == ALIVE
             self._aimed[rows[ok]], self._aims[rows[ok]] = True, pos[ok]
-            return ok
+            return np.flatnonzero(~ok)
 
         refused = _in_batch(msg, len(msg.targets), whole,
                             lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
@@ -612,17 +612,20 @@ class Engine:
         fleet, steps = self.fleet, msg.moves
         numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
 
-        def whole() -> np.ndarray:
-            rows = fleet.row_of_number[numbers]
-            known = rows >= 0
-            rows = np.where(known, rows, 0)
-            ok = (known & (fleet.host_code[rows] == fleet.hosts.get(msg.sender, -2)) & (fleet.state[rows] == ALIVE)
-                  & ~self._moved[rows] & (np.abs(pos - fleet.pos[rows]).sum(axis=1) <= 1))
-            take = rows[ok]
-            self._proposed[take], self._moved[take], self._said[take] = pos[ok], True, notes[ok]
-            self._ranked[take] = steps.column("ranked")[ok]
-            self._awaiting -= len(take)
-            return ok
+        def whole() -> np.ndarray:  # (the MOVES as columns of the fleet's rows: docs/performance.md, Memory)
+            rows, n = fleet.row_of_number[numbers], len(fleet)  # -1, the extra row: a number not of this game
+            step = np.full(n + 1, 2, np.int64)  # each row's step in this MOVES (2: none sent)
+            step[rows] = np.abs(pos - fleet.pos[rows]).sum(axis=1)
+            take = (step[:-1] <= 1) & (fleet.host_code == fleet.hosts.get(msg.sender, -2)) & (fleet.state == ALIVE)
+            take &= ~self._moved
+            for mine, theirs in ((self._proposed, pos), (self._said, notes), (self._ranked, steps.column("ranked"))):
+                sent = np.empty((n + 1, *theirs.shape[1:]), theirs.dtype)
+                sent[rows] = theirs
+                np.copyto(mine, sent[:-1], where=take if theirs.ndim == 1 else take[:, None])
+            self._moved |= take
+            taken = int(np.count_nonzero(take))
+            self._awaiting -= taken
+            return rows[:0] if taken == len(rows) else np.flatnonzero(~np.append(take, False)[rows])
 
         refused = _in_batch(msg, len(steps), whole, lambda j: self._host_move(
             msg.sender, drone_name(int(numbers[j])), cell_of(pos[j]), NOTES[notes[j]], int(steps.column("ranked")[j])))
@@ -671,39 +674,42 @@ class Engine:
         del self._upd_due[turn]
         return []
 
-    def _judge(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _judge(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
         the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
-        deadlines and the turn's journal record. The alive rows, their cells before and after, and which moved."""
+        deadlines and the turn's journal record. Every drone's cell before and after, and which moved (only alive
+        drones move). Its masks are over every row, dead or alive, as the observer's (`observer.judge`)."""
         fleet, ids = self.fleet, self.fleet.ids
-        alive = fleet.alive_rows()
-        before = fleet.pos[alive]
-        took = self._moved[alive]
-        hovering = len(alive) - np.count_nonzero(took)  # (most turns: none, whose bookkeeping is skipped)
-        after = np.where(took[:, None], self._proposed[alive], before) if hovering else self._proposed[alive]
-        if np.count_nonzero(fleet.cooperative) and np.count_nonzero(fleet.cooperative[alive]):
-            after = self._arbitrate(alive, before, after)
+        alive, took = fleet.state == ALIVE, self._moved  # (a drone not alive has no move taken)
+        before = fleet.pos.copy()
+        hovering = np.count_nonzero(alive) - np.count_nonzero(took)  # (most turns: none, whose bookkeeping is skipped)
+        after = np.where(took[:, None], self._proposed, before)
+        if np.count_nonzero(fleet.cooperative & alive):
+            rows = alive.nonzero()[0]
+            after[rows] = self._arbitrate(rows, before[rows], after[rows])
         moved = (after != before).any(axis=1)
         any_moved = np.count_nonzero(moved) > 0
         if any_moved:  # a cell outside the world is the observer's to judge (OUTSIDE), never a building
             inside = inside_rows(after, self.size)
             building = moved & inside & self._solid[np.where(inside, linear_rows(after, self.size), 0)]
-            cause = observer.judge(self.size, before, after, building)
+            cause = observer.judge(self.size, before, after, building, alive)
         else:  # where the drones were, alive and apart, they still are
-            cause = np.zeros(len(alive), np.uint8)
-        fleet.pos[alive] = after
-        said = took & (self._said[alive] != fleet.note[alive]) if hovering else self._said[alive] != fleet.note[alive]
-        said = alive[said] if np.count_nonzero(said) else alive[:0]  # (most turns: the notes said before)
+            cause = np.zeros(len(fleet), np.uint8)
+        fleet.pos[:] = after
+        says = took & (self._said != fleet.note)  # (most turns: the notes said before)
+        said = says.nonzero()[0]
         if len(said):
-            fleet.note[said] = self._said[said]
+            np.copyto(fleet.note, self._said, where=says)
         self.age(alive)
-        hovered = alive[~took] if hovering else alive[:0]
+        hovered = (alive & ~took).nonzero()[0] if hovering else said[:0]
         if hovering or np.count_nonzero(fleet.misses):  # misses in a row: a move starts the count again
-            fleet.misses[alive] = np.where(took, 0, fleet.misses[alive] + 1)
+            fleet.misses[:] = np.where(took, 0, fleet.misses + alive)
         lost = hovered[fleet.misses[hovered] >= self.config.lost_after] if hovering else hovered
-        dead = alive[cause != 0] if np.count_nonzero(cause) else alive[:0]
+        died = cause != 0
+        dead = died.nonzero()[0]
         if len(dead):
-            fleet.state[dead], fleet.cause[dead] = DEAD, cause[cause != 0]
+            fleet.state[died] = DEAD
+            np.copyto(fleet.cause, cause, where=died)
         for i in dead.tolist():
             self._log.warning("turn %d: %s died (%s) at %s", self.turn, ids[i], CAUSES[fleet.cause[i]].value,
                               cell_of(fleet.pos[i]))
@@ -713,14 +719,15 @@ class Engine:
         log = self._turn_log
         if self.journaled:  # what the turn did, drone by drone
             if any_moved:
-                log["moves"] = dict(zip([ids[i] for i in alive[moved].tolist()], after[moved].tolist()))
+                rows = moved.nonzero()[0]
+                log["moves"] = dict(zip([ids[i] for i in rows.tolist()], after[rows].tolist()))
             if len(said):
                 log["notes"] = {ids[i]: NOTES[c].value for i, c in zip(said.tolist(), fleet.note[said].tolist())}
             if len(hovered):
                 log["hovered"] = [ids[i] for i in hovered.tolist()]
             if len(dead):
                 log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
-        return alive, before, after, moved
+        return before, after, moved
 
     def _lose(self, i: int) -> None:
         d = self.fleet.ids[i]
@@ -874,9 +881,9 @@ def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one:
     """Take the `n` items of `msg` (a MOVES's moves, a DONE's targets, a TGT's one) each on its own (`one(j)`
     takes item j or raises why not, changing nothing): a `Refusal` of `msg` if some were refused, the first one's
     error naming the others. A batch of more than FEW_ROWS is taken as a whole first (`whole()` takes, in array
-    operations, every item `one` would take, and says which), the rest one by one."""
+    operations, every item `one` would take, and says which it did not), the rest one by one."""
     refused = []
-    for j in range(n) if n <= FEW_ROWS or whole is None else np.flatnonzero(~whole()).tolist():
+    for j in range(n) if n <= FEW_ROWS or whole is None else whole().tolist():
         try:
             one(j)
         except RemoteInputError as err:

@@ -25,53 +25,58 @@ _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause
 K = TypeVar("K", str, int)  # what `deaths` knows a drone by: its id, or its row
 
 
-def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
+def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray, alive: np.ndarray | None = None,
           few: int = JUDGE_FEW_DRONES) -> np.ndarray:
-    """The cause of death of each alive drone (`Cause` codes, as in a STATUS table; 0 = NONE). `before` and
-    `after`: each alive drone's cell at the start and end of the turn, (n, 3) C-ordered integers, rows in id
-    order; `building`: whether its `after` cell is a building. Up to `few` drones, judged drone by drone
-    (`deaths`: an array operation's fixed cost is more than a few drones' Python)."""
+    """The cause of death of each drone (`Cause` codes, as in a STATUS table; 0 = NONE). `before` and `after`: each
+    drone's cell at the start and end of the turn, (n, 3) C-ordered integers, rows in id order; `building`: whether
+    its `after` cell is a building; `alive`: the drones alive at the start of the turn (None: every row), the others
+    taking no part (cause 0). Every array the rules make has the n rows, whoever is alive or moves: numpy keeps up to
+    7 freed buffers of each size under 1 KiB, and masks of a size that changed with each death or each turn's movers
+    would pile up there (docs/performance.md, Memory). Up to `few` alive drones, judged drone by drone (`deaths`: an
+    array operation's fixed cost is more than a few drones' Python)."""
     n = len(after)
-    if n <= few:
-        return _judge_few(size, before, after, building)
+    rows = np.arange(n)
+    live = np.ones(n, bool) if alive is None else alive
+    if np.count_nonzero(live) <= few:
+        return _judge_few(size, before, after, building, rows[live])
     cause = np.zeros(n, np.uint8)
-    out = ~inside_rows(after, size)
+    inside = inside_rows(after, size)
+    out = live & ~inside
+    hit = live & inside & building
     cause[out] = _OUTSIDE
-    hit = building & ~out
     cause[hit] = _BUILDING
-    if n < 2:
-        return cause  # no one to meet
-    # each cell as one integer; a drone outside or in a building gets a number no other drone has
+    # each cell as one integer; a drone outside, in a building or not alive gets a number no other drone has
     key = linear_rows(after, size)
-    alone = np.where(out | hit, -1 - np.arange(n), key)
+    alone = np.where(live & inside & ~hit, key, -1 - rows)
     order = np.argsort(alone, kind="stable")
     same = alone[order[1:]] == alone[order[:-1]]
     if np.count_nonzero(same):
         cause[order[1:][same]] = cause[order[:-1][same]] = _VERTEX
-    moved = (after != before).any(axis=1).nonzero()[0]
-    if len(moved) < 2:
+    moving = live & (after != before).any(axis=1)
+    if np.count_nonzero(moving) < 2:
         return cause  # a swap takes two movers
-    src = linear_rows(before[moved], size)
-    entering = np.where(out[moved], -1 - moved, key[moved])  # outside: a cell no drone comes from
+    entering = np.where(moving & inside, key, -1 - rows)  # outside, or not moving: a cell no drone comes from
     # the drone remembered as entering each cell: the last mover (in id order) whose `after` it is
     entered, first = np.unique(entering[::-1], return_index=True)
-    enterer = moved[::-1][first]
+    enterer = n - 1 - first
+    src = linear_rows(before, size)
     at = np.minimum(np.searchsorted(entered, src), len(entered) - 1)
-    other = np.where(entered[at] == src, enterer[at], -1)
-    swap = (other >= 0) & (other != moved)
-    swap[swap] = (before[other[swap]] == after[moved[swap]]).all(axis=1)
+    other = np.where(moving & (entered[at] == src), enterer[at], -1)  # the mover entering each mover's cell
+    swap = (other >= 0) & (other != rows) & (before[other] == after).all(axis=1)
     if np.count_nonzero(swap):
-        pair = np.concatenate([moved[swap], other[swap]])
+        pair = np.concatenate([rows[swap], other[swap]])
         cause[pair[cause[pair] == 0]] = _SWAP
     return cause
 
 
-def _judge_few(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray) -> np.ndarray:
-    """`judge` by `deaths`, rows as keys (their order is the id order)."""
-    cells = list(map(tuple, after.tolist()))
-    buildings = {c for c, hit in zip(cells, building.tolist()) if hit}
-    dead = deaths(size, dict(enumerate(map(tuple, before.tolist()))), dict(enumerate(cells)), buildings)
-    cause = np.zeros(len(cells), np.uint8)
+def _judge_few(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
+               alive: np.ndarray) -> np.ndarray:
+    """`judge` by `deaths`, the `alive` rows (indices) as keys (their order is the id order)."""
+    keys = alive.tolist()
+    cells = list(map(tuple, after[alive].tolist()))
+    buildings = {c for c, hit in zip(cells, building[alive].tolist()) if hit}
+    dead = deaths(size, dict(zip(keys, map(tuple, before[alive].tolist()))), dict(zip(keys, cells)), buildings)
+    cause = np.zeros(len(after), np.uint8)
     if dead:
         cause[list(dead)] = [code_of(c) for c in dead.values()]
     return cause

@@ -244,7 +244,7 @@ class Table:
             if kind is Col.DRONE:
                 if col.min() < 1 or col.max() > MAX_DRONE:
                     return _WHY_NUMBER
-                ordered = len(col) == 1 or (col[1:] > col[:-1]).all()  # (rows in order: at once)
+                ordered = np.diff(col.astype(np.int32)).min(initial=1) > 0  # (rows in order: at once)
                 if not ordered and len(np.unique(col)) != len(col):
                     return _WHY_ONCE
             elif isinstance(kind, Col):
@@ -368,18 +368,20 @@ def _cell_ok(value: object, lo: int) -> bool:
 
 def _column_ok(col: np.ndarray, kind: Col) -> bool:
     """A cell or ranking column valid, with numpy. A ranking: each value among the valid rankings (a bisection
-    each). A cell: a u32 view of an i32 turns negative values into huge ones, so one maximum checks both bounds."""
+    each). A cell: a u32 view of an i32 turns negative values into huge ones, so one maximum checks both bounds.
+    No mask of one byte a row: numpy keeps freed buffers under 1 KiB, up to 7 of each size, and tables of every
+    size come (docs/performance.md, Memory)."""
     if kind is Col.RANKED:
         at = np.searchsorted(_RANKINGS, col).clip(max=len(_RANKINGS) - 1)
-        return bool((_RANKINGS[at] == col).all())
+        return not np.count_nonzero(_RANKINGS[at] - col)
     lo = _LOWEST[kind]
     if kind is not Col.OPTIONAL:
         return bool((col - lo if lo else col).view(np.uint32).max() <= MAX_COORD - lo)
     u = np.ascontiguousarray(col).view(np.uint32) + np.uint32(1)  # an absent cell's -1 is 0 (u32 wraps)
     if u.max() > MAX_COORD + 1:
         return False
-    absent = u == 0
-    return bool(((absent[:, 0] == absent[:, 1]) & (absent[:, 1] == absent[:, 2])).all())  # all three or none
+    # all three absent or none: as many rows with no coordinate absent as rows with one present
+    return np.count_nonzero(u.min(axis=1)) == np.count_nonzero(u.max(axis=1))
 
 
 _WHY_NUMBER = f"drone numbers must be in 1..{MAX_DRONE}"

@@ -208,3 +208,17 @@ def test_the_columnar_rules_agree_with_the_rules_drone_by_drone(data) -> None:
     expected = deaths(size, before, after, buildings)
     assert judged(size, before, after, buildings) == expected
     assert judged(size, before, after, buildings, few=n) == expected  # (rows as keys: the id order)
+    # rows of drones not alive, among the others in id order, anywhere (in the world, a building, on an alive
+    # drone's cell, outside, even "moving"): they take no part
+    spots = cells + [(3, 0, 0), (0, -1, 1)]
+    spot = st.sampled_from(spots)
+    dead = {f"D{i:02d}": (data.draw(spot), data.draw(spot), data.draw(st.booleans()))
+            for i in data.draw(st.lists(st.integers(1, 1200), max_size=6, unique=True)) if f"D{i:02d}" not in before}
+    order = sorted([*before, *dead])
+    b = np.array([before[d] if d in before else dead[d][0] for d in order], np.int64)
+    a = np.array([after[d] if d in after else dead[d][1] for d in order], np.int64)
+    building = np.array([after[d] in buildings if d in after else dead[d][2] for d in order], bool)
+    alive = np.array([d in before for d in order], bool)
+    for few in (0, n):
+        cause = judge(size, b, a, building, alive, few=few)
+        assert {order[i]: CAUSES[c] for i, c in enumerate(cause.tolist()) if c} == expected
