@@ -618,10 +618,12 @@ class Engine:
             step[rows] = np.abs(pos - fleet.pos[rows]).sum(axis=1)
             take = (step[:-1] <= 1) & (fleet.host_code == fleet.hosts.get(msg.sender, -2)) & (fleet.state == ALIVE)
             take &= ~self._moved
-            for mine, theirs in ((self._proposed, pos), (self._said, notes), (self._ranked, steps.column("ranked"))):
-                sent = np.empty((n + 1, *theirs.shape[1:]), theirs.dtype)
-                sent[rows] = theirs
-                np.copyto(mine, sent[:-1], where=take if theirs.ndim == 1 else take[:, None])
+            item = np.zeros(n + 1, np.intp)  # each row's item in this MOVES (where it sent one)
+            item[rows] = np.arange(len(rows))
+            item = item[:-1]
+            np.copyto(self._proposed, pos[item], where=take[:, None])
+            np.copyto(self._said, notes[item], where=take)
+            np.copyto(self._ranked, steps.column("ranked")[item], where=take)
             self._moved |= take
             taken = int(np.count_nonzero(take))
             self._awaiting -= taken

@@ -62,7 +62,7 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     src = linear_rows(before, size)
     at = np.minimum(np.searchsorted(entered, src), len(entered) - 1)
     other = np.where(moving & (entered[at] == src), enterer[at], -1)  # the mover entering each mover's cell
-    swap = (other >= 0) & (other != rows) & (before[other] == after).all(axis=1)
+    swap = (other >= 0) & (other != rows) & (src[other] == entering)  # ... and coming from where it goes
     if np.count_nonzero(swap):
         pair = np.concatenate([rows[swap], other[swap]])
         cause[pair[cause[pair] == 0]] = _SWAP

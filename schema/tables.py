@@ -244,7 +244,7 @@ class Table:
             if kind is Col.DRONE:
                 if col.min() < 1 or col.max() > MAX_DRONE:
                     return _WHY_NUMBER
-                ordered = np.diff(col.astype(np.int32)).min(initial=1) > 0  # (rows in order: at once)
+                ordered = len(col) == 1 or np.subtract(col[1:], col[:-1], dtype=np.int32).min() > 0  # (at once)
                 if not ordered and len(np.unique(col)) != len(col):
                     return _WHY_ONCE
             elif isinstance(kind, Col):
@@ -380,8 +380,10 @@ def _column_ok(col: np.ndarray, kind: Col) -> bool:
     u = np.ascontiguousarray(col).view(np.uint32) + np.uint32(1)  # an absent cell's -1 is 0 (u32 wraps)
     if u.max() > MAX_COORD + 1:
         return False
-    # all three absent or none: as many rows with no coordinate absent as rows with one present
-    return np.count_nonzero(u.min(axis=1)) == np.count_nonzero(u.max(axis=1))
+    # all three absent or none: as many rows with no coordinate absent as rows with one present (column by
+    # column: a reduction over each row's three values costs ten times as much)
+    x, y, z = u[:, 0], u[:, 1], u[:, 2]
+    return np.count_nonzero(np.minimum(np.minimum(x, y), z)) == np.count_nonzero(np.maximum(np.maximum(x, y), z))
 
 
 _WHY_NUMBER = f"drone numbers must be in 1..{MAX_DRONE}"
