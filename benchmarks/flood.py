@@ -213,7 +213,8 @@ def rows_of(games: list[Played], case: Case) -> tuple[list[Row], list[str]]:
                 errors.append(f"{p.name}: {p.attacker_error}")
             elif p.attacker:
                 a = p.attacker
-                cells["attacker"] = f"{a['sent']:,} / {a['answered']:,} / {a['refused']:,} ({a['cpu']:.2f})"
+                cells["attacker"] = f"{a['sent']:,} / {a['answered']:,} / {a['refused']:,} ({a['cpu']:.2f})" + (
+                    f", {a['unanswered']:,} unanswered" if a.get("unanswered") else "")
                 if not g.error:
                     rate, turns, seconds, cut = flood_rate(g, case, a["first"], a["last"])
                     ratio = rate / clean_rate
@@ -279,7 +280,9 @@ def legend(facts: dict) -> str:
            "cores, while the router takes the whole flood" if facts["nice"] > 0 else
            ": it shares this machine's cores with the game as an equal") + ") floods as D01: (a) NPS for turn 1 on "
         "D01's own key, as fast as it can; (b) ASKs of 32,768 cells to the environment, all at once, then waits "
-        "for their replies. Turns/s (measured turns) = 1 ÷ the mean time between consecutive STATUS; during the "
+        "for their replies (\"unanswered\": queries that finished with none, having reached the environment after "
+        "the game's end, when it had left: only when the flood was cut). Turns/s (measured turns) = 1 ÷ the mean "
+        "time between consecutive STATUS; during the "
         "flood = the turns it overlaps (from the last turn begun before the attacker's first message to the first "
         "begun after its last message or reply; \"cut\": the flood outlasted the measured turns, counted to the "
         "last) ÷ their time; ÷ clean = that ÷ the mean of the two clean games' turns/s. Same "

@@ -8,11 +8,12 @@
 * ``nps``: `count` well-formed NPS for a past turn (turn 1) from D01 on D01's own key, as fast as it can
   (BLOCK congestion control): what an authenticated drone may do on its own key under access control.
 * ``ask``: `count` ASKs of `Ask.MAX_CELLS` cells from D01 to the environment, all sent at once; it waits
-  for every reply (answered, or refused with an error reply) up to `--timeout`.
+  for every query to finish (answered, refused with an error reply, or with no reply: one that reached the
+  environment after it left, the game over) up to `--timeout`.
 
 Once connected, with its messages ready, it prints "ready" and waits for a line on stdin: the flood
 starts then (the bench starts it as the measured turns begin). Its last line on stdout is JSON:
-{"sent", "answered", "refused", "first", "last", "cpu"}: "first" and "last" the `time.monotonic()`
+{"sent", "answered", "refused", "unanswered", "first", "last", "cpu"}: "first" and "last" the `time.monotonic()`
 (system-wide on Linux) of the first message sent and of the last message sent or reply received (the
 flood's window, which the bench compares with the game's turns), "cpu" the CPU seconds it used
 meanwhile (all its threads).
@@ -47,7 +48,7 @@ def flood_nps(session: zenoh.Session, keys: Keys, count: int) -> dict:
     first, cpu = time.monotonic(), time.process_time()
     for _ in range(count):
         pub.put(stale)
-    return {"sent": count, "answered": 0, "refused": 0, "first": first, "last": time.monotonic(),
+    return {"sent": count, "answered": 0, "refused": 0, "unanswered": 0, "first": first, "last": time.monotonic(),
             "cpu": time.process_time() - cpu}
 
 
@@ -56,23 +57,28 @@ def flood_ask(session: zenoh.Session, keys: Keys, count: int, timeout: float) ->
                                                         for x in range(Ask.MAX_CELLS))))
     lock = threading.Lock()
     done = threading.Event()
-    got = {"answered": 0, "refused": 0, "last": 0.0}
+    got = {"answered": 0, "refused": 0, "finished": 0, "last": 0.0}
 
     def on_reply(reply: zenoh.Reply) -> None:
         with lock:
             got["answered" if reply.ok is not None else "refused"] += 1
             got["last"] = time.monotonic()
-            if got["answered"] + got["refused"] >= count:
+
+    def on_finished() -> None:  # a query is over: with its reply, or with none (no environment to answer it)
+        with lock:
+            got["finished"] += 1
+            if got["finished"] >= count:
                 done.set()
 
     go()
     first, cpu = time.monotonic(), time.process_time()
     for _ in range(count):
-        session.get(keys.ask, on_reply, payload=big, timeout=timeout)
+        session.get(keys.ask, zenoh.handlers.Callback(on_reply, on_finished), payload=big, timeout=timeout)
     done.wait(timeout)
     with lock:
-        return {"sent": count, **got, "first": first, "last": got["last"] or time.monotonic(),
-                "cpu": time.process_time() - cpu}
+        unanswered = got.pop("finished") - got["answered"] - got["refused"]
+        return {"sent": count, **got, "unanswered": unanswered, "first": first,
+                "last": got["last"] or time.monotonic(), "cpu": time.process_time() - cpu}
 
 
 def main(argv: list[str] | None = None) -> int:
