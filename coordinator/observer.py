@@ -46,8 +46,8 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     cause[out] = _OUTSIDE
     cause[hit] = _BUILDING
     # each cell as one integer; a drone outside, in a building or not alive gets a number no other drone has
-    key = linear_rows(after, size)
-    alone = np.where(live & inside & ~hit, key, -1 - rows)
+    key, nowhere = linear_rows(after, size), -1 - rows
+    alone = np.where(live & inside & ~hit, key, nowhere)
     order = np.argsort(alone, kind="stable")
     same = alone[order[1:]] == alone[order[:-1]]
     if np.count_nonzero(same):
@@ -55,7 +55,7 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     moving = live & (after != before).any(axis=1)
     if np.count_nonzero(moving) < 2:
         return cause  # a swap takes two movers
-    entering = np.where(moving & inside, key, -1 - rows)  # outside, or not moving: a cell no drone comes from
+    entering = np.where(moving & inside, key, nowhere)  # outside, or not moving: a cell no drone comes from
     # the drone remembered as entering each cell: the last mover (in id order) whose `after` it is
     entered, first = np.unique(entering[::-1], return_index=True)
     enterer = n - 1 - first
