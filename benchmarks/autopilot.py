@@ -34,8 +34,8 @@ import numpy as np
 
 from benchmarks import add_write_args, command_line, replace_section
 from entities.autopilots import REGISTRY, make_autopilot
-from entities.world import World
 from schema import Cell, Note
+from world.grid import World
 
 SECTION = "## Autopilot benchmark"
 BIG = (64, 64, 16)

@@ -29,7 +29,7 @@ import time
 
 import zenoh
 
-from dronesim.transport import add_zenoh_args, zenoh_config
+from network.transport import add_zenoh_args, zenoh_config
 from schema import Ask, Keys, Nps, encode
 
 SENDER = "D01"

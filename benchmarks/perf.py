@@ -71,7 +71,7 @@ import zenoh
 
 from benchmarks import add_write_args, pogema, replace_section
 from dronesim import child_env
-from dronesim.transport import client_config
+from network.transport import client_config
 from schema.tuning import ANSWER_AHEAD
 
 SECTION = "## Performance"
@@ -259,7 +259,7 @@ def measure_floor(rounds: int, warmup: int, logs: Path, *, pubsub: tuple[str, ..
                   query: tuple[str, ...] = ("cb", "th")) -> list[Floor]:
     """Pub/sub and query round trips between this process and a pingpong helper process, the helper
     replying from its callbacks ("cb") or its main thread ("th"): a Floor for each mode asked, pub/sub first."""
-    from dronesim.membership import await_presence
+    from network.membership import await_presence
 
     root = f"perf{uuid.uuid4().hex[:8]}"
     procs = Procs(logs)
@@ -394,8 +394,8 @@ def _free_near(world, cell: tuple[int, int, int], used: set) -> tuple[int, int, 
 
 def make_scenario(case: Case, seed: int = WORLD_SEED) -> dict | None:
     """The scenario file's JSON for `case`, or None if the drones do not fit (see module docstring)."""
-    from entities.environment import build_world
     from schema import WorldSpec, drone_id
+    from world.grid import build_world
 
     nx, ny, nz = case.size
     n = case.drones
@@ -456,7 +456,7 @@ ROLES = ("coordinator", "env", "swarm")
 
 def shared_memory_configs(folder: Path) -> tuple[Path, Path]:
     """Zenoh configuration files with shared memory on (zenoh's default, which this project turns off),
-    the rest as our defaults (dronesim/transport.py): the router's (its flood filters, its admin space
+    the rest as our defaults (network/transport.py): the router's (its flood filters, its admin space
     readable) and the other processes'."""
     from schema.acl import flood_filters
 
@@ -503,7 +503,7 @@ class Secured:
 
     def session(self, locator: str, entity: str) -> zenoh.Config:
         """A client session's config as `entity`, as its process would make it."""
-        from dronesim.transport import add_zenoh_args, zenoh_config
+        from network.transport import add_zenoh_args, zenoh_config
 
         parser = argparse.ArgumentParser()
         add_zenoh_args(parser)
@@ -537,9 +537,9 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     import logging
 
     from dronesim.scenario import Scenario
-    from dronesim.transport import Outbox, Presence, Received
     from entities.gcs import End, Ground, Send, Station
-    from entities.gcs_node import join, listen, publisher
+    from entities.station_link import join, listen, publisher
+    from network.transport import Outbox, Presence, Received
     from schema import Keys, Status, Turn, drone_id
 
     scenario = Scenario.load(scenario_file)
@@ -759,7 +759,7 @@ def python_baseline_kib() -> int:
     the loopback router that has sent and received 500 small messages: the fixed cost of any running
     process, whatever its world and drones."""
     code = ("import os, sys, queue, zenoh, numpy, coordinator.node, entities.env_node, "
-            "entities.drone_node; from dronesim.transport import client_config\n"
+            "entities.drone_node; from network.transport import client_config\n"
             "numpy.random.default_rng(0)\n"
             "s = zenoh.open(client_config(sys.argv[1])); got = queue.SimpleQueue()\n"
             "sub = s.declare_subscriber('baseline/echo', lambda m: got.put(m.payload.to_bytes()))\n"
@@ -774,7 +774,7 @@ def python_baseline_kib() -> int:
 
 
 def world_generation(size: tuple[int, int, int], repeat: int = 3) -> list[float]:
-    from entities.world import World
+    from world.grid import World
 
     times = []
     for _ in range(repeat):
@@ -1004,13 +1004,13 @@ MECHANISMS: tuple[Mechanism, ...] = (
         "The UPD report only for a listener (the environment follows the ENV phase only then)",
         ("entities/environment.py::EnvironmentProcess.listened", "entities/environment.py::Follow",
          "entities/environment.py:/_listened/", "entities/env_node.py:/Matching|matching|Follow|watch/",
-         "dronesim/transport.py::Matching", "dronesim/transport.py::Outbox.watch",
+         "network/transport.py::Matching", "network/transport.py::Outbox.watch",
          "coordinator/node.py:/Matching|matching|env_followed/", "coordinator/engine.py:/env_followed/"),
         Variant(upd_listener=True), ((128, (64, 64, 16)), (1000, (64, 64, 16))),
         "a subscriber to ENV/UPD (in this process, a callback that does nothing)"),
     Mechanism(
         "The environment takes the newest STATUS when a query needs it, not every one",
-        ("dronesim/transport.py::Inbox.newest", "dronesim/membership.py:/skips_status/",
+        ("network/transport.py::Inbox.newest", "network/membership.py:/skips_status/",
          "entities/environment.py::EnvironmentProcess.start", "entities/environment.py::EnvironmentProcess._follow",
          "entities/environment.py::EnvironmentProcess._following",
          "entities/environment.py:/self\\._all|taken already/", "entities/env_node.py::Effects._follow",
@@ -1024,7 +1024,7 @@ MECHANISMS: tuple[Mechanism, ...] = (
         "`dronesim coordinator --journal FILE` (the gain then includes writing the journal)"),
     Mechanism(
         "Zenoh's shared-memory transport is off",
-        ("dronesim/transport.py:/shared_memory|shared.memory/",),
+        ("network/transport.py:/shared_memory|shared.memory/",),
         Variant(shared_memory=True), ((1000, (64, 64, 16)),),
         "every process and the router with a `--config` turning it on (shared_memory_configs)"),
     Mechanism(

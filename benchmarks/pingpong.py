@@ -6,7 +6,7 @@ As a Zenoh client of the router it answers, on keys under ROOT:
 
 * ``cb/ping`` -> ``cb/pong``: republishes each sample from Zenoh's callback thread (the bare floor);
 * ``th/ping`` -> ``th/pong``: hands each sample to the main thread, which republishes it (what every
-  process of a game does: its callbacks only enqueue, the main thread acts, see dronesim/transport.py);
+  process of a game does: its callbacks only enqueue, the main thread acts, see network/transport.py);
 * ``cb/query`` and ``th/query``: queryables replying with the query's payload, from the callback or
   from the main thread.
 

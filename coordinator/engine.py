@@ -37,8 +37,6 @@ from typing import Any, overload
 
 import numpy as np
 
-from entities.environment import build_world
-from entities.world import World, in_bounds, inside_rows, linear_rows
 from schema import (
     Cause,
     Cell,
@@ -70,6 +68,7 @@ from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, Unkn
 from schema.messages import drone_id, is_drone_id
 from schema.tables import code_of, drone_name, drone_number
 from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
+from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 
 from . import arbiter, observer
 from .admission import Roster

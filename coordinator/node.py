@@ -20,8 +20,8 @@ from typing import Any
 
 import zenoh
 
-from dronesim.signals import Interrupted, exit_status, on_stop, waking
-from dronesim.transport import (
+from network.signals import Interrupted, exit_status, on_stop, waking
+from network.transport import (
     Asked,
     Inbox,
     Matching,
@@ -35,7 +35,6 @@ from dronesim.transport import (
     setup_logging,
     zenoh_config,
 )
-from entities.world import World
 from schema import (
     Cell,
     Connect,
@@ -59,6 +58,7 @@ from schema import (
 from schema.errors import WrongSender
 from schema.messages import WorldSpec
 from schema.tuning import LINGER_S, PEER_CHECK_S, SETTLE_S
+from world.grid import World
 
 from . import arbiter
 from .admission import Presences

@@ -16,10 +16,10 @@ from typing import TypeVar
 
 import numpy as np
 
-from entities.world import in_bounds, inside_rows, linear_rows
 from schema import Cause, Cell
 from schema.tables import code_of
 from schema.tuning import JUDGE_FEW_DRONES
+from world.grid import in_bounds, inside_rows, linear_rows
 
 _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause.BUILDING, Cause.VERTEX, Cause.SWAP))
 K = TypeVar("K", str, int)  # what `deaths` knows a drone by: its id, or its row

@@ -21,7 +21,7 @@ TIMEOUT_S = float(os.environ.get("DRONESIM_HEALTH_TIMEOUT", "5"))
 
 def probe_config(args: argparse.Namespace, connect: list[str]):
     """A client config reaching `connect`, with the entity's config file (TLS, credentials) if any."""
-    from dronesim.transport import zenoh_config
+    from network.transport import zenoh_config
 
     conf = zenoh_config(argparse.Namespace(**{**vars(args), "mode": "client", "connect": connect, "listen": []}))
     conf.insert_json5("listen/endpoints", "[]")  # never take the entity's port
@@ -31,7 +31,7 @@ def probe_config(args: argparse.Namespace, connect: list[str]):
 def check(state: dict) -> tuple[bool, str]:
     import zenoh
 
-    from dronesim.transport import add_zenoh_args
+    from network.transport import add_zenoh_args
 
     pid = state.get("pid")
     if pid and Path("/proc").is_dir() and not Path(f"/proc/{pid}").exists():

@@ -17,12 +17,13 @@ from coordinator.engine import Engine, GameConfig, Publish, Record, Refusal, Sta
 from dronesim.scenario import swarm_hosts
 from entities.autopilots import make_autopilot, make_swarm, pilot_class
 from entities.autopilots.base import Decision, drive, fly_pilots, fly_swarm
-from entities.environment import Environment, build_world
+from entities.environment import Environment
 from entities.gcs import Plan, gcs_done
 from schema import Cell, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd
 from schema.errors import UsageError
 from schema.tables import drone_number
 from schema.tuning import SWARM_MIN
+from world.grid import build_world
 
 
 @dataclass(slots=True)

@@ -16,10 +16,9 @@ from dataclasses import dataclass, field
 
 from coordinator.engine import DroneSpec, GameConfig
 from coordinator.journal import dumps, read
-from entities.environment import build_world
 from entities.gcs import Plan
-from entities.world import World
 from schema import Cell, Intent, RemoteInputError, UsageError, WorldSpec
+from world.grid import World, build_world
 
 from .local import Inputs, simulate
 

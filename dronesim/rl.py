@@ -24,7 +24,6 @@ import numpy as np
 
 from coordinator.engine import DroneSpec, Engine, GameConfig, Publish, Stage
 from coordinator.fleet import ALIVE, CAUSES, NOTES, STATES
-from entities.world import World, checked_int, inside_rows, padded_steps
 from schema import (
     AimTable,
     Cell,
@@ -44,6 +43,7 @@ from schema import (
 from schema.messages import AROUND
 from schema.tables import MAX_DRONE, code_of, drone_name
 from schema.tuning import EYES_ONE_BY_ONE
+from world.grid import World, checked_int, inside_rows, padded_steps
 
 if TYPE_CHECKING:
     from dronesim.rl_few import FewEpisode

@@ -27,9 +27,9 @@ import zenoh
 
 from coordinator.engine import GameConfig
 from dronesim import child_env
-from dronesim.membership import Refusal, admit
 from dronesim.rl import HOST, BackendError, Board, hellos, turn_messages
-from dronesim.transport import (
+from network.membership import Refusal, admit
+from network.transport import (
     Inbox,
     Outbox,
     Presence,
@@ -39,8 +39,8 @@ from dronesim.transport import (
     router_locators,
     session_id,
 )
-from entities.world import World
 from schema import Done, Intent, Keys, Message, Moves, Over, Phase, Status, Turn, UsageError
+from world.grid import World
 
 #: The processes of a game, by the name their presence token has.
 ROLES = {"SRV": "coordinator", "ENV": "environment"}

@@ -11,7 +11,7 @@ import sys
 
 import zenoh
 
-from dronesim.transport import add_zenoh_args, apply_flags, router_config, router_locators, setup_logging, zenoh_config
+from network.transport import add_zenoh_args, apply_flags, router_config, router_locators, setup_logging, zenoh_config
 from schema import UsageError
 
 

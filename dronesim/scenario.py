@@ -11,7 +11,7 @@
 The game ends when every drone has reached its last target (or said it is unreachable), when no drone
 is alive, or at ``max_turns``.
 
-A MovingAI instance (entities/movingai.py) becomes a scenario with `movingai_scenario` (``dronesim up
+A MovingAI instance (world/movingai.py) becomes a scenario with `movingai_scenario` (``dronesim up
 --world room.map --scen room.scen --agents 200``).
 """
 
@@ -26,11 +26,10 @@ from dataclasses import dataclass
 
 from coordinator.engine import DroneSpec, DroneTable, GameConfig
 from entities.autopilots import REGISTRY
-from entities.environment import build_world
 from entities.gcs import Plan
-from entities.movingai import read_scen
-from entities.world import World, checked_int
 from schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
+from world.grid import World, build_world, checked_int
+from world.movingai import read_scen
 
 FORMAT = "dronesim-scenario"
 

@@ -24,8 +24,8 @@ import zenoh
 
 from dronesim import child_env
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
-from dronesim.signals import Stop, exit_status, on_stop, stop, waking
-from dronesim.transport import router_config, router_locators
+from network.signals import Stop, exit_status, on_stop, stop, waking
+from network.transport import router_config, router_locators
 from schema import UsageError, drone_id
 from schema.tuning import KILL_S, STOP_S
 

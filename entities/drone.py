@@ -44,10 +44,10 @@ from schema.errors import OutOfRange, Refusal, RemoteInputError
 from schema.messages import _KINDS, AROUND, OrderTable, Welcome
 from schema.tables import drone_number
 from schema.tuning import ASK_AHEAD_MAX_DRONES, ASK_AHEAD_REACH, CHART_FEW_CELLS, MAP_TRIES, PREFETCH_CHUNK, SWARM_MIN
+from world.grid import World, inside_rows, linear_rows
 
 from .autopilots import make_autopilot, make_swarm, pilot_class
 from .autopilots.base import NO_ANSWER, Answers, Decision, fly_pilots, fly_swarm
-from .world import World, inside_rows, linear_rows
 
 # --------------------------------------------------------------------------- effects and inputs
 

@@ -17,9 +17,9 @@ import time
 
 import zenoh
 
-from dronesim.membership import Membership, add_entity_args
-from dronesim.signals import until_stopped
-from dronesim.transport import (
+from network.membership import Membership, add_entity_args
+from network.signals import until_stopped
+from network.transport import (
     Inbox,
     Outbox,
     Presence,
@@ -60,7 +60,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
             inputs: list[Input] = []
             for ev in (event, *inbox.drain()):
                 match ev:
-                    case _ if not member.clock.screen(ev, inbox.rejects):
+                    case _ if not member.screen(ev, inbox.rejects):
                         pass
                     case Presence("SRV"):
                         member.on_presence(ev)

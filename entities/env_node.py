@@ -15,9 +15,9 @@ from collections.abc import Callable
 
 import zenoh
 
-from dronesim.membership import Membership, add_entity_args
-from dronesim.signals import until_stopped
-from dronesim.transport import (
+from network.membership import Membership, add_entity_args
+from network.signals import until_stopped
+from network.transport import (
     Asked,
     Event,
     Inbox,
@@ -52,7 +52,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
         effects.run(env.start())
 
         def handle(event: Event | None) -> None:
-            if not member.clock.screen(event, inbox.rejects):
+            if not member.screen(event, inbox.rejects):
                 return
             match event:
                 case None:

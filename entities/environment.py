@@ -14,18 +14,10 @@ import numpy as np
 
 from schema import Ans, Ask, Cell, CellInfo, CellKind, MapRequest, MoveTable, Over, Phase
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, WrongSender
-from schema.messages import AROUND, Status, Turn, Upd, Welcome, WorldMap, WorldSpec, asked_cells, is_host_id
+from schema.messages import AROUND, Status, Turn, Upd, Welcome, WorldMap, asked_cells, is_host_id
 from schema.tables import drone_name, drone_number, is_drone_id
 from schema.tuning import SURVEY_FEW_CELLS
-
-from .world import World, inside_rows, linear_rows
-
-
-def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
-    """The world a `WorldSpec` describes: the given cells, or generated from its seed keeping the starts free."""
-    if spec.cells:
-        return World.from_packed(spec.size, spec.cells)
-    return World.generate(spec.size, np.random.default_rng(spec.seed), keep_free=tuple(starts))
+from world.grid import World, build_world, inside_rows, linear_rows
 
 
 class Environment:

@@ -37,9 +37,7 @@ from schema import (
 )
 from schema.tables import drone_name
 from schema.tuning import ANSWER_AHEAD, FINAL_STATUS_WAIT
-
-from .environment import build_world
-from .world import World, in_bounds
+from world.grid import World, build_world, in_bounds
 
 _ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,5})\s*[= ]\s*)?"
                    r"(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")

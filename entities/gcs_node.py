@@ -4,8 +4,8 @@ Each GCS phase it sends the targets that change (`entities.gcs.Station`, the pro
 plays); after each turn it shows every drone's state; on OVER it draws the world with the drones' paths and
 prints a summary. Interactive mode forces a first target, then offers each turn to change it.
 
-This module is the Zenoh adapter: `listen` and `join` connect a station, `play` feeds it every event on the
-main thread (Zenoh's callbacks only decode and queue) and carries out its effects.
+This module is the terminal's Zenoh adapter and the `dronesim gcs` command, which picks the face (terminal, web);
+every face connects and plays through `entities.station_link`.
 """
 
 from __future__ import annotations
@@ -15,92 +15,28 @@ import logging
 import queue
 import sys
 import threading
-import time
-from collections.abc import Callable, Sequence
 from functools import partial
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TextIO
 
 import zenoh
 
-from dronesim.membership import Membership, add_entity_args
-from dronesim.signals import until_stopped, waking
-from dronesim.transport import (
-    Inbox,
+from network.membership import add_entity_args
+from network.signals import until_stopped, waking
+from network.transport import (
     Outbox,
-    Presence,
-    Received,
     add_zenoh_args,
-    session_id,
     setup_logging,
     zenoh_config,
 )
-from schema import Connect, Keys, Over, Phase, Role, Status, Turn, UsageError
+from schema import Keys, Over, UsageError
 
-from .gcs import Console, Effect, End, Ground, Send, Show, Station
-
-if TYPE_CHECKING:  # (the terminal's ground station does not load the web page's)
-    from .web.model import GroundState
-
-
-def listen(session: zenoh.Session, keys: Keys, logger: logging.Logger, *, every_phase: bool = False) -> Inbox:
-    """An inbox of what a ground station hears: TURN (of its phase, or of every phase), STATUS and OVER."""
-    inbox = Inbox(session, keys, logger)
-    inbox.subscribe(keys.turn if every_phase else keys.turn_of(Phase.GCS), Turn)
-    inbox.subscribe(keys.status, Status)
-    inbox.subscribe(keys.over, Over)
-    return inbox
-
-
-def join(session: zenoh.Session, inbox: Inbox, logger: logging.Logger, *, connect_timeout: float,
-         grace: float) -> Membership:
-    hello = Connect(turn=0, sender="GCS", role=Role.GCS, session=session_id(session))
-    return Membership(session, inbox, hello, logger, connect_timeout=connect_timeout, grace=grace)
-
-
-def publisher(out: Outbox, keys: Keys, logger: logging.Logger,
-              show: Callable[[str], None]) -> Callable[[Effect], None]:
-    """Carries out a station's effects: a DONE is published, a text shown."""
-    def perform(effect: Effect) -> None:
-        match effect:
-            case Send(msg, ahead):
-                out.put(keys.gcs_done, msg)
-                logger.debug("answered turn %d%s: %d targets, %s", msg.turn, " ahead" if ahead else "",
-                             len(msg.targets), msg.intent.value)
-            case Show(text):
-                show(text)
-    return perform
-
-
-def play(core: Station | GroundState, inbox: Inbox, member: Membership, perform: Callable[[Any], None],
-         other: Callable[[object], None] = lambda event: None) -> Over:
-    """Feed `core` every event, on this thread, until it ends; `other` takes the events posted by this
-    process (the web page's commands). Returns the game's OVER."""
-    while True:
-        waits = [w for w in (core.wake(time.monotonic()), member.timeout()) if w is not None]
-        event = inbox.get(min(waits) if waits else None)
-        if not member.clock.screen(event, inbox.rejects):
-            continue
-        now = time.monotonic()
-        effects: Sequence[object] = []
-        match event:
-            case None:
-                member.check()
-            case Presence() as presence:
-                if (welcome := member.on_presence(presence)) is not None:
-                    effects = core.admitted(welcome)
-            case Received(_, msg):
-                effects = core.receive(msg, now)
-            case _:
-                other(event)
-        for effect in [*effects, *core.tick(now)]:
-            perform(effect)
-            if isinstance(effect, End):
-                return effect.over
+from .gcs import Console, Ground, Station
+from .station_link import join, listen, play, publisher
 
 
 class Lines:
     """The terminal's lines, read by a thread of their own: the main thread waits for the next one in a
-    queue, which a signal wakes (`dronesim.signals.waking`), where a read of its own would wait on."""
+    queue, which a signal wakes (`network.signals.waking`), where a read of its own would wait on."""
 
     _WAKE = object()
 

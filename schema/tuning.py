@@ -4,7 +4,7 @@ A tuning constant changes how fast something is done (or how long a process wait
 decided while every process keeps up: journals are the same whatever their values. The waits (the last section)
 also bound what a crashed, hung or cut-off peer costs, so they decide when such a peer counts as gone. Not here: the
 wire contract's limits (`MAX_COORD`, `MAX_PAYLOAD`...), the bounds on what a display keeps (entities/web/) and the
-world generator's parameters (entities/world.py), which decide the world. It is in `schema`, which imports none of
+world generator's parameters (world/grid.py), which decide the world. It is in `schema`, which imports none of
 our packages: all can read it.
 
 Measurements: 2026-11-23, AMD EPYC, 2 cores shared with other work, Python 3.11.7, numpy 2.4; each "a vs b" is
@@ -72,10 +72,10 @@ PREFETCH_CHUNK = 512
 SWARM_MIN = 32
 
 #: Events from one origin (a drone, a host, the coordinator...) a process may hold queued, more are refused unread
-#: (dronesim/transport.py). Not measured: far above a game's few events a turn per origin (a process hundreds of
+#: (network/transport.py). Not measured: far above a game's few events a turn per origin (a process hundreds of
 #: turns behind resyncs from the next TURN and STATUS).
 ORIGIN_QUEUE = 1024
-#: Events of one origin in line at a time, the rest waiting to join it (dronesim/transport.py `FairQueue`): a burst
+#: Events of one origin in line at a time, the rest waiting to join it (network/transport.py `FairQueue`): a burst
 #: from one origin delays another's next event by at most this many; below it, events are taken in order of
 #: arrival. Not measured: above what one origin sends a process in a turn (a ground station's DONE and the two it
 #: answers ahead, a host's MOVES and its presence).

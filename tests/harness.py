@@ -21,7 +21,7 @@ import zenoh
 
 from dronesim import child_env
 from dronesim.scenario import Scenario, swarm_hosts
-from dronesim.transport import client_config, router_config, router_locators
+from network.transport import client_config, router_config, router_locators
 
 TIMEOUT = 60.0
 #: What tests/setup.d/ scripts leave behind (downloads, the zenohd install status).
@@ -252,8 +252,8 @@ class ScriptedGCS:
                  intent: str = "FINAL") -> None:
         import logging
 
-        from dronesim.membership import Membership
-        from dronesim.transport import Inbox, Outbox, session_id
+        from network.membership import Membership
+        from network.transport import Inbox, Outbox, session_id
         from schema import Connect, Intent, Keys, Over, Role, Status, Turn
 
         self.keys = Keys(root)
@@ -273,7 +273,7 @@ class ScriptedGCS:
         self.over = None
 
     def next_event(self, timeout: float = TIMEOUT):
-        from dronesim.transport import Presence, Received
+        from network.transport import Presence, Received
         from schema import Over, Status
 
         ev = self.inbox.get(timeout)
@@ -290,7 +290,7 @@ class ScriptedGCS:
 
     def wait_phase(self, phase: str, turn: int | None = None, timeout: float = TIMEOUT):
         """Block until TURN(turn, phase) arrives (any turn if None); returns it (None if the game ended)."""
-        from dronesim.transport import Received
+        from network.transport import Received
         from schema import Turn
 
         while self.over is None:

@@ -19,10 +19,10 @@ import pytest
 from entities.autopilots import make_autopilot
 from entities.autopilots.base import Decision
 from entities.autopilots.dstar import DStarPilot
-from entities.world import World
 from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import rank_steps, ranked_steps
+from world.grid import World
 
 STAY = (0, 0, 0)
 

@@ -25,13 +25,13 @@ from coordinator.journal import dumps, read
 from coordinator.resume import restore
 from dronesim import replay
 from dronesim.local import Inputs, Result, simulate
-from entities import movingai
 from entities.autopilots.dstar import DStarPilot
 from entities.gcs import Plan
-from entities.world import World
 from schema import Cell, EndReason, Note, WorldSpec
 from schema.tables import code_of
 from tests.harness import embedded_router, journal_records, play_scenario
+from world import movingai
+from world.grid import World
 
 LOG = logging.getLogger("test.cooperation")
 

@@ -11,8 +11,8 @@ import pytest
 
 from coordinator.engine import DroneSpec, Engine, GameConfig
 from coordinator.node import LINGER_S, SETTLE_S, Coordinator, Executor, parse_starts
-from dronesim.signals import Interrupted
-from dronesim.transport import Asked, Presence, Received, Sessions, sessions_listed
+from network.signals import Interrupted
+from network.transport import Asked, Presence, Received, Sessions, sessions_listed
 from schema import (
     Connect,
     Done,

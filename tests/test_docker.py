@@ -685,7 +685,7 @@ def embedded_router_from_config():
     """docker/zenohd.json5 in a Python router session, listening on a free loopback port instead."""
     import zenoh
 
-    from dronesim.transport import router_locators
+    from network.transport import router_locators
 
     conf = zenoh.Config.from_file(str(ZENOHD_CONF))
     conf.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"]))
@@ -1321,7 +1321,7 @@ def test_engine_router_restarted_mid_game_the_game_survives(projects, host_journ
 
 SPOOF = """
 import argparse, sys, threading, zenoh
-from dronesim.transport import add_zenoh_args, zenoh_config
+from network.transport import add_zenoh_args, zenoh_config
 parser = argparse.ArgumentParser()
 add_zenoh_args(parser)
 with zenoh.open(zenoh_config(parser.parse_args(sys.argv[1:]))) as session:

@@ -335,8 +335,8 @@ def test_answers_from_the_chart_are_what_the_environment_says() -> None:
 
     from entities.drone import Chart, occupancy_of
     from entities.environment import Environment
-    from entities.world import World
     from schema import Ans, Order, OrderTable
+    from world.grid import World
 
     starts = {"D01": (1, 1, 1), "D02": (2, 1, 1), "D03": (2, 1, 1)}
     e = Environment(World.generate((6, 6, 4), np.random.default_rng(2)), starts)
@@ -388,8 +388,8 @@ def test_chart_from_the_environments_map_answers_every_cell_as_the_environment_d
 
     from entities.drone import Chart
     from entities.environment import Environment
-    from entities.world import World
     from schema import CellKind, OutOfRange, WorldMap
+    from world.grid import World
 
     world = World.generate((7, 5, 3), np.random.default_rng(4))
     env = Environment(world, {})

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import zenoh
 
-from dronesim.transport import Inbox, client_config
 from entities.drone import Answer
 from entities.environment import Environment
-from entities.world import World
+from network.transport import Inbox, client_config
 from schema import Ans, Ask, Keys, RemoteInputError, decode, encode
+from world.grid import World
 
 from .harness import embedded_router, unique_root
 

@@ -18,7 +18,6 @@ from entities.environment import (
     Report,
     build_world,
 )
-from entities.world import Building, World
 from schema import (
     Ans,
     Ask,
@@ -45,6 +44,7 @@ from schema import (
     WorldSpec,
 )
 from schema.errors import StaleTurn, WrongSender
+from world.grid import Building, World
 
 SIZE = (4, 4, 3)
 

@@ -14,8 +14,8 @@ from entities.gcs import (
     parse_command,
     targets_of,
 )
-from entities.world import Building, World
 from schema import Cause, DroneState, DroneStatus, Intent, Note, Start, Status, UsageError, Welcome, WorldSpec
+from world.grid import Building, World
 
 SIZE = (10, 10, 5)
 OPEN = World.from_buildings(SIZE, [])

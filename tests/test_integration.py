@@ -10,9 +10,8 @@ import sys
 import pytest
 import zenoh
 
-from dronesim.membership import Membership
-from dronesim.transport import Inbox, Outbox, Received, session_id
-from entities.world import Building, World
+from network.membership import Membership
+from network.transport import Inbox, Outbox, Received, session_id
 from schema import (
     Ans,
     Ask,
@@ -31,6 +30,7 @@ from schema import (
     encode,
 )
 from tests.harness import Cluster, client_config, embedded_router, journal_records
+from world.grid import Building, World
 
 pytestmark = pytest.mark.integration
 

@@ -20,9 +20,9 @@ from coordinator.journal import read
 from dronesim import replay
 from dronesim.local import Inputs, Result, simulate
 from entities.gcs import Plan
-from entities.world import World
 from schema import Cell, EndReason, WorldSpec
 from tests.harness import embedded_router, journal_records, play_scenario
+from world.grid import World
 
 LOG = logging.getLogger("test.lrta")
 

@@ -1,10 +1,10 @@
-"""An entity's turn clock (`dronesim.membership.TurnClock`): what it lets through of the coordinator's messages."""
+"""An entity's turn clock (`network.clock.TurnClock`): what it lets through of the coordinator's messages."""
 
 from __future__ import annotations
 
 import pytest
 
-from dronesim.membership import TurnClock
+from network.clock import TurnClock
 from schema import EndReason, Over, Phase, StaleTurn, Status, StatusTable, Turn
 
 GAME = "9f2c4e1a7b3d5f60"

@@ -1,4 +1,4 @@
-"""MovingAI .map / .scen (entities/movingai.py): read, write, the generated families, and a game from them."""
+"""MovingAI .map / .scen (world/movingai.py): read, write, the generated families, and a game from them."""
 
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ import pytest
 from dronesim import child_env
 from dronesim.local import Inputs, simulate
 from dronesim.scenario import Scenario, movingai_scenario
-from entities import movingai
-from entities.world import World
 from schema import EndReason, UsageError
+from world import movingai
+from world.grid import World
 
 MAP = """type octile
 height 3

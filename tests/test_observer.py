@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 from coordinator.fleet import CAUSES
 from coordinator.observer import deaths, judge
-from entities.world import in_bounds
 from schema import Cause
+from world.grid import in_bounds
 
 SIZE = (5, 5, 5)
 

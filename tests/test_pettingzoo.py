@@ -20,9 +20,9 @@ from coordinator.fleet import ALIVE
 from dronesim import SOURCE_ROOT, child_env
 from dronesim.rl import ACTIONS, ON_TARGET, Board, ConfigError, Episode, Eyes, LocalTurns, Seen, turn_messages
 from dronesim.rl_few import FewEpisode
-from entities.world import World
 from schema import Done, Intent, Over, Phase, Status, UsageError
 from schema.tuning import EPISODE_FEW_DRONES
+from world.grid import World
 
 pytestmark = pytest.mark.filterwarnings("error")  # PettingZoo's tests warn about what they do not fail on
 
@@ -140,7 +140,7 @@ def test_collisions_kill_both_drones() -> None:
 
 
 def test_movingai_map_is_a_world(tmp_path) -> None:
-    from entities.movingai import generate, write_map
+    from world.movingai import generate, write_map
 
     path = tmp_path / "warehouse-32-32.map"
     path.write_text(write_map(generate("warehouse-32-32", 1)), encoding="utf-8")
@@ -521,7 +521,7 @@ def test_backends_agree_step_by_step(on_target: str, moves_ahead: bool) -> None:
 def test_zenoh_joins_a_router_and_close_ends_every_process() -> None:
     import zenoh
 
-    from dronesim.transport import router_config, router_locators
+    from network.transport import router_config, router_locators
 
     with zenoh.open(router_config()) as router:
         env = dz.parallel_env(backend="zenoh", connect=router_locators(router)[0], num_drones=3, max_cycles=5)

@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from dronesim.membership import await_presence
-from dronesim.transport import client_config, router_config
+from network.membership import await_presence
+from network.transport import client_config, router_config
 from schema import Keys
 from tests.harness import (
     TIMEOUT,

@@ -13,8 +13,8 @@ from dronesim.local import Inputs, simulate
 from dronesim.scenario import FORMAT, Scenario
 from entities.environment import build_world
 from entities.gcs import Plan
-from entities.world import Building, World
 from schema import UsageError, WorldSpec
+from world.grid import Building, World
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SWARM16 = ROOT / "scenarios" / "swarm16.json"

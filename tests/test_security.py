@@ -70,7 +70,7 @@ import pytest
 import zenoh
 
 from dronesim import certs
-from dronesim.transport import add_zenoh_args, router_locators, zenoh_config
+from network.transport import add_zenoh_args, router_locators, zenoh_config
 from schema import (
     KEY_TABLE,
     CellKind,

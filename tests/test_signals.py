@@ -1,4 +1,4 @@
-"""dronesim/signals.py: a signal that another thread takes still ends the main thread's wait at once."""
+"""network/signals.py: a signal that another thread takes still ends the main thread's wait at once."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import queue
 import signal
 import threading
 
-from dronesim.signals import Interrupted, on_stop, waking
+from network.signals import Interrupted, on_stop, waking
 
 
 def test_a_signal_taken_by_another_thread_ends_the_main_threads_wait() -> None:
@@ -42,7 +42,7 @@ def test_a_signal_that_lands_while_a_message_is_decoded_is_not_taken_for_a_bad_p
     import msgpack
     import pytest
 
-    from dronesim.signals import Stop
+    from network.signals import Stop
     from schema import decode
 
     def interrupted(*args, **kwargs):

@@ -1,4 +1,4 @@
-"""Inbox over a real router: the threading model of dronesim/transport.py. Zenoh's callbacks only
+"""Inbox over a real router: the threading model of network/transport.py. Zenoh's callbacks only
 enqueue; `run` hands every event to its handler on the calling thread, one at a time, in order of
 arrival; a deadline the handler sets is kept; a handler's failure is raised by `run` at once; events
 arriving after the end stay queued for `get`. And floods: stale, oversized and over-budget messages are
@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from dronesim.transport import FairQueue, Inbox, Outbox, Received, _direct, router_locators
+from network.transport import FairQueue, Inbox, Outbox, Received, _direct, router_locators
 from schema import Ask, Connect, EndReason, Keys, Over, RemoteInputError, Role, Status, StatusTable, Target, encode
 from schema.keys import size_limit
 from schema.tables import MAX_DRONE, drone_name

@@ -26,7 +26,6 @@ from entities.web import node as web_node
 from entities.web.model import GroundState, Rejected, parse_cell, world_json
 from entities.web.replay import Replay
 from entities.web.server import Hub, WebServer, parse_address
-from entities.world import Building, World
 from schema import (
     Cause,
     DroneState,
@@ -41,6 +40,7 @@ from schema import (
     UsageError,
     WorldSpec,
 )
+from world.grid import Building, World
 
 LOG = logging.getLogger("dronesim.tests.web")
 WALL = World.from_buildings((5, 5, 2), [Building(x=2, y=0, length=1, width=5, height=1)])

@@ -8,8 +8,8 @@ from collections import deque
 import numpy as np
 import pytest
 
-from entities.world import Building, World
 from schema import CellInfo, CellKind, UsageError
+from world.grid import Building, World
 
 
 def B(x: int, y: int, length: int, width: int, height: int) -> Building:

@@ -20,9 +20,9 @@ from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
-from entities.world import linear_rows
 from schema import Cell, CellInfo, Note, StepTable, UsageError
 from schema.tables import code_of, drone_number
+from world.grid import linear_rows
 
 Q = TypeVar("Q")
 A = TypeVar("A")

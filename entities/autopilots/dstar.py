@@ -63,10 +63,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from entities.world import in_bounds, padded_steps
 from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import rank_steps
+from world.grid import in_bounds, padded_steps
 
 from .base import Decision, Sensing
 

@@ -61,10 +61,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from entities.world import in_bounds, linear_rows
 from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import code_of
+from world.grid import in_bounds, linear_rows
 
 from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing
 

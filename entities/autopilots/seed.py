@@ -49,9 +49,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from entities.world import in_bounds
 from schema import Cell, CellInfo, CellKind, Note
 from schema.tables import code_of
+from world.grid import in_bounds
 
 from .base import NO_ANSWER, Decision, Sensing, SwarmBase, SwarmSensing
 

@@ -17,9 +17,9 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from entities.world import in_bounds
 from schema import Cell, Note
 from schema.messages import AROUND
+from world.grid import in_bounds
 
 from .base import Decision, Sensing
 

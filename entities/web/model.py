@@ -35,9 +35,9 @@ from schema import (
     is_drone_id,
 )
 from schema.tuning import STATUS_GRACE
+from world.grid import World
 
 from ..gcs import Effect, Ground, Station, check_cell
-from ..world import World
 
 #: How the page names a drone's state.
 ALIVE, REACHED, UNREACHABLE, DEAD, LOST = "alive", "reached", "unreachable", "dead", "lost"

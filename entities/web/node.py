@@ -1,6 +1,6 @@
 """``dronesim gcs --web [HOST:]PORT``: the ground station as a web page; ``--replay JOURNAL`` plays a journal.
 
-Live mode is the terminal ground station's admission and protocol (`gcs_node.play`, `entities.gcs.Station`)
+Live mode is the terminal ground station's admission and protocol (`station_link.play`, `entities.gcs.Station`)
 on one main thread that owns the `GroundState`: it drains one queue fed by the Zenoh callbacks and by the
 HTTP threads (the human's commands, each answered through its own reply queue), and publishes the state to
 the `Hub` after every change. After OVER it serves the final state, then exits 0 (after ``--linger`` seconds).
@@ -18,13 +18,13 @@ from functools import partial
 
 import zenoh
 
-from dronesim.signals import waking
-from dronesim.transport import Outbox, zenoh_config
+from network.signals import waking
+from network.transport import Outbox, zenoh_config
 from schema import Keys, Over, UsageError
 from schema.tuning import COMMAND_TIMEOUT
 
 from ..gcs import Ground
-from ..gcs_node import join, listen, play, publisher
+from ..station_link import join, listen, play, publisher
 from .model import GroundState, Refresh, Rejected, check_pace_arg, world_json
 from .server import Hub, WebServer, parse_address
 

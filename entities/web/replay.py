@@ -12,8 +12,8 @@ import pathlib
 from coordinator.journal import read
 from dronesim.replay import header_config, tracks
 from schema import Cause, UsageError
+from world.grid import build_world
 
-from ..environment import build_world
 from .model import ALIVE, DEAD, LOST, REACHED, change_entry, drone_json, entry, fmt, over_entry, world_json
 
 

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from entities.environment import build_world
-from entities.world import Building, World
 from schema import WorldSpec
 from tests.e2e.conftest import fly_to_clicked_cell
 from tests.harness import Cluster, Proc, embedded_router, journal_records
 from tests.test_web_gcs import write_journal
+from world.grid import Building, World
 
 pytestmark = pytest.mark.integration
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from schema import Cell, CellInfo, CellKind, UsageError
-from schema.messages import AROUND, MAX_COORD
+from schema.messages import AROUND, MAX_COORD, WorldSpec
 
 from .movingai import read_map, world_grid
 
@@ -338,7 +338,7 @@ class World:
 
     @classmethod
     def load(cls, path: str | Path) -> World:
-        """Read a world file (see `to_json`), or a MovingAI .map (a world 1 cell high, entities/movingai.py);
+        """Read a world file (see `to_json`), or a MovingAI .map (a world 1 cell high, world/movingai.py);
         `UsageError` if unreadable or invalid."""
         try:
             text = Path(path).read_text(encoding="utf-8")
@@ -457,3 +457,10 @@ def _json_ints(value: object, n: int, what: str) -> list[int]:
     if not isinstance(value, list) or len(value) != n or any(type(v) is not int for v in value):
         raise UsageError(f"{what} must be a list of {n} integers, got {value!r}")
     return value
+
+
+def build_world(spec: WorldSpec, starts: Iterable[Cell]) -> World:
+    """The world a `WorldSpec` describes: the given cells, or generated from its seed keeping the starts free."""
+    if spec.cells:
+        return World.from_packed(spec.size, spec.cells)
+    return World.generate(spec.size, np.random.default_rng(spec.seed), keep_free=tuple(starts))
