@@ -14,7 +14,7 @@ from schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable
 from schema.tables import MAX_DRONE, code_of, drone_number
 
 ALIVE, DEAD, LOST = (code_of(s) for s in (DroneState.ALIVE, DroneState.DEAD, DroneState.LOST))
-REACHED, UNREACHABLE = code_of(Note.REACHED), code_of(Note.UNREACHABLE)
+NONE, REACHED, UNREACHABLE = code_of(Note.NONE), code_of(Note.REACHED), code_of(Note.UNREACHABLE)
 STATES, NOTES, CAUSES = tuple(DroneState), tuple(Note), tuple(Cause)
 
 
@@ -69,9 +69,14 @@ class Fleet:
         return (self.state == ALIVE).nonzero()[0]
 
     def notes(self) -> np.ndarray:
-        """Each drone's note as the STATUS says it: REACHED whenever an alive drone is on its target."""
-        on = (self.state == ALIVE) & (self.pos == self.target).all(axis=1)
-        return np.where(on, REACHED, self.note).astype(np.uint8)
+        """Each drone's note as the STATUS (and so the end of the game, OVER, every ground station) says it,
+        from where the drones are now, after the turn's moves: REACHED whenever an alive drone is on its target
+        and only then. A drone says REACHED as it plans, before the arbitration, which may push it off its
+        target (PIBT lends a parked drone's cell to one with a higher priority): off it, an alive drone that
+        said REACHED has NONE. Otherwise what the drone said (UNREACHABLE, NONE)."""
+        alive = self.state == ALIVE
+        on = alive & (self.pos == self.target).all(axis=1)
+        return np.where(on, REACHED, np.where(alive & (self.note == REACHED), NONE, self.note)).astype(np.uint8)
 
     def status(self) -> StatusTable:
         rows = StatusTable.empty(len(self))

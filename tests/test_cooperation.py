@@ -26,8 +26,9 @@ from coordinator.resume import restore
 from dronesim import replay
 from dronesim.local import Inputs, Result, simulate
 from entities.autopilots.dstar import DStarPilot
-from entities.gcs import Plan
-from schema import Cell, EndReason, Note, WorldSpec
+from entities.gcs import Plan, describe
+from entities.web.model import view_of
+from schema import Cell, DroneState, EndReason, Note, WorldSpec
 from schema.tables import code_of
 from tests.harness import embedded_router, journal_records, play_scenario
 from world import movingai
@@ -49,11 +50,32 @@ def config(grid: np.ndarray, drones: dict[str, tuple[Cell, Cell, str]], max_turn
 
 
 def play(grid: np.ndarray, drones: dict[str, tuple[Cell, Cell, str]], max_turns: int = 300, *,
-         swarm: bool = False, arbiter: Arbiter | None = None) -> Result:
+         swarm: bool = False, arbiter: Arbiter | None = None, keep_statuses: bool = False) -> Result:
     """Every drone given its target at turn 1, the ground station's plan final at once."""
     plan = Plan(tuple(sorted((1, d, t) for d, (_, t, _) in drones.items())))
     return simulate(config(grid, drones, max_turns), {d: a for d, (_, _, a) in drones.items()}, Inputs(plan=plan),
-                    LOG, swarm=swarm, arbiter=arbiter)
+                    LOG, swarm=swarm, arbiter=arbiter, keep_statuses=keep_statuses)
+
+
+def true_verdict(result: Result, drones: dict[str, tuple[Cell, Cell, str]]) -> None:
+    """The end of the game says where the drones are after its last turn (issue 33, 3): ALL_REACHED, every alive
+    drone on its target; SETTLED, every alive one on it but those it names unreachable; the last STATUS (if
+    kept) says REACHED for exactly the alive drones on their targets."""
+    pos, gone = {d: s for d, (s, _, _) in drones.items()}, set()
+    for r in result.records:
+        pos |= {d: tuple(p) for d, p in r.get("moves", {}).items()}
+        gone |= set(r.get("deaths", {})) | set(r.get("lost", ()))
+    away = sorted(d for d, (_, t, _) in drones.items() if d not in gone and pos[d] != t)
+    over = result.over
+    if over.reason is EndReason.ALL_REACHED:
+        assert not away, f"{over.text}, yet {away} are not on their targets"
+    if over.reason is EndReason.SETTLED:
+        named = set(over.text.rsplit("unreachable for ", 1)[1].split(", "))
+        assert set(away) <= named, f"{over.text}, yet {sorted(set(away) - named)} are not on their targets"
+    if result.statuses:
+        for s in result.statuses[-1].drones:
+            on = s.state is DroneState.ALIVE and s.pos == s.target
+            assert (s.note is Note.REACHED) == on, f"the last STATUS says {s}"
 
 
 def deaths(result: Result) -> dict[str, str]:
@@ -328,7 +350,31 @@ def test_property_random_small_worlds(game) -> None:
         for d, cause in r.get("deaths", {}).items():
             if d in coop and cause in ("VERTEX", "SWAP"):
                 assert any(e not in coop for e in r["deaths"] if e != d), f"cooperative {d} killed by one of its own"
+    true_verdict(result, drones)
     assert play(grid, drones, max_turns=120, swarm=True).records == result.records  # the same in every layout
+
+
+def test_a_push_on_the_last_turn_is_no_false_verdict() -> None:
+    """Issue 33 (3), found among random small worlds: at turn 105, D01, stuck (UNREACHABLE), pushes D03 off its
+    target (PIBT lends it D03's cell); D03 had said REACHED as it planned. The game ended SETTLED "targets
+    reached, except unreachable for D01" with D03 off its target. The end reads where the drones are: the game
+    goes on, D01 pushes through and every drone reaches its target (a true ALL_REACHED); the ground stations
+    show the last STATUS, whose notes are the positions'."""
+    grid = np.zeros((5, 2, 2), bool)
+    for c in [(0, 1, 0), (1, 0, 1), (1, 1, 0), (2, 0, 1), (2, 1, 1), (4, 0, 0)]:
+        grid[c] = True
+    drones = {"D01": ((2, 0, 0), (0, 1, 1), "dstar"), "D02": ((2, 1, 0), (3, 0, 1), "seed"),
+              "D03": ((0, 0, 0), (0, 0, 1), "dstar")}
+    result = play(grid, drones, max_turns=120, keep_statuses=True)
+    pushed = [r["turn"] for r in result.records if r.get("notes", {}).get("D03") == "REACHED"
+              and r.get("moves", {}).get("D03") not in (None, [0, 0, 1])]
+    assert pushed, "D03 is never pushed off its target after saying REACHED: the test is void"
+    true_verdict(result, drones)
+    assert result.over.reason is EndReason.ALL_REACHED, result.over.text
+    last = result.statuses[-1]
+    assert [describe(s) for s in last.drones] == [f"{d} at {t}: reached its target, target {t}"
+                                                  for d, (_, t, _) in sorted(drones.items())]
+    assert {view_of(s) for s in last.drones} == {"reached"}
 
 
 # --------------------------------------------------------------------------- journal: replay and resume

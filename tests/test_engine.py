@@ -22,6 +22,8 @@ from coordinator.engine import (
     replace_config,
 )
 from coordinator.resume import restore
+from entities.gcs import describe
+from entities.web.model import view_of
 from schema import (
     Aim,
     Cause,
@@ -57,6 +59,7 @@ from schema import (
     WrongSender,
     encode,
 )
+from schema.tables import rank_steps
 from schema.tuning import AHEAD_MAX, FEW_ROWS
 
 SIZE = (5, 5, 5)
@@ -721,6 +724,46 @@ def test_final_with_unreachable_settles() -> None:
     assert g.engine.end is not None
     assert g.engine.end.reason is EndReason.SETTLED
     assert "D02" in g.engine.end.text
+
+
+def test_a_drone_pushed_off_its_target_on_the_last_turn_is_not_said_to_have_reached_it() -> None:
+    """Issue 33 (3): the end of the game reads where the drones are after the turn's moves. D02, parked on its
+    target, says REACHED; D01, stuck (UNREACHABLE, so ahead of the drones at home: arbiter.STUCK), takes D02's
+    cell in the final turn and the arbitration pushes D02 aside. That REACHED, said before the push, is no
+    verdict: no SETTLED ("targets reached, except unreachable for D01"), the STATUS says NONE for D02 off its
+    target; the game goes on, and ends SETTLED once D02 is back on it, as the STATUS then says."""
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (1, 0, 0))), hosts={})
+    for d in ("D01", "D02"):
+        g.feed(g.engine.connect(Connect(turn=0, sender=d, role=Role.DRONE, drones=(d,), autopilot="dstar",
+                                        cooperative=True), Token(d)))
+    g.gcs({"D01": (4, 4, 4), "D02": (1, 0, 0)})
+    g.feed(g.engine.receive(Nps(turn=1, sender="D01", pos=(0, 0, 0), note=Note.UNREACHABLE)))
+    g.feed(g.engine.receive(Nps(turn=1, sender="D02", pos=(1, 0, 0), note=Note.REACHED)))
+    assert g.stage is Stage.GCS and g.turn == 2, "D01 hovers stuck (its priority STUCK now), D02 parked"
+    g.gcs(intent=Intent.FINAL)
+    # the final turn: D01 offers D02's cell only; D02 stays, else steps aside (+y)
+    g.feed(g.engine.receive(Nps(turn=2, sender="D01", pos=(1, 0, 0), note=Note.UNREACHABLE,
+                                ranked=rank_steps([(1, 0, 0)]))))
+    effects = g.feed(g.engine.receive(Nps(turn=2, sender="D02", pos=(1, 0, 0), note=Note.REACHED,
+                                          ranked=rank_steps([(0, 0, 0), (0, 1, 0)]))))
+    assert records(effects)[0]["moves"] == {"D01": [1, 0, 0], "D02": [1, 1, 0]}, "no push: the test is void"
+    assert not pubs(effects, Over), f"a false verdict: {pubs(effects, Over)}"
+    assert g.engine.end is None and g.stage is Stage.GCS and g.turn == 3
+    status = pubs(effects, Status)[-1]
+    assert {s.drone: (s.pos, s.note) for s in status.drones} == {"D01": ((1, 0, 0), Note.UNREACHABLE),
+                                                                 "D02": ((1, 1, 0), Note.NONE)}
+    # the ground stations show the STATUS: the terminal's line and the page's drone say it is not there
+    assert describe(status.drones[1]) == "D02 at (1, 1, 0): alive, target (1, 0, 0)"
+    assert view_of(status.drones[1]) == "alive"
+    g.gcs(intent=Intent.FINAL)  # D01 steps back, D02 goes home: now the verdict is true
+    g.feed(g.engine.receive(Nps(turn=3, sender="D01", pos=(0, 0, 0), note=Note.UNREACHABLE,
+                                ranked=rank_steps([(-1, 0, 0)]))))
+    effects = g.feed(g.engine.receive(Nps(turn=3, sender="D02", pos=(1, 0, 0), ranked=rank_steps([(0, -1, 0)]))))
+    assert records(effects)[0]["moves"] == {"D01": [0, 0, 0], "D02": [1, 0, 0]}
+    assert pubs(effects, Over) == [g.engine.end]
+    end = g.engine.end
+    assert (end.reason, end.text) == (EndReason.SETTLED, "targets reached, except unreachable for D01")
+    assert records(effects)[-1]["reason"] == "SETTLED"
 
 
 def test_new_target_clears_the_note() -> None:
