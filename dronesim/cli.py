@@ -12,6 +12,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "env": ("entities.env_node", "cli", "the environment (ENV)"),
     "drone": ("entities.drone_node", "cli", "a drone, or a swarm host of several drones"),
     "gcs": ("entities.gcs_node", "cli", "the ground control station (GCS)"),
+    "ros2": ("entities.ros2.node", "cli", "the game as ROS 2 topics (rmw_zenoh) and live in Foxglove (docs/ros2.md)"),
+    "export": ("dronesim.export", "main", "a journal as an MCAP file (Foxglove scene + ROS 2 topics, docs/ros2.md)"),
     "router": ("dronesim.router", "cli", "a standalone Zenoh router (for multi-host runs without zenohd)"),
     "certs": ("dronesim.certs", "cli", "a development CA and per-role TLS certificates/passwords (docs/security.md)"),
     "replay": ("dronesim.replay", "main", "re-render a run from its journal; --verify re-simulates it"),

@@ -55,6 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="do not print every turn")
     p.add_argument("--web", metavar="[HOST:]PORT",
                    help="the ground station is a web page on this address (see docs/web-gcs.md)")
+    p.add_argument("--ros2", action="store_true",
+                   help="publish the game to ROS 2 (rmw_zenoh) and take ROS 2 goals as targets (docs/ros2.md)")
+    p.add_argument("--foxglove", metavar="[HOST:]PORT", help="serve the game live to Foxglove (docs/ros2.md)")
     p.add_argument("--log-level", default="WARNING", help="log level of the entity processes (default WARNING)")
     return p
 
@@ -96,7 +99,10 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
             procs.append((host, [*base, "drone", *common, "--id", ",".join(ids), "--host", host, "--autopilot", pilot]))
     else:
         procs += [(d, [*base, "drone", *common, "--id", d, "--autopilot", pilots[d]]) for d in sorted(pilots)]
-    procs.append(("GCS", [*base, "gcs", *common, *_passed(args, "scenario", "targets", "script", "quiet", "web")]))
+    procs.append(("GCS", [*base, "gcs", *common, *_passed(args, "scenario", "targets", "script", "quiet", "web",
+                                                             "ros2")]))
+    if args.ros2 or args.foxglove:  # the viewer: ROS 2 topics, Foxglove live
+        procs.append(("ROS2", [*base, "ros2", *common, *_passed(args, "foxglove")]))
     return procs
 
 

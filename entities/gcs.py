@@ -310,17 +310,21 @@ class Station:
       in which its plan has nothing new (`turns_to_answer_ahead`): the coordinator takes them without a
       round trip and without announcing them, so the station goes by STATUS;
     - a console asks its person, in the phase; a held station (`hold`: the web page) keeps the phase
-      `pending` until `answer` is called.
+      `pending` until `answer` is called;
+    - a station taking `goals` as they come (ROS 2's, `want`) answers no phase ahead and never says its plan
+      is final (the game goes on to its turn limit, or until someone quits).
     It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the targets
     in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last turn is in, or
     `FINAL_STATUS_WAIT` s after OVER."""
 
     def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
-                 quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD) -> None:
+                 quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD,
+                 goals: bool = False) -> None:
         self.ground, self.plan = ground, ground.plan
         self.console, self.hold, self.quit_at, self.verbose = console, hold, quit_at, verbose
         self.scripted = console is None and not hold
-        self.ahead = ahead  # phases a script answers ahead at most (0: none; the benchmark's switch)
+        self.ahead = 0 if goals else ahead  # phases a script answers ahead at most (0: none; the benchmark's switch)
+        self.goals = goals
         self.wanted: dict[str, Cell] = {}  # the targets this station wants, of drones alive
         self.gone: set[str] = set()  # drones dead or lost: nothing more to say to them
         self.tracks = Tracks()
@@ -381,6 +385,8 @@ class Station:
     def intent(self, turn: int) -> Intent:
         if self.quit_at is not None:
             return Intent.QUIT if turn >= self.quit_at else Intent.CONTINUE
+        if self.goals:
+            return Intent.CONTINUE
         return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
 
     def _gcs_phase(self, turn: int) -> list[Effect]:

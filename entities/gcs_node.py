@@ -15,6 +15,7 @@ import logging
 import queue
 import sys
 import threading
+from collections.abc import Callable
 from functools import partial
 from typing import TextIO
 
@@ -23,6 +24,7 @@ import zenoh
 from network.membership import add_entity_args
 from network.signals import until_stopped, waking
 from network.transport import (
+    Inbox,
     Outbox,
     add_zenoh_args,
     setup_logging,
@@ -67,16 +69,18 @@ def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
     conf, keys, draw = zenoh_config(args), Keys(args.root), not args.no_draw
     with zenoh.open(conf) as session:
         inbox = listen(session, keys, logger)
-        lines = None if args.targets or args.script or args.scenario else Lines(sys.stdin)  # no plan: a person
+        lines = (None if args.targets or args.script or args.scenario or args.ros2  # no plan: a person
+                 else Lines(sys.stdin))
         with waking(partial(inbox.post, None), *([lines.wake] if lines else [])):  # a signal ends any wait
             member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)
             ground = Ground.from_welcome(member.welcome, args.targets, args.script)
             console = Console(ground.world, list(ground.starts), read=lines.read) if lines else None
-            station = Station(ground, console=console, verbose=not args.quiet)
+            station = Station(ground, console=console, verbose=not args.quiet, goals=args.ros2)
             if draw:
                 print(station.opening(), flush=True)
             show = publisher(Outbox(session), keys, logger, lambda text: print(text, flush=True))
-            over = play(station, inbox, member, show)
+            take = ros2_goals(args, session, inbox, ground, station, logger) if args.ros2 else None
+            over = play(station, inbox, member, show, other=take or (lambda event: None))
         print(station.report(draw=draw), flush=True)
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.snapshot())
@@ -84,7 +88,38 @@ def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
         return over
 
 
+def ros2_goals(args: argparse.Namespace, session: zenoh.Session, inbox: Inbox, ground: Ground, station: Station,
+               logger: logging.Logger) -> Callable[[object], None]:
+    """Take ROS 2 goals (`entities.ros2`): each drone's goal topic is subscribed, a goal read is the station's
+    target for that drone, a bad one is refused with a log line and counted. Returns the handler of the goals."""
+    from .ros2.goals import Goal, Goals
+    from .ros2.model import POSE, drone_topic
+    from .ros2.node import RosGraph, ros_keys
+
+    goals = Goals(ground.world, frozenset(ground.starts), args.cell_size)
+    graph = RosGraph(session, ros_keys(args), "dronesim_gcs")
+    graph.subscribe({drone_topic(args.namespace, d, "goal_pose"): d for d in ground.starts}, POSE,
+                    lambda drone, payload: inbox.post(Goal(drone, payload)))
+    logger.info("taking ROS 2 goals on %s, domain %d", drone_topic(args.namespace, "<Dnn>", "goal_pose"), args.domain)
+
+    def take(event: object) -> None:
+        if not isinstance(event, Goal):
+            logger.error("unexpected event %r", event)
+            return
+        try:
+            drone, cell = goals.read(event)
+        except UsageError as err:
+            logger.warning("refused a ROS 2 goal for %s: %s (refused so far: %s)", event.drone, err,
+                           dict(goals.refused))
+            return
+        station.want({drone: cell})
+        logger.info("ROS 2 goal: %s -> %s", drone, cell)
+        print(f"ROS 2 goal: {drone} -> {cell}", flush=True)
+    return take
+
+
 def cli(argv: list[str] | None = None) -> int:
+    from .ros2.node import add_ros2_args
     from .web.node import add_web_args, run_web
 
     p = argparse.ArgumentParser(prog="dronesim gcs", description=__doc__)
@@ -97,6 +132,9 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--no-draw", action="store_true", help="do not draw the world at the end")
     add_entity_args(p)
     add_web_args(p)
+    p.add_argument("--ros2", action="store_true",
+                   help="take targets from ROS 2 goals (/<namespace>/<Dnn>/goal_pose, docs/ros2.md)")
+    add_ros2_args(p, viewer=False)
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "GCS")
 

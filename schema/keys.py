@@ -147,3 +147,40 @@ _WRITERS: dict[str, str | None] = {
     spec.template.split("/")[1]: None if spec.writer == "DRONE" else spec.writer
     for spec in KEY_TABLE if spec.how == "put"
 }
+
+
+class RosKeys:
+    """The key expressions of ROS 2's Zenoh middleware (rmw_zenoh, ROS 2 Jazzy and newer) for one domain:
+    a topic's data key ``<domain>/<topic>/<DDS type name>/<RIHS01 hash>`` and the liveliness tokens under
+    ``@ros2_lv/<domain>/<zenoh id>/<node id>/<entity id>/<kind>/<enclave>/<namespace>/<node>[/...]`` that
+    make a node (``NN``), its publishers (``MP``) and subscriptions (``MS``) appear in ROS 2's graph (a name's
+    ``/`` is ``%`` there; an empty enclave or namespace is ``%``)."""
+
+    ADMIN = "@ros2_lv"
+    NODE, PUBLISHER, SUBSCRIPTION = "NN", "MP", "MS"
+
+    def __init__(self, domain: int = 0) -> None:
+        if not (isinstance(domain, int) and 0 <= domain <= 232):
+            raise ValueError(f"bad ROS domain id {domain!r}: 0..232")
+        self.domain = domain
+
+    @staticmethod
+    def dds_type(typename: str) -> str:
+        """``geometry_msgs/msg/PoseStamped`` -> ``geometry_msgs::msg::dds_::PoseStamped_``."""
+        package, kind, name = typename.split("/")
+        return f"{package}::{kind}::dds_::{name}_"
+
+    @staticmethod
+    def mangle(name: str) -> str:
+        return name.replace("/", "%") or "%"
+
+    def topic(self, topic: str, typename: str, type_hash: str) -> str:
+        return f"{self.domain}/{topic.strip('/')}/{self.dds_type(typename)}/{type_hash}"
+
+    def node_token(self, zid: str, node_id: int, namespace: str, node: str) -> str:
+        return f"{self.ADMIN}/{self.domain}/{zid}/{node_id}/{node_id}/{self.NODE}/%/{self.mangle(namespace)}/{node}"
+
+    def endpoint_token(self, zid: str, node_id: int, entity_id: int, kind: str, namespace: str, node: str,
+                       topic: str, typename: str, type_hash: str, qos: str) -> str:
+        return (f"{self.ADMIN}/{self.domain}/{zid}/{node_id}/{entity_id}/{kind}/%/{self.mangle(namespace)}/{node}/"
+                f"{self.mangle(topic)}/{self.dds_type(typename)}/{type_hash}/{qos}")

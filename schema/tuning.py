@@ -144,3 +144,12 @@ STATUS_GRACE = 2.0
 COMMAND_TIMEOUT = 10.0
 #: Seconds between the web ground station's keep-alive comments on an event stream, so a vanished page is noticed.
 KEEPALIVE = 15.0
+
+#: Turns a second at most that `dronesim ros2` publishes to ROS 2 (and Foxglove): each turn while the game goes no
+#: faster, else the newest at this rate, so that a swarm's viewer costs a bounded share of the machine. Not
+#: measured against a viewer: RViz2 and Foxglove draw at about this rate; the 1000-drone cost is in BENCHMARKS.md.
+ROS_RATE = 20.0
+#: Seconds between two trails (nav_msgs/Path) of a drone that keeps moving (the last turn's always goes out).
+ROS_PATH_PERIOD = 1.0
+#: Seconds between two MAP queries of a viewer whose environment has not answered yet (it may not be up).
+ROS_MAP_RETRY = 1.0

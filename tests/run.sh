@@ -6,7 +6,7 @@
 #     browser tests, zenohd, ...), each idempotent and quick when already done.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install --quiet --disable-pip-version-check -e '.[test,rl]'
+python3 -m pip install --quiet --disable-pip-version-check -e '.[test,rl,ros2]'
 for step in tests/setup.d/*.sh; do
   [ -e "$step" ] || continue
   echo "setup: $step"

@@ -1,0 +1,155 @@
+"""The game for Foxglove (foxglove-sdk), live (a WebSocket server, subprotocol ``foxglove.sdk.v1``) or in an MCAP file:
+the ROS 2 topics of `entities.ros2.model.Scene` (``ros2msg`` schemas, CDR), and a Foxglove scene on
+``/<namespace>/scene`` (``foxglove.SceneUpdate``): the buildings as cubes, each drone as a sphere in its own frame
+(moved by ``/tf``; sent again only when its state changes), each target as a cube, each trail as a line strip.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import foxglove
+import numpy as np
+from foxglove.channels import SceneUpdateChannel
+from foxglove.messages import (
+    Color,
+    CubePrimitive,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneEntityDeletion,
+    SceneEntityDeletionType,
+    SceneUpdate,
+    SpherePrimitive,
+    Timestamp,
+    Vector3,
+)
+
+from .model import BUILDING_COLOUR, COLOURS, FRAME, TARGET_COLOUR, Out, Scene, Snapshot, drone_topic, msgdef
+
+
+def _colour(rgba: Any) -> Color:
+    r, g, b, a = (float(v) for v in rgba)
+    return Color(r=r, g=g, b=b, a=a)
+
+
+def _at(x: float, y: float, z: float) -> Pose:
+    return Pose(position=Vector3(x=x, y=y, z=z), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+
+
+def _stamp(ns: int) -> Timestamp:
+    return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+
+class FoxScene:
+    """The Foxglove scene's updates, from what `Scene` was fed (pure of any network or file)."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self._views: dict[str, int] = {}
+        self._targets: dict[str, tuple[int, int, int] | None] = {}
+        self._colours = [_colour(c) for c in COLOURS]
+
+    def buildings(self, grid: np.ndarray) -> SceneUpdate:
+        s = self.scene.cell_size
+        size, colour = Vector3(x=s, y=s, z=s), _colour(BUILDING_COLOUR)
+        cubes = [CubePrimitive(pose=_at(x * s, y * s, z * s), size=size, color=colour)
+                 for x, y, z in np.argwhere(grid).tolist()]
+        return SceneUpdate(entities=[SceneEntity(timestamp=_stamp(0), frame_id=FRAME, id="buildings", cubes=cubes)])
+
+    def turn(self, snap: Snapshot, names: list[str]) -> SceneUpdate | None:
+        """The drones whose state and the targets that changed (None: nothing did)."""
+        s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(snap.turn))
+        entities, deletions = [], []
+        ball = Vector3(x=0.8 * s, y=0.8 * s, z=0.8 * s)
+        for name, view, target in zip(names, snap.view.tolist(), snap.target.tolist()):
+            if self._views.get(name) != view:
+                self._views[name] = view
+                entities.append(SceneEntity(timestamp=stamp, frame_id=name, id=f"drone/{name}", frame_locked=True,
+                                            spheres=[SpherePrimitive(pose=_at(0.0, 0.0, 0.0), size=ball,
+                                                                     color=self._colours[view])]))
+            cell = None if target[0] < 0 else (target[0], target[1], target[2])
+            if self._targets.get(name) != cell:
+                self._targets[name] = cell
+                if cell is None:
+                    deletions.append(SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.MatchingId,
+                                                         id=f"target/{name}"))
+                else:
+                    entities.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"target/{name}", cubes=[
+                        CubePrimitive(pose=_at(cell[0] * s, cell[1] * s, cell[2] * s),
+                                      size=Vector3(x=0.5 * s, y=0.5 * s, z=0.5 * s), color=_colour(TARGET_COLOUR))]))
+        return SceneUpdate(entities=entities, deletions=deletions) if entities or deletions else None
+
+    def trails(self, turn: int, trails: dict[str, list]) -> SceneUpdate | None:
+        if not trails:
+            return None
+        s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(turn))
+        return SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"trail/{name}", lines=[
+            LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.1 * s, color=self._colours[self._views.get(
+                name, 0)], points=[Point3(x=x * s, y=y * s, z=z * s) for x, y, z in cells])])
+            for name, cells in trails.items()])
+
+
+class FoxgloveSink:
+    """Logs a game to a foxglove-sdk context (its sinks: an MCAP file, a WebSocket server): each ROS 2 topic on a
+    channel of its own, the scene on ``/<namespace>/scene``; every message at its simulated time."""
+
+    def __init__(self, context: foxglove.Context, scene: Scene) -> None:
+        self.context, self.scene, self.fox = context, scene, FoxScene(scene)
+        self._channels: dict[str, foxglove.Channel] = {}
+        self._scene = SceneUpdateChannel(drone_topic(scene.namespace, "scene"), context=context)
+        self.logged = 0
+
+    def _channel(self, out: Out) -> foxglove.Channel:
+        if (ch := self._channels.get(out.topic)) is None:
+            schema = foxglove.Schema(name=out.typename, encoding="ros2msg", data=msgdef(out.typename).encode())
+            ch = self._channels[out.topic] = foxglove.Channel(out.topic, schema=schema, message_encoding="cdr",
+                                                              context=self.context)
+        return ch
+
+    def log(self, outs: list[Out]) -> None:
+        for out in outs:
+            self._channel(out).log(out.payload, log_time=out.time)
+        self.logged += len(outs)
+
+    def world(self, grid: np.ndarray, outs: list[Out]) -> None:
+        self.log(outs)
+        self._scene.log(self.fox.buildings(grid), log_time=0)
+
+    def turn(self, snap: Snapshot, outs: list[Out]) -> None:
+        self.log(outs)
+        t = self.scene.time_of(snap.turn)
+        for update in (self.fox.turn(snap, self.scene.drones()), self.fox.trails(snap.turn, self.scene.sent_trails)):
+            if update is not None:
+                self._scene.log(update, log_time=t)
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    try:
+        number = int(port)
+    except ValueError:
+        number = -1
+    if not 0 <= number <= 65535:
+        from schema import UsageError
+
+        raise UsageError(f"--foxglove wants [HOST:]PORT, got {text!r}")
+    return host or "127.0.0.1", number
+
+
+class FoxgloveLive(FoxgloveSink):
+    """A live Foxglove WebSocket server of the game (`address`: ``[HOST:]PORT``)."""
+
+    def __init__(self, address: str, scene: Scene, logger: logging.Logger) -> None:
+        host, port = parse_address(address)
+        super().__init__(foxglove.Context(), scene)
+        self.server = foxglove.start_server(name="dronesim", host=host, port=port, context=self.context)
+        self.url = f"ws://{host}:{self.server.port}"
+        logger.info("Foxglove WebSocket server on %s", self.url)
+
+    def close(self) -> None:
+        self.server.stop()

@@ -1,0 +1,302 @@
+"""``dronesim ros2``: the game as ROS 2 topics over the game's own Zenoh router (rmw_zenoh's wire format), and as a
+live Foxglove WebSocket server with ``--foxglove [HOST:]PORT``. See docs/ros2.md.
+
+It is an observer: it hears STATUS and OVER as a ground station does, asks the environment for the map (ENV/MAP,
+a read), and never writes to the game. It publishes each turn while the game goes no faster than ``--rate``,
+else the newest turn at that rate (Zenoh keeps only the newest STATUS for it: nothing queues), with congestion
+control DROP: a slow or absent ROS 2 subscriber never slows the game.
+
+`RosGraph` is our node in ROS 2's graph: its liveliness tokens, its publishers (rmw_zenoh's attachment on every
+sample) and its goal subscriptions, also used by the ground station's ROS 2 face (`dronesim gcs --ros2`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import logging
+import struct
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, Protocol
+
+import numpy as np
+import zenoh
+import zenoh.ext
+
+from network.signals import until_stopped, waking
+from network.transport import Inbox, Received, add_zenoh_args, setup_logging, zenoh_config
+from schema import Keys, MapRequest, Over, Status, UsageError, WorldMap
+from schema.keys import RosKeys
+from schema.tuning import FINAL_STATUS_WAIT, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE
+
+from ..gcs import OBSERVED_ENDS
+from .model import Out, Scene, Snapshot, type_hash
+
+#: rmw_zenoh's QoS strings (reliability:durability:history,depth:deadline:lifespan:liveliness), for the tokens.
+QOS_TELEMETRY = "2:2:1,1:,:,:,,"  # best effort, volatile, keep last 1
+QOS_LATCHED = "1:1:1,1:,:,:,,"  # reliable, transient local, keep last 1
+QOS_GOALS = "1:2:1,10:,:,:,,"  # reliable, volatile, keep last 10
+
+
+def add_ros2_args(parser: argparse.ArgumentParser, *, viewer: bool = True) -> None:
+    g = parser.add_argument_group("ROS 2 (docs/ros2.md)")
+    g.add_argument("--domain", type=int, default=0, help="the ROS 2 domain id (ROS_DOMAIN_ID; default 0)")
+    g.add_argument("--namespace", default="dronesim", help="prefix of the drones' topics (default dronesim)")
+    g.add_argument("--cell-size", type=float, default=1.0, help="metres a cell (default 1.0)")
+    if viewer:
+        g.add_argument("--turn-period", type=float, default=0.1,
+                       help="simulated seconds a turn, the stamps' and /clock's (default 0.1)")
+        g.add_argument("--rate", type=float, default=ROS_RATE,
+                       help=f"turns a second at most published; faster games are sampled (default {ROS_RATE:g})")
+        g.add_argument("--foxglove", metavar="[HOST:]PORT",
+                       help="also serve the game live to Foxglove on this WebSocket address (host 127.0.0.1 unless "
+                            "given; port 0: any free port)")
+
+
+def scene_of(args: argparse.Namespace) -> Scene:
+    try:
+        return Scene(namespace=args.namespace, cell_size=args.cell_size, turn_period=args.turn_period)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+
+
+def ros_keys(args: argparse.Namespace) -> RosKeys:
+    try:
+        return RosKeys(args.domain)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+
+
+def _gid(zid: str, entity: int) -> bytes:
+    """An endpoint's 16-byte id, as rmw_zenoh sends in its attachment: derived from the session and entity ids."""
+    return hashlib.blake2b(f"{zid}/{entity}".encode(), digest_size=16).digest()
+
+
+@dataclass(slots=True)
+class _Publisher:
+    pub: Any  # zenoh.Publisher or zenoh.ext.AdvancedPublisher
+    token: zenoh.LivelinessToken
+    gid: bytes
+    seq: int = 0
+
+
+class RosGraph:
+    """A ROS 2 node over Zenoh, as rmw_zenoh makes one: a node token, and per topic a publisher with its token
+    (declared on first use; telemetry best effort with congestion control DROP; a latched topic keeps its last
+    sample for late joiners, as a transient-local publisher does) or a subscription with its token."""
+
+    def __init__(self, session: zenoh.Session, keys: RosKeys, node: str, namespace: str = "/") -> None:
+        self.session, self.keys, self.node, self.namespace = session, keys, node, namespace
+        self.zid = str(session.info.zid())
+        self._node_token = session.liveliness().declare_token(keys.node_token(self.zid, 0, namespace, node))
+        self._entities = 0
+        self._pubs: dict[tuple[str, bool], _Publisher] = {}
+        self._handles: list[Any] = []
+        self.sent = 0
+
+    def _entity(self) -> int:
+        self._entities += 1
+        return self._entities
+
+    def _token(self, kind: str, entity: int, topic: str, typename: str, qos: str) -> zenoh.LivelinessToken:
+        key = self.keys.endpoint_token(self.zid, 0, entity, kind, self.namespace, self.node, topic, typename,
+                                       type_hash(typename), qos)
+        return self.session.liveliness().declare_token(key)
+
+    def _publisher(self, topic: str, typename: str, latched: bool) -> _Publisher:
+        if (p := self._pubs.get((topic, latched))) is None:
+            entity, key = self._entity(), self.keys.topic(topic, typename, type_hash(typename))
+            if latched:
+                pub: Any = zenoh.ext.declare_advanced_publisher(
+                    self.session, key, encoding=zenoh.Encoding("application/cdr"), cache=zenoh.ext.CacheConfig(1),
+                    publisher_detection=True, reliability=zenoh.Reliability.RELIABLE)
+            else:
+                pub = self.session.declare_publisher(key, encoding=zenoh.Encoding("application/cdr"),
+                                                     congestion_control=zenoh.CongestionControl.DROP,
+                                                     reliability=zenoh.Reliability.BEST_EFFORT)
+            token = self._token(self.keys.PUBLISHER, entity, topic, typename, QOS_LATCHED if latched else QOS_TELEMETRY)
+            p = self._pubs[(topic, latched)] = _Publisher(pub, token, _gid(self.zid, entity))
+        return p
+
+    def publish(self, out: Out, *, latched: bool = False) -> None:
+        p = self._publisher(out.topic, out.typename, latched)
+        p.pub.put(out.payload, attachment=struct.pack("<QQB16s", p.seq, time.time_ns(), 16, p.gid))
+        p.seq += 1
+        self.sent += 1
+
+    def subscribe(self, topics: dict[str, str], typename: str, on: Callable[[str, bytes], None]) -> None:
+        """Subscribe to each of `topics` (topic -> what `on` is told it came for) with a token each, through one
+        Zenoh subscriber on their keys' common pattern: `on(what, payload)` on Zenoh's thread."""
+        by_key = {self.keys.topic(t, typename, type_hash(typename)): what for t, what in topics.items()}
+        for topic in topics:
+            self._handles.append(self._token(self.keys.SUBSCRIPTION, self._entity(), topic, typename, QOS_GOALS))
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            what = by_key.get(str(sample.key_expr))
+            if what is not None:
+                on(what, sample.payload.to_bytes())
+
+        for key in by_key:
+            self._handles.append(self.session.declare_subscriber(key, on_sample))
+
+    def close(self) -> None:
+        for p in self._pubs.values():
+            p.token.undeclare()
+            p.pub.undeclare()
+        for h in self._handles:
+            h.undeclare()
+        self._node_token.undeclare()
+        self._pubs, self._handles = {}, []
+
+
+@dataclass(frozen=True, slots=True)
+class MapAnswer:
+    """The environment's replies to our MAP query (none: nobody answered)."""
+
+    replies: tuple
+
+
+def world_grid(reply: WorldMap) -> np.ndarray:
+    size = reply.size
+    bits = np.unpackbits(np.frombuffer(reply.buildings, np.uint8))[:size[0] * size[1] * size[2]]
+    return bits.reshape(size).astype(bool)
+
+
+class Sink(Protocol):
+    """Where a game's messages go: the world's (once) and each turn's."""
+
+    def world(self, grid: np.ndarray, outs: list[Out]) -> None: ...
+    def turn(self, snap: Snapshot, outs: list[Out]) -> None: ...
+
+
+class RosSink:
+    """A game's messages to ROS 2: the buildings latched, the rest telemetry."""
+
+    def __init__(self, graph: RosGraph) -> None:
+        self.graph = graph
+
+    def world(self, grid: np.ndarray, outs: list[Out]) -> None:
+        for out in outs:
+            self.graph.publish(out, latched=True)
+
+    def turn(self, snap: Snapshot, outs: list[Out]) -> None:
+        for out in outs:
+            self.graph.publish(out)
+
+
+class Viewer:
+    """What `dronesim ros2` does with what it hears, given where its messages go (`sinks`): pure of the network
+    but for the sinks. Times are seconds of any monotonic clock."""
+
+    def __init__(self, scene: Scene, sinks: list[Sink], *, rate: float, logger: logging.Logger) -> None:
+        if not (np.isfinite(rate) and rate > 0):
+            raise UsageError(f"--rate must be > 0, got {rate!r}")
+        self.scene, self.sinks, self.period, self.log = scene, sinks, 1.0 / rate, logger
+        self.turn = -1  # the last turn published
+        self.due = 0.0  # when the next turn may go out
+        self.paths_due = 0.0
+        self.over: Over | None = None
+        self.over_since = 0.0
+        self.have_map = False
+
+    def world(self, grid: np.ndarray) -> None:
+        self.have_map = True
+        outs = [self.scene.buildings(grid)]
+        for sink in self.sinks:
+            sink.world(grid, outs)
+
+    def status(self, status: Status, now: float) -> None:
+        if status.turn <= self.turn:
+            return
+        paths = now >= self.paths_due or self._final(status.turn)
+        snap = Snapshot.of_status(status)
+        outs = self.scene.turn(snap, paths=paths)
+        for sink in self.sinks:
+            sink.turn(snap, outs)
+        self.turn, self.due = status.turn, now + self.period
+        if paths:
+            self.paths_due = now + ROS_PATH_PERIOD
+
+    def _final(self, turn: int) -> bool:
+        return self.over is not None and turn >= self.over.turn
+
+    def ended(self, now: float) -> bool:
+        """After OVER, once the last turn's STATUS went out (or `FINAL_STATUS_WAIT` s after OVER)."""
+        over = self.over
+        return over is not None and (self.turn >= over.turn or over.reason not in OBSERVED_ENDS
+                                     or now >= self.over_since + FINAL_STATUS_WAIT)
+
+
+def run(args: argparse.Namespace, logger: logging.Logger) -> int:
+    conf, keys, scene, ros = zenoh_config(args), Keys(args.root), scene_of(args), ros_keys(args)
+    conf.insert_json5("timestamping/enabled", "true")  # a latched topic's cache orders its samples by timestamp
+    fox = None
+    if args.foxglove is not None:
+        from .foxglove import FoxgloveLive
+
+        fox = FoxgloveLive(args.foxglove, scene, logger)
+    with zenoh.open(conf) as session:
+        inbox = Inbox(session, keys, logger)
+        inbox.subscribe(keys.over, Over)
+        newest = inbox.newest(keys.status, Status)
+        graph = RosGraph(session, ros, "dronesim")
+        sinks: list[Sink] = [RosSink(graph)]
+        if fox is not None:
+            sinks.append(fox)
+        viewer = Viewer(scene, sinks, rate=args.rate, logger=logger)
+        print(f"ros2: node /dronesim on domain {ros.domain}, topics under /{args.namespace.strip('/')}"
+              + (f"; foxglove on {fox.url}" if fox else ""), flush=True)
+        map_due = 0.0
+        try:
+            with waking(partial(inbox.post, None)):
+                while not viewer.ended(time.monotonic()):
+                    now = time.monotonic()
+                    if not viewer.have_map and now >= map_due:
+                        map_due = now + ROS_MAP_RETRY
+                        inbox.query(keys.map, MapRequest(turn=0, sender="OBS"), WorldMap, timeout=ROS_MAP_RETRY,
+                                    then=MapAnswer)
+                    event = inbox.get(max(0.0, min(viewer.due, map_due if not viewer.have_map else viewer.due) - now))
+                    now = time.monotonic()
+                    match event:
+                        case Received(_, Over() as over) if viewer.over is None:
+                            viewer.over, viewer.over_since = over, now
+                        case MapAnswer(replies) if not viewer.have_map:
+                            for reply in replies:
+                                if isinstance(reply, WorldMap):
+                                    viewer.world(world_grid(reply))
+                                    break
+                    if now >= viewer.due and (got := newest()) is not None and isinstance(got.msg, Status):
+                        viewer.status(got.msg, now)
+        finally:
+            graph.close()
+            inbox.close()
+            if fox is not None:
+                fox.close()
+    end = viewer.over
+    print(f"ros2: published {graph.sent} messages up to turn {viewer.turn}"
+          + (f"; game over at turn {end.turn}: {end.reason.value}" if end else ""), flush=True)
+    if inbox.rejects.total:
+        logger.info("rejected inputs: %s", inbox.rejects.snapshot())
+    return 0
+
+
+def cli(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="dronesim ros2", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_zenoh_args(p)
+    add_ros2_args(p)
+    args = p.parse_args(argv)
+    logger = setup_logging(args.log_level, "ROS2")
+    try:
+        return until_stopped(lambda: run(args, logger), logger)
+    except UsageError as err:
+        logger.error("%s", err)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(cli())

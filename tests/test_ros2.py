@@ -1,0 +1,276 @@
+"""ROS 2 over Zenoh (entities/ros2, docs/ros2.md), tested against peers no one here wrote: rosbags decodes every
+payload and computes every type hash; zenoh-ros2-sdk (a ROS-2-over-Zenoh client, given message definitions made
+offline from rosbags' own) lists our topics with their types, decodes the poses, and sends a goal the drone flies to."""
+
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from dronesim.replay import header_config, tracks
+from schema import UsageError
+from schema.keys import RosKeys
+from world.grid import World, build_world
+
+rosbags = pytest.importorskip("rosbags", reason="rosbags is in the ros2 extra: pip install -e '.[ros2]'")
+
+from entities.ros2.goals import Goal, Goals  # noqa: E402
+from entities.ros2.model import (  # noqa: E402
+    CLOCK,
+    MARKERS,
+    PATH,
+    POSE,
+    TF,
+    TYPES,
+    Scene,
+    Snapshot,
+    dependencies,
+    deserialize,
+    make,
+    own_msgdef,
+    serialize,
+    type_hash,
+    typestore,
+)
+
+from .harness import Cluster, embedded_router, journal_records  # noqa: E402
+
+
+def snapshot(turn: int, pos: np.ndarray, view: np.ndarray | None = None, target: np.ndarray | None = None) -> Snapshot:
+    n = len(pos)
+    return Snapshot(turn=turn, numbers=np.arange(1, n + 1), pos=np.asarray(pos, np.int32),
+                    view=np.zeros(n, np.int8) if view is None else view,
+                    target=-np.ones((n, 3), np.int32) if target is None else target)
+
+
+def test_every_message_is_what_rosbags_makes_of_the_turn() -> None:
+    """Each turn's messages decode with rosbags to the drones' cells (x cell size), at turn x period."""
+    scene = Scene(cell_size=2.0, turn_period=0.25)
+    rng = np.random.default_rng(1)
+    pos = rng.integers(0, 50, (37, 3))
+    trails: dict[str, object] = {}
+    for turn in range(1, 6):
+        pos = pos + rng.integers(-1, 2, pos.shape)
+        view = rng.integers(0, 5, len(pos)).astype(np.int8)
+        target = np.where(rng.random((len(pos), 1)) < 0.5, pos + 3, -1)
+        outs = scene.turn(snapshot(turn, pos, view, target))
+        by_topic = {o.topic: o for o in outs}
+        stamp = (turn // 4, (turn % 4) * 250_000_000)
+        for i, name in enumerate(f"D{n:02d}" for n in range(1, len(pos) + 1)):
+            msg = deserialize(by_topic[f"/dronesim/{name}/pose"].payload, POSE)
+            assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == (*stamp, "map")
+            p = msg.pose.position
+            assert (p.x, p.y, p.z) == tuple(2.0 * pos[i]) and msg.pose.orientation.w == 1.0
+            if (out := by_topic.get(f"/dronesim/{name}/path")) is not None:  # (sent when the drone moved)
+                trails[name] = deserialize(out.payload, PATH)
+            path = trails[name]
+            assert [2.0 * pos[i][k] for k in range(3)] == [getattr(path.poses[-1].pose.position, a) for a in "xyz"]
+        tf = deserialize(by_topic["/tf"].payload, TF)
+        assert [t.child_frame_id for t in tf.transforms] == [f"D{n:02d}" for n in range(1, len(pos) + 1)]
+        assert [[t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]
+                for t in tf.transforms] == (2.0 * pos).tolist()
+        markers = deserialize(by_topic["/dronesim/markers"].payload, MARKERS).markers
+        assert [m.ns for m in markers] == ["drones", "targets"]
+        assert [[q.x, q.y, q.z] for q in markers[0].points] == (2.0 * pos).tolist()
+        alpha = [c.a for c in markers[1].colors]
+        assert [a > 0 for a in alpha] == (target[:, 0] >= 0).tolist()
+        clock = deserialize(by_topic["/clock"].payload, CLOCK)
+        assert (clock.clock.sec, clock.clock.nanosec) == stamp
+        for o in outs:  # and each is byte for byte what rosbags serialises of what it decodes to
+            assert serialize(deserialize(o.payload, o.typename), o.typename) == o.payload
+
+
+def test_trails_grow_with_moves_only() -> None:
+    scene = Scene()
+    pos = np.array([[1, 1, 1], [5, 5, 5]])
+    scene.turn(snapshot(1, pos))
+    outs = scene.turn(snapshot(2, pos + [[1, 0, 0], [0, 0, 0]]))
+    paths = {o.topic: deserialize(o.payload, PATH) for o in outs if o.typename == PATH}
+    assert list(paths) == ["/dronesim/D01/path"]  # D02 did not move: its trail is unchanged, not sent again
+    assert [(q.pose.position.x, q.pose.position.y) for q in paths["/dronesim/D01/path"].poses] == [(1, 1), (2, 1)]
+
+
+def test_buildings_are_one_cube_list() -> None:
+    grid = np.zeros((4, 4, 3), bool)
+    grid[1, 2, 0] = grid[3, 3, 2] = True
+    markers = deserialize(Scene(cell_size=0.5).buildings(grid).payload, MARKERS).markers
+    assert [(m.ns, m.type) for m in markers] == [("buildings", 6)]
+    assert [(q.x, q.y, q.z) for q in markers[0].points] == [(0.5, 1.0, 0.0), (1.5, 1.5, 1.0)]
+
+
+def test_type_hashes_and_keys() -> None:
+    """rmw_zenoh's key of a topic: domain, topic, DDS type name, RIHS01 hash (rosbags' own)."""
+    keys = RosKeys(3)
+    assert keys.topic("/dronesim/D01/pose", POSE, type_hash(POSE)) == (
+        "3/dronesim/D01/pose/geometry_msgs::msg::dds_::PoseStamped_/" + typestore().hash_rihs01(POSE))
+    assert type_hash(POSE).startswith("RIHS01_") and len(type_hash(POSE)) == 7 + 64
+    token = keys.endpoint_token("abc", 0, 4, "MP", "/", "dronesim", "/tf", TF, type_hash(TF), "q")
+    assert token == f"@ros2_lv/3/abc/0/4/MP/%/%/dronesim/%tf/tf2_msgs::msg::dds_::TFMessage_/{type_hash(TF)}/q"
+    with pytest.raises(ValueError):
+        RosKeys(-1)
+
+
+def goal(x: float, y: float, z: float, frame: str = "map") -> bytes:
+    return serialize(make(POSE, header=make("std_msgs/msg/Header", frame_id=frame),
+                          pose=make("geometry_msgs/msg/Pose",
+                                    position=make("geometry_msgs/msg/Point", x=x, y=y, z=z))), POSE)
+
+
+def test_goals_refused_with_a_reason_and_counted() -> None:
+    grid = np.zeros((6, 6, 4), bool)
+    grid[2, 2, :2] = True
+    goals = Goals(World.from_grid(grid), frozenset({"D01"}), cell_size=2.0)
+    assert goals.read(Goal("D01", goal(6.2, 3.9, 2.0))) == ("D01", (3, 2, 1))
+    bad = {"outside the world": goal(13.0, 0.0, 0.0), "in a building": goal(4.0, 4.0, 0.0),
+           "other frame": goal(0.0, 0.0, 0.0, frame="odom"), "not finite": goal(math.nan, 0.0, 0.0),
+           "malformed": b"\x00\x01\x00\x00garbage"}
+    for reason, payload in bad.items():
+        with pytest.raises(UsageError, match=reason):
+            goals.read(Goal("D01", payload))
+    with pytest.raises(UsageError, match="unknown drone"):
+        goals.read(Goal("D07", goal(0.0, 0.0, 0.0)))
+    assert goals.taken == 1 and sum(goals.refused.values()) == 6 and set(goals.refused) == {*bad, "unknown drone"}
+
+
+# ------------------------------------------------------------------------------------------ against real peers
+
+
+def write_msg_files(root: Path) -> Path:
+    """The .msg files of every type we publish, made offline from rosbags' definitions (zenoh-ros2-sdk otherwise
+    clones them from the internet at run time)."""
+    for t in {d for typename in TYPES for d in dependencies(typename)}:
+        path = root / f"{t}.msg"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(own_msgdef(t))
+    return root
+
+
+@pytest.fixture()
+def sdk(tmp_path: Path):
+    sdk = pytest.importorskip("zenoh_ros2_sdk", reason="zenoh-ros2-sdk is in the ros2 extra")
+    import zenoh_ros2_sdk.message_registry as registry
+
+    registry._registry = registry.MessageRegistry(str(write_msg_files(tmp_path / "msgs")))
+    yield sdk
+    if sdk.ZenohSession._instance is not None:
+        sdk.ZenohSession._instance.close()
+    registry._registry = None
+
+
+def free_cell_above(world: World, start: tuple[int, int, int]) -> tuple[int, int, int]:
+    x, y, _ = start
+    for z in range(world.size[2] - 1, 0, -1):
+        if not world.is_building((x, y, z)):
+            return (x, y, z)
+    raise AssertionError("no free cell above the start")
+
+
+def test_live_topics_graph_and_goals_with_zenoh_ros2_sdk(tmp_path: Path, sdk) -> None:
+    """A game with `dronesim ros2` and `dronesim gcs --ros2`: zenoh-ros2-sdk sees every topic with its type in
+    its graph view, decodes the poses (each the journal's cell at its stamp's turn), and its goal flies D01
+    there; bad goals are refused and counted; rosbags decodes every payload on the wire, under its type's hash."""
+    journal = tmp_path / "game.journal"
+    wire: list[tuple[str, bytes, bytes | None]] = []
+    with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
+        port = int(locator.rsplit(":", 1)[1])
+        srv = c.start("SRV", "coordinator", "--seed", "7", "--size", "10,10,8", "--drones", "2", "--max-turns",
+                      "150", "--pace", "0.04", "--journal", str(journal), "--admit-deadline", "60")
+        srv.expect("coordinator ready")
+        c.start("ENV", "env", "--no-draw")
+        for d in ("D01", "D02"):
+            c.start(d, "drone", "--id", d, "--autopilot", "seed")
+        gcs = c.start("GCS", "gcs", "--ros2", "--quiet", "--no-draw")
+        viewer = c.start("ROS2", "ros2", "--turn-period", "0.1")
+        viewer.expect("ros2: node /dronesim")
+        gcs.expect("taking ROS 2 goals")
+
+        raw = zenoh.open(zenoh.Config.from_json5(f'{{mode: "client", connect: {{endpoints: ["{locator}"]}}}}'))
+        lock = threading.Lock()
+
+        def keep(sample: zenoh.Sample) -> None:
+            att = sample.attachment.to_bytes() if sample.attachment is not None else None
+            with lock:
+                wire.append((str(sample.key_expr), sample.payload.to_bytes(), att))
+
+        raw_sub = raw.declare_subscriber("0/**", keep)
+        want = {"/dronesim/D01/pose": POSE, "/dronesim/D02/pose": POSE, "/dronesim/D01/path": PATH,
+                "/tf": TF, "/dronesim/markers": MARKERS, "/clock": CLOCK}
+        seen: dict[str, list[str]] = {}
+        deadline = time.monotonic() + 30
+        while not set(want) <= set(seen) and time.monotonic() < deadline:  # (each query waits 0.5 s)
+            seen = dict(sdk.get_topic_names_and_types(router_port=port, timeout=0.5))
+        assert {t: seen.get(t) for t in want} == {t: [ty] for t, ty in want.items()}, seen
+
+        got: dict[str, list] = {t: [] for t in want}
+        subs = [sdk.ROS2Subscriber(t, ty, got[t].append, router_port=port) for t, ty in want.items()]
+        header = journal_records(journal)[0] if journal.exists() else None
+        assert header is not None
+        config, _ = header_config(header)
+        world = build_world(config.world, (d.start for d in config.drones))
+        start = dict((d.drone, d.start) for d in config.drones)["D01"]
+        cell = free_cell_above(world, start)
+        pub = sdk.ROS2Publisher("/dronesim/D01/goal_pose", POSE, router_port=port)
+        deadline = time.monotonic() + 10  # the goal's route: the SDK's publisher matches the ground station's
+        while not pub.pub.matching_status.matching and time.monotonic() < deadline:
+            threading.Event().wait(0.05)
+        for bad in ({"frame_id": "odom", "at": cell}, {"frame_id": "map", "at": (99, 0, 0)},
+                    {"frame_id": "map", "at": (math.nan, 0, 0)}):
+            publish(pub, bad["frame_id"], bad["at"])
+        raw.put(f"0/dronesim/D01/goal_pose/geometry_msgs::msg::dds_::PoseStamped_/{type_hash(POSE)}", b"\x00\x01")
+        publish(pub, "map", cell)
+        gcs.expect(rf"ROS 2 goal: D01 -> \({cell[0]}, {cell[1]}, {cell[2]}\)")
+        codes = c.wait_all(timeout=120)
+        for s in subs:
+            s.close()
+        pub.close()
+        raw_sub.undeclare()
+        raw.close()
+    assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
+    assert len(gcs.expect("refused a ROS 2 goal.*refused so far: .*'malformed': 1")) > 0
+    for reason in ("other frame", "outside the world", "not finite"):
+        gcs.expect(f"refused a ROS 2 goal for D01: {reason}")
+
+    records = journal_records(journal)
+    final, _ = tracks(config, records)
+    assert final["D01"].pos == cell  # the drone flew to the goal
+    for topic in ("/dronesim/D01/pose", "/dronesim/D02/pose"):
+        assert got[topic], topic
+        drone = topic.split("/")[2]
+        for msg in got[topic]:
+            turn = round((msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9) / 0.1)
+            at, _ = tracks(config, records, until=turn)
+            p = msg.pose.position
+            assert (p.x, p.y, p.z) == at[drone].pos, (topic, turn)
+    assert got["/dronesim/D01/pose"][-1].pose.position.x == cell[0]
+    assert got["/tf"] and got["/clock"] and got["/dronesim/markers"] and got["/dronesim/D01/path"]
+
+    # every sample we sent: the key's hash is rosbags' for the type named, the payload decodes, the attachment
+    # is rmw_zenoh's (sequence number, timestamp, 16-byte publisher id)
+    ours = [(k, p, a) for k, p, a in wire if "goal_pose" not in k]
+    assert len(ours) > 50
+    names = {RosKeys.dds_type(t): t for t in TYPES}
+    sequences: dict[str, list[int]] = {}
+    for key, payload, att in ours:
+        _, *topic, dds, hashed = key.split("/")
+        typename = names[dds]
+        assert hashed == typestore().hash_rihs01(typename), key
+        deserialize(payload, typename)
+        assert att is not None and len(att) == 33 and att[16] == 16, key
+        sequences.setdefault(key, []).append(struct.unpack_from("<Q", att)[0])
+    for key, seq in sequences.items():
+        assert seq == sorted(seq) and len(set(seq)) == len(seq), key
+
+
+def publish(pub, frame: str, at: tuple) -> None:
+    x, y, z = (float(v) for v in at)
+    Time, Header = (pub.session_mgr.store.types[t] for t in ("builtin_interfaces/msg/Time", "std_msgs/msg/Header"))
+    Point, Quat, Pose = (pub.session_mgr.store.types[f"geometry_msgs/msg/{t}"] for t in ("Point", "Quaternion", "Pose"))
+    pub.publish(header=Header(stamp=Time(sec=0, nanosec=0), frame_id=frame),
+                pose=Pose(position=Point(x=x, y=y, z=z), orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0)))
