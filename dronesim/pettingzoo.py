@@ -2,8 +2,9 @@
 AEC form `env(**config)`, as PettingZoo's own environments expose them (an example: docs/rl.md).
 
 Agents are the drones (``drone_1`` flies D01); actions `Discrete(7)` (0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z,
-6 -z); observations a `Box` of int32: the cells around the drone (`dronesim.rl.Seen` codes) then the offset
-to its target. The rules, the configuration and the backends are in dronesim/rl.py and docs/rl.md.
+6 -z; on a world one cell high, POGEMA's five: `Discrete(5)`, no ±z); observations a `Box` of int32: the
+cells around the drone (`dronesim.rl.Seen` codes) then the offset to its target. The rules, the
+configuration and the backends are in dronesim/rl.py and docs/rl.md.
 """
 
 from __future__ import annotations
@@ -14,10 +15,10 @@ from collections.abc import Mapping
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from dronesim.rl import (
-    ACTIONS,
     RENDER_MODES,
     Config,
     ConfigError,
@@ -53,7 +54,7 @@ class DroneParallelEnv(ParallelEnv):
         #: The space of `state()`: the whole world as observation codes.
         self.state_space = spaces.Box(0, max(Seen), shape=cfg.size, dtype=np.int8)
         # Action spaces are seeded from the configuration's seed, so sampled actions are reproducible too.
-        self._action_spaces = {a: spaces.Discrete(len(ACTIONS), seed=cfg.seed + i)
+        self._action_spaces = {a: spaces.Discrete(cfg.actions, seed=cfg.seed + i)
                                for i, a in enumerate(self.possible_agents)}
         self._observation_spaces: dict[str, spaces.Box] = {}
         self._episodes = np.random.default_rng(cfg.seed)  # seeds of the episodes reset() without a seed starts
@@ -126,6 +127,8 @@ class DroneParallelEnv(ParallelEnv):
         if episode is None:
             raise ConfigError("step() before reset()")
         if episode.ended:
+            if isinstance(actions, Mapping) and not actions:  # (PettingZoo's convention: nothing to step)
+                return {}, {}, {}, {}, {}
             raise ConfigError("step() after the end of the episode: call reset()")
         if type(actions) is not dict and not isinstance(actions, Mapping):
             raise ConfigError(f"actions must be a dict of agent -> action, got {type(actions).__name__}")
@@ -193,6 +196,20 @@ def parallel_env(**config: object) -> DroneParallelEnv:
     return DroneParallelEnv(**config)
 
 
+class _ToAEC(parallel_to_aec_wrapper):
+    """PettingZoo's `parallel_to_aec_wrapper`, but an action other than None for an agent that is done (its
+    turn comes once more, to be removed) raises ConfigError before anything changes, where the wrapper would
+    fail a bare assertion after dropping the agent's entry, the environment broken."""
+
+    def step(self, action):
+        agent = self.agent_selection
+        if action is not None and (self.terminations.get(agent) or self.truncations.get(agent)):
+            why = "terminated" if self.terminations.get(agent) else "truncated"
+            raise ConfigError(f"{agent} is {why}: its last step takes None (env.step(None)), not {action!r}")
+        super().step(action)
+
+
 def env(**config: object):
-    """The game as a PettingZoo AECEnv (PettingZoo's `parallel_to_aec` of `parallel_env`)."""
-    return parallel_to_aec(parallel_env(**config))
+    """The game as a PettingZoo AECEnv (PettingZoo's `parallel_to_aec` of `parallel_env`, with a clear error
+    for an action given to an agent that is done)."""
+    return OrderEnforcingWrapper(_ToAEC(parallel_env(**config)))

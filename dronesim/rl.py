@@ -50,6 +50,9 @@ if TYPE_CHECKING:
 
 #: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
 ACTIONS: tuple[Cell, ...] = ((0, 0, 0), *AROUND)
+#: On a world one cell high (a MovingAI map), the first five alone: hover, +x, -x, +y, -y (POGEMA's five;
+#: ±z would only leave the world).
+FLAT_ACTIONS = 5
 _DELTAS = np.array(ACTIONS, np.int32)
 #: What happens when a drone reaches its target (docs/rl.md).
 ON_TARGET = ("finish", "stay", "new")
@@ -121,6 +124,11 @@ class Config:
         if world is not None and "size" in config:
             raise ConfigError("give a world or a size, not both (a world has its own size)")
         return cls(**config)  # type: ignore[arg-type]
+
+    @property
+    def actions(self) -> int:
+        """How many actions the agents have: `FLAT_ACTIONS` on a world one cell high, else all of `ACTIONS`."""
+        return FLAT_ACTIONS if self.size[2] == 1 else len(ACTIONS)
 
     def __post_init__(self) -> None:
         n = int_in(self.num_drones, "num_drones", 1, MAX_DRONE)
@@ -197,10 +205,11 @@ def components(grid: np.ndarray, seeds: np.ndarray) -> np.ndarray:
 
 
 def clear_cells(grid: np.ndarray) -> np.ndarray:
-    """Which cells are free with their 6 neighbours free and inside the world (bool, the grid's shape)."""
+    """Which cells are free with the neighbours an agent's actions reach free and inside the world (bool, the
+    grid's shape): the 6 neighbours, or on a world one cell high the 4 of its floor (`FLAT_ACTIONS`)."""
     free = np.pad(~grid, 1)
     clear = free[1:-1, 1:-1, 1:-1].copy()
-    for axis in range(3):
+    for axis in range(3 if grid.shape[2] > 1 else 2):
         for shift in (1, -1):
             clear &= np.roll(free, shift, axis=axis)[1:-1, 1:-1, 1:-1]
     return clear
@@ -216,11 +225,13 @@ class Layout:
     reachable: np.ndarray  # (n,) bool: the target is in the start's component
     label: np.ndarray  # each cell's component (see `components`), C order
     rng: np.random.Generator
+    clear: np.ndarray  # (n,) bool: the start is clear (`clear_cells`: no action kills at the first step)
 
     @classmethod
     def draw(cls, config: Config, seed: int) -> Layout:
-        """The layout of an episode (docs/rl.md, "Layout and seeds"): starts among the clear cells if there are
-        enough; a target with no free cell left in its start's component is any free cell, and unreachable."""
+        """The layout of an episode (docs/rl.md, "Layout and seeds"): starts among the clear cells, where there are
+        fewer than the drones every clear cell and the others among the free cells; a target with no free cell
+        left in its start's component is any free cell, and unreachable."""
         rng = np.random.default_rng(seed)
         world = config.world if config.world is not None else World.generate(config.size, rng, keep_free=())
         n = config.num_drones
@@ -228,8 +239,13 @@ class Layout:
         if len(free) < 2 * n:
             raise ConfigError(f"the world of seed {seed} has {len(free)} free cells, too few for {n} drones "
                               "(a start and a target each)")
-        clear = np.flatnonzero(clear_cells(world.grid).ravel())  # room around: no death at the first move
-        start_lin = rng.choice(clear if len(clear) >= n else free, n, replace=False)
+        clear_grid = clear_cells(world.grid).ravel()
+        clear = np.flatnonzero(clear_grid)  # room around: no death at the first move
+        if len(clear) >= n:
+            start_lin = rng.choice(clear, n, replace=False)
+        else:  # every clear cell, then free ones (`clear` says which starts are clear)
+            rest = rng.choice(np.flatnonzero(~world.grid.ravel() & ~clear_grid), n - len(clear), replace=False)
+            start_lin = rng.permutation(np.concatenate([clear, rest]))
         starts = np.stack(np.unravel_index(start_lin, world.size), axis=1).astype(np.int32)
         label = components(world.grid, starts)
         taken = np.zeros(world.grid.size, bool)
@@ -260,7 +276,8 @@ class Layout:
                 cell, reachable[i] = take(-2), False  # any free cell: unreachable
             taken[cell] = True
             targets[i] = np.unravel_index(cell, world.size)
-        return cls(world=world, starts=starts, targets=targets, reachable=reachable, label=label, rng=rng)
+        return cls(world=world, starts=starts, targets=targets, reachable=reachable, label=label, rng=rng,
+                   clear=clear_grid[start_lin])
 
     def new_target(self, i: int, here: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, bool]:
         """A new target for drone row `i` at `here` (the lifelong variant): a free cell of its start's
@@ -615,6 +632,7 @@ class Episode(EpisodeBase):
         self.on = np.zeros(n, bool)  # rows on their target at the last STATUS
         self.aim_next = self._all  # rows whose target the next DONE carries (all, at turn 1)
         self._say = self._notes()  # each row's note to the engine (whether its target is reachable)
+        self.note = np.where(layout.reachable, self.note, _UNREACHABLE).astype(np.uint8)  # (as said at turn 1)
         self._reward = np.array(self.rewards, np.float64)
 
     def _notes(self) -> np.ndarray:
@@ -650,7 +668,7 @@ class Episode(EpisodeBase):
             if len(done):
                 raise done_agents(done.tolist())
         actions = np.zeros(self.n, np.intp)
-        actions[at] = checked_actions(given, values)
+        actions[at] = checked_actions(given, values, self.config.actions)
         t = self.cycle + 1
         aim = self.aim_next
         everyone = self.everyone
@@ -750,17 +768,18 @@ class Expert:
 _ACTION_OF = {a: k for k, a in enumerate(ACTIONS)}
 _BOOLS = frozenset({bool, np.bool_})
 _INTEGERS = frozenset({int, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64})
-_VALID = frozenset(range(len(ACTIONS)))
+_VALID = {k: frozenset(range(k)) for k in (FLAT_ACTIONS, len(ACTIONS))}
+_MEANING = ("0 hover", "1 +x", "2 -x", "3 +y", "4 -y", "5 +z", "6 -z")
 
 
-def checked_actions(rows: list[int], values: list) -> list:
-    """The actions `values` (`values[k]` for row `rows[k]`) as integers, if each is an integer in 0..6 (a Python
-    or numpy integer, or a 0-d integer array); else ConfigError for the first that is not."""
-    if set(map(type, values)) <= _INTEGERS and set(values) <= _VALID:  # (the usual case: plain integers)
+def checked_actions(rows: list[int], values: list, count: int = len(ACTIONS)) -> list:
+    """The actions `values` (`values[k]` for row `rows[k]`) as integers, if each is an integer in 0..count - 1
+    (a Python or numpy integer, or a 0-d integer array); else ConfigError for the first that is not."""
+    if set(map(type, values)) <= _INTEGERS and set(values) <= _VALID[count]:  # (the usual case: plain integers)
         return values
     for row, a in zip(rows, values):
         if type(a) in _BOOLS or not isinstance(a, (int, np.integer, np.ndarray)) or np.ndim(a) != 0 \
-                or not np.issubdtype(np.asarray(a).dtype, np.integer) or not 0 <= int(a) < len(ACTIONS):
-            raise ConfigError(f"action {a!r} for drone_{row + 1} is outside Discrete({len(ACTIONS)}): "
-                              "0 hover, 1 +x, 2 -x, 3 +y, 4 -y, 5 +z, 6 -z")
+                or not np.issubdtype(np.asarray(a).dtype, np.integer) or not 0 <= int(a) < count:
+            raise ConfigError(f"action {a!r} for drone_{row + 1} is outside Discrete({count}): "
+                              + ", ".join(_MEANING[:count]))
     return [int(a) for a in values]

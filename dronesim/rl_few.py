@@ -67,6 +67,7 @@ class FewEpisode(EpisodeBase):
         self._rows = list(range(n))  # the rows acting, ascending
         self._alive = list(range(n))  # the rows alive, ascending
         self._say = [_NONE_NOTE if r else _UNREACHABLE for r in layout.reachable.tolist()]  # notes to the engine
+        self._shown = self._say[:]  # (an unreachable target is noted at the start: as it will be said)
         self.left = n
         self._finish, self._new = config.on_target == "finish", config.on_target == "new"
         self._solid = self.world.grid.tobytes()  # a building cell: solid[(x * ny + y) * nz + z] == 1
@@ -115,7 +116,7 @@ class FewEpisode(EpisodeBase):
             done = [i for i in rows if not acting[i]]
             if done:
                 raise done_agents(done)
-        action = dict(zip(rows, checked_actions(rows, values)))
+        action = dict(zip(rows, checked_actions(rows, values, self.config.actions)))
         t = self.cycle + 1
         pos, state, say, shown = self._pos, self._state, self._say, self._shown
         # the engine's turn: every alive drone moves (the acting ones as told, hover by default; the parked ones

@@ -80,8 +80,9 @@ def test_arrival_finishes_the_agent_and_its_drone_stays_parked() -> None:
         assert terms["drone_1"] is last and truncs["drone_1"] is False
     assert infos["drone_1"] == {"cell": target, "target": target, "note": "reached", "state": "alive", "cause": "none"}
     assert env.agents == []
+    assert env.step({}) == ({}, {}, {}, {}, {})  # nothing to step (PettingZoo's convention)
     with pytest.raises(ConfigError, match="after the end"):
-        env.step({})
+        env.step({"drone_1": 0})
 
 
 def test_stay_rewards_each_arrival_and_truncates_at_max_cycles() -> None:
@@ -317,7 +318,7 @@ def test_bad_steps() -> None:
         env.observation_space("drone_9")
     assert env.observation_space("drone_1") is env.observation_space("drone_1")
     assert env.action_space("drone_2") is env.action_space("drone_2")
-    assert env.action_space("drone_2").n == len(ACTIONS) == 7
+    assert env.action_space("drone_2").n == len(ACTIONS) == 7  # (a world of several floors)
 
 
 @pytest.mark.parametrize("few_drones", [99, 0])
@@ -364,12 +365,12 @@ def test_module_has_pettingzoo_entry_points() -> None:
 # --------------------------------------------------------------------------- the zenoh backend
 
 
-def greedy(obs: np.ndarray, rng: np.random.Generator) -> int:
-    """Along the axis of the largest offset to the target, or a random action one time in three."""
+def greedy(obs: np.ndarray, rng: np.random.Generator, actions: int = 7) -> int:
+    """Along the axis of the largest offset to the target, or a random action (of `actions`) one time in three."""
     offset = obs[-3:]
     axis = int(np.argmax(np.abs(offset)))
     if rng.random() < 1 / 3 or offset[axis] == 0:
-        return int(rng.integers(7))
+        return int(rng.integers(actions))
     return 1 + 2 * axis + (offset[axis] < 0)
 
 
@@ -408,10 +409,12 @@ def random_trace(env, seed: int) -> list:
     """`trace`'s with random actions for a random subset of the agents (the others hover)."""
     rng = np.random.default_rng(seed)
     out = [env.reset(seed=seed)]
+    k = env.config.actions  # (5 on a world one cell high)
     while env.agents:
         obs = out[-1][0]
         agents = [a for a in env.agents if rng.random() < 0.9]
-        out.append(env.step({a: greedy(obs[a], rng) if rng.random() < 0.5 else int(rng.integers(7)) for a in agents}))
+        out.append(env.step({a: greedy(obs[a], rng, k) if rng.random() < 0.5 else int(rng.integers(k))
+                             for a in agents}))
     return out
 
 
