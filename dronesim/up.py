@@ -24,6 +24,7 @@ import zenoh
 
 from dronesim import child_env
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
+from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
 from network.transport import router_config, router_locators
 from schema import UsageError, drone_id
@@ -59,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="publish the game to ROS 2 (rmw_zenoh) and take ROS 2 goals as targets (docs/ros2.md)")
     p.add_argument("--foxglove", metavar="[HOST:]PORT", help="serve the game live to Foxglove (docs/ros2.md)")
     p.add_argument("--log-level", default="WARNING", help="log level of the entity processes (default WARNING)")
+    add_mavlink_args(p)  # the ground station as MAVLink vehicles (docs/mavlink.md)
     return p
 
 
@@ -99,8 +101,9 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
             procs.append((host, [*base, "drone", *common, "--id", ",".join(ids), "--host", host, "--autopilot", pilot]))
     else:
         procs += [(d, [*base, "drone", *common, "--id", d, "--autopilot", pilots[d]]) for d in sorted(pilots)]
+    mavlink = [str(a) for a in _passed(args, *MAVLINK_FLAGS)] if args.mavlink else []
     procs.append(("GCS", [*base, "gcs", *common, *_passed(args, "scenario", "targets", "script", "quiet", "web",
-                                                             "ros2")]))
+                                                             "ros2"), *mavlink]))
     if args.ros2 or args.foxglove:  # the viewer: ROS 2 topics, Foxglove live
         procs.append(("ROS2", [*base, "ros2", *common, *_passed(args, "foxglove")]))
     return procs
@@ -125,7 +128,7 @@ def main(args: argparse.Namespace) -> int:
             path.write_text(json.dumps(data))
             return main(argparse.Namespace(**{**vars(args), "scen": None, "world": None, "scenario": str(path)}))
     check_game(args)
-    interactive = not args.targets and not args.script and not args.scenario and not args.web
+    interactive = not args.targets and not args.script and not args.scenario and not args.web and not args.mavlink
     with zenoh.open(router_config(args.listen)) as router:
         locator = router_locators(router)[0]
         what = f"scenario {args.scenario}" if args.scenario else \

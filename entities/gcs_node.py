@@ -119,6 +119,7 @@ def ros2_goals(args: argparse.Namespace, session: zenoh.Session, inbox: Inbox, g
 
 
 def cli(argv: list[str] | None = None) -> int:
+    from .mavlink.options import add_mavlink_args
     from .ros2.node import add_ros2_args
     from .web.node import add_web_args, run_web
 
@@ -135,6 +136,7 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--ros2", action="store_true",
                    help="take targets from ROS 2 goals (/<namespace>/<Dnn>/goal_pose, docs/ros2.md)")
     add_ros2_args(p, viewer=False)
+    add_mavlink_args(p, cell_size=False)  # (--cell-size: the ROS 2 flags')
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "GCS")
 
@@ -145,6 +147,10 @@ def cli(argv: list[str] | None = None) -> int:
             args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
         if args.web is not None or args.replay is not None:  # the browser ground station (docs/web-gcs.md)
             return run_web(args, logger)
+        if args.mavlink:  # every drone a MAVLink vehicle (docs/mavlink.md)
+            from .mavlink.node import run_mavlink
+
+            return run_mavlink(args, logger)
         return main(args, logger)
 
     try:

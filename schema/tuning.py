@@ -153,3 +153,11 @@ ROS_RATE = 20.0
 ROS_PATH_PERIOD = 1.0
 #: Seconds between two MAP queries of a viewer whose environment has not answered yet (it may not be up).
 ROS_MAP_RETRY = 1.0
+
+# The MAVLink ground station (entities/mavlink, docs/mavlink.md).
+#: Its default turn period (s): a cell a turn then reads as 4 cells a second, a plausible speed at 1 m a cell.
+MAVLINK_PERIOD = 0.25
+#: How often each vehicle sends its whole telemetry (HEARTBEAT ... BATTERY_STATUS), on top of each turn's position.
+MAVLINK_TELEMETRY_S = 0.5
+#: Datagrams read but not yet handled, at most; more are refused (a flood cannot grow the process).
+MAVLINK_QUEUE = 1024

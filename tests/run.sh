@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Installs what the tests need, runs the static checks (ruff, mypy), then the whole suite. This is the README's
 # test command and CI's.
-#   - the Python package, its test extras and its rl extra (PettingZoo, gymnasium: tests/test_pettingzoo.py);
+#   - the Python package, its test extras, its rl extra (PettingZoo, gymnasium: tests/test_pettingzoo.py) and its
+#     mavlink extra (pymavlink, MAVProxy, MAVSDK: tests/test_mavlink*.py);
 #   - every tests/setup.d/*.sh (system packages: iproute2 for the multi-host tests, chromium for the
 #     browser tests, zenohd, ...), each idempotent and quick when already done.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install --quiet --disable-pip-version-check -e '.[test,rl,ros2]'
+python3 -m pip install --quiet --disable-pip-version-check -e '.[test,rl,ros2,mavlink]'
 for step in tests/setup.d/*.sh; do
   [ -e "$step" ] || continue
   echo "setup: $step"

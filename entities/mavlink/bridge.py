@@ -1,0 +1,171 @@
+"""The MAVLink ground station's core, pure: the fleet of `Vehicle`s around the ground station's protocol
+(`entities.gcs.Station`, held as the web page holds it). It plays `station_link.play`'s `Core` (the game's
+TURN, STATUS and OVER) and takes the clients' decoded messages (`packet`), and returns effects: MAVLink messages
+to send (`Mav`), the station's DONE (`Send`), refusals. Times are seconds of any monotonic clock.
+
+- Dispatch: a message for system n goes to vehicle n; on vehicle n's API port, system 0 means n and any other
+  system is refused; on the ground station's shared link, a command must name its system.
+- Pacing: the GCS phase is answered `period` seconds after the last one (the game's pace for people), with the
+  targets the vehicles asked for since; the game never waits for a client.
+- Telemetry: every STATUS brings each vehicle's position; the whole set goes every `telemetry_period`.
+- A flood: each vehicle takes at most `COMMANDS_PER_TURN` commands a turn; the rest are DENIED, counted."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from schema import Intent, Message, Over, Status, Turn, Welcome
+from schema.errors import Refusal, RemoteInputError, UnknownEntity
+from schema.tables import drone_number
+from schema.tuning import STATUS_GRACE
+
+from ..gcs import Ground, Station
+from .geo import Geo
+from .vehicle import Goal, Mav, Origin, Vehicle, ack
+
+#: Commands (COMMAND_*, SET_MODE, SET_POSITION_TARGET_*) a vehicle takes a turn; more are DENIED.
+COMMANDS_PER_TURN = 32
+COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT", "SET_MODE", "SET_POSITION_TARGET_LOCAL_NED",
+                      "SET_POSITION_TARGET_GLOBAL_INT"})
+#: Messages a vehicle answers or acts on (others -- heartbeats, parameter and stream requests -- are ignored).
+HANDLED = COMMANDS | {"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_LIST",
+                      "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT",
+                      "MISSION_ACK"}
+
+
+class Bridge:
+    """The fleet of a game (`ground`: its world and starts) as MAVLink systems 1..n (drone Dnn is system n)."""
+
+    def __init__(self, ground: Ground, geo: Geo, *, period: float, telemetry_period: float, now: float) -> None:
+        self.station = Station(ground, hold=True)
+        self.vehicles = {drone_number(d): Vehicle(drone_number(d), d, c, ground.world, geo)
+                         for d, c in sorted(ground.starts.items())}
+        self.period, self.telemetry_period, self.boot = period, telemetry_period, now
+        self.last_answer: float | None = None
+        self.pending_since = 0.0
+        self.next_telemetry = now
+        self.commands = dict.fromkeys(self.vehicles, 0)  # commands taken this turn, by vehicle
+        self.ignored = 0  # messages of kinds no vehicle acts on
+        self.quit = False
+
+    def ms(self, now: float) -> int:
+        return int((now - self.boot) * 1000) & 0xFFFFFFFF
+
+    # ------------------------------------------------------------------ the game (station_link.Core)
+
+    def admitted(self, welcome: Welcome) -> Sequence[object]:
+        return self.station.admitted(welcome)
+
+    def receive(self, msg: Message, now: float) -> Sequence[object]:
+        effects: list[Any] = []
+        match msg:
+            case Turn():
+                was = self.station.pending
+                effects = self.station.receive(msg, now)
+                if self.station.pending is not None and self.station.pending != was:
+                    self.pending_since = now
+            case Status() if msg.turn >= self.station.status_turn:
+                effects = self._status(msg, now) + self.station.receive(msg, now)
+            case Over() if self.station.over is None:
+                effects = [e for v in self.vehicles.values() for e in v.over(f"{msg.reason.value} {msg.text}")]
+                effects += self.station.receive(msg, now)
+        return effects
+
+    def _status(self, status: Status, now: float) -> list[Any]:
+        effects: list[Any] = []
+        ms = self.ms(now)
+        for row in status.drones:
+            v = self.vehicles.get(drone_number(row.drone))
+            if v is None:
+                continue
+            events = v.observe(row)  # (first: it takes the row's position)
+            effects += [Mav(v.system, m) for m in v.positions(ms)]
+            effects += events
+        self.commands = dict.fromkeys(self.vehicles, 0)
+        return self._goals(effects)
+
+    def _goals(self, effects: list[Any]) -> list[Any]:
+        """The vehicles' `Goal`s become the station's targets (sent at its next phase); the rest stays."""
+        goals = {e.drone: e.cell for e in effects if isinstance(e, Goal)}
+        if goals:
+            self.station.want(goals)
+        return [e for e in effects if not isinstance(e, Goal)]
+
+    def due(self, now: float) -> float | None:
+        """Seconds until the pending GCS phase is answered (None: none pending)."""
+        station = self.station
+        if station.pending is None or station.over is not None:
+            return None
+        wait = 0.0 if self.last_answer is None or self.quit else self.last_answer + self.period - now
+        if station.status_turn < station.pending - 1:  # its STATUS is on the way: decide on it
+            wait = max(wait, self.pending_since + STATUS_GRACE - now)
+        return max(0.0, wait)
+
+    def wake(self, now: float) -> float | None:
+        waits = [w for w in (self.due(now), self.station.wake(now)) if w is not None]
+        if self.station.over is None:
+            waits.append(max(0.0, self.next_telemetry - now))
+        return min(waits, default=None)
+
+    def tick(self, now: float) -> Sequence[object]:
+        effects: list[Any] = []
+        if self.station.over is None and now >= self.next_telemetry:
+            self.next_telemetry = now + self.telemetry_period
+            ms = self.ms(now)
+            effects += [Mav(v.system, m) for v in self.vehicles.values() for m in v.telemetry(ms)]
+        if self.due(now) == 0.0:
+            assert self.station.pending is not None
+            self.last_answer = now
+            effects += self.station.answer(self.station.pending, Intent.QUIT if self.quit else Intent.CONTINUE)
+        return effects + self.station.tick(now)
+
+    # ------------------------------------------------------------------ the clients
+
+    def packet(self, origin: Origin, messages: Sequence[Any]) -> list[Any]:
+        """The messages of one datagram, decoded (MAVLink 2), that came from `origin`."""
+        effects: list[Any] = []
+        for msg in messages:
+            effects += self._message(origin, msg)
+        return self._goals(effects)
+
+    def _message(self, origin: Origin, msg: Any) -> list[Any]:
+        kind = msg.get_type()
+        if kind not in HANDLED:
+            self.ignored += 1
+            return []
+        system = msg.target_system
+        if origin.port:  # a vehicle's own API port
+            if system not in (0, origin.port):
+                return [_refuse(f"{kind} on system {origin.port}'s port", UnknownEntity(
+                    f"a message for system {system} on the port of system {origin.port}", reason="mavlink-target"))]
+            system = origin.port
+        if system not in self.vehicles:
+            why = "names no system (0): commands on the shared link name one" if system == 0 else \
+                f"is for system {system}, which this game does not fly (1..{max(self.vehicles)})"
+            return [_refuse(f"{kind} from {origin.addr}", UnknownEntity(f"a {kind} that {why}",
+                                                                        reason="mavlink-target"))]
+        vehicle = self.vehicles[system]
+        if self.station.over is not None:
+            return [*_denied(vehicle, msg, origin, mav.MAV_RESULT_DENIED),
+                    _refuse(f"{kind} for {vehicle.drone}", RemoteInputError("the game is over", reason="mavlink-over"))]
+        if kind in COMMANDS:
+            self.commands[system] += 1
+            if self.commands[system] > COMMANDS_PER_TURN:
+                return [*_denied(vehicle, msg, origin, mav.MAV_RESULT_TEMPORARILY_REJECTED),
+                        _refuse(f"{kind} for {vehicle.drone}", RemoteInputError(
+                            f"more than {COMMANDS_PER_TURN} commands in one turn", reason="mavlink-flood"))]
+        return vehicle.handle(msg, origin)
+
+
+def _refuse(what: str, err: RemoteInputError) -> Refusal:
+    return Refusal(what, err)
+
+
+def _denied(vehicle: Vehicle, msg: Any, origin: Origin, result: int) -> list[Mav]:
+    """A command's COMMAND_ACK with `result` (other messages get none: their refusal is counted)."""
+    if msg.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
+        return []
+    return [Mav(vehicle.system, ack(msg.command, result, msg), origin)]

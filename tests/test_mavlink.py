@@ -1,0 +1,471 @@
+"""The MAVLink ground station's pure core (entities/mavlink: geo, vehicle, bridge) and the adapter's datagram
+reading, without a network: messages are built by pymavlink, framed as a client would send them and read back
+as the adapter reads a datagram. The real clients fly it in tests/test_mavlink_clients.py."""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+
+import pytest
+
+mav = pytest.importorskip("pymavlink.dialects.v20.ardupilotmega", reason="pymavlink (the mavlink extra) is needed")
+
+from entities.gcs import Ground, Plan, Send  # noqa: E402
+from entities.mavlink.bridge import COMMANDS_PER_TURN, Bridge  # noqa: E402
+from entities.mavlink.geo import DEFAULT_ORIGIN, BadPosition, Geo  # noqa: E402
+from entities.mavlink.node import Links, Packet, Reader, decode_datagram  # noqa: E402
+from entities.mavlink.vehicle import MISSION_LIMIT, Goal, Mav, Mode, Origin, Vehicle  # noqa: E402
+from schema import (  # noqa: E402
+    Cause,
+    DroneState,
+    DroneStatus,
+    EndReason,
+    Note,
+    Over,
+    Phase,
+    RejectCounter,
+    RemoteInputError,
+    Status,
+    Turn,
+    UsageError,
+)
+from schema.errors import Refusal  # noqa: E402
+from world.grid import Building, World  # noqa: E402
+
+WORLD = World.from_buildings((12, 12, 8), [Building(x=6, y=6, length=2, width=2, height=4)])
+STARTS = {"D01": (0, 0, 0), "D02": (0, 2, 0), "D03": (0, 4, 0)}
+GEO = Geo()
+GCS = Origin(0, ("127.0.0.1", 14550))
+CLIENT = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+
+
+def wire(msg):
+    """`msg` as a client sends it and the bridge reads it (framed by pymavlink, decoded on its own)."""
+    (decoded,) = decode_datagram(msg.pack(CLIENT))
+    return decoded
+
+
+def bridge() -> Bridge:
+    return Bridge(Ground(WORLD, dict(STARTS), Plan(())), GEO, period=0.0, telemetry_period=1.0, now=0.0)
+
+
+def sent(effects, kind: str) -> list:
+    return [e.msg for e in effects if isinstance(e, Mav) and e.msg.get_type() == kind]
+
+
+def acks(effects) -> list[int]:
+    return [m.result for m in sent(effects, "COMMAND_ACK")]
+
+
+def refusals(effects) -> list[str]:
+    return [e.err.reason for e in effects if isinstance(e, Refusal)]
+
+
+def command(system: int, cmd: int, *params: float, confirmation: int = 0):
+    p = [*params, *[0.0] * (7 - len(params))]
+    return wire(mav.MAVLink_command_long_message(system, 1, cmd, confirmation, *p))
+
+
+def arm(system: int, on: bool = True):
+    return command(system, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if on else 0.0)
+
+
+def set_mode(system: int, mode: int):
+    return command(system, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
+
+
+def local_target(system: int, north: float, east: float, down: float, mask: int = 0b110111111000):
+    return wire(mav.MAVLink_set_position_target_local_ned_message(0, system, 1, mav.MAV_FRAME_LOCAL_NED, mask,
+                                                                  north, east, down, 0, 0, 0, 0, 0, 0, 0, 0))
+
+
+def reposition(system: int, cell, frame: int = mav.MAV_FRAME_GLOBAL_INT):
+    lat, lon, alt = GEO.wgs84(cell)
+    return wire(mav.MAVLink_command_int_message(system, 1, frame, mav.MAV_CMD_DO_REPOSITION, 0, 0, -1,
+                                                mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, 0,
+                                                round(lat * 1e7), round(lon * 1e7), alt))
+
+
+def status(turn: int, **rows: DroneStatus) -> Status:
+    drones = tuple(rows.get(d, DroneStatus(drone=d, pos=c, state=DroneState.ALIVE)) for d, c in STARTS.items())
+    return Status(turn=turn, sender="OBS", drones=drones)
+
+
+def row(drone: str, pos, target=None, note=Note.NONE, state=DroneState.ALIVE, cause=Cause.NONE) -> DroneStatus:
+    return DroneStatus(drone=drone, pos=pos, state=state, target=target, note=note, cause=cause)
+
+
+def guided(b: Bridge, system: int) -> None:
+    """Vehicle `system` armed in GUIDED."""
+    effects = b.packet(GCS, [set_mode(system, Mode.GUIDED), arm(system)])
+    assert acks(effects) == [mav.MAV_RESULT_ACCEPTED] * 2
+
+
+def answer(b: Bridge, turn: int, now: float = 100.0, in_force: dict | None = None) -> Send:
+    """The bridge's DONE for the GCS phase of `turn`, after the STATUS of the turn before (with the targets
+    `in_force`)."""
+    b.receive(status(turn - 1, **{d: row(d, STARTS[d], target=c) for d, c in (in_force or {}).items()}), now)
+    b.receive(Turn(turn=turn, sender="SRV", phase=Phase.GCS), now)
+    (done,) = [e for e in b.tick(now) if isinstance(e, Send)]
+    return done
+
+
+# ---------------------------------------------------------------------------------------------- coordinates
+
+
+def test_geo_maps_cells_both_ways_and_rounds_to_the_nearest_cell() -> None:
+    geo = Geo(cell_size=2.5, origin=(-33.86, 151.2, 10.0))
+    for cell in [(0, 0, 0), (3, 7, 2), (-4, 11, 5), (999, 999, 99)]:
+        assert geo.cell_of_wgs84(*geo.wgs84(cell)) == cell
+        assert geo.cell_of_ned(*geo.ned(cell)) == cell
+    assert geo.ned((1, 2, 3)) == (2.5, 5.0, -7.5)  # north = x, east = y, down = -z
+    assert geo.cell_of_ned(3.7, 1.2, -6.3) == (1, 0, 3)  # 1.48, 0.48, 2.52 cells
+    assert GEO.wgs84((0, 0, 0)) == DEFAULT_ORIGIN
+    lat, lon, _ = GEO.wgs84((1, 1, 0))
+    assert lat > DEFAULT_ORIGIN[0] and lon > DEFAULT_ORIGIN[1]  # x north, y east
+    for bad in [(math.nan, 8.5, 490.0), (47.3, math.inf, 490.0), (91.0, 8.5, 490.0), (47.3, 8.5, 1e300)]:
+        with pytest.raises(BadPosition):
+            GEO.cell_of_wgs84(*bad)
+    for size in [0.0, -1.0, math.nan]:
+        with pytest.raises(UsageError):
+            Geo(cell_size=size)
+    with pytest.raises(UsageError, match="LAT,LON,ALT"):
+        Geo.parse_origin("47.3,8.5")
+
+
+# ---------------------------------------------------------------------------------------------- commands
+
+
+def test_telemetry_presents_an_ardupilot_copter_at_its_cell() -> None:
+    b = bridge()
+    effects = b.tick(0.0)
+    kinds = {e.msg.get_type() for e in effects if e.system == 2}
+    assert {"HEARTBEAT", "SYS_STATUS", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "HOME_POSITION",
+            "EXTENDED_SYS_STATE", "BATTERY_STATUS"} <= kinds
+    hb = next(e.msg for e in effects if e.system == 2 and e.msg.get_type() == "HEARTBEAT")
+    assert (hb.type, hb.autopilot, hb.custom_mode) == (mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                                       Mode.LOITER)
+    assert hb.system_status == mav.MAV_STATE_STANDBY and not hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+    local = next(e.msg for e in effects if e.system == 2 and e.msg.get_type() == "LOCAL_POSITION_NED")
+    assert (local.x, local.y, local.z) == (0.0, 2.0, 0.0)
+    assert b.wake(0.5) == 0.5  # the next set is due after the telemetry period
+    # every turn brings each vehicle's position
+    effects = b.receive(status(1, D02=row("D02", (1, 2, 0))), 0.1)
+    (pos,) = [e.msg for e in effects if e.system == 2 and e.msg.get_type() == "GLOBAL_POSITION_INT"]
+    assert GEO.cell_of_wgs84(pos.lat / 1e7, pos.lon / 1e7, pos.alt / 1000) == (1, 2, 0)
+
+
+def test_arm_guided_and_position_targets_become_the_stations_targets() -> None:
+    b = bridge()
+    guided(b, 2)
+    hb = b.vehicles[2].heartbeat()
+    assert hb.custom_mode == Mode.GUIDED and hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+    assert hb.system_status == mav.MAV_STATE_ACTIVE
+    b.packet(GCS, [local_target(2, 5.2, 3.9, -2.6)])  # rounded to the nearest cell
+    b.packet(GCS, [arm(3), set_mode(3, Mode.GUIDED), reposition(3, (4, 4, 1))])
+    done = answer(b, 1)
+    assert {a.drone: a.pos for a in done.msg.targets} == {"D02": (5, 4, 3), "D03": (4, 4, 1)}
+    assert answer(b, 2, in_force={a.drone: a.pos for a in done.msg.targets}).msg.targets == ()  # (only changes)
+    # a second identical command is accepted and changes nothing (the command protocol's idempotence)
+    assert acks(b.packet(GCS, [arm(2)])) == [mav.MAV_RESULT_ACCEPTED]
+
+
+def test_takeoff_land_rtl_and_disarm_set_the_targets_of_their_modes() -> None:
+    b = bridge()
+    v = b.vehicles[1]
+    assert acks(b.packet(GCS, [command(1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 3.0)])) == \
+        [mav.MAV_RESULT_DENIED]  # disarmed
+    guided(b, 1)
+    assert acks(b.packet(GCS, [command(1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 3.0)])) == \
+        [mav.MAV_RESULT_ACCEPTED]
+    assert v.goal == (0, 0, 3)
+    b.receive(status(5, D01=row("D01", (2, 3, 3), target=(2, 3, 3), note=Note.REACHED)), 1.0)
+    b.packet(GCS, [command(1, mav.MAV_CMD_NAV_LAND)])
+    assert (v.mode, v.goal) == (Mode.LAND, (2, 3, 0))  # the lowest free cell below
+    effects = b.receive(status(8, D01=row("D01", (2, 3, 0), target=(2, 3, 0), note=Note.REACHED)), 2.0)
+    assert not v.armed and any("landed" in m.text for m in sent(effects, "STATUSTEXT"))
+    guided(b, 1)
+    b.packet(GCS, [command(1, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH)])
+    assert (v.mode, v.goal) == (Mode.RTL, (0, 0, 0))
+    b.receive(status(9, D01=row("D01", (1, 3, 0), target=(0, 0, 0))), 3.0)
+    b.packet(GCS, [arm(1, False)])
+    assert v.goal == (1, 3, 0)  # a disarmed drone holds its cell
+    assert acks(b.packet(GCS, [reposition(1, (5, 5, 1))])) == [mav.MAV_RESULT_DENIED]
+    assert v.goal == (1, 3, 0)
+    # above a building, a drone lands on its roof
+    w = Vehicle(9, "D09", (6, 6, 6), WORLD, GEO)
+    assert w._ground_below((6, 6, 6)) == (6, 6, 4)
+
+
+def test_modes_the_vehicle_does_not_fly_and_unknown_commands_are_refused() -> None:
+    b = bridge()
+    effects = b.packet(GCS, [set_mode(1, 15)])  # Plane's GUIDED
+    assert acks(effects) == [mav.MAV_RESULT_DENIED] and refusals(effects) == ["mavlink-denied"]
+    assert "mode 15" in sent(effects, "STATUSTEXT")[0].text
+    assert acks(b.packet(GCS, [set_mode(1, Mode.AUTO)])) == [mav.MAV_RESULT_DENIED]  # no mission
+    assert acks(b.packet(GCS, [command(1, mav.MAV_CMD_DO_SET_MODE, 0, 4)])) == [mav.MAV_RESULT_UNSUPPORTED]
+    assert acks(b.packet(GCS, [command(1, mav.MAV_CMD_DO_CHANGE_SPEED, 1, 5)])) == [mav.MAV_RESULT_UNSUPPORTED]
+    set_mode_msg = wire(mav.MAVLink_set_mode_message(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, Mode.RTL))
+    assert acks(b.packet(GCS, [set_mode_msg])) == [mav.MAV_RESULT_ACCEPTED] and b.vehicles[1].mode is Mode.RTL
+    effects = b.packet(GCS, [command(1, mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)])
+    assert acks(effects) == [mav.MAV_RESULT_ACCEPTED] and sent(effects, "AUTOPILOT_VERSION")
+    assert b.vehicles[1].goal is None and b.vehicles[2].goal is None
+
+
+# ---------------------------------------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize("target", [
+    pytest.param(lambda: local_target(2, math.nan, 1, -1), id="NaN"),
+    pytest.param(lambda: local_target(2, 1, math.inf, -1), id="infinite"),
+    pytest.param(lambda: local_target(2, 50, 1, -1), id="outside-the-world"),
+    pytest.param(lambda: local_target(2, 1, 1, 2), id="below-the-ground"),
+    pytest.param(lambda: local_target(2, 6, 6, -1), id="inside-a-building"),
+    pytest.param(lambda: local_target(2, 1e12, 1, -1), id="far-out-of-range"),
+    pytest.param(lambda: reposition(2, (30, 0, 1)), id="reposition-outside"),
+    pytest.param(lambda: wire(mav.MAVLink_command_int_message(
+        2, 1, mav.MAV_FRAME_GLOBAL_INT, mav.MAV_CMD_DO_REPOSITION, 0, 0, -1, 1, 0, 0, -(1 << 31), -(1 << 31), 490)),
+        id="latitude-out-of-range"),
+    pytest.param(lambda: wire(mav.MAVLink_command_long_message(2, 1, mav.MAV_CMD_DO_REPOSITION, 0, -1, 1, 0, 0,
+                                                               47.4, 8.5, math.nan)), id="far-away"),
+])
+def test_bad_targets_are_refused_and_counted_and_change_nothing(target) -> None:
+    b = bridge()
+    guided(b, 2)
+    b.packet(GCS, [local_target(2, 2, 2, -1)])
+    effects = b.packet(GCS, [target()])
+    assert refusals(effects) == ["mavlink-denied"]
+    assert acks(effects) in ([], [mav.MAV_RESULT_DENIED])
+    assert sent(effects, "STATUSTEXT")  # why, for the person at the ground station
+    assert b.vehicles[2].goal == (2, 2, 1)
+    assert {a.drone: a.pos for a in answer(b, 1).msg.targets} == {"D02": (2, 2, 1)}
+
+
+def test_wrong_target_systems_are_refused_and_counted() -> None:
+    b = bridge()
+    effects = b.packet(GCS, [arm(7)])  # no system 7 in this game
+    assert refusals(effects) == ["mavlink-target"] and not acks(effects)
+    effects = b.packet(GCS, [arm(0)])  # a command on the shared link must name its system
+    assert refusals(effects) == ["mavlink-target"]
+    effects = b.packet(Origin(3, ("127.0.0.1", 5000)), [arm(2)])  # system 2's command on system 3's port
+    assert refusals(effects) == ["mavlink-target"]
+    assert not any(v.armed for v in b.vehicles.values())
+    effects = b.packet(Origin(3, ("127.0.0.1", 5000)), [arm(0)])  # on a vehicle's port, 0 is that vehicle
+    assert acks(effects) == [mav.MAV_RESULT_ACCEPTED] and b.vehicles[3].armed
+    assert effects[0].to == Origin(3, ("127.0.0.1", 5000))  # answered where it came from
+    heartbeat = wire(mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))  # a ground station's: nothing to do
+    assert b.packet(GCS, [heartbeat]) == [] and b.ignored == 1
+
+
+def test_a_dead_drone_takes_no_commands_and_says_why_once() -> None:
+    b = bridge()
+    guided(b, 2)
+    effects = b.receive(status(4, D02=row("D02", (1, 2, 0), state=DroneState.DEAD, cause=Cause.VERTEX)), 1.0)
+    (text,) = sent(effects, "STATUSTEXT")
+    assert "D02 died" in text.text and "vertex" in text.text
+    assert b.vehicles[2].heartbeat().system_status == mav.MAV_STATE_EMERGENCY
+    assert not sent(b.receive(status(5, D02=row("D02", (1, 2, 0), state=DroneState.DEAD, cause=Cause.VERTEX)),
+                              1.1), "STATUSTEXT")
+    for msg in [arm(2), reposition(2, (3, 3, 1)), command(2, mav.MAV_CMD_NAV_TAKEOFF)]:
+        effects = b.packet(GCS, [msg])
+        assert acks(effects) == [mav.MAV_RESULT_DENIED] and refusals(effects) == ["mavlink-denied"]
+    assert refusals(b.packet(GCS, [local_target(2, 3, 3, -1)])) == ["mavlink-denied"]
+    assert b.vehicles[2].goal is None and answer(b, 6).msg.targets == ()
+
+
+def test_a_command_flood_is_denied_beyond_its_budget_a_turn() -> None:
+    b = bridge()
+    guided(b, 1)
+    flood = [local_target(1, 1 + i % 3, 1, -1) for i in range(COMMANDS_PER_TURN * 4)]
+    effects = b.packet(GCS, flood)
+    assert refusals(effects).count("mavlink-flood") == len(flood) - (COMMANDS_PER_TURN - 2)
+    assert b.commands[1] == len(flood) + 2
+    cmds = b.packet(GCS, [arm(1, False)])  # still over budget this turn: TEMPORARILY_REJECTED, still armed
+    assert acks(cmds) == [mav.MAV_RESULT_TEMPORARILY_REJECTED] and b.vehicles[1].armed
+    assert acks(b.packet(GCS, [arm(2)])) == [mav.MAV_RESULT_ACCEPTED]  # the other vehicles are not affected
+    b.receive(status(1), 1.0)  # a new turn: a new budget
+    assert acks(b.packet(GCS, [arm(1, False)])) == [mav.MAV_RESULT_ACCEPTED]
+
+
+def test_datagrams_that_are_not_mavlink_2_are_refused() -> None:
+    heartbeat = mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)
+    good = heartbeat.pack(mav.MAVLink(None, srcSystem=255))
+    assert [m.get_type() for m in decode_datagram(good + good)] == ["HEARTBEAT", "HEARTBEAT"]
+    v1 = mav.MAVLink(None, srcSystem=255)
+    v1.WIRE_PROTOCOL_VERSION = "1.0"
+    old = heartbeat.pack(v1, force_mavlink1=True)
+    assert old[0] == 0xFE
+    with pytest.raises(RemoteInputError) as err:
+        decode_datagram(old)
+    assert err.value.reason == "mavlink1"
+    corrupt = bytearray(good)
+    corrupt[-1] ^= 0xFF  # a bad checksum
+    for garbage in [b"", b"\x00" * 40, b"\xfd\x09garbage", bytes(corrupt), good[:-3], good + b"\x01\x02",
+                    bytes(range(256)) * 4]:
+        with pytest.raises(RemoteInputError) as err:
+            decode_datagram(garbage)
+        assert err.value.reason == "mavlink-garbage"
+
+
+def test_the_reader_refuses_garbage_and_floods_and_keeps_reading(logger) -> None:
+    """Through real sockets: garbage and MAVLink 1 are refused and counted, good datagrams after them still
+    come through, and no more than `limit` datagrams wait for the main thread."""
+
+    class Counting(RejectCounter):
+        seen = threading.Semaphore(0)
+
+        def reject(self, *args, **kwargs) -> None:
+            super().reject(*args, **kwargs)
+            self.seen.release()
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as client:
+        client.bind(("127.0.0.1", 0))
+        links = Links(client.getsockname(), 30000, [1, 2])
+        got: list[Packet] = []
+        arrived = threading.Semaphore(0)
+        rejects = Counting(logger)
+
+        def post(packet: Packet) -> None:
+            got.append(packet)
+            arrived.release()
+
+        reader = Reader(links, post, rejects, limit=3)
+        reader.start()
+        try:
+            vehicle_port = links.sockets[2].getsockname()
+            gcs_port = ("127.0.0.1", links.sockets[0].getsockname()[1])
+            good = arm(2).pack(CLIENT)
+            client.sendto(b"\xfd\x01garbage", vehicle_port)
+            v1 = mav.MAVLink(None, srcSystem=255)
+            client.sendto(mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(v1, force_mavlink1=True),
+                          vehicle_port)
+            for _ in range(3):
+                client.sendto(good, vehicle_port)
+            for _ in range(3):
+                assert arrived.acquire(timeout=10)
+            client.sendto(good, vehicle_port)  # a 4th and a 5th while 3 wait: refused
+            client.sendto(good, gcs_port)
+            for _ in range(4):
+                assert rejects.seen.acquire(timeout=10)
+            reader.taken()
+            client.sendto(good, gcs_port)  # one was taken: there is room again
+            assert arrived.acquire(timeout=10)
+        finally:
+            reader.stop()
+            links.close()
+    assert [p.origin.port for p in got] == [2, 2, 2, 0]
+    assert got[0].messages[0].get_type() == "COMMAND_LONG"
+    assert rejects.snapshot() == {"mavlink-garbage": 1, "mavlink1": 1, "mavlink-flood": 2}
+
+
+# ---------------------------------------------------------------------------------------------- missions
+
+
+def item(seq: int, cell, command: int = mav.MAV_CMD_NAV_WAYPOINT, frame: int = mav.MAV_FRAME_GLOBAL_INT):
+    lat, lon, alt = GEO.wgs84(cell)
+    return wire(mav.MAVLink_mission_item_int_message(2, 1, seq, frame, command, 0, 1, 0, 0, 0, 0,
+                                                     round(lat * 1e7), round(lon * 1e7), alt))
+
+
+def upload(b: Bridge, items: list, system: int = 2) -> list:
+    effects = b.packet(GCS, [wire(mav.MAVLink_mission_count_message(system, 1, len(items)))])
+    for it in items:
+        (request,) = sent(effects, "MISSION_REQUEST_INT")
+        assert request.seq == it.seq
+        effects = b.packet(GCS, [it])
+    return effects
+
+
+def test_a_mission_is_uploaded_downloaded_and_flown_in_auto() -> None:
+    b = bridge()
+    v = b.vehicles[2]
+    cells = [(0, 2, 0), (0, 2, 2), (3, 2, 2), (3, 5, 2)]
+    items = [item(0, cells[0]), item(1, cells[1], mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT),
+             item(2, cells[2]), item(3, cells[3]), item(4, (0, 0, 0), mav.MAV_CMD_NAV_LAND)]
+    items[1] = wire(mav.MAVLink_mission_item_int_message(2, 1, 1, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                         mav.MAV_CMD_NAV_TAKEOFF, 0, 1, 0, 0, 0, 0, 0, 0, 2.0))
+    items[4] = wire(mav.MAVLink_mission_item_int_message(2, 1, 4, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                         mav.MAV_CMD_NAV_LAND, 0, 1, 0, 0, 0, 0, 0, 0, 0))
+    effects = upload(b, items)
+    assert [a.type for a in sent(effects, "MISSION_ACK")] == [mav.MAV_MISSION_ACCEPTED]
+    assert len(v.mission) == 5 and v.goal is None  # (not in AUTO yet)
+    # download: the same items back
+    effects = b.packet(GCS, [wire(mav.MAVLink_mission_request_list_message(2, 1))])
+    assert sent(effects, "MISSION_COUNT")[0].count == 5
+    back = sent(b.packet(GCS, [wire(mav.MAVLink_mission_request_int_message(2, 1, 2))]), "MISSION_ITEM_INT")[0]
+    assert (back.seq, back.x, back.y, back.z) == (2, items[2].x, items[2].y, items[2].z)
+    # AUTO flies the items in order (item 0 is home)
+    b.packet(GCS, [arm(2), set_mode(2, Mode.AUTO)])
+    assert v.goal == (0, 2, 2)
+    flown = []
+    pos = (0, 2, 0)
+    for turn in range(1, 6):
+        if not v.armed:
+            break
+        flown.append(v.goal)
+        pos = v.goal
+        effects = b.receive(status(turn, D02=row("D02", pos, target=pos, note=Note.REACHED)), float(turn))
+        assert sent(effects, "MISSION_CURRENT")[0].seq == v.current
+        assert sent(effects, "MISSION_ITEM_REACHED")[0].seq == turn
+    assert flown == [(0, 2, 2), (3, 2, 2), (3, 5, 2), (3, 5, 0)]
+    assert v.mission_current().mission_state == mav.MISSION_STATE_COMPLETE
+    assert any("landed" in m.text for m in sent(effects, "STATUSTEXT"))
+    b.packet(GCS, [arm(2)])
+    # set current, then clear
+    b.packet(GCS, [wire(mav.MAVLink_mission_set_current_message(2, 1, 2))])
+    assert (v.current, v.goal) == (2, (3, 2, 2))
+    effects = b.packet(GCS, [wire(mav.MAVLink_mission_clear_all_message(2, 1))])
+    assert sent(effects, "MISSION_ACK")[0].type == mav.MAV_MISSION_ACCEPTED and v.mission == []
+    assert v.mode is Mode.LOITER
+
+
+def test_bad_missions_are_refused_whole_and_keep_the_mission_in_force() -> None:
+    b = bridge()
+    v = b.vehicles[2]
+    upload(b, [item(0, (0, 2, 0)), item(1, (2, 2, 1))])
+    kept = list(v.mission)
+    effects = b.packet(GCS, [wire(mav.MAVLink_mission_count_message(2, 1, 10_000))])  # a 10,000-item mission
+    assert [a.type for a in sent(effects, "MISSION_ACK")] == [mav.MAV_MISSION_NO_SPACE]
+    assert refusals(effects) == ["mavlink-denied"] and v.upload is None
+    for bad in [item(2, (6, 6, 1)), item(2, (40, 2, 1)),
+                item(2, (1, 1, 1), command=mav.MAV_CMD_DO_SET_SERVO)]:
+        effects = upload(b, [item(0, (0, 2, 0)), item(1, (1, 2, 1)), bad])
+        assert sent(effects, "MISSION_ACK")[0].type != mav.MAV_MISSION_ACCEPTED
+        assert refusals(effects) == ["mavlink-denied"]
+        assert v.mission == kept
+    # an item out of order is asked for again; an item outside an upload is refused
+    b.packet(GCS, [wire(mav.MAVLink_mission_count_message(2, 1, 2))])
+    assert sent(b.packet(GCS, [item(1, (1, 2, 1))]), "MISSION_REQUEST_INT")[0].seq == 0
+    assert refusals(upload(b, [item(0, (0, 2, 0)), item(1, (1, 2, 1))]) + b.packet(GCS, [item(5, (1, 1, 1))])) == \
+        ["mavlink-denied"]
+    # a fence is not kept
+    fence = wire(mav.MAVLink_mission_count_message(2, 1, 3, mav.MAV_MISSION_TYPE_FENCE))
+    assert sent(b.packet(GCS, [fence]), "MISSION_ACK")[0].type == mav.MAV_MISSION_UNSUPPORTED
+    assert MISSION_LIMIT < 10_000
+
+
+# ---------------------------------------------------------------------------------------------- the game
+
+
+def test_the_phase_is_answered_at_the_turn_period_and_the_game_over_is_said() -> None:
+    b = Bridge(Ground(WORLD, dict(STARTS), Plan(())), GEO, period=0.25, telemetry_period=10.0, now=0.0)
+    b.tick(0.0)
+    b.receive(status(0), 0.0)
+    assert [type(e) for e in b.receive(Turn(turn=1, sender="SRV", phase=Phase.GCS), 0.0)] == []
+    assert isinstance(b.tick(0.0)[0], Send)  # the first at once
+    b.receive(status(1), 0.05)
+    b.receive(Turn(turn=2, sender="SRV", phase=Phase.GCS), 0.05)
+    assert b.wake(0.05) == pytest.approx(0.20) and b.tick(0.1) == []
+    assert isinstance(b.tick(0.25)[0], Send)
+    effects = b.receive(Over(turn=2, sender="SRV", reason=EndReason.TURN_LIMIT, text="turn limit 2"), 0.3)
+    texts = sent(effects, "STATUSTEXT")
+    assert len(texts) == 3 and all("game over" in t.text for t in texts)
+
+
+def test_goal_effects_never_leave_the_core() -> None:
+    b = bridge()
+    guided(b, 1)
+    assert not [e for e in b.packet(GCS, [local_target(1, 3, 0, -1)]) if isinstance(e, Goal)]
+    assert b.station.wanted == {"D01": (3, 0, 1)}
