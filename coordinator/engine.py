@@ -804,6 +804,18 @@ class Engine:
             return []
         return self._over(EndReason.INTERRUPTED, why, self.status().turn)  # the last turn played (and STATUS sent)
 
+    def unrecorded(self, why: str, turn: int) -> list[Effect] | None:
+        """The journal could not take the record of `turn` (`why`: a full disk, a file size limit). The game
+        stops at once: OVER JOURNAL_FAILED in that turn (one the entities still take, wherever in it they are),
+        without an over record (none could be written, and a journal without one resumes, `--resume`, once
+        there is room, from the turn before, replaying this one); what the lost record was for is not sent.
+        None if the game was over already (its over record was the one lost): its OVER goes out all the same."""
+        if self.stage is Stage.OVER:
+            return None
+        text = f"the journal could not be written ({why}): the game stops in turn {turn}, which it does not " \
+               "hold; resume it from its journal (--resume) once there is room"
+        return [e for e in self._over(EndReason.JOURNAL_FAILED, text, turn) if not isinstance(e, Record)]
+
     def link_lost(self) -> list[Effect]:
         """The coordinator's link is down (its own presence vanished, as every other's does when the router
         restarts): nobody has left, the game holds until every admitted entity is back (`present`) or

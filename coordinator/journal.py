@@ -4,6 +4,7 @@ whatever the process layout."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import pathlib
@@ -16,22 +17,43 @@ def dumps(record: dict) -> str:
     return json.dumps(record, sort_keys=True, separators=(",", ":"))
 
 
+class JournalFailed(Exception):
+    """The journal could not take a record (a full disk, a file size limit, an I/O error): the record is not in
+    it, the journal holds only the whole records written before."""
+
+
 class JournalWriter:
-    """Appends records to a file, flushed line by line (a crash loses at most the line being written)."""
+    """Appends records to a file, one write of a whole line each. A line that cannot be written whole (ENOSPC,
+    EFBIG past RLIMIT_FSIZE, EIO) is cut off again at once (`JournalFailed`): the journal holds only whole
+    records, and resumes (`--resume`) from the last once there is room."""
 
     def __init__(self, path: str | os.PathLike[str] | None) -> None:
-        self._f = open(path, "a", buffering=1, encoding="utf-8") if path else None  # noqa: SIM115
+        self.path = path
+        try:
+            self._fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666) if path else None
+        except OSError as exc:
+            raise UsageError(f"cannot open journal {path}: {exc.strerror or exc}") from None
 
     def append(self, record: dict) -> None:
-        if self._f is not None:
-            self._f.write(dumps(record) + "\n")
+        if self._fd is None:
+            return
+        line = memoryview((dumps(record) + "\n").encode())
+        end = os.lseek(self._fd, 0, os.SEEK_END)
+        try:
+            while line:
+                line = line[os.write(self._fd, line):]
+        except OSError as exc:
+            with contextlib.suppress(OSError):  # (shrinking a file needs no room, nor passes a size limit)
+                os.ftruncate(self._fd, end)
+            raise JournalFailed(f"cannot write the journal {self.path}: {exc.strerror or exc}") from exc
 
     def __enter__(self) -> JournalWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self._f is not None:
-            self._f.close()
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
 
 def repair_tail(path: str | os.PathLike[str]) -> None:

@@ -20,7 +20,7 @@ from typing import Any
 
 import zenoh
 
-from network.signals import Interrupted, exit_status, on_stop, waking
+from network.signals import JOURNAL_FAILED_STATUS, Interrupted, exit_status, on_stop, waking
 from network.transport import (
     Asked,
     Inbox,
@@ -63,7 +63,7 @@ from world.grid import World
 from . import arbiter
 from .admission import Presences
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
-from .journal import JournalWriter, read, repair_tail
+from .journal import JournalFailed, JournalWriter, read, repair_tail
 from .resume import restore
 
 
@@ -84,8 +84,13 @@ class Executor:
     The end of the game is never held: OVER sends what was held before it, at once."""
 
     def __init__(self, keys: Keys, out: Outbox, writer: JournalWriter, rejects: RejectCounter,
-                 pace: float = 0.0, clock: Callable[[], float] = time.monotonic) -> None:
+                 pace: float = 0.0, clock: Callable[[], float] = time.monotonic,
+                 unrecorded: Callable[[str, int], list | None] = lambda why, turn: None) -> None:
         self.keys, self.out, self.writer, self.rejects, self.pace, self.clock = keys, out, writer, rejects, pace, clock
+        #: Told when a record cannot be journaled (why, the record's turn): the effects that stand instead of the
+        #: rest (`Engine.unrecorded`), or None to go on with them (the over record was lost).
+        self.unrecorded = unrecorded
+        self.failed: JournalFailed | None = None  # the journal failed: nothing more is written to it
         self._held: list = []  # a new turn's TURN, held until `pace` has passed, and the effects after it
         self._turn = 0  # the last turn whose first TURN went out
         self._last = float("-inf")  # when it went out
@@ -107,8 +112,15 @@ class Executor:
                     self.out.put(_key_of(self.keys, msg), msg)
                 case Reply(query, msg):
                     self.answer(query, encode(msg))
-                case Record(data):
-                    self.writer.append(data)
+                case Record(data) if self.failed is None:
+                    try:
+                        self.writer.append(data)
+                    except JournalFailed as err:
+                        self.failed = err
+                        instead = self.unrecorded(str(err), data.get("turn", 0))
+                        if instead is not None:  # what the record stood for is not sent
+                            self.run(instead)
+                            return
                 case Refusal(what, err):
                     self.rejects.reject(what, err)
 
@@ -141,6 +153,7 @@ class Coordinator:
                  clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None) -> None:
         self.engine, self.effects, self.rejects, self.log, self.me, self.clock = \
             engine, effects, rejects, logger, me, clock
+        effects.unrecorded = engine.unrecorded  # a journal that fails ends the game
         self.audit = audit  # asks which sessions are connected: a `Sessions` event comes back
         self._auditing = self._audit_again = False
         self.presences: Presences[zenoh.Query] = Presences()
@@ -290,9 +303,10 @@ def open_game(game: GameConfig, journal: str | None, resume: bool, logger: loggi
 
 
 def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None, logger: logging.Logger,
-         resume: bool = False, pace: float = 0.0, verify_env: bool = False) -> tuple[Over, int | None]:
-    """Run one game to its end (or, with `resume`, the rest of the journal's game): its OVER, and the signal
-    that stopped it (None: it ended by itself)."""
+         resume: bool = False, pace: float = 0.0, verify_env: bool = False) -> tuple[Over, int]:
+    """Run one game to its end (or, with `resume`, the rest of the journal's game): its OVER, and the exit
+    status: 0, 128 + the signal that stopped it, or JOURNAL_FAILED_STATUS when its journal could not be written
+    (its OVER then says JOURNAL_FAILED, unless it was its over record that was lost)."""
     engine = open_game(game, journal, resume, logger)
     engine.verify_env, engine.journaled = verify_env, journal is not None
     engine.env_followed = False  # until a Matching event says someone follows the ENV phase
@@ -312,7 +326,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         with JournalWriter(journal) as writer:
             out = Outbox(session)
             out.watch(keys.turn_of(Phase.ENV), inbox)  # (a Matching event at once if someone follows it)
-            srv = Coordinator(engine, Executor(keys, out, writer, inbox.rejects, pace), inbox.rejects,
+            effects = Executor(keys, out, writer, inbox.rejects, pace)
+            srv = Coordinator(engine, effects, inbox.rejects,
                               logger, me, audit=partial(audit_sessions, session, inbox.post))
             logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                         keys.root, ", ".join(d.drone for d in game.drones))
@@ -327,7 +342,11 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     assert engine.end is not None
     if timed.calls:
         logger.info("arbitration: %d turns, %.3f ms of CPU a turn", timed.calls, 1000 * timed.cpu / timed.calls)
-    return engine.end, srv.signal
+    if effects.failed is not None:
+        logger.error("%s: the journal holds the game up to the turn before; once there is room, "
+                     "`dronesim coordinator --resume --journal %s` plays on", effects.failed, journal)
+        return engine.end, JOURNAL_FAILED_STATUS
+    return engine.end, 0 if srv.signal is None else exit_status(srv.signal)
 
 
 def parse_starts(text: str, count: int, size: Cell | None = None,
@@ -423,10 +442,10 @@ def cli(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logger = setup_logging(args.log_level, "SRV")
     try:
-        over, signum = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal,
+        over, status = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal,
                             logger=logger, resume=args.resume, pace=args.pace, verify_env=args.verify_env)
     except UsageError as err:
         logger.error("%s", err)
         return 2
     print(f"OVER at turn {over.turn}: {over.reason.value}: {over.text}", file=sys.stderr)
-    return 0 if signum is None else exit_status(signum)
+    return status

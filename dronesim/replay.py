@@ -100,9 +100,12 @@ def summary(tr: dict[str, Track], over: dict | None) -> str:
 
 
 def verify(path: str, records: list[dict], config: GameConfig, autopilots: dict[str, str]) -> str | None:
-    """None if a fresh in-process re-simulation writes exactly this journal; else the first difference."""
+    """None if a fresh in-process re-simulation writes exactly this journal; else the first difference. A game
+    the journal leaves unfinished (no over record: a crash, a full disk) is checked as far as it goes."""
     quiet = logging.getLogger("dronesim.replay.verify")
     result = simulate(config, autopilots, inputs_of(records, config.world.size), quiet)
+    if records[-1].get("record") != "over":
+        result.records[len(records):] = []
     for n, (mine, theirs) in enumerate(zip(records, result.records), 1):
         if dumps(mine) != dumps(theirs):
             return f"{path}:{n}: journal has\n  {dumps(mine)}\nre-simulation gives\n  {dumps(theirs)}"
@@ -139,7 +142,9 @@ def main(argv: list[str] | None = None) -> int:
             if diff := verify(args.journal, records, config, autopilots):
                 print(f"VERIFY FAILED: {diff}")
                 return 1
-            print(f"verified: a fresh re-simulation writes this journal byte for byte ({len(records)} records)")
+            unfinished = "" if over else f"; the game is unfinished: its last turn is {t}"
+            print(f"verified: a fresh re-simulation writes this journal byte for byte ({len(records)} records"
+                  f"{unfinished})")
     except UsageError as err:
         print(f"dronesim replay: {err}", file=sys.stderr)
         return 2

@@ -12,6 +12,8 @@ import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
+from schema import EndReason, Over
+
 
 @dataclass(frozen=True, slots=True)
 class Interrupted:
@@ -32,6 +34,17 @@ class Stop(BaseException):
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
         self.signum = signum
+
+
+#: The exit status of every process of a game that ended because its journal could not be written (OVER
+#: JOURNAL_FAILED: a full disk, a file size limit): EX_TEMPFAIL (sysexits.h), "try again later": once there is
+#: room, the coordinator resumes the game from its journal (`--resume`).
+JOURNAL_FAILED_STATUS = 75
+
+
+def over_status(over: object) -> int:
+    """The exit status of an entity whose game ended with `over` (an OVER, or anything else: 0)."""
+    return JOURNAL_FAILED_STATUS if isinstance(over, Over) and over.reason is EndReason.JOURNAL_FAILED else 0
 
 
 def stop(event: Interrupted) -> None:
@@ -62,12 +75,12 @@ def on_stop(post: Callable[[Interrupted], None]) -> Iterator[None]:
 def until_stopped(run: Callable[[], object], logger: logging.Logger) -> int:
     """Run an entity's `run` on the main thread; Ctrl-C or SIGTERM unwinds it wherever it waits (its sessions,
     presence and servers close on the way out): one warning line, no traceback, and the status shells expect.
-    Otherwise the exit status `run` returns, or 0 if it returns something else (an entity's `main`: the OVER
-    that ended its game)."""
+    Otherwise the exit status `run` returns, or for the OVER that ended its game (an entity's `main`) 0, or
+    JOURNAL_FAILED_STATUS if the game ended because its journal could not be written."""
     try:
         with on_stop(stop):
             status = run()
-        return status if isinstance(status, int) else 0
+        return status if isinstance(status, int) else over_status(status)
     except Stop as sig:
         logger.warning("stopped by %s", sig)
         return exit_status(sig.signum)

@@ -132,6 +132,7 @@ class EndReason(enum.Enum):
     GCS_QUIT = "GCS_QUIT"
     ABORTED = "ABORTED"
     INTERRUPTED = "INTERRUPTED"  # the coordinator was told to stop (SIGINT, SIGTERM)
+    JOURNAL_FAILED = "JOURNAL_FAILED"  # the journal could not be written (a full disk): resumable once there is room
 
 
 class Intent(enum.Enum):
@@ -613,7 +614,8 @@ class Status(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Over(Message):
-    """SRV -> all (key ``SRV/OVER``): ``SRV:X:OVER``, the game has ended; every process exits 0."""
+    """SRV -> all (key ``SRV/OVER``): ``SRV:X:OVER``, the game has ended; every process exits 0 (75, EX_TEMPFAIL,
+    when its journal could not be written: JOURNAL_FAILED)."""
 
     TAG: ClassVar[str] = "OVER"
     reason: EndReason

@@ -123,9 +123,11 @@ class Cluster:
         self.procs: list[Proc] = []
 
     def start(self, name: str, role: str, *args: str, stdin: int | None = subprocess.DEVNULL,
-              netns: str | None = None, connect: str | None = None, verify_env: bool = True) -> Proc:
-        """Start `dronesim ROLE` as a client of the router (in network namespace `netns` if given)."""
-        prefix = ["ip", "netns", "exec", netns] if netns else []
+              netns: str | None = None, connect: str | None = None, verify_env: bool = True,
+              wrap: tuple[str, ...] = ()) -> Proc:
+        """Start `dronesim ROLE` as a client of the router (in network namespace `netns` if given; run by the
+        command `wrap` if given, e.g. `prlimit --fsize=N`)."""
+        prefix = [*(["ip", "netns", "exec", netns] if netns else []), *wrap]
         if role == "coordinator" and verify_env:  # test games also check the environment's UPD against the world
             args = ("--verify-env", *args)
         argv = [*prefix, sys.executable, "-m", "dronesim", role, "--mode", "client",

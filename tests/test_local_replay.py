@@ -172,9 +172,12 @@ def test_verify_names_the_tampered_line(tmp_path: pathlib.Path, swarm_run: Resul
 
 def test_verify_reports_missing_and_extra_records(tmp_path: pathlib.Path, swarm_run: Result) -> None:
     config, autopilots = replay.header_config(swarm_run.records[0])
-    short = swarm_run.records[:-1]
+    unfinished = swarm_run.records[:-1]  # no over record (a crash, a full disk): checked as far as it goes
+    assert replay.verify("j", unfinished, config, autopilots) is None
+    assert replay.verify("j", swarm_run.records[:3], config, autopilots) is None
+    short = swarm_run.records[:-2] + swarm_run.records[-1:]  # its last turn lost, its over record kept
     diff = replay.verify("j", short, config, autopilots)
-    assert diff == f"j: journal has {len(short)} records, re-simulation gives {len(swarm_run.records)}"
+    assert diff is not None and diff.startswith(f"j:{len(short)}: journal has"), diff
     longer = swarm_run.records + [{"record": "note"}]
     assert "records" in replay.verify("j", longer, config, autopilots)
 
@@ -273,12 +276,14 @@ def test_torn_last_line_is_ignored(tmp_path: pathlib.Path, swarm_run: Result, ca
     full = dumps(swarm_run.records[-1])
     path = write(tmp_path / "torn.jsonl", swarm_run.records[:-1], tail=full[: len(full) // 2])
     assert list(journal.read(path)) == swarm_run.records[:-1]
-    # a crash lost the OVER record: the journal reads, renders, and differs from a full re-simulation only there
+    # a crash lost the OVER record: the journal reads, renders, and verifies as far as it goes (unfinished)
     assert replay.main([str(path)]) == 0
     assert "OVER" not in capsys.readouterr().out
     records = list(journal.read(path))
     config, autopilots = replay.header_config(records[0])
-    assert "records" in replay.verify(str(path), records, config, autopilots)
+    assert replay.verify(str(path), records, config, autopilots) is None
+    assert replay.main([str(path), "--verify"]) == 0
+    assert f"the game is unfinished: its last turn is {records[-1]['turn']}" in capsys.readouterr().out
 
 
 def test_torn_line_after_a_complete_journal(tmp_path: pathlib.Path, swarm_journal: pathlib.Path,

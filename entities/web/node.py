@@ -18,7 +18,7 @@ from functools import partial
 
 import zenoh
 
-from network.signals import waking
+from network.signals import over_status, waking
 from network.transport import Outbox, zenoh_config
 from schema import Keys, Over, UsageError
 from schema.tuning import COMMAND_TIMEOUT
@@ -179,7 +179,8 @@ def run_replay(args: argparse.Namespace, logger: logging.Logger, address: tuple[
 
 
 def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
-    """`dronesim gcs --web ...` (its targets, scenario's included, in `args.targets`): 0 after OVER or at the
+    """`dronesim gcs --web ...` (its targets, scenario's included, in `args.targets`): 0 after OVER (75 after
+    OVER JOURNAL_FAILED: `network.signals.over_status`) or at the
     end of a replay's `--linger`; a UsageError for bad flags. Stopped by a signal (gcs_node.cli), it exits
     with 128 + its number, the page's server stopped."""
     if args.web is None:
@@ -188,8 +189,7 @@ def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
     if args.linger < 0:
         raise UsageError(f"--linger must be >= 0, got {args.linger:g}")
     run = run_live if args.replay is None else run_replay
-    run(args, logger, address)
-    return 0
+    return over_status(run(args, logger, address))
 
 
 if __name__ == "__main__":  # pragma: no cover
