@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Installs what the tests need, runs the static checks (ruff, mypy), then the whole suite. This is the README's
 # test command and CI's.
-#   - the Python package, its test extras, its rl extra (PettingZoo, gymnasium: tests/test_pettingzoo.py) and its
-#     mavlink extra (pymavlink, MAVProxy, MAVSDK: tests/test_mavlink*.py);
+#   - the Python package, its test extras, its rl extra (PettingZoo, gymnasium, SuperSuit: tests/test_pettingzoo.py),
+#     its train extra (JAX, Flax, Optax: tests/test_ppo.py) and its mavlink extra (pymavlink, MAVProxy, MAVSDK:
+#     tests/test_mavlink*.py);
 #   - every tests/setup.d/*.sh (system packages: iproute2 for the multi-host tests, chromium for the
 #     browser tests, zenohd, ...), each idempotent and quick when already done.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install --quiet --disable-pip-version-check -e '.[test,rl,ros2,mavlink]'
+python3 -m pip install --quiet --disable-pip-version-check -e '.[test,rl,train,ros2,mavlink]'
 for step in tests/setup.d/*.sh; do
   [ -e "$step" ] || continue
   echo "setup: $step"
