@@ -66,6 +66,18 @@ def repair_tail(path: str | os.PathLike[str]) -> None:
         os.truncate(path, data.rfind(b"\n") + 1)
 
 
+def held_game(path: str | os.PathLike[str]) -> tuple[bool, int] | None:
+    """The game a journal already holds: (whether it is over, its last turn); None when the file is missing or
+    empty. A journal holds one game: a coordinator starting a new one on it refuses, or resumes it."""
+    if not os.path.exists(path) or os.path.getsize(path) == 0:
+        return None
+    over, turn = False, 0
+    for record in read(path):
+        over = over or record.get("record") == "over"
+        turn = record.get("turn", turn) if isinstance(record.get("turn"), int) else turn
+    return over, turn
+
+
 def read(path: str | os.PathLike[str]) -> Iterator[dict]:
     """The records of a journal; a torn last line (a crash mid-write) is ignored, anything else bad is an error."""
     try:

@@ -63,7 +63,7 @@ from world.grid import World
 from . import arbiter
 from .admission import Presences
 from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
-from .journal import JournalFailed, JournalWriter, read, repair_tail
+from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
 
 
@@ -294,6 +294,11 @@ def open_game(game: GameConfig, journal: str | None, resume: bool, logger: loggi
     identity = secrets.token_hex(8)
     if resume and not journal:
         raise UsageError("--resume needs --journal")
+    if not resume and journal and (held := held_game(journal)) is not None:  # a journal holds one game
+        over, turn = held
+        raise UsageError(f"{journal} holds a finished game (over at turn {turn}): give another --journal" if over
+                         else f"{journal} holds an unfinished game (its last turn {turn}): resume it with --resume, "
+                              "or give another --journal")
     if resume and journal and os.path.exists(journal) and os.path.getsize(journal) > 0:
         repair_tail(journal)
         return restore(game, list(read(journal)), logger, identity)
@@ -396,7 +401,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--link-grace", type=float, default=30.0, metavar="SECONDS",
                    help="how long the game holds when the coordinator's link is down (every presence vanished at "
                         "once, e.g. a router restart) for its entities to come back (default 30)")
-    p.add_argument("--journal", help="append the game's journal to this file")
+    p.add_argument("--journal", help="write the game's journal to this file, missing or empty (a journal holds one "
+                                     "game; --resume takes up an unfinished one)")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS (default 0: as fast as the entities answer)")
     p.add_argument("--verify-env", action="store_true",

@@ -31,7 +31,8 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
     turn = 0
     for r in records[1:]:
         if r.get("record") == "over":
-            raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume")
+            raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume (a journal "
+                             "holds one game: give another --journal for a new one)")
         if r.get("record") == "turn":
             turn = _restore_turn(engine, r)
     engine.turn, engine.stage = turn, Stage.RESUMING
