@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from coordinator import arbiter
-from coordinator.engine import DroneSpec, GameConfig
+from coordinator.config import DroneSpec, GameConfig
 from dronesim.local import Inputs, simulate
 from entities.gcs import Plan
 from schema import Cell, WorldSpec, drone_id

@@ -26,14 +26,12 @@ targets stay as they were; a vanished environment holds the drones' phase for `e
 
 from __future__ import annotations
 
-import dataclasses
 import enum
 import hashlib
 import itertools
 import logging
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any, overload
 
 import numpy as np
 
@@ -61,18 +59,19 @@ from schema import (
     Turn,
     Upd,
     Welcome,
-    WorldSpec,
     encode,
 )
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
-from schema.messages import drone_id, is_drone_id
+from schema.messages import drone_id
 from schema.tables import code_of, drone_name, drone_number
 from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 
 from . import arbiter, observer
 from .admission import Roster
+from .config import GameConfig
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
+from .journal import TurnLog, header_record, over_record
 
 
 class Stage(enum.Enum):
@@ -81,89 +80,6 @@ class Stage(enum.Enum):
     GCS = "GCS"
     DRONES = "DRONES"
     OVER = "OVER"
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class DroneSpec:
-    drone: str
-    start: Cell
-
-
-class DroneTable(Sequence[DroneSpec]):
-    """A game's drones as columns (a swarm's scenario): their ids and an (n, 3) array of their start cells,
-    read as the sequence of `DroneSpec`s it stands for (each made when read: they cost a hundred bytes each)."""
-
-    __slots__ = ("ids", "starts")
-
-    def __init__(self, ids: Sequence[str], starts: Sequence[Cell] | Sequence[int]) -> None:
-        """`starts`: each drone's start cell, or their coordinates in a row (x, y, z, x, y, z, ...)."""
-        self.ids = tuple(ids)
-        try:
-            self.starts = np.array(starts, np.int64).reshape(len(self.ids), 3)
-        except OverflowError:
-            raise UsageError("a start cell is outside any world") from None
-
-    def __len__(self) -> int:
-        return len(self.ids)
-
-    @overload
-    def __getitem__(self, i: int) -> DroneSpec: ...
-
-    @overload
-    def __getitem__(self, i: slice) -> tuple[DroneSpec, ...]: ...
-
-    def __getitem__(self, i: int | slice) -> DroneSpec | tuple[DroneSpec, ...]:
-        if isinstance(i, slice):
-            return tuple(self)[i]
-        return DroneSpec(drone=self.ids[i], start=cell_of(self.starts[i]))
-
-    def __iter__(self) -> Iterator[DroneSpec]:
-        return (DroneSpec(drone=d, start=(x, y, z)) for d, (x, y, z) in zip(self.ids, self.starts.tolist()))
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, Sequence) and len(other) == len(self) and all(a == b for a, b in zip(self, other))
-
-    def __hash__(self) -> int:
-        return hash(tuple(self))
-
-    def __repr__(self) -> str:
-        return f"DroneTable({list(self)!r})"
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class GameConfig:
-    world: WorldSpec
-    drones: Sequence[DroneSpec]  # a tuple, or a `DroneTable`
-    max_turns: int = 1000
-    phase_deadline: float = 5.0  # seconds for the drones and the environment
-    gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
-    admit_deadline: float | None = 600.0  # seconds for every entity to connect (None: forever, if asked)
-    lost_after: int = 3  # missed DRONES deadlines in a row before a drone is LOST
-    env_grace: float = 30.0  # seconds the game waits for a vanished environment to come back
-    link_grace: float = 30.0  # seconds the game holds for the entities after a lost link (a router restart)
-    gcs_grace: float = 30.0  # seconds a resumed game waits for its ground station once the others are back
-
-    def __post_init__(self) -> None:
-        if not self.drones:
-            raise UsageError("a game needs at least one drone")
-        # (checked as columns: a swarm's drones as records, sets and lists would double its scenario's peak)
-        table = self.drones if isinstance(self.drones, DroneTable) else \
-            DroneTable([d.drone for d in self.drones], [d.start for d in self.drones])
-        ids, starts = table.ids, table.starts
-        if bad := [d for d in ids if not is_drone_id(d)]:
-            raise UsageError(f"{bad[0]!r} is not a drone id (D01 ... D65535)")
-        if len(set(ids)) != len(ids):
-            raise UsageError(f"duplicate drone ids in {list(ids)}")
-        if len(np.unique(starts, axis=0)) != len(starts):
-            raise UsageError("two drones cannot start in the same cell")
-        if not (inside := inside_rows(starts, self.world.size)).all():
-            i = int(inside.argmin())
-            raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
-        if self.max_turns < 1 or self.lost_after < 1:
-            raise UsageError("max_turns and lost_after must be >= 1")
-        if not (self.phase_deadline > 0 and all(d is None or d > 0 for d in (self.gcs_deadline, self.admit_deadline))
-                and min(self.env_grace, self.link_grace, self.gcs_grace) >= 0):
-            raise UsageError("deadlines must be positive (the GCS's and admission's: or none) and graces >= 0")
 
 
 # --------------------------------------------------------------------------- effects
@@ -219,7 +135,7 @@ class Engine:
         #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule, for the benchmark).
         self.arbiter: arbiter.Arbiter = arbiter.cooperate
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
-        self._turn_log: dict = {}
+        self._turn_log = TurnLog(0)
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
         # The adapter's switches: the environment's UPD reports are checked; the turn records say what each drone
         # was told and did (off without a journal); someone follows the ENV phase (else its TURN is not made).
@@ -332,15 +248,9 @@ class Engine:
     def header(self) -> dict:
         """The journal's first record: what identifies the game (see resume.py). Without a journal it leaves
         out the drones and the world's cells, which would only be dropped (a swarm's: a burst of objects)."""
-        fleet, config = self.fleet, self.config
-        world: dict[str, Any] = {"size": list(self.size), "seed": config.world.seed}
-        header: dict[str, Any] = {"record": "header", "format": "dronesim-journal", "version": 1, "world": world,
-                                  "max_turns": config.max_turns, "lost_after": config.lost_after}
-        if self.journaled:  # (the journal's lines sort their keys: the order here is not the written one)
-            world["cells"] = config.world.cells.hex()
-            rows = zip(fleet.ids, fleet.pos.tolist(), fleet.autopilot, fleet.cooperative.tolist())
-            header["drones"] = [dict(zip(("drone", "start", "autopilot", "cooperative"), row)) for row in rows]
-        return header
+        fleet = self.fleet
+        drones = zip(fleet.ids, fleet.pos.tolist(), fleet.autopilot, fleet.cooperative.tolist())
+        return header_record(self.config, self.size, drones if self.journaled else None)
 
     def _start(self) -> list[Effect]:
         """Everyone is there: the game starts (its header opens the journal), or a resumed one goes on."""
@@ -379,7 +289,7 @@ class Engine:
         self.stage, self.turn = Stage.GCS, turn
         self._aimed[:] = False
         self._tgt_seen, self._done = 0, None
-        self._turn_log = {"record": "turn", "turn": turn}
+        self._turn_log = TurnLog(turn)
         early = self._early.pop(turn, None)
         self._early = {t: d for t, d in self._early.items() if t > turn}
         return early
@@ -400,10 +310,10 @@ class Engine:
                 effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
         status = self.status(turn)  # (encoded as it goes out, after the next turn's drones' phase)
         if self.journaled:
-            log["state"] = state_hash(status)
-        self._log.debug("turn %d observed: %s", turn, log)
+            log.state(state_hash(status))
+        self._log.debug("turn %d observed: %s", turn, log.record)
         end = self._end_reason()
-        effects += [Record(log), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
+        effects += [Record(log.record), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
         return _drones_first(effects)
 
     def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
@@ -416,10 +326,9 @@ class Engine:
         final, yielded, gave_way = self.arbiter(self.size, before, proposed, ranked, fleet.cooperative[alive],
                                                 self.priority[alive], fleet.target[alive], self._open, self.turn)
         self._gave_way[alive] = gave_way
-        if np.count_nonzero(gave_way):
-            self._turn_log["gave_way"] = [fleet.ids[i] for i in alive[gave_way].tolist()]
-        if np.count_nonzero(yielded):
-            self._turn_log["yielded"] = [fleet.ids[i] for i in alive[yielded].tolist()]
+        if np.count_nonzero(gave_way) or np.count_nonzero(yielded):
+            self._turn_log.arbitration([fleet.ids[i] for i in alive[gave_way].tolist()],
+                                       [fleet.ids[i] for i in alive[yielded].tolist()])
         return final
 
     def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
@@ -548,7 +457,7 @@ class Engine:
         if self._done is None:
             self._aimed[:] = False
         elif not self._targets_set(self._done.intent):
-            return [Record(self._turn_log), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
+            return [Record(self._turn_log.record), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
         return self._drones_phase()
 
     def _targets_set(self, intent: Intent) -> bool:
@@ -558,10 +467,9 @@ class Engine:
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
             fleet.aim(changed, self._aims[changed])
             if len(changed) and self.journaled:
-                self._turn_log["targets"] = dict(zip([fleet.ids[i] for i in changed.tolist()],
-                                                     self._aims[changed].tolist()))
+                self._turn_log.targets([fleet.ids[i] for i in changed.tolist()], self._aims[changed].tolist())
         if intent is not self.intent:
-            self._turn_log["intent"] = intent.value
+            self._turn_log.intent(intent)
             self.intent = intent
         if intent is Intent.QUIT:
             return False
@@ -721,13 +629,13 @@ class Engine:
         if self.journaled:  # what the turn did, drone by drone
             if any_moved:
                 rows = moved.nonzero()[0]
-                log["moves"] = dict(zip([ids[i] for i in rows.tolist()], after[rows].tolist()))
+                log.moves([ids[i] for i in rows.tolist()], after[rows].tolist())
             if len(said):
-                log["notes"] = {ids[i]: NOTES[c].value for i, c in zip(said.tolist(), fleet.note[said].tolist())}
+                log.notes([ids[i] for i in said.tolist()], [NOTES[c] for c in fleet.note[said].tolist()])
             if len(hovered):
-                log["hovered"] = [ids[i] for i in hovered.tolist()]
+                log.hovered([ids[i] for i in hovered.tolist()])
             if len(dead):
-                log["deaths"] = {ids[i]: CAUSES[c].value for i, c in zip(dead.tolist(), fleet.cause[dead].tolist())}
+                log.deaths([ids[i] for i in dead.tolist()], [CAUSES[c] for c in fleet.cause[dead].tolist()])
         return before, after, moved
 
     def _lose(self, i: int) -> None:
@@ -735,7 +643,7 @@ class Engine:
         self.fleet.end(i, DroneState.LOST, Cause.LOST)
         if self.stage is Stage.DRONES and not self._moved[i]:
             self._awaiting -= 1
-        self._turn_log.setdefault("lost", []).append(d)
+        self._turn_log.lost(d)
         self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
 
     def _end_reason(self) -> tuple[EndReason, str] | None:
@@ -762,7 +670,7 @@ class Engine:
         self.stage = Stage.OVER
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
         self._log.info("game over at turn %d: %s", turn, text)
-        return [Record({"record": "over", "turn": turn, "reason": reason.value, "text": text}), Publish(self.end)]
+        return [Record(over_record(turn, reason.value, text)), Publish(self.end)]
 
     # ------------------------------------------------------------------ faults
 
@@ -906,10 +814,6 @@ def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one:
     first = refused[0]
     more = f" (and {len(refused) - 1} more: {'; '.join(map(str, refused[1:4]))})" if len(refused) > 1 else ""
     return [Refusal(f"{msg.TAG} from {msg.sender}", type(first)(f"{first}{more}"))]
-
-
-def replace_config(config: GameConfig, **changes: Any) -> GameConfig:
-    return dataclasses.replace(config, **changes)
 
 
 def id_ranges(drones: Iterable[str]) -> str:

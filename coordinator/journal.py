@@ -1,6 +1,14 @@
-"""The append-only journal: one JSON line per record (header, one per turn, over). Lines are canonical JSON
-(sorted keys, no spaces, no timestamps) so two runs of the same scenario give byte-identical journals,
-whatever the process layout."""
+"""The journal, the one home of its record format: written here (`header_record`, `TurnLog`, `over_record`, one
+JSON line each, by `JournalWriter`) and read here (`read`, `header_config`, `TurnRecord`, `tracks`) by the
+engine, resume, `dronesim replay` and the web page's replay. Lines are canonical JSON (sorted keys, no spaces,
+no timestamps) so two runs of the same scenario give byte-identical journals, whatever the process layout.
+
+  header  {"record": "header", "format": "dronesim-journal", "version": 1, "world": {size, seed, cells},
+           "drones": [{drone, start, autopilot, cooperative}], "max_turns", "lost_after"}
+  turn    {"record": "turn", "turn": t, and what the turn changed: "targets", "intent", "moves", "notes",
+           "gave_way", "yielded", "hovered", "deaths", "lost", "state" (the STATUS's digest)}
+  over    {"record": "over", "turn": t, "reason", "text"}
+"""
 
 from __future__ import annotations
 
@@ -8,9 +16,16 @@ import contextlib
 import json
 import os
 import pathlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
-from schema import UsageError
+from schema import Cause, Cell, Intent, Note, RemoteInputError, UsageError, WorldSpec
+
+from .config import DroneSpec, GameConfig
+
+FORMAT = "dronesim-journal"
+VERSION = 1
 
 
 def dumps(record: dict) -> str:
@@ -79,20 +94,175 @@ def held_game(path: str | os.PathLike[str]) -> tuple[bool, int] | None:
 
 
 def read(path: str | os.PathLike[str]) -> Iterator[dict]:
-    """The records of a journal; a torn last line (a crash mid-write) is ignored, anything else bad is an error."""
+    """The records of a journal, one line at a time (a game of any length in the memory of its largest turn); a
+    torn last line (a crash mid-write) is ignored, anything else bad is an error."""
     try:
-        lines = pathlib.Path(path).read_text(encoding="utf-8").split("\n")
+        with open(path, encoding="utf-8") as f:
+            for n, line in enumerate(f, 1):
+                if not line.strip():
+                    continue
+                try:
+                    record = json.loads(line)
+                except json.JSONDecodeError:
+                    if not line.endswith("\n"):  # the last line, without its newline: torn by a crash
+                        return
+                    record = None
+                if not isinstance(record, dict) or "record" not in record:
+                    raise UsageError(f"{path}:{n}: not a journal record")
+                yield record
     except (OSError, UnicodeDecodeError) as exc:
         raise UsageError(f"cannot read journal {path}: {exc}") from None
-    for n, line in enumerate(lines, 1):
-        if not line:
+
+
+# --------------------------------------------------------------------------- the header
+
+
+def header_record(config: GameConfig, size: Cell, drones: Iterable[tuple[str, list[int], str, bool]] | None) -> dict:
+    """The journal's first record: what identifies the game (resume checks it). `drones`: each drone's id,
+    start, autopilot and whether it cooperates; None leaves out the drones and the world's cells (a game
+    without a journal, which would only drop them)."""
+    world: dict[str, Any] = {"size": list(size), "seed": config.world.seed}
+    header: dict[str, Any] = {"record": "header", "format": FORMAT, "version": VERSION, "world": world,
+                              "max_turns": config.max_turns, "lost_after": config.lost_after}
+    if drones is not None:  # (the journal's lines sort their keys: the order here is not the written one)
+        world["cells"] = config.world.cells.hex()
+        header["drones"] = [dict(zip(("drone", "start", "autopilot", "cooperative"), row)) for row in drones]
+    return header
+
+
+def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
+    """The game a journal's header describes, and each drone's autopilot. UsageError if it is not a header."""
+    if header.get("record") != "header" or header.get("format") != FORMAT:
+        raise UsageError("not a dronesim journal: the first record must be its header")
+    try:
+        w = header["world"]
+        spec = WorldSpec(size=tuple(w["size"]), seed=w["seed"], cells=bytes.fromhex(w["cells"]))
+        drones = tuple(DroneSpec(drone=d["drone"], start=tuple(d["start"])) for d in header["drones"])
+        autopilots = {d["drone"]: d["autopilot"] for d in header["drones"]}
+        config = GameConfig(world=spec, drones=drones, max_turns=header["max_turns"],
+                            lost_after=header.get("lost_after", 3))
+    except (KeyError, TypeError, ValueError, IndexError, RemoteInputError) as exc:
+        raise UsageError(f"bad journal header: {exc}") from None
+    return config, autopilots
+
+
+# --------------------------------------------------------------------------- turns and the end
+
+
+class TurnLog:
+    """One turn's record as the engine writes it: what the turn changed, drone by drone."""
+
+    __slots__ = ("record",)
+
+    def __init__(self, turn: int) -> None:
+        self.record: dict[str, Any] = {"record": "turn", "turn": turn}
+
+    def targets(self, drones: Sequence[str], cells: list[list[int]]) -> None:
+        self.record["targets"] = dict(zip(drones, cells))
+
+    def intent(self, intent: Intent) -> None:
+        self.record["intent"] = intent.value
+
+    def arbitration(self, gave_way: Sequence[str], yielded: Sequence[str]) -> None:
+        """Who gave way (their priorities reset) and who did not get its first choice."""
+        if gave_way:
+            self.record["gave_way"] = list(gave_way)
+        if yielded:
+            self.record["yielded"] = list(yielded)
+
+    def moves(self, drones: Sequence[str], cells: list[list[int]]) -> None:
+        self.record["moves"] = dict(zip(drones, cells))
+
+    def notes(self, drones: Sequence[str], notes: Iterable[Note]) -> None:
+        self.record["notes"] = {d: n.value for d, n in zip(drones, notes)}
+
+    def hovered(self, drones: Sequence[str]) -> None:
+        self.record["hovered"] = list(drones)
+
+    def deaths(self, drones: Sequence[str], causes: Iterable[Cause]) -> None:
+        self.record["deaths"] = {d: c.value for d, c in zip(drones, causes)}
+
+    def lost(self, drone: str) -> None:
+        self.record.setdefault("lost", []).append(drone)
+
+    def state(self, digest: str) -> None:
+        self.record["state"] = digest
+
+
+def over_record(turn: int, reason: str, text: str) -> dict:
+    return {"record": "over", "turn": turn, "reason": reason, "text": text}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TurnRecord:
+    """A turn record as read back (see the module doc)."""
+
+    turn: int
+    targets: dict[str, Cell] = field(default_factory=dict)
+    intent: Intent | None = None
+    moves: dict[str, Cell] = field(default_factory=dict)
+    notes: dict[str, Note] = field(default_factory=dict)
+    gave_way: tuple[str, ...] = ()
+    hovered: tuple[str, ...] = ()
+    deaths: dict[str, Cause] = field(default_factory=dict)
+    lost: tuple[str, ...] = ()
+    state: str | None = None
+
+    @classmethod
+    def of(cls, r: dict) -> TurnRecord:
+        """The turn record `r`; KeyError, TypeError or ValueError if it is not of the format."""
+        intent = r.get("intent")
+        return cls(turn=int(r["turn"]),
+                   targets={d: _cell(p) for d, p in r.get("targets", {}).items()},
+                   intent=None if intent is None else Intent(intent),
+                   moves={d: _cell(p) for d, p in r.get("moves", {}).items()},
+                   notes={d: Note(n) for d, n in r.get("notes", {}).items()},
+                   gave_way=tuple(r.get("gave_way", ())), hovered=tuple(r.get("hovered", ())),
+                   deaths={d: Cause(c) for d, c in r.get("deaths", {}).items()},
+                   lost=tuple(r.get("lost", ())), state=r.get("state"))
+
+
+def _cell(p: Sequence[int]) -> Cell:
+    x, y, z = p
+    return (int(x), int(y), int(z))
+
+
+def turns(records: Iterable[dict]) -> Iterator[TurnRecord]:
+    """The turn records among `records`, read."""
+    return (TurnRecord.of(r) for r in records if r.get("record") == "turn")
+
+
+def over_of(records: Iterable[dict]) -> dict | None:
+    """The over record among `records`, if the game ended."""
+    return next((r for r in records if r.get("record") == "over"), None)
+
+
+@dataclass(slots=True)
+class Track:
+    """One drone's story as the journal tells it, up to some turn."""
+
+    pos: Cell
+    state: str = "ALIVE"
+    cause: str = ""
+    path: list[Cell] = field(default_factory=list)
+    target: Cell | None = None
+
+
+def tracks(config: GameConfig, records: Iterable[dict], until: int | None = None) -> tuple[dict[str, Track], int]:
+    """Every drone's track after turn `until` (the last: None), and that turn."""
+    out = {d.drone: Track(pos=d.start, path=[d.start]) for d in config.drones}
+    last = 0
+    for r in turns(records):
+        if until is not None and r.turn > until:
             continue
-        try:
-            record = json.loads(line)
-        except json.JSONDecodeError:
-            if n == len(lines):  # the last line, without its newline: torn by a crash
-                return
-            record = None
-        if not isinstance(record, dict) or "record" not in record:
-            raise UsageError(f"{path}:{n}: not a journal record")
-        yield record
+        last = r.turn
+        for d, p in r.targets.items():
+            out[d].target = p
+        for d, p in r.moves.items():
+            out[d].pos = p
+            out[d].path.append(p)
+        for d, cause in r.deaths.items():
+            out[d].state, out[d].cause = "DEAD", cause.value
+        for d in r.lost:
+            out[d].state, out[d].cause = "LOST", "LOST"
+    return out, last

@@ -62,7 +62,8 @@ from world.grid import World
 
 from . import arbiter
 from .admission import Presences
-from .engine import DroneSpec, Engine, GameConfig, Publish, Record, Refusal, Reply, Stage
+from .config import DroneSpec, GameConfig
+from .engine import Engine, Publish, Record, Refusal, Reply, Stage
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
 
@@ -426,14 +427,19 @@ def parse_size(text: str) -> tuple[int, int, int]:
     return size
 
 
-def game_config(args: argparse.Namespace) -> GameConfig:
+#: Reads a scenario file into the game's configuration, given the deadlines (`dronesim.scenario`, which the
+#: application hands to `cli`: the coordinator reads no scenario format of its own).
+ScenarioReader = Callable[..., GameConfig]
+
+
+def game_config(args: argparse.Namespace, scenario: ScenarioReader | None = None) -> GameConfig:
     deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
                      admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace,
                      link_grace=args.link_grace)
     if args.scenario:
-        from dronesim.scenario import Scenario
-
-        return Scenario.load(args.scenario, plan=False).game_config(**deadlines)
+        if scenario is None:
+            raise UsageError("--scenario is read by the dronesim command: dronesim coordinator --scenario FILE")
+        return scenario(args.scenario, **deadlines)
 
     if args.world:
         world = World.load(args.world)
@@ -444,11 +450,12 @@ def game_config(args: argparse.Namespace) -> GameConfig:
     return GameConfig(world=spec, drones=drones, max_turns=args.max_turns, **deadlines)
 
 
-def cli(argv: list[str] | None = None) -> int:
+def cli(argv: list[str] | None = None, *, scenario: ScenarioReader | None = None) -> int:
     args = build_parser().parse_args(argv)
     logger = setup_logging(args.log_level, "SRV")
     try:
-        over, status = main(zenoh_config(args), game_config(args), keys=Keys(args.root), journal=args.journal,
+        over, status = main(zenoh_config(args), game_config(args, scenario), keys=Keys(args.root),
+                            journal=args.journal,
                             logger=logger, resume=args.resume, pace=args.pace, verify_env=args.verify_env)
     except UsageError as err:
         logger.error("%s", err)

@@ -7,10 +7,12 @@ import logging
 
 import numpy as np
 
-from schema import Cause, DroneState, Intent, Note, UsageError
+from schema import Cause, DroneState, Intent, UsageError
 from schema.tables import code_of
 
-from .engine import Engine, GameConfig, Stage, state_hash
+from .config import GameConfig
+from .engine import Engine, Stage, state_hash
+from .journal import TurnRecord, over_of, turns
 
 
 def restore(config: GameConfig, records: list[dict], logger: logging.Logger, game: str = "") -> Engine:
@@ -28,39 +30,40 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
             fleet.autopilot[i], fleet.cooperative[i] = d.get("autopilot", ""), d.get("cooperative", False)
     if engine.header() != theirs:
         raise UsageError("the journal is of another game (world, drones or limits differ)")
+    if (over := over_of(records)) is not None:
+        raise UsageError(f"the journal's game is over (turn {over.get('turn')}): nothing to resume (a journal "
+                         "holds one game: give another --journal for a new one)")
     turn = 0
-    for r in records[1:]:
-        if r.get("record") == "over":
-            raise UsageError(f"the journal's game is over (turn {r.get('turn')}): nothing to resume (a journal "
-                             "holds one game: give another --journal for a new one)")
-        if r.get("record") == "turn":
+    try:
+        for r in turns(records[1:]):
             turn = _restore_turn(engine, r)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise UsageError(f"the journal has a bad turn record after turn {turn}: {exc!r}") from None
     engine.turn, engine.stage = turn, Stage.RESUMING
     logger.info("restored turn %d from the journal", turn)
     return engine
 
 
-def _restore_turn(engine: Engine, r: dict) -> int:
+def _restore_turn(engine: Engine, r: TurnRecord) -> int:
     """Apply one journaled turn to the engine's state; its turn."""
     fleet, row = engine.fleet, engine.fleet.index
     alive = fleet.alive_rows()
-    for d, p in r.get("targets", {}).items():
-        fleet.aim(row[d], tuple(p))
-    if "intent" in r:
-        engine.intent = Intent(r["intent"])
+    for d, p in r.targets.items():
+        fleet.aim(row[d], p)
+    if r.intent is not None:
+        engine.intent = r.intent
         engine.final = engine.intent is Intent.FINAL
-    for d, p in r.get("moves", {}).items():
+    for d, p in r.moves.items():
         fleet.pos[row[d]] = p
-    for d, n in r.get("notes", {}).items():
-        fleet.note[row[d]] = code_of(Note(n))
-    engine.age(alive, [row[d] for d in r.get("gave_way", ())])  # the arbitration's priorities
-    hovered = np.isin(alive, [row[d] for d in r.get("hovered", ())])
+    for d, n in r.notes.items():
+        fleet.note[row[d]] = code_of(n)
+    engine.age(alive, [row[d] for d in r.gave_way])  # the arbitration's priorities
+    hovered = np.isin(alive, [row[d] for d in r.hovered])
     fleet.misses[alive] = np.where(hovered, fleet.misses[alive] + 1, 0)
-    for d, cause in r.get("deaths", {}).items():
-        fleet.end(row[d], DroneState.DEAD, Cause(cause))
-    for d in r.get("lost", ()):
+    for d, cause in r.deaths.items():
+        fleet.end(row[d], DroneState.DEAD, cause)
+    for d in r.lost:
         fleet.end(row[d], DroneState.LOST, Cause.LOST)
-    turn = r["turn"]
-    if state_hash(engine.status(turn)) != r.get("state"):
-        raise UsageError(f"the journal's turn {turn} does not replay to its recorded state")
-    return turn
+    if state_hash(engine.status(r.turn)) != r.state:
+        raise UsageError(f"the journal's turn {r.turn} does not replay to its recorded state")
+    return r.turn

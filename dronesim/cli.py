@@ -8,10 +8,10 @@ import sys
 #: subcommand -> (module, function taking argv, help line); the module is imported on use.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "up": ("dronesim.up", "cli", "run everything on one machine (embedded router + every entity)"),
-    "coordinator": ("coordinator.node", "cli", "the coordinator (SRV + observer)"),
+    "coordinator": ("dronesim.roles", "coordinator", "the coordinator (SRV + observer)"),
     "env": ("entities.env_node", "cli", "the environment (ENV)"),
     "drone": ("entities.drone_node", "cli", "a drone, or a swarm host of several drones"),
-    "gcs": ("entities.gcs_node", "cli", "the ground control station (GCS)"),
+    "gcs": ("dronesim.roles", "gcs", "the ground control station (GCS)"),
     "ros2": ("entities.ros2.node", "cli", "the game as ROS 2 topics (rmw_zenoh) and live in Foxglove (docs/ros2.md)"),
     "export": ("dronesim.export", "main", "a journal as an MCAP file (Foxglove scene + ROS 2 topics, docs/ros2.md)"),
     "router": ("dronesim.router", "cli", "a standalone Zenoh router (for multi-host runs without zenohd)"),

@@ -12,75 +12,28 @@ import argparse
 import logging
 import sys
 from collections.abc import Iterable
-from dataclasses import dataclass, field
 
-from coordinator.engine import DroneSpec, GameConfig
-from coordinator.journal import dumps, read
+from coordinator.config import GameConfig
+from coordinator.journal import Track, dumps, header_config, over_of, read, tracks, turns
 from entities.gcs import Plan
-from schema import Cell, Intent, RemoteInputError, UsageError, WorldSpec
+from schema import Cell, UsageError
 from world.grid import World, build_world
 
 from .local import Inputs, simulate
 
 
-@dataclass(slots=True)
-class Track:
-    pos: Cell
-    state: str = "ALIVE"
-    cause: str = ""
-    path: list[Cell] = field(default_factory=list)
-    target: Cell | None = None
-
-
-def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
-    if header.get("record") != "header" or header.get("format") != "dronesim-journal":
-        raise UsageError("not a dronesim journal: the first record must be its header")
-    try:
-        w = header["world"]
-        spec = WorldSpec(size=tuple(w["size"]), seed=w["seed"], cells=bytes.fromhex(w["cells"]))
-        drones = tuple(DroneSpec(drone=d["drone"], start=tuple(d["start"])) for d in header["drones"])
-        autopilots = {d["drone"]: d["autopilot"] for d in header["drones"]}
-        config = GameConfig(world=spec, drones=drones, max_turns=header["max_turns"],
-                            lost_after=header.get("lost_after", 3))
-    except (KeyError, TypeError, ValueError, IndexError, RemoteInputError) as exc:
-        raise UsageError(f"bad journal header: {exc}") from None
-    return config, autopilots
-
-
 def inputs_of(records: Iterable[dict], size: Cell) -> Inputs:
     """The inputs a journal records: targets and intents by turn, missed deadlines, vanished drones."""
     items, intents, hovered, vanished = [], {}, {}, {}
-    for r in records:
-        if r.get("record") != "turn":
-            continue
-        t = r["turn"]
-        items += [(t, d, tuple(p)) for d, p in sorted(r.get("targets", {}).items())]
-        if "intent" in r:
-            intents[t] = Intent(r["intent"])
-        if r.get("hovered"):
-            hovered[t] = set(r["hovered"])
-        if gone := set(r.get("lost", ())) - set(r.get("hovered", ())):
-            vanished[t] = gone
+    for r in turns(records):
+        items += [(r.turn, d, p) for d, p in sorted(r.targets.items())]
+        if r.intent is not None:
+            intents[r.turn] = r.intent
+        if r.hovered:
+            hovered[r.turn] = set(r.hovered)
+        if gone := set(r.lost) - set(r.hovered):
+            vanished[r.turn] = gone
     return Inputs(plan=Plan(tuple(sorted(items))), intents=intents, hovered=hovered, vanished=vanished, scripted=False)
-
-
-def tracks(config: GameConfig, records: Iterable[dict], until: int | None = None) -> tuple[dict[str, Track], int]:
-    out = {d.drone: Track(pos=d.start, path=[d.start]) for d in config.drones}
-    last = 0
-    for r in records:
-        if r.get("record") != "turn" or (until is not None and r["turn"] > until):
-            continue
-        last = r["turn"]
-        for d, p in r.get("targets", {}).items():
-            out[d].target = tuple(p)
-        for d, p in r.get("moves", {}).items():
-            out[d].pos = tuple(p)
-            out[d].path.append(tuple(p))
-        for d, cause in r.get("deaths", {}).items():
-            out[d].state, out[d].cause = "DEAD", cause
-        for d in r.get("lost", ()):
-            out[d].state, out[d].cause = "LOST", "LOST"
-    return out, last
 
 
 def render(world: World, tr: dict[str, Track], turn: int, *, compact: bool | None = None) -> str:
@@ -130,13 +83,12 @@ def main(argv: list[str] | None = None) -> int:
         config, autopilots = header_config(records[0])
         world = build_world(config.world, (d.start for d in config.drones))
         if args.turns:
-            for r in records[1:]:
-                if r.get("record") == "turn":
-                    tr, t = tracks(config, records, until=r["turn"])
-                    print(f"turn {t}: " + ", ".join(f"{d} {x.pos} {x.state}" for d, x in tr.items()))
+            for r in turns(records):
+                tr, t = tracks(config, records, until=r.turn)
+                print(f"turn {t}: " + ", ".join(f"{d} {x.pos} {x.state}" for d, x in tr.items()))
         tr, t = tracks(config, records, until=args.at)
         print(render(world, tr, t, compact=True if args.compact else None))
-        over = next((r for r in records if r.get("record") == "over"), None)
+        over = over_of(records)
         print(summary(tr, over if args.at is None else None))
         if args.verify:
             if diff := verify(args.journal, records, config, autopilots):

@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
-from coordinator.engine import DroneSpec, Engine, GameConfig, Publish, Stage
+from coordinator.config import DroneSpec, GameConfig
+from coordinator.engine import Engine, Publish, Stage
 from coordinator.fleet import ALIVE, CAUSES, NOTES, STATES
 from schema import (
     AimTable,

@@ -25,7 +25,7 @@ from typing import cast
 import numpy as np
 import zenoh
 
-from coordinator.engine import GameConfig
+from coordinator.config import GameConfig
 from dronesim import child_env
 from dronesim.rl import HOST, BackendError, Board, hellos, turn_messages
 from network.membership import Refusal, admit

@@ -24,7 +24,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from coordinator.engine import DroneSpec, DroneTable, GameConfig
+from coordinator.config import DroneSpec, DroneTable, GameConfig
 from entities.autopilots import REGISTRY
 from entities.gcs import Plan
 from schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id

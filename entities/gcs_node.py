@@ -15,7 +15,7 @@ import logging
 import queue
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import partial
 from typing import TextIO
 
@@ -118,7 +118,9 @@ def ros2_goals(args: argparse.Namespace, session: zenoh.Session, inbox: Inbox, g
     return take
 
 
-def cli(argv: list[str] | None = None) -> int:
+def cli(argv: list[str] | None = None, *, scenario_targets: Callable[[str], Sequence[str]] | None = None) -> int:
+    """`dronesim gcs`; `scenario_targets` reads a scenario file's targets (`dronesim.scenario`, which the
+    application hands in: the ground station reads no scenario format of its own)."""
     from .mavlink.options import add_mavlink_args
     from .ros2.node import add_ros2_args
     from .web.node import add_web_args, run_web
@@ -142,9 +144,9 @@ def cli(argv: list[str] | None = None) -> int:
 
     def run() -> object:
         if args.scenario:
-            from dronesim.scenario import Scenario
-
-            args.targets = [*Scenario.load(args.scenario).targets, *args.targets]
+            if scenario_targets is None:
+                raise UsageError("--scenario is read by the dronesim command: dronesim gcs --scenario FILE")
+            args.targets = [*scenario_targets(args.scenario), *args.targets]
         if args.web is not None or args.replay is not None:  # the browser ground station (docs/web-gcs.md)
             return run_web(args, logger)
         if args.mavlink:  # every drone a MAVLink vehicle (docs/mavlink.md)

@@ -20,7 +20,8 @@ from hypothesis import strategies as st
 
 from coordinator import arbiter as arbiter_module
 from coordinator.arbiter import STUCK, TIE_SPAN, Arbiter, cooperate, fixed
-from coordinator.engine import DroneSpec, Engine, GameConfig
+from coordinator.config import DroneSpec, GameConfig
+from coordinator.engine import Engine
 from coordinator.journal import dumps, read
 from coordinator.resume import restore
 from dronesim import replay

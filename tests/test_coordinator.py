@@ -9,7 +9,8 @@ import signal
 import numpy as np
 import pytest
 
-from coordinator.engine import DroneSpec, Engine, GameConfig
+from coordinator.config import DroneSpec, GameConfig
+from coordinator.engine import Engine
 from coordinator.node import LINGER_S, SETTLE_S, Coordinator, Executor, parse_starts
 from network.signals import Interrupted
 from network.transport import Asked, Presence, Received, Sessions, sessions_listed

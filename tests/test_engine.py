@@ -10,17 +10,8 @@ import numpy as np
 import pytest
 
 from coordinator import journal
-from coordinator.engine import (
-    DroneSpec,
-    Engine,
-    GameConfig,
-    Publish,
-    Record,
-    Refusal,
-    Reply,
-    Stage,
-    replace_config,
-)
+from coordinator.config import DroneSpec, GameConfig, replace_config
+from coordinator.engine import Engine, Publish, Record, Refusal, Reply, Stage
 from coordinator.resume import restore
 from entities.gcs import describe
 from entities.web.model import view_of

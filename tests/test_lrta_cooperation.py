@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coordinator.engine import DroneSpec, GameConfig
+from coordinator.config import DroneSpec, GameConfig
 from coordinator.journal import read
 from dronesim import replay
 from dronesim.local import Inputs, Result, simulate

@@ -8,7 +8,7 @@ import pathlib
 
 import pytest
 
-from coordinator.engine import DroneSpec, DroneTable, GameConfig
+from coordinator.config import DroneSpec, DroneTable, GameConfig
 from dronesim.local import Inputs, simulate
 from dronesim.scenario import FORMAT, Scenario
 from entities.environment import build_world

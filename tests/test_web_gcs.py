@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from coordinator.engine import DroneSpec, GameConfig
+from coordinator.config import DroneSpec, GameConfig
 from coordinator.journal import dumps
 from dronesim.local import Inputs, simulate
 from entities.gcs import Ground, Plan, Send

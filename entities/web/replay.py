@@ -1,6 +1,6 @@
 """A journal as frames the page plays (``dronesim gcs --web PORT --replay JOURNAL``). Pure, no network.
 
-Frame 0 is the start, frame k the state after the k-th turn record (`dronesim.replay.tracks`): every drone's
+Frame 0 is the start, frame k the state after the k-th turn record (`coordinator.journal.tracks`): every drone's
 cell, state, cause and target; trails are the page's to accumulate (so the data grows with turns x drones,
 not with its square).
 """
@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import pathlib
 
-from coordinator.journal import read
-from dronesim.replay import header_config, tracks
-from schema import Cause, UsageError
+from coordinator.journal import TurnRecord, header_config, over_of, read, tracks, turns
+from schema import Cause, Intent, UsageError
 from world.grid import build_world
 
 from .model import ALIVE, DEAD, LOST, REACHED, change_entry, drone_json, entry, fmt, over_entry, world_json
@@ -41,21 +40,22 @@ class Replay:
             raise UsageError(f"{self.path} is empty: not a journal")
         self.config, self.autopilots = header_config(records[0])
         self.world = build_world(self.config.world, (d.start for d in self.config.drones))
-        self.over = next(({"turn": r["turn"], "reason": r["reason"], "text": r.get("text", "")}
-                          for r in records if r.get("record") == "over"), None)
+        over = over_of(records)
+        self.over = None if over is None else {"turn": over["turn"], "reason": over["reason"],
+                                               "text": over.get("text", "")}
         self.frames = self._frames(records)
 
     def _frames(self, records: list[dict]) -> list[dict]:
-        turns = [r for r in records if r.get("record") == "turn"]
         try:
-            frames = []
+            played = list(turns(records))
+            frames: list[dict] = []
             before: dict[str, str] = {}
-            for k, until in enumerate([0, *(r["turn"] for r in turns)]):
+            for k, until in enumerate([0, *(r.turn for r in played)]):
                 tr, _ = tracks(self.config, records, until=until)
-                record = turns[k - 1] if k else {}
+                record = played[k - 1] if k else TurnRecord(turn=0)
                 events = [entry(until, "target", f"target of {d} set to {fmt(p)}")
-                          for d, p in sorted(record.get("targets", {}).items())]
-                if hovered := record.get("hovered"):
+                          for d, p in sorted(record.targets.items())]
+                if hovered := record.hovered:
                     events.append(entry(until, "info", f"no move in time from {', '.join(hovered)}: hovering"))
                 drones = []
                 for d, t in tr.items():
@@ -66,7 +66,7 @@ class Replay:
                     before[d] = status
                     drones.append({**drone_json(d, t.pos, status, cause, t.target),
                                    "autopilot": self.autopilots.get(d, "")})
-                if record.get("intent") == "QUIT":
+                if record.intent is Intent.QUIT:
                     events.append(entry(until, "control", "the ground station ended the game"))
                 frames.append({"turn": until, "drones": drones, "events": events})
         except (KeyError, TypeError, ValueError, IndexError) as exc:

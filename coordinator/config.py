@@ -1,0 +1,105 @@
+"""A game's configuration: its world, its drones and their start cells (`DroneTable`: a swarm's as columns),
+its limits, deadlines and graces (`GameConfig`), checked when made. The engine, the journal's header, resume,
+scenarios and the RL episodes all read a game from it."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any, overload
+
+import numpy as np
+
+from schema import Cell, UsageError, WorldSpec
+from schema.messages import is_drone_id
+from world.grid import inside_rows
+
+from .fleet import cell_of
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DroneSpec:
+    drone: str
+    start: Cell
+
+
+class DroneTable(Sequence[DroneSpec]):
+    """A game's drones as columns (a swarm's scenario): their ids and an (n, 3) array of their start cells,
+    read as the sequence of `DroneSpec`s it stands for (each made when read: they cost a hundred bytes each)."""
+
+    __slots__ = ("ids", "starts")
+
+    def __init__(self, ids: Sequence[str], starts: Sequence[Cell] | Sequence[int]) -> None:
+        """`starts`: each drone's start cell, or their coordinates in a row (x, y, z, x, y, z, ...)."""
+        self.ids = tuple(ids)
+        try:
+            self.starts = np.array(starts, np.int64).reshape(len(self.ids), 3)
+        except OverflowError:
+            raise UsageError("a start cell is outside any world") from None
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @overload
+    def __getitem__(self, i: int) -> DroneSpec: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> tuple[DroneSpec, ...]: ...
+
+    def __getitem__(self, i: int | slice) -> DroneSpec | tuple[DroneSpec, ...]:
+        if isinstance(i, slice):
+            return tuple(self)[i]
+        return DroneSpec(drone=self.ids[i], start=cell_of(self.starts[i]))
+
+    def __iter__(self) -> Iterator[DroneSpec]:
+        return (DroneSpec(drone=d, start=(x, y, z)) for d, (x, y, z) in zip(self.ids, self.starts.tolist()))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and len(other) == len(self) and all(a == b for a, b in zip(self, other))
+
+    def __hash__(self) -> int:
+        return hash(tuple(self))
+
+    def __repr__(self) -> str:
+        return f"DroneTable({list(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GameConfig:
+    world: WorldSpec
+    drones: Sequence[DroneSpec]  # a tuple, or a `DroneTable`
+    max_turns: int = 1000
+    phase_deadline: float = 5.0  # seconds for the drones and the environment
+    gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
+    admit_deadline: float | None = 600.0  # seconds for every entity to connect (None: forever, if asked)
+    lost_after: int = 3  # missed DRONES deadlines in a row before a drone is LOST
+    env_grace: float = 30.0  # seconds the game waits for a vanished environment to come back
+    link_grace: float = 30.0  # seconds the game holds for the entities after a lost link (a router restart)
+    gcs_grace: float = 30.0  # seconds a resumed game waits for its ground station once the others are back
+
+    def __post_init__(self) -> None:
+        if not self.drones:
+            raise UsageError("a game needs at least one drone")
+        # (checked as columns: a swarm's drones as records, sets and lists would double its scenario's peak)
+        table = self.drones if isinstance(self.drones, DroneTable) else \
+            DroneTable([d.drone for d in self.drones], [d.start for d in self.drones])
+        ids, starts = table.ids, table.starts
+        if bad := [d for d in ids if not is_drone_id(d)]:
+            raise UsageError(f"{bad[0]!r} is not a drone id (D01 ... D65535)")
+        if len(set(ids)) != len(ids):
+            raise UsageError(f"duplicate drone ids in {list(ids)}")
+        if len(np.unique(starts, axis=0)) != len(starts):
+            raise UsageError("two drones cannot start in the same cell")
+        if not (inside := inside_rows(starts, self.world.size)).all():
+            i = int(inside.argmin())
+            raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
+        if self.max_turns < 1 or self.lost_after < 1:
+            raise UsageError("max_turns and lost_after must be >= 1")
+        if not (self.phase_deadline > 0 and all(d is None or d > 0 for d in (self.gcs_deadline, self.admit_deadline))
+                and min(self.env_grace, self.link_grace, self.gcs_grace) >= 0):
+            raise UsageError("deadlines must be positive (the GCS's and admission's: or none) and graces >= 0")
+
+
+def replace_config(config: GameConfig, **changes: Any) -> GameConfig:
+    return dataclasses.replace(config, **changes)
