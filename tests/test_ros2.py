@@ -274,3 +274,101 @@ def publish(pub, frame: str, at: tuple) -> None:
     Point, Quat, Pose = (pub.session_mgr.store.types[f"geometry_msgs/msg/{t}"] for t in ("Point", "Quaternion", "Pose"))
     pub.publish(header=Header(stamp=Time(sec=0, nanosec=0), frame_id=frame),
                 pose=Pose(position=Point(x=x, y=y, z=z), orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0)))
+
+
+# ------------------------------------------------------------------------------------------ MCAP export
+
+
+@pytest.fixture(scope="module")
+def game_journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 16-drone game (scenarios/swarm16.json) played in-process, as its journal."""
+    import logging
+
+    from coordinator.journal import dumps
+    from dronesim.local import Inputs, simulate
+    from dronesim.scenario import Scenario
+
+    scenario = Scenario.load(str(Path(__file__).resolve().parent.parent / "scenarios" / "swarm16.json"))
+    quiet = logging.getLogger("dronesim.tests.ros2")
+    quiet.propagate = False
+    result = simulate(scenario.game_config(), scenario.autopilots, Inputs(plan=scenario.plan()), quiet)
+    path = tmp_path_factory.mktemp("export") / "swarm16.journal"
+    path.write_text("".join(dumps(r) + "\n" for r in result.records), encoding="utf-8")
+    return path
+
+
+def journal_cells(journal: Path) -> tuple[dict[int, dict[str, tuple]], int]:
+    records = journal_records(journal)
+    config, _ = header_config(records[0])
+    last = max(r["turn"] for r in records if r.get("record") == "turn")
+    return {t: {d: tr.pos for d, tr in tracks(config, records, until=t)[0].items()} for t in range(last + 1)}, last
+
+
+def test_export_mcap_reads_back_with_the_mcap_decoders(tmp_path: Path, game_journal: Path) -> None:
+    """`dronesim export`: identical journals give byte-identical files; the mcap library's ROS 2 and protobuf
+    decoders decode every message; the poses are the journal's cells, the scene has the buildings and drones."""
+    pytest.importorskip("mcap_ros2", reason="mcap-ros2-support is in the ros2 extra")
+    pytest.importorskip("mcap_protobuf", reason="mcap-protobuf-support is in the ros2 extra")
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoders
+    from mcap_ros2.decoder import DecoderFactory as Ros2Decoders
+
+    from dronesim.export import main
+
+    first, second = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    assert main([str(game_journal), "--mcap", str(first)]) == 0
+    assert main([str(game_journal), "--mcap", str(second)]) == 0
+    assert first.read_bytes() == second.read_bytes()
+
+    cells, last = journal_cells(game_journal)
+    topics: dict[str, int] = {}
+    scene_ids: set[str] = set()
+    with first.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[Ros2Decoders(), ProtobufDecoders()])
+        assert reader.get_header().profile == "ros2"
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            topics[channel.topic] = topics.get(channel.topic, 0) + 1
+            if channel.topic == "/dronesim/scene":
+                assert schema.name == "foxglove.SceneUpdate" and schema.encoding == "protobuf"
+                scene_ids |= {e.id for e in decoded.entities}
+            elif channel.topic.endswith("/pose"):
+                assert schema.name == POSE and channel.message_encoding == "cdr"
+                turn = round(message.log_time / 1e8)
+                p = decoded.pose.position
+                assert (p.x, p.y, p.z) == cells[turn][channel.topic.split("/")[2]]
+    assert topics["/dronesim/D01/pose"] == last + 1 and topics["/tf"] == last + 1 and topics["/clock"] == last + 1
+    assert {"/dronesim/markers", "/dronesim/D16/path", "/dronesim/scene"} <= set(topics)
+    assert {"buildings", "drone/D01", "drone/D16", "trail/D16"} <= scene_ids
+
+
+def test_export_without_scene_is_a_bag_rosbags_reads(tmp_path: Path, game_journal: Path) -> None:
+    from rosbags.rosbag2 import Reader
+
+    from dronesim.export import main
+
+    bag = tmp_path / "bag.mcap"
+    assert main([str(game_journal), "--mcap", str(bag), "--no-scene", "--turn-period", "0.5"]) == 0
+    cells, last = journal_cells(game_journal)
+    seen: dict[str, int] = {}
+    with Reader(bag) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types["/tf"] == TF and types["/dronesim/D03/pose"] == POSE and types["/dronesim/markers"] == MARKERS
+        for connection, stamp, data in reader.messages():
+            msg = deserialize(data, connection.msgtype)
+            seen[connection.topic] = seen.get(connection.topic, 0) + 1
+            if connection.msgtype == POSE:
+                turn = round(stamp / 5e8)
+                assert (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec) == stamp
+                p = msg.pose.position
+                assert (p.x, p.y, p.z) == cells[turn][connection.topic.split("/")[2]]
+    assert seen["/dronesim/D07/pose"] == last + 1
+
+
+def test_export_refuses_what_is_not_a_journal(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from dronesim.export import main
+
+    bad = tmp_path / "bad.journal"
+    bad.write_text('{"record": "header", "format": "other"}\n')
+    assert main([str(bad), "--mcap", str(tmp_path / "x.mcap")]) == 2
+    assert "not a dronesim journal" in capsys.readouterr().err
+    assert main([str(tmp_path / "missing"), "--mcap", str(tmp_path / "x.mcap")]) == 2

@@ -31,6 +31,9 @@ from foxglove.messages import (
 
 from .model import BUILDING_COLOUR, COLOURS, FRAME, TARGET_COLOUR, Out, Scene, Snapshot, drone_topic, msgdef
 
+#: Cells of a trail the scene draws (its last ones): a line's points are objects, a ROS 2 path's are bytes.
+SCENE_TRAIL = 50
+
 
 def _colour(rgba: Any) -> Color:
     r, g, b, a = (float(v) for v in rgba)
@@ -90,7 +93,7 @@ class FoxScene:
         s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(turn))
         return SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"trail/{name}", lines=[
             LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.1 * s, color=self._colours[self._views.get(
-                name, 0)], points=[Point3(x=x * s, y=y * s, z=z * s) for x, y, z in cells])])
+                name, 0)], points=[Point3(x=x * s, y=y * s, z=z * s) for x, y, z in cells[-SCENE_TRAIL:]])])
             for name, cells in trails.items()])
 
 
@@ -98,10 +101,11 @@ class FoxgloveSink:
     """Logs a game to a foxglove-sdk context (its sinks: an MCAP file, a WebSocket server): each ROS 2 topic on a
     channel of its own, the scene on ``/<namespace>/scene``; every message at its simulated time."""
 
-    def __init__(self, context: foxglove.Context, scene: Scene) -> None:
+    def __init__(self, context: foxglove.Context, scene: Scene, *, with_scene: bool = True) -> None:
         self.context, self.scene, self.fox = context, scene, FoxScene(scene)
         self._channels: dict[str, foxglove.Channel] = {}
-        self._scene = SceneUpdateChannel(drone_topic(scene.namespace, "scene"), context=context)
+        self._scene = (SceneUpdateChannel(drone_topic(scene.namespace, "scene"), context=context) if with_scene
+                       else None)
         self.logged = 0
 
     def _channel(self, out: Out) -> foxglove.Channel:
@@ -116,16 +120,22 @@ class FoxgloveSink:
             self._channel(out).log(out.payload, log_time=out.time)
         self.logged += len(outs)
 
+    def scene_log(self, update: SceneUpdate | None, time: int) -> None:
+        if update is not None and self._scene is not None:
+            self._scene.log(update, log_time=time)
+
     def world(self, grid: np.ndarray, outs: list[Out]) -> None:
         self.log(outs)
-        self._scene.log(self.fox.buildings(grid), log_time=0)
+        if self._scene is not None:
+            self.scene_log(self.fox.buildings(grid), 0)
 
     def turn(self, snap: Snapshot, outs: list[Out]) -> None:
         self.log(outs)
+        if self._scene is None:
+            return
         t = self.scene.time_of(snap.turn)
-        for update in (self.fox.turn(snap, self.scene.drones()), self.fox.trails(snap.turn, self.scene.sent_trails)):
-            if update is not None:
-                self._scene.log(update, log_time=t)
+        self.scene_log(self.fox.turn(snap, self.scene.drones()), t)
+        self.scene_log(self.fox.trails(snap.turn, self.scene.sent_trails), t)
 
 
 def parse_address(text: str) -> tuple[str, int]:

@@ -1,0 +1,124 @@
+"""``dronesim export JOURNAL --mcap OUT.mcap``: a game as an MCAP file that opens in Foxglove and as a ROS 2 bag.
+
+It holds the ROS 2 topics of ``dronesim ros2`` (docs/ros2.md: every drone's pose each turn, ``/tf``, the markers,
+``/clock``, the trails every ``--path-every`` turns and at the end), with their ``ros2msg`` schemas and CDR
+payloads, and (unless ``--no-scene``) a Foxglove scene (``/<namespace>/scene``, ``foxglove.SceneUpdate``). Every
+message is logged at its simulated time (turn x ``--turn-period``), so identical journals give byte-identical
+files. The journal is read line by line: memory is bounded by the largest turn, not the game.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+from collections.abc import Iterator
+
+import numpy as np
+
+from coordinator.journal import read
+from entities.ros2.model import Scene, Snapshot
+from schema import UsageError
+from schema.tables import drone_number
+from world.grid import build_world
+
+from .replay import header_config
+
+#: Views of a drone (entities.ros2.model.VIEWS): alive, reached, dead, lost (a journal has no notes: "reached" is
+#: standing on its target, as the web page's replay says).
+ALIVE, REACHED, DEAD, LOST = 0, 1, 3, 4
+
+
+def snapshots(records: Iterator[dict],
+              drones: list[tuple[str, tuple[int, int, int]]]) -> Iterator[tuple[Snapshot | None, dict]]:
+    """The `Snapshot` of the start (turn 0) and after each turn record, with the record (another record: None)."""
+    index = {d: i for i, (d, _) in enumerate(drones)}
+    numbers = np.array([drone_number(d) for d, _ in drones])
+    pos = np.array([start for _, start in drones], np.int32).reshape(-1, 3)
+    target = -np.ones_like(pos)
+    state = np.zeros(len(drones), np.int8)
+
+    def snap(turn: int) -> Snapshot:
+        reached = (state == ALIVE) & (target[:, 0] >= 0) & (pos == target).all(axis=1)
+        return Snapshot(turn=turn, numbers=numbers, pos=pos.copy(), view=np.where(reached, REACHED, state),
+                        target=target.copy())
+
+    yield snap(0), {}
+    for r in records:
+        if r.get("record") != "turn":
+            yield None, r
+            continue
+        for d, p in r.get("targets", {}).items():
+            target[index[d]] = p
+        for d, p in r.get("moves", {}).items():
+            pos[index[d]] = p
+        for d in r.get("deaths", {}):
+            state[index[d]] = DEAD
+        for d in r.get("lost", ()):
+            state[index[d]] = LOST
+        yield snap(r["turn"]), r
+
+
+def export(journal: str, out: pathlib.Path, *, namespace: str = "dronesim", cell_size: float = 1.0,
+           turn_period: float = 0.1, path_every: int = 50, scene: bool = True) -> tuple[int, int]:
+    """Write the MCAP file (without `scene`: only the ROS 2 topics); (turns, messages)."""
+    import foxglove
+    from foxglove.mcap import MCAPWriteOptions
+
+    from entities.ros2.foxglove import FoxgloveSink
+
+    if path_every < 1:
+        raise UsageError(f"--path-every must be >= 1, got {path_every}")
+    records = read(journal)
+    header = next(records, None)
+    if header is None:
+        raise UsageError(f"{journal} is empty: not a journal")
+    config, _ = header_config(header)
+    world = build_world(config.world, (d.start for d in config.drones))
+    try:
+        ros = Scene(namespace=namespace, cell_size=cell_size, turn_period=turn_period)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    context = foxglove.Context()
+    turns = 0
+    with foxglove.open_mcap(out, allow_overwrite=True, context=context,
+                            writer_options=MCAPWriteOptions(profile="ros2")):
+        sink = FoxgloveSink(context, ros, with_scene=scene)
+        sink.world(world.grid, [ros.buildings(world.grid)])
+        last = None
+        try:
+            for snap, _ in snapshots(records, [(d.drone, d.start) for d in config.drones]):
+                if snap is None:
+                    continue
+                sink.turn(snap, ros.turn(snap, paths=snap.turn % path_every == 0))
+                last, turns = snap, turns + 1
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise UsageError(f"{journal}: bad journal record: {exc!r}") from None
+        if last is not None and (paths := ros.paths(last.turn)):  # every trail as it ends
+            sink.log(paths)
+            sink.scene_log(sink.fox.trails(last.turn, ros.sent_trails), ros.time_of(last.turn))
+    return turns, sink.logged
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="dronesim export", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("journal")
+    p.add_argument("--mcap", required=True, metavar="OUT.mcap", help="the MCAP file to write (replaced if there)")
+    p.add_argument("--namespace", default="dronesim", help="prefix of the drones' topics (default dronesim)")
+    p.add_argument("--cell-size", type=float, default=1.0, help="metres a cell (default 1.0)")
+    p.add_argument("--turn-period", type=float, default=0.1, help="simulated seconds a turn (default 0.1)")
+    p.add_argument("--path-every", type=int, default=50, help="turns between two trails of a drone (default 50)")
+    p.add_argument("--no-scene", action="store_true",
+                   help="only the ROS 2 topics: a pure ROS 2 bag (rosbags, for one, reads no MCAP file that holds a "
+                        "Foxglove scene's protobuf schema)")
+    args = p.parse_args(argv)
+    try:
+        turns, messages = export(args.journal, pathlib.Path(args.mcap), namespace=args.namespace,
+                                 cell_size=args.cell_size, turn_period=args.turn_period, path_every=args.path_every,
+                                 scene=not args.no_scene)
+    except UsageError as err:
+        print(f"dronesim export: {err}", file=sys.stderr)
+        return 2
+    print(f"exported {turns} turns, {messages} ROS 2 messages and the Foxglove scene to {args.mcap}")
+    return 0
