@@ -16,13 +16,11 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from coordinator.journal import read
+from coordinator.journal import header_config, read
 from entities.ros2.model import Scene, Snapshot
 from schema import UsageError
 from schema.tables import drone_number
 from world.grid import build_world
-
-from .replay import header_config
 
 #: Views of a drone (entities.ros2.model.VIEWS): alive, reached, dead, lost (a journal has no notes: "reached" is
 #: standing on its target, as the web page's replay says).

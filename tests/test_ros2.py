@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from dronesim.replay import header_config, tracks
+from coordinator.journal import header_config, tracks
 from schema import UsageError
 from schema.keys import RosKeys
 from world.grid import World, build_world
