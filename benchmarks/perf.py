@@ -537,7 +537,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     import logging
 
     from dronesim.scenario import Scenario
-    from entities.gcs import End, Ground, Send, Station
+    from entities.gcs import End, Ground, SendDone, Station
     from entities.station_link import join, listen, publisher
     from network.transport import Outbox, Presence, Received
     from schema import Keys, Status, Turn, drone_id
@@ -640,8 +640,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                         idle_since = time.monotonic()
                     for effect in [*effects, *station.tick(time.monotonic())]:
                         send(effect)
-                        if isinstance(effect, Send) and isinstance(event, Received) and isinstance(event.msg, Turn) \
-                                and effect.msg.turn == event.msg.turn:
+                        if (isinstance(effect, SendDone) and isinstance(event, Received)
+                                and isinstance(event.msg, Turn) and effect.msg.turn == event.msg.turn):
                             stamps[("DONE", effect.msg.turn)] = time.perf_counter()  # not answered ahead
                         elif isinstance(effect, End):
                             end = effect

@@ -91,7 +91,7 @@ class Publish:
 
 
 @dataclass(frozen=True, slots=True)
-class Reply:
+class ReplyToConnect:
     token: object
     msg: Message
 
@@ -101,7 +101,7 @@ class Record:
     data: dict  # one journal record (a JSON-able dict, written as one line)
 
 
-Effect = Publish | Reply | Record | Refusal
+Effect = Publish | ReplyToConnect | Record | Refusal
 
 
 class Engine:
@@ -178,7 +178,7 @@ class Engine:
     def _env_missing(self) -> bool:
         return self._playing() and not self.roster.has(Role.ENV)
 
-    def clock(self) -> tuple[Stage, int, bool, bool, bool, bool]:
+    def deadline_key(self) -> tuple[Stage, int, bool, bool, bool, bool]:
         """What the current deadline is measured from: it restarts whenever this changes."""
         return (self.stage, self.turn, self._done is not None, self._env_missing(), self._back_but_gcs(),
                 self._away is not None)
@@ -217,7 +217,7 @@ class Engine:
         refusal = self.roster.refusal(msg, self.fleet, over=self.stage is Stage.OVER, admitting=self._admitting())
         if refusal:
             self._log.warning("refused %s: %s", msg.sender, refusal)
-            refused: list[Effect] = [Reply(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
+            refused: list[Effect] = [ReplyToConnect(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
             # one that comes back after the end (its link was down when OVER went out) is told the end again
             return refused + ([Publish(self.end)] if self.end is not None else [])
         again = self.roster.admit(msg)  # the same process connecting again (its session says so)
@@ -231,7 +231,7 @@ class Engine:
         self._log.info("%s %s", "re-admitted" if again else "admitted", what)
         welcome = Welcome(turn=self.turn, sender="SRV", entity=msg.sender, text=f"You are connected as {what}",
                           world=self.config.world, starts=starts, game=self.game)
-        effects: list[Effect] = [Reply(token, welcome)]
+        effects: list[Effect] = [ReplyToConnect(token, welcome)]
         if self._admitting():
             # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
             awaited = fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None

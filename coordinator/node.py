@@ -63,7 +63,7 @@ from world.grid import World
 from . import arbiter
 from .admission import Presences
 from .config import DroneSpec, GameConfig
-from .engine import Engine, Publish, Record, Refusal, Reply, Stage
+from .engine import Engine, Publish, Record, Refusal, ReplyToConnect, Stage
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
 
@@ -111,7 +111,7 @@ class Executor:
                         self.release()
                 case Publish(msg):
                     self.out.put(_key_of(self.keys, msg), msg)
-                case Reply(query, msg):
+                case ReplyToConnect(query, msg):
                     self.answer(query, encode(msg))
                 case Record(data) if self.failed is None:
                     try:
@@ -125,7 +125,7 @@ class Executor:
                 case Refusal(what, err):
                     self.rejects.reject(what, err)
 
-    def answer(self, query: Any, data: bytes) -> None:  # a zenoh.Query (a Reply's token)
+    def answer(self, query: Any, data: bytes) -> None:  # a zenoh.Query (a ReplyToConnect's token)
         """Reply to a query; the final answer: the asker stops waiting now."""
         query.reply(query.key_expr, data)
         query.drop()
@@ -160,7 +160,7 @@ class Coordinator:
         self.presences: Presences[zenoh.Query] = Presences()
         self.signal: int | None = None  # the signal that stopped the game
         self.rival: str | None = None  # another coordinator's session on this root, which this one yields to
-        self._phase = engine.clock()
+        self._phase = engine.deadline_key()
         self._started = clock()
         self._vanishing: dict[tuple[str, str], float] = {}  # (entity, session) -> when its going counts
         self._linger_until: float | None = None
@@ -250,7 +250,7 @@ class Coordinator:
 
     def _tick(self) -> None:
         """The deadline restarts whenever what it is measured from changes (`Engine.clock`)."""
-        if (phase := self.engine.clock()) != self._phase:
+        if (phase := self.engine.deadline_key()) != self._phase:
             self._phase, self._started = phase, self.clock()
 
     def _due(self, now: float) -> None:

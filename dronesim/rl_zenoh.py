@@ -28,7 +28,7 @@ import zenoh
 from coordinator.config import GameConfig
 from dronesim import child_env
 from dronesim.rl import HOST, BackendError, Board, hellos, turn_messages
-from network.membership import Refusal, admit
+from network.membership import NotAdmitted, admit
 from network.transport import (
     Inbox,
     Outbox,
@@ -191,7 +191,7 @@ class _Game:
                         slice_ = min(1.0, max(0.1, end - time.monotonic()))
                         admit(self.session, self.keys, hello, self.log, timeout=slice_)
                         break
-                    except Refusal as err:
+                    except NotAdmitted as err:
                         raise BackendError(f"the coordinator refused {hello.sender}: {err}") from None
                     except UsageError:
                         if time.monotonic() >= end:

@@ -53,7 +53,7 @@ from .autopilots.base import NO_ANSWER, Answers, Decision, fly_pilots, fly_swarm
 
 
 @dataclass(frozen=True, slots=True)
-class Send:
+class SendMoves:
     """Publish a lone drone's NPS (on its NPS key) or a swarm host's MOVES (on its MOVES key)."""
 
     msg: Nps | Moves
@@ -75,7 +75,7 @@ class Timer:
     seconds: float
 
 
-Effect = Send | Query | Timer | Refusal
+Effect = SendMoves | Query | Timer | Refusal
 
 
 @dataclass(frozen=True, slots=True)
@@ -279,8 +279,8 @@ class DroneProcess:
     def _messages(self, turn: Turn, moves: StepTable | dict[str, Decision]) -> list[Effect]:
         """A turn's moves as messages: a swarm host's MOVES (none if it has no drone left), a lone drone's NPS."""
         if isinstance(moves, StepTable):
-            return [Send(Moves(turn=turn.turn, sender=self.sender, moves=moves))] if moves else []
-        return [Send(Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note, ranked=dec.ranked))
+            return [SendMoves(Moves(turn=turn.turn, sender=self.sender, moves=moves))] if moves else []
+        return [SendMoves(Nps(turn=turn.turn, sender=d, pos=dec.pos, note=dec.note, ranked=dec.ranked))
                 for d, dec in moves.items()]
 
     # ------------------------------------------------------------------ questions

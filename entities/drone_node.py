@@ -33,7 +33,7 @@ from schema import Ans, Ask, Connect, Keys, Moves, Over, Phase, Role, Turn, Usag
 from schema.messages import drone_list, is_host_id
 
 from .autopilots import REGISTRY, SWARM_MIN, pilot_class
-from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, Send, Timer
+from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, SendMoves, Timer
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
@@ -90,7 +90,7 @@ class Effects:
     def run(self, effects: list[Effect]) -> None:
         for eff in effects:
             match eff:
-                case Send(msg):  # a swarm host's MOVES, a lone drone's NPS
+                case SendMoves(msg):  # a swarm host's MOVES, a lone drone's NPS
                     self.out.put((self.keys.moves if isinstance(msg, Moves) else self.keys.nps)(msg.sender), msg)
                 case Query(ref, msg):  # an ASK, or the map
                     key, reply, timeout = ((self.keys.ask, Ans, self.ask_timeout) if isinstance(msg, Ask)

@@ -32,7 +32,7 @@ from network.transport import (
 )
 from schema import Ask, Connect, Keys, MapRequest, Over, Phase, Role, Status, Turn, UsageError, encode
 
-from .environment import Effect, EnvironmentProcess, Fail, Follow, Refusal, Reply, Report
+from .environment import Effect, EnvironmentProcess, Fail, Follow, Refusal, ReplyToQuery, Report
 
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
@@ -95,7 +95,7 @@ class Effects:
     def run(self, effects: list[Effect]) -> None:
         for eff in effects:
             match eff:
-                case Reply(zenoh.Query() as query, msg):  # the core holds the query it was given: a zenoh.Query
+                case ReplyToQuery(zenoh.Query() as query, msg):  # the core holds the query it was given: a zenoh.Query
                     query.reply(query.key_expr, encode(msg))
                     query.drop()
                 case Fail(zenoh.Query() as query, why):

@@ -137,7 +137,7 @@ class Environment:
 
 
 @dataclass(frozen=True, slots=True)
-class Reply:
+class ReplyToQuery:
     """Answer the query `query` (the adapter's handle: a zenoh.Query) with `msg` (an ANS or the MAP)."""
 
     query: Any
@@ -168,7 +168,7 @@ class Follow:
     status: bool
 
 
-Effect = Reply | Fail | Report | Follow | Refusal
+Effect = ReplyToQuery | Fail | Report | Follow | Refusal
 
 
 class EnvironmentProcess:
@@ -213,10 +213,10 @@ class EnvironmentProcess:
                 f"{int(world.grid.sum())} building cells:\n{world.draw(self.env.drones)}")
 
     def asked(self, query: object, msg: Ask | MapRequest) -> list[Effect]:
-        """A query to answer (through `Reply` or `Fail` with `query`)."""
+        """A query to answer (through `ReplyToQuery` or `Fail` with `query`)."""
         match msg:
             case MapRequest():
-                return [Reply(query, WorldMap(turn=self._ready - 1, sender="ENV", size=self.world.size,
+                return [ReplyToQuery(query, WorldMap(turn=self._ready - 1, sender="ENV", size=self.world.size,
                                               buildings=self.world.packed()))]
             case Ask(sender=who) if not (is_drone_id(who) or is_host_id(who)):
                 return self._refuse(query, WrongSender(f"ASK from {who}: only drones ask"))
@@ -302,11 +302,11 @@ class EnvironmentProcess:
             return []
         return [Report(Upd(turn=turn.turn, sender="ENV", cells=self.env.answer(changed)))]
 
-    def _answer(self, query: object, ask: Ask) -> Reply:
+    def _answer(self, query: object, ask: Ask) -> ReplyToQuery:
         if ask.turn != 0:
             self._sync()
         kinds, drones = self.env.survey(ask.cells, ask.around, drones=ask.turn != 0)
-        return Reply(query, Ans(turn=ask.turn, sender="ENV", kinds=kinds, drones=drones))
+        return ReplyToQuery(query, Ans(turn=ask.turn, sender="ENV", kinds=kinds, drones=drones))
 
     @staticmethod
     def _refuse(query: object, err: RemoteInputError) -> list[Effect]:

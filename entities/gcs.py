@@ -277,7 +277,7 @@ OBSERVED_ENDS = frozenset({EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndR
 
 
 @dataclass(frozen=True, slots=True)
-class Send:
+class SendDone:
     """Publish this DONE on the ground station's key (`ahead`: before its phase has begun)."""
 
     msg: Done
@@ -298,7 +298,7 @@ class End:
     over: Over
 
 
-Effect = Send | Show | End
+Effect = SendDone | Show | End
 
 
 class Station:
@@ -380,7 +380,7 @@ class Station:
         self.want(new)
         in_force = targets_of(self.tracks.last) if self.tracks.last is not None else None
         self.answered, self.pending = max(self.answered, turn), None
-        return [Send(gcs_done(turn, self.wanted, intent, in_force))]
+        return [SendDone(gcs_done(turn, self.wanted, intent, in_force))]
 
     def intent(self, turn: int) -> Intent:
         if self.quit_at is not None:
@@ -395,7 +395,7 @@ class Station:
             return self._ahead(turn)
         if self.scripted and self.quit_at is not None and turn >= self.quit_at:
             self.answered = turn
-            return [Send(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
+            return [SendDone(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
         self.want(self.plan.at(turn))
         if self.hold:
             self.pending = turn
@@ -412,7 +412,7 @@ class Station:
             return []
         turns = turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead)
         self.answered = max([self.answered, *turns])
-        return [Send(gcs_done(ahead, {}, self.intent(ahead)), ahead=True) for ahead in turns]
+        return [SendDone(gcs_done(ahead, {}, self.intent(ahead)), ahead=True) for ahead in turns]
 
     def _status(self, status: Status) -> list[Effect]:
         if status.turn < self.status_turn:

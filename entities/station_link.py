@@ -15,7 +15,7 @@ from network.membership import Membership
 from network.transport import Inbox, Outbox, Presence, Received, session_id
 from schema import Connect, Keys, Over, Phase, Role, Status, Turn, Welcome
 
-from .gcs import Effect, End, Send, Show
+from .gcs import Effect, End, SendDone, Show
 
 
 class Core(Protocol):
@@ -47,7 +47,7 @@ def publisher(out: Outbox, keys: Keys, logger: logging.Logger,
     """Carries out a station's effects: a DONE is published, a text shown."""
     def perform(effect: Effect) -> None:
         match effect:
-            case Send(msg, ahead):
+            case SendDone(msg, ahead):
                 out.put(keys.gcs_done, msg)
                 logger.debug("answered turn %d%s: %d targets, %s", msg.turn, " ahead" if ahead else "",
                              len(msg.targets), msg.intent.value)

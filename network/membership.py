@@ -18,7 +18,7 @@ from schema import Connect, Keys, Over, Refused, Status, Turn, Welcome
 from schema.errors import RejectCounter, RemoteInputError, UsageError
 
 
-class Refusal(UsageError):
+class NotAdmitted(UsageError):
     """The coordinator refused this entity (e.g. its role is already taken)."""
 
 
@@ -38,7 +38,7 @@ def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Lo
             # No queryable yet: wait for the coordinator's presence token instead of polling blindly.
             await_presence(session, keys.alive_of("SRV"), end - time.monotonic())
     if isinstance(reply, Refused):
-        raise Refusal(f"connection refused: {reply.text}")
+        raise NotAdmitted(f"connection refused: {reply.text}")
     assert isinstance(reply, Welcome)
     logger.info("%s", reply.text)
     return reply, coordinator
@@ -84,7 +84,7 @@ class Membership:
             try:
                 self.welcome, self.coordinator = admit(self.session, self.keys, self.hello, self.log,
                                                       timeout=self.connect_timeout)
-            except Refusal as err:
+            except NotAdmitted as err:
                 self.log.warning("%s: %s takes no further part and leaves at the end of the game",
                                  err, self.hello.sender)
                 return None

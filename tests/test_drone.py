@@ -18,7 +18,7 @@ from entities.drone import (
     Expired,
     Query,
     Refusal,
-    Send,
+    SendMoves,
     Timer,
 )
 from entities.environment import Environment, build_world
@@ -95,7 +95,7 @@ def queries(effects, kind=None) -> list[Query]:
 
 
 def sent(effects) -> list:
-    return [e.msg for e in effects if isinstance(e, Send)]
+    return [e.msg for e in effects if isinstance(e, SendMoves)]
 
 
 def expected_nps(t: int, drones=("D01",), pos=None) -> list[Nps]:

@@ -11,7 +11,7 @@ import pytest
 
 from coordinator import journal
 from coordinator.config import DroneSpec, GameConfig, replace_config
-from coordinator.engine import Engine, Publish, Record, Refusal, Reply, Stage
+from coordinator.engine import Engine, Publish, Record, Refusal, ReplyToConnect, Stage
 from coordinator.resume import restore
 from entities.gcs import describe
 from entities.web.model import view_of
@@ -96,7 +96,7 @@ def refused(effects: list, error: type[RemoteInputError] = RemoteInputError, mat
 
 
 def reply(effects: list) -> Message:
-    replies = [e for e in effects if isinstance(e, Reply)]
+    replies = [e for e in effects if isinstance(e, ReplyToConnect)]
     assert len(replies) == 1
     return replies[0].msg
 
@@ -235,7 +235,7 @@ def test_welcome_texts_and_starts() -> None:
     w = reply(effects)
     assert w.text == "You are connected as D02"
     assert [(s.drone, s.pos) for s in w.starts] == [("D02", (1, 0, 0))]
-    assert effects == [Reply(effects[0].token, w)], "no game before everyone is there"
+    assert effects == [ReplyToConnect(effects[0].token, w)], "no game before everyone is there"
     assert e.stage is Stage.ADMITTING
 
 
@@ -252,7 +252,7 @@ def test_game_starts_when_everyone_is_there() -> None:
     assert e.connect(connect("GCS", Role.GCS), 2)[1:] == []
     assert e.connect(connect("D02", Role.DRONE, ("D02",), "seed"), 3)[1:] == []
     effects = e.connect(connect("ENV", Role.ENV), 4)
-    assert isinstance(effects[0], Reply) and isinstance(effects[0].msg, Welcome)
+    assert isinstance(effects[0], ReplyToConnect) and isinstance(effects[0].msg, Welcome)
     header, status, turn = effects[1:]
     assert isinstance(header, Record)
     data = dict(header.data)
@@ -358,7 +358,7 @@ def test_no_joining_a_running_or_finished_game() -> None:
     g.feed(g.engine.vanished("ENV"))
     assert g.stage is Stage.GCS, "the game waits for the environment to come back"
     assert g.engine.deadline() == g.engine.config.env_grace
-    g.feed(g.engine.expire(*g.engine.clock()))
+    g.feed(g.engine.expire(*g.engine.deadline_key()))
     assert g.stage is Stage.OVER and g.engine.end.reason is EndReason.ABORTED
     effects = g.engine.connect(connect("ENV", Role.ENV), 2)
     assert isinstance(reply(effects), Refused) and reply(effects).text == "the game is over"
@@ -932,7 +932,7 @@ def test_vanished_env_aborts_after_its_grace_and_unknown_or_late_vanish_ignored(
     g = Game()
     assert g.engine.vanished("H77") == []
     assert g.feed(g.engine.vanished("ENV")) == []
-    effects = g.feed(g.engine.expire(*g.engine.clock()))
+    effects = g.feed(g.engine.expire(*g.engine.deadline_key()))
     assert pubs(effects, Over)[0].reason is EndReason.ABORTED
     assert g.engine.vanished("D01") == []
     assert g.engine.vanished("GCS") == []
@@ -1305,6 +1305,6 @@ def test_a_resumed_game_waits_for_its_ground_station_a_grace_period() -> None:
 
 def test_a_resumed_game_goes_on_without_a_ground_station_that_does_not_come_back() -> None:
     e, _ = resumed()
-    effects = e.expire(*e.clock())
+    effects = e.expire(*e.deadline_key())
     assert [(t.turn, t.phase) for t in pubs(effects, Turn)] == [(3, Phase.DRONES)]
     assert pubs(effects, Turn)[0].orders == (Order(drone="D01", pos=(2, 0, 0), target=(4, 0, 0)),)

@@ -14,7 +14,7 @@ from entities.environment import (
     Fail,
     Follow,
     Refusal,
-    Reply,
+    ReplyToQuery,
     Report,
     build_world,
 )
@@ -268,7 +268,7 @@ def status_of(turn: int, **cells) -> Status:
 
 def replied(effects, query) -> Any:  # (an Ans or a WorldMap, as the query asked)
     (eff,) = [e for e in effects if getattr(e, "query", None) == query]
-    assert isinstance(eff, Reply), effects
+    assert isinstance(eff, ReplyToQuery), effects
     return eff.msg
 
 

@@ -405,7 +405,7 @@ def test_a_script_answers_ahead_up_to_its_next_change() -> None:
 # --------------------------------------------------------------------------- the protocol (Station)
 
 
-from entities.gcs import FINAL_STATUS_WAIT, End, Send, Show, Station  # noqa: E402
+from entities.gcs import FINAL_STATUS_WAIT, End, SendDone, Show, Station  # noqa: E402
 from schema import EndReason, Over, Phase, Turn  # noqa: E402
 
 
@@ -424,7 +424,8 @@ def status(t: int, *drones: DroneStatus) -> Status:
 
 def sent(effects) -> list[tuple[int, dict, Intent]]:
     """The DONEs among `effects`: (turn, the targets they carry, intent)."""
-    return [(e.msg.turn, {a.drone: a.pos for a in e.msg.targets}, e.msg.intent) for e in effects if isinstance(e, Send)]
+    return [(e.msg.turn, {a.drone: a.pos for a in e.msg.targets}, e.msg.intent)
+            for e in effects if isinstance(e, SendDone)]
 
 
 def over(t: int, reason: EndReason) -> Over:

@@ -12,7 +12,7 @@ import pytest
 
 mav = pytest.importorskip("pymavlink.dialects.v20.ardupilotmega", reason="pymavlink (the mavlink extra) is needed")
 
-from entities.gcs import Ground, Plan, Send  # noqa: E402
+from entities.gcs import Ground, Plan, SendDone  # noqa: E402
 from entities.mavlink.bridge import COMMANDS_PER_TURN, Bridge  # noqa: E402
 from entities.mavlink.geo import DEFAULT_ORIGIN, BadPosition, Geo  # noqa: E402
 from entities.mavlink.node import Links, Packet, Reader, decode_datagram  # noqa: E402
@@ -103,12 +103,12 @@ def guided(b: Bridge, system: int) -> None:
     assert acks(effects) == [mav.MAV_RESULT_ACCEPTED] * 2
 
 
-def answer(b: Bridge, turn: int, now: float = 100.0, in_force: dict | None = None) -> Send:
+def answer(b: Bridge, turn: int, now: float = 100.0, in_force: dict | None = None) -> SendDone:
     """The bridge's DONE for the GCS phase of `turn`, after the STATUS of the turn before (with the targets
     `in_force`)."""
     b.receive(status(turn - 1, **{d: row(d, STARTS[d], target=c) for d, c in (in_force or {}).items()}), now)
     b.receive(Turn(turn=turn, sender="SRV", phase=Phase.GCS), now)
-    (done,) = [e for e in b.tick(now) if isinstance(e, Send)]
+    (done,) = [e for e in b.tick(now) if isinstance(e, SendDone)]
     return done
 
 
@@ -454,11 +454,11 @@ def test_the_phase_is_answered_at_the_turn_period_and_the_game_over_is_said() ->
     b.tick(0.0)
     b.receive(status(0), 0.0)
     assert [type(e) for e in b.receive(Turn(turn=1, sender="SRV", phase=Phase.GCS), 0.0)] == []
-    assert isinstance(b.tick(0.0)[0], Send)  # the first at once
+    assert isinstance(b.tick(0.0)[0], SendDone)  # the first at once
     b.receive(status(1), 0.05)
     b.receive(Turn(turn=2, sender="SRV", phase=Phase.GCS), 0.05)
     assert b.wake(0.05) == pytest.approx(0.20) and b.tick(0.1) == []
-    assert isinstance(b.tick(0.25)[0], Send)
+    assert isinstance(b.tick(0.25)[0], SendDone)
     effects = b.receive(Over(turn=2, sender="SRV", reason=EndReason.TURN_LIMIT, text="turn limit 2"), 0.3)
     texts = sent(effects, "STATUSTEXT")
     assert len(texts) == 3 and all("game over" in t.text for t in texts)

@@ -21,7 +21,7 @@ import pytest
 from coordinator.config import DroneSpec, GameConfig
 from coordinator.journal import dumps
 from dronesim.local import Inputs, simulate
-from entities.gcs import Ground, Plan, Send
+from entities.gcs import Ground, Plan, SendDone
 from entities.web import node as web_node
 from entities.web.model import GroundState, Rejected, parse_cell, world_json
 from entities.web.replay import Replay
@@ -76,7 +76,7 @@ def started(pace: float = 0.5, drones=("D01", "D02"), plan: Plan = NO_PLAN) -> G
 def answer(g: GroundState, now: float) -> tuple[int, dict, Intent]:
     """The pending phase answered: its DONE's turn, the targets it carries (those that change), its intent."""
     [send] = g.answer(now)
-    assert isinstance(send, Send)
+    assert isinstance(send, SendDone)
     return send.msg.turn, {a.drone: a.pos for a in send.msg.targets}, send.msg.intent
 
 

@@ -1,7 +1,7 @@
 """The MAVLink ground station's core, pure: the fleet of `Vehicle`s around the ground station's protocol
 (`entities.gcs.Station`, held as the web page holds it). It plays `station_link.play`'s `Core` (the game's
 TURN, STATUS and OVER) and takes the clients' decoded messages (`packet`), and returns effects: MAVLink messages
-to send (`Mav`), the station's DONE (`Send`), refusals. Times are seconds of any monotonic clock.
+to send (`Mav`), the station's DONE (`SendDone`), refusals. Times are seconds of any monotonic clock.
 
 - Dispatch: a message for system n goes to vehicle n; on vehicle n's API port, system 0 means n and any other
   system is refused; on the ground station's shared link, a command must name its system.
