@@ -372,3 +372,87 @@ def test_export_refuses_what_is_not_a_journal(tmp_path: Path, capsys: pytest.Cap
     assert main([str(bad), "--mcap", str(tmp_path / "x.mcap")]) == 2
     assert "not a dronesim journal" in capsys.readouterr().err
     assert main([str(tmp_path / "missing"), "--mcap", str(tmp_path / "x.mcap")]) == 2
+
+
+# ------------------------------------------------------------------------------------------ Foxglove live
+
+
+def scene_decoder(channel: dict):
+    """A protobuf message class for a channel advertised with a protobuf schema (base64 FileDescriptorSet)."""
+    import base64
+
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    files = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(channel["schema"]))
+    pool = descriptor_pool.DescriptorPool()
+    for proto in files.file:
+        pool.Add(proto)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(channel["schemaName"]))
+
+
+def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
+    """`dronesim ros2 --foxglove`: a WebSocket client negotiating foxglove.sdk.v1 sees every channel advertised,
+    subscribes, and decodes the poses (the journal's cells), /tf and the scene (protobuf); the old subprotocol
+    is refused."""
+    ws = pytest.importorskip("websockets.sync.client", reason="websockets is in the ros2 extra")
+    import json
+
+    from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+    journal = tmp_path / "game.journal"
+    with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
+        viewer = c.start("ROS2", "ros2", "--foxglove", "127.0.0.1:0")
+        url = viewer.expect(r"foxglove on ws://").rsplit(" ", 1)[1]
+        srv = c.start("SRV", "coordinator", "--seed", "7", "--size", "10,10,8", "--drones", "2", "--max-turns",
+                      "60", "--pace", "0.05", "--journal", str(journal), "--admit-deadline", "60")
+        srv.expect("coordinator ready")
+        c.start("ENV", "env", "--no-draw")
+        for d in ("D01", "D02"):
+            c.start(d, "drone", "--id", d, "--autopilot", "seed")
+        c.start("GCS", "gcs", "--ros2", "--quiet", "--no-draw")  # (no target: the drones hover to the turn limit)
+        with pytest.raises(InvalidStatus):
+            ws.connect(url, subprotocols=["foxglove.websocket.v1"], open_timeout=10).close()
+        got: dict[str, list] = {}
+        with ws.connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=10, max_size=None) as conn:
+            assert conn.subprotocol == "foxglove.sdk.v1"
+            channels: dict[int, dict] = {}
+            subscribed: dict[int, dict] = {}
+            want = {"/dronesim/D01/pose", "/tf", "/dronesim/scene", "/dronesim/markers"}
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not (len(got.get("/dronesim/D01/pose", ())) > 5
+                                                       and "/dronesim/scene" in got and "/tf" in got):
+                try:
+                    frame = conn.recv(timeout=5)
+                except TimeoutError:
+                    continue
+                except ConnectionClosed:  # the game is over: the viewer has stopped its server
+                    break
+                if isinstance(frame, str):
+                    msg = json.loads(frame)
+                    if msg.get("op") == "advertise":
+                        fresh = [ch for ch in msg["channels"] if ch["topic"] in want and ch["id"] not in channels]
+                        channels.update({ch["id"]: ch for ch in fresh})
+                        subs = [{"id": 100 + ch["id"], "channelId": ch["id"]} for ch in fresh]
+                        subscribed.update({100 + ch["id"]: ch for ch in fresh})
+                        if subs:
+                            conn.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                    continue
+                assert frame[0] == 1  # message data
+                sub, log_time = struct.unpack_from("<IQ", frame, 1)
+                ch = subscribed[sub]
+                if ch["schemaEncoding"] == "protobuf":
+                    decoded = scene_decoder(ch).FromString(frame[13:])
+                else:
+                    assert ch["encoding"] == "cdr" and ch["schemaEncoding"] == "ros2msg"
+                    decoded = deserialize(frame[13:], ch["schemaName"])
+                got.setdefault(ch["topic"], []).append((log_time, decoded))
+        codes = c.wait_all(timeout=120)
+    assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
+    cells, _ = journal_cells(journal)
+    assert len(got["/dronesim/D01/pose"]) > 5
+    for log_time, msg in got["/dronesim/D01/pose"]:
+        p = msg.pose.position
+        assert (p.x, p.y, p.z) == cells[round(log_time / 1e8)]["D01"]
+    assert [t.child_frame_id for t in got["/tf"][-1][1].transforms] == ["D01", "D02"]
+    ids = {e.id for _, update in got["/dronesim/scene"] for e in update.entities}
+    assert {"drone/D01", "drone/D02"} <= ids
