@@ -1,7 +1,7 @@
 """RL benchmark: steps per second of `dronesim.pettingzoo.parallel_env`, both backends, beside POGEMA's.
 
-    dronesim bench rl                       # 1, 16, 128 and 1000 drones, local and zenoh, and POGEMA
-    dronesim bench rl --repeat 3 --write    # three runs, ranges, "## RL environment" in BENCHMARKS.md
+    dronesim bench rl                       # 1, 16, 128 and 1000 drones, safe and random, three runs, and POGEMA
+    dronesim bench rl --write               # the same, "## RL environment" in BENCHMARKS.md
     dronesim bench rl --quick --no-pogema   # a tiny subset (used by the tests)
     dronesim bench rl --few-gain --counts 1,16,64   # the drone-by-drone path on beside off (performance.md)
     dronesim bench rl --ahead-gain --counts 1,128   # the zenoh backend's MOVES ahead on beside off (idem)
@@ -10,16 +10,19 @@ Each run measures, at every agent count, one after the other (the machine's spee
 PettingZoo integration (`pogema.integrations.pettingzoo.parallel_env`, in its own cached virtual environment,
 benchmarks/pogema.py: a 64x64 grid of obstacle density 0.3, observation radius 5, uniformly random actions,
 agents staying on their targets) and our `parallel_env` with backend="local" (in this process: drone by drone
-up to 64 drones, else the engine), alternately in `--slices` slices of `--seconds` (on a shared machine a
-burst of other work then slows both alike), then our backend="zenoh" (every step a turn of the coordinator and
-environment processes, through a router in this process). Ours: a 64x64x16 generated world, observation
-radius 2 (a cube of 125 cells, POGEMA's 121), on_target="stay". Only the step calls are timed, after 20
-warm-up steps (in every slice), for `--seconds` of stepping.
+up to 64 drones, else the engine) under two policies, alternately in `--slices` slices of `--seconds` (on a
+shared machine a burst of other work then slows all alike), then our backend="zenoh" (every step a turn of the
+coordinator and environment processes, through a router in this process) under the safe policy. Ours: a
+64x64x16 world generated from seed 1 and given (every episode on it, as POGEMA's map is one per seed),
+observation radius 2 (a cube of 125 cells, POGEMA's 121), on_target="stay". The step calls are timed, after 20
+warm-up steps (in every slice), for `--seconds` of stepping; with the random policy the resets too.
 
-Our drones die where POGEMA's agents would only be blocked, so random actions would empty the world within
-a few dozen steps: the policy here is random among the moves its observation shows to be safe (hover, or a
-free neighbour cell next to no other drone), which never kills a drone (no building, no border, and no two
-drones can choose one cell or swap). The table says how many agents were still acting at the end.
+Policies. "safe": random among the moves its observation shows to be safe (hover, or a free neighbour cell
+next to no other drone), which never kills a drone (no building, no border, and no two drones can choose one
+cell or swap): every step has all its agents, as POGEMA's, whose agents are only blocked where ours die.
+"random": uniformly random actions, as POGEMA's; drones die, an episode ends when every drone has, and the
+environment is reset then (timed: a reset is part of what a policy that dies costs). The table says how many
+agents were acting at the end (safe) and how many episodes the random policy played.
 """
 
 from __future__ import annotations
@@ -76,31 +79,49 @@ class SafeRandom:
         return np.argmax(self.rng.random(allowed.shape) * allowed, axis=1)
 
 
-def ours(backend: str, n: int, seconds: float, few_drones: int | None = None,
-         moves_ahead: bool = True) -> tuple[float, int]:
-    """Steps per second of our parallel_env with `n` drones on `backend`, and the agents acting at the end;
-    `few_drones`: the env's (None: its default; 0: the engine's path whatever the count); `moves_ahead`: the
-    zenoh backend's (False: each MOVES waits for its drones' phase)."""
+POLICIES = ("safe", "random")
+
+
+def world():
+    """The benchmark's world: generated from seed 1 (as `parallel_env(size=SIZE, seed=1)`'s first episode's)."""
+    from world.grid import World
+
+    return World.generate(SIZE, np.random.default_rng(1), keep_free=())
+
+
+def ours(backend: str, n: int, seconds: float, few_drones: int | None = None, moves_ahead: bool = True,
+         policy: str = "safe") -> tuple[float, int, int]:
+    """Steps per second of our parallel_env with `n` drones on `backend` under `policy` (POLICIES), the agents
+    acting at the end and the episodes reset; `few_drones`: the env's (None: its default; 0: the engine's path
+    whatever the count); `moves_ahead`: the zenoh backend's (False: each MOVES waits for its drones' phase)."""
     from dronesim.pettingzoo import parallel_env
 
-    env = parallel_env(num_drones=n, size=SIZE, obs_radius=RADIUS, on_target="stay", max_cycles=10**6, seed=1,
+    env = parallel_env(num_drones=n, world=world(), obs_radius=RADIUS, on_target="stay", max_cycles=10**6, seed=1,
                        backend=backend)
     if few_drones is not None:
         env.few_drones = few_drones
     env.moves_ahead = moves_ahead
-    policy = SafeRandom(RADIUS)
+    safe = SafeRandom(RADIUS) if policy == "safe" else None
+    rng = np.random.default_rng(0)
     try:
         obs, _ = env.reset(seed=1)
-        steps, spent = 0, 0.0
-        while spent < seconds and env.agents:
+        steps, spent, resets = 0, 0.0, 0
+        while spent < seconds and (env.agents or safe is None):
+            reset = 0.0
+            if not env.agents:  # (random: every drone died; the reset is timed with the steps)
+                t0 = time.perf_counter()
+                obs, _ = env.reset()
+                reset = time.perf_counter() - t0
+                resets += 1
             agents = env.agents
-            actions = dict(zip(agents, policy(np.stack([obs[a] for a in agents])).tolist()))
+            chosen = safe(np.stack([obs[a] for a in agents])) if safe is not None else rng.integers(0, 7, len(agents))
+            actions = dict(zip(agents, chosen.tolist()))
             t0 = time.perf_counter()
             obs = env.step(actions)[0]
             if steps >= WARMUP:
-                spent += time.perf_counter() - t0
+                spent += time.perf_counter() - t0 + reset
             steps += 1
-        return (steps - WARMUP) / spent if spent else float("nan"), len(env.agents)
+        return (steps - WARMUP) / spent if spent else float("nan"), len(env.agents), resets
     finally:
         env.close()
 
@@ -113,16 +134,18 @@ def _range(values: list[float], fmt: str) -> str:
 
 def run(counts: tuple[int, ...], seconds: float, repeat: int, with_pogema: bool,
         slices: int = SLICES) -> tuple[str, bool, list[str]]:
-    """(the table, whether every target was met, notes) over `repeat` runs."""
-    rates: dict[tuple[str, int], list[float]] = {}
-    acting: dict[tuple[str, int], list[int]] = {}
+    """(the table, whether every target was met, notes) over `repeat` runs: a row per agent count and policy."""
+    rates: dict[tuple[str, int, str], list[float]] = {}  # (backend, agents, policy) -> a rate per run
+    acting: dict[tuple[str, int, str], list[int]] = {}  # ... -> the agents acting at the end (safe)
+    episodes: dict[int, list[int]] = {}  # agents -> episodes reset per run (random)
     notes: list[str] = []
     for r in range(repeat):
-        for n in counts:  # the three side by side, within seconds of each other: the machine's speed drifts
-            # POGEMA and the local backend alternate in `slices` slices each (a burst of other work on the
-            # shared machine then slows both alike); each figure is the mean of its slices' rates
+        for n in counts:  # side by side, within seconds of each other: the machine's speed drifts
+            # POGEMA and the local backend's two policies alternate in `slices` slices each (a burst of other
+            # work on the shared machine then slows all alike); each figure is the mean of its slices' rates
             pog: list[float] | None = [] if with_pogema else None
-            local: list[float] = []
+            local: dict[str, list[float]] = {p: [] for p in POLICIES}
+            resets = 0
             for _ in range(slices):
                 if pog is not None:
                     try:
@@ -131,43 +154,52 @@ def run(counts: tuple[int, ...], seconds: float, repeat: int, with_pogema: bool,
                         notes.append(f"run {r + 1}, {n} agents: POGEMA not measured: {err}")
                         print(f"  POGEMA: {err}", file=sys.stderr)
                         pog = None
-                rate, left = ours("local", n, seconds / slices)
-                local.append(rate)
+                for policy in POLICIES:
+                    rate, left, reset = ours("local", n, seconds / slices, policy=policy)
+                    local[policy].append(rate)
+                    if policy == "safe":
+                        acting.setdefault(("local", n, policy), []).append(left)
+                    resets += reset
             if pog:
-                rates.setdefault(("pogema", n), []).append(sum(pog) / len(pog))
-            measured = [("local", sum(local) / len(local), left), ("zenoh", *ours("zenoh", n, seconds))]
-            for backend, rate, left in measured:
-                rates.setdefault((backend, n), []).append(rate)
-                acting.setdefault((backend, n), []).append(left)
-                print(f"  run {r + 1}: {backend} {n} drones: {rate:.1f} steps/s "
-                      f"(POGEMA {rates.get(('pogema', n), [float('nan')])[-1]:.1f})", file=sys.stderr, flush=True)
-    head = ("agents", "POGEMA PettingZoo steps/s", "local steps/s", "local ÷ POGEMA", "zenoh steps/s",
-            "zenoh ÷ POGEMA", "agents acting at the end (local / zenoh)", "target")
+                rates.setdefault(("pogema", n, "random"), []).append(sum(pog) / len(pog))
+            episodes.setdefault(n, []).append(resets + slices)
+            for policy in POLICIES:
+                rates.setdefault(("local", n, policy), []).append(sum(local[policy]) / slices)
+            rate, left, _ = ours("zenoh", n, seconds)
+            rates.setdefault(("zenoh", n, "safe"), []).append(rate)
+            acting.setdefault(("zenoh", n, "safe"), []).append(left)
+            print(f"  run {r + 1}, {n} drones: local {rates[('local', n, 'safe')][-1]:.1f} (safe), "
+                  f"{rates[('local', n, 'random')][-1]:.1f} (random), zenoh {rate:.1f} (safe) steps/s; POGEMA "
+                  f"{rates.get(('pogema', n, 'random'), [float('nan')])[-1]:.1f}", file=sys.stderr, flush=True)
+    head = ("agents", "policy", "POGEMA PettingZoo steps/s", "local steps/s", "local ÷ POGEMA", "zenoh steps/s",
+            "zenoh ÷ POGEMA", "agents acting at the end (local / zenoh); episodes", "target")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     ok = True
     for n in counts:
-        pog = rates.get(("pogema", n), [])
-        local, zen = rates[("local", n)], rates[("zenoh", n)]
-        paired = len(pog) == repeat
-        lr = [a / b for a, b in zip(local, pog)] if paired else []
-        zr = [a / b for a, b in zip(zen, pog)] if paired else []
-        verdicts = []
-        if not paired:
-            verdicts.append("not judged: POGEMA not measured in every run")
-            ok = False
-        else:
-            met = min(lr) >= LOCAL_RATIO
-            verdicts.append(f"local ≥ POGEMA: {'met' if met else 'UNMET'}")
-            ok &= met
-            if n == ZENOH_AT:
-                met = min(zr) >= ZENOH_RATIO
-                verdicts.append(f"zenoh ≥ 25 % of POGEMA: {'met' if met else 'UNMET'}")
+        pog = rates.get(("pogema", n, "random"), [])
+        for policy in POLICIES:
+            ours_, zen = rates[("local", n, policy)], rates.get(("zenoh", n, policy), [])
+            paired = len(pog) == repeat
+            lr = [a / b for a, b in zip(ours_, pog)] if paired else []
+            zr = [a / b for a, b in zip(zen, pog)] if paired and zen else []
+            verdicts = []
+            if not paired:
+                verdicts.append("not judged: POGEMA not measured in every run")
+                ok = False
+            else:
+                met = min(lr) >= LOCAL_RATIO
+                verdicts.append(f"local ≥ POGEMA: {'met' if met else 'UNMET'}")
                 ok &= met
-        acting_at_end = f"{min(acting[('local', n)])} / {min(acting[('zenoh', n)])} of {n}"
-        lines.append("| " + " | ".join([
-            str(n), _range(pog, "{:.1f}") if pog else "—", _range(local, "{:.1f}"),
-            _range(lr, "{:.1f}x") if lr else "—", _range(zen, "{:.1f}"), _range(zr, "{:.2f}x") if zr else "—",
-            acting_at_end, "; ".join(verdicts)]) + " |")
+                if n == ZENOH_AT and zr:
+                    met = min(zr) >= ZENOH_RATIO
+                    verdicts.append(f"zenoh ≥ 25 % of POGEMA: {'met' if met else 'UNMET'}")
+                    ok &= met
+            end = (f"{min(acting[('local', n, policy)])} / {min(acting[('zenoh', n, policy)])} of {n}"
+                   if policy == "safe" else f"{_range([float(e) for e in episodes[n]], '{:.0f}')} episodes a run")
+            lines.append("| " + " | ".join([
+                str(n), policy, _range(pog, "{:.1f}") if pog else "—", _range(ours_, "{:.1f}"),
+                _range(lr, "{:.1f}x") if lr else "—", _range(zen, "{:.1f}") if zen else "—",
+                _range(zr, "{:.2f}x") if zr else "—", end, "; ".join(verdicts)]) + " |")
     return "\n".join(lines), ok, notes
 
 
@@ -206,8 +238,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="dronesim bench rl", description=__doc__.split("\n")[0])
     parser.add_argument("--counts", default=",".join(map(str, COUNTS)), help="agent counts (default 1,16,128,1000)")
     parser.add_argument("--seconds", type=float, default=2.0, help="seconds of stepping per measure (default 2)")
-    parser.add_argument("--repeat", type=int, default=1, help="runs; the table gives each figure's range (default 1)")
-    parser.add_argument("--quick", action="store_true", help="1 and 16 drones, 0.3 s each (for the tests)")
+    parser.add_argument("--repeat", type=int, default=3, help="runs; the table gives each figure's range (default 3)")
+    parser.add_argument("--quick", action="store_true", help="1 and 16 drones, 0.3 s each, one run (for the tests)")
     parser.add_argument("--no-pogema", dest="pogema", action="store_false",
                         help="do not measure POGEMA (installed once into a cached virtual environment)")
     parser.add_argument("--slices", type=int, default=SLICES,
@@ -223,7 +255,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         parser.error("--counts takes integers separated by commas")
     if args.quick:
-        counts, args.seconds = (1, 16), 0.3
+        counts, args.seconds, args.repeat = (1, 16), 0.3, 1
     if args.repeat < 1 or args.seconds <= 0 or min(counts) < 1 or args.slices < 1:
         parser.error("--repeat, --seconds, --slices and the counts must be positive")
     if args.few_gain or args.ahead_gain:
@@ -250,18 +282,23 @@ def main(argv: list[str] | None = None) -> int:
             f"{others:.2f} cores on average during the run"
             + (" (other work ran alongside: absolute numbers are pessimistic, ratios are taken within seconds)."
                if others > 0.2 else ".") + "\n\n"
-            "Targets (issue \"A PettingZoo environment\"): the local backend ≥ POGEMA's PettingZoo integration at "
-            "every agent count, the zenoh backend ≥ 25 % of it at 128 agents, in the same run.\n\n"
+            "Targets (issues \"A PettingZoo environment\" and \"Train with the tools RL researchers use\"): the "
+            "local backend ≥ POGEMA's PettingZoo integration at every agent count, under the safe policy and under "
+            "uniformly random actions (resets included), the zenoh backend ≥ 25 % of it at 128 agents, in the same "
+            "run.\n\n"
             f"{table}\n\n"
             f"Legend. Steps per second of `parallel_env(...).step` alone, after {WARMUP} warm-up steps, "
-            f"{args.seconds:g} s of stepping per figure; POGEMA and the local backend alternate in {args.slices} "
-            "slices of it (a new environment each, the figure the mean of their rates), so that a burst of other "
-            "work slows both alike; with several runs, each figure is the range over the runs and each ratio is "
-            "taken within a run. POGEMA: 1.4.0's `pogema.integrations.pettingzoo."
+            f"{args.seconds:g} s of stepping per figure; POGEMA and the local backend's two policies alternate in "
+            f"{args.slices} slices of it (a new environment each, the figure the mean of their rates), so that a "
+            "burst of other work slows all alike; with several runs, each figure is the range over the runs and "
+            "each ratio is taken within a run. POGEMA: 1.4.0's `pogema.integrations.pettingzoo."
             "parallel_env` in its own virtual environment, 64x64 grid, density 0.3, observation radius 5, random "
-            "actions, on_target \"nothing\". Ours: a generated 64x64x16 world, observation radius 2 (125 cells), "
-            "on_target \"stay\", random safe actions (benchmarks/rl.py: no drone dies, so every step has all "
-            "its agents); local = in this process (drone by drone up to 64 drones, `dronesim/rl_few.py`, else the "
+            "actions, on_target \"nothing\" (its agents never die: no reset). Ours: a 64x64x16 world generated from "
+            "seed 1 and given (every episode on it, as POGEMA's map), observation radius 2 (125 cells), "
+            "on_target \"stay\"; policy \"safe\": random safe actions (benchmarks/rl.py: no drone dies, so every "
+            "step has all its agents), \"random\": uniformly random actions, drones die, and an episode whose "
+            "drones have all died is reset, the reset timed with the steps (the episodes column); local = in this "
+            "process (drone by drone up to 64 drones, `dronesim/rl_few.py`, else the "
             "engine), zenoh = each step a turn of the coordinator and "
             "environment processes through a router in this process (the step's DONE and MOVES sent at once: one "
             "round trip).\n"

@@ -28,6 +28,7 @@ from dronesim.rl import (
     Layout,
     LocalTurns,
     Seen,
+    Terrain,
     Turns,
     int_in,
 )
@@ -61,6 +62,7 @@ class DroneParallelEnv(ParallelEnv):
         self._seeded = False
         self._turns: Turns | None = None
         self._eyes: Eyes | None = None
+        self._terrain: Terrain | None = None
         self.episode: Episode | FewEpisode | None = None
         #: Episodes of up to this many drones are played drone by drone (`FewEpisode`: the same steps, fewer
         #: array operations) on the local backend; 0: always by `Episode` and the engine.
@@ -107,7 +109,8 @@ class DroneParallelEnv(ParallelEnv):
         else:
             episode_seed = int(self._episodes.integers(2**31))
         self._seeded = True
-        layout = Layout.draw(self.config, episode_seed)
+        layout = Layout.draw(self.config, episode_seed, self._terrain)
+        self._terrain = layout.terrain  # (the next episode's, if it has the same world: a given one)
         self.episode = None
         if self.config.num_drones <= self.few_drones:
             self.episode = FewEpisode(self.config, layout, max_cycles, self._eyes)

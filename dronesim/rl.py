@@ -18,7 +18,7 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, NamedTuple, Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -45,9 +45,6 @@ from schema.messages import AROUND
 from schema.tables import MAX_DRONE, code_of, drone_name
 from schema.tuning import EYES_ONE_BY_ONE
 from world.grid import World, checked_int, inside_rows, padded_steps
-
-if TYPE_CHECKING:
-    from dronesim.rl_few import FewEpisode
 
 #: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
 ACTIONS: tuple[Cell, ...] = ((0, 0, 0), *AROUND)
@@ -181,28 +178,37 @@ def _choice(value: object, choices: tuple[str, ...], what: str) -> None:
 # --------------------------------------------------------------------------- an episode's layout
 
 
-def components(grid: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+def components(grid: np.ndarray, seeds: np.ndarray, label: np.ndarray | None = None) -> np.ndarray:
     """The label of every cell (C order, -1: a building or a free cell reached from no seed): the free cells
-    6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component."""
+    6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component. `label`: the
+    labels found so far (modified: a seed in a labelled component costs nothing; a new component's label is
+    one more than the largest so far)."""
     free = np.pad(~grid, 1)  # a blocked border: flat neighbours need no bounds checks
     sx, sy, offsets = padded_steps(grid.shape)
+    nx, ny, nz = grid.shape
     steps = np.array(offsets, np.int64)
-    label = np.full(free.size, -1, np.int64)
-    open_ = free.ravel().copy()
-    for i, (x, y, z) in enumerate(seeds.tolist()):
-        s = (x + 1) * sx + (y + 1) * sy + z + 1
-        if not open_[s]:
+    if label is None:
+        label = np.full(grid.size, -1, np.int64)
+    padded: np.ndarray | None = None  # (the padded labels: made once a new component is searched)
+    for x, y, z in seeds.tolist():
+        if label[(x * ny + y) * nz + z] >= 0 or grid[x, y, z]:
             continue  # in a component already labelled (or a building)
+        if padded is None:
+            padded = np.pad(label.reshape(grid.shape), 1, constant_values=-1).ravel()
+            open_ = free.ravel() & (padded < 0)
+        mark = int(label.max()) + 1
+        s = (x + 1) * sx + (y + 1) * sy + z + 1
         open_[s] = False
-        label[s] = i
+        padded[s] = mark
         frontier = np.array([s], np.int64)
         while frontier.size:
             nxt = (frontier[:, None] + steps).ravel()
             nxt = np.unique(nxt[open_[nxt]])
             open_[nxt] = False
-            label[nxt] = i
+            padded[nxt] = mark
             frontier = nxt
-    return label.reshape(free.shape)[1:-1, 1:-1, 1:-1].ravel()
+        label[:] = padded.reshape(free.shape)[1:-1, 1:-1, 1:-1].ravel()
+    return label
 
 
 def clear_cells(grid: np.ndarray) -> np.ndarray:
@@ -216,6 +222,51 @@ def clear_cells(grid: np.ndarray) -> np.ndarray:
     return clear
 
 
+class Terrain:
+    """What drawing an episode's layout needs of its world, computed once per world (an environment keeps it
+    while its episodes share a world, a given one): the free cells, the clear ones (`clear_cells`), the packed
+    grid, and the components of the free cells reached from the starts so far, with each one's cells."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        grid = world.grid.ravel()
+        self.free = np.flatnonzero(~grid)
+        self.clear_mask = clear_cells(world.grid).ravel()
+        self.clear = np.flatnonzero(self.clear_mask)
+        self.packed = world.packed()
+        self.label = np.full(grid.size, -1, np.int64)  # each cell's component, -1: not reached yet (`components`)
+        self._members: dict[int, np.ndarray] = {}
+
+    def fits(self, world: World) -> bool:
+        return world is self.world or world == self.world
+
+    def labels(self, start_lin: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        """The component of each start (flat cells `start_lin`, cells `starts`), labelling new ones."""
+        comp = self.label[start_lin]
+        if np.count_nonzero(comp < 0):
+            components(self.world.grid, starts[comp < 0], self.label)
+            comp = self.label[start_lin]
+        return comp
+
+    def members(self, comp: int) -> np.ndarray:
+        """The flat cells of component `comp` (ascending)."""
+        cells = self._members.get(comp)
+        if cells is None:
+            cells = self._members[comp] = np.flatnonzero(self.label == comp)
+        return cells
+
+
+def _pick(rng: np.random.Generator, cells: np.ndarray, taken: np.ndarray) -> int:
+    """A cell of `cells` (flat) not `taken`, drawn uniformly from `rng`; -1 if every one is taken."""
+    k = len(cells)
+    for _ in range(8):  # (most draws: the first try; a crowded component: the cells left, below)
+        cell = int(cells[int(rng.random() * k)]) if k else -1
+        if cell < 0 or not taken[cell]:
+            return cell
+    rest = cells[~taken[cells]]
+    return int(rest[int(rng.random() * len(rest))]) if len(rest) else -1
+
+
 @dataclass(frozen=True, slots=True)
 class Layout:
     """One episode's world, starts and first targets, and the generator that draws its later targets."""
@@ -224,69 +275,56 @@ class Layout:
     starts: np.ndarray  # (n, 3) int32, drone i + 1's start
     targets: np.ndarray  # (n, 3) int32
     reachable: np.ndarray  # (n,) bool: the target is in the start's component
-    label: np.ndarray  # each cell's component (see `components`), C order
+    terrain: Terrain
+    comp: np.ndarray  # (n,) each start's component (`Terrain.label`)
     rng: np.random.Generator
     clear: np.ndarray  # (n,) bool: the start is clear (`clear_cells`: no action kills at the first step)
 
     @classmethod
-    def draw(cls, config: Config, seed: int) -> Layout:
+    def draw(cls, config: Config, seed: int, terrain: Terrain | None = None) -> Layout:
         """The layout of an episode (docs/rl.md, "Layout and seeds"): starts among the clear cells, where there are
-        fewer than the drones every clear cell and the others among the free cells; a target with no free cell
-        left in its start's component is any free cell, and unreachable."""
+        fewer than the drones every clear cell and the others among the free cells; each target a free cell of
+        its start's component that no start or other target holds, or if none is left any such free cell, and
+        unreachable. `terrain`: the world's, if the caller has it (an environment's previous episode)."""
         rng = np.random.default_rng(seed)
         world = config.world if config.world is not None else World.generate(config.size, rng, keep_free=())
+        if terrain is None or not terrain.fits(world):
+            terrain = Terrain(world)
         n = config.num_drones
-        free = np.flatnonzero(~world.grid.ravel())
+        free, clear = terrain.free, terrain.clear
         if len(free) < 2 * n:
             raise ConfigError(f"the world of seed {seed} has {len(free)} free cells, too few for {n} drones "
                               "(a start and a target each)")
-        clear_grid = clear_cells(world.grid).ravel()
-        clear = np.flatnonzero(clear_grid)  # room around: no death at the first move
-        if len(clear) >= n:
-            start_lin = rng.choice(clear, n, replace=False)
+        if len(clear) >= n:  # room around: no death at the first move
+            start_lin = clear[(rng.random(n) * len(clear)).astype(np.intp)]
+            if n > 1 and len(np.unique(start_lin)) < n:  # (two drones drew one cell: draw them all without it)
+                start_lin = rng.choice(clear, n, replace=False)
         else:  # every clear cell, then free ones (`clear` says which starts are clear)
-            rest = rng.choice(np.flatnonzero(~world.grid.ravel() & ~clear_grid), n - len(clear), replace=False)
+            rest = rng.choice(np.flatnonzero(~world.grid.ravel() & ~terrain.clear_mask), n - len(clear),
+                              replace=False)
             start_lin = rng.permutation(np.concatenate([clear, rest]))
         starts = np.stack(np.unravel_index(start_lin, world.size), axis=1).astype(np.int32)
-        label = components(world.grid, starts)
+        comp = terrain.labels(start_lin, starts)
         taken = np.zeros(world.grid.size, bool)
         taken[start_lin] = True
-        order = rng.permutation(free)  # every free cell once, in a random order: targets are taken from it
-        order_label = label[order]
         targets = np.empty((n, 3), np.int32)
         reachable = np.ones(n, bool)
-        pointer: dict[int, int] = {}  # component (-2: any) -> how far its cells in `order` are used
-
-        def take(comp: int) -> int:
-            """The next cell of `order` in component `comp` (-2: any) not taken yet, or -1."""
-            at = pointer.get(comp, 0)
-            while at < len(order):
-                block = order[at:at + 256]
-                ok = ~taken[block] if comp == -2 else (order_label[at:at + 256] == comp) & ~taken[block]
-                hit = np.flatnonzero(ok)
-                if hit.size:
-                    pointer[comp] = at + int(hit[0]) + 1
-                    return int(block[hit[0]])
-                at += len(block)
-            pointer[comp] = at
-            return -1
-
-        for i, s in enumerate(start_lin.tolist()):
-            cell = take(int(label[s]))
+        nx, ny, nz = world.size
+        for i, c in enumerate(comp.tolist()):
+            cell = _pick(rng, terrain.members(c), taken)
             if cell < 0:
-                cell, reachable[i] = take(-2), False  # any free cell: unreachable
+                cell, reachable[i] = _pick(rng, free, taken), False  # any free cell: unreachable
             taken[cell] = True
-            targets[i] = np.unravel_index(cell, world.size)
-        return cls(world=world, starts=starts, targets=targets, reachable=reachable, label=label, rng=rng,
-                   clear=clear_grid[start_lin])
+            targets[i] = cell // (ny * nz), cell // nz % ny, cell % nz
+        return cls(world=world, starts=starts, targets=targets, reachable=reachable, terrain=terrain, comp=comp,
+                   rng=rng, clear=terrain.clear_mask[start_lin])
 
     def new_target(self, i: int, here: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, bool]:
         """A new target for drone row `i` at `here` (the lifelong variant): a free cell of its start's
         component other than `here` and the other targets (`others`, (n, 3)), drawn from the episode's
         generator; (the cell, whether it is reachable)."""
         size = self.world.size
-        comp = self.label[int(np.ravel_multi_index(tuple(self.starts[i]), size))]
-        cells = np.flatnonzero(self.label == comp)
+        cells = self.terrain.members(int(self.comp[i]))
         used = {tuple(c) for c in others.tolist()} | {tuple(here.tolist())}
         if len(cells) > len(used):
             while True:
@@ -297,7 +335,7 @@ class Layout:
 
     def game(self, max_turns: int, phase_deadline: float = 5.0) -> GameConfig:
         """The engine's game for this layout (the world given cell by cell: every backend builds the same)."""
-        spec = WorldSpec(size=self.world.size, cells=self.world.packed())
+        spec = WorldSpec(size=self.world.size, cells=self.terrain.packed)
         drones = tuple(DroneSpec(drone=drone_name(i + 1), start=(x, y, z))
                        for i, (x, y, z) in enumerate(self.starts.tolist()))
         return GameConfig(world=spec, drones=drones, max_turns=max_turns, phase_deadline=phase_deadline)
@@ -731,17 +769,21 @@ _CAUSE_TEXT = tuple(c.value.lower() for c in CAUSES)
 class Expert:
     """One of the project's autopilots per drone (D* by default) choosing each acting drone's action: an expert
     for imitation learning, or a baseline. It senses as a drone process does (the episode's world answers its
-    ASK), and a cooperative autopilot's drones give way to each other as in a game (coordinator/arbiter.py)."""
+    ASK). A cooperative autopilot's drones give way to each other by the former fixed-priority rule
+    (`coordinator.arbiter.arbitrate`: a drone whose move is claimed by a drone with a smaller id, or that would
+    swap cells with one, hovers), not by the PIBT that games run (`arbiter.cooperate`, which needs the engine's
+    priorities and each drone's ranked candidates): the expert's drones never collide with each other, but may
+    wait where a game's drones would go round."""
 
     def __init__(self, autopilot: str = "dstar") -> None:
         from entities.autopilots import pilot_class
 
         self.autopilot = autopilot
         self.cooperative = pilot_class(autopilot).cooperative
-        self._episode: Episode | FewEpisode | None = None
+        self._episode: EpisodeBase | None = None
         self._pilots: dict[str, object] = {}
 
-    def actions(self, episode: Episode | FewEpisode) -> dict[int, int]:
+    def actions(self, episode: EpisodeBase) -> dict[int, int]:
         """row -> action of every acting drone of `episode` at its current turn."""
         from coordinator.arbiter import arbitrate
         from entities.autopilots import make_autopilot
@@ -750,15 +792,16 @@ class Expert:
 
         if episode is not self._episode:  # a new episode: fresh pilots (they remember the world they saw)
             self._episode, self._pilots = episode, {}
-        alive = np.flatnonzero(episode.state == ALIVE).tolist()
-        here = {drone_name(i + 1): c for i, c in zip(alive, map(tuple, episode.pos[alive].tolist()))}
+        pos, state, targets, acting_ = episode.columns()
+        alive = np.flatnonzero(state == ALIVE).tolist()
+        here = {drone_name(i + 1): c for i, c in zip(alive, map(tuple, pos[alive].tolist()))}
         env = Environment(episode.world, here)
-        acting = {i: drone_name(i + 1) for i in alive if episode.acting[i]}
+        acting = {i: drone_name(i + 1) for i in alive if acting_[i]}
         steps = {}
         for i, d in acting.items():
             if d not in self._pilots:
                 self._pilots[d] = make_autopilot(self.autopilot, world_size=episode.world.size)
-            steps[d] = self._pilots[d].step(here[d], tuple(episode.targets[i].tolist()))  # type: ignore[attr-defined]
+            steps[d] = self._pilots[d].step(here[d], tuple(targets[i].tolist()))  # type: ignore[attr-defined]
         decided = drive(fly_round(steps), env.oracle)
         wants = {d: decided[d].pos if d in decided else c for d, c in here.items()}
         if self.cooperative:

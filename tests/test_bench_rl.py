@@ -1,5 +1,6 @@
-"""`dronesim bench rl --quick`: the table has both backends at each count, and the benchmark's policy kills
-no drone (every step has all its agents). Behaviour only: no wall-clock assertion."""
+"""`dronesim bench rl --quick`: the table has a safe and a random row at each count, both backends for the
+safe policy, which kills no drone (every step has all its agents), and the random policy's episodes (resets).
+Behaviour only: no wall-clock assertion."""
 
 from __future__ import annotations
 
@@ -19,12 +20,16 @@ def test_quick_run_writes_the_table(capsys, tmp_path):
     assert rl.main(["--quick", "--no-pogema", "--write", "--output", str(out_file)]) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("| ")]
     head = [c.strip() for c in lines[0].strip("|").split("|")]
-    rows = {cells[0]: dict(zip(head, cells)) for cells in
+    rows = {(cells[0], cells[1]): dict(zip(head, cells)) for cells in
             ([c.strip() for c in ln.strip("|").split("|")] for ln in lines[1:])}
-    assert set(rows) == {"1", "16"}
-    for n, row in rows.items():
-        assert float(row["local steps/s"]) > 0 and float(row["zenoh steps/s"]) > 0
-        assert row["agents acting at the end (local / zenoh)"] == f"{n} / {n} of {n}"
+    assert set(rows) == {(n, p) for n in ("1", "16") for p in ("safe", "random")}
+    for (n, policy), row in rows.items():
+        assert float(row["local steps/s"]) > 0
+        end = row["agents acting at the end (local / zenoh); episodes"]
+        if policy == "safe":  # the safe policy kills no drone: every step has all its agents
+            assert float(row["zenoh steps/s"]) > 0 and end == f"{n} / {n} of {n}"
+        else:  # uniformly random actions: drones die, episodes end and are reset (each slice starts one)
+            assert row["zenoh steps/s"] == "—" and int(end.split()[0]) >= rl.SLICES
         assert row["target"].startswith("not judged")  # no POGEMA, no verdict
     text = out_file.read_text(encoding="utf-8")
     assert "## Performance\n\nkept" in text and "## RL environment" in text
