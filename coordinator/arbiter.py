@@ -67,6 +67,11 @@ class Timed:
         self.calls += 1
         return out
 
+    def __getattr__(self, name: str) -> Any:
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)  # (the search's `follow`, `unsolvable`, its counts)
+
 
 def arbitrate(before: Mapping[K, Cell], proposed: Mapping[K, Cell], cooperative: Set[K]) -> dict[K, Cell]:
     """The moves after arbitration: `proposed` with some cooperative drones' moves turned into hovers (drones
@@ -108,7 +113,7 @@ class OpenCells:
     (`flat_cells`: padded by one blocked cell each side) is no building, else 0. One bit a cell, made a slab at a
     time (never a padded copy of the world, even for a moment: the coordinator's peak memory counts it)."""
 
-    __slots__ = ("_bits",)
+    __slots__ = ("_bits", "_count")
 
     SLAB = 8 * 512  # cells made at a time (a multiple of 8: whole bytes; its index arrays: a few 32 KiB)
 
@@ -117,6 +122,7 @@ class OpenCells:
         solid = np.ascontiguousarray(grid, bool).reshape(-1)
         total = -(-(X + 2) * (Y + 2) * (Z + 2) // 8) * 8
         bits = bytearray(total // 8)
+        self._count = 0
         for start in range(0, total, self.SLAB):
             u = np.arange(start, min(start + self.SLAB, total))
             z, rest = u % (Z + 2) - 1, u // (Z + 2)
@@ -124,11 +130,20 @@ class OpenCells:
             inside = (x >= 0) & (x < X) & (y >= 0) & (y < Y) & (z >= 0) & (z < Z)
             free = np.zeros(len(u), bool)
             free[inside] = ~solid[((x * Y + y) * Z + z)[inside]]
+            self._count += int(np.count_nonzero(free))
             bits[start // 8:(start + len(u)) // 8] = np.packbits(free, bitorder="little").tobytes()
         self._bits = bytes(bits)
 
     def __getitem__(self, u: int) -> int:
         return self._bits[u >> 3] >> (u & 7) & 1
+
+    def array(self) -> np.ndarray:
+        """Every flat cell's bit, as a bool array (a byte a cell: for the search's graph, coordinator/lacam.py)."""
+        return np.unpackbits(np.frombuffer(self._bits, np.uint8), bitorder="little").astype(bool)
+
+    def count(self) -> int:
+        """How many cells are open."""
+        return self._count
 
 
 def cells_of(flat: np.ndarray, size: Cell) -> np.ndarray:

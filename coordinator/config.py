@@ -65,6 +65,10 @@ class DroneTable(Sequence[DroneSpec]):
         return f"DroneTable({list(self)!r})"
 
 
+#: The arbitrations a game may choose: the complete search (coordinator/lacam.py, the default) or PIBT alone.
+ARBITERS = ("lacam", "pibt")
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class GameConfig:
     world: WorldSpec
@@ -77,8 +81,11 @@ class GameConfig:
     env_grace: float = 30.0  # seconds the game waits for a vanished environment to come back
     link_grace: float = 30.0  # seconds the game holds for the entities after a lost link (a router restart)
     gcs_grace: float = 30.0  # seconds a resumed game waits for its ground station once the others are back
+    arbiter: str = "lacam"  # the cooperative drones' arbitration: ARBITERS (journaled in the header if not lacam)
 
     def __post_init__(self) -> None:
+        if self.arbiter not in ARBITERS:
+            raise UsageError(f"arbiter {self.arbiter!r}: one of {', '.join(ARBITERS)}")
         if not self.drones:
             raise UsageError("a game needs at least one drone")
         # (checked as columns: a swarm's drones as records, sets and lists would double its scenario's peak)

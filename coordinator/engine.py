@@ -67,7 +67,7 @@ from schema.tables import code_of, drone_name, drone_number
 from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 
-from . import arbiter, observer
+from . import arbiter, lacam, observer
 from .admission import Roster
 from .config import GameConfig
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
@@ -132,8 +132,9 @@ class Engine:
         self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
         self.priority = np.zeros(n, np.int64)  # each drone's for the arbitration (`age`): from the journaled turns
         self._gave_way = np.zeros(n, bool)  # who gave way this turn (arbiter.pibt)
-        #: The arbitration: arbiter.cooperate (PIBT), or arbiter.fixed (the former rule, for the benchmark).
-        self.arbiter: arbiter.Arbiter = arbiter.cooperate
+        #: The arbitration: the search (lacam.Lacam), arbiter.cooperate (PIBT), or arbiter.fixed (the former rule,
+        #: for the benchmark).
+        self.arbiter: arbiter.Arbiter = lacam.Lacam() if config.arbiter == "lacam" else arbiter.cooperate
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log = TurnLog(0)
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
@@ -321,15 +322,29 @@ class Engine:
         ("yielded") and who gave way ("gave_way": their priority resets)."""
         fleet = self.fleet
         ranked = np.where(self._moved[alive], self._ranked[alive], 0)
-        if self._open is None:
-            self._open = arbiter.OpenCells(self.world.grid)
         final, yielded, gave_way = self.arbiter(self.size, before, proposed, ranked, fleet.cooperative[alive],
-                                                self.priority[alive], fleet.target[alive], self._open, self.turn)
+                                                self.priority[alive], fleet.target[alive], self.open_cells(),
+                                                self.turn)
         self._gave_way[alive] = gave_way
         if np.count_nonzero(gave_way) or np.count_nonzero(yielded):
             self._turn_log.arbitration([fleet.ids[i] for i in alive[gave_way].tolist()],
                                        [fleet.ids[i] for i in alive[yielded].tolist()])
         return final
+
+    def open_cells(self) -> arbiter.OpenCells:
+        """The world's open cells as the arbiter reads them (made once needed)."""
+        if self._open is None:
+            self._open = arbiter.OpenCells(self.world.grid)
+        return self._open
+
+    def follow(self, alive: np.ndarray) -> None:
+        """A journaled turn replayed (resume.py), before its moves: the arbitration's search does its work as when
+        the turn was played (its state is a function of the drones' cells and targets: coordinator/lacam.py)."""
+        follow = getattr(self.arbiter, "follow", None)
+        if follow is not None and np.count_nonzero(self.fleet.cooperative[alive]):
+            fleet = self.fleet
+            follow(self.size, fleet.pos[alive], fleet.cooperative[alive], fleet.target[alive], self.open_cells(),
+                   self.turn)
 
     def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
         """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target or
@@ -654,6 +669,11 @@ class Engine:
             causes = ", ".join(f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
                                for d, r in self.drones.items())
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
+        if getattr(self.arbiter, "unsolvable", False):  # (a proof: coordinator/lacam.py)
+            away = alive & (fleet.target[:, 0] >= 0) & (fleet.pos != fleet.target).any(axis=1)
+            return EndReason.SETTLED, ("no solution (the search over the drones' configurations proved it): targets "
+                                       "reached, except unreachable for "
+                                       f"{', '.join(fleet.ids[i] for i in np.flatnonzero(away))}")
         if self.final:
             notes = fleet.notes()[alive]
             if np.count_nonzero(notes == REACHED) == len(notes):

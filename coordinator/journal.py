@@ -124,6 +124,8 @@ def header_record(config: GameConfig, size: Cell, drones: Iterable[tuple[str, li
     world: dict[str, Any] = {"size": list(size), "seed": config.world.seed}
     header: dict[str, Any] = {"record": "header", "format": FORMAT, "version": VERSION, "world": world,
                               "max_turns": config.max_turns, "lost_after": config.lost_after}
+    if config.arbiter != "lacam":
+        header["arbiter"] = config.arbiter
     if drones is not None:  # (the journal's lines sort their keys: the order here is not the written one)
         world["cells"] = config.world.cells.hex()
         header["drones"] = [dict(zip(("drone", "start", "autopilot", "cooperative"), row)) for row in drones]
@@ -140,7 +142,7 @@ def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
         drones = tuple(DroneSpec(drone=d["drone"], start=tuple(d["start"])) for d in header["drones"])
         autopilots = {d["drone"]: d["autopilot"] for d in header["drones"]}
         config = GameConfig(world=spec, drones=drones, max_turns=header["max_turns"],
-                            lost_after=header.get("lost_after", 3))
+                            lost_after=header.get("lost_after", 3), arbiter=header.get("arbiter", "lacam"))
     except (KeyError, TypeError, ValueError, IndexError, RemoteInputError) as exc:
         raise UsageError(f"bad journal header: {exc}") from None
     return config, autopilots

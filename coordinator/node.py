@@ -62,7 +62,7 @@ from world.grid import World
 
 from . import arbiter
 from .admission import Presences
-from .config import DroneSpec, GameConfig
+from .config import ARBITERS, DroneSpec, GameConfig
 from .engine import Engine, Publish, Record, Refusal, ReplyToConnect, Stage
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
@@ -396,6 +396,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="how long the game waits for every entity to connect (also when resumed), then ends "
                         "ABORTED naming who never came (default 600; 0: wait forever)")
     p.add_argument("--lost-after", type=int, default=3, help="missed deadlines before a drone is LOST")
+    p.add_argument("--arbiter", choices=ARBITERS, default="lacam",
+                   help="the cooperative drones' arbitration: lacam, the complete search (default), or pibt, PIBT "
+                        "alone (docs/cooperation.md)")
     p.add_argument("--gcs-grace", type=float, default=30.0, metavar="SECONDS",
                    help="with --resume: how long the game waits for its ground station once the environment "
                         "and the drones are back (default 30)")
@@ -435,7 +438,7 @@ ScenarioReader = Callable[..., GameConfig]
 def game_config(args: argparse.Namespace, scenario: ScenarioReader | None = None) -> GameConfig:
     deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
                      admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace,
-                     link_grace=args.link_grace)
+                     link_grace=args.link_grace, arbiter=args.arbiter)
     if args.scenario:
         if scenario is None:
             raise UsageError("--scenario is read by the dronesim command: dronesim coordinator --scenario FILE")

@@ -53,6 +53,8 @@ def _restore_turn(engine: Engine, r: TurnRecord) -> int:
     if r.intent is not None:
         engine.intent = r.intent
         engine.final = engine.intent is Intent.FINAL
+    engine.turn = r.turn
+    engine.follow(alive)  # (before the moves, as the arbitration ran)
     for d, p in r.moves.items():
         fleet.pos[row[d]] = p
     for d, n in r.notes.items():

@@ -48,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scripted targets; without --targets or --script the ground station is interactive")
     p.add_argument("--script", help="a file of scripted targets")
     p.add_argument("--max-turns", type=int, default=200)
+    p.add_argument("--arbiter", choices=("lacam", "pibt"),
+                   help="the cooperative drones' arbitration (default lacam, the complete search; pibt: PIBT alone)")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS, to watch the game (default: full speed)")
     p.add_argument("--journal", help="write the journal to this file")
@@ -86,7 +88,7 @@ def coordinator_flags(args: argparse.Namespace, locator: str) -> list[str]:
     """The coordinator's flags (after `dronesim coordinator`): the game it plays."""
     return [*_common(args, locator), "--seed", str(args.seed), "--size", args.size, "--drones", str(args.drones),
             "--max-turns", str(args.max_turns), "--admit-deadline", "60", "--pace", str(args.pace),
-            *_passed(args, "world", "starts", "journal", "scenario")]
+            *_passed(args, "world", "starts", "journal", "scenario", "arbiter")]
 
 
 def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str]]]:

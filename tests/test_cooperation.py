@@ -44,18 +44,22 @@ def world_of(rows: list[str], floors: int = 1) -> np.ndarray:
     return np.repeat(plane[:, :, None], floors, axis=2)
 
 
-def config(grid: np.ndarray, drones: dict[str, tuple[Cell, Cell, str]], max_turns: int = 300) -> GameConfig:
+def config(grid: np.ndarray, drones: dict[str, tuple[Cell, Cell, str]], max_turns: int = 300,
+           using: str = "lacam") -> GameConfig:
     world = World.from_grid(grid)
     return GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=max_turns,
-                      drones=tuple(DroneSpec(drone=d, start=s) for d, (s, _, _) in sorted(drones.items())))
+                      drones=tuple(DroneSpec(drone=d, start=s) for d, (s, _, _) in sorted(drones.items())),
+                      arbiter=using)
 
 
 def play(grid: np.ndarray, drones: dict[str, tuple[Cell, Cell, str]], max_turns: int = 300, *,
-         swarm: bool = False, arbiter: Arbiter | None = None, keep_statuses: bool = False) -> Result:
-    """Every drone given its target at turn 1, the ground station's plan final at once."""
+         swarm: bool = False, arbiter: Arbiter | None = None, keep_statuses: bool = False,
+         using: str = "lacam") -> Result:
+    """Every drone given its target at turn 1, the ground station's plan final at once; `using`: the game's
+    arbitration (the complete search by default, "pibt" for PIBT alone); `arbiter`: another one in its place."""
     plan = Plan(tuple(sorted((1, d, t) for d, (_, t, _) in drones.items())))
-    return simulate(config(grid, drones, max_turns), {d: a for d, (_, _, a) in drones.items()}, Inputs(plan=plan),
-                    LOG, swarm=swarm, arbiter=arbiter, keep_statuses=keep_statuses)
+    return simulate(config(grid, drones, max_turns, using), {d: a for d, (_, _, a) in drones.items()},
+                    Inputs(plan=plan), LOG, swarm=swarm, arbiter=arbiter, keep_statuses=keep_statuses)
 
 
 def true_verdict(result: Result, drones: dict[str, tuple[Cell, Cell, str]]) -> None:
@@ -139,14 +143,18 @@ def test_parked_drone_steps_aside_and_comes_back() -> None:
 def test_parked_drone_in_a_corridor_with_a_bay(bay: int) -> None:
     # D02 is parked beside the bay (it steps in), before it (it is pushed to it, then comes back), or behind
     # D01's way in: there it would have to move towards D01 first, which PIBT's greedy steps never do, and
-    # D01 says so (docs/cooperation.md, "Where it is complete").
+    # D01 says so (docs/cooperation.md, "Where it is complete"); the search (the default) finds that way.
     rows = ["".join("." if x == bay else "#" for x in range(10)), "." * 10]
     drones = {"D01": ((0, 1, 0), (9, 1, 0), "dstar"), "D02": ((5, 1, 0), (5, 1, 0), "dstar")}
-    result = play(world_of(rows), drones)
-    assert not deaths(result)
     if bay < 5:
+        result = play(world_of(rows), drones, using="pibt")
         assert result.over.reason is EndReason.SETTLED and "D01" in result.over.text, result.over.text
+        result = play(world_of(rows), drones)
+        assert not deaths(result)
+        arrived(result)
         return
+    result = play(world_of(rows), drones, using="pibt")
+    assert not deaths(result)
     arrived(result)
     assert any(r.get("moves", {}).get("D02") == [bay, 0, 0] for r in result.records)
 
@@ -229,11 +237,12 @@ def test_neighbouring_targets_one_drone_goes_round(monkeypatch: pytest.MonkeyPat
     off its target a third time, a drone that finds a drone in its way near its target goes round the ring
     instead (D02: 8 moves longer, within the bound; D01's way round, 10 longer, is not taken), and both are
     home in 30 turns; without that rule they never are."""
-    result = play(world_of(RING), NEIGHBOURS, max_turns=100)
+    result = play(world_of(RING), NEIGHBOURS, max_turns=100, using="pibt")
     arrived(result)
     assert result.over.turn <= 40
     monkeypatch.setattr(DStarPilot, "PUSHED_OFF", 10 ** 6)
-    assert play(world_of(RING), NEIGHBOURS, max_turns=100).over.reason is EndReason.TURN_LIMIT
+    assert play(world_of(RING), NEIGHBOURS, max_turns=100, using="pibt").over.reason is EndReason.TURN_LIMIT
+    arrived(play(world_of(RING), NEIGHBOURS, max_turns=100))  # the search needs no such rule
 
 
 # --------------------------------------------------------------------------- tie-breaks
@@ -281,21 +290,25 @@ def test_the_longer_trip_goes_first_among_drones_away_as_long() -> None:
 # --------------------------------------------------------------------------- where nobody can pass
 
 
-def test_a_dead_end_is_said_not_waited_for() -> None:
-    # a corridor closed at both ends, no passing place: both drones say UNREACHABLE and the game settles
+@pytest.mark.parametrize("using", ["pibt", "lacam"])
+def test_a_dead_end_is_said_not_waited_for(using: str) -> None:
+    # a corridor closed at both ends, no passing place: with PIBT both drones say UNREACHABLE and the game
+    # settles; the search proves at once that no way exists and ends it
     drones = {"D01": ((0, 0, 0), (9, 0, 0), "dstar"), "D02": ((9, 0, 0), (0, 0, 0), "dstar")}
-    result = play(world_of(["." * 10]), drones, max_turns=400)
+    result = play(world_of(["." * 10]), drones, max_turns=400, using=using)
     assert result.over.reason is EndReason.SETTLED, result.over.text
     assert "D01" in result.over.text and "D02" in result.over.text
-    assert result.over.turn < 200 and not deaths(result)
+    assert result.over.turn < (200 if using == "pibt" else 10) and not deaths(result)
+    assert ("no solution" in result.over.text) == (using == "lacam")
 
 
-def test_a_target_behind_a_drone_parked_at_a_dead_end() -> None:
+@pytest.mark.parametrize("using", ["pibt", "lacam"])
+def test_a_target_behind_a_drone_parked_at_a_dead_end(using: str) -> None:
     drones = {"D01": ((0, 0, 0), (8, 0, 0), "dstar"), "D02": ((9, 0, 0), (9, 0, 0), "dstar")}
-    result = play(world_of(["." * 10]), drones)
+    result = play(world_of(["." * 10]), drones, using=using)
     assert result.over.reason is EndReason.ALL_REACHED  # reachable: D02 is pushed along... and back
     drones = {"D01": ((0, 0, 0), (9, 0, 0), "dstar"), "D02": ((8, 0, 0), (8, 0, 0), "dstar")}
-    result = play(world_of(["." * 10]), drones, max_turns=400)
+    result = play(world_of(["." * 10]), drones, max_turns=400, using=using)
     assert result.over.reason is EndReason.SETTLED and "D01" in result.over.text  # never: D01 says so
 
 
@@ -381,19 +394,22 @@ def test_a_push_on_the_last_turn_is_no_false_verdict() -> None:
 # --------------------------------------------------------------------------- journal: replay and resume
 
 
-def test_a_cooperative_game_replays_and_resumes(tmp_path: pathlib.Path) -> None:
+@pytest.mark.parametrize("using", ["pibt", "lacam"])
+def test_a_cooperative_game_replays_and_resumes(tmp_path: pathlib.Path, using: str) -> None:
     rows = ["###.######", ".........."]
     drones = {"D01": ((0, 1, 0), (9, 1, 0), "dstar"), "D02": ((9, 1, 0), (0, 1, 0), "dstar"),
               "D03": ((5, 1, 0), (5, 1, 0), "dstar")}
-    result = play(world_of(rows), drones)
+    result = play(world_of(rows), drones, using=using)
     arrived(result)
-    assert any("gave_way" in r for r in result.records)  # the head-on meeting was resolved by giving way
+    # the head-on meeting was resolved by giving way (PIBT), or by the search (no drone gives way)
+    assert any("gave_way" in r for r in result.records) == (using == "pibt")
     path = tmp_path / "game.jsonl"
     path.write_text("".join(dumps(r) + "\n" for r in result.records))
     records = list(read(path))
-    cfg = config(world_of(rows), drones)
+    cfg = config(world_of(rows), drones, using=using)
     autopilots = {d: a for d, (_, _, a) in drones.items()}
     assert replay.verify(str(path), records, cfg, autopilots) is None, "replay --verify disagrees"
+    assert (records[0].get("arbiter") == "pibt") == (using == "pibt")
     # a coordinator resumed after any turn has the priorities PIBT's rule gives from the journal alone
     for cut in range(2, len(records) - 1):
         resumed = restore(cfg, records[:cut], LOG)

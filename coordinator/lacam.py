@@ -1,0 +1,373 @@
+"""A complete arbitration: a LaCAM search over the cooperative drones' configurations, run by the coordinator
+over turns and committed one step a turn (docs/cooperation.md, "Completeness: the search").
+
+PIBT (coordinator/arbiter.py) plans one step; where its condition fails (dead ends, 1-wide corridors and doors)
+it can push drones to and fro for ever. LaCAM (Okumura, "LaCAM: Search-Based Algorithm for Quick Multi-Agent
+Pathfinding", AAAI 2023) searches the graph of configurations (one cell a drone) depth first, generating each
+node's successors lazily with PIBT under *constraints* ("drone i goes to cell v"), added one drone at a time
+breadth first (the low-level search): every successor of a configuration is eventually tried, so on a finite
+world the search finds a way to the goal configuration if one exists, and says so when none does. The swap
+and the clear operation (Okumura, IJCAI 2023) are PIBT's own here (`arbiter.pibt`), and so is the way a
+pushed drone's cells are ordered (`arbiter.candidates`).
+
+Online, in the manner of Real-Time LaCAM (Liang et al., 2025): the search tree persists from turn to turn; each
+turn spends a budget of *work units* (a PIBT call costs a unit per drone, a distance table one per open cell:
+never wall-clock time, so that every layout, replay and resume does the same work) and the drones then take one
+step along the tree from the node they are at towards the goal node if found, else towards the top of the
+search's stack (a step up the tree is a move back: every transition is reversible). The search is complete
+whatever the drones do meanwhile, and once it has found the goal the drones walk to it: every drone home.
+
+State and determinism: what the search keeps is a function of the calls' arguments alone (the drones' cells,
+targets, whether they cooperate, the world and the turn), never of their offers or of time, so
+`coordinator/resume.py` rebuilds it by calling `Lacam.follow` with each journaled turn. The drones' offers
+decide whether the step is taken: a cooperative drone only ever moves to a cell it offered (or stays); if a
+step is not offered (a drone that missed its deadline offers only its own cell), the turn is PIBT's
+(`arbiter.cooperate`) and the search starts again from where the drones are.
+
+The search runs where it is affordable and needed: at once when the drones' distance tables (a BFS from each
+target over the static world) are small (`EAGER` entries), otherwise once the drones stop making progress (the
+number on their targets has not reached a new high for `STALL` turns), and never where the tables would exceed
+`LIMIT` entries (the 256 x 256 x 32 city: plain PIBT). Until the tables are made, PIBT plays.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from schema import Cell
+
+from .arbiter import OpenCells, candidates, cells_of, cooperate, flat_cells, offered, pibt, steps_flat
+
+__all__ = ["Lacam", "Search", "Graph", "cells_of", "flat_cells"]
+
+#: Work units a turn (a PIBT call costs one per drone, a distance table one per CELLS_A_UNIT open cells): 20 ms or
+#: less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md, "Cost").
+WORK = 2400
+#: A breadth-first search costs about a 32nd of a PIBT call's time per cell that a PIBT call spends per drone.
+CELLS_A_UNIT = 32
+#: Distance-table entries (drones x open cells) up to which the search starts at once.
+EAGER = 1 << 21
+#: ... beyond which it never runs (int16 entries: 64 MiB).
+LIMIT = 1 << 25
+#: Turns without a new high of drones on their targets after which a search starts (below LIMIT).
+STALL = 32
+#: A distance that means "no way" (int16).
+FAR = np.iinfo(np.int16).max
+#: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
+SPAN = 1 << 16
+
+
+class Graph:
+    """The static world's open cells, numbered 0..F-1 (`cells`: their flat cells, `arbiter.flat_cells`'s padded
+    numbering; `index`: the other way, -1 for a building), each one's open neighbours (`near`, (F, 6), -1 for
+    none) and its connected component (`part`)."""
+
+    __slots__ = ("cells", "index", "near", "adjacent", "part")
+
+    def __init__(self, open_: OpenCells, size: Cell) -> None:
+        bits = open_.array()
+        self.cells = np.flatnonzero(bits).astype(np.int64)
+        self.index = np.full(len(bits), -1, np.int64)
+        self.index[self.cells] = np.arange(len(self.cells))
+        steps = np.array([d for d in steps_flat(size)[1:].tolist() if d], np.int64)
+        self.near = self.index[self.cells[:, None] + steps]
+        self.adjacent = [[v for v in row if v >= 0] for row in self.near.tolist()]
+        part = [-1] * len(self.cells)
+        for root in range(len(part)):
+            if part[root] < 0:
+                part[root] = root
+                for u in _reached(self.adjacent, root):
+                    part[u] = root
+        self.part = np.array(part, np.int64)
+
+    def distances(self, goal: int) -> np.ndarray:
+        """Each open cell's distance to open cell `goal` (numbered), FAR where none: a breadth-first search."""
+        far = np.full(len(self.cells), FAR, np.int16)
+        dist = [-1] * len(self.cells)
+        dist[goal] = 0
+        queue = [goal]
+        adjacent = self.adjacent
+        for u in queue:
+            du = dist[u] + 1
+            for v in adjacent[u]:
+                if dist[v] < 0:
+                    dist[v] = du
+                    queue.append(v)
+        d = np.array(dist, np.int64)
+        return np.where(d >= 0, np.minimum(d, FAR - 1), far).astype(np.int16)
+
+
+def _reached(adjacent: list[list[int]], root: int) -> list[int]:
+    seen, queue = {root}, [root]
+    for u in queue:
+        for v in adjacent[u]:
+            if v not in seen:
+                seen.add(v)
+                queue.append(v)
+    return queue
+
+
+class Node:
+    """A configuration of the search: the drones' cells (flat), its parent in the tree, its depth, the drones'
+    PIBT priorities there, its low-level search (the constraints still to try: (drones, cells) pairs) and the
+    order in which its constraints pin drones (highest priority first)."""
+
+    __slots__ = ("cfg", "parent", "depth", "prio", "tree", "order", "number", "near")
+
+    def __init__(self, cfg: np.ndarray, parent: Node | None, prio: np.ndarray, number: int) -> None:
+        self.cfg, self.parent, self.prio, self.number = cfg, parent, prio, number
+        self.depth: int = 0 if parent is None else parent.depth + 1
+        n = len(cfg)
+        self.order = np.lexsort((np.arange(n), -prio))
+        self.tree: deque[tuple[tuple[int, ...], tuple[int, ...]]] = deque([((), ())])
+        self.near: list[Node] = [] if parent is None else [parent]  # its neighbours in the configurations' graph
+
+
+def _rewire(a: Node, b: Node) -> None:
+    """Edge a-b found: the depths (moves from the root) and parents of every node a shorter way now reaches
+    (Dijkstra with unit costs, LaCAM*'s rewiring: the drones' way to the goal is the tree's, as short as known)."""
+    if a.depth > b.depth:
+        a, b = b, a
+    if a.depth + 1 >= b.depth:
+        return
+    b.parent, b.depth = a, a.depth + 1
+    queue = deque([b])
+    while queue:
+        u = queue.popleft()
+        for v in u.near:
+            if u.depth + 1 < v.depth:
+                v.parent, v.depth = u, u.depth + 1
+                queue.append(v)
+
+
+class Search:
+    """One LaCAM search from a configuration to the goal one (`goals`, flat cells): `expand` spends work on it,
+    `step` gives the drones' next configuration from the node they are at (`at`)."""
+
+    def __init__(self, graph: Graph, size: Cell, start: np.ndarray, goals: np.ndarray, aims: np.ndarray,
+                 dist: np.ndarray) -> None:
+        """`aims`: the drones' real targets (flat, -1 for none: PIBT's swap and retreats read them); `dist`: each
+        drone's distance table ((n, F), to its goal)."""
+        self.graph, self.size, self.goals, self.dist = graph, size, goals, dist
+        self.aims = aims.tolist()
+        n = len(start)
+        self.rows = np.arange(n)
+        self.at_goal = goals.tobytes()
+        prio = np.minimum(dist[self.rows, graph.index[start]].astype(np.int64), SPAN - 1)
+        self.base = prio
+        self.created = 1
+        root = Node(start, None, np.where(start == goals, prio, prio + SPAN), 0)
+        self.at = root  # where the drones are
+        self.explored: dict[bytes, Node] = {start.tobytes(): root}
+        self.open: list[Node] = [root]
+        self.found: Node | None = root if start.tobytes() == self.at_goal else None
+        self.expansions = 0
+        self.gave: list[int] = []  # the drones that gave way in the last successor (`arbiter.pibt`)
+        shape = (size[0] + 2, size[1] + 2, size[2] + 2)
+        self.steps = [d for d in steps_flat(size)[1:].tolist() if d]
+        self.aimed = (self.aims, shape)
+
+    @property
+    def unsolvable(self) -> bool:
+        """The search is over and found no way: no configuration sequence brings every drone home."""
+        return self.found is None and not self.open
+
+    def expand(self, work: int, open_: OpenCells) -> int:
+        """Spend up to `work` units (at least one PIBT call, unless the search is over); the units spent."""
+        spent, n = 0, len(self.goals)
+        while self.found is None and self.open and (spent < work or not spent):
+            node = self.open[-1]
+            if not node.tree:
+                self.open.pop()
+                continue
+            who, where = node.tree.popleft()
+            if len(who) < n:  # the next drone in the node's order gets each of its cells in turn, nearest first
+                i = int(node.order[len(who)])
+                for v in self._moves(node.cfg[i], i):
+                    node.tree.append((who + (i,), where + (v,)))
+            spent += n
+            self.expansions += 1
+            nxt = self._successor(node, who, where, open_)
+            if nxt is None:
+                continue
+            key = nxt.tobytes()
+            known = self.explored.get(key)
+            if known is not None:  # LaCAM*: a shorter way to it?
+                if known is not node:
+                    node.near.append(known)
+                    known.near.append(node)
+                    _rewire(node, known)
+                continue
+            prio = np.where(nxt == self.goals, self.base, node.prio + SPAN)
+            prio[self.gave] = self.base[self.gave]  # gave way: the drones it could not push push it back
+            child = Node(nxt, node, prio, self.created)
+            node.near.append(child)
+            self.created += 1
+            self.explored[key] = child
+            self.open.append(child)
+            if key == self.at_goal:
+                self.found = child
+        return spent
+
+    def _moves(self, cell: int, i: int) -> list[int]:
+        """Drone i's cells from `cell` (its open neighbours and itself), nearest to its goal first."""
+        g = self.graph
+        c = int(g.index[cell])
+        near = [c] + [v for v in g.near[c].tolist() if v >= 0]
+        d = self.dist[i]
+        return [int(g.cells[v]) for v in sorted(near, key=lambda v: (int(d[v]), v != c, v))]
+
+    def _successor(self, node: Node, who: tuple[int, ...], where: tuple[int, ...], open_: OpenCells
+                   ) -> np.ndarray | None:
+        """PIBT's next configuration from `node` with drones `who` sent to cells `where`; None if there is none."""
+        g, here = self.graph, node.cfg
+        n = len(here)
+        taken = np.full(n, -1, np.int64)
+        if who:
+            taken[list(who)] = where
+            fixed = taken[taken >= 0]
+            if len(np.unique(fixed)) < len(fixed):
+                return None
+        c = g.index[here]
+        near = np.concatenate([g.near[c], c[:, None]], axis=1)  # (n, 7): the neighbours, then the cell itself
+        d = np.where(near >= 0, self.dist[self.rows[:, None], np.maximum(near, 0)], FAR).astype(np.int64)
+        rank = d * 8 + np.array([1, 2, 3, 4, 5, 6, 0])  # staying before a neighbour as near: as a drone ranks
+        rank = np.where(near >= 0, rank, 1 << 40)
+        sort = np.argsort(rank, axis=1, kind="stable")
+        own = np.take_along_axis(np.where(near >= 0, g.cells[np.maximum(near, 0)], -1), sort, axis=1)
+        cand = candidates(here, own, self.size, np.array(self.aims, np.int64), node.number)
+        order = [i for i in node.order.tolist() if taken[i] < 0]
+        world = (open_, self.steps, self.aims)
+        chosen, gave = pibt(here.tolist(), cand.tolist(), order, taken.tolist(), world, self.aimed)
+        nxt = np.array(chosen, np.int64)
+        if (nxt < 0).any() or len(np.unique(nxt)) < n:
+            return None
+        self.gave = gave
+        srt = np.argsort(here)
+        k = np.minimum(np.searchsorted(here[srt], nxt), n - 1)
+        j = srt[k]
+        if ((here[j] == nxt) & (j != self.rows) & (nxt[j] == here)).any():
+            return None  # a swap
+        return nxt
+
+    def step(self) -> np.ndarray:
+        """The drones' next configuration: one step along the tree from `at` towards the goal node (or the top of
+        the stack while the goal is not found), which becomes `at`; `at`'s own once there (or the search over)."""
+        aim = self.found if self.found is not None else (self.open[-1] if self.open else self.at)
+        at = self.at
+        node: Node | None = aim
+        while node is not None and node.depth > at.depth + 1:
+            node = node.parent
+        if node is not None and node.parent is at:
+            self.at = node
+        elif at is not aim and at.parent is not None:
+            self.at = at.parent
+        return self.at.cfg
+
+
+class Lacam:
+    """The complete arbitration (an `arbiter.Arbiter`, with state): `follow` runs the search and gives its step,
+    the call checks the step against the drones' offers (PIBT, `cooperate`, when there is no step or it is not
+    offered). `unsolvable`: the search proved that no way brings every drone home (the engine ends the game)."""
+
+    complete = True
+
+    def __init__(self, work: int = WORK, eager: int = EAGER, limit: int = LIMIT, stall: int = STALL) -> None:
+        self.work, self.eager, self.limit, self.stall = work, eager, limit, stall
+        self._graph: Graph | None = None
+        self._of: OpenCells | None = None
+        self._tables: dict[int, np.ndarray] = {}  # goal (numbered open cell) -> its distance table
+        self._search: Search | None = None
+        self._key = b""  # the targets and cooperative drones the record and the search are for
+        self._best, self._since = -1, 0  # most drones on their targets at once, and turns since
+        self.unsolvable = False
+        self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
+
+    def __call__(self, size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray,
+                 cooperative: np.ndarray, priority: np.ndarray, targets: np.ndarray, open_: OpenCells | None = None,
+                 salt: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        plan = self.follow(size, before, cooperative, targets, open_, salt)
+        if plan is None:
+            return cooperate(size, before, proposed, ranked, cooperative, priority, targets, open_, salt)
+        here = flat_cells(before, size)
+        wants = flat_cells(proposed, size)
+        own = offered(here, ranked, wants, size)
+        if not ((plan == here) | (own == plan[:, None]).any(axis=1)).all():
+            # (the drones will not be where the search thinks, unless PIBT sends them there: it then goes on, else
+            # starts again, as `follow` sees next turn from their cells alone)
+            return cooperate(size, before, proposed, ranked, cooperative, priority, targets, open_, salt)
+        first = ranked.astype(np.int64) & 7
+        yielded = plan != np.where(first > 0, here + steps_flat(size)[first], wants)
+        return cells_of(plan, size), yielded, np.zeros(len(before), bool)
+
+    def follow(self, size: Cell, before: np.ndarray, cooperative: np.ndarray, targets: np.ndarray,
+               open_: OpenCells | None, salt: int | None = None) -> np.ndarray | None:
+        """The drones' cells (flat, `arbiter.flat_cells`) the search sends them to this turn, or None (PIBT's
+        turn). A function of the arguments of this and every earlier call alone (`coordinator/resume.py`)."""
+        n = len(before)
+        if open_ is None or not n or not cooperative.all():
+            self._search, self._key = None, b""  # a non-cooperative drone's move is its own: PIBT
+            return None
+        if open_ is not self._of:
+            self._graph, self._of, self._tables = None, open_, {}
+        here = flat_cells(before, size)
+        aims = np.where(targets[:, 0] >= 0, flat_cells(targets, size), -1)
+        key = aims.tobytes()
+        if key != self._key:
+            self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
+        search = self._search
+        if search is not None and not np.array_equal(search.at.cfg, here):
+            search = self._search = None
+        if search is None:
+            home = int(np.count_nonzero(here == aims))
+            self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
+            if home == n:
+                return None  # every drone home: nothing to search
+            cells = int(open_.count())
+            if n * cells > self.limit or (n * cells > self.eager and self._since < self.stall):
+                return None
+            search = self._start(size, here, aims)
+            if search is None:
+                return None
+        self.expansions -= search.expansions
+        search.expand(self.work, open_)
+        self.expansions += search.expansions
+        if search.unsolvable:
+            self.unsolvable = True
+        return search.step()
+
+    def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | None:
+        """A search from `here` once every drone's distance table is made (a turn's work at most on them: None
+        until then). A drone whose target is none, a building or cut off from it by the static world has its
+        cell as its goal (it must be able to come back there)."""
+        if self._graph is None:
+            self._graph = Graph(self._of, size)  # type: ignore[arg-type]
+        g = self._graph
+        hc = g.index[here]
+        ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
+        way = (ac >= 0) & (hc >= 0)
+        way[way] = g.part[ac[way]] == g.part[hc[way]]
+        if (hc < 0).any():
+            return None  # a drone in a building or outside (it is dying): PIBT
+        goal_c = np.where(way, ac, hc)
+        spent = 0
+        for c in dict.fromkeys(goal_c.tolist()):
+            if c not in self._tables:
+                if spent >= self.work:
+                    return None
+                self._tables[c] = g.distances(c)
+                spent += len(g.cells) // CELLS_A_UNIT + 1
+        if len(self._tables) > 4 * len(here):  # (new targets keep coming: keep the tables in use)
+            self._tables = {c: self._tables[c] for c in dict.fromkeys(goal_c.tolist())}
+        dist = np.stack([self._tables[c] for c in goal_c.tolist()])
+        self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), dist)
+        return self._search
+
+    def state(self) -> dict[str, Any]:
+        """A summary of the search (for logs and tests): nodes, PIBT calls, found, unsolvable."""
+        s = self._search
+        return {"nodes": 0 if s is None else len(s.explored), "expansions": self.expansions,
+                "found": s is not None and s.found is not None, "unsolvable": self.unsolvable}

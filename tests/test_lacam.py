@@ -1,0 +1,145 @@
+"""The complete arbitration (coordinator/lacam.py): a LaCAM search over the cooperative drones' configurations,
+run by the coordinator over turns and committed a step a turn.
+
+Small hard instances where PIBT alone pushes drones to and fro for ever or gives up (1-wide corridors with a
+bay, doors, swaps) are solved; a provably unsolvable instance is recognised and ended; journals are the same in
+every layout, `replay --verify` re-simulates them, and a resumed coordinator's search is the one that played."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from coordinator import lacam
+from coordinator.arbiter import OpenCells, flat_cells
+from coordinator.config import DroneSpec, GameConfig
+from coordinator.resume import restore
+from dronesim import replay
+from dronesim.local import Inputs, Result, simulate
+from entities.gcs import Plan
+from schema import Cell, EndReason, WorldSpec
+from world.grid import World
+
+LOG = logging.getLogger("test_lacam")
+Drones = dict[str, tuple[Cell, Cell]]
+
+
+def world_of(rows: list[str]) -> np.ndarray:
+    """A grid [x, y, 0] from rows of text (row k is y = k; '#' a building)."""
+    return np.array([[c == "#" for c in r] for r in rows]).T[:, :, None]
+
+
+def config(grid: np.ndarray, drones: Drones, max_turns: int, using: str) -> GameConfig:
+    world = World.from_grid(grid)
+    return GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=max_turns, arbiter=using,
+                      drones=tuple(DroneSpec(drone=d, start=s) for d, (s, _) in sorted(drones.items())))
+
+
+def play(grid: np.ndarray, drones: Drones, max_turns: int = 200, using: str = "lacam", swarm: bool = False,
+         arbiter: lacam.Lacam | None = None) -> Result:
+    plan = Plan(tuple(sorted((1, d, t) for d, (_, t) in drones.items())))
+    return simulate(config(grid, drones, max_turns, using), dict.fromkeys(drones, "dstar"), Inputs(plan=plan), LOG,
+                    swarm=swarm, arbiter=arbiter)
+
+
+#: Hard instances: (name, map rows, drones). PIBT (with giving way, the swap and the clear operation) does not
+#: bring every drone home on any of them (its drones end saying UNREACHABLE); each has a solution.
+HARD: list[tuple[str, list[str], Drones]] = [
+    # D02 parked past the only bay: D01 must first step back to let it into the bay
+    ("parked past the bay", ["###.######", ".........."],
+     {"D01": ((0, 1, 0), (9, 1, 0)), "D02": ((5, 1, 0), (5, 1, 0))}),
+    # two drones swap the ends of a 1-wide corridor with a pocket near each end, a third parked between
+    ("swap past a parked drone", ["#.#####.#", "........."],
+     {"D01": ((0, 1, 0), (8, 1, 0)), "D02": ((8, 1, 0), (0, 1, 0)), "D03": ((2, 1, 0), (2, 1, 0))}),
+    # the same in a short corridor, the parked drone between the two pockets
+    ("swap in a short corridor", ["#.#.#", "....."],
+     {"D01": ((0, 1, 0), (4, 1, 0)), "D02": ((4, 1, 0), (0, 1, 0)), "D03": ((2, 1, 0), (2, 1, 0))}),
+]
+
+#: Two rooms joined by a 1-wide corridor three cells long (a door), the drones trading sides.
+DOOR = (["..###..", ".......", "..###.."],
+        {"D01": ((0, 0, 0), (6, 2, 0)), "D02": ((1, 0, 0), (5, 2, 0)), "D03": ((0, 1, 0), (6, 1, 0)),
+         "D04": ((6, 0, 0), (0, 2, 0)), "D05": ((5, 0, 0), (1, 2, 0)), "D06": ((6, 1, 0), (0, 1, 0))})
+
+
+@pytest.mark.parametrize("name, rows, drones", HARD, ids=[h[0] for h in HARD])
+def test_hard_instances_are_solved_where_pibt_is_not(name: str, rows: list[str], drones: Drones) -> None:
+    pibt = play(world_of(rows), drones, using="pibt")
+    assert pibt.over.reason is not EndReason.ALL_REACHED, f"{name}: PIBT alone solved it ({pibt.over.text})"
+    result = play(world_of(rows), drones)
+    assert result.over.reason is EndReason.ALL_REACHED, f"{name}: {result.over.text}"
+    assert not any(r.get("deaths") for r in result.records)
+    assert result.over.turn <= 4 * max(8, len(rows[0]))  # within a few times the longest way
+
+
+def test_a_door_between_two_rooms() -> None:
+    rows, drones = DOOR
+    result = play(world_of(rows), drones)
+    assert result.over.reason is EndReason.ALL_REACHED, result.over.text
+    assert result.over.turn <= play(world_of(rows), drones, using="pibt").over.turn
+
+
+def test_the_search_proves_a_swap_in_a_closed_corridor_unsolvable_and_finds_one_with_a_bay() -> None:
+    for rows, solvable in ((["....."], False), (["..#..", "....."], True)):
+        grid = world_of(rows)
+        size: Cell = grid.shape  # type: ignore[assignment]
+        y = len(rows) - 1
+        before = np.array([(0, y, 0), (4, y, 0)], np.int32)
+        targets = before[::-1].copy()
+        search = lacam.Lacam()
+        open_ = OpenCells(grid)
+        cells = before
+        for turn in range(1, 40):
+            plan = search.follow(size, cells, np.ones(2, bool), targets, open_, turn)
+            assert plan is not None
+            nxt = np.array([[int(v) for v in c] for c in lacam.cells_of(plan, size)], np.int32)
+            assert np.abs(nxt - cells).sum(axis=1).max() <= 1 and len({tuple(c) for c in nxt.tolist()}) == 2
+            assert not ((nxt[0] == cells[1]).all() and (nxt[1] == cells[0]).all()), "a swap"
+            cells = nxt
+            if search.unsolvable or (cells == targets).all():
+                break
+        assert search.unsolvable is not solvable
+        assert bool((cells == targets).all()) is solvable
+
+
+def test_same_journal_in_every_layout_and_run() -> None:
+    rows, drones = HARD[1][1], HARD[1][2]
+    first = play(world_of(rows), drones)
+    assert play(world_of(rows), drones).records == first.records
+    assert play(world_of(rows), drones, swarm=True).records == first.records
+
+
+def test_a_resumed_coordinator_has_the_search_that_played() -> None:
+    """The search's state is a function of the journal: a coordinator restored after any turn (resume.py
+    replays each turn's work) holds the same search as the one that played that turn, and plays on alike."""
+    rows, drones = DOOR
+    grid = world_of(rows)
+    states: list[dict] = []
+
+    class Watched(lacam.Lacam):
+        def __call__(self, *args: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[override]
+            out = super().__call__(*args)  # type: ignore[arg-type]
+            s = self._search
+            states.append({**self.state(), "at": None if s is None else s.at.cfg.tolist()})
+            return out
+
+    result = play(grid, drones, arbiter=Watched())
+    assert result.over.reason is EndReason.ALL_REACHED
+    records = result.records
+    cfg = config(grid, drones, 200, "lacam")
+    assert replay.verify("game", records, cfg, dict.fromkeys(drones, "dstar")) is None
+    turns = [r for r in records if r.get("record") == "turn"]
+    for cut in range(1, len(turns)):
+        resumed = restore(cfg, records[:cut + 1], LOG)
+        arb = resumed.arbiter
+        assert isinstance(arb, lacam.Lacam)
+        s = arb._search
+        assert {**arb.state(), "at": None if s is None else s.at.cfg.tolist()} == states[cut - 1], f"turn {cut}"
+
+
+def test_flat_cells_round_trip() -> None:
+    size = (3, 4, 2)
+    cells = np.array([(0, 0, 0), (2, 3, 1), (1, 2, 0)], np.int32)
+    assert (lacam.cells_of(flat_cells(cells, size), size) == cells).all()
