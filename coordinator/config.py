@@ -13,9 +13,15 @@ import numpy as np
 
 from schema import Cell, UsageError, WorldSpec
 from schema.messages import is_drone_id
+from schema.tuning import ADMIT_DEADLINE_S, ENV_GRACE_S, GCS_GRACE_S, LINK_GRACE_S, PHASE_DEADLINE_S
 from world.grid import inside_rows
 
 from .fleet import cell_of
+
+#: The game's rules by default (the waits are in schema/tuning.py): its turn limit, and the missed drones' phases in
+#: a row after which a drone is LOST.
+MAX_TURNS = 1000
+LOST_AFTER = 3
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -73,14 +79,14 @@ ARBITERS = ("lacam", "pibt")
 class GameConfig:
     world: WorldSpec
     drones: Sequence[DroneSpec]  # a tuple, or a `DroneTable`
-    max_turns: int = 1000
-    phase_deadline: float = 5.0  # seconds for the drones and the environment
+    max_turns: int = MAX_TURNS
+    phase_deadline: float = PHASE_DEADLINE_S  # seconds for the drones and the environment
     gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
-    admit_deadline: float | None = 600.0  # seconds for every entity to connect (None: forever, if asked)
-    lost_after: int = 3  # missed DRONES deadlines in a row before a drone is LOST
-    env_grace: float = 30.0  # seconds the game waits for a vanished environment to come back
-    link_grace: float = 30.0  # seconds the game holds for the entities after a lost link (a router restart)
-    gcs_grace: float = 30.0  # seconds a resumed game waits for its ground station once the others are back
+    admit_deadline: float | None = ADMIT_DEADLINE_S  # seconds for every entity to connect (None: forever, if asked)
+    lost_after: int = LOST_AFTER  # missed DRONES deadlines in a row before a drone is LOST
+    env_grace: float = ENV_GRACE_S  # seconds the game waits for a vanished environment to come back
+    link_grace: float = LINK_GRACE_S  # seconds the game holds for the entities after a lost link (a router restart)
+    gcs_grace: float = GCS_GRACE_S  # seconds a resumed game waits for its ground station once the others are back
     arbiter: str = "lacam"  # the cooperative drones' arbitration: ARBITERS (journaled in the header if not lacam)
 
     def __post_init__(self) -> None:

@@ -22,7 +22,7 @@ from typing import Any
 
 from schema import Cause, Cell, Intent, Note, RemoteInputError, UsageError, WorldSpec
 
-from .config import DroneSpec, GameConfig
+from .config import LOST_AFTER, DroneSpec, GameConfig
 
 FORMAT = "dronesim-journal"
 VERSION = 1
@@ -142,7 +142,7 @@ def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
         drones = tuple(DroneSpec(drone=d["drone"], start=tuple(d["start"])) for d in header["drones"])
         autopilots = {d["drone"]: d["autopilot"] for d in header["drones"]}
         config = GameConfig(world=spec, drones=drones, max_turns=header["max_turns"],
-                            lost_after=header.get("lost_after", 3), arbiter=header.get("arbiter", "lacam"))
+                            lost_after=header.get("lost_after", LOST_AFTER), arbiter=header.get("arbiter", "lacam"))
     except (KeyError, TypeError, ValueError, IndexError, RemoteInputError) as exc:
         raise UsageError(f"bad journal header: {exc}") from None
     return config, autopilots

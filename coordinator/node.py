@@ -57,12 +57,20 @@ from schema import (
 )
 from schema.errors import WrongSender
 from schema.messages import WorldSpec
-from schema.tuning import LINGER_S, PEER_CHECK_S, SETTLE_S
+from schema.tuning import (
+    ADMIT_DEADLINE_S,
+    GCS_GRACE_S,
+    LINGER_S,
+    LINK_GRACE_S,
+    PEER_CHECK_S,
+    PHASE_DEADLINE_S,
+    SETTLE_S,
+)
 from world.grid import World
 
 from . import arbiter
 from .admission import Presences
-from .config import ARBITERS, DroneSpec, GameConfig
+from .config import ARBITERS, LOST_AFTER, MAX_TURNS, DroneSpec, GameConfig
 from .engine import Engine, Publish, Record, Refusal, ReplyToConnect, Stage
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
@@ -389,22 +397,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", help="a scenario file (world, drones, starts, max turns): overrides those flags")
     p.add_argument("--drones", type=int, default=1, help="number of drones D01..Dnn (default 1)")
     p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: rows of every other cell)')
-    p.add_argument("--max-turns", type=int, default=1000)
-    p.add_argument("--phase-deadline", type=float, default=5.0, help="seconds for drones and ENV per phase")
+    p.add_argument("--max-turns", type=int, default=MAX_TURNS, help=f"the game's turn limit (default {MAX_TURNS})")
+    p.add_argument("--phase-deadline", type=float, default=PHASE_DEADLINE_S,
+                   help=f"seconds for drones and ENV per phase (default {PHASE_DEADLINE_S:g})")
     p.add_argument("--gcs-deadline", type=float, default=0.0, help="seconds for the GCS phase (0: wait)")
-    p.add_argument("--admit-deadline", type=float, default=600.0, metavar="SECONDS",
+    p.add_argument("--admit-deadline", type=float, default=ADMIT_DEADLINE_S, metavar="SECONDS",
                    help="how long the game waits for every entity to connect (also when resumed), then ends "
-                        "ABORTED naming who never came (default 600; 0: wait forever)")
-    p.add_argument("--lost-after", type=int, default=3, help="missed deadlines before a drone is LOST")
+                        f"ABORTED naming who never came (default {ADMIT_DEADLINE_S:g}; 0: wait forever)")
+    p.add_argument("--lost-after", type=int, default=LOST_AFTER,
+                   help=f"missed deadlines before a drone is LOST (default {LOST_AFTER})")
     p.add_argument("--arbiter", choices=ARBITERS, default="lacam",
                    help="the cooperative drones' arbitration: lacam, the complete search (default), or pibt, PIBT "
                         "alone (docs/cooperation.md)")
-    p.add_argument("--gcs-grace", type=float, default=30.0, metavar="SECONDS",
+    p.add_argument("--gcs-grace", type=float, default=GCS_GRACE_S, metavar="SECONDS",
                    help="with --resume: how long the game waits for its ground station once the environment "
-                        "and the drones are back (default 30)")
-    p.add_argument("--link-grace", type=float, default=30.0, metavar="SECONDS",
+                        f"and the drones are back (default {GCS_GRACE_S:g})")
+    p.add_argument("--link-grace", type=float, default=LINK_GRACE_S, metavar="SECONDS",
                    help="how long the game holds when the coordinator's link is down (every presence vanished at "
-                        "once, e.g. a router restart) for its entities to come back (default 30)")
+                        f"once, e.g. a router restart) for its entities to come back (default {LINK_GRACE_S:g})")
     p.add_argument("--journal", help="write the game's journal to this file, missing or empty (a journal holds one "
                                      "game; --resume takes up an unfinished one)")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",

@@ -43,7 +43,7 @@ from schema import (
 )
 from schema.messages import AROUND
 from schema.tables import MAX_DRONE, code_of, drone_name
-from schema.tuning import EYES_ONE_BY_ONE
+from schema.tuning import EYES_ONE_BY_ONE, PHASE_DEADLINE_S
 from world.grid import World, checked_int, inside_rows, padded_steps
 
 #: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
@@ -333,7 +333,7 @@ class Layout:
                     return cell, True
         return self.targets[i].copy(), bool(self.reachable[i])  # nowhere else to go: the same target
 
-    def game(self, max_turns: int, phase_deadline: float = 5.0) -> GameConfig:
+    def game(self, max_turns: int, phase_deadline: float = PHASE_DEADLINE_S) -> GameConfig:
         """The engine's game for this layout (the world given cell by cell: every backend builds the same)."""
         spec = WorldSpec(size=self.world.size, cells=self.terrain.packed)
         drones = tuple(DroneSpec(drone=drone_name(i + 1), start=(x, y, z))

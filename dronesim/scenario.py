@@ -24,7 +24,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from coordinator.config import DroneSpec, DroneTable, GameConfig
+from coordinator.config import MAX_TURNS, DroneSpec, DroneTable, GameConfig
 from entities.autopilots import REGISTRY
 from entities.gcs import Plan
 from schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
@@ -47,7 +47,7 @@ class Scenario:
     drones: Sequence[DroneSpec]  # a `DroneTable` (a tuple will do)
     autopilots: dict[str, str]  # drone -> autopilot name
     targets: tuple[str, ...]
-    max_turns: int = 1000
+    max_turns: int = MAX_TURNS
 
     def game_config(self, **deadlines: object) -> GameConfig:
         return GameConfig(world=self.world, drones=self.drones, max_turns=self.max_turns, **deadlines)  # type: ignore[arg-type]
@@ -103,7 +103,7 @@ class Scenario:
         if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets):
             raise UsageError('"targets" must be a list of "[Dnn=]x,y,z[@turn]" strings')
         scenario = cls(world=spec, drones=drones, autopilots=autopilots, targets=tuple(targets),
-                       max_turns=checked_int(data.get("max_turns", 1000), "max_turns"))
+                       max_turns=checked_int(data.get("max_turns", MAX_TURNS), "max_turns"))
         scenario.game_config()  # validates ids, starts
         # targets are checked against the world's buildings too: built here (as every process builds it) only
         # when there are targets and the world is generated
@@ -114,7 +114,7 @@ class Scenario:
 
 
 def movingai_scenario(map_path: str | pathlib.Path, scen_path: str | pathlib.Path, agents: int | None = None,
-                      autopilot: str = "dstar", max_turns: int = 1000) -> dict:
+                      autopilot: str = "dstar", max_turns: int = MAX_TURNS) -> dict:
     """The scenario (its JSON form, for `Scenario.from_json` or a file) of the first `agents` agents of a
     MovingAI .scen (all of them: None) on its .map. UsageError if either is unreadable or they disagree."""
     world = World.load(map_path)

@@ -31,14 +31,15 @@ from network.transport import (
 )
 from schema import Ans, Ask, Connect, Keys, Moves, Over, Phase, Role, Turn, UsageError, WorldMap
 from schema.messages import drone_list, is_host_id
+from schema.tuning import ASK_TIMEOUT_S, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S
 
 from .autopilots import REGISTRY, SWARM_MIN, pilot_class
 from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, SendMoves, Timer
 
 
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
-         host: str | None = None, connect_timeout: float = 30.0, grace: float = 30.0,
-         ask_timeout: float = 5.0, swarm_min: int = SWARM_MIN, chart: bool = True) -> Over:
+         host: str | None = None, connect_timeout: float = CONNECT_TIMEOUT_S, grace: float = COORDINATOR_GRACE_S,
+         ask_timeout: float = ASK_TIMEOUT_S, swarm_min: int = SWARM_MIN, chart: bool = True) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn_of(Phase.DRONES), Turn)

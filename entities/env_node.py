@@ -31,12 +31,13 @@ from network.transport import (
     zenoh_config,
 )
 from schema import Ask, Connect, Keys, MapRequest, Over, Phase, Role, Status, Turn, UsageError, encode
+from schema.tuning import CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S
 
 from .environment import Effect, EnvironmentProcess, Fail, Follow, Refusal, ReplyToQuery, Report
 
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
-         connect_timeout: float = 30.0, grace: float = 30.0, follow: bool = False) -> Over:
+         connect_timeout: float = CONNECT_TIMEOUT_S, grace: float = COORDINATOR_GRACE_S, follow: bool = False) -> Over:
     with zenoh.open(conf) as session:
         inbox = Inbox(session, keys, logger)
         newest = inbox.newest(keys.status, Status)  # (handed to the core before each query, unless followed)

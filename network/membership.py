@@ -16,6 +16,7 @@ from network.clock import TurnClock
 from network.transport import Inbox, Presence, Received, ask
 from schema import Connect, Keys, Over, Refused, Status, Turn, Welcome
 from schema.errors import RejectCounter, RemoteInputError, UsageError
+from schema.tuning import CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S
 
 
 class NotAdmitted(UsageError):
@@ -121,7 +122,7 @@ class Membership:
 def add_entity_args(parser) -> None:
     """Flags every entity process shares."""
     g = parser.add_argument_group("membership")
-    g.add_argument("--connect-timeout", type=float, default=30.0,
-                   help="seconds to wait for the coordinator to admit this entity (default 30)")
-    g.add_argument("--grace", type=float, default=30.0,
-                   help="seconds to wait for a vanished coordinator to come back (default 30)")
+    g.add_argument("--connect-timeout", type=float, default=CONNECT_TIMEOUT_S,
+                   help=f"seconds to wait for the coordinator to admit this entity (default {CONNECT_TIMEOUT_S:g})")
+    g.add_argument("--grace", type=float, default=COORDINATOR_GRACE_S,
+                   help=f"seconds to wait for a vanished coordinator to come back (default {COORDINATOR_GRACE_S:g})")

@@ -121,6 +121,23 @@ EPISODE_FEW_DRONES = 64
 # round trip through a router is about 0.5 ms, a token's disappearance a few ms: BENCHMARKS.md, docs/reliability.md)
 # and short enough that a person waiting does not give up.
 
+#: How long the drones (and the environment) have to answer a turn's phase before the missing ones hover
+#: (`GameConfig.phase_deadline`, `--phase-deadline`).
+PHASE_DEADLINE_S = 5.0
+#: How long a game waits for every entity to connect, also when resumed (`--admit-deadline`; 0: forever).
+ADMIT_DEADLINE_S = 600.0
+#: How long a game waits for a vanished environment to come back (`GameConfig.env_grace`).
+ENV_GRACE_S = 30.0
+#: How long a game holds after the coordinator's link is lost, e.g. a router restart (`--link-grace`).
+LINK_GRACE_S = 30.0
+#: How long a resumed game waits for its ground station once the others are back (`--gcs-grace`).
+GCS_GRACE_S = 30.0
+#: How long an entity waits for the coordinator to admit it (`--connect-timeout`), and for a vanished coordinator
+#: to come back (`--grace`).
+CONNECT_TIMEOUT_S = 30.0
+COORDINATOR_GRACE_S = 30.0
+#: How long a drone waits for the environment's answer to its ASK.
+ASK_TIMEOUT_S = 5.0
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway (coordinator/node.py).
 LINGER_S = 5.0
 #: How long the coordinator holds a vanished presence before it counts: when the router goes away, every token
