@@ -81,6 +81,8 @@ WORLD_SEED = 3
 GEN_SIZE = (512, 512, 64)
 PHASE_DEADLINE = 60.0  # seconds: a benchmark measures, it does not test deadlines
 EVENT_TIMEOUT = 180.0  # seconds without any event from the game before the run is declared stalled
+#: The share of its turns/s a game keeps with a ROS 2 viewer publishing it (issue 35).
+ROS2_KEEPS = 0.9
 TARGETS = {"latency": 4.0, "tps128": 200.0, "pogema128": 0.25, "tps1000": 20.0, "kib_per_drone": 1.0,
            "per_world_byte": 2.0}
 
@@ -526,6 +528,7 @@ class Variant:
     hosts: int = 1  # swarm hosts H01, H02, ... (processes "swarm", or "swarm1", "swarm2", ...), drones in id order
     statuses: bool = True  # keep every STATUS (`Game.statuses`; False: only the last, `Game.last_status`)
     env_follows: bool = False  # the environment takes every STATUS (`dronesim env --follow-status`)
+    ros2: bool = False  # a `dronesim ros2` viewer publishes the game to ROS 2 beside it (docs/ros2.md)
 
 
 def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path | None = None,
@@ -581,6 +584,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                                               "--host", f"H{h:02d}"])
             else:
                 procs.start("swarm", [*flying, "--id", ids, "--host", "H01", *creds("H01")])
+            if variant.ros2:  # an observer: it hears STATUS and OVER, publishes to ROS 2 at its own rate
+                procs.start("ros2", [*base, "ros2", *common, "--log-level", "WARNING"])
             conf = client_config(loc) if secured is None else secured.session(loc, "GCS")
             if config is not None:
                 conf.insert_json5("transport/shared_memory/enabled", "true")
@@ -1028,6 +1033,11 @@ MECHANISMS: tuple[Mechanism, ...] = (
         Variant(shared_memory=True), ((1000, (64, 64, 16)),),
         "every process and the router with a `--config` turning it on (shared_memory_configs)"),
     Mechanism(
+        "ROS 2 is published by an observer of its own, never by the game (the newest turn at its rate, DROP)",
+        ("entities/ros2/node.py::Viewer", "entities/ros2/node.py:/newest|DROP/", "schema/tuning.py::ROS_RATE"),
+        Variant(ros2=True), ((1000, (64, 64, 16)),),
+        f"a `dronesim ros2` viewer publishing the game beside it (turns/s with it ≥ {ROS2_KEEPS:.0%} of without)"),
+    Mechanism(
         "Tables (schema version 2+): swarm-sized data as fixed rows checked by numpy",
         ("schema/tables.py",),
         switch="not switched off: the records path they replaced is gone (tables are the one form of swarm-sized "
@@ -1159,6 +1169,10 @@ def mechanism_rows(pairs: list[Pair], selected: Callable[[str], bool]) -> tuple[
             # (CPU times come in clock ticks: a short game may have used less than one, on or off)
             cpu = f"{cpu_off / cpu_on:.2f}x" if cpu_on > 0 and cpu_off > 0 else "below the clock tick"
             cells["gain"] = f"turn {turn:.2f}x, CPU {cpu}"
+            if m.off.ros2:  # the switch adds a viewer: the game must keep its speed
+                keeps = 1 / turn
+                cells["gain"] += f"; keeps {keeps:.0%} of its turns/s (target ≥ {ROS2_KEEPS:.0%})"
+                ok = ok and (keeps >= ROS2_KEEPS or p.case.drones < 1000)  # (judged on the swarm it is for)
             if m.off.shared_memory:
                 cells["gain"] += f", peak memory {off['hwm'] - on['hwm']:+.0f} MiB off (the three processes)"
             base = _states(p.on[0].statuses)
