@@ -139,6 +139,49 @@ def test_goals_refused_with_a_reason_and_counted() -> None:
     assert goals.taken == 1 and sum(goals.refused.values()) == 6 and set(goals.refused) == {*bad, "unknown drone"}
 
 
+def status(turn: int, cells: list[tuple[int, int, int]]):
+    from schema import DroneState, DroneStatus, Status
+
+    return Status(turn=turn, sender="SRV", drones=tuple(
+        DroneStatus(drone=f"D{i + 1:02d}", pos=c, state=DroneState.ALIVE) for i, c in enumerate(cells)))
+
+
+def test_the_viewer_publishes_the_newest_turn_at_its_rate() -> None:
+    """`dronesim ros2`'s core: it looks for the newest STATUS once a period (nothing read in between), publishes
+    a turn once, and ends after OVER once the last turn went out."""
+    import logging
+
+    from entities.ros2.node import Viewer
+    from network.transport import Received
+    from schema import EndReason, Over
+
+    class Sink:
+        def __init__(self) -> None:
+            self.turns: list[int] = []
+
+        def world(self, grid: np.ndarray, outs: list) -> None:
+            raise AssertionError("no map was given")
+
+        def turn(self, snap: Snapshot, outs: list) -> None:
+            self.turns.append(snap.turn)
+
+    sink, asked = Sink(), []
+    viewer = Viewer(Scene(), [sink], rate=10.0, logger=logging.getLogger("test"))
+    queue = {0.0: 1, 0.05: 2, 0.1: 3, 0.25: 3, 0.4: None}
+
+    for now, turn in queue.items():
+        def newest(turn: int | None = turn, now: float = now) -> Received | None:
+            asked.append(now)
+            return None if turn is None else Received("k", status(turn, [(1, 1, 1), (2, 2, 2)]))
+        viewer.tick(now, newest)
+    assert sink.turns == [1, 3] and asked == [0.0, 0.1, 0.25, 0.4]  # (0.05: not due; 0.25: turn 3 again)
+    assert not viewer.ended(0.4)
+    viewer.over, viewer.over_since = Over(turn=3, sender="SRV", reason=EndReason.TURN_LIMIT), 0.4
+    assert viewer.ended(0.4)
+    with pytest.raises(UsageError):
+        Viewer(Scene(), [], rate=0.0, logger=logging.getLogger("test"))
+
+
 # ------------------------------------------------------------------------------------------ against real peers
 
 

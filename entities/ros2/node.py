@@ -197,7 +197,7 @@ class Viewer:
             raise UsageError(f"--rate must be > 0, got {rate!r}")
         self.scene, self.sinks, self.period, self.log = scene, sinks, 1.0 / rate, logger
         self.turn = -1  # the last turn published
-        self.due = 0.0  # when the next turn may go out
+        self.due = 0.0  # when to look for the newest STATUS again
         self.paths_due = 0.0
         self.over: Over | None = None
         self.over_since = 0.0
@@ -209,6 +209,14 @@ class Viewer:
         for sink in self.sinks:
             sink.world(grid, outs)
 
+    def tick(self, now: float, newest: Callable[[], Received | None]) -> None:
+        """Once a period (`due`): the newest STATUS, if one came since the last look."""
+        if now < self.due:
+            return
+        self.due = now + self.period
+        if (got := newest()) is not None and isinstance(got.msg, Status):
+            self.status(got.msg, now)
+
     def status(self, status: Status, now: float) -> None:
         if status.turn <= self.turn:
             return
@@ -217,7 +225,7 @@ class Viewer:
         outs = self.scene.turn(snap, paths=paths)
         for sink in self.sinks:
             sink.turn(snap, outs)
-        self.turn, self.due = status.turn, now + self.period
+        self.turn = status.turn
         if paths:
             self.paths_due = now + ROS_PATH_PERIOD
 
@@ -269,8 +277,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
                                 if isinstance(reply, WorldMap):
                                     viewer.world(world_grid(reply))
                                     break
-                    if now >= viewer.due and (got := newest()) is not None and isinstance(got.msg, Status):
-                        viewer.status(got.msg, now)
+                    viewer.tick(now, newest)
         finally:
             graph.close()
             inbox.close()
