@@ -3,7 +3,8 @@
 No network and no clock here: the Zenoh adapter (node.py) feeds it validated messages, expired deadlines
 and vanished entities, one at a time, and carries out the effects it returns (publish, reply to a CONNECT,
 journal, count a `Refusal`: an input that cannot be accepted changes nothing). Who may join: admission.py;
-a game restarted from its journal: resume.py.
+a game restarted from its journal: resume.py (through `Engine.resume`). The stages it goes through and the
+messages each stage takes are two tables that drive it, `TRANSITIONS` and `TAKES` (h11's `_state.py` style).
 
 One turn (the seed's cycle GCS -> D01 -> ENV -> OBS -> GCS):
 
@@ -71,7 +72,7 @@ from . import arbiter, lacam, observer
 from .admission import Roster
 from .config import GameConfig
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
-from .journal import TurnLog, header_record, over_record
+from .journal import TurnLog, TurnRecord, header_record, over_record
 
 
 class Stage(enum.Enum):
@@ -80,6 +81,44 @@ class Stage(enum.Enum):
     GCS = "GCS"
     DRONES = "DRONES"
     OVER = "OVER"
+
+
+class When(enum.Enum):
+    """A message's turn against the engine's: the turn being played, a coming one (up to `AHEAD_MAX` on), or any
+    (its handler checks it)."""
+
+    NOW = "NOW"
+    AHEAD = "AHEAD"
+    ANY = "ANY"
+    OTHER = "OTHER"  # a past turn, or one too far on: taken in no stage
+
+
+#: The state machine, as tables that drive it (in the manner of h11's `_state.py`).
+#: The stage changes: each stage and the stages it may go to. The turn cycle GCS -> DRONES -> GCS (the ENV and OBS
+#: phases are effects of the drones' phase closing); admission (or resuming) opens the first turn's GCS phase, or
+#: its drones' phase when no ground station is there; a GCS phase opens the next one when a whole turn is played
+#: in one call (`play`); any stage ends in OVER (an end, a fault, a signal), which is final.
+TRANSITIONS: dict[Stage, frozenset[Stage]] = {
+    Stage.ADMITTING: frozenset({Stage.GCS, Stage.DRONES, Stage.RESUMING, Stage.OVER}),
+    Stage.RESUMING: frozenset({Stage.GCS, Stage.DRONES, Stage.OVER}),
+    Stage.GCS: frozenset({Stage.DRONES, Stage.GCS, Stage.OVER}),
+    Stage.DRONES: frozenset({Stage.GCS, Stage.OVER}),
+    Stage.OVER: frozenset(),
+}
+
+#: The messages the engine takes, in which stage and for which turn, and the method that takes each
+#: (stage None: any stage; its method checks the stage and turn itself, after the sender). Any other
+#: (stage, message, turn) is stale: refused (`StaleTurn`), changing nothing.
+TAKES: dict[tuple[Stage | None, type[Message], When], str] = {
+    (None, Target, When.ANY): "_target",  # the GCS's targets: WrongSender before StaleTurn
+    (None, Upd, When.ANY): "_upd",  # the environment's report of a recent ENV phase
+    (Stage.GCS, Done, When.NOW): "_gcs_done",  # the GCS phase's end
+    (Stage.GCS, Done, When.AHEAD): "_hold",  # a DONE for a coming GCS phase, held for it
+    (Stage.DRONES, Done, When.AHEAD): "_hold",
+    (Stage.GCS, Moves, When.NOW): "_hold_moves",  # a swarm host's MOVES before its phase opened, held for it
+    (Stage.DRONES, Nps, When.NOW): "_nps",  # a drone's move
+    (Stage.DRONES, Moves, When.NOW): "_moves_of_host",  # a swarm host's moves
+}
 
 
 # --------------------------------------------------------------------------- effects
@@ -169,6 +208,12 @@ class Engine:
 
     def _by_id(self, rows: np.ndarray, cells: np.ndarray) -> dict[str, Cell]:
         return {self.fleet.ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
+
+    def _enter(self, stage: Stage) -> None:
+        """Change stage, as `TRANSITIONS` allows (a change it does not list is a bug of the engine's)."""
+        if stage not in TRANSITIONS[self.stage]:
+            raise AssertionError(f"the engine cannot go from {self.stage.value} to {stage.value}")
+        self.stage = stage
 
     def _playing(self) -> bool:
         return self.stage in (Stage.GCS, Stage.DRONES)
@@ -273,7 +318,7 @@ class Engine:
 
     def _drones_phase(self) -> list[Effect]:
         """The drones' phase of this turn opens: no move taken yet, every alive drone's awaited."""
-        self.stage = Stage.DRONES
+        self._enter(Stage.DRONES)
         self._moved[:] = False
         alive = self.fleet.alive_rows()
         self._awaiting = len(alive)
@@ -287,7 +332,8 @@ class Engine:
 
     def _open_gcs(self, turn: int) -> Done | None:
         """The GCS phase of `turn` begins: nothing received yet; the DONE sent ahead for it, if any."""
-        self.stage, self.turn = Stage.GCS, turn
+        self._enter(Stage.GCS)
+        self.turn = turn
         self._aimed[:] = False
         self._tgt_seen, self._done = 0, None
         self._turn_log = TurnLog(turn)
@@ -373,26 +419,15 @@ class Engine:
     def receive(self, msg: Message) -> list[Effect]:
         """A message from the network, decoded and addressed correctly: its effects. One that cannot be accepted
         changes nothing but gives a `Refusal` (a refused TGT still counts towards its DONE, a batch's others go on)."""
-        now = msg.turn == self.turn
+        when = When.NOW if msg.turn == self.turn else \
+            When.AHEAD if self.turn < msg.turn <= self.turn + AHEAD_MAX else When.OTHER
+        take = TAKES.get((None, type(msg), When.ANY)) or TAKES.get((self.stage, type(msg), when))
         try:
-            match msg:
-                case Target():
-                    return self._target(msg)
-                case Upd():
-                    return self._upd(msg)
-                case Done() if self._playing() and self.turn < msg.turn <= self.turn + AHEAD_MAX:
-                    return self._hold(msg)
-                case Done() if self.stage is Stage.GCS and now:
-                    return self._gcs_done(msg)
-                case Nps() if self.stage is Stage.DRONES and now:
-                    self._move(msg.sender, msg.pos, msg.note, msg.ranked)
-                    return self._drones_check()
-                case Moves() if self.stage is Stage.DRONES and now:
-                    return self._moves_of_host(msg)
-                case Moves() if self.stage is Stage.GCS and now:
-                    return self._hold_moves(msg)
-            raise StaleTurn(f"{msg.TAG} for turn {msg.turn} from {msg.sender} while in {self.stage.value} "
-                            f"of turn {self.turn}")
+            if take is None:
+                raise StaleTurn(f"{msg.TAG} for turn {msg.turn} from {msg.sender} while in {self.stage.value} "
+                                f"of turn {self.turn}")
+            effects: list[Effect] = getattr(self, take)(msg)
+            return effects
         except RemoteInputError as err:  # raised before anything changed
             return [Refusal(f"{msg.TAG} from {msg.sender}", err)]
 
@@ -427,6 +462,10 @@ class Engine:
             raise StaleTurn(f"second DONE ahead for turn {msg.turn}")
         self._early[msg.turn] = msg
         return []
+
+    def _nps(self, msg: Nps) -> list[Effect]:
+        self._move(msg.sender, msg.pos, msg.note, msg.ranked)
+        return self._drones_check()
 
     def _hold_moves(self, msg: Moves) -> list[Effect]:
         """A swarm host's MOVES for this turn, sent before its drones' phase opened (a host that decides from
@@ -687,10 +726,46 @@ class Engine:
 
     def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
         turn = self.turn if turn is None else turn
-        self.stage = Stage.OVER
+        self._enter(Stage.OVER)
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
         self._log.info("game over at turn %d: %s", turn, text)
         return [Record(over_record(turn, reason.value, text)), Publish(self.end)]
+
+    # ------------------------------------------------------------------ resuming
+
+    def resume(self, records: Iterable[TurnRecord]) -> int:
+        """A game restarted from its journal (resume.py checks the header): each journaled turn replayed as the
+        observer played it and checked against the state it recorded, then the engine waits (RESUMING) for the
+        entities to connect again and plays the turn after the last. The last turn; UsageError if a turn does
+        not replay to its recorded state."""
+        for r in records:
+            self._replay(r)
+        self._enter(Stage.RESUMING)
+        return self.turn
+
+    def _replay(self, r: TurnRecord) -> None:
+        fleet, row = self.fleet, self.fleet.index
+        alive = fleet.alive_rows()
+        for d, p in r.targets.items():
+            fleet.aim(row[d], p)
+        if r.intent is not None:
+            self.intent = r.intent
+            self.final = self.intent is Intent.FINAL
+        self.turn = r.turn
+        self.follow(alive)  # (before the moves, as the arbitration ran)
+        for d, p in r.moves.items():
+            fleet.pos[row[d]] = p
+        for d, n in r.notes.items():
+            fleet.note[row[d]] = code_of(n)
+        self.age(alive, [row[d] for d in r.gave_way])  # the arbitration's priorities
+        hovered = np.isin(alive, [row[d] for d in r.hovered])
+        fleet.misses[alive] = np.where(hovered, fleet.misses[alive] + 1, 0)
+        for d, cause in r.deaths.items():
+            fleet.end(row[d], DroneState.DEAD, cause)
+        for d in r.lost:
+            fleet.end(row[d], DroneState.LOST, Cause.LOST)
+        if state_hash(self.status(r.turn)) != r.state:
+            raise UsageError(f"the journal's turn {r.turn} does not replay to its recorded state")
 
     # ------------------------------------------------------------------ faults
 

@@ -5,14 +5,11 @@ from __future__ import annotations
 
 import logging
 
-import numpy as np
-
-from schema import Cause, DroneState, Intent, UsageError
-from schema.tables import code_of
+from schema import UsageError
 
 from .config import GameConfig
-from .engine import Engine, Stage, state_hash
-from .journal import TurnRecord, over_of, turns
+from .engine import Engine
+from .journal import over_of, turns
 
 
 def restore(config: GameConfig, records: list[dict], logger: logging.Logger, game: str = "") -> Engine:
@@ -33,39 +30,9 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
     if (over := over_of(records)) is not None:
         raise UsageError(f"the journal's game is over (turn {over.get('turn')}): nothing to resume (a journal "
                          "holds one game: give another --journal for a new one)")
-    turn = 0
     try:
-        for r in turns(records[1:]):
-            turn = _restore_turn(engine, r)
+        turn = engine.resume(turns(records[1:]))
     except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise UsageError(f"the journal has a bad turn record after turn {turn}: {exc!r}") from None
-    engine.turn, engine.stage = turn, Stage.RESUMING
+        raise UsageError(f"the journal has a bad turn record: {exc!r}") from None
     logger.info("restored turn %d from the journal", turn)
     return engine
-
-
-def _restore_turn(engine: Engine, r: TurnRecord) -> int:
-    """Apply one journaled turn to the engine's state; its turn."""
-    fleet, row = engine.fleet, engine.fleet.index
-    alive = fleet.alive_rows()
-    for d, p in r.targets.items():
-        fleet.aim(row[d], p)
-    if r.intent is not None:
-        engine.intent = r.intent
-        engine.final = engine.intent is Intent.FINAL
-    engine.turn = r.turn
-    engine.follow(alive)  # (before the moves, as the arbitration ran)
-    for d, p in r.moves.items():
-        fleet.pos[row[d]] = p
-    for d, n in r.notes.items():
-        fleet.note[row[d]] = code_of(n)
-    engine.age(alive, [row[d] for d in r.gave_way])  # the arbitration's priorities
-    hovered = np.isin(alive, [row[d] for d in r.hovered])
-    fleet.misses[alive] = np.where(hovered, fleet.misses[alive] + 1, 0)
-    for d, cause in r.deaths.items():
-        fleet.end(row[d], DroneState.DEAD, cause)
-    for d in r.lost:
-        fleet.end(row[d], DroneState.LOST, Cause.LOST)
-    if state_hash(engine.status(r.turn)) != r.state:
-        raise UsageError(f"the journal's turn {r.turn} does not replay to its recorded state")
-    return r.turn
