@@ -29,7 +29,7 @@ import time
 
 import zenoh
 
-from network.transport import add_zenoh_args, zenoh_config
+from network.transport import add_zenoh_args, open_session, zenoh_config
 from schema import Ask, Keys, Nps, encode
 
 SENDER = "D01"
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--count", type=int, required=True, help="messages (nps) or queries (ask) to send")
     p.add_argument("--timeout", type=float, default=120.0, help="seconds to wait for the ASKs' replies")
     args = p.parse_args(argv)
-    with zenoh.open(zenoh_config(args)) as session:
+    with open_session(zenoh_config(args)) as session:
         keys = Keys(args.root)
         if args.kind == "nps":
             result = flood_nps(session, keys, args.count)

@@ -53,6 +53,12 @@ class Roster:
                 return f"drone {d} is already taken by {host}"
         return ""
 
+    def claimed(self, msg: Connect, fleet: Fleet) -> bool:
+        """Whether `msg` (refused) claims a drone id another process already holds: what each drone replica that
+        tries ids in turn meets on a normal start (docker/entrypoint.py), expected, not a fault."""
+        return msg.role is Role.DRONE and (msg.sender in self.roles or any(
+            d in fleet.index and fleet.host[fleet.index[d]] not in (None, msg.sender) for d in msg.drones))
+
     def admit(self, msg: Connect) -> bool:
         """Admit `msg`'s sender (checked by `refusal`); True if it was admitted already (the same process
         connecting again)."""

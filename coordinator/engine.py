@@ -262,7 +262,8 @@ class Engine:
         """Admit an entity or refuse it; start the game when everyone is there."""
         refusal = self.roster.refusal(msg, self.fleet, over=self.stage is Stage.OVER, admitting=self._admitting())
         if refusal:
-            self._log.warning("refused %s: %s", msg.sender, refusal)
+            expected = self.roster.claimed(msg, self.fleet)  # (an id taken: a replica tries the next one)
+            self._log.log(logging.INFO if expected else logging.WARNING, "refused %s: %s", msg.sender, refusal)
             refused: list[Effect] = [ReplyToConnect(token, Refused(turn=self.turn, sender="SRV", text=refusal))]
             # one that comes back after the end (its link was down when OVER went out) is told the end again
             return refused + ([Publish(self.end)] if self.end is not None else [])

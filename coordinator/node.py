@@ -31,6 +31,7 @@ from network.transport import (
     Sessions,
     add_zenoh_args,
     audit_sessions,
+    open_session,
     session_id,
     setup_logging,
     zenoh_config,
@@ -325,7 +326,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     engine.verify_env, engine.journaled = verify_env, journal is not None
     engine.env_followed = False  # until a Matching event says someone follows the ENV phase
     engine.arbiter = timed = arbiter.Timed(engine.arbiter)  # its CPU, reported at the end (benchmarks read it)
-    with zenoh.open(conf) as session:
+    with open_session(conf) as session:
         if (other := rival(session, keys)) is not None:
             raise UsageError(f"another coordinator (session {other}) runs on {keys.root}: one game per root")
         me, inbox = session_id(session), Inbox(session, keys, logger)

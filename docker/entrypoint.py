@@ -102,12 +102,15 @@ def claim(argv: list[str]) -> int:
             return code
         proc = subprocess.Popen(dronesim("drone", *args), stderr=subprocess.PIPE, text=True, bufsize=1)
         refusal = ""
-        for line in proc.stderr:  # passed through, and scanned for a refusal
-            sys.stderr.write(line)
-            sys.stderr.flush()
+        for line in proc.stderr:  # passed through, and scanned for a refusal (held back: it may be expected)
             if "connection refused:" in line and not refusal:
                 refusal = line.strip()
+                continue
+            sys.stderr.write(line)
+            sys.stderr.flush()
         code = proc.wait()
+        if refusal and (code == 0 or stopping or not TAKEN.search(refusal)):
+            print(refusal, file=sys.stderr, flush=True)  # (a taken id is expected: the line below says it)
         if code == 0 or stopping or not refusal:
             return code
         if TAKEN.search(refusal):

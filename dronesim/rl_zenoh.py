@@ -38,6 +38,7 @@ from network.transport import (
     router_config,
     router_locators,
     session_id,
+    zenoh_error,
 )
 from schema import Done, Intent, Keys, Message, Moves, Over, Phase, Status, Turn, UsageError
 from world.grid import World
@@ -63,17 +64,22 @@ class ZenohTurns:
         #: that exits) must not leave a coordinator behind that waits for a router gone with this process.
         self._children: list[subprocess.Popen] = []
         self._files: list = []  # the current game's log files
-        self._finalizer = weakref.finalize(self, _abandon, self._children, self._files, self._logs)
+        #: The sessions open, for the finalizer too: one left for the interpreter's teardown to drop hangs it
+        #: (a script that ends or raises mid-episode without close() would never exit).
+        self._sessions: list[zenoh.Session] = []
+        self._finalizer = weakref.finalize(self, _abandon, self._children, self._files, self._logs, self._sessions)
         try:
             if connect is None:
                 self._router = zenoh.open(router_config("tcp/127.0.0.1:0"))
+                self._sessions.append(self._router)
                 connect = router_locators(self._router)[0]
             self.locator = connect
             self._session = zenoh.open(client_config(connect))
+            self._sessions.append(self._session)
         except Exception as err:
             self.close()
             where = f"the Zenoh router at {connect}" if connect else "a Zenoh router in this process"
-            raise BackendError(f"cannot open a session with {where}: {err}") from err
+            raise BackendError(f"cannot open a session with {where}: {zenoh_error(err)}") from None
 
     def start(self, game: GameConfig, world: World) -> Board:
         self.stop()
@@ -98,12 +104,8 @@ class ZenohTurns:
         try:
             self.stop()
         finally:
-            for session in (self._session, self._router):
-                if session is not None:
-                    with contextlib.suppress(Exception):
-                        session.close()
             self._session = self._router = None
-            self._finalizer()
+            self._finalizer()  # (closes the sessions)
 
 
 class _Game:
@@ -268,9 +270,14 @@ class _Game:
             self._files.clear()
 
 
-def _abandon(children: list[subprocess.Popen], files: list, logs: tempfile.TemporaryDirectory) -> None:
-    """Kill the processes still running and remove their logs (after close(), or as the finalizer of an
-    environment dropped without it)."""
+def _abandon(children: list[subprocess.Popen], files: list, logs: tempfile.TemporaryDirectory,
+             sessions: list[zenoh.Session]) -> None:
+    """Close the sessions still open (the client's first), kill the processes still running and remove their logs
+    (after close(), or as the finalizer of an environment dropped without it, at the latest when the interpreter
+    exits: before its teardown, which would hang on an open session)."""
+    while sessions:
+        with contextlib.suppress(Exception):
+            sessions.pop().close()
     for proc in children:
         if proc.poll() is None:
             proc.kill()

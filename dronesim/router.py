@@ -9,9 +9,16 @@ import argparse
 import signal
 import sys
 
-import zenoh
-
-from network.transport import add_zenoh_args, apply_flags, router_config, router_locators, setup_logging, zenoh_config
+from network.transport import (
+    add_zenoh_args,
+    apply_flags,
+    connect_to,
+    open_session,
+    router_config,
+    router_locators,
+    setup_logging,
+    zenoh_config,
+)
 from schema import UsageError
 
 
@@ -25,10 +32,11 @@ def cli(argv: list[str] | None = None) -> int:
             conf = zenoh_config(args)
         else:
             conf = router_config(args.listen or "tcp/0.0.0.0:7447")
+            connect_to(conf, args.connect)
             apply_flags(conf, args, router=True)
         conf.insert_json5("mode", '"router"')
-        session = zenoh.open(conf)
-    except (UsageError, zenoh.ZError) as err:  # (a bad endpoint, or one it cannot listen on)
+        session = open_session(conf)
+    except UsageError as err:  # (a bad endpoint, one it cannot listen on or reach)
         print(f"dronesim router: {err}", file=sys.stderr)
         return 2
     signals = {signal.SIGINT, signal.SIGTERM}

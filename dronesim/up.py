@@ -20,13 +20,11 @@ import tempfile
 import threading
 import time
 
-import zenoh
-
 from dronesim import child_env
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
 from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
-from network.transport import router_config, router_locators
+from network.transport import open_session, router_config, router_locators
 from schema import UsageError, drone_id
 from schema.tuning import KILL_S, STOP_S
 
@@ -52,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the cooperative drones' arbitration (default lacam, the complete search; pibt: PIBT alone)")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS, to watch the game (default: full speed)")
+    p.add_argument("--phase-deadline", type=float, metavar="SECONDS",
+                   help="seconds the drones (and the environment) have for each phase (default: the coordinator's, 5)")
     p.add_argument("--journal", help="write the journal to this file")
     p.add_argument("--root", default="sim", help="key root (default sim)")
     p.add_argument("--listen", default="tcp/127.0.0.1:0", help="the embedded router's endpoint (default: a free port)")
@@ -88,7 +88,8 @@ def coordinator_flags(args: argparse.Namespace, locator: str) -> list[str]:
     """The coordinator's flags (after `dronesim coordinator`): the game it plays."""
     return [*_common(args, locator), "--seed", str(args.seed), "--size", args.size, "--drones", str(args.drones),
             "--max-turns", str(args.max_turns), "--admit-deadline", "60", "--pace", str(args.pace),
-            *_passed(args, "world", "starts", "journal", "scenario", "arbiter")]
+            *_passed(args, "world", "starts", "journal", "scenario", "arbiter"),
+            *(["--phase-deadline", str(args.phase_deadline)] if args.phase_deadline is not None else [])]
 
 
 def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str]]]:
@@ -131,7 +132,7 @@ def main(args: argparse.Namespace) -> int:
             return main(argparse.Namespace(**{**vars(args), "scen": None, "world": None, "scenario": str(path)}))
     check_game(args)
     interactive = not args.targets and not args.script and not args.scenario and not args.web and not args.mavlink
-    with zenoh.open(router_config(args.listen)) as router:
+    with open_session(router_config(args.listen)) as router:
         locator = router_locators(router)[0]
         what = f"scenario {args.scenario}" if args.scenario else \
             f"seed {args.seed}, {args.drones} drone(s), autopilot {args.autopilot}"

@@ -25,6 +25,7 @@ from network.transport import (
     Presence,
     Received,
     add_zenoh_args,
+    open_session,
     session_id,
     setup_logging,
     zenoh_config,
@@ -40,7 +41,7 @@ from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Qu
 def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: Keys, logger: logging.Logger,
          host: str | None = None, connect_timeout: float = CONNECT_TIMEOUT_S, grace: float = COORDINATOR_GRACE_S,
          ask_timeout: float = ASK_TIMEOUT_S, swarm_min: int = SWARM_MIN, chart: bool = True) -> Over:
-    with zenoh.open(conf) as session:
+    with open_session(conf) as session:
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.turn_of(Phase.DRONES), Turn)
         inbox.subscribe(keys.over, Over)

@@ -26,6 +26,7 @@ from network.transport import (
     Presence,
     Received,
     add_zenoh_args,
+    open_session,
     session_id,
     setup_logging,
     zenoh_config,
@@ -38,7 +39,7 @@ from .environment import Effect, EnvironmentProcess, Fail, Follow, Refusal, Repl
 
 def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool = True,
          connect_timeout: float = CONNECT_TIMEOUT_S, grace: float = COORDINATOR_GRACE_S, follow: bool = False) -> Over:
-    with zenoh.open(conf) as session:
+    with open_session(conf) as session:
         inbox = Inbox(session, keys, logger)
         newest = inbox.newest(keys.status, Status)  # (handed to the core before each query, unless followed)
         inbox.subscribe(keys.over, Over)

@@ -27,6 +27,7 @@ from network.transport import (
     Inbox,
     Outbox,
     add_zenoh_args,
+    open_session,
     setup_logging,
     zenoh_config,
 )
@@ -67,7 +68,7 @@ class Lines:
 
 def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
     conf, keys, draw = zenoh_config(args), Keys(args.root), not args.no_draw
-    with zenoh.open(conf) as session:
+    with open_session(conf) as session:
         inbox = listen(session, keys, logger)
         lines = (None if args.targets or args.script or args.scenario or args.ros2  # no plan: a person
                  else Lines(sys.stdin))

@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import queue
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -78,10 +79,31 @@ def zenoh_config(args: argparse.Namespace) -> zenoh.Config:
             raise UsageError(f"cannot load zenoh config {args.config}: {exc}") from None
     else:
         conf = _config({})
-    _insert(conf, {"scouting/delay": 0, "mode": args.mode, "connect/endpoints": args.connect,
-                   "listen/endpoints": args.listen})
+    _insert(conf, {"scouting/delay": 0, "mode": args.mode, "listen/endpoints": args.listen})
+    connect_to(conf, args.connect)
     apply_flags(conf, args)
     return conf
+
+
+def connect_to(conf: zenoh.Config, endpoints: list[str]) -> None:
+    """Connect to `endpoints` (given on the command line): one that cannot be reached fails the session's
+    opening at once, in every mode (a peer or a router would otherwise wait for it in the background)."""
+    if endpoints:
+        _insert(conf, {"connect/endpoints": endpoints, "connect/timeout_ms": 0, "connect/exit_on_failure": True})
+
+
+def open_session(conf: zenoh.Config) -> zenoh.Session:
+    """`zenoh.open`, failing with a UsageError (one line: what failed) when an endpoint cannot be reached or
+    listened on, instead of Zenoh's error and its source locations."""
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as err:
+        raise UsageError(f"cannot open a Zenoh session: {zenoh_error(err)}") from None
+
+
+def zenoh_error(err: BaseException) -> str:
+    """Zenoh's error message without the Rust source locations it appends (`... at /path/file.rs:12.`)."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(err)).strip()
 
 
 def _insert(conf: zenoh.Config, settings: dict[str, object]) -> None:

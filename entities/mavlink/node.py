@@ -22,11 +22,10 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
-import zenoh
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from network.signals import waking
-from network.transport import Outbox, zenoh_config
+from network.transport import Outbox, open_session, zenoh_config
 from schema import Keys, MalformedMessage, Over, RejectCounter, RemoteInputError, UsageError
 from schema.errors import Refusal
 from schema.tuning import MAVLINK_QUEUE, MAVLINK_TELEMETRY_S
@@ -183,7 +182,7 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
     if not (args.turn_period >= 0 and args.turn_period <= 60):
         raise UsageError(f"--turn-period must be 0..60 seconds, got {args.turn_period:g}")
     conf, keys = zenoh_config(args), Keys(args.root)
-    with zenoh.open(conf) as session:
+    with open_session(conf) as session:
         inbox = listen(session, keys, logger)
         with waking(partial(inbox.post, None)):
             member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)

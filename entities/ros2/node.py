@@ -28,7 +28,7 @@ import zenoh
 import zenoh.ext
 
 from network.signals import until_stopped, waking
-from network.transport import Inbox, Received, add_zenoh_args, setup_logging, zenoh_config
+from network.transport import Inbox, Received, add_zenoh_args, open_session, setup_logging, zenoh_config
 from schema import Keys, MapRequest, Over, Status, UsageError, WorldMap
 from schema.keys import RosKeys
 from schema.tuning import FINAL_STATUS_WAIT, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE
@@ -247,7 +247,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
         from .foxglove import FoxgloveLive
 
         fox = FoxgloveLive(args.foxglove, scene, logger)
-    with zenoh.open(conf) as session:
+    with open_session(conf) as session:
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.over, Over)
         newest = inbox.newest(keys.status, Status)

@@ -16,10 +16,8 @@ import threading
 from dataclasses import dataclass
 from functools import partial
 
-import zenoh
-
 from network.signals import over_status, waking
-from network.transport import Outbox, zenoh_config
+from network.transport import Outbox, open_session, zenoh_config
 from schema import Keys, Over, UsageError
 from schema.tuning import COMMAND_TIMEOUT
 
@@ -111,7 +109,7 @@ def carry_out(state: GroundState, cmd: object) -> None:
 
 def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[str, int]) -> Over:
     conf, keys, pace, hub = zenoh_config(args), Keys(args.root), check_pace_arg(args.pace), Hub()
-    with zenoh.open(conf) as session:
+    with open_session(conf) as session:
         inbox = listen(session, keys, logger, every_phase=True)
         backend = LiveBackend(inbox.post)
         server = WebServer(address, backend, hub, logger)  # binds now: a taken port fails before admission
