@@ -46,10 +46,9 @@ def snapshots(records: Iterator[dict],
         if r.get("record") != "turn":
             yield None, r
             continue
-        for d, p in r.get("targets", {}).items():
-            target[index[d]] = p
-        for d, p in r.get("moves", {}).items():
-            pos[index[d]] = p
+        for cells, into in ((r.get("targets"), target), (r.get("moves"), pos)):
+            if cells:  # (a swarm's thousand cells in one assignment)
+                into[[index[d] for d in cells]] = list(cells.values())
         for d in r.get("deaths", {}):
             state[index[d]] = DEAD
         for d in r.get("lost", ()):

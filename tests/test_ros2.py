@@ -166,7 +166,7 @@ def test_the_viewer_publishes_the_newest_turn_at_its_rate() -> None:
             self.turns.append(snap.turn)
 
     sink, asked = Sink(), []
-    viewer = Viewer(Scene(), [sink], rate=10.0, logger=logging.getLogger("test"))
+    viewer = Viewer(Scene(), [sink], rate=10.0, logger=logging.getLogger("test"), cpu=lambda: 0.0)
     queue = {0.0: 1, 0.05: 2, 0.1: 3, 0.25: 3, 0.4: None}
 
     for now, turn in queue.items():
@@ -180,6 +180,26 @@ def test_the_viewer_publishes_the_newest_turn_at_its_rate() -> None:
     assert viewer.ended(0.4)
     with pytest.raises(UsageError):
         Viewer(Scene(), [], rate=0.0, logger=logging.getLogger("test"))
+
+
+def test_a_costly_turn_makes_the_viewer_wait() -> None:
+    """A turn that cost the viewer C s of CPU: the next look C / ROS_CPU_SHARE s later, at most ROS_SLOWEST."""
+    import logging
+
+    from entities.ros2.node import Viewer
+    from network.transport import Received
+    from schema.tuning import ROS_CPU_SHARE, ROS_SLOWEST
+
+    class Sink:
+        def world(self, grid: np.ndarray, outs: list) -> None: ...
+        def turn(self, snap: Snapshot, outs: list) -> None: ...
+
+    spent = iter([0.0, 0.2 * ROS_CPU_SHARE, 1.0, 1.0 + 10 * ROS_SLOWEST])
+    viewer = Viewer(Scene(), [Sink()], rate=20.0, logger=logging.getLogger("test"), cpu=lambda: next(spent))
+    viewer.tick(0.0, lambda: Received("k", status(1, [(0, 0, 0)])))
+    assert viewer.due == pytest.approx(0.2)
+    viewer.tick(0.25, lambda: Received("k", status(2, [(0, 1, 0)])))
+    assert viewer.due == pytest.approx(0.25 + ROS_SLOWEST)
 
 
 # ------------------------------------------------------------------------------------------ against real peers

@@ -53,9 +53,9 @@ class FoxScene:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
-        self._views: dict[str, int] = {}
-        self._targets: dict[str, tuple[int, int, int] | None] = {}
+        self._last: Snapshot | None = None  # the last turn's snapshot: what the scene shows
         self._colours = [_colour(c) for c in COLOURS]
+        self._trail_colour = _colour(COLOURS[0])
 
     def buildings(self, grid: np.ndarray) -> SceneUpdate:
         s = self.scene.cell_size
@@ -68,33 +68,39 @@ class FoxScene:
         """The drones whose state and the targets that changed (None: nothing did)."""
         s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(snap.turn))
         entities, deletions = [], []
-        ball = Vector3(x=0.8 * s, y=0.8 * s, z=0.8 * s)
-        for name, view, target in zip(names, snap.view.tolist(), snap.target.tolist()):
-            if self._views.get(name) != view:
-                self._views[name] = view
+        ball, box = Vector3(x=0.8 * s, y=0.8 * s, z=0.8 * s), Vector3(x=0.5 * s, y=0.5 * s, z=0.5 * s)
+        last = self._last
+        changed = (np.arange(len(names)) if last is None or len(last.view) != len(names) else
+                   np.flatnonzero((snap.view != last.view) | (snap.target != last.target).any(axis=1)))
+        first = last is None or len(last.view) != len(names)
+        self._last = snap
+        for i in changed.tolist():
+            name, view, target = names[i], int(snap.view[i]), snap.target[i].tolist()
+            if first or view != last.view[i]:  # type: ignore[union-attr]
                 entities.append(SceneEntity(timestamp=stamp, frame_id=name, id=f"drone/{name}", frame_locked=True,
                                             spheres=[SpherePrimitive(pose=_at(0.0, 0.0, 0.0), size=ball,
                                                                      color=self._colours[view])]))
-            cell = None if target[0] < 0 else (target[0], target[1], target[2])
-            if self._targets.get(name) != cell:
-                self._targets[name] = cell
-                if cell is None:
-                    deletions.append(SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.MatchingId,
-                                                         id=f"target/{name}"))
+            if first or target != last.target[i].tolist():  # type: ignore[union-attr]
+                if target[0] < 0:
+                    if not first:
+                        deletions.append(SceneEntityDeletion(timestamp=stamp, id=f"target/{name}",
+                                                             type=SceneEntityDeletionType.MatchingId))
                 else:
                     entities.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"target/{name}", cubes=[
-                        CubePrimitive(pose=_at(cell[0] * s, cell[1] * s, cell[2] * s),
-                                      size=Vector3(x=0.5 * s, y=0.5 * s, z=0.5 * s), color=_colour(TARGET_COLOUR))]))
+                        CubePrimitive(pose=_at(target[0] * s, target[1] * s, target[2] * s), size=box,
+                                      color=_colour(TARGET_COLOUR))]))
         return SceneUpdate(entities=entities, deletions=deletions) if entities or deletions else None
 
     def trails(self, turn: int, trails: dict[str, list]) -> SceneUpdate | None:
         if not trails:
             return None
         s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(turn))
-        return SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"trail/{name}", lines=[
-            LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.1 * s, color=self._colours[self._views.get(
-                name, 0)], points=[Point3(x=x * s, y=y * s, z=z * s) for x, y, z in cells[-SCENE_TRAIL:]])])
-            for name, cells in trails.items()])
+        def line(cells: list) -> LinePrimitive:
+            return LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.1 * s, color=self._trail_colour,
+                                 points=[Point3(x=x * s, y=y * s, z=z * s) for x, y, z in cells[-SCENE_TRAIL:]])
+
+        return SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"trail/{name}",
+                                                 lines=[line(cells)]) for name, cells in trails.items()])
 
 
 class FoxgloveSink:

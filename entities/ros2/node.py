@@ -31,7 +31,7 @@ from network.signals import until_stopped, waking
 from network.transport import Inbox, Received, add_zenoh_args, open_session, setup_logging, zenoh_config
 from schema import Keys, MapRequest, Over, Status, UsageError, WorldMap
 from schema.keys import RosKeys
-from schema.tuning import FINAL_STATUS_WAIT, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE
+from schema.tuning import FINAL_STATUS_WAIT, ROS_CPU_SHARE, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE, ROS_SLOWEST
 
 from ..gcs import OBSERVED_ENDS
 from .model import Out, Scene, Snapshot, type_hash
@@ -192,10 +192,11 @@ class Viewer:
     """What `dronesim ros2` does with what it hears, given where its messages go (`sinks`): pure of the network
     but for the sinks. Times are seconds of any monotonic clock."""
 
-    def __init__(self, scene: Scene, sinks: list[Sink], *, rate: float, logger: logging.Logger) -> None:
+    def __init__(self, scene: Scene, sinks: list[Sink], *, rate: float, logger: logging.Logger,
+                 cpu: Callable[[], float] = time.thread_time) -> None:
         if not (np.isfinite(rate) and rate > 0):
             raise UsageError(f"--rate must be > 0, got {rate!r}")
-        self.scene, self.sinks, self.period, self.log = scene, sinks, 1.0 / rate, logger
+        self.scene, self.sinks, self.period, self.log, self.cpu = scene, sinks, 1.0 / rate, logger, cpu
         self.turn = -1  # the last turn published
         self.due = 0.0  # when to look for the newest STATUS again
         self.paths_due = 0.0
@@ -210,12 +211,15 @@ class Viewer:
             sink.world(grid, outs)
 
     def tick(self, now: float, newest: Callable[[], Received | None]) -> None:
-        """Once a period (`due`): the newest STATUS, if one came since the last look."""
+        """When due: the newest STATUS, if one came since the last look. Due again a period later, or later still
+        after a turn that cost much CPU (`ROS_CPU_SHARE`, at most `ROS_SLOWEST` s): the viewer of a swarm takes a
+        bounded share of the machine, whatever the game's speed."""
         if now < self.due:
             return
-        self.due = now + self.period
+        spent = self.cpu()
         if (got := newest()) is not None and isinstance(got.msg, Status):
             self.status(got.msg, now)
+        self.due = now + min(max(self.period, (self.cpu() - spent) / ROS_CPU_SHARE), max(self.period, ROS_SLOWEST))
 
     def status(self, status: Status, now: float) -> None:
         if status.turn <= self.turn:
