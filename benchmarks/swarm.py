@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coordinator import arbiter
+from coordinator import arbiter, lacam
 from coordinator.config import DroneSpec, GameConfig
 from dronesim.local import Inputs, simulate
 from entities.gcs import Plan
@@ -65,14 +65,14 @@ from schema.tables import RANK_STEPS, rank_steps
 from world import movingai
 from world.grid import World, padded_steps
 
-from . import add_write_args, command_line, pogema, replace_section, replace_subsection
+from . import add_write_args, anchor, command_line, pogema, replace_section, replace_subsection
 
 SECTION = "## Swarm benchmark"
 AGENTS = (50, 100, 200, 400)
 #: The 3D city: size, drones.
 CITY = ((64, 64, 8), 1000)
 QUICK_CITY = ((16, 16, 4), 40)
-VARIANTS = ("fixed", "pibt", "pibt+map")
+VARIANTS = ("fixed", "pibt", "pibt+map", "lacam")
 #: POGEMA's episode on 32 x 32 (turns): the ISR at this turn is reported too.
 TURNS_32 = 256
 #: The turn limit on 32 x 32 is this many times the instance's lower-bound makespan (the longest single-agent
@@ -116,6 +116,7 @@ class Outcome:
     seconds: float
     arbiter_cpu: float  # seconds of process time inside the arbiter, over the game
     arbitrated: int  # turns the arbiter ran
+    arbiter_worst: float  # seconds of the arbiter's longest turn
     max_turns: int
     bridges: int  # edges on no cycle in the instance's free cells (0: PIBT's condition holds)
 
@@ -200,9 +201,10 @@ def play(inst: Instance, variant: str) -> Outcome:
     config = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=inst.max_turns,
                         drones=tuple(DroneSpec(drone=d, start=s) for d, s in zip(ids, inst.starts)))
     plan = Plan(tuple(sorted((1, d, g) for d, g in zip(ids, inst.goals))))
-    timed = arbiter.Timed(arbiter.fixed if variant == "fixed" else arbiter.cooperate)
+    timed = arbiter.Timed(arbiter.fixed if variant == "fixed" else lacam.Lacam() if variant == "lacam" else
+                          arbiter.cooperate)
     # the former D* never said UNREACHABLE while stuck behind drones: it waited to the turn limit
-    options = {"pibt": None, "pibt+map": {"dstar": {"known": inst.grid}},
+    options = {"pibt": None, "lacam": None, "pibt+map": {"dstar": {"known": inst.grid}},
                "fixed": {"dstar": {"stuck_after": inst.max_turns + 1}}}[variant]
     t0 = time.perf_counter()
     result = simulate(config, dict.fromkeys(ids, "dstar"), Inputs(plan=plan), LOG, verify_env=False,
@@ -214,7 +216,8 @@ def play(inst: Instance, variant: str) -> Outcome:
     paid = [turns if c is None else c for c in costs]
     moving = sum(c is None and m > turns - RECENT for c, m in zip(costs, last_move))
     return Outcome(inst.name, len(ids), variant, arrived, sum(paid), max(paid), sum(inst.optimal), max(inst.optimal),
-                   collisions, at_256, moving, turns, seconds, timed.cpu, timed.calls, inst.max_turns, inst.bridges)
+                   collisions, at_256, moving, turns, seconds, timed.cpu, timed.calls, timed.worst, inst.max_turns,
+                   inst.bridges)
 
 
 def _costs(records: list[dict], ids: list[str], starts: dict[str, Cell], goals: dict[str, Cell]
@@ -557,6 +560,76 @@ def city_distributed(quick: bool, runs: int, with_pogema: bool) -> tuple[list[Ci
     return games, pogema_sps
 
 
+# --------------------------------------------------------------------------- the LaCAM-class anchor
+
+ANCHOR_SECTION = "### LaCAM: the complete arbitration and its anchor"
+#: The anchor's instances: the densest of every family, on seeds 1-5; the anchor's time limit an instance.
+ANCHOR_AGENTS = (400,)
+ANCHOR_SEEDS = 5
+ANCHOR_SECONDS = 120.0
+ANCHOR_LEGEND = (
+    "Each instance played in process by D* drones with the complete arbitration (`lacam`, coordinator/lacam.py, "
+    "the default) and with PIBT alone (`pibt`), and solved by the anchor, pymapf's LaCAM (Okumura, AAAI 2023), in "
+    "its own virtual environment (benchmarks/anchor.py), on the same instances and conventions (4-connected, "
+    "vertex and swap conflicts forbidden, agents stay at their goals, an agent's cost the turn after which it "
+    "stays on its goal). home: drones on their goal at the end; SoC and makespan (a game not finished counts "
+    "its length); s: wall-clock seconds of our whole in-process game (every drone's D* included) and of the "
+    "anchor's solve; lacam ms/turn: process time in the arbitration a turn, mean and the longest turn.")
+
+
+def anchor_compare(families: list[str], agents: tuple[int, ...], seeds: int, seconds: float,
+                   variants: tuple[str, ...] = ("lacam", "pibt")) -> tuple[str, str]:
+    """Each instance played by our drones with each of `variants` and solved by the anchor (benchmarks/anchor.py,
+    pymapf's LaCAM, in its own environment): a table, one row an instance, and the summary lines."""
+    head = ["instance", "agents", "seed", "SoC LB", "makespan LB"]
+    for v in variants:
+        head += [f"{v} home", f"{v} SoC", f"{v} makespan", f"{v} s"]
+    head += ["lacam ms/turn mean / max", "anchor solved", "anchor SoC", "anchor makespan", "anchor s"]
+    lines = [_row(head), _row(["---"] * len(head))]
+    done: list[tuple[dict[str, Outcome], anchor.Result | None]] = []
+    for family in families:
+        for n in agents:
+            for seed in range(1, seeds + 1):
+                inst = movingai_instance(family, n, seed)
+                ours = {v: play(inst, v) for v in variants}
+                g = inst.grid[:, :, 0]
+                rows = [[int(g[x, y]) for x in range(g.shape[0])] for y in range(g.shape[1])]
+                try:
+                    theirs: anchor.Result | None = anchor.solve(
+                        [(rows, [s[:2] for s in inst.starts], [t[:2] for t in inst.goals])], seconds)[0]
+                except anchor.Unavailable as err:
+                    print(f"anchor not measured: {err}", file=sys.stderr)
+                    theirs = None
+                done.append((ours, theirs))
+                first = ours[variants[0]]
+                row: list[object] = [family, n, seed, first.soc_lb, first.makespan_lb]
+                for v in variants:
+                    o = ours[v]
+                    row += [f"{o.arrived}/{o.agents}", o.soc, o.makespan, f"{o.seconds:.1f}"]
+                lc = ours.get("lacam", first)
+                row += [f"{1000 * lc.arbiter_cpu / max(1, lc.arbitrated):.1f} / {1000 * lc.arbiter_worst:.1f}"]
+                row += (["-"] * 4 if theirs is None else
+                        [str(theirs.solved).lower(), theirs.soc if theirs.solved else "-",
+                         theirs.makespan if theirs.solved else "-", f"{theirs.seconds:.1f}"])
+                lines.append(_row(row))
+                print(f"  {lines[-1]}", file=sys.stderr, flush=True)
+    out = []
+    for v in variants:
+        mine = [o[v] for o, _ in done]
+        both = [(o[v], a) for o, a in done if a is not None and a.solved and o[v].csr]
+        ratio = sum(o.soc / a.soc for o, a in both) / max(1, len(both))
+        out.append(f"- `{v}`: CSR {sum(o.csr for o in mine):.0f} of {len(mine)}, ISR "
+                   f"{100 * sum(o.arrived for o in mine) / max(1, sum(o.agents for o in mine)):.2f} %, within 4 x the "
+                   f"lower-bound makespan {sum(o.csr and o.makespan <= 4 * o.makespan_lb for o in mine)}; sum of costs "
+                   f"{ratio:.2f} x the anchor's on the {len(both)} instances both solved; the longest arbitration "
+                   f"turn {1000 * max((o.arbiter_worst for o in mine), default=0):.1f} ms")
+    anchors = [a for _, a in done if a is not None]
+    out.append(f"- anchor (pymapf {anchor.VERSION} LaCAM, {seconds:g} s an instance): solved "
+               f"{sum(a.solved for a in anchors)} of {len(anchors)}, "
+               f"{sum(a.seconds for a in anchors) / max(1, len(anchors)):.1f} s an instance")
+    return "\n".join(lines), "\n".join(out)
+
+
 # --------------------------------------------------------------------------- main
 
 
@@ -583,6 +656,12 @@ def main(argv: list[str] | None = None) -> int:
                              "--no-city-distributed: skip them (default: play everything)")
     parser.add_argument("--city-runs", type=int, default=CITY_RUNS, help=f"runs of each distributed city game "
                                                                           f"(default {CITY_RUNS})")
+    parser.add_argument("--anchor", action="store_true",
+                        help="only the complete arbitration (lacam) and PIBT against the LaCAM-class anchor (pymapf, "
+                             "in its own environment) on the densest instances "
+                             f"({'/'.join(map(str, ANCHOR_AGENTS))} agents) of every family, seeds 1-{ANCHOR_SEEDS} "
+                             "(--agents, --seeds, --families narrow it)")
+    parser.add_argument("--anchor-seconds", type=float, default=ANCHOR_SECONDS, help="the anchor's time an instance")
     parser.add_argument("--lrta-alone", action="store_true",
                         help="only the distributed city's 10,000 trips flown by LRTA* drones each alone, for cube "
                              "radii 0-2 (the pilot's own quality, docs/cooperation.md)")
@@ -600,6 +679,20 @@ def main(argv: list[str] | None = None) -> int:
         print(lrta_alone(size, drones, (0, 1, 2), limit=6000))
         return 0
     t_start = time.perf_counter()
+    if args.anchor:
+        chosen = agents if "--agents" in (argv or sys.argv) else (10,) if args.quick else ANCHOR_AGENTS
+        seeds = args.seeds if "--seeds" in (argv or sys.argv) else 1 if args.quick else ANCHOR_SEEDS
+        body_table, lines = anchor_compare(families, chosen, seeds, args.anchor_seconds)
+        print()
+        print(body_table)
+        print()
+        print(lines)
+        if args.write:
+            body = (f"{command_line('swarm', argv, time.perf_counter() - t_start)}\n\n{ANCHOR_LEGEND}\n\n"
+                    f"{body_table}\n\n{lines}\n")
+            replace_subsection(args.output, SECTION, ANCHOR_SECTION, body)
+            print(f"\nwrote {ANCHOR_SECTION!r} in {args.output}")
+        return 0
     city_games: list[CityGame] = []
     city_pogema: dict[int, float] = {}
     if args.city_distributed is not False:

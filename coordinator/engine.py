@@ -718,7 +718,8 @@ class Engine:
             notes = fleet.notes()[alive]
             if np.count_nonzero(notes == REACHED) == len(notes):
                 return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
-            if np.count_nonzero((notes == REACHED) | (notes == UNREACHABLE)) == len(notes):
+            if np.count_nonzero((notes == REACHED) | (notes == UNREACHABLE)) == len(notes) and \
+                    not getattr(self.arbiter, "busy", False):  # (the search brings them home: lacam.Lacam)
                 stuck = [fleet.ids[i] for i in alive.nonzero()[0][notes == UNREACHABLE].tolist()]
                 return EndReason.SETTLED, f"targets reached, except unreachable for {', '.join(stuck)}"
         if self.turn >= self.config.max_turns:

@@ -46,10 +46,11 @@ __all__ = ["Lacam", "Search", "Graph", "cells_of", "flat_cells"]
 #: Work units a turn (a PIBT call costs one per drone, a distance table one per CELLS_A_UNIT open cells): 20 ms or
 #: less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md, "Cost").
 WORK = 2400
-#: A breadth-first search costs about a 32nd of a PIBT call's time per cell that a PIBT call spends per drone.
-CELLS_A_UNIT = 32
-#: Distance-table entries (drones x open cells) up to which the search starts at once.
-EAGER = 1 << 21
+#: A breadth-first search spends about an 8th of the time per cell that a PIBT call spends per drone.
+CELLS_A_UNIT = 8
+#: Distance-table entries (drones x open cells) up to which the search starts at once (small worlds); beyond,
+#: PIBT plays while it makes progress (its sum of costs is the better one where it brings every drone home).
+EAGER = 1 << 12
 #: ... beyond which it never runs (int16 entries: 64 MiB).
 LIMIT = 1 << 25
 #: Turns without a new high of drones on their targets after which a search starts (below LIMIT).
@@ -343,8 +344,9 @@ class Lacam:
         """A search from `here` once every drone's distance table is made (a turn's work at most on them: None
         until then). A drone whose target is none, a building or cut off from it by the static world has its
         cell as its goal (it must be able to come back there)."""
-        if self._graph is None:
+        if self._graph is None:  # (a turn's work of its own)
             self._graph = Graph(self._of, size)  # type: ignore[arg-type]
+            return None
         g = self._graph
         hc = g.index[here]
         ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
@@ -365,6 +367,13 @@ class Lacam:
         dist = np.stack([self._tables[c] for c in goal_c.tolist()])
         self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), dist)
         return self._search
+
+    @property
+    def busy(self) -> bool:
+        """A search is bringing the drones home (a drone that says UNREACHABLE meanwhile is not: the engine does
+        not settle the game on it)."""
+        s = self._search
+        return s is not None and not self.unsolvable and (s.found is None or s.at is not s.found)
 
     def state(self) -> dict[str, Any]:
         """A summary of the search (for logs and tests): nodes, PIBT calls, found, unsolvable."""

@@ -17,7 +17,7 @@ def test_quick_run_writes_the_section(tmp_path: pathlib.Path) -> None:
     text = out.read_text()
     assert "## Other\n\nkept" in text and swarm.SECTION in text
     rows = [line for line in text.splitlines() if line.startswith("| empty-32-32 |")]
-    assert [r.split(" | ")[3] for r in rows] == ["fixed", "pibt", "pibt+map"] * 2
+    assert [r.split(" | ")[3] for r in rows] == ["fixed", "pibt", "pibt+map", "lacam"] * 2
     for r in rows:
         assert r.split(" | ")[1] == "0"  # no edge on no cycle: PIBT's condition holds
         if r.split(" | ")[3] != "fixed":
@@ -97,3 +97,20 @@ def test_bridges_are_the_edges_on_no_cycle() -> None:
     assert swarm.bridges(np.ones((1, 4, 1), bool)) == 3  # a corridor: every edge
     two = np.zeros((2, 2, 2), bool)  # a 2 x 2 x 2 block: every edge on a square
     assert swarm.bridges(~two) == 0
+
+
+def test_quick_anchor_comparison_writes_its_subsection(tmp_path: pathlib.Path) -> None:
+    """`--anchor --quick`: the complete arbitration and PIBT against pymapf's LaCAM (its own environment; a row
+    of dashes where it cannot be installed) on a small instance, every drone home, in a subsection of its own."""
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text("# Benchmarks\n\n## Other\n\nkept\n")
+    assert cli(["swarm", "--quick", "--anchor", "--families", "empty-32-32", "--anchor-seconds", "30", "--write",
+                "--output", str(out)]) == 0
+    text = out.read_text()
+    assert "## Other\n\nkept" in text and swarm.ANCHOR_SECTION in text
+    rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| empty-32-32 |")]
+    assert len(rows) == 1 and rows[0][5] == "10/10" and rows[0][9] == "10/10", rows  # lacam, pibt: all home
+    if rows[0][14] == "-":
+        print("the anchor (pymapf) could not be installed here: its columns are dashes")
+    else:
+        assert rows[0][14] == "true", rows
