@@ -97,6 +97,7 @@ class RosGraph:
         self._pubs: dict[tuple[str, bool], _Publisher] = {}
         self._handles: list[Any] = []
         self.sent = 0
+        self.unheard = 0  # telemetry not sent: nobody subscribed to its topic
 
     def _entity(self) -> int:
         self._entities += 1
@@ -123,7 +124,11 @@ class RosGraph:
         return p
 
     def publish(self, out: Out, *, latched: bool = False) -> None:
+        """Publish `out` (telemetry: only if someone subscribes to its topic; a latched sample always, for later)."""
         p = self._publisher(out.topic, out.typename, latched)
+        if not latched and not p.pub.matching_status.matching:
+            self.unheard += 1
+            return
         p.pub.put(out.payload, attachment=struct.pack("<QQB16s", p.seq, time.time_ns(), 16, p.gid))
         p.seq += 1
         self.sent += 1
@@ -193,7 +198,7 @@ class Viewer:
     but for the sinks. Times are seconds of any monotonic clock."""
 
     def __init__(self, scene: Scene, sinks: list[Sink], *, rate: float, logger: logging.Logger,
-                 cpu: Callable[[], float] = time.thread_time) -> None:
+                 cpu: Callable[[], float] = time.process_time) -> None:
         if not (np.isfinite(rate) and rate > 0):
             raise UsageError(f"--rate must be > 0, got {rate!r}")
         self.scene, self.sinks, self.period, self.log, self.cpu = scene, sinks, 1.0 / rate, logger, cpu
@@ -288,7 +293,8 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
             if fox is not None:
                 fox.close()
     end = viewer.over
-    print(f"ros2: published {graph.sent} messages up to turn {viewer.turn}"
+    print(f"ros2: published {graph.sent} messages up to turn {viewer.turn} ({graph.unheard} with no subscriber "
+          "left unsent)"
           + (f"; game over at turn {end.turn}: {end.reason.value}" if end else ""), flush=True)
     if inbox.rejects.total:
         logger.info("rejected inputs: %s", inbox.rejects.snapshot())
