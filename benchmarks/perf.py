@@ -1426,6 +1426,10 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
                                "turns": f"{len(times)} runs",
                                "lat": f"{statistics.median(times) * 1e3:.0f} / {max(times) * 1e3:.0f}",
                                "target": "in-process, seed 3"}))
+    # 6. the MAVLink ground station's CPU per turn, 100 vehicles streaming (benchmarks/mavlink.py)
+    name = "MAVLink ground station, 100 vehicles"
+    if selected(name):
+        rows.append(mavlink_row(name, turns=50 if args.quick else 300))
     # 1 (end). the second half of the floor, the floor rows first in the table, the ratios to it
     if want_floor and floor_runs:
         floor_now()
@@ -1462,10 +1466,26 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     return rows, facts
 
 
+def mavlink_row(name: str, turns: int) -> Row:
+    """The bridge's CPU per turn (benchmarks/mavlink.py); without pymavlink (the mavlink extra), not measured."""
+    try:
+        from .mavlink import TARGET_TPS, bridge_cpu
+
+        r = bridge_cpu(100, turns)
+    except ImportError as exc:
+        return Row(name, {"target": f"not measured: {exc}"})
+    tps = 1 / r["cpu"]
+    return Row(name, {"turns": f"20 + {turns:.0f} in-process, {r['messages']:.0f} MAVLink messages a turn",
+                      "tps": f"{tps:.0f}/s (CPU-bound)", "cpu": f"ground station {r['cpu'] * 1e3:.2f}",
+                      "target": _verdict(tps, TARGET_TPS, False, f"≥ {TARGET_TPS:g} turns/s")})
+
+
 def legend(facts: dict) -> str:
     base = facts.get("baseline_kib", 0) / 1024
     return (
-        "Legend. Floor rows: round trips between this process and a helper process through the router, 16-byte "
+        "Legend. The MAVLink row: benchmarks/mavlink.py (the bridge in this process, 100 vehicles flying, every "
+        "message encoded and sent; CPU a turn, and the turn rate that CPU allows). "
+        "Floor rows: round trips between this process and a helper process through the router, 16-byte "
         "payloads, BLOCK congestion control, after a warm-up, half of them at the start of the run and half at "
         "the end (\"callback replies\": the helper answers from "
         "Zenoh's callback thread, the bare floor; "

@@ -165,8 +165,12 @@ def test_arm_guided_and_position_targets_become_the_stations_targets() -> None:
     assert hb.system_status == mav.MAV_STATE_ACTIVE
     b.packet(GCS, [local_target(2, 5.2, 3.9, -2.6)])  # rounded to the nearest cell
     b.packet(GCS, [arm(3), set_mode(3, Mode.GUIDED), reposition(3, (4, 4, 1))])
+    lat, lon, _ = GEO.wgs84((7, 1, 0))
+    b.packet(GCS, [set_mode(1, Mode.GUIDED), arm(1), wire(mav.MAVLink_set_position_target_global_int_message(
+        0, 1, 1, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 0b110111111000, round(lat * 1e7), round(lon * 1e7), 2.2,
+        0, 0, 0, 0, 0, 0, 0, 0))])
     done = answer(b, 1)
-    assert {a.drone: a.pos for a in done.msg.targets} == {"D02": (5, 4, 3), "D03": (4, 4, 1)}
+    assert {a.drone: a.pos for a in done.msg.targets} == {"D01": (7, 1, 2), "D02": (5, 4, 3), "D03": (4, 4, 1)}
     assert answer(b, 2, in_force={a.drone: a.pos for a in done.msg.targets}).msg.targets == ()  # (only changes)
     # a second identical command is accepted and changes nothing (the command protocol's idempotence)
     assert acks(b.packet(GCS, [arm(2)])) == [mav.MAV_RESULT_ACCEPTED]
@@ -469,3 +473,42 @@ def test_goal_effects_never_leave_the_core() -> None:
     guided(b, 1)
     assert not [e for e in b.packet(GCS, [local_target(1, 3, 0, -1)]) if isinstance(e, Goal)]
     assert b.station.wanted == {"D01": (3, 0, 1)}
+
+
+def test_any_values_of_the_messages_handled_never_break_the_bridge() -> None:
+    """Every message kind a vehicle acts on, with values drawn at random in their wire types (NaN, infinities,
+    extremes), for systems in and out of the game: refused or taken, never an exception."""
+    import random
+
+    from entities.mavlink.bridge import HANDLED
+
+    rng = random.Random(36)
+    limits = {"int8_t": (-128, 127), "uint8_t": (0, 255), "int16_t": (-(1 << 15), (1 << 15) - 1),
+              "uint16_t": (0, (1 << 16) - 1), "int32_t": (-(1 << 31), (1 << 31) - 1), "uint32_t": (0, (1 << 32) - 1),
+              "int64_t": (-(1 << 63), (1 << 63) - 1), "uint64_t": (0, (1 << 64) - 1)}
+    floats = [math.nan, math.inf, -math.inf, 0.0, 1.0, -1.0, 1e38, -1e38, 47.4, 8.5, 3.0]
+    interesting = [0, 1, 2, 3, 4, 5, 6, 9, 15, 20, 21, 22, 176, 192, 300, 400, 512]
+
+    def value(kind: str, name: str):
+        if kind in ("float", "double"):
+            return rng.choice(floats) if rng.random() < 0.7 else rng.uniform(-100, 100)
+        if kind == "char":
+            return b"x"
+        lo, hi = limits[kind]
+        if name in ("target_system", "target_component"):
+            return rng.choice([0, 1, 2, 3, 7, 255])
+        pick = rng.choice(interesting) if rng.random() < 0.6 else rng.randint(lo, hi)
+        return min(max(pick, lo), hi)
+
+    classes = [c for c in mav.mavlink_map.values() if c.msgname in HANDLED]
+    assert len(classes) == len(HANDLED)
+    b = bridge()
+    for _ in range(1500):
+        cls = rng.choice(classes)
+        args = []
+        for name, kind, length in zip(cls.fieldnames, cls.fieldtypes, cls.array_lengths):
+            args.append([value(kind, name) for _ in range(length)] if length and kind != "char" else value(kind, name))
+        msg = cls(*args)
+        b.packet(Origin(rng.choice([0, 1, 2, 3]), ("127.0.0.1", 9)), [wire(msg)])
+        if rng.random() < 0.05:
+            b.receive(status(1), 1.0)

@@ -24,7 +24,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from network.signals import waking
+from network.signals import Interrupted, Stop, on_stop, waking
 from network.transport import Outbox, open_session, zenoh_config
 from schema import Keys, MalformedMessage, Over, RejectCounter, RemoteInputError, UsageError
 from schema.errors import Refusal
@@ -38,6 +38,7 @@ from .options import parse_udpout
 from .vehicle import Mav, Origin
 
 MAVLINK1_MAGIC = 0xFE
+_WOKEN = object()  # a signal came: the main thread looks at what it asked
 DATAGRAM_MAX = 65535
 
 
@@ -202,13 +203,33 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
                     case _:
                         send(effect)  # type: ignore[arg-type]
 
+            signals: list[Interrupted] = []  # (appended by the handler: nothing that takes a lock)
+
             def other(event: object) -> None:
+                while signals:  # the station quits: the game ends at its next phase
+                    sig = signals.pop(0)
+                    if bridge.quit:
+                        raise Stop(sig.signum)  # (a second signal: stop now)
+                    bridge.quit = True
+                    logger.warning("%s: ending the game at the next GCS phase (again to stop now)", sig.name)
+                if event is _WOKEN:
+                    return
                 if not isinstance(event, Packet):
                     logger.error("unexpected event %r", event)
                     return
                 reader.taken()
                 links.heard(event.origin)
-                for effect in bridge.packet(event.origin, event.messages):
+                if logger.isEnabledFor(logging.DEBUG):
+                    for msg in event.messages:
+                        logger.debug("from %s:%d (port %d): %s", *event.origin.addr, event.origin.port, msg)
+                try:
+                    effects = bridge.packet(event.origin, event.messages)
+                except Exception:  # a bug: logged, the datagram refused, the game goes on
+                    logger.exception("error handling a datagram from %s:%d", *event.origin.addr)
+                    inbox.rejects.reject("MAVLink datagram", RemoteInputError("not handled: an error (logged)",
+                                                                              reason="mavlink-error"))
+                    return
+                for effect in effects:
                     perform(effect)
 
             last = max(bridge.vehicles)
@@ -217,7 +238,8 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
                   flush=True)
             reader.start()
             try:
-                over = play(bridge, inbox, member, perform, other=other)
+                with on_stop(signals.append), waking(partial(inbox.post, _WOKEN)):
+                    over = play(bridge, inbox, member, perform, other=other)
             finally:
                 reader.stop()
                 links.close()

@@ -24,7 +24,7 @@ def add_mavlink_args(parser: argparse.ArgumentParser, *, cell_size: bool = True)
                    help="vehicle n sends to an API client on UDP PORT + n - 1 (default 14540, as PX4)")
     if cell_size:
         g.add_argument("--cell-size", type=float, default=1.0, metavar="METRES", help="metres a cell (default 1.0)")
-    g.add_argument("--origin", default=",".join(f"{v:g}" for v in DEFAULT_ORIGIN), metavar="LAT,LON,ALT",
+    g.add_argument("--origin", default=",".join(map(repr, DEFAULT_ORIGIN)), metavar="LAT,LON,ALT",
                    help="WGS84 position of cell (0,0,0): degrees, degrees, metres above sea level "
                         "(default %(default)s, PX4's simulation home)")
     g.add_argument("--turn-period", type=float, default=MAVLINK_PERIOD, metavar="SECONDS",

@@ -261,7 +261,7 @@ class Vehicle:
             case mav.MAV_CMD_NAV_LOITER_UNLIM:
                 return self._enter(Mode.LOITER)
             case mav.MAV_CMD_DO_REPOSITION:
-                if self.mode is not Mode.GUIDED and not int(p[1]) & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE:
+                if self.mode is not Mode.GUIDED and not whole(p[1]) & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE:
                     raise Denied("DO_REPOSITION outside GUIDED without its change-mode flag")
                 cell = self._command_position(msg)
                 self._require_armed()
@@ -274,9 +274,9 @@ class Vehicle:
                 self.current = min(max(first, FIRST_ITEM), len(self.mission) - 1)
                 return self._enter(Mode.AUTO)
             case mav.MAV_CMD_DO_SET_MISSION_CURRENT:
-                return self._set_current(int(p[0]) if math.isfinite(p[0]) else -1)
+                return self._set_current(whole(p[0]))
             case mav.MAV_CMD_REQUEST_MESSAGE:
-                return self._requested(int(p[0]) if math.isfinite(p[0]) else -1)
+                return self._requested(whole(p[0]))
             case mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
                 return [Mav(self.system, self.autopilot_version())]
         raise Denied(f"command {cmd} is not supported", mav.MAV_RESULT_UNSUPPORTED)
@@ -305,10 +305,10 @@ class Vehicle:
         return self._enter(self.mode) if self.mode in (Mode.AUTO, Mode.RTL, Mode.LAND) else []
 
     def _set_mode(self, base: float, custom: float) -> list[Effect]:
-        if not int(base) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        if not whole(base, 0) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             raise Denied("only custom (ArduCopter) mode numbers are taken", mav.MAV_RESULT_UNSUPPORTED)
         try:
-            mode = Mode(int(custom))
+            mode = Mode(whole(custom))
         except ValueError:
             names = ", ".join(f"{m.name} {m.value}" for m in Mode)
             raise Denied(f"mode {custom:g} is not flown here: {names}") from None
@@ -417,7 +417,7 @@ class Vehicle:
         self._require_armed()
         local = msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
         frame = msg.coordinate_frame
-        x, y, z = msg.x, msg.y, msg.z
+        x, y, z = (msg.x, msg.y, msg.z) if local else (msg.lat_int, msg.lon_int, msg.alt)
         if mask:  # the axes left out keep the drone's
             if local and frame == mav.MAV_FRAME_LOCAL_NED:
                 here: tuple[float, ...] = self.geo.ned(self.pos)
@@ -623,6 +623,11 @@ class Vehicle:
                 | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT)
         return mav.MAVLink_autopilot_version_message(caps, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, self.system)
+
+
+def whole(value: float, default: int = -1) -> int:
+    """A command's parameter as an integer (`default` if it is not a finite number)."""
+    return int(value) if math.isfinite(value) else default
 
 
 def ack(command: int, result: int, msg: Msg) -> Msg:

@@ -1,0 +1,90 @@
+"""The MAVLink ground station's CPU per turn (a row of `dronesim bench perf`; docs/mavlink.md, Speed).
+
+In this process, the bridge as `dronesim gcs --mavlink` runs it, without Zenoh: `vehicles` drones armed in
+GUIDED, each flying to a target, every turn a STATUS in which each of them moves a cell and the GCS phase
+answered, the game clock at 20 turns a second (the whole telemetry set every `MAVLINK_TELEMETRY_S`), every
+message encoded by pymavlink and sent over UDP to the ground station's port and each vehicle's API port, as
+the adapter sends them. CPU: this process's user + system time over the measured turns."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+from schema import DroneState, DroneStatus, Phase, Status, StatusTable, Turn, drone_id
+from schema.tuning import MAVLINK_TELEMETRY_S
+
+#: The turn rate the bridge must sustain with 100 vehicles (issue 36).
+TARGET_TPS = 20.0
+
+
+def bridge_cpu(vehicles: int = 100, turns: int = 200, warmup: int = 20) -> dict[str, float]:
+    """{"cpu": CPU seconds per turn, "messages": messages sent per turn, "turns": turns measured}."""
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from entities.gcs import Ground, Plan
+    from entities.mavlink.bridge import Bridge
+    from entities.mavlink.geo import Geo
+    from entities.mavlink.node import Links, decode_datagram
+    from entities.mavlink.vehicle import Mav, Origin
+    from world.grid import World
+
+    side = 64
+    world = World.from_buildings((side, side, 8), [])
+    starts = {drone_id(n): ((n - 1) % side, 2 * ((n - 1) // side), 1) for n in range(1, vehicles + 1)}
+    bridge = Bridge(Ground(world, starts, Plan(())), Geo(), period=0.0, telemetry_period=MAVLINK_TELEMETRY_S,
+                    now=0.0)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
+        sink.bind(("127.0.0.1", 0))
+        sink.setblocking(False)
+        links = Links(sink.getsockname(), 40000, sorted(bridge.vehicles))
+        client = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        gcs = Origin(0, sink.getsockname())
+
+        def perform(effects) -> int:
+            sent = 0
+            for e in effects:
+                if isinstance(e, Mav):
+                    links.send(e)
+                    sent += 1
+            while True:  # (the sink drops what it got: its buffer never fills)
+                try:
+                    sink.recv(65535)
+                except BlockingIOError:
+                    break
+            return sent
+
+        for n in bridge.vehicles:  # every vehicle armed in GUIDED, flying to the far side
+            for msg in (mav.MAVLink_command_long_message(n, 1, 176, 0, 1, 4, 0, 0, 0, 0, 0),
+                        mav.MAVLink_command_long_message(n, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0),
+                        mav.MAVLink_set_position_target_local_ned_message(0, n, 1, 1, 0b110111111000,
+                                                                          side - 1, starts[drone_id(n)][1], -1,
+                                                                          0, 0, 0, 0, 0, 0, 0, 0)):
+                perform(bridge.packet(gcs, decode_datagram(msg.pack(client))))
+        pos = dict(starts)
+        cpu0, sent = 0.0, 0
+        try:
+            for turn in range(1, warmup + turns + 1):
+                if turn == warmup + 1:
+                    cpu0, sent = time.process_time(), 0
+                now = turn / TARGET_TPS
+                pos = {d: ((x + 1) % side, y, z) for d, (x, y, z) in pos.items()}
+                rows = StatusTable.of(DroneStatus(drone=d, pos=c, state=DroneState.ALIVE, target=(side - 1, c[1], 1))
+                             for d, c in sorted(pos.items()))
+                sent += perform(bridge.receive(Status(turn=turn - 1, sender="OBS", drones=rows), now))
+                sent += perform(bridge.receive(Turn(turn=turn, sender="SRV", phase=Phase.GCS), now))
+                sent += perform(bridge.tick(now))
+            cpu = time.process_time() - cpu0
+        finally:
+            links.close()
+    return {"cpu": cpu / turns, "messages": sent / turns, "turns": float(turns)}
+
+
+def main() -> None:  # pragma: no cover (a quick look: python -m benchmarks.mavlink)
+    r = bridge_cpu()
+    print(f"{r['cpu'] * 1e3:.2f} ms CPU a turn, {r['messages']:.0f} messages a turn: "
+          f"at most {1 / r['cpu']:.0f} turns/s (target >= {TARGET_TPS:g})")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
