@@ -168,9 +168,11 @@ KEEPALIVE = 15.0
 ROS_RATE = 20.0
 #: The share of a core `dronesim ros2` spends publishing at most: after a turn that took it C seconds of CPU, it
 #: publishes the next no sooner than C / ROS_CPU_SHARE seconds later (and no later than `ROS_SLOWEST` after it).
-#: Measured: a 1000-drone turn costs it about 10 ms (encoding 4, publishing 6), so about 5 turns a second; a
-#: 1000-drone game on 2 cores then keeps its turns/s (`dronesim bench perf`, the ROS 2 mechanism row).
-ROS_CPU_SHARE = 0.05
+#: Measured: a 1000-drone turn costs it about 10 ms (encoding 4, publishing 6), so about 2 turns a second (a small
+#: game's, well under a millisecond, `ROS_RATE`); at 5 % a 1000-drone game on 2 cores shared with other work ran
+#: 13 % slower beside it (`dronesim bench perf`, the ROS 2 mechanism row; with a viewer that never published after
+#: its first turn, no slower).
+ROS_CPU_SHARE = 0.02
 ROS_SLOWEST = 1.0
 #: Seconds between two trails (nav_msgs/Path) of a drone that keeps moving (the last turn's always goes out).
 ROS_PATH_PERIOD = 1.0
