@@ -542,6 +542,7 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     from dronesim.scenario import Scenario
     from entities.gcs import End, Ground, SendDone, Station
     from entities.station_link import join, listen, publisher
+    from network.membership import Answered
     from network.transport import Outbox, Presence, Received
     from schema import Keys, Status, Turn, drone_id
 
@@ -625,8 +626,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                                 raise RuntimeError("a process ended during the game: " + ", ".join(procs.dead()))
                             if time.monotonic() - idle_since > EVENT_TIMEOUT:
                                 raise RuntimeError(f"the game stalled: no event for {EVENT_TIMEOUT:g} s")
-                        case Presence() as p:
-                            if (welcome := member.on_presence(p)) is not None:
+                        case Presence() | Answered():
+                            if (welcome := member.on_event(event)) is not None:
                                 effects = station.admitted(welcome)
                         case Received(_, Status() as st):
                             stamps[("STATUS", st.turn)] = now  # turn st.turn + 1 begins

@@ -17,7 +17,7 @@ import time
 
 import zenoh
 
-from network.membership import Membership, add_entity_args
+from network.membership import Answered, Membership, add_entity_args
 from network.signals import until_stopped
 from network.transport import (
     Inbox,
@@ -64,8 +64,8 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                 match ev:
                     case _ if not member.screen(ev, inbox.rejects):
                         pass
-                    case Presence("SRV"):
-                        member.on_presence(ev)
+                    case Presence("SRV") | Answered():
+                        member.on_event(ev)
                     case Presence(_, sid, alive):
                         inputs.append(EnvPresence(sid, alive))
                     case Received(_, Turn() | Over() as msg):

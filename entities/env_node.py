@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from network.membership import Membership, add_entity_args
+from network.membership import Answered, Membership, add_entity_args
 from network.signals import until_stopped
 from network.transport import (
     Asked,
@@ -59,8 +59,8 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
             match event:
                 case None:
                     member.check()
-                case Presence() as presence:
-                    member.on_presence(presence)  # the world stays; the next STATUS resyncs the drones
+                case Presence() | Answered():
+                    member.on_event(event)  # the world stays; the next STATUS resyncs the drones
                 case Matching(matching=matching):
                     effects.run(env.listened(matching))
                 case Asked(query, Ask() | MapRequest() as msg):  # the queryables serve these alone

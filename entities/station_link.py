@@ -11,7 +11,7 @@ from typing import Any, Protocol
 
 import zenoh
 
-from network.membership import Membership
+from network.membership import Answered, Membership
 from network.transport import Inbox, Outbox, Presence, Received, session_id
 from schema import Connect, Keys, Over, Phase, Role, Status, Turn, Welcome
 
@@ -70,8 +70,8 @@ def play(core: Core, inbox: Inbox, member: Membership, perform: Callable[[Any], 
         match event:
             case None:
                 member.check()
-            case Presence() as presence:
-                if (welcome := member.on_presence(presence)) is not None:
+            case Presence() | Answered():
+                if (welcome := member.on_event(event)) is not None:
                     effects = core.admitted(welcome)
             case Received(_, msg):
                 effects = core.receive(msg, now)

@@ -9,12 +9,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from dataclasses import dataclass
 
 import zenoh
 
 from network.clock import TurnClock
-from network.transport import Inbox, Presence, Received, ask
-from schema import Connect, Keys, Over, Refused, Status, Turn, Welcome
+from network.transport import Inbox, Presence, Received, ask, ask_later
+from schema import Connect, Keys, Message, Over, Refused, Status, Turn, Welcome
 from schema.errors import RejectCounter, RemoteInputError, UsageError
 from schema.tuning import CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S
 
@@ -55,43 +56,104 @@ def await_presence(session: zenoh.Session, key: str, timeout: float) -> bool:
         sub.undeclare()
 
 
+@dataclass(frozen=True, slots=True)
+class Answered:
+    """The coordinator's answer to this entity's CONNECT, an event of its inbox (posted by the query's callback):
+    a Welcome or Refused (`reply`) from the session `coordinator`, or None and why none came (`error`)."""
+
+    reply: Message | None
+    coordinator: str = ""
+    error: str = ""
+
+
 class Membership:
     """An entity's admission, kept through a coordinator restart or a cut link. It declares the entity's
     presence token, connects, and watches the token of the coordinator that admitted it (the session that
     answered its CONNECT: another token under the coordinator's name holds nothing): when it has gone, it
     waits up to `grace` seconds for a coordinator to appear and then connects again (the coordinator re-admits
     the same process, or resumes a game from its journal). Refused then (a drone declared LOST meanwhile), the
-    entity takes no further part: it says so and leaves at OVER. Feed it every `Presence` event of the inbox;
-    use `timeout()` for the inbox wait and `check()` when it times out."""
+    entity takes no further part: it says so and leaves at OVER. Admission is events on the entity's main loop,
+    never a blocking wait: the CONNECT's answer comes as an `Answered` event of the inbox, the coordinator's
+    presence as `Presence` events (a signal wakes the loop at once). Feed it every `Presence` and `Answered`
+    event (`on_event`); use `timeout()` for the inbox wait and `check()` when it times out."""
 
     def __init__(self, session: zenoh.Session, inbox: Inbox, hello: Connect, logger: logging.Logger, *,
                  connect_timeout: float, grace: float, skips_status: bool = False) -> None:
-        self.session, self.keys, self.log = session, inbox.keys, logger
+        """Connect, taking the inbox's events until admitted (those not about admission are held for the entity's
+        loop, `Inbox.hold`); UsageError if no coordinator answered within `connect_timeout`, NotAdmitted if refused."""
+        self.session, self.inbox, self.keys, self.log = session, inbox, inbox.keys, logger
         self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
-        inbox.watch_presence("SRV")
-        self.welcome, self.coordinator = admit(session, self.keys, hello, logger, timeout=connect_timeout)
-        # the coordinator's messages pass through its clock (`screen`)
-        self.clock = TurnClock(game=self.welcome.game, skips_status=skips_status)
+        self.coordinator, self._present, self._asking = "", False, False
         self._lost_since: float | None = None
+        inbox.watch_presence("SRV")
+        self._connect()
+        end, held, welcome = time.monotonic() + connect_timeout, [], None
+        while welcome is None:
+            event = inbox.get(max(0.0, end - time.monotonic()))
+            if event is None and time.monotonic() >= end:
+                raise UsageError(f"no coordinator answered on {self.keys.connect} within {connect_timeout:g} s")
+            if isinstance(event, Answered):
+                welcome = self._answered(event)
+            elif isinstance(event, Presence) and event.entity == "SRV":
+                self._seen(event)
+            elif event is not None:
+                held.append(event)
+        inbox.hold(held)
+        self.welcome: Welcome = welcome
+        # the coordinator's messages pass through its clock (`screen`)
+        self.clock: TurnClock = TurnClock(game=welcome.game, skips_status=skips_status)
 
-    def on_presence(self, event: Presence) -> Welcome | None:
-        """Track the coordinator; returns the new Welcome when this entity was admitted again."""
-        if event.entity != "SRV":
+    def _connect(self) -> None:
+        """Send CONNECT; its answer comes as an `Answered` event."""
+        self._asking = True
+        ask_later(self.session, self.keys.connect, self.hello, (Welcome, Refused), self.connect_timeout,
+                  lambda reply, coordinator, error: self.inbox.post(Answered(reply, coordinator, error)))
+
+    def _seen(self, event: Presence) -> None:
+        """A coordinator's token came or went: one that appears is asked (again) if no CONNECT is out."""
+        self._present = event.alive
+        if event.alive and not self._asking:
+            self._connect()
+
+    def _answered(self, event: Answered) -> Welcome | None:
+        """The CONNECT's answer: the Welcome; None if none came (asked again at once while a coordinator's token
+        is there, else when one appears); NotAdmitted if refused."""
+        self._asking = False
+        if isinstance(event.reply, Refused):
+            raise NotAdmitted(f"connection refused: {event.reply.text}")
+        if not isinstance(event.reply, Welcome):
+            self.log.debug("CONNECT unanswered (%s)%s", event.error, ": asking again" if self._present else "")
+            if self._present:
+                self._connect()
             return None
-        if event.alive and self._lost_since is not None:
-            self._lost_since = None
-            self.log.warning("the coordinator is back: connecting again")
+        self.log.info("%s", event.reply.text)
+        self.coordinator = event.coordinator
+        return event.reply
+
+    def on_event(self, event: Presence | Answered) -> Welcome | None:
+        """Track the coordinator (its `Presence`), connect again when it is back, and take the answer (`Answered`):
+        the new Welcome when this entity was admitted again."""
+        if isinstance(event, Answered):
             try:
-                self.welcome, self.coordinator = admit(self.session, self.keys, self.hello, self.log,
-                                                      timeout=self.connect_timeout)
+                welcome = self._answered(event)
             except NotAdmitted as err:
                 self.log.warning("%s: %s takes no further part and leaves at the end of the game",
                                  err, self.hello.sender)
                 return None
-            self.clock = TurnClock(self.welcome.turn, game=self.welcome.game, skips_status=self.clock.skips_status)
-            return self.welcome
-        if not event.alive and event.session == (self.coordinator or event.session) and self._lost_since is None:
+            if welcome is not None:
+                self.welcome = welcome
+                self.clock = TurnClock(welcome.turn, game=welcome.game, skips_status=self.clock.skips_status)
+            return welcome
+        if event.entity != "SRV":
+            return None
+        self._present = event.alive
+        if event.alive and self._lost_since is not None:
+            self._lost_since = None
+            self.log.warning("the coordinator is back: connecting again")
+            if not self._asking:
+                self._connect()
+        elif not event.alive and event.session == (self.coordinator or event.session) and self._lost_since is None:
             self._lost_since = time.monotonic()  # (the one that admitted it; any, if Zenoh did not say which)
             self.log.warning("the coordinator vanished: waiting up to %g s for it to come back", self.grace)
         return None

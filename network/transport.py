@@ -430,6 +430,7 @@ class Inbox:
         self._handles: list[Any] = []  # subscribers, queryables: undeclared by `close`
         self._events = FairQueue(budget, share=share)
         self.rejects = RejectCounter(logger, wake=self._events.wake)  # (its summaries are logged by `get`)
+        self._held: collections.deque[Any] = collections.deque()  # events given back (`hold`)
 
     def run(self, handler: Callable[[Event | None], None], *, timeout: Callable[[], float | None],
             until: Callable[[], bool]) -> None:
@@ -598,10 +599,19 @@ class Inbox:
 
     def drain(self) -> list[Event]:
         """Every event already queued, without waiting (in the order `get` takes them)."""
-        return [e for e in map(self._read, self._events.drain()) if e is not None]
+        held, self._held = list(self._held), collections.deque()
+        return [*held, *(e for e in map(self._read, self._events.drain()) if e is not None)]
+
+    def hold(self, events: list[object]) -> None:
+        """Give `events`, taken from this inbox by the main thread and not handled yet, back: the next `get`s and
+        `drain` return them first, in their order (admission takes the events it is waiting for, and holds the
+        others for the loop that follows)."""
+        self._held.extend(events)
 
     def get(self, timeout: float | None = None) -> Event | None:
         """The next event, or None when `timeout` seconds pass first."""
+        if self._held:
+            return self._held.popleft()
         end = None if timeout is None else time.monotonic() + max(0.0, timeout)
         while True:
             self.rejects.flush()
@@ -645,6 +655,29 @@ class Outbox:
         first, at once, if someone already does)."""
         on_status = _direct(lambda status: inbox.post(Matching(key, status.matching)))
         self._listeners.append(self._pub(key).declare_matching_listener(on_status))
+
+
+def ask_later(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
+              timeout: float, done: Callable[[Message | None, str, str], None]) -> None:
+    """`ask` without waiting: `done(reply, replier, error)` is called once, on Zenoh's thread, with the first valid
+    reply and the session id of its replier, or with None and why none came (an error reply, none in time)."""
+    answered: list[bool] = []
+
+    def on_reply(reply: zenoh.Reply) -> None:
+        if answered:
+            return
+        answered.append(True)
+        try:
+            done(_answer(key, reply, expect), "" if reply.replier_id is None else str(reply.replier_id.zid), "")
+        except RemoteInputError as err:
+            done(None, "", str(err))
+
+    def on_end() -> None:
+        if not answered:
+            done(None, "", f"no answer on {key} within {timeout:.1f} s")
+
+    session.get(key, _direct(on_reply, on_end), payload=encode(msg), timeout=timeout,
+                consolidation=zenoh.ConsolidationMode.NONE)
 
 
 def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],

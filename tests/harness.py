@@ -275,6 +275,7 @@ class ScriptedGCS:
         self.over = None
 
     def next_event(self, timeout: float = TIMEOUT):
+        from network.membership import Answered
         from network.transport import Presence, Received
         from schema import Over, Status
 
@@ -282,8 +283,8 @@ class ScriptedGCS:
         if ev is None:
             raise AssertionError("the game stalled: no event")
         match ev:
-            case Presence() as p:
-                self.member.on_presence(p)
+            case Presence() | Answered():
+                self.member.on_event(ev)
             case Received(_, Status() as st):
                 self.statuses.append(st)
             case Received(_, Over() as over):
