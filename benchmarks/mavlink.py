@@ -19,7 +19,8 @@ TARGET_TPS = 20.0
 
 
 def bridge_cpu(vehicles: int = 100, turns: int = 200, warmup: int = 20) -> dict[str, float]:
-    """{"cpu": CPU seconds per turn, "messages": messages sent per turn, "turns": turns measured}."""
+    """{"cpu": CPU seconds per turn, "messages": messages sent per turn, "datagrams": datagrams sent per turn,
+    "turns": turns measured}."""
     from pymavlink.dialects.v20 import ardupilotmega as mav
 
     from entities.gcs import Ground, Plan
@@ -47,6 +48,7 @@ def bridge_cpu(vehicles: int = 100, turns: int = 200, warmup: int = 20) -> dict[
                 if isinstance(e, Mav):
                     links.send(e)
                     sent += 1
+            links.flush()
             while True:  # (the sink drops what it got: its buffer never fills)
                 try:
                     sink.recv(65535)
@@ -62,11 +64,11 @@ def bridge_cpu(vehicles: int = 100, turns: int = 200, warmup: int = 20) -> dict[
                                                                           0, 0, 0, 0, 0, 0, 0, 0)):
                 perform(bridge.packet(gcs, decode_datagram(msg.pack(client))))
         pos = dict(starts)
-        cpu0, sent = 0.0, 0
+        cpu0, sent, datagrams = 0.0, 0, 0
         try:
             for turn in range(1, warmup + turns + 1):
                 if turn == warmup + 1:
-                    cpu0, sent = time.process_time(), 0
+                    cpu0, sent, datagrams = time.process_time(), 0, links.sent
                 now = turn / TARGET_TPS
                 pos = {d: ((x + 1) % side, y, z) for d, (x, y, z) in pos.items()}
                 rows = StatusTable.of(DroneStatus(drone=d, pos=c, state=DroneState.ALIVE, target=(side - 1, c[1], 1))
@@ -74,15 +76,67 @@ def bridge_cpu(vehicles: int = 100, turns: int = 200, warmup: int = 20) -> dict[
                 sent += perform(bridge.receive(Status(turn=turn - 1, sender="OBS", drones=rows), now))
                 sent += perform(bridge.receive(Turn(turn=turn, sender="SRV", phase=Phase.GCS), now))
                 sent += perform(bridge.tick(now))
-            cpu = time.process_time() - cpu0
+            cpu, datagrams = time.process_time() - cpu0, links.sent - datagrams
         finally:
             links.close()
-    return {"cpu": cpu / turns, "messages": sent / turns, "turns": float(turns)}
+    return {"cpu": cpu / turns, "messages": sent / turns, "datagrams": datagrams / turns, "turns": float(turns)}
+
+
+def game_rate(vehicles: int = 100, turns: int = 300, timeout: float = 300.0) -> dict[str, float]:
+    """`dronesim up --mavlink --swarm` with `vehicles` drones at full speed (--turn-period 0), every vehicle
+    streaming its telemetry to a pymavlink ground station in this process, which times the game from the first
+    to the last of D01's positions (every turn's, and the telemetry set's): {"tps": the journal's turns a
+    second of that span, "turns": turns played, "messages": MAVLink messages received a turn}."""
+    import subprocess
+    import sys
+    import tempfile
+
+    from pymavlink import mavutil
+
+    from coordinator.journal import read
+    from dronesim import child_env
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega")
+    argv = [sys.executable, "-m", "dronesim", "up", "--mavlink", "--swarm", "--drones", str(vehicles),
+            "--size", "64,64,4", "--max-turns", str(turns), "--turn-period", "0", "--quiet",
+            "--mavlink-gcs", f"udpout:127.0.0.1:{port}", "--mavlink-api-base", "41000"]
+    folder = tempfile.TemporaryDirectory(prefix="dronesim-mavlink-")
+    journal = f"{folder.name}/journal.jsonl"
+    proc = subprocess.Popen([*argv, "--journal", journal], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=child_env())
+    stamps: list[int] = []
+    received = 0
+    end = time.monotonic() + timeout
+    try:
+        while proc.poll() is None and time.monotonic() < end:
+            msg = conn.recv_msg()
+            if msg is None:
+                conn.select(0.5)
+                continue
+            received += 1
+            if msg.get_type() == "LOCAL_POSITION_NED" and msg.get_srcSystem() == 1:
+                stamps.append(msg.time_boot_ms)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+        conn.close()
+        played = sum(1 for r in read(journal) if r.get("record") == "turn")
+        folder.cleanup()
+    span = (stamps[-1] - stamps[0]) / 1000 if len(stamps) > 1 else 0.0
+    return {"tps": played / span if span > 0 else float("nan"), "turns": float(played),
+            "messages": received / max(played, 1)}
 
 
 def main() -> None:  # pragma: no cover (a quick look: python -m benchmarks.mavlink)
+    g = game_rate()
+    print(f"a game of 100 vehicles streaming: {g['tps']:.1f} turns/s over {g['turns']:.0f} turns, "
+          f"{g['messages']:.0f} messages a turn at the ground station")
     r = bridge_cpu()
-    print(f"{r['cpu'] * 1e3:.2f} ms CPU a turn, {r['messages']:.0f} messages a turn: "
+    print(f"{r['cpu'] * 1e3:.2f} ms CPU a turn, {r['messages']:.0f} messages in {r['datagrams']:.0f} datagrams a turn: "
           f"at most {1 / r['cpu']:.0f} turns/s (target >= {TARGET_TPS:g})")
 
 

@@ -1479,7 +1479,8 @@ def mavlink_row(name: str, turns: int) -> Row:
     except ImportError as exc:
         return Row(name, {"target": f"not measured: {exc}"})
     tps = 1 / r["cpu"]
-    return Row(name, {"turns": f"20 + {turns:.0f} in-process, {r['messages']:.0f} MAVLink messages a turn",
+    return Row(name, {"turns": f"20 + {turns:.0f} in-process, {r['messages']:.0f} MAVLink messages "
+                               f"in {r['datagrams']:.0f} datagrams a turn",
                       "tps": f"{tps:.0f}/s (CPU-bound)", "cpu": f"ground station {r['cpu'] * 1e3:.2f}",
                       "target": _verdict(tps, TARGET_TPS, False, f"≥ {TARGET_TPS:g} turns/s")})
 

@@ -512,3 +512,32 @@ def test_any_values_of_the_messages_handled_never_break_the_bridge() -> None:
         b.packet(Origin(rng.choice([0, 1, 2, 3]), ("127.0.0.1", 9)), [wire(msg)])
         if rng.random() < 0.05:
             b.receive(status(1), 1.0)
+
+
+def test_links_send_a_destinations_frames_together_in_order_and_under_the_mtu() -> None:
+    from entities.mavlink.node import DATAGRAM_PACK
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gcs, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as api:
+        gcs.bind(("127.0.0.1", 0))
+        api.bind(("127.0.0.1", 0))
+        links = Links(gcs.getsockname(), api.getsockname()[1], [1])
+        try:
+            texts = [f"message {i}" for i in range(100)]
+            for text in texts:
+                links.send(Mav(1, mav.MAVLink_statustext_message(6, text.encode())))
+            assert links.sent == 0  # (queued until flushed)
+            links.flush()
+            for sock in (gcs, api):
+                got, sock_texts = [], []
+                sock.settimeout(10)
+                while len(sock_texts) < len(texts):
+                    data = sock.recv(65535)
+                    got.append(len(data))
+                    sock_texts += [m.text for m in decode_datagram(data)]
+                assert sock_texts == texts and max(got) <= DATAGRAM_PACK and len(got) < len(texts) / 10
+            seqs = [m.get_seq() for m in decode_datagram(b"".join(
+                links.encode(1, mav.MAVLink_heartbeat_message(2, 3, 0, 0, 3, 3)) for _ in range(3)))]
+            assert seqs == [100, 101, 102]  # one sequence a vehicle
+        finally:
+            links.close()

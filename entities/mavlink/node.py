@@ -40,6 +40,8 @@ from .vehicle import Mav, Origin
 MAVLINK1_MAGIC = 0xFE
 _WOKEN = object()  # a signal came: the main thread looks at what it asked
 DATAGRAM_MAX = 65535
+#: The most bytes of frames sent in one datagram (under an Ethernet MTU: no IP fragments).
+DATAGRAM_PACK = 1400
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,7 +90,8 @@ class Links:
             raise UsageError(f"cannot open the MAVLink sockets: {exc}") from None
         self.encoders = {n: mav.MAVLink(None, srcSystem=n, srcComponent=1) for n in systems}
         self.writers: dict[int, tuple[str, int]] = {}  # the last peer that wrote on a vehicle's port, if not its API
-        self.sent = 0
+        self.sent = 0  # datagrams
+        self._out: dict[tuple[int, tuple[str, int]], list[bytes]] = {}  # frames to send, by (socket, address)
 
     def encode(self, system: int, msg: Any) -> bytes:
         encoder = self.encoders[system]
@@ -97,18 +100,42 @@ class Links:
         return data
 
     def send(self, effect: Mav) -> None:
+        """Queue `effect`'s message for its destinations (sent by `flush`)."""
         data = self.encode(effect.system, effect.msg)
         if effect.to is not None:
-            self._sendto(effect.to.port, data, effect.to.addr)
+            self._queue(effect.to.port, effect.to.addr, data)
             return
-        self._sendto(0, data, self.gcs)
-        self._sendto(effect.system, data, self.api[effect.system])
+        self._queue(0, self.gcs, data)
+        self._queue(effect.system, self.api[effect.system], data)
         if (writer := self.writers.get(effect.system)) is not None:
-            self._sendto(effect.system, data, writer)
+            self._queue(effect.system, writer, data)
 
-    def _sendto(self, port: int, data: bytes, addr: tuple[str, int]) -> None:
+    def _queue(self, port: int, addr: tuple[str, int], data: bytes) -> None:
+        frames = self._out.get((port, addr))
+        if frames is None:
+            self._out[(port, addr)] = [data]
+        else:
+            frames.append(data)
+
+    def flush(self) -> None:
+        """Send what is queued: a destination's frames, in order, several to a datagram (at most
+        `DATAGRAM_PACK` bytes; MAVLink over UDP is a stream of frames, which clients parse as such): a
+        turn of a hundred vehicles is a few datagrams to the ground station, one to each API client."""
+        out, self._out = self._out, {}
+        for (port, addr), frames in out.items():
+            sock, size = self.sockets[port], 0
+            chunk: list[bytes] = []
+            for frame in frames:
+                if size + len(frame) > DATAGRAM_PACK and chunk:
+                    self._sendto(sock, b"".join(chunk), addr)
+                    chunk, size = [], 0
+                chunk.append(frame)
+                size += len(frame)
+            self._sendto(sock, b"".join(chunk), addr)
+
+    def _sendto(self, sock: socket.socket, data: bytes, addr: tuple[str, int]) -> None:
         with contextlib.suppress(OSError):  # (nobody listening there, a full buffer: telemetry is not kept)
-            self.sockets[port].sendto(data, addr)
+            sock.sendto(data, addr)
             self.sent += 1
 
     def heard(self, origin: Origin) -> None:
@@ -176,6 +203,27 @@ class Reader:
             logging.getLogger("dronesim.GCS").exception("error reading a MAVLink datagram")
 
 
+class Flushing:
+    """The bridge as `station_link.play` drives it, its messages sent (`Links.flush`) each time `play` is
+    about to wait: all the frames of what it has just handled travel together."""
+
+    def __init__(self, bridge: Bridge, links: Links) -> None:
+        self.bridge, self.links = bridge, links
+
+    def wake(self, now: float) -> float | None:
+        self.links.flush()
+        return self.bridge.wake(now)
+
+    def admitted(self, welcome: Any) -> Sequence[object]:
+        return self.bridge.admitted(welcome)
+
+    def receive(self, msg: Any, now: float) -> Sequence[object]:
+        return self.bridge.receive(msg, now)
+
+    def tick(self, now: float) -> Sequence[object]:
+        return self.bridge.tick(now)
+
+
 def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
     """Play the game as the MAVLink ground station until it is over."""
     geo = Geo(cell_size=args.cell_size, origin=Geo.parse_origin(args.origin))
@@ -231,6 +279,7 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
                     return
                 for effect in effects:
                     perform(effect)
+                links.flush()
 
             last = max(bridge.vehicles)
             print(f"MAVLink ground station: systems 1..{last} to udpout:{gcs[0]}:{gcs[1]}, API ports "
@@ -239,7 +288,7 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
             reader.start()
             try:
                 with on_stop(signals.append), waking(partial(inbox.post, _WOKEN)):
-                    over = play(bridge, inbox, member, perform, other=other)
+                    over = play(Flushing(bridge, links), inbox, member, perform, other=other)
             finally:
                 reader.stop()
                 links.close()
