@@ -45,7 +45,7 @@ __all__ = ["Lacam", "Search", "Graph", "cells_of", "flat_cells"]
 
 #: Work units a turn (a PIBT call costs one per drone, a distance table one per CELLS_A_UNIT open cells): 20 ms or
 #: less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md, "Cost").
-WORK = 2400
+WORK = 1200
 #: A breadth-first search spends about an 8th of the time per cell that a PIBT call spends per drone.
 CELLS_A_UNIT = 8
 #: Distance-table entries (drones x open cells) up to which the search starts at once (small worlds); beyond,
@@ -169,6 +169,8 @@ class Search:
         self.gave: list[int] = []  # the drones that gave way in the last successor (`arbiter.pibt`)
         shape = (size[0] + 2, size[1] + 2, size[2] + 2)
         self.steps = [d for d in steps_flat(size)[1:].tolist() if d]
+        self.aim_array = aims.astype(np.int64)
+        self._cached: tuple[Any, list[int], list[list[int]], list[int]] = (None, [], [], [])
         self.aimed = (self.aims, shape)
 
     @property
@@ -224,7 +226,7 @@ class Search:
     def _successor(self, node: Node, who: tuple[int, ...], where: tuple[int, ...], open_: OpenCells
                    ) -> np.ndarray | None:
         """PIBT's next configuration from `node` with drones `who` sent to cells `where`; None if there is none."""
-        g, here = self.graph, node.cfg
+        here = node.cfg
         n = len(here)
         taken = np.full(n, -1, np.int64)
         if who:
@@ -232,17 +234,12 @@ class Search:
             fixed = taken[taken >= 0]
             if len(np.unique(fixed)) < len(fixed):
                 return None
-        c = g.index[here]
-        near = np.concatenate([g.near[c], c[:, None]], axis=1)  # (n, 7): the neighbours, then the cell itself
-        d = np.where(near >= 0, self.dist[self.rows[:, None], np.maximum(near, 0)], FAR).astype(np.int64)
-        rank = d * 8 + np.array([1, 2, 3, 4, 5, 6, 0])  # staying before a neighbour as near: as a drone ranks
-        rank = np.where(near >= 0, rank, 1 << 40)
-        sort = np.argsort(rank, axis=1, kind="stable")
-        own = np.take_along_axis(np.where(near >= 0, g.cells[np.maximum(near, 0)], -1), sort, axis=1)
-        cand = candidates(here, own, self.size, np.array(self.aims, np.int64), node.number)
-        order = [i for i in node.order.tolist() if taken[i] < 0]
+        if self._cached[0] is not node:  # (a node is often tried again at once, under its next constraint)
+            self._cached = (node, here.tolist(), self._candidates(node).tolist(), node.order.tolist())
+        _, here_list, cand, order_all = self._cached
+        order = [i for i in order_all if taken[i] < 0] if who else order_all
         world = (open_, self.steps, self.aims)
-        chosen, gave = pibt(here.tolist(), cand.tolist(), order, taken.tolist(), world, self.aimed)
+        chosen, gave = pibt(here_list, cand, order, taken.tolist(), world, self.aimed)
         nxt = np.array(chosen, np.int64)
         if (nxt < 0).any() or len(np.unique(nxt)) < n:
             return None
@@ -253,6 +250,19 @@ class Search:
         if ((here[j] == nxt) & (j != self.rows) & (nxt[j] == here)).any():
             return None  # a swap
         return nxt
+
+    def _candidates(self, node: Node) -> np.ndarray:
+        """Each drone's cells from `node` in the order PIBT tries them ((n, 7), flat, -1 after the last): nearest
+        to its goal first, staying before a neighbour as near (as a drone ranks), reordered by
+        `arbiter.candidates` (free cells first, retreats out of the others' way, ties drawn from the node)."""
+        g, here = self.graph, node.cfg
+        c = g.index[here]
+        near = np.concatenate([g.near[c], c[:, None]], axis=1)  # (n, 7): the neighbours, then the cell itself
+        d = np.where(near >= 0, self.dist[self.rows[:, None], np.maximum(near, 0)], FAR).astype(np.int64)
+        rank = np.where(near >= 0, d * 8 + np.array([1, 2, 3, 4, 5, 6, 0]), 1 << 40)
+        sort = np.argsort(rank, axis=1, kind="stable")
+        own = np.take_along_axis(np.where(near >= 0, g.cells[np.maximum(near, 0)], -1), sort, axis=1)
+        return candidates(here, own, self.size, self.aim_array, node.number)
 
     def step(self) -> np.ndarray:
         """The drones' next configuration: one step along the tree from `at` towards the goal node (or the top of
@@ -333,6 +343,7 @@ class Lacam:
             search = self._start(size, here, aims)
             if search is None:
                 return None
+            return search.step()  # (made this turn: its first work is the next turn's)
         self.expansions -= search.expansions
         search.expand(self.work, open_)
         self.expansions += search.expansions
