@@ -727,11 +727,14 @@ class Engine:
         return None
 
     def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
+        """The game ends: its over record closes the journal (a game that never started has none: its journal
+        stays empty, free for a new game) and OVER goes out."""
         turn = self.turn if turn is None else turn
+        started = self.stage is not Stage.ADMITTING
         self._enter(Stage.OVER)
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
         self._log.info("game over at turn %d: %s", turn, text)
-        return [Record(over_record(turn, reason.value, text)), Publish(self.end)]
+        return [*([Record(over_record(turn, reason.value, text))] if started else []), Publish(self.end)]
 
     # ------------------------------------------------------------------ resuming
 
@@ -831,6 +834,20 @@ class Engine:
         self._log.warning("the link is down: the game holds up to %g s for %s to come back", self.config.link_grace,
                           ", ".join(sorted(self._away)) or "its entities")
         return []
+
+    @property
+    def holding(self) -> bool:
+        """Whether the game holds for a lost link (`link_lost`)."""
+        return self._away is not None
+
+    def link_back(self) -> list[Effect]:
+        """The coordinator reaches its entities again after a hold that no presence ends (a frozen router: no
+        token vanished, so none comes back): the hold ends as when the last one is back (`present`)."""
+        if self._away is None:
+            return []
+        self._away = None
+        self._log.warning("the routers answer again: turn %d goes on", self.turn)
+        return self._go_on()
 
     def present(self, entity: str, session: str) -> list[Effect]:
         """An entity's presence token is there (again). The last admitted one back after a lost link ends the

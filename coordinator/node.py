@@ -66,6 +66,7 @@ from schema.tuning import (
     PEER_CHECK_S,
     PHASE_DEADLINE_S,
     SETTLE_S,
+    STOP_LINGER_S,
 )
 from world.grid import World
 
@@ -157,10 +158,15 @@ class Coordinator:
     (`Presences`), keeps the deadlines, holds a vanished presence SETTLE_S before it counts (its own vanishing
     means the link is down), yields to a rival coordinator, ends the game on a signal, and after OVER waits up
     to LINGER_S for the entities to leave. When an admitted session's token vanishes or a phase's deadline
-    passes, it asks the routers which sessions they connect (`audit`): one not among them has gone."""
+    passes, it asks the routers which sessions they connect (`audit`): one not among them has gone. Once the
+    routers have answered such a question (`probe`, at start), a phase's deadline counts only when they answer
+    again: if none does, nobody can be reached (a frozen router: no token vanishes, no lease has run out yet),
+    and the game holds as for a lost link (`Engine.link_lost`), asking again until one answers, then goes on
+    as if nothing happened (`Engine.link_back`: the phase again, its deadline anew)."""
 
     def __init__(self, engine: Engine, effects: Executor, rejects: RejectCounter, logger: logging.Logger, me: str,
-                 clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None) -> None:
+                 clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None,
+                 stops: list[Interrupted] | None = None) -> None:
         self.engine, self.effects, self.rejects, self.log, self.me, self.clock = \
             engine, effects, rejects, logger, me, clock
         effects.unrecorded = engine.unrecorded  # a journal that fails ends the game
@@ -173,7 +179,16 @@ class Coordinator:
         self._started = clock()
         self._vanishing: dict[tuple[str, str], float] = {}  # (entity, session) -> when its going counts
         self._linger_until: float | None = None
-        self._stops: list[Interrupted] = []  # signals noted by `stop`, not yet acted on
+        # signals noted by `stop` (or, from `stops`, before this loop existed), not yet acted on
+        self._stops: list[Interrupted] = [] if stops is None else stops
+        self._routed = False  # a router has answered an audit: one that does not answer is unreachable
+        self._deferred: tuple | None = None  # the phase whose passed deadline waits for the routers' answer
+        self._frozen = False  # the game holds because no router answers (not for a vanished presence)
+
+    def probe(self) -> None:
+        """Ask the routers once, at start: whether they answer at all (else, without a router, or with one
+        that keeps its admin space closed, a deadline counts as it passes, as before)."""
+        self._ask_who_is_connected()
 
     def stop(self, event: Interrupted) -> None:
         """A signal, from its handler (which may run while the loop holds the inbox's lock): noted only; the
@@ -187,7 +202,7 @@ class Coordinator:
         if self._linger_until is not None:
             return max(0.0, self._linger_until - now)
         limit = self.engine.deadline()
-        left = None if limit is None else max(0.0, self._started + limit - now)
+        left = None if limit is None or self._deferred == self._phase else max(0.0, self._started + limit - now)
         vanish = max(0.0, min(self._vanishing.values()) - now) if self._vanishing else None
         delays = (left, self.effects.due_in(), self.presences.due_in(now), vanish)
         return min((d for d in delays if d is not None), default=None)
@@ -200,12 +215,12 @@ class Coordinator:
         run, engine, now = self.effects.run, self.engine, self.clock()
         if isinstance(event, Interrupted):
             self.stop(event)
-        while self._stops:  # a signal ends the game
+        while self._stops:  # a signal ends the game, and the coordinator soon after (STOP_LINGER_S)
             sig = self._stops.pop(0)
-            if self.signal is not None:  # a second one: stop waiting for the entities to leave
-                self._linger_until = now
+            until = now if self.signal is not None else now + STOP_LINGER_S  # a second one: at once
             self.signal = sig.signum
             run(engine.interrupt(f"the coordinator was stopped ({sig.name})"))
+            self._linger_until = until if self._linger_until is None else min(self._linger_until, until)
         match event:
             case None:
                 self._due(now)
@@ -222,14 +237,19 @@ class Coordinator:
             case Presence("SRV", sid, alive) if sid == self.me:
                 if not alive:  # every presence vanishes with the link: nobody has left
                     self._vanishing.clear()
+                    if self._frozen:  # (a router frozen past the leases: the link grace counts from now)
+                        self._frozen, self._started = False, now
                     run(engine.link_lost())
             case Presence("SRV", sid, True) if engine.stage is not Stage.OVER and sid < self.me:
                 self.rival = sid  # two started at once: the one with the smaller session id goes on
-            case Sessions(connected):
+            case Sessions(connected, answered):
                 self._auditing = False
+                stale = self._audit_again  # (an answer to a question asked before the one awaited)
                 self._gone_unless(connected)
                 if self._audit_again:
                     self._ask_who_is_connected()
+                if not stale:
+                    self._reached(answered)
             case Presence(entity, sid, alive):
                 for query, msg in self.presences.presence(entity, sid, alive):
                     run(engine.connect(msg, query))
@@ -257,6 +277,26 @@ class Coordinator:
                 self.presences.presence(entity, sid, False)
                 self.effects.run(self.engine.vanished(entity, sid))
 
+    def _reached(self, answered: bool) -> None:
+        """The routers answered (or none did in time) a question asked after a deadline passed, or while the
+        game holds for them: the deadline counts, the game holds (nobody can be reached), or it goes on."""
+        self._routed |= answered
+        deferred, self._deferred = self._deferred, None
+        if self.engine.stage is Stage.OVER:
+            return
+        if not answered and self._routed and (deferred is not None or self._frozen):
+            if not self._frozen:
+                self._frozen = True
+                self.log.warning("turn %d: no router answers (frozen or cut off): nobody can be reached, the "
+                                 "deadline does not count", self.engine.turn)
+                self.effects.run(self.engine.link_lost())
+            self._ask_who_is_connected()  # again, until one answers
+        elif answered and self._frozen:
+            self._frozen = False
+            self.effects.run(self.engine.link_back())
+        elif deferred is not None and deferred == self._phase:
+            self.effects.run(self.engine.expire(*deferred))
+
     def _tick(self) -> None:
         """The deadline restarts whenever what it is measured from changes (`Engine.clock`)."""
         if (phase := self.engine.deadline_key()) != self._phase:
@@ -276,9 +316,13 @@ class Coordinator:
             self.effects.run(self.engine.vanished(entity, sid))
         self._tick()  # (a departure may have changed what the deadline is measured from)
         limit = self.engine.deadline()
-        if limit is not None and now >= self._started + limit and self._linger_until is None:
+        if limit is not None and now >= self._started + limit and self._linger_until is None \
+                and self._deferred != self._phase:
             if self.engine.stage in (Stage.GCS, Stage.DRONES):
                 self._ask_who_is_connected()  # someone missed a deadline: is everyone whose token we see connected?
+                if self._routed and not self.engine.holding:
+                    self._deferred = self._phase  # and can anyone be reached? it counts once a router answers
+                    return
             self.effects.run(self.engine.expire(*self._phase))
 
     def _ask_who_is_connected(self) -> None:
@@ -318,10 +362,12 @@ def open_game(game: GameConfig, journal: str | None, resume: bool, logger: loggi
 
 
 def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | None, logger: logging.Logger,
-         resume: bool = False, pace: float = 0.0, verify_env: bool = False) -> tuple[Over, int]:
+         resume: bool = False, pace: float = 0.0, verify_env: bool = False,
+         stops: list[Interrupted] | None = None) -> tuple[Over, int]:
     """Run one game to its end (or, with `resume`, the rest of the journal's game): its OVER, and the exit
     status: 0, 128 + the signal that stopped it, or JOURNAL_FAILED_STATUS when its journal could not be written
-    (its OVER then says JOURNAL_FAILED, unless it was its over record that was lost)."""
+    (its OVER then says JOURNAL_FAILED, unless it was its over record that was lost). `stops`: the signals a
+    handler notes from before the game opens (`cli`); the loop acts on them as it starts."""
     engine = open_game(game, journal, resume, logger)
     engine.verify_env, engine.journaled = verify_env, journal is not None
     engine.env_followed = False  # until a Matching event says someone follows the ENV phase
@@ -343,12 +389,16 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
             out.watch(keys.turn_of(Phase.ENV), inbox)  # (a Matching event at once if someone follows it)
             effects = Executor(keys, out, writer, inbox.rejects, pace)
             srv = Coordinator(engine, effects, inbox.rejects,
-                              logger, me, audit=partial(audit_sessions, session, inbox.post))
+                              logger, me, audit=partial(audit_sessions, session, inbox.post), stops=stops)
+            srv.probe()
             logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                         keys.root, ", ".join(d.drone for d in game.drones))
             with on_stop(srv.stop), waking(partial(inbox.post, None)):  # a signal is noted, the loop woken
                 inbox.run(srv.handle, timeout=srv.timeout, until=srv.finished)
         token.undeclare()
+        if srv.signal is not None and (staying := srv.presences.others()):
+            logger.info("stopped: not waiting for %s to leave (OVER went out %g s ago)", ", ".join(sorted(staying)),
+                        STOP_LINGER_S)
         if srv.rival is not None:
             raise UsageError(f"another coordinator (session {srv.rival}) started on {keys.root} at the same time")
         inbox.rejects.flush(everything=True)
@@ -415,7 +465,8 @@ def build_parser() -> argparse.ArgumentParser:
                         f"and the drones are back (default {GCS_GRACE_S:g})")
     p.add_argument("--link-grace", type=float, default=LINK_GRACE_S, metavar="SECONDS",
                    help="how long the game holds when the coordinator's link is down (every presence vanished at "
-                        f"once, e.g. a router restart) for its entities to come back (default {LINK_GRACE_S:g})")
+                        "once, e.g. a router restart; or no router answers, e.g. one frozen) for its entities to come "
+                        f"back (default {LINK_GRACE_S:g})")
     p.add_argument("--journal", help="write the game's journal to this file, missing or empty (a journal holds one "
                                      "game; --resume takes up an unfinished one)")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
@@ -467,10 +518,14 @@ def game_config(args: argparse.Namespace, scenario: ScenarioReader | None = None
 def cli(argv: list[str] | None = None, *, scenario: ScenarioReader | None = None) -> int:
     args = build_parser().parse_args(argv)
     logger = setup_logging(args.log_level, "SRV")
+    # SIGINT and SIGTERM are noted from the start, whatever the coordinator is doing (a container's first process
+    # would otherwise ignore SIGTERM): the game ends INTERRUPTED as soon as its loop runs
+    stops: list[Interrupted] = []
     try:
-        over, status = main(zenoh_config(args), game_config(args, scenario), keys=Keys(args.root),
-                            journal=args.journal,
-                            logger=logger, resume=args.resume, pace=args.pace, verify_env=args.verify_env)
+        with on_stop(stops.append):
+            over, status = main(zenoh_config(args), game_config(args, scenario), keys=Keys(args.root),
+                                journal=args.journal, logger=logger, resume=args.resume, pace=args.pace,
+                                verify_env=args.verify_env, stops=stops)
     except UsageError as err:
         logger.error("%s", err)
         return 2

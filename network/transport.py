@@ -212,9 +212,11 @@ def router_locators(session: zenoh.Session) -> list[str]:
 
 @dataclass(frozen=True, slots=True)
 class Sessions:
-    """The sessions the routers say are connected (`audit_sessions`); None: the listing may be incomplete."""
+    """The sessions the routers say are connected (`audit_sessions`); None: the listing may be incomplete.
+    `answered`: whether any router answered at all (no: none could be reached in time, e.g. one frozen)."""
 
     connected: frozenset[str] | None
+    answered: bool = True
 
 
 def sessions_listed(answers: list[dict[str, Any]]) -> frozenset[str] | None:
@@ -242,7 +244,8 @@ def audit_sessions(session: zenoh.Session, post: Callable[[object], None], timeo
             if reply.ok is not None:
                 answers.append(json.loads(reply.ok.payload.to_bytes()))
 
-    session.get("@/*/router", _direct(on_reply, lambda: post(Sessions(sessions_listed(answers)))), timeout=timeout)
+    session.get("@/*/router", _direct(on_reply, lambda: post(Sessions(sessions_listed(answers), bool(answers)))),
+                timeout=timeout)
 
 
 @dataclass(frozen=True, slots=True)
@@ -609,7 +612,8 @@ class Inbox:
         self._held.extend(events)
 
     def get(self, timeout: float | None = None) -> Event | None:
-        """The next event, or None when `timeout` seconds pass first."""
+        """The next event, or None when `timeout` seconds pass first, or at once for a `post(None)` (a wake: a
+        signal noted by its handler, which the caller's loop must look at now, not when its wait is over)."""
         if self._held:
             return self._held.popleft()
         end = None if timeout is None else time.monotonic() + max(0.0, timeout)
@@ -618,6 +622,8 @@ class Inbox:
             left = None if end is None else max(0.0, end - time.monotonic())
             summary = self.rejects.due_in()  # (a summary of rejections is logged when due)
             got, event = self._events.take(left if summary is None else summary if left is None else min(left, summary))
+            if got and event is None:
+                return None
             if got and (read := self._read(event)) is not None:
                 return read
             if left is not None and time.monotonic() >= end:  # type: ignore[operator]

@@ -140,6 +140,8 @@ COORDINATOR_GRACE_S = 30.0
 ASK_TIMEOUT_S = 5.0
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway (coordinator/node.py).
 LINGER_S = 5.0
+#: The same after a signal (OVER INTERRUPTED): a process manager stops the others too, a person wants it over.
+STOP_LINGER_S = 1.0
 #: How long the coordinator holds a vanished presence before it counts: when the router goes away, every token
 #: vanishes, the others' sometimes just before the coordinator's own (which tells a lost link from departures).
 SETTLE_S = 0.5

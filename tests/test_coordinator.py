@@ -383,3 +383,86 @@ def test_a_bad_game_flag_is_a_usage_error_before_anything_starts(flags, why) -> 
 
     with pytest.raises(UsageError, match=why):
         game_config(build_parser().parse_args(flags))
+
+
+def routed(run: Run) -> Run:
+    """The coordinator's first question (`probe`, at start) answered: a router answers audits."""
+    run.srv.probe()
+    run.srv.handle(Sessions(frozenset({ME, *SESSIONS.values(), "r0"})))
+    return run
+
+
+def test_a_deadline_that_passes_while_no_router_answers_does_not_count_and_the_game_goes_on() -> None:
+    """A frozen router (SIGSTOP, a stalled VM or link) shorter than the leases: no token vanishes, nothing
+    arrives, the deadline passes. The coordinator asks the routers first: none answers, so nobody can be reached
+    and nobody is to blame; the game holds, asking again, until one answers, then goes on as if nothing
+    happened: the phase again, its deadline anew, nobody hovered (issue 33, 5)."""
+    run = routed(Run(drones=2, phase_deadline=1.0))
+    run.play(1, {"D01": (1, 0, 0)})  # D02's move is held up by the frozen router
+    asked = len(run.audits)
+    run.wait(1.0)
+    assert len(run.audits) == asked + 1 and run.engine.turn == 1, "asked the routers before counting it"
+    assert run.engine.drones["D02"].misses == 0
+    run.srv.handle(Sessions(None, answered=False))  # no router answered in time
+    assert run.engine.holding and len(run.audits) == asked + 2, "the game holds, asking again"
+    run.wait(10.0)
+    run.srv.handle(Sessions(None, answered=False))
+    run.wait(10.0)
+    assert run.engine.turn == 1 and run.engine.drones["D02"].misses == 0 and len(run.journal.records) == 1
+    sent = len(run.wire.sent)
+    run.srv.handle(Sessions(frozenset({ME, *SESSIONS.values(), "r0"})))  # thawed: the router answers again
+    again = run.wire.sent[sent:]
+    assert not run.engine.holding
+    assert [type(m) for m in again] == [Status, Turn] and again[1].phase is Phase.DRONES, "the phase again"
+    run.wait(0.9)  # its deadline anew
+    run.send(Nps(turn=1, sender="D02", pos=(1, 2, 0)))  # what the router held comes through
+    assert run.engine.turn == 2 and "hovered" not in run.journal.records[-1]
+    assert run.srv.timeout() is None, "nothing left waiting"
+
+
+def test_a_deadline_counts_once_a_router_answers() -> None:
+    run = routed(Run(drones=2, phase_deadline=1.0))
+    run.play(1, {"D01": (1, 0, 0)})  # D02 is hung: the router answers, D02 does not
+    run.wait(1.0)
+    assert run.engine.turn == 1 and run.srv.timeout() is None, "waiting for the routers' answer"
+    run.srv.handle(Sessions(frozenset({ME, *SESSIONS.values(), "r0"})))
+    assert run.engine.turn == 2 and run.journal.records[-1]["hovered"] == ["D02"]
+
+
+def test_an_answer_to_a_question_asked_before_the_deadline_passed_decides_nothing() -> None:
+    run = routed(Run(drones=2, phase_deadline=1.0))
+    run.play(1, {"D01": (1, 0, 0)})
+    run.srv.handle(Presence("D01", "other", False))  # (no audit: not D01's session)
+    run.leave("D02")  # an audit under way...
+    run.srv.handle(Presence("D02", SESSIONS["D02"], True))  # (D02 was back at once)
+    run.wait(1.0)  # ... when the deadline passes: asked again after its answer
+    run.srv.handle(Sessions(frozenset({ME, *SESSIONS.values(), "r0"})))  # the earlier question's answer
+    assert run.engine.turn == 1 and run.engine.drones["D02"].misses == 0
+    run.srv.handle(Sessions(None, answered=False))  # the awaited answer: none (the router froze meanwhile)
+    assert run.engine.holding and run.engine.drones["D02"].misses == 0
+
+
+def test_a_router_frozen_past_the_leases_becomes_a_lost_link_whose_grace_counts_from_then() -> None:
+    run = routed(Run(drones=2, phase_deadline=1.0, link_grace=5.0))
+    run.play(1, {"D01": (1, 0, 0)})
+    run.wait(1.0)
+    run.srv.handle(Sessions(None, answered=False))
+    run.wait(4.0)
+    run.srv.handle(Presence("SRV", ME, False))  # the leases ran out: every link goes, every token vanishes
+    run.leave("ENV", "GCS", "D01", "D02")
+    run.wait(4.0)  # 8 s since the hold began, 4 since the link went: within the grace
+    for e in ("SRV", "ENV", "GCS", "D01", "D02"):
+        run.srv.handle(Presence(e, ME if e == "SRV" else SESSIONS[e], True))
+    assert not run.engine.holding and all(d.state.value == "ALIVE" for d in run.engine.drones.values())
+    run.send(Nps(turn=1, sender="D02", pos=(1, 2, 0)))
+    assert run.engine.turn == 2 and "hovered" not in run.journal.records[-1]
+
+
+def test_without_a_router_that_answers_a_deadline_counts_as_it_passes() -> None:
+    """No router (peers), or one whose admin space is closed: nothing tells a frozen router, as before."""
+    run = Run(drones=2, phase_deadline=1.0)
+    run.srv.probe()
+    run.srv.handle(Sessions(None, answered=False))
+    run.play(1, {"D01": (1, 0, 0)})
+    run.wait(1.0)
+    assert run.engine.turn == 2 and run.journal.records[-1]["hovered"] == ["D02"]

@@ -544,4 +544,6 @@ def test_a_copy_of_a_drones_exact_presence_key_does_not_hide_its_death(router, t
     records = journal_records(journal)
     hovered = [r["turn"] for r in records if "D02" in r.get("hovered", ())]
     lost = [r["turn"] for r in records if "D02" in r.get("lost", ())]
-    assert len(lost) == 1 and len(hovered) <= 2 and lost[0] <= hovered[0] + 1, (hovered, lost)
+    # (lost as its first deadline passes: the deadline counts once the routers have answered, and they no longer
+    # list its session; or, under load, a turn later)
+    assert len(lost) == 1 and len(hovered) <= 2 and (not hovered or lost[0] <= hovered[0] + 1), (hovered, lost)

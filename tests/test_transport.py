@@ -329,3 +329,14 @@ def test_a_payload_above_its_keys_size_limit_is_refused_unread(where, request) -
     assert inbox.get(10).msg == target(1)
     expected = {"too-large": 1} if where == "bare" else {}
     assert inbox.rejects.snapshot() == expected
+
+
+def test_a_wake_posted_from_another_thread_ends_the_wait_at_once(pair) -> None:
+    """`post(None)`: what `network.signals.waking` does when a signal lands (issue 33, 1: a coordinator waiting
+    in a long wait, e.g. a resumed game's ground station's grace, noted SIGTERM and waited on to the end). The
+    wait returns None for it, not the event that comes next (nor nothing until its timeout)."""
+    inbox = pair[0]
+    inbox.post(None)
+    inbox.post("next")
+    assert inbox.get(timeout=3600.0) is None
+    assert inbox.get(timeout=3600.0) == "next"
