@@ -104,7 +104,9 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
             procs.append((host, [*base, "drone", *common, "--id", ",".join(ids), "--host", host, "--autopilot", pilot]))
     else:
         procs += [(d, [*base, "drone", *common, "--id", d, "--autopilot", pilots[d]]) for d in sorted(pilots)]
-    mavlink = [str(a) for a in _passed(args, *MAVLINK_FLAGS)] if args.mavlink else []
+    mavlink = ["--mavlink", *(x for name in MAVLINK_FLAGS[1:] for x in ("--" + name.replace("_", "-"),
+                                                                         str(getattr(args, name))))] \
+        if args.mavlink else []  # (every value, 0 too: --turn-period 0 is full speed)
     procs.append(("GCS", [*base, "gcs", *common, *_passed(args, "scenario", "targets", "script", "quiet", "web",
                                                              "ros2"), *mavlink]))
     if args.ros2 or args.foxglove:  # the viewer: ROS 2 topics, Foxglove live

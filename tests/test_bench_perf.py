@@ -57,6 +57,7 @@ def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
     assert rows["1 drone @ 10x10x10"]["target"].startswith(f"≤ {perf.TARGETS['latency']:g}x RTT: ")
     assert rows["128 drones @ 10x10x10"]["target"].startswith("skipped: 128 drones do not fit")
     assert "world generation 64x64x16" in rows
+    assert rows["MAVLink ground station, 100 vehicles"]["target"].startswith("≥ 20 turns/s: ")  # (docs/mavlink.md)
     # each mechanism that remains: its lines of code, and, switched off, the same game (4 drones here)
     mechanisms = _rows(out, "mechanism")
     assert len(mechanisms) == len(perf.MECHANISMS)

@@ -7,7 +7,8 @@ to send (`Mav`), the station's DONE (`SendDone`), refusals. Times are seconds of
   system is refused; on the ground station's shared link, a command must name its system.
 - Pacing: the GCS phase is answered `period` seconds after the last one (the game's pace for people), with the
   targets the vehicles asked for since; the game never waits for a client.
-- Telemetry: every STATUS brings each vehicle's position; the whole set goes every `telemetry_period`.
+- Telemetry: every STATUS brings the position of each vehicle whose row changed (moved, reached, died); the
+  whole set, every vehicle's, goes every `telemetry_period`.
 - A flood: each vehicle takes at most `COMMANDS_PER_TURN` commands a turn; the rest are DENIED, counted."""
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from schema import Intent, Message, Over, Status, Turn, Welcome
@@ -48,6 +50,7 @@ class Bridge:
         self.pending_since = 0.0
         self.next_telemetry = now
         self.commands = dict.fromkeys(self.vehicles, 0)  # commands taken this turn, by vehicle
+        self._rows: np.ndarray | None = None  # the last STATUS's rows
         self.ignored = 0  # messages of kinds no vehicle acts on
         self.quit = False
 
@@ -75,9 +78,20 @@ class Bridge:
         return effects
 
     def _status(self, status: Status, now: float) -> list[Any]:
+        """Each vehicle whose row changed (it moved, reached, died...) takes its row and sends its position;
+        the others' rows are as before (a swarm's hovering drones cost nothing a turn)."""
         effects: list[Any] = []
         ms = self.ms(now)
-        for row in status.drones:
+        table, last = status.drones, self._rows
+        rows = table.rows
+        if last is not None and last.dtype == rows.dtype and len(last) == len(rows) \
+                and np.array_equal(last["drone"], rows["drone"]):
+            changed: list[int] = np.flatnonzero(rows != last).tolist()
+        else:
+            changed = list(range(len(rows)))
+        self._rows = rows
+        for i in changed:
+            row = table[i]
             v = self.vehicles.get(drone_number(row.drone))
             if v is None:
                 continue
