@@ -13,6 +13,7 @@ import argparse
 import pathlib
 import sys
 from collections.abc import Iterator
+from itertools import chain
 
 import numpy as np
 
@@ -48,7 +49,8 @@ def snapshots(records: Iterator[dict],
             continue
         for cells, into in ((r.get("targets"), target), (r.get("moves"), pos)):
             if cells:  # (a swarm's thousand cells in one assignment)
-                into[[index[d] for d in cells]] = list(cells.values())
+                rows = [index[d] for d in cells]
+                into[rows] = np.fromiter(chain.from_iterable(cells.values()), np.int32, 3 * len(rows)).reshape(-1, 3)
         for d in r.get("deaths", {}):
             state[index[d]] = DEAD
         for d in r.get("lost", ()):

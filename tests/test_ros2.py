@@ -97,6 +97,18 @@ def test_trails_grow_with_moves_only() -> None:
     assert [(q.pose.position.x, q.pose.position.y) for q in paths["/dronesim/D01/path"].poses] == [(1, 1), (2, 1)]
 
 
+def test_a_trail_keeps_its_last_cells_oldest_first() -> None:
+    from entities.ros2.model import Trails
+
+    trails = Trails(2, limit=3)
+    for step in range(5):  # D01 moves every time, D02 twice
+        trails.add(np.array([0, 1]) if step in (1, 3) else np.array([0]),
+                   np.array([[step, 0, 0], [0, step, 0]]) if step in (1, 3) else np.array([[step, 0, 0]]))
+    groups = {k: (drones.tolist(), cells.tolist()) for k, drones, cells in trails.take()}
+    assert groups == {3: ([0], [[[2, 0, 0], [3, 0, 0], [4, 0, 0]]]), 2: ([1], [[[0, 1, 0], [0, 3, 0]]])}
+    assert trails.take() == []  # nothing moved since
+
+
 def test_buildings_are_one_cube_list() -> None:
     grid = np.zeros((4, 4, 3), bool)
     grid[1, 2, 0] = grid[3, 3, 2] = True

@@ -91,13 +91,13 @@ class FoxScene:
                                       color=_colour(TARGET_COLOUR))]))
         return SceneUpdate(entities=entities, deletions=deletions) if entities or deletions else None
 
-    def trails(self, turn: int, trails: dict[str, list]) -> SceneUpdate | None:
+    def trails(self, turn: int, trails: dict[str, np.ndarray]) -> SceneUpdate | None:
         if not trails:
             return None
         s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(turn))
-        def line(cells: list) -> LinePrimitive:
+        def line(cells: np.ndarray) -> LinePrimitive:
             return LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.1 * s, color=self._trail_colour,
-                                 points=[Point3(x=x * s, y=y * s, z=z * s) for x, y, z in cells[-SCENE_TRAIL:]])
+                                 points=[Point3(x=x, y=y, z=z) for x, y, z in (cells[-SCENE_TRAIL:] * s).tolist()])
 
         return SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"trail/{name}",
                                                  lines=[line(cells)]) for name, cells in trails.items()])
@@ -110,20 +110,24 @@ class FoxgloveSink:
     def __init__(self, context: foxglove.Context, scene: Scene, *, with_scene: bool = True) -> None:
         self.context, self.scene, self.fox = context, scene, FoxScene(scene)
         self._channels: dict[str, foxglove.Channel] = {}
+        self._logs: dict[str, Any] = {}  # topic -> its channel's log
         self._scene = (SceneUpdateChannel(drone_topic(scene.namespace, "scene"), context=context) if with_scene
                        else None)
         self.logged = 0
 
-    def _channel(self, out: Out) -> foxglove.Channel:
-        if (ch := self._channels.get(out.topic)) is None:
-            schema = foxglove.Schema(name=out.typename, encoding="ros2msg", data=msgdef(out.typename).encode())
-            ch = self._channels[out.topic] = foxglove.Channel(out.topic, schema=schema, message_encoding="cdr",
-                                                              context=self.context)
-        return ch
+    def _channel(self, out: Out) -> Any:
+        schema = foxglove.Schema(name=out.typename, encoding="ros2msg", data=msgdef(out.typename).encode())
+        channel = foxglove.Channel(out.topic, schema=schema, message_encoding="cdr", context=self.context)
+        self._channels[out.topic] = channel
+        return channel.base  # (its log of bytes, without the wrapper's checks for JSON: a swarm logs a million)
 
     def log(self, outs: list[Out]) -> None:
+        channels = self._logs
         for out in outs:
-            self._channel(out).log(out.payload, log_time=out.time)
+            log = channels.get(out.topic)
+            if log is None:
+                log = channels[out.topic] = self._channel(out).log
+            log(out.payload, out.time, None)
         self.logged += len(outs)
 
     def scene_log(self, update: SceneUpdate | None, time: int) -> None:

@@ -13,9 +13,8 @@ itself against rosbags at construction, byte for byte.
 from __future__ import annotations
 
 import functools
-from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -339,6 +338,36 @@ class Out(NamedTuple):
     time: int
 
 
+class Trails:
+    """Each drone's last `TRAIL_LIMIT` cells, in a ring of rows (numpy: a swarm's turn is a few array operations),
+    and which drones moved since their trail was last taken."""
+
+    def __init__(self, n: int, limit: int = TRAIL_LIMIT) -> None:
+        self.limit = limit
+        self.ring = np.zeros((n, limit, 3), np.float64)
+        self.count = np.zeros(n, np.int64)  # cells ever added (the next goes to count % limit)
+        self.dirty = np.zeros(n, bool)
+
+    def add(self, drones: np.ndarray, cells: np.ndarray) -> None:
+        self.ring[drones, self.count[drones] % self.limit] = cells
+        self.count[drones] += 1
+        self.dirty[drones] = True
+
+    def take(self) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """(length k, drones, their cells (drones x k x 3), oldest first) for the drones moved since the last take,
+        grouped by length."""
+        moved = np.flatnonzero(self.dirty)
+        self.dirty[:] = False
+        lengths = np.minimum(self.count[moved], self.limit)
+        groups = []
+        for k in np.unique(lengths).tolist():
+            drones = moved[lengths == k]
+            start = np.where(self.count[drones] > self.limit, self.count[drones] % self.limit, 0)
+            at = (start[:, None] + np.arange(k)) % self.limit
+            groups.append((k, drones, self.ring[drones[:, None], at]))
+        return groups
+
+
 @dataclass(slots=True)
 class _Fleet:
     numbers: np.ndarray
@@ -346,8 +375,7 @@ class _Fleet:
     poses: list[str]  # each drone's pose topic
     tf: Layout
     markers: Layout
-    trails: list[deque] = field(default_factory=list)
-    dirty: set[int] = field(default_factory=set)  # drones whose trail changed since their last path
+    trails: Trails
     last_pos: np.ndarray | None = None
 
 
@@ -365,7 +393,7 @@ class Scene:
         self.markers_topic = drone_topic(namespace, "markers")
         self._pose = pose_layout()
         self._fleet: _Fleet | None = None
-        self.sent_trails: dict[str, list] = {}  # the trails (cells) of the last turn's paths, by drone
+        self.sent_trails: dict[str, np.ndarray] = {}  # the trails (cells x 3) of the last turn's paths, by drone
 
     def pose_topic(self, drone: str) -> str:
         return drone_topic(self.namespace, drone, "pose")
@@ -389,7 +417,7 @@ class Scene:
             f = self._fleet = _Fleet(numbers=np.array(snap.numbers), names=names,
                                      poses=[self.pose_topic(d) for d in names], tf=tf_layout(names),
                                      markers=markers_layout(len(names), self.cell_size),
-                                     trails=[deque(maxlen=TRAIL_LIMIT) for _ in names])
+                                     trails=Trails(len(names)))
         return f
 
     def turn(self, snap: Snapshot, *, paths: bool = True) -> list[Out]:
@@ -399,11 +427,9 @@ class Scene:
         n, sec, nsec = len(f.names), t // 1_000_000_000, t % 1_000_000_000
         xyz = snap.pos.astype(np.float64) * self.cell_size
         moved = (np.arange(n) if f.last_pos is None else
-                 np.flatnonzero((snap.pos != f.last_pos).any(axis=1))).tolist()
+                 np.flatnonzero((snap.pos != f.last_pos).any(axis=1)))
         f.last_pos = np.array(snap.pos)
-        for i, cell in zip(moved, snap.pos[moved].tolist()):
-            f.trails[i].append(cell)
-            f.dirty.add(i)
+        f.trails.add(moved, snap.pos[moved])
         out = [Out("/clock", CLOCK, serialize(make(CLOCK, clock=make("builtin_interfaces/msg/Time", sec=sec,
                                                                      nanosec=nsec)), CLOCK), t)]
         out.append(Out("/tf", TF, f.tf.fill({"sec": [sec], "nsec": [nsec], "xyz": xyz.reshape(1, -1)})[0].tobytes(), t))
@@ -425,21 +451,17 @@ class Scene:
     def paths(self, turn: int) -> list[Out]:
         """The trail of every drone that moved since its last one (all of them at once, a layout per length)."""
         f = self._fleet
-        if f is None or not f.dirty:
+        if f is None:
             return []
         t = self.time_of(turn)
         sec, nsec = t // 1_000_000_000, t % 1_000_000_000
-        by_length: dict[int, list[int]] = {}
-        for i in sorted(f.dirty):
-            by_length.setdefault(len(f.trails[i]), []).append(i)
-        f.dirty.clear()
         out: list[Out] = []
-        for k, drones in by_length.items():
-            cells = np.array([list(f.trails[i]) for i in drones], np.float64).reshape(len(drones), -1)
+        for k, drones, cells in f.trails.take():
             rows = path_layout(k).fill({"sec": [[sec] * (k + 1)], "nsec": [[nsec] * (k + 1)],
-                                        "xyz": cells * self.cell_size})
-            out += [Out(self.path_topic(f.names[i]), PATH, row.tobytes(), t) for i, row in zip(drones, rows)]
-            self.sent_trails.update((f.names[i], list(f.trails[i])) for i in drones)
+                                        "xyz": cells.reshape(len(drones), -1) * self.cell_size})
+            names = [f.names[i] for i in drones.tolist()]
+            out += [Out(self.path_topic(name), PATH, row.tobytes(), t) for name, row in zip(names, rows)]
+            self.sent_trails.update(zip(names, cells))
         return out
 
     def drones(self) -> list[str]:
