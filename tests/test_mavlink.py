@@ -541,3 +541,13 @@ def test_links_send_a_destinations_frames_together_in_order_and_under_the_mtu() 
             assert seqs == [100, 101, 102]  # one sequence a vehicle
         finally:
             links.close()
+
+
+def test_drones_past_system_255_fly_on_without_a_vehicle() -> None:
+    world = World.from_buildings((30, 30, 2), [])
+    starts = {f"D{n:02d}": (n % 30, n // 30, 0) for n in range(1, 301)}
+    b = Bridge(Ground(world, starts, Plan(())), GEO, period=0.0, telemetry_period=1.0, now=0.0)
+    assert sorted(b.vehicles) == list(range(1, 256)) and b.unseen == 45
+    rows = tuple(DroneStatus(drone=d, pos=c, state=DroneState.ALIVE) for d, c in starts.items())
+    b.receive(Status(turn=0, sender="OBS", drones=rows), 0.0)  # (rows of drones without a vehicle: skipped)
+    assert {e.system for e in b.tick(0.0) if isinstance(e, Mav)} == set(range(1, 256))

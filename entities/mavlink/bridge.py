@@ -28,6 +28,8 @@ from ..gcs import Ground, Station
 from .geo import Geo
 from .vehicle import Goal, Mav, Origin, Vehicle, ack
 
+#: MAVLink's largest system id: drones past D255 fly on, not MAVLink vehicles (their targets from elsewhere).
+MAX_SYSTEM = 255
 #: Commands (COMMAND_*, SET_MODE, SET_POSITION_TARGET_*) a vehicle takes a turn; more are DENIED.
 COMMANDS_PER_TURN = 32
 COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT", "SET_MODE", "SET_POSITION_TARGET_LOCAL_NED",
@@ -44,7 +46,8 @@ class Bridge:
     def __init__(self, ground: Ground, geo: Geo, *, period: float, telemetry_period: float, now: float) -> None:
         self.station = Station(ground, hold=True)
         self.vehicles = {drone_number(d): Vehicle(drone_number(d), d, c, ground.world, geo)
-                         for d, c in sorted(ground.starts.items())}
+                         for d, c in sorted(ground.starts.items()) if drone_number(d) <= MAX_SYSTEM}
+        self.unseen = len(ground.starts) - len(self.vehicles)  # drones beyond D255: no system id for them
         self.period, self.telemetry_period, self.boot = period, telemetry_period, now
         self.last_answer: float | None = None
         self.pending_since = 0.0

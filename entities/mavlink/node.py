@@ -281,6 +281,9 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
                     perform(effect)
                 links.flush()
 
+            if bridge.unseen:
+                logger.warning("%d drones past D255 are not MAVLink vehicles (MAVLink's system ids end at 255)",
+                               bridge.unseen)
             last = max(bridge.vehicles)
             print(f"MAVLink ground station: systems 1..{last} to udpout:{gcs[0]}:{gcs[1]}, API ports "
                   f"{args.mavlink_api_base}..{args.mavlink_api_base + last - 1}; a turn every {args.turn_period:g} s",
