@@ -9,7 +9,7 @@ loopback `dronesim router` process, secured as docs/security.md says (TLS, user/
 control generated from the key table; `--plain`: none of these) with the flood filters generated from
 the key table (`schema.acl.flood_filters`), every process with its own credentials; the coordinator,
 the environment and one swarm host (H01) flying every drone with the seed autopilot, each a process;
-this process the scripted ground station; the coordinator keeps a journal), four games of the same
+this process the scripted ground station; the coordinator keeps a journal), the games of the same
 scenario:
 
 1. clean;
@@ -21,14 +21,19 @@ scenario:
    which takes the whole flood, runs as the game does);
 3. flood (b): the attacker sends 300 ASKs of 32,768 cells from D01 to the environment at once and waits
    for their replies;
-4. clean again (the machine's speed drifts: the clean speed is the mean of games 1 and 4).
+4. flood (c), (d): 200,000 stale DONEs on the ground station's key, 200,000 stale TGTs on D01's (what any peer
+   may do on a plain router; under access control, a buggy ground station: the attacker is a second session of
+   the GCS); flood (e): 20,000 CONNECT queries with invented sessions, naming D01, D02... in turn (any peer allowed
+   to connect: a drone under access control), all at once (issue 33);
+5. clean again (the machine's speed drifts: the clean speed is the mean of the first and last clean games).
+`--floods nps,done` plays only those floods.
 
 For each: turns/s over the measured turns, and turns/s during the flood (over the turns it overlaps:
 from the last turn begun before the attacker's first message to the first begun after its last message
 or reply), its ratio to the clean speed (target ≥ 0.5), whether the journal is byte-identical to the
 first clean game's (the journal leaves out the game identity each coordinator draws) and every drone's
 state after every turn equal, the rejections the coordinator and the environment report in their last
-lines, and the exit codes. `--repeat N` plays the four games N times and gives the ratios' range.
+lines, and the exit codes. `--repeat N` plays the games N times and gives the ratios' range.
 """
 
 from __future__ import annotations
@@ -66,13 +71,22 @@ SECTION = "## Floods"
 TARGET = 0.5  # flooded turns/s ÷ clean turns/s, at least
 SIZE = (64, 64, 16)
 DRONES = 16
-FLOODS = {"nps": 200_000, "ask": 300}
-ATTACKER = "H01"  # on the secured router: the principal D01's keys belong to (the swarm host flying it)
-QUICK_FLOODS = {"nps": 2_000, "ask": 100}  # --quick: small floods (some ASKs still over the budget)
+FLOODS = {"nps": 200_000, "ask": 300, "done": 200_000, "tgt": 200_000, "connect": 20_000}
+#: On the secured router, the principal each flood comes as: D01's keys and queries belong to the swarm host flying
+#: it; the ground station's keys (DONE, TGT) to the GCS (a buggy ground station: a second session of it).
+ATTACKERS = {"nps": "H01", "ask": "H01", "connect": "H01", "done": "GCS", "tgt": "GCS"}
+QUICK_FLOODS = {"nps": 2_000, "ask": 100, "done": 2_000, "tgt": 2_000, "connect": 500}  # --quick: small floods
+#: What each flood sends, for the table.
+FLOOD_NAMES = {"nps": "{:,} stale NPS", "ask": "{:,} ASKs of 32,768 cells", "done": "{:,} stale DONEs",
+               "tgt": "{:,} stale TGTs", "connect": "{:,} CONNECTs with invented sessions"}
 #: The attacker's niceness: it stands for a client on a host of its own (an authenticated drone), so the game's
 #: processes go first on this machine's cores; the router, which takes the whole flood, runs as the game does.
 #: `--attacker-nice 0`: an attacker that shares the game's cores as an equal (on 2 cores it takes one of them).
 ATTACKER_NICE = 19
+
+
+#: Each flood's letter in the table.
+LETTERS = dict(zip(FLOODS, "abcde"))
 
 
 def quick_case() -> Case:
@@ -83,7 +97,7 @@ def quick_case() -> Case:
 @dataclass(slots=True)
 class Played:
     name: str
-    flood: str | None  # "nps", "ask" or None (clean)
+    flood: str | None  # a key of FLOODS, or None (clean)
     game: Game
     journal: bytes = b""
     rejected: dict[str, str] = field(default_factory=dict)  # process -> its "rejected inputs" report
@@ -112,7 +126,7 @@ def play(name: str, flood: str | None, count: int, case: Case, scenario: Path, l
         if flood is None:
             return
         if turn == 1:
-            creds = secured.flags(ATTACKER) if secured is not None else []
+            creds = secured.flags(ATTACKERS[flood]) if secured is not None else []
             a = subprocess.Popen([sys.executable, "-m", "benchmarks.flooder", flood, "--mode", "client", "--connect",
                                   locator, "--root", keys.root, "--count", str(count), *creds],
                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -240,8 +254,9 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     secured = None if args.plain else Secured.make(logs / "certs", [d["id"] for d in scen["drones"]], "H01")
     facts["secured"] = secured is not None
     facts["nice"] = args.attacker_nice
-    plan = [("clean", None), (f"flood (a): {counts['nps']:,} stale NPS", "nps"),
-            (f"flood (b): {counts['ask']} ASKs of 32,768 cells", "ask"), ("clean again", None)]
+    floods = [f for f in FLOODS if f in args.floods]
+    plan = [("clean", None), *((f"flood ({LETTERS[f]}): {FLOOD_NAMES[f].format(counts[f])}", f) for f in floods),
+            ("clean again", None)]
     rows: list[Row] = []
     facts["errors"], facts["loads"], facts["ratios"] = [], [], {flood: [] for _, flood in plan if flood}
     for k in range(1, args.repeat + 1):
@@ -279,7 +294,9 @@ def legend(facts: dict) -> str:
         + (": it stands for a client on a host of its own, so the game's processes go first on this machine's "
            "cores, while the router takes the whole flood" if facts["nice"] > 0 else
            ": it shares this machine's cores with the game as an equal") + ") floods as D01: (a) NPS for turn 1 on "
-        "D01's own key, as fast as it can; (b) ASKs of 32,768 cells to the environment, all at once, then waits "
+        "D01's own key, as fast as it can; (c), (d) stale DONEs on the ground station's key, stale TGTs on D01's, "
+        "as a second session of the GCS; (e) CONNECTs with invented sessions, all at once; (b) ASKs of 32,768 "
+        "cells to the environment, all at once, then waits "
         "for their replies (\"unanswered\": queries that finished with none, having reached the environment after "
         "the game's end, when it had left: only when the flood was cut). Turns/s (measured turns) = 1 ÷ the mean "
         "time between consecutive STATUS; during the "
@@ -315,12 +332,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--attacker-nice", type=int, default=ATTACKER_NICE,
                         help=f"the attacker's niceness (default {ATTACKER_NICE}: it stands for a client on a host of "
                              "its own; 0: it shares this machine's cores with the game as an equal)")
-    parser.add_argument("--repeat", type=int, default=1, help="play the four games this many times (default 1)")
+    parser.add_argument("--floods", default=",".join(FLOODS), type=lambda v: [f for f in v.split(",") if f],
+                        help=f"the floods to play, of {','.join(FLOODS)} (default: all)")
+    parser.add_argument("--repeat", type=int, default=1, help="play the games this many times (default 1)")
     parser.add_argument("--keep-logs", action="store_true", help="keep the processes' logs (kept anyway on failure)")
     add_write_args(parser)
     args = parser.parse_args(argv)
     if args.turns < 2 or args.repeat < 1:
         parser.error("--turns must be >= 2 and --repeat >= 1")
+    if not args.floods or set(args.floods) - set(FLOODS):
+        parser.error(f"--floods takes some of {','.join(FLOODS)}")
     rows, facts = run(args)
     table = render(rows, COLUMNS)
     print(table)
@@ -344,7 +365,7 @@ def main(argv: list[str] | None = None) -> int:
                + ("met." if ok and not missed else
                   "MISSED" + (f" ({', '.join(missed)})" if missed else "")
                   + ("; a game failed or its journal changed" if not ok else "") + "."))
-    ranges = "; ".join(f"flood ({'a' if flood == 'nps' else 'b'}) ÷ clean: {_span(values)}"
+    ranges = "; ".join(f"flood ({LETTERS[flood]}) ÷ clean: {_span(values)}"
                        for flood, values in facts["ratios"].items() if values)
     verdict += f" Over {args.repeat} run{'s' if args.repeat > 1 else ''}: {ranges}." if ranges else ""
     print(f"\n{load}\n{verdict}", file=sys.stderr)

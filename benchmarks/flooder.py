@@ -7,6 +7,10 @@
 
 * ``nps``: `count` well-formed NPS for a past turn (turn 1) from D01 on D01's own key, as fast as it can
   (BLOCK congestion control): what an authenticated drone may do on its own key under access control.
+* ``done`` / ``tgt``: `count` stale DONEs (turn 1) on the ground station's key / stale targets for D01 on D01's
+  TGT key, as fast as it can: what any peer may do on a plain router, or a buggy ground station under access control.
+* ``connect``: `count` CONNECT queries with invented sessions (naming D01, D02, ... in turn), all at once, waiting
+  for every one to finish: what any peer allowed to connect may do (a drone under access control).
 * ``ask``: `count` ASKs of `Ask.MAX_CELLS` cells from D01 to the environment, all sent at once; it waits
   for every query to finish (answered, refused with an error reply, or with no reply: one that reached the
   environment after it left, the game over) up to `--timeout`.
@@ -23,14 +27,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import secrets
 import sys
 import threading
 import time
+from collections.abc import Callable
 
 import zenoh
 
 from network.transport import add_zenoh_args, open_session, zenoh_config
-from schema import Ask, Keys, Nps, encode
+from schema import Ask, Connect, Done, Keys, Nps, Phase, Role, Target, drone_id, encode
 
 SENDER = "D01"
 
@@ -41,20 +47,35 @@ def go() -> None:
     sys.stdin.readline()
 
 
-def flood_nps(session: zenoh.Session, keys: Keys, count: int) -> dict:
-    stale = encode(Nps(turn=1, sender=SENDER, pos=(0, 0, 1)))
-    pub = session.declare_publisher(keys.nps(SENDER), congestion_control=zenoh.CongestionControl.BLOCK)
+def flood_puts(session: zenoh.Session, key: str, payload: bytes, count: int) -> dict:
+    """`count` copies of `payload` on `key`, as fast as it can (BLOCK congestion control)."""
+    pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     go()
     first, cpu = time.monotonic(), time.process_time()
     for _ in range(count):
-        pub.put(stale)
+        pub.put(payload)
     return {"sent": count, "answered": 0, "refused": 0, "unanswered": 0, "first": first, "last": time.monotonic(),
             "cpu": time.process_time() - cpu}
 
 
-def flood_ask(session: zenoh.Session, keys: Keys, count: int, timeout: float) -> dict:
-    big = encode(Ask(turn=0, sender=SENDER, cells=tuple((x % 10, x // 10 % 10, x // 100 % 10)
-                                                        for x in range(Ask.MAX_CELLS))))
+def flood_nps(session: zenoh.Session, keys: Keys, count: int) -> dict:
+    return flood_puts(session, keys.nps(SENDER), encode(Nps(turn=1, sender=SENDER, pos=(0, 0, 1))), count)
+
+
+def flood_done(session: zenoh.Session, keys: Keys, count: int) -> dict:
+    """Stale DONEs (turn 1) from the ground station, on its own key."""
+    return flood_puts(session, keys.gcs_done, encode(Done(turn=1, sender="GCS", phase=Phase.GCS)), count)
+
+
+def flood_tgt(session: zenoh.Session, keys: Keys, count: int) -> dict:
+    """Stale targets (turn 1) for D01 from the ground station, on D01's TGT key."""
+    return flood_puts(session, keys.tgt(SENDER), encode(Target(turn=1, sender="GCS", drone=SENDER, pos=(1, 1, 1))),
+                      count)
+
+
+def flood_queries(session: zenoh.Session, key: str, payloads: Callable[[int], bytes], count: int,
+                  timeout: float) -> dict:
+    """`count` queries on `key` (the i-th with `payloads(i)`), all sent at once; waits for every one to finish."""
     lock = threading.Lock()
     done = threading.Event()
     got = {"answered": 0, "refused": 0, "finished": 0, "last": 0.0}
@@ -64,16 +85,17 @@ def flood_ask(session: zenoh.Session, keys: Keys, count: int, timeout: float) ->
             got["answered" if reply.ok is not None else "refused"] += 1
             got["last"] = time.monotonic()
 
-    def on_finished() -> None:  # a query is over: with its reply, or with none (no environment to answer it)
+    def on_finished() -> None:  # a query is over: with its reply, or with none (no one left to answer it)
         with lock:
             got["finished"] += 1
             if got["finished"] >= count:
                 done.set()
 
+    ready = [payloads(i) for i in range(count)]
     go()
     first, cpu = time.monotonic(), time.process_time()
-    for _ in range(count):
-        session.get(keys.ask, zenoh.handlers.Callback(on_reply, on_finished), payload=big, timeout=timeout)
+    for payload in ready:
+        session.get(key, zenoh.handlers.Callback(on_reply, on_finished), payload=payload, timeout=timeout)
     done.wait(timeout)
     with lock:
         unanswered = got.pop("finished") - got["answered"] - got["refused"]
@@ -81,19 +103,41 @@ def flood_ask(session: zenoh.Session, keys: Keys, count: int, timeout: float) ->
                 "last": got["last"] or time.monotonic(), "cpu": time.process_time() - cpu}
 
 
+def flood_ask(session: zenoh.Session, keys: Keys, count: int, timeout: float) -> dict:
+    big = encode(Ask(turn=0, sender=SENDER, cells=tuple((x % 10, x // 10 % 10, x // 100 % 10)
+                                                        for x in range(Ask.MAX_CELLS))))
+    return flood_queries(session, keys.ask, lambda _: big, count, timeout)
+
+
+def flood_connect(session: zenoh.Session, keys: Keys, count: int, timeout: float) -> dict:
+    """CONNECTs with invented sessions, naming D01 and then, one by one, other drones (no token is seen for any:
+    the coordinator refuses them all)."""
+    def hello(i: int) -> bytes:
+        d = drone_id(1 + i % 60_000)
+        return encode(Connect(turn=0, sender=d, role=Role.DRONE, drones=(d,), autopilot="seed",
+                              session=secrets.token_hex(16)))
+
+    return flood_queries(session, keys.connect, hello, count, timeout)
+
+
+PUTS = {"nps": flood_nps, "done": flood_done, "tgt": flood_tgt}
+QUERIES = {"ask": flood_ask, "connect": flood_connect}
+KINDS = (*PUTS, *QUERIES)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.flooder", description=__doc__.split("\n")[0])
-    p.add_argument("kind", choices=("nps", "ask"))
+    p.add_argument("kind", choices=KINDS)
     add_zenoh_args(p)
     p.add_argument("--count", type=int, required=True, help="messages (nps) or queries (ask) to send")
     p.add_argument("--timeout", type=float, default=120.0, help="seconds to wait for the ASKs' replies")
     args = p.parse_args(argv)
     with open_session(zenoh_config(args)) as session:
         keys = Keys(args.root)
-        if args.kind == "nps":
-            result = flood_nps(session, keys, args.count)
+        if args.kind in PUTS:
+            result = PUTS[args.kind](session, keys, args.count)
         else:
-            result = flood_ask(session, keys, args.count, args.timeout)
+            result = QUERIES[args.kind](session, keys, args.count, args.timeout)
     print(json.dumps(result), flush=True)
     return 0
 

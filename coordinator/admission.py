@@ -8,8 +8,9 @@ from collections.abc import Sequence
 from typing import Generic, TypeVar
 
 from schema import Connect, Role
+from schema.errors import RemoteInputError
 from schema.messages import is_host_id
-from schema.tuning import PRESENCE_WAIT_S
+from schema.tuning import CONNECT_WAITING, CONNECT_WAITING_PER_SENDER, PRESENCE_WAIT_S
 
 from .fleet import ALIVE, STATES, Fleet
 
@@ -87,16 +88,29 @@ class Presences(Generic[Q]):
     by writing its name in a CONNECT (the coordinator cannot see who sent a query). The token may arrive just
     after the query (another path), hence a short wait; a CONNECT without one is refused."""
 
-    def __init__(self) -> None:
+    def __init__(self, room: int = CONNECT_WAITING, per_sender: int = CONNECT_WAITING_PER_SENDER) -> None:
         self.present: set[tuple[str, str]] = set()
         self._waiting: list[tuple[float, Q, Connect]] = []
+        self.room, self.per_sender = room, per_sender  # CONNECTs waiting at most, in all and naming one sender
 
     def connect(self, query: Q, msg: Connect, now: float) -> list[tuple[Q, Connect]]:
-        """A CONNECT: ready at once if its token is there, else it waits (up to PRESENCE_WAIT_S)."""
+        """A CONNECT: ready at once if its token is there, else it waits (up to PRESENCE_WAIT_S); a `flood`
+        RemoteInputError if `room` CONNECTs wait already, or `per_sender` naming its sender (it is refused: a
+        flood with invented sessions holds no memory, and the real process asks again)."""
         if (msg.sender, msg.session) in self.present:
             return [(query, msg)]
+        if len(self._waiting) >= self.room:
+            raise RemoteInputError(f"{len(self._waiting)} CONNECTs already wait for their presence token",
+                                   reason="flood")
+        if sum(w[2].sender == msg.sender for w in self._waiting) >= self.per_sender:
+            raise RemoteInputError(f"{self.per_sender} CONNECTs from {msg.sender} already wait for their presence "
+                                   "token", reason="flood")
         self._waiting.append((now + PRESENCE_WAIT_S, query, msg))
         return []
+
+    def waiting(self) -> int:
+        """CONNECTs waiting for their token."""
+        return len(self._waiting)
 
     def presence(self, entity: str, session: str, alive: bool) -> list[tuple[Q, Connect]]:
         """A token came or went: the CONNECTs it makes ready."""

@@ -56,7 +56,7 @@ from schema import (
     drone_id,
     encode,
 )
-from schema.errors import WrongSender
+from schema.errors import RemoteInputError, WrongSender, excerpt
 from schema.messages import WorldSpec
 from schema.tuning import (
     ADMIT_DEADLINE_S,
@@ -138,6 +138,11 @@ class Executor:
     def answer(self, query: Any, data: bytes) -> None:  # a zenoh.Query (a ReplyToConnect's token)
         """Reply to a query; the final answer: the asker stops waiting now."""
         query.reply(query.key_expr, data)
+        query.drop()
+
+    def fail(self, query: Any, text: str) -> None:  # a zenoh.Query
+        """An error reply to a query (its asker may ask again); the final answer."""
+        query.reply_err(excerpt(text).encode())
         query.drop()
 
     def due_in(self) -> float | None:
@@ -228,7 +233,13 @@ class Coordinator:
                 for gone in [k for k in self._vanishing if k[0] == hello.sender]:  # a process that replaces a
                     del self._vanishing[gone]  # vanished one: the departure counts now, not after SETTLE_S
                     run(engine.vanished(*gone))
-                for query, msg in self.presences.connect(asked, hello, now):
+                try:
+                    ready = self.presences.connect(asked, hello, now)
+                except RemoteInputError as err:  # too many wait for their token: an error reply, it asks again
+                    self.rejects.reject(f"CONNECT from {hello.sender}", err, hello.sender)
+                    self.effects.fail(asked, str(err))
+                    ready = []
+                for query, msg in ready:
                     run(engine.connect(msg, query))
             case Received(_, msg) if engine.stage is not Stage.OVER:  # after OVER: sent before it was seen
                 run(engine.receive(msg))

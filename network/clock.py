@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from schema import Message, Over, Status, Turn
 from schema.errors import StaleTurn
+from schema.tuning import TURNS_PER_S_MAX
 
 
 class TurnClock:
@@ -19,19 +20,33 @@ class TurnClock:
     must be of this entity's `game` (from its WELCOME): another game's, or an earlier coordinator's, is foreign,
     whatever its turn. (A forged message for the right turn is spoofing: the router's access control stops it.)
     With `skips_status` (the environment, which reads only the newest STATUS, when it needs one), a STATUS of any
-    later turn is current too."""
+    later turn is current too. Given the time (`now`, seconds), nothing is current that is further ahead than a game
+    can have gone since the clock last moved (`TURNS_PER_S_MAX`): one absurd message cannot wedge it."""
 
-    def __init__(self, turn: int | None = None, *, game: str = "", skips_status: bool = False) -> None:
+    def __init__(self, turn: int | None = None, *, game: str = "", skips_status: bool = False,
+                 now: float | None = None, known: int = 0) -> None:
         self.turn: int | None = turn or None  # the turn being played (after STATUS(t): t + 1, the next)
         self.game, self.skips_status = game, skips_status
         self._seen: dict[tuple[str, object, int], Message] = {}
+        # (the turn the clock last moved to -- at first, `known`: the WELCOME's --, and when), for `now`'s bound
+        self._moved = (max(turn or 0, known), now)
 
-    def admit(self, msg: Turn | Status | Over) -> None:
+    def admit(self, msg: Turn | Status | Over, now: float | None = None) -> None:
         """Check `msg` against the clock (StaleTurn if it cannot be current) and advance the clock."""
         if msg.game != self.game:
             raise StaleTurn(f"a {msg.TAG} of game {msg.game or '(none)'}, not this one ({self.game or '(none)'})",
                             reason="foreign-game")
-        now = msg.turn + 1 if isinstance(msg, Status) else msg.turn
+        turn = msg.turn + 1 if isinstance(msg, Status) else msg.turn
+        known, since = self._moved
+        if now is not None and since is not None and turn > known + 1 + TURNS_PER_S_MAX * max(0.0, now - since):
+            raise StaleTurn(f"{msg.TAG} for turn {msg.turn}: no game gets there from turn {known} in "
+                            f"{max(0.0, now - since):.1f} s", reason="future-turn")
+        before = self.turn
+        self._advance(msg, turn)
+        if self.turn != before or since is None:
+            self._moved = (self.turn or 0, now)
+
+    def _advance(self, msg: Turn | Status | Over, now: int) -> None:
         if self.turn is not None:  # (STATUS(t) makes t + 1 "now"; the end may come at any turn)
             lo, hi = (self.turn - 1, float("inf")) if isinstance(msg, Over) else (self.turn, self.turn + 1)
             if self.skips_status and isinstance(msg, Status):

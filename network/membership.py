@@ -6,6 +6,7 @@ entities/*_node.py) connects with this module and screens the coordinator's mess
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -85,6 +86,10 @@ class Membership:
         self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
         self.coordinator, self._present, self._asking = "", False, False
+        # the sessions with a coordinator's presence token: an answer to CONNECT counts only from one of them
+        self._coordinators: set[str] = set()
+        self._watch = session.liveliness().declare_subscriber(self.keys.alive_of("SRV"), self._coordinator_token,
+                                                              history=True)
         self._lost_since: float | None = None
         inbox.watch_presence("SRV")
         self._connect()
@@ -102,13 +107,32 @@ class Membership:
         inbox.hold(held)
         self.welcome: Welcome = welcome
         # the coordinator's messages pass through its clock (`screen`)
-        self.clock: TurnClock = TurnClock(game=welcome.game, skips_status=skips_status)
+        self.clock: TurnClock = TurnClock(game=welcome.game, skips_status=skips_status, now=time.monotonic(),
+                                          known=welcome.turn)
+
+    def _coordinator_token(self, sample: zenoh.Sample) -> None:  # (on Zenoh's thread)
+        with contextlib.suppress(ValueError):
+            sid = self.keys.presence_of(str(sample.key_expr))[1]
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._coordinators.add(sid)
+            else:
+                self._coordinators.discard(sid)
+
+    def _from_coordinator(self, replier: str) -> bool:  # (on Zenoh's thread)
+        """Whether an answer to CONNECT comes from a session with a coordinator's presence token (on a plain router
+        anyone may answer: a forged REFUSED must not send the entity away, nor a forged WELCOME keep it)."""
+        if replier in self._coordinators:
+            return True
+        self.log.warning("an answer to CONNECT from session %s, which has no coordinator's presence: ignored",
+                         replier or "(unknown)")
+        return False
 
     def _connect(self) -> None:
         """Send CONNECT; its answer comes as an `Answered` event."""
         self._asking = True
         ask_later(self.session, self.keys.connect, self.hello, (Welcome, Refused), self.connect_timeout,
-                  lambda reply, coordinator, error: self.inbox.post(Answered(reply, coordinator, error)))
+                  lambda reply, coordinator, error: self.inbox.post(Answered(reply, coordinator, error)),
+                  accept=self._from_coordinator)
 
     def _seen(self, event: Presence) -> None:
         """A coordinator's token came or went: one that appears is asked (again) if no CONNECT is out."""
@@ -143,7 +167,8 @@ class Membership:
                 return None
             if welcome is not None:
                 self.welcome = welcome
-                self.clock = TurnClock(welcome.turn, game=welcome.game, skips_status=self.clock.skips_status)
+                self.clock = TurnClock(welcome.turn, game=welcome.game, skips_status=self.clock.skips_status,
+                                       now=time.monotonic())
             return welcome
         if event.entity != "SRV":
             return None
@@ -168,13 +193,14 @@ class Membership:
             raise UsageError(f"the coordinator vanished and did not come back within {self.grace:g} s")
 
     def close(self) -> None:
+        self._watch.undeclare()
         self.token.undeclare()
 
     def screen(self, event: object, rejects: RejectCounter) -> bool:
         """False (the rejection counted and logged) for a coordinator message that fails `admit`."""
         if isinstance(event, Received) and isinstance(event.msg, (Turn, Status, Over)):
             try:
-                self.clock.admit(event.msg)
+                self.clock.admit(event.msg, time.monotonic())
             except RemoteInputError as err:
                 rejects.reject(event.key, err)
                 return False

@@ -664,32 +664,48 @@ class Outbox:
 
 
 def ask_later(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
-              timeout: float, done: Callable[[Message | None, str, str], None]) -> None:
+              timeout: float, done: Callable[[Message | None, str, str], None],
+              accept: Callable[[str], bool] | None = None) -> None:
     """`ask` without waiting: `done(reply, replier, error)` is called once, on Zenoh's thread, with the first valid
-    reply and the session id of its replier, or with None and why none came (an error reply, none in time)."""
+    reply and the session id of its replier, or with None and why none came (an error reply, none in time). With
+    `accept` (called on Zenoh's thread), a reply from a session it does not accept is skipped (anyone may declare a
+    queryable on a plain router)."""
     answered: list[bool] = []
+    skipped: list[str] = []
 
     def on_reply(reply: zenoh.Reply) -> None:
         if answered:
             return
+        replier = "" if reply.replier_id is None else str(reply.replier_id.zid)
+        if accept is not None and not accept(replier):
+            skipped.append(replier)
+            return
         answered.append(True)
         try:
-            done(_answer(key, reply, expect), "" if reply.replier_id is None else str(reply.replier_id.zid), "")
+            done(_answer(key, reply, expect), replier, "")
         except RemoteInputError as err:
             done(None, "", str(err))
 
     def on_end() -> None:
         if not answered:
-            done(None, "", f"no answer on {key} within {timeout:.1f} s")
+            done(None, "", f"no answer on {key} within {timeout:.1f} s" +
+                 (f" but {len(skipped)} from sessions that may not answer it" if skipped else ""))
 
     session.get(key, _direct(on_reply, on_end), payload=encode(msg), timeout=timeout,
                 consolidation=zenoh.ConsolidationMode.NONE)
 
 
 def ask(session: zenoh.Session, key: str, msg: Message, expect: type[Message] | tuple[type[Message], ...],
-        timeout: float) -> tuple[Message, str]:
+        timeout: float, accept: Callable[[str], bool] | None = None) -> tuple[Message, str]:
     """One query, one valid reply (raises RemoteInputError on an error reply, TimeoutError on none), and the
-    session id of the process that answered (as Zenoh says it, "" if it does not)."""
+    session id of the process that answered (as Zenoh says it, "" if it does not). With `accept`, only a reply from
+    a session it accepts counts (the others are skipped: anyone may declare a queryable on a plain router)."""
+    skipped = 0
     for reply in session.get(key, payload=encode(msg), timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE):
-        return _answer(key, reply, expect), "" if reply.replier_id is None else str(reply.replier_id.zid)
-    raise TimeoutError(f"no answer on {key} within {timeout:.1f} s")
+        replier = "" if reply.replier_id is None else str(reply.replier_id.zid)
+        if accept is not None and not accept(replier):
+            skipped += 1
+            continue
+        return _answer(key, reply, expect), replier
+    raise TimeoutError(f"no answer on {key} within {timeout:.1f} s" +
+                       (f" but {skipped} from sessions that may not answer it" if skipped else ""))

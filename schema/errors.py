@@ -12,7 +12,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from .tuning import REJECT_EXCERPT, REJECT_LOG_FIRST, REJECT_LOG_WINDOW
+from .tuning import REJECT_EXCERPT, REJECT_LOG_FIRST, REJECT_LOG_WINDOW, REJECT_ORIGINS
 
 
 class UsageError(Exception):
@@ -89,13 +89,19 @@ class RejectCounter:
         self._windows: dict[tuple[str, str], _Window] = {}
 
     def reject(self, where: str, err: RemoteInputError, origin: str | None = None) -> None:
-        """Count `err`, refused at `where` (a key, or what was refused), from `origin` (default: `where`)."""
+        """Count `err`, refused at `where` (a key, or what was refused), from `origin` (default: `where`; beyond
+        `REJECT_ORIGINS` origins named apart, "(others)")."""
         who, now = origin or where, self._clock()
         with self._lock:
+            if who not in self._origins and len(self._origins) >= REJECT_ORIGINS:
+                who = OTHERS
             self._counts[err.reason] += 1
             self._origins[who] += 1
             window = self._windows.get((who, err.reason))
             if window is None or now >= window.start + REJECT_LOG_WINDOW and not window.held:
+                if window is None and len(self._windows) >= REJECT_ORIGINS:  # (the windows over, holding nothing)
+                    self._windows = {k: w for k, w in self._windows.items()
+                                     if w.held or now < w.start + REJECT_LOG_WINDOW}
                 window = self._windows[(who, err.reason)] = _Window(now)
             window.logged += 1
             first = None  # (None: logged now)
@@ -138,6 +144,10 @@ class RejectCounter:
         """Every rejection so far, by reason and by origin (e.g. for a process's last words)."""
         with self._lock:
             return f"{dict(self._counts)}, from {dict(self._origins.most_common())}"
+
+
+#: The origin of the rejections from origins beyond the first `REJECT_ORIGINS` (`RejectCounter`).
+OTHERS = "(others)"
 
 
 @dataclasses.dataclass(slots=True)

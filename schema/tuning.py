@@ -91,12 +91,22 @@ ORIGIN_BYTES = 8 << 20
 #: flood reaches the coordinator at a rate its refusal of stale messages keeps up with.
 DRONE_PUT_RATE = 10_000.0
 
+#: Turns a second no game can exceed: a turn takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor).
+#: An entity refuses a TURN, STATUS or OVER further ahead of the turn it knows than this rate allows since it last
+#: learnt one (network/clock.py `TurnClock`): one absurd message (a STATUS at turn 2^40 from any peer on a plain
+#: router) used to move its clock beyond every real message to come, and wedge it.
+TURNS_PER_S_MAX = 10_000.0
+
 #: Rejections logged in full per origin and reason in each window of `REJECT_LOG_WINDOW` seconds (schema/errors.py
 #: `RejectCounter`). Not measured: a flood logs a few lines a second.
 REJECT_LOG_FIRST = 3
 REJECT_LOG_WINDOW = 1.0
 #: Characters of a rejection's text logged (an excerpt of a payload's bytes in it, not the payload).
 REJECT_EXCERPT = 200
+#: Origins a process names apart in its rejection counts and logs (schema/errors.py `RejectCounter`); rejections from
+#: any further origin count as "(others)". A query names its sender itself: a flood naming a new one each time
+#: (CONNECTs "from" D00001...D65535) made the counts, the log and the time each rejection took grow with it.
+REJECT_ORIGINS = 256
 
 #: Bytes of the MessagePack packer's first buffer (it grows as needed): msgpack's default allocates 256 KiB for
 #: every message packed, most of which are a few dozen bytes.
@@ -149,6 +159,12 @@ SETTLE_S = 0.5
 PEER_CHECK_S = 2.0
 #: How long a CONNECT may wait for its sender's presence token to be seen (coordinator/admission.py).
 PRESENCE_WAIT_S = 5.0
+#: CONNECTs that may wait for their presence token at once (coordinator/admission.py `Presences`): in all, and
+#: naming one sender. More are refused at once with an error reply (the asker asks again): a flood of CONNECTs
+#: with invented sessions held each one's query (about 25 KB) for PRESENCE_WAIT_S, without bound. Not measured:
+#: a process sends one CONNECT at a time, and its token is seen before its CONNECT but for a race of paths.
+CONNECT_WAITING = 64
+CONNECT_WAITING_PER_SENDER = 4
 #: How long `dronesim up`'s entities have, once the coordinator is told to stop, to see its OVER and exit.
 STOP_S = 3.0
 #: How long a process still running after `STOP_S` has to end on SIGTERM before it is killed.

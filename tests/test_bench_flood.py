@@ -31,7 +31,9 @@ def test_quick_run_records_the_table_and_the_floods_change_no_journal(capsys, tm
     rows = _rows(section, "game")
     counts = flood.QUICK_FLOODS
     nps, ask = f"flood (a): {counts['nps']:,} stale NPS", f"flood (b): {counts['ask']} ASKs of 32,768 cells"
-    assert list(rows) == ["clean", nps, ask, "clean again"]
+    done, tgt = f"flood (c): {counts['done']:,} stale DONEs", f"flood (d): {counts['tgt']:,} stale TGTs"
+    connect = f"flood (e): {counts['connect']:,} CONNECTs with invented sessions"
+    assert list(rows) == ["clean", nps, ask, done, tgt, connect, "clean again"]
     for row in rows.values():
         assert row["same journal / states"] == "yes / yes", row
         assert row["exit codes"] == "0 / 0 / 0", row
@@ -50,3 +52,13 @@ def test_quick_run_records_the_table_and_the_floods_change_no_journal(capsys, tm
     assert f"{{'flood': {refused}}}, from {{'D01': {refused}}}" == rows[ask]["rejected by the environment"]
     assert rows[nps][attacker].startswith(f"{flood.QUICK_FLOODS['nps']:,} / 0 / 0 ("), rows[nps]
     assert re.fullmatch(r"\{'stale-turn': (\d+)\}, from \{'D01': \1\}", rows[nps]["rejected by the coordinator"])
+    for name in (done, tgt):  # the ground station's keys: stale, refused unread, counted against the GCS
+        assert re.fullmatch(r"\{'stale-turn': (\d+)\}, from \{'GCS': \1\}", rows[name]["rejected by the coordinator"])
+    # CONNECTs with invented sessions: refused (no presence token; past the room to wait, at once), the journal
+    # unchanged (checked above); every one is accounted for
+    found = re.fullmatch(r"([\d,]+) / ([\d,]+) / ([\d,]+) \(\d+\.\d\d\)(?:, ([\d,]+) unanswered)?",
+                         rows[connect][attacker])
+    assert found, rows[connect]
+    sent, answered, refused, unanswered = (int((v or "0").replace(",", "")) for v in found.groups())
+    assert sent == counts["connect"] and answered + refused + unanswered == sent and refused > 0, rows[connect]
+    assert "flood" in rows[connect]["rejected by the coordinator"], rows[connect]

@@ -1,0 +1,135 @@
+"""Hostile peers (issue 33, items 6 and 7): floods of CONNECTs with invented sessions hold bounded memory, and on
+a plain router no entity wedges on one absurd message (a TURN, STATUS or OVER at turn 2^40, an answer to CONNECT
+from a session that is not the coordinator)."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+
+import pytest
+import zenoh
+
+from coordinator.admission import Presences
+from network.clock import TurnClock
+from network.transport import client_config
+from schema import Connect, Keys, Over, Phase, Refused, Role, Status, Turn, encode
+from schema.errors import OTHERS, RejectCounter, RemoteInputError, StaleTurn, WrongSender
+from schema.messages import EndReason
+from schema.samples import SAMPLES
+from schema.tuning import CONNECT_WAITING, CONNECT_WAITING_PER_SENDER, REJECT_ORIGINS
+
+from .harness import Cluster, embedded_router
+from .test_integration import start_game
+
+ABSURD = 2 ** 40
+
+
+def hello(sender: str, session: str) -> Connect:
+    return Connect(turn=0, sender=sender, role=Role.DRONE, drones=(sender,), autopilot="seed", session=session)
+
+
+def test_connects_with_invented_sessions_wait_in_bounded_numbers_and_the_rest_are_refused_at_once() -> None:
+    """A flood of CONNECTs whose presence token never comes held every query (about 25 KB each) for 5 s: now at
+    most CONNECT_WAITING wait, CONNECT_WAITING_PER_SENDER naming one sender; the rest are refused (`flood`) at once,
+    and a CONNECT whose token is there is still admitted at once."""
+    p: Presences[int] = Presences()
+    refused = 0
+    for i in range(20_000):
+        sender = "D01" if i % 2 else f"D{i % 60_000 + 1:02d}"
+        try:
+            assert p.connect(i, hello(sender, f"s{i}"), now=0.0) == []
+        except RemoteInputError as err:
+            assert err.reason == "flood"
+            refused += 1
+        assert p.waiting() <= CONNECT_WAITING
+    assert p.waiting() == CONNECT_WAITING and refused == 20_000 - CONNECT_WAITING
+    assert sum(1 for _, _, m in p._waiting if m.sender == "D01") <= CONNECT_WAITING_PER_SENDER
+    p.presence("D02", "real", True)
+    assert p.connect("q", hello("D02", "real"), now=0.0) == [("q", hello("D02", "real"))]
+    assert len(p.expired(now=10.0)) == CONNECT_WAITING and p.waiting() == 0
+
+
+def test_rejections_from_ever_new_origins_are_counted_in_bounded_structures() -> None:
+    """A query names its sender itself: rejections naming a new one each time are counted whole, under "(others)"
+    beyond REJECT_ORIGINS origins, and the log windows stay bounded."""
+    now = [0.0]
+    rejects = RejectCounter(logging.getLogger("dronesim.tests.hostile"), clock=lambda: now[0])
+    for i in range(20_000):
+        now[0] = i * 0.001
+        rejects.reject("CONNECT", WrongSender("no presence token"), f"D{i + 1:02d}")
+    assert rejects.total == 20_000
+    assert len(rejects._origins) == REJECT_ORIGINS + 1 and rejects._origins[OTHERS] == 20_000 - REJECT_ORIGINS
+    assert len(rejects._windows) <= REJECT_ORIGINS + 1
+
+
+def status(turn: int) -> Status:
+    return dataclasses.replace(SAMPLES["status"], turn=turn, game="g")  # type: ignore[type-var]
+
+
+def test_a_turn_far_in_the_future_is_refused_and_the_clock_goes_on() -> None:
+    """One STATUS (the environment takes any later one), TURN or OVER at turn 2^40 used to move an entity's clock
+    past every real message to come. Given the time, the clock refuses what no game can have reached yet."""
+    for skips in (False, True):
+        clock = TurnClock(game="g", skips_status=skips, now=100.0)
+        clock.admit(Turn(turn=1, sender="SRV", phase=Phase.DRONES, game="g"), 100.0)
+        for absurd in (status(ABSURD),
+                       Turn(turn=ABSURD, sender="SRV", phase=Phase.DRONES, game="g"),
+                       Over(turn=ABSURD, sender="SRV", reason=EndReason.INTERRUPTED, text="forged", game="g")):
+            with pytest.raises(StaleTurn) as err:
+                clock.admit(absurd, 100.5)  # type: ignore[arg-type]
+            assert err.value.reason in ("future-turn", "stale-turn")
+        clock.admit(status(1), 100.5)
+        clock.admit(Turn(turn=2, sender="SRV", phase=Phase.DRONES, game="g"), 100.6)
+        assert clock.turn == 2
+    late = TurnClock(game="g", skips_status=True, now=0.0, known=40)  # a resumed game, the environment idle 10 s
+    late.admit(status(50_000), 10.0)
+    assert late.turn == 50_001
+
+
+@pytest.fixture
+def router():
+    with embedded_router() as locator:
+        yield locator
+
+
+def test_a_hostile_peer_on_a_plain_router_wedges_no_entity(router, tmp_path) -> None:
+    """On a plain router a peer answers every CONNECT with REFUSED (it has no coordinator's presence) and, once the
+    game runs, publishes a STATUS, TURNs and an OVER of this game at turn 2^40: every entity ignores them (counted),
+    the game ends as it would have, every process exits 0 with the journal of an unattacked game."""
+
+    def play(root: str, hostile: bool) -> tuple[bytes, Cluster]:
+        keys, stop = Keys(root), threading.Event()
+        with zenoh.open(client_config(router)) as s, Cluster(router, tmp_path, root=root) as c:
+            if hostile:
+                def lie(query: zenoh.Query) -> None:
+                    query.reply(query.key_expr, encode(Refused(turn=0, sender="SRV", text="forged: go away")))
+
+                def forge(sample: zenoh.Sample) -> None:
+                    from schema import decode
+
+                    real = decode(sample.payload.to_bytes(), Status)
+                    if stop.is_set() or real.turn < 2:
+                        return
+                    stop.set()
+                    s.put(keys.status, encode(Status(turn=ABSURD, sender="OBS", drones=real.drones, game=real.game)))
+                    for phase in (Phase.GCS, Phase.DRONES, Phase.ENV):
+                        s.put(keys.turn_of(phase), encode(Turn(turn=ABSURD, sender="SRV", phase=phase, game=real.game)))
+                    s.put(keys.over, encode(Over(turn=ABSURD, sender="SRV", reason=EndReason.INTERRUPTED,
+                                                 text="forged", game=real.game)))
+
+                s.declare_queryable(keys.connect, lie)
+                s.declare_subscriber(keys.status, forge)
+            journal = start_game(c, tmp_path, coord_args=("--seed", "3", "--pace", "0.05"))
+            codes = c.wait_all()
+            assert set(codes.values()) == {0}, [p.text for p in c.procs]
+            assert stop.is_set() == hostile
+            return journal.read_bytes(), c
+
+    clean, _ = play("clean" + tmp_path.name[-6:], hostile=False)
+    attacked, c = play("hostile" + tmp_path.name[-6:], hostile=True)
+    assert attacked == clean
+    for p in c.procs[1:]:  # ENV, D01, GCS: none took the forged REFUSED (all admitted), each refused the absurd turns
+        assert not any("connection refused" in line for line in p.err), p.text
+        assert any("future-turn" in line for line in p.err), p.text
