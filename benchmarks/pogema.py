@@ -76,7 +76,9 @@ def python() -> Path:
 
 
 #: Run inside POGEMA's environment: steps per second of its PettingZoo integration (`parallel_env`, a dict of
-#: actions per step) for each agent count, timing the step calls alone (the random actions are drawn before).
+#: actions per step) for each agent count, timing the step calls alone (the random actions are drawn before) in
+#: the process's CPU time (`dronesim bench rl` times our local backend so too: other work on a shared machine
+#: does not count) and by the wall clock: [CPU rate, wall rate].
 _PARALLEL_SCRIPT = """
 import json, sys, time
 import numpy as np
@@ -90,15 +92,16 @@ for n in agents:
     env = parallel_env(GridConfig(size=size, num_agents=n, density=density, obs_radius=radius, seed=1,
                                   max_episode_steps=10**9, on_target="nothing"))
     env.reset(seed=1)
-    steps, spent = 0, 0.0
+    steps, spent, wall = 0, 0.0, 0.0
     while spent < seconds:
         actions = dict(zip(env.agents, rng.integers(0, 5, size=len(env.agents)).tolist()))
-        t0 = time.perf_counter()
+        t0, w0 = time.process_time(), time.perf_counter()
         env.step(actions)
         if steps >= 20:  # after a warm-up
-            spent += time.perf_counter() - t0
+            spent += time.process_time() - t0
+            wall += time.perf_counter() - w0
         steps += 1
-    out[n] = (steps - 20) / spent
+    out[n] = [(steps - 20) / spent, (steps - 20) / wall]
 print(json.dumps(out))
 """
 
@@ -110,12 +113,17 @@ def steps_per_second(agents: list[int], seconds: float = 2.0, size: int = SIZE) 
 
 
 def parallel_steps_per_second(agents: list[int], seconds: float = 2.0) -> dict[int, float]:
-    """The steps per second of POGEMA's PettingZoo integration with each number of `agents` (the same
+    """The steps per CPU second of POGEMA's PettingZoo integration with each number of `agents` (the same
     scenario as `steps_per_second`; step calls alone)."""
-    return _run(_PARALLEL_SCRIPT, agents, seconds)
+    return {n: cpu for n, (cpu, _) in parallel_rates(agents, seconds).items()}
 
 
-def _run(script: str, agents: list[int], seconds: float, size: int = SIZE) -> dict[int, float]:
+def parallel_rates(agents: list[int], seconds: float = 2.0) -> dict[int, tuple[float, float]]:
+    """`parallel_steps_per_second`'s CPU rates, each with the same steps' wall-clock rate."""
+    return {n: (v[0], v[1]) for n, v in _run(_PARALLEL_SCRIPT, agents, seconds).items()}
+
+
+def _run(script: str, agents: list[int], seconds: float, size: int = SIZE) -> dict:
     exe = python()
     args = json.dumps([agents, seconds, size, DENSITY, OBS_RADIUS])
     try:
@@ -126,4 +134,4 @@ def _run(script: str, agents: list[int], seconds: float, size: int = SIZE) -> di
     if done.returncode != 0:
         tail = done.stderr.strip().splitlines()[-1:] or ["no output"]
         raise Unavailable(f"POGEMA exited {done.returncode}: {tail[0]}")
-    return {int(n): float(v) for n, v in json.loads(done.stdout.strip().splitlines()[-1]).items()}
+    return {int(n): v for n, v in json.loads(done.stdout.strip().splitlines()[-1]).items()}

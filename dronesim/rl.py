@@ -60,7 +60,8 @@ RENDER_MODES = ("human", "ansi", "rgb_array")
 HOST = "H01"
 #: The name the swarm host gives as its autopilot (journaled in the header).
 PILOT = "policy"
-_UNREACHABLE, _NONE_NOTE = code_of(Note.UNREACHABLE), code_of(Note.NONE)
+#: The note codes an episode tells the engine (its drones' targets reachable or not).
+UNREACHABLE_NOTE, NONE_NOTE = code_of(Note.UNREACHABLE), code_of(Note.NONE)
 _NO_AIMS = AimTable(AimTable.empty(0))  # a DONE that changes no target
 _NO_ROWS, _NO_CELLS = np.zeros(0, np.intp), np.zeros((0, 3), np.int32)  # (read-only: nothing to hold)
 _NO_ROWS.flags.writeable = _NO_CELLS.flags.writeable = False
@@ -671,11 +672,11 @@ class Episode(EpisodeBase):
         self.on = np.zeros(n, bool)  # rows on their target at the last STATUS
         self.aim_next = self._all  # rows whose target the next DONE carries (all, at turn 1)
         self._say = self._notes()  # each row's note to the engine (whether its target is reachable)
-        self.note = np.where(layout.reachable, self.note, _UNREACHABLE).astype(np.uint8)  # (as said at turn 1)
+        self.note = np.where(layout.reachable, self.note, UNREACHABLE_NOTE).astype(np.uint8)  # (as said at turn 1)
         self._reward = np.array(self.rewards, np.float64)
 
     def _notes(self) -> np.ndarray:
-        return np.where(self.reachable, _NONE_NOTE, _UNREACHABLE).astype(np.uint8)
+        return np.where(self.reachable, NONE_NOTE, UNREACHABLE_NOTE).astype(np.uint8)
 
     # ------------------------------------------------------------------ reading
 
@@ -691,8 +692,8 @@ class Episode(EpisodeBase):
         columns = (self.pos, self.targets, self.note, self.state, self.cause)
         if len(rows) < self.n:
             columns = tuple(c[rows] for c in columns)
-        return [{"cell": tuple(p), "target": tuple(t), "note": _NOTE_TEXT[nt], "state": _STATE_TEXT[s],
-                 "cause": _CAUSE_TEXT[c]} for p, t, nt, s, c in zip(*(c.tolist() for c in columns))]
+        return [{"cell": tuple(p), "target": tuple(t), "note": NOTE_TEXT[nt], "state": STATE_TEXT[s],
+                 "cause": CAUSE_TEXT[c]} for p, t, nt, s, c in zip(*(c.tolist() for c in columns))]
 
     # ------------------------------------------------------------------ acting
 
@@ -761,9 +762,10 @@ class Episode(EpisodeBase):
                        terminated.tolist(), truncated.tolist(), infos)
 
 
-_NOTE_TEXT = tuple(n.value.lower() for n in NOTES)
-_STATE_TEXT = tuple(s.value.lower() for s in STATES)
-_CAUSE_TEXT = tuple(c.value.lower() for c in CAUSES)
+#: The infos' texts of the fleet's note, state and cause codes.
+NOTE_TEXT = tuple(n.value.lower() for n in NOTES)
+STATE_TEXT = tuple(s.value.lower() for s in STATES)
+CAUSE_TEXT = tuple(c.value.lower() for c in CAUSES)
 
 
 class Expert:

@@ -16,12 +16,12 @@ import numpy as np
 from coordinator.fleet import ALIVE, DEAD
 from coordinator.observer import deaths
 from dronesim.rl import (
-    _CAUSE_TEXT,
-    _NONE_NOTE,
-    _NOTE_TEXT,
-    _STATE_TEXT,
-    _UNREACHABLE,
     ACTIONS,
+    CAUSE_TEXT,
+    NONE_NOTE,
+    NOTE_TEXT,
+    STATE_TEXT,
+    UNREACHABLE_NOTE,
     Config,
     ConfigError,
     EpisodeBase,
@@ -61,12 +61,12 @@ class FewEpisode(EpisodeBase):
         self._targets: list[Cell] = list(map(tuple, layout.targets.tolist()))
         self._state = [ALIVE] * n
         self._cause = [0] * n
-        self._shown = [_NONE_NOTE] * n  # each drone's note as the last STATUS says it (REACHED on its target)
+        self._shown = [NONE_NOTE] * n  # each drone's note as the last STATUS says it (REACHED on its target)
         self._on = [False] * n  # an acting row was on its target at the last turn (its arrival is rewarded)
         self._acting = [True] * n
         self._rows = list(range(n))  # the rows acting, ascending
         self._alive = list(range(n))  # the rows alive, ascending
-        self._say = [_NONE_NOTE if r else _UNREACHABLE for r in layout.reachable.tolist()]  # notes to the engine
+        self._say = [NONE_NOTE if r else UNREACHABLE_NOTE for r in layout.reachable.tolist()]  # notes to the engine
         self._shown = self._say[:]  # (an unreachable target is noted at the start: as it will be said)
         self.left = n
         self._finish, self._new = config.on_target == "finish", config.on_target == "new"
@@ -102,8 +102,8 @@ class FewEpisode(EpisodeBase):
     def infos(self, rows) -> list[dict]:
         """As `Episode.infos`."""
         pos, targets, shown, state, cause = self._pos, self._targets, self._shown, self._state, self._cause
-        return [{"cell": pos[i], "target": targets[i], "note": _NOTE_TEXT[shown[i]], "state": _STATE_TEXT[state[i]],
-                 "cause": _CAUSE_TEXT[cause[i]]} for i in rows]
+        return [{"cell": pos[i], "target": targets[i], "note": NOTE_TEXT[shown[i]], "state": STATE_TEXT[state[i]],
+                 "cause": CAUSE_TEXT[cause[i]]} for i in rows]
 
     # ------------------------------------------------------------------ acting
 
@@ -184,7 +184,7 @@ class FewEpisode(EpisodeBase):
                 new, ok = self.layout.new_target(i, np.array(pos[i], np.int32), others)
                 others[i] = new
                 targets[i] = int(new[0]), int(new[1]), int(new[2])
-                say[i] = _NONE_NOTE if ok else _UNREACHABLE
+                say[i] = NONE_NOTE if ok else UNREACHABLE_NOTE
                 was_on[i] = False
         if stops:
             for i, end, cut in zip(rows_out, terminated, truncated):
