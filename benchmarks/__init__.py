@@ -29,12 +29,13 @@ def cli(argv: list[str] | None = None) -> int:
     return int(importlib.import_module(f"{__name__}.{BENCHMARKS[argv[0]]}").main(argv[1:]) or 0)
 
 
-def replace_section(path: Path, title: str, body: str, keep: str | None = None) -> None:
+def replace_section(path: Path, title: str, body: str, keep: str | tuple[str, ...] | None = None) -> None:
     """Replace (or append) the section `title` ("## ...") of a Markdown file, leaving the others alone (and its
-    subsection `keep` ("### ..."), if it has one: another command's)."""
+    subsections `keep` ("### ..."), those it has: other commands')."""
     text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    kept = _subsection(text, title, keep) if keep else None
-    section = f"{title}\n\n{body.strip()}\n" + (f"\n{kept.strip()}\n" if kept else "")
+    subs = (keep,) if isinstance(keep, str) else keep or ()
+    kept = [k for k in (_subsection(text, title, sub) for sub in subs) if k]
+    section = f"{title}\n\n{body.strip()}\n" + "".join(f"\n{k.strip()}\n" for k in kept)
     pattern = re.compile(rf"^{re.escape(title)}[ \t]*\n.*?(?=^## |\Z)", re.S | re.M)
     if pattern.search(text):
         text = pattern.sub(lambda _: section + "\n", text, count=1).rstrip("\n") + "\n"

@@ -42,6 +42,7 @@ collisions, the coordinator's arbitration CPU a turn, every process's CPU, and P
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import os
@@ -620,7 +621,8 @@ def anchor_compare(families: list[str], agents: tuple[int, ...], seeds: int, sec
         ratio = sum(o.soc / a.soc for o, a in both) / max(1, len(both))
         out.append(f"- `{v}`: CSR {sum(o.csr for o in mine):.0f} of {len(mine)}, ISR "
                    f"{100 * sum(o.arrived for o in mine) / max(1, sum(o.agents for o in mine)):.2f} %, within 4 x the "
-                   f"lower-bound makespan {sum(o.csr and o.makespan <= 4 * o.makespan_lb for o in mine)}; sum of costs "
+                   f"lower-bound makespan {sum(bool(o.csr) and o.makespan <= 4 * o.makespan_lb for o in mine)}; "
+                   "sum of costs "
                    f"{ratio:.2f} x the anchor's on the {len(both)} instances both solved; the longest arbitration "
                    f"turn {1000 * max((o.arbiter_worst for o in mine), default=0):.1f} ms")
     anchors = [a for _, a in done if a is not None]
@@ -628,6 +630,37 @@ def anchor_compare(families: list[str], agents: tuple[int, ...], seeds: int, sec
                f"{sum(a.solved for a in anchors)} of {len(anchors)}, "
                f"{sum(a.seconds for a in anchors) / max(1, len(anchors)):.1f} s an instance")
     return "\n".join(lines), "\n".join(out)
+
+
+def search_alone(cases: list[tuple[str, int]], turns: int = 40) -> dict[tuple[str, int], tuple[float, float, float]]:
+    """The complete arbitration's search on its own, per turn of its budget (`lacam.WORK`): for each (family or
+    "city", drones), the search started at the instance's start (its graph and distance tables made beforehand,
+    untimed), `turns` turns of its work each followed by its step; process time a turn in ms: mean, 95th
+    percentile, longest (the garbage collector held off, as `arbiter.Timed` does)."""
+    out = {}
+    for family, n in cases:
+        inst = city_instance(CITY[0], n, 1) if family == "city" else movingai_instance(family, n, 1)
+        size: Cell = inst.grid.shape
+        open_ = arbiter.OpenCells(inst.grid)
+        search = lacam.Lacam(work=1 << 62, eager=lacam.LIMIT)
+        pos, goals, coop = np.array(inst.starts, np.int32), np.array(inst.goals, np.int32), np.ones(n, bool)
+        while search.follow(size, pos, coop, goals, open_) is None or not search.busy:
+            pass
+        search.work = lacam.WORK
+        spent = []
+        gc.disable()
+        try:
+            for turn in range(turns):
+                t0 = time.process_time()
+                plan = search.follow(size, pos, coop, goals, open_, turn)
+                spent.append(time.process_time() - t0)
+                assert plan is not None
+                pos = lacam.cells_of(plan, size)
+        finally:
+            gc.enable()
+        ms = 1000 * np.array(spent)
+        out[(family, n)] = (float(ms.mean()), float(np.percentile(ms, 95)), float(ms.max()))
+    return out
 
 
 # --------------------------------------------------------------------------- main
@@ -662,6 +695,9 @@ def main(argv: list[str] | None = None) -> int:
                              f"({'/'.join(map(str, ANCHOR_AGENTS))} agents) of every family, seeds 1-{ANCHOR_SEEDS} "
                              "(--agents, --seeds, --families narrow it)")
     parser.add_argument("--anchor-seconds", type=float, default=ANCHOR_SECONDS, help="the anchor's time an instance")
+    parser.add_argument("--search-alone", action="store_true",
+                        help="only the complete arbitration's search on its own: ms a turn of its budget at 400 "
+                             "drones on the densest families and 1000 drones in the 64x64x8 city")
     parser.add_argument("--lrta-alone", action="store_true",
                         help="only the distributed city's 10,000 trips flown by LRTA* drones each alone, for cube "
                              "radii 0-2 (the pilot's own quality, docs/cooperation.md)")
@@ -679,6 +715,13 @@ def main(argv: list[str] | None = None) -> int:
         print(lrta_alone(size, drones, (0, 1, 2), limit=6000))
         return 0
     t_start = time.perf_counter()
+    if args.search_alone:
+        dense = ("room-32-32-4", "random-32-32-20", "maze-32-32-2", "warehouse-32-32")
+        cases = [("room-32-32-4", 50)] if args.quick else [(f, 400) for f in dense] + [("city", 1000)]
+        for (family, n), (mean, p95, worst) in search_alone(cases).items():
+            print(f"- {family}, {n} drones: {mean:.1f} ms a turn on average, 95th percentile {p95:.1f}, longest "
+                  f"{worst:.1f}")
+        return 0
     if args.anchor:
         chosen = agents if "--agents" in (argv or sys.argv) else (10,) if args.quick else ANCHOR_AGENTS
         seeds = args.seeds if "--seeds" in (argv or sys.argv) else 1 if args.quick else ANCHOR_SEEDS
@@ -750,7 +793,7 @@ def main(argv: list[str] | None = None) -> int:
             f"reached their turn limit, agents off their goal that moved in the last {RECENT} turns.\n\n"
             f"{body_table}\n\n{lines}\n"
         )
-        replace_section(args.output, SECTION, body, keep=CITY_SECTION)
+        replace_section(args.output, SECTION, body, keep=(CITY_SECTION, ANCHOR_SECTION))
         print(f"\nwrote {SECTION!r} in {args.output}")
     return 0
 

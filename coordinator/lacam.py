@@ -43,9 +43,11 @@ from .arbiter import OpenCells, candidates, cells_of, cooperate, flat_cells, off
 
 __all__ = ["Lacam", "Search", "Graph", "cells_of", "flat_cells"]
 
-#: Work units a turn (a PIBT call costs one per drone, a distance table one per CELLS_A_UNIT open cells): 20 ms or
-#: less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md, "Cost").
+#: Work units a turn (a PIBT call costs one per drone and CALL, a distance table one per CELLS_A_UNIT open cells):
+#: 20 ms or less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md).
 WORK = 1200
+#: A PIBT call's fixed cost (its arrays, whatever the number of drones), in units.
+CALL = 150
 #: A breadth-first search spends about an 8th of the time per cell that a PIBT call spends per drone.
 CELLS_A_UNIT = 8
 #: Distance-table entries (drones x open cells) up to which the search starts at once (small worlds); beyond,
@@ -191,7 +193,7 @@ class Search:
                 i = int(node.order[len(who)])
                 for v in self._moves(node.cfg[i], i):
                     node.tree.append((who + (i,), where + (v,)))
-            spent += n
+            spent += n + CALL
             self.expansions += 1
             nxt = self._successor(node, who, where, open_)
             if nxt is None:
