@@ -551,3 +551,15 @@ def test_drones_past_system_255_fly_on_without_a_vehicle() -> None:
     rows = tuple(DroneStatus(drone=d, pos=c, state=DroneState.ALIVE) for d, c in starts.items())
     b.receive(Status(turn=0, sender="OBS", drones=rows), 0.0)  # (rows of drones without a vehicle: skipped)
     assert {e.system for e in b.tick(0.0) if isinstance(e, Mav)} == set(range(1, 256))
+
+
+def test_the_flags_are_checked_before_anything_starts() -> None:
+    from entities.mavlink.options import parse_udpout
+
+    assert parse_udpout("udpout:127.0.0.1:14550") == ("127.0.0.1", 14550)
+    assert parse_udpout("udpout:gcs.example:9") == ("gcs.example", 9)
+    for bad in ["udpin:0.0.0.0:14550", "udpout:127.0.0.1", "udpout::14550", "udpout:h:0", "udpout:h:70000", "x"]:
+        with pytest.raises(UsageError, match="udpout:HOST:PORT"):
+            parse_udpout(bad)
+    with pytest.raises(UsageError, match="must be UDP ports"):
+        Links(("127.0.0.1", 9), 65500, [1, 2, 255])

@@ -161,7 +161,8 @@ def mavproxy(master: str, target: int, cmds: list[str], cwd: Path, name: str) ->
     """MAVProxy headless. Its --cmd runs before the first vehicle message, when nothing can be sent yet (the
     link learns the vehicle's address from what it receives): each command is repeated every second, as the
     command protocol allows (a repeat is accepted and changes nothing)."""
-    exe = shutil.which("mavproxy.py")
+    beside = Path(sys.executable).parent / "mavproxy.py"  # (pip puts it beside the interpreter)
+    exe = shutil.which("mavproxy.py") or (str(beside) if beside.exists() else None)
     if exe is None:
         pytest.skip("MAVProxy (the mavlink extra) is not installed: mavproxy.py not found")
     repeats = "; ".join(f"repeat add 1 {c}" for c in cmds)
