@@ -4,13 +4,19 @@ hands each role what it needs of it, so that no role imports the application."""
 from __future__ import annotations
 
 from coordinator import node
+from coordinator.config import GameConfig
 from entities import gcs_node
 
 from .scenario import Scenario
 
 
+def game_of_scenario(path: str, **deadlines: object) -> GameConfig:
+    """The game a scenario file describes, as the coordinator reads it (its targets are the ground station's)."""
+    return Scenario.load(path, plan=False).game_config(**deadlines)
+
+
 def coordinator(argv: list[str]) -> int:
-    return node.cli(argv, scenario=lambda path, **deadlines: Scenario.load(path, plan=False).game_config(**deadlines))
+    return node.cli(argv, scenario=game_of_scenario)
 
 
 def gcs(argv: list[str]) -> int:

@@ -119,7 +119,10 @@ def check_game(args: argparse.Namespace) -> None:
     given (a UsageError: drones that do not fit, a start in a building, a bad world file...)."""
     from coordinator import node as coordinator
 
-    coordinator.game_config(coordinator.build_parser().parse_args(coordinator_flags(args, "tcp/127.0.0.1:0")))
+    from .roles import game_of_scenario
+
+    coordinator.game_config(coordinator.build_parser().parse_args(coordinator_flags(args, "tcp/127.0.0.1:0")),
+                            game_of_scenario)
 
 
 def main(args: argparse.Namespace) -> int:
