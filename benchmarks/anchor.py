@@ -13,11 +13,12 @@ makespan as `benchmarks/swarm.py` counts ours, against the same lower bounds.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from . import venvs
+from .venvs import Unavailable
 
 VERSION = "0.9.0"
 
@@ -48,10 +49,6 @@ print(json.dumps(out))
 """
 
 
-class Unavailable(RuntimeError):
-    """The anchor could not be installed or run here (the reason says why)."""
-
-
 @dataclass(frozen=True, slots=True)
 class Result:
     solved: bool
@@ -61,28 +58,12 @@ class Result:
 
 
 def venv_dir() -> Path:
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return cache / "dronesim" / f"pymapf-{VERSION}"
+    return venvs.venv_dir(f"pymapf-{VERSION}")
 
 
 def python() -> Path:
-    """The interpreter of the anchor's environment, made (and pymapf installed) on first use."""
-    venv = venv_dir()
-    exe = venv / "bin" / "python"
-    if exe.exists() and subprocess.run([str(exe), "-c", "import pymapf"], capture_output=True).returncode == 0:
-        return exe
-    print(f"  pymapf {VERSION}: installing into {venv} (once) ...", file=sys.stderr, flush=True)
-    steps = ([sys.executable, "-m", "venv", "--clear", str(venv)],
-             [str(exe), "-m", "pip", "install", "--quiet", "--disable-pip-version-check", f"pymapf=={VERSION}"])
-    for cmd in steps:
-        try:
-            done = subprocess.run(cmd, capture_output=True, text=True, timeout=900, stdin=subprocess.DEVNULL)
-        except (OSError, subprocess.TimeoutExpired) as exc:
-            raise Unavailable(f"{cmd[2]} failed: {exc}") from None
-        if done.returncode != 0:
-            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
-            raise Unavailable(f"`{' '.join(cmd[-3:])}` exited {done.returncode}: {tail[0]}")
-    return exe
+    """The interpreter of pymapf's environment, made (and pymapf installed) on first use."""
+    return venvs.python(f"pymapf-{VERSION}", f"pymapf=={VERSION}", "pymapf")
 
 
 def solve(instances: list[tuple[list[list[int]], list[tuple[int, int]], list[tuple[int, int]]]],

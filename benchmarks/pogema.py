@@ -12,10 +12,11 @@ turn of our 1000-drone games moves most drones.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
+
+from . import venvs
+from .venvs import Unavailable
 
 VERSION = "1.4.0"
 SIZE = 64
@@ -46,33 +47,13 @@ print(json.dumps(out))
 """
 
 
-class Unavailable(RuntimeError):
-    """POGEMA could not be installed or run here (the reason says why)."""
-
-
 def venv_dir() -> Path:
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return cache / "dronesim" / f"pogema-{VERSION}"
+    return venvs.venv_dir(f"pogema-{VERSION}")
 
 
 def python() -> Path:
     """The interpreter of POGEMA's environment, made (and POGEMA installed) on first use."""
-    venv = venv_dir()
-    exe = venv / "bin" / "python"
-    if exe.exists() and subprocess.run([str(exe), "-c", "import pogema"], capture_output=True).returncode == 0:
-        return exe
-    print(f"  POGEMA {VERSION}: installing into {venv} (once) ...", file=sys.stderr, flush=True)
-    steps = ([sys.executable, "-m", "venv", "--clear", str(venv)],
-             [str(exe), "-m", "pip", "install", "--quiet", "--disable-pip-version-check", f"pogema=={VERSION}"])
-    for cmd in steps:
-        try:
-            done = subprocess.run(cmd, capture_output=True, text=True, timeout=900, stdin=subprocess.DEVNULL)
-        except (OSError, subprocess.TimeoutExpired) as exc:
-            raise Unavailable(f"{cmd[2]} failed: {exc}") from None
-        if done.returncode != 0:
-            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
-            raise Unavailable(f"`{' '.join(cmd[-3:])}` exited {done.returncode}: {tail[0]}")
-    return exe
+    return venvs.python(f"pogema-{VERSION}", f"pogema=={VERSION}", "pogema")
 
 
 #: Run inside POGEMA's environment: steps per second of its PettingZoo integration (`parallel_env`, a dict of
