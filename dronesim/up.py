@@ -20,11 +20,14 @@ import tempfile
 import threading
 import time
 
+import zenoh
+
 from dronesim import child_env
+from dronesim.certs import GameCredentials, game_credentials
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
 from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
-from network.transport import open_session, router_config, router_locators
+from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
 from schema import UsageError, drone_id
 from schema.tuning import KILL_S, STOP_S
 
@@ -54,7 +57,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds the drones (and the environment) have for each phase (default: the coordinator's, 5)")
     p.add_argument("--journal", help="write the journal to this file")
     p.add_argument("--root", default="sim", help="key root (default sim)")
-    p.add_argument("--listen", default="tcp/127.0.0.1:0", help="the embedded router's endpoint (default: a free port)")
+    p.add_argument("--listen", default="tcp/127.0.0.1:0", help="the embedded router's endpoint (default: a free port; "
+                   "tcp/ becomes tls/ unless --insecure)")
+    p.add_argument("--insecure", action="store_true",
+                   help="a plain router: no TLS, no passwords, no access control (by default each game makes its "
+                        "own credentials and access control at its start: docs/security.md)")
+    p.add_argument("--credentials", metavar="DIR",
+                   help="keep the game's credentials in DIR (default: a temporary folder, removed at the end); a "
+                        "remote ground station needs DIR/ca.pem and DIR/GCS.password (docs/security.md)")
+    p.add_argument("--router-host", action="append", default=[], metavar="NAME",
+                   help="a name or address remote processes reach the router at (in its TLS certificate)")
     p.add_argument("--quiet", action="store_true", help="do not print every turn")
     p.add_argument("--web", metavar="[HOST:]PORT",
                    help="the ground station is a web page on this address (see docs/web-gcs.md)")
@@ -136,8 +148,34 @@ def main(args: argparse.Namespace) -> int:
             path.write_text(json.dumps(data))
             return main(argparse.Namespace(**{**vars(args), "scen": None, "world": None, "scenario": str(path)}))
     check_game(args)
+    if args.insecure:
+        return play(args, None)
+    with contextlib.ExitStack() as stack:
+        folder = args.credentials or stack.enter_context(tempfile.TemporaryDirectory(prefix="dronesim-credentials-"))
+        return play(args, credentials(args, folder))
+
+
+def credentials(args: argparse.Namespace, folder: str) -> GameCredentials:
+    """The game's credentials and access control (`dronesim.certs.game_credentials`), made now in `folder`."""
+    pilots = (Scenario.load(args.scenario).autopilots if args.scenario
+              else {drone_id(n): args.autopilot for n in range(1, args.drones + 1)})
+    hosts = {host: ids for host, (_, ids) in swarm_hosts(pilots).items()} if args.swarm else {}
+    return game_credentials(folder, drones=sorted(pilots), hosts=hosts, roots=[args.root],
+                            router_hosts=args.router_host)
+
+
+def secured_router(listen: str, creds: GameCredentials) -> zenoh.Config:
+    """The embedded router's config with the game's TLS certificate, users and access control."""
+    parser = argparse.ArgumentParser()
+    add_zenoh_args(parser)
+    conf = router_config("tls/" + listen.removeprefix("tcp/") if listen.startswith("tcp/") else listen)
+    apply_flags(conf, parser.parse_args(creds.router_flags()), router=True)
+    return conf
+
+
+def play(args: argparse.Namespace, creds: GameCredentials | None) -> int:
     interactive = not args.targets and not args.script and not args.scenario and not args.web and not args.mavlink
-    with open_session(router_config(args.listen)) as router:
+    with open_session(router_config(args.listen) if creds is None else secured_router(args.listen, creds)) as router:
         locator = router_locators(router)[0]
         what = f"scenario {args.scenario}" if args.scenario else \
             f"seed {args.seed}, {args.drones} drone(s), autopilot {args.autopilot}"
@@ -146,6 +184,8 @@ def main(args: argparse.Namespace) -> int:
         try:
             with on_stop(stop):
                 for name, argv in commands(args, locator):
+                    if creds is not None:  # (the viewer reads what the ground station may read)
+                        argv = [*argv, *creds.flags("GCS" if name == "ROS2" else name)]
                     console = name == "GCS" and interactive  # it reads the terminal: it stays in its group
                     running.append((name, subprocess.Popen(argv, stdin=None if console else subprocess.DEVNULL,
                                                            env=child_env(), start_new_session=not console)))

@@ -4,17 +4,22 @@ from a session that is not the coordinator)."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import logging
+import subprocess
+import sys
 import threading
 
 import pytest
 import zenoh
 
 from coordinator.admission import Presences
+from dronesim import child_env
+from dronesim.certs import GameCredentials
 from network.clock import TurnClock
-from network.transport import client_config
-from schema import Connect, Keys, Over, Phase, Refused, Role, Status, Turn, encode
+from network.transport import add_zenoh_args, client_config, zenoh_config
+from schema import Connect, Keys, Over, Phase, Refused, Role, Status, Turn, decode, encode
 from schema.errors import OTHERS, RejectCounter, RemoteInputError, StaleTurn, WrongSender
 from schema.messages import EndReason
 from schema.samples import SAMPLES
@@ -133,3 +138,77 @@ def test_a_hostile_peer_on_a_plain_router_wedges_no_entity(router, tmp_path) -> 
     for p in c.procs[1:]:  # ENV, D01, GCS: none took the forged REFUSED (all admitted), each refused the absurd turns
         assert not any("connection refused" in line for line in p.err), p.text
         assert any("future-turn" in line for line in p.err), p.text
+
+
+def run_up(tmp_path, name: str, *flags: str, attack=None) -> tuple[int, bytes, str]:
+    """`dronesim up` (a scripted game, paced so that the attacker acts while it runs): its exit code, its journal
+    and its output; `attack(locator, credentials folder)` runs once the router is up."""
+    journal, creds = tmp_path / f"{name}.journal", tmp_path / f"{name}-credentials"
+    proc = subprocess.Popen([sys.executable, "-m", "dronesim", "up", "--targets", "9,9,0", "--max-turns", "40",
+                             "--pace", "0.05", "--quiet", "--journal", str(journal), "--credentials", str(creds),
+                             *flags], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=child_env())
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    locator = first.split("router on ")[1].split(",")[0]
+    if attack is not None:
+        attack(locator, creds)
+    out = first + proc.stdout.read()
+    return proc.wait(timeout=120), journal.read_bytes(), out
+
+
+def forge(locator: str, conf: zenoh.Config, root: str = "sim") -> bool:
+    """From a session on `conf`: a forged REFUSED to every CONNECT, and once a STATUS of turn 2 or more is seen,
+    a STATUS, TURNs and an OVER of the game at turn 2^40 (what a peer can send on a plain router)."""
+    keys, done = Keys(root), threading.Event()
+    with zenoh.open(conf) as s:
+        s.declare_queryable(keys.connect, lambda q: q.reply(q.key_expr, encode(Refused(turn=0, sender="SRV",
+                                                                                       text="forged"))))
+
+        def on_status(sample: zenoh.Sample) -> None:
+            real = decode(sample.payload.to_bytes(), Status)
+            if real.turn >= 2 and not done.is_set():
+                s.put(keys.status, encode(Status(turn=ABSURD, sender="OBS", drones=real.drones, game=real.game)))
+                for phase in (Phase.GCS, Phase.DRONES, Phase.ENV):
+                    s.put(keys.turn_of(phase), encode(Turn(turn=ABSURD, sender="SRV", phase=phase, game=real.game)))
+                s.put(keys.over, encode(Over(turn=ABSURD, sender="SRV", reason=EndReason.INTERRUPTED, text="forged",
+                                             game=real.game)))
+                done.set()
+
+        s.declare_subscriber(keys.status, on_status)
+        return done.wait(30)
+
+
+def assert_forged(locator: str) -> None:
+    assert forge(locator, client_config(locator))
+
+
+def client(locator: str, *flags: str) -> zenoh.Config:
+    parser = argparse.ArgumentParser()
+    add_zenoh_args(parser)
+    return zenoh_config(parser.parse_args(["--mode", "client", "--connect", locator, *flags]))
+
+
+def test_dronesim_up_is_secured_by_default_and_attacks_that_break_a_plain_game_change_nothing(tmp_path) -> None:
+    """By default `dronesim up` makes the game's credentials and access control: a peer without credentials cannot
+    even open a session (TLS and a password), and one holding another principal's (a drone's) cannot answer CONNECT
+    nor forge STATUS, TURN or OVER (the router drops them). On a plain router (`--insecure`) the same peer's forged
+    REFUSED and turns at 2^40 are ignored (no entity wedges). Each game ends as an unattacked one."""
+    code, clean, out = run_up(tmp_path, "clean", "--insecure")
+    assert code == 0, out
+
+    def attack_secured(locator: str, creds) -> None:
+        assert locator.startswith("tls/")
+        for flags in ((), ("--tls-ca", str(creds / "ca.pem")), ("--tls-ca", str(creds / "ca.pem"), "--user", "GCS",
+                                                                 "--password-file", str(creds / "D01.password"))):
+            with pytest.raises(zenoh.ZError):  # no credentials, or a wrong password: no session
+                zenoh.open(client(locator, *flags)).close()
+        with pytest.raises(zenoh.ZError):
+            zenoh.open(client(locator.replace("tls/", "tcp/"))).close()
+        assert forge(locator, client(locator, *GameCredentials(creds).flags("D01")))  # a drone's credentials
+
+    code, secured, out = run_up(tmp_path, "secured", attack=attack_secured)
+    assert code == 0 and secured == clean, out
+    assert "future-turn" not in out  # (the router dropped them: no process had to refuse them)
+
+    code, plain, out = run_up(tmp_path, "plain", "--insecure", attack=lambda loc, _: assert_forged(loc))
+    assert code == 0 and plain == clean, out
