@@ -531,3 +531,13 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
     assert [t.child_frame_id for t in got["/tf"][-1][1].transforms] == ["D01", "D02"]
     ids = {e.id for _, update in got["/dronesim/scene"] for e in update.entities}
     assert {"drone/D01", "drone/D02"} <= ids
+
+
+def test_up_runs_the_viewer_and_a_ground_station_taking_goals() -> None:
+    from dronesim.up import build_parser, commands
+
+    procs = dict(commands(build_parser().parse_args(["--drones", "2", "--ros2", "--foxglove", "8765"]),
+                          "tcp/127.0.0.1:7447"))
+    assert "--ros2" in procs["GCS"] and procs["ROS2"][3] == "ros2"
+    assert procs["ROS2"][-2:] == ["--foxglove", "8765"]
+    assert "ROS2" not in dict(commands(build_parser().parse_args(["--drones", "2"]), "tcp/127.0.0.1:7447"))
