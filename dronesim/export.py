@@ -82,7 +82,7 @@ def export(journal: str, out: pathlib.Path, *, namespace: str = "dronesim", cell
     context = foxglove.Context()
     turns = 0
     with foxglove.open_mcap(out, allow_overwrite=True, context=context,
-                            writer_options=MCAPWriteOptions(profile="ros2", compression={
+                            writer_options=MCAPWriteOptions(profile="ros2", compression_threads=1, compression={
                                 "zstd": MCAPCompression.Zstd, "lz4": MCAPCompression.Lz4, "none": None}[compression])):
         sink = FoxgloveSink(context, ros, with_scene=scene)
         sink.world(world.grid, [ros.buildings(world.grid)])
