@@ -354,3 +354,38 @@ def test_mavsdk_flies_one_vehicle_and_a_mission_on_another(tmp_path: Path) -> No
     targets = g.targets()
     assert targets["D02"][:2] == [(0, 2, 3), (5, 3, 3)] and targets["D02"][-1] == (5, 3, 0)
     assert targets["D03"] == [(1, 4, 1), (1, 7, 1)]
+
+
+# ---------------------------------------------------------------------------------------------- a swarm
+
+
+def test_a_hundred_vehicles_stream_while_the_game_plays_at_full_speed(tmp_path: Path) -> None:
+    """100 drones from one swarm host, --turn-period 0: every one of them a vehicle whose telemetry reaches a
+    pymavlink ground station on the shared link while the game plays to its turn limit (its speed is
+    `dronesim bench perf`'s MAVLink row, not a test's)."""
+    gcs, turns = free_ports(1), 150
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{gcs}", source_system=255, dialect="ardupilotmega")
+    journal = tmp_path / "journal.jsonl"
+    argv = [sys.executable, "-m", "dronesim", "up", "--mavlink", "--swarm", "--drones", "100", "--size", "64,64,4",
+            "--max-turns", str(turns), "--turn-period", "0", "--quiet", "--journal", str(journal),
+            "--mavlink-gcs", f"udpout:127.0.0.1:{gcs}", "--mavlink-api-base", str(free_ports(100))]
+    proc = Proc("up", argv, tmp_path)
+    heartbeats: set[int] = set()
+    positions = 0
+    try:
+        end = time.monotonic() + 300
+        while proc.p.poll() is None and time.monotonic() < end:
+            msg = conn.recv_msg()
+            if msg is None:
+                conn.select(0.5)
+            elif msg.get_type() == "HEARTBEAT":
+                heartbeats.add(msg.get_srcSystem())
+            elif msg.get_type() == "LOCAL_POSITION_NED":
+                positions += 1
+        assert proc.wait(60) == 0, proc.text[-3000:]
+    finally:
+        conn.close()
+        proc.kill()
+    assert heartbeats == set(range(1, 101))
+    assert positions >= 100  # (at least each vehicle's telemetry set once)
+    assert sum(1 for r in journal_records(journal) if r["record"] == "turn") == turns
