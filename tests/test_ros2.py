@@ -256,7 +256,7 @@ def test_live_topics_graph_and_goals_with_zenoh_ros2_sdk(tmp_path: Path, sdk) ->
     with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
         port = int(locator.rsplit(":", 1)[1])
         srv = c.start("SRV", "coordinator", "--seed", "7", "--size", "10,10,8", "--drones", "2", "--max-turns",
-                      "150", "--pace", "0.04", "--journal", str(journal), "--admit-deadline", "60")
+                      "300", "--pace", "0.04", "--journal", str(journal), "--admit-deadline", "60")
         srv.expect("coordinator ready")
         c.start("ENV", "env", "--no-draw")
         for d in ("D01", "D02"):
@@ -479,7 +479,7 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
         viewer = c.start("ROS2", "ros2", "--foxglove", "127.0.0.1:0")
         url = viewer.expect(r"foxglove on ws://").rsplit(" ", 1)[1]
         srv = c.start("SRV", "coordinator", "--seed", "7", "--size", "10,10,8", "--drones", "2", "--max-turns",
-                      "60", "--pace", "0.05", "--journal", str(journal), "--admit-deadline", "60")
+                      "120", "--pace", "0.05", "--journal", str(journal), "--admit-deadline", "60")
         srv.expect("coordinator ready")
         c.start("ENV", "env", "--no-draw")
         for d in ("D01", "D02"):
