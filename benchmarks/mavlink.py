@@ -63,17 +63,20 @@ def bridge_cpu(vehicles: int = 100, turns: int = 200, warmup: int = 20) -> dict[
                                                                           side - 1, starts[drone_id(n)][1], -1,
                                                                           0, 0, 0, 0, 0, 0, 0, 0)):
                 perform(bridge.packet(gcs, decode_datagram(msg.pack(client))))
+        statuses = []  # every turn's STATUS, made before the clock starts (the coordinator's work, not ours)
         pos = dict(starts)
+        for turn in range(1, warmup + turns + 1):
+            pos = {d: ((x + 1) % side, y, z) for d, (x, y, z) in pos.items()}
+            rows = StatusTable.of(DroneStatus(drone=d, pos=c, state=DroneState.ALIVE, target=(side - 1, c[1], 1))
+                                  for d, c in sorted(pos.items()))
+            statuses.append(Status(turn=turn - 1, sender="OBS", drones=rows))
         cpu0, sent, datagrams = 0.0, 0, 0
         try:
-            for turn in range(1, warmup + turns + 1):
+            for turn, status in enumerate(statuses, 1):
                 if turn == warmup + 1:
                     cpu0, sent, datagrams = time.process_time(), 0, links.sent
                 now = turn / TARGET_TPS
-                pos = {d: ((x + 1) % side, y, z) for d, (x, y, z) in pos.items()}
-                rows = StatusTable.of(DroneStatus(drone=d, pos=c, state=DroneState.ALIVE, target=(side - 1, c[1], 1))
-                             for d, c in sorted(pos.items()))
-                sent += perform(bridge.receive(Status(turn=turn - 1, sender="OBS", drones=rows), now))
+                sent += perform(bridge.receive(status, now))
                 sent += perform(bridge.receive(Turn(turn=turn, sender="SRV", phase=Phase.GCS), now))
                 sent += perform(bridge.tick(now))
             cpu, datagrams = time.process_time() - cpu0, links.sent - datagrams
