@@ -20,6 +20,7 @@ from typing import Any
 
 import zenoh
 
+from network.progress import Progress
 from network.signals import JOURNAL_FAILED_STATUS, Interrupted, exit_status, on_stop, waking
 from network.transport import (
     Asked,
@@ -171,9 +172,10 @@ class Coordinator:
 
     def __init__(self, engine: Engine, effects: Executor, rejects: RejectCounter, logger: logging.Logger, me: str,
                  clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None,
-                 stops: list[Interrupted] | None = None) -> None:
+                 stops: list[Interrupted] | None = None, progress: Progress | None = None) -> None:
         self.engine, self.effects, self.rejects, self.log, self.me, self.clock = \
             engine, effects, rejects, logger, me, clock
+        self.progress = progress or Progress(None)  # where the game stands, for a health check
         effects.unrecorded = engine.unrecorded  # a journal that fails ends the game
         self.audit = audit  # asks which sessions are connected: a `Sessions` event comes back
         self._auditing = self._audit_again = False
@@ -274,6 +276,17 @@ class Coordinator:
         self._tick()
         if engine.stage is Stage.OVER and self._linger_until is None:
             self._linger_until = self.clock() + LINGER_S  # let OVER reach everyone
+        if self.progress.path is not None:
+            self._report()
+
+    def _report(self) -> None:
+        """The stage, the turn and, while entities are awaited, which (`network.progress`)."""
+        engine = self.engine
+        waiting = ""
+        if engine.stage in (Stage.ADMITTING, Stage.RESUMING):
+            awaited = engine.fleet.alive_rows().tolist() if engine.stage is Stage.RESUMING else None
+            waiting = ", ".join(engine.roster.missing(engine.fleet, awaited))
+        self.progress.note(engine.stage.value, engine.turn, waiting)
 
     def _gone_unless(self, connected: frozenset[str] | None) -> None:
         """Admitted entities whose session is not `connected` have gone (their token is a copy's); nothing
@@ -400,7 +413,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
             out.watch(keys.turn_of(Phase.ENV), inbox)  # (a Matching event at once if someone follows it)
             effects = Executor(keys, out, writer, inbox.rejects, pace)
             srv = Coordinator(engine, effects, inbox.rejects,
-                              logger, me, audit=partial(audit_sessions, session, inbox.post), stops=stops)
+                              logger, me, audit=partial(audit_sessions, session, inbox.post), stops=stops,
+                              progress=Progress.from_environment())
             srv.probe()
             logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                         keys.root, ", ".join(d.drone for d in game.drones))

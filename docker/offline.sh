@@ -3,19 +3,21 @@
 #
 #   PYTHON_IMAGE  dronesim-local/python:3.11-bookworm  a Debian bookworm root with Python 3.11, made by
 #                 debootstrap from Debian's packages and `docker import`ed (stands for python:3.11-slim)
-#   ZENOH_IMAGE   dronesim-local/zenoh:<pin>           that root plus the zenohd that cargo built
-#                 (tests/setup.d/zenohd.sh: ~/.cargo/bin/zenohd; stands for eclipse/zenoh:<pin>)
+#   ZENOH_IMAGE   dronesim-local/zenoh:<pin>           that root plus the zenohd that cargo builds
+#                 (tests/setup.d/zenohd.sh, run here when ~/.cargo/bin/zenohd is missing: about 10 minutes
+#                 once; stands for eclipse/zenoh:<pin>)
 #   WHEELHOUSE    docker/wheelhouse                    the wheels of docker/*requirements.lock for the
 #                 engine's architecture, checked against the locks' sha256
 #
-# and writes them to docker/offline.env, which compose reads with --env-file:
+# and writes them to docker/offline.env, which compose reads with --env-file (Compose v1: docker-compose):
 #
 #   bash docker/offline.sh
 #   docker compose --env-file docker/offline.env -f docker/compose.yaml up --build
 #
 # Each part is made once and kept while its inputs are unchanged (an image label holds the hash of its
-# recipe; the wheelhouse a stamp of the locks): a second run takes a few seconds. Needs root (debootstrap),
-# debootstrap (apt-get install debootstrap), Debian's package mirror (DEBIAN_MIRROR), PyPI for the wheels.
+# recipe; the wheelhouse a stamp of the locks): a second run takes a few seconds. From zero it needs root
+# (debootstrap; it installs debootstrap with apt-get when missing), Debian's package mirror (DEBIAN_MIRROR),
+# cargo and crates.io for zenohd (or ZENOHD=a zenohd <pin> binary), PyPI for the wheels.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -26,7 +28,8 @@ PACKAGES=python3,python3-venv,python3-pip   # Python 3.11 in bookworm; venv and 
 PYTHON_IMAGE="${PYTHON_IMAGE:-dronesim-local/python:3.11-bookworm}"
 ZENOH_IMAGE="${ZENOH_IMAGE:-dronesim-local/zenoh:$PIN}"
 WHEELHOUSE="${WHEELHOUSE:-docker/wheelhouse}"
-ZENOHD="${ZENOHD:-${CARGO_HOME:-$HOME/.cargo}/bin/zenohd}"
+CARGO_ZENOHD="${CARGO_HOME:-$HOME/.cargo}/bin/zenohd"   # where tests/setup.d/zenohd.sh installs it
+ZENOHD="${ZENOHD:-$CARGO_ZENOHD}"
 ENV_FILE="${ENV_FILE:-docker/offline.env}"
 LABEL=org.dronesim.inputs
 WORK="${XDG_CACHE_HOME:-$HOME/.cache}/dronesim/offline"
@@ -51,8 +54,13 @@ base_key="$( { echo "$SUITE $MIRROR $PACKAGES"; declare -f make_root; } | hash_o
 if [ "$(label_of "$PYTHON_IMAGE")" = "$base_key" ]; then
   say "$PYTHON_IMAGE is up to date"
 else
-  command -v debootstrap >/dev/null || die "debootstrap is missing (apt-get install debootstrap)"
   [ "$(id -u)" = 0 ] || die "debootstrap needs root"
+  if ! command -v debootstrap >/dev/null && command -v apt-get >/dev/null; then
+    say "installing debootstrap (apt-get)"
+    export DEBIAN_FRONTEND=noninteractive
+    { apt-get install -y -qq debootstrap || { apt-get update -qq && apt-get install -y -qq debootstrap; }; } >/dev/null 2>&1
+  fi
+  command -v debootstrap >/dev/null || die "debootstrap is missing and apt-get could not install it (apt-get install debootstrap)"
   say "making $PYTHON_IMAGE: debootstrap $SUITE from $MIRROR (a few minutes)"
   mkdir -p "$WORK"
   root="$(mktemp -d "$WORK/root.XXXXXX")"
@@ -70,8 +78,15 @@ else
 fi
 
 # --------------------------------------------------------------------------- the router image
-[ -x "$ZENOHD" ] || die "no zenohd at $ZENOHD: run tests/setup.d/zenohd.sh (cargo install zenohd --version =$PIN --locked)"
-"$ZENOHD" --version 2>/dev/null | grep -q "v$PIN\b" || die "$ZENOHD is not zenohd $PIN: $("$ZENOHD" --version 2>&1 | head -n1)"
+zenohd_is_pin() { [ -x "$ZENOHD" ] && "$ZENOHD" --version 2>/dev/null | grep -q "v$PIN\b"; }
+if ! zenohd_is_pin && [ "$ZENOHD" = "$CARGO_ZENOHD" ]; then
+  say "no zenohd $PIN at $ZENOHD: building it with cargo (tests/setup.d/zenohd.sh; about 10 minutes, once)"
+  bash tests/setup.d/zenohd.sh >&2
+fi
+if ! zenohd_is_pin; then
+  [ -x "$ZENOHD" ] || die "no zenohd at $ZENOHD: $(cat "${XDG_CACHE_HOME:-$HOME/.cache}/dronesim/zenohd-install.txt" 2>/dev/null || echo "give ZENOHD=a zenohd $PIN")"
+  die "$ZENOHD is not zenohd $PIN: $("$ZENOHD" --version 2>&1 | head -n1)"
+fi
 router_key="$( { sha256sum <"$ZENOHD"; cat docker/zenohd.Dockerfile; docker image inspect --format '{{.Id}}' "$PYTHON_IMAGE"; } | hash_of)"
 if [ "$(label_of "$ZENOH_IMAGE")" = "$router_key" ]; then
   say "$ZENOH_IMAGE is up to date"
@@ -116,4 +131,5 @@ fi
   echo "ZENOH_IMAGE=$ZENOH_IMAGE"
   echo "WHEELHOUSE=$WHEELHOUSE"
 } >"$ENV_FILE"
-say "wrote $ENV_FILE: docker compose --env-file $ENV_FILE -f docker/compose.yaml up --build"
+if docker compose version >/dev/null 2>&1; then compose="docker compose"; else compose=docker-compose; fi
+say "wrote $ENV_FILE: $compose --env-file $ENV_FILE -f docker/compose.yaml up --build"

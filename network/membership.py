@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import zenoh
 
 from network.clock import TurnClock
+from network.progress import Progress
 from network.transport import Inbox, Presence, Received, ask, ask_later
 from schema import Connect, Keys, Message, Over, Refused, Status, Turn, Welcome
 from schema.errors import RejectCounter, RemoteInputError, UsageError
@@ -91,6 +92,8 @@ class Membership:
         self._watch = session.liveliness().declare_subscriber(self.keys.alive_of("SRV"), self._coordinator_token,
                                                               history=True)
         self._lost_since: float | None = None
+        self.progress = Progress.from_environment()  # for a health check (docker/healthcheck.py)
+        self.progress.note("connecting", 0, "the coordinator")
         inbox.watch_presence("SRV")
         self._connect()
         end, held, welcome = time.monotonic() + connect_timeout, [], None
@@ -106,6 +109,7 @@ class Membership:
                 held.append(event)
         inbox.hold(held)
         self.welcome: Welcome = welcome
+        self.progress.note("admitted", welcome.turn)
         # the coordinator's messages pass through its clock (`screen`)
         self.clock: TurnClock = TurnClock(game=welcome.game, skips_status=skips_status, now=time.monotonic(),
                                           known=welcome.turn)
@@ -164,9 +168,11 @@ class Membership:
             except NotAdmitted as err:
                 self.log.warning("%s: %s takes no further part and leaves at the end of the game",
                                  err, self.hello.sender)
+                self.progress.note("refused", self.welcome.turn, str(err))
                 return None
             if welcome is not None:
                 self.welcome = welcome
+                self.progress.note("admitted", welcome.turn)
                 self.clock = TurnClock(welcome.turn, game=welcome.game, skips_status=self.clock.skips_status,
                                        now=time.monotonic())
             return welcome
@@ -181,6 +187,7 @@ class Membership:
         elif not event.alive and event.session == (self.coordinator or event.session) and self._lost_since is None:
             self._lost_since = time.monotonic()  # (the one that admitted it; any, if Zenoh did not say which)
             self.log.warning("the coordinator vanished: waiting up to %g s for it to come back", self.grace)
+            self.progress.note("waiting", self.welcome.turn, "the coordinator, which vanished")
         return None
 
     def timeout(self) -> float | None:
@@ -204,6 +211,7 @@ class Membership:
             except RemoteInputError as err:
                 rejects.reject(event.key, err)
                 return False
+            self.progress.note("over" if isinstance(event.msg, Over) else "playing", event.msg.turn)
         return True
 
 

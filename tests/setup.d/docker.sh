@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The images of the Docker engine tests (tests/test_docker.py, marker `docker`), built without a registry:
-# docker/offline.sh makes the local base images and the wheelhouse (debootstrap, the zenohd of
-# tests/setup.d/zenohd.sh, pip download of the locks), then compose builds the dronesim image from them.
+# docker/offline.sh makes the local base images and the wheelhouse (debootstrap, installed if missing; the zenohd
+# of tests/setup.d/zenohd.sh, built if missing; pip download of the locks), then compose builds the dronesim image
+# from them.
 # Idempotent and quick when nothing changed (labels keyed on the inputs, Docker's layer cache).
 #
 # It never fails the run: it writes what happened to $STATUS_FILE, which the engine tests read.
@@ -31,11 +32,6 @@ if ! "${compose[@]}" version >/dev/null 2>&1; then
   status "FAILED: neither docker compose (v2) nor docker-compose (v1) is installed"
   exit 0
 fi
-if ! command -v debootstrap >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-  export DEBIAN_FRONTEND=noninteractive
-  { apt-get install -y -qq debootstrap || { apt-get update -qq && apt-get install -y -qq debootstrap; }; } >/dev/null 2>&1
-fi
-bash tests/setup.d/zenohd.sh >/dev/null  # the router image's zenohd (quick when installed)
 
 start=$(date +%s)
 if ! bash docker/offline.sh >"$LOG_FILE" 2>&1; then
