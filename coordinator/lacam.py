@@ -47,7 +47,7 @@ __all__ = ["Lacam", "Search", "Graph", "cells_of", "flat_cells"]
 #: 20 ms or less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md).
 WORK = 1200
 #: A PIBT call's fixed cost (its arrays, whatever the number of drones), in units.
-CALL = 150
+CALL = 30
 #: A breadth-first search spends about an 8th of the time per cell that a PIBT call spends per drone.
 CELLS_A_UNIT = 8
 #: Distance-table entries (drones x open cells) up to which the search starts at once (small worlds); beyond,
@@ -342,44 +342,45 @@ class Lacam:
             cells = int(open_.count())
             if n * cells > self.limit or (n * cells > self.eager and self._since < self.stall):
                 return None
-            search = self._start(size, here, aims)
+            search, spent = self._start(size, here, aims)
             if search is None:
                 return None
-            return search.step()  # (made this turn: its first work is the next turn's)
+        else:
+            spent = 0
         self.expansions -= search.expansions
-        search.expand(self.work, open_)
+        search.expand(self.work - spent, open_)  # (at least one PIBT call: the drones never wait for the search)
         self.expansions += search.expansions
         if search.unsolvable:
             self.unsolvable = True
         return search.step()
 
-    def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | None:
+    def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> tuple[Search | None, int]:
         """A search from `here` once every drone's distance table is made (a turn's work at most on them: None
         until then). A drone whose target is none, a building or cut off from it by the static world has its
-        cell as its goal (it must be able to come back there)."""
+        cell as its goal (it must be able to come back there). The work spent on the tables with it."""
         if self._graph is None:  # (a turn's work of its own)
             self._graph = Graph(self._of, size)  # type: ignore[arg-type]
-            return None
+            return None, 0
         g = self._graph
         hc = g.index[here]
         ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
         way = (ac >= 0) & (hc >= 0)
         way[way] = g.part[ac[way]] == g.part[hc[way]]
         if (hc < 0).any():
-            return None  # a drone in a building or outside (it is dying): PIBT
+            return None, 0  # a drone in a building or outside (it is dying): PIBT
         goal_c = np.where(way, ac, hc)
         spent = 0
         for c in dict.fromkeys(goal_c.tolist()):
             if c not in self._tables:
                 if spent >= self.work:
-                    return None
+                    return None, spent
                 self._tables[c] = g.distances(c)
                 spent += len(g.cells) // CELLS_A_UNIT + 1
         if len(self._tables) > 4 * len(here):  # (new targets keep coming: keep the tables in use)
             self._tables = {c: self._tables[c] for c in dict.fromkeys(goal_c.tolist())}
         dist = np.stack([self._tables[c] for c in goal_c.tolist()])
         self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), dist)
-        return self._search
+        return self._search, spent
 
     @property
     def busy(self) -> bool:
