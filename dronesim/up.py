@@ -29,7 +29,7 @@ from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
 from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
 from schema import UsageError, drone_id
-from schema.tuning import KILL_S, STOP_S
+from schema.tuning import KILL_S, PHASE_DEADLINE_S, STOP_S
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,7 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS, to watch the game (default: full speed)")
     p.add_argument("--phase-deadline", type=float, metavar="SECONDS",
-                   help="seconds the drones (and the environment) have for each phase (default: the coordinator's, 5)")
+                   help="seconds the drones (and the environment) have for each phase "
+                        f"(default: the coordinator's, {PHASE_DEADLINE_S:g})")
     p.add_argument("--journal", help="write the journal to this file")
     p.add_argument("--root", default="sim", help="key root (default sim)")
     p.add_argument("--listen", default="tcp/127.0.0.1:0", help="the embedded router's endpoint (default: a free port; "
