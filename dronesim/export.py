@@ -1,10 +1,11 @@
 """``dronesim export JOURNAL --mcap OUT.mcap``: a game as an MCAP file that opens in Foxglove and as a ROS 2 bag.
 
 It holds the ROS 2 topics of ``dronesim ros2`` (docs/ros2.md: every drone's pose each turn, ``/tf``, the markers,
-``/clock``, the trails every ``--path-every`` turns and at the end), with their ``ros2msg`` schemas and CDR
-payloads, and (unless ``--no-scene``) a Foxglove scene (``/<namespace>/scene``, ``foxglove.SceneUpdate``). Every
-message is logged at its simulated time (turn x ``--turn-period``), so identical journals give byte-identical
-files. The journal is read line by line: memory is bounded by the largest turn, not the game.
+``/clock``, the trails every ``--path-every`` turns and at the end) and (unless ``--no-scene``) a Foxglove scene
+(``/<namespace>/scene``, ``foxglove_msgs/msg/SceneUpdate``), every channel with its ``ros2msg`` schema and CDR
+payloads: Foxglove shows the scene, rosbags and ``ros2 bag`` read every topic. Every message is logged at its
+simulated time (turn x ``--turn-period``), so identical journals give byte-identical files. The journal is read line
+by line: memory is bounded by the largest turn, not the game.
 """
 
 from __future__ import annotations
@@ -85,7 +86,7 @@ def export(journal: str, out: pathlib.Path, *, namespace: str = "dronesim", cell
                             writer_options=MCAPWriteOptions(profile="ros2", compression_threads=1, compression={
                                 "zstd": MCAPCompression.Zstd, "lz4": MCAPCompression.Lz4, "none": None}[compression])):
         sink = FoxgloveSink(context, ros, with_scene=scene)
-        sink.world(world.grid, [ros.buildings(world.grid)])
+        sink.world(world.grid, ros.buildings(world.grid))
         last = None
         try:
             for snap, _ in snapshots(records, [(d.drone, d.start) for d in config.drones]):
@@ -95,9 +96,9 @@ def export(journal: str, out: pathlib.Path, *, namespace: str = "dronesim", cell
                 last, turns = snap, turns + 1
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise UsageError(f"{journal}: bad journal record: {exc!r}") from None
-        if last is not None and (paths := ros.paths(last.turn)):  # every trail as it ends
+        if last is not None and len(paths := ros.paths(last.turn)):  # every trail as it ends
             sink.log(paths)
-            sink.scene_log(sink.fox.trails(last.turn, ros.sent_trails), ros.time_of(last.turn))
+            sink.trails(last.turn)
     return turns, sink.logged
 
 
@@ -113,8 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd",
                    help="of the file's chunks (default zstd; none: about a third faster, files several times larger)")
     p.add_argument("--no-scene", action="store_true",
-                   help="only the ROS 2 topics: a pure ROS 2 bag (rosbags, for one, reads no MCAP file that holds a "
-                        "Foxglove scene's protobuf schema)")
+                   help="without the Foxglove scene (foxglove_msgs/msg/SceneUpdate): for a ROS 2 installation "
+                        "without the foxglove_msgs package, or a smaller file")
     args = p.parse_args(argv)
     try:
         turns, messages = export(args.journal, pathlib.Path(args.mcap), namespace=args.namespace,

@@ -21,16 +21,7 @@ from world.grid import World, build_world
 
 rosbags = pytest.importorskip("rosbags", reason="rosbags is in the ros2 extra: pip install -e '.[ros2]'")
 
-from entities.ros2.goals import Goal, Goals  # noqa: E402
-from entities.ros2.model import (  # noqa: E402
-    CLOCK,
-    MARKERS,
-    PATH,
-    POSE,
-    TF,
-    TYPES,
-    Scene,
-    Snapshot,
+from entities.ros2.cdr import (  # noqa: E402
     dependencies,
     deserialize,
     make,
@@ -39,6 +30,8 @@ from entities.ros2.model import (  # noqa: E402
     type_hash,
     typestore,
 )
+from entities.ros2.goals import Goal, Goals  # noqa: E402
+from entities.ros2.model import CLOCK, MARKERS, PATH, POSE, TF, TYPES, Scene, Snapshot  # noqa: E402
 
 from .harness import Cluster, embedded_router, journal_records  # noqa: E402
 
@@ -87,6 +80,39 @@ def test_every_message_is_what_rosbags_makes_of_the_turn() -> None:
             assert serialize(deserialize(o.payload, o.typename), o.typename) == o.payload
 
 
+def test_drone_names_of_every_length_in_one_message() -> None:
+    """Drones D01 to D1000 side by side (names of 3, 4 and 5 letters: a transform's place shifts with its name):
+    every message, the Foxglove scene's too, is rosbags' own bytes for the cells given."""
+    from entities.ros2.foxglove import SCENE, FoxScene
+
+    numbers = np.array([1, 2, 98, 99, 100, 101, 102, 998, 999, 1000, 1001])
+    rng = np.random.default_rng(5)
+    scene = Scene(cell_size=0.5)
+    fox = FoxScene(scene)
+    for turn in (1, 2):
+        pos = rng.integers(0, 40, (len(numbers), 3)).astype(np.int32)
+        target = np.where(rng.random((len(numbers), 1)) < 0.5, pos + 1, -1).astype(np.int32)
+        snap = Snapshot(turn=turn, numbers=numbers, pos=pos, view=rng.integers(0, 5, len(numbers)).astype(np.int8),
+                        target=target)
+        outs = list(scene.turn(snap)) + list(fox.turn(snap, scene.drones()))
+        outs += list(fox.trails(turn, scene.sent_trails, scene.drones()))
+        for o in outs:
+            assert serialize(deserialize(o.payload, o.typename), o.typename) == o.payload, o.topic
+        tf = deserialize(next(o for o in outs if o.topic == "/tf").payload, TF)
+        assert [t.child_frame_id for t in tf.transforms] == [f"D{n:02d}" for n in numbers]
+        assert [[t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]
+                for t in tf.transforms] == (0.5 * pos).tolist()
+        entities = {e.id: e for o in outs if o.typename == SCENE for e in deserialize(o.payload, SCENE).entities}
+        for i, n in enumerate(numbers):
+            name = f"D{n:02d}"
+            assert entities[f"trail/{name}"].lines[0].points[-1].x == 0.5 * pos[i][0]
+            if turn == 1:
+                assert entities[f"drone/{name}"].frame_id == name
+                assert (f"target/{name}" in entities) == (target[i][0] >= 0)
+            pose = deserialize(next(o for o in outs if o.topic == f"/dronesim/{name}/pose").payload, POSE)
+            assert pose.pose.position.z == 0.5 * pos[i][2]
+
+
 def test_trails_grow_with_moves_only() -> None:
     scene = Scene()
     pos = np.array([[1, 1, 1], [5, 5, 5]])
@@ -112,9 +138,39 @@ def test_a_trail_keeps_its_last_cells_oldest_first() -> None:
 def test_buildings_are_one_cube_list() -> None:
     grid = np.zeros((4, 4, 3), bool)
     grid[1, 2, 0] = grid[3, 3, 2] = True
-    markers = deserialize(Scene(cell_size=0.5).buildings(grid).payload, MARKERS).markers
+    (out,) = Scene(cell_size=0.5).buildings(grid)
+    markers = deserialize(out.payload, MARKERS).markers
     assert [(m.ns, m.type) for m in markers] == [("buildings", 6)]
     assert [(q.x, q.y, q.z) for q in markers[0].points] == [(0.5, 1.0, 0.0), (1.5, 1.5, 1.0)]
+    assert serialize(deserialize(out.payload, MARKERS), MARKERS) == out.payload
+
+
+def test_a_sequence_of_any_length_is_what_rosbags_serialises() -> None:
+    """`Repeated` (a path's poses, a world's cubes) extrapolates rosbags' messages of 3 and 4 elements: for every
+    length, byte for byte rosbags' own serialisation of what it decodes to, with the values given."""
+    from entities.ros2.foxglove import SCENE, FoxScene
+    from entities.ros2.model import building_markers, path_layout
+
+    rng = np.random.default_rng(3)
+    for k in (1, 2, 3, 5, 9, 64):
+        xyz = rng.integers(-50, 50, (1, 3 * k)).astype(np.float64) / 4
+        payload = path_layout(k).fill({"sec": [[7] * (k + 1)], "nsec": [[5] * (k + 1)], "xyz": xyz})[0].tobytes()
+        path = deserialize(payload, PATH)
+        assert [[q.pose.position.x, q.pose.position.y, q.pose.position.z] for q in path.poses] == \
+            xyz.reshape(-1, 3).tolist()
+        assert serialize(path, PATH) == payload
+    for cells in (0, 1, 4, 11):
+        grid = np.zeros((6, 6, 4), bool)
+        grid.flat[rng.choice(grid.size, cells, replace=False)] = True
+        payload = building_markers(grid, 0.25)
+        assert [(q.x, q.y, q.z) for q in deserialize(payload, MARKERS).markers[0].points] == \
+            [tuple(c) for c in (np.argwhere(grid) * 0.25).tolist()]
+        assert serialize(deserialize(payload, MARKERS), MARKERS) == payload
+        (update,) = FoxScene(Scene(cell_size=0.25)).buildings(grid)
+        cubes = deserialize(update.payload, SCENE).entities[0].cubes
+        assert [(c.pose.position.x, c.pose.position.y, c.pose.position.z) for c in cubes] == \
+            [tuple(c) for c in (np.argwhere(grid) * 0.25).tolist()]
+        assert serialize(deserialize(update.payload, SCENE), SCENE) == update.payload
 
 
 def test_type_hashes_and_keys() -> None:
@@ -380,12 +436,11 @@ def journal_cells(journal: Path) -> tuple[dict[int, dict[str, tuple]], int]:
 
 
 def test_export_mcap_reads_back_with_the_mcap_decoders(tmp_path: Path, game_journal: Path) -> None:
-    """`dronesim export`: identical journals give byte-identical files; the mcap library's ROS 2 and protobuf
-    decoders decode every message; the poses are the journal's cells, the scene has the buildings and drones."""
+    """`dronesim export`: identical journals give byte-identical files; the mcap library's ROS 2 decoder decodes
+    every message, the scene's too (foxglove_msgs/msg/SceneUpdate, the name Foxglove renders); the poses are the
+    journal's cells, the scene has the buildings, drones, targets and trails."""
     pytest.importorskip("mcap_ros2", reason="mcap-ros2-support is in the ros2 extra")
-    pytest.importorskip("mcap_protobuf", reason="mcap-protobuf-support is in the ros2 extra")
     from mcap.reader import make_reader
-    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoders
     from mcap_ros2.decoder import DecoderFactory as Ros2Decoders
 
     from dronesim.export import main
@@ -399,21 +454,118 @@ def test_export_mcap_reads_back_with_the_mcap_decoders(tmp_path: Path, game_jour
     topics: dict[str, int] = {}
     scene_ids: set[str] = set()
     with first.open("rb") as f:
-        reader = make_reader(f, decoder_factories=[Ros2Decoders(), ProtobufDecoders()])
+        reader = make_reader(f, decoder_factories=[Ros2Decoders()])
         assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        assert summary is not None
+        assert {(s.encoding, c.message_encoding) for c in summary.channels.values()
+                for s in [summary.schemas[c.schema_id]]} == {("ros2msg", "cdr")}
         for schema, channel, message, decoded in reader.iter_decoded_messages():
             topics[channel.topic] = topics.get(channel.topic, 0) + 1
             if channel.topic == "/dronesim/scene":
-                assert schema.name == "foxglove.SceneUpdate" and schema.encoding == "protobuf"
+                assert schema.name == "foxglove_msgs/msg/SceneUpdate"
                 scene_ids |= {e.id for e in decoded.entities}
             elif channel.topic.endswith("/pose"):
-                assert schema.name == POSE and channel.message_encoding == "cdr"
+                assert schema.name == POSE
                 turn = round(message.log_time / 1e8)
                 p = decoded.pose.position
                 assert (p.x, p.y, p.z) == cells[turn][channel.topic.split("/")[2]]
     assert topics["/dronesim/D01/pose"] == last + 1 and topics["/tf"] == last + 1 and topics["/clock"] == last + 1
     assert {"/dronesim/markers", "/dronesim/D16/path", "/dronesim/scene"} <= set(topics)
-    assert {"buildings", "drone/D01", "drone/D16", "trail/D16"} <= scene_ids
+    assert {"buildings", "drone/D01", "drone/D16", "trail/D16", "target/D01"} <= scene_ids
+
+
+def test_export_is_a_ros2_bag_rosbags_reads_scene_and_all(tmp_path: Path, game_journal: Path) -> None:
+    """The default export (with the Foxglove scene) opens with rosbags as a ROS 2 bag (rosbags 0.11 reads every
+    schema as text of a ROS format: a protobuf scene made it fail), and its AnyReader decodes every message from
+    the definitions in the file alone; the scene, applied update after update, ends as the game did: each drone a
+    sphere in its own frame coloured by its state, each target a cube at the journal's target, each trail ending
+    at the drone's last cell."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import Reader
+
+    from dronesim.export import main
+    from entities.ros2.model import COLOURS, VIEWS
+
+    bag = tmp_path / "game.mcap"
+    assert main([str(game_journal), "--mcap", str(bag), "--cell-size", "2.0"]) == 0
+    with Reader(bag) as reader:
+        assert {c.topic: c.msgtype for c in reader.connections}["/dronesim/scene"] == "foxglove_msgs/msg/SceneUpdate"
+    entities: dict[str, object] = {}
+    counts: dict[str, int] = {}
+    with AnyReader([bag]) as reader:  # (its own type store: only what the file defines)
+        for connection, _, data in reader.messages():
+            msg = reader.deserialize(data, connection.msgtype)
+            counts[connection.topic] = counts.get(connection.topic, 0) + 1
+            if connection.topic == "/dronesim/scene":
+                for d in msg.deletions:
+                    entities.pop(d.id)
+                entities.update({e.id: e for e in msg.entities})
+    assert counts["/dronesim/scene"] > 16 and counts["/dronesim/D01/pose"] == counts["/clock"]
+    records = journal_records(game_journal)
+    config, _ = header_config(records[0])
+    final, _ = tracks(config, records)
+    grid = build_world(config.world, (d.start for d in config.drones)).grid
+    cubes = entities["buildings"].cubes  # type: ignore[attr-defined]
+    assert [(c.pose.position.x, c.pose.position.y, c.pose.position.z) for c in cubes] == \
+        [tuple(c) for c in (np.argwhere(grid) * 2.0).tolist()]
+    for drone, track in final.items():
+        sphere = entities[f"drone/{drone}"]
+        assert (sphere.frame_id, sphere.frame_locked) == (drone, True)  # type: ignore[attr-defined]
+        view = {"DEAD": "dead", "LOST": "lost"}.get(track.state, "reached" if track.pos == track.target else "alive")
+        colour = sphere.spheres[0].color  # type: ignore[attr-defined]
+        assert [colour.r, colour.g, colour.b, colour.a] == COLOURS[VIEWS.index(view)].astype(float).tolist()
+        if track.target is not None:
+            cube = entities[f"target/{drone}"].cubes[0]  # type: ignore[attr-defined]
+            assert (cube.pose.position.x, cube.pose.position.y, cube.pose.position.z) == \
+                tuple(2.0 * v for v in track.target)
+        end = entities[f"trail/{drone}"].lines[0].points[-1]  # type: ignore[attr-defined]
+        assert (end.x, end.y, end.z) == tuple(2.0 * v for v in track.pos)
+
+
+def test_foxglove_msgs_are_foxglove_sdk_scene_field_for_field() -> None:
+    """The ROS 2 scene's definitions (shipped as .msg text) have the fields, in order and of the same kinds, of
+    the scene schema foxglove-sdk ships (protobuf, made from the same source as Foxglove's ROS 2 messages)."""
+    from foxglove.messages import SceneUpdate
+    from google.protobuf import descriptor_pb2
+    from google.protobuf.descriptor import FieldDescriptor as F
+
+    from entities.ros2.foxglove import SCENE
+
+    files = descriptor_pb2.FileDescriptorSet.FromString(bytes(SceneUpdate.get_schema().data))
+    proto = {f"{file.package}.{m.name}": m for file in files.file for m in file.message_type}
+    same = {".google.protobuf.Timestamp": "builtin_interfaces/msg/Time",
+            ".google.protobuf.Duration": "builtin_interfaces/msg/Duration",
+            ".foxglove.Pose": "geometry_msgs/msg/Pose", ".foxglove.Vector3": "geometry_msgs/msg/Vector3",
+            ".foxglove.Point3": "geometry_msgs/msg/Point"}
+    scalars = {F.TYPE_DOUBLE: "float64", F.TYPE_BOOL: "bool", F.TYPE_STRING: "string", F.TYPE_FIXED32: "uint32",
+               F.TYPE_UINT32: "uint32", F.TYPE_ENUM: "uint8", F.TYPE_BYTES: "uint8[]"}
+    checked = set()
+    todo = [SCENE]
+    while todo:
+        ros = todo.pop()
+        if ros in checked:
+            continue
+        checked.add(ros)
+        mine = []
+        for name, (kind, rest) in typestore().fielddefs[ros][1]:
+            if kind.name == "BASE":
+                mine.append((name, rest[0]))
+            elif kind.name == "NAME":
+                mine.append((name, rest))
+            else:
+                inner = rest[0][1] if rest[0][0].name == "NAME" else rest[0][1][0]
+                mine.append((name, f"{inner}[]"))
+        theirs = []
+        for f in proto["foxglove." + ros.rsplit("/", 1)[1]].field:
+            if f.type == F.TYPE_MESSAGE:
+                kind = same.get(f.type_name, "foxglove_msgs/msg/" + f.type_name.rsplit(".", 1)[1])
+            else:
+                kind = scalars[f.type]
+            theirs.append((f.name, kind + ("[]" if f.label == F.LABEL_REPEATED else "")))
+        assert mine == theirs, ros
+        todo += [k.rstrip("[]") for _, k in mine if k.startswith("foxglove_msgs/")]
+    assert len(checked) == 13
 
 
 def test_export_without_scene_is_a_bag_rosbags_reads(tmp_path: Path, game_journal: Path) -> None:
@@ -452,23 +604,10 @@ def test_export_refuses_what_is_not_a_journal(tmp_path: Path, capsys: pytest.Cap
 # ------------------------------------------------------------------------------------------ Foxglove live
 
 
-def scene_decoder(channel: dict):
-    """A protobuf message class for a channel advertised with a protobuf schema (base64 FileDescriptorSet)."""
-    import base64
-
-    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
-
-    files = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(channel["schema"]))
-    pool = descriptor_pool.DescriptorPool()
-    for proto in files.file:
-        pool.Add(proto)
-    return message_factory.GetMessageClass(pool.FindMessageTypeByName(channel["schemaName"]))
-
-
 def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
     """`dronesim ros2 --foxglove`: a WebSocket client negotiating foxglove.sdk.v1 sees every channel advertised,
-    subscribes, and decodes the poses (the journal's cells), /tf and the scene (protobuf); the old subprotocol
-    is refused."""
+    subscribes, and decodes the poses (the journal's cells), /tf and the scene (foxglove_msgs/msg/SceneUpdate, CDR
+    as every channel); the old subprotocol is refused."""
     ws = pytest.importorskip("websockets.sync.client", reason="websockets is in the ros2 extra")
     import json
 
@@ -515,11 +654,8 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
                 assert frame[0] == 1  # message data
                 sub, log_time = struct.unpack_from("<IQ", frame, 1)
                 ch = subscribed[sub]
-                if ch["schemaEncoding"] == "protobuf":
-                    decoded = scene_decoder(ch).FromString(frame[13:])
-                else:
-                    assert ch["encoding"] == "cdr" and ch["schemaEncoding"] == "ros2msg"
-                    decoded = deserialize(frame[13:], ch["schemaName"])
+                assert ch["encoding"] == "cdr" and ch["schemaEncoding"] == "ros2msg"
+                decoded = deserialize(frame[13:], ch["schemaName"])
                 got.setdefault(ch["topic"], []).append((log_time, decoded))
         codes = c.wait_all(timeout=120)
     assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]

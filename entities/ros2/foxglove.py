@@ -1,51 +1,92 @@
 """The game for Foxglove (foxglove-sdk), live (a WebSocket server, subprotocol ``foxglove.sdk.v1``) or in an MCAP file:
-the ROS 2 topics of `entities.ros2.model.Scene` (``ros2msg`` schemas, CDR), and a Foxglove scene on
-``/<namespace>/scene`` (``foxglove.SceneUpdate``): the buildings as cubes, each drone as a sphere in its own frame
-(moved by ``/tf``; sent again only when its state changes), each target as a cube, each trail as a line strip.
+the ROS 2 topics of `entities.ros2.model.Scene` and a Foxglove scene on ``/<namespace>/scene``, every channel a
+``ros2msg`` schema with CDR payloads. The scene is ``foxglove_msgs/msg/SceneUpdate`` (Foxglove's scene as ROS 2
+messages, `entities.ros2.foxglove_msgs`): the buildings as cubes, each drone a sphere in its own frame (moved by
+``/tf``; sent again only when its state changes), each target a cube, each trail a line strip (its last
+`SCENE_TRAIL` cells). An MCAP file of it is a ROS 2 bag as well (rosbags reads no protobuf schema).
+
+A swarm's scene is made as its topics are: a layout per kind of entity and length of drone name (`cdr.Layout`,
+the name a string field), filled for every drone that changed at once; a message per drone.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
+from collections.abc import Mapping
 from typing import Any
 
 import foxglove
 import numpy as np
-from foxglove.channels import SceneUpdateChannel
-from foxglove.messages import (
-    Color,
-    CubePrimitive,
-    LinePrimitive,
-    LinePrimitiveLineType,
-    Point3,
-    Pose,
-    Quaternion,
-    SceneEntity,
-    SceneEntityDeletion,
-    SceneEntityDeletionType,
-    SceneUpdate,
-    SpherePrimitive,
-    Timestamp,
-    Vector3,
-)
 
-from .model import BUILDING_COLOUR, COLOURS, FRAME, TARGET_COLOUR, Out, Scene, Snapshot, drone_topic, msgdef
+from .cdr import Layout, Repeated, make, msgdef, serialize
+from .model import BUILDING_COLOUR, COLOURS, FRAME, TARGET_COLOUR, Outs, Scene, Snapshot, drone_topic, rows_of
 
-#: Cells of a trail the scene draws (its last ones): a line's points are objects, a ROS 2 path's are bytes.
+SCENE = "foxglove_msgs/msg/SceneUpdate"
+_ENTITY, _TIME = "foxglove_msgs/msg/SceneEntity", "builtin_interfaces/msg/Time"
+
+#: Cells of a trail the scene draws (its last ones; a shorter trail starts with its first cell repeated).
 SCENE_TRAIL = 50
 
 
-def _colour(rgba: Any) -> Color:
+def _colour(rgba: Any) -> Any:
     r, g, b, a = (float(v) for v in rgba)
-    return Color(r=r, g=g, b=b, a=a)
+    return make("foxglove_msgs/msg/Color", r=r, g=g, b=b, a=a)
 
 
-def _at(x: float, y: float, z: float) -> Pose:
-    return Pose(position=Vector3(x=x, y=y, z=z), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+def _size(s: float) -> Any:
+    return make("geometry_msgs/msg/Vector3", x=s, y=s, z=s)
 
 
-def _stamp(ns: int) -> Timestamp:
-    return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+def _at(xyz: Any, i: int) -> Any:
+    x, y, z = (float(v) for v in xyz[3 * i:3 * i + 3])
+    return make("geometry_msgs/msg/Pose", position=make("geometry_msgs/msg/Point", x=x, y=y, z=z))
+
+
+def _update(v: Mapping[str, np.ndarray], **entity: Any) -> Any:
+    """A SceneUpdate of one entity stamped `v`'s sec and nsec (0 without them)."""
+    stamp = make(_TIME, sec=int(v["sec"][0]), nanosec=int(v["nsec"][0])) if "sec" in v else make(_TIME)
+    return make(SCENE, entities=[make(_ENTITY, timestamp=stamp, **entity)])
+
+
+@functools.cache
+def _layout(kind: str, width: int, cell_size: float) -> Layout:
+    """A SceneUpdate of one entity of a drone whose name is `width` bytes: ``drone`` (a sphere in the drone's
+    frame, coloured `rgba`), ``target`` (a cube at `xyz`), ``trail`` (a line strip through `xyz`)."""
+    s, stamp = cell_size, {"sec": ("<i4", 1), "nsec": ("<u4", 1), "name": (f"S{width}", 1)}
+    if kind == "drone":
+        def build(v: Mapping[str, np.ndarray]) -> Any:
+            name = v["name"][0].decode()
+            return _update(v, frame_id=name, id=f"drone/{name}", frame_locked=True, spheres=[make(
+                "foxglove_msgs/msg/SpherePrimitive", size=_size(0.8 * s), color=_colour(v["rgba"]))])
+
+        return Layout.of(SCENE, {**stamp, "rgba": ("<f8", 4)}, build)
+    if kind == "target":
+        def build(v: Mapping[str, np.ndarray]) -> Any:
+            return _update(v, frame_id=FRAME, id=f"target/{v['name'][0].decode()}", cubes=[make(
+                "foxglove_msgs/msg/CubePrimitive", pose=_at(v["xyz"], 0), size=_size(0.5 * s),
+                color=_colour(TARGET_COLOUR))])
+
+        return Layout.of(SCENE, {**stamp, "xyz": ("<f8", 3)}, build)
+
+    def line(v: Mapping[str, np.ndarray]) -> Any:
+        return _update(v, frame_id=FRAME, id=f"trail/{v['name'][0].decode()}", lines=[make(
+            "foxglove_msgs/msg/LinePrimitive", type=0, thickness=0.1 * s, color=_colour(COLOURS[0]),  # LINE_STRIP
+            points=[make("geometry_msgs/msg/Point", x=float(x), y=float(y), z=float(z))
+                    for x, y, z in np.reshape(v["xyz"], (-1, 3)).tolist()])])
+
+    return Layout.of(SCENE, {**stamp, "xyz": ("<f8", 3 * SCENE_TRAIL)}, line)
+
+
+@functools.cache
+def _buildings(cell_size: float) -> Repeated:
+    """A SceneUpdate of one entity, ``buildings``: a cube at each of `xyz`."""
+    def build(k: int, v: Mapping[str, np.ndarray]) -> Any:
+        return _update(v, frame_id=FRAME, id="buildings", cubes=[make(
+            "foxglove_msgs/msg/CubePrimitive", pose=_at(v["xyz"], i), size=_size(cell_size),
+            color=_colour(BUILDING_COLOUR)) for i in range(k)])
+
+    return Repeated(SCENE, lambda k: {"xyz": ("<f8", 3 * k)}, build)
 
 
 class FoxScene:
@@ -53,99 +94,116 @@ class FoxScene:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
+        self.topic = drone_topic(scene.namespace, "scene")
         self._last: Snapshot | None = None  # the last turn's snapshot: what the scene shows
-        self._colours = [_colour(c) for c in COLOURS]
-        self._trail_colour = _colour(COLOURS[0])
 
-    def buildings(self, grid: np.ndarray) -> SceneUpdate:
-        s = self.scene.cell_size
-        size, colour = Vector3(x=s, y=s, z=s), _colour(BUILDING_COLOUR)
-        cubes = [CubePrimitive(pose=_at(x * s, y * s, z * s), size=size, color=colour)
-                 for x, y, z in np.argwhere(grid).tolist()]
-        return SceneUpdate(entities=[SceneEntity(timestamp=_stamp(0), frame_id=FRAME, id="buildings", cubes=cubes)])
+    def _outs(self, time: int, payloads: list[bytes]) -> Outs:
+        return Outs(time, [self.topic] * len(payloads), [SCENE] * len(payloads), payloads)
 
-    def turn(self, snap: Snapshot, names: list[str]) -> SceneUpdate | None:
-        """The drones whose state and the targets that changed (None: nothing did)."""
-        s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(snap.turn))
-        entities, deletions = [], []
-        ball, box = Vector3(x=0.8 * s, y=0.8 * s, z=0.8 * s), Vector3(x=0.5 * s, y=0.5 * s, z=0.5 * s)
-        last = self._last
-        changed = (np.arange(len(names)) if last is None or len(last.view) != len(names) else
-                   np.flatnonzero((snap.view != last.view) | (snap.target != last.target).any(axis=1)))
-        first = last is None or len(last.view) != len(names)
-        self._last = snap
-        for i in changed.tolist():
-            name, view, target = names[i], int(snap.view[i]), snap.target[i].tolist()
-            if first or view != last.view[i]:  # type: ignore[union-attr]
-                entities.append(SceneEntity(timestamp=stamp, frame_id=name, id=f"drone/{name}", frame_locked=True,
-                                            spheres=[SpherePrimitive(pose=_at(0.0, 0.0, 0.0), size=ball,
-                                                                     color=self._colours[view])]))
-            if first or target != last.target[i].tolist():  # type: ignore[union-attr]
-                if target[0] < 0:
-                    if not first:
-                        deletions.append(SceneEntityDeletion(timestamp=stamp, id=f"target/{name}",
-                                                             type=SceneEntityDeletionType.MatchingId))
-                else:
-                    entities.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"target/{name}", cubes=[
-                        CubePrimitive(pose=_at(target[0] * s, target[1] * s, target[2] * s), size=box,
-                                      color=_colour(TARGET_COLOUR))]))
-        return SceneUpdate(entities=entities, deletions=deletions) if entities or deletions else None
+    def _each(self, kind: str, names: list[str], drones: np.ndarray, values: Mapping[str, np.ndarray],
+              time: int) -> list[bytes]:
+        """A message for each of `drones` (indices in `names`), grouped by the length of their names; `values`:
+        the layout's fields but the stamp and the name, a row per drone."""
+        if not len(drones):
+            return []
+        sec, nsec = time // 1_000_000_000, time % 1_000_000_000
+        widths = np.fromiter((len(names[i]) for i in drones.tolist()), np.int64, len(drones))
+        out: list[bytes] = []
+        for width in np.unique(widths).tolist():
+            rows = np.flatnonzero(widths == width)
+            block = _layout(kind, width, self.scene.cell_size).fill(
+                {"sec": [[sec]], "nsec": [[nsec]], "name": np.array([names[i] for i in drones[rows].tolist()],
+                                                                    f"S{width}"),
+                 **{k: v[rows] for k, v in values.items()}})
+            out += rows_of(block)
+        return out
 
-    def trails(self, turn: int, trails: dict[str, np.ndarray]) -> SceneUpdate | None:
-        if not trails:
-            return None
-        s, stamp = self.scene.cell_size, _stamp(self.scene.time_of(turn))
-        def line(cells: np.ndarray) -> LinePrimitive:
-            return LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.1 * s, color=self._trail_colour,
-                                 points=[Point3(x=x, y=y, z=z) for x, y, z in (cells[-SCENE_TRAIL:] * s).tolist()])
+    def buildings(self, grid: np.ndarray) -> Outs:
+        cells = np.argwhere(grid).astype(np.float64) * self.scene.cell_size
+        block = _buildings(self.scene.cell_size).layout(len(cells)).fill({"xyz": cells.reshape(1, -1)})
+        return self._outs(0, rows_of(block))
 
-        return SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"trail/{name}",
-                                                 lines=[line(cells)]) for name, cells in trails.items()])
+    def turn(self, snap: Snapshot, names: list[str]) -> Outs:
+        """The drones whose state and the targets that changed."""
+        s, time = self.scene.cell_size, self.scene.time_of(snap.turn)
+        last, self._last = self._last, snap
+        if last is None or len(last.view) != len(names):
+            drones = targets = np.arange(len(names))
+            gone = np.zeros(0, np.int64)
+        else:
+            drones = np.flatnonzero(snap.view != last.view)
+            targets = np.flatnonzero((snap.target != last.target).any(axis=1))
+            gone = targets[snap.target[targets, 0] < 0]
+        targets = targets[snap.target[targets, 0] >= 0]
+        payloads = self._each("drone", names, drones, {"rgba": COLOURS[snap.view[drones]].astype(np.float64)}, time)
+        payloads += self._each("target", names, targets, {"xyz": snap.target[targets].astype(np.float64) * s}, time)
+        if len(gone):  # (rare: rosbags' own objects)
+            stamp = make(_TIME, sec=time // 1_000_000_000, nanosec=time % 1_000_000_000)
+            payloads += [serialize(make(SCENE, deletions=[make("foxglove_msgs/msg/SceneEntityDeletion",
+                                                               timestamp=stamp, type=0,  # MATCHING_ID
+                                                               id=f"target/{names[i]}")]), SCENE)
+                         for i in gone.tolist()]
+        return self._outs(time, payloads)
+
+    def trails(self, turn: int, trails: list[tuple[np.ndarray, np.ndarray]], names: list[str]) -> Outs:
+        """The trails `Scene` sent last (groups of drones and their cells), each as its last `SCENE_TRAIL` cells."""
+        time, payloads = self.scene.time_of(turn), []
+        for drones, cells in trails:
+            last = cells[:, -SCENE_TRAIL:]
+            if last.shape[1] < SCENE_TRAIL:
+                last = np.concatenate([np.repeat(last[:, :1], SCENE_TRAIL - last.shape[1], axis=1), last], axis=1)
+            payloads += self._each("trail", names, drones,
+                                   {"xyz": last.reshape(len(drones), -1).astype(np.float64) * self.scene.cell_size},
+                                   time)
+        return self._outs(time, payloads)
 
 
 class FoxgloveSink:
-    """Logs a game to a foxglove-sdk context (its sinks: an MCAP file, a WebSocket server): each ROS 2 topic on a
-    channel of its own, the scene on ``/<namespace>/scene``; every message at its simulated time."""
+    """Logs a game to a foxglove-sdk context (its sinks: an MCAP file, a WebSocket server): each topic on a channel
+    of its own (its ``ros2msg`` schema, CDR), the scene on ``/<namespace>/scene`` unless not `with_scene`; every
+    message at its simulated time. `logged` counts the ROS 2 topics' messages (not the scene's)."""
 
     def __init__(self, context: foxglove.Context, scene: Scene, *, with_scene: bool = True) -> None:
-        self.context, self.scene, self.fox = context, scene, FoxScene(scene)
+        self.context, self.scene = context, scene
+        self.fox = FoxScene(scene) if with_scene else None
         self._channels: dict[str, foxglove.Channel] = {}
         self._logs: dict[str, Any] = {}  # topic -> its channel's log
-        self._scene = (SceneUpdateChannel(drone_topic(scene.namespace, "scene"), context=context) if with_scene
-                       else None)
         self.logged = 0
 
-    def _channel(self, out: Out) -> Any:
-        schema = foxglove.Schema(name=out.typename, encoding="ros2msg", data=msgdef(out.typename).encode())
-        channel = foxglove.Channel(out.topic, schema=schema, message_encoding="cdr", context=self.context)
-        self._channels[out.topic] = channel
-        return channel.base  # (its log of bytes, without the wrapper's checks for JSON: a swarm logs a million)
+    def _log_of(self, topic: str, typename: str) -> Any:
+        schema = foxglove.Schema(name=typename, encoding="ros2msg", data=msgdef(typename).encode())
+        channel = foxglove.Channel(topic, schema=schema, message_encoding="cdr", context=self.context)
+        self._channels[topic] = channel
+        log = self._logs[topic] = channel.base.log  # (bytes, without the wrapper's checks: a swarm logs millions)
+        return log
 
-    def log(self, outs: list[Out]) -> None:
-        channels = self._logs
-        for out in outs:
-            log = channels.get(out.topic)
+    def _write(self, outs: Outs) -> None:
+        logs, time = self._logs, outs.time
+        for topic, typename, payload in zip(outs.topics, outs.typenames, outs.payloads):
+            log = logs.get(topic)
             if log is None:
-                log = channels[out.topic] = self._channel(out).log
-            log(out.payload, out.time, None)
+                log = self._log_of(topic, typename)
+            log(payload, time, None)
+
+    def log(self, outs: Outs) -> None:
+        self._write(outs)
         self.logged += len(outs)
 
-    def scene_log(self, update: SceneUpdate | None, time: int) -> None:
-        if update is not None and self._scene is not None:
-            self._scene.log(update, log_time=time)
-
-    def world(self, grid: np.ndarray, outs: list[Out]) -> None:
+    def world(self, grid: np.ndarray, outs: Outs) -> None:
         self.log(outs)
-        if self._scene is not None:
-            self.scene_log(self.fox.buildings(grid), 0)
+        if self.fox is not None:
+            self._write(self.fox.buildings(grid))
 
-    def turn(self, snap: Snapshot, outs: list[Out]) -> None:
+    def turn(self, snap: Snapshot, outs: Outs) -> None:
         self.log(outs)
-        if self._scene is None:
-            return
-        t = self.scene.time_of(snap.turn)
-        self.scene_log(self.fox.turn(snap, self.scene.drones()), t)
-        self.scene_log(self.fox.trails(snap.turn, self.scene.sent_trails), t)
+        self.trails(snap.turn)
+        if self.fox is not None:
+            self._write(self.fox.turn(snap, self.scene.drones()))
+
+    def trails(self, turn: int) -> None:
+        """The scene's trails of the paths `Scene` made last."""
+        if self.fox is not None and self.scene.sent_trails:
+            self._write(self.fox.trails(turn, self.scene.sent_trails, self.scene.drones()))
 
 
 def parse_address(text: str) -> tuple[str, int]:

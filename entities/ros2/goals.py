@@ -11,7 +11,8 @@ from schema import Cell, UsageError
 from world.grid import World
 
 from ..gcs import check_cell
-from .model import FRAME, POSE, deserialize
+from .cdr import deserialize
+from .model import FRAME, POSE
 
 
 @dataclass(frozen=True, slots=True)

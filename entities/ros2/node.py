@@ -34,7 +34,8 @@ from schema.keys import RosKeys
 from schema.tuning import FINAL_STATUS_WAIT, ROS_CPU_SHARE, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE, ROS_SLOWEST
 
 from ..gcs import OBSERVED_ENDS
-from .model import Out, Scene, Snapshot, type_hash
+from .cdr import type_hash
+from .model import Out, Outs, Scene, Snapshot
 
 #: rmw_zenoh's QoS strings (reliability:durability:history,depth:deadline:lifespan:liveliness), for the tokens.
 QOS_TELEMETRY = "2:2:1,1:,:,:,,"  # best effort, volatile, keep last 1
@@ -174,8 +175,8 @@ def world_grid(reply: WorldMap) -> np.ndarray:
 class Sink(Protocol):
     """Where a game's messages go: the world's (once) and each turn's."""
 
-    def world(self, grid: np.ndarray, outs: list[Out]) -> None: ...
-    def turn(self, snap: Snapshot, outs: list[Out]) -> None: ...
+    def world(self, grid: np.ndarray, outs: Outs) -> None: ...
+    def turn(self, snap: Snapshot, outs: Outs) -> None: ...
 
 
 class RosSink:
@@ -184,11 +185,11 @@ class RosSink:
     def __init__(self, graph: RosGraph) -> None:
         self.graph = graph
 
-    def world(self, grid: np.ndarray, outs: list[Out]) -> None:
+    def world(self, grid: np.ndarray, outs: Outs) -> None:
         for out in outs:
             self.graph.publish(out, latched=True)
 
-    def turn(self, snap: Snapshot, outs: list[Out]) -> None:
+    def turn(self, snap: Snapshot, outs: Outs) -> None:
         for out in outs:
             self.graph.publish(out)
 
@@ -211,7 +212,7 @@ class Viewer:
 
     def world(self, grid: np.ndarray) -> None:
         self.have_map = True
-        outs = [self.scene.buildings(grid)]
+        outs = self.scene.buildings(grid)
         for sink in self.sinks:
             sink.world(grid, outs)
 
