@@ -13,7 +13,7 @@ import numpy as np
 
 from schema import Cell, UsageError, WorldSpec
 from schema.messages import is_drone_id
-from schema.tuning import ADMIT_DEADLINE_S, ENV_GRACE_S, GCS_GRACE_S, LINK_GRACE_S, PHASE_DEADLINE_S
+from schema.tuning import ADMIT_DEADLINE_S, ENV_GRACE_S, GCS_GRACE_S, LINK_GRACE_S, PHASE_CAP_S, PHASE_DEADLINE_S
 from world.grid import inside_rows
 
 from .fleet import cell_of
@@ -81,6 +81,7 @@ class GameConfig:
     drones: Sequence[DroneSpec]  # a tuple, or a `DroneTable`
     max_turns: int = MAX_TURNS
     phase_deadline: float = PHASE_DEADLINE_S  # seconds for the drones and the environment
+    phase_cap: float = PHASE_CAP_S  # seconds a drones' phase may last in all while a host says it is still deciding
     gcs_deadline: float | None = None  # None: the GCS paces the game (a human types)
     admit_deadline: float | None = ADMIT_DEADLINE_S  # seconds for every entity to connect (None: forever, if asked)
     lost_after: int = LOST_AFTER  # missed DRONES deadlines in a row before a drone is LOST
@@ -109,7 +110,8 @@ class GameConfig:
             raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
-        if not (self.phase_deadline > 0 and all(d is None or d > 0 for d in (self.gcs_deadline, self.admit_deadline))
+        if not (self.phase_deadline > 0 and self.phase_cap > 0
+                and all(d is None or d > 0 for d in (self.gcs_deadline, self.admit_deadline))
                 and min(self.env_grace, self.link_grace, self.gcs_grace) >= 0):
             raise UsageError("deadlines must be positive (the GCS's and admission's: or none) and graces >= 0")
 

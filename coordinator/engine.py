@@ -22,7 +22,10 @@ instead of waiting a round trip for the environment's UPD. The environment still
 cells; a UPD that disagrees with the engine's world is rejected and counted.
 
 A deadline ends a stage early: missing drones hover (and are LOST after `lost_after` misses in a row),
-targets stay as they were; a vanished environment holds the drones' phase for `env_grace` seconds.
+targets stay as they were; a vanished environment holds the drones' phase for `env_grace` seconds. A swarm host
+still deciding its drones' moves says so (an empty MOVES): the drones' phase deadline then counts from its last
+word, for up to `phase_cap` seconds in all (`stretch`; the adapter keeps the time), so that a host that is alive
+and working is not taken for a hung one (which says nothing, and is LOST as before).
 """
 
 from __future__ import annotations
@@ -63,9 +66,9 @@ from schema import (
     encode,
 )
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
-from schema.messages import drone_id
+from schema.messages import MAX_OVER_TEXT, drone_id
 from schema.tables import code_of, drone_name, drone_number
-from schema.tuning import AHEAD_MAX, FEW_ROWS, UPD_WINDOW
+from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 
 from . import arbiter, lacam, observer
@@ -188,6 +191,9 @@ class Engine:
         self._held = False  # that TURN waits for the environment to come back
         self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
         self._away: set[str] | None = None  # while the link is down (`link_lost`): the entities not back yet
+        #: Words from hosts still deciding this drones' phase (empty MOVES): each one restarts its deadline
+        #: (`phase_cap`).
+        self.deciding = 0
 
     # ------------------------------------------------------------------ queries
 
@@ -248,6 +254,16 @@ class Engine:
             return self.config.gcs_deadline
         # (the GCS phase once its DONE is in: the TGTs it counts that have not arrived get a drone's time)
         return self.config.phase_deadline if self._playing() else None
+
+    def stretch(self) -> tuple[float, float] | None:
+        """While a host says it is still deciding this drones' phase (`deciding`): how long the phase waits after its
+        last word (the deadline, at least `DECIDING_SILENCE_S`: one word missed or late does not end it), and how
+        long it may last in all (`phase_cap`, at least the deadline). None: no such word, or the stage's deadline is
+        not the drones' phase's."""
+        if self.stage is not Stage.DRONES or not self.deciding or self._away is not None or self._env_missing():
+            return None
+        deadline = self.config.phase_deadline
+        return max(deadline, DECIDING_SILENCE_S), max(self.config.phase_cap, deadline)
 
     def status(self, turn: int | None = None) -> Status:
         """Every drone's state at the end of `turn`; by default now, i.e. during a turn, as it stood at
@@ -321,6 +337,7 @@ class Engine:
         """The drones' phase of this turn opens: no move taken yet, every alive drone's awaited."""
         self._enter(Stage.DRONES)
         self._moved[:] = False
+        self.deciding = 0
         alive = self.fleet.alive_rows()
         self._awaiting = len(alive)
         orders = self.fleet.orders(alive)
@@ -473,6 +490,8 @@ class Engine:
         the STATUS alone sends its DONE and MOVES at once): kept, one per host, taken as the phase opens."""
         if msg.sender not in self.fleet.hosts:
             raise WrongSender(f"MOVES ahead from {msg.sender}, which flies no drone of this game")
+        if not len(msg.moves):  # (a host says it is deciding only once the phase it decides is open)
+            raise StaleTurn(f"an empty MOVES from {msg.sender} before turn {msg.turn}'s drones' phase opened")
         if msg.sender in self._early_moves:
             raise StaleTurn(f"second MOVES ahead from {msg.sender} for turn {msg.turn}")
         self._early_moves[msg.sender] = msg
@@ -572,6 +591,8 @@ class Engine:
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
         """A swarm host's moves, each taken as if sent as an NPS (`whole`: `_host_move`'s checks, as arrays)."""
         fleet, steps = self.fleet, msg.moves
+        if not len(steps):
+            return self._still_deciding(msg)
         numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
 
         def whole() -> np.ndarray:  # (the MOVES as columns of the fleet's rows: docs/performance.md, Memory)
@@ -594,6 +615,21 @@ class Engine:
         refused = _in_batch(msg, len(steps), whole, lambda j: self._host_move(
             msg.sender, drone_name(int(numbers[j])), cell_of(pos[j]), NOTES[notes[j]], int(steps.column("ranked")[j])))
         return [*refused, *self._drones_check()]
+
+    def _still_deciding(self, msg: Moves) -> list[Effect]:
+        """An empty MOVES: a host whose drones' moves this phase still awaits is deciding them (alive and working,
+        however slow): noted (`deciding`: the phase's deadline counts again from now, up to its cap: `stretch`). From a
+        host with no move awaited it changes nothing (a word that crossed its MOVES on the way)."""
+        code = self.fleet.hosts.get(msg.sender)
+        if code is None:
+            raise WrongSender(f"MOVES from {msg.sender}, which flies no drone of this game")
+        fleet = self.fleet
+        if np.count_nonzero((fleet.host_code == code) & (fleet.state == ALIVE) & ~self._moved):
+            if not self.deciding:
+                self._log.info("turn %d: %s is still deciding: the drones' phase waits for it (up to %g s)",
+                               self.turn, msg.sender, max(self.config.phase_cap, self.config.phase_deadline))
+            self.deciding += 1
+        return []
 
     def _host_move(self, sender: str, d: str, pos: Cell, note: Note, ranked: int) -> None:
         """Take a move a swarm host sent for one of its drones, or raise (and take nothing)."""
@@ -706,14 +742,14 @@ class Engine:
         fleet = self.fleet
         alive = fleet.state == ALIVE
         if not np.count_nonzero(alive):
-            causes = ", ".join(f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
-                               for d, r in self.drones.items())
+            causes = named([f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
+                            for d, r in self.drones.items()])
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
         if getattr(self.arbiter, "unsolvable", False):  # (a proof: coordinator/lacam.py)
             away = alive & (fleet.target[:, 0] >= 0) & (fleet.pos != fleet.target).any(axis=1)
             return EndReason.SETTLED, ("no solution (the search over the drones' configurations proved it): targets "
                                        "reached, except unreachable for "
-                                       f"{', '.join(fleet.ids[i] for i in np.flatnonzero(away))}")
+                                       f"{named([fleet.ids[i] for i in np.flatnonzero(away)])}")
         if self.final:
             notes = fleet.notes()[alive]
             if np.count_nonzero(notes == REACHED) == len(notes):
@@ -721,7 +757,7 @@ class Engine:
             if np.count_nonzero((notes == REACHED) | (notes == UNREACHABLE)) == len(notes) and \
                     not getattr(self.arbiter, "busy", False):  # (the search brings them home: lacam.Lacam)
                 stuck = [fleet.ids[i] for i in alive.nonzero()[0][notes == UNREACHABLE].tolist()]
-                return EndReason.SETTLED, f"targets reached, except unreachable for {', '.join(stuck)}"
+                return EndReason.SETTLED, f"targets reached, except unreachable for {named(stuck)}"
         if self.turn >= self.config.max_turns:
             return EndReason.TURN_LIMIT, f"turn limit {self.config.max_turns} reached"
         return None
@@ -732,6 +768,7 @@ class Engine:
         turn = self.turn if turn is None else turn
         started = self.stage is not Stage.ADMITTING
         self._enter(Stage.OVER)
+        text = clipped(text)
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
         self._log.info("game over at turn %d: %s", turn, text)
         return [*([Record(over_record(turn, reason.value, text))] if started else []), Publish(self.end)]
@@ -790,7 +827,7 @@ class Engine:
                               self.config.gcs_grace)
             return self._start()
         if self._admitting():
-            missing = ", ".join(self.roster.missing(self.fleet))
+            missing = named(self.roster.missing(self.fleet))
             return self._over(EndReason.ABORTED, f"entities never connected: {missing}")
         if stage is Stage.GCS:
             if self._done is None:
@@ -894,6 +931,27 @@ class Engine:
             if self.stage is Stage.DRONES:
                 return self._drones_check()
         return []
+
+
+#: Characters of the names an end's text lists (then "and N more"), within `MAX_OVER_TEXT` with room for the rest.
+NAMES_ROOM = MAX_OVER_TEXT - 128
+
+
+def named(items: list[str], room: int = NAMES_ROOM) -> str:
+    """`items` joined by ", ", as many as fit in `room` characters, then "and N more": the text of an OVER (and of
+    its journal record) stays within `MAX_OVER_TEXT` whatever the number of drones it names."""
+    text = ", ".join(items)
+    if len(text) <= room:
+        return text
+    shown = list(itertools.takewhile(lambda n: n < room - 24, itertools.accumulate(len(i) + 2 for i in items)))
+    return f"{', '.join(items[:len(shown)])} and {len(items) - len(shown)} more"
+
+
+def clipped(text: str) -> str:
+    """`text` cut to `MAX_OVER_TEXT` bytes of UTF-8 (ending "..." if cut): an OVER's text (a full disk's error may
+    name a long path)."""
+    data = text.encode()
+    return text if len(data) <= MAX_OVER_TEXT else data[:MAX_OVER_TEXT - 3].decode(errors="ignore") + "..."
 
 
 def state_hash(status: Status) -> str:

@@ -65,6 +65,7 @@ from schema.tuning import (
     LINGER_S,
     LINK_GRACE_S,
     PEER_CHECK_S,
+    PHASE_CAP_S,
     PHASE_DEADLINE_S,
     SETTLE_S,
     STOP_LINGER_S,
@@ -184,12 +185,13 @@ class Coordinator:
         self.rival: str | None = None  # another coordinator's session on this root, which this one yields to
         self._phase = engine.deadline_key()
         self._started = clock()
+        self._heard = (engine.deciding, self._started)  # hosts' words that they are still deciding, the last's time
         self._vanishing: dict[tuple[str, str], float] = {}  # (entity, session) -> when its going counts
         self._linger_until: float | None = None
         # signals noted by `stop` (or, from `stops`, before this loop existed), not yet acted on
         self._stops: list[Interrupted] = [] if stops is None else stops
         self._routed = False  # a router has answered an audit: one that does not answer is unreachable
-        self._deferred: tuple | None = None  # the phase whose passed deadline waits for the routers' answer
+        self._deferred: tuple | None = None  # the deadline (`_mark`) whose passing waits for the routers' answer
         self._frozen = False  # the game holds because no router answers (not for a vanished presence)
 
     def probe(self) -> None:
@@ -208,8 +210,8 @@ class Coordinator:
             return 0.0
         if self._linger_until is not None:
             return max(0.0, self._linger_until - now)
-        limit = self.engine.deadline()
-        left = None if limit is None or self._deferred == self._phase else max(0.0, self._started + limit - now)
+        end = self._deadline_end()
+        left = None if end is None or self._deferred == self._mark() else max(0.0, end - now)
         vanish = max(0.0, min(self._vanishing.values()) - now) if self._vanishing else None
         delays = (left, self.effects.due_in(), self.presences.due_in(now), vanish)
         return min((d for d in delays if d is not None), default=None)
@@ -318,13 +320,34 @@ class Coordinator:
         elif answered and self._frozen:
             self._frozen = False
             self.effects.run(self.engine.link_back())
-        elif deferred is not None and deferred == self._phase:
-            self.effects.run(self.engine.expire(*deferred))
+        elif deferred is not None and deferred == self._mark():  # (a host that spoke meanwhile: not passed)
+            self.effects.run(self.engine.expire(*self._phase))
 
     def _tick(self) -> None:
-        """The deadline restarts whenever what it is measured from changes (`Engine.clock`)."""
-        if (phase := self.engine.deadline_key()) != self._phase:
+        """The deadline restarts whenever what it is measured from changes (`Engine.deadline_key`); a host's word
+        that it is still deciding (`Engine.deciding`) is noted with its time."""
+        engine = self.engine
+        if (phase := engine.deadline_key()) != self._phase:
             self._phase, self._started = phase, self.clock()
+            self._heard = (engine.deciding, self._started)
+        elif engine.deciding != self._heard[0]:
+            self._heard = (engine.deciding, self.clock())
+
+    def _deadline_end(self) -> float | None:
+        """When the current deadline passes (None: it has none): its time from the stage's start, or, while a host
+        says it is still deciding (`Engine.stretch`), from its last word, up to the cap from the stage's start."""
+        limit = self.engine.deadline()
+        if limit is None:
+            return None
+        end = self._started + limit
+        if (stretch := self.engine.stretch()) is not None:
+            wait, cap = stretch
+            end = min(max(end, self._heard[1] + wait), self._started + cap)
+        return end
+
+    def _mark(self) -> tuple:
+        """What a deadline that passed is: the stage's (`_phase`) and the last word of a host still deciding."""
+        return self._phase, self._heard[0]
 
     def _due(self, now: float) -> None:
         """Whatever is due: held turns, CONNECTs without a token, vanished presences, the phase deadline."""
@@ -339,13 +362,12 @@ class Coordinator:
             del self._vanishing[(entity, sid)]
             self.effects.run(self.engine.vanished(entity, sid))
         self._tick()  # (a departure may have changed what the deadline is measured from)
-        limit = self.engine.deadline()
-        if limit is not None and now >= self._started + limit and self._linger_until is None \
-                and self._deferred != self._phase:
+        end = self._deadline_end()
+        if end is not None and now >= end and self._linger_until is None and self._deferred != self._mark():
             if self.engine.stage in (Stage.GCS, Stage.DRONES):
                 self._ask_who_is_connected()  # someone missed a deadline: is everyone whose token we see connected?
                 if self._routed and not self.engine.holding:
-                    self._deferred = self._phase  # and can anyone be reached? it counts once a router answers
+                    self._deferred = self._mark()  # and can anyone be reached? it counts once a router answers
                     return
             self.effects.run(self.engine.expire(*self._phase))
 
@@ -476,6 +498,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-turns", type=int, default=MAX_TURNS, help=f"the game's turn limit (default {MAX_TURNS})")
     p.add_argument("--phase-deadline", type=float, default=PHASE_DEADLINE_S,
                    help=f"seconds for drones and ENV per phase (default {PHASE_DEADLINE_S:g})")
+    p.add_argument("--phase-cap", type=float, default=PHASE_CAP_S, metavar="SECONDS",
+                   help="how long a drones' phase may last in all while a swarm host says it is still deciding (its "
+                        f"deadline counts again from each such word; default {PHASE_CAP_S:g})")
     p.add_argument("--gcs-deadline", type=float, default=0.0, help="seconds for the GCS phase (0: wait)")
     p.add_argument("--admit-deadline", type=float, default=ADMIT_DEADLINE_S, metavar="SECONDS",
                    help="how long the game waits for every entity to connect (also when resumed), then ends "
@@ -523,9 +548,10 @@ ScenarioReader = Callable[..., GameConfig]
 
 
 def game_config(args: argparse.Namespace, scenario: ScenarioReader | None = None) -> GameConfig:
-    deadlines = dict(phase_deadline=args.phase_deadline, gcs_deadline=args.gcs_deadline or None,
-                     admit_deadline=args.admit_deadline or None, lost_after=args.lost_after, gcs_grace=args.gcs_grace,
-                     link_grace=args.link_grace, arbiter=args.arbiter)
+    deadlines = dict(phase_deadline=args.phase_deadline, phase_cap=args.phase_cap,
+                     gcs_deadline=args.gcs_deadline or None, admit_deadline=args.admit_deadline or None,
+                     lost_after=args.lost_after, gcs_grace=args.gcs_grace, link_grace=args.link_grace,
+                     arbiter=args.arbiter)
     if args.scenario:
         if scenario is None:
             raise UsageError("--scenario is read by the dronesim command: dronesim coordinator --scenario FILE")

@@ -153,7 +153,9 @@ class DroneProcess:
         size = welcome.world.size
         self.swarm = make_swarm(autopilot, world_size=size, drones=[drone_number(d) for d in drones],
                                 least=swarm_min) if host else None
-        self.pilots = {} if self.swarm else {d: make_autopilot(autopilot, world_size=size) for d in drones}
+        # (each made as its drone is first flown: a D* pilot of a big world costs milliseconds, which a host flying
+        # hundreds spends deciding its first turn, while it says so, rather than before it can hear one)
+        self.pilots: dict[str, Any] = {} if self.swarm else Pilots(autopilot, size)
         if self.swarm:
             logger.info("flying %d drones with the %s autopilot's swarm form", len(drones), autopilot)
         self.chart = Chart(size)
@@ -169,6 +171,11 @@ class DroneProcess:
         self._env: set[str] = set()  # the sessions of the environment processes present
         self._deciding: _Deciding | None = None
         self._done: tuple[tuple, StepTable | dict[str, Decision]] | None = None  # the last turn decided: key, moves
+
+    def deciding(self) -> int | None:
+        """The turn being decided (None: none); another thread may read it (entities/drone_node.py `Deciding`)."""
+        d = self._deciding
+        return None if d is None else d.turn.turn
 
     # ------------------------------------------------------------------ inputs
 
@@ -424,6 +431,18 @@ class DroneProcess:
         chunk = min(PREFETCH_CHUNK, Ask.MAX_CELLS)
         return effects + [self._query(Ask(turn=0, sender=self.sender, cells=cells[i:i + chunk]))
                           for i in range(0, len(cells), chunk)]
+
+
+class Pilots(dict):
+    """One autopilot per drone, each made when first asked for (`make_autopilot`)."""
+
+    def __init__(self, autopilot: str, size: Cell) -> None:
+        super().__init__()
+        self.autopilot, self.size = autopilot, size
+
+    def __missing__(self, drone: str) -> Any:
+        pilot = self[drone] = make_autopilot(self.autopilot, world_size=self.size)
+        return pilot
 
 
 def _reply(reply: Ans | WorldMap | RemoteInputError) -> Any:

@@ -5,6 +5,10 @@ It subscribes to the DRONES phase's TURN and to OVER, watches the coordinator's 
 kept through a coordinator restart) and the environment's, and hands every event to the core in batches of
 everything queued. It carries out the core's effects: publishes NPS or MOVES, sends ASK and MAP queries whose
 outcome comes back to the core as one event each, and keeps the core's one timer. It exits on OVER.
+
+A swarm host whose planning of a turn goes on for a while says so (`Deciding`, a thread: the main thread is in the
+plan): an empty MOVES every DECIDING_EVERY_S while its main thread computes, so that the coordinator waits for it
+instead of making its drones hover and, turns later, LOST. A hung host computes nothing and says nothing.
 """
 
 from __future__ import annotations
@@ -13,7 +17,9 @@ import argparse
 import functools
 import logging
 import sys
+import threading
 import time
+from collections.abc import Callable
 
 import zenoh
 
@@ -30,9 +36,9 @@ from network.transport import (
     setup_logging,
     zenoh_config,
 )
-from schema import Ans, Ask, Connect, Keys, Moves, Over, Phase, Role, Turn, UsageError, WorldMap
+from schema import Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, Role, StepTable, Turn, UsageError, WorldMap
 from schema.messages import drone_list, is_host_id
-from schema.tuning import ASK_TIMEOUT_S, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S
+from schema.tuning import ASK_TIMEOUT_S, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, DECIDING_EVERY_S
 
 from .autopilots import REGISTRY, SWARM_MIN, pilot_class
 from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, SendMoves, Timer
@@ -53,6 +59,9 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                             swarm_min=swarm_min, patience=grace, chart=chart)
         effects = Effects(inbox, Outbox(session), ask_timeout=ask_timeout, map_timeout=grace)
         effects.run(core.start())
+        pulse = Deciding(core, effects.send, thread_cpu()) if host else None
+        if pulse is not None:
+            pulse.start()
 
         def handle(event: object) -> None:
             if event is None:  # nothing came in time: the coordinator's grace, or the core's timer, is over
@@ -75,7 +84,11 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
             effects.run(core.receive(inputs))
 
         waits = lambda: (t for t in (member.timeout(), effects.due_in()) if t is not None)  # noqa: E731
-        inbox.run(handle, timeout=lambda: min(waits(), default=None), until=lambda: core.over is not None)
+        try:
+            inbox.run(handle, timeout=lambda: min(waits(), default=None), until=lambda: core.over is not None)
+        finally:
+            if pulse is not None:
+                pulse.stop()
         member.close()
         assert core.over is not None
         return core.over
@@ -88,12 +101,20 @@ class Effects:
         self.inbox, self.out, self.keys = inbox, out, inbox.keys
         self.ask_timeout, self.map_timeout = ask_timeout, map_timeout
         self._timer: tuple[float, int] | None = None  # (when, ref)
+        self._sending = threading.Lock()  # the moves go out one at a time (`Deciding` sends from its thread)
+
+    def send(self, msg: Moves | Nps, unless: Callable[[], bool] = lambda: False) -> None:
+        """Publish a swarm host's MOVES or a lone drone's NPS, unless `unless()`, asked once no other is being sent
+        (`Deciding`'s word for a turn whose moves have gone out meanwhile is not sent after them)."""
+        with self._sending:
+            if not unless():
+                self.out.put((self.keys.moves if isinstance(msg, Moves) else self.keys.nps)(msg.sender), msg)
 
     def run(self, effects: list[Effect]) -> None:
         for eff in effects:
             match eff:
                 case SendMoves(msg):  # a swarm host's MOVES, a lone drone's NPS
-                    self.out.put((self.keys.moves if isinstance(msg, Moves) else self.keys.nps)(msg.sender), msg)
+                    self.send(msg)
                 case Query(ref, msg):  # an ASK, or the map
                     key, reply, timeout = ((self.keys.ask, Ans, self.ask_timeout) if isinstance(msg, Ask)
                                            else (self.keys.map, WorldMap, self.map_timeout))
@@ -112,6 +133,54 @@ class Effects:
             return []
         ref, self._timer = self._timer[1], None
         return [Expired(ref)]
+
+
+class Deciding:
+    """A swarm host's word that it is still deciding a turn (an empty MOVES), every `every` seconds while the core
+    decides one and the main thread computes (its CPU time, `cpu`, went on by at least `busy` of the interval since
+    the last look): the coordinator then waits for its moves, up to its cap (`Engine.stretch`). On a thread of its
+    own (the main thread is in the plan); a hung process (stopped, or its main thread blocked) says nothing."""
+
+    def __init__(self, core: DroneProcess, send: Callable[..., None], cpu: Callable[[], float], *,
+                 every: float = DECIDING_EVERY_S, busy: float = 0.1) -> None:
+        self.core, self.send, self.cpu, self.every, self.busy = core, send, cpu, every, busy
+        self._last: tuple[int | None, float] = (None, 0.0)  # the turn being decided and the CPU time, at the last look
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="deciding", daemon=True)
+
+    def look(self) -> Moves | None:
+        """The word to send now, if any: the same turn is being decided as at the last look, and worked on."""
+        now = (self.core.deciding(), self.cpu())
+        was, self._last = self._last, now
+        if now[0] is None or now[0] != was[0] or now[1] - was[1] < self.busy * self.every:
+            return None
+        return Moves(turn=now[0], sender=self.core.sender, moves=StepTable.of([]))
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.every):
+            if (word := self.look()) is not None:  # (not once that turn's moves went out: they close it)
+                self.send(word, unless=functools.partial(self._decided, word.turn))
+
+    def _decided(self, turn: int) -> bool:
+        return self.core.deciding() != turn
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def thread_cpu() -> Callable[[], float]:
+    """A clock of the calling thread's CPU time (seconds) that another thread may read (where the platform has none:
+    the process's)."""
+    try:
+        clock = time.pthread_getcpuclockid(threading.get_ident())
+        time.clock_gettime(clock)
+    except (AttributeError, OSError):
+        return time.process_time
+    return functools.partial(time.clock_gettime, clock)
 
 
 def cli(argv: list[str] | None = None) -> int:

@@ -46,6 +46,10 @@ SCHEMA_VERSION = 5
 MAX_TURN = 1 << 40
 #: Largest payload any receiver decodes; bigger ones are rejected before parsing.
 MAX_PAYLOAD = 1 << 22
+#: Largest text (in UTF-8 bytes) an OVER carries: the whole OVER stays under its key's size limit
+#: (`schema.keys.ENVELOPE`, which every receiver enforces unread). A longer one never reached anyone: the end of a
+#: game that named its hundred lost drones one by one.
+MAX_OVER_TEXT = 768
 
 Cell = tuple[int, int, int]
 
@@ -577,14 +581,14 @@ class Nps(Message):
 class Moves(Message):
     """Swarm host -> SRV (key ``<host>/MOVES``): the NPS of every drone it flies, in one message. Sent in the
     turn's GCS phase (with the GCS's DONE, by a host that decides from the STATUS alone), it is held until the
-    drones' phase opens."""
+    drones' phase opens. An empty MOVES, in the drones' phase, says the host is still deciding that turn: the
+    phase's deadline counts again from it, up to a cap (`--phase-cap`); never held."""
 
     TAG: ClassVar[str] = "MOVES"
     moves: StepTable
 
     def _validate(self) -> None:
         _as_table(self, "moves", StepTable)
-        _check(len(self.moves) >= 1, "MOVES carries at least one move")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -625,7 +629,8 @@ class Over(Message):
     def _validate(self) -> None:
         _check_game(self.game)
         _check(isinstance(self.reason, EndReason), "reason must be an EndReason")
-        _check(isinstance(self.text, str), "text must be a string")
+        _check(isinstance(self.text, str) and len(self.text.encode()) <= MAX_OVER_TEXT,
+               f"text must be a string of at most {MAX_OVER_TEXT} bytes")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

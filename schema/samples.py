@@ -52,6 +52,7 @@ SAMPLES: dict[str, m.Message] = {
     "moves": m.Moves(turn=1, sender="H01", moves=m.StepTable.of([
         m.Step(drone="D01", pos=(1, 0, 0), ranked=rank_steps([(1, 0, 0), (0, 0, 0)])),
         m.Step(drone="D02", pos=(0, 1, 0), note=m.Note.UNREACHABLE)])),
+    "moves_deciding": m.Moves(turn=2, sender="H01", moves=m.StepTable.of([])),
     "upd": m.Upd(turn=1, sender="ENV", cells=(m.CellInfo(pos=(0, 0, 0), kind=m.CellKind.EMPTY),
                                               m.CellInfo(pos=(1, 0, 0), kind=m.CellKind.BUILDING, drones=("D01",)))),
     "status": m.Status(turn=1, sender="OBS", drones=m.StatusTable.of([

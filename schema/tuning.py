@@ -134,6 +134,19 @@ EPISODE_FEW_DRONES = 64
 #: How long the drones (and the environment) have to answer a turn's phase before the missing ones hover
 #: (`GameConfig.phase_deadline`, `--phase-deadline`).
 PHASE_DEADLINE_S = 5.0
+#: How long a drones' phase may last in all while a swarm host says it is still deciding (an empty MOVES every
+#: `DECIDING_EVERY_S` while its main thread computes: the deadline counts again from each), so that a slow host that
+#: is alive and working keeps its drones, and one that says so forever still ends the phase (`--phase-cap`).
+PHASE_CAP_S = 60.0
+#: How often a swarm host says it is still deciding a turn while its main thread computes it (an empty MOVES: the
+#: coordinator waits for it, up to `PHASE_CAP_S`); a phase deadline below twice this gains nothing from it. Not
+#: measured: a planning that takes this long is 100 times a D* swarm turn's usual (BENCHMARKS.md), and the words
+#: are a few dozen bytes.
+DECIDING_EVERY_S = 0.05
+#: How long a drones' phase waits, after a host's last word that it is still deciding, for its next word or its moves,
+#: when that is longer than the phase deadline: a word late (a host descheduled on a loaded machine) or lost does
+#: not end a phase the host is known to be working on. Not measured: 20 words.
+DECIDING_SILENCE_S = 1.0
 #: How long a game waits for every entity to connect, also when resumed (`--admit-deadline`; 0: forever).
 ADMIT_DEADLINE_S = 600.0
 #: How long a game waits for a vanished environment to come back (`GameConfig.env_grace`).

@@ -20,6 +20,7 @@ from schema import (
     EndReason,
     Keys,
     Message,
+    Moves,
     Nps,
     Over,
     Phase,
@@ -31,6 +32,7 @@ from schema import (
     WorldSpec,
     decode,
 )
+from schema.tuning import DECIDING_SILENCE_S
 
 LOG = logging.getLogger("dronesim.tests.coordinator")
 ME = "5e55"  # the coordinator's session id
@@ -466,3 +468,58 @@ def test_without_a_router_that_answers_a_deadline_counts_as_it_passes() -> None:
     run.play(1, {"D01": (1, 0, 0)})
     run.wait(1.0)
     assert run.engine.turn == 2 and run.journal.records[-1]["hovered"] == ["D02"]
+
+
+def _deciding(run: Run, drone: str = "D01") -> None:
+    """`drone`'s process says it is still deciding the current turn (an empty MOVES)."""
+    run.send(Moves(turn=run.engine.turn, sender=drone, moves=()))
+
+
+def test_a_host_that_says_it_is_still_deciding_keeps_its_phase_open_up_to_the_cap() -> None:
+    """Issue 33, 8: a swarm host whose planning outlasted the phase deadline had its drones hover, then LOST, alive
+    and working as it was. Its words keep the phase open, each for the deadline (at least DECIDING_SILENCE_S)."""
+    run = Run(drones=1, phase_deadline=1.0, phase_cap=10.0)
+    run.send(Done(turn=1, sender="GCS", phase=Phase.GCS))
+    for _ in range(19):
+        run.wait(0.5)
+        _deciding(run)
+    assert (run.engine.turn, run.engine.drones["D01"].misses) == (1, 0), "9.5 s: deciding, and waited for"
+    run.wait(0.5)
+    _deciding(run)
+    assert run.engine.turn == 2 and run.engine.drones["D01"].misses == 1, "the cap: the phase ends all the same"
+
+
+def test_a_host_that_falls_silent_after_saying_it_is_deciding_misses_the_phase_once_its_silence_has_lasted() -> None:
+    run = Run(drones=2, phase_deadline=0.2)
+    run.send(Done(turn=1, sender="GCS", phase=Phase.GCS))
+    run.send(Nps(turn=1, sender="D02", pos=(1, 2, 0)))
+    run.wait(0.1)
+    _deciding(run)
+    run.wait(DECIDING_SILENCE_S - 0.01)
+    assert run.engine.turn == 1, "one word late or lost does not end the phase"
+    run.wait(0.01)
+    assert run.engine.turn == 2 and run.engine.drones["D01"].misses == 1 and not run.engine.drones["D02"].misses
+
+
+def test_a_hung_host_says_nothing_and_misses_the_phase_at_its_deadline() -> None:
+    run = Run(drones=1, phase_deadline=0.2)
+    run.send(Done(turn=1, sender="GCS", phase=Phase.GCS))
+    run.wait(0.19)
+    assert run.engine.turn == 1
+    run.wait(0.01)
+    assert run.engine.turn == 2 and run.engine.drones["D01"].misses == 1
+
+
+def test_a_word_that_comes_while_the_routers_are_asked_about_a_passed_deadline_keeps_the_phase_open() -> None:
+    run = Run(drones=1, phase_deadline=0.5)
+    run.srv.handle(Sessions(frozenset({ME, "e0", "g0", "d1"})))  # the routers answer: a deadline waits for them
+    run.send(Done(turn=1, sender="GCS", phase=Phase.GCS))
+    run.wait(0.5)
+    asked = len(run.audits)
+    assert asked and run.engine.turn == 1, "the deadline passed: the routers are asked first"
+    _deciding(run)
+    run.srv.handle(Sessions(frozenset({ME, "e0", "g0", "d1"})))
+    assert run.engine.turn == 1 and run.engine.drones["D01"].misses == 0, "it spoke meanwhile: not passed"
+    run.wait(DECIDING_SILENCE_S)
+    run.srv.handle(Sessions(frozenset({ME, "e0", "g0", "d1"})))
+    assert run.engine.turn == 2 and run.engine.drones["D01"].misses == 1

@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import functools
 import logging
+import threading
+import types
 
 import numpy as np
 import pytest
 import zenoh
 
 from entities.drone import Answer
+from entities.drone_node import Deciding, Effects, thread_cpu
 from entities.environment import Environment
 from network.transport import Inbox, client_config
-from schema import Ans, Ask, Keys, RemoteInputError, decode, encode
+from schema import Ans, Ask, Keys, Moves, RemoteInputError, decode, encode
 from world.grid import World
 
 from .harness import embedded_router, unique_root
@@ -97,3 +100,66 @@ def test_the_router_refuses_an_endpoint_that_is_not_one_with_exit_2(capsys) -> N
 
     assert cli(["--listen", "foo"]) == 2
     assert "bad zenoh setting listen/endpoints" in capsys.readouterr().err
+
+
+class _Core:
+    """What `Deciding` reads of the core: the turn being decided (None: none)."""
+
+    sender = "H01"
+
+    def __init__(self) -> None:
+        self.turn: int | None = None
+
+    def deciding(self) -> int | None:
+        return self.turn
+
+
+def test_a_host_says_it_is_still_deciding_only_while_its_main_thread_computes_the_same_turn() -> None:
+    """Issue 33, 8: a host whose planning outlasts the phase deadline says so (an empty MOVES) at each look while its
+    main thread computes (its CPU time goes on); a hung one (no CPU), or one that is not deciding, says nothing."""
+    core, cpu = _Core(), [0.0]
+    pulse = Deciding(core, lambda *a, **k: None, lambda: cpu[0], every=0.05)  # type: ignore[arg-type]
+    assert pulse.look() is None, "not deciding"
+    core.turn = 3
+    cpu[0] += 0.05
+    assert pulse.look() is None, "a turn first seen: its planning may end at once (most turns take a millisecond)"
+    cpu[0] += 0.04
+    word = pulse.look()
+    assert word is not None and (word.turn, word.sender, len(word.moves)) == (3, "H01", 0)
+    assert pulse.look() is None, "no CPU since the last look: hung (or waiting), it says nothing"
+    cpu[0] += 0.05
+    core.turn = 4
+    assert pulse.look() is None, "another turn: first seen"
+    cpu[0] += 0.05
+    assert pulse.look() is not None
+    core.turn = None
+    cpu[0] += 0.05
+    assert pulse.look() is None, "decided"
+
+
+def test_a_hosts_word_that_it_is_deciding_does_not_follow_the_moves_of_its_turn() -> None:
+    """The word is sent from its own thread: once the turn's moves went out (the core no longer decides it), a word
+    for it is not sent (it would reach the coordinator after them)."""
+    keys = Keys("sim")
+    out = types.SimpleNamespace(sent=[])
+    out.put = lambda key, msg: out.sent.append((key, msg))
+    effects = Effects(types.SimpleNamespace(keys=keys), out, ask_timeout=1.0, map_timeout=1.0)  # type: ignore[arg-type]
+    core = _Core()
+    pulse = Deciding(core, effects.send, lambda: 0.0)
+    word = Moves(turn=5, sender="H01", moves=())
+    core.turn = 5
+    pulse.send(word, unless=functools.partial(pulse._decided, 5))
+    core.turn = None  # its moves went out
+    pulse.send(word, unless=functools.partial(pulse._decided, 5))
+    assert out.sent == [(keys.moves("H01"), word)]
+
+
+def test_the_main_threads_cpu_clock_is_read_from_another_thread() -> None:
+    clock, seen = thread_cpu(), []
+    reader = threading.Thread(target=lambda: seen.append(clock()))
+    start = clock()
+    while clock() - start < 0.02:  # this thread computes
+        pass
+    reader.start()
+    reader.join()
+    assert seen[0] >= start + 0.02

@@ -48,10 +48,13 @@ from schema import (
     Welcome,
     WorldSpec,
     WrongSender,
+    decode,
     encode,
 )
+from schema.keys import size_limit
+from schema.messages import drone_id
 from schema.tables import rank_steps
-from schema.tuning import AHEAD_MAX, FEW_ROWS
+from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS
 
 SIZE = (5, 5, 5)
 LOG = logging.getLogger("dronesim.tests.engine")
@@ -1309,3 +1312,71 @@ def test_a_resumed_game_goes_on_without_a_ground_station_that_does_not_come_back
     effects = e.expire(*e.deadline_key())
     assert [(t.turn, t.phase) for t in pubs(effects, Turn)] == [(3, Phase.DRONES)]
     assert pubs(effects, Turn)[0].orders == (Order(drone="D01", pos=(2, 0, 0), target=(4, 0, 0)),)
+
+
+# --------------------------------------------------------------------------- a host still deciding (issue 33, 8)
+
+
+def _deciding(turn: int, sender: str = "H01") -> Moves:
+    """A host's word that it is still deciding `turn`: an empty MOVES."""
+    return Moves(turn=turn, sender=sender, moves=())
+
+
+def test_a_hosts_word_that_it_is_still_deciding_stretches_the_phase_and_changes_nothing_else() -> None:
+    g = _hosted_pair(phase_deadline=0.5, phase_cap=20.0)
+    g.gcs()
+    assert g.stage is Stage.DRONES and g.engine.stretch() is None, "no word yet: the deadline as it is"
+    snap = g.snapshot()
+    assert g.feed(g.engine.receive(_deciding(1))) == [] and g.snapshot() == snap
+    assert g.engine.deciding == 1 and g.engine.stretch() == (DECIDING_SILENCE_S, 20.0)
+    g.feed(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0)})))  # D01 decided, D02 not yet
+    g.feed(g.engine.receive(_deciding(1)))
+    assert g.engine.deciding == 2, "a host with a move still awaited is still deciding"
+    g.feed(g.engine.receive(_host_moves(1, {"D02": (4, 4, 3)})))
+    assert (g.stage, g.turn) == (Stage.GCS, 2) and g.engine.stretch() is None
+    g.gcs()
+    assert g.engine.deciding == 0 and g.engine.stretch() is None, "each drones' phase starts without a word"
+
+
+def test_a_word_that_it_is_still_deciding_is_not_held_nor_taken_from_a_host_with_nothing_left_to_decide() -> None:
+    g = _hosted_pair()
+    refused(g.engine.receive(_deciding(1)), StaleTurn, "before turn 1's drones' phase opened")
+    assert not g.engine._early_moves, "never held: the host's real MOVES ahead is still taken"
+    g.gcs()
+    refused(g.engine.receive(_deciding(1, "D07")), WrongSender, "flies no drone")
+    refused(g.engine.receive(_deciding(1, "D01")), WrongSender, "flies no drone")  # (H01 flies it)
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))), hosts={"H01": ("D01",), "H02": ("D02",)})
+    g.gcs()
+    g.feed(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0)})))
+    assert g.feed(g.engine.receive(_deciding(1))) == [] and g.engine.deciding == 0, \
+        "a word that crossed its host's MOVES: nothing left to wait for"
+    g.feed(g.engine.receive(_deciding(1, "H02")))
+    assert g.engine.deciding == 1
+
+
+def test_the_stretch_is_never_shorter_than_the_deadline() -> None:
+    g = _hosted_pair(phase_deadline=90.0, phase_cap=5.0)
+    g.gcs()
+    g.feed(g.engine.receive(_deciding(1)))
+    assert g.engine.stretch() == (90.0, 90.0)
+
+
+@pytest.mark.parametrize("drones", [3, 300])
+def test_an_over_naming_every_lost_drone_fits_its_key_whatever_their_number(drones: int) -> None:
+    """Issue 33, 8: the OVER after a host's hundred drones were LOST named each one, exceeded its key's size limit,
+    and reached no one (every other process waited 30 s and exited 2)."""
+    starts = tuple((drone_id(i + 1), (i // 25 % 5, i % 5, i // 5 % 5)) for i in range(drones))
+    cells = 5 * 5 * 5
+    g = Game(GameConfig(world=WorldSpec(size=(5, 5, 5 * (1 + drones // cells))), drones=tuple(
+        DroneSpec(drone=d, start=(x, y, z + 5 * (i // cells))) for i, (d, (x, y, z)) in enumerate(starts)),
+        lost_after=1), hosts={"H01": tuple(d for d, _ in starts)})
+    g.gcs()
+    g.feed(g.engine.expire(Stage.DRONES, 1))
+    (over,) = pubs(g.effects, Over)
+    assert over.reason is EndReason.NO_DRONE_ALIVE and len(encode(over)) <= size_limit(Over)
+    assert decode(encode(over)) == over, "as every receiver reads it"
+    order = list(g.engine.drones)  # (the fleet's order: by id)
+    named = [d for d in order if f"{d} lost" in over.text]
+    assert named == order[:len(named)] and named
+    assert drones == 3 or over.text.endswith(f"and {drones - len(named)} more")
+    assert records(g.effects)[-1]["text"] == over.text, "the journal says what the OVER says"

@@ -547,3 +547,71 @@ def test_a_copy_of_a_drones_exact_presence_key_does_not_hide_its_death(router, t
     # (lost as its first deadline passes: the deadline counts once the routers have answered, and they no longer
     # list its session; or, under load, a turn later)
     assert len(lost) == 1 and len(hovered) <= 2 and (not hovered or lost[0] <= hovered[0] + 1), (hovered, lost)
+
+
+def _dstar_swarm_scenario(path: Path, size: tuple[int, int, int], drones: int, max_turns: int) -> Path:
+    """A scenario of `drones` D* drones along one side of a generated city of `size` (seed 7), each aiming at a cell
+    on the far side."""
+    import json
+
+    from schema import WorldSpec
+    from world.grid import build_world
+
+    world = build_world(WorldSpec(size=size, seed=7), [])
+    nx, ny, _ = size
+    open_cells = [(x, y, 0) for x in range(0, nx, 2) for y in range(0, ny, 2) if not world.is_building((x, y, 0))]
+    far = [(x, y, 0) for x in range(nx - 1, 0, -2) for y in range(ny - 1, 0, -2) if not world.is_building((x, y, 0))]
+    path.write_text(json.dumps({
+        "format": "dronesim-scenario", "version": 1, "world": {"size": list(size), "seed": 7},
+        "drones": [{"id": f"D{i + 1:02d}", "start": list(c), "autopilot": "dstar"} for i, c in
+                   enumerate(open_cells[:drones])],
+        "targets": [f"D{i + 1:02d}={x},{y},{z}" for i, (x, y, z) in enumerate(far[:drones])],
+        "max_turns": max_turns}))
+    return path
+
+
+def test_a_dstar_swarm_host_slower_than_the_phase_deadline_keeps_its_drones(router, tmp_path):
+    """Issue 33, 8: a D* swarm host whose planning outlasted the phase deadline had every drone declared LOST at turn
+    3, alive and working as it was, and the OVER that followed (naming them all) reached no other process. Here
+    real D* planning (40 drones over a 128x128x16 city: their pilots made and their first searches, about a second
+    on this machine) outlasts a tiny deadline, and a drone that misses one is LOST: the host says it is still
+    deciding, the phase waits for it, and the game plays to its turn limit with every drone."""
+    scenario = _dstar_swarm_scenario(tmp_path / "city.json", (128, 128, 16), 40, 6)
+    journal = tmp_path / "city.journal"
+    with Cluster(router, tmp_path) as c:
+        srv = c.start("SRV", "coordinator", "--scenario", str(scenario), "--journal", str(journal),
+                      "--phase-deadline", "0.5", "--lost-after", "1", "--admit-deadline", "120")
+        srv.expect("coordinator ready")
+        c.start("ENV", "env", "--no-draw")
+        c.start("H01", "drone", "--id", "D01-D40", "--host", "H01", "--autopilot", "dstar")
+        gcs = c.start("GCS", "gcs", "--scenario", str(scenario), "--quiet", "--no-draw")
+        assert set(c.wait_all(timeout=180).values()) == {0}, [p.text for p in c.procs]
+    srv.expect(r"turn 1: H01 is still deciding")  # (its planning did outlast the deadline)
+    records = journal_records(journal)
+    assert not [r for r in records if r.get("lost")], "no drone LOST"
+    assert records[-1]["reason"] == "TURN_LIMIT"
+    gcs.expect("GAME OVER at turn 6: TURN_LIMIT")
+
+
+def test_a_hung_swarm_host_loses_its_drones_at_the_deadline_and_the_over_reaches_everyone(router, tmp_path):
+    """Issue 33, 8: a hung host (its token alive, no word, no move) still misses its phases at the deadline and its
+    drones are LOST after `--lost-after` misses; the OVER that then names forty lost drones reaches every process
+    (it used to exceed its key's size limit: each waited 30 s for the coordinator and exited 2)."""
+    with Cluster(router, tmp_path) as c:
+        srv, journal = start(c, tmp_path, "--phase-deadline", "0.5", "--lost-after", "2", "--size", "14,14,2",
+                             "--drones", "40")
+        env = c.start("ENV", "env", "--no-draw")
+        host = c.start("H01", "drone", "--id", "D01-D40", "--host", "H01", "--autopilot", "seed")
+        host.expect("You are connected as H01")
+        host.p.send_signal(signal.SIGSTOP)  # hung before the game starts (it starts once the GCS is there)
+        try:
+            gcs = c.start("GCS", "gcs", "--targets", "0,0,0", "--quiet", "--no-draw")
+            gcs.expect("GAME OVER at turn 2: NO_DRONE_ALIVE")
+            env.expect("OVER: no drone alive")
+        finally:
+            host.p.send_signal(signal.SIGCONT)
+        assert set(c.wait_all().values()) == {0}, [p.text for p in c.procs]
+    records = journal_records(journal)
+    turns = [r for r in records if r.get("record") == "turn"]
+    assert [len(r.get("hovered", ())) for r in turns] == [40, 40] and len(turns[-1]["lost"]) == 40
+    assert records[-1]["reason"] == "NO_DRONE_ALIVE" and records[-1]["text"].endswith("more")

@@ -309,7 +309,6 @@ def test_optional_fields_may_be_omitted() -> None:
     ("nps_ranked", "ranked", 8 ** 7),
     ("nps_ranked", "ranked", True),
     ("nps_ranked", "ranked", 1.0),
-    ("moves", "moves", b""),  # at least one move
 ])
 def test_rejects_wrong_field_value(name: str, field: str, value: object) -> None:
     rejects(mutated(name, **{field: value}))
