@@ -195,20 +195,28 @@ class Place:
                                                                                         grid.shape)):
                 continue
             pieces = _runs(grid[:, 0], g, inner)
-            if all(p.outer >= p.inner * (g - 1) + width for p in pieces) and (best is None or len(pieces) < len(best)):
+            if pieces is None or not all(p.outer >= p.inner * (g - 1) + width for p in pieces):
+                continue
+            if best is None or len(pieces) < len(best):
                 best = pieces
             if len(pieces) <= 1:
                 break
-        return cls(starts, best if best is not None and len(best) <= _PIECES else None)
+        return cls(starts, best)
 
 
-def _runs(heads: np.ndarray, group: int, inner: int) -> tuple[Piece, ...]:
-    """`heads` (where each group starts) cut into its longest runs of equal steps, as pieces."""
+def _runs(heads: np.ndarray, group: int, inner: int) -> tuple[Piece, ...] | None:
+    """`heads` (where each group starts) cut into its longest runs of equal steps, as pieces (None: more than
+    `_PIECES`)."""
     steps = np.diff(heads)
     changes = np.flatnonzero(steps[1:] != steps[:-1]) + 1  # (steps[c] differs from steps[c - 1])
-    pieces, row = [], 0
+    if len(changes) > 2 * _PIECES:
+        return None
+    pieces: list[Piece] = []
+    row = 0
     while row < len(heads):
-        later = changes[changes > row]
+        if len(pieces) == _PIECES:
+            return None
+        later = changes[np.searchsorted(changes, row + 1):]
         end = len(heads) if row + 1 >= len(heads) or not len(later) else int(later[0]) + 1
         outer = int(steps[row]) if end - row > 1 else inner * group
         pieces.append(Piece(row, end - row, group, int(heads[row]), outer, inner))
