@@ -542,9 +542,10 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
     from dronesim.scenario import Scenario
     from entities.gcs import End, Ground, SendDone, Station
     from entities.station_link import join, listen, publisher
-    from network.membership import Answered
+    from network.membership import Answered, await_presence
     from network.transport import Outbox, Presence, Received
     from schema import Keys, Status, Turn, drone_id
+    from schema.keys import RosKeys
 
     scenario = Scenario.load(scenario_file)
     root = f"perf{uuid.uuid4().hex[:8]}"
@@ -595,6 +596,9 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                     session.declare_subscriber(keys.upd, lambda _sample: None)
                 if variant.ros2:  # a ROS 2 user subscribed to every topic of domain 0 (RViz's are a few)
                     session.declare_subscriber("0/**", lambda _sample: None)
+                    # the viewer's node token comes once it hears OVER: a game played before would leave it waiting
+                    if not await_presence(session, RosKeys().node_tokens("dronesim"), 120.0):
+                        raise RuntimeError("the ROS 2 viewer did not appear within 120 s")
                 inbox = listen(session, keys, log)
                 member = join(session, inbox, log, connect_timeout=120.0, grace=30.0)
                 # the scripted ground station's protocol (`dronesim gcs --scenario`), quitting after the measure
@@ -1575,7 +1579,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{MECHANISMS_TITLE}\n\n{mechanisms}\n\n{mechanism_legend(repeat)}")
     for err in facts.get("errors", []):
         print(f"\n{err}", file=sys.stderr)
-    ok = all(r.ok for r in [*rows, *facts["mechanisms"]])
+    failed = [r.name for r in [*rows, *facts["mechanisms"]] if not r.ok]
+    for name in failed:
+        print(f"not ok: {name} (a process exited non-zero, a game failed or differs: its logs are kept)",
+              file=sys.stderr)
+    ok = not failed
     if ok and not args.keep_logs:
         shutil.rmtree(facts["logs"], ignore_errors=True)
         where = "removed (--keep-logs keeps them)"

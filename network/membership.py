@@ -6,7 +6,6 @@ entities/*_node.py) connects with this module and screens the coordinator's mess
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import threading
 import time
@@ -87,15 +86,14 @@ class Membership:
         self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
         self.coordinator, self._present, self._asking = "", False, False
-        # the sessions with a coordinator's presence token: an answer to CONNECT counts only from one of them
+        # the sessions with a coordinator's presence token, as this loop has heard them (`Presence` events): an
+        # answer to CONNECT counts only from one of them, and CONNECT is sent only once one is known (so the
+        # genuine answer never comes ahead of its sender's token)
         self._coordinators: set[str] = set()
-        self._watch = session.liveliness().declare_subscriber(self.keys.alive_of("SRV"), self._coordinator_token,
-                                                              history=True)
         self._lost_since: float | None = None
         self.progress = Progress.from_environment()  # for a health check (docker/healthcheck.py)
         self.progress.note("connecting", 0, "the coordinator")
         inbox.watch_presence("SRV")
-        self._connect()
         end, held, welcome = time.monotonic() + connect_timeout, [], None
         while welcome is None:
             event = inbox.get(max(0.0, end - time.monotonic()))
@@ -114,14 +112,6 @@ class Membership:
         self.clock: TurnClock = TurnClock(game=welcome.game, skips_status=skips_status, now=time.monotonic(),
                                           known=welcome.turn)
 
-    def _coordinator_token(self, sample: zenoh.Sample) -> None:  # (on Zenoh's thread)
-        with contextlib.suppress(ValueError):
-            sid = self.keys.presence_of(str(sample.key_expr))[1]
-            if sample.kind == zenoh.SampleKind.PUT:
-                self._coordinators.add(sid)
-            else:
-                self._coordinators.discard(sid)
-
     def _from_coordinator(self, replier: str) -> bool:  # (on Zenoh's thread)
         """Whether an answer to CONNECT comes from a session with a coordinator's presence token (on a plain router
         anyone may answer: a forged REFUSED must not send the entity away, nor a forged WELCOME keep it)."""
@@ -138,9 +128,17 @@ class Membership:
                   lambda reply, coordinator, error: self.inbox.post(Answered(reply, coordinator, error)),
                   accept=self._from_coordinator)
 
+    def _track(self, event: Presence) -> None:
+        """Note a coordinator's token that came or went (the sessions whose answers to CONNECT count)."""
+        self._present = event.alive
+        if event.alive:
+            self._coordinators.add(event.session)
+        else:
+            self._coordinators.discard(event.session)
+
     def _seen(self, event: Presence) -> None:
         """A coordinator's token came or went: one that appears is asked (again) if no CONNECT is out."""
-        self._present = event.alive
+        self._track(event)
         if event.alive and not self._asking:
             self._connect()
 
@@ -178,7 +176,7 @@ class Membership:
             return welcome
         if event.entity != "SRV":
             return None
-        self._present = event.alive
+        self._track(event)
         if event.alive and self._lost_since is not None:
             self._lost_since = None
             self.log.warning("the coordinator is back: connecting again")
@@ -200,7 +198,6 @@ class Membership:
             raise UsageError(f"the coordinator vanished and did not come back within {self.grace:g} s")
 
     def close(self) -> None:
-        self._watch.undeclare()
         self.token.undeclare()
 
     def screen(self, event: object, rejects: RejectCounter) -> bool:

@@ -180,6 +180,10 @@ class RosKeys:
     def node_token(self, zid: str, node_id: int, namespace: str, node: str) -> str:
         return f"{self.ADMIN}/{self.domain}/{zid}/{node_id}/{node_id}/{self.NODE}/%/{self.mangle(namespace)}/{node}"
 
+    def node_tokens(self, node: str) -> str:
+        """The pattern of the node tokens named `node` on this domain, from any process."""
+        return f"{self.ADMIN}/{self.domain}/*/*/*/{self.NODE}/%/*/{node}"
+
     def endpoint_token(self, zid: str, node_id: int, entity_id: int, kind: str, namespace: str, node: str,
                        topic: str, typename: str, type_hash: str, qos: str) -> str:
         return (f"{self.ADMIN}/{self.domain}/{zid}/{node_id}/{entity_id}/{kind}/%/{self.mangle(namespace)}/{node}/"

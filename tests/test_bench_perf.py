@@ -33,9 +33,9 @@ def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
     out_file = tmp_path / "BENCHMARKS.md"
     out_file.write_text("# Benchmarks\n\n## Autopilot benchmark\n\nkept\n", encoding="utf-8")
     code = perf.main(["--quick", "--write", "--output", str(out_file)])
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     rows = _rows(out)
-    assert code == 0, out
+    assert code == 0, err + out
     for name in ("floor: pub/sub round trip (callback replies)", "floor: pub/sub round trip (main thread replies)",
                  "floor: query round trip (callback replies)", "floor: query round trip (main thread replies)"):
         assert rows[name]["exit codes"] == "helper 0"
