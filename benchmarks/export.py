@@ -10,9 +10,9 @@ and back a floor higher, every drone flying; benchmarks/perf.py), played in-proc
 flies it (`dronesim.local.simulate`, one swarm host) for `--turns` turns, then quit; kept in `--cache` by its
 parameters. Its first tenth of turns is a second journal: the same drones and world, a tenth of the game.
 
-Each run is `python -m dronesim export JOURNAL --mcap OUT` in a child process, the two journals alternated:
-its wall time, its CPU (user + system of all its threads, from wait4: foxglove-sdk compresses on a thread of
-its own) and its peak resident memory (ru_maxrss). The machine is shared: each row says the 1-minute load
+Each run is `dronesim export JOURNAL --mcap OUT` in a child process, the two journals alternated: its wall
+time, its CPU (user + system of all its threads, from wait4: foxglove-sdk compresses on a thread of its own) and
+its peak resident memory (its VmHWM as it ends). The machine is shared: each row says the 1-minute load
 average before the run and the cores the rest of the machine used during it (/proc/stat, less the child's).
 """
 
@@ -95,6 +95,12 @@ def first_part(journal: Path, turns: int) -> Path:
     return path
 
 
+#: The child: `dronesim export`, then its peak resident memory (VmHWM: that of its own program; wait4's ru_maxrss
+#: would count the parent's pages it was forked with, the journal just played among them).
+_CHILD = ("import re, sys\nfrom dronesim.export import main\ncode = main(sys.argv[1:])\n"
+          "print(re.search(r'VmHWM:\\s+(\\d+) kB', open('/proc/self/status').read()).group(1))\nsys.exit(code)")
+
+
 def _busy() -> float:
     fields = [int(v) for v in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
     return (sum(fields[:8]) - fields[3] - fields[4]) / os.sysconf("SC_CLK_TCK")
@@ -103,7 +109,7 @@ def _busy() -> float:
 def export_once(journal: Path, label: str, out: Path) -> Run:
     load = os.getloadavg()[0]
     busy0, t0 = _busy(), time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "dronesim", "export", str(journal), "--mcap", str(out)],
+    proc = subprocess.Popen([sys.executable, "-c", _CHILD, str(journal), "--mcap", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=child_env(), text=True)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
@@ -111,10 +117,10 @@ def export_once(journal: Path, label: str, out: Path) -> Run:
     stdout, stderr = proc.communicate()
     if os.waitstatus_to_exitcode(status) != 0:
         raise SystemExit(f"dronesim export failed: {stderr.strip()}")
-    words = stdout.split()  # "exported T turns, M ROS 2 messages ..."
+    words = stdout.split()  # "exported T turns, M ROS 2 messages ...", then the child's VmHWM in kB
     cpu = usage.ru_utime + usage.ru_stime
     return Run(journal=label, turns=int(words[1]), messages=int(words[3]), wall=wall, cpu=cpu,
-               peak_mib=usage.ru_maxrss / 1024, file_mib=out.stat().st_size / 2**20, load=load,
+               peak_mib=int(words[-1]) / 1024, file_mib=out.stat().st_size / 2**20, load=load,
                others=max(0.0, busy - cpu) / wall)
 
 
