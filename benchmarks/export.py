@@ -12,7 +12,9 @@ parameters. Its first tenth of turns is a second journal: the same drones and wo
 
 Each run is `dronesim export JOURNAL --mcap OUT` in a child process, the two journals alternated: its wall
 time, its CPU (user + system of all its threads, from wait4: foxglove-sdk compresses on a thread of its own) and
-its peak resident memory (its VmHWM as it ends). The machine is shared: each row says the 1-minute load
+its peak resident memory (its VmHWM as it ends). The peak is the world's more than the game's: the buildings go
+out once, as a scene message of a cube each and a marker of a point each (this city has about 250 000 building
+cells; a 10x10x8 world's export peaks near 55 MiB). The machine is shared: each row says the 1-minute load
 average before the run and the cores the rest of the machine used during it (/proc/stat, less the child's).
 """
 
@@ -37,6 +39,10 @@ SECTION = "## MCAP export"
 #: Issue 35: a 1000-drone, 1000-turn journal exports in at most this many seconds.
 TARGET_S = 10.0
 SIZE = (256, 256, 32)
+#: Cores the rest of the machine may keep busy for a wall time to be judged.
+QUIET_CORES = 0.25
+#: A subsection written by hand that --write keeps.
+BEFORE = "### Against the exporter before"
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,11 +144,13 @@ def verdicts(runs: list[Run], drones: int, turns: int) -> list[str]:
     tenth = [r for r in runs if r.journal != "whole"]
     cpu, wall = statistics.median(r.cpu for r in whole), statistics.median(r.wall for r in whole)
     others = statistics.median(r.others for r in whole)
+    quiet = others <= QUIET_CORES
     out = [f"Time ({drones} drones, {turns} turns; target <= {TARGET_S:.0f} s): median CPU {cpu:.2f} s "
-           f"({'met' if cpu <= TARGET_S else 'missed'}), median wall {wall:.2f} s "
-           f"({'met' if wall <= TARGET_S else 'missed'}) while the rest of the machine kept "
-           f"{others:.2f} of its {os.cpu_count()} cores busy (a wall time taken on a shared machine is not the "
-           f"export's alone)."]
+           f"({'met' if cpu <= TARGET_S else 'missed'}); median wall {wall:.2f} s, "
+           + (f"{'met' if wall <= TARGET_S else 'missed'}." if quiet else
+              f"not judged: the rest of the machine kept {others:.2f} of its {os.cpu_count()} cores busy (the "
+              f"export had the rest; a quiet machine's wall time is about its CPU time, the compression on a "
+              f"second core).")]
     if tenth:
         peak, small = max(r.peak_mib for r in whole), max(r.peak_mib for r in tenth)
         out.append(f"Memory: peak {peak:.0f} MiB for the whole game, {small:.0f} MiB for its first tenth "
@@ -175,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
                       .strip(), "", table(runs), "", *(f"- {v}" for v in verdicts(runs, args.drones, args.turns))])
     print(body)
     if args.write:
-        replace_section(args.output, SECTION, body)
+        replace_section(args.output, SECTION, body, keep=BEFORE)
     return 0
 
 
