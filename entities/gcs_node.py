@@ -19,12 +19,9 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from typing import TextIO
 
-import zenoh
-
 from network.membership import add_entity_args
 from network.signals import until_stopped, waking
 from network.transport import (
-    Inbox,
     Outbox,
     add_zenoh_args,
     open_session,
@@ -80,8 +77,13 @@ def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
             if draw:
                 print(station.opening(), flush=True)
             show = publisher(Outbox(session), keys, logger, lambda text: print(text, flush=True))
-            take = ros2_goals(args, session, inbox, ground, station, logger) if args.ros2 else None
-            over = play(station, inbox, member, show, other=take or (lambda event: None))
+            take = None
+            if args.ros2:
+                from .ros2.node import take_goals
+
+                take = take_goals(args, session, inbox, ground, lambda drone, cell: station.want({drone: cell}),
+                                  lambda text: print(text, flush=True), logger)
+            over = play(station, inbox, member, show, other=partial(unexpected, take, logger))
         print(station.report(draw=draw), flush=True)
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.snapshot())
@@ -89,34 +91,10 @@ def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
         return over
 
 
-def ros2_goals(args: argparse.Namespace, session: zenoh.Session, inbox: Inbox, ground: Ground, station: Station,
-               logger: logging.Logger) -> Callable[[object], None]:
-    """Take ROS 2 goals (`entities.ros2`): each drone's goal topic is subscribed, a goal read is the station's
-    target for that drone, a bad one is refused with a log line and counted. Returns the handler of the goals."""
-    from .ros2.goals import Goal, Goals
-    from .ros2.model import POSE, drone_topic
-    from .ros2.node import RosGraph, ros_keys
-
-    goals = Goals(ground.world, frozenset(ground.starts), args.cell_size)
-    graph = RosGraph(session, ros_keys(args), "dronesim_gcs")
-    graph.subscribe({drone_topic(args.namespace, d, "goal_pose"): d for d in ground.starts}, POSE,
-                    lambda drone, payload: inbox.post(Goal(drone, payload)))
-    logger.info("taking ROS 2 goals on %s, domain %d", drone_topic(args.namespace, "<Dnn>", "goal_pose"), args.domain)
-
-    def take(event: object) -> None:
-        if not isinstance(event, Goal):
-            logger.error("unexpected event %r", event)
-            return
-        try:
-            drone, cell = goals.read(event)
-        except UsageError as err:
-            logger.warning("refused a ROS 2 goal for %s: %s (refused so far: %s)", event.drone, err,
-                           dict(goals.refused))
-            return
-        station.want({drone: cell})
-        logger.info("ROS 2 goal: %s -> %s", drone, cell)
-        print(f"ROS 2 goal: {drone} -> {cell}", flush=True)
-    return take
+def unexpected(take: Callable[[object], bool] | None, logger: logging.Logger, event: object) -> None:
+    """An event of the inbox besides the game's: a ROS 2 goal if goals are taken, else a bug (logged)."""
+    if take is None or not take(event):
+        logger.error("unexpected event %r", event)
 
 
 def cli(argv: list[str] | None = None, *, scenario_targets: Callable[[str], Sequence[str]] | None = None) -> int:
@@ -137,13 +115,17 @@ def cli(argv: list[str] | None = None, *, scenario_targets: Callable[[str], Sequ
     add_entity_args(p)
     add_web_args(p)
     p.add_argument("--ros2", action="store_true",
-                   help="take targets from ROS 2 goals (/<namespace>/<Dnn>/goal_pose, docs/ros2.md)")
+                   help="also take targets from ROS 2 goals (/<namespace>/<Dnn>/goal_pose, docs/ros2.md), beside "
+                        "the terminal's or the web page's")
     add_ros2_args(p, viewer=False)
     add_mavlink_args(p, cell_size=False)  # (--cell-size: the ROS 2 flags')
     args = p.parse_args(argv)
     logger = setup_logging(args.log_level, "GCS")
 
     def run() -> object:
+        if args.ros2 and (args.mavlink or args.replay is not None):
+            raise UsageError("--ros2 goals go to the terminal or web ground station: not with --mavlink (its "
+                             "targets are its vehicles') nor --replay (a replay takes no targets)")
         if args.scenario:
             if scenario_targets is None:
                 raise UsageError("--scenario is read by the dronesim command: dronesim gcs --scenario FILE")

@@ -318,6 +318,16 @@ def free_cell_above(world: World, start: tuple[int, int, int]) -> tuple[int, int
     raise AssertionError("no free cell above the start")
 
 
+def two_drone_game(c: Cluster, journal: Path, max_turns: int, pace: float) -> None:
+    """The coordinator of a 10x10x8 game of two seed drones (seed 7), its environment and drones, started."""
+    srv = c.start("SRV", "coordinator", "--seed", "7", "--size", "10,10,8", "--drones", "2", "--max-turns",
+                  str(max_turns), "--pace", str(pace), "--journal", str(journal), "--admit-deadline", "60")
+    srv.expect("coordinator ready")
+    c.start("ENV", "env", "--no-draw")
+    for d in ("D01", "D02"):
+        c.start(d, "drone", "--id", d, "--autopilot", "seed")
+
+
 def test_live_topics_graph_and_goals_with_zenoh_ros2_sdk(tmp_path: Path, sdk) -> None:
     """A game with `dronesim ros2` and `dronesim gcs --ros2`: zenoh-ros2-sdk sees every topic with its type in
     its graph view, decodes the poses (each the journal's cell at its stamp's turn), and its goal flies D01
@@ -326,12 +336,7 @@ def test_live_topics_graph_and_goals_with_zenoh_ros2_sdk(tmp_path: Path, sdk) ->
     wire: list[tuple[str, bytes, bytes | None]] = []
     with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
         port = int(locator.rsplit(":", 1)[1])
-        srv = c.start("SRV", "coordinator", "--seed", "7", "--size", "10,10,8", "--drones", "2", "--max-turns",
-                      "300", "--pace", "0.04", "--journal", str(journal), "--admit-deadline", "60")
-        srv.expect("coordinator ready")
-        c.start("ENV", "env", "--no-draw")
-        for d in ("D01", "D02"):
-            c.start(d, "drone", "--id", d, "--autopilot", "seed")
+        two_drone_game(c, journal, 300, 0.04)
         gcs = c.start("GCS", "gcs", "--ros2", "--quiet", "--no-draw")
         viewer = c.start("ROS2", "ros2", "--turn-period", "0.1")
         viewer.expect("ros2: node /dronesim")
@@ -412,6 +417,118 @@ def test_live_topics_graph_and_goals_with_zenoh_ros2_sdk(tmp_path: Path, sdk) ->
         sequences.setdefault((key, att[17:]), []).append(struct.unpack_from("<Q", att)[0])
     for (key, _), seq in sequences.items():
         assert seq == sorted(seq) and len(set(seq)) == len(seq), key
+
+
+def test_the_web_ground_station_takes_ros2_goals_beside_its_page(tmp_path: Path) -> None:
+    """`dronesim gcs --web ... --ros2`: a goal published on D01's goal topic is that drone's target as if clicked
+    on the page (it shows it, in the drone's row and in its log), and the drone flies there; a goal in another
+    frame is refused with a line in the page's log; the page's quit ends the game."""
+    import json
+    import re
+    import urllib.request
+
+    def api(url: str, path: str, body: dict | None = None) -> dict:
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(url + path, data=data, headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(req, timeout=10) as reply:
+            return json.loads(reply.read())
+
+    journal = tmp_path / "game.journal"
+    with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
+        two_drone_game(c, journal, 400, 0.02)
+        gcs = c.start("GCS", "gcs", "--web", "127.0.0.1:0", "--pace", "0", "--ros2")
+        found = re.search(r"(http://\S+)", gcs.expect("web ground station: http"))
+        assert found is not None
+        url = found.group(1).rstrip("/")
+        gcs.expect("taking ROS 2 goals")
+        config, _ = header_config(journal_records(journal)[0])
+        world = build_world(config.world, (d.start for d in config.drones))
+        cell = free_cell_above(world, dict((d.drone, d.start) for d in config.drones)["D01"])
+        key = RosKeys(0).topic("/dronesim/D01/goal_pose", POSE, type_hash(POSE))
+        raw = zenoh.open(zenoh.Config.from_json5(f'{{mode: "client", connect: {{endpoints: ["{locator}"]}}}}'))
+        try:
+            deadline = time.monotonic() + 30
+            while True:  # (until the goal's route is up: the subscription is the ground station's to declare)
+                raw.put(key, goal(*map(float, cell)))
+                try:
+                    gcs.expect(rf"ROS 2 goal: D01 -> \({cell[0]}, {cell[1]}, {cell[2]}\)", timeout=1)
+                    break
+                except AssertionError:
+                    assert time.monotonic() < deadline, gcs.text()
+            raw.put(key, goal(*map(float, cell), frame="odom"))
+            gcs.expect("refused a ROS 2 goal for D01: other frame")
+        finally:
+            raw.close()
+        deadline = time.monotonic() + 60
+        while (state := api(url, "/api/state")) and time.monotonic() < deadline:
+            d01 = next(d for d in state["drones"] if d["id"] == "D01")
+            if d01["pos"] == list(cell):
+                break
+            threading.Event().wait(0.2)
+        assert d01["wanted"] == list(cell) and d01["pos"] == list(cell), state
+        log = [e["text"] for e in state["log"]]
+        assert f"ROS 2 goal: D01 -> {cell}" in log and any(t.startswith("refused a ROS 2 goal for D01: other frame")
+                                                             for t in log), log
+        assert api(url, "/api/control", {"action": "quit"})["ok"]
+        codes = c.wait_all(timeout=120)
+    assert set(codes.values()) == {0}, [p.text() for p in c.procs if p.p.returncode]
+    records = journal_records(journal)
+    final, _ = tracks(config, records)
+    assert final["D01"].pos == cell and final["D01"].target == cell
+
+
+def test_ros2_goals_are_not_taken_where_no_one_would_use_them(caplog: pytest.LogCaptureFixture) -> None:
+    """A MAVLink ground station (its targets are its vehicles') and a replay refuse --ros2, rather than ignore it."""
+    from entities.gcs_node import cli
+
+    for face in (["--mavlink"], ["--web", "127.0.0.1:0", "--replay", "x.journal"]):
+        assert cli([*face, "--ros2", "--connect", "tcp/127.0.0.1:1"]) == 2
+    assert caplog.text.count("--ros2 goals go to the terminal or web ground station") == 2
+
+
+def test_a_stuck_subscriber_neither_holds_our_publisher_nor_starves_another(tmp_path: Path) -> None:
+    """A slow or absent ROS 2 subscriber never slows the game: the viewer is a process of its own (it reads the
+    newest STATUS when it wants, a ring of one), and its telemetry (`RosGraph.publish`, best effort, congestion
+    control DROP) beside a subscriber that stops reading after its first sample goes on: 128 MiB more of poses
+    go out without waiting for it, and a subscriber that reads still gets what comes after."""
+    from entities.ros2.model import Out
+    from entities.ros2.node import RosGraph
+
+    release = threading.Event()
+    stuck_calls: list[int] = []
+    got: list[int] = []
+    topic = "/dronesim/D01/pose"
+
+    def client() -> zenoh.Session:
+        return zenoh.open(zenoh.Config.from_json5(f'{{mode: "client", connect: {{endpoints: ["{locator}"]}}}}'))
+
+    with embedded_router() as locator:
+        ours, stuck, reader = client(), client(), client()
+        try:
+            key = RosKeys(0).topic(topic, POSE, type_hash(POSE))
+            stuck.declare_subscriber(key, lambda sample: (stuck_calls.append(1), release.wait()))
+            reader.declare_subscriber(key, lambda sample: got.append(int.from_bytes(sample.payload.to_bytes()[:4],
+                                                                                     "little")))
+            graph = RosGraph(ours, RosKeys(0), "dronesim")
+            filler = bytes(64 << 10)
+            deadline = time.monotonic() + 30
+            while not got and time.monotonic() < deadline:  # (until both subscriptions reach our publisher)
+                graph.publish(Out(topic, POSE, (0).to_bytes(4, "little") + filler, 0))
+                threading.Event().wait(0.05)
+            assert got and stuck_calls == [1]
+            for i in range(1, 2049):  # 128 MiB: far more than the stuck one's socket buffers and queues hold
+                graph.publish(Out(topic, POSE, i.to_bytes(4, "little") + filler, i))
+            deadline = time.monotonic() + 30
+            while 10_000 not in got and time.monotonic() < deadline:  # what comes after the flood still comes
+                graph.publish(Out(topic, POSE, (10_000).to_bytes(4, "little"), 0))
+                threading.Event().wait(0.05)
+            assert 10_000 in got and stuck_calls == [1]
+            assert graph.sent >= 2049
+            graph.close()
+        finally:
+            release.set()
+            for session in (ours, stuck, reader):
+                session.close()
 
 
 def publish(pub, frame: str, at: tuple) -> None:
@@ -632,12 +749,7 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
     with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
         viewer = c.start("ROS2", "ros2", "--foxglove", "127.0.0.1:0")
         url = viewer.expect(r"foxglove on ws://").rsplit(" ", 1)[1]
-        srv = c.start("SRV", "coordinator", "--seed", "7", "--size", "10,10,8", "--drones", "2", "--max-turns",
-                      "120", "--pace", "0.05", "--journal", str(journal), "--admit-deadline", "60")
-        srv.expect("coordinator ready")
-        c.start("ENV", "env", "--no-draw")
-        for d in ("D01", "D02"):
-            c.start(d, "drone", "--id", d, "--autopilot", "seed")
+        two_drone_game(c, journal, 120, 0.05)
         c.start("GCS", "gcs", "--ros2", "--quiet", "--no-draw")  # (no target: the drones hover to the turn limit)
         with pytest.raises(InvalidStatus):
             ws.connect(url, subprotocols=["foxglove.websocket.v1"], open_timeout=10).close()
@@ -692,3 +804,5 @@ def test_up_runs_the_viewer_and_a_ground_station_taking_goals() -> None:
     assert "--ros2" in procs["GCS"] and procs["ROS2"][3] == "ros2"
     assert procs["ROS2"][-2:] == ["--foxglove", "8765"]
     assert "ROS2" not in dict(commands(build_parser().parse_args(["--drones", "2"]), "tcp/127.0.0.1:7447"))
+    web = dict(commands(build_parser().parse_args(["--drones", "2", "--ros2", "--web", "8080"]), "tcp/127.0.0.1:7447"))
+    assert {"--ros2", "--web"} <= set(web["GCS"]) and "ROS2" in web  # (the page and ROS 2 goals, side by side)

@@ -43,6 +43,11 @@ class Goals:
         self.taken += 1
         return goal.drone, cell
 
+    def refuse(self, err: UsageError) -> None:
+        """A goal read well, then refused by the ground station (its drone gone, the game over): counted so."""
+        self.taken -= 1
+        self.refused[str(err).split(":", 1)[0]] += 1
+
     def _cell(self, goal: Goal) -> Cell:
         if goal.drone not in self.drones:
             raise UsageError(f"unknown drone: {goal.drone} is not in this game")

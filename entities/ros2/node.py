@@ -29,13 +29,14 @@ import zenoh.ext
 
 from network.signals import until_stopped, waking
 from network.transport import Inbox, Received, add_zenoh_args, open_session, setup_logging, zenoh_config
-from schema import Keys, MapRequest, Over, Status, UsageError, WorldMap
+from schema import Cell, Keys, MapRequest, Over, Status, UsageError, WorldMap
 from schema.keys import RosKeys
 from schema.tuning import FINAL_STATUS_WAIT, ROS_CPU_SHARE, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE, ROS_SLOWEST
 
-from ..gcs import OBSERVED_ENDS
+from ..gcs import OBSERVED_ENDS, Ground
 from .cdr import type_hash
-from .model import Out, Outs, Scene, Snapshot
+from .goals import Goal, Goals
+from .model import POSE, Out, Outs, Scene, Snapshot, drone_topic
 
 #: rmw_zenoh's QoS strings (reliability:durability:history,depth:deadline:lifespan:liveliness), for the tokens.
 QOS_TELEMETRY = "2:2:1,1:,:,:,,"  # best effort, volatile, keep last 1
@@ -157,6 +158,42 @@ class RosGraph:
             h.undeclare()
         self._node_token.undeclare()
         self._pubs, self._handles = {}, []
+
+
+def take_goals(args: argparse.Namespace, session: zenoh.Session, inbox: Inbox, ground: Ground,
+               set_target: Callable[[str, Cell], object], say: Callable[[str], None],
+               logger: logging.Logger) -> Callable[[object], bool]:
+    """ROS 2 goals as a ground station's targets, whatever its face (terminal, web page): each drone's goal topic
+    is subscribed (`args`: the ROS 2 flags), each goal posted to `inbox`. Returns the handler of the inbox's
+    events: a goal is read (`Goals`) and, if it is one, `set_target(drone, cell)` (which may refuse it too, with
+    a UsageError); what became of it is logged and `say`-ed (a refusal counted by reason). True for a goal."""
+    goals = Goals(ground.world, frozenset(ground.starts), args.cell_size)
+    graph = RosGraph(session, ros_keys(args), "dronesim_gcs")
+    graph.subscribe({drone_topic(args.namespace, d, "goal_pose"): d for d in ground.starts}, POSE,
+                    lambda drone, payload: inbox.post(Goal(drone, payload)))
+    logger.info("taking ROS 2 goals on %s, domain %d", drone_topic(args.namespace, "<Dnn>", "goal_pose"), args.domain)
+
+    def refused(drone: str, err: UsageError) -> bool:
+        logger.warning("refused a ROS 2 goal for %s: %s (refused so far: %s)", drone, err, dict(goals.refused))
+        say(f"refused a ROS 2 goal for {drone}: {err}")
+        return True
+
+    def take(event: object) -> bool:
+        if not isinstance(event, Goal):
+            return False
+        try:
+            drone, cell = goals.read(event)
+        except UsageError as err:
+            return refused(event.drone, err)
+        try:
+            set_target(drone, cell)
+        except UsageError as err:
+            goals.refuse(err)
+            return refused(drone, err)
+        logger.info("ROS 2 goal: %s -> %s", drone, cell)
+        say(f"ROS 2 goal: {drone} -> {cell}")
+        return True
+    return take
 
 
 @dataclass(frozen=True, slots=True)

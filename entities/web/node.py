@@ -13,12 +13,15 @@ import logging
 import queue
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 
+import zenoh
+
 from network.signals import over_status, waking
-from network.transport import Outbox, open_session, zenoh_config
-from schema import Keys, Over, UsageError
+from network.transport import Inbox, Outbox, open_session, zenoh_config
+from schema import Cell, Keys, Over, UsageError
 from schema.tuning import COMMAND_TIMEOUT
 
 from ..gcs import Ground
@@ -123,8 +126,9 @@ def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[st
                 server.start()
                 print(f"web ground station: {server.url} ({state.describe()})", flush=True)
                 send = publisher(Outbox(session), keys, logger, lambda text: state.note("info", text))
+                take = ros2_goals(args, session, inbox, ground, state, logger) if args.ros2 else None
                 over = play(state, inbox, member, lambda e: hub.publish(state.snapshot()) if isinstance(e, Refresh)
-                            else send(e), other=lambda cmd: carry_out(state, cmd))
+                            else send(e), other=lambda e: None if take is not None and take(e) else carry_out(state, e))
             backend.close()  # the commands still queued are refused: the game is over
             for cmd in inbox.drain():
                 carry_out(state, cmd)
@@ -144,6 +148,21 @@ def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[st
     finally:
         server.stop()
     return over
+
+
+def ros2_goals(args: argparse.Namespace, session: zenoh.Session, inbox: Inbox, ground: Ground, state: GroundState,
+               logger: logging.Logger) -> Callable[[object], bool]:
+    """ROS 2 goals beside the page's targets (`--ros2`): each a target as if clicked on the page (the same checks),
+    its fate in the page's log."""
+    from ..ros2.node import take_goals
+
+    def set_target(drone: str, cell: Cell) -> None:
+        try:
+            state.set_target(drone, cell)
+        except Rejected as err:
+            raise UsageError(str(err)) from None
+
+    return take_goals(args, session, inbox, ground, set_target, lambda text: state.note("info", text), logger)
 
 
 class ReplayBackend:
