@@ -796,6 +796,28 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
     assert {"drone/D01", "drone/D02"} <= ids
 
 
+def test_the_shipped_rviz_config_names_our_topics_with_qos_they_match() -> None:
+    """docs/dronesim.rviz (RViz2 itself is not run here: no ROS 2 package repository is reachable): fixed frame
+    ``map``; each display's topic is one `dronesim ros2` publishes, of the type the display reads, asking a QoS our
+    publisher offers (the markers reliable and transient local, as latched; telemetry best effort, volatile); the
+    goal tool sends to the goal topic the ground station takes."""
+    yaml = pytest.importorskip("yaml", reason="pyyaml is in the test extra")
+    config = yaml.safe_load((Path(__file__).resolve().parent.parent / "docs" / "dronesim.rviz").read_text())
+    manager = config["Visualization Manager"]
+    assert manager["Global Options"]["Fixed Frame"] == "map"
+    scene = Scene()
+    reads = {"rviz_default_plugins/MarkerArray": (scene.markers_topic, ("Reliable", "Transient Local")),
+             "rviz_default_plugins/Pose": (scene.pose_topic("D01"), ("Best Effort", "Volatile")),
+             "rviz_default_plugins/Path": (scene.path_topic("D01"), ("Best Effort", "Volatile"))}
+    shown = {}
+    for display in manager["Displays"]:
+        if "Topic" in display:
+            topic = display["Topic"]
+            shown[display["Class"]] = (topic["Value"], (topic["Reliability Policy"], topic["Durability Policy"]))
+    assert shown == reads
+    assert {t.get("Topic", {}).get("Value") for t in manager["Tools"]} >= {scene.goal_topic("D01")}
+
+
 def test_up_runs_the_viewer_and_a_ground_station_taking_goals() -> None:
     from dronesim.up import build_parser, commands
 
