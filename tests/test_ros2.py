@@ -658,6 +658,7 @@ def test_export_is_a_ros2_bag_rosbags_reads_scene_and_all(tmp_path: Path, game_j
 def test_foxglove_msgs_are_foxglove_sdk_scene_field_for_field() -> None:
     """The ROS 2 scene's definitions (shipped as .msg text) have the fields, in order and of the same kinds, of
     the scene schema foxglove-sdk ships (protobuf, made from the same source as Foxglove's ROS 2 messages)."""
+    pytest.importorskip("google.protobuf", reason="protobuf is in the ros2 extra")
     from foxglove.messages import SceneUpdate
     from google.protobuf import descriptor_pb2
     from google.protobuf.descriptor import FieldDescriptor as F
