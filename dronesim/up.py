@@ -148,6 +148,9 @@ def main(args: argparse.Namespace) -> int:
             path = pathlib.Path(tmp) / "scenario.json"
             path.write_text(json.dumps(data))
             return main(argparse.Namespace(**{**vars(args), "scen": None, "world": None, "scenario": str(path)}))
+    if args.ros2 and args.mavlink:
+        raise UsageError("--ros2 takes ROS 2 goals, which a MAVLink ground station does not (its vehicles' targets are "
+                         "MAVLink's); --foxglove PORT alone runs the viewer, which publishes the game to ROS 2 too")
     check_game(args)
     if args.insecure:
         return play(args, None)

@@ -484,6 +484,9 @@ def test_ros2_goals_are_not_taken_where_no_one_would_use_them(caplog: pytest.Log
     for face in (["--mavlink"], ["--web", "127.0.0.1:0", "--replay", "x.journal"]):
         assert cli([*face, "--ros2", "--connect", "tcp/127.0.0.1:1"]) == 2
     assert caplog.text.count("--ros2 goals go to the terminal or web ground station") == 2
+    from dronesim.up import cli as up
+
+    assert up(["--drones", "2", "--ros2", "--mavlink"]) == 2
 
 
 def test_a_stuck_subscriber_neither_holds_our_publisher_nor_starves_another(tmp_path: Path) -> None:
