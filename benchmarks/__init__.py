@@ -13,8 +13,8 @@ import sys
 from pathlib import Path
 
 #: benchmark name -> module (each has ``main(argv) -> int``).
-BENCHMARKS = {"autopilot": "autopilot", "export": "export", "flood": "flood", "perf": "perf", "rl": "rl",
-              "swarm": "swarm"}
+BENCHMARKS = {"autopilot": "autopilot", "export": "export", "flood": "flood", "lifelong": "lifelong", "perf": "perf",
+              "rl": "rl", "swarm": "swarm"}
 
 
 def cli(argv: list[str] | None = None) -> int:

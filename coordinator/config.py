@@ -89,6 +89,9 @@ class GameConfig:
     link_grace: float = LINK_GRACE_S  # seconds the game holds for the entities after a lost link (a router restart)
     gcs_grace: float = GCS_GRACE_S  # seconds a resumed game waits for its ground station once the others are back
     arbiter: str = "lacam"  # the cooperative drones' arbitration: ARBITERS (journaled in the header if not lacam)
+    #: Lifelong: the ground station gives a drone a new target each time it reaches its own (entities/tasks.py); the
+    #: engine counts the tasks done and the end says how many, and how many a turn (journaled in the header if so).
+    lifelong: bool = False
 
     def __post_init__(self) -> None:
         if self.arbiter not in ARBITERS:

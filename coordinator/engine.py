@@ -194,6 +194,9 @@ class Engine:
         #: Words from hosts still deciding this drones' phase (empty MOVES): each one restarts its deadline
         #: (`phase_cap`).
         self.deciding = 0
+        #: A lifelong game's tasks done so far: arrivals on a target given (`Fleet.tasks_done`, counted after each
+        #: turn's moves, and again as a resumed game replays its journal).
+        self.tasks = 0
 
     # ------------------------------------------------------------------ queries
 
@@ -716,6 +719,8 @@ class Engine:
         for i in lost.tolist():
             if fleet.state[i] == ALIVE:
                 self._lose(i)
+        if self.config.lifelong:
+            self.tasks += fleet.tasks_done()
         log = self._turn_log
         if self.journaled:  # what the turn did, drone by drone
             if any_moved:
@@ -768,10 +773,14 @@ class Engine:
         turn = self.turn if turn is None else turn
         started = self.stage is not Stage.ADMITTING
         self._enter(Stage.OVER)
+        lifelong = self.config.lifelong and started
+        if lifelong:  # (first: the names an end lists are cut to fit after it)
+            text = f"{self.tasks} tasks done in {turn} turns, {self.tasks / max(turn, 1):.3f} a turn; {text}"
         text = clipped(text)
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
         self._log.info("game over at turn %d: %s", turn, text)
-        return [*([Record(over_record(turn, reason.value, text))] if started else []), Publish(self.end)]
+        record = over_record(turn, reason.value, text, self.tasks if lifelong else None)
+        return [*([Record(record)] if started else []), Publish(self.end)]
 
     # ------------------------------------------------------------------ resuming
 
@@ -806,6 +815,8 @@ class Engine:
             fleet.end(row[d], DroneState.DEAD, cause)
         for d in r.lost:
             fleet.end(row[d], DroneState.LOST, Cause.LOST)
+        if self.config.lifelong:
+            self.tasks += fleet.tasks_done()
         if state_hash(self.status(r.turn)) != r.state:
             raise UsageError(f"the journal's turn {r.turn} does not replay to its recorded state")
 

@@ -54,6 +54,7 @@ class Fleet:
         self.state = np.full(n, ALIVE, np.uint8)
         self.target = np.full((n, 3), -1, np.int32)
         self.note = np.zeros(n, np.uint8)
+        self.done = np.zeros(n, bool)  # on its target at the end of a turn since that target was given (a task done)
         self.cause = np.zeros(n, np.uint8)
         self.misses = np.zeros(n, np.int32)
         self.host: list[str | None] = [None] * n
@@ -101,6 +102,15 @@ class Fleet:
         """New targets for a drone (a row and a cell) or several (rows and an (n, 3) array of cells)."""
         self.target[rows] = targets
         self.note[rows] = 0  # Note.NONE: a new target, nothing said of it yet
+        self.done[rows] = False
+
+    def tasks_done(self) -> int:
+        """How many alive drones are on their targets for the first time since they were given (after a turn's
+        moves): the tasks this turn completed (`done` notes them)."""
+        on = (self.state == ALIVE) & (self.target[:, 0] >= 0) & (self.pos == self.target).all(axis=1)
+        new = on & ~self.done
+        self.done |= on
+        return int(np.count_nonzero(new))
 
     def end(self, i: int, state: DroneState, cause: Cause) -> None:
         self.state[i], self.cause[i] = code_of(state), code_of(cause)

@@ -7,7 +7,7 @@ no timestamps) so two runs of the same scenario give byte-identical journals, wh
            "drones": [{drone, start, autopilot, cooperative}], "max_turns", "lost_after"}
   turn    {"record": "turn", "turn": t, and what the turn changed: "targets", "intent", "moves", "notes",
            "gave_way", "yielded", "hovered", "deaths", "lost", "state" (the STATUS's digest)}
-  over    {"record": "over", "turn": t, "reason", "text"}
+  over    {"record": "over", "turn": t, "reason", "text"; a lifelong game's: "tasks", the tasks done}
 """
 
 from __future__ import annotations
@@ -126,6 +126,8 @@ def header_record(config: GameConfig, size: Cell, drones: Iterable[tuple[str, li
                               "max_turns": config.max_turns, "lost_after": config.lost_after}
     if config.arbiter != "lacam":
         header["arbiter"] = config.arbiter
+    if config.lifelong:
+        header["lifelong"] = True
     if drones is not None:  # (the journal's lines sort their keys: the order here is not the written one)
         world["cells"] = config.world.cells.hex()
         header["drones"] = [dict(zip(("drone", "start", "autopilot", "cooperative"), row)) for row in drones]
@@ -142,7 +144,8 @@ def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
         drones = tuple(DroneSpec(drone=d["drone"], start=tuple(d["start"])) for d in header["drones"])
         autopilots = {d["drone"]: d["autopilot"] for d in header["drones"]}
         config = GameConfig(world=spec, drones=drones, max_turns=header["max_turns"],
-                            lost_after=header.get("lost_after", LOST_AFTER), arbiter=header.get("arbiter", "lacam"))
+                            lost_after=header.get("lost_after", LOST_AFTER), arbiter=header.get("arbiter", "lacam"),
+                            lifelong=header.get("lifelong", False) is True)
     except (KeyError, TypeError, ValueError, IndexError, RemoteInputError) as exc:
         raise UsageError(f"bad journal header: {exc}") from None
     return config, autopilots
@@ -191,8 +194,10 @@ class TurnLog:
         self.record["state"] = digest
 
 
-def over_record(turn: int, reason: str, text: str) -> dict:
-    return {"record": "over", "turn": turn, "reason": reason, "text": text}
+def over_record(turn: int, reason: str, text: str, tasks: int | None = None) -> dict:
+    """The journal's last record; `tasks`: a lifelong game's tasks done (None: not lifelong)."""
+    record = {"record": "over", "turn": turn, "reason": reason, "text": text}
+    return record if tasks is None else {**record, "tasks": tasks}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -248,6 +253,8 @@ class Track:
     cause: str = ""
     path: list[Cell] = field(default_factory=list)
     target: Cell | None = None
+    tasks: int = 0  # arrivals on a target given, each counted once (a lifelong game's tasks, as the engine counts)
+    done: bool = False  # on its target at the end of a turn since that target was given
 
 
 def tracks(config: GameConfig, records: Iterable[dict], until: int | None = None) -> tuple[dict[str, Track], int]:
@@ -259,7 +266,7 @@ def tracks(config: GameConfig, records: Iterable[dict], until: int | None = None
             continue
         last = r.turn
         for d, p in r.targets.items():
-            out[d].target = p
+            out[d].target, out[d].done = p, False
         for d, p in r.moves.items():
             out[d].pos = p
             out[d].path.append(p)
@@ -267,4 +274,8 @@ def tracks(config: GameConfig, records: Iterable[dict], until: int | None = None
             out[d].state, out[d].cause = "DEAD", cause.value
         for d in r.lost:
             out[d].state, out[d].cause = "LOST", "LOST"
+        for d in r.targets.keys() | r.moves.keys():  # (only these can have arrived)
+            t = out[d]
+            if not t.done and t.state == "ALIVE" and t.pos == t.target:
+                t.tasks, t.done = t.tasks + 1, True
     return out, last

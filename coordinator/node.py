@@ -510,6 +510,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--arbiter", choices=ARBITERS, default="lacam",
                    help="the cooperative drones' arbitration: lacam, the complete search (default), or pibt, PIBT "
                         "alone (docs/cooperation.md)")
+    p.add_argument("--lifelong", action="store_true",
+                   help="a lifelong game: its ground station gives each drone a new target when it reaches its own "
+                        "(dronesim gcs --lifelong SEED); the end says the tasks done and the tasks a turn")
     p.add_argument("--gcs-grace", type=float, default=GCS_GRACE_S, metavar="SECONDS",
                    help="with --resume: how long the game waits for its ground station once the environment "
                         f"and the drones are back (default {GCS_GRACE_S:g})")
@@ -551,7 +554,7 @@ def game_config(args: argparse.Namespace, scenario: ScenarioReader | None = None
     deadlines = dict(phase_deadline=args.phase_deadline, phase_cap=args.phase_cap,
                      gcs_deadline=args.gcs_deadline or None, admit_deadline=args.admit_deadline or None,
                      lost_after=args.lost_after, gcs_grace=args.gcs_grace, link_grace=args.link_grace,
-                     arbiter=args.arbiter)
+                     arbiter=args.arbiter, lifelong=args.lifelong)
     if args.scenario:
         if scenario is None:
             raise UsageError("--scenario is read by the dronesim command: dronesim coordinator --scenario FILE")

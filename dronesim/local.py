@@ -20,6 +20,7 @@ from entities.autopilots import make_autopilot, make_swarm, pilot_class
 from entities.autopilots.base import Decision, drive, fly_pilots, fly_swarm
 from entities.environment import Environment
 from entities.gcs import Plan, gcs_done
+from entities.tasks import Tasks
 from schema import Cell, Connect, Intent, Moves, Nps, Over, Phase, Role, Status, StepTable, Turn, Upd
 from schema.errors import UsageError
 from schema.tables import drone_number
@@ -36,9 +37,14 @@ class Inputs:
     hovered: dict[int, set[str]] = field(default_factory=dict)  # turn -> drones that sent no NPS
     vanished: dict[int, set[str]] = field(default_factory=dict)  # turn -> drones whose process vanished
     scripted: bool = True  # no intents given: FINAL once the plan is over, as a scripted GCS says
+    #: Lifelong: a new target for each drone that reached its own, as a lifelong ground station draws it (its
+    #: intent then stays CONTINUE: the game goes on to its turn limit).
+    tasks: Tasks | None = None
 
     def intent(self, turn: int) -> Intent:
         if self.scripted and not self.intents:
+            if self.tasks is not None:
+                return Intent.CONTINUE
             return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
         said = [t for t in self.intents if t <= turn]
         return self.intents[max(said)] if said else Intent.CONTINUE
@@ -49,23 +55,26 @@ class Result:
     records: list[dict]
     over: Over
     statuses: list[Status]
+    final: Status | None = None  # the last STATUS
+    tasks: int = 0  # a lifelong game's tasks done (`Engine.tasks`)
 
 
 def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
              logger: logging.Logger | None = None, *, keep_statuses: bool = False, verify_env: bool = True,
              swarm: bool = False, swarm_min: int = SWARM_MIN, arbiter: Arbiter | None = None,
-             pilot_options: Mapping[str, Mapping[str, object]] | None = None) -> Result:
+             pilot_options: Mapping[str, Mapping[str, object]] | None = None, journaled: bool = True) -> Result:
     """Play the game. `swarm`: the drones flown as `dronesim up --swarm` flies them, one host per
     autopilot sending one MOVES a turn, with the autopilot's swarm form from `swarm_min` drones on (the
     journal is the same; drones that miss or vanish need the layout of a process per drone).
     `arbiter` (`Engine.arbiter`, e.g. the former `arbiter.fixed`) and `pilot_options` (autopilot name ->
-    options for each of its instances flown one per drone, e.g. D*'s `known` map) are the benchmark's."""
+    options for each of its instances flown one per drone, e.g. D*'s `known` map) are the benchmark's, and so is
+    `journaled` False: the turn records say only their turn (a long game of thousands of drones in less memory)."""
     log = logger or logging.getLogger("dronesim.local")
     if swarm and (inputs.hovered or inputs.vanished):
         raise UsageError("drones that miss a turn or vanish are played with one process per drone, not swarm hosts")
     world = build_world(config.world, (d.start for d in config.drones))
     engine = Engine(config, log, world)
-    engine.verify_env = verify_env
+    engine.verify_env, engine.journaled = verify_env, journaled
     if arbiter is not None:  # (the benchmark's; by default the engine's own)
         engine.arbiter = arbiter
     records: list[dict] = []
@@ -93,15 +102,19 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
               for d, a in autopilots.items() if swarms.get(host_of[d]) is None}
     env = Environment(world, {d.drone: d.start for d in config.drones})  # (as its WELCOME says: each at its start)
     current: dict[str, Cell] = {}
+    last: Status | None = None  # the last STATUS (a lifelong ground station's draws read it)
     while queue:
         effect = queue.popleft()
         match effect:
             case Record(data):
                 records.append(data)
             case Publish(Turn(phase=Phase.GCS, turn=t)):
-                current.update(inputs.plan.at(t))
+                given = inputs.plan.at(t)
+                current.update(given)
                 alive = set(engine.alive())
                 current = {d: c for d, c in current.items() if d in alive}
+                if inputs.tasks is not None and last is not None:
+                    current.update(inputs.tasks.assign(t, last, given))
                 push(engine.receive(gcs_done(t, current, inputs.intent(t), engine.targets())))
             case Publish(Turn(phase=Phase.DRONES, turn=t) as turn):
                 for d in sorted(inputs.vanished.get(t, ())):
@@ -133,10 +146,11 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
                     env.move(turn.moves)
             case Publish(Status() as status):
                 env.sync(status)
+                last = status
                 if keep_statuses:
                     statuses.append(status)
             case Refusal(what, err):
                 log.warning("rejected %s: %s", what, err)
     assert engine.end is not None
-    return Result(records=records, over=engine.end, statuses=statuses)
+    return Result(records=records, over=engine.end, statuses=statuses, final=last, tasks=engine.tasks)
 

@@ -90,6 +90,9 @@ def main(argv: list[str] | None = None) -> int:
         print(render(world, tr, t, compact=True if args.compact else None))
         over = over_of(records)
         print(summary(tr, over if args.at is None else None))
+        if config.lifelong:
+            done = sum(x.tasks for x in tr.values())
+            print(f"lifelong: {done} tasks done in {t} turns, {done / max(t, 1):.3f} a turn")
         if args.verify:
             if diff := verify(args.journal, records, config, autopilots):
                 print(f"VERIFY FAILED: {diff}")

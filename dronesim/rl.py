@@ -44,7 +44,7 @@ from schema import (
 from schema.messages import AROUND
 from schema.tables import MAX_DRONE, code_of, drone_name
 from schema.tuning import EYES_ONE_BY_ONE, PHASE_DEADLINE_S
-from world.grid import World, checked_int, inside_rows, padded_steps
+from world.grid import Regions, World, checked_int, inside_rows, pick_cell
 
 #: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
 ACTIONS: tuple[Cell, ...] = ((0, 0, 0), *AROUND)
@@ -179,39 +179,6 @@ def _choice(value: object, choices: tuple[str, ...], what: str) -> None:
 # --------------------------------------------------------------------------- an episode's layout
 
 
-def components(grid: np.ndarray, seeds: np.ndarray, label: np.ndarray | None = None) -> np.ndarray:
-    """The label of every cell (C order, -1: a building or a free cell reached from no seed): the free cells
-    6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component. `label`: the
-    labels found so far (modified: a seed in a labelled component costs nothing; a new component's label is
-    one more than the largest so far)."""
-    free = np.pad(~grid, 1)  # a blocked border: flat neighbours need no bounds checks
-    sx, sy, offsets = padded_steps(grid.shape)
-    nx, ny, nz = grid.shape
-    steps = np.array(offsets, np.int64)
-    if label is None:
-        label = np.full(grid.size, -1, np.int64)
-    padded: np.ndarray | None = None  # (the padded labels: made once a new component is searched)
-    for x, y, z in seeds.tolist():
-        if label[(x * ny + y) * nz + z] >= 0 or grid[x, y, z]:
-            continue  # in a component already labelled (or a building)
-        if padded is None:
-            padded = np.pad(label.reshape(grid.shape), 1, constant_values=-1).ravel()
-            open_ = free.ravel() & (padded < 0)
-        mark = int(label.max()) + 1
-        s = (x + 1) * sx + (y + 1) * sy + z + 1
-        open_[s] = False
-        padded[s] = mark
-        frontier = np.array([s], np.int64)
-        while frontier.size:
-            nxt = (frontier[:, None] + steps).ravel()
-            nxt = np.unique(nxt[open_[nxt]])
-            open_[nxt] = False
-            padded[nxt] = mark
-            frontier = nxt
-        label[:] = padded.reshape(free.shape)[1:-1, 1:-1, 1:-1].ravel()
-    return label
-
-
 def clear_cells(grid: np.ndarray) -> np.ndarray:
     """Which cells are free with the neighbours an agent's actions reach free and inside the world (bool, the
     grid's shape): the 6 neighbours, or on a world one cell high the 4 of its floor (`FLAT_ACTIONS`)."""
@@ -223,49 +190,21 @@ def clear_cells(grid: np.ndarray) -> np.ndarray:
     return clear
 
 
-class Terrain:
+class Terrain(Regions):
     """What drawing an episode's layout needs of its world, computed once per world (an environment keeps it
     while its episodes share a world, a given one): the free cells, the clear ones (`clear_cells`), the packed
-    grid, and the components of the free cells reached from the starts so far, with each one's cells."""
+    grid, and the components of the free cells reached from the starts so far, with each one's cells
+    (`Regions`)."""
 
     def __init__(self, world: World) -> None:
-        self.world = world
-        grid = world.grid.ravel()
-        self.free = np.flatnonzero(~grid)
+        super().__init__(world)
+        self.free = np.flatnonzero(~world.grid.ravel())
         self.clear_mask = clear_cells(world.grid).ravel()
         self.clear = np.flatnonzero(self.clear_mask)
         self.packed = world.packed()
-        self.label = np.full(grid.size, -1, np.int64)  # each cell's component, -1: not reached yet (`components`)
-        self._members: dict[int, np.ndarray] = {}
 
     def fits(self, world: World) -> bool:
         return world is self.world or world == self.world
-
-    def labels(self, start_lin: np.ndarray, starts: np.ndarray) -> np.ndarray:
-        """The component of each start (flat cells `start_lin`, cells `starts`), labelling new ones."""
-        comp = self.label[start_lin]
-        if np.count_nonzero(comp < 0):
-            components(self.world.grid, starts[comp < 0], self.label)
-            comp = self.label[start_lin]
-        return comp
-
-    def members(self, comp: int) -> np.ndarray:
-        """The flat cells of component `comp` (ascending)."""
-        cells = self._members.get(comp)
-        if cells is None:
-            cells = self._members[comp] = np.flatnonzero(self.label == comp)
-        return cells
-
-
-def _pick(rng: np.random.Generator, cells: np.ndarray, taken: np.ndarray) -> int:
-    """A cell of `cells` (flat) not `taken`, drawn uniformly from `rng`; -1 if every one is taken."""
-    k = len(cells)
-    for _ in range(8):  # (most draws: the first try; a crowded component: the cells left, below)
-        cell = int(cells[int(rng.random() * k)]) if k else -1
-        if cell < 0 or not taken[cell]:
-            return cell
-    rest = cells[~taken[cells]]
-    return int(rest[int(rng.random() * len(rest))]) if len(rest) else -1
 
 
 @dataclass(frozen=True, slots=True)
@@ -312,9 +251,9 @@ class Layout:
         reachable = np.ones(n, bool)
         nx, ny, nz = world.size
         for i, c in enumerate(comp.tolist()):
-            cell = _pick(rng, terrain.members(c), taken)
+            cell = pick_cell(rng, terrain.members(c), taken)
             if cell < 0:
-                cell, reachable[i] = _pick(rng, free, taken), False  # any free cell: unreachable
+                cell, reachable[i] = pick_cell(rng, free, taken), False  # any free cell: unreachable
             taken[cell] = True
             targets[i] = cell // (ny * nz), cell // nz % ny, cell % nz
         return cls(world=world, starts=starts, targets=targets, reachable=reachable, terrain=terrain, comp=comp,

@@ -19,5 +19,11 @@ def coordinator(argv: list[str]) -> int:
     return node.cli(argv, scenario=game_of_scenario)
 
 
+def plan_of_scenario(path: str) -> tuple[tuple[str, ...], int | None]:
+    """A scenario file's targets and lifelong seed, as the ground station reads them."""
+    scenario = Scenario.load(path)
+    return scenario.targets, scenario.lifelong
+
+
 def gcs(argv: list[str]) -> int:
-    return gcs_node.cli(argv, scenario_targets=lambda path: Scenario.load(path).targets)
+    return gcs_node.cli(argv, scenario_plan=plan_of_scenario)

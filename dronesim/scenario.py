@@ -9,7 +9,9 @@
  "max_turns": 200}
 ```
 The game ends when every drone has reached its last target (or said it is unreachable), when no drone
-is alive, or at ``max_turns``.
+is alive, or at ``max_turns``. ``"lifelong": true`` (or ``{"seed": n}``) makes it a lifelong game: the ground
+station gives each drone a new target each time it reaches its own, drawn with the world's seed (or n;
+entities/tasks.py), and the game goes on to ``max_turns``, whose end says the tasks done.
 
 A MovingAI instance (world/movingai.py) becomes a scenario with `movingai_scenario` (``dronesim up
 --world room.map --scen room.scen --agents 200``).
@@ -48,9 +50,13 @@ class Scenario:
     autopilots: dict[str, str]  # drone -> autopilot name
     targets: tuple[str, ...]
     max_turns: int = MAX_TURNS
+    lifelong: int | None = None  # a lifelong game: the seed of its targets' draws (None: not lifelong)
 
     def game_config(self, **deadlines: object) -> GameConfig:
-        return GameConfig(world=self.world, drones=self.drones, max_turns=self.max_turns, **deadlines)  # type: ignore[arg-type]
+        """The game, with `deadlines` (GameConfig's fields; ``lifelong=True``: lifelong, as the scenario may say)."""
+        lifelong = bool(deadlines.pop("lifelong", False)) or self.lifelong is not None
+        return GameConfig(world=self.world, drones=self.drones, max_turns=self.max_turns, lifelong=lifelong,
+                          **deadlines)  # type: ignore[arg-type]
 
     def plan(self) -> Plan:
         return Plan.parse(self.targets, self.world.size, default_drone=self.drones[0].drone)
@@ -103,7 +109,8 @@ class Scenario:
         if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets):
             raise UsageError('"targets" must be a list of "[Dnn=]x,y,z[@turn]" strings')
         scenario = cls(world=spec, drones=drones, autopilots=autopilots, targets=tuple(targets),
-                       max_turns=checked_int(data.get("max_turns", MAX_TURNS), "max_turns"))
+                       max_turns=checked_int(data.get("max_turns", MAX_TURNS), "max_turns"),
+                       lifelong=_lifelong(data.get("lifelong", False), spec.seed))
         scenario.game_config()  # validates ids, starts
         # targets are checked against the world's buildings too: built here (as every process builds it) only
         # when there are targets and the world is generated
@@ -182,6 +189,18 @@ def _entry(d: object, n: int = 0) -> _Entry:
     if not isinstance(pilot, str) or pilot not in REGISTRY:
         raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
     return _Entry((d["id"], *_cell(d.get("start"), f"{d['id']} start"), sys.intern(pilot)))  # (one name string for all)
+
+
+def _lifelong(v: object, world_seed: int) -> int | None:
+    """A scenario's "lifelong": false (not lifelong: None), true (the world's seed draws its targets) or
+    {"seed": n}."""
+    if v is False or v is True:
+        return world_seed if v else None
+    if isinstance(v, dict) and set(v) == {"seed"}:
+        seed = checked_int(v["seed"], "lifelong seed")
+        if seed >= 0:
+            return seed
+    raise UsageError(f'"lifelong" must be true, false or {{"seed": n}} with n >= 0, got {v!r}')
 
 
 def _cell(v: object, what: str) -> Cell:

@@ -51,6 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-turns", type=int, default=200)
     p.add_argument("--arbiter", choices=("lacam", "pibt"),
                    help="the cooperative drones' arbitration (default lacam, the complete search; pibt: PIBT alone)")
+    p.add_argument("--lifelong", action="store_true",
+                   help="a lifelong game: each drone that reaches its target gets a new one from the ground station, "
+                        "drawn with --seed (entities/tasks.py), until --max-turns; the end says the tasks done and "
+                        "the tasks a turn")
     p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS, to watch the game (default: full speed)")
     p.add_argument("--phase-deadline", type=float, metavar="SECONDS",
@@ -101,7 +105,7 @@ def coordinator_flags(args: argparse.Namespace, locator: str) -> list[str]:
     """The coordinator's flags (after `dronesim coordinator`): the game it plays."""
     return [*_common(args, locator), "--seed", str(args.seed), "--size", args.size, "--drones", str(args.drones),
             "--max-turns", str(args.max_turns), "--admit-deadline", "60", "--pace", str(args.pace),
-            *_passed(args, "world", "starts", "journal", "scenario", "arbiter"),
+            *_passed(args, "world", "starts", "journal", "scenario", "arbiter", "lifelong"),
             *(["--phase-deadline", str(args.phase_deadline)] if args.phase_deadline is not None else [])]
 
 
@@ -120,8 +124,9 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
     mavlink = ["--mavlink", *(x for name in MAVLINK_FLAGS[1:] for x in ("--" + name.replace("_", "-"),
                                                                          str(getattr(args, name))))] \
         if args.mavlink else []  # (every value, 0 too: --turn-period 0 is full speed)
+    lifelong = ["--lifelong", str(args.seed)] if args.lifelong else []  # (its targets drawn with the game's seed)
     procs.append(("GCS", [*base, "gcs", *common, *_passed(args, "scenario", "targets", "script", "quiet", "web",
-                                                             "ros2"), *mavlink]))
+                                                             "ros2"), *lifelong, *mavlink]))
     if args.ros2 or args.foxglove:  # the viewer: ROS 2 topics, Foxglove live
         procs.append(("ROS2", [*base, "ros2", *common, *_passed(args, "foxglove")]))
     return procs
@@ -178,7 +183,8 @@ def secured_router(listen: str, creds: GameCredentials) -> zenoh.Config:
 
 
 def play(args: argparse.Namespace, creds: GameCredentials | None) -> int:
-    interactive = not args.targets and not args.script and not args.scenario and not args.web and not args.mavlink
+    interactive = (not args.targets and not args.script and not args.scenario and not args.web and not args.mavlink
+                   and not args.lifelong)
     with open_session(router_config(args.listen) if creds is None else secured_router(args.listen, creds)) as router:
         locator = router_locators(router)[0]
         what = f"scenario {args.scenario}" if args.scenario else \

@@ -39,6 +39,8 @@ from schema.tables import drone_name
 from schema.tuning import ANSWER_AHEAD, FINAL_STATUS_WAIT
 from world.grid import World, build_world, in_bounds
 
+from .tasks import Tasks
+
 _ITEM = re.compile(r"\s*(?:(?P<drone>D\d{2,5})\s*[= ]\s*)?"
                    r"(?P<cell>-?\d+\s*,\s*-?\d+\s*,\s*-?\d+)\s*(?:@\s*(?P<turn>\d+))?\s*\Z")
 
@@ -312,19 +314,24 @@ class Station:
     - a console asks its person, in the phase; a held station (`hold`: the web page) keeps the phase
       `pending` until `answer` is called;
     - a station taking `goals` as they come (ROS 2's, `want`) answers no phase ahead and never says its plan
-      is final (the game goes on to its turn limit, or until someone quits).
+      is final (the game goes on to its turn limit, or until someone quits);
+    - a lifelong script (`tasks`) answers each phase in it, once the STATUS of the turn before is in: its plan's
+      targets, then a new target for every drone that reached its own (`entities.tasks`); it never says its
+      plan is final either.
     It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the targets
     in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last turn is in, or
     `FINAL_STATUS_WAIT` s after OVER."""
 
     def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
                  quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD,
-                 goals: bool = False) -> None:
+                 goals: bool = False, tasks: Tasks | None = None) -> None:
         self.ground, self.plan = ground, ground.plan
         self.console, self.hold, self.quit_at, self.verbose = console, hold, quit_at, verbose
         self.scripted = console is None and not hold
-        self.ahead = 0 if goals else ahead  # phases a script answers ahead at most (0: none; the benchmark's switch)
-        self.goals = goals
+        # phases a script answers ahead at most (0: none; the benchmark's switch)
+        self.ahead = 0 if goals or tasks is not None else ahead
+        self.goals, self.tasks = goals, tasks
+        self._due: int | None = None  # lifelong: a GCS phase waiting for the STATUS of the turn before it
         self.wanted: dict[str, Cell] = {}  # the targets this station wants, of drones alive
         self.gone: set[str] = set()  # drones dead or lost: nothing more to say to them
         self.tracks = Tracks()
@@ -350,6 +357,8 @@ class Station:
             case Turn():  # a held phase the coordinator closed without us (its GCS deadline passed)
                 if self.pending is not None and self.pending <= msg.turn:
                     self.pending = None
+                if self._due is not None and self._due <= msg.turn:
+                    self._due = None
             case Status():
                 return self._status(msg)
             case Over():
@@ -385,7 +394,7 @@ class Station:
     def intent(self, turn: int) -> Intent:
         if self.quit_at is not None:
             return Intent.QUIT if turn >= self.quit_at else Intent.CONTINUE
-        if self.goals:
+        if self.goals or self.tasks is not None:
             return Intent.CONTINUE
         return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
 
@@ -397,12 +406,24 @@ class Station:
             self.answered = turn
             return [SendDone(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
         self.want(self.plan.at(turn))
+        if self.tasks is not None:
+            if self.status_turn < turn - 1:  # (its STATUS, which the draws read, is still on its way)
+                self._due = turn
+                return []
+            return self._tasks_done(turn)
         if self.hold:
             self.pending = turn
             return []
         new, intent = (self.console.ask(turn, self.wanted, self.gone) if self.console is not None
                        else ({}, self.intent(turn)))
         return self.answer(turn, intent, new) + self._ahead(turn)
+
+    def _tasks_done(self, turn: int) -> list[Effect]:
+        """A lifelong station's answer in the GCS phase of `turn`, the STATUS of the turn before in: the new targets
+        of the drones that reached theirs (`Tasks.assign`), besides its plan's."""
+        assert self.tasks is not None and self.tracks.last is not None
+        self.want(self.tasks.assign(turn, self.tracks.last, given=self.plan.at(turn)))
+        return self.answer(turn, self.intent(turn))
 
     def _ahead(self, turn: int) -> list[Effect]:
         """A script with nothing new in the turns after `turn` answers them now, in batches: once half of
@@ -431,6 +452,10 @@ class Station:
             for d, c in targets_of(status).items():
                 if d not in self.gone:
                     self.wanted.setdefault(d, c)
+        if self._due is not None and status.turn >= self._due - 1:  # lifelong: the phase it waited for
+            due, self._due = self._due, None
+            if status.turn == due - 1:
+                effects += self._tasks_done(due)
         if self.verbose:
             effects.append(Show(format_status(status)))
         if self.over is not None and status.turn >= self.over.turn:

@@ -32,6 +32,7 @@ from schema import Keys, Over, UsageError
 
 from .gcs import Console, Ground, Station
 from .station_link import join, listen, play, publisher
+from .tasks import Tasks
 
 
 class Lines:
@@ -68,12 +69,13 @@ def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
     with open_session(conf) as session:
         inbox = listen(session, keys, logger)
         lines = (None if args.targets or args.script or args.scenario or args.ros2  # no plan: a person
-                 else Lines(sys.stdin))
+                 or args.lifelong is not None else Lines(sys.stdin))
         with waking(partial(inbox.post, None), *([lines.wake] if lines else [])):  # a signal ends any wait
             member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)
             ground = Ground.from_welcome(member.welcome, args.targets, args.script)
             console = Console(ground.world, list(ground.starts), read=lines.read) if lines else None
-            station = Station(ground, console=console, verbose=not args.quiet, goals=args.ros2)
+            tasks = None if args.lifelong is None else Tasks(ground.world, args.lifelong)
+            station = Station(ground, console=console, verbose=not args.quiet, goals=args.ros2, tasks=tasks)
             if draw:
                 print(station.opening(), flush=True)
             show = publisher(Outbox(session), keys, logger, lambda text: print(text, flush=True))
@@ -97,9 +99,13 @@ def unexpected(take: Callable[[object], bool] | None, logger: logging.Logger, ev
         logger.error("unexpected event %r", event)
 
 
-def cli(argv: list[str] | None = None, *, scenario_targets: Callable[[str], Sequence[str]] | None = None) -> int:
-    """`dronesim gcs`; `scenario_targets` reads a scenario file's targets (`dronesim.scenario`, which the
-    application hands in: the ground station reads no scenario format of its own)."""
+#: Reads a scenario file's targets and, for a lifelong game, the seed of its draws (None: not lifelong).
+ScenarioPlan = Callable[[str], tuple[Sequence[str], int | None]]
+
+
+def cli(argv: list[str] | None = None, *, scenario_plan: ScenarioPlan | None = None) -> int:
+    """`dronesim gcs`; `scenario_plan` reads a scenario file's targets and lifelong seed (`dronesim.scenario`,
+    which the application hands in: the ground station reads no scenario format of its own)."""
     from .mavlink.options import add_mavlink_args
     from .ros2.node import add_ros2_args
     from .web.node import add_web_args, run_web
@@ -110,6 +116,9 @@ def cli(argv: list[str] | None = None, *, scenario_targets: Callable[[str], Sequ
                    help="scripted targets (repeatable, or ';'-separated)")
     p.add_argument("--script", help="a file of scripted targets, one [Dnn=]x,y,z[@turn] per line")
     p.add_argument("--scenario", help="take the scripted targets from a scenario file")
+    p.add_argument("--lifelong", type=int, metavar="SEED",
+                   help="a lifelong game: each drone that reaches its target gets a new one, drawn with SEED "
+                        "(entities/tasks.py; the coordinator plays it with --lifelong)")
     p.add_argument("--quiet", action="store_true", help="do not print every turn's status")
     p.add_argument("--no-draw", action="store_true", help="do not draw the world at the end")
     add_entity_args(p)
@@ -127,9 +136,17 @@ def cli(argv: list[str] | None = None, *, scenario_targets: Callable[[str], Sequ
             raise UsageError("--ros2 goals go to the terminal or web ground station: not with --mavlink (its "
                              "targets are its vehicles') nor --replay (a replay takes no targets)")
         if args.scenario:
-            if scenario_targets is None:
+            if scenario_plan is None:
                 raise UsageError("--scenario is read by the dronesim command: dronesim gcs --scenario FILE")
-            args.targets = [*scenario_targets(args.scenario), *args.targets]
+            targets, lifelong = scenario_plan(args.scenario)
+            args.targets = [*targets, *args.targets]
+            if args.lifelong is None:
+                args.lifelong = lifelong
+        if args.lifelong is not None and (args.web is not None or args.replay is not None or args.mavlink
+                                          or args.ros2):
+            raise UsageError("--lifelong is the scripted ground station's (not with --web, --mavlink or --ros2)")
+        if args.lifelong is not None and args.lifelong < 0:
+            raise UsageError(f"--lifelong takes a seed >= 0, got {args.lifelong}")
         if args.web is not None or args.replay is not None:  # the browser ground station (docs/web-gcs.md)
             return run_web(args, logger)
         if args.mavlink:  # every drone a MAVLink vehicle (docs/mavlink.md)

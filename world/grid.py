@@ -65,6 +65,50 @@ def padded_steps(size: Cell) -> tuple[int, int, tuple[int, ...]]:
     return sx, sy, tuple(dx * sx + dy * sy + dz for dx, dy, dz in AROUND)
 
 
+def components(grid: np.ndarray, seeds: np.ndarray, label: np.ndarray | None = None) -> np.ndarray:
+    """The label of every cell (C order, -1: a building or a free cell reached from no seed): the free cells
+    6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component. `label`: the
+    labels found so far (modified: a seed in a labelled component costs nothing; a new component's label is
+    one more than the largest so far)."""
+    free = np.pad(~grid, 1)  # a blocked border: flat neighbours need no bounds checks
+    sx, sy, offsets = padded_steps(grid.shape)
+    nx, ny, nz = grid.shape
+    steps = np.array(offsets, np.int64)
+    if label is None:
+        label = np.full(grid.size, -1, np.int64)
+    padded: np.ndarray | None = None  # (the padded labels: made once a new component is searched)
+    for x, y, z in seeds.tolist():
+        if label[(x * ny + y) * nz + z] >= 0 or grid[x, y, z]:
+            continue  # in a component already labelled (or a building)
+        if padded is None:
+            padded = np.pad(label.reshape(grid.shape), 1, constant_values=-1).ravel()
+            open_ = free.ravel() & (padded < 0)
+        mark = int(label.max()) + 1
+        s = (x + 1) * sx + (y + 1) * sy + z + 1
+        open_[s] = False
+        padded[s] = mark
+        frontier = np.array([s], np.int64)
+        while frontier.size:
+            nxt = (frontier[:, None] + steps).ravel()
+            nxt = np.unique(nxt[open_[nxt]])
+            open_[nxt] = False
+            padded[nxt] = mark
+            frontier = nxt
+        label[:] = padded.reshape(free.shape)[1:-1, 1:-1, 1:-1].ravel()
+    return label
+
+
+def pick_cell(rng: np.random.Generator, cells: np.ndarray, taken: np.ndarray) -> int:
+    """A cell of `cells` (flat) not `taken`, drawn uniformly from `rng`; -1 if every one is taken."""
+    k = len(cells)
+    for _ in range(8):  # (most draws: the first try; a crowded component: the cells left, below)
+        cell = int(cells[int(rng.random() * k)]) if k else -1
+        if cell < 0 or not taken[cell]:
+            return cell
+    rest = cells[~taken[cells]]
+    return int(rest[int(rng.random() * len(rest))]) if len(rest) else -1
+
+
 def checked_int(value: object, what: str, error: type[UsageError] = UsageError) -> int:
     """`value` as a plain int (numpy integers accepted, bools and floats refused with `error`)."""
     if isinstance(value, bool):
@@ -451,6 +495,32 @@ class World:
             rows = [("" if compact else " ").join(s.ljust(width) for s in row).rstrip() for row in cells.tolist()]
             blocks.append("\n".join([f"z = {z}", *rows]))
         return "\n\n".join([*blocks, legend])
+
+
+class Regions:
+    """The components of a world's free cells (6-connected), labelled as cells in them are asked about
+    (`labels`), with each one's cells (`members`): where a drone at a cell can go."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.label = np.full(world.grid.size, -1, np.int64)  # each cell's component, -1: not reached yet (`components`)
+        self._members: dict[int, np.ndarray] = {}
+
+    def labels(self, flat: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """The component of each cell (flat cells `flat`, the same as an (n, 3) array `cells`), labelling new ones
+        (-1: a building)."""
+        comp = self.label[flat]
+        if np.count_nonzero(comp < 0):
+            components(self.world.grid, cells[comp < 0], self.label)
+            comp = self.label[flat]
+        return comp
+
+    def members(self, comp: int) -> np.ndarray:
+        """The flat cells of component `comp` (ascending)."""
+        cells = self._members.get(comp)
+        if cells is None:
+            cells = self._members[comp] = np.flatnonzero(self.label == comp)
+        return cells
 
 
 def _json_ints(value: object, n: int, what: str) -> list[int]:
