@@ -10,8 +10,9 @@ runs, and with which Zenoh flags, to $DRONESIM_STATE (a small JSON file), for th
 
 ``--id auto`` (docs/docker.md) tries D01, D02, ... in turn, running `dronesim drone --id Dnn` for each,
 until the coordinator admits one: a taken id is refused ("D01 is already connected", "drone D01 is
-already taken by H01"); "unknown drone Dnn" means every drone of the game already flies (exit 2). A
-refused attempt leaves no trace: presence tokens are per Zenoh session. ``{id}`` in any argument becomes
+already taken by H01"); "unknown drone Dnn", or no credentials for Dnn (its --password-file, --tls-cert or
+--tls-key missing), means every drone of the game already flies (exit 2). A refused attempt leaves no
+trace: presence tokens are per Zenoh session. ``{id}`` in any argument becomes
 the entity id (SRV, ENV, GCS, the claimed Dnn, or Hnn): ``--tls-cert /certs/{id}.pem``.
 """
 
@@ -33,6 +34,9 @@ TAKEN = re.compile(r"connection refused: .*(is already connected|is already take
 #: the refusal that means "there is no such drone in this game": every id is taken.
 UNKNOWN = re.compile(r"connection refused: (unknown drone .*)")
 MAX_ID = 65535
+#: The flags naming a file of the process's own credentials: for `--id auto`, an id whose file is missing is one the
+#: game has no credentials for (docker/compose.yaml makes them for its DRONES drones).
+CREDENTIALS = ("--password-file", "--tls-cert", "--tls-key")
 
 
 def flags(argv: list[str]) -> argparse.Namespace:
@@ -51,6 +55,15 @@ def drone_entity(args: argparse.Namespace) -> str | None:
     if ident.isdigit():
         return f"D{int(ident):02d}"
     return ident if re.fullmatch(r"D\d{2,5}", ident) else None
+
+
+def missing_credentials(argv: list[str]) -> str | None:
+    """The first file of the process's own credentials (`CREDENTIALS`) that `argv` names and that does not exist."""
+    p = argparse.ArgumentParser(add_help=False)
+    for flag in CREDENTIALS:
+        p.add_argument(flag)
+    args = vars(p.parse_known_args(argv)[0])
+    return next((path for path in args.values() if path and not os.path.exists(path)), None)
 
 
 def write_state(role: str, entity: str | None, argv: list[str]) -> None:
@@ -100,6 +113,15 @@ def claim(argv: list[str]) -> int:
         write_state("drone", ident, args)
         if stopping:  # stopped between two attempts: start no other
             return code
+        if missing := missing_credentials(args):  # (no use asking the coordinator: the router would not let it in)
+            if n == 1:
+                print(f"dronesim-entrypoint: no credentials for {ident}: {missing} is missing", file=sys.stderr,
+                      flush=True)
+            else:
+                print(f"dronesim-entrypoint: no free drone id (no credentials for {ident}: {missing}): this replica is "
+                      "one too many; start as many drone replicas as the coordinator's --drones (DRONES)",
+                      file=sys.stderr, flush=True)
+            return 2
         proc = subprocess.Popen(dronesim("drone", *args), stderr=subprocess.PIPE, text=True, bufsize=1)
         refusal = ""
         for line in proc.stderr:  # passed through, and scanned for a refusal (held back: it may be expected)

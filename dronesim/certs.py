@@ -130,12 +130,19 @@ class Kit:
 
     def _write(self, path: Path, text: str) -> Path:
         """`text` into `path`, readable by the user alone (mode 0600), in one step."""
-        tmp = path.with_name(path.name + ".tmp")
-        with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-        self.written.append(path)
+        self.written.append(write_private(path, text))
         return path
+
+
+def write_private(path: Path, text: str, mode: int = 0o600) -> Path:
+    """`text` into `path` with `mode` (by default readable by the user alone), in one step: a reader sees the old
+    file or the new one, never a part."""
+    tmp = path.with_name(path.name + ".tmp")
+    with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w", encoding="utf-8") as f:
+        f.write(text)
+    tmp.chmod(mode)
+    os.replace(tmp, path)
+    return path
 
 
 def entities(drones: Iterable[str] = (), hosts: Iterable[str] = ()) -> list[str]:
@@ -166,6 +173,19 @@ def make(folder: str | Path, *, drones: Iterable[str] = (), hosts: Iterable[str]
     return kit
 
 
+#: The shares of a game's credentials (`GameCredentials.hand_out`): a folder per role, named here, holding the CA's
+#: certificate and the passwords of that role's entities -- the drones' one every drone's and swarm host's (a drone
+#: replica of docker/compose.yaml claims its id when it starts).
+SHARES = ("SRV", "ENV", "GCS", "drones")
+#: Where the router of `router.json5` (`game_credentials`) listens: zenohd in docker/compose.yaml.
+ZENOHD_LISTEN = "tls/0.0.0.0:7447"
+
+
+def share_of(entity: str) -> str:
+    """The share (`SHARES`) holding `entity`'s password."""
+    return "drones" if is_drone_id(entity) or is_host_id(entity) else entity
+
+
 @dataclasses.dataclass(frozen=True, slots=True)
 class GameCredentials:
     """One game's credentials in `folder` (`game_credentials`): what each process and the router are given."""
@@ -183,27 +203,56 @@ class GameCredentials:
         return ["--tls-ca", str(f / "ca.pem"), "--tls-cert", str(f / "router.pem"), "--tls-key", str(f / "router.key"),
                 "--users-file", str(f / "users.txt"), "--acl", str(f / "acl.json5")]
 
+    def hand_out(self, out: str | Path) -> list[Path]:
+        """Each role's share of the credentials in `out`/SHARE (`SHARES`): the CA's certificate and the passwords of
+        the role's entities, nothing else (no other role's password, no key). A password no longer in the kit
+        is removed from its share. The folders written."""
+        out = Path(out)
+        ca = (self.folder / "ca.pem").read_text()
+        passwords = {p.stem: p.read_text() for p in sorted(self.folder.glob("*.password"))}
+        written = []
+        for share in SHARES:
+            folder = out / share
+            folder.mkdir(parents=True, exist_ok=True)
+            write_private(folder / "ca.pem", ca, 0o644)
+            mine = {e: text for e, text in passwords.items() if share_of(e) == share}
+            for entity, text in mine.items():
+                write_private(folder / f"{entity}.password", text)
+            for stale in folder.glob("*.password"):
+                if stale.stem not in mine:
+                    stale.unlink()
+            written.append(folder)
+        return written
+
 
 def game_credentials(folder: str | Path, *, drones: Sequence[str], hosts: Mapping[str, Sequence[str]] | None = None,
-                     roots: Sequence[str] = ("sim",), router_hosts: Iterable[str] = ()) -> GameCredentials:
-    """A game's credentials, made at its start (`dronesim up`, the cluster's entrypoint): a CA, the router's TLS
-    certificate (for localhost and `router_hosts`), a random password per entity (SRV, ENV, GCS, each drone that no
-    swarm host flies, each host), the router's users.txt, and the game's access control (`acl.json5`, generated
-    from the key table: `schema.acl`). No client certificate: processes authenticate by user/password over TLS."""
-    from schema.acl import access_control, render
+                     spare_hosts: Sequence[str] = (), roots: Sequence[str] = ("sim",), router_hosts: Iterable[str] = (),
+                     listen: str = ZENOHD_LISTEN) -> GameCredentials:
+    """A game's credentials, made at its start (`dronesim up`, the cluster's `credentials` service): a CA, the
+    router's TLS certificate (for localhost and `router_hosts`), a random password per entity (SRV, ENV, GCS, each
+    drone that no swarm host flies, each host and spare host: `schema.acl.principals`), the router's users.txt, the
+    game's access control (`acl.json5`, generated from the key table: `schema.acl`) and a whole router config using
+    them (`router.json5`, for ``zenohd -c``: TLS on `listen`, user/password, the access control, the flood filters).
+    No client certificate: processes authenticate by user/password over TLS. What exists is kept (the CA, the router's
+    certificate unless it lacks a name, every password): made again in the same folder, the credentials are the
+    same, and a process holding them still gets in."""
+    from schema.acl import access_control, json5_document, render, router_config
 
     hosts = {h: tuple(ds) for h, ds in (hosts or {}).items()}
     try:
-        block = access_control(drones, roots=roots, identity="usrpwd", hosts=hosts)
+        block = access_control(drones, roots=roots, identity="usrpwd", hosts=hosts, spare_hosts=spare_hosts)
     except ValueError as err:
         raise UsageError(str(err)) from None
     kit = Kit(folder)
     kit.issue("router", names=["localhost", "127.0.0.1", "::1", *router_hosts], server=True, force=kit.new_ca)
     hosted = {d for ds in hosts.values() for d in ds}
-    for e in entities([d for d in drones if d not in hosted], hosts):
+    for e in entities([d for d in drones if d not in hosted], [*hosts, *spare_hosts]):
         kit.password(e)
     kit.users()
     kit._write(kit.dir / "acl.json5", render(block, "The game's access control: generated by dronesim certs --game"))
+    conf = router_config(block, listen=listen, certs=str(kit.dir), users=str(kit.dir / "users.txt"), roots=roots)
+    header = "The game's router (zenohd -c FILE): TLS, user/password and access control, by dronesim certs --game"
+    kit._write(kit.dir / "router.json5", json5_document(conf, header))
     return GameCredentials(kit.dir)
 
 
@@ -226,11 +275,20 @@ def cli(argv: list[str] | None = None) -> int:
                         "(with --drones, --fly, --root, --router-host); no client certificates")
     p.add_argument("--fly", action="append", default=[], metavar="Hnn=Dnn-Dmm",
                    help="with --game: a swarm host and the drones it flies (repeatable)")
+    p.add_argument("--spare-host", action="append", default=[], metavar="Hnn",
+                   help="with --game: a swarm host that may fly every drone in place of the drone processes, which "
+                        "keep their own credentials (docker/compose.yaml's swarm profile; repeatable)")
     p.add_argument("--root", action="append", default=[], help="with --game: the game's key root (default sim)")
+    p.add_argument("--by-role", metavar="DIR",
+                   help="with --game: also each role's share in DIR/SRV, DIR/ENV, DIR/GCS and DIR/drones (the drones "
+                        "and swarm hosts): ca.pem and the role's passwords alone (docker/compose.yaml mounts each "
+                        "share in its role's containers only)")
     args = p.parse_args(argv)
     try:
         if args.drones < 0 or args.days < 1:
             raise UsageError("--drones must be >= 0 and --days >= 1")
+        if not args.game and (args.fly or args.spare_host or args.root or args.by_role):
+            raise UsageError("--fly, --spare-host, --root and --by-role go with --game")
         if args.game:
             from schema.acl import parse_hosts
 
@@ -239,10 +297,14 @@ def cli(argv: list[str] | None = None) -> int:
             except ValueError as err:
                 raise UsageError(str(err)) from None
             creds = game_credentials(args.folder, drones=[drone_id(n) for n in range(1, args.drones + 1)],
-                                     hosts=hosts, roots=args.root or ["sim"], router_hosts=args.router_host)
+                                     hosts=hosts, spare_hosts=args.spare_host, roots=args.root or ["sim"],
+                                     router_hosts=args.router_host)
             print(f"router: dronesim router {' '.join(creds.router_flags())}")
+            print(f"   or: zenohd -c {creds.folder / 'router.json5'}")
             print(f"each process: {' '.join(creds.flags('ENTITY'))} (a remote ground station: ca.pem and "
                   "GCS.password)")
+            if args.by_role:
+                print(f"each role's share: {' '.join(str(f) for f in creds.hand_out(args.by_role))}")
             return 0
         kit = make(args.folder, drones=[drone_id(n) for n in range(1, args.drones + 1)], hosts=args.host,
                    router_hosts=args.router_host, passwords=args.passwords, days=args.days, force=args.force,

@@ -48,9 +48,17 @@ class Principal:
     drones: tuple[str, ...] = ()
 
 
-def principals(drones: Iterable[str], hosts: Mapping[str, Sequence[str]] | None = None) -> list[Principal]:
-    """SRV, ENV, GCS, every drone not flown by a host, and every host with its drones."""
+def principals(drones: Iterable[str], hosts: Mapping[str, Sequence[str]] | None = None,
+               spare_hosts: Iterable[str] = ()) -> list[Principal]:
+    """SRV, ENV, GCS, every drone not flown by a host, every host with its drones, and every spare host with all
+    the drones: a swarm host that may fly the game in place of the drone processes, which keep their own
+    principals (docker/compose.yaml's `swarm` profile: the drone processes may read each other's credentials
+    anyway, since each claims its id when it starts)."""
     hosts = dict(hosts or {})
+    spare = list(dict.fromkeys(spare_hosts))
+    for host in spare:
+        if not is_host_id(host) or host in hosts:
+            raise ValueError(f"bad spare swarm host {host!r}: expected H01, H02... not also a --host")
     hosted: dict[str, str] = {}
     for host, flown in hosts.items():
         if not is_host_id(host):
@@ -67,7 +75,8 @@ def principals(drones: Iterable[str], hosts: Mapping[str, Sequence[str]] | None 
             raise ValueError(f"bad drone id {d!r}")
     return [Principal("SRV", "SRV"), Principal("ENV", "ENV"), Principal("GCS", "GCS"),
             *(Principal(d, "DRONE", (d,)) for d in drones if d not in hosted),
-            *(Principal(h, "DRONE", tuple(flown)) for h, flown in sorted(hosts.items()))]
+            *(Principal(h, "DRONE", tuple(flown)) for h, flown in sorted(hosts.items())),
+            *(Principal(h, "DRONE", tuple(drones)) for h in spare)]
 
 
 #: The roles each word of the key table's ``readers`` column stands for.
@@ -126,8 +135,8 @@ def grants(p: Principal, roots: Sequence[str]) -> dict[tuple[str, str], list[str
 
 
 def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), identity: str = "usrpwd",
-                   hosts: Mapping[str, Sequence[str]] | None = None) -> dict:
-    """The ``access_control`` block (a plain dict, JSON-able) for a router."""
+                   hosts: Mapping[str, Sequence[str]] | None = None, spare_hosts: Iterable[str] = ()) -> dict:
+    """The ``access_control`` block (a plain dict, JSON-able) for a router (`principals`: who is granted)."""
     if identity not in IDENTITIES:
         raise ValueError(f"identity must be one of {', '.join(IDENTITIES)}, not {identity!r}")
     roots = [Keys(r).root for r in roots]  # validates each root
@@ -135,7 +144,7 @@ def access_control(drones: Iterable[str], *, roots: Sequence[str] = ("sim",), id
         raise ValueError("at least one key root is needed")
     rules_of = {p: [{"id": f"{p.name} {flow} {msg}", "permission": "allow", "flows": [flow], "messages": [msg],
                      "key_exprs": keys} for (flow, msg), keys in grants(p, roots).items()]
-                for p in principals(drones, hosts)}
+                for p in principals(drones, hosts, spare_hosts)}
     return {"enabled": True, "default_permission": "deny", "rules": [r for rules in rules_of.values() for r in rules],
             "subjects": [{"id": p.name, **{field: [p.name] for field in IDENTITIES[identity]}} for p in rules_of],
             "policies": [{"id": f"{p.name} policy", "rules": [r["id"] for r in rules], "subjects": [p.name]}
@@ -182,7 +191,7 @@ def parse_hosts(items: Iterable[str]) -> dict[str, tuple[str, ...]]:
 
 def render(block: dict, header: str = "") -> str:
     """A JSON5 document holding the block (itself a valid partial zenoh config)."""
-    return _json5({"access_control": block}, header)
+    return json5_document({"access_control": block}, header)
 
 
 def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
@@ -259,25 +268,25 @@ Other games: python -m schema.acl --drones N --root ROOT [--host H01=D01-D08] --
 Access control for root '{EXAMPLE_ROOT}', D01..D{EXAMPLE_DRONES:02d}, principals named by their TLS client
 certificate's CN.
 Other games: python -m schema.acl --drones N --root ROOT [--host H01=D01-D08] --identity cert"""),
-        "router-tls-usrpwd.json5": _json5(router_config(usrpwd, users="certs/users.txt"), f"""
+        "router-tls-usrpwd.json5": json5_document(router_config(usrpwd, users="certs/users.txt"), f"""
 {gen}
 A router: TLS on port 7447 (server certificate certs/router.pem), every process authenticated by
 user/password (certs/users.txt, from `dronesim certs certs --passwords`), and the ACL of
 router-acl-usrpwd.json5. Paths are relative to the router's working directory.
 Run: dronesim router --config config/router-tls-usrpwd.json5   (or: zenohd -c config/router-tls-usrpwd.json5)"""),
-        "router-mtls.json5": _json5(router_config(cert, mtls=True), f"""
+        "router-mtls.json5": json5_document(router_config(cert, mtls=True), f"""
 {gen}
 A router: mutual TLS on port 7447 -- every process presents a certificate signed by certs/ca.pem,
 and its common name (SRV, ENV, GCS, D01...) is its identity for the ACL of router-acl-cert.json5.
 Run: dronesim router --config config/router-mtls.json5   (or: zenohd -c config/router-mtls.json5)"""),
-        "gcs-remote-tls.json5": _json5(client_config("GCS"), """
+        "gcs-remote-tls.json5": json5_document(client_config("GCS"), """
 A remote ground station joining over TLS with user/password (the router runs router-tls-usrpwd.json5).
 Replace ROUTER_HOST (it must be a name in the router certificate: dronesim certs --router-host NAME).
 Run: dronesim gcs --config config/gcs-remote-tls.json5 --user GCS --password-file certs/GCS.password
 (the password comes from the file or DRONESIM_PASSWORD, never from this config nor a flag).
 Same without a config file: dronesim gcs -m client -e tls/ROUTER_HOST:7447 --tls-ca certs/ca.pem --user GCS
      --password-file certs/GCS.password"""),
-        "gcs-remote-mtls.json5": _json5(client_config("GCS", mtls=True), """
+        "gcs-remote-mtls.json5": json5_document(client_config("GCS", mtls=True), """
 A remote ground station joining over mutual TLS (the router runs router-mtls.json5); its identity is
 its certificate (CN=GCS). Replace ROUTER_HOST.
 Run: dronesim gcs --config config/gcs-remote-mtls.json5
@@ -286,7 +295,8 @@ Same without a config file: dronesim gcs -m client -e tls/ROUTER_HOST:7447 --tls
     }
 
 
-def _json5(conf: dict, header: str) -> str:
+def json5_document(conf: dict, header: str) -> str:
+    """`conf` as a JSON5 document (a Zenoh config file) under a comment `header`."""
     lines = [f"// {line}".rstrip() for line in header.strip().splitlines()]
     return "\n".join([*lines, json.dumps(conf, indent=2), ""])
 
@@ -326,7 +336,7 @@ def main(argv: list[str] | None = None) -> int:
         users = f"{args.certs}/users.txt" if "usernames" in fields else None
         conf = router_config(block, listen=args.listen, certs=args.certs, roots=args.root or ["sim"],
                              mtls="cert_common_names" in fields, users=users)
-    sys.stdout.write(_json5(conf, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
+    sys.stdout.write(json5_document(conf, "Generated by: python -m schema.acl " + " ".join(argv or sys.argv[1:])))
     return 0
 
 

@@ -1,14 +1,15 @@
 """docker/ without a Docker engine: what can be checked of the image recipe and the compose cluster here.
 
-- docker/compose.yaml (and compose.tls.yaml) validate against the Compose specification's JSON schema
-  (and with `docker compose config` where the compose plugin exists);
+- docker/compose.yaml (and its overrides compose.insecure.yaml, compose.tls.yaml) validate against the
+  Compose specification's JSON schema (and with `config` of each compose tool installed);
 - every command in them is `dronesim ROLE ...` and parses with that role's real argparse parser; every
   file they name exists in the repository or the image;
 - docker/Dockerfile copies what exists, what .dockerignore lets through and all the package
   needs; its lock files pin what pyproject.toml asks for and what is installed here; the build stage's
   commands run here (a venv instead of an image);
-- docker/zenohd.json5 and the compose command lines play a whole game: through an embedded router
-  loaded from that file, and through zenohd itself when it is installed (tests/setup.d/zenohd.sh);
+- the compose command lines play a whole game: through zenohd running the config and with the credentials the
+  cluster's credentials service makes (secure by default), and, plain (compose.insecure.yaml), through an
+  embedded router loaded from docker/zenohd.json5 and through zenohd with it (tests/setup.d/zenohd.sh);
 - the entrypoint gives scaled drone replicas unique ids; the health check tells a present entity from
   an absent one.
 """
@@ -20,12 +21,14 @@ import importlib
 import importlib.metadata
 import json
 import os
+import queue
 import re
 import shlex
 import shutil
 import socket
 import subprocess
 import sys
+import threading
 import tomllib
 import zipfile
 from pathlib import Path
@@ -38,6 +41,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCKER = ROOT / "docker"
 COMPOSE = DOCKER / "compose.yaml"
 COMPOSE_TLS = DOCKER / "compose.tls.yaml"
+COMPOSE_INSECURE = DOCKER / "compose.insecure.yaml"
 DOCKERFILE = DOCKER / "Dockerfile"
 DOCKERIGNORE = ROOT / ".dockerignore"
 ZENOHD_CONF = DOCKER / "zenohd.json5"
@@ -52,8 +56,13 @@ ROLE_MODULES = {
     "drone": "entities.drone_node",
     "gcs": "entities.gcs_node",
     "router": "dronesim.router",
+    "certs": "dronesim.certs",
 }
-ROUTER_ENDPOINT = "tcp/router:7447"
+#: The roles of the processes that play the game (the services that are entities).
+ENTITY_ROLES = ("coordinator", "env", "drone", "gcs")
+#: Where every entity connects: over TLS by default, plain with compose.insecure.yaml.
+ROUTER_ENDPOINT = "tls/router:7447"
+PLAIN_ENDPOINT = "tcp/router:7447"
 
 yaml = pytest.importorskip("yaml", reason="PyYAML is needed to read the compose files")
 
@@ -130,9 +139,10 @@ GENERATED = {"../certs"}
 
 
 def dronesim_services(compose: dict) -> dict[str, dict]:
-    """The services running the dronesim image (every one but the router)."""
+    """The services running a dronesim entity (every one but the router and the one-shot credentials service)."""
     return {name: svc for name, svc in compose["services"].items()
-            if isinstance(svc.get("command"), list) and svc["command"][:1] == ["dronesim"]}
+            if isinstance(svc.get("command"), list) and svc["command"][:1] == ["dronesim"]
+            and svc["command"][1] in ENTITY_ROLES}
 
 
 def flag_values(argv: list[str], *names: str) -> list[str]:
@@ -214,7 +224,7 @@ def compose_schema() -> dict:
 
 
 def compose_files() -> list[Path]:
-    return [p for p in (COMPOSE, COMPOSE_TLS) if p.exists()]
+    return [p for p in (COMPOSE, COMPOSE_INSECURE, COMPOSE_TLS) if p.exists()]
 
 
 @pytest.mark.parametrize("path", compose_files(), ids=lambda p: p.name)
@@ -241,13 +251,13 @@ def compose_tool(name: str) -> list[str] | None:
 
 @pytest.mark.parametrize("tool", sorted(COMPOSE_TOOLS))
 def test_the_compose_tool_accepts_the_files(tool):
-    """`config` of each tool here, with and without the TLS override (the schema test stands in for a
-    tool that is not installed)."""
+    """`config` of each tool here, alone and with each override (the schema test stands in for a tool that is not
+    installed)."""
     argv = compose_tool(tool)
     if argv is None:
         pytest.skip(f"{shlex.join(COMPOSE_TOOLS[tool])} is not installed here (the schema test stands in)")
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHON_IMAGE", "ZENOH_IMAGE", "WHEELHOUSE")}
-    for files in ([COMPOSE], compose_files()):
+    for files in ([COMPOSE], *([COMPOSE, override] for override in compose_files()[1:])):
         flags = [a for p in files for a in ("-f", str(p))]
         p = subprocess.run([*argv, *flags, "config"], capture_output=True, text=True, timeout=60, env=env)
         assert p.returncode == 0, p.stderr
@@ -258,7 +268,7 @@ def test_the_compose_tool_accepts_the_files(tool):
 
 #: Where the compose commands a user reads are: fenced blocks and `code` of the docs, the files' comments.
 COMPOSE_DOCS = [ROOT / "docs" / "docker.md", ROOT / "README.md"]
-COMPOSE_COMMENTED = [COMPOSE, COMPOSE_TLS, DOCKER / "offline.sh"]
+COMPOSE_COMMENTED = [COMPOSE, COMPOSE_INSECURE, COMPOSE_TLS, DOCKER / "offline.sh"]
 #: Compose's global options that take a value (v1 and v2 alike).
 COMPOSE_GLOBALS = {"-f", "--file", "-p", "--project-name", "--env-file", "--profile", "--project-directory"}
 
@@ -343,15 +353,29 @@ def test_every_documented_compose_command_works_with_each_compose_tool(tool, tmp
 # --------------------------------------------------------------------------- what the compose file says
 
 
+def router_config_path(router: dict) -> str:
+    """The config file the router service gives zenohd (`-c FILE`), as its container sees it."""
+    return router["command"][router["command"].index("-c") + 1]
+
+
 def test_router_is_the_real_zenohd_matching_eclipse_zenoh():
+    """By default zenohd runs the config the credentials service writes (in the `credentials` volume, which the
+    router mounts read-only and which the service completes before the router starts); with compose.insecure.yaml,
+    docker/zenohd.json5."""
     compose = load_compose()
     router = compose["services"]["router"]
     assert router["image"] == f"eclipse/zenoh:{zenoh_pin()}", "the router image must match eclipse-zenoh's version"
-    mounts = {v.split(":")[1]: (DOCKER / v.split(":")[0]).resolve() for v in router["volumes"]}
-    conf_in_container = router["command"][router["command"].index("-c") + 1]
-    assert mounts[conf_in_container] == ZENOHD_CONF.resolve()
     assert any(p.endswith(":7447") for p in router["ports"])
     assert router["healthcheck"]["test"][0] == "CMD-SHELL"
+    conf = router_config_path(router)
+    kit = str(Path(conf).parent)
+    credentials = compose["services"]["credentials"]
+    assert router["volumes"] == [f"credentials:{kit}:ro"] and f"credentials:{kit}" in credentials["volumes"]
+    assert router["depends_on"]["credentials"]["condition"] == "service_completed_successfully"
+    assert credentials["command"][:4] == ["dronesim", "certs", kit, "--game"] and Path(conf).name == "router.json5"
+    plain = load_cluster(COMPOSE_INSECURE)["services"]["router"]
+    files = {v.split(":")[1]: (DOCKER / v.split(":")[0]).resolve() for v in plain["volumes"] if v.startswith(".")}
+    assert files[router_config_path(plain)] == ZENOHD_CONF.resolve()
 
 
 def test_router_config_listens_on_7447_without_multicast():
@@ -365,14 +389,16 @@ def test_router_config_listens_on_7447_without_multicast():
     assert admin["enabled"] is True and admin["permissions"] == {"read": True, "write": False}
 
 
-def test_every_dronesim_service_is_an_explicit_client_of_the_router():
-    compose = load_compose()
+@pytest.mark.parametrize("path,endpoint", [(COMPOSE, ROUTER_ENDPOINT), (COMPOSE_INSECURE, PLAIN_ENDPOINT)],
+                         ids=["secured", "insecure"])
+def test_every_dronesim_service_is_an_explicit_client_of_the_router(path, endpoint):
+    compose = load_cluster(path)
     services = dronesim_services(compose)
     roles = {svc["command"][1] for svc in services.values()}
     assert {"coordinator", "env", "drone", "gcs"} <= roles
     for name, svc in services.items():
         argv = svc["command"]
-        assert flag_values(argv, "--connect", "-e") == [ROUTER_ENDPOINT], name
+        assert flag_values(argv, "--connect", "-e") == [endpoint], name
         assert flag_values(argv, "--mode", "-m") == ["client"], name
         assert not flag_values(argv, "--listen", "-l"), name
         assert svc["build"]["dockerfile"] == "docker/Dockerfile"
@@ -406,6 +432,63 @@ def test_tls_variant_uses_mutual_tls_and_access_control_everywhere():
         assert "/certs" in mounts(svc), name
     drones = int(flag_values(cluster["services"]["coordinator"]["command"], "--drones")[0])
     assert all(f"D{i:02d}" in subjects for i in range(1, drones + 1)), "the ACL must name every drone"
+
+
+def run_credentials_service(cluster: dict, root: Path) -> subprocess.CompletedProcess:
+    """The credentials service's command, run here through the image's entrypoint as in its container, its
+    /credentials/... volumes being folders under `root`."""
+    if shutil.which("openssl") is None:
+        skip_or_fail("openssl is needed by dronesim certs (tests/setup.d/security.sh installs it)")
+    argv = [a.replace("/credentials", str(root)) for a in cluster["services"]["credentials"]["command"]]
+    made = subprocess.run([sys.executable, str(ENTRYPOINT), *argv], capture_output=True, text=True, timeout=120,
+                          cwd=ROOT)
+    assert made.returncode == 0, made.stdout + made.stderr
+    return made
+
+
+def test_the_credentials_service_gives_each_entity_its_own_and_keeps_them(tmp_path):
+    """Issue 33, 7: the credentials service's command, run as in its container (its volumes: folders here), makes
+    the game's kit: the router's config (TLS on 7447, user/password, the access control of the game's drones and of
+    the swarm host H01) naming the kit's files. Every credential file an entity's command names is in a volume
+    that entity mounts read-only, which the service writes at the same path, and which holds the CA's certificate
+    and the passwords of that entity's role alone: a drone's container has no password of the coordinator, the
+    environment or the ground station (nor they a drone's). Run again (`up` again: a crashed coordinator resumed),
+    not one byte changes."""
+    import zenoh
+
+    cluster = load_compose(DRONES="3")
+    root = tmp_path / "credentials"
+    run_credentials_service(cluster, root)
+    service = cluster["services"]["credentials"]
+    written = {dst: volume for dst, volume in mounts(service).items()}
+    drones = ["D01", "D02", "D03"]
+    expected = {"coordinator": ["SRV"], "env": ["ENV"], "gcs": ["GCS"], "drone": drones, "swarm": ["H01"]}
+    for name, svc in dronesim_services(cluster).items():
+        ids = expected.pop(name)
+        for ident in ids:
+            argv = [a.replace("{id}", ident) for a in svc["command"]]
+            assert flag_values(argv, "--user") == [ident], name
+            for value in flag_values(argv, "--tls-ca", "--password-file"):
+                folder = str(Path(value).parent)
+                assert svc["volumes"].count(f"{written[folder]}:{folder}:ro") == 1, (name, value)
+                assert (root / Path(value).relative_to("/credentials")).exists(), (name, value)
+        folder = str(Path(flag_values(svc["command"], "--password-file")[0]).parent)
+        share = root / Path(folder).relative_to("/credentials")
+        role = drones + ["H01"] if svc["command"][1] == "drone" else ids
+        assert sorted(f.name for f in share.iterdir()) == sorted(["ca.pem", *(f"{e}.password" for e in role)]), name
+    assert not expected, f"services without credentials: {expected}"
+    router = cluster["services"]["router"]
+    conf = zenoh.Config.from_file(str(root / Path(router_config_path(router)).relative_to("/credentials")))
+    kit = root / "kit"
+    assert json.loads(conf.get_json("listen/endpoints")) == ["tls/0.0.0.0:7447"]
+    assert json.loads(conf.get_json("transport/auth/usrpwd/dictionary_file")) == str(kit / "users.txt")
+    assert json.loads(conf.get_json("transport/link/tls/listen_private_key")) == str(kit / "router.key")
+    acl = json.loads(conf.get_json("access_control"))
+    assert acl["default_permission"] == "deny"
+    assert sorted(s["id"] for s in acl["subjects"]) == sorted(["SRV", "ENV", "GCS", *drones, "H01"])
+    before = {f: f.read_bytes() for f in root.rglob("*") if f.is_file()}
+    run_credentials_service(cluster, root)
+    assert {f: f.read_bytes() for f in root.rglob("*") if f.is_file()} == before, "made again: the same"
 
 
 def test_drones_scale_to_the_coordinators_drone_count():
@@ -463,8 +546,10 @@ def documented_commands() -> list[list[str]]:
 
 def test_every_documented_command_parses():
     commands = documented_commands()
-    assert any(c[0] == "gcs" and "tcp/HOST:7447" in c for c in commands), "the remote join is documented"
-    assert any(c[0] == "gcs" and "tls/HOST:7447" in c for c in commands), "the TLS remote join is documented"
+    assert any(c[0] == "gcs" and "tls/HOST:7447" in c and "--password-file" in c for c in commands), \
+        "the remote join, with the credentials the cluster makes, is documented"
+    assert any(c[0] == "gcs" and "tls/HOST:7447" in c and "--tls-cert" in c for c in commands), \
+        "the mutual-TLS remote join is documented"
     for argv in commands:
         parse_role(argv[0], argv[1:])
     text = (ROOT / "docs" / "docker.md").read_text()
@@ -888,8 +973,9 @@ GAME_ENV = {"DRONES": "2", "SEED": "7", "MAX_TURNS": "40", "WEB_PACE": "0", "WEB
 
 def play_compose_game(cluster: dict, rewrite: dict[str, str], tmp_path: Path) -> tuple[dict[str, Proc], Path]:
     """The cluster's command lines, run through the image's entrypoint with each `rewrite` applied (the
-    router endpoint, /data, /certs): the web page takes a free loopback port and gets scripted targets,
-    and three drone replicas with `--id auto` race for the two drone ids. The "containers" are checked
+    router endpoint, /data, /credentials, /certs): the web page takes a free loopback port and gets scripted
+    targets, and three drone replicas with `--id auto` race for the two drone ids (the one too many finds no
+    credentials for a third drone, or, given some, is refused by the coordinator). The "containers" are checked
     healthy while they wait for the ground station, which a test then drives as a human would."""
     services = cluster["services"]
     data = tmp_path / "data"
@@ -915,12 +1001,19 @@ def play_compose_game(cluster: dict, rewrite: dict[str, str], tmp_path: Path) ->
         procs["coordinator"].expect("coordinator ready")
         procs["env"] = start("env", argv_of("env"))
         replicas = services["drone"]["deploy"]["replicas"]
+        exited: queue.SimpleQueue[str] = queue.SimpleQueue()
         for n in range(1, replicas + 2):  # one replica too many
             procs[f"drone-{n}"] = start(f"drone-{n}", argv_of("drone"))
+            threading.Thread(target=lambda name=f"drone-{n}": exited.put(name) if procs[name].p.wait() else None,
+                             daemon=True).start()
         for i in range(1, replicas + 1):
             procs["coordinator"].expect(rf"admitted D{i:02d}\b")
         extra = f"D{replicas + 1:02d}"
-        procs["coordinator"].expect(rf"refused {extra}: unknown drone")
+        credentials = flag_values([a.replace("{id}", extra) for a in argv_of("drone")], "--password-file",
+                                  "--tls-cert", "--tls-key")
+        if all(Path(f).exists() for f in credentials):  # (else it stops before it asks: no credentials for it)
+            procs["coordinator"].expect(rf"refused {extra}: unknown drone")
+        exited.get(timeout=120)  # the replica one too many has given up
         procs["coordinator"].expect(r"admitted ENV\b")
         drones = {n: json.loads(p.state.read_text())["entity"] for n, p in procs.items() if n.startswith("drone-")}
         assert sorted(drones.values()) == [*(f"D{i:02d}" for i in range(1, replicas + 1)), extra]
@@ -975,8 +1068,10 @@ def check_game(procs: dict[str, Proc], journal: Path) -> None:
 @pytest.mark.integration
 @pytest.mark.slow
 def test_compose_game_through_the_router_config(tmp_path):
+    """compose.insecure.yaml through docker/zenohd.json5 loaded into an embedded router."""
     with embedded_router_from_config() as locator:
-        procs, journal = play_compose_game(load_cluster(COMPOSE, **GAME_ENV), {ROUTER_ENDPOINT: locator}, tmp_path)
+        procs, journal = play_compose_game(load_cluster(COMPOSE_INSECURE, **GAME_ENV), {PLAIN_ENDPOINT: locator},
+                                           tmp_path)
     check_game(procs, journal)
 
 
@@ -989,7 +1084,30 @@ def router_health_probe(port: int) -> str:
 
 @pytest.mark.integration
 @pytest.mark.slow
+def test_compose_game_through_zenohd_secured_by_default(tmp_path):
+    """Issue 33, 7: docker/compose.yaml as it is. The credentials service's command makes the kit; zenohd runs the
+    router config it wrote (TLS, user/password, the game's access control); every entity connects with its own
+    credentials, the drone replicas with those of the id they claim, and the game plays; the replica one too many
+    finds no credentials for a third drone and says it is one too many (exit 2)."""
+    cluster = load_cluster(COMPOSE, **GAME_ENV)
+    root = tmp_path / "credentials"
+    run_credentials_service(cluster, root)
+    port = free_port()
+    text = (root / Path(router_config_path(cluster["services"]["router"])).relative_to("/credentials")).read_text()
+    assert '"tls/0.0.0.0:7447"' in text
+    conf = tmp_path / "zenohd.json5"
+    conf.write_text(text.replace('"tls/0.0.0.0:7447"', f'"tls/127.0.0.1:{port}"'))
+    with zenohd(conf, f"tls/127.0.0.1:{port}", tmp_path) as locator:
+        procs, journal = play_compose_game(cluster, {ROUTER_ENDPOINT: locator, "/credentials/": f"{root}/"}, tmp_path)
+    check_game(procs, journal)
+    extra = next(p for n, p in procs.items() if n.startswith("drone-") and p.p.returncode == 2)
+    assert any("no credentials for D03" in line for line in extra.err), extra.text
+
+
+@pytest.mark.integration
+@pytest.mark.slow
 def test_compose_game_through_zenohd(tmp_path):
+    """compose.insecure.yaml through zenohd running docker/zenohd.json5."""
     port = free_port()
     text = ZENOHD_CONF.read_text()
     assert '"tcp/0.0.0.0:7447"' in text
@@ -998,7 +1116,8 @@ def test_compose_game_through_zenohd(tmp_path):
     with zenohd(conf, f"tcp/127.0.0.1:{port}", tmp_path) as locator:
         assert subprocess.run(["sh", "-c", router_health_probe(port)]).returncode == 0, \
             "the router's health check misses zenohd's listening socket"
-        procs, journal = play_compose_game(load_cluster(COMPOSE, **GAME_ENV), {ROUTER_ENDPOINT: locator}, tmp_path)
+        procs, journal = play_compose_game(load_cluster(COMPOSE_INSECURE, **GAME_ENV), {PLAIN_ENDPOINT: locator},
+                                           tmp_path)
     check_game(procs, journal)
 
 
@@ -1176,11 +1295,27 @@ class Project:
                                                    "--filter", "type=container", "--format", "{{json .}}"], tmp)
 
     def compose(self, *argv: str, timeout: float = ENGINE_TIMEOUT) -> str:
+        return self.compose_bytes(*argv, timeout=timeout).decode()
+
+    def compose_bytes(self, *argv: str, timeout: float = ENGINE_TIMEOUT) -> bytes:
+        """The compose tool's output, as it comes (a `run` may pipe a tar archive)."""
         files = [a for f in self.files for a in ("-f", str(f))]
         cmd = [*self.engine.compose, "-p", self.name, *files, *argv]
-        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=self.env, cwd=ROOT)
-        assert p.returncode == 0, f"{shlex.join(cmd)}:\n{p.stdout}{p.stderr}"
+        p = subprocess.run(cmd, capture_output=True, timeout=timeout, env=self.env, cwd=ROOT)
+        assert p.returncode == 0, f"{shlex.join(cmd)}:\n{p.stdout.decode(errors='replace')}{p.stderr.decode()}"
         return p.stdout
+
+    def gcs_credentials(self, folder: Path) -> dict[str, bytes]:
+        """The ground station's credentials, taken out of the cluster as docs/docker.md says (`run --rm --no-deps -T
+        gcs tar -cC /credentials/GCS .`, unpacked into `folder`): file name -> content."""
+        import io
+        import tarfile
+
+        archive = self.compose_bytes("run", "--rm", "--no-deps", "-T", "gcs", "tar", "-cC", "/credentials/GCS", ".")
+        folder.mkdir(parents=True, exist_ok=True)
+        with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+            tar.extractall(folder, filter="data")
+        return {f.name: f.read_bytes() for f in sorted(folder.iterdir())}
 
     def override(self, name: str, services: dict) -> Path:
         """An extra compose file (JSON is YAML) applied after the others."""
@@ -1203,10 +1338,15 @@ class Project:
         assert len(found) == 1, f"{service}: {found}"
         return next(iter(found.values()))
 
+    def long_running(self) -> dict[str, str]:
+        """The project's containers but the one-shot credentials service's (it has exited: no health, no game)."""
+        once = set(self.containers("credentials").values())
+        return {n: i for n, i in self.containers().items() if i not in once}
+
     def entities(self) -> dict[str, str]:
-        """The dronesim containers (every one but the router)."""
+        """The dronesim entity containers (every one but the router and the credentials service's)."""
         router = set(self.containers("router").values())
-        return {n: i for n, i in self.containers().items() if i not in router}
+        return {n: i for n, i in self.long_running().items() if i not in router}
 
     def inspect(self, cid: str, fmt: str) -> str:
         return docker("inspect", "--format", fmt, cid).strip()
@@ -1394,7 +1534,7 @@ def test_engine_up_plays_a_scripted_game_healthy_and_like_dronesim_up(projects, 
     p = projects([COMPOSE], {**game.env(), "HEALTH_INTERVAL": "2s"})
     scripted(p, game)
     p.compose("up", "-d", "--scale", "gcs=0")  # the game cannot start without its ground station
-    held = p.containers()
+    held = p.long_running()
     services = sorted(p.inspect(i, f'{{{{index .Config.Labels "{SERVICE_LABEL}"}}}}') for i in held.values())
     assert services == ["coordinator", "drone", "drone", "drone", "env", "router"], services
     p.await_healthy(list(held.values()))
@@ -1582,19 +1722,141 @@ def test_engine_tls_cluster_plays_and_zenohd_drops_a_spoofed_move(projects, host
     assert p.journal() == host_journals(game)
 
 
+ATTACK = """
+import argparse, sys, threading, zenoh
+from network.transport import add_zenoh_args, zenoh_config
+from schema import Keys, Over, Phase, Refused, Status, Turn, decode, encode
+from schema.messages import Done, EndReason, Intent, Target
+parser = argparse.ArgumentParser()
+add_zenoh_args(parser)
+session = zenoh.open(zenoh_config(parser.parse_args(sys.argv[1:])))
+keys, done, block, absurd = Keys("sim"), threading.Event(), zenoh.CongestionControl.BLOCK, 2 ** 40
+
+def forge(sample):
+    real = decode(sample.payload.to_bytes(), Status)
+    if real.turn < 2 or done.is_set():
+        return
+    put = lambda key, message: session.put(key, encode(message), congestion_control=block)
+    put(keys.status, Status(turn=absurd, sender="OBS", drones=real.drones, game=real.game))
+    for phase in (Phase.GCS, Phase.DRONES, Phase.ENV):
+        put(keys.turn_of(phase), Turn(turn=absurd, sender="SRV", phase=phase, game=real.game))
+    put(keys.tgt("D02"), Target(turn=real.turn, sender="GCS", drone="D02", pos=(0, 0, 0)))
+    put(keys.gcs_done, Done(turn=real.turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))
+    put(keys.over, Over(turn=absurd, sender="SRV", reason=EndReason.INTERRUPTED, text="forged", game=real.game))
+    session.put(keys.nps("D01"), b"attacker: on its own key", congestion_control=block)  # the one allowed: last
+    done.set()
+
+session.declare_queryable(keys.connect, lambda q: q.reply(q.key_expr, encode(Refused(turn=0, sender="SRV",
+                                                                                         text="forged: go away"))))
+session.declare_subscriber(keys.status, forge)
+print("attacker: ready", flush=True)
+assert done.wait(300), "no STATUS of turn 2"
+print("attacker: forged", flush=True)
+session.close()
+"""
+
+
+def open_fails(conf) -> str:
+    """Why a Zenoh session on `conf` does not open (the test fails if it does)."""
+    import zenoh
+
+    try:
+        zenoh.open(conf).close()
+    except zenoh.ZError as err:
+        return str(err)
+    raise AssertionError("the router let a session in")
+
+
+@docker_engine
+@pytest.mark.slow
+def test_engine_the_cluster_is_secured_by_default_and_the_opt_out_is_a_plain_router(projects, host_journals,
+                                                                                      tmp_path):
+    """Issue 33, 7. `up` makes the game's credentials and access control (the credentials service): the router,
+    published on the host, opens no session without credentials (plain TCP, or TLS without a user). A container
+    holding a drone's credentials (D01's, from the drones' volume) answers CONNECT with a forged REFUSED before the
+    ground station joins, and once the game runs forges a STATUS and TURNs at turn 2^40, a target for D02, the
+    ground station's DONE (quit) and an OVER, then puts on its own key: the coordinator receives (and refuses)
+    that last one alone, no process had a forgery to refuse, the ground station was admitted, and the game plays
+    to its end with `dronesim up`'s journal. Taken out again after `up -d` of the credentials service, the
+    ground station's credentials are the same; after `down -v`, new. With compose.insecure.yaml the router is a
+    plain one: a session with no credentials opens and writes the game's keys, and the game plays the same."""
+    import zenoh
+
+    from schema import Keys
+    from tests.test_hostile_peers import client
+
+    game = Game()
+    p = projects([COMPOSE], {**game.env(), "PACE": "0.5"})
+    scripted(p, game)
+    p.compose("up", "-d", "--scale", "gcs=0")
+    srv = p.follow(p.one("coordinator"), "coordinator")
+    srv.expect("coordinator ready")
+    port = p.port("router", 7447)
+    kit = tmp_path / "gcs"
+    credentials = p.gcs_credentials(kit)
+    for flags in ((), ("--tls-ca", str(kit / "ca.pem"))):  # TLS only, and a user to authenticate
+        for scheme in ("tcp", "tls"):
+            open_fails(client(f"{scheme}/127.0.0.1:{port}", *flags))
+    attacker = docker("run", "-d", "--label", f"{TEST_LABEL}={p.name}", "--network", p.network(), "--volume",
+                      f"{p.name}_credentials-drones:/credentials/drones:ro", "--read-only", "--cap-drop", "ALL",
+                      p.engine.image, "python3", "-c", ATTACK, "--mode", "client", "--connect", ROUTER_ENDPOINT,
+                      "--tls-ca", "/credentials/drones/ca.pem", "--user", "D01", "--password-file",
+                      "/credentials/drones/D01.password").strip()
+    attack = p.follow(attacker, "attacker")
+    attack.expect("attacker: ready", ENGINE_TIMEOUT)
+    p.compose("up", "-d", "--no-deps", "gcs")
+    attack.expect("attacker: forged", ENGINE_TIMEOUT)
+    srv.expect(r"rejected sim/D01/NPS", ENGINE_TIMEOUT)  # its own key: through the router, refused as garbage
+    codes = exit_codes(p)
+    assert set(codes.values()) == {0}, codes
+    assert int(docker("wait", attacker).strip()) == 0, p.logs(attacker)
+    docker("rm", attacker)  # (it holds the drones' volume)
+    logs = {n: p.logs(i) for n, i in p.entities().items()}
+    assert "You are connected as GCS" in p.logs(p.one("gcs")), "the forged REFUSED got in"
+    for name, said in logs.items():
+        assert "future-turn" not in said and "connection refused" not in said, (name, said)
+        assert "D02/TGT" not in said and "GCS/DONE" not in said, (name, said)
+    assert p.journal() == host_journals(game), "an attack changed the game"
+    p.compose("up", "-d", "--no-deps", "credentials")  # made again, as every `up` does: kept
+    assert p.gcs_credentials(tmp_path / "again") == credentials, "`up` again made new credentials"
+    p.compose("down", "--volumes", "--timeout", "2")
+    p.compose("up", "-d", "--no-deps", "credentials")
+    fresh = p.gcs_credentials(tmp_path / "fresh")
+    assert fresh["ca.pem"] != credentials["ca.pem"] and fresh["GCS.password"] != credentials["GCS.password"]
+
+    plain = projects([COMPOSE, COMPOSE_INSECURE], {**game.env(), "PACE": "0.5"})
+    scripted(plain, game, COMPOSE_INSECURE)
+    plain.compose("up", "-d", "--scale", "gcs=0")
+    srv = plain.follow(plain.one("coordinator"), "coordinator")
+    srv.expect("coordinator ready")
+    assert plain.gcs_credentials(tmp_path / "none") == {}, "credentials made for a plain router"
+    with zenoh.open(client(f"tcp/127.0.0.1:{plain.port('router', 7447)}")) as stranger:
+        stranger.put(Keys("sim").nps("D01"), b"a stranger on a plain router",
+                     congestion_control=zenoh.CongestionControl.BLOCK)
+        srv.expect(r"rejected sim/D01/NPS", ENGINE_TIMEOUT)  # it got through: the entities alone judge it
+    plain.compose("up", "-d", "--no-deps", "gcs")
+    codes = exit_codes(plain)
+    assert set(codes.values()) == {0}, codes
+    assert plain.journal() == host_journals(game)
+
+
 @docker_engine
 @pytest.mark.slow
 def test_engine_remote_ground_station_and_web_page_in_chromium(projects, host_journals, tmp_path, request):
-    """A ground station on the host, outside the compose network, joins through the router's published
-    port and plays the game. Then the web ground station's page, published by its container, in Debian's
-    chromium driven by Playwright: a click on a cell sets the drone's target and the drone arrives."""
+    """A ground station on the host, outside the compose network, takes its credentials out of the cluster in the
+    one step docs/docker.md gives, joins over TLS through the router's published port and plays the game. Then
+    the web ground station's page, published by its container, in Debian's chromium driven by Playwright: a click
+    on a cell sets the drone's target and the drone arrives."""
     game = Game()
     p = projects([COMPOSE], game.env())
     p.compose("up", "-d", "--scale", "gcs=0")
     port = p.port("router", 7447)
+    kit = tmp_path / "gcs-credentials"
+    assert sorted(p.gcs_credentials(kit)) == ["GCS.password", "ca.pem"]
     remote = Proc("remote-gcs", [sys.executable, "-m", "dronesim", "gcs", "--mode", "client", "--connect",
-                                 f"tcp/127.0.0.1:{port}", "--targets", game.targets(), "--no-draw",
-                                 "--connect-timeout", "120"], tmp_path)
+                                 f"tls/127.0.0.1:{port}", "--tls-ca", str(kit / "ca.pem"), "--user", "GCS",
+                                 "--password-file", str(kit / "GCS.password"), "--targets", game.targets(),
+                                 "--no-draw", "--connect-timeout", "120"], tmp_path)
     try:
         assert remote.wait(ENGINE_TIMEOUT) == 0, remote.text
     finally:
@@ -1613,7 +1875,7 @@ def test_engine_remote_ground_station_and_web_page_in_chromium(projects, host_jo
     w = projects([COMPOSE], {"DRONES": "1", "SEED": "7", "MAX_TURNS": "80", "WEB_PACE": "0.05",
                              "HEALTH_INTERVAL": "2s"})
     w.compose("up", "-d")
-    w.await_healthy(list(w.containers().values()))  # the page holds the game until the first target
+    w.await_healthy(list(w.long_running().values()))  # the page holds the game until the first target
     url = f"http://127.0.0.1:{w.port('gcs', 8080)}/"
     browser = pw.chromium.launch(executable_path=chromium_path(), headless=True, args=CHROMIUM_FLAGS)
     try:
@@ -1649,11 +1911,13 @@ def test_engine_a_killed_coordinator_resumes_with_up_again_one_game_in_the_journ
     coordinator, env = p.one("coordinator"), p.one("env")
     gcs, env_log = p.follow(p.one("gcs"), "gcs"), p.follow(env, "env")
     gcs.expect(r"^turn 3:", ENGINE_TIMEOUT)
+    credentials = p.gcs_credentials(p.tmp / "before")
     docker("kill", coordinator)
     env_log.expect("the coordinator vanished: waiting up to 600 s", ENGINE_TIMEOUT)
     status, said = p.probe(env)  # it waits (GRACE) for its coordinator, and says so
     assert status == 1 and "waiting for the coordinator, which vanished" in said, said
     p.compose("up", "-d")  # the obvious way back
+    assert p.gcs_credentials(p.tmp / "after") == credentials, "`up -d` made new credentials"
     env_log.expect("You are connected as ENV", ENGINE_TIMEOUT, fresh=True)
     gcs.expect(r"^turn \d+:", ENGINE_TIMEOUT, fresh=True)
     status, said = p.probe(env)  # back in the game

@@ -198,6 +198,51 @@ def test_acl_swarm_hosts_fly_their_drones_only():
         assert acl.main(["--drones", "4", "--host", bad, "--identity", "usrpwd"]) == 2, bad
 
 
+def test_acl_a_spare_host_may_fly_every_drone_which_keep_their_own_principals():
+    """docker/compose.yaml's swarm profile: H01 may fly the game in place of the drone processes; each drone keeps
+    its own principal (the drone replicas hold every drone's credentials anyway); the other roles' keys stay theirs."""
+    block = acl.access_control(["D01", "D02"], spare_hosts=["H01"])
+    assert sorted(s["id"] for s in block["subjects"]) == ["D01", "D02", "ENV", "GCS", "H01", "SRV"]
+    for who in ("H01", "D01"):
+        assert acl.allowed(block, who, "ingress", "put", "sim/D01/NPS")
+    assert acl.allowed(block, "H01", "ingress", "put", "sim/D02/NPS")
+    assert not acl.allowed(block, "D01", "ingress", "put", "sim/D02/NPS")
+    assert acl.allowed(block, "H01", "ingress", "put", "sim/H01/MOVES")
+    for key in ("sim/D01/TGT", "sim/GCS/DONE", "sim/OBS/STATUS", "sim/SRV/OVER", "sim/SRV/TURN/DRONES"):
+        assert not acl.allowed(block, "H01", "ingress", "put", key), key
+    for bad in (["D03"], ["H01", "H01x"]):
+        with pytest.raises(ValueError, match="spare"):
+            acl.access_control(["D01"], spare_hosts=bad)
+    with pytest.raises(ValueError, match="spare"):
+        acl.access_control(["D01"], hosts={"H01": ("D01",)}, spare_hosts=["H01"])
+
+
+def test_game_credentials_are_kept_and_each_role_gets_its_share_alone(tmp_path, capsys):
+    """`dronesim certs DIR --game --by-role OUT` (docker/compose.yaml's credentials service): the router's zenohd
+    config besides the kit, and each role's share in OUT: the CA's certificate and that role's passwords alone.
+    Made again, nothing changes; a password no longer in the kit leaves its share."""
+    kit, out = tmp_path / "kit", tmp_path / "out"
+    argv = [str(kit), "--game", "--drones", "2", "--spare-host", "H01", "--by-role", str(out)]
+    assert certs.cli(argv) == 0
+    assert f"zenohd -c {kit / 'router.json5'}" in capsys.readouterr().out
+    shares = {share.name: sorted(f.name for f in share.iterdir()) for share in out.iterdir()}
+    assert shares == {"SRV": ["SRV.password", "ca.pem"], "ENV": ["ENV.password", "ca.pem"],
+                      "GCS": ["GCS.password", "ca.pem"],
+                      "drones": ["D01.password", "D02.password", "H01.password", "ca.pem"]}
+    assert (out / "drones" / "D02.password").read_text() == (kit / "D02.password").read_text()
+    assert (out / "drones" / "D02.password").stat().st_mode & 0o777 == 0o600
+    conf = zenoh.Config.from_file(str(kit / "router.json5"))
+    assert json.loads(conf.get_json("listen/endpoints")) == ["tls/0.0.0.0:7447"]
+    assert json.loads(conf.get_json("transport/auth/usrpwd/dictionary_file")) == str(kit / "users.txt")
+    before = {f: f.read_bytes() for f in tmp_path.rglob("*") if f.is_file()}
+    assert certs.cli(argv) == 0
+    assert {f: f.read_bytes() for f in tmp_path.rglob("*") if f.is_file()} == before
+    (kit / "D02.password").unlink()
+    assert certs.cli([str(kit), "--game", "--drones", "1", "--spare-host", "H01", "--by-role", str(out)]) == 0
+    assert sorted(f.name for f in (out / "drones").iterdir()) == ["D01.password", "H01.password", "ca.pem"]
+    assert certs.cli([str(kit), "--by-role", str(out)]) == 2, "--by-role goes with --game"
+
+
 def test_acl_binds_a_per_entity_query_key_to_its_asker(monkeypatch):
     """Were admission keyed by entity (SRV/CONNECT/{entity}, see docs/security.md), the generated ACL
     would let each principal ask only as itself, and the coordinator serve them all."""
