@@ -76,7 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--web", metavar="[HOST:]PORT",
                    help="the ground station is a web page on this address (see docs/web-gcs.md)")
     p.add_argument("--ros2", action="store_true",
-                   help="publish the game to ROS 2 (rmw_zenoh) and take ROS 2 goals as targets (docs/ros2.md)")
+                   help="publish the game to ROS 2 (rmw_zenoh) and take ROS 2 goals as targets, beside the console's "
+                        "or the other targets (docs/ros2.md)")
     p.add_argument("--foxglove", metavar="[HOST:]PORT", help="serve the game live to Foxglove (docs/ros2.md)")
     p.add_argument("--log-level", default="WARNING", help="log level of the entity processes (default WARNING)")
     add_mavlink_args(p)  # the ground station as MAVLink vehicles (docs/mavlink.md)

@@ -1,5 +1,6 @@
-"""The ground station, pure: the seed's input check (correctForm), scripted plans, the console's reading,
-the display, and `Station`, the protocol every ground station plays (scripted, interactive, web, benchmark).
+"""The ground station, pure: the seed's input check (correctForm), scripted plans, the console's reading of a
+line, the display, and `Station`, the protocol every ground station plays (scripted, interactive, web, benchmark;
+the console's own is `entities.console`).
 
 A plan maps turns to targets: ``9,9,0`` (D01 from turn 1), ``D02=3,4,0`` (D02 from turn 1),
 ``D01=5,5,0@12`` (from turn 12). A script file holds one such item per line (``#`` comments).
@@ -11,7 +12,7 @@ import bisect
 import pathlib
 import re
 from collections import Counter
-from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import takewhile
 
@@ -233,47 +234,6 @@ class Ground:
         return cls(world, starts, plan)
 
 
-class Console:
-    """The seed's interactive loop over a line reader (stdin by default)."""
-
-    def __init__(self, world: World, drones: list[str], read: Callable[[str], str] = input,
-                 write: Callable[[str], None] = print) -> None:
-        self.world, self.drones, self.read, self.write = world, drones, read, write
-
-    def ask(self, turn: int, current: Mapping[str, Cell],
-            gone: Collection[str] = ()) -> tuple[dict[str, Cell], Intent]:
-        """New targets for this turn. Drones without a target must get one (the seed forces the first), but
-        those `gone` (dead or lost)."""
-        new: dict[str, Cell] = {}
-        while True:
-            missing = [d for d in self.drones if d not in current and d not in new and d not in gone]
-            try:
-                line = self.read(f"turn {turn}: target for {missing[0]} (x,y,z): " if missing else
-                                 f"turn {turn}: new target ([Dnn] x,y,z; ...), Enter to keep, q to quit: ").strip()
-            except EOFError:
-                return new, Intent.QUIT
-            if line.lower() in ("q", "quit", "exit"):
-                return new, Intent.QUIT
-            if not line and missing:
-                self.write(f"a first target is required for {missing[0]}")
-                continue
-            if not line:
-                return new, Intent.CONTINUE
-            given: dict[str, Cell] = {}
-            try:  # all or nothing: one bad item rejects the line
-                for part in map(str.strip, line.split(";")):
-                    if missing and not part.startswith("D"):
-                        part = f"{missing[0]} {part}"
-                    given.update(parse_command(part, self.world.size, self.drones, self.world))
-                    missing = [d for d in missing if d not in given]
-            except UsageError as err:
-                self.write(f"invalid: {err}")
-                continue
-            new.update(given)
-            if not missing:
-                return new, Intent.CONTINUE
-
-
 #: End reasons whose last turn produced a STATUS (the others end a turn before its STATUS).
 OBSERVED_ENDS = frozenset({EndReason.NO_DRONE_ALIVE, EndReason.ALL_REACHED, EndReason.SETTLED, EndReason.TURN_LIMIT})
 
@@ -307,12 +267,11 @@ class Station:
     """The ground station's side of the protocol: fed the coordinator's messages, it returns what to do. No
     network, no clock (times are seconds of any monotonic clock). Each GCS phase it answers with a DONE
     carrying the targets that change (`gcs_done`), its plan's of that turn and the person's. Who decides, and when:
-    - a script (neither `console` nor `hold`) answers at once from its plan, intent FINAL from the plan's
+    - a script (not `hold`) answers at once from its plan, intent FINAL from the plan's
       last turn (given `quit_at`: CONTINUE until that turn, then QUIT), and answers ahead the coming phases
       in which its plan has nothing new (`turns_to_answer_ahead`): the coordinator takes them without a
       round trip and without announcing them, so the station goes by STATUS;
-    - a console asks its person, in the phase; a held station (`hold`: the web page) keeps the phase
-      `pending` until `answer` is called;
+    - a held station (`hold`: the console, the web page) keeps the phase `pending` until `answer` is called;
     - a station taking `goals` as they come (ROS 2's, `want`) answers no phase ahead and never says its plan
       is final (the game goes on to its turn limit, or until someone quits);
     - a lifelong script (`tasks`) answers each phase in it, once the STATUS of the turn before is in: its plan's
@@ -322,12 +281,11 @@ class Station:
     in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last turn is in, or
     `FINAL_STATUS_WAIT` s after OVER."""
 
-    def __init__(self, ground: Ground, *, console: Console | None = None, hold: bool = False,
-                 quit_at: int | None = None, verbose: bool = False, ahead: int = ANSWER_AHEAD,
-                 goals: bool = False, tasks: Tasks | None = None) -> None:
+    def __init__(self, ground: Ground, *, hold: bool = False, quit_at: int | None = None, verbose: bool = False,
+                 ahead: int = ANSWER_AHEAD, goals: bool = False, tasks: Tasks | None = None) -> None:
         self.ground, self.plan = ground, ground.plan
-        self.console, self.hold, self.quit_at, self.verbose = console, hold, quit_at, verbose
-        self.scripted = console is None and not hold
+        self.hold, self.quit_at, self.verbose = hold, quit_at, verbose
+        self.scripted = not hold
         # phases a script answers ahead at most (0: none; the benchmark's switch)
         self.ahead = 0 if goals or tasks is not None else ahead
         self.goals, self.tasks = goals, tasks
@@ -385,6 +343,17 @@ class Station:
         self.wanted.update(changed)
         return changed
 
+    def take(self, drone: str, cell: Cell) -> None:
+        """A target from outside the plan (a ROS 2 goal), for the next GCS phase; UsageError (``reason: ...``) if
+        there is no such drone, it is dead or lost, or the game is over."""
+        if self.over is not None:
+            raise UsageError("game over: no more targets")
+        if drone not in self.ground.starts:
+            raise UsageError(f"unknown drone: this game flies {', '.join(self.ground.starts)}")
+        if drone in self.gone:
+            raise UsageError(f"dead or lost: {drone} takes no more targets")
+        self.want({drone: cell})
+
     def answer(self, turn: int, intent: Intent, new: Mapping[str, Cell] = {}) -> list[Effect]:
         self.want(new)
         in_force = targets_of(self.tracks.last) if self.tracks.last is not None else None
@@ -414,9 +383,7 @@ class Station:
         if self.hold:
             self.pending = turn
             return []
-        new, intent = (self.console.ask(turn, self.wanted, self.gone) if self.console is not None
-                       else ({}, self.intent(turn)))
-        return self.answer(turn, intent, new) + self._ahead(turn)
+        return self.answer(turn, self.intent(turn)) + self._ahead(turn)
 
     def _tasks_done(self, turn: int) -> list[Effect]:
         """A lifelong station's answer in the GCS phase of `turn`, the STATUS of the turn before in: the new targets

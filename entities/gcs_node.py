@@ -2,7 +2,8 @@
 
 Each GCS phase it sends the targets that change (`entities.gcs.Station`, the protocol every ground station
 plays); after each turn it shows every drone's state; on OVER it draws the world with the drones' paths and
-prints a summary. Interactive mode forces a first target, then offers each turn to change it.
+prints a summary. Interactive mode (no plan) is the console (`entities.console`): it forces a first target, then
+offers each turn to change it; with ``--ros2`` a ROS 2 goal is a target typed there.
 
 This module is the terminal's Zenoh adapter and the `dronesim gcs` command, which picks the face (terminal, web);
 every face connects and plays through `entities.station_link`.
@@ -12,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import queue
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -28,75 +28,130 @@ from network.transport import (
     setup_logging,
     zenoh_config,
 )
-from schema import Keys, Over, UsageError
+from schema import Cell, Keys, Over, UsageError
 
-from .gcs import Console, Ground, Station
+from .console import Console, Prompt, Typed
+from .gcs import Effect, End, Ground, SendDone, Show, Station
 from .station_link import join, listen, play, publisher
 from .tasks import Tasks
 
 
-class Lines:
-    """The terminal's lines, read by a thread of their own: the main thread waits for the next one in a
-    queue, which a signal wakes (`network.signals.waking`), where a read of its own would wait on."""
-
-    _WAKE = object()
-
-    def __init__(self, stream: TextIO) -> None:
-        self._q: queue.SimpleQueue[object] = queue.SimpleQueue()
-        threading.Thread(target=self._pump, args=(stream,), name="stdin", daemon=True).start()
-
-    def _pump(self, stream: TextIO) -> None:
+def read_lines(stream: TextIO, post: Callable[[object], None]) -> None:
+    """The terminal's lines, read by a thread of their own and posted (`Typed`; None at the end) where the main
+    thread waits: its inbox, which a signal wakes too (`network.signals.waking`), where a read would wait on."""
+    def pump() -> None:
         for line in stream:
-            self._q.put(line)
-        self._q.put(None)
+            post(Typed(line.rstrip("\n")))
+        post(Typed(None))
+    threading.Thread(target=pump, name="stdin", daemon=True).start()
 
-    def wake(self) -> None:
-        self._q.put(self._WAKE)
 
-    def read(self, prompt: str) -> str:
-        """`input`: the next line without its end of line, EOFError at the end."""
-        print(prompt, end="", flush=True)
-        while (line := self._q.get()) is self._WAKE:
-            pass
-        if not isinstance(line, str):
-            self._q.put(None)  # the end, for the next read too
-            raise EOFError
-        return line.rstrip("\n")
+class Screen:
+    """The terminal's output: each text on lines of its own, the console's prompt last. A text that comes while the
+    prompt waits (a turn's status, a ROS 2 goal's fate) goes on a line of its own, and the prompt is shown again
+    below it, unless the phase it asked about has been answered. `echoed`: a line typed ends the prompt's line (a
+    terminal's echo; a pipe's lines are not shown)."""
+
+    def __init__(self, out: TextIO, *, echoed: bool) -> None:
+        self.out, self.echoed = out, echoed
+        self.prompt: str | None = None  # the prompt waiting for a line
+        self.open = False  # the last line shown is a prompt's, not ended
+
+    def _write(self, text: str) -> None:
+        if self.open:
+            self.out.write("\n")
+        self.out.write(text)
+        self.out.flush()
+
+    def show(self, text: str) -> None:
+        self._write(text + "\n")
+        self.open = False
+        if self.prompt is not None:
+            self.ask(self.prompt)
+
+    def ask(self, prompt: str) -> None:
+        self._write(prompt)
+        self.prompt, self.open = prompt, True
+
+    def answered(self) -> None:
+        """The phase the prompt asked about is answered: it is not shown again."""
+        self.prompt = None
+
+    def typed(self) -> None:
+        if self.echoed:
+            self.open = False
+
+
+class Terminal:
+    """The terminal face: carries out its protocol's effects (on the `screen`, and `send`: `station_link.publisher`)
+    and hands the `console`, if a person is at it, the lines typed and ROS 2's goals (`take`, with `--ros2`)."""
+
+    def __init__(self, station: Station, console: Console | None, screen: Screen, send: Callable[[Effect], None],
+                 logger: logging.Logger) -> None:
+        self.station, self.console, self.screen, self.send, self.log = station, console, screen, send, logger
+        self.take: Callable[[object], bool] | None = None
+
+    def perform(self, effect: object) -> None:
+        match effect:
+            case Prompt(text):
+                self.screen.ask(text)
+            case SendDone(ahead=False):
+                self.screen.answered()
+                self.send(effect)
+            case SendDone() | Show() | End():
+                self.send(effect)
+
+    def goal(self, drone: str, cell: Cell) -> None:
+        """A ROS 2 goal read well (`take_goals`): the drone's target (a UsageError if the console refuses it)."""
+        if self.console is None:
+            self.station.take(drone, cell)
+            return
+        for effect in self.console.goal(drone, cell):
+            self.perform(effect)
+
+    def other(self, event: object) -> None:
+        """An event of the inbox besides the game's: a line typed, a ROS 2 goal, else a bug (logged)."""
+        if isinstance(event, Typed) and self.console is not None:
+            self.screen.typed()
+            for effect in self.console.line(event.text):
+                self.perform(effect)
+        elif self.take is None or not self.take(event):
+            self.log.error("unexpected event %r", event)
 
 
 def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
     conf, keys, draw = zenoh_config(args), Keys(args.root), not args.no_draw
     with open_session(conf) as session:
         inbox = listen(session, keys, logger)
-        lines = (None if args.targets or args.script or args.scenario or args.ros2  # no plan: a person
-                 or args.lifelong is not None else Lines(sys.stdin))
-        with waking(partial(inbox.post, None), *([lines.wake] if lines else [])):  # a signal ends any wait
+        person = not (args.targets or args.script or args.scenario  # no plan: a person at the console
+                      or args.lifelong is not None)
+        if person:
+            read_lines(sys.stdin, inbox.post)
+        with waking(partial(inbox.post, None)):  # a signal ends any wait (a prompt's too)
             member = join(session, inbox, logger, connect_timeout=args.connect_timeout, grace=args.grace)
             ground = Ground.from_welcome(member.welcome, args.targets, args.script)
-            console = Console(ground.world, list(ground.starts), read=lines.read) if lines else None
+            console = Console(ground, goals=args.ros2, verbose=not args.quiet) if person else None
             tasks = None if args.lifelong is None else Tasks(ground.world, args.lifelong)
-            station = Station(ground, console=console, verbose=not args.quiet, goals=args.ros2, tasks=tasks)
+            station = console.station if console else Station(ground, verbose=not args.quiet, goals=args.ros2,
+                                                                tasks=tasks)
+            screen = Screen(sys.stdout, echoed=person and sys.stdin.isatty())
             if draw:
-                print(station.opening(), flush=True)
-            show = publisher(Outbox(session), keys, logger, lambda text: print(text, flush=True))
-            take = None
+                screen.show(station.opening())
+            face = Terminal(station, console, screen, publisher(Outbox(session), keys, logger, screen.show), logger)
             if args.ros2:
+                from .ros2.model import drone_topic
                 from .ros2.node import take_goals
 
-                take = take_goals(args, session, inbox, ground, lambda drone, cell: station.want({drone: cell}),
-                                  lambda text: print(text, flush=True), logger)
-            over = play(station, inbox, member, show, other=partial(unexpected, take, logger))
-        print(station.report(draw=draw), flush=True)
+                face.take = take_goals(args, session, inbox, ground, face.goal, screen.show, logger)
+                if console is not None:
+                    screen.show(f"ROS 2 goals on {drone_topic(args.namespace, '<Dnn>', 'goal_pose')} (domain "
+                                f"{args.domain}) are targets typed here")
+            over = play(console or station, inbox, member, face.perform, other=face.other)
+        screen.show(station.report(draw=draw))
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.snapshot())
         member.close()
         return over
-
-
-def unexpected(take: Callable[[object], bool] | None, logger: logging.Logger, event: object) -> None:
-    """An event of the inbox besides the game's: a ROS 2 goal if goals are taken, else a bug (logged)."""
-    if take is None or not take(event):
-        logger.error("unexpected event %r", event)
 
 
 #: Reads a scenario file's targets and, for a lifelong game, the seed of its draws (None: not lifelong).
@@ -125,7 +180,7 @@ def cli(argv: list[str] | None = None, *, scenario_plan: ScenarioPlan | None = N
     add_web_args(p)
     p.add_argument("--ros2", action="store_true",
                    help="also take targets from ROS 2 goals (/<namespace>/<Dnn>/goal_pose, docs/ros2.md), beside "
-                        "the terminal's or the web page's")
+                        "the script's, the console's (a goal is a target typed there) or the web page's")
     add_ros2_args(p, viewer=False)
     add_mavlink_args(p, cell_size=False)  # (--cell-size: the ROS 2 flags')
     args = p.parse_args(argv)

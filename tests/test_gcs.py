@@ -1,11 +1,10 @@
-"""The ground station's pure parts and its interactive console, driven by a scripted reader."""
+"""The ground station's pure parts (the console's protocol: tests/test_console.py)."""
 
 from __future__ import annotations
 
 import pytest
 
 from entities.gcs import (
-    Console,
     Ground,
     Plan,
     correct_form,
@@ -286,111 +285,6 @@ def test_targets_of() -> None:
     assert targets_of(status) == {"D01": (1, 1, 1)}
 
 
-# --------------------------------------------------------------------------- the console
-
-
-class Script:
-    """A scripted `read`: returns the lines in order, then raises EOFError."""
-
-    def __init__(self, *lines: str) -> None:
-        self.lines = list(lines)
-        self.prompts: list[str] = []
-        self.written: list[str] = []
-
-    def read(self, prompt: str) -> str:
-        self.prompts.append(prompt)
-        if not self.lines:
-            raise EOFError
-        return self.lines.pop(0)
-
-    def write(self, text: str) -> None:
-        self.written.append(text)
-
-
-def console(script: Script, drones=("D01",), world: World = OPEN) -> Console:
-    return Console(world, list(drones), read=script.read, write=script.write)
-
-
-def test_console_forces_the_first_target() -> None:
-    s = Script("", "garbage", "99,0,0", "3,4,1")
-    new, intent = console(s).ask(1, {})
-    assert (new, intent) == ({"D01": (3, 4, 1)}, Intent.CONTINUE)
-    assert s.prompts == ["turn 1: target for D01 (x,y,z): "] * 4
-    assert s.written[0] == "a first target is required for D01"
-    assert s.written[1].startswith("invalid: ") and "type x,y,z" in s.written[1]
-    assert s.written[2].startswith("invalid: ") and "outside the world" in s.written[2]
-    assert len(s.written) == 3
-
-
-def test_console_forces_a_target_for_every_drone() -> None:
-    s = Script("1,1,1", "", "2,2,2")
-    new, intent = console(s, DRONES).ask(1, {})
-    assert (new, intent) == ({"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)
-    assert s.prompts == ["turn 1: target for D01 (x,y,z): ", "turn 1: target for D02 (x,y,z): ",
-                         "turn 1: target for D02 (x,y,z): "]
-    assert s.written == ["a first target is required for D02"]
-
-
-def test_console_several_first_targets_on_one_line() -> None:
-    s = Script("1,1,1; 2,2,2")
-    assert console(s, DRONES).ask(1, {}) == ({"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)
-
-
-def test_console_refuses_a_building_cell_and_asks_again() -> None:
-    s = Script("3,3,0", "4,4,1", "3,3,2")
-    new, intent = console(s, world=CITY).ask(1, {})
-    assert (new, intent) == ({"D01": (3, 3, 2)}, Intent.CONTINUE)
-    assert s.written == ["invalid: (3, 3, 0) is inside a building: no drone can get there",
-                         "invalid: (4, 4, 1) is inside a building: no drone can get there"]
-
-
-def test_console_enter_keeps() -> None:
-    s = Script("")
-    assert console(s).ask(2, {"D01": (1, 1, 1)}) == ({}, Intent.CONTINUE)
-    assert s.prompts == ["turn 2: new target ([Dnn] x,y,z; ...), Enter to keep, q to quit: "]
-    assert s.written == []
-
-
-@pytest.mark.parametrize("line", ["q", "Q", "quit", "exit", "  q  "])
-def test_console_q_quits(line: str) -> None:
-    assert console(Script(line)).ask(2, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
-
-
-def test_console_q_quits_even_before_the_first_target() -> None:
-    assert console(Script("q")).ask(1, {}) == ({}, Intent.QUIT)
-
-
-def test_console_eof_quits() -> None:
-    assert console(Script()).ask(1, {}) == ({}, Intent.QUIT)
-    assert console(Script()).ask(3, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
-    # EOF after a refused line: still a clean quit
-    assert console(Script("nope")).ask(3, {"D01": (1, 1, 1)}) == ({}, Intent.QUIT)
-
-
-def test_console_changes_one_drone() -> None:
-    current = {"D01": (1, 1, 1), "D02": (2, 2, 2)}
-    s = Script("D02 1,2,3")
-    assert console(s, DRONES).ask(4, current) == ({"D02": (1, 2, 3)}, Intent.CONTINUE)
-    s = Script("4,4,4")
-    assert console(s, DRONES).ask(4, current) == ({"D01": (4, 4, 4)}, Intent.CONTINUE)
-
-
-def test_console_line_with_one_bad_item_changes_nothing() -> None:
-    current = {"D01": (1, 1, 1), "D02": (2, 2, 2)}
-    s = Script("D02 1,2,3; D09 1,1,1", "D01 1,2,3; D02 0,0,99", "")
-    new, intent = console(s, DRONES).ask(4, current)
-    assert (new, intent) == ({}, Intent.CONTINUE)
-    assert len(s.written) == 2 and all(w.startswith("invalid: ") for w in s.written)
-    assert "D09" in s.written[0]
-    assert current == {"D01": (1, 1, 1), "D02": (2, 2, 2)}
-
-
-def test_console_several_changes_on_one_line() -> None:
-    current = {"D01": (1, 1, 1), "D02": (2, 2, 2)}
-    s = Script("D02 3,3,3; D01 4,4,4")
-    assert console(s, DRONES).ask(4, current) == ({"D01": (4, 4, 4), "D02": (3, 3, 3)}, Intent.CONTINUE)
-
-
 def test_a_script_answers_ahead_up_to_its_next_change() -> None:
     from entities.gcs import Plan, turns_to_answer_ahead
 
@@ -478,22 +372,19 @@ def test_dead_drones_are_forgotten_and_a_late_station_takes_over_the_targets_in_
     assert sent(station.receive(gcs(5), 0.0))[0] == (5, {"D01": (6, 6, 0)}, Intent.FINAL)
 
 
-def test_a_console_is_asked_in_the_phase_and_never_answers_ahead() -> None:
-    script = Script("1,1,1; 2,2,2", "", "q")
-    station = Station(ground(), console=console(script, DRONES))
-    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)]
-    station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0), target=(2, 2, 2))), 0.0)
-    assert sent(station.receive(gcs(2), 0.0)) == [(2, {}, Intent.CONTINUE)]  # Enter keeps
-    assert sent(station.receive(gcs(3), 0.0)) == [(3, {}, Intent.QUIT)]
-    assert script.prompts[1].startswith("turn 2: new target")
-
-
-def test_a_console_asks_no_first_target_for_a_drone_that_died_before_its_first_phase() -> None:
-    script = Script("1,1,1")
-    station = Station(ground(), console=console(script, DRONES))
+def test_a_target_from_outside_the_plan_is_taken_for_a_drone_flying_and_refused_with_a_reason_else() -> None:
+    station = Station(ground(["D01=1,1,1"]), goals=True)
     station.receive(status(0, st("D01", (0, 0, 0)), st("D02", (0, 2, 0), DroneState.LOST, cause=Cause.LOST)), 0.0)
-    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]
-    assert script.prompts == ["turn 1: target for D01 (x,y,z): "]
+    station.take("D01", (5, 5, 0))
+    for drone, reason in (("D02", "dead or lost: D02"), ("D07", "unknown drone: this game flies D01, D02")):
+        with pytest.raises(UsageError, match=f"^{reason}"):
+            station.take(drone, (5, 5, 0))
+    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]  # the plan's, at its turn
+    station.take("D01", (5, 5, 0))
+    assert sent(station.receive(gcs(2), 0.0)) == [(2, {"D01": (5, 5, 0)}, Intent.CONTINUE)]
+    station.receive(over(2, EndReason.GCS_QUIT), 0.0)
+    with pytest.raises(UsageError, match="^game over"):
+        station.take("D01", (6, 6, 0))
 
 
 def test_a_held_station_answers_when_told_and_forgets_a_phase_the_coordinator_closed() -> None:

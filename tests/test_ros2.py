@@ -5,7 +5,10 @@ offline from rosbags' own) lists our topics with their types, decodes the poses,
 from __future__ import annotations
 
 import math
+import re
 import struct
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -33,7 +36,7 @@ from entities.ros2.cdr import (  # noqa: E402
 from entities.ros2.goals import Goal, Goals  # noqa: E402
 from entities.ros2.model import CLOCK, MARKERS, PATH, POSE, TF, TYPES, Scene, Snapshot  # noqa: E402
 
-from .harness import Cluster, embedded_router, journal_records  # noqa: E402
+from .harness import Cluster, Proc, embedded_router, journal_records  # noqa: E402
 
 
 def snapshot(turn: int, pos: np.ndarray, view: np.ndarray | None = None, target: np.ndarray | None = None) -> Snapshot:
@@ -424,7 +427,6 @@ def test_the_web_ground_station_takes_ros2_goals_beside_its_page(tmp_path: Path)
     on the page (it shows it, in the drone's row and in its log), and the drone flies there; a goal in another
     frame is refused with a line in the page's log; the page's quit ends the game."""
     import json
-    import re
     import urllib.request
 
     def api(url: str, path: str, body: dict | None = None) -> dict:
@@ -475,6 +477,103 @@ def test_the_web_ground_station_takes_ros2_goals_beside_its_page(tmp_path: Path)
     records = journal_records(journal)
     final, _ = tracks(config, records)
     assert final["D01"].pos == cell and final["D01"].target == cell
+
+
+def goal_route(pub) -> None:
+    """Until zenoh-ros2-sdk's goal publisher matches the ground station's subscription (up to 30 s)."""
+    deadline = time.monotonic() + 30
+    while not pub.pub.matching_status.matching:
+        assert time.monotonic() < deadline, "the ground station's goal subscription never matched"
+        threading.Event().wait(0.05)
+
+
+def enter_until_there(console: Proc, drone: str, cell: tuple[int, int, int], turns: int = 80) -> None:
+    """Press Enter at the console, a turn each, until its status shows `drone` at `cell`; then q. (A status line seen
+    late makes an Enter more: it answers a later turn, the drone hovering at its target.)"""
+    assert console.p.stdin is not None
+    at = f"  {drone} at ({cell[0]}, {cell[1]}, {cell[2]}):"
+    for _ in range(turns):
+        console.p.stdin.write("\n")
+        console.p.stdin.flush()
+        if console.expect(rf"^  {drone} at \(", fresh=True).startswith(at):
+            break
+    else:
+        raise AssertionError(f"{drone} never reached {cell}:\n{console.text}")
+    console.p.stdin.write("q\n")
+    console.p.stdin.close()
+
+
+def shown(console: Proc, text: str) -> bool:
+    """Whether the console showed `text` at the start of a line of its own (its prompt goes on below)."""
+    return any(line.startswith(text) for line in console.out)
+
+
+def test_the_console_takes_ros2_goals_as_targets_typed_there(tmp_path: Path, sdk) -> None:
+    """`dronesim gcs --ros2` with a person at the console (its input a pipe): zenoh-ros2-sdk's goal for D01 is a
+    target typed at the console: it answers the turn the console holds (the game waits for it), the console shows
+    it, and a goal in another frame refused with its reason; a line typed gives D02 its target (D02 hovered
+    without one until then); the drones fly there one Enter a turn; q ends the game. The journal shows the flight."""
+    journal = tmp_path / "game.journal"
+    with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
+        two_drone_game(c, journal, 300, 0.0)
+        gcs = c.start("GCS", "gcs", "--ros2", "--no-draw", stdin=subprocess.PIPE)
+        gcs.expect("taking ROS 2 goals")
+        gcs.expect(r"^turn 0:")  # the game has begun (its header is in the journal)
+        config, _ = header_config(journal_records(journal)[0])
+        world = build_world(config.world, (d.start for d in config.drones))
+        start = dict((d.drone, d.start) for d in config.drones)
+        cell, other = free_cell_above(world, start["D01"]), free_cell_above(world, start["D02"])
+        pub = sdk.ROS2Publisher("/dronesim/D01/goal_pose", POSE, router_port=int(locator.rsplit(":", 1)[1]))
+        goal_route(pub)
+        publish(pub, "odom", cell)
+        gcs.expect("refused a ROS 2 goal for D01: other frame")
+        publish(pub, "map", cell)
+        gcs.expect(rf"ROS 2 goal: D01 -> \({cell[0]}, {cell[1]}, {cell[2]}\)")
+        assert gcs.p.stdin is not None
+        gcs.p.stdin.write(f"D02 {other[0]},{other[1]},{other[2]}\n")
+        enter_until_there(gcs, "D01", cell)
+        codes = c.wait_all(timeout=120)
+        pub.close()
+    assert set(codes.values()) == {0}, [p.text for p in c.procs if p.p.returncode]
+    assert shown(gcs, "ROS 2 goals on /dronesim/<Dnn>/goal_pose (domain 0) are targets typed here")
+    assert shown(gcs, f"ROS 2 goal: D01 -> {cell}") and shown(gcs, "refused a ROS 2 goal for D01: other frame")
+    assert "turn 1: without a target, hovering: D01, D02; new target" in gcs.out[gcs.out.index("turn 0:") + 3], \
+        gcs.text  # (the prompt that waited for the goal; the refusal's line ended it, and it was shown again)
+    records = journal_records(journal)
+    assert records[-1]["reason"] == "GCS_QUIT"
+    final, _ = tracks(config, records)
+    assert final["D01"].pos == cell and final["D01"].target == cell  # flown there
+    assert final["D02"].target == other
+    first, _ = tracks(config, records, until=1)
+    assert first["D01"].target == cell and first["D02"].target is None  # the goal answered turn 1
+
+
+def test_up_with_ros2_is_the_console_with_ros2_goals(tmp_path: Path, sdk) -> None:
+    """`dronesim up --ros2` offers its console (the terminal's input goes to the ground station) beside ROS 2 goals:
+    zenoh-ros2-sdk's goal flies D01 there, Enter a turn; q ends the game; every process exits 0."""
+    journal = tmp_path / "up.journal"
+    up = Proc("UP", [sys.executable, "-m", "dronesim", "up", "--insecure", "--ros2", "--seed", "7", "--size",
+                     "10,10,8", "--max-turns", "200", "--journal", str(journal)], tmp_path, stdin=subprocess.PIPE)
+    try:
+        found = re.search(r"router on tcp/[\d.]+:(\d+),", up.expect("dronesim up: router on"))
+        assert found is not None
+        up.expect(r"^ROS 2 goals on /dronesim/<Dnn>/goal_pose \(domain 0\) are targets typed here")
+        up.expect(r"^turn 0:")  # the game has begun (its header is in the journal)
+        config, _ = header_config(journal_records(journal)[0])
+        world = build_world(config.world, (d.start for d in config.drones))
+        cell = free_cell_above(world, config.drones[0].start)
+        pub = sdk.ROS2Publisher("/dronesim/D01/goal_pose", POSE, router_port=int(found.group(1)))
+        goal_route(pub)
+        publish(pub, "map", cell)
+        up.expect(rf"^ROS 2 goal: D01 -> \({cell[0]}, {cell[1]}, {cell[2]}\)")
+        enter_until_there(up, "D01", cell)
+        assert up.wait(120) == 0, up.text
+        pub.close()
+    finally:
+        up.kill()
+    assert "dronesim up: all 5 processes exited 0" in up.out, up.text
+    final, _ = tracks(config, journal_records(journal))
+    assert final["D01"].pos == cell
 
 
 def test_ros2_goals_are_not_taken_where_no_one_would_use_them(caplog: pytest.LogCaptureFixture) -> None:
