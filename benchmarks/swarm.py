@@ -204,7 +204,7 @@ def play(inst: Instance, variant: str) -> Outcome:
     plan = Plan(tuple(sorted((1, d, g) for d, g in zip(ids, inst.goals))))
     timed = arbiter.Timed(arbiter.fixed if variant == "fixed" else lacam.Lacam() if variant == "lacam" else
                           arbiter.cooperate)
-    # the former D* never said UNREACHABLE while stuck behind drones: it waited to the turn limit
+    # the former D* never said it was stuck behind drones: it waited to the turn limit
     options = {"pibt": None, "lacam": None, "pibt+map": {"dstar": {"known": inst.grid}},
                "fixed": {"dstar": {"stuck_after": inst.max_turns + 1}}}[variant]
     t0 = time.perf_counter()

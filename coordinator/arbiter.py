@@ -38,8 +38,8 @@ MOST = len(RANK_STEPS)
 #: A priority (the engine's `age`) is the turns since the drone was last at rest times TIE_SPAN plus a
 #: tie-break below TIE_SPAN (its distance to its target when it left rest).
 TIE_SPAN = 1 << 16
-#: The priority of a drone that says UNREACHABLE away from its target: at rest (below every drone on its way,
-#: TIE_SPAN or more), but ahead of the drones at home (0): once every other drone is home, it pushes through
+#: The priority of a drone that says UNREACHABLE or STUCK away from its target: at rest (below every drone on its
+#: way, TIE_SPAN or more), but ahead of the drones at home (0): once every other drone is home, it pushes through
 #: where a way exists (with priority 0, nobody would lend it one and the game settled with it stuck).
 STUCK = 1
 #: An arbitration as the engine calls it: (world size, before, proposed, ranked, cooperative, priority,

@@ -74,7 +74,7 @@ from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 from . import arbiter, lacam, observer
 from .admission import Roster
 from .config import GameConfig
-from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, UNREACHABLE, Drones, Fleet, cell_of
+from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of
 from .journal import TurnLog, TurnRecord, header_record, over_record
 
 
@@ -416,15 +416,15 @@ class Engine:
     def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
         """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target or
         without one) or that gave way this turn (`gave_way` rows, else the arbiter's), arbiter.STUCK for one
-        that says UNREACHABLE, arbiter.TIE_SPAN more for each other (PIBT's rule), plus a tie-break below
-        TIE_SPAN: its Manhattan distance to its target when it left rest (PIBT2's, the long trips first).
-        resume.py replays it turn by turn."""
+        that says UNREACHABLE or STUCK (held up by drones for long), arbiter.TIE_SPAN more for each other (PIBT's
+        rule), plus a tie-break below TIE_SPAN: its Manhattan distance to its target when it left rest (PIBT2's, the
+        long trips first). resume.py replays it turn by turn."""
         fleet = self.fleet
         if gave_way is not None:
             self._gave_way[gave_way] = True
         target = fleet.target  # (every row, then the alive ones: fewer operations than selecting first)
         home = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1)
-        stuck = ~home & (fleet.note == UNREACHABLE) & ~self._gave_way
+        stuck = ~home & ((fleet.note == UNREACHABLE) | (fleet.note == STUCK)) & ~self._gave_way
         prio, span = self.priority, arbiter.TIE_SPAN
         far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
         moving = np.where(prio < span, span + far, prio + span)  # leaving rest now: its tie-break is taken now

@@ -14,7 +14,7 @@ from schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable
 from schema.tables import MAX_DRONE, code_of, drone_number
 
 ALIVE, DEAD, LOST = (code_of(s) for s in (DroneState.ALIVE, DroneState.DEAD, DroneState.LOST))
-NONE, REACHED, UNREACHABLE = code_of(Note.NONE), code_of(Note.REACHED), code_of(Note.UNREACHABLE)
+NONE, REACHED, UNREACHABLE, STUCK = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE, Note.STUCK))
 STATES, NOTES, CAUSES = tuple(DroneState), tuple(Note), tuple(Cause)
 
 
@@ -74,7 +74,7 @@ class Fleet:
         from where the drones are now, after the turn's moves: REACHED whenever an alive drone is on its target
         and only then. A drone says REACHED as it plans, before the arbitration, which may push it off its
         target (PIBT lends a parked drone's cell to one with a higher priority): off it, an alive drone that
-        said REACHED has NONE. Otherwise what the drone said (UNREACHABLE, NONE)."""
+        said REACHED has NONE. Otherwise what the drone said (UNREACHABLE, STUCK, NONE)."""
         alive = self.state == ALIVE
         on = alive & (self.pos == self.target).all(axis=1)
         return np.where(on, REACHED, np.where(alive & (self.note == REACHED), NONE, self.note)).astype(np.uint8)

@@ -161,7 +161,8 @@ def describe(s: DroneStatus) -> str:
     """One drone's line: position, alive/dead (the seed's display), target and notes."""
     if s.state is DroneState.ALIVE:
         state = "reached its target" if s.note is Note.REACHED else (
-            "target UNREACHABLE, hovering" if s.note is Note.UNREACHABLE else "alive")
+            "target UNREACHABLE, hovering" if s.note is Note.UNREACHABLE else
+            "alive, held up by other drones" if s.note is Note.STUCK else "alive")
     else:
         state = f"{s.state.value} ({s.cause.value.lower()})"
     target = "no target" if s.target is None else f"target {s.target}"

@@ -104,11 +104,14 @@ class CellKind(enum.IntEnum):
 
 
 class Note(enum.Enum):
-    """What a drone says about its own progress alongside its new position."""
+    """What a drone says about its own progress alongside its new position: REACHED, on its target; UNREACHABLE, the
+    static world has no way to it (a building, outside the world, walled in); STUCK, a way exists but other drones
+    have been in it for long (the arbitration's to resolve; never a reason to give up)."""
 
     NONE = "NONE"
     REACHED = "REACHED"
     UNREACHABLE = "UNREACHABLE"
+    STUCK = "STUCK"
 
 
 class DroneState(enum.Enum):

@@ -87,6 +87,19 @@ def deaths(result: Result) -> dict[str, str]:
     return {d: c for r in result.records for d, c in r.get("deaths", {}).items()}
 
 
+def notes(result: Result) -> set[tuple[str, str]]:
+    """Every (drone, note) said in the game."""
+    return {(d, n) for r in result.records for d, n in r.get("notes", {}).items()}
+
+
+def held_up(result: Result, *drones: str) -> None:
+    """PIBT alone could not bring `drones` home (its turn limit), and they said so: STUCK, held up by the drones in
+    their way, never UNREACHABLE (the static world has a way to every target here)."""
+    assert result.over.reason is EndReason.TURN_LIMIT, result.over.text
+    assert {(d, "STUCK") for d in drones} <= notes(result) and "UNREACHABLE" not in {n for _, n in notes(result)}
+    assert not deaths(result)
+
+
 def arrived(result: Result) -> None:
     assert result.over.reason is EndReason.ALL_REACHED, result.over.text
     assert not deaths(result)
@@ -115,7 +128,7 @@ def test_the_former_arbitration_never_resolved_it() -> None:
     rows = ["#####.####", ".........."]
     drones = {"D01": ((0, 1, 0), (9, 1, 0), "dstar"), "D02": ((9, 1, 0), (0, 1, 0), "dstar")}
     result = play(world_of(rows), drones, max_turns=100, arbiter=fixed)
-    assert result.over.reason is EndReason.SETTLED and not deaths(result)  # stuck: now they say so
+    held_up(result, "D01", "D02")  # stuck: now they say so
 
 
 @pytest.mark.parametrize("second", ["D01", "D02", "D03"])
@@ -143,12 +156,11 @@ def test_parked_drone_steps_aside_and_comes_back() -> None:
 def test_parked_drone_in_a_corridor_with_a_bay(bay: int) -> None:
     # D02 is parked beside the bay (it steps in), before it (it is pushed to it, then comes back), or behind
     # D01's way in: there it would have to move towards D01 first, which PIBT's greedy steps never do, and
-    # D01 says so (docs/cooperation.md, "Where it is complete"); the search (the default) finds that way.
+    # D01 says it is stuck (docs/cooperation.md, "Where it is complete"); the search (the default) finds that way.
     rows = ["".join("." if x == bay else "#" for x in range(10)), "." * 10]
     drones = {"D01": ((0, 1, 0), (9, 1, 0), "dstar"), "D02": ((5, 1, 0), (5, 1, 0), "dstar")}
     if bay < 5:
-        result = play(world_of(rows), drones, using="pibt")
-        assert result.over.reason is EndReason.SETTLED and "D01" in result.over.text, result.over.text
+        held_up(play(world_of(rows), drones, max_turns=150, using="pibt"), "D01")
         result = play(world_of(rows), drones)
         assert not deaths(result)
         arrived(result)
@@ -213,14 +225,14 @@ POCKET = ["......", "##.###", "##.###"]
 @pytest.mark.parametrize("start", [(2, 1, 0), (2, 0, 0)])
 def test_two_targets_in_a_dead_end_entered_in_the_wrong_order(start: Cell) -> None:
     """D02 is home on (2, 1), or just outside, before D01 reaches the dead end's far cell (2, 2) beyond it.
-    PIBT alone pushes D02 to the end, gives way, is pushed back out and pushes again, for ever (D01 ends by
-    saying UNREACHABLE); with the swap pulling a drone off its target that blocks a deeper one, and the clear
+    PIBT alone pushes D02 to the end, gives way, is pushed back out and pushes again, for ever (D01 says it is
+    STUCK); with the swap pulling a drone off its target that blocks a deeper one, and the clear
     operation (a drone next to a dead end lets the one going deeper in first), both are home in 6 turns."""
     drones = {"D01": ((0, 0, 0), (2, 2, 0), "dstar"), "D02": (start, (2, 1, 0), "dstar")}
     result = play(world_of(POCKET), drones, max_turns=100)
     arrived(result)
     assert result.over.turn <= 8
-    assert play(world_of(POCKET), drones, max_turns=100, arbiter=_without_swap).over.reason is EndReason.SETTLED
+    held_up(play(world_of(POCKET), drones, max_turns=100, arbiter=_without_swap), "D01")
 
 
 # --------------------------------------------------------------------------- neighbouring targets: going round
@@ -292,14 +304,17 @@ def test_the_longer_trip_goes_first_among_drones_away_as_long() -> None:
 
 @pytest.mark.parametrize("using", ["pibt", "lacam"])
 def test_a_dead_end_is_said_not_waited_for(using: str) -> None:
-    # a corridor closed at both ends, no passing place: with PIBT both drones say UNREACHABLE and the game
-    # settles; the search proves at once that no way exists and ends it
+    # a corridor closed at both ends, no passing place: the search proves at once that no way exists and ends the
+    # game; PIBT alone cannot prove it: both drones say they are STUCK (never UNREACHABLE: each target has a way in
+    # the static world, the other drone is in it) and the game goes on to its turn limit
     drones = {"D01": ((0, 0, 0), (9, 0, 0), "dstar"), "D02": ((9, 0, 0), (0, 0, 0), "dstar")}
-    result = play(world_of(["." * 10]), drones, max_turns=400, using=using)
+    result = play(world_of(["." * 10]), drones, max_turns=150, using=using)
+    if using == "pibt":
+        held_up(result, "D01", "D02")
+        return
     assert result.over.reason is EndReason.SETTLED, result.over.text
-    assert "D01" in result.over.text and "D02" in result.over.text
-    assert result.over.turn < (200 if using == "pibt" else 20) and not deaths(result)
-    assert ("no solution" in result.over.text) == (using == "lacam")
+    assert "D01" in result.over.text and "D02" in result.over.text and "no solution" in result.over.text
+    assert result.over.turn < 20 and not deaths(result)
 
 
 @pytest.mark.parametrize("using", ["pibt", "lacam"])
@@ -308,8 +323,41 @@ def test_a_target_behind_a_drone_parked_at_a_dead_end(using: str) -> None:
     result = play(world_of(["." * 10]), drones, using=using)
     assert result.over.reason is EndReason.ALL_REACHED  # reachable: D02 is pushed along... and back
     drones = {"D01": ((0, 0, 0), (9, 0, 0), "dstar"), "D02": ((8, 0, 0), (8, 0, 0), "dstar")}
-    result = play(world_of(["." * 10]), drones, max_turns=400, using=using)
-    assert result.over.reason is EndReason.SETTLED and "D01" in result.over.text  # never: D01 says so
+    result = play(world_of(["." * 10]), drones, max_turns=150, using=using)
+    if using == "pibt":  # never, and PIBT cannot prove it: D01 says it is held up
+        held_up(result, "D01")
+    else:  # the search proves it
+        assert result.over.reason is EndReason.SETTLED and "D01" in result.over.text and "no solution" in \
+            result.over.text
+
+
+#: A corridor (y = 1) with a pocket above x = 4..6, reached only through the corridor cells below it.
+CROWDED = ["####...#####", "............"]
+
+
+@pytest.mark.parametrize("pilot", ["dstar", "lrta"])
+@pytest.mark.parametrize("using", ["lacam", "pibt"])
+def test_a_crowd_that_blocks_a_corridor_for_a_while_is_waited_for_never_unreachable(pilot: str, using: str) -> None:
+    """Issue 37: UNREACHABLE only where the static world has no way, never because of other drones. Three drones
+    that nobody can push (the seed's V1, parked on their targets) fill the corridor for 110 turns, longer than D*'s
+    `stuck_after` (64 here); D01 and D02 wait behind them. A D* drone says STUCK meanwhile (held up: its priority is
+    arbiter.STUCK), an LRTA* drone nothing (drones never enter its values); neither ever says UNREACHABLE, the game
+    does not settle on them, and once the crowd steps into the pocket both pass and arrive."""
+    crowd = {f"D0{k}": ((x, 1, 0), (x, 1, 0), "v1") for k, x in ((3, 4), (4, 5), (5, 6))}
+    drones = {"D01": ((0, 1, 0), (10, 1, 0), pilot), "D02": ((1, 1, 0), (11, 1, 0), pilot), **crowd}
+    leave = 110
+    plan = Plan(tuple(sorted([(1, d, t) for d, (_, t, _) in drones.items()] +
+                             [(leave, d, (s[0], 0, 0)) for d, (s, _, _) in crowd.items()])))
+    grid = world_of(CROWDED)
+    result = simulate(config(grid, drones, 300, using), {d: a for d, (_, _, a) in drones.items()},
+                      Inputs(plan=plan), LOG)
+    arrived(result)
+    said = notes(result)
+    assert "UNREACHABLE" not in {n for _, n in said}
+    if pilot == "dstar":
+        assert {("D01", "STUCK"), ("D02", "STUCK")} <= said
+    waited = [r["turn"] for r in result.records if r.get("moves", {}).get("D01", [0])[0] > 3]
+    assert waited and waited[0] > leave and result.over.turn < leave + 40  # it passed once they left, not before
 
 
 # --------------------------------------------------------------------------- mixed games

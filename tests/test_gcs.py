@@ -231,6 +231,8 @@ def test_describe() -> None:
         "D01 at (9, 9, 0): reached its target, target (9, 9, 0)"
     assert describe(st("D01", (1, 1, 1), target=(2, 2, 2), note=Note.UNREACHABLE)) == \
         "D01 at (1, 1, 1): target UNREACHABLE, hovering, target (2, 2, 2)"
+    assert describe(st("D01", (1, 1, 1), target=(2, 2, 2), note=Note.STUCK)) == \
+        "D01 at (1, 1, 1): alive, held up by other drones, target (2, 2, 2)"
     assert describe(st("D02", (1, 0, 0), DroneState.DEAD, cause=Cause.BUILDING)) == \
         "D02 at (1, 0, 0): DEAD (building), no target"
     assert describe(st("D02", (-1, 0, 0), DroneState.DEAD, (3, 3, 3), cause=Cause.OUTSIDE)) == \

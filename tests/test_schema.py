@@ -288,7 +288,7 @@ def test_optional_fields_may_be_omitted() -> None:
     ("status", "drones", "D01"),
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 3, NO_CELL, 0, 0))),  # no 4th DroneState
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, (-1, 0, 0), 0, 0))),  # a target outside
-    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 3, 0))),  # no 4th Note
+    ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 4, 0))),  # no 5th Note
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 6))),  # no 7th Cause
     ("status", "drones", rows(StatusTable, (0, (1, 0, 0), 0, NO_CELL, 0, 0))),  # no drone 0
     ("status", "drones", rows(StatusTable, (1, (1, 0, 0), 0, NO_CELL, 0, 0), (1, (2, 0, 0), 0, NO_CELL, 0, 0))),
@@ -299,7 +299,7 @@ def test_optional_fields_may_be_omitted() -> None:
     ("turn_drones", "orders", rows(OrderTable, (1, (0, 0, 0), (-1, -1, 0)))),
     ("turn_env", "moves", rows(MoveTable, (1, (-1, 0, 0), (0, 0, 0)))),
     ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 0, 0), (1, (0, 1, 0), 0, 0))),  # one move per drone
-    ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 3, 0))),
+    ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 4, 0))),  # no 5th Note
     ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 0, 0o11))),  # a ranked step twice
     ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 0, 0o101))),  # a hole in the ranking
     ("moves", "moves", rows(StepTable, (1, (1, 0, 0), 0, 8 ** 7))),  # more steps than there are

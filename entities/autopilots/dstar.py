@@ -44,10 +44,13 @@ ties in the tie-break order below. The arbiter (PIBT) picks one of them for it, 
 aside or pushed aside itself; on its target it offers its cell first and its free neighbours after, so that it can
 be pushed out of the way and come back.
 
-A drone whose distance has not reached a new low for ``stuck_after`` turns (learning a wall starts the count again)
-says UNREACHABLE while it lasts: nothing it knows is in the way, so other drones are, and they have not let it pass
-in all that time (a dead-end corridor, a drone that never moves). It keeps offering its candidates and says NONE
-again once it gets closer.
+It says UNREACHABLE only where the static world has no way: the target is outside the world or a building, or its
+known map (buildings, never drones) has no path to it. A drone whose distance has not reached a new low for
+``stuck_after`` turns (learning a wall starts the count again) says STUCK while it lasts: nothing it knows is in the
+way, so other drones are, and they have not let it pass in all that time (a crowd in a corridor, a drone that never
+moves). That is the arbitration's to resolve (its priority: `arbiter.STUCK`; the search, coordinator/lacam.py, finds
+the way or proves there is none), never a reason for the game to give up on it. It keeps offering its candidates and
+says NONE again once it gets closer.
 
 The move it proposes (``pos``, for an arbitration that takes one move per drone) skips the other drones seen in this
 step's answers: another equally short move if there is one, else the drone waits ``PATIENCE`` turns, then
@@ -372,7 +375,7 @@ class DStarPilot:
             self._round = self._detour(self._avoid, s)
             if self._round is None:
                 self._avoid = -1
-        note = Note.UNREACHABLE if self._since >= self.stuck_after else Note.NONE
+        note = Note.STUCK if self._since >= self.stuck_after else Note.NONE
         stuck = self._since >= self.DETOUR_AFTER
         if not self._tried and (stuck or self._pushed >= self.PUSHED_OFF and self._since and g[s] <= self.DETOUR_NEAR):
             self._tried = True
