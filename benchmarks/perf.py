@@ -1063,16 +1063,26 @@ MECHANISMS: tuple[Mechanism, ...] = (
     Mechanism(
         "A few rows or cells are taken one by one, below a threshold where numpy's fixed cost dominates",
         ("schema/tuning.py::FEW_ROWS", "schema/tuning.py::SURVEY_FEW_CELLS", "schema/tuning.py::CHART_FEW_CELLS",
-         "schema/tuning.py::JUDGE_FEW_DRONES", "coordinator/engine.py:/FEW_ROWS/",
+         "schema/tuning.py::SMALL_FLEET", "coordinator/engine.py:/FEW_ROWS/",
          "entities/environment.py:/SURVEY_FEW_CELLS/", "entities/drone.py:/CHART_FEW_CELLS/",
-         "coordinator/observer.py:/JUDGE_FEW_DRONES|few/", "coordinator/observer.py::_judge_few",
+         "coordinator/fleet.py::Fleet.column", "coordinator/fleet.py::nonzero", "coordinator/fleet.py::Fleet.whole",
          "schema/tuning.py::CHECK_FEW_ROWS", "schema/tables.py::Table._why_few", "schema/tables.py:/CHECK_FEW_ROWS/",
          "schema/tables.py:/ROW|AT\\b/"),
-        switch="not switched off: a constant each (the lines counted are those naming it, the observer's "
-               "_judge_few and the tables' _why_few: a branch's other lines are not); schema/tuning.py gives "
-               "each one's measurement, e.g. a MOVES of 2 moves taken in 171 µs instead of 184, 16 drones judged "
-               "in 47 µs instead of 106, an ASK of 6 cells answered in 12 µs instead of 46, a 1-row STATUS "
-               "table checked in 10 µs instead of 34 (a one-drone turn 5 to 20 % faster, alternated)"),
+        switch="not switched off: a constant each (the lines counted are those naming it, the fleet's readers of a "
+               "small fleet and the tables' _why_few: a branch's other lines are not); schema/tuning.py gives "
+               "each one's measurement, e.g. a MOVES of 2 moves taken in 171 µs instead of 184, an ASK of 6 cells "
+               "answered in 12 µs instead of 46, a 1-row STATUS table checked in 10 µs instead of 34 (a one-drone "
+               "turn 5 to 20 % faster, alternated)"),
+    Mechanism(
+        "A few drones' turn is played over Python lists (the engine's `_judge_few`, up to TURN_FEW_DRONES)",
+        ("schema/tuning.py::TURN_FEW_DRONES", "coordinator/engine.py::Engine._judge_few",
+         "coordinator/engine.py::Engine._missed", "coordinator/engine.py::Engine._died",
+         "coordinator/engine.py::Engine._journal_few", "coordinator/engine.py::_set_rows",
+         "coordinator/observer.py::deaths_of_moves", "coordinator/observer.py::_meet",
+         "coordinator/engine.py:/TURN_FEW_DRONES|whole|took/"),
+        switch="not switched off: a constant (tests/test_engine_turn.py plays random games with the lists always "
+               "and the arrays always: the same journals); schema/tuning.py gives its measurement, a whole turn "
+               "of 1 drone 10 µs instead of 64, 16: 25 instead of 88, 64: 78 instead of 117"),
     Mechanism(
         "The ground station sends only the targets that change (the coordinator keeps them)",
         ("entities/gcs.py:/in_force|keep = |keep\\.get/",),

@@ -64,8 +64,12 @@ class Roster:
         """Admit `msg`'s sender (checked by `refusal`); True if it was admitted already (the same process
         connecting again)."""
         again = msg.sender in self.roles
-        self.roles[msg.sender], self.sessions[msg.sender] = msg.role, msg.session
+        self.enter(msg.sender, msg.role, msg.session)
         return again
+
+    def enter(self, entity: str, role: Role, session: str = "") -> None:
+        """`entity` is there as `role` (admitted, or in the engine's process: `Engine.start_here`)."""
+        self.roles[entity], self.sessions[entity] = role, session
 
     def leave(self, entity: str, session: str = "") -> Role | None:
         """`entity`'s presence went away: its role, if that was the admitted process's own (`session`; ""

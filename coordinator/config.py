@@ -14,7 +14,7 @@ import numpy as np
 from schema import Cell, UsageError, WorldSpec
 from schema.messages import is_drone_id
 from schema.tuning import ADMIT_DEADLINE_S, ENV_GRACE_S, GCS_GRACE_S, LINK_GRACE_S, PHASE_CAP_S, PHASE_DEADLINE_S
-from world.grid import inside_rows
+from world.grid import inside_rows, linear_rows
 
 from .fleet import cell_of
 
@@ -36,8 +36,9 @@ class DroneTable(Sequence[DroneSpec]):
 
     __slots__ = ("ids", "starts")
 
-    def __init__(self, ids: Sequence[str], starts: Sequence[Cell] | Sequence[int]) -> None:
-        """`starts`: each drone's start cell, or their coordinates in a row (x, y, z, x, y, z, ...)."""
+    def __init__(self, ids: Sequence[str], starts: Sequence[Cell] | Sequence[int] | np.ndarray) -> None:
+        """`starts`: each drone's start cell, or their coordinates in a row (x, y, z, x, y, z, ...), or an (n, 3)
+        array of them."""
         self.ids = tuple(ids)
         try:
             self.starts = np.array(starts, np.int64).reshape(len(self.ids), 3)
@@ -106,17 +107,25 @@ class GameConfig:
             raise UsageError(f"{bad[0]!r} is not a drone id (D01 ... D65535)")
         if len(set(ids)) != len(ids):
             raise UsageError(f"duplicate drone ids in {list(ids)}")
-        if len(np.unique(starts, axis=0)) != len(starts):
-            raise UsageError("two drones cannot start in the same cell")
-        if not (inside := inside_rows(starts, self.world.size)).all():
-            i = int(inside.argmin())
+        if not (starts >= 0).all() or not (starts < self.world.size).all():  # (fewer operations than inside_rows)
+            i = int(inside_rows(starts, self.world.size).argmin())
             raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
+        if len(set(linear_rows(starts, self.world.size).tolist())) != len(starts):  # (cells inside: a number each)
+            raise UsageError("two drones cannot start in the same cell")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
         if not (self.phase_deadline > 0 and self.phase_cap > 0
                 and all(d is None or d > 0 for d in (self.gcs_deadline, self.admit_deadline))
                 and min(self.env_grace, self.link_grace, self.gcs_grace) >= 0):
             raise UsageError("deadlines must be positive (the GCS's and admission's: or none) and graces >= 0")
+
+
+def starts_of(config: GameConfig) -> Iterator[tuple[str, Cell]]:
+    """Each drone of `config` and its start cell (a `DroneTable`'s read as its columns)."""
+    drones = config.drones
+    if isinstance(drones, DroneTable):
+        return zip(drones.ids, map(tuple, drones.starts.tolist()))  # type: ignore[arg-type]
+    return ((d.drone, d.start) for d in drones)
 
 
 def replace_config(config: GameConfig, **changes: Any) -> GameConfig:

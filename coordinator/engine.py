@@ -36,6 +36,7 @@ import itertools
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -68,13 +69,13 @@ from schema import (
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
 from schema.messages import MAX_OVER_TEXT, drone_id
 from schema.tables import code_of, drone_name, drone_number
-from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, UPD_WINDOW
+from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, SMALL_FLEET, TURN_FEW_DRONES, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 
 from . import arbiter, lacam, observer
 from .admission import Roster
-from .config import GameConfig
-from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of
+from .config import GameConfig, starts_of
+from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
 from .journal import TurnLog, TurnRecord, header_record, over_record
 
 
@@ -84,6 +85,8 @@ class Stage(enum.Enum):
     GCS = "GCS"
     DRONES = "DRONES"
     OVER = "OVER"
+
+    __hash__ = object.__hash__  # (a member is its one instance; Enum's hash is a Python call, `_enter`'s each turn)
 
 
 class When(enum.Enum):
@@ -145,6 +148,22 @@ class Record:
 
 Effect = Publish | ReplyToConnect | Record | Refusal
 
+#: What `Engine.play` takes: rows, cells and Note codes as arrays, or as lists (a few drones' turn).
+Rows = np.ndarray | list[int]
+Cells = np.ndarray | list[Cell]
+Codes = np.ndarray | list[int]
+CAUSE_CODE = {c: code_of(c) for c in Cause}
+
+
+class Moved(NamedTuple):
+    """What a turn did (`Engine._judge`): the drones it moved, their rows and their cells before and after (arrays,
+    or lists), and how many drones are alive after it."""
+
+    rows: Rows
+    src: Cells
+    dst: Cells
+    alive: int
+
 
 class Engine:
     """The coordinator's game: feed it events, carry out the effects it returns."""
@@ -159,7 +178,7 @@ class Engine:
         self._solid = self.world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
         self._open: arbiter.OpenCells | None = None  # the same, as the arbiter reads it (PIBT's swap; made once needed)
         self.stage, self.turn = Stage.ADMITTING, 0
-        self.fleet = Fleet((d.drone, d.start) for d in config.drones)
+        self.fleet = Fleet(starts_of(config))
         self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
         self.roster = Roster()
         self.entities = self.roster.roles  # the admitted entities: id -> role
@@ -208,7 +227,7 @@ class Engine:
         return self._by_id(self.fleet.target[:, 0] >= 0, self.fleet.target)
 
     def aims(self) -> dict[str, Cell]:
-        """The targets this GCS phase has received so far (in force once the phase ends)."""
+        """The targets this GCS phase has received so far (once it has ended: none, they are in force, `targets`)."""
         return self._by_id(self._aimed, self._aims)
 
     def moves_taken(self) -> dict[str, Cell]:
@@ -288,8 +307,7 @@ class Engine:
             return refused + ([Publish(self.end)] if self.end is not None else [])
         again = self.roster.admit(msg)  # the same process connecting again (its session says so)
         fleet = self.fleet
-        for d in msg.drones:
-            fleet.fly(fleet.index[d], msg.sender, msg.autopilot, msg.cooperative)
+        fleet.fly([fleet.index[d] for d in msg.drones], msg.sender, msg.autopilot, msg.cooperative)
         rows = sorted(range(len(fleet)) if msg.role is not Role.DRONE else [fleet.index[d] for d in msg.drones])
         starts = StartTable.build(drone=fleet.numbers[rows], pos=fleet.pos[rows])
         what = msg.sender if msg.role is not Role.DRONE or msg.drones == (msg.sender,) else \
@@ -310,6 +328,18 @@ class Engine:
         elif self._phase_msg is not None and (msg.role, self.stage) == (Role.GCS, Stage.GCS):
             effects.append(Publish(self._phase_msg))
         return effects
+
+    def start_here(self, host: str, autopilot: str) -> None:
+        """The game started for a caller in this process that is its environment, its ground station and the
+        swarm host `host` flying every drone with `autopilot` (dronesim/rl.py): each there as if it had connected,
+        with no message built, and the first turn's GCS phase opened (`play` plays the turns). UsageError if
+        someone connected already."""
+        if self.stage is not Stage.ADMITTING or self.entities:
+            raise UsageError("a game is started here before anyone has connected")
+        for entity, role in (("ENV", Role.ENV), ("GCS", Role.GCS), (host, Role.DRONE)):
+            self.roster.enter(entity, role)
+        self.fleet.fly(list(range(len(self.fleet))), host, autopilot, False)
+        self._open_gcs(1)
 
     def header(self) -> dict:
         """The journal's first record: what identifies the game (see resume.py). Without a journal it leaves
@@ -354,10 +384,11 @@ class Engine:
     def _open_gcs(self, turn: int) -> Done | None:
         """The GCS phase of `turn` begins: nothing received yet; the DONE sent ahead for it, if any."""
         self._enter(Stage.GCS)
-        self.turn = turn
-        self._aimed[:] = False
+        self.turn = turn  # (no target received yet: `_targets_set` and `_gcs_finish` cleared `_aimed`)
         self._tgt_seen, self._done = 0, None
         self._turn_log = TurnLog(turn)
+        if not self._early:
+            return None
         early = self._early.pop(turn, None)
         self._early = {t: d for t, d in self._early.items() if t > turn}
         return early
@@ -366,11 +397,11 @@ class Engine:
         """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), then the observer's
         STATUS and the turn's journal record, and the next turn or the end."""
         turn, fleet, log = self.turn, self.fleet, self._turn_log
-        before, final, moving = self._judge()
+        moved, src, dst, alive = self._judge()
         effects: list[Effect] = []
-        if (self.env_followed or self.verify_env) and np.count_nonzero(moving):
-            rows = MoveTable.empty(int(np.count_nonzero(moving)))
-            rows["drone"], rows["src"], rows["dst"] = fleet.numbers[moving], before[moving], final[moving]
+        if (self.env_followed or self.verify_env) and len(moved):
+            rows = MoveTable.empty(len(moved))
+            rows["drone"], rows["src"], rows["dst"] = fleet.numbers[moved], src, dst
             moves = MoveTable(rows)
             if self.verify_env:  # its report may come turns later (nothing waits for it): keep a few
                 self._upd_due = {t: m for t, m in self._upd_due.items() if t > turn - UPD_WINDOW} | {turn: moves}
@@ -380,7 +411,7 @@ class Engine:
         if self.journaled:
             log.state(state_hash(status))
         self._log.debug("turn %d observed: %s", turn, log.record)
-        end = self._end_reason()
+        end = self._end_reason(alive)
         effects += [Record(log.record), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
         return _drones_first(effects)
 
@@ -537,14 +568,16 @@ class Engine:
             return [Record(self._turn_log.record), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
         return self._drones_phase()
 
-    def _targets_set(self, intent: Intent) -> bool:
-        """The GCS phase closes: its targets take force, its intent is noted; whether the game goes on (not QUIT)."""
+    def _targets_set(self, intent: Intent, aimed: bool = True) -> bool:
+        """The GCS phase closes: its targets take force (`aimed`: whether it may have received any), its intent is
+        noted; whether the game goes on (not QUIT)."""
         fleet = self.fleet
-        if np.count_nonzero(self._aimed):  # (most GCS phases bring no target)
+        if aimed and nonzero(self._aimed):  # (most GCS phases bring no target)
             changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
             fleet.aim(changed, self._aims[changed])
             if len(changed) and self.journaled:
                 self._turn_log.targets([fleet.ids[i] for i in changed.tolist()], self._aims[changed].tolist())
+            self._aimed.fill(False)
         if intent is not self.intent:
             self._turn_log.intent(intent)
             self.intent = intent
@@ -553,39 +586,55 @@ class Engine:
         self.final = intent is Intent.FINAL
         return True
 
-    def play(self, aim_rows: np.ndarray, aims: np.ndarray, move_rows: np.ndarray, moves: np.ndarray,
-             notes: np.ndarray) -> Over | None:
-        """One whole turn from arrays, for a caller in this process that is the ground station and every drone's
-        host (dronesim/rl.py): as if a DONE (CONTINUE) carried the targets `aims` of the rows `aim_rows`, then a
-        MOVES the `moves` (cells) and `notes` (Note codes) of the rows `move_rows` (each once; the other alive
-        drones hover), with no message built and no journal record. The turn's OVER if the game ended with it.
-        UsageError, nothing changed, if the turn is not the GCS's (or a DONE or MOVES came ahead) or an input
-        would be refused."""
+    def play(self, aim_rows: Rows, aims: Cells, move_rows: Rows, moves: Cells, notes: Codes) -> Over | None:
+        """One whole turn without messages, for a caller in this process that is the ground station and every
+        drone's host (dronesim/rl.py): as if a DONE (CONTINUE) carried the targets `aims` of the rows `aim_rows`,
+        then a MOVES the `moves` (cells) and `notes` (Note codes) of the rows `move_rows` (each once; the other
+        alive drones hover), with no message built and no journal record. Rows, cells and codes as arrays, or as
+        lists (ints, (x, y, z) tuples, ints: what a caller playing a few drones holds). The turn's OVER if the
+        game ended with it. UsageError, nothing changed, if the turn is not the GCS's (or a DONE or MOVES came
+        ahead) or an input would be refused."""
         fleet = self.fleet
         if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
                              f"of turn {self.turn}")
-        state = fleet.state
-        if len(aim_rows) and not (np.count_nonzero(state[aim_rows] != ALIVE) == 0
-                                  and np.count_nonzero(inside_rows(aims, self.size)) == len(aim_rows)):
+        if len(aim_rows) and not (np.count_nonzero(fleet.state[aim_rows] != ALIVE) == 0
+                                  and np.count_nonzero(inside_rows(np.asarray(aims), self.size)) == len(aim_rows)):
             raise UsageError("a target for a drone not alive, or outside the world")
-        if len(move_rows) <= FEW_ROWS:  # (as `_in_batch` takes a few rows: in Python, an array's fixed costs)
-            ok = all(s == ALIVE and abs(a - x) + abs(b - y) + abs(c - z) <= 1 for s, (a, b, c), (x, y, z)
-                     in zip(state[move_rows].tolist(), moves.tolist(), fleet.pos[move_rows].tolist()))
+        rows: Rows
+        cells: Cells
+        codes: Codes
+        few = len(move_rows) <= TURN_FEW_DRONES
+        if few:  # (Python's lists: an array operation's fixed cost is more than a few rows' work)
+            rows = move_rows if isinstance(move_rows, list) else move_rows.tolist()
+            cells = moves if isinstance(moves, list) else list(map(tuple, moves.tolist()))
+            codes = notes if isinstance(notes, list) else notes.tolist()
+            whole = fleet.whole()  # (the columns as lists, read once for the turn: a small fleet's)
+            state, pos = whole if whole else (fleet.column(fleet.state, rows), fleet.column(fleet.pos, rows))
+            ok, took = True, {}
+            for k, i, cell, code in zip(rows if whole else range(len(rows)), rows, cells, codes):
+                (a, b, c), (x, y, z) = cell, pos[k]
+                ok = ok and state[k] == ALIVE and abs(a - x) + abs(b - y) + abs(c - z) <= 1
+                took[i] = cell, code
         else:
-            ok = (np.count_nonzero(state[move_rows] != ALIVE) == 0
-                  and np.abs(moves - fleet.pos[move_rows]).sum(axis=1).max() <= 1)
+            rows, cells, codes = move_rows, np.asarray(moves), np.asarray(notes)
+            ok = (np.count_nonzero(fleet.state[rows] != ALIVE) == 0
+                  and np.abs(cells - fleet.pos[rows]).sum(axis=1).max() <= 1)
         if not ok:
             raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
         if len(aim_rows):
             self._aimed[aim_rows], self._aims[aim_rows] = True, aims
-        self._targets_set(Intent.CONTINUE)
-        self._moved[:] = False  # (the drones' phase, opened and closed at once)
-        self._proposed[move_rows], self._said[move_rows], self._moved[move_rows] = moves, notes, True
-        if np.count_nonzero(fleet.cooperative):  # (only the arbitration reads them)
-            self._ranked[move_rows] = 0
-        self._judge()
-        if end := self._end_reason():
+            self._targets_set(Intent.CONTINUE)
+        elif self.intent is not Intent.CONTINUE:  # (else the phase changes nothing: no target, the same intent)
+            self._targets_set(Intent.CONTINUE, False)
+        if few and not fleet.cooperating:  # (only the arbitration reads the arrays then)
+            turn = self._judge(took, whole)
+        else:
+            self._moved[:] = False  # (the drones' phase, opened and closed at once)
+            self._proposed[rows], self._said[rows], self._moved[rows] = cells, codes, True
+            self._ranked[rows] = 0
+            turn = self._judge()
+        if end := self._end_reason(turn.alive):
             self._over(*end)
             return self.end
         self._open_gcs(self.turn + 1)
@@ -677,11 +726,124 @@ class Engine:
         del self._upd_due[turn]
         return []
 
-    def _judge(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _judge(self, took: dict[int, tuple[Cell, int]] | None = None,
+               whole: tuple[list[int], list[list[int]]] | None = None) -> Moved:
         """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
         the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
-        deadlines and the turn's journal record. Every drone's cell before and after, and which moved (only alive
-        drones move). Its masks are over every row, dead or alive, as the observer's (`observer.judge`)."""
+        deadlines and the turn's journal record. The drones that moved: their rows, cells before and after.
+        The moves taken: `took` (row -> its cell and note code), or None: the phase's (`_moved`, `_proposed`,
+        `_said`). Up to TURN_FEW_DRONES alive drones, the turn is played over Python's lists (`_judge_few`),
+        else in array operations (`_judge_arrays`): the same turn (tests/test_engine_turn.py). `whole`: the
+        fleet's state and cells as lists (`Fleet.whole`), if the caller read them this turn."""
+        fleet = self.fleet
+        whole = whole or fleet.whole()
+        if whole:
+            alive = []
+            for i, s in enumerate(whole[0]):  # (loops, not comprehensions, in the few drones' turn: Python 3.11
+                if s == ALIVE:  # calls a function for each comprehension, a few drones' whole work)
+                    alive.append(i)
+        else:
+            alive = fleet.alive_rows().tolist()
+        if len(alive) > TURN_FEW_DRONES:
+            return self._judge_arrays()
+        every = alive  # the rows in play: the alive ones, and any whose move was taken before it was LOST
+        if took is None:
+            rows = np.flatnonzero(self._moved).tolist()
+            took = dict(zip(rows, zip(map(tuple, fleet.column(self._proposed, rows)), fleet.column(self._said, rows))))
+            if not took.keys() <= set(alive):  # (it moves, as in the arrays: `_judge_arrays`)
+                every = sorted({*alive, *took})
+        return self._judge_few(alive, every, took, whole[1] if whole else None)
+
+    def _judge_few(self, alive: list[int], every: list[int], took: dict[int, tuple[Cell, int]],
+                   whole: list[list[int]] | None) -> Moved:
+        """`_judge` over lists: `alive`, the alive rows (ascending); `every`, the rows in play (those and any whose
+        move was taken); `took`, the moves taken; `whole`: every drone's cell (None: those of `every` read here)."""
+        fleet = self.fleet
+        pos: list[list[int]] | dict[int, list[int]] = \
+            dict(zip(every, fleet.column(fleet.pos, every))) if whole is None else whole
+        before: dict[int, Cell] = {}
+        after: dict[int, Cell] = {}
+        moved: list[int] = []
+        for i in every:
+            x, y, z = pos[i]
+            here = before[i] = (x, y, z)
+            move = took.get(i)
+            cell = after[i] = here if move is None else move[0]
+            if cell != here:
+                moved.append(i)
+        if fleet.cooperating and True in fleet.column(fleet.cooperative, alive):
+            final = self._arbitrate(np.array(alive), np.array([before[i] for i in alive]),
+                                    np.array([after[i] for i in alive]))
+            after.update(zip(alive, map(tuple, final.tolist())))
+            moved = [i for i in every if after[i] != before[i]]
+        if not moved:  # where the drones were, alive and apart, they still are
+            dead: dict[int, Cause] = {}
+        elif every is alive:
+            dead = observer.deaths_of_moves(self.size, self._solid, before, after, moved)
+        else:
+            live = set(alive)
+            dead = observer.deaths_of_moves(self.size, self._solid, {i: before[i] for i in alive},
+                                            {i: after[i] for i in alive}, [i for i in moved if i in live])
+        if moved:
+            _set_rows(fleet.pos, moved, [after[i] for i in moved])
+        notes = fleet.note.tolist() if len(fleet) <= SMALL_FLEET else dict(zip(took, fleet.column(fleet.note, [*took])))
+        said = []  # (in any order: the journal's is its own)
+        for i, (_, code) in took.items():
+            if code != notes[i]:
+                said.append(i)
+        if said:
+            _set_rows(fleet.note, said, [took[i][1] for i in said])
+        if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
+            self.age(np.array(alive, np.intp))
+        if dead:
+            self._died(dead, after)
+        hovered = [i for i in alive if i not in took] if len(alive) != len(took) else []  # (as the arrays count:
+        lost = 0  # a LOST drone's move taken counts)
+        if hovered or nonzero(fleet.misses):  # misses in a row: a move starts the count again
+            lost = self._missed(alive, [*took], hovered)
+        if self.config.lifelong:
+            self.tasks += fleet.tasks_done()
+        if self.journaled:  # what the turn did, drone by drone
+            self._journal_few(moved, after, said, took, hovered, dead)
+        left = len(alive) - len(dead) - lost
+        if not (self.env_followed or self.verify_env):  # (nobody reads the moves' cells: `_drones_finish`)
+            return Moved(moved, [], [], left)
+        return Moved(moved, [before[i] for i in moved], [after[i] for i in moved], left)
+
+    def _journal_few(self, moved: list[int], after: dict[int, Cell], said: list[int],
+                     took: dict[int, tuple[Cell, int]], hovered: list[int], dead: dict[int, Cause]) -> None:
+        ids, log = self.fleet.ids, self._turn_log
+        if moved:
+            log.moves([ids[i] for i in moved], [list(after[i]) for i in moved])
+        if said:
+            log.notes([ids[i] for i in said], [NOTES[took[i][1]] for i in said])
+        if hovered:
+            log.hovered([ids[i] for i in hovered])
+        if dead:
+            log.deaths([ids[i] for i in sorted(dead)], [dead[i] for i in sorted(dead)])
+
+    def _missed(self, alive: list[int], took: list[int], hovered: list[int]) -> int:
+        """The misses in a row after a turn (`_judge_few`): 0 for a drone whose move was taken, one more for an alive
+        one that hovered; LOST after `lost_after`. How many were LOST."""
+        fleet, n = self.fleet, len(self.fleet)
+        took_mask, alive_mask = np.zeros(n, bool), np.zeros(n, bool)
+        took_mask[took], alive_mask[alive] = True, True
+        fleet.misses[:] = np.where(took_mask, 0, fleet.misses + alive_mask)
+        lost = [i for i in hovered if fleet.misses[i] >= self.config.lost_after and fleet.state[i] == ALIVE]
+        for i in lost:  # (not one that died this turn)
+            self._lose(i)
+        return len(lost)
+
+    def _died(self, dead: dict[int, Cause], at: dict[int, Cell]) -> None:
+        fleet, rows = self.fleet, sorted(dead)
+        _set_rows(fleet.state, rows, [DEAD] * len(rows))
+        _set_rows(fleet.cause, rows, [CAUSE_CODE[dead[i]] for i in rows])
+        for i in rows:
+            self._log.warning("turn %d: %s died (%s) at %s", self.turn, fleet.ids[i], dead[i].value, at[i])
+
+    def _judge_arrays(self) -> Moved:
+        """`_judge` in array operations, of the phase's moves. Its masks are over every row, dead or alive, as the
+        observer's (`observer.judge`)."""
         fleet, ids = self.fleet, self.fleet.ids
         alive, took = fleet.state == ALIVE, self._moved  # (a drone not alive has no move taken)
         before = fleet.pos.copy()
@@ -703,7 +865,8 @@ class Engine:
         said = says.nonzero()[0]
         if len(said):
             np.copyto(fleet.note, self._said, where=says)
-        self.age(alive)
+        if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
+            self.age(alive)
         hovered = (alive & ~took).nonzero()[0] if hovering else said[:0]
         if hovering or np.count_nonzero(fleet.misses):  # misses in a row: a move starts the count again
             fleet.misses[:] = np.where(took, 0, fleet.misses + alive)
@@ -722,9 +885,9 @@ class Engine:
         if self.config.lifelong:
             self.tasks += fleet.tasks_done()
         log = self._turn_log
+        rows = moved.nonzero()[0]
         if self.journaled:  # what the turn did, drone by drone
             if any_moved:
-                rows = moved.nonzero()[0]
                 log.moves([ids[i] for i in rows.tolist()], after[rows].tolist())
             if len(said):
                 log.notes([ids[i] for i in said.tolist()], [NOTES[c] for c in fleet.note[said].tolist()])
@@ -732,7 +895,7 @@ class Engine:
                 log.hovered([ids[i] for i in hovered.tolist()])
             if len(dead):
                 log.deaths([ids[i] for i in dead.tolist()], [CAUSES[c] for c in fleet.cause[dead].tolist()])
-        return before, after, moved
+        return Moved(rows, before[rows], after[rows], int(np.count_nonzero(fleet.state == ALIVE)))
 
     def _lose(self, i: int) -> None:
         d = self.fleet.ids[i]
@@ -742,20 +905,20 @@ class Engine:
         self._turn_log.lost(d)
         self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
 
-    def _end_reason(self) -> tuple[EndReason, str] | None:
-        """Whether the game ends with the turn just judged, and why."""
+    def _end_reason(self, left: int) -> tuple[EndReason, str] | None:
+        """Whether the game ends with the turn just judged (leaving `left` drones alive), and why."""
         fleet = self.fleet
-        alive = fleet.state == ALIVE
-        if not np.count_nonzero(alive):
+        if not left:
             causes = named([f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
                             for d, r in self.drones.items()])
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
         if getattr(self.arbiter, "unsolvable", False):  # (a proof: coordinator/lacam.py)
-            away = alive & (fleet.target[:, 0] >= 0) & (fleet.pos != fleet.target).any(axis=1)
+            away = (fleet.state == ALIVE) & (fleet.target[:, 0] >= 0) & (fleet.pos != fleet.target).any(axis=1)
             return EndReason.SETTLED, ("no solution (the search over the drones' configurations proved it): targets "
                                        "reached, except unreachable for "
                                        f"{named([fleet.ids[i] for i in np.flatnonzero(away)])}")
         if self.final:
+            alive = fleet.state == ALIVE
             notes = fleet.notes()[alive]
             if np.count_nonzero(notes == REACHED) == len(notes):
                 return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
@@ -808,7 +971,8 @@ class Engine:
             fleet.pos[row[d]] = p
         for d, n in r.notes.items():
             fleet.note[row[d]] = code_of(n)
-        self.age(alive, [row[d] for d in r.gave_way])  # the arbitration's priorities
+        if fleet.cooperating:  # the arbitration's priorities (as `_judge` keeps them)
+            self.age(alive, [row[d] for d in r.gave_way])
         hovered = np.isin(alive, [row[d] for d in r.hovered])
         fleet.misses[alive] = np.where(hovered, fleet.misses[alive] + 1, 0)
         for d, cause in r.deaths.items():
@@ -997,6 +1161,15 @@ def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one:
     first = refused[0]
     more = f" (and {len(refused) - 1} more: {'; '.join(map(str, refused[1:4]))})" if len(refused) > 1 else ""
     return [Refusal(f"{msg.TAG} from {msg.sender}", type(first)(f"{first}{more}"))]
+
+
+def _set_rows(column: np.ndarray, rows: list[int], values: list) -> None:
+    """column[rows] = values, a few rows one by one (a selection by a list costs as much as FEW_ROWS rows)."""
+    if len(rows) <= FEW_ROWS:
+        for i, v in zip(rows, values):
+            column[i] = v
+    else:
+        column[rows] = values
 
 
 def id_ranges(drones: Iterable[str]) -> str:

@@ -5,6 +5,7 @@ bytes each)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
@@ -12,6 +13,7 @@ import numpy as np
 
 from schema import Cause, Cell, DroneState, Note, OrderTable, StatusTable
 from schema.tables import MAX_DRONE, code_of, drone_number
+from schema.tuning import SMALL_FLEET
 
 ALIVE, DEAD, LOST = (code_of(s) for s in (DroneState.ALIVE, DroneState.DEAD, DroneState.LOST))
 NONE, REACHED, UNREACHABLE, STUCK = (code_of(n) for n in (Note.NONE, Note.REACHED, Note.UNREACHABLE, Note.STUCK))
@@ -21,6 +23,11 @@ STATES, NOTES, CAUSES = tuple(DroneState), tuple(Note), tuple(Cause)
 def cell_of(row: np.ndarray) -> Cell:
     x, y, z = row.tolist()
     return (x, y, z)
+
+
+def nonzero(column: np.ndarray) -> bool:
+    """Whether any of `column` is not 0 (a short one's read as a list: cheaper than a reduction)."""
+    return any(column.tolist()) if len(column) <= SMALL_FLEET else bool(np.count_nonzero(column))
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,23 +55,43 @@ class Fleet:
         self.index: dict[str, int] = {d: i for i, d in enumerate(self.ids)}
         n = len(self.ids)
         self.numbers = np.array([drone_number(d) for d in self.ids], np.uint16)
-        self.row_of_number = np.full(MAX_DRONE + 1, -1, np.int32)  # drone number -> row
-        self.row_of_number[self.numbers] = np.arange(n, dtype=np.int32)
         self.pos = np.array([c for _, c in pairs], np.int32).reshape(n, 3)
-        self.state = np.full(n, ALIVE, np.uint8)
-        self.target = np.full((n, 3), -1, np.int32)
+        self.state = np.zeros(n, np.uint8) + ALIVE
+        self.target = np.empty((n, 3), np.int32)  # (np.full: three times the time of a small fleet's empty + fill)
+        self.target.fill(-1)
         self.note = np.zeros(n, np.uint8)
         self.done = np.zeros(n, bool)  # on its target at the end of a turn since that target was given (a task done)
         self.cause = np.zeros(n, np.uint8)
         self.misses = np.zeros(n, np.int32)
         self.host: list[str | None] = [None] * n
-        self.host_code = np.full(n, -1, np.int16)  # index of its host in `hosts`, -1: none
+        self.host_code = np.empty(n, np.int16)  # index of its host in `hosts`, -1: none
+        self.host_code.fill(-1)
         self.hosts: dict[str, int] = {}
         self.autopilot: list[str] = [""] * n
         self.cooperative = np.zeros(n, bool)
+        self.cooperating = 0  # how many drones are cooperative (`learn`)
 
     def __len__(self) -> int:
         return len(self.ids)
+
+    @functools.cached_property
+    def row_of_number(self) -> np.ndarray:
+        """Each drone number's row, -1 for a number not of this game (made once read: a 256 KiB table)."""
+        rows = np.full(MAX_DRONE + 1, -1, np.int32)
+        rows[self.numbers] = np.arange(len(self.ids), dtype=np.int32)
+        return rows
+
+    def column(self, column: np.ndarray, rows: list[int]) -> list:
+        """The values of one of the fleet's columns (or an array of its rows) at `rows`, as Python values (a cell:
+        a list): the whole column read when the fleet is small, a few rows' selection costing more."""
+        if len(self.ids) <= SMALL_FLEET:
+            values = column.tolist()
+            return [values[i] for i in rows]
+        return column.take(rows, 0).tolist()
+
+    def whole(self) -> tuple[list[int], list[list[int]]] | None:
+        """A small fleet's state and cells as lists (None: a large one's, `column` reads a few rows of them)."""
+        return (self.state.tolist(), self.pos.tolist()) if len(self.ids) <= SMALL_FLEET else None
 
     def alive_rows(self) -> np.ndarray:
         return (self.state == ALIVE).nonzero()[0]
@@ -91,9 +118,19 @@ class Fleet:
         table["drone"], table["pos"], table["target"] = self.numbers[rows], self.pos[rows], self.target[rows]
         return OrderTable(table)
 
-    def fly(self, i: int, host: str, autopilot: str, cooperative: bool) -> None:
-        self.host[i], self.host_code[i] = host, self.hosts.setdefault(host, len(self.hosts))
-        self.autopilot[i], self.cooperative[i] = autopilot, cooperative
+    def fly(self, rows: list[int], host: str, autopilot: str, cooperative: bool) -> None:
+        """`host` flies the drones of `rows` with `autopilot`."""
+        for i in rows:
+            self.host[i] = host
+        self.host_code[rows] = self.hosts.setdefault(host, len(self.hosts))
+        self.learn(rows, autopilot, cooperative)
+
+    def learn(self, rows: list[int], autopilot: str, cooperative: bool) -> None:
+        """The drones of `rows` are flown with `autopilot` (cooperative or not)."""
+        for i in rows:
+            self.autopilot[i] = autopilot
+        self.cooperative[rows] = cooperative
+        self.cooperating = int(np.count_nonzero(self.cooperative))
 
     def unhost(self, i: int) -> None:
         self.host[i], self.host_code[i] = None, -1

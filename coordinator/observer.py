@@ -4,41 +4,39 @@ A drone dies when it leaves the world, enters a building cell, shares a cell wit
 conflict) or swaps cells with another drone (swap conflict), the first of these that applies being its cause.
 When several drones enter one cell, the last in id order is the one remembered as entering it (swap rule).
 
-`judge` decides for a whole swarm at once, over columns: the engine's observer. `deaths` is the same rules
-drone by drone, over mappings: the reference that tests/test_observer.py holds `judge` to (a property test).
+`judge` decides for a whole swarm at once, over columns: the engine's observer of many drones. `deaths` is the same
+rules drone by drone, over mappings: the reference that tests/test_observer.py holds `judge` to (a property test),
+and the observer of a few drones' turn (`deaths_of_moves`: the rules run only when someone may die).
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Mapping, Set
+from collections.abc import Mapping, Sequence, Set
 from typing import TypeVar
 
 import numpy as np
 
 from schema import Cause, Cell
 from schema.tables import code_of
-from schema.tuning import JUDGE_FEW_DRONES
 from world.grid import in_bounds, inside_rows, linear_rows
 
 _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause.BUILDING, Cause.VERTEX, Cause.SWAP))
 K = TypeVar("K", str, int)  # what `deaths` knows a drone by: its id, or its row
 
 
-def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray, alive: np.ndarray | None = None,
-          few: int = JUDGE_FEW_DRONES) -> np.ndarray:
+def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
+          alive: np.ndarray | None = None) -> np.ndarray:
     """The cause of death of each drone (`Cause` codes, as in a STATUS table; 0 = NONE). `before` and `after`: each
     drone's cell at the start and end of the turn, (n, 3) C-ordered integers, rows in id order; `building`: whether
     its `after` cell is a building; `alive`: the drones alive at the start of the turn (None: every row), the others
     taking no part (cause 0). Every array the rules make has the n rows, whoever is alive or moves: numpy keeps up to
     7 freed buffers of each size under 1 KiB, and masks of a size that changed with each death or each turn's movers
-    would pile up there (docs/performance.md, Memory). Up to `few` alive drones, judged drone by drone (`deaths`: an
-    array operation's fixed cost is more than a few drones' Python)."""
+    would pile up there (docs/performance.md, Memory). (A few drones' turn is judged drone by drone:
+    `deaths_of_moves`.)"""
     n = len(after)
     rows = np.arange(n)
     live = np.ones(n, bool) if alive is None else alive
-    if np.count_nonzero(live) <= few:
-        return _judge_few(size, before, after, building, rows[live])
     cause = np.zeros(n, np.uint8)
     inside = inside_rows(after, size)
     out = live & ~inside
@@ -69,17 +67,30 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     return cause
 
 
-def _judge_few(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
-               alive: np.ndarray) -> np.ndarray:
-    """`judge` by `deaths`, the `alive` rows (indices) as keys (their order is the id order)."""
-    keys = alive.tolist()
-    cells = list(map(tuple, after[alive].tolist()))
-    buildings = {c for c, hit in zip(cells, building[alive].tolist()) if hit}
-    dead = deaths(size, dict(zip(keys, map(tuple, before[alive].tolist()))), dict(zip(keys, cells)), buildings)
-    cause = np.zeros(len(after), np.uint8)
-    if dead:
-        cause[list(dead)] = [code_of(c) for c in dead.values()]
-    return cause
+def deaths_of_moves(size: Cell, solid: np.ndarray, before: Mapping[K, Cell], after: Mapping[K, Cell],
+                    moved: Sequence[K]) -> dict[K, Cause]:
+    """`deaths`, for drones of which `moved` changed cell (`solid`: the world's buildings, flat in C order), with
+    the rules run only if someone may die: one left the world or entered a building, or two ended in one cell or
+    swapped cells (most turns, nobody)."""
+    nx, ny, nz = size
+    buildings, outside = set(), False
+    for d in moved:
+        x, y, z = cell = after[d]
+        if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
+            outside = True
+        elif solid[(x * ny + y) * nz + z]:
+            buildings.add(cell)
+    if outside or buildings or len(after) > 1 and _meet(before, after, moved):
+        return deaths(size, before, after, buildings)
+    return {}
+
+
+def _meet(before: Mapping[K, Cell], after: Mapping[K, Cell], moved: Sequence[K]) -> bool:
+    """Whether two drones end in one cell, or two movers swap cells."""
+    if len(set(after.values())) < len(after):
+        return True
+    entering = {after[d]: d for d in moved}
+    return any(before[e] == after[d] for d in moved if (e := entering.get(before[d])) is not None)
 
 
 def deaths(size: Cell, before: Mapping[K, Cell], after: Mapping[K, Cell], buildings: Set[Cell]) -> dict[K, Cause]:

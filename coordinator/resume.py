@@ -24,7 +24,7 @@ def restore(config: GameConfig, records: list[dict], logger: logging.Logger, gam
     for d in theirs.get("drones", []):  # autopilots are learnt at admission, not configured
         i = fleet.index.get(d.get("drone"))
         if i is not None:
-            fleet.autopilot[i], fleet.cooperative[i] = d.get("autopilot", ""), d.get("cooperative", False)
+            fleet.learn([i], d.get("autopilot", ""), d.get("cooperative", False))
     if engine.header() != theirs:
         raise UsageError("the journal is of another game (world, drones or limits differ)")
     if (over := over_of(records)) is not None:

@@ -112,10 +112,11 @@ class DroneParallelEnv(ParallelEnv):
         layout = Layout.draw(self.config, episode_seed, self._terrain)
         self._terrain = layout.terrain  # (the next episode's, if it has the same world: a given one)
         self.episode = None
-        if self.config.num_drones <= self.few_drones:
-            self.episode = FewEpisode(self.config, layout, max_cycles, self._eyes)
+        turns = self._backend()
+        if self.config.num_drones <= self.few_drones and isinstance(turns, LocalTurns):
+            self.episode = FewEpisode(self.config, layout, max_cycles, turns.log, self._eyes)
         else:
-            self.episode = Episode(self.config, layout, self._backend(), max_cycles, self._eyes)
+            self.episode = Episode(self.config, layout, turns, max_cycles, self._eyes)
         self._eyes = self.episode.eyes
         self.agents = self.possible_agents[:]
         rows = np.arange(len(self.agents))
@@ -148,8 +149,8 @@ class DroneParallelEnv(ParallelEnv):
             if True in terminated or True in truncated else names[:]
         if self.render_mode == "human":
             self.render()
-        observations, rewards, terminations, truncations, infos = (dict(zip(names, column)) for column in out[1:])
-        return observations, rewards, terminations, truncations, infos
+        return (dict(zip(names, out.observations)), dict(zip(names, out.rewards)), dict(zip(names, out.terminated)),
+                dict(zip(names, out.truncated)), dict(zip(names, out.infos)))
 
     # ------------------------------------------------------------------ the rest
 

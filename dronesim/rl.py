@@ -22,8 +22,8 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from coordinator.config import DroneSpec, GameConfig
-from coordinator.engine import Engine, Publish, Stage
+from coordinator.config import DroneTable, GameConfig
+from coordinator.engine import Engine, Stage
 from coordinator.fleet import ALIVE, CAUSES, NOTES, STATES
 from schema import (
     AimTable,
@@ -201,7 +201,7 @@ class Terrain(Regions):
         self.free = np.flatnonzero(~world.grid.ravel())
         self.clear_mask = clear_cells(world.grid).ravel()
         self.clear = np.flatnonzero(self.clear_mask)
-        self.packed = world.packed()
+        self.spec = WorldSpec(size=world.size, cells=world.packed())  # the world as every backend's game gives it
 
     def fits(self, world: World) -> bool:
         return world is self.world or world == self.world
@@ -275,10 +275,8 @@ class Layout:
 
     def game(self, max_turns: int, phase_deadline: float = PHASE_DEADLINE_S) -> GameConfig:
         """The engine's game for this layout (the world given cell by cell: every backend builds the same)."""
-        spec = WorldSpec(size=self.world.size, cells=self.terrain.packed)
-        drones = tuple(DroneSpec(drone=drone_name(i + 1), start=(x, y, z))
-                       for i, (x, y, z) in enumerate(self.starts.tolist()))
-        return GameConfig(world=spec, drones=drones, max_turns=max_turns, phase_deadline=phase_deadline)
+        drones = DroneTable([drone_name(i) for i in range(1, len(self.starts) + 1)], self.starts)
+        return GameConfig(world=self.terrain.spec, drones=drones, max_turns=max_turns, phase_deadline=phase_deadline)
 
 
 # --------------------------------------------------------------------------- backends
@@ -342,25 +340,29 @@ def turn_messages(turn: int, aim_rows: np.ndarray, aims: np.ndarray, move_rows: 
     return done, Moves(turn=turn, sender=HOST, moves=steps)
 
 
+def local_game(game: GameConfig, world: World, logger: logging.Logger) -> Engine:
+    """The engine of an episode's game in this process, started (`Engine.start_here`: the policy is its ground
+    station and the host flying every drone, the engine judges the moves from its own copy of the world, as the
+    coordinator does), without a journal."""
+    engine = Engine(game, logger, world)
+    engine.verify_env = engine.journaled = engine.env_followed = False
+    engine.start_here(HOST, PILOT)
+    return engine
+
+
 class LocalTurns:
-    """The engine in this process, its turns played from arrays (`Engine.play`: the same steps as from the
+    """The engine in this process, its turns played from arrays (`Engine.play`: the same turn as from the
     messages the processes would send, none of them built) and read from its fleet. No environment process:
     the engine judges the moves from its own copy of the world, as the coordinator does."""
 
     def __init__(self) -> None:
         # Deaths are the engine's warnings, and an episode's everyday business: only its errors are said.
-        self._log = logging.Logger("dronesim.rl.engine", logging.ERROR)
+        self.log = logging.Logger("dronesim.rl.engine", logging.ERROR)
         self.engine: Engine | None = None
         self._rows: np.ndarray | None = None  # the engine's row of each of ours (None: the same)
 
     def start(self, game: GameConfig, world: World) -> Board:
-        engine = Engine(game, self._log, world)
-        engine.verify_env, engine.journaled = False, False
-        effects = [e for hello in (Connect(turn=0, sender="ENV", role=Role.ENV), *hellos(game))
-                   for e in engine.connect(hello, None)]
-        if engine.stage is not Stage.GCS or not any(isinstance(e, Publish) and isinstance(e.msg, Status)
-                                                    for e in effects):
-            raise BackendError("the engine did not start the game")
+        engine = local_game(game, world, self.log)
         fleet = engine.fleet
         rows = fleet.row_of_number[1:len(fleet) + 1].astype(np.intp)  # engine rows are in id text order
         self._rows = None if np.array_equal(rows, np.arange(len(fleet))) else rows
@@ -467,7 +469,8 @@ class Eyes:
         """`see` of drones given as cells (lists of (x, y, z)), with fewer array operations: for up to
         EYES_ONE_BY_ONE drones, their observations one by one (a list of arrays), else `see`'s rows."""
         cells, sx, sy, o = self._static, self._sx, self._sy, self._origin
-        at = [x * sx + y * sy + z + o for x, y, z in drones]
+        # the drones marked in the world for the while (a lone drone that sees itself: its cell is FREE in its view)
+        at = [] if len(drones) == 1 and pos == drones else [x * sx + y * sy + z + o for x, y, z in drones]
         offsets = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
         for k in at:
             cells[k] = _DRONE

@@ -27,10 +27,17 @@ AHEAD_MAX = 16
 #: arrays: 2 moves 171 vs 184 µs, 8: 186 vs 194, 16: 199 vs 194, 32: 277 vs 225.
 FEW_ROWS = 8
 
-#: Alive drones up to which the observer judges a turn drone by drone (`observer.deaths`), not in array operations
-#: (`observer.judge`). Random moves on 64x64x16, drone by drone vs arrays: 1 drone 7 vs 9 µs, 8: 28 vs 62, 16: 47
-#: vs 106, 32: 110 vs 124, 48: 133 vs 101, 64: 217 vs 115.
-JUDGE_FEW_DRONES = 32
+#: Drones up to which the engine reads a few rows of its fleet's columns by reading the whole columns into lists
+#: (`Fleet.column`), not by a selection: 1 row of 1 drone's cells 0.1 vs 1.3 µs, 16 of 16: 2.2 vs 2.8, 16 of 1000:
+#: 313 vs 2.1 (`ndarray.tolist` vs `ndarray.take(...).tolist`).
+SMALL_FLEET = 128
+
+#: Alive drones up to which the engine plays a turn over Python's lists (`Engine._judge_few`: the moves, the
+#: observer's rules drone by drone only when someone may die, the notes, misses and journal), not in array operations
+#: (`Engine._judge_arrays`). A whole turn (`Engine.play`, every drone moving) on 64x64x16, lists vs arrays (CPU time,
+#: best of 7, load 6): 1 drone 10 vs 64 µs, 8: 16 vs 83, 16: 25 vs 88, 32: 46 vs 93, 48: 59 vs 91, 64: 78 vs 117,
+#: 96: 152 vs 136.
+TURN_FEW_DRONES = 64
 
 #: Turns an ENV phase's report (UPD) may lag behind its turn and still be checked (`--verify-env`). Not measured:
 #: a bound on the moves kept for it.
@@ -117,11 +124,11 @@ PACK_BUFFER = 1024
 #: 2: 8.4 vs 10.7, 3: 7.9 vs 10.4, 4: 15.4 vs 12.5, 6: 22.9 vs 15.0, 8: 31.6 vs 17.2.
 EYES_ONE_BY_ONE = 3
 
-#: Drones up to which a local RL episode is played drone by drone (`dronesim.rl_few.FewEpisode`, at most 99), not
-#: in array operations (`Episode` over the engine). A step of `dronesim bench rl`'s (CPU time, best of 5 passes of
-#: 1500 steps, load 4), drone by drone vs the engine's path: 1 drone 11 vs 97 µs, 16: 43 vs 110, 32: 77 vs 167,
-#: 64: 181 vs 412, 80: 203 vs 389, 99: 250 vs 485 (an earlier run: 241 vs 273 at 99, and the policy here kills no
-#: drone, where the drone-by-drone judgement costs most: 64 keeps a margin).
+#: Drones up to which a local RL episode keeps its rules over Python lists (`dronesim.rl_few.FewEpisode`, at most
+#: 99), not in array operations (`Episode`); both play each turn through `Engine.play`. `dronesim bench rl
+#: --few-gain --counts 1,16,64 --seconds 1 --repeat 3` (2026-11-29, load 9), lists vs arrays: 1 drone 2.3x-3.1x,
+#: 16: 1.0x-1.9x, 64: 1.0x-1.4x (before the turn had one home, with the episode's own turn: 11 vs 97 µs a step at
+#: 1 drone, 181 vs 412 at 64, 250 vs 485 at 99).
 EPISODE_FEW_DRONES = 64
 
 

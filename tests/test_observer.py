@@ -5,7 +5,6 @@ drone by drone (the reference); a property test holds the first to the second on
 
 from __future__ import annotations
 
-import functools
 import itertools
 
 import numpy as np
@@ -14,27 +13,35 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from coordinator.fleet import CAUSES
-from coordinator.observer import deaths, judge
+from coordinator.observer import deaths, deaths_of_moves, judge
 from schema import Cause
 from world.grid import in_bounds
 
 SIZE = (5, 5, 5)
 
 
-def judged(size, before: dict, after: dict, buildings: set, few: int = 0) -> dict:
-    """`judge` (columns, rows in id order) over the mappings `deaths` takes; in array operations unless the
-    drones are `few` at most (then drone by drone, through `deaths`)."""
+def judged(size, before: dict, after: dict, buildings: set) -> dict:
+    """`judge` (columns, rows in id order) over the mappings `deaths` takes."""
     order = sorted(after)
     if not order:
         return {}
     b = np.array([before[d] for d in order], np.int64)
     a = np.array([after[d] for d in order], np.int64)
-    cause = judge(size, b, a, np.array([after[d] in buildings for d in order], bool), few=few)
+    cause = judge(size, b, a, np.array([after[d] in buildings for d in order], bool))
     return {order[i]: CAUSES[c] for i, c in enumerate(cause.tolist()) if c}
 
 
-@pytest.fixture(params=[judged, functools.partial(judged, few=10**6), deaths],
-                ids=["columns", "columns-few", "drone-by-drone"])
+def of_moves(size, before: dict, after: dict, buildings: set) -> dict:
+    """`deaths_of_moves` (a few drones' turn in the engine) over the mappings `deaths` takes; the buildings a grid
+    (only a drone that moves can enter one: the engine's, where a drone in a building has died)."""
+    grid = np.zeros(size, bool)
+    for c in buildings:
+        if all(0 <= v < s for v, s in zip(c, size)):
+            grid[c] = True
+    return deaths_of_moves(size, grid.ravel(), before, after, [d for d in sorted(after) if after[d] != before[d]])
+
+
+@pytest.fixture(params=[judged, deaths], ids=["columns", "drone-by-drone"])
 def die(request):
     """Who dies, by one form of the rules: every example runs against both."""
     rules = request.param
@@ -207,7 +214,8 @@ def test_the_columnar_rules_agree_with_the_rules_drone_by_drone(data) -> None:
     buildings = {c for c in after.values() if data.draw(st.booleans())}
     expected = deaths(size, before, after, buildings)
     assert judged(size, before, after, buildings) == expected
-    assert judged(size, before, after, buildings, few=n) == expected  # (rows as keys: the id order)
+    entered = {after[d] for d in after if after[d] != before[d]} & buildings  # (the buildings a mover entered)
+    assert of_moves(size, before, after, entered) == deaths(size, before, after, entered)
     # rows of drones not alive, among the others in id order, anywhere (in the world, a building, on an alive
     # drone's cell, outside, even "moving"): they take no part
     spots = cells + [(3, 0, 0), (0, -1, 1)]
@@ -219,6 +227,5 @@ def test_the_columnar_rules_agree_with_the_rules_drone_by_drone(data) -> None:
     a = np.array([after[d] if d in after else dead[d][1] for d in order], np.int64)
     building = np.array([after[d] in buildings if d in after else dead[d][2] for d in order], bool)
     alive = np.array([d in before for d in order], bool)
-    for few in (0, n):
-        cause = judge(size, b, a, building, alive, few=few)
-        assert {order[i]: CAUSES[c] for i, c in enumerate(cause.tolist()) if c} == expected
+    cause = judge(size, b, a, building, alive)
+    assert {order[i]: CAUSES[c] for i, c in enumerate(cause.tolist()) if c} == expected
