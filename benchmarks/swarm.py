@@ -64,7 +64,8 @@ from schema import Cell, WorldSpec, drone_id
 from schema.messages import Cause, DroneState
 from schema.tables import RANK_STEPS, rank_steps
 from world import movingai
-from world.grid import World, padded_steps
+from world.grid import World
+from world.search import components, padded_steps
 
 from . import add_write_args, anchor, command_line, pogema, replace_section, replace_subsection
 
@@ -388,23 +389,9 @@ class CityGame:
 
 
 def reachable(grid: np.ndarray, start: Cell) -> np.ndarray:
-    """The free cells (not `grid`) connected to `start` (6-connectivity), as a bool array of grid's shape: a
-    breadth-first search whose frontier is an array (each cell visited once)."""
-    X, Y, Z = grid.shape
-    seen = np.ones((X + 2, Y + 2, Z + 2), bool)
-    seen[1:-1, 1:-1, 1:-1] = grid
-    blocked = seen.copy()
-    flat = seen.reshape(-1)
-    _, _, offsets = padded_steps((X, Y, Z))
-    steps = np.array(offsets, np.int64)
-    frontier = np.array([((start[0] + 1) * (Y + 2) + start[1] + 1) * (Z + 2) + start[2] + 1], np.int64)
-    flat[frontier] = True
-    while len(frontier):
-        nxt = (frontier[:, None] + steps).reshape(-1)
-        nxt = np.unique(nxt[~flat[nxt]])
-        flat[nxt] = True
-        frontier = nxt
-    return (seen & ~blocked)[1:-1, 1:-1, 1:-1]
+    """The free cells (not `grid`) connected to `start`, a free cell (6-connectivity), as a bool array of grid's
+    shape: its component (`world.search.components`)."""
+    return components(grid, np.array([start])).reshape(grid.shape) >= 0
 
 
 def city_limit(size: Cell) -> int:

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from schema import Cell
+from world.search import levels
 
 from .arbiter import OpenCells, candidates, cells_of, cooperate, flat_cells, offered, pibt, steps_flat
 
@@ -66,51 +67,29 @@ SPAN = 1 << 16
 class Graph:
     """The static world's open cells, numbered 0..F-1 (`cells`: their flat cells, `arbiter.flat_cells`'s padded
     numbering; `index`: the other way, -1 for a building), each one's open neighbours (`near`, (F, 6), -1 for
-    none) and its connected component (`part`)."""
+    none) and its connected component (`part`: the first open cell of it)."""
 
-    __slots__ = ("cells", "index", "near", "adjacent", "part")
+    __slots__ = ("cells", "index", "near", "part", "_steps")
 
     def __init__(self, open_: OpenCells, size: Cell) -> None:
         bits = open_.array()
         self.cells = np.flatnonzero(bits).astype(np.int64)
         self.index = np.full(len(bits), -1, np.int64)
         self.index[self.cells] = np.arange(len(self.cells))
-        steps = np.array([d for d in steps_flat(size)[1:].tolist() if d], np.int64)
+        self._steps = steps = np.array([d for d in steps_flat(size)[1:].tolist() if d], np.int64)
         self.near = self.index[self.cells[:, None] + steps]
-        self.adjacent = [[v for v in row if v >= 0] for row in self.near.tolist()]
-        part = [-1] * len(self.cells)
-        for root in range(len(part)):
-            if part[root] < 0:
-                part[root] = root
-                for u in _reached(self.adjacent, root):
-                    part[u] = root
-        self.part = np.array(part, np.int64)
+        self.part = np.full(len(self.cells), -1, np.int64)
+        for root in range(len(self.cells)):
+            if self.part[root] < 0:  # (a breadth-first search of its component, the cells it has left open)
+                for reached in levels(bits, [int(self.cells[root])], steps):
+                    self.part[self.index[reached]] = root
 
     def distances(self, goal: int) -> np.ndarray:
         """Each open cell's distance to open cell `goal` (numbered), FAR where none: a breadth-first search."""
-        far = np.full(len(self.cells), FAR, np.int16)
-        dist = [-1] * len(self.cells)
-        dist[goal] = 0
-        queue = [goal]
-        adjacent = self.adjacent
-        for u in queue:
-            du = dist[u] + 1
-            for v in adjacent[u]:
-                if dist[v] < 0:
-                    dist[v] = du
-                    queue.append(v)
-        d = np.array(dist, np.int64)
-        return np.where(d >= 0, np.minimum(d, FAR - 1), far).astype(np.int16)
-
-
-def _reached(adjacent: list[list[int]], root: int) -> list[int]:
-    seen, queue = {root}, [root]
-    for u in queue:
-        for v in adjacent[u]:
-            if v not in seen:
-                seen.add(v)
-                queue.append(v)
-    return queue
+        dist = np.full(len(self.cells), FAR, np.int16)
+        for d, reached in enumerate(levels(self.index >= 0, [int(self.cells[goal])], self._steps)):
+            dist[self.index[reached]] = min(d, FAR - 1)
+        return dist
 
 
 class Node:

@@ -20,6 +20,7 @@ from schema import Cell, CellInfo, CellKind, UsageError
 from schema.messages import AROUND, MAX_COORD, WorldSpec
 
 from .movingai import read_map, world_grid
+from .search import components, levels, padded_cell, padded_steps
 
 #: The JSON file's ``format`` and ``version`` values.
 FORMAT = "dronesim-world"
@@ -55,47 +56,6 @@ def linear_rows(cells: np.ndarray, size: Cell) -> np.ndarray:
 
 def in_bounds(cell: Sequence[int], size: Cell) -> bool:
     return 0 <= cell[0] < size[0] and 0 <= cell[1] < size[1] and 0 <= cell[2] < size[2]
-
-
-def padded_steps(size: Cell) -> tuple[int, int, tuple[int, ...]]:
-    """For a C-ordered grid of `size` with a border of one cell on every side (so that a cell's neighbours
-    need no bounds checks): the strides of x and y, and each neighbour's offset, in AROUND order."""
-    sy = size[2] + 2
-    sx = (size[1] + 2) * sy
-    return sx, sy, tuple(dx * sx + dy * sy + dz for dx, dy, dz in AROUND)
-
-
-def components(grid: np.ndarray, seeds: np.ndarray, label: np.ndarray | None = None) -> np.ndarray:
-    """The label of every cell (C order, -1: a building or a free cell reached from no seed): the free cells
-    6-connected to each seed cell ((n, 3) array), labelled by the first seed of their component. `label`: the
-    labels found so far (modified: a seed in a labelled component costs nothing; a new component's label is
-    one more than the largest so far)."""
-    free = np.pad(~grid, 1)  # a blocked border: flat neighbours need no bounds checks
-    sx, sy, offsets = padded_steps(grid.shape)
-    nx, ny, nz = grid.shape
-    steps = np.array(offsets, np.int64)
-    if label is None:
-        label = np.full(grid.size, -1, np.int64)
-    padded: np.ndarray | None = None  # (the padded labels: made once a new component is searched)
-    for x, y, z in seeds.tolist():
-        if label[(x * ny + y) * nz + z] >= 0 or grid[x, y, z]:
-            continue  # in a component already labelled (or a building)
-        if padded is None:
-            padded = np.pad(label.reshape(grid.shape), 1, constant_values=-1).ravel()
-            open_ = free.ravel() & (padded < 0)
-        mark = int(label.max()) + 1
-        s = (x + 1) * sx + (y + 1) * sy + z + 1
-        open_[s] = False
-        padded[s] = mark
-        frontier = np.array([s], np.int64)
-        while frontier.size:
-            nxt = (frontier[:, None] + steps).ravel()
-            nxt = np.unique(nxt[open_[nxt]])
-            open_[nxt] = False
-            padded[nxt] = mark
-            frontier = nxt
-        label[:] = padded.reshape(free.shape)[1:-1, 1:-1, 1:-1].ravel()
-    return label
 
 
 def pick_cell(rng: np.random.Generator, cells: np.ndarray, taken: np.ndarray) -> int:
@@ -435,19 +395,13 @@ class World:
         start, goal = _cell(start, "start"), _cell(goal, "goal")
         if not self.contains(start) or not self.contains(goal) or self.grid[start] or self.grid[goal]:
             return None
-        # The free map padded with a blocked border, so flat-index neighbours need no bounds checks.
-        unseen = np.pad(~self.grid, 1).ravel()
-        sx, sy, steps = padded_steps(self.size)
-        offsets = np.array(steps, dtype=np.int64)
-        s, g = ((c[0] + 1) * sx + (c[1] + 1) * sy + c[2] + 1 for c in (start, goal))
-        unseen[s] = False
-        frontier, distance = np.array([s], dtype=np.int64), 0
-        while unseen[g] and frontier.size:
-            nxt = (frontier[:, None] + offsets).ravel()
-            frontier = np.unique(nxt[unseen[nxt]])
-            unseen[frontier] = False
-            distance += 1
-        return None if unseen[g] else distance
+        unseen = np.pad(~self.grid, 1).ravel()  # (padded: a cell's neighbours need no bounds checks)
+        _, _, steps = padded_steps(self.size)
+        g = padded_cell(goal, self.size)
+        for distance, _ in enumerate(levels(unseen, [padded_cell(start, self.size)], steps)):
+            if not unseen[g]:
+                return distance
+        return None
 
     def packed(self) -> bytes:
         """The grid as the MAP message's packed bits."""

@@ -30,7 +30,6 @@ off is blocked). `scenario` draws agents' starts and goals on them, as the bench
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -38,6 +37,8 @@ from functools import partial
 import numpy as np
 
 from schema import UsageError
+
+from .search import components, levels, padded_cell, padded_steps
 
 #: Characters of a .map: free, and blocked (out of bounds, trees, water are all blocked for a drone).
 FREE_CHARS = frozenset(".GS")
@@ -145,21 +146,20 @@ def write_scen(agents: Iterable[Agent]) -> str:
 
 
 def distances(blocked: np.ndarray, source: tuple[int, int]) -> np.ndarray:
-    """Moves from `source` to every cell of a [x, y] grid, 4-connected (-1: unreachable or blocked)."""
+    """Moves from `source` to every cell of a [x, y] grid, 4-connected (-1: unreachable or blocked): a world 1 cell
+    high's breadth-first search (`world.search.levels`: its ±z neighbours are the border, never open)."""
     width, height = blocked.shape
-    dist = np.full((width, height), -1, np.int64)
+    dist = np.full(width * height, -1, np.int64)
     if blocked[source]:
-        return dist
-    dist[source] = 0
-    queue = deque([source])
-    while queue:
-        x, y = queue.popleft()
-        d = dist[x, y] + 1
-        for nx, ny in ((x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)):
-            if 0 <= nx < width and 0 <= ny < height and dist[nx, ny] < 0 and not blocked[nx, ny]:
-                dist[nx, ny] = d
-                queue.append((nx, ny))
-    return dist
+        return dist.reshape(width, height)
+    open_ = np.pad(~blocked[:, :, None], 1).ravel()
+    size = (width, height, 1)
+    _, _, steps = padded_steps(size)
+    index = np.full(len(open_), -1, np.int64)  # each padded cell's cell of the map (row-major [x, y])
+    index.reshape(width + 2, height + 2, 3)[1:-1, 1:-1, 1] = np.arange(width * height).reshape(width, height)
+    for d, reached in enumerate(levels(open_, [padded_cell((*source, 0), size)], steps)):
+        dist[index[reached]] = d
+    return dist.reshape(width, height)
 
 
 def scenario(blocked: np.ndarray, agents: int, seed: int, map_name: str = "") -> list[Agent]:
@@ -190,16 +190,10 @@ def _connected(blocked: np.ndarray) -> np.ndarray:
     free = np.argwhere(~blocked)
     if not len(free):
         return blocked
-    label = np.full(blocked.shape, -1, np.int64)
-    sizes: list[int] = []
-    for x, y in free.tolist():
-        if label[x, y] >= 0:
-            continue
-        reach = distances(blocked, (x, y)) >= 0
-        label[reach] = len(sizes)
-        sizes.append(int(reach.sum()))
+    label = components(blocked[:, :, None], np.column_stack([free, np.zeros(len(free), np.int64)]))
+    sizes = np.bincount(label[label >= 0])
     out = blocked.copy()
-    out[(label != int(np.argmax(sizes))) & ~blocked] = True
+    out[(label.reshape(blocked.shape) != int(np.argmax(sizes))) & ~blocked] = True
     return out
 
 

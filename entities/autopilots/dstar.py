@@ -69,7 +69,8 @@ import numpy as np
 from schema import Cell, CellInfo, CellKind, Note
 from schema.messages import AROUND
 from schema.tables import rank_steps
-from world.grid import in_bounds, padded_steps
+from world.grid import in_bounds
+from world.search import breadth_first, padded_steps
 
 from .base import Decision, Sensing
 
@@ -435,21 +436,8 @@ class DStarPilot:
         state, offs, goal = self._state, self._offs, self._goal
         if avoid == goal:
             return None
-        dist = {goal: 0}
-        frontier = [goal]
         need = {s} | {s + d for d in offs if state[s + d] != BLOCKED and s + d != avoid}
-        while frontier and need:
-            nxt: list[int] = []
-            for c in frontier:
-                dc = dist[c] + 1
-                for d in offs:
-                    p = c + d
-                    if p in dist or p == avoid or state[p] == BLOCKED:
-                        continue
-                    dist[p] = dc
-                    need.discard(p)
-                    nxt.append(p)
-            frontier = nxt
+        dist = breadth_first(state, BLOCKED, offs, goal, closed=avoid, until=need)
         return dist if s in dist else None
 
     def _aside(self, s: int) -> int:
