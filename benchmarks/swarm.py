@@ -65,7 +65,7 @@ from schema.messages import Cause, DroneState
 from schema.tables import RANK_STEPS, rank_steps
 from world import movingai
 from world.grid import World
-from world.search import components, padded_steps
+from world.search import cells_of, components, padded_steps
 
 from . import add_write_args, anchor, command_line, pogema, replace_section, replace_subsection
 
@@ -642,7 +642,7 @@ def search_alone(cases: list[tuple[str, int]], turns: int = 40) -> dict[tuple[st
                 plan = search.follow(size, pos, coop, goals, open_, turn)
                 spent.append(time.process_time() - t0)
                 assert plan is not None
-                pos = lacam.cells_of(plan, size)
+                pos = cells_of(plan, size)
         finally:
             gc.enable()
         ms = 1000 * np.array(spent)

@@ -29,6 +29,7 @@ import numpy as np
 
 from schema import Cell
 from schema.tables import RANK_STEPS, RANKED_LIMIT
+from world.search import cells_of, flat_cells, padded_steps
 
 K = TypeVar("K", str, int)  # what `arbitrate` knows a drone by: its id, or its row
 #: Each drone's candidates (flat cells) as PIBT reads them: a list by row, or a mapping of the rows it may read.
@@ -102,14 +103,6 @@ def arbitrate(before: Mapping[K, Cell], proposed: Mapping[K, Cell], cooperative:
     return final
 
 
-def flat_cells(cells: np.ndarray, size: Cell) -> np.ndarray:
-    """Cells ((n, 3), each coordinate in -1..size: one step off the world at most) as one integer each, on
-    the world padded by one cell each side, so that a step is an addition (`steps_flat`)."""
-    _, Y, Z = size
-    c = cells.astype(np.int64) + 1
-    return (c[:, 0] * (Y + 2) + c[:, 1]) * (Z + 2) + c[:, 2]
-
-
 class OpenCells:
     """The world's open cells as the arbiter reads them: `open[u]` is 1 where the cell of flat number u
     (`flat_cells`: padded by one blocked cell each side) is no building, else 0. One bit a cell, made a slab at a
@@ -148,18 +141,9 @@ class OpenCells:
         return self._count
 
 
-def cells_of(flat: np.ndarray, size: Cell) -> np.ndarray:
-    """`flat_cells` undone: (n, 3) int32."""
-    _, Y, Z = size
-    xy, z = np.divmod(flat, Z + 2)
-    x, y = np.divmod(xy, Y + 2)
-    return (np.stack([x, y, z], axis=1) - 1).astype(np.int32)
-
-
 def steps_flat(size: Cell) -> np.ndarray:
-    """The flat offset of each rank code (0: none, -1 here; k + 1: RANK_STEPS[k])."""
-    _, Y, Z = size
-    return np.array([0] + [(dx * (Y + 2) + dy) * (Z + 2) + dz for dx, dy, dz in RANK_STEPS], np.int64)
+    """The flat offset of each rank code (0: none, -1 here; k + 1: RANK_STEPS[k], the 6 moves then staying)."""
+    return np.array([0, *padded_steps(size)[2], 0], np.int64)
 
 
 def among(cells: np.ndarray, these: np.ndarray) -> np.ndarray:

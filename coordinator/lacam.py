@@ -38,11 +38,11 @@ from typing import Any
 import numpy as np
 
 from schema import Cell
-from world.search import levels
+from world.search import cells_of, flat_cells, levels, padded_steps
 
-from .arbiter import OpenCells, candidates, cells_of, cooperate, flat_cells, offered, pibt, steps_flat
+from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat
 
-__all__ = ["Lacam", "Search", "Graph", "cells_of", "flat_cells"]
+__all__ = ["Lacam", "Search", "Graph"]
 
 #: Work units a turn (a PIBT call costs one per drone and CALL, a distance table one per CELLS_A_UNIT open cells):
 #: 20 ms or less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md).
@@ -65,7 +65,7 @@ SPAN = 1 << 16
 
 
 class Graph:
-    """The static world's open cells, numbered 0..F-1 (`cells`: their flat cells, `arbiter.flat_cells`'s padded
+    """The static world's open cells, numbered 0..F-1 (`cells`: their flat cells, `world.search.flat_cells`'s padded
     numbering; `index`: the other way, -1 for a building), each one's open neighbours (`near`, (F, 6), -1 for
     none) and its connected component (`part`: the first open cell of it)."""
 
@@ -76,7 +76,7 @@ class Graph:
         self.cells = np.flatnonzero(bits).astype(np.int64)
         self.index = np.full(len(bits), -1, np.int64)
         self.index[self.cells] = np.arange(len(self.cells))
-        self._steps = steps = np.array([d for d in steps_flat(size)[1:].tolist() if d], np.int64)
+        self._steps = steps = np.array(padded_steps(size)[2], np.int64)
         self.near = self.index[self.cells[:, None] + steps]
         self.part = np.full(len(self.cells), -1, np.int64)
         for root in range(len(self.cells)):
@@ -149,7 +149,7 @@ class Search:
         self.expansions = 0
         self.gave: list[int] = []  # the drones that gave way in the last successor (`arbiter.pibt`)
         shape = (size[0] + 2, size[1] + 2, size[2] + 2)
-        self.steps = [d for d in steps_flat(size)[1:].tolist() if d]
+        self.steps = list(padded_steps(size)[2])
         self.aim_array = aims.astype(np.int64)
         self._cached: tuple[Any, list[int], list[list[int]], list[int]] = (None, [], [], [])
         self.aimed = (self.aims, shape)
@@ -297,7 +297,7 @@ class Lacam:
 
     def follow(self, size: Cell, before: np.ndarray, cooperative: np.ndarray, targets: np.ndarray,
                open_: OpenCells | None, salt: int | None = None) -> np.ndarray | None:
-        """The drones' cells (flat, `arbiter.flat_cells`) the search sends them to this turn, or None (PIBT's
+        """The drones' cells (flat, `world.search.flat_cells`) the search sends them to this turn, or None (PIBT's
         turn). A function of the arguments of this and every earlier call alone (`coordinator/resume.py`)."""
         n = len(before)
         if open_ is None or not n or not cooperative.all():

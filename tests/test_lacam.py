@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from coordinator import lacam
-from coordinator.arbiter import OpenCells, flat_cells
+from coordinator.arbiter import OpenCells
 from coordinator.config import DroneSpec, GameConfig
 from coordinator.resume import restore
 from dronesim import replay
@@ -21,6 +21,7 @@ from dronesim.local import Inputs, Result, simulate
 from entities.gcs import Plan
 from schema import Cell, EndReason, WorldSpec
 from world.grid import World
+from world.search import cells_of, flat_cells
 
 LOG = logging.getLogger("test_lacam")
 Drones = dict[str, tuple[Cell, Cell]]
@@ -96,7 +97,7 @@ def test_the_search_proves_a_swap_in_a_closed_corridor_unsolvable_and_finds_one_
             plan = search.follow(size, cells, np.ones(2, bool), targets, open_, turn)
             if plan is None:  # (a turn of PIBT's: the world's graph is made)
                 continue
-            nxt = np.array([[int(v) for v in c] for c in lacam.cells_of(plan, size)], np.int32)
+            nxt = np.array([[int(v) for v in c] for c in cells_of(plan, size)], np.int32)
             assert np.abs(nxt - cells).sum(axis=1).max() <= 1 and len({tuple(c) for c in nxt.tolist()}) == 2
             assert not ((nxt[0] == cells[1]).all() and (nxt[1] == cells[0]).all()), "a swap"
             cells = nxt
@@ -144,4 +145,4 @@ def test_a_resumed_coordinator_has_the_search_that_played() -> None:
 def test_flat_cells_round_trip() -> None:
     size = (3, 4, 2)
     cells = np.array([(0, 0, 0), (2, 3, 1), (1, 2, 0)], np.int32)
-    assert (lacam.cells_of(flat_cells(cells, size), size) == cells).all()
+    assert (cells_of(flat_cells(cells, size), size) == cells).all()

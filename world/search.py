@@ -36,6 +36,22 @@ def padded_cell(cell: Sequence[int], size: Cell) -> int:
     return (cell[0] + 1) * sx + (cell[1] + 1) * sy + cell[2] + 1
 
 
+def flat_cells(cells: np.ndarray, size: Cell) -> np.ndarray:
+    """Cells ((n, 3), each coordinate in -1..size: one step off the world at most) as one integer each, on
+    the world padded by one cell each side, so that a step is an addition (`padded_steps`)."""
+    _, Y, Z = size
+    c = cells.astype(np.int64) + 1
+    return (c[:, 0] * (Y + 2) + c[:, 1]) * (Z + 2) + c[:, 2]
+
+
+def cells_of(flat: np.ndarray, size: Cell) -> np.ndarray:
+    """`flat_cells` undone: (n, 3) int32."""
+    _, Y, Z = size
+    xy, z = np.divmod(flat, Z + 2)
+    x, y = np.divmod(xy, Y + 2)
+    return (np.stack([x, y, z], axis=1) - 1).astype(np.int32)
+
+
 def levels(open_: np.ndarray, sources: Iterable[int], steps: Sequence[int] | np.ndarray) -> Iterator[np.ndarray]:
     """The cells reached from `sources` (numbered on a padded grid, open), a level at a time: the sources, then
     each level's new cells (ascending), through the cells still open (True) in the flat bool array `open_`, which
