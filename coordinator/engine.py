@@ -34,7 +34,7 @@ import enum
 import hashlib
 import itertools
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -76,7 +76,7 @@ from . import arbiter, lacam, observer
 from .admission import Roster
 from .config import GameConfig, starts_of
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
-from .journal import TurnLog, TurnRecord, header_record, over_record
+from .journal import TurnLog, TurnRecord, header_record, over_of, over_record, turns
 
 
 class Stage(enum.Enum):
@@ -947,13 +947,31 @@ class Engine:
 
     # ------------------------------------------------------------------ resuming
 
-    def resume(self, records: Iterable[TurnRecord]) -> int:
-        """A game restarted from its journal (resume.py checks the header): each journaled turn replayed as the
-        observer played it and checked against the state it recorded, then the engine waits (RESUMING) for the
-        entities to connect again and plays the turn after the last. The last turn; UsageError if a turn does
-        not replay to its recorded state."""
-        for r in records:
-            self._replay(r)
+    def resume(self, records: Sequence[dict]) -> int:
+        """A game restarted from its journal's records (coordinator/resume.py reads them): its header checked
+        against this game (the drones' autopilots learnt from it, as the game learnt them at admission), each
+        journaled turn replayed as the observer played it and checked against the state it recorded; then the
+        engine waits (RESUMING) for the entities to connect again and plays the turn after the last. The last
+        turn; UsageError, if the journal is not this game's, is over, or does not replay to its recorded states."""
+        if self.stage is not Stage.ADMITTING or self.entities:
+            raise UsageError("a game is resumed before anyone has connected")
+        if not records or records[0].get("record") != "header":
+            raise UsageError("the journal has no header: nothing to resume")
+        theirs, fleet = records[0], self.fleet
+        for d in theirs.get("drones", []):  # (autopilots are learnt at admission, not configured)
+            i = fleet.index.get(d.get("drone"))
+            if i is not None:
+                fleet.learn([i], d.get("autopilot", ""), d.get("cooperative", False))
+        if self.header() != theirs:
+            raise UsageError("the journal is of another game (world, drones or limits differ)")
+        if (over := over_of(records)) is not None:
+            raise UsageError(f"the journal's game is over (turn {over.get('turn')}): nothing to resume (a journal "
+                             "holds one game: give another --journal for a new one)")
+        try:
+            for r in turns(records[1:]):
+                self._replay(r)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise UsageError(f"the journal has a bad turn record: {exc!r}") from None
         self._enter(Stage.RESUMING)
         return self.turn
 
