@@ -329,16 +329,18 @@ class Engine:
             effects.append(Publish(self._phase_msg))
         return effects
 
-    def start_here(self, host: str, autopilot: str) -> None:
+    def start_here(self, host: str, autopilot: str, cooperative: Sequence[int] = ()) -> None:
         """The game started for a caller in this process that is its environment, its ground station and the
-        swarm host `host` flying every drone with `autopilot` (dronesim/rl.py): each there as if it had connected,
-        with no message built, and the first turn's GCS phase opened (`play` plays the turns). UsageError if
-        someone connected already."""
+        swarm host `host` flying every drone with `autopilot`, those of rows `cooperative` cooperating (dronesim/
+        rl.py): each there as if it had connected, with no message built, and the first turn's GCS phase opened
+        (`play` plays the turns). UsageError if someone connected already."""
         if self.stage is not Stage.ADMITTING or self.entities:
             raise UsageError("a game is started here before anyone has connected")
         for entity, role in (("ENV", Role.ENV), ("GCS", Role.GCS), (host, Role.DRONE)):
             self.roster.enter(entity, role)
         self.fleet.fly(list(range(len(self.fleet))), host, autopilot, False)
+        if len(cooperative):
+            self.fleet.learn(list(cooperative), autopilot, True)
         self._open_gcs(1)
 
     def header(self) -> dict:
@@ -586,14 +588,15 @@ class Engine:
         self.final = intent is Intent.FINAL
         return True
 
-    def play(self, aim_rows: Rows, aims: Cells, move_rows: Rows, moves: Cells, notes: Codes) -> Over | None:
+    def play(self, aim_rows: Rows, aims: Cells, move_rows: Rows, moves: Cells, notes: Codes,
+             ranked: Codes | None = None) -> Over | None:
         """One whole turn without messages, for a caller in this process that is the ground station and every
         drone's host (dronesim/rl.py): as if a DONE (CONTINUE) carried the targets `aims` of the rows `aim_rows`,
-        then a MOVES the `moves` (cells) and `notes` (Note codes) of the rows `move_rows` (each once; the other
-        alive drones hover), with no message built and no journal record. Rows, cells and codes as arrays, or as
-        lists (ints, (x, y, z) tuples, ints: what a caller playing a few drones holds). The turn's OVER if the
-        game ended with it. UsageError, nothing changed, if the turn is not the GCS's (or a DONE or MOVES came
-        ahead) or an input would be refused."""
+        then a MOVES the `moves` (cells), `notes` (Note codes) and `ranked` candidates (cooperative drones', as an
+        NPS's; None: none) of the rows `move_rows` (each once; the other alive drones hover), with no message
+        built and no journal record. Rows, cells and codes as arrays, or as lists (ints, (x, y, z) tuples, ints:
+        what a caller playing a few drones holds). The turn's OVER if the game ended with it. UsageError, nothing
+        changed, if the turn is not the GCS's (or a DONE or MOVES came ahead) or an input would be refused."""
         fleet = self.fleet
         if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
@@ -632,7 +635,7 @@ class Engine:
         else:
             self._moved[:] = False  # (the drones' phase, opened and closed at once)
             self._proposed[rows], self._said[rows], self._moved[rows] = cells, codes, True
-            self._ranked[rows] = 0
+            self._ranked[rows] = 0 if ranked is None else ranked
             turn = self._judge()
         if end := self._end_reason(turn.alive):
             self._over(*end)

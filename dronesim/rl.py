@@ -713,11 +713,12 @@ CAUSE_TEXT = tuple(c.value.lower() for c in CAUSES)
 class Expert:
     """One of the project's autopilots per drone (D* by default) choosing each acting drone's action: an expert
     for imitation learning, or a baseline. It senses as a drone process does (the episode's world answers its
-    ASK). A cooperative autopilot's drones give way to each other by the former fixed-priority rule
-    (`coordinator.arbiter.arbitrate`: a drone whose move is claimed by a drone with a smaller id, or that would
-    swap cells with one, hovers), not by the PIBT that games run (`arbiter.cooperate`, which needs the engine's
-    priorities and each drone's ranked candidates): the expert's drones never collide with each other, but may
-    wait where a game's drones would go round."""
+    ASK). A cooperative autopilot's drones give way to each other as a game's do: their decisions (each one's
+    move, note and ranked candidates) are a turn of the expert's own game of the episode's alive drones
+    (`Engine.play`), whose arbitration (the search, coordinator/lacam.py, and PIBT) gives each its cell; a drone
+    that no longer acts (parked on its target) is in that game as a drone that does not cooperate. The game
+    follows the episode turn by turn, and starts again from the episode's cells when they are not its own (a
+    new episode, or another policy's steps)."""
 
     def __init__(self, autopilot: str = "dstar") -> None:
         from entities.autopilots import pilot_class
@@ -726,16 +727,19 @@ class Expert:
         self.cooperative = pilot_class(autopilot).cooperative
         self._episode: EpisodeBase | None = None
         self._pilots: dict[str, object] = {}
+        self._game: Engine | None = None
+        self._rows: list[int] = []  # the episode's rows in the game (the alive drones when it started), in order
+        self._acting: list[int] = []  # those acting then (the game's cooperative drones)
+        self._log = logging.Logger("dronesim.rl.expert", logging.ERROR)
 
     def actions(self, episode: EpisodeBase) -> dict[int, int]:
         """row -> action of every acting drone of `episode` at its current turn."""
-        from coordinator.arbiter import arbitrate
         from entities.autopilots import make_autopilot
         from entities.autopilots.base import drive, fly_round
         from entities.environment import Environment
 
         if episode is not self._episode:  # a new episode: fresh pilots (they remember the world they saw)
-            self._episode, self._pilots = episode, {}
+            self._episode, self._pilots, self._game = episode, {}, None
         pos, state, targets, acting_ = episode.columns()
         alive = np.flatnonzero(state == ALIVE).tolist()
         here = {drone_name(i + 1): c for i, c in zip(alive, map(tuple, pos[alive].tolist()))}
@@ -749,8 +753,38 @@ class Expert:
         decided = drive(fly_round(steps), env.oracle)
         wants = {d: decided[d].pos if d in decided else c for d, c in here.items()}
         if self.cooperative:
-            wants = arbitrate(here, wants, set(decided))
+            wants = self._arbitrated(episode, alive, acting, decided, wants)
         return {i: _ACTION_OF[tuple(w - h for w, h in zip(wants[d], here[d]))] for i, d in acting.items()}
+
+    def _arbitrated(self, episode: EpisodeBase, alive: list[int], acting: dict[int, str], decided: dict,
+                    wants: dict[str, Cell]) -> dict[str, Cell]:
+        """`wants` after a turn of the expert's game (`Expert`'s doc), which then stands where the drones go."""
+        pos, _, targets, _ = episode.columns()
+        game = self._game
+        if game is None or game.stage is not Stage.GCS or self._rows != alive or self._acting != [*acting] or \
+                not np.array_equal(
+                game.fleet.pos[[game.fleet.index[drone_name(k + 1)] for k in range(len(alive))]], pos[alive]):
+            game = self._start(episode, alive, acting)
+        rows = [game.fleet.index[drone_name(k + 1)] for k in range(len(alive))]
+        names = [drone_name(i + 1) for i in alive]
+        moves = [decided[d] if d in decided else None for d in names]
+        game.play(rows, targets[alive], rows, [wants[d] for d in names],
+                  [0 if m is None else code_of(m.note) for m in moves], [0 if m is None else m.ranked for m in moves])
+        after = game.fleet.pos[rows].tolist()
+        return {d: (x, y, z) for d, (x, y, z) in zip(names, after)}
+
+    def _start(self, episode: EpisodeBase, alive: list[int], acting: dict[int, str]) -> Engine:
+        """The expert's game of `episode`'s alive drones where they are (the k-th named drone_name(k + 1))."""
+        pos, _, targets, _ = episode.columns()
+        drones = DroneTable([drone_name(k + 1) for k in range(len(alive))], pos[alive])
+        config = GameConfig(world=WorldSpec(size=episode.world.size, cells=episode.world.packed()), drones=drones,
+                            max_turns=1 << 30)
+        game = Engine(config, self._log, episode.world)
+        game.verify_env = game.journaled = game.env_followed = False
+        game.start_here(HOST, self.autopilot, [game.fleet.index[drone_name(k + 1)] for k, i in enumerate(alive)
+                                               if i in acting])
+        self._game, self._rows, self._acting = game, alive, [*acting]
+        return game
 
 
 _ACTION_OF = {a: k for k, a in enumerate(ACTIONS)}
