@@ -28,7 +28,7 @@ import zenoh
 from coordinator.config import GameConfig
 from dronesim import child_env
 from dronesim.rl import HOST, BackendError, Board, hellos, turn_messages
-from network.membership import NotAdmitted, admit
+from network.membership import Membership, NotAdmitted
 from network.transport import (
     Inbox,
     Outbox,
@@ -41,6 +41,7 @@ from network.transport import (
     zenoh_error,
 )
 from schema import Done, Intent, Keys, Message, Moves, Over, Phase, Status, Turn, UsageError
+from schema.tuning import PROCESS_CHECK_S
 from world.grid import World
 
 #: The processes of a game, by the name their presence token has.
@@ -121,7 +122,7 @@ class _Game:
         self.children, self._files, self.logs = turns._children, turns._files, Path(turns._logs.name)
         self.inbox = Inbox(self.session, self.keys, self.log)
         self.out = Outbox(self.session)
-        self.tokens: list = []
+        self.members: list[Membership] = []  # the ground station's and the swarm host's admissions
 
     def _start(self, name: str, argv: list[str]) -> None:
         log = open(self.logs / f"{self.root}.{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed in end()
@@ -152,7 +153,7 @@ class _Game:
             if left <= 0:
                 raise BackendError(f"no {waiting_for} within {self.deadline:g} s: the game's processes stopped "
                                    "answering")
-            event = self.inbox.get(min(left, 0.25))
+            event = self.inbox.get(min(left, PROCESS_CHECK_S))
             if event is None:
                 self._check()
                 continue
@@ -183,22 +184,16 @@ class _Game:
                                 "--max-turns", str(game.max_turns), "--phase-deadline", deadline,
                                 "--admit-deadline", deadline])
             self._start("ENV", [*base, "env", *common, "--no-draw", "--connect-timeout", deadline])
-            sid = session_id(self.session)
             end = time.monotonic() + self.deadline
-            for hello in hellos(self.game, sid):
-                self.tokens.append(self.session.liveliness().declare_token(self.keys.alive(hello.sender, sid)))
-                while True:  # in slices, to notice a process that died instead of waiting for the deadline
-                    self._check()
-                    try:
-                        slice_ = min(1.0, max(0.1, end - time.monotonic()))
-                        admit(self.session, self.keys, hello, self.log, timeout=slice_)
-                        break
-                    except NotAdmitted as err:
-                        raise BackendError(f"the coordinator refused {hello.sender}: {err}") from None
-                    except UsageError:
-                        if time.monotonic() >= end:
-                            raise BackendError(f"no coordinator admitted {hello.sender} within {self.deadline:g} s: "
-                                               f"{self._tail('SRV')}") from None
+            for hello in hellos(self.game, session_id(self.session)):  # (admission as the inbox's events; a process
+                try:  # that dies meanwhile raises at once)
+                    self.members.append(Membership(self.session, self.inbox, hello, self.log, grace=0.0,
+                                                   connect_timeout=max(0.1, end - time.monotonic()), check=self._check))
+                except NotAdmitted as err:
+                    raise BackendError(f"the coordinator refused {hello.sender}: {err}") from None
+                except UsageError:
+                    raise BackendError(f"no coordinator admitted {hello.sender} within {self.deadline:g} s: "
+                                       f"{self._tail('SRV')}") from None
             return self._status(0, end)
         except BaseException:
             self.end()
@@ -245,17 +240,17 @@ class _Game:
     def end(self) -> None:
         """End the game if it runs (the ground station quits), then its processes, subscriptions and presence."""
         try:
-            if self.over is None and self.tokens and all(p.poll() is None for p in self.procs.values()):
+            if self.over is None and self.members and all(p.poll() is None for p in self.procs.values()):
                 self.out.put(self.keys.gcs_done, Done(turn=self.turn + 1, sender="GCS", phase=Phase.GCS,
                                                       intent=Intent.QUIT))
                 self._over(time.monotonic() + min(self.deadline, 10.0))
         except BackendError as err:
             self.log.warning("the game did not end cleanly: %s", err)
         finally:
-            for token in self.tokens:  # gone: the coordinator, which waits for its entities to leave, ends
+            for member in self.members:  # gone: the coordinator, which waits for its entities to leave, ends
                 with contextlib.suppress(Exception):
-                    token.undeclare()
-            self.tokens.clear()
+                    member.close()
+            self.members.clear()
             end = time.monotonic() + min(self.deadline, 10.0)
             for proc in self.procs.values():
                 try:

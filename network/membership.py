@@ -9,42 +9,21 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import zenoh
 
 from network.clock import TurnClock
 from network.progress import Progress
-from network.transport import Inbox, Presence, Received, ask, ask_later
-from schema import Connect, Keys, Message, Over, Refused, Status, Turn, Welcome
+from network.transport import Inbox, Presence, Received, ask_later
+from schema import Connect, Message, Over, Refused, Status, Turn, Welcome
 from schema.errors import RejectCounter, RemoteInputError, UsageError
-from schema.tuning import CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S
+from schema.tuning import CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, PROCESS_CHECK_S
 
 
 class NotAdmitted(UsageError):
     """The coordinator refused this entity (e.g. its role is already taken)."""
-
-
-def admit(session: zenoh.Session, keys: Keys, hello: Connect, logger: logging.Logger, *,
-          timeout: float) -> tuple[Welcome, str]:
-    """Send CONNECT and wait for the coordinator's answer (waiting for it to appear, until `timeout`): its
-    Welcome, and the session id of the coordinator that admitted this entity."""
-    end = time.monotonic() + timeout
-    while True:
-        try:
-            reply, coordinator = ask(session, keys.connect, hello, (Welcome, Refused),
-                                     timeout=max(0.1, end - time.monotonic()))
-            break
-        except (TimeoutError, RemoteInputError) as err:
-            if time.monotonic() >= end:
-                raise UsageError(f"no coordinator answered on {keys.connect}: {err}") from None
-            # No queryable yet: wait for the coordinator's presence token instead of polling blindly.
-            await_presence(session, keys.alive_of("SRV"), end - time.monotonic())
-    if isinstance(reply, Refused):
-        raise NotAdmitted(f"connection refused: {reply.text}")
-    assert isinstance(reply, Welcome)
-    logger.info("%s", reply.text)
-    return reply, coordinator
 
 
 def await_presence(session: zenoh.Session, key: str, timeout: float) -> bool:
@@ -79,9 +58,12 @@ class Membership:
     event (`on_event`); use `timeout()` for the inbox wait and `check()` when it times out."""
 
     def __init__(self, session: zenoh.Session, inbox: Inbox, hello: Connect, logger: logging.Logger, *,
-                 connect_timeout: float, grace: float, skips_status: bool = False) -> None:
+                 connect_timeout: float, grace: float, skips_status: bool = False,
+                 check: Callable[[], None] | None = None) -> None:
         """Connect, taking the inbox's events until admitted (those not about admission are held for the entity's
-        loop, `Inbox.hold`); UsageError if no coordinator answered within `connect_timeout`, NotAdmitted if refused."""
+        loop, `Inbox.hold`); UsageError if no coordinator answered within `connect_timeout`, NotAdmitted if refused.
+        `check`: called every PROCESS_CHECK_S without an event meanwhile (it raises to give up: a process the
+        caller started has died)."""
         self.session, self.inbox, self.keys, self.log = session, inbox, inbox.keys, logger
         self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
@@ -96,9 +78,12 @@ class Membership:
         inbox.watch_presence("SRV")
         end, held, welcome = time.monotonic() + connect_timeout, [], None
         while welcome is None:
-            event = inbox.get(max(0.0, end - time.monotonic()))
+            left = max(0.0, end - time.monotonic())
+            event = inbox.get(left if check is None else min(left, PROCESS_CHECK_S))
             if event is None and time.monotonic() >= end:
                 raise UsageError(f"no coordinator answered on {self.keys.connect} within {connect_timeout:g} s")
+            if event is None and check is not None:
+                check()
             if isinstance(event, Answered):
                 welcome = self._answered(event)
             elif isinstance(event, Presence) and event.entity == "SRV":

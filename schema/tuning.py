@@ -166,6 +166,9 @@ GCS_GRACE_S = 30.0
 #: to come back (`--grace`).
 CONNECT_TIMEOUT_S = 30.0
 COORDINATOR_GRACE_S = 30.0
+#: How often a process that started the game's processes itself (the RL environment's zenoh backend) looks whether
+#: one has died while it waits for them (admission, a turn's STATUS, the end): a dead one is an error at once.
+PROCESS_CHECK_S = 0.25
 #: How long a drone waits for the environment's answer to its ASK.
 ASK_TIMEOUT_S = 5.0
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway (coordinator/node.py).

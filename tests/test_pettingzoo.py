@@ -568,6 +568,27 @@ def test_zenoh_process_death_raises(role: str) -> None:
     assert all(p.poll() is not None for p in game.procs.values())
 
 
+@pytest.mark.integration
+def test_zenoh_coordinator_dead_before_admission_raises_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The backend's admission is events of its inbox, its processes checked while none comes: a coordinator that
+    exits before it admits anyone is said (its exit code), not waited for until the deadline."""
+    from dronesim import rl_zenoh
+    from dronesim.rl import BackendError
+
+    start = rl_zenoh._Game._start
+
+    def dead_coordinator(self, name: str, argv: list[str]) -> None:
+        start(self, name, [sys.executable, "-c", "raise SystemExit(3)"] if name == "SRV" else argv)
+
+    monkeypatch.setattr(rl_zenoh._Game, "_start", dead_coordinator)
+    env = dz.parallel_env(backend="zenoh", num_drones=2, deadline=600.0)
+    try:
+        with pytest.raises(BackendError, match="coordinator process exited with 3"):
+            env.reset(seed=1)
+    finally:
+        env.close()
+
+
 # --------------------------------------------------------------------------- the expert and the examples
 
 
