@@ -421,14 +421,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     with open_session(conf) as session:
         if (other := rival(session, keys)) is not None:
             raise UsageError(f"another coordinator (session {other}) runs on {keys.root}: one game per root")
-        me, inbox = session_id(session), Inbox(session, keys, logger)
-        inbox.serve(keys.connect, Connect)
-        for key, kind in [(keys.any_tgt, Target), (keys.gcs_done, Done), (keys.any_nps, Nps),
-                          (keys.any_moves, Moves)] + [(keys.upd, Upd)] * verify_env:
-            # (UPD: each ENV phase's report, checked against the engine's world; the others are refused
-            # unread when they are for a turn before the engine's: stale)
-            inbox.subscribe(key, kind, since=None if kind is Upd else lambda: engine.turn)
-        inbox.watch_presence()
+        me, inbox = session_id(session), listening(session, keys, engine, logger, verify_env)
         token = session.liveliness().declare_token(keys.alive("SRV", me))
         with JournalWriter(journal) as writer:
             out = Outbox(session)
@@ -443,14 +436,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
             with on_stop(srv.stop), waking(partial(inbox.post, None)):  # a signal is noted, the loop woken
                 inbox.run(srv.handle, timeout=srv.timeout, until=srv.finished)
         token.undeclare()
-        if srv.signal is not None and (staying := srv.presences.others()):
-            logger.info("stopped: not waiting for %s to leave (OVER went out %g s ago)", ", ".join(sorted(staying)),
-                        STOP_LINGER_S)
-        if srv.rival is not None:
-            raise UsageError(f"another coordinator (session {srv.rival}) started on {keys.root} at the same time")
-        inbox.rejects.flush(everything=True)
-        if inbox.rejects.total:
-            logger.info("rejected inputs: %s", inbox.rejects.report())
+        closing(srv, inbox, keys, logger)
     assert engine.end is not None
     if timed.calls:
         logger.info("arbitration: %d turns, %.3f ms of CPU a turn", timed.calls, 1000 * timed.cpu / timed.calls)
@@ -459,6 +445,31 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
                      "`dronesim coordinator --resume --journal %s` plays on", effects.failed, journal)
         return engine.end, JOURNAL_FAILED_STATUS
     return engine.end, 0 if srv.signal is None else exit_status(srv.signal)
+
+
+def listening(session: zenoh.Session, keys: Keys, engine: Engine, logger: logging.Logger, verify_env: bool) -> Inbox:
+    """The coordinator's inbox: CONNECT served, the entities' messages and presences heard."""
+    inbox = Inbox(session, keys, logger)
+    inbox.serve(keys.connect, Connect)
+    for key, kind in [(keys.any_tgt, Target), (keys.gcs_done, Done), (keys.any_nps, Nps),
+                      (keys.any_moves, Moves)] + [(keys.upd, Upd)] * verify_env:
+        # (UPD: each ENV phase's report, checked against the engine's world; the others are refused
+        # unread when they are for a turn before the engine's: stale)
+        inbox.subscribe(key, kind, since=None if kind is Upd else lambda: engine.turn)
+    inbox.watch_presence()
+    return inbox
+
+
+def closing(srv: Coordinator, inbox: Inbox, keys: Keys, logger: logging.Logger) -> None:
+    """After the game's loop: who was not waited for, a rival that started alongside (an error), the rejections."""
+    if srv.signal is not None and (staying := srv.presences.others()):
+        logger.info("stopped: not waiting for %s to leave (OVER went out %g s ago)", ", ".join(sorted(staying)),
+                    STOP_LINGER_S)
+    if srv.rival is not None:
+        raise UsageError(f"another coordinator (session {srv.rival}) started on {keys.root} at the same time")
+    inbox.rejects.flush(everything=True)
+    if inbox.rejects.total:
+        logger.info("rejected inputs: %s", inbox.rejects.report())
 
 
 def parse_starts(text: str, count: int, size: Cell | None = None,
