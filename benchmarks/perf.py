@@ -621,7 +621,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                     measured_to.append(turn)
 
                 while end is None:
-                    event = inbox.get(1.0)
+                    due = station.wake(time.monotonic())  # (its DONEs go out paced)
+                    event = inbox.get(1.0 if due is None else min(1.0, due))
                     now = time.perf_counter()
                     effects: list = []
                     match event:

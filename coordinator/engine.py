@@ -121,6 +121,7 @@ TAKES: dict[tuple[Stage | None, type[Message], When], str] = {
     (Stage.GCS, Done, When.NOW): "_gcs_done",  # the GCS phase's end
     (Stage.GCS, Done, When.AHEAD): "_hold",  # a DONE for a coming GCS phase, held for it
     (Stage.DRONES, Done, When.AHEAD): "_hold",
+    (Stage.DRONES, Done, When.NOW): "_done_again",  # the GCS phase's DONE again (the station repeats it)
     (Stage.GCS, Moves, When.NOW): "_hold_moves",  # a swarm host's MOVES before its phase opened, held for it
     (Stage.DRONES, Nps, When.NOW): "_nps",  # a drone's move
     (Stage.DRONES, Moves, When.NOW): "_moves_of_host",  # a swarm host's moves
@@ -513,6 +514,8 @@ class Engine:
         if msg.count:
             raise StaleTurn(f"a DONE ahead for turn {msg.turn} carries its targets itself, it cannot count TGTs")
         if msg.turn in self._early:
+            if msg == self._early[msg.turn]:
+                return []  # (the same again)
             raise StaleTurn(f"second DONE ahead for turn {msg.turn}")
         self._early[msg.turn] = msg
         return []
@@ -539,10 +542,19 @@ class Engine:
         held, self._early_moves = self._early_moves, {}
         return [e for msg in held.values() for e in self.receive(msg)]
 
+    def _done_again(self, msg: Done) -> list[Effect]:
+        """A DONE of the turn whose GCS phase has closed: the one taken, again (a ground station repeats its DONE
+        until the turn's STATUS: it may have been lost), changes nothing; any other is stale."""
+        if msg != self._done:
+            raise StaleTurn(f"DONE for turn {msg.turn} from {msg.sender} in its drones' phase")
+        return []
+
     def _gcs_done(self, msg: Done) -> list[Effect]:
         if msg.sender != "GCS" or msg.phase is not Phase.GCS:
             raise WrongSender(f"DONE({msg.phase.value}) from {msg.sender} in the GCS phase")
         if self._done is not None:
+            if msg == self._done:
+                return []  # (the same again: a ground station repeats its DONE until the turn is played)
             raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
         self._done = msg
         fleet, numbers, pos = self.fleet, msg.targets.numbers, msg.targets.column("pos")

@@ -173,14 +173,15 @@ class Coordinator:
 
     def __init__(self, engine: Engine, effects: Executor, rejects: RejectCounter, logger: logging.Logger, me: str,
                  clock: Callable[[], float] = time.monotonic, audit: Callable[[], None] = lambda: None,
-                 stops: list[Interrupted] | None = None, progress: Progress | None = None) -> None:
+                 stops: list[Interrupted] | None = None, progress: Progress | None = None,
+                 presences: Presences[zenoh.Query] | None = None) -> None:
         self.engine, self.effects, self.rejects, self.log, self.me, self.clock = \
             engine, effects, rejects, logger, me, clock
         self.progress = progress or Progress(None)  # where the game stands, for a health check
         effects.unrecorded = engine.unrecorded  # a journal that fails ends the game
         self.audit = audit  # asks which sessions are connected: a `Sessions` event comes back
         self._auditing = self._audit_again = False
-        self.presences: Presences[zenoh.Query] = Presences()
+        self.presences: Presences[zenoh.Query] = presences or Presences()
         self.signal: int | None = None  # the signal that stopped the game
         self.rival: str | None = None  # another coordinator's session on this root, which this one yields to
         self._phase = engine.deadline_key()
@@ -421,7 +422,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     with open_session(conf) as session:
         if (other := rival(session, keys)) is not None:
             raise UsageError(f"another coordinator (session {other}) runs on {keys.root}: one game per root")
-        me, inbox = session_id(session), listening(session, keys, engine, logger, verify_env)
+        me, inbox = session_id(session), listening(session, keys, engine, logger, verify_env,
+                                                   presences := Presences[zenoh.Query]())
         token = session.liveliness().declare_token(keys.alive("SRV", me))
         with JournalWriter(journal) as writer:
             out = Outbox(session)
@@ -429,7 +431,7 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
             effects = Executor(keys, out, writer, inbox.rejects, pace)
             srv = Coordinator(engine, effects, inbox.rejects,
                               logger, me, audit=partial(audit_sessions, session, inbox.post), stops=stops,
-                              progress=Progress.from_environment())
+                              progress=Progress.from_environment(), presences=presences)
             srv.probe()
             logger.info("coordinator ready on %s/**: waiting for ENV, GCS and %s",
                         keys.root, ", ".join(d.drone for d in game.drones))
@@ -447,10 +449,12 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     return engine.end, 0 if srv.signal is None else exit_status(srv.signal)
 
 
-def listening(session: zenoh.Session, keys: Keys, engine: Engine, logger: logging.Logger, verify_env: bool) -> Inbox:
-    """The coordinator's inbox: CONNECT served, the entities' messages and presences heard."""
+def listening(session: zenoh.Session, keys: Keys, engine: Engine, logger: logging.Logger, verify_env: bool,
+              presences: Presences[zenoh.Query]) -> Inbox:
+    """The coordinator's inbox: CONNECT served (those beyond the ones that may wait for their presence token,
+    `presences`, are refused on Zenoh's thread, unread), the entities' messages and presences heard."""
     inbox = Inbox(session, keys, logger)
-    inbox.serve(keys.connect, Connect)
+    inbox.serve(keys.connect, Connect, most=presences.room, waiting=presences.waiting)
     for key, kind in [(keys.any_tgt, Target), (keys.gcs_done, Done), (keys.any_nps, Nps),
                       (keys.any_moves, Moves)] + [(keys.upd, Upd)] * verify_env:
         # (UPD: each ENV phase's report, checked against the engine's world; the others are refused

@@ -11,7 +11,7 @@ from __future__ import annotations
 import bisect
 import pathlib
 import re
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import takewhile
@@ -37,7 +37,7 @@ from schema import (
     Welcome,
 )
 from schema.tables import drone_name
-from schema.tuning import ANSWER_AHEAD, FINAL_STATUS_WAIT
+from schema.tuning import ANSWER_AHEAD, DONE_GAP, DONE_RETRY_S, FINAL_STATUS_WAIT
 from world.grid import World, build_world, in_bounds
 
 from .tasks import Tasks
@@ -280,7 +280,14 @@ class Station:
       plan is final either.
     It keeps every drone's path (`tracks`), forgets the drones that died or were lost, takes over the targets
     in force of a game it joins late, and ends (`End`) after OVER once the STATUS of the last turn is in, or
-    `FINAL_STATUS_WAIT` s after OVER."""
+    `FINAL_STATUS_WAIT` s after OVER.
+
+    Its DONEs may be lost on the way: a router keeps at most `PUT_RATE` puts a second from one session on its
+    key (schema/acl.py `flood_filters`; a buggy or hostile second session floods it in vain). So the DONEs of its
+    own making (`receive`) go out `DONE_GAP` s apart at least, queued until due (`tick`); a phase announced although
+    it was answered ahead is answered again (the coordinator announces a phase whose DONE it does not hold); and
+    a phase's DONE goes out again, `DONE_RETRY_S` s later, then twice as long each time, until that turn's STATUS
+    comes (the coordinator takes a repeat of the DONE it holds as nothing new)."""
 
     def __init__(self, ground: Ground, *, hold: bool = False, quit_at: int | None = None, verbose: bool = False,
                  ahead: int = ANSWER_AHEAD, goals: bool = False, tasks: Tasks | None = None) -> None:
@@ -295,6 +302,11 @@ class Station:
         self.gone: set[str] = set()  # drones dead or lost: nothing more to say to them
         self.tracks = Tracks()
         self.answered = 0  # the last turn whose GCS phase this station has answered (maybe ahead)
+        self._outgoing: deque[SendDone] = deque()  # DONEs not sent yet: one every DONE_GAP s (`_paced`)
+        self._next_send = float("-inf")  # when the next DONE may go out
+        self._unacked: tuple[SendDone, float, float] | None = None  # a phase's DONE, when it goes out again, and
+        # how long after that, until its STATUS comes
+        self._ahead_sent: dict[int, SendDone] = {}  # the DONEs answered ahead, until their phase (`_lost`)
         self.pending: int | None = None  # a held GCS phase not answered yet
         self.over: Over | None = None
         self._over_since: float | None = None  # when OVER came, while its turn's STATUS is awaited
@@ -310,14 +322,21 @@ class Station:
         """A message from the coordinator (TURN, STATUS or OVER), already screened by its turn clock."""
         if self.ended:
             return []
+        return self._paced(self._receive(msg, now), now)
+
+    def _receive(self, msg: Message, now: float) -> list[Effect]:
         match msg:
             case Turn(phase=Phase.GCS):
+                if self._unacked is not None and msg.turn > self._unacked[0].msg.turn:
+                    self._unacked = None  # a later phase: its DONE came
                 return self._gcs_phase(msg.turn)
             case Turn():  # a held phase the coordinator closed without us (its GCS deadline passed)
                 if self.pending is not None and self.pending <= msg.turn:
                     self.pending = None
                 if self._due is not None and self._due <= msg.turn:
                     self._due = None
+                if self._unacked is not None and msg.turn >= self._unacked[0].msg.turn:
+                    self._unacked = None  # its GCS phase is over
             case Status():
                 return self._status(msg)
             case Over():
@@ -327,16 +346,54 @@ class Station:
     def admitted(self, welcome: Welcome) -> list[Effect]:
         """Admitted again (the coordinator came back): it does not know what was answered ahead."""
         self.answered, self._joining = 0, True
+        self._ahead_sent.clear()
+        self._outgoing.clear()
+        self._unacked = None
         return []
 
     def wake(self, now: float) -> float | None:
         """Seconds until `tick` has something to do (None: nothing, whatever the time)."""
-        since = self._over_since  # (None once it has ended)
-        return None if since is None else max(0.0, since + FINAL_STATUS_WAIT - now)
+        if self.ended:
+            return None
+        since = self._over_since
+        dues = [since + FINAL_STATUS_WAIT if since is not None else None,
+                self._next_send if self._outgoing else None,
+                self._unacked[1] if self._unacked is not None and self.over is None else None]
+        return min((max(0.0, due - now) for due in dues if due is not None), default=None)
 
     def tick(self, now: float) -> list[Effect]:
-        """What is due at `now` without a message: the end, once the last STATUS is given up."""
-        return [self._end()] if self.wake(now) == 0.0 else []
+        """What is due at `now` without a message: a DONE queued or to send again, the end once the last STATUS is
+        given up."""
+        if self.ended:
+            return []
+        effects: list[Effect] = []
+        if self._unacked is not None and self.over is None and now >= self._unacked[1]:
+            done, _, wait = self._unacked
+            self._unacked = (done, now + 2 * wait, 2 * wait)
+            self._outgoing.append(done)
+        effects += self._release(now)
+        since = self._over_since
+        return effects + ([self._end()] if since is not None and now >= since + FINAL_STATUS_WAIT else [])
+
+    def _paced(self, effects: list[Effect], now: float) -> list[Effect]:
+        """`effects` with their DONEs queued, to go out DONE_GAP s apart; a phase's DONE (not one ahead) is kept to
+        go out again until its turn's STATUS (`tick`)."""
+        out: list[Effect] = []
+        for effect in effects:
+            if isinstance(effect, SendDone):
+                self._outgoing.append(effect)
+                if not effect.ahead:
+                    self._unacked = (effect, now + DONE_RETRY_S, DONE_RETRY_S)
+            else:
+                out.append(effect)
+        return self._release(now) + out
+
+    def _release(self, now: float) -> list[Effect]:
+        """The queued DONE due now, if any (the next one DONE_GAP s later)."""
+        if not self._outgoing or now < self._next_send:
+            return []
+        self._next_send = now + DONE_GAP
+        return [self._outgoing.popleft()]
 
     def want(self, targets: Mapping[str, Cell]) -> dict[str, Cell]:
         """Take `targets` for the drones still flying; returns those that changed."""
@@ -368,10 +425,21 @@ class Station:
             return Intent.CONTINUE
         return Intent.FINAL if turn >= self.plan.last_turn else Intent.CONTINUE
 
+    def _lost(self, turn: int) -> SendDone | None:
+        """The DONE of `turn` answered ahead, if it was lost on its way: its phase is announced, and the coordinator
+        opens a phase unannounced when it holds its DONE (a router's budget of puts a second may keep only the first
+        of DONEs sent together: `schema.tuning.PUT_RATE`). It goes out again, the same (if the first came after all,
+        the coordinator takes the second as nothing new)."""
+        lost = self._ahead_sent.get(turn)
+        for t in [t for t in self._ahead_sent if t <= turn]:
+            del self._ahead_sent[t]
+        return None if lost is None else SendDone(lost.msg)
+
     def _gcs_phase(self, turn: int) -> list[Effect]:
         if turn <= self.answered or turn == self.pending:  # answered (maybe ahead), or held
             self.answered = max(self.answered, turn)
-            return self._ahead(turn)
+            again = self._lost(turn)
+            return [*([again] if again is not None else []), *self._ahead(turn)]
         if self.scripted and self.quit_at is not None and turn >= self.quit_at:
             self.answered = turn
             return [SendDone(Done(turn=turn, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT))]
@@ -401,11 +469,15 @@ class Station:
             return []
         turns = turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead)
         self.answered = max([self.answered, *turns])
-        return [SendDone(gcs_done(ahead, {}, self.intent(ahead)), ahead=True) for ahead in turns]
+        sent = {ahead: SendDone(gcs_done(ahead, {}, self.intent(ahead)), ahead=True) for ahead in turns}
+        self._ahead_sent.update(sent)
+        return list(sent.values())
 
     def _status(self, status: Status) -> list[Effect]:
         if status.turn < self.status_turn:
             return []
+        if self._unacked is not None and status.turn >= self._unacked[0].msg.turn:
+            self._unacked = None  # its turn was played: its DONE came
         # the coming turn was answered ahead: no TURN(GCS) comes for it, its STATUS says it has begun
         effects = self._ahead(status.turn + 1) if status.turn + 1 <= self.answered else []
         self.tracks.add(status)

@@ -174,6 +174,8 @@ def apply_flags(conf: zenoh.Config, args: argparse.Namespace, *, router: bool | 
         if not json.loads(block).get("enabled"):
             raise UsageError(f"--acl {args.acl}: its access_control block is missing or not enabled")
         conf.insert_json5("access_control", block)
+        if router:  # the budgets of puts a second key by key, for the keys it grants (`flood_filters`)
+            _insert(conf, {"downsampling": flood_filters(["**"], json.loads(block))["downsampling"]})
 
 
 def setup_logging(level: str, name: str) -> logging.Logger:
@@ -434,6 +436,8 @@ class Inbox:
         self._events = FairQueue(budget, share=share)
         self.rejects = RejectCounter(logger, wake=self._events.wake)  # (its summaries are logged by `get`)
         self._held: collections.deque[Any] = collections.deque()  # events given back (`hold`)
+        self._asked: collections.Counter[str] = collections.Counter()  # queries queued, by key (`serve`'s `most`)
+        self._asking = threading.Lock()  # guards `_asked` (Zenoh's thread adds, the main thread takes)
 
     def run(self, handler: Callable[[Event | None], None], *, timeout: Callable[[], float | None],
             until: Callable[[], bool]) -> None:
@@ -503,9 +507,12 @@ class Inbox:
         sub.undeclare()
         self._handles.remove(sub)
 
-    def serve(self, key: str, expect: type[Message]) -> None:
+    def serve(self, key: str, expect: type[Message], *, most: int | None = None,
+              waiting: Callable[[], int] = lambda: 0) -> None:
         """Declare a queryable; valid queries become `Asked` events, refused ones get an error reply (their
-        origin is the sender they name)."""
+        origin is the sender they name). With `most`, one that finds `most` of them queued or held by the main
+        thread (`waiting()`: read from Zenoh's thread) is refused at once there, unread (`flood`; its asker asks
+        again): a flood of them, each naming another sender, costs the main thread nothing."""
         limit = size_limit(expect)
 
         def on_query(query: zenoh.Query) -> None:
@@ -519,7 +526,15 @@ class Inbox:
                 origin = sender if isinstance(sender, str) and is_entity_id(sender) else key
                 # (the sender a query names is its payload's claim, not its key's: a query claiming SRV is budgeted)
                 self._admit(origin, len(payload), limit, True)
-                self._events.put(origin, _Unread(key, origin, query, data, expect), len(data))
+                with self._asking:
+                    if most is not None and (held := self._asked[key] + waiting()) >= most:
+                        raise RemoteInputError(f"{held} queries on {key} already wait", reason="flood")
+                    self._asked[key] += 1
+                try:
+                    self._events.put(origin, _Unread(key, origin, query, data, expect), len(data))
+                except RemoteInputError:
+                    self._taken(key)
+                    raise
             except RemoteInputError as err:
                 self._refuse(key, origin, query, err)
             except Exception:
@@ -535,10 +550,16 @@ class Inbox:
             query.reply_err(excerpt(str(err)).encode())
             query.drop()
 
+    def _taken(self, key: str) -> None:
+        with self._asking:
+            self._asked[key] -= 1
+
     def _read(self, event: object) -> Event | None:
         """A payload, decoded; None if it is malformed or not its key's (refused: `_refuse`)."""
         if not isinstance(event, _Unread):
             return event  # type: ignore[return-value]
+        if event.query is not None:
+            self._taken(event.key)
         try:
             msg = decode(event.data, event.expect)
             if event.query is not None:

@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from .errors import UsageError
 from .keys import KEY_TABLE, Keys, KeySpec, size_limit
 from .messages import drone_id, drone_list, is_drone_id, is_host_id
-from .tuning import DRONE_PUT_RATE
+from .tuning import PUT_RATE
 
 #: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
 ROLES = ("SRV", "ENV", "GCS", "DRONE")
@@ -197,13 +197,16 @@ def render(block: dict, header: str = "") -> str:
 def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
     """A router's `low_pass_filter` and `downsampling` blocks, from the key table: on what the router receives
     from each session, the payloads (a put's, a query's) above their key's message's largest valid size
-    (`schema.keys.size_limit`) are dropped, and the puts on a drone key (NPS, MOVES) beyond `DRONE_PUT_RATE` a
-    second. With `acl` (an `access_control` block) the rate is kept key by key for the drone keys it grants (a
-    session's refused puts on another drone's key do not count against its own); without, for all at once."""
+    (`schema.keys.size_limit`) are dropped, and the puts on a key a drone or the ground station writes (NPS,
+    MOVES; DONE, TGT) beyond `PUT_RATE` a second, each session on a budget of its own. With `acl` (an
+    `access_control` block) the rate of puts is kept key by key for the keys it grants (a session's refused puts
+    on another drone's key do not count against its own), and the TGT keys one by one for the drones it names;
+    without, for all of a kind at once, and none on the TGT keys (a station may send a TGT for every drone at
+    once: one budget for all would drop them; dronesim's stations send none, their DONE carries the targets)."""
     import zenoh
 
     sizes: dict[tuple[str, int], list[str]] = {}
-    drone_keys = []
+    budgeted = []
     granted = None if acl is None else sorted(  # every key expression `acl` lets some subject put on
         {k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
          and "ingress" in rule["flows"] for k in rule["key_exprs"]})
@@ -212,13 +215,16 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
             continue
         exprs = [str(zenoh.KeyExpr.autocanonize(f"{root}/{_PLACEHOLDER.sub('*', spec.template)}")) for root in roots]
         sizes.setdefault((spec.how, size_limit(spec.message)), []).extend(exprs)
-        if spec.how == "put" and spec.writer == "DRONE":
-            drone_keys += [k for k in (exprs if granted is None else granted) if any(_includes(x, k) for x in exprs)]
+        if spec.how == "put" and spec.writer == "DRONE" or spec.template == "GCS/DONE":
+            budgeted += [k for k in (exprs if granted is None else granted) if any(_includes(x, k) for x in exprs)]
+        elif spec.how == "put" and spec.writer == "GCS" and granted is not None:  # TGT: a budget per drone
+            budgeted += [f"{k.rsplit('/', 1)[0]}/{spec.template.split('/', 1)[1]}" for k in granted
+                         if k.endswith("/NPS") and "*" not in k]
     low_pass = [{"id": f"{how}-{limit}", "messages": [how], "flows": ["ingress"], "key_exprs": exprs,
                  "size_limit": limit} for (how, limit), exprs in sorted(sizes.items())]
-    rate = {"id": "drone-puts", "messages": ["put"], "flows": ["ingress"],
-            "rules": [{"key_expr": expr, "freq": DRONE_PUT_RATE} for expr in drone_keys]}
-    return {"low_pass_filter": low_pass, "downsampling": [rate]}
+    puts = {"id": "puts", "messages": ["put"], "flows": ["ingress"],
+            "rules": [{"key_expr": expr, "freq": PUT_RATE} for expr in budgeted]}
+    return {"low_pass_filter": low_pass, "downsampling": [puts]}
 
 
 def router_config(block: dict, *, listen: str = "tls/0.0.0.0:7447", certs: str = "certs", mtls: bool = False,

@@ -92,11 +92,23 @@ ORIGIN_SHARE = 8
 #: host's asking ahead (512-cell ASKs of about 5 KB); a flood of big ASKs is refused unread past it.
 ORIGIN_BYTES = 8 << 20
 
-#: Puts a second a router forwards from one session on drone keys (NPS, MOVES: its `downsampling`, schema/acl.py
-#: `flood_filters`): a process sends one a turn per key, and a turn takes at least a pub/sub round trip (about 0.3
-#: ms, BENCHMARKS.md's floor), so 10,000 never drops a real one (messages closer than 0.1 ms are dropped), while a
-#: flood reaches the coordinator at a rate its refusal of stale messages keeps up with.
-DRONE_PUT_RATE = 10_000.0
+#: Puts a second a router forwards from one session on a key a drone or the ground station writes (NPS, MOVES,
+#: DONE, TGT: its `downsampling`, schema/acl.py `flood_filters`): a process sends one a turn per key, and a turn
+#: takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor), so 10,000 never drops a real one
+#: (messages closer than 0.1 ms are dropped; a scripted ground station's answers ahead, sent together, may lose all
+#: but the first: it answers those phases when they are announced, entities/gcs.py `Station`), while a flood
+#: reaches the coordinator at a rate its refusal of stale messages keeps up with.
+PUT_RATE = 10_000.0
+#: Seconds at least between two DONEs a ground station sends (entities/gcs.py `Station`), so that a router's
+#: budget of `PUT_RATE` puts a second on its key keeps them all: 5 times the budget's interval (the margin: a link
+#: may still bring two together, whose second the station answers again). Not measured: answers ahead go out over
+#: 2 ms instead of at once, well before their phases.
+DONE_GAP = 5 / PUT_RATE
+#: Seconds after which a ground station sends its DONE of a phase again if that turn's STATUS has not come (then
+#: twice as long each time): a DONE lost on the way (a router's budget; rare, `DONE_GAP`) must not stall the game.
+#: Not measured: a turn takes milliseconds; a repeat of the DONE the coordinator holds changes nothing, one that
+#: crosses the turn's STATUS is refused as stale (counted).
+DONE_RETRY_S = 1.0
 
 #: Turns a second no game can exceed: a turn takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor).
 #: An entity refuses a TURN, STATUS or OVER further ahead of the turn it knows than this rate allows since it last

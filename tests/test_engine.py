@@ -17,6 +17,7 @@ from entities.gcs import describe
 from entities.web.model import view_of
 from schema import (
     Aim,
+    AimTable,
     Cause,
     CellInfo,
     CellKind,
@@ -594,7 +595,7 @@ def test_misplaced_messages_refused() -> None:
     assert g.snapshot() == snap
     g.done()
     snap = g.snapshot()
-    refused(g.done(), StaleTurn)  # in the DRONES phase
+    refused(g.done(Intent.FINAL), StaleTurn)  # in the DRONES phase (the same DONE again: nothing, not refused)
     refused(g.nps("D01", (1, 0, 0), turn=2), StaleTurn)
     refused(g.engine.receive(Nps(turn=1, sender="D09", pos=(0, 0, 0))), UnknownEntity)
     refused(g.engine.receive(Upd(turn=1, sender="ENV", cells=())), StaleTurn)
@@ -1380,3 +1381,19 @@ def test_an_over_naming_every_lost_drone_fits_its_key_whatever_their_number(dron
     assert named == order[:len(named)] and named
     assert drones == 3 or over.text.endswith(f"and {drones - len(named)} more")
     assert records(g.effects)[-1]["text"] == over.text, "the journal says what the OVER says"
+
+
+def test_a_repeat_of_the_done_taken_changes_nothing_and_another_is_refused() -> None:
+    """A ground station repeats its DONE until the turn is played (one may be lost on the way: a router's budget of
+    puts a second, issue 33, 6): the same DONE again is taken as nothing new, in its GCS phase or after it."""
+    g = Game(config(("D01", (0, 0, 0))))
+    done = Done(turn=1, sender="GCS", phase=Phase.GCS, targets=AimTable.of([Aim(drone="D01", pos=(3, 0, 0))]))
+    g.feed(g.engine.receive(done))
+    assert g.stage is Stage.DRONES
+    snap = g.snapshot()
+    assert g.feed(g.engine.receive(done)) == [] and g.snapshot() == snap, "the same again: nothing"
+    refused(g.engine.receive(Done(turn=1, sender="GCS", phase=Phase.GCS)), StaleTurn, "in its drones' phase")
+    ahead = Done(turn=2, sender="GCS", phase=Phase.GCS)
+    assert g.feed(g.engine.receive(ahead)) == [] and g.feed(g.engine.receive(ahead)) == []
+    refused(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, intent=Intent.FINAL)), StaleTurn,
+            "second DONE ahead")

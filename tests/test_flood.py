@@ -1,6 +1,6 @@
 """Floods cannot move a game (issue 18): a client of the router publishes 200,000 well-formed NPS for a
 past turn on a drone's key while the game runs, as an authenticated drone may on its own key under the
-router's access control. The router forwards at most `DRONE_PUT_RATE` of them a second (its
+router's access control. The router forwards at most `PUT_RATE` of them a second (its
 `downsampling`, from the key table), and the coordinator refuses those on arrival, unread beyond their
 first bytes, so the turn's messages never wait behind them: the journal is byte-identical to a clean
 run's, every process exits 0, and the coordinator's log stays a few summary lines long while it counts
@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import re
 import threading
+from collections.abc import Callable
 
 import pytest
 import zenoh
 
 from benchmarks.flood import flood_rate
 from benchmarks.perf import Case, Game
-from schema import Keys, Nps, encode
-from tests.harness import Cluster, ScriptedGCS, client_config, embedded_router, play_to_the_end
+from schema import Done, Keys, Message, Nps, Phase, encode
+from tests.harness import Cluster, Proc, ScriptedGCS, client_config, embedded_router, play_to_the_end
 
 pytestmark = pytest.mark.integration
 
@@ -36,16 +37,18 @@ def start(c: Cluster, tmp_path):
     return journal
 
 
-def flood(locator: str, keys: Keys, sent: list[int]) -> None:
-    stale = encode(Nps(turn=1, sender="D01", pos=(0, 0, 1)))
+def flood(locator: str, key: str, stale: bytes, sent: list[int]) -> None:
     with zenoh.open(client_config(locator)) as s:
-        pub = s.declare_publisher(keys.nps("D01"), congestion_control=zenoh.CongestionControl.BLOCK)
+        pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         for _ in range(FLOOD):
             pub.put(stale)
             sent[0] += 1
 
 
-def test_200000_stale_nps_on_a_drones_key_change_nothing(tmp_path):
+def flooded_game(tmp_path, key: Callable[[Keys], str], stale: Message) -> tuple[Proc, int]:
+    """The game clean, then again with FLOOD copies of `stale` put on `key` from the turn after START: every
+    process exits 0, the attacker sent them all, the journal is byte-identical to the clean one's. The
+    coordinator's process, and how many the coordinator refused from the key's origin."""
     with embedded_router() as router:
         with Cluster(router, tmp_path) as clean:
             expected = start(clean, tmp_path)
@@ -55,7 +58,7 @@ def test_200000_stale_nps_on_a_drones_key_change_nothing(tmp_path):
             keys = Keys(c.root)
             gcs = ScriptedGCS(router, c.root, TARGETS)
             sent = [0]
-            attacker = threading.Thread(target=flood, args=(router, keys, sent))
+            attacker = threading.Thread(target=flood, args=(router, key(keys), encode(stale), sent))
             try:
                 gcs.play_until(START)
                 attacker.start()
@@ -69,11 +72,24 @@ def test_200000_stale_nps_on_a_drones_key_change_nothing(tmp_path):
         assert journal.read_bytes() == expected.read_bytes(), "the flood changed the game"
         srv = c.procs[0]
         report = next(line for line in srv.err if "rejected inputs:" in line)
-        found = re.search(r"'D01': (\d+)", report)
-        counted = int(found.group(1)) if found else 0
-        assert "stale-turn" in report and counted > 0, report
-        logged = [line for line in srv.err if "rejected" in line and line is not report]
-        assert len(logged) < max(10, counted // 10), f"{len(logged)} lines of log for {counted} rejections"
+        found = re.search(rf"'{keys.origin_of(key(keys))}': (\d+)", report)
+        return srv, int(found.group(1)) if found else 0
+
+
+def test_200000_stale_dones_on_the_ground_stations_key_change_nothing_and_most_stop_at_the_router(tmp_path):
+    """Issue 33, 6: a second session floods the ground station's DONE key with stale DONEs (any peer on a plain
+    router). The router keeps at most PUT_RATE of them a second from that session (`downsampling`); they all used
+    to reach the coordinator, and the game waited behind them on its link."""
+    _, counted = flooded_game(tmp_path, lambda keys: keys.gcs_done, Done(turn=1, sender="GCS", phase=Phase.GCS))
+    assert 0 < counted < FLOOD, "the router dropped none"
+
+
+def test_200000_stale_nps_on_a_drones_key_change_nothing(tmp_path):
+    srv, counted = flooded_game(tmp_path, lambda keys: keys.nps("D01"), Nps(turn=1, sender="D01", pos=(0, 0, 1)))
+    report = next(line for line in srv.err if "rejected inputs:" in line)
+    assert "stale-turn" in report and counted > 0, report
+    logged = [line for line in srv.err if "rejected" in line and line is not report]
+    assert len(logged) < max(10, counted // 10), f"{len(logged)} lines of log for {counted} rejections"
 
 
 def test_a_flood_of_big_asks_from_one_drone_does_not_starve_another_drones_ask(tmp_path):

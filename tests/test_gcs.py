@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import weakref
+
 import pytest
 
 from entities.gcs import (
@@ -303,11 +305,27 @@ def test_a_script_answers_ahead_up_to_its_next_change() -> None:
 
 from entities.gcs import FINAL_STATUS_WAIT, End, SendDone, Show, Station  # noqa: E402
 from schema import EndReason, Over, Phase, Turn  # noqa: E402
+from schema.tuning import DONE_GAP, DONE_RETRY_S  # noqa: E402
 
 
 def ground(plan: list[str] = (), drones=("D01", "D02")) -> Ground:
     starts = {d: (0, 2 * i, 0) for i, d in enumerate(drones)}
     return Ground(OPEN, starts, Plan.parse(plan, SIZE))
+
+
+_CLOCKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def heard(station: Station, msg) -> list:
+    """What `station` does on `msg`, its DONEs paced out (`DONE_GAP` apart: the station's clock goes on by as much as
+    they take, one tick each)."""
+    now = _CLOCKS.get(station, 0.0)
+    effects = list(station.receive(msg, now))
+    while (wait := station.wake(now)) is not None and wait <= 2 * DONE_GAP:
+        now += wait
+        effects += station.tick(now)
+    _CLOCKS[station] = now
+    return effects
 
 
 def gcs(t: int) -> Turn:
@@ -330,88 +348,91 @@ def over(t: int, reason: EndReason) -> Over:
 
 def test_a_script_answers_its_phase_at_once_and_the_phases_with_nothing_new_ahead() -> None:
     station = Station(ground(["D01=1,1,1", "D02=2,2,2@5"]), ahead=2)
-    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE),
+    assert sent(heard(station, gcs(1))) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE),
                                                   (2, {}, Intent.CONTINUE), (3, {}, Intent.CONTINUE)]
     # the coordinator does not announce a phase answered ahead: STATUS(1) says turn 2 has begun
-    assert sent(station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) \
+    assert sent(heard(station, status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))) \
         == [(4, {}, Intent.CONTINUE)]
-    assert station.receive(gcs(3), 0.0) == []  # (announced all the same: answered already, 5 brings a change)
-    assert sent(station.receive(gcs(5), 0.0)) == [(5, {"D02": (2, 2, 2)}, Intent.FINAL),
+    # announced all the same: its DONE ahead was lost on the way (a router's budget kept the first of a burst), so
+    # it answers again (and nothing more ahead: 5 brings a change)
+    assert sent(heard(station, gcs(3))) == [(3, {}, Intent.CONTINUE)]
+    assert heard(station, gcs(3)) == [], "the phase announced again (after a lost link): answered once more"
+    assert sent(heard(station, gcs(5))) == [(5, {"D02": (2, 2, 2)}, Intent.FINAL),
                                                   (6, {}, Intent.FINAL), (7, {}, Intent.FINAL)]
 
 
 def test_a_script_answers_ahead_in_batches_once_half_of_its_answers_ahead_are_used() -> None:
     station = Station(ground(["D01=1,1,1", "D02=2,2,2@12"]), ahead=8)
-    assert [t for t, _, _ in sent(station.receive(gcs(1), 0.0))] == list(range(1, 10))  # its phase and 8 ahead
+    assert [t for t, _, _ in sent(heard(station, gcs(1)))] == list(range(1, 10))  # its phase and 8 ahead
     for t in (1, 2, 3):  # turns 2, 3, 4 begin: 7, 6, 5 turns still answered ahead
-        assert sent(station.receive(status(t, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) \
+        assert sent(heard(station, status(t, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))) \
             == []
     # turn 5 begins: only 4 answered ahead (6 to 9); it answers up to its plan's next change at once
-    assert sent(station.receive(status(4, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) \
+    assert sent(heard(station, status(4, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))) \
         == [(10, {}, Intent.CONTINUE), (11, {}, Intent.CONTINUE)]
 
 
 def test_a_script_told_to_answer_nothing_ahead_answers_each_phase_in_it() -> None:
     station = Station(ground(["D01=1,1,1", "D02=2,2,2@5"]), ahead=0)
-    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]
-    assert sent(station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)) == []
-    assert sent(station.receive(gcs(2), 0.0)) == [(2, {}, Intent.CONTINUE)]
+    assert sent(heard(station, gcs(1))) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]
+    assert sent(heard(station, status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))) == []
+    assert sent(heard(station, gcs(2))) == [(2, {}, Intent.CONTINUE)]
 
 
 def test_a_script_sends_only_the_targets_that_differ_from_those_in_force() -> None:
     station = Station(ground(["D01=1,1,1", "D01=1,1,1@2"]))
-    station.receive(gcs(1), 0.0)
-    station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 0.0)
-    assert sent(station.receive(gcs(2), 0.0))[0] == (2, {}, Intent.FINAL)
+    heard(station, gcs(1))
+    heard(station, status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))
+    assert sent(heard(station, gcs(2)))[0] == (2, {}, Intent.FINAL)
 
 
 def test_dead_drones_are_forgotten_and_a_late_station_takes_over_the_targets_in_force() -> None:
     station = Station(ground(["D02=3,3,3@2"]))
-    station.receive(status(4, st("D01", (1, 0, 0), target=(5, 5, 0)),
-                           st("D02", (0, 2, 0), DroneState.DEAD, target=(4, 4, 4), cause=Cause.BUILDING)), 0.0)
+    heard(station, status(4, st("D01", (1, 0, 0), target=(5, 5, 0)),
+                           st("D02", (0, 2, 0), DroneState.DEAD, target=(4, 4, 4), cause=Cause.BUILDING)))
     assert station.wanted == {"D01": (5, 5, 0)} and station.gone == {"D02"}
     assert station.want({"D02": (1, 1, 1), "D01": (6, 6, 0)}) == {"D01": (6, 6, 0)}
-    assert sent(station.receive(gcs(5), 0.0))[0] == (5, {"D01": (6, 6, 0)}, Intent.FINAL)
+    assert sent(heard(station, gcs(5)))[0] == (5, {"D01": (6, 6, 0)}, Intent.FINAL)
 
 
 def test_a_target_from_outside_the_plan_is_taken_for_a_drone_flying_and_refused_with_a_reason_else() -> None:
     station = Station(ground(["D01=1,1,1"]), goals=True)
-    station.receive(status(0, st("D01", (0, 0, 0)), st("D02", (0, 2, 0), DroneState.LOST, cause=Cause.LOST)), 0.0)
+    heard(station, status(0, st("D01", (0, 0, 0)), st("D02", (0, 2, 0), DroneState.LOST, cause=Cause.LOST)))
     station.take("D01", (5, 5, 0))
     for drone, reason in (("D02", "dead or lost: D02"), ("D07", "unknown drone: this game flies D01, D02")):
         with pytest.raises(UsageError, match=f"^{reason}"):
             station.take(drone, (5, 5, 0))
-    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]  # the plan's, at its turn
+    assert sent(heard(station, gcs(1))) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE)]  # the plan's, at its turn
     station.take("D01", (5, 5, 0))
-    assert sent(station.receive(gcs(2), 0.0)) == [(2, {"D01": (5, 5, 0)}, Intent.CONTINUE)]
-    station.receive(over(2, EndReason.GCS_QUIT), 0.0)
+    assert sent(heard(station, gcs(2))) == [(2, {"D01": (5, 5, 0)}, Intent.CONTINUE)]
+    heard(station, over(2, EndReason.GCS_QUIT))
     with pytest.raises(UsageError, match="^game over"):
         station.take("D01", (6, 6, 0))
 
 
 def test_a_held_station_answers_when_told_and_forgets_a_phase_the_coordinator_closed() -> None:
     station = Station(ground(["D01=1,1,1"]), hold=True)
-    assert station.receive(gcs(1), 0.0) == [] and station.pending == 1
+    assert heard(station, gcs(1)) == [] and station.pending == 1
     assert station.wanted == {"D01": (1, 1, 1)}  # the plan's, taken at its turn
     assert sent(station.answer(1, Intent.CONTINUE, {"D02": (2, 2, 2)})) == \
         [(1, {"D01": (1, 1, 1), "D02": (2, 2, 2)}, Intent.CONTINUE)]
     assert station.pending is None
-    station.receive(gcs(2), 0.0)
-    station.receive(Turn(turn=2, sender="SRV", phase=Phase.DRONES), 0.0)  # its GCS deadline passed
+    heard(station, gcs(2))
+    heard(station, Turn(turn=2, sender="SRV", phase=Phase.DRONES))  # its GCS deadline passed
     assert station.pending is None
 
 
 def test_admitted_again_it_answers_again_what_it_had_answered_ahead() -> None:
     station = Station(ground(["D01=1,1,1"]), ahead=2)
-    assert len(station.receive(gcs(1), 0.0)) == 3  # 2 and 3 ahead
+    assert len(heard(station, gcs(1))) == 3  # 2 and 3 ahead
     station.admitted(None)  # a restarted coordinator does not know what was said ahead
-    assert sent(station.receive(gcs(2), 0.0))[0] == (2, {"D01": (1, 1, 1)}, Intent.FINAL)
+    assert sent(heard(station, gcs(2)))[0] == (2, {"D01": (1, 1, 1)}, Intent.FINAL)
 
 
 def test_a_script_that_quits_at_a_turn_says_continue_until_then_and_answers_no_further_ahead() -> None:
     station = Station(ground(["D01=1,1,1"]), quit_at=3)
-    assert sent(station.receive(gcs(1), 0.0)) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE), (2, {}, Intent.CONTINUE)]
-    assert sent(station.receive(gcs(3), 0.0)) == [(3, {}, Intent.QUIT)]
+    assert sent(heard(station, gcs(1))) == [(1, {"D01": (1, 1, 1)}, Intent.CONTINUE), (2, {}, Intent.CONTINUE)]
+    assert sent(heard(station, gcs(3))) == [(3, {}, Intent.QUIT)]
 
 
 def test_it_ends_after_over_once_the_last_status_is_in_or_given_up() -> None:
@@ -433,10 +454,34 @@ def test_it_ends_after_over_once_the_last_status_is_in_or_given_up() -> None:
 def test_the_report_draws_the_paths_and_counts_each_drones_moves() -> None:
     station = Station(ground(drones=("D01",)))
     for t, pos in enumerate([(0, 0, 0), (1, 0, 0), (1, 0, 0), (2, 0, 0)]):
-        station.receive(status(t, st("D01", pos, target=(2, 0, 0))), 0.0)
-    station.receive(over(3, EndReason.ALL_REACHED), 0.0)
+        heard(station, status(t, st("D01", pos, target=(2, 0, 0))))
+    heard(station, over(3, EndReason.ALL_REACHED))
     text = station.report(draw=True)
     assert "Final world with the drones' paths:" in text
     assert text.endswith("GAME OVER at turn 3: ALL_REACHED - the end\n  D01: 2 moves, alive, target (2, 0, 0)")
     assert "Final world" not in station.report(draw=False)
     assert station.opening().startswith("World (10, 10, 5), 0 building cells")
+
+
+def test_its_dones_go_out_paced_so_that_a_routers_budget_of_puts_keeps_them_all() -> None:
+    """Issue 33, 6: a router keeps at most PUT_RATE puts a second from one session on the DONE key (a flood of
+    them from a second session is dropped there); a station's answers ahead, sent at once, lost all but the first."""
+    station = Station(ground(["D01=1,1,1"]), ahead=2)
+    assert sent(station.receive(gcs(1), 5.0)) == [(1, {"D01": (1, 1, 1)}, Intent.FINAL)]
+    assert station.wake(5.0) == pytest.approx(DONE_GAP) and station.tick(5.0) == []
+    assert sent(station.tick(5.0 + DONE_GAP)) == [(2, {}, Intent.FINAL)]
+    assert sent(station.tick(5.0 + 1.5 * DONE_GAP)) == [], "one every DONE_GAP s"
+    assert sent(station.tick(5.0 + 2 * DONE_GAP)) == [(3, {}, Intent.FINAL)]
+
+
+def test_a_phases_done_goes_out_again_until_its_turn_is_played() -> None:
+    """A DONE lost on the way must not stall the game: the phase's DONE goes out again DONE_RETRY_S s later, then
+    twice as long each time, until that turn's STATUS (the coordinator takes a repeat as nothing new)."""
+    station = Station(ground(["D01=1,1,1"]), ahead=0)
+    (first,) = station.receive(gcs(1), 0.0)
+    assert station.wake(0.0) == pytest.approx(DONE_RETRY_S)
+    assert station.tick(DONE_RETRY_S) == [first]
+    assert station.tick(2 * DONE_RETRY_S) == [], "then twice as long"
+    assert station.tick(3 * DONE_RETRY_S) == [first]
+    station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 1.0)
+    assert station.wake(1.0) is None and station.tick(100.0) == [], "its turn was played"

@@ -272,6 +272,41 @@ def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_ano
     inbox.close()
 
 
+def test_queries_beyond_those_that_may_wait_are_refused_unread_whatever_sender_they_name(pair) -> None:
+    """Issue 33, 6: CONNECTs with invented sessions, each naming another sender, got past every budget of one
+    origin and cost the coordinator's main thread a decode and an error reply each. With `most`, a query that finds
+    that many queued or held by the main thread (`waiting`) is refused on Zenoh's thread, unread."""
+    inbox, out, keys = pair
+    inbox = Inbox(inbox.session, keys, LOG)
+    held = [1]  # (the main thread holds one already: a CONNECT waiting for its token)
+    inbox.serve(keys.connect, Connect, most=3, waiting=lambda: held[0])
+    asker = out.session
+    replies = {}
+    arrived = threading.Event()  # a put after the queries, from the same session: they came before it
+    barrier = inbox.session.declare_subscriber(keys.over, _direct(lambda sample: arrived.set()))
+    querier = asker.declare_querier(keys.connect)
+    while not querier.matching_status.matching:
+        arrived.wait(0.01)
+    querier.undeclare()
+    for n in range(1, 6):
+        sender = drone_name(n)
+        data = encode(Connect(turn=0, sender=sender, role=Role.DRONE, drones=(sender,), session=f"s{n}"))
+        replies[sender] = asker.get(keys.connect, payload=data, timeout=10)
+    asker.put(keys.over, encode(over(1)))
+    assert arrived.wait(10)
+    barrier.undeclare()
+    refused = {d: [r.err.payload.to_bytes() for r in replies[d] if r.err is not None] for d in ("D03", "D04", "D05")}
+    assert all(b"already wait" in errs[0] for errs in refused.values()), refused
+    assert inbox.rejects.report() == "{'flood': 3}, from {'D03': 1, 'D04': 1, 'D05': 1}"
+    asked: list[Any] = [inbox.get(10) for _ in range(2)]
+    assert [e.msg.sender for e in asked] == ["D01", "D02"], "the first two, queued and read"
+    for e in asked:
+        e.query.reply(e.query.key_expr, b"ok")
+        e.query.drop()
+    assert [r.ok.payload.to_bytes() for r in replies["D01"]] == [b"ok"]
+    inbox.close()
+
+
 def test_newest_keeps_the_last_message_queues_no_event_and_checks_it_when_read(pair) -> None:
     """A key read with `Inbox.newest` (the environment's STATUS): nothing is queued for it; each read gives the
     message that came since the last read, checked as a subscription's are."""
