@@ -193,24 +193,24 @@ def dones(effects: list) -> list[tuple[int, dict, Intent, bool]]:
 
 
 def test_a_lifelong_station_answers_each_phase_once_the_status_before_it_is_in() -> None:
-    s = station()
-    assert s.receive(gcs(1), 0.0) == []  # STATUS(0) not in yet: the draws read it
+    s = station()  # (each message a second after the last: its DONEs go out `DONE_GAP` s apart at least)
+    assert s.receive(gcs(1), 1.0) == []  # STATUS(0) not in yet: the draws read it
     st0 = status(0, ("D01", (0, 0, 0), None, Note.NONE), ("D02", (0, 2, 0), None, Note.NONE))
-    (turn, first, intent, ahead), = dones(s.receive(st0, 0.0))
+    (turn, first, intent, ahead), = dones(s.receive(st0, 2.0))
     assert (turn, intent, ahead) == (1, Intent.CONTINUE, False) and first.keys() == {"D01", "D02"}
     assert first == station().tasks.assign(1, st0)  # (what the in-process game draws)
     st1 = status(1, ("D01", (1, 0, 0), first["D01"], Note.NONE), ("D02", (0, 3, 0), first["D02"], Note.NONE))
-    assert dones(s.receive(st1, 0.0)) == []  # nothing answered ahead
-    assert dones(s.receive(gcs(2), 0.0)) == [(2, {}, Intent.CONTINUE, False)]
+    assert dones(s.receive(st1, 3.0)) == []  # nothing answered ahead
+    assert dones(s.receive(gcs(2), 4.0)) == [(2, {}, Intent.CONTINUE, False)]
     home = first["D02"]
     st2 = status(2, ("D01", (2, 0, 0), first["D01"], Note.NONE), ("D02", home, home, Note.REACHED))
-    s.receive(st2, 0.0)
-    (turn, new, intent, _), = dones(s.receive(gcs(3), 0.0))
+    s.receive(st2, 5.0)
+    (turn, new, intent, _), = dones(s.receive(gcs(3), 6.0))
     assert turn == 3 and new.keys() == {"D02"} and new["D02"] not in (home, first["D01"])
     # a phase the coordinator closed without it (its deadline) is not answered when its STATUS comes late
-    assert s.receive(gcs(5), 0.0) == [] and s.receive(Turn(turn=5, sender="SRV", phase=Phase.DRONES), 0.0) == []
+    assert s.receive(gcs(5), 7.0) == [] and s.receive(Turn(turn=5, sender="SRV", phase=Phase.DRONES), 8.0) == []
     assert dones(s.receive(status(4, ("D01", (2, 0, 0), first["D01"], Note.NONE),
-                                  ("D02", home, new["D02"], Note.NONE)), 0.0)) == []
+                                  ("D02", home, new["D02"], Note.NONE)), 9.0)) == []
 
 
 # --------------------------------------------------------------------------- configuration
