@@ -677,8 +677,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--city-runs", type=int, default=CITY_RUNS, help=f"runs of each distributed city game "
                                                                           f"(default {CITY_RUNS})")
     parser.add_argument("--anchor", action="store_true",
-                        help="only the complete arbitration (lacam) and PIBT against the LaCAM-class anchor (pymapf, "
-                             "in its own environment) on the densest instances "
+                        help="only the complete arbitration (lacam) and PIBT (--variants: those) against the "
+                             "LaCAM-class anchor (pymapf, in its own environment) on the densest instances "
                              f"({'/'.join(map(str, ANCHOR_AGENTS))} agents) of every family, seeds 1-{ANCHOR_SEEDS} "
                              "(--agents, --seeds, --families narrow it)")
     parser.add_argument("--anchor-seconds", type=float, default=ANCHOR_SECONDS, help="the anchor's time an instance")
@@ -712,7 +712,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.anchor:
         chosen = agents if "--agents" in (argv or sys.argv) else (10,) if args.quick else ANCHOR_AGENTS
         seeds = args.seeds if "--seeds" in (argv or sys.argv) else 1 if args.quick else ANCHOR_SEEDS
-        body_table, lines = anchor_compare(families, chosen, seeds, args.anchor_seconds)
+        played = tuple(variants) if "--variants" in (argv or sys.argv) else ("lacam", "pibt")
+        body_table, lines = anchor_compare(families, chosen, seeds, args.anchor_seconds, played)
         print()
         print(body_table)
         print()
