@@ -60,7 +60,7 @@ class Run:
 
 def make_journal(drones: int, turns: int, cache: Path) -> Path:
     """The game's journal (made once per parameters, then read from `cache`)."""
-    from benchmarks.perf import WORLD_SEED, Case, make_scenario
+    from benchmarks.games import WORLD_SEED, Case, make_scenario
     from coordinator.journal import dumps
     from dronesim.local import Inputs, simulate
     from dronesim.scenario import Scenario

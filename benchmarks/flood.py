@@ -4,7 +4,7 @@
     dronesim bench flood --write           # ... and updates "## Floods" in BENCHMARKS.md
     dronesim bench flood --quick           # a tiny game and small floods (used by the tests)
 
-In one run, each game as `dronesim bench perf` plays it (`benchmarks.perf.play_distributed`: a
+In one run, each game as `dronesim bench perf` plays it (`benchmarks.games.play_distributed`: a
 loopback `dronesim router` process, secured as docs/security.md says (TLS, user/password, the access
 control generated from the key table; `--plain`: none of these) with the flood filters generated from
 the key table (`schema.acl.flood_filters`), every process with its own credentials; the coordinator,
@@ -53,17 +53,8 @@ from functools import partial
 from pathlib import Path
 
 from benchmarks import add_write_args, command_line, replace_section
-from benchmarks.perf import (
-    Case,
-    Game,
-    Row,
-    Secured,
-    Variant,
-    busy_seconds,
-    make_scenario,
-    play_distributed,
-    render,
-)
+from benchmarks.games import Case, Game, Secured, Variant, make_scenario, play_distributed
+from benchmarks.measure import Row, busy_seconds, render
 from dronesim import child_env
 from schema import Keys
 

@@ -40,7 +40,7 @@ from collections.abc import Callable
 import numpy as np
 
 from benchmarks import add_write_args, pogema, replace_section
-from benchmarks.perf import busy_seconds, machine
+from benchmarks.measure import busy_seconds, machine
 
 SECTION = "## RL environment"
 COUNTS = (1, 16, 128, 1000)

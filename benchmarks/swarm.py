@@ -34,7 +34,7 @@ same agent counts in the same run: its steps per second with random actions on i
 
 The distributed cities (`city_distributed`, its own subsection "Distributed cities (LRTA*)", which the table's
 --write keeps): a 256 x 256 x 32 city of 1000 LRTA* drones in one swarm host and of 10,000 on two, through real
-processes (benchmarks/perf.py's `play_distributed`), each played three times, with turns per second, ISR/CSR,
+processes (benchmarks/games.py's `play_distributed`), each played three times, with turns per second, ISR/CSR,
 collisions, the coordinator's arbitration CPU a turn, every process's CPU, and POGEMA with as many agents on
 256 x 256 (its 64 x 64 cannot hold 10,000) in the same run.
 """
@@ -351,7 +351,7 @@ CITY_RUNS = 3
 POGEMA_CITY_SIZE = 256
 
 CITY_LEGEND = (
-    "Each game through real processes on loopback (benchmarks/perf.py's `play_distributed`): a `dronesim router`, the "
+    "Each game through real processes on loopback (benchmarks/games.py's `play_distributed`): a `dronesim router`, the "
     "coordinator, the environment and the swarm hosts (`dronesim drone --autopilot lrta --host Hnn`, the drones "
     "split in id order, each host flying its own with `LrtaSwarm`), this process the scripted ground station. "
     "A city of `World.generate` (seed 1), drones at random free cells with random free targets given at turn 1, "
@@ -366,7 +366,7 @@ CITY_LEGEND = (
 
 @dataclass(frozen=True, slots=True)
 class CityGame:
-    """One distributed city game (benchmarks/perf.py's `play_distributed`) and what it gave."""
+    """One distributed city game (benchmarks/games.py's `play_distributed`) and what it gave."""
 
     size: Cell
     drones: int
@@ -460,15 +460,15 @@ def city_scenario(size: Cell, drones: int, seed: int, folder: Path) -> Path:
 def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path) -> CityGame:
     """One distributed game (coordinator, environment, `hosts` swarm hosts of LRTA* drones, a loopback router,
     this process as the ground station), played until every drone has arrived or the turn limit."""
-    from . import perf
+    from . import games
 
     scenario = city_scenario(size, drones, 1, folder)
     logs = folder / f"{drones}-{run}"
     logs.mkdir(parents=True, exist_ok=True)
     limit = city_limit(size)
     load = os.getloadavg()[0]
-    case = perf.Case(drones=drones, size=size, warmup=CITY_WARMUP, turns=limit - CITY_WARMUP - 1)
-    game = perf.play_distributed(case, scenario, logs, variant=perf.Variant(autopilot=CITY_PILOT, hosts=hosts,
+    case = games.Case(drones=drones, size=size, warmup=CITY_WARMUP, turns=limit - CITY_WARMUP - 1)
+    game = games.play_distributed(case, scenario, logs, variant=games.Variant(autopilot=CITY_PILOT, hosts=hosts,
                                                                             statuses=False))
     found = re.search(r"arbitration: \d+ turns, ([\d.]+) ms", (logs / "coordinator.log").read_text(errors="replace"))
     status = game.last_status

@@ -10,7 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from benchmarks import BENCHMARKS, perf, pogema
+from benchmarks import BENCHMARKS, games, perf, pogema
+from benchmarks.measure import size_text
+from benchmarks.mechanisms import MECHANISMS, MECHANISMS_TITLE, code_lines
 
 pytestmark = pytest.mark.integration
 
@@ -60,10 +62,10 @@ def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
     assert rows["MAVLink ground station, 100 vehicles"]["target"].startswith("≥ 20 turns/s: ")  # (docs/mavlink.md)
     # each mechanism that remains: its lines of code, and, switched off, the same game (4 drones here)
     mechanisms = _rows(out, "mechanism")
-    assert len(mechanisms) == len(perf.MECHANISMS)
-    for m in perf.MECHANISMS:
+    assert len(mechanisms) == len(MECHANISMS)
+    for m in MECHANISMS:
         row = mechanisms[m.name]
-        assert int(row["lines of code"]) == perf.code_lines(m.code) > 0
+        assert int(row["lines of code"]) == code_lines(m.code) > 0
         if m.off is None:
             assert row["switched off by"].startswith("not switched off: "), row
         else:
@@ -74,23 +76,23 @@ def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
     assert "## Autopilot benchmark\n\nkept\n" in text
     assert text.count("## Performance") == 1 and "`dronesim bench perf --quick --write --output" in text
     assert "1 drone @ 10x10x10" in text.split("## Performance", 1)[1]
-    assert perf.MECHANISMS_TITLE in text.split("## Performance", 1)[1]
+    assert MECHANISMS_TITLE in text.split("## Performance", 1)[1]
 
 
 def test_lines_of_code_are_counted_once_from_definitions_and_regexes(tmp_path):
     (tmp_path / "m.py").write_text(
         "X = 1\n\n\n@dec\nclass A:\n    def f(self):\n        return X\n\n    def g(self):\n"
         "        pass\n\n\ndef h():\n    # uses X\n    return 2\n", encoding="utf-8")
-    assert perf.code_lines(["m.py::X"], tmp_path) == 1
-    assert perf.code_lines(["m.py::A"], tmp_path) == 7  # its decorator in
-    assert perf.code_lines(["m.py::A.g"], tmp_path) == 2
-    assert perf.code_lines(["m.py::A.f", "m.py:/X/"], tmp_path) == 4  # line 7 once
-    assert perf.code_lines(["m.py"], tmp_path) == 15
+    assert code_lines(["m.py::X"], tmp_path) == 1
+    assert code_lines(["m.py::A"], tmp_path) == 7  # its decorator in
+    assert code_lines(["m.py::A.g"], tmp_path) == 2
+    assert code_lines(["m.py::A.f", "m.py:/X/"], tmp_path) == 4  # line 7 once
+    assert code_lines(["m.py"], tmp_path) == 15
     for missing in ("m.py::B", "m.py::A.k", "m.py:/nowhere/"):
         with pytest.raises(KeyError):
-            perf.code_lines([missing], tmp_path)
-    for m in perf.MECHANISMS:  # every name the table counts is there
-        assert perf.code_lines(m.code) > 0, m.name
+            code_lines([missing], tmp_path)
+    for m in MECHANISMS:  # every name the table counts is there
+        assert code_lines(m.code) > 0, m.name
         assert (m.off is None) == (not m.games) and m.switch, m.name
 
 
@@ -98,9 +100,9 @@ def test_scenarios_fit_start_free_and_are_valid(tmp_path):
     from dronesim.scenario import Scenario
     from entities.environment import build_world
 
-    assert perf.make_scenario(perf.Case(1000, (10, 10, 10), 5, 10)) is None
-    for case in (perf.Case(16, (10, 10, 10), 3, 20), perf.Case(128, (64, 64, 16), 10, 30)):
-        data = perf.make_scenario(case)
+    assert games.make_scenario(games.Case(1000, (10, 10, 10), 5, 10)) is None
+    for case in (games.Case(16, (10, 10, 10), 3, 20), games.Case(128, (64, 64, 16), 10, 30)):
+        data = games.make_scenario(case)
         path = tmp_path / "s.json"
         path.write_text(json.dumps(data), encoding="utf-8")
         sc = Scenario.load(path)
@@ -124,15 +126,15 @@ def test_memory_growth_is_judged_per_drone_and_per_world_byte():
         ("env", 1, small): 50_000, ("env", 1, large): 60_000,
     }
     rows = {r.name: r for r in perf.memory_growth(peaks)}
-    per_drone = rows[f"memory per drone (128 → 1000 drones @ {perf._size_text(mid)})"]
+    per_drone = rows[f"memory per drone (128 → 1000 drones @ {size_text(mid)})"]
     assert per_drone.cells["srv"] == "2.00 KiB/drone" and per_drone.cells["env"] == "1.00 KiB/drone"
     assert per_drone.cells["target"] == "≤ 1 KiB per drone: UNMET"  # the worse of the two decides
-    from_one = rows[f"memory per drone from 1 drone (1 → 1000 drones @ {perf._size_text(mid)})"]
+    from_one = rows[f"memory per drone from 1 drone (1 → 1000 drones @ {size_text(mid)})"]
     assert from_one.cells["srv"] == f"{3_000 / 999:.2f} KiB/drone"
     assert from_one.cells["env"] == f"{1_872 / 999:.2f} KiB/drone"
     assert from_one.cells["target"].startswith("—")  # shown, not judged
     grown = int(np.prod(large)) - int(np.prod(small))
-    per_byte = rows[f"memory per world byte (1 drone, {perf._size_text(small)} → {perf._size_text(large)})"]
+    per_byte = rows[f"memory per world byte (1 drone, {size_text(small)} → {size_text(large)})"]
     assert per_byte.cells["srv"] == f"{2_000 * 1024 / grown:.2f} bytes/byte"
     assert per_byte.cells["env"] == f"{10_000 * 1024 / grown:.2f} bytes/byte"
     expect = "met" if 10_000 * 1024 / grown <= 2 else "UNMET"

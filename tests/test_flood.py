@@ -16,7 +16,7 @@ import pytest
 import zenoh
 
 from benchmarks.flood import flood_rate
-from benchmarks.perf import Case, Game
+from benchmarks.games import Case, Game
 from schema import Done, Keys, Message, Nps, Phase, encode
 from tests.harness import Cluster, Proc, ScriptedGCS, client_config, embedded_router, play_to_the_end
 
