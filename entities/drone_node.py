@@ -38,7 +38,7 @@ from network.transport import (
 )
 from schema import Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, Role, StepTable, Turn, UsageError, WorldMap
 from schema.messages import drone_list, is_host_id
-from schema.tuning import ASK_TIMEOUT_S, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, DECIDING_EVERY_S
+from schema.tuning import ASK_TIMEOUT_S, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, DECIDING_EVERY_S, PUT_GAP
 
 from .autopilots import REGISTRY, SWARM_MIN, pilot_class
 from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, SendMoves, Timer
@@ -97,18 +97,27 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
 class Effects:
     """Carries out the core's effects: publications, queries (their outcome an `Answer` event), its timer."""
 
-    def __init__(self, inbox: Inbox, out: Outbox, *, ask_timeout: float, map_timeout: float) -> None:
+    def __init__(self, inbox: Inbox, out: Outbox, *, ask_timeout: float, map_timeout: float,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         self.inbox, self.out, self.keys = inbox, out, inbox.keys
         self.ask_timeout, self.map_timeout = ask_timeout, map_timeout
+        self.clock, self.sleep = clock, sleep
         self._timer: tuple[float, int] | None = None  # (when, ref)
         self._sending = threading.Lock()  # the moves go out one at a time (`Deciding` sends from its thread)
+        self._sent: dict[str, float] = {}  # key -> when the last put on it went out
 
     def send(self, msg: Moves | Nps, unless: Callable[[], bool] = lambda: False) -> None:
         """Publish a swarm host's MOVES or a lone drone's NPS, unless `unless()`, asked once no other is being sent
-        (`Deciding`'s word for a turn whose moves have gone out meanwhile is not sent after them)."""
+        (`Deciding`'s word for a turn whose moves have gone out meanwhile is not sent after them), PUT_GAP s at
+        least after the last put on its key (the router keeps at most PUT_RATE a second: a MOVES right after a word
+        that the host is still deciding would be dropped)."""
+        key = (self.keys.moves if isinstance(msg, Moves) else self.keys.nps)(msg.sender)
         with self._sending:
             if not unless():
-                self.out.put((self.keys.moves if isinstance(msg, Moves) else self.keys.nps)(msg.sender), msg)
+                if (wait := self._sent.get(key, float("-inf")) + PUT_GAP - self.clock()) > 0:
+                    self.sleep(wait)
+                self.out.put(key, msg)
+                self._sent[key] = self.clock()
 
     def run(self, effects: list[Effect]) -> None:
         for eff in effects:

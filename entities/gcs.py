@@ -37,7 +37,7 @@ from schema import (
     Welcome,
 )
 from schema.tables import drone_name
-from schema.tuning import ANSWER_AHEAD, DONE_GAP, DONE_RETRY_S, FINAL_STATUS_WAIT
+from schema.tuning import ANSWER_AHEAD, DONE_RETRY_S, FINAL_STATUS_WAIT, PUT_GAP
 from world.grid import World, build_world, in_bounds
 
 from .tasks import Tasks
@@ -284,7 +284,7 @@ class Station:
 
     Its DONEs may be lost on the way: a router keeps at most `PUT_RATE` puts a second from one session on its
     key (schema/acl.py `flood_filters`; a buggy or hostile second session floods it in vain). So the DONEs of its
-    own making (`receive`) go out `DONE_GAP` s apart at least, queued until due (`tick`); a phase announced although
+    own making (`receive`) go out `PUT_GAP` s apart at least, queued until due (`tick`); a phase announced although
     it was answered ahead is answered again (the coordinator announces a phase whose DONE it does not hold); and
     a phase's DONE goes out again, `DONE_RETRY_S` s later, then twice as long each time, until that turn's STATUS
     comes (the coordinator takes a repeat of the DONE it holds as nothing new)."""
@@ -302,7 +302,7 @@ class Station:
         self.gone: set[str] = set()  # drones dead or lost: nothing more to say to them
         self.tracks = Tracks()
         self.answered = 0  # the last turn whose GCS phase this station has answered (maybe ahead)
-        self._outgoing: deque[SendDone] = deque()  # DONEs not sent yet: one every DONE_GAP s (`_paced`)
+        self._outgoing: deque[SendDone] = deque()  # DONEs not sent yet: one every PUT_GAP s (`_paced`)
         self._next_send = float("-inf")  # when the next DONE may go out
         self._unacked: tuple[SendDone, float, float] | None = None  # a phase's DONE, when it goes out again, and
         # how long after that, until its STATUS comes
@@ -376,7 +376,7 @@ class Station:
         return effects + ([self._end()] if since is not None and now >= since + FINAL_STATUS_WAIT else [])
 
     def _paced(self, effects: list[Effect], now: float) -> list[Effect]:
-        """`effects` with their DONEs queued, to go out DONE_GAP s apart; a phase's DONE (not one ahead) is kept to
+        """`effects` with their DONEs queued, to go out PUT_GAP s apart; a phase's DONE (not one ahead) is kept to
         go out again until its turn's STATUS (`tick`)."""
         out: list[Effect] = []
         for effect in effects:
@@ -389,10 +389,10 @@ class Station:
         return self._release(now) + out
 
     def _release(self, now: float) -> list[Effect]:
-        """The queued DONE due now, if any (the next one DONE_GAP s later)."""
+        """The queued DONE due now, if any (the next one PUT_GAP s later)."""
         if not self._outgoing or now < self._next_send:
             return []
-        self._next_send = now + DONE_GAP
+        self._next_send = now + PUT_GAP
         return [self._outgoing.popleft()]
 
     def want(self, targets: Mapping[str, Cell]) -> dict[str, Cell]:

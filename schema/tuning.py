@@ -99,13 +99,15 @@ ORIGIN_BYTES = 8 << 20
 #: but the first: it answers those phases when they are announced, entities/gcs.py `Station`), while a flood
 #: reaches the coordinator at a rate its refusal of stale messages keeps up with.
 PUT_RATE = 10_000.0
-#: Seconds at least between two DONEs a ground station sends (entities/gcs.py `Station`), so that a router's
-#: budget of `PUT_RATE` puts a second on its key keeps them all: 5 times the budget's interval (the margin: a link
-#: may still bring two together, whose second the station answers again). Not measured: answers ahead go out over
-#: 2 ms instead of at once, well before their phases.
-DONE_GAP = 5 / PUT_RATE
+#: Seconds at least between two puts a process makes on one of those keys, so that the router's budget of `PUT_RATE`
+#: puts a second keeps them all: a ground station's DONEs (entities/gcs.py `Station`: its answers ahead used to go
+#: out at once), a swarm host's word that it is still deciding and its MOVES (entities/drone_node.py `Effects`). 5
+#: times the budget's interval (the margin: a link may still bring two together; a station sends a lost DONE again,
+#: a host's MOVES lost so would leave its drones hovering a turn). Not measured: answers ahead go out over 2 ms
+#: instead of at once, well before their phases; a host waits at most this long, only after a word.
+PUT_GAP = 5 / PUT_RATE
 #: Seconds after which a ground station sends its DONE of a phase again if that turn's STATUS has not come (then
-#: twice as long each time): a DONE lost on the way (a router's budget; rare, `DONE_GAP`) must not stall the game.
+#: twice as long each time): a DONE lost on the way (a router's budget; rare, `PUT_GAP`) must not stall the game.
 #: Not measured: a turn takes milliseconds; a repeat of the DONE the coordinator holds changes nothing, one that
 #: crosses the turn's STATUS is refused as stale (counted).
 DONE_RETRY_S = 1.0

@@ -16,6 +16,7 @@ from entities.drone_node import Deciding, Effects, thread_cpu
 from entities.environment import Environment
 from network.transport import Inbox, client_config
 from schema import Ans, Ask, Keys, Moves, RemoteInputError, decode, encode
+from schema.tuning import PUT_GAP
 from world.grid import World
 
 from .harness import embedded_router, unique_root
@@ -152,6 +153,23 @@ def test_a_hosts_word_that_it_is_deciding_does_not_follow_the_moves_of_its_turn(
     core.turn = None  # its moves went out
     pulse.send(word, unless=functools.partial(pulse._decided, 5))
     assert out.sent == [(keys.moves("H01"), word)]
+
+
+def test_a_hosts_moves_go_out_a_put_gap_after_its_word_so_that_the_routers_budget_keeps_them() -> None:
+    """The router keeps at most PUT_RATE puts a second from one session on a MOVES key (issue 18's budget): a host's
+    MOVES sent right after its word that it is still deciding would be dropped, and its drones would hover."""
+    keys, now, slept = Keys("sim"), [10.0], []
+    out = types.SimpleNamespace(sent=[])
+    out.put = lambda key, msg: out.sent.append((now[0], msg.turn))
+    effects = Effects(types.SimpleNamespace(keys=keys), out, ask_timeout=1.0, map_timeout=1.0,  # type: ignore[arg-type]
+                      clock=lambda: now[0], sleep=lambda s: (slept.append(s), now.__setitem__(0, now[0] + s)))
+    effects.send(Moves(turn=3, sender="H01", moves=()))
+    now[0] += PUT_GAP / 5
+    effects.send(Moves(turn=3, sender="H01", moves=()))
+    assert slept == [pytest.approx(PUT_GAP * 4 / 5)] and out.sent[1][0] - out.sent[0][0] == pytest.approx(PUT_GAP)
+    now[0] += 1.0
+    effects.send(Moves(turn=4, sender="H01", moves=()))
+    assert len(slept) == 1, "a put long after the last waits for nothing"
 
 
 def test_the_main_threads_cpu_clock_is_read_from_another_thread() -> None:

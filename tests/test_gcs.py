@@ -305,7 +305,7 @@ def test_a_script_answers_ahead_up_to_its_next_change() -> None:
 
 from entities.gcs import FINAL_STATUS_WAIT, End, SendDone, Show, Station  # noqa: E402
 from schema import EndReason, Over, Phase, Turn  # noqa: E402
-from schema.tuning import DONE_GAP, DONE_RETRY_S  # noqa: E402
+from schema.tuning import DONE_RETRY_S, PUT_GAP  # noqa: E402
 
 
 def ground(plan: list[str] = (), drones=("D01", "D02")) -> Ground:
@@ -317,11 +317,11 @@ _CLOCKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def heard(station: Station, msg) -> list:
-    """What `station` does on `msg`, its DONEs paced out (`DONE_GAP` apart: the station's clock goes on by as much as
+    """What `station` does on `msg`, its DONEs paced out (`PUT_GAP` apart: the station's clock goes on by as much as
     they take, one tick each)."""
     now = _CLOCKS.get(station, 0.0)
     effects = list(station.receive(msg, now))
-    while (wait := station.wake(now)) is not None and wait <= 2 * DONE_GAP:
+    while (wait := station.wake(now)) is not None and wait <= 2 * PUT_GAP:
         now += wait
         effects += station.tick(now)
     _CLOCKS[station] = now
@@ -468,10 +468,10 @@ def test_its_dones_go_out_paced_so_that_a_routers_budget_of_puts_keeps_them_all(
     them from a second session is dropped there); a station's answers ahead, sent at once, lost all but the first."""
     station = Station(ground(["D01=1,1,1"]), ahead=2)
     assert sent(station.receive(gcs(1), 5.0)) == [(1, {"D01": (1, 1, 1)}, Intent.FINAL)]
-    assert station.wake(5.0) == pytest.approx(DONE_GAP) and station.tick(5.0) == []
-    assert sent(station.tick(5.0 + DONE_GAP)) == [(2, {}, Intent.FINAL)]
-    assert sent(station.tick(5.0 + 1.5 * DONE_GAP)) == [], "one every DONE_GAP s"
-    assert sent(station.tick(5.0 + 2 * DONE_GAP)) == [(3, {}, Intent.FINAL)]
+    assert station.wake(5.0) == pytest.approx(PUT_GAP) and station.tick(5.0) == []
+    assert sent(station.tick(5.0 + PUT_GAP)) == [(2, {}, Intent.FINAL)]
+    assert sent(station.tick(5.0 + 1.5 * PUT_GAP)) == [], "one every PUT_GAP s"
+    assert sent(station.tick(5.0 + 2 * PUT_GAP)) == [(3, {}, Intent.FINAL)]
 
 
 def test_a_phases_done_goes_out_again_until_its_turn_is_played() -> None:

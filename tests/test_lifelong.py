@@ -193,7 +193,7 @@ def dones(effects: list) -> list[tuple[int, dict, Intent, bool]]:
 
 
 def test_a_lifelong_station_answers_each_phase_once_the_status_before_it_is_in() -> None:
-    s = station()  # (each message a second after the last: its DONEs go out `DONE_GAP` s apart at least)
+    s = station()  # (each message a second after the last: its DONEs go out `PUT_GAP` s apart at least)
     assert s.receive(gcs(1), 1.0) == []  # STATUS(0) not in yet: the draws read it
     st0 = status(0, ("D01", (0, 0, 0), None, Note.NONE), ("D02", (0, 2, 0), None, Note.NONE))
     (turn, first, intent, ahead), = dones(s.receive(st0, 2.0))
