@@ -68,8 +68,8 @@ from schema import (
 )
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
 from schema.messages import MAX_OVER_TEXT, drone_id
-from schema.tables import code_of, drone_name, drone_number
-from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, SMALL_FLEET, TURN_FEW_DRONES, UPD_WINDOW
+from schema.tables import RANK_STEPS, code_of, drone_name, drone_number
+from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, TURN_FEW_DRONES, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 
 from . import arbiter, lacam, observer
@@ -154,6 +154,8 @@ Rows = np.ndarray | list[int]
 Cells = np.ndarray | list[Cell]
 Codes = np.ndarray | list[int]
 CAUSE_CODE = {c: code_of(c) for c in Cause}
+#: A drone's moves in a turn: staying, or one cell along an axis (6-connectivity).
+STEPS = frozenset(RANK_STEPS)
 
 
 class Moved(NamedTuple):
@@ -613,23 +615,26 @@ class Engine:
         if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
                              f"of turn {self.turn}")
-        if len(aim_rows) and not (np.count_nonzero(fleet.state[aim_rows] != ALIVE) == 0
-                                  and np.count_nonzero(inside_rows(np.asarray(aims), self.size)) == len(aim_rows)):
+        few = len(move_rows) <= TURN_FEW_DRONES
+        whole = fleet.whole() if few else None  # (the columns as lists, read once for the turn: a small fleet's)
+        if len(aim_rows) and not (
+                all(whole[0][i] == ALIVE and in_bounds(c, self.size) for i, c in zip(aim_rows, aims))
+                if whole is not None and isinstance(aims, list) else
+                np.count_nonzero(fleet.state[aim_rows] != ALIVE) == 0
+                and np.count_nonzero(inside_rows(np.asarray(aims), self.size)) == len(aim_rows)):
             raise UsageError("a target for a drone not alive, or outside the world")
         rows: Rows
         cells: Cells
         codes: Codes
-        few = len(move_rows) <= TURN_FEW_DRONES
         if few:  # (Python's lists: an array operation's fixed cost is more than a few rows' work)
             rows = move_rows if isinstance(move_rows, list) else move_rows.tolist()
             cells = moves if isinstance(moves, list) else list(map(tuple, moves.tolist()))
             codes = notes if isinstance(notes, list) else notes.tolist()
-            whole = fleet.whole()  # (the columns as lists, read once for the turn: a small fleet's)
             state, pos = whole if whole else (fleet.column(fleet.state, rows), fleet.column(fleet.pos, rows))
             ok, took = True, {}
             for k, i, cell, code in zip(rows if whole else range(len(rows)), rows, cells, codes):
                 (a, b, c), (x, y, z) = cell, pos[k]
-                ok = ok and state[k] == ALIVE and abs(a - x) + abs(b - y) + abs(c - z) <= 1
+                ok = ok and state[k] == ALIVE and (a - x, b - y, c - z) in STEPS
                 took[i] = cell, code
         else:
             rows, cells, codes = move_rows, np.asarray(moves), np.asarray(notes)
@@ -799,9 +804,11 @@ class Engine:
             live = set(alive)
             dead = observer.deaths_of_moves(self.size, self._solid, {i: before[i] for i in alive},
                                             {i: after[i] for i in alive}, [i for i in moved if i in live])
-        if moved:
+        if len(moved) == 1:
+            fleet.pos[moved[0]] = after[moved[0]]
+        elif moved:
             _set_rows(fleet.pos, moved, [after[i] for i in moved])
-        notes = fleet.note.tolist() if len(fleet) <= SMALL_FLEET else dict(zip(took, fleet.column(fleet.note, [*took])))
+        notes = fleet.note.tolist() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
         said = []  # (in any order: the journal's is its own)
         for i, (_, code) in took.items():
             if code != notes[i]:
@@ -814,7 +821,7 @@ class Engine:
             self._died(dead, after)
         hovered = [i for i in alive if i not in took] if len(alive) != len(took) else []  # (as the arrays count:
         lost = 0  # a LOST drone's move taken counts)
-        if hovered or nonzero(fleet.misses):  # misses in a row: a move starts the count again
+        if hovered or fleet.missing:  # misses in a row: a move starts the count again
             lost = self._missed(alive, [*took], hovered)
         if self.config.lifelong:
             self.tasks += fleet.tasks_done()
@@ -843,7 +850,7 @@ class Engine:
         fleet, n = self.fleet, len(self.fleet)
         took_mask, alive_mask = np.zeros(n, bool), np.zeros(n, bool)
         took_mask[took], alive_mask[alive] = True, True
-        fleet.misses[:] = np.where(took_mask, 0, fleet.misses + alive_mask)
+        fleet.count_misses(took_mask, alive_mask)
         lost = [i for i in hovered if fleet.misses[i] >= self.config.lost_after and fleet.state[i] == ALIVE]
         for i in lost:  # (not one that died this turn)
             self._lose(i)
@@ -883,8 +890,8 @@ class Engine:
         if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
             self.age(alive)
         hovered = (alive & ~took).nonzero()[0] if hovering else said[:0]
-        if hovering or np.count_nonzero(fleet.misses):  # misses in a row: a move starts the count again
-            fleet.misses[:] = np.where(took, 0, fleet.misses + alive)
+        if hovering or fleet.missing:  # misses in a row: a move starts the count again
+            fleet.count_misses(took, alive)
         lost = hovered[fleet.misses[hovered] >= self.config.lost_after] if hovering else hovered
         died = cause != 0
         dead = died.nonzero()[0]
@@ -923,9 +930,10 @@ class Engine:
     def _end_reason(self, left: int) -> tuple[EndReason, str] | None:
         """Whether the game ends with the turn just judged (leaving `left` drones alive), and why."""
         fleet = self.fleet
-        if not left:
-            causes = named([f"{d} {r.state.value.lower()} ({r.cause.value.lower()}) at {r.pos}"
-                            for d, r in self.drones.items()])
+        if not left:  # (from the columns: a DroneView each would cost an RL episode's end more than its turn)
+            causes = named([f"{d} {STATES[s].value.lower()} ({CAUSES[c].value.lower()}) at {tuple(p)}"
+                            for d, s, c, p in zip(fleet.ids, fleet.state.tolist(), fleet.cause.tolist(),
+                                                  fleet.pos.tolist())])
             return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
         if getattr(self.arbiter, "unsolvable", False):  # (a proof: coordinator/lacam.py)
             away = (fleet.state == ALIVE) & (fleet.target[:, 0] >= 0) & (fleet.pos != fleet.target).any(axis=1)
@@ -1007,7 +1015,9 @@ class Engine:
         if fleet.cooperating:  # the arbitration's priorities (as `_judge` keeps them)
             self.age(alive, [row[d] for d in r.gave_way])
         hovered = np.isin(alive, [row[d] for d in r.hovered])
-        fleet.misses[alive] = np.where(hovered, fleet.misses[alive] + 1, 0)
+        took, live = np.zeros(len(fleet), bool), np.zeros(len(fleet), bool)
+        took[alive[~hovered]], live[alive] = True, True
+        fleet.count_misses(took, live)
         for d, cause in r.deaths.items():
             fleet.end(row[d], DroneState.DEAD, cause)
         for d in r.lost:

@@ -63,6 +63,8 @@ class Fleet:
         self.done = np.zeros(n, bool)  # on its target at the end of a turn since that target was given (a task done)
         self.cause = np.zeros(n, np.uint8)
         self.misses = np.zeros(n, np.int32)
+        self.missing = False  # whether some drone's misses are not 0 (`count_misses`)
+        self.small = n <= SMALL_FLEET  # its columns are read whole (`column`, `whole`)
         self.host: list[str | None] = [None] * n
         self.host_code = np.empty(n, np.int16)  # index of its host in `hosts`, -1: none
         self.host_code.fill(-1)
@@ -81,17 +83,23 @@ class Fleet:
         rows[self.numbers] = np.arange(len(self.ids), dtype=np.int32)
         return rows
 
+    def count_misses(self, took: np.ndarray, alive: np.ndarray) -> None:
+        """The DRONES deadlines missed in a row after a turn: 0 for a drone whose move was taken (`took`, a mask),
+        one more for an `alive` one (a mask) whose was not."""
+        self.misses[:] = np.where(took, 0, self.misses + alive)
+        self.missing = bool(np.count_nonzero(self.misses))
+
     def column(self, column: np.ndarray, rows: list[int]) -> list:
         """The values of one of the fleet's columns (or an array of its rows) at `rows`, as Python values (a cell:
         a list): the whole column read when the fleet is small, a few rows' selection costing more."""
-        if len(self.ids) <= SMALL_FLEET:
+        if self.small:
             values = column.tolist()
             return [values[i] for i in rows]
         return column.take(rows, 0).tolist()
 
     def whole(self) -> tuple[list[int], list[list[int]]] | None:
         """A small fleet's state and cells as lists (None: a large one's, `column` reads a few rows of them)."""
-        return (self.state.tolist(), self.pos.tolist()) if len(self.ids) <= SMALL_FLEET else None
+        return (self.state.tolist(), self.pos.tolist()) if self.small else None
 
     def alive_rows(self) -> np.ndarray:
         return (self.state == ALIVE).nonzero()[0]
