@@ -340,6 +340,9 @@ def main(argv: list[str] | None = None) -> int:
     print(legend(facts))
     for err in facts["errors"]:
         print(f"\n{err}", file=sys.stderr)
+    for row in rows:
+        if not row.ok:
+            print(f"not ok: {row.name}: " + "; ".join(f"{k} {v}" for k, v in row.cells.items()), file=sys.stderr)
     ok = all(r.ok for r in rows)
     missed = [r.name for r in rows if r.cells.get("target") == "MISSED"]
     if ok and not args.keep_logs:
