@@ -24,10 +24,14 @@ decide whether the step is taken: a cooperative drone only ever moves to a cell 
 step is not offered (a drone that missed its deadline offers only its own cell), the turn is PIBT's
 (`arbiter.cooperate`) and the search starts again from where the drones are.
 
-The search runs where it is affordable and needed: at once when the drones' distance tables (a BFS from each
-target over the static world) are small (`EAGER` entries), otherwise once the drones stop making progress (the
-number on their targets has not reached a new high for `STALL` turns), and never where the tables would exceed
-`LIMIT` entries (the 256 x 256 x 32 city: plain PIBT). Until the tables are made, PIBT plays.
+The search runs where it is affordable: at once (new targets, a new search), once the drones' distance tables (a BFS
+from each target over the static world) are made, and never where the tables would exceed `LIMIT` entries (the
+256 x 256 x 32 city: plain PIBT). Until the tables are made, PIBT plays. A search that has not brought a new high of
+drones onto their targets for `STALL` turns (twice as many each time one is so left) hands the turns back to PIBT
+until PIBT stalls as long, then a new search starts from where the drones are: the search's steps follow its depth
+first frontier, back up the tree too, which in a dense endgame undoes more than PIBT's greedy steps; PIBT's turns
+know no map (the drones rank their cells by what they have learned), the search's distances are the static
+world's. The patience doubling, some search eventually runs as long as it needs: the whole stays complete.
 """
 
 from __future__ import annotations
@@ -51,12 +55,10 @@ WORK = 1200
 CALL = 30
 #: A breadth-first search spends about an 8th of the time per cell that a PIBT call spends per drone.
 CELLS_A_UNIT = 8
-#: Distance-table entries (drones x open cells) up to which the search starts at once (small worlds); beyond,
-#: PIBT plays while it makes progress (its sum of costs is the better one where it brings every drone home).
-EAGER = 1 << 12
-#: ... beyond which it never runs (int16 entries: 64 MiB).
+#: Distance-table entries (drones x open cells) beyond which the search never runs (int16 entries: 64 MiB).
 LIMIT = 1 << 25
-#: Turns without a new high of drones on their targets after which a search starts (below LIMIT).
+#: Turns without a new high of drones on their targets after which a search hands back to PIBT (the first time; twice
+#: as many each later time), and after which PIBT hands over to a new search.
 STALL = 32
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
@@ -267,14 +269,16 @@ class Lacam:
 
     complete = True
 
-    def __init__(self, work: int = WORK, eager: int = EAGER, limit: int = LIMIT, stall: int = STALL) -> None:
-        self.work, self.eager, self.limit, self.stall = work, eager, limit, stall
+    def __init__(self, work: int = WORK, limit: int = LIMIT, stall: int = STALL) -> None:
+        self.work, self.limit, self.stall = work, limit, stall
         self._graph: Graph | None = None
         self._of: OpenCells | None = None
         self._tables: dict[int, np.ndarray] = {}  # goal (numbered open cell) -> its distance table
         self._search: Search | None = None
         self._key = b""  # the targets and cooperative drones the record and the search are for
         self._best, self._since = -1, 0  # most drones on their targets at once, and turns since
+        self._patience = stall  # turns without a new high after which the running search hands back to PIBT
+        self._handed = False  # a search handed back (for these targets): the next starts once PIBT stalls
         self.unsolvable = False
         self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
 
@@ -310,20 +314,24 @@ class Lacam:
         key = aims.tobytes()
         if key != self._key:
             self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
+            self._patience, self._handed = self.stall, False
         search = self._search
         if search is not None and not np.array_equal(search.at.cfg, here):
             search = self._search = None
+        home = int(np.count_nonzero(here == aims))
+        self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
+        if search is not None and search.found is None and self._since >= self._patience:
+            search = self._search = None  # no progress for long: PIBT's turns, until PIBT stalls as long
+            self._patience, self._handed, self._since = 2 * self._patience, True, 0
         if search is None:
-            home = int(np.count_nonzero(here == aims))
-            self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
             if home == n:
                 return None  # every drone home: nothing to search
-            cells = int(open_.count())
-            if n * cells > self.limit or (n * cells > self.eager and self._since < self.stall):
+            if n * int(open_.count()) > self.limit or (self._handed and self._since < self.stall):
                 return None
             search, spent = self._start(size, here, aims)
             if search is None:
                 return None
+            self._since = 0  # (its patience counts from its start)
         else:
             spent = 0
         self.expansions -= search.expansions

@@ -107,6 +107,30 @@ def test_the_search_proves_a_swap_in_a_closed_corridor_unsolvable_and_finds_one_
         assert bool((cells == targets).all()) is solvable
 
 
+def test_a_search_without_progress_hands_back_to_pibt_and_comes_back_with_more_patience() -> None:
+    """A search that brings no new high of drones home for `stall` turns (twice as many each later time) gives the
+    turns back to PIBT; a new one starts once PIBT has stalled `stall` turns (here the drones hold still in PIBT's
+    turns); the patience doubling, a search eventually runs to the end: the swap with a bay is done."""
+    grid = world_of(["....#....", "........."])  # a bay in the middle of a corridor 9 long: the swap needs 12 turns
+    size: Cell = grid.shape  # type: ignore[assignment]
+    before = np.array([(0, 1, 0), (8, 1, 0)], np.int32)
+    targets = before[::-1].copy()
+    search, open_, cells = lacam.Lacam(work=1, stall=2), OpenCells(grid), before  # (a PIBT call a turn)
+    searching: list[bool] = []
+    for turn in range(1, 200):
+        plan = search.follow(size, cells, np.ones(2, bool), targets, open_, turn)
+        searching.append(plan is not None)
+        if plan is not None:
+            cells = np.array([[int(v) for v in c] for c in cells_of(plan, size)], np.int32)
+        if (cells == targets).all():
+            break
+    assert (cells == targets).all()
+    runs = [len(r) for r in "".join("s" if s else "." for s in searching).split(".") if r]
+    pauses = [len(p) for p in "".join("s" if s else "." for s in searching).strip(".").split("s") if p]
+    assert len(runs) >= 3 and runs[-1] > runs[0], runs  # handed back, and came back with more patience
+    assert all(p == 2 for p in pauses[1:]), pauses  # each time PIBT held still for `stall` turns (after the tables)
+
+
 def test_same_journal_in_every_layout_and_run() -> None:
     rows, drones = HARD[1][1], HARD[1][2]
     first = play(world_of(rows), drones)
