@@ -3,14 +3,15 @@
     dronesim bench rl                       # 1, 16, 128 and 1000 drones, safe and random, three runs, and POGEMA
     dronesim bench rl --write               # the same, "## RL environment" in BENCHMARKS.md
     dronesim bench rl --quick --no-pogema   # a tiny subset (used by the tests)
-    dronesim bench rl --few-gain --counts 1,16,64   # the drone-by-drone path on beside off (performance.md)
+    dronesim bench rl --few-gain --counts 1,16,64   # the few drones' episode over lists on beside off
     dronesim bench rl --ahead-gain --counts 1,128   # the zenoh backend's MOVES ahead on beside off (idem)
 
 Each run measures, at every agent count, one after the other (the machine's speed drifts): POGEMA 1.4.0's
 PettingZoo integration (`pogema.integrations.pettingzoo.parallel_env`, in its own cached virtual environment,
 benchmarks/pogema.py: a 64x64 grid of obstacle density 0.3, observation radius 5, uniformly random actions,
-agents staying on their targets) and our `parallel_env` with backend="local" (in this process: drone by drone
-up to 64 drones, else the engine) under two policies, alternately in `--slices` slices of `--seconds` (on a
+agents staying on their targets) and our `parallel_env` with backend="local" (in this process, each step a
+turn of the engine: the episode's rules over lists up to 64 drones, in arrays beyond) under two policies,
+alternately in `--slices` slices of `--seconds` (on a
 shared machine a burst of other work then slows all alike), then our backend="zenoh" (every step a turn of the
 coordinator and environment processes, through a router in this process) under the safe policy. Ours: a
 64x64x16 world generated from seed 1 and given (every episode on it, as POGEMA's map is one per seed),
@@ -213,12 +214,13 @@ def run(counts: tuple[int, ...], seconds: float, repeat: int, with_pogema: bool,
 
 
 def few_gain(counts: tuple[int, ...], seconds: float, repeat: int) -> str:
-    """The drone-by-drone path's gain (docs/performance.md): local steps/s with it (`FewEpisode`, the default
-    up to EPISODE_FEW_DRONES drones) and without (`few_drones = 0`: `Episode` over the engine)."""
+    """The few drones' episode's gain (docs/performance.md): local steps/s with its rules over lists (`FewEpisode`,
+    the default up to EPISODE_FEW_DRONES drones) and without (`few_drones = 0`: `Episode`, in arrays); both step
+    through the engine's turn."""
     from dronesim.rl_few import FEW_MAX
 
-    return _gain(counts, repeat, ("drone by drone", lambda n: ours("local", n, seconds, FEW_MAX)[0]),
-                 ("engine's path", lambda n: ours("local", n, seconds, 0)[0]), "{:.1f}x")
+    return _gain(counts, repeat, ("episode over lists", lambda n: ours("local", n, seconds, FEW_MAX)[0]),
+                 ("episode in arrays", lambda n: ours("local", n, seconds, 0)[0]), "{:.1f}x")
 
 
 def ahead_gain(counts: tuple[int, ...], seconds: float, repeat: int) -> str:
@@ -254,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slices", type=int, default=SLICES,
                         help=f"POGEMA and the local backend alternate in this many slices (default {SLICES})")
     parser.add_argument("--few-gain", action="store_true",
-                        help="only the local backend, its drone-by-drone path on and off (docs/performance.md)")
+                        help="only the local backend, the few drones' episode over lists on and off (performance.md)")
     parser.add_argument("--ahead-gain", action="store_true",
                         help="only the zenoh backend, MOVES ahead on and off (docs/performance.md)")
     add_write_args(parser)
@@ -310,8 +312,8 @@ def main(argv: list[str] | None = None) -> int:
             "on_target \"stay\"; policy \"safe\": random safe actions (benchmarks/rl.py: no drone dies, so every "
             "step has all its agents), \"random\": uniformly random actions, drones die, and an episode whose "
             "drones have all died is reset, the reset timed with the steps (the episodes column); local = in this "
-            "process (drone by drone up to 64 drones, `dronesim/rl_few.py`, else the "
-            "engine), zenoh = each step a turn of the coordinator and "
+            "process, each step a turn of the engine (`Engine.play`; the episode's rules over lists up to 64 drones, "
+            "`dronesim/rl_few.py`, in arrays beyond), zenoh = each step a turn of the coordinator and "
             "environment processes through a router in this process (the step's DONE and MOVES sent at once: one "
             "round trip).\n"
             + "".join(f"\n{note}\n" for note in notes)
