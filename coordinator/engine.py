@@ -68,9 +68,10 @@ from schema import (
 )
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
 from schema.messages import MAX_OVER_TEXT, drone_id
-from schema.tables import RANK_STEPS, code_of, drone_name, drone_number
+from schema.tables import code_of, drone_name, drone_number
 from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, TURN_FEW_DRONES, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
+from world.search import STEPS, is_step, step_lengths
 
 from . import arbiter, lacam, observer
 from .admission import Roster
@@ -154,8 +155,6 @@ Rows = np.ndarray | list[int]
 Cells = np.ndarray | list[Cell]
 Codes = np.ndarray | list[int]
 CAUSE_CODE = {c: code_of(c) for c in Cause}
-#: A drone's moves in a turn: staying, or one cell along an axis (6-connectivity).
-STEPS = frozenset(RANK_STEPS)
 
 
 class Moved(NamedTuple):
@@ -639,7 +638,7 @@ class Engine:
         else:
             rows, cells, codes = move_rows, np.asarray(moves), np.asarray(notes)
             ok = (np.count_nonzero(fleet.state[rows] != ALIVE) == 0
-                  and np.abs(cells - fleet.pos[rows]).sum(axis=1).max() <= 1)
+                  and step_lengths(fleet.pos[rows], cells).max() <= 1)
         if not ok:
             raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
         if len(aim_rows):
@@ -670,7 +669,7 @@ class Engine:
         def whole() -> np.ndarray:  # (the MOVES as columns of the fleet's rows: docs/performance.md, Memory)
             rows, n = fleet.row_of_number[numbers], len(fleet)  # -1, the extra row: a number not of this game
             step = np.full(n + 1, 2, np.int64)  # each row's step in this MOVES (2: none sent)
-            step[rows] = np.abs(pos - fleet.pos[rows]).sum(axis=1)
+            step[rows] = step_lengths(fleet.pos[rows], pos)
             take = (step[:-1] <= 1) & (fleet.host_code == fleet.hosts.get(msg.sender, -2)) & (fleet.state == ALIVE)
             take &= ~self._moved
             item = np.zeros(n + 1, np.intp)  # each row's item in this MOVES (where it sent one)
@@ -719,8 +718,8 @@ class Engine:
             raise UnknownEntity(f"NPS from {d}, which is not an alive drone of this game")
         if self._moved[i]:
             raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
-        x, y, z = here = cell_of(fleet.pos[i])
-        if abs(pos[0] - x) + abs(pos[1] - y) + abs(pos[2] - z) > 1:
+        here = cell_of(fleet.pos[i])
+        if not is_step(here, pos):
             # refused: the drone may still send a valid move, or hover at the deadline
             raise OutOfRange(f"{d} cannot move from {here} to {pos}: one cell per turn, 6-connectivity")
         self._proposed[i], self._moved[i], self._said[i], self._ranked[i] = pos, True, code_of(note), ranked

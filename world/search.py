@@ -20,6 +20,20 @@ import numpy as np
 
 from schema import Cell
 from schema.messages import AROUND
+from schema.tables import RANK_STEPS
+
+#: A drone's moves in a turn, as steps (dx, dy, dz): staying, or one cell along an axis (6-connectivity).
+STEPS = frozenset(RANK_STEPS)
+
+
+def is_step(src: Sequence[int], dst: Sequence[int]) -> bool:
+    """Whether a drone may move from cell `src` to `dst` in a turn (`STEPS`)."""
+    return (dst[0] - src[0], dst[1] - src[1], dst[2] - src[2]) in STEPS
+
+
+def step_lengths(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """`is_step` of rows of cells ((n, 3) arrays), as the moves' lengths: a move is a step where it is at most 1."""
+    return np.abs(dst.astype(np.int64) - src).sum(axis=1)
 
 
 def padded_steps(size: Cell) -> tuple[int, int, tuple[int, ...]]:
