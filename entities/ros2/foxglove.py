@@ -123,17 +123,19 @@ class FoxScene:
         block = _buildings(self.scene.cell_size).layout(len(cells)).fill({"xyz": cells.reshape(1, -1)})
         return self._outs(0, rows_of(block))
 
-    def turn(self, snap: Snapshot, names: list[str]) -> Outs:
-        """The drones whose state and the targets that changed."""
+    def turn(self, snap: Snapshot, names: list[str], *, whole: bool = False) -> Outs:
+        """The drones whose state and the targets that changed (every drone and target if `whole`: a live viewer
+        may have subscribed since the last turn, and a hovering drone changes nothing)."""
         s, time = self.scene.cell_size, self.scene.time_of(snap.turn)
         last, self._last = self._last, snap
         if last is None or len(last.view) != len(names):
             drones = targets = np.arange(len(names))
             gone = np.zeros(0, np.int64)
         else:
-            drones = np.flatnonzero(snap.view != last.view)
-            targets = np.flatnonzero((snap.target != last.target).any(axis=1))
-            gone = targets[snap.target[targets, 0] < 0]
+            drones = np.arange(len(names)) if whole else np.flatnonzero(snap.view != last.view)
+            changed = np.flatnonzero((snap.target != last.target).any(axis=1))
+            gone = changed[snap.target[changed, 0] < 0]
+            targets = np.arange(len(names)) if whole else changed
         targets = targets[snap.target[targets, 0] >= 0]
         payloads = self._each("drone", names, drones, {"rgba": COLOURS[snap.view[drones]].astype(np.float64)}, time)
         payloads += self._each("target", names, targets, {"xyz": snap.target[targets].astype(np.float64) * s}, time)
@@ -169,6 +171,7 @@ class FoxgloveSink:
         self._channels: dict[str, foxglove.Channel] = {}
         self._logs: dict[str, Any] = {}  # topic -> its channel's log
         self.logged = 0
+        self.whole = False  # each turn's scene: what changed (a file), or every drone and target (a live server)
 
     def _log_of(self, topic: str, typename: str) -> Any:
         schema = foxglove.Schema(name=typename, encoding="ros2msg", data=msgdef(typename).encode())
@@ -198,7 +201,7 @@ class FoxgloveSink:
         self.log(outs)
         self.trails(snap.turn)
         if self.fox is not None:
-            self._write(self.fox.turn(snap, self.scene.drones()))
+            self._write(self.fox.turn(snap, self.scene.drones(), whole=self.whole))
 
     def trails(self, turn: int) -> None:
         """The scene's trails of the paths `Scene` made last."""
@@ -225,6 +228,7 @@ class FoxgloveLive(FoxgloveSink):
     def __init__(self, address: str, scene: Scene, logger: logging.Logger) -> None:
         host, port = parse_address(address)
         super().__init__(foxglove.Context(), scene)
+        self.whole = True  # a client that subscribes late sees every drone at the next turn
         self.server = foxglove.start_server(name="dronesim", host=host, port=port, context=self.context)
         self.url = f"ws://{host}:{self.server.port}"
         logger.info("Foxglove WebSocket server on %s", self.url)
