@@ -239,5 +239,6 @@ ROS_MAP_RETRY = 1.0
 MAVLINK_PERIOD = 0.25
 #: How often each vehicle sends its whole telemetry (HEARTBEAT ... BATTERY_STATUS), on top of each turn's position.
 MAVLINK_TELEMETRY_S = 0.5
-#: Datagrams read but not yet handled, at most; more are refused (a flood cannot grow the process).
-MAVLINK_QUEUE = 1024
+#: Messages read but not yet handled, at most (some 850 bytes each, decoded); more are refused (a flood cannot grow
+#: the process).
+MAVLINK_QUEUE = 4096

@@ -4,6 +4,7 @@ as the adapter reads a datagram. The real clients fly it in tests/test_mavlink_c
 
 from __future__ import annotations
 
+import logging
 import math
 import socket
 import threading
@@ -353,15 +354,45 @@ def test_the_reader_refuses_garbage_and_floods_and_keeps_reading(logger) -> None
             client.sendto(good, gcs_port)
             for _ in range(4):
                 assert rejects.seen.acquire(timeout=10)
-            reader.taken()
-            client.sendto(good, gcs_port)  # one was taken: there is room again
+            reader.taken(got[0])
+            client.sendto(good * 2, gcs_port)  # one message was taken: no room for a datagram of two
+            assert rejects.seen.acquire(timeout=10)
+            client.sendto(good, gcs_port)  # but for one
             assert arrived.acquire(timeout=10)
         finally:
             reader.stop()
             links.close()
     assert [p.origin.port for p in got] == [2, 2, 2, 0]
     assert got[0].messages[0].get_type() == "COMMAND_LONG"
-    assert rejects.snapshot() == {"mavlink-garbage": 1, "mavlink1": 1, "mavlink-flood": 2}
+    assert rejects.snapshot() == {"mavlink-garbage": 1, "mavlink1": 1, "mavlink-flood": 3}
+
+
+def test_the_readers_bound_is_in_messages_so_memory_stays_bounded_under_a_flood() -> None:
+    """A datagram of 64 KiB holds some 1,500 commands (1.2 MB decoded): the reader's bound counts the messages
+    waiting, so that however the datagrams are made, what waits for the main thread stays a few MB."""
+    from schema.tuning import MAVLINK_QUEUE
+
+    frame = arm(1).pack(CLIENT)
+    fat = frame * (65000 // len(frame))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as client:
+        client.bind(("127.0.0.1", 0))
+        links = Links(client.getsockname(), 30000, [1])
+        got: list[Packet] = []
+        rejects = RejectCounter(logging.getLogger("dronesim.tests"))
+        reader = Reader(links, got.append, rejects)  # (not started: datagrams handed to it one by one)
+        origin = Origin(0, ("127.0.0.1", 9))
+        try:
+            for _ in range(50):
+                reader._datagram(origin, fat)
+            waiting, taken = sum(len(p.messages) for p in got), len(got)
+            assert 0 < waiting <= MAVLINK_QUEUE < 50 * len(decode_datagram(fat))
+            assert rejects.snapshot() == {"mavlink-flood": 50 - taken}
+            reader.taken(got[0])  # the main thread took one: room for one more
+            reader._datagram(origin, fat)
+            assert len(got) == taken + 1
+        finally:
+            reader._selector.close()
+            links.close()
 
 
 # ---------------------------------------------------------------------------------------------- missions
@@ -448,6 +479,75 @@ def test_bad_missions_are_refused_whole_and_keep_the_mission_in_force() -> None:
     fence = wire(mav.MAVLink_mission_count_message(2, 1, 3, mav.MAV_MISSION_TYPE_FENCE))
     assert sent(b.packet(GCS, [fence]), "MISSION_ACK")[0].type == mav.MAV_MISSION_UNSUPPORTED
     assert MISSION_LIMIT < 10_000
+
+
+def test_a_mission_goes_on_from_an_item_the_drone_is_on_already() -> None:
+    """Two items on one cell, a takeoff below the drone: reached at once (MISSION_ITEM_REACHED each), the
+    mission goes on; it never waits for a target it has reached already."""
+    b = bridge()
+    v = b.vehicles[2]
+    takeoff = wire(mav.MAVLink_mission_item_int_message(2, 1, 3, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                        mav.MAV_CMD_NAV_TAKEOFF, 0, 1, 0, 0, 0, 0, 0, 0, 1.0))
+    upload(b, [item(0, (0, 2, 0)), item(1, (2, 2, 1)), item(2, (2, 2, 1)), takeoff, item(4, (3, 2, 1))])
+    b.packet(GCS, [arm(2), set_mode(2, Mode.AUTO)])
+    assert v.goal == (2, 2, 1)
+    effects = b.receive(status(1, D02=row("D02", (2, 2, 1), target=(2, 2, 1), note=Note.REACHED)), 1.0)
+    assert [m.seq for m in sent(effects, "MISSION_ITEM_REACHED")] == [1, 2, 3]
+    assert (v.current, v.goal) == (4, (3, 2, 1))
+    assert [m.seq for m in sent(effects, "MISSION_CURRENT")] == [2, 3, 4]
+
+
+def test_a_mission_of_a_thousand_items_that_cannot_be_flown_is_skipped_in_one_go() -> None:
+    """Takeoffs far above the world pass the upload (their altitude is a number) and are skipped in flight,
+    each said: a thousand of them end the mission at once (a loop: no recursion to overflow)."""
+    b = bridge()
+    v = b.vehicles[2]
+    high = [wire(mav.MAVLink_mission_item_int_message(2, 1, i, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                      mav.MAV_CMD_NAV_TAKEOFF, 0, 1, 0, 0, 0, 0, 0, 0, 500.0))
+            for i in range(1, MISSION_LIMIT)]
+    assert sent(upload(b, [item(0, (0, 2, 0)), *high]), "MISSION_ACK")[0].type == mav.MAV_MISSION_ACCEPTED
+    effects = b.packet(GCS, [arm(2), set_mode(2, Mode.AUTO)])
+    assert acks(effects) == [mav.MAV_RESULT_ACCEPTED] * 2
+    texts = [m.text for m in sent(effects, "STATUSTEXT")]
+    assert sum("skipped" in t for t in texts) == MISSION_LIMIT - 1 and "mission complete" in texts[-1]
+    assert v.current == MISSION_LIMIT and v.goal == (0, 2, 0)
+    assert v.mission_current().mission_state == mav.MISSION_STATE_COMPLETE
+
+
+def test_mission_items_in_a_local_frame_and_a_landing_at_a_position() -> None:
+    """MISSION_ITEM_INT carries local x and y in metres * 1e4; a NAV_LAND with a latitude and longitude
+    lands below them (in the relative frame QGroundControl and MAVProxy use)."""
+    b = bridge()
+    v = b.vehicles[2]
+    local = wire(mav.MAVLink_mission_item_int_message(2, 1, 1, mav.MAV_FRAME_LOCAL_NED, mav.MAV_CMD_NAV_WAYPOINT,
+                                                      0, 1, 0, 0, 0, 0, 30_000, 50_000, -2.0))
+    lat, lon, _ = GEO.wgs84((4, 1, 0))
+    land = wire(mav.MAVLink_mission_item_int_message(2, 1, 2, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                     mav.MAV_CMD_NAV_LAND, 0, 1, 0, 0, 0, 0, round(lat * 1e7),
+                                                     round(lon * 1e7), 0.0))
+    assert sent(upload(b, [item(0, (0, 2, 0)), local, land]), "MISSION_ACK")[0].type == mav.MAV_MISSION_ACCEPTED
+    b.packet(GCS, [arm(2), set_mode(2, Mode.AUTO)])
+    assert v.goal == (3, 5, 2)
+    b.receive(status(1, D02=row("D02", (3, 5, 2), target=(3, 5, 2), note=Note.REACHED)), 1.0)
+    assert v.goal == (4, 1, 0)
+    effects = b.receive(status(9, D02=row("D02", (4, 1, 0), target=(4, 1, 0), note=Note.REACHED)), 2.0)
+    assert [m.seq for m in sent(effects, "MISSION_ITEM_REACHED")] == [2] and not v.armed
+
+
+def test_a_lost_drone_and_an_unreachable_target_are_said_and_in_the_heartbeat() -> None:
+    b = bridge()
+    guided(b, 1)
+    b.packet(GCS, [local_target(1, 5, 5, -1)])
+    effects = b.receive(status(3, D01=row("D01", (1, 0, 0), target=(5, 5, 1), note=Note.UNREACHABLE)), 1.0)
+    (text,) = sent(effects, "STATUSTEXT")
+    assert "unreachable" in text.text and text.severity == mav.MAV_SEVERITY_CRITICAL
+    assert b.vehicles[1].heartbeat().system_status == mav.MAV_STATE_CRITICAL
+    effects = b.receive(status(4, D01=row("D01", (1, 0, 0), state=DroneState.LOST, cause=Cause.LOST)), 2.0)
+    (text,) = sent(effects, "STATUSTEXT")
+    assert "D01 is LOST" in text.text and text.severity == mav.MAV_SEVERITY_EMERGENCY
+    assert b.vehicles[1].heartbeat().system_status == mav.MAV_STATE_EMERGENCY
+    effects = b.packet(GCS, [arm(1, False)])
+    assert acks(effects) == [mav.MAV_RESULT_DENIED] and "lost" in sent(effects, "STATUSTEXT")[0].text
 
 
 # ---------------------------------------------------------------------------------------------- the game

@@ -6,7 +6,7 @@ an API client on UDP ``--mavlink-api-base`` + n - 1 from a socket of its own, an
 it there), pymavlink's MAVLink 2 framing, and the game's link (`station_link`). A thread reads the sockets and
 decodes each datagram on its own (a datagram of garbage never swallows the next one); its messages go to the
 main thread, which owns the bridge. What cannot be taken -- garbage, MAVLink 1 frames, a flood beyond
-`MAVLINK_QUEUE` datagrams waiting -- is refused there, counted and logged (`RejectCounter`)."""
+`MAVLINK_QUEUE` messages waiting -- is refused there, counted and logged (`RejectCounter`)."""
 
 from __future__ import annotations
 
@@ -149,7 +149,8 @@ class Links:
 
 class Reader:
     """The thread that reads every socket: each datagram decoded on its own and posted (`post`) as a `Packet`,
-    at most `limit` waiting for the main thread (`taken` frees one); the rest refused and counted."""
+    at most `limit` messages waiting for the main thread (`taken` frees a packet's); the rest refused and
+    counted. Messages, not datagrams: a datagram of 64 KiB holds up to 5,000 frames, some 4 MB decoded."""
 
     def __init__(self, links: Links, post: Callable[[object], None], rejects: RejectCounter,
                  limit: int = MAVLINK_QUEUE) -> None:
@@ -170,9 +171,9 @@ class Reader:
         self._thread.join()
         self._selector.close()
 
-    def taken(self) -> None:
+    def taken(self, packet: Packet) -> None:
         with self._lock:
-            self._waiting -= 1
+            self._waiting -= len(packet.messages)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -191,11 +192,15 @@ class Reader:
         where = f"MAVLink datagram from {origin.addr[0]}:{origin.addr[1]}"
         try:
             with self._lock:
-                if self._waiting >= self.limit:
-                    raise RemoteInputError(f"more than {self.limit} datagrams waiting", reason="mavlink-flood")
-            packet = Packet(origin, decode_datagram(data))
-            with self._lock:
-                self._waiting += 1
+                full = self._waiting >= self.limit
+            if not full:  # (a flood is refused before it costs a decode)
+                packet = Packet(origin, decode_datagram(data))
+                with self._lock:
+                    full = self._waiting + len(packet.messages) > self.limit
+                    if not full:
+                        self._waiting += len(packet.messages)
+            if full:
+                raise RemoteInputError(f"more than {self.limit} messages waiting", reason="mavlink-flood")
             self.post(packet)
         except RemoteInputError as err:
             self.rejects.reject(where, err, f"{origin.addr[0]}:{origin.addr[1]}")
@@ -265,7 +270,7 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
                 if not isinstance(event, Packet):
                     logger.error("unexpected event %r", event)
                     return
-                reader.taken()
+                reader.taken(event)
                 links.heard(event.origin)
                 if logger.isEnabledFor(logging.DEBUG):
                     for msg in event.messages:

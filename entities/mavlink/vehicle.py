@@ -185,19 +185,16 @@ class Vehicle:
         effects = self.say(mav.MAV_SEVERITY_INFO, f"{self.drone} reached {self.goal}")
         if not self.armed:
             return effects
-        flying = self.mode is Mode.AUTO and self.current < len(self.mission)
-        landing = self.mode is Mode.LAND or flying and self.mission[self.current].command == mav.MAV_CMD_NAV_LAND
-        if flying:
-            effects.append(Mav(self.system, mav.MAVLink_mission_item_reached_message(self.current)))
-            if landing:  # (the mission ends on the ground)
-                self.current = len(self.mission)
-                effects.append(Mav(self.system, self.mission_current()))
-            else:
-                effects += self._next_item(self.current + 1)
-        if landing and self._on_ground():
-            self.armed = False
-            effects += self.say(mav.MAV_SEVERITY_INFO, f"{self.drone} landed: disarmed")
-        return effects
+        if self.mode is Mode.AUTO and self.current < len(self.mission):
+            return effects + self._fly(self.current, reached=True)
+        return effects + (self._landed() if self.mode is Mode.LAND else [])
+
+    def _landed(self) -> list[Effect]:
+        """On the ground at the end of a landing: disarmed."""
+        if not self._on_ground():
+            return []
+        self.armed = False
+        return self.say(mav.MAV_SEVERITY_INFO, f"{self.drone} landed: disarmed")
 
     def over(self, text: str) -> list[Effect]:
         return self.say(mav.MAV_SEVERITY_NOTICE, f"game over: {text}")
@@ -368,13 +365,16 @@ class Vehicle:
     # ------------------------------------------------------------------ positions
 
     def position(self, frame: int, x: float, y: float, z: float, *, scaled: bool) -> Cell:
-        """The cell of a position in `frame` (latitude and longitude in degrees * 1e7 if `scaled`), checked
-        against the world (`Denied` if outside, in a building, or not a number)."""
+        """The cell of a position in `frame` (if `scaled`, as MISSION_ITEM_INT and COMMAND_INT carry it: latitude
+        and longitude in degrees * 1e7, local x and y in metres * 1e4), checked against the world (`Denied` if
+        outside, in a building, or not a number)."""
         try:
             if frame in AMSL_FRAMES | RELATIVE_FRAMES:
                 lat, lon = (x / 1e7, y / 1e7) if scaled else (x, y)
                 alt = z + (self.geo.amsl(self.home[2]) if frame in RELATIVE_FRAMES else 0.0)
                 cell = self.geo.cell_of_wgs84(lat, lon, alt)
+            elif scaled:
+                return self.position(frame, x / 1e4, y / 1e4, z, scaled=False)
             elif frame == mav.MAV_FRAME_LOCAL_NED:
                 cell = self.geo.cell_of_ned(x, y, z)
             elif frame in OFFSET_FRAMES:  # (the drone's yaw is 0: its body frame is NED)
@@ -417,6 +417,9 @@ class Vehicle:
         self._require_armed()
         local = msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
         frame = msg.coordinate_frame
+        if not local and frame not in AMSL_FRAMES | RELATIVE_FRAMES:
+            raise Denied(f"SET_POSITION_TARGET_GLOBAL_INT in frame {frame}: a global frame only",
+                         mav.MAV_RESULT_UNSUPPORTED)
         x, y, z = (msg.x, msg.y, msg.z) if local else (msg.lat_int, msg.lon_int, msg.alt)
         if mask:  # the axes left out keep the drone's
             if local and frame == mav.MAV_FRAME_LOCAL_NED:
@@ -534,29 +537,62 @@ class Vehicle:
 
     def _next_item(self, seq: int) -> list[Effect]:
         """Fly item `seq` (AUTO): its goal, MISSION_CURRENT; past the last item, hold."""
-        self.current = seq
-        effects: list[Effect] = [Mav(self.system, self.mission_current())]
-        if seq >= len(self.mission):
-            return effects + self.say(mav.MAV_SEVERITY_INFO, f"{self.drone}: mission complete") + self._aim(self.pos)
-        it = self.mission[seq]
+        return self._fly(seq)
+
+    def _fly(self, seq: int, *, reached: bool = False) -> list[Effect]:
+        """AUTO from item `seq` on (`reached`: item `seq` has just been reached): MISSION_ITEM_REACHED for what
+        is reached, MISSION_CURRENT for the item flown next and its goal. An item that cannot be flown is skipped
+        (said in a STATUSTEXT); one whose cell the drone has reached already (the same cell as the item before,
+        a takeoff below the drone) is reached at once; a NAV_LAND reached ends the mission. A loop, not a
+        recursion: a mission of `MISSION_LIMIT` such items is one call."""
+        effects: list[Effect] = []
+        while True:
+            if reached:
+                effects.append(Mav(self.system, mav.MAVLink_mission_item_reached_message(seq)))
+                if self.mission[seq].command == mav.MAV_CMD_NAV_LAND:  # (the mission ends on the ground)
+                    self.current = len(self.mission)
+                    return [*effects, Mav(self.system, self.mission_current()), *self._landed()]
+                seq, reached = seq + 1, False
+            self.current = seq
+            effects.append(Mav(self.system, self.mission_current()))
+            if seq >= len(self.mission):
+                return effects + self.say(mav.MAV_SEVERITY_INFO, f"{self.drone}: mission complete") + \
+                    self._aim(self.pos)
+            try:
+                cell = self._item_cell(self.mission[seq])
+            except (Denied, BadPosition) as err:
+                effects += self.say(mav.MAV_SEVERITY_WARNING, f"{self.drone}: item {seq} skipped: {err}")
+                seq += 1
+                continue
+            if cell == self.goal and self._reported == (cell, Note.REACHED):  # there already
+                effects += self.say(mav.MAV_SEVERITY_INFO, f"{self.drone} reached {cell}")
+                reached = True
+                continue
+            return effects + self._aim(cell)
+
+    def _item_cell(self, it: Item) -> Cell:
+        """Where a mission item flies the drone from its cell."""
         x, y, z = self.pos
-        try:
-            match it.command:
-                case mav.MAV_CMD_NAV_WAYPOINT:
-                    cell = self.position(it.frame, it.x, it.y, it.z, scaled=True)
-                case mav.MAV_CMD_NAV_TAKEOFF:
-                    floor = self.geo.floor_of(self.geo.amsl(self.home[2]) + it.z)
-                    cell = self._checked((x, y, max(z, floor)))
-                case mav.MAV_CMD_NAV_LAND:
-                    there = (x, y, z) if it.x == 0 and it.y == 0 else \
-                        self.position(it.frame, it.x, it.y, self.geo.amsl(z), scaled=True)
-                    cell = self._ground_below(self._checked((there[0], there[1], z)))
-                case _:
-                    cell = self.home
-        except (Denied, BadPosition) as err:
-            return effects + self.say(mav.MAV_SEVERITY_WARNING, f"{self.drone}: item {seq} skipped: {err}") + \
-                self._next_item(seq + 1)
-        return effects + self._aim(cell)
+        match it.command:
+            case mav.MAV_CMD_NAV_WAYPOINT:
+                return self.position(it.frame, it.x, it.y, it.z, scaled=True)
+            case mav.MAV_CMD_NAV_TAKEOFF:
+                floor = self.geo.floor_of(self.geo.amsl(self.home[2]) + it.z)
+                return self._checked((x, y, max(z, floor)))
+            case mav.MAV_CMD_NAV_LAND:  # (below its latitude and longitude if given, else below the drone)
+                there = self.pos if it.x == 0 and it.y == 0 else \
+                    self.position(it.frame, it.x, it.y, self._altitude_here(it.frame), scaled=True)
+                return self._ground_below(there)
+        return self.home
+
+    def _altitude_here(self, frame: int) -> float:
+        """The drone's altitude as a position in `frame` gives it (metres)."""
+        z = self.pos[2]
+        if frame in AMSL_FRAMES:
+            return self.geo.amsl(z)
+        if frame in RELATIVE_FRAMES:
+            return (z - self.home[2]) * self.geo.cell_size
+        return -z * self.geo.cell_size if frame == mav.MAV_FRAME_LOCAL_NED else 0.0
 
     # ------------------------------------------------------------------ telemetry
 
