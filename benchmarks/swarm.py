@@ -582,12 +582,13 @@ def anchor_compare(families: list[str], agents: tuple[int, ...], seeds: int, sec
                 ours = {v: play(inst, v) for v in variants}
                 g = inst.grid[:, :, 0]
                 rows = [[int(g[x, y]) for x in range(g.shape[0])] for y in range(g.shape[1])]
-                try:
-                    theirs: anchor.Result | None = anchor.solve(
-                        [(rows, [s[:2] for s in inst.starts], [t[:2] for t in inst.goals])], seconds)[0]
+                theirs: anchor.Result | None = None
+                try:  # (--anchor-seconds 0: ours alone, as the anchor's figures are in an earlier run)
+                    if seconds > 0:
+                        theirs = anchor.solve([(rows, [s[:2] for s in inst.starts], [t[:2] for t in inst.goals])],
+                                              seconds)[0]
                 except anchor.Unavailable as err:
                     print(f"anchor not measured: {err}", file=sys.stderr)
-                    theirs = None
                 done.append((ours, theirs))
                 first = ours[variants[0]]
                 row: list[object] = [family, n, seed, first.soc_lb, first.makespan_lb]
@@ -681,7 +682,8 @@ def main(argv: list[str] | None = None) -> int:
                              "LaCAM-class anchor (pymapf, in its own environment) on the densest instances "
                              f"({'/'.join(map(str, ANCHOR_AGENTS))} agents) of every family, seeds 1-{ANCHOR_SEEDS} "
                              "(--agents, --seeds, --families narrow it)")
-    parser.add_argument("--anchor-seconds", type=float, default=ANCHOR_SECONDS, help="the anchor's time an instance")
+    parser.add_argument("--anchor-seconds", type=float, default=ANCHOR_SECONDS,
+                        help="the anchor's time an instance (0: not run)")
     parser.add_argument("--search-alone", action="store_true",
                         help="only the complete arbitration's search on its own: ms a turn of its budget at 400 "
                              "drones on the densest families and 1000 drones in the 64x64x8 city")

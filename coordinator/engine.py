@@ -343,7 +343,15 @@ class Engine:
         self.fleet.fly(list(range(len(self.fleet))), host, autopilot, False)
         if len(cooperative):
             self.fleet.learn(list(cooperative), autopilot, True)
+        self._prepare()
         self._open_gcs(1)
+
+    def _prepare(self) -> None:
+        """The game starts: the arbitration makes what it needs of the static world before the turns (lacam.Lacam's
+        graph and distance tables: outside the turns' budget, and the same decisions whenever they are made)."""
+        prepare = getattr(self.arbiter, "prepare", None)
+        if prepare is not None:
+            prepare(self.size, self.open_cells())
 
     def header(self) -> dict:
         """The journal's first record: what identifies the game (see resume.py). Without a journal it leaves
@@ -354,6 +362,7 @@ class Engine:
 
     def _start(self) -> list[Effect]:
         """Everyone is there: the game starts (its header opens the journal), or a resumed one goes on."""
+        self._prepare()
         if self.stage is Stage.RESUMING:
             self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
             return [Publish(self.status()), *self._gcs_phase(self.turn + 1)]

@@ -11,8 +11,10 @@ and the clear operation (Okumura, IJCAI 2023) are PIBT's own here (`arbiter.pibt
 pushed drone's cells are ordered (`arbiter.candidates`).
 
 Online, in the manner of Real-Time LaCAM (Liang et al., 2025): the search tree persists from turn to turn; each
-turn spends a budget of *work units* (a PIBT call costs a unit per drone, a distance table one per open cell:
-never wall-clock time, so that every layout, replay and resume does the same work) and the drones then take one
+turn spends a budget of *work units* (a PIBT call costs a unit per drone and `CALL`, a distance table made in the
+turns one a level and one per `CELLS_A_UNIT` open cells: never wall-clock time, so that every layout, replay and
+resume does the same work; a call or table begun only if it fits, so the longest turn is bounded; the tables of a
+small world made at the game's start, `Lacam.prepare`) and the drones then take one
 step along the tree from the node they are at towards the goal node if found, else towards the top of the
 search's stack (a step up the tree is a move back: every transition is reversible). The search is complete
 whatever the drones do meanwhile, and once it has found the goal the drones walk to it: every drone home.
@@ -25,13 +27,15 @@ step is not offered (a drone that missed its deadline offers only its own cell),
 (`arbiter.cooperate`) and the search starts again from where the drones are.
 
 The search runs where it is affordable: at once (new targets, a new search), once the drones' distance tables (a BFS
-from each target over the static world) are made, and never where the tables would exceed `LIMIT` entries (the
-256 x 256 x 32 city: plain PIBT). Until the tables are made, PIBT plays. A search that has not brought a new high of
-drones onto their targets for `STALL` turns (twice as many each time one is so left) hands the turns back to PIBT
-until PIBT stalls as long, then a new search starts from where the drones are: the search's steps follow its depth
-first frontier, back up the tree too, which in a dense endgame undoes more than PIBT's greedy steps; PIBT's turns
-know no map (the drones rank their cells by what they have learned), the search's distances are the static
-world's. The patience doubling, some search eventually runs as long as it needs: the whole stays complete.
+from each target over the static world) are made (at the game's start where every cell's fits in `PRECOMPUTE`), and
+never where the tables would exceed `LIMIT` entries (the 256 x 256 x 32 city: plain PIBT). Until the tables are
+made, PIBT plays. A search that has not brought a new high of drones onto their targets for `STALL` turns (twice as
+many each time one is so left) hands the turns back to PIBT until PIBT stalls as long, then a new search starts from
+where the drones are: the search's steps follow its depth first frontier, back up the tree too, which in a dense
+endgame undoes more than PIBT's greedy steps; PIBT's turns know no map (the drones rank their cells by what they
+have learned), the search's distances are the static world's. The patience doubling, some search eventually runs as
+long as it needs: the whole stays complete, for the instances whose search fits in `MEMORY` entries (a search that
+fills it hands back as one without progress does, and never says an instance unsolvable).
 """
 
 from __future__ import annotations
@@ -48,18 +52,29 @@ from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat
 
 __all__ = ["Lacam", "Search", "Graph"]
 
-#: Work units a turn (a PIBT call costs one per drone and CALL, a distance table one per CELLS_A_UNIT open cells):
-#: 20 ms or less a turn at 400 drones, 100 at 1000, on the benchmark's densest instances (docs/cooperation.md).
-WORK = 1200
 #: A PIBT call's fixed cost (its arrays, whatever the number of drones), in units.
 CALL = 30
-#: A breadth-first search spends about an 8th of the time per cell that a PIBT call spends per drone.
-CELLS_A_UNIT = 8
+#: The search's work units a turn (a PIBT call costs one a drone and CALL; a distance table one a level of its
+#: breadth-first search and one per CELLS_A_UNIT open cells): three PIBT calls at 400 drones. A turn is that work, or
+#: that of the tables, and at most one more PIBT call (the turn's own when the search does not play it), never more:
+#: the search's calls and tables are only started within the budget (the first of a turn excepted: one call at least,
+#: the drones never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md, "Cost
+#: of a turn": 20 ms or less at 400 drones, 100 at 1000, on the benchmark's densest instances).
+WORK = 3 * (400 + CALL)
+#: A breadth-first search's level costs about a unit (the arrays of its frontier); its cells about a 32nd each.
+CELLS_A_UNIT = 32
+#: Every open cell's distance table is made at the game's start (`Lacam.prepare`) where they hold this many entries
+#: or fewer (open cells squared, int16: 8 MiB; every 32 x 32 map); elsewhere the tables are made in the turns' budget.
+PRECOMPUTE = 1 << 22
 #: Distance-table entries (drones x open cells) beyond which the search never runs (int16 entries: 64 MiB).
 LIMIT = 1 << 25
 #: Turns without a new high of drones on their targets after which a search hands back to PIBT (the first time; twice
 #: as many each later time), and after which PIBT hands over to a new search.
 STALL = 32
+#: The entries a search may hold (a configuration's cells, priorities and order: 3 a drone; a queued constraint: 2 a
+#: drone it pins): 2^21, about 50 MB. A search that reaches it stops and hands the turns back to PIBT as one without
+#: progress does (docs/cooperation.md, "Memory"): complete only for the instances whose search fits in it.
+MEMORY = 1 << 21
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
 #: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
@@ -86,12 +101,39 @@ class Graph:
                 for reached in levels(bits, [int(self.cells[root])], steps):
                     self.part[self.index[reached]] = root
 
-    def distances(self, goal: int) -> np.ndarray:
-        """Each open cell's distance to open cell `goal` (numbered), FAR where none: a breadth-first search."""
+    def distances(self, goal: int) -> tuple[np.ndarray, int]:
+        """Each open cell's distance to open cell `goal` (numbered), FAR where none (a breadth-first search), and its
+        work units (`CELLS_A_UNIT`)."""
         dist = np.full(len(self.cells), FAR, np.int16)
-        for d, reached in enumerate(levels(self.index >= 0, [int(self.cells[goal])], self._steps)):
-            dist[self.index[reached]] = min(d, FAR - 1)
-        return dist
+        depth = 0
+        for depth, reached in enumerate(levels(self.index >= 0, [int(self.cells[goal])], self._steps)):
+            dist[self.index[reached]] = min(depth, FAR - 1)
+        return dist, depth + 1 + len(self.cells) // CELLS_A_UNIT
+
+    def every_distance(self) -> np.ndarray:
+        """Every open cell's distance to every open cell ((F, F), row: the goal; FAR where none): the breadth-first
+        searches from every cell at once, bit-parallel (64 goals a word of each cell's frontier), a level at a time."""
+        n, words = len(self.cells), (len(self.cells) + 63) // 64
+        dist = np.full((n, n), FAR, np.int16)
+        goals = np.arange(n)
+        front = np.zeros((n + 1, words), np.uint64)  # (row n: no neighbour, always empty)
+        front[goals, goals // 64] = np.left_shift(np.uint64(1), (goals % 64).astype(np.uint64))
+        seen = front[:n].copy()
+        near = np.where(self.near >= 0, self.near, n)
+        dist[goals, goals] = 0
+        depth = 0
+        while True:
+            nxt = np.bitwise_or.reduce(front[near], axis=1) & ~seen
+            cells, word = np.nonzero(nxt)
+            if not len(cells):
+                return dist
+            depth += 1
+            seen |= nxt
+            front[:n] = nxt
+            bits = np.unpackbits(nxt[cells, word].astype("<u8").view(np.uint8).reshape(-1, 8), axis=1,
+                                 bitorder="little")
+            k, bit = np.nonzero(bits)
+            dist[word[k] * 64 + bit, cells[k]] = min(depth, FAR - 1)
 
 
 class Node:
@@ -132,10 +174,10 @@ class Search:
     `step` gives the drones' next configuration from the node they are at (`at`)."""
 
     def __init__(self, graph: Graph, size: Cell, start: np.ndarray, goals: np.ndarray, aims: np.ndarray,
-                 dist: np.ndarray) -> None:
+                 dist: np.ndarray, memory: int = MEMORY) -> None:
         """`aims`: the drones' real targets (flat, -1 for none: PIBT's swap and retreats read them); `dist`: each
-        drone's distance table ((n, F), to its goal)."""
-        self.graph, self.size, self.goals, self.dist = graph, size, goals, dist
+        drone's distance table ((n, F), to its goal); `memory`: the entries it may hold (`MEMORY`)."""
+        self.graph, self.size, self.goals, self.dist, self.memory = graph, size, goals, dist, memory
         self.aims = aims.tolist()
         n = len(start)
         self.rows = np.arange(n)
@@ -149,6 +191,7 @@ class Search:
         self.open: list[Node] = [root]
         self.found: Node | None = root if start.tobytes() == self.at_goal else None
         self.expansions = 0
+        self.held = 3 * n  # the entries it holds (`MEMORY`): the root's
         self.gave: list[int] = []  # the drones that gave way in the last successor (`arbiter.pibt`)
         shape = (size[0] + 2, size[1] + 2, size[2] + 2)
         self.steps = list(padded_steps(size)[2])
@@ -158,22 +201,31 @@ class Search:
 
     @property
     def unsolvable(self) -> bool:
-        """The search is over and found no way: no configuration sequence brings every drone home."""
-        return self.found is None and not self.open
+        """The search is over and found no way: no configuration sequence brings every drone home (never said by a
+        search that reached its memory: it stops there, `full`)."""
+        return self.found is None and not self.open and not self.full
+
+    @property
+    def full(self) -> bool:
+        """The search holds its `memory`'s entries: it expands no more."""
+        return self.held >= self.memory
 
     def expand(self, work: int, open_: OpenCells) -> int:
-        """Spend up to `work` units (at least one PIBT call, unless the search is over); the units spent."""
+        """Spend `work` units at most (but one PIBT call at least, unless the search is over): a call is made only
+        if its units fit in what is left; the units spent."""
         spent, n = 0, len(self.goals)
-        while self.found is None and self.open and (spent < work or not spent):
+        while self.found is None and self.open and not self.full and (spent + n + CALL <= work or not spent):
             node = self.open[-1]
             if not node.tree:
                 self.open.pop()
                 continue
             who, where = node.tree.popleft()
+            self.held -= 2 * len(who)
             if len(who) < n:  # the next drone in the node's order gets each of its cells in turn, nearest first
                 i = int(node.order[len(who)])
                 for v in self._moves(node.cfg[i], i):
                     node.tree.append((who + (i,), where + (v,)))
+                    self.held += 2 * len(who) + 2
             spent += n + CALL
             self.expansions += 1
             nxt = self._successor(node, who, where, open_)
@@ -192,6 +244,7 @@ class Search:
             child = Node(nxt, node, prio, self.created)
             node.near.append(child)
             self.created += 1
+            self.held += 3 * n
             self.explored[key] = child
             self.open.append(child)
             if key == self.at_goal:
@@ -269,11 +322,13 @@ class Lacam:
 
     complete = True
 
-    def __init__(self, work: int = WORK, limit: int = LIMIT, stall: int = STALL) -> None:
-        self.work, self.limit, self.stall = work, limit, stall
+    def __init__(self, work: int = WORK, limit: int = LIMIT, stall: int = STALL, memory: int = MEMORY) -> None:
+        self.work, self.limit, self.stall, self.memory = work, limit, stall, memory
         self._graph: Graph | None = None
         self._of: OpenCells | None = None
         self._tables: dict[int, np.ndarray] = {}  # goal (numbered open cell) -> its distance table
+        self._table_units = 0  # the units of the costliest table made so far (in this world)
+        self._every: np.ndarray | None = None  # every open cell's table (`PRECOMPUTE`), made by `prepare`
         self._search: Search | None = None
         self._key = b""  # the targets and cooperative drones the record and the search are for
         self._best, self._since = -1, 0  # most drones on their targets at once, and turns since
@@ -281,6 +336,7 @@ class Lacam:
         self._handed = False  # a search handed back (for these targets): the next starts once PIBT stalls
         self.unsolvable = False
         self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
+        self.full = 0  # searches stopped at their memory (`MEMORY`)
 
     def __call__(self, size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray,
                  cooperative: np.ndarray, priority: np.ndarray, targets: np.ndarray, open_: OpenCells | None = None,
@@ -307,8 +363,7 @@ class Lacam:
         if open_ is None or not n or not cooperative.all():
             self._search, self._key = None, b""  # a non-cooperative drone's move is its own: PIBT
             return None
-        if open_ is not self._of:
-            self._graph, self._of, self._tables = None, open_, {}
+        self.prepare(size, open_)
         here = flat_cells(before, size)
         aims = np.where(targets[:, 0] >= 0, flat_cells(targets, size), -1)
         key = aims.tobytes()
@@ -320,54 +375,72 @@ class Lacam:
             search = self._search = None
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
-        if search is not None and search.found is None and self._since >= self._patience:
-            search = self._search = None  # no progress for long: PIBT's turns, until PIBT stalls as long
+        if search is not None and search.found is None and (self._since >= self._patience or search.full):
+            # no progress for long, or its memory full: PIBT's turns, until PIBT stalls as long
+            self.full += search.full
+            search = self._search = None
             self._patience, self._handed, self._since = 2 * self._patience, True, 0
         if search is None:
             if home == n:
                 return None  # every drone home: nothing to search
             if n * int(open_.count()) > self.limit or (self._handed and self._since < self.stall):
                 return None
-            search, spent = self._start(size, here, aims)
+            search = self._start(size, here, aims)
             if search is None:
-                return None
+                return None  # (its graph or tables made this turn: PIBT's turn)
             self._since = 0  # (its patience counts from its start)
-        else:
-            spent = 0
         self.expansions -= search.expansions
-        search.expand(self.work - spent, open_)  # (at least one PIBT call: the drones never wait for the search)
+        search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search)
         self.expansions += search.expansions
         if search.unsolvable:
             self.unsolvable = True
         return search.step()
 
-    def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> tuple[Search | None, int]:
-        """A search from `here` once every drone's distance table is made (a turn's work at most on them: None
-        until then). A drone whose target is none, a building or cut off from it by the static world has its
-        cell as its goal (it must be able to come back there). The work spent on the tables with it."""
-        if self._graph is None:  # (a turn's work of its own)
-            self._graph = Graph(self._of, size)  # type: ignore[arg-type]
-            return None, 0
+    def prepare(self, size: Cell, open_: OpenCells) -> None:
+        """The game starts in the world of `open_`: its graph, and every open cell's distance table where they hold
+        `PRECOMPUTE` entries or fewer, made now, before the turns (the engine calls it as the game starts). A
+        function of the world alone: where nobody called it (a replay, a resumed game), `follow`'s first call in the
+        world does, and the search takes the same decisions."""
+        if open_ is self._of:
+            return
+        self._of, self._tables, self._table_units = open_, {}, 0
+        self._graph = g = Graph(open_, size)
+        self._every = g.every_distance() if len(g.cells) ** 2 <= PRECOMPUTE else None
+
+    def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | None:
+        """A search from `here` once every drone's distance table is made, None until then: made at the game's start
+        (`prepare`) in a small world, else in turns of `work` units (one at least a turn; another only if the
+        costliest so far fits in what is left), the search starting on the turn after the last. A drone whose
+        target is none, a building or cut off from it by the static world has its cell as its goal (it must be able
+        to come back there)."""
         g = self._graph
+        assert g is not None  # (`prepare`)
         hc = g.index[here]
         ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
         way = (ac >= 0) & (hc >= 0)
         way[way] = g.part[ac[way]] == g.part[hc[way]]
         if (hc < 0).any():
-            return None, 0  # a drone in a building or outside (it is dying): PIBT
+            return None  # a drone in a building or outside (it is dying): PIBT
         goal_c = np.where(way, ac, hc)
+        if self._every is not None:
+            self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), self._every[goal_c],
+                                  self.memory)
+            return self._search
         spent = 0
         for c in dict.fromkeys(goal_c.tolist()):
             if c not in self._tables:
-                if spent >= self.work:
-                    return None, spent
-                self._tables[c] = g.distances(c)
-                spent += len(g.cells) // CELLS_A_UNIT + 1
+                if spent and spent + self._table_units > self.work:
+                    return None
+                self._tables[c], units = g.distances(c)
+                self._table_units = max(self._table_units, units)
+                spent += units
+        if spent:
+            return None  # (the search starts next turn: this one's work went on the tables)
         if len(self._tables) > 4 * len(here):  # (new targets keep coming: keep the tables in use)
             self._tables = {c: self._tables[c] for c in dict.fromkeys(goal_c.tolist())}
         dist = np.stack([self._tables[c] for c in goal_c.tolist()])
-        self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), dist)
-        return self._search, spent
+        self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), dist, self.memory)
+        return self._search
 
     @property
     def busy(self) -> bool:
@@ -379,5 +452,6 @@ class Lacam:
     def state(self) -> dict[str, Any]:
         """A summary of the search (for logs and tests): nodes, PIBT calls, found, unsolvable."""
         s = self._search
-        return {"nodes": 0 if s is None else len(s.explored), "expansions": self.expansions,
+        return {"nodes": 0 if s is None else len(s.explored), "held": 0 if s is None else s.held,
+                "expansions": self.expansions, "full": self.full,
                 "found": s is not None and s.found is not None, "unsolvable": self.unsolvable}

@@ -121,14 +121,16 @@ CASES = {
     "episode of 80 drones, finish": lambda: _episode(80, "finish", (12, 12, 3), 4),
 }
 
-#: Each case's sha256 (its first 16 hex digits), taken before the turn had one home (issue 34).
+#: Each case's sha256 (its first 16 hex digits), taken before the turn had one home (issue 34); the four games the
+#: search plays taken again when it got its distance tables at the game's start and its budget a turn became a bound
+#: (issue 37: a deliberate change of its rules).
 GOLDEN = {
-    '70 cooperative drones crossing': 'f8c1b1f6963af56b',
+    '70 cooperative drones crossing': '5dc81c958e0aa6e9',
     '80 mixed drones crossing': '86e930ffb9ebeb7d',
     '80 uncooperative drones crossing': '1bd38dda70edb9e6',
-    'a few drones that miss turns and vanish': '4a27a9c5e68ef776',
-    'a lifelong game of D* drones': 'f0ae6374142a56d1',
-    'a lifelong game of LRTA* drones': '41bf3430cbbbe543',
+    'a few drones that miss turns and vanish': '9550184d691084ed',
+    'a lifelong game of D* drones': 'd6495fd895e2a5a4',
+    'a lifelong game of LRTA* drones': '4ffa1365a8d5e569',
     'episode of 1 drone, finish': '2c9f0e5a77438c95',
     "episode of 16 drones by the engine's arrays, stay": '74c8b2973c16ae93',
     'episode of 16 drones, stay': '74c8b2973c16ae93',

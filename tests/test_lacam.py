@@ -79,7 +79,7 @@ def test_a_door_between_two_rooms() -> None:
     rows, drones = DOOR
     result = play(world_of(rows), drones)
     assert result.over.reason is EndReason.ALL_REACHED, result.over.text
-    # (PIBT plays the two turns in which the search's graph and root are made)
+    # (the search's way may be a turn or two longer than PIBT's where PIBT finds one)
     assert result.over.turn <= play(world_of(rows), drones, using="pibt").over.turn + 2
 
 
@@ -129,6 +129,63 @@ def test_a_search_without_progress_hands_back_to_pibt_and_comes_back_with_more_p
     pauses = [len(p) for p in "".join("s" if s else "." for s in searching).strip(".").split("s") if p]
     assert len(runs) >= 3 and runs[-1] > runs[0], runs  # handed back, and came back with more patience
     assert all(p == 2 for p in pauses[1:]), pauses  # each time PIBT held still for `stall` turns (after the tables)
+
+
+def _swap(rows: list[str], search: lacam.Lacam, turns: int = 60) -> np.ndarray:
+    """The two drones at the ends of the last row swap them under `search` (each turn's plan taken, or PIBT's
+    turn: the drones hold still); their cells at the end."""
+    grid = world_of(rows)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    y = len(rows) - 1
+    cells = np.array([(0, y, 0), (len(rows[-1]) - 1, y, 0)], np.int32)
+    targets, open_ = cells[::-1].copy(), OpenCells(grid)
+    for turn in range(1, turns):
+        plan = search.follow(size, cells, np.ones(2, bool), targets, open_, turn)
+        if plan is not None:
+            cells = np.array([[int(v) for v in c] for c in cells_of(plan, size)], np.int32)
+        if search.unsolvable or (cells == targets).all():
+            break
+    return cells
+
+
+def test_a_search_that_fills_its_memory_hands_back_and_never_claims_a_proof() -> None:
+    """A search holds `memory` entries at most (its configurations and queued constraints): one that reaches it
+    stops, the turns go back to PIBT (`full` counts it), and it never says the instance is unsolvable; with the
+    memory the proof needs, the same closed corridor is proved unsolvable."""
+    small = lacam.Lacam(stall=2, memory=40)
+    _swap(["....."], small)
+    assert small.full >= 1 and not small.unsolvable
+    assert small._search is None or small._search.held <= 40 + 3 * 2 + 7 * 2 * 2  # (one expansion past it at most)
+    enough = lacam.Lacam(stall=2)
+    _swap(["....."], enough)
+    assert enough.unsolvable and enough.full == 0
+    solved = lacam.Lacam(memory=1 << 10)  # (the bay: found well within it)
+    assert (_swap(["..#..", "....."], solved) == np.array([(4, 1, 0), (0, 1, 0)])).all()
+
+
+def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; where the distance
+    tables are not made at the game's start (a world too big: here made so), a turn makes those its units hold
+    (one at least) and the search starts the turn after the last, PIBT playing meanwhile."""
+    rows, drones = DOOR
+    grid = world_of(rows)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    n = len(drones)
+    cells = np.array([s for s, _ in drones.values()], np.int32)
+    targets = np.array([t for _, t in drones.values()], np.int32)
+    coop, open_ = np.ones(n, bool), OpenCells(grid)
+    for work in (1, 2 * (n + lacam.CALL), 2 * (n + lacam.CALL) + n + lacam.CALL - 1):
+        search = lacam.Lacam(work=work)
+        for turn in range(1, 6):
+            before = search.expansions
+            assert search.follow(size, cells, coop, targets, open_, turn) is not None  # (the tables made before)
+            assert search.expansions - before == max(1, work // (n + lacam.CALL)) or search.state()["found"]
+    monkeypatch.setattr(lacam, "PRECOMPUTE", 0)
+    search = lacam.Lacam(work=1)
+    made = []
+    while search.follow(size, cells, coop, targets, open_, len(made)) is None:
+        made.append(len(search._tables))
+    assert made == list(range(1, len({tuple(t) for t in targets.tolist()}) + 1))  # (a table a turn, then the search)
 
 
 def test_same_journal_in_every_layout_and_run() -> None:
