@@ -851,9 +851,9 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
     journal = tmp_path / "game.journal"
     with embedded_router() as locator, Cluster(locator, tmp_path, log_level="INFO") as c:
         viewer = c.start("ROS2", "ros2", "--foxglove", "127.0.0.1:0")
-        url = viewer.expect(r"foxglove on ws://").rsplit(" ", 1)[1]
         two_drone_game(c, journal, 400, 0.05)  # (20 s: a loaded machine's viewer publishes a turn in seconds)
         c.start("GCS", "gcs", "--ros2", "--quiet", "--no-draw")  # (no target: the drones hover to the turn limit)
+        url = viewer.expect(r"foxglove on ws://").rsplit(" ", 1)[1]  # (the server opens at the first turn)
         with pytest.raises(InvalidStatus):
             ws.connect(url, subprotocols=["foxglove.websocket.v1"], open_timeout=10).close()
         got: dict[str, list] = {}
@@ -864,7 +864,7 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
             want = {"/dronesim/D01/pose", "/tf", "/dronesim/scene", "/dronesim/markers"}
             deadline = time.monotonic() + 60
             while time.monotonic() < deadline and not (len(got.get("/dronesim/D01/pose", ())) > 5 and "/tf" in got
-                                                       and {"drone/D01", "drone/D02"} <= scene_ids(got)):
+                                                       and {"buildings", "drone/D01", "drone/D02"} <= scene_ids(got)):
                 try:
                     frame = conn.recv(timeout=5)
                 except TimeoutError:
@@ -895,7 +895,7 @@ def test_foxglove_live_channels_over_websocket(tmp_path: Path) -> None:
         p = msg.pose.position
         assert (p.x, p.y, p.z) == cells[round(log_time / 1e8)]["D01"]
     assert [t.child_frame_id for t in got["/tf"][-1][1].transforms] == ["D01", "D02"]
-    assert {"drone/D01", "drone/D02"} <= scene_ids(got)
+    assert {"buildings", "drone/D01", "drone/D02"} <= scene_ids(got)
 
 
 def scene_ids(got: dict[str, list]) -> set[str]:

@@ -2,8 +2,8 @@
 the ROS 2 topics of `entities.ros2.model.Scene` and a Foxglove scene on ``/<namespace>/scene``, every channel a
 ``ros2msg`` schema with CDR payloads. The scene is ``foxglove_msgs/msg/SceneUpdate`` (Foxglove's scene as ROS 2
 messages, `entities.ros2.foxglove_msgs`): the buildings as cubes, each drone a sphere in its own frame (moved by
-``/tf``; sent again only when its state changes), each target a cube, each trail a line strip (its last
-`SCENE_TRAIL` cells). An MCAP file of it is a ROS 2 bag as well (rosbags reads no protobuf schema).
+``/tf``; in a file sent again only when its state changes, live every turn), each target a cube, each trail a line
+strip (its last `SCENE_TRAIL` cells). An MCAP file of it is a ROS 2 bag as well (rosbags reads no protobuf schema).
 
 A swarm's scene is made as its topics are: a layout per kind of entity and length of drone name (`cdr.Layout`,
 the name a string field), filled for every drone that changed at once; a message per drone.
@@ -13,14 +13,28 @@ from __future__ import annotations
 
 import functools
 import logging
-from collections.abc import Mapping
+import threading
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import foxglove
 import numpy as np
+from foxglove.websocket import ChannelView, Client, ServerListener
 
 from .cdr import Layout, Repeated, make, msgdef, serialize
-from .model import BUILDING_COLOUR, COLOURS, FRAME, TARGET_COLOUR, Outs, Scene, Snapshot, drone_topic, rows_of
+from .model import (
+    BUILDING_COLOUR,
+    COLOURS,
+    FRAME,
+    MARKERS,
+    PATH,
+    TARGET_COLOUR,
+    Outs,
+    Scene,
+    Snapshot,
+    drone_topic,
+    rows_of,
+)
 
 SCENE = "foxglove_msgs/msg/SceneUpdate"
 _ENTITY, _TIME = "foxglove_msgs/msg/SceneEntity", "builtin_interfaces/msg/Time"
@@ -222,16 +236,56 @@ def parse_address(text: str) -> tuple[str, int]:
     return host or "127.0.0.1", number
 
 
-class FoxgloveLive(FoxgloveSink):
-    """A live Foxglove WebSocket server of the game (`address`: ``[HOST:]PORT``)."""
+class FoxgloveLive(FoxgloveSink, ServerListener):
+    """A live Foxglove WebSocket server of the game (`address`: ``[HOST:]PORT``), opened at the game's first turn with
+    a channel for every topic of the game made before it opens: foxglove-sdk (0.30.3) advertises a channel made
+    while a client is connected before it can take that client's subscription to it, which it then refuses
+    ("Unknown channel ID", the topic lost for that client). The buildings, logged once, are logged again at the
+    turn after a client subscribes to the scene or the markers; every turn's scene holds every drone and target.
+    `opened` is called with the server's URL."""
 
-    def __init__(self, address: str, scene: Scene, logger: logging.Logger) -> None:
-        host, port = parse_address(address)
+    def __init__(self, address: str, scene: Scene, logger: logging.Logger, *,
+                 opened: Callable[[str], None] = lambda url: None) -> None:
+        self.host, self.port = parse_address(address)
         super().__init__(foxglove.Context(), scene)
         self.whole = True  # a client that subscribes late sees every drone at the next turn
-        self.server = foxglove.start_server(name="dronesim", host=host, port=port, context=self.context)
-        self.url = f"ws://{host}:{self.server.port}"
-        logger.info("Foxglove WebSocket server on %s", self.url)
+        self.server: foxglove.WebSocketServer | None = None
+        self.url: str | None = None
+        self._logger, self._opened = logger, opened
+        self._world: tuple[np.ndarray, Outs] | None = None
+        self._joined = threading.Event()  # a client subscribed to the buildings' topics since they were logged
+
+    def world(self, grid: np.ndarray, outs: Outs) -> None:
+        self._world = (grid, outs)
+        super().world(grid, outs)
+
+    def turn(self, snap: Snapshot, outs: Outs) -> None:
+        if self.server is None:
+            self._open(outs)
+        if self._world is not None and self._joined.is_set():
+            self._joined.clear()
+            super().world(*self._world)
+        super().turn(snap, outs)
+
+    def _open(self, outs: Outs) -> None:
+        """Every channel of the game (this turn's topics, each drone's path, the scene), then the server."""
+        names = self.scene.drones()
+        for topic, typename in [*zip(outs.topics, outs.typenames), (self.scene.markers_topic, MARKERS),
+                                *((self.scene.path_topic(n), PATH) for n in names),
+                                *(((self.fox.topic, SCENE),) if self.fox is not None else ())]:
+            if topic not in self._logs:
+                self._log_of(topic, typename)
+        self.server = foxglove.start_server(name="dronesim", host=self.host, port=self.port, context=self.context,
+                                            server_listener=self)
+        self.url = f"ws://{self.host}:{self.server.port}"
+        self._logger.info("Foxglove WebSocket server on %s", self.url)
+        self._opened(self.url)
+
+    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
+        """(foxglove-sdk's thread) A client subscribed: the buildings again if to their topics."""
+        if channel.topic in (self.scene.markers_topic, self.fox.topic if self.fox is not None else None):
+            self._joined.set()
 
     def close(self) -> None:
-        self.server.stop()
+        if self.server is not None:
+            self.server.stop()

@@ -293,7 +293,8 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
     if args.foxglove is not None:
         from .foxglove import FoxgloveLive
 
-        fox = FoxgloveLive(args.foxglove, scene, logger)
+        fox = FoxgloveLive(args.foxglove, scene, logger,
+                           opened=lambda url: print(f"ros2: foxglove on {url}", flush=True))
     with open_session(conf) as session:
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.over, Over)
@@ -304,7 +305,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
             sinks.append(fox)
         viewer = Viewer(scene, sinks, rate=args.rate, logger=logger)
         print(f"ros2: node /dronesim on domain {ros.domain}, topics under /{args.namespace.strip('/')}"
-              + (f"; foxglove on {fox.url}" if fox else ""), flush=True)
+              + ("; foxglove from the first turn" if fox else ""), flush=True)
         map_due = 0.0
         try:
             with waking(partial(inbox.post, None)):
