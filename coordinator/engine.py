@@ -348,9 +348,11 @@ class Engine:
 
     def _prepare(self) -> None:
         """The game starts: the arbitration makes what it needs of the static world before the turns (lacam.Lacam's
-        graph and distance tables: outside the turns' budget, and the same decisions whenever they are made)."""
+        graph and distance tables: outside the turns' budget, and the same decisions whenever they are made). Not
+        in a game without a cooperative drone, which never arbitrates (an RL episode's: its reset would build the
+        world's graph, some 20 ms on 64x64x16, every ~40 steps)."""
         prepare = getattr(self.arbiter, "prepare", None)
-        if prepare is not None:
+        if prepare is not None and self.fleet.cooperating:
             prepare(self.size, self.open_cells())
 
     def header(self) -> dict:

@@ -337,6 +337,19 @@ def test_an_agent_that_is_done_cannot_act(few_drones: int) -> None:
         env.step({a: 0 for a in env.possible_agents})
 
 
+@pytest.mark.parametrize("few_drones", [99, 0])
+def test_an_episode_prepares_no_arbitration(few_drones: int) -> None:
+    """An episode's drones are not cooperative: its game never arbitrates, so its start (at every reset) builds
+    none of the search's graph of the world (coordinator/lacam.py, `prepare`: some 20 ms on 64x64x16)."""
+    env = dz.parallel_env(size=(16, 16, 4), num_drones=3, seed=1)
+    env.few_drones = few_drones
+    for seed in range(2):
+        env.reset(seed=seed)
+        env.step({a: 0 for a in env.agents})
+        engine = env.episode.engine if few_drones else env._turns.engine
+        assert not engine.fleet.cooperating and engine._open is None and engine.arbiter._graph is None
+
+
 def test_done_agents_cannot_act() -> None:
     env = dz.parallel_env(world=corridor(6), num_drones=1, seed=1, max_cycles=20)
     _, infos = env.reset()
