@@ -175,7 +175,10 @@ def mavproxy(master: str, target: int, cmds: list[str], cwd: Path, name: str) ->
 
 def test_mavproxy_flies_two_vehicles_at_once(tmp_path: Path) -> None:
     """One MAVProxy on the ground station's link (the whole fleet) flies D02, another on D03's API port
-    flies D03: mode GUIDED, arm throttle, guided LAT LON ALT (DO_REPOSITION)."""
+    flies D03: mode GUIDED, arm throttle, guided LAT LON ALT (DO_REPOSITION). A third, on D01's API port, is
+    refused: `guided` into the building (DENIED, and a STATUSTEXT saying why), a mode Copter has and the
+    vehicle does not fly (CIRCLE: DENIED, the modes it flies said), DO_CHANGE_SPEED (UNSUPPORTED); D01 never
+    gets a target."""
     goal2, goal3 = (8, 3, 3), (4, 9, 2)
     with game(tmp_path) as g:
         lat, lon, alt = relative(goal2)
@@ -184,13 +187,22 @@ def test_mavproxy_flies_two_vehicles_at_once(tmp_path: Path) -> None:
         lat, lon, alt = relative(goal3)
         one = mavproxy(f"udpin:127.0.0.1:{g.api + 2}", 3, ["mode GUIDED", "arm throttle",
                                                             f"guided {lat} {lon} {alt}"], tmp_path, "mavproxy-d03")
+        lat, lon, alt = relative((6, 7, 1))  # (the building: x 6..7, y 6..7, up to z 3)
+        refused = mavproxy(f"udpin:127.0.0.1:{g.api}", 1, ["mode GUIDED", "arm throttle", f"guided {lat} {lon} {alt}",
+                                                           "mode CIRCLE", "long DO_CHANGE_SPEED 1 5 -1"],
+                           tmp_path, "mavproxy-d01")
         try:
             expect(fleet, r"Detected vehicle 3:1")  # the shared link shows the whole fleet
             expect(fleet, r"AP: D02 reached \(8, 3, 3\)")
             expect(one, r"AP: D03 reached \(4, 9, 2\)")
+            expect(refused, r"Got COMMAND_ACK: DO_REPOSITION: DENIED")
+            expect(refused, r"AP: D01: target refused: .*building")
+            expect(refused, r"AP: D01: mode 7 is not flown here: AUTO 3, GUIDED 4, LOITER 5, RTL 6, LAND 9")
+            expect(refused, r"Got COMMAND_ACK: DO_CHANGE_SPEED: UNSUPPORTED")
         finally:
             fleet.kill()
             one.kill()
+            refused.kill()
         out = g.finish()
     targets = g.targets()
     assert targets["D02"] == [goal2] and targets["D03"] == [goal3] and "D01" not in targets
@@ -218,8 +230,10 @@ def command(conn, system: int, cmd: int, *params: float) -> int:
 def test_pymavlink_commands_position_targets_missions_and_bad_input(tmp_path: Path) -> None:
     """pymavlink on the shared link: raw COMMAND_LONGs, SET_POSITION_TARGET_LOCAL_NED for D01,
     SET_POSITION_TARGET_GLOBAL_INT for D02, a mission uploaded to D03 and flown in AUTO; meanwhile garbage,
-    MAVLink 1 frames, commands for systems the game does not fly, NaN targets and a 10,000-item mission are
-    refused and counted, and change nothing."""
+    MAVLink 1 frames, commands for systems the game does not fly, NaN targets, a 10,000-item mission, a
+    position inside the building (DENIED, said why), a mode not flown (DENIED), DO_CHANGE_SPEED (UNSUPPORTED)
+    and a flood of 500 commands (TEMPORARILY_REJECTED past the budget) are refused and counted, and change
+    nothing."""
     mav = mavutil.mavlink
     with game(tmp_path) as g:
         conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{g.gcs}", source_system=255, dialect="ardupilotmega")
@@ -243,6 +257,14 @@ def test_pymavlink_commands_position_targets_missions_and_bad_input(tmp_path: Pa
             wait_for(conn, "STATUSTEXT", 1, lambda m: "not a finite position" in m.text)
             conn.mav.mission_count_send(2, 1, 10_000)
             assert wait_for(conn, "MISSION_ACK", 2).type == mav.MAV_MISSION_NO_SPACE
+            lat, lon, alt = relative((7, 6, 2))  # (inside the building)
+            conn.mav.command_int_send(2, 1, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_CMD_DO_REPOSITION, 0, 0,
+                                      -1, 0, 0, 0, round(lat * 1e7), round(lon * 1e7), alt)
+            assert wait_for(conn, "COMMAND_ACK", 2, lambda m: m.command == mav.MAV_CMD_DO_REPOSITION).result == \
+                mav.MAV_RESULT_DENIED
+            wait_for(conn, "STATUSTEXT", 2, lambda m: "target refused: (7, 6, 2) is inside" in m.text)  # (a chunk)
+            assert command(conn, 2, mav.MAV_CMD_DO_CHANGE_SPEED, 1, 5, -1) == mav.MAV_RESULT_UNSUPPORTED
+            assert command(conn, 2, mav.MAV_CMD_DO_SET_MODE, 1, 7) == mav.MAV_RESULT_DENIED  # (Copter's CIRCLE)
             # D01: a local position target (north 5, east 1, up 2), D02: a global one (above home)
             conn.mav.set_position_target_local_ned_send(0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b110111111000,
                                                         5.0, 1.0, -2.0, 0, 0, 0, 0, 0, 0, 0, 0)
@@ -272,12 +294,18 @@ def test_pymavlink_commands_position_targets_missions_and_bad_input(tmp_path: Pa
             wait_for(conn, "LOCAL_POSITION_NED", 1, lambda m: (m.x, m.y, m.z) == (5.0, 1.0, -2.0), timeout=60)
             wait_for(conn, "GLOBAL_POSITION_INT", 2, lambda m: GEO.cell_of_wgs84(m.lat / 1e7, m.lon / 1e7,
                                                                                   m.alt / 1000) == (9, 2, 2))
+            # a command flood at D01, there now: 500 mode changes (to its mode) in two datagrams, each answered
+            # (encoded by the connection: MAVLink 2 since it heard the vehicles; `mav` is the dialect before that)
+            frame = conn.mav.command_long_encode(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, 1, COPTER_GUIDED, 0, 0, 0, 0, 0)
+            for _ in range(2):
+                conn.port.sendto(frame.pack(conn.mav) * 250, bridge)
+            wait_for(conn, "COMMAND_ACK", 1, lambda m: m.result == mav.MAV_RESULT_TEMPORARILY_REJECTED)
         finally:
             conn.close()
         out = g.finish()
     assert g.targets() == {"D01": [(5, 1, 2)], "D02": [(9, 2, 2)], "D03": [(2, 4, 2), (2, 8, 2), (4, 8, 2)]}
     (rejected,) = [line for line in out.splitlines() if "rejected inputs" in line and "GCS" in line]
-    for reason in ("mavlink-garbage", "mavlink1", "mavlink-target", "mavlink-denied"):
+    for reason in ("mavlink-garbage", "mavlink1", "mavlink-target", "mavlink-denied", "mavlink-flood"):
         assert reason in rejected
 
 
@@ -286,12 +314,14 @@ def test_pymavlink_commands_position_targets_missions_and_bad_input(tmp_path: Pa
 
 def test_mavsdk_flies_one_vehicle_and_a_mission_on_another(tmp_path: Path) -> None:
     """MAVSDK-Python (the native 4.x binding), one instance a vehicle as PX4's layout has it (udpin on
-    14540 + n - 1): D02 takes off, goes to a position (goto_location) and lands; D03 flies a mission
+    14540 + n - 1): D02 takes off, is refused a position in the building (COMMAND_DENIED, the STATUSTEXT
+    saying why) and a speed (UNSUPPORTED), goes to a position (goto_location) and lands; D03 flies a mission
     uploaded by MissionRaw (item 0 home, as ArduPilot's missions are)."""
     mavsdk = pytest.importorskip("mavsdk.asyncio", reason="MAVSDK-Python (the mavlink extra) is needed")
     from mavsdk.asyncio.plugins.action import ActionAsync
     from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+    from mavsdk.plugins.action import ActionError, ActionResult
     from mavsdk.plugins.mission_raw import MissionItem
 
     async def connect(sdk, port: int):
@@ -305,6 +335,12 @@ def test_mavsdk_flies_one_vehicle_and_a_mission_on_another(tmp_path: Path) -> No
             if not math.isnan(p.latitude_deg) and pred(p):
                 return p
 
+    async def status_text(tel, part: str) -> str:
+        async for text in tel.subscribe_status_text():
+            if part in text.text:
+                return text.text
+        raise AssertionError("no more status texts")
+
     async def fly_d02(sdk, port: int) -> None:
         system = await connect(sdk, port)
         assert await system.get_system_id() == 2
@@ -315,6 +351,16 @@ def test_mavsdk_flies_one_vehicle_and_a_mission_on_another(tmp_path: Path) -> No
         await act.set_takeoff_altitude(3.0)
         await act.takeoff()
         up = await position(tel, lambda p: p.relative_altitude_m > 2.5)
+        # refused: a position inside the building (DENIED, a STATUSTEXT saying why), a speed (UNSUPPORTED)
+        texts = asyncio.ensure_future(status_text(tel, "target refused"))
+        await asyncio.sleep(0)  # (the task subscribes at its first step, before the command goes)
+        with pytest.raises(ActionError) as denied:
+            await act.goto_location(*GEO.wgs84((6, 7, 1)), 0.0)
+        assert denied.value.result is ActionResult.COMMAND_DENIED
+        assert "inside a building" in await asyncio.wait_for(texts, 30)
+        with pytest.raises(ActionError) as unsupported:
+            await act.set_current_speed(5.0)
+        assert unsupported.value.result is ActionResult.UNSUPPORTED
         lat, lon, amsl = GEO.wgs84((5, 3, 3))
         await act.goto_location(lat, lon, amsl, 0.0)
         await position(tel, lambda p: GEO.cell_of_wgs84(p.latitude_deg, p.longitude_deg,
