@@ -52,15 +52,18 @@ from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat
 
 __all__ = ["Lacam", "Search", "Graph"]
 
-#: A PIBT call's fixed cost (its arrays, whatever the number of drones), in units.
+#: A PIBT call's fixed cost, in units, besides a unit a drone that chooses in it and one per FIXED drones (its arrays,
+#: dictionaries, the swap's test and the node's candidates, over every drone).
 CALL = 30
-#: The search's work units a turn (a PIBT call costs one a drone and CALL; a distance table one a level of its
+FIXED = 4
+#: The search's work units a turn (a PIBT call costs one a drone that chooses in it — not the drones of its order's
+#: end that would stay, `_choosing` —, one per FIXED drones and CALL; a distance table one a level of its
 #: breadth-first search and one per CELLS_A_UNIT open cells): three PIBT calls at 400 drones. A turn is that work, or
 #: that of the tables, and at most one more PIBT call (the turn's own when the search does not play it), never more:
 #: the search's calls and tables are only started within the budget (the first of a turn excepted: one call at least,
 #: the drones never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md, "Cost
 #: of a turn": 20 ms or less at 400 drones, 100 at 1000, on the benchmark's densest instances).
-WORK = 3 * (400 + CALL)
+WORK = 3 * (400 + 400 // FIXED + CALL)
 #: A breadth-first search's level costs about a unit (the arrays of its frontier); its cells about a 32nd each.
 CELLS_A_UNIT = 32
 #: Every open cell's distance table is made at the game's start (`Lacam.prepare`) where they hold this many entries
@@ -214,21 +217,26 @@ class Search:
         """Spend `work` units at most (but one PIBT call at least, unless the search is over): a call is made only
         if its units fit in what is left; the units spent."""
         spent, n = 0, len(self.goals)
-        while self.found is None and self.open and not self.full and (spent + n + CALL <= work or not spent):
+        while self.found is None and self.open and not self.full:
             node = self.open[-1]
             if not node.tree:
                 self.open.pop()
                 continue
-            who, where = node.tree.popleft()
+            who, where = node.tree[0]
+            call = self._choosers(node, who, where)
+            cost = CALL + n // FIXED + (0 if call is None else len(call[0]))  # (those that choose: `_choosing`)
+            if spent and spent + cost > work:
+                break
+            node.tree.popleft()
             self.held -= 2 * len(who)
             if len(who) < n:  # the next drone in the node's order gets each of its cells in turn, nearest first
                 i = int(node.order[len(who)])
                 for v in self._moves(node.cfg[i], i):
                     node.tree.append((who + (i,), where + (v,)))
                     self.held += 2 * len(who) + 2
-            spent += n + CALL
+            spent += cost
             self.expansions += 1
-            nxt = self._successor(node, who, where, open_)
+            nxt = None if call is None else self._successor(node, call, open_)
             if nxt is None:
                 continue
             key = nxt.tobytes()
@@ -259,11 +267,11 @@ class Search:
         d = self.dist[i]
         return [int(g.cells[v]) for v in sorted(near, key=lambda v: (int(d[v]), v != c, v))]
 
-    def _successor(self, node: Node, who: tuple[int, ...], where: tuple[int, ...], open_: OpenCells
-                   ) -> np.ndarray | None:
-        """PIBT's next configuration from `node` with drones `who` sent to cells `where`; None if there is none."""
-        here = node.cfg
-        n = len(here)
+    def _choosers(self, node: Node, who: tuple[int, ...], where: tuple[int, ...]
+                  ) -> tuple[list[int], list[int]] | None:
+        """The PIBT call from `node` with drones `who` sent to cells `where`: the drones that choose, highest priority
+        first (`_choosing`), and each drone's cell taken by the constraints (-1: none); None if two share one."""
+        n = len(node.cfg)
         taken = np.full(n, -1, np.int64)
         if who:
             taken[list(who)] = where
@@ -271,13 +279,20 @@ class Search:
             if len(np.unique(fixed)) < len(fixed):
                 return None
         if self._cached[0] is not node:  # (a node is often tried again at once, under its next constraint)
-            self._cached = (node, here.tolist(), self._candidates(node).tolist(), node.order.tolist())
+            self._cached = (node, node.cfg.tolist(), self._candidates(node).tolist(), node.order.tolist())
         _, here_list, cand, order_all = self._cached
         order = [i for i in order_all if taken[i] < 0] if who else order_all
-        world = (open_, self.steps, self.aims)
-        chosen, gave = pibt(here_list, cand, order, taken.tolist(), world, self.aimed)
+        return order[:_choosing(order, here_list, cand, set(where))], taken.tolist()
+
+    def _successor(self, node: Node, call: tuple[list[int], list[int]], open_: OpenCells) -> np.ndarray | None:
+        """PIBT's next configuration from `node` (`_choosers`' call); None if there is none."""
+        here = node.cfg
+        n = len(here)
+        _, here_list, cand, _ = self._cached
+        chosen, gave = pibt(here_list, cand, call[0], call[1], (open_, self.steps, self.aims), self.aimed)
         nxt = np.array(chosen, np.int64)
-        if (nxt < 0).any() or len(np.unique(nxt)) < n:
+        nxt = np.where(nxt < 0, here, nxt)  # (the drones of the order's end that would stay: `_choosing`)
+        if len(np.unique(nxt)) < n:
             return None
         self.gave = gave
         srt = np.argsort(here)
@@ -315,6 +330,19 @@ class Search:
         return self.at.cfg
 
 
+def _choosing(order: list[int], here: list[int], cand: list[list[int]], fixed: set[int]) -> int:
+    """How many of `order`'s drones PIBT must let choose: not the drones at its end whose first candidate is their
+    own cell (drones on their goals, of the lowest priorities) and that no constraint sends another drone into
+    (`fixed`: those cells). Each of those, when its turn came, would take its cell (nobody can have claimed it
+    without pushing it, and then it has chosen already) and no drone after it could push it: left out, those nobody
+    pushes stay, as PIBT would have them, the others are pushed as they would be (every drone before them has
+    chosen the same). In a crowd's endgame most drones are such: the call costs the others."""
+    k = len(order)
+    while k and cand[order[k - 1]][0] == here[order[k - 1]] and here[order[k - 1]] not in fixed:
+        k -= 1
+    return k
+
+
 class Lacam:
     """The complete arbitration (an `arbiter.Arbiter`, with state): `follow` runs the search and gives its step,
     the call checks the step against the drones' offers (PIBT, `cooperate`, when there is no step or it is not
@@ -337,6 +365,7 @@ class Lacam:
         self.unsolvable = False
         self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
         self.full = 0  # searches stopped at their memory (`MEMORY`)
+        self.spent = 0  # the units the search spent in its last turn
 
     def __call__(self, size: Cell, before: np.ndarray, proposed: np.ndarray, ranked: np.ndarray,
                  cooperative: np.ndarray, priority: np.ndarray, targets: np.ndarray, open_: OpenCells | None = None,
@@ -390,7 +419,7 @@ class Lacam:
                 return None  # (its graph or tables made this turn: PIBT's turn)
             self._since = 0  # (its patience counts from its start)
         self.expansions -= search.expansions
-        search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search)
+        self.spent = search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search)
         self.expansions += search.expansions
         if search.unsolvable:
             self.unsolvable = True

@@ -174,14 +174,21 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
     cells = np.array([s for s, _ in drones.values()], np.int32)
     targets = np.array([t for _, t in drones.values()], np.int32)
     coop, open_ = np.ones(n, bool), OpenCells(grid)
-    for work in (1, 2 * (n + lacam.CALL), 2 * (n + lacam.CALL) + n + lacam.CALL - 1):
-        search = lacam.Lacam(work=work)
-        for turn in range(1, 6):
+    full = n + n // lacam.FIXED + lacam.CALL  # (a call where every drone chooses: the first ones here)
+    start = cells
+    for work in (1, 2 * full, 3 * full - 1, 4 * full):
+        search, cells = lacam.Lacam(work=work), start
+        calls = []
+        for turn in range(1, 8):
             before = search.expansions
-            assert search.follow(size, cells, coop, targets, open_, turn) is not None  # (the tables made before)
-            assert search.expansions - before == max(1, work // (n + lacam.CALL)) or search.state()["found"]
+            plan = search.follow(size, cells, coop, targets, open_, turn)  # (the tables made before the turns)
+            assert plan is not None
+            calls.append(search.expansions - before)
+            assert search.spent <= work or calls[-1] == 1, (work, turn, search.spent)
+            cells = cells_of(plan, size).astype(np.int32)
+        assert calls[0] == max(1, work // full), calls
     monkeypatch.setattr(lacam, "PRECOMPUTE", 0)
-    search = lacam.Lacam(work=1)
+    search, cells = lacam.Lacam(work=1), start
     made = []
     while search.follow(size, cells, coop, targets, open_, len(made)) is None:
         made.append(len(search._tables))
