@@ -89,15 +89,16 @@ def make_journal(drones: int, turns: int, cache: Path) -> Path:
 
 def first_part(journal: Path, turns: int) -> Path:
     """The journal up to turn `turns` (its header and turn records; no end)."""
+    from coordinator.journal import dumps, is_over, is_turn, read
+
     path = journal.with_name(f"{journal.stem}-first{turns}.journal")
     if not path.exists():
-        with journal.open(encoding="utf-8") as src, path.open("w", encoding="utf-8") as dst:
-            for line in src:
-                record = json.loads(line)
-                if record.get("record") == "turn" and record.get("turn", 0) > turns:
+        with path.open("w", encoding="utf-8") as dst:
+            for record in read(journal):
+                if is_turn(record) and record["turn"] > turns:
                     break
-                if record.get("record") != "over":
-                    dst.write(line)
+                if not is_over(record):
+                    dst.write(dumps(record) + "\n")  # (its line again: the journal's lines are canonical)
     return path
 
 

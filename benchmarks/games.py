@@ -27,6 +27,7 @@ import numpy as np
 import zenoh
 
 from benchmarks.measure import Procs, cpu_seconds, loopback_router, proc_status, size_text
+from coordinator.journal import is_turn
 from network.transport import client_config
 from schema.tuning import ANSWER_AHEAD
 
@@ -485,7 +486,7 @@ def play_local(case: Case, scenario_file: Path) -> Local:
     st = inputs.stamps  # type: ignore[attr-defined]
     ts = [st[t] for t in range(case.warmup + 1, case.end_turn + 1)]
     measured = [r for r in res.records
-                if r.get("record") == "turn" and case.warmup < r.get("turn", 0) < case.end_turn]
+                if is_turn(r) and case.warmup < r.get("turn", 0) < case.end_turn]
     moving = statistics.fmean(len(r.get("moves", {})) for r in measured) if measured else 0.0
     return Local([b - a for a, b in zip(ts, ts[1:])], {st.turn: st for st in res.statuses}, moving)
 

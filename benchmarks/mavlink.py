@@ -96,7 +96,7 @@ def game_rate(vehicles: int = 100, turns: int = 300, timeout: float = 300.0) -> 
 
     from pymavlink import mavutil
 
-    from coordinator.journal import read
+    from coordinator.journal import is_turn, read
     from dronesim import child_env
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
@@ -127,7 +127,7 @@ def game_rate(vehicles: int = 100, turns: int = 300, timeout: float = 300.0) -> 
             proc.kill()
         proc.wait()
         conn.close()
-        played = sum(1 for r in read(journal) if r.get("record") == "turn")
+        played = sum(1 for r in read(journal) if is_turn(r))
         folder.cleanup()
     span = (stamps[-1] - stamps[0]) / 1000 if len(stamps) > 1 else 0.0
     return {"tps": played / span if span > 0 else float("nan"), "turns": float(played),

@@ -58,6 +58,7 @@ import numpy as np
 
 from coordinator import arbiter, lacam
 from coordinator.config import DroneSpec, GameConfig
+from coordinator.journal import is_turn
 from dronesim.local import Inputs, simulate
 from entities.gcs import Plan
 from schema import Cell, WorldSpec, drone_id
@@ -234,7 +235,7 @@ def _costs(records: list[dict], ids: list[str], starts: dict[str, Cell], goals: 
     at_256 = None
     dead: set[str] = set()
     for r in records:
-        if r.get("record") != "turn":
+        if not is_turn(r):
             continue
         turns = r["turn"]
         for d, c in r.get("moves", {}).items():

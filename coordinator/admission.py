@@ -4,12 +4,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+from collections.abc import Iterable, Sequence
 from typing import Generic, TypeVar
 
 from schema import Connect, Role
 from schema.errors import RemoteInputError
-from schema.messages import is_host_id
+from schema.messages import drone_id, is_host_id
+from schema.tables import drone_number
 from schema.tuning import CONNECT_WAITING, CONNECT_WAITING_PER_SENDER, PRESENCE_WAIT_S
 
 from .fleet import ALIVE, STATES, Fleet
@@ -139,3 +141,10 @@ class Presences(Generic[Q]):
     def others(self) -> set[str]:
         """The entities with a token, but the coordinator."""
         return {e for e, _ in self.present} - {"SRV"}
+
+
+def id_ranges(drones: Iterable[str]) -> str:
+    """Drone ids as runs of consecutive numbers, as `dronesim drone --id` reads them: "D01-D03, D07"."""
+    runs = itertools.groupby(enumerate(sorted(map(drone_number, drones))), lambda item: item[1] - item[0])
+    ends = [(run[0][1], run[-1][1]) for run in (list(items) for _, items in runs)]
+    return ", ".join(drone_id(a) if a == b else f"{drone_id(a)}-{drone_id(b)}" for a, b in ends)

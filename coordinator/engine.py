@@ -31,10 +31,9 @@ and working is not taken for a hung one (which says nothing, and is LOST as befo
 from __future__ import annotations
 
 import enum
-import hashlib
 import itertools
 import logging
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -64,20 +63,19 @@ from schema import (
     Turn,
     Upd,
     Welcome,
-    encode,
 )
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
-from schema.messages import MAX_OVER_TEXT, drone_id
-from schema.tables import code_of, drone_name, drone_number
+from schema.messages import MAX_OVER_TEXT
+from schema.tables import code_of, drone_name
 from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, TURN_FEW_DRONES, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 from world.search import STEPS, is_step, step_lengths
 
 from . import arbiter, lacam, observer
-from .admission import Roster
+from .admission import Roster, id_ranges
 from .config import GameConfig, starts_of
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
-from .journal import TurnLog, TurnRecord, header_record, over_of, over_record, turns
+from .journal import TurnLog, TurnRecord, header_of, header_record, over_of, over_record, state_hash, turns
 
 
 class Stage(enum.Enum):
@@ -988,9 +986,9 @@ class Engine:
         turn; UsageError, if the journal is not this game's, is over, or does not replay to its recorded states."""
         if self.stage is not Stage.ADMITTING or self.entities:
             raise UsageError("a game is resumed before anyone has connected")
-        if not records or records[0].get("record") != "header":
+        theirs, fleet = header_of(records), self.fleet
+        if theirs is None:
             raise UsageError("the journal has no header: nothing to resume")
-        theirs, fleet = records[0], self.fleet
         for d in theirs.get("drones", []):  # (autopilots are learnt at admission, not configured)
             i = fleet.index.get(d.get("drone"))
             if i is not None:
@@ -1182,12 +1180,6 @@ def clipped(text: str) -> str:
     return text if len(data) <= MAX_OVER_TEXT else data[:MAX_OVER_TEXT - 3].decode(errors="ignore") + "..."
 
 
-def state_hash(status: Status) -> str:
-    """The journal's digest of a turn's state: its STATUS as the wire says it, the game's identity left out: a
-    journal depends on the seed, the scenario and the inputs only."""
-    return hashlib.sha256(encode(Status(turn=status.turn, sender=status.sender, drones=status.drones))).hexdigest()[:16]
-
-
 def opens_drones_phase(effect: Effect) -> bool:
     return isinstance(effect, Publish) and isinstance(effect.msg, Turn) and effect.msg.phase is Phase.DRONES
 
@@ -1224,9 +1216,3 @@ def _set_rows(column: np.ndarray, rows: list[int], values: list) -> None:
     else:
         column[rows] = values
 
-
-def id_ranges(drones: Iterable[str]) -> str:
-    """Drone ids as runs of consecutive numbers, as `dronesim drone --id` reads them: "D01-D03, D07"."""
-    runs = itertools.groupby(enumerate(sorted(map(drone_number, drones))), lambda item: item[1] - item[0])
-    ends = [(run[0][1], run[-1][1]) for run in (list(items) for _, items in runs)]
-    return ", ".join(drone_id(a) if a == b else f"{drone_id(a)}-{drone_id(b)}" for a, b in ends)

@@ -1,6 +1,7 @@
 """The journal, the one home of its record format: written here (`header_record`, `TurnLog`, `over_record`, one
-JSON line each, by `JournalWriter`) and read here (`read`, `header_config`, `TurnRecord`, `tracks`) by the
-engine, resume, `dronesim replay` and the web page's replay. Lines are canonical JSON (sorted keys, no spaces,
+JSON line each, by `JournalWriter`; a turn's state digest, `state_hash`) and read here (`read`, `header_of`,
+`header_config`, `TurnRecord`, `turns`, `over_of`, `is_turn`, `tracks`) by the engine, resume, `dronesim replay`
+and `export`, the web page's replay and the benchmarks. Lines are canonical JSON (sorted keys, no spaces,
 no timestamps) so two runs of the same scenario give byte-identical journals, whatever the process layout.
 
   header  {"record": "header", "format": "dronesim-journal", "version": 1, "world": {size, seed, cells},
@@ -13,6 +14,7 @@ no timestamps) so two runs of the same scenario give byte-identical journals, wh
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import pathlib
@@ -20,12 +22,14 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from schema import Cause, Cell, Intent, Note, RemoteInputError, UsageError, WorldSpec
+from schema import Cause, Cell, Intent, Note, RemoteInputError, Status, UsageError, WorldSpec, encode
 
 from .config import LOST_AFTER, DroneSpec, GameConfig
 
 FORMAT = "dronesim-journal"
 VERSION = 1
+#: The records' kinds (their "record" field).
+HEADER, TURN, OVER = "header", "turn", "over"
 
 
 def dumps(record: dict) -> str:
@@ -88,7 +92,7 @@ def held_game(path: str | os.PathLike[str]) -> tuple[bool, int] | None:
         return None
     over, turn = False, 0
     for record in read(path):
-        over = over or record.get("record") == "over"
+        over = over or is_over(record)
         turn = record.get("turn", turn) if isinstance(record.get("turn"), int) else turn
     return over, turn
 
@@ -122,7 +126,7 @@ def header_record(config: GameConfig, size: Cell, drones: Iterable[tuple[str, li
     start, autopilot and whether it cooperates; None leaves out the drones and the world's cells (a game
     without a journal, which would only drop them)."""
     world: dict[str, Any] = {"size": list(size), "seed": config.world.seed}
-    header: dict[str, Any] = {"record": "header", "format": FORMAT, "version": VERSION, "world": world,
+    header: dict[str, Any] = {"record": HEADER, "format": FORMAT, "version": VERSION, "world": world,
                               "max_turns": config.max_turns, "lost_after": config.lost_after}
     if config.arbiter != "lacam":
         header["arbiter"] = config.arbiter
@@ -136,7 +140,7 @@ def header_record(config: GameConfig, size: Cell, drones: Iterable[tuple[str, li
 
 def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
     """The game a journal's header describes, and each drone's autopilot. UsageError if it is not a header."""
-    if header.get("record") != "header" or header.get("format") != FORMAT:
+    if header.get("record") != HEADER or header.get("format") != FORMAT:
         raise UsageError("not a dronesim journal: the first record must be its header")
     try:
         w = header["world"]
@@ -160,7 +164,7 @@ class TurnLog:
     __slots__ = ("record",)
 
     def __init__(self, turn: int) -> None:
-        self.record: dict[str, Any] = {"record": "turn", "turn": turn}
+        self.record: dict[str, Any] = {"record": TURN, "turn": turn}
 
     def targets(self, drones: Sequence[str], cells: list[list[int]]) -> None:
         self.record["targets"] = dict(zip(drones, cells))
@@ -196,7 +200,7 @@ class TurnLog:
 
 def over_record(turn: int, reason: str, text: str, tasks: int | None = None) -> dict:
     """The journal's last record; `tasks`: a lifelong game's tasks done (None: not lifelong)."""
-    record = {"record": "over", "turn": turn, "reason": reason, "text": text}
+    record = {"record": OVER, "turn": turn, "reason": reason, "text": text}
     return record if tasks is None else {**record, "tasks": tasks}
 
 
@@ -234,14 +238,33 @@ def _cell(p: Sequence[int]) -> Cell:
     return (int(x), int(y), int(z))
 
 
+def state_hash(status: Status) -> str:
+    """A turn record's "state": the digest of the turn's STATUS as the wire says it, the game's identity left out (a
+    journal depends on the seed, the scenario and the inputs only)."""
+    return hashlib.sha256(encode(Status(turn=status.turn, sender=status.sender, drones=status.drones))).hexdigest()[:16]
+
+
+def is_turn(record: dict) -> bool:
+    return record.get("record") == TURN
+
+
+def is_over(record: dict) -> bool:
+    return record.get("record") == OVER
+
+
+def header_of(records: Sequence[dict]) -> dict | None:
+    """The header that opens `records`, if they begin with one."""
+    return records[0] if records and records[0].get("record") == HEADER else None
+
+
 def turns(records: Iterable[dict]) -> Iterator[TurnRecord]:
     """The turn records among `records`, read."""
-    return (TurnRecord.of(r) for r in records if r.get("record") == "turn")
+    return (TurnRecord.of(r) for r in records if is_turn(r))
 
 
 def over_of(records: Iterable[dict]) -> dict | None:
     """The over record among `records`, if the game ended."""
-    return next((r for r in records if r.get("record") == "over"), None)
+    return next((r for r in records if is_over(r)), None)
 
 
 @dataclass(slots=True)

@@ -18,7 +18,7 @@ from itertools import chain
 
 import numpy as np
 
-from coordinator.journal import header_config, read
+from coordinator.journal import header_config, is_turn, read
 from entities.ros2.model import Scene, Snapshot
 from schema import UsageError
 from schema.tables import drone_number
@@ -50,7 +50,7 @@ def snapshots(records: Iterator[dict],
 
     yield snap(0), {}
     for r in records:
-        if r.get("record") != "turn":
+        if not is_turn(r):
             yield None, r
             continue
         for cells, into in ((r.get("targets"), target), (r.get("moves"), pos)):

@@ -14,7 +14,7 @@ import sys
 from collections.abc import Iterable
 
 from coordinator.config import GameConfig
-from coordinator.journal import Track, dumps, header_config, over_of, read, tracks, turns
+from coordinator.journal import Track, dumps, header_config, is_over, over_of, read, tracks, turns
 from entities.gcs import Plan
 from schema import Cell, UsageError
 from world.grid import World, build_world
@@ -57,7 +57,7 @@ def verify(path: str, records: list[dict], config: GameConfig, autopilots: dict[
     the journal leaves unfinished (no over record: a crash, a full disk) is checked as far as it goes."""
     quiet = logging.getLogger("dronesim.replay.verify")
     result = simulate(config, autopilots, inputs_of(records, config.world.size), quiet)
-    if records[-1].get("record") != "over":
+    if not is_over(records[-1]):
         result.records[len(records):] = []
     for n, (mine, theirs) in enumerate(zip(records, result.records), 1):
         if dumps(mine) != dumps(theirs):

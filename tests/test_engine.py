@@ -218,7 +218,7 @@ def test_config_validation() -> None:
 
 
 def test_a_hosts_drones_are_named_as_runs_of_numbers() -> None:
-    from coordinator.engine import id_ranges
+    from coordinator.admission import id_ranges
 
     assert id_ranges(["D07", "D01", "D02", "D03", "D100", "D09", "D10"]) == "D01-D03, D07, D09-D10, D100"
     assert id_ranges([f"D{n:02d}" for n in range(1, 2001)]) == "D01-D2000"
