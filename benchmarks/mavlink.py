@@ -85,11 +85,16 @@ def bridge_cpu(vehicles: int = 100, turns: int = 200, warmup: int = 20) -> dict[
     return {"cpu": cpu / turns, "messages": sent / turns, "datagrams": datagrams / turns, "turns": float(turns)}
 
 
-def game_rate(vehicles: int = 100, turns: int = 300, timeout: float = 300.0) -> dict[str, float]:
-    """`dronesim up --mavlink --swarm` with `vehicles` drones at full speed (--turn-period 0), every vehicle
-    streaming its telemetry to a pymavlink ground station in this process, which times the game from the first
-    to the last of D01's positions (every turn's, and the telemetry set's): {"tps": the journal's turns a
-    second of that span, "turns": turns played, "messages": MAVLink messages received a turn}."""
+def game_rate(vehicles: int = 100, turns: int = 400, timeout: float = 300.0) -> dict[str, float]:
+    """`dronesim up --mavlink --swarm` with `vehicles` drones at full speed (--turn-period 0) on an empty world of
+    200 x 64 cells, flown by a pymavlink ground station in this process on the shared link, as a person's would:
+    once the fleet is heard, each vehicle armed in GUIDED and sent 150 cells north (SET_POSITION_TARGET_LOCAL_NED
+    in LOCAL_OFFSET_NED), so that every one moves a cell a turn and streams its position each turn, beside every
+    vehicle's telemetry set.
+    The rate is timed by the vehicles' own clock (time_boot_ms): the turns' position batches (stamps that are no
+    telemetry set's) while D01 moves, their count less one over their span. {"tps": that rate, "moving": those
+    turns, "turns": turns played, "messages": MAVLink messages received a turn while they moved}."""
+    import json
     import subprocess
     import sys
     import tempfile
@@ -103,15 +108,21 @@ def game_rate(vehicles: int = 100, turns: int = 300, timeout: float = 300.0) -> 
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega")
-    argv = [sys.executable, "-m", "dronesim", "up", "--mavlink", "--swarm", "--drones", str(vehicles),
-            "--size", "64,64,4", "--max-turns", str(turns), "--turn-period", "0", "--quiet",
-            "--mavlink-gcs", f"udpout:127.0.0.1:{port}", "--mavlink-api-base", "41000"]
+    mav = mavutil.mavlink
     folder = tempfile.TemporaryDirectory(prefix="dronesim-mavlink-")
-    journal = f"{folder.name}/journal.jsonl"
-    proc = subprocess.Popen([*argv, "--journal", journal], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env=child_env())
-    stamps: list[int] = []
+    world, journal = f"{folder.name}/world.json", f"{folder.name}/journal.jsonl"
+    with open(world, "w", encoding="utf-8") as f:
+        json.dump({"format": "dronesim-world", "version": 1, "size": [200, 64, 2], "buildings": []}, f)
+    argv = [sys.executable, "-m", "dronesim", "up", "--mavlink", "--swarm", "--drones", str(vehicles),
+            "--world", world, "--max-turns", str(turns), "--turn-period", "0", "--quiet", "--journal", journal,
+            "--mavlink-gcs", f"udpout:127.0.0.1:{port}", "--mavlink-api-base", "41000"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=child_env())
+    flying = False
+    stamps: set[int] = set()  # time_boot_ms of the turns' positions (D01's, while it moves)
+    sets: set[int] = set()  # ... of the telemetry sets (ATTITUDE comes only in them)
+    last: tuple[float, float] | None = None
     received = 0
+    window: list[int] = []  # messages received while D01 moves: [first index, last index]
     end = time.monotonic() + timeout
     try:
         while proc.poll() is None and time.monotonic() < end:
@@ -120,8 +131,22 @@ def game_rate(vehicles: int = 100, turns: int = 300, timeout: float = 300.0) -> 
                 conn.select(0.5)
                 continue
             received += 1
-            if msg.get_type() == "LOCAL_POSITION_NED" and msg.get_srcSystem() == 1:
-                stamps.append(msg.time_boot_ms)
+            kind, system = msg.get_type(), msg.get_srcSystem()
+            if kind == "ATTITUDE":
+                sets.add(msg.time_boot_ms)
+            if not flying:  # the fleet is there: fly it (GUIDED, armed, 150 cells north of where each one is)
+                for n in range(1, vehicles + 1):
+                    conn.mav.command_long_send(n, 1, mav.MAV_CMD_DO_SET_MODE, 0, 1, 4, 0, 0, 0, 0, 0)
+                    conn.mav.command_long_send(n, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+                    conn.mav.set_position_target_local_ned_send(0, n, 1, mav.MAV_FRAME_LOCAL_OFFSET_NED,
+                                                                0b110111111000, 150, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+                flying = True
+            if kind == "LOCAL_POSITION_NED" and system == 1 and (msg.x, msg.y) != last:
+                moved, last = last is not None, (msg.x, msg.y)
+                if not moved:
+                    continue
+                stamps.add(msg.time_boot_ms)
+                window[:] = [window[0] if window else received, received]
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -129,15 +154,17 @@ def game_rate(vehicles: int = 100, turns: int = 300, timeout: float = 300.0) -> 
         conn.close()
         played = sum(1 for r in read(journal) if is_turn(r))
         folder.cleanup()
-    span = (stamps[-1] - stamps[0]) / 1000 if len(stamps) > 1 else 0.0
-    return {"tps": played / span if span > 0 else float("nan"), "turns": float(played),
-            "messages": received / max(played, 1)}
+    moving = sorted(stamps - sets)
+    span = (moving[-1] - moving[0]) / 1000 if len(moving) > 1 else 0.0
+    return {"tps": (len(moving) - 1) / span if span > 0 else float("nan"), "moving": float(len(moving)),
+            "turns": float(played), "messages": (window[1] - window[0]) / max(len(moving) - 1, 1) if window else 0.0}
 
 
 def main() -> None:  # pragma: no cover (a quick look: python -m benchmarks.mavlink)
     g = game_rate()
-    print(f"a game of 100 vehicles streaming: {g['tps']:.1f} turns/s over {g['turns']:.0f} turns, "
-          f"{g['messages']:.0f} messages a turn at the ground station")
+    print(f"a game of 100 vehicles flown by a pymavlink ground station, each moving a cell a turn: {g['tps']:.1f} "
+          f"turns/s over the {g['moving']:.0f} turns D01 moved ({g['turns']:.0f} played), {g['messages']:.0f} "
+          f"messages a turn at the ground station")
     r = bridge_cpu()
     print(f"{r['cpu'] * 1e3:.2f} ms CPU a turn, {r['messages']:.0f} messages in {r['datagrams']:.0f} datagrams a turn: "
           f"at most {1 / r['cpu']:.0f} turns/s (target >= {TARGET_TPS:g})")

@@ -438,3 +438,13 @@ def test_a_hundred_vehicles_stream_while_the_game_plays_at_full_speed(tmp_path: 
     assert heartbeats == set(range(1, 101))
     assert positions >= 100  # (at least each vehicle's telemetry set once)
     assert sum(1 for r in journal_records(journal) if r["record"] == "turn") == turns
+
+
+def test_the_speed_benchmarks_game_flies_every_vehicle_every_turn() -> None:
+    """`python -m benchmarks.mavlink`'s whole game (BENCHMARKS.md, "MAVLink ground station"), with 10 vehicles:
+    its pymavlink ground station flies every vehicle 150 cells north, so D01 moves every turn for 150 turns and
+    the rate is timed over them (the rate itself is the benchmark's, not a test's)."""
+    from benchmarks.mavlink import game_rate
+
+    r = game_rate(vehicles=10, turns=250)
+    assert r["turns"] == 250 and 145 <= r["moving"] <= 150 and r["tps"] > 0 and r["messages"] >= 10
