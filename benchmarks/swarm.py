@@ -383,6 +383,7 @@ class CityGame:
     over: str
     error: str
     load: float  # the machine's load average (1 min) when the game started
+    arbiter_worst_ms: float | None = None  # the coordinator's longest turn in the arbitration, CPU (its log)
 
     @property
     def isr(self) -> float:
@@ -441,37 +442,38 @@ def lrta_alone(size: Cell, drones: int, radii: Iterable[int], limit: int) -> str
     return "\n".join([_row(head), _row(["---"] * len(head)), *(_row(r) for r in rows)])
 
 
-def city_scenario(size: Cell, drones: int, seed: int, folder: Path) -> Path:
-    """A scenario file of a generated city (saved beside it) with `drones` LRTA* drones on `city_trips`, each
-    target given at turn 1; the turn limit as the in-process city's."""
+def city_scenario(size: Cell, drones: int, seed: int, folder: Path, pilot: str = CITY_PILOT) -> Path:
+    """A scenario file of a generated city (saved beside it) with `drones` drones of autopilot `pilot` (LRTA*) on
+    `city_trips`, each target given at turn 1; the turn limit as the in-process city's."""
     world, starts_a, goals_a = city_trips(size, drones, seed)
     starts, goals = starts_a.tolist(), goals_a.tolist()
     world_file = folder / f"city-{seed}.json"
     world.save(world_file)
     ids = [drone_id(k + 1) for k in range(drones)]
     scenario = {"format": "dronesim-scenario", "version": 1, "world": {"file": str(world_file)},
-                "drones": [{"id": d, "start": s, "autopilot": CITY_PILOT} for d, s in zip(ids, starts)],
+                "drones": [{"id": d, "start": s, "autopilot": pilot} for d, s in zip(ids, starts)],
                 "targets": [f"{d}={x},{y},{z}@1" for d, (x, y, z) in zip(ids, goals)],
                 "max_turns": city_limit(size) + 10}
-    path = folder / f"city-{seed}-{drones}.json"
+    path = folder / f"city-{seed}-{drones}-{pilot}.json"
     path.write_text(json.dumps(scenario), encoding="utf-8")
     return path
 
 
-def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path) -> CityGame:
-    """One distributed game (coordinator, environment, `hosts` swarm hosts of LRTA* drones, a loopback router,
-    this process as the ground station), played until every drone has arrived or the turn limit."""
+def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path, pilot: str = CITY_PILOT) -> CityGame:
+    """One distributed game (coordinator, environment, `hosts` swarm hosts of `pilot` (LRTA*) drones, a loopback
+    router, this process as the ground station), played until every drone has arrived or the turn limit."""
     from . import games
 
-    scenario = city_scenario(size, drones, 1, folder)
+    scenario = city_scenario(size, drones, 1, folder, pilot)
     logs = folder / f"{drones}-{run}"
     logs.mkdir(parents=True, exist_ok=True)
     limit = city_limit(size)
     load = os.getloadavg()[0]
     case = games.Case(drones=drones, size=size, warmup=CITY_WARMUP, turns=limit - CITY_WARMUP - 1)
-    game = games.play_distributed(case, scenario, logs, variant=games.Variant(autopilot=CITY_PILOT, hosts=hosts,
+    game = games.play_distributed(case, scenario, logs, variant=games.Variant(autopilot=pilot, hosts=hosts,
                                                                             statuses=False))
-    found = re.search(r"arbitration: \d+ turns, ([\d.]+) ms", (logs / "coordinator.log").read_text(errors="replace"))
+    found = re.search(r"arbitration: \d+ turns, ([\d.]+) ms of CPU a turn(?:, the longest ([\d.]+))?",
+                      (logs / "coordinator.log").read_text(errors="replace"))
     status = game.last_status
     arrived = collisions = alive = 0
     if status is not None:
@@ -483,7 +485,8 @@ def play_city(size: Cell, drones: int, hosts: int, run: int, folder: Path) -> Ci
     mean = sum(game.latencies) / len(game.latencies) if game.latencies else float("nan")
     return CityGame(size, drones, hosts, run, 1 / mean, len(game.latencies), arrived, collisions, alive,
                     float(found.group(1)) if found else None, {n: 1000 * v for n, v in game.cpu.items()},
-                    game.over, game.error.splitlines()[0] if game.error else "", load)
+                    game.over, game.error.splitlines()[0] if game.error else "", load,
+                    float(found.group(2)) if found and found.group(2) else None)
 
 
 def city_table(games: list[CityGame], pogema_sps: dict[int, float]) -> str:
@@ -685,6 +688,9 @@ def main(argv: list[str] | None = None) -> int:
                              "(--agents, --seeds, --families narrow it)")
     parser.add_argument("--anchor-seconds", type=float, default=ANCHOR_SECONDS,
                         help="the anchor's time an instance (0: not run)")
+    parser.add_argument("--city-dstar", action="store_true",
+                        help="only the 64x64x8 city of 1000 D* drones through real processes (one swarm host, the "
+                             "default arbitration: the complete search), --city-runs times")
     parser.add_argument("--search-alone", action="store_true",
                         help="only the complete arbitration's search on its own: ms a turn of its budget at 400 "
                              "drones on the densest families and 1000 drones in the 64x64x8 city")
@@ -705,6 +711,16 @@ def main(argv: list[str] | None = None) -> int:
         print(lrta_alone(size, drones, (0, 1, 2), limit=6000))
         return 0
     t_start = time.perf_counter()
+    if args.city_dstar:
+        size, drones = QUICK_CITY if args.quick else CITY
+        with tempfile.TemporaryDirectory(prefix="dronesim-city-") as tmp:
+            for run in range(1, max(1, args.city_runs) + 1):
+                g = play_city(size, drones, 1, run, Path(tmp), "dstar")
+                print(f"- city {_size(size)}, {drones} D* drones, run {run} (load {g.load:.1f} at its start): "
+                      f"{g.turns_per_s:.1f} turns/s over {g.measured} turns, {g.arrived} of {drones} home "
+                      f"({g.alive} alive), {g.collisions} collisions; the arbitration {g.arbiter_ms} ms of CPU a turn, "
+                      f"the longest {g.arbiter_worst_ms}; {g.error or g.over}", flush=True)
+        return 0
     if args.search_alone:
         dense = ("room-32-32-4", "random-32-32-20", "maze-32-32-2", "warehouse-32-32")
         cases = [("room-32-32-4", 50)] if args.quick else [(f, 400) for f in dense] + [("city", 1000)]

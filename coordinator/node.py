@@ -441,7 +441,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
         closing(srv, inbox, keys, logger)
     assert engine.end is not None
     if timed.calls:
-        logger.info("arbitration: %d turns, %.3f ms of CPU a turn", timed.calls, 1000 * timed.cpu / timed.calls)
+        logger.info("arbitration: %d turns, %.3f ms of CPU a turn, the longest %.3f", timed.calls,
+                    1000 * timed.cpu / timed.calls, 1000 * timed.worst)
     if effects.failed is not None:
         logger.error("%s: the journal holds the game up to the turn before; once there is room, "
                      "`dronesim coordinator --resume --journal %s` plays on", effects.failed, journal)
