@@ -55,15 +55,15 @@ __all__ = ["Lacam", "Search", "Graph"]
 #: A PIBT call's fixed cost, in units, besides a unit a drone that chooses in it and one per FIXED drones (its arrays,
 #: dictionaries, the swap's test and the node's candidates, over every drone).
 CALL = 30
-FIXED = 4
-#: The search's work units a turn (a PIBT call costs one a drone that chooses in it — not the drones of its order's
-#: end that would stay, `_choosing` —, one per FIXED drones and CALL; a distance table one a level of its
-#: breadth-first search and one per CELLS_A_UNIT open cells): three PIBT calls at 400 drones. A turn is that work, or
-#: that of the tables, and at most one more PIBT call (the turn's own when the search does not play it), never more:
-#: the search's calls and tables are only started within the budget (the first of a turn excepted: one call at least,
-#: the drones never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md, "Cost
-#: of a turn": 20 ms or less at 400 drones, 100 at 1000, on the benchmark's densest instances).
-WORK = 3 * (400 + 400 // FIXED + CALL)
+FIXED = 2
+#: The search's work units a turn, two full PIBT calls at 400 drones (a PIBT call costs one a drone that chooses in it
+#: — not the drones of its order's end that would stay, `_choosing` —, one per FIXED drones and CALL; a distance table
+#: one a level of its breadth-first search and one per CELLS_A_UNIT open cells). A turn is that work, or that of the
+#: tables, and at most one more PIBT call (the turn's own when the search does not play it), never more: the search's
+#: calls and tables are only started within the budget (the first of a turn excepted: one call at least, the drones
+#: never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md, "Online": 20 ms
+#: or less at 400 drones, 100 at 1000, on the benchmark's densest instances).
+WORK = 2 * (400 + 400 // FIXED + CALL)
 #: A breadth-first search's level costs about a unit (the arrays of its frontier); its cells about a 32nd each.
 CELLS_A_UNIT = 32
 #: Every open cell's distance table is made at the game's start (`Lacam.prepare`) where they hold this many entries
