@@ -3,6 +3,7 @@ bytes, and a quiet logger for the pure state machines."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 
@@ -48,10 +49,15 @@ def logger() -> logging.Logger:
     return log
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def playwright_driver():
-    """The session's one Playwright driver (a second sync Playwright in the same process fails), for the
-    browser tests (tests/e2e/) and the engine test of the web page; skipped, saying why, without a browser."""
+    """A module's one Playwright driver (a second sync Playwright started while one runs fails), for the browser
+    tests (tests/e2e/) and the engine test of the web page; skipped, saying why, without a browser.
+
+    Stopped at the end of the module, not of the session: a started sync Playwright runs its asyncio loop in a
+    greenlet of the main thread, so that until it stops the main thread holds a running event loop
+    (`asyncio.get_running_loop()` returns it) and any later test's `asyncio.run` fails with "cannot be called
+    from a running event loop" (MAVSDK's, in tests/test_mavlink_clients.py, after tests/e2e/ in a whole run)."""
     from tests.e2e.conftest import _skipped, browser_problem
 
     problem = browser_problem()
@@ -65,3 +71,5 @@ def playwright_driver():
         yield pw
     finally:
         pw.stop()
+    with pytest.raises(RuntimeError):  # (stopped: the main thread's running loop is gone with it)
+        asyncio.get_running_loop()

@@ -1870,7 +1870,7 @@ def test_engine_remote_ground_station_and_web_page_in_chromium(projects, host_jo
     problem = browser_problem()
     if problem:
         skip_or_fail(problem)
-    pw = request.getfixturevalue("playwright_driver")  # the session's one driver (the browser tests' too)
+    pw = request.getfixturevalue("playwright_driver")  # (this module's driver: stopped at its end)
 
     w = projects([COMPOSE], {"DRONES": "1", "SEED": "7", "MAX_TURNS": "80", "WEB_PACE": "0.05",
                              "HEALTH_INTERVAL": "2s"})

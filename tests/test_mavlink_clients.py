@@ -9,7 +9,6 @@ Each game runs on ports of its own (--mavlink-gcs, --mavlink-api-base), so tests
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import contextlib
 import json
 import math
@@ -395,10 +394,8 @@ def test_mavsdk_flies_one_vehicle_and_a_mission_on_another(tmp_path: Path) -> No
         async with mavsdk.Mavsdk(configs[0]) as one, mavsdk.Mavsdk(configs[1]) as other:
             await asyncio.wait_for(asyncio.gather(fly_d02(one, api + 1), fly_d03(other, api + 2)), 90)
 
-    with game(tmp_path) as g, concurrent.futures.ThreadPoolExecutor(1) as pool:
-        # on a thread of its own: the suite's main thread may hold a running event loop (seen in CI: asyncio.run
-        # refused with "cannot be called from a running event loop")
-        pool.submit(asyncio.run, main(g.api)).result()
+    with game(tmp_path) as g:
+        asyncio.run(main(g.api))
         g.finish()
     targets = g.targets()
     assert targets["D02"][:2] == [(0, 2, 3), (5, 3, 3)] and targets["D02"][-1] == (5, 3, 0)

@@ -37,8 +37,9 @@ def browser_problem() -> str | None:
     return None
 
 
-# The session's one Playwright driver, `playwright_driver`, is in tests/conftest.py: the engine tests
-# (tests/test_docker.py) drive the web page too, and a second sync Playwright in one process fails.
+# The Playwright driver, `playwright_driver`, is in tests/conftest.py: the engine tests (tests/test_docker.py)
+# drive the web page too. One a module, stopped at its end: a running sync Playwright leaves the main thread
+# holding a running event loop (a second one started meanwhile fails, and so does any asyncio.run).
 
 
 @pytest.fixture
