@@ -5,6 +5,7 @@ scenarios and the RL episodes all read a game from it."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, overload
@@ -103,21 +104,31 @@ class GameConfig:
         table = self.drones if isinstance(self.drones, DroneTable) else \
             DroneTable([d.drone for d in self.drones], [d.start for d in self.drones])
         ids, starts = table.ids, table.starts
-        if bad := [d for d in ids if not is_drone_id(d)]:
-            raise UsageError(f"{bad[0]!r} is not a drone id (D01 ... D65535)")
-        if len(set(ids)) != len(ids):
-            raise UsageError(f"duplicate drone ids in {list(ids)}")
-        if not (starts >= 0).all() or not (starts < self.world.size).all():  # (fewer operations than inside_rows)
+        if problem := _ids_problem(ids):
+            raise UsageError(problem)
+        if np.count_nonzero(starts.view(np.uint64) >= self.world.size):  # (a negative coordinate, unsigned, is huge)
             i = int(inside_rows(starts, self.world.size).argmin())
             raise UsageError(f"{ids[i]} starts at {cell_of(starts[i])}, outside the world {self.world.size}")
-        if len(set(linear_rows(starts, self.world.size).tolist())) != len(starts):  # (cells inside: a number each)
+        if len(starts) > 1 and len(set(linear_rows(starts, self.world.size).tolist())) != len(starts):  # (one each)
             raise UsageError("two drones cannot start in the same cell")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
         if not (self.phase_deadline > 0 and self.phase_cap > 0
-                and all(d is None or d > 0 for d in (self.gcs_deadline, self.admit_deadline))
+                and (self.gcs_deadline is None or self.gcs_deadline > 0)
+                and (self.admit_deadline is None or self.admit_deadline > 0)
                 and min(self.env_grace, self.link_grace, self.gcs_grace) >= 0):
             raise UsageError("deadlines must be positive (the GCS's and admission's: or none) and graces >= 0")
+
+
+@functools.lru_cache(maxsize=8)
+def _ids_problem(ids: tuple[str, ...]) -> str:
+    """What is wrong with a game's drone ids ("" if nothing): remembered for the last few sets of ids (an RL
+    environment starts a game of the same drones at every reset)."""
+    if bad := [d for d in ids if not is_drone_id(d)]:
+        return f"{bad[0]!r} is not a drone id (D01 ... D65535)"
+    if len(set(ids)) != len(ids):
+        return f"duplicate drone ids in {list(ids)}"
+    return ""
 
 
 def starts_of(config: GameConfig) -> Iterator[tuple[str, Cell]]:

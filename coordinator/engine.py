@@ -773,6 +773,10 @@ class Engine:
         else:
             alive = fleet.alive_rows().tolist()
         if len(alive) > TURN_FEW_DRONES:
+            if took is not None:  # (a turn of `play`'s with a few moves: they are the phase's, as the arrays read it)
+                self._moved[:] = False
+                for i, (cell, code) in took.items():
+                    self._proposed[i], self._said[i], self._moved[i], self._ranked[i] = cell, code, True, 0
             return self._judge_arrays()
         every = alive  # the rows in play: the alive ones, and any whose move was taken before it was LOST
         if took is None:

@@ -56,7 +56,8 @@ class Fleet:
         n = len(self.ids)
         self.numbers = np.array([drone_number(d) for d in self.ids], np.uint16)
         self.pos = np.array([c for _, c in pairs], np.int32).reshape(n, 3)
-        self.state = np.zeros(n, np.uint8) + ALIVE
+        self.state = np.empty(n, np.uint8)
+        self.state.fill(ALIVE)
         self.target = np.empty((n, 3), np.int32)  # (np.full: three times the time of a small fleet's empty + fill)
         self.target.fill(-1)
         self.note = np.zeros(n, np.uint8)

@@ -119,7 +119,7 @@ class DroneParallelEnv(ParallelEnv):
             self.episode = Episode(self.config, layout, turns, max_cycles, self._eyes)
         self._eyes = self.episode.eyes
         self.agents = self.possible_agents[:]
-        rows = np.arange(len(self.agents))
+        rows = range(len(self.agents))  # (every row: no episode selects by them)
         observations = dict(zip(self.agents, self.episode.observe(rows)))
         infos = dict(zip(self.agents, self.episode.infos(rows)))
         if self.render_mode == "human":

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -243,7 +244,7 @@ class Layout:
             rest = rng.choice(np.flatnonzero(~world.grid.ravel() & ~terrain.clear_mask), n - len(clear),
                               replace=False)
             start_lin = rng.permutation(np.concatenate([clear, rest]))
-        starts = np.stack(np.unravel_index(start_lin, world.size), axis=1).astype(np.int32)
+        starts = np.array(np.unravel_index(start_lin, world.size), np.int32).T.copy()  # (n, 3), C order
         comp = terrain.labels(start_lin, starts)
         taken = np.zeros(world.grid.size, bool)
         taken[start_lin] = True
@@ -275,8 +276,14 @@ class Layout:
 
     def game(self, max_turns: int, phase_deadline: float = PHASE_DEADLINE_S) -> GameConfig:
         """The engine's game for this layout (the world given cell by cell: every backend builds the same)."""
-        drones = DroneTable([drone_name(i) for i in range(1, len(self.starts) + 1)], self.starts)
+        drones = DroneTable(drone_names(len(self.starts)), self.starts)
         return GameConfig(world=self.terrain.spec, drones=drones, max_turns=max_turns, phase_deadline=phase_deadline)
+
+
+@functools.lru_cache(maxsize=8)
+def drone_names(n: int) -> tuple[str, ...]:
+    """The ids of an episode's drones, D01 ... (the same at every reset: made once)."""
+    return tuple(drone_name(i) for i in range(1, n + 1))
 
 
 # --------------------------------------------------------------------------- backends
@@ -623,16 +630,16 @@ class Episode(EpisodeBase):
 
     # ------------------------------------------------------------------ reading
 
-    def observe(self, rows: np.ndarray, whole: bool = True) -> np.ndarray:
+    def observe(self, rows: np.ndarray | range, whole: bool = True) -> np.ndarray:
         """The observations of `rows`; `whole`: whether they are every drone, all alive (as at the start)."""
         if whole:
             return self.eyes.see(self.pos, self.targets)
         return self.eyes.see(self.pos[rows], self.targets[rows], self.pos[self.state == ALIVE])
 
-    def infos(self, rows: np.ndarray) -> list[dict]:
+    def infos(self, rows: np.ndarray | range) -> list[dict]:
         """Each row's info: its cell, target, note (as the STATUS says: reached, unreachable or none), state
         and cause of death (none while alive)."""
-        columns = (self.pos, self.targets, self.note, self.state, self.cause)
+        columns: tuple[np.ndarray, ...] = (self.pos, self.targets, self.note, self.state, self.cause)
         if len(rows) < self.n:
             columns = tuple(c[rows] for c in columns)
         return [{"cell": tuple(p), "target": tuple(t), "note": NOTE_TEXT[nt], "state": STATE_TEXT[s],

@@ -95,3 +95,24 @@ def test_a_drone_lost_after_its_move_was_taken_still_makes_it(few: int, monkeypa
                                       "moves": {"D01": [1, 0, 0], "D02": [4, 4, 3]}, "notes": {"D03": "UNREACHABLE"},
                                       "state": records(g.effects)[-1]["state"]}
     assert g.status("D01").pos == (1, 0, 0)
+
+
+def test_a_few_moves_among_many_alive_drones_are_made() -> None:
+    """`Engine.play` given fewer moves than alive drones, these more than TURN_FEW_DRONES (so the turn is the arrays'):
+    the moves given are made (they were left out, and the drones hovered), the other drones hover."""
+    from coordinator.config import DroneTable, GameConfig
+    from dronesim.rl import local_game
+    from world.grid import World
+
+    world = World(size=(20, 20, 2), grid=np.zeros((20, 20, 2), bool))
+    starts = [(x, y, 0) for x in range(0, 20, 2) for y in range(0, 14, 2)]
+    assert len(starts) > engine_module.TURN_FEW_DRONES
+    game = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()),
+                      drones=DroneTable([f"D{i:02d}" for i in range(1, len(starts) + 1)], starts))
+    engine = local_game(game, world, QUIET)
+    fleet = engine.fleet
+    rows = [fleet.index["D01"], fleet.index["D70"]]
+    before = fleet.pos.copy()
+    engine.play([], [], rows, [(1, 0, 0), (18, 12, 1)], [0, 0])
+    moved = np.flatnonzero((fleet.pos != before).any(axis=1)).tolist()
+    assert sorted(moved) == sorted(rows) and fleet.pos[rows].tolist() == [[1, 0, 0], [18, 12, 1]]
