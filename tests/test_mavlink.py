@@ -219,6 +219,27 @@ def test_modes_the_vehicle_does_not_fly_and_unknown_commands_are_refused() -> No
     assert b.vehicles[1].goal is None and b.vehicles[2].goal is None
 
 
+def test_the_parameter_list_is_one_read_only_parameter() -> None:
+    """Ground stations fetch a vehicle's parameters when they meet it (QGroundControl holds it not ready until the
+    list is complete): the list is SYSID_THISMAV, by list, index or name; a set leaves it as it is; other names
+    are not answered."""
+    b = bridge()
+
+    def values(msg) -> list:
+        return [(m.param_id, m.param_value, m.param_count, m.param_index) for m in sent(b.packet(GCS, [wire(msg)]),
+                                                                                        "PARAM_VALUE")]
+
+    one = [("SYSID_THISMAV", 2.0, 1, 0)]
+    assert values(mav.MAVLink_param_request_list_message(2, 0)) == one
+    assert values(mav.MAVLink_param_request_read_message(2, 0, b"", 0)) == one
+    assert values(mav.MAVLink_param_request_read_message(2, 0, b"SYSID_THISMAV", -1)) == one
+    assert values(mav.MAVLink_param_set_message(2, 0, b"SYSID_THISMAV", 7.0, mav.MAV_PARAM_TYPE_INT16)) == one
+    assert values(mav.MAVLink_param_request_read_message(2, 0, b"", 1)) == []
+    assert values(mav.MAVLink_param_request_read_message(2, 0, b"WPNAV_SPEED", -1)) == []
+    assert values(mav.MAVLink_param_set_message(2, 0, b"WPNAV_SPEED", 5.0, mav.MAV_PARAM_TYPE_REAL32)) == []
+    assert b.vehicles[2].system == 2 and b.vehicles[2].goal is None
+
+
 # ---------------------------------------------------------------------------------------------- bad input
 
 
@@ -593,7 +614,7 @@ def test_any_values_of_the_messages_handled_never_break_the_bridge() -> None:
         if kind in ("float", "double"):
             return rng.choice(floats) if rng.random() < 0.7 else rng.uniform(-100, 100)
         if kind == "char":
-            return b"x"
+            return rng.choice([b"x", b"", b"SYSID_THISMAV", b"\xff" * 16])
         lo, hi = limits[kind]
         if name in ("target_system", "target_component"):
             return rng.choice([0, 1, 2, 3, 7, 255])
@@ -606,7 +627,9 @@ def test_any_values_of_the_messages_handled_never_break_the_bridge() -> None:
     for _ in range(1500):
         cls = rng.choice(classes)
         args = []
-        for name, kind, length in zip(cls.fieldnames, cls.fieldtypes, cls.array_lengths):
+        lengths = dict(zip(cls.ordered_fieldnames, cls.array_lengths))  # (array_lengths are in wire order)
+        for name, kind in zip(cls.fieldnames, cls.fieldtypes):
+            length = lengths[name]
             args.append([value(kind, name) for _ in range(length)] if length and kind != "char" else value(kind, name))
         msg = cls(*args)
         b.packet(Origin(rng.choice([0, 1, 2, 3]), ("127.0.0.1", 9)), [wire(msg)])

@@ -194,6 +194,7 @@ def test_mavproxy_flies_two_vehicles_at_once(tmp_path: Path) -> None:
             expect(fleet, r"Detected vehicle 3:1")  # the shared link shows the whole fleet
             expect(fleet, r"AP: D02 reached \(8, 3, 3\)")
             expect(one, r"AP: D03 reached \(4, 9, 2\)")
+            expect(one, r"Received 1 parameters")  # (its parameter list: SYSID_THISMAV, after trying MAVFTP)
             expect(refused, r"Got COMMAND_ACK: DO_REPOSITION: DENIED")
             expect(refused, r"AP: D01: target refused: .*building")
             expect(refused, r"AP: D01: mode 7 is not flown here: AUTO 3, GUIDED 4, LOITER 5, RTL 6, LAND 9")

@@ -34,10 +34,10 @@ MAX_SYSTEM = 255
 COMMANDS_PER_TURN = 32
 COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT", "SET_MODE", "SET_POSITION_TARGET_LOCAL_NED",
                       "SET_POSITION_TARGET_GLOBAL_INT"})
-#: Messages a vehicle answers or acts on (others -- heartbeats, parameter and stream requests -- are ignored).
+#: Messages a vehicle answers or acts on (others -- heartbeats, stream requests... -- are ignored).
 HANDLED = COMMANDS | {"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_LIST",
                       "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT",
-                      "MISSION_ACK"}
+                      "MISSION_ACK", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"}
 
 
 class Bridge:

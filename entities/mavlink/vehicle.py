@@ -55,6 +55,8 @@ RELATIVE_FRAMES = frozenset({mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GL
                              mav.MAV_FRAME_GLOBAL_TERRAIN_ALT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT})
 OFFSET_FRAMES = frozenset({mav.MAV_FRAME_LOCAL_OFFSET_NED, mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED,
                            mav.MAV_FRAME_BODY_FRD})
+#: The vehicle's one parameter (ArduPilot's name of the system id), read-only.
+PARAMETER = "SYSID_THISMAV"
 POSITION_IGNORED = 0b111  # SET_POSITION_TARGET_*'s type_mask: x, y, z ignored
 INT32_MAX = (1 << 31) - 1
 
@@ -220,6 +222,8 @@ class Vehicle:
                         "MISSION_REQUEST_INT" | "MISSION_REQUEST" | "MISSION_CLEAR_ALL" | "MISSION_SET_CURRENT" | \
                         "MISSION_ACK":
                     return self._mission(kind, msg, origin)
+                case "PARAM_REQUEST_LIST" | "PARAM_REQUEST_READ" | "PARAM_SET":
+                    return self._parameter(kind, msg, origin)
         except Denied as err:  # (a message without an answer of its own: said in a STATUSTEXT)
             return [*self._refused(kind, err), *self.say(mav.MAV_SEVERITY_WARNING, f"{self.drone}: {err.text}")]
         return []
@@ -431,6 +435,19 @@ class Vehicle:
                 here = (lat * 1e7, lon * 1e7, alt - (self.geo.amsl(self.home[2]) if frame in RELATIVE_FRAMES else 0))
             x, y, z = (h if mask & bit else v for v, h, bit in zip((x, y, z), here, (1, 2, 4)))
         return self._aim(self.position(frame, x, y, z, scaled=not local))
+
+    # ------------------------------------------------------------------ the parameter protocol
+
+    def _parameter(self, kind: str, msg: Msg, origin: Origin) -> list[Effect]:
+        """The one parameter a vehicle has, SYSID_THISMAV (its system id, read-only): ground stations fetch the
+        parameters when they meet a vehicle (QGroundControl holds its vehicle not ready until the list is
+        complete), and a list of one is complete. Another name or index is not answered (as ArduPilot does);
+        a set is answered with the value in force."""
+        by_index = kind == "PARAM_REQUEST_READ" and msg.param_index != -1  # (-1: by its name)
+        if kind == "PARAM_REQUEST_LIST" or (msg.param_index == 0 if by_index else msg.param_id == PARAMETER):
+            return [Mav(self.system, mav.MAVLink_param_value_message(
+                PARAMETER.encode(), float(self.system), mav.MAV_PARAM_TYPE_INT16, 1, 0), origin)]
+        return []
 
     # ------------------------------------------------------------------ the mission protocol
 
