@@ -29,7 +29,7 @@ import zenoh
 from benchmarks.measure import Procs, cpu_seconds, loopback_router, proc_status, size_text
 from coordinator.journal import is_turn
 from network.transport import client_config
-from schema.tuning import ANSWER_AHEAD
+from schema.tuning import ANSWER_AHEAD, COORDINATOR_GRACE_S
 
 WORLD_SEED = 3
 
@@ -337,7 +337,7 @@ class _Watch:
             if not await_presence(session, RosKeys().node_tokens("dronesim"), 120.0):
                 raise RuntimeError("the ROS 2 viewer did not appear within 120 s")
         inbox = listen(session, keys, log)
-        member = join(session, inbox, log, connect_timeout=120.0, grace=30.0)
+        member = join(session, inbox, log, connect_timeout=120.0, grace=COORDINATOR_GRACE_S)
         station = Station(Ground.from_welcome(member.welcome, Scenario.load(scenario_file).targets, None),
                           quit_at=self.case.end_turn, ahead=self.variant.ahead)
         send, idle_since, end = publisher(Outbox(session), keys, log, print), time.monotonic(), None

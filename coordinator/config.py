@@ -23,6 +23,11 @@ from .fleet import cell_of
 #: a row after which a drone is LOST.
 MAX_TURNS = 1000
 LOST_AFTER = 3
+#: The turn limit of a game `dronesim up` starts (the Docker cluster's too: docker/compose*.yaml's MAX_TURNS), one to
+#: watch.
+UP_MAX_TURNS = 200
+#: The size of a generated world when none is given (`--size`): nx, ny, nz.
+SIZE = (10, 10, 10)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

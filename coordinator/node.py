@@ -74,7 +74,7 @@ from world.grid import World
 
 from . import arbiter
 from .admission import Presences
-from .config import ARBITERS, LOST_AFTER, MAX_TURNS, DroneSpec, GameConfig
+from .config import ARBITERS, LOST_AFTER, MAX_TURNS, SIZE, DroneSpec, GameConfig
 from .engine import Engine, Publish, Record, Refusal, ReplyToConnect, Stage
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
@@ -506,7 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dronesim coordinator", description=__doc__)
     add_zenoh_args(p)
     p.add_argument("--seed", type=int, default=0, help="world seed (default 0)")
-    p.add_argument("--size", default="10,10,10", help="world size nx,ny,nz (default 10,10,10)")
+    p.add_argument("--size", default=",".join(map(str, SIZE)), help="world size nx,ny,nz (default %(default)s)")
     p.add_argument("--world", help="a world file (JSON) instead of a generated world")
     p.add_argument("--scenario", help="a scenario file (world, drones, starts, max turns): overrides those flags")
     p.add_argument("--drones", type=int, default=1, help="number of drones D01..Dnn (default 1)")

@@ -5,7 +5,7 @@ Healthy: this container's entity is *present on the network* and its game *makes
 ``<root>/<ENTITY>/ALIVE/<session>``, which the coordinator watches, is asked of the router by a short-lived client
 session with the entity's own Zenoh flags (--connect, --config: TLS and credentials included). Its progress is what
 the process last noted in $DRONESIM_PROGRESS (network/progress.py): a step that stands still longer than
-$DRONESIM_HEALTH_STALL seconds (default 60) where it should not is unhealthy -- an entity not admitted, a game that
+$DRONESIM_HEALTH_STALL seconds (default 60, schema/tuning.py) where it should not is unhealthy -- an entity not admitted, a game that
 waits for entities that do not come (the coordinator's, new or resumed), a drones' phase that never ends -- and so is
 an entity whose coordinator has vanished or that was refused. The ground station's phase may last (a person decides:
 the page holds the game for its next target), and after the game's end the process is healthy while it lives (a
@@ -23,8 +23,10 @@ import sys
 import time
 from pathlib import Path
 
-TIMEOUT_S = float(os.environ.get("DRONESIM_HEALTH_TIMEOUT", "5"))
-STALL_S = float(os.environ.get("DRONESIM_HEALTH_STALL", "60"))
+from schema.tuning import HEALTH_STALL_S, HEALTH_TIMEOUT_S  # noqa: E402 (the image's packages: `sys.path` as run)
+
+TIMEOUT_S = float(os.environ.get("DRONESIM_HEALTH_TIMEOUT", HEALTH_TIMEOUT_S))
+STALL_S = float(os.environ.get("DRONESIM_HEALTH_STALL", HEALTH_STALL_S))
 #: Steps that may stand still without end: the ground station's phase (a person decides), and an entity admitted or
 #: playing (the game's pace is the coordinator's and the ground station's: their own checks judge it; a drone hears
 #: nothing before its first phase, which waits for the person). The end is apart.

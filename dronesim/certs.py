@@ -39,6 +39,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from schema import UsageError, drone_id
+from schema.keys import ROOT
 from schema.messages import is_drone_id, is_host_id
 
 #: Elliptic-curve keys (P-256): small, fast, and accepted by Zenoh's TLS (rustls).
@@ -226,7 +227,7 @@ class GameCredentials:
 
 
 def game_credentials(folder: str | Path, *, drones: Sequence[str], hosts: Mapping[str, Sequence[str]] | None = None,
-                     spare_hosts: Sequence[str] = (), roots: Sequence[str] = ("sim",), router_hosts: Iterable[str] = (),
+                     spare_hosts: Sequence[str] = (), roots: Sequence[str] = (ROOT,), router_hosts: Iterable[str] = (),
                      listen: str = ZENOHD_LISTEN) -> GameCredentials:
     """A game's credentials, made at its start (`dronesim up`, the cluster's `credentials` service): a CA, the
     router's TLS certificate (for localhost and `router_hosts`), a random password per entity (SRV, ENV, GCS, each
@@ -278,7 +279,7 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--spare-host", action="append", default=[], metavar="Hnn",
                    help="with --game: a swarm host that may fly every drone in place of the drone processes, which "
                         "keep their own credentials (docker/compose.yaml's swarm profile; repeatable)")
-    p.add_argument("--root", action="append", default=[], help="with --game: the game's key root (default sim)")
+    p.add_argument("--root", action="append", default=[], help=f"with --game: the game's key root (default {ROOT})")
     p.add_argument("--by-role", metavar="DIR",
                    help="with --game: also each role's share in DIR/SRV, DIR/ENV, DIR/GCS and DIR/drones (the drones "
                         "and swarm hosts): ca.pem and the role's passwords alone (docker/compose.yaml mounts each "
@@ -297,7 +298,7 @@ def cli(argv: list[str] | None = None) -> int:
             except ValueError as err:
                 raise UsageError(str(err)) from None
             creds = game_credentials(args.folder, drones=[drone_id(n) for n in range(1, args.drones + 1)],
-                                     hosts=hosts, spare_hosts=args.spare_host, roots=args.root or ["sim"],
+                                     hosts=hosts, spare_hosts=args.spare_host, roots=args.root or [ROOT],
                                      router_hosts=args.router_host)
             print(f"router: dronesim router {' '.join(creds.router_flags())}")
             print(f"   or: zenohd -c {creds.folder / 'router.json5'}")

@@ -44,7 +44,7 @@ from schema import (
 )
 from schema.messages import AROUND
 from schema.tables import MAX_DRONE, code_of, drone_name
-from schema.tuning import EYES_ONE_BY_ONE, PHASE_DEADLINE_S
+from schema.tuning import EYES_ONE_BY_ONE, PHASE_DEADLINE_S, RL_WAIT_S
 from world.grid import Regions, World, checked_int, inside_rows, pick_cell
 
 #: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
@@ -107,7 +107,7 @@ class Config:
     render_mode: str | None = None
     backend: str = "local"
     connect: str | None = None  # zenoh backend: a router's endpoint to join (default: start one in-process)
-    deadline: float = 30.0  # zenoh backend: seconds any wait may last (start of a game, a turn, the end)
+    deadline: float = RL_WAIT_S  # zenoh backend: seconds any wait may last (start of a game, a turn, the end)
 
     @classmethod
     def of(cls, **config: object) -> Config:

@@ -41,7 +41,7 @@ from network.transport import (
     zenoh_error,
 )
 from schema import Done, Intent, Keys, Message, Moves, Over, Phase, Status, Turn, UsageError
-from schema.tuning import PROCESS_CHECK_S
+from schema.tuning import PROCESS_CHECK_S, RL_WAIT_S
 from world.grid import World
 
 #: The processes of a game, by the name their presence token has.
@@ -51,7 +51,7 @@ ROLES = {"SRV": "coordinator", "ENV": "environment"}
 class ZenohTurns:
     """Games on real processes over Zenoh, one per episode (see the module's docstring)."""
 
-    def __init__(self, *, connect: str | None = None, deadline: float = 30.0, moves_ahead: bool = True) -> None:
+    def __init__(self, *, connect: str | None = None, deadline: float = RL_WAIT_S, moves_ahead: bool = True) -> None:
         self.deadline = deadline
         self.moves_ahead = moves_ahead  # False: each MOVES waits for its drones' phase (a second round trip)
         self._log = logging.getLogger("dronesim.rl")

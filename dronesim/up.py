@@ -22,6 +22,7 @@ import time
 
 import zenoh
 
+from coordinator.config import SIZE, UP_MAX_TURNS
 from dronesim import child_env
 from dronesim.certs import GameCredentials, game_credentials
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
@@ -29,13 +30,14 @@ from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
 from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
 from schema import UsageError, drone_id
-from schema.tuning import KILL_S, PHASE_DEADLINE_S, STOP_S
+from schema.keys import ROOT
+from schema.tuning import KILL_S, PHASE_DEADLINE_S, STOP_S, UP_ADMIT_DEADLINE_S
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dronesim up", description=__doc__)
     p.add_argument("--seed", type=int, default=7, help="world seed (default 7)")
-    p.add_argument("--size", default="10,10,10", help="world size nx,ny,nz (default 10,10,10)")
+    p.add_argument("--size", default=",".join(map(str, SIZE)), help="world size nx,ny,nz (default %(default)s)")
     p.add_argument("--world", help="a world file (JSON, or a MovingAI .map) instead of a generated world")
     p.add_argument("--scen", help="a MovingAI .scen on the --world .map: its agents are the drones, their goals the "
                                   "targets (the autopilot: --autopilot, default dstar here)")
@@ -48,7 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--targets", action="append", default=[], metavar="[Dnn=]x,y,z[@turn]",
                    help="scripted targets; without --targets or --script the ground station is interactive")
     p.add_argument("--script", help="a file of scripted targets")
-    p.add_argument("--max-turns", type=int, default=200)
+    p.add_argument("--max-turns", type=int, default=UP_MAX_TURNS, help="the game's turn limit (default %(default)s)")
     p.add_argument("--arbiter", choices=("lacam", "pibt"),
                    help="the cooperative drones' arbitration (default lacam, the complete search; pibt: PIBT alone)")
     p.add_argument("--lifelong", action="store_true",
@@ -61,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds the drones (and the environment) have for each phase "
                         f"(default: the coordinator's, {PHASE_DEADLINE_S:g})")
     p.add_argument("--journal", help="write the journal to this file")
-    p.add_argument("--root", default="sim", help="key root (default sim)")
+    p.add_argument("--root", default=ROOT, help=f"key root (default {ROOT})")
     p.add_argument("--listen", default="tcp/127.0.0.1:0", help="the embedded router's endpoint (default: a free port; "
                    "tcp/ becomes tls/ unless --insecure)")
     p.add_argument("--insecure", action="store_true",
@@ -105,7 +107,8 @@ def _common(args: argparse.Namespace, locator: str) -> list[str]:
 def coordinator_flags(args: argparse.Namespace, locator: str) -> list[str]:
     """The coordinator's flags (after `dronesim coordinator`): the game it plays."""
     return [*_common(args, locator), "--seed", str(args.seed), "--size", args.size, "--drones", str(args.drones),
-            "--max-turns", str(args.max_turns), "--admit-deadline", "60", "--pace", str(args.pace),
+            "--max-turns", str(args.max_turns), "--admit-deadline", f"{UP_ADMIT_DEADLINE_S:g}",
+            "--pace", str(args.pace),
             *_passed(args, "world", "starts", "journal", "scenario", "arbiter", "lifelong"),
             *(["--phase-deadline", str(args.phase_deadline)] if args.phase_deadline is not None else [])]
 

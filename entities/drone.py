@@ -43,7 +43,15 @@ from schema import Ans, Ask, Cell, CellInfo, CellKind, MapRequest, Moves, Nps, O
 from schema.errors import OutOfRange, Refusal, RemoteInputError
 from schema.messages import _KINDS, AROUND, OrderTable, Welcome
 from schema.tables import drone_number
-from schema.tuning import ASK_AHEAD_MAX_DRONES, ASK_AHEAD_REACH, CHART_FEW_CELLS, MAP_TRIES, PREFETCH_CHUNK, SWARM_MIN
+from schema.tuning import (
+    ASK_AHEAD_MAX_DRONES,
+    ASK_AHEAD_REACH,
+    CHART_FEW_CELLS,
+    COORDINATOR_GRACE_S,
+    MAP_TRIES,
+    PREFETCH_CHUNK,
+    SWARM_MIN,
+)
 from world.grid import World, inside_rows, linear_rows
 
 from .autopilots import make_autopilot, make_swarm, pilot_class
@@ -143,7 +151,7 @@ class DroneProcess:
     """A drone process's protocol: feed it inputs, carry out the effects it returns (see the module)."""
 
     def __init__(self, welcome: Welcome, *, drones: Sequence[str], autopilot: str, logger: logging.Logger,
-                 host: str | None = None, swarm_min: int = SWARM_MIN, patience: float = 30.0,
+                 host: str | None = None, swarm_min: int = SWARM_MIN, patience: float = COORDINATOR_GRACE_S,
                  chart: bool = True) -> None:
         self.sender = host or drones[0]
         self.host = host

@@ -32,9 +32,9 @@ import zenoh
 from schema import Keys, Message, Target, Turn, decode, encode
 from schema.acl import flood_filters
 from schema.errors import MalformedMessage, RejectCounter, RemoteInputError, StaleTurn, UsageError, WrongSender, excerpt
-from schema.keys import size_limit
+from schema.keys import ROOT, size_limit
 from schema.messages import is_entity_id
-from schema.tuning import ORIGIN_BYTES, ORIGIN_QUEUE, ORIGIN_SHARE
+from schema.tuning import AUDIT_S, ORIGIN_BYTES, ORIGIN_QUEUE, ORIGIN_SHARE, ROUTER_ANSWER_S
 
 
 def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
@@ -49,7 +49,7 @@ def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--lease", type=float, metavar="SECONDS",
                    help="link lease (transport/link/tx/lease): a hung or cut-off process is declared gone after "
                         "about 0.75 x this (zenoh's default: 10)")
-    g.add_argument("--root", default="sim", help="key expression root of this simulation (default: sim)")
+    g.add_argument("--root", default=ROOT, help=f"key expression root of this simulation (default: {ROOT})")
     g.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ERROR (default: INFO)")
     s = parser.add_argument_group("zenoh security (docs/security.md)")
     s.add_argument("--tls-ca", metavar="FILE", help="CA certificate that signed the router's (and peers') TLS "
@@ -206,7 +206,7 @@ def client_config(locator: str) -> zenoh.Config:
 
 def router_locators(session: zenoh.Session) -> list[str]:
     """The endpoints a router session really listens on (with the port chosen for `:0`)."""
-    for reply in session.get(f"@/{session_id(session)}/router", timeout=5.0):
+    for reply in session.get(f"@/{session_id(session)}/router", timeout=ROUTER_ANSWER_S):
         if reply.ok is not None:
             return list(json.loads(reply.ok.payload.to_bytes())["locators"])
     raise UsageError("the router did not report its locators")
@@ -235,7 +235,7 @@ def sessions_listed(answers: list[dict[str, Any]]) -> frozenset[str] | None:
     return frozenset(connected) if answers else None
 
 
-def audit_sessions(session: zenoh.Session, post: Callable[[object], None], timeout: float = 2.0) -> None:
+def audit_sessions(session: zenoh.Session, post: Callable[[object], None], timeout: float = AUDIT_S) -> None:
     """Ask every router which sessions it connects, without waiting: `post(Sessions(...))` once answered. A
     presence token says nothing of who declared it: this tells a copy's (on a plain router) from its own."""
     answers: list[dict[str, Any]] = []

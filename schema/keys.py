@@ -14,6 +14,8 @@ from . import messages as m
 from .tables import MAX_DRONE, Table
 
 _ROOT = re.compile(r"[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*\Z")
+#: The key root of a simulation that names none (`--root`): every key is under it.
+ROOT = "sim"
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -81,7 +83,7 @@ def size_limit(message: type[m.Message]) -> int:
 class Keys:
     """Concrete key expressions under one root (several simulations can share one router)."""
 
-    def __init__(self, root: str = "sim") -> None:
+    def __init__(self, root: str = ROOT) -> None:
         if not _ROOT.match(root):
             raise ValueError(f"bad key root {root!r}: use letters, digits, '_', '-' and '/'")
         self.root = root

@@ -170,6 +170,8 @@ DECIDING_EVERY_S = 0.05
 DECIDING_SILENCE_S = 1.0
 #: How long a game waits for every entity to connect, also when resumed (`--admit-deadline`; 0: forever).
 ADMIT_DEADLINE_S = 600.0
+#: The same for the game `dronesim up` plays: it starts every entity itself, on this machine.
+UP_ADMIT_DEADLINE_S = 60.0
 #: How long a game waits for a vanished environment to come back (`GameConfig.env_grace`).
 ENV_GRACE_S = 30.0
 #: How long a game holds after the coordinator's link is lost, e.g. a router restart (`--link-grace`).
@@ -183,8 +185,16 @@ COORDINATOR_GRACE_S = 30.0
 #: How often a process that started the game's processes itself (the RL environment's zenoh backend) looks whether
 #: one has died while it waits for them (admission, a turn's STATUS, the end): a dead one is an error at once.
 PROCESS_CHECK_S = 0.25
+#: How long the RL environment's zenoh backend waits for any step of its game (the game's start, a turn's STATUS,
+#: the end) before it gives up (`dronesim.rl.Config.deadline`, the game's phase deadline too).
+RL_WAIT_S = 30.0
 #: How long a drone waits for the environment's answer to its ASK.
 ASK_TIMEOUT_S = 5.0
+#: How long a process waits for its own router's answer to an admin query (the endpoints it listens on).
+ROUTER_ANSWER_S = 5.0
+#: How long the coordinator's audit of the sessions the routers connect waits for their answers
+#: (network/transport.py `audit_sessions`): a router that does not answer in time leaves the listing incomplete.
+AUDIT_S = 2.0
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway (coordinator/node.py).
 LINGER_S = 5.0
 #: The same after a signal (OVER INTERRUPTED): a process manager stops the others too, a person wants it over.
@@ -216,6 +226,13 @@ STATUS_GRACE = 2.0
 COMMAND_TIMEOUT = 10.0
 #: Seconds between the web ground station's keep-alive comments on an event stream, so a vanished page is noticed.
 KEEPALIVE = 15.0
+#: How long the web ground station waits, as it closes, for its event streams to write what they hold (the end).
+STREAMS_CLOSE_S = 5.0
+#: The Docker image's health check (docker/healthcheck.py; $DRONESIM_HEALTH_TIMEOUT and $DRONESIM_HEALTH_STALL
+#: override them): how long it waits for the router's answer (a presence token, a web page), and how long an
+#: entity's progress may stand still where it should not before the container is unhealthy.
+HEALTH_TIMEOUT_S = 5.0
+HEALTH_STALL_S = 60.0
 
 #: Turns a second at most that `dronesim ros2` publishes to ROS 2 (and Foxglove): each turn while the game goes no
 #: faster, else the newest at this rate, so that a swarm's viewer costs a bounded share of the machine. Not

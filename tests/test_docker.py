@@ -708,6 +708,18 @@ def test_the_image_gets_everything_the_package_is_built_from():
     assert {"pyproject.toml", project["project"]["readme"]} <= copied
 
 
+def test_the_clusters_game_is_dronesim_ups_by_default():
+    """The compose files' defaults for the game are `dronesim up`'s (coordinator/config.py): one place to change."""
+    from coordinator.config import SIZE, UP_MAX_TURNS
+    from dronesim.up import build_parser
+
+    up = build_parser().parse_args([])
+    for compose in (COMPOSE, COMPOSE_TLS, COMPOSE_INSECURE):
+        text = compose.read_text()
+        assert f'"${{MAX_TURNS:-{UP_MAX_TURNS}}}"' in text, compose.name
+        assert f'"${{SEED:-{up.seed}}}"' in text and f'"${{SIZE:-{",".join(map(str, SIZE))}}}"' in text, compose.name
+
+
 def lock(path: Path) -> dict[str, tuple[str, list[str]]]:
     """name -> (version, hashes) of a pip lock file."""
     text = path.read_text().replace("\\\n", " ")

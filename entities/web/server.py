@@ -17,7 +17,7 @@ from typing import Protocol
 from urllib.parse import urlsplit
 
 from schema import UsageError
-from schema.tuning import KEEPALIVE
+from schema.tuning import KEEPALIVE, STREAMS_CLOSE_S
 
 from .model import Rejected, parse_cell
 
@@ -95,7 +95,7 @@ class Hub:
         with self._cond:
             return len(self._subs)
 
-    def close(self, timeout: float = 5.0) -> bool:
+    def close(self, timeout: float = STREAMS_CLOSE_S) -> bool:
         """End every stream after what it has queued (the final state); wait until they are written."""
         with self._cond:
             self._closed = True
