@@ -708,6 +708,25 @@ def test_the_image_gets_everything_the_package_is_built_from():
     assert {"pyproject.toml", project["project"]["readme"]} <= copied
 
 
+def test_every_folder_the_wheel_takes_files_from_is_a_declared_package():
+    """setuptools installs the files of declared packages only (and warns, for a folder of data it would take
+    as an undeclared package, that it will stop): every folder under a package that holds a module or a file of
+    its package data (the web page's static/) is declared, with its data."""
+    setuptools = pyproject()["tool"]["setuptools"]
+    declared, data = set(setuptools["packages"]), setuptools.get("package-data", {})
+    tops = {name.split(".")[0] for name in declared}
+    for top in tops:
+        for folder in [ROOT / top, *(p for p in (ROOT / top).rglob("*") if p.is_dir())]:
+            if folder.name == "__pycache__":
+                continue
+            files = [f for f in folder.iterdir() if f.is_file() and not f.name.endswith(".pyc")]
+            name = ".".join(folder.relative_to(ROOT).parts)
+            if files:
+                assert name in declared, f"{name} holds {files[0].name} but is not a declared package"
+            if not any(f.suffix == ".py" for f in files) and files:
+                assert name in data, f"{name} holds data files that no package-data pattern takes"
+
+
 def test_the_clusters_game_is_dronesim_ups_by_default():
     """The compose files' defaults for the game are `dronesim up`'s (coordinator/config.py): one place to change."""
     from coordinator.config import SIZE, UP_MAX_TURNS
