@@ -19,10 +19,10 @@ from itertools import chain
 import numpy as np
 
 from coordinator.journal import header_config, is_turn, read
-from entities.ros2.model import Scene, Snapshot
+from entities.ros2.model import NAMESPACE, TURN_PERIOD_S, Scene, Snapshot
 from schema import UsageError
 from schema.tables import drone_number
-from world.grid import build_world
+from world.grid import CELL_SIZE_M, build_world
 
 #: Bytes of messages in a chunk of the file (uncompressed). A chunk has a message index for each channel in it,
 #: and a swarm's game has two channels a drone: 4 MiB chunks (foxglove-sdk's default is under 1 MiB) make the
@@ -64,8 +64,8 @@ def snapshots(records: Iterator[dict],
         yield snap(r["turn"]), r
 
 
-def export(journal: str, out: pathlib.Path, *, namespace: str = "dronesim", cell_size: float = 1.0,
-           turn_period: float = 0.1, path_every: int = 50, scene: bool = True,
+def export(journal: str, out: pathlib.Path, *, namespace: str = NAMESPACE, cell_size: float = CELL_SIZE_M,
+           turn_period: float = TURN_PERIOD_S, path_every: int = 50, scene: bool = True,
            compression: str = "zstd") -> tuple[int, int]:
     """Write the MCAP file (without `scene`: only the ROS 2 topics); (turns, messages)."""
     import foxglove
@@ -114,9 +114,10 @@ def main(argv: list[str] | None = None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("journal")
     p.add_argument("--mcap", required=True, metavar="OUT.mcap", help="the MCAP file to write (replaced if there)")
-    p.add_argument("--namespace", default="dronesim", help="prefix of the drones' topics (default dronesim)")
-    p.add_argument("--cell-size", type=float, default=1.0, help="metres a cell (default 1.0)")
-    p.add_argument("--turn-period", type=float, default=0.1, help="simulated seconds a turn (default 0.1)")
+    p.add_argument("--namespace", default=NAMESPACE, help=f"prefix of the drones' topics (default {NAMESPACE})")
+    p.add_argument("--cell-size", type=float, default=CELL_SIZE_M, help=f"metres a cell (default {CELL_SIZE_M})")
+    p.add_argument("--turn-period", type=float, default=TURN_PERIOD_S,
+                   help=f"simulated seconds a turn (default {TURN_PERIOD_S})")
     p.add_argument("--path-every", type=int, default=50, help="turns between two trails of a drone (default 50)")
     p.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd",
                    help="of the file's chunks (default zstd; none: about a third faster, files several times larger)")

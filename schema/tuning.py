@@ -222,6 +222,9 @@ FINAL_STATUS_WAIT = 5.0
 #: How long the web ground station's GCS phase waits for the STATUS of the turn before it (they travel on
 #: different keys; entities/web/model.py).
 STATUS_GRACE = 2.0
+#: The web ground station's pace by default (`--pace`): at most one turn every this many seconds, so a person can
+#: follow (the page changes it; docker/compose*.yaml's WEB_PACE the same).
+WEB_PACE_S = 0.5
 #: How long an HTTP thread of the web ground station waits for its main thread to carry out a command.
 COMMAND_TIMEOUT = 10.0
 #: Seconds between the web ground station's keep-alive comments on an event stream, so a vanished page is noticed.

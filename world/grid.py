@@ -26,6 +26,9 @@ from .search import components, levels, padded_cell, padded_steps
 FORMAT = "dronesim-world"
 FORMAT_VERSION = 1
 
+#: Metres a cell, where a face maps cells to metres (ROS 2, Foxglove, MCAP, MAVLink) and is not told (--cell-size).
+CELL_SIZE_M = 1.0
+
 #: Default generation parameters (they decide the world: not tuning constants).
 _DEFAULT_FOOTPRINT = 3
 _DEFAULT_GROUND_COVER = 0.25  # expected fraction of ground cells under a building, before rejections

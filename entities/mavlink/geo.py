@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 from schema import Cell, UsageError
+from world.grid import CELL_SIZE_M
 
 #: WGS84's equatorial radius (metres).
 EARTH_RADIUS = 6_378_137.0
@@ -33,7 +34,7 @@ def _finite(*values: float) -> None:
 class Geo:
     """The mapping of one game: `cell_size` metres a cell, the WGS84 `origin` of cell (0, 0, 0)."""
 
-    cell_size: float = 1.0
+    cell_size: float = CELL_SIZE_M
     origin: tuple[float, float, float] = DEFAULT_ORIGIN
 
     def __post_init__(self) -> None:

@@ -6,6 +6,7 @@ import argparse
 
 from schema import UsageError
 from schema.tuning import MAVLINK_PERIOD
+from world.grid import CELL_SIZE_M
 
 from .geo import DEFAULT_ORIGIN
 
@@ -23,7 +24,8 @@ def add_mavlink_args(parser: argparse.ArgumentParser, *, cell_size: bool = True)
     g.add_argument("--mavlink-api-base", type=int, default=14540, metavar="PORT",
                    help="vehicle n sends to an API client on UDP PORT + n - 1 (default 14540, as PX4)")
     if cell_size:
-        g.add_argument("--cell-size", type=float, default=1.0, metavar="METRES", help="metres a cell (default 1.0)")
+        g.add_argument("--cell-size", type=float, default=CELL_SIZE_M, metavar="METRES",
+                       help=f"metres a cell (default {CELL_SIZE_M})")
     g.add_argument("--origin", default=",".join(map(repr, DEFAULT_ORIGIN)), metavar="LAT,LON,ALT",
                    help="WGS84 position of cell (0,0,0): degrees, degrees, metres above sea level "
                         "(default %(default)s, PX4's simulation home)")

@@ -20,6 +20,7 @@ import numpy as np
 
 from schema import Status
 from schema.tables import drone_name
+from world.grid import CELL_SIZE_M
 
 from .cdr import Layout, Repeated, make
 
@@ -35,6 +36,11 @@ COLOURS = np.array([(0.10, 0.45, 0.95, 1.0), (0.10, 0.75, 0.25, 1.0), (0.95, 0.6
                     (0.85, 0.10, 0.10, 1.0), (0.50, 0.50, 0.50, 1.0)], np.float32)
 TARGET_COLOUR = (1.0, 0.85, 0.0, 0.8)
 BUILDING_COLOUR = (0.55, 0.55, 0.6, 1.0)
+
+#: By default, the prefix of the drones' topics (``/<namespace>/<Dnn>/pose``) and the simulated seconds a turn (the
+#: stamps' and /clock's), unless told (--namespace, --turn-period).
+NAMESPACE = "dronesim"
+TURN_PERIOD_S = 0.1
 
 #: Cells of a drone's trail kept and published (its last ones).
 TRAIL_LIMIT = 200
@@ -256,7 +262,8 @@ class Scene:
     """The messages of a game (see the module doc). `namespace` prefixes the per-drone topics and the markers'
     (``/<namespace>/<Dnn>/pose``); a cell is `cell_size` metres; turn t is at t x `turn_period` seconds."""
 
-    def __init__(self, *, namespace: str = "dronesim", cell_size: float = 1.0, turn_period: float = 0.1) -> None:
+    def __init__(self, *, namespace: str = NAMESPACE, cell_size: float = CELL_SIZE_M,
+                 turn_period: float = TURN_PERIOD_S) -> None:
         if not (np.isfinite(cell_size) and cell_size > 0):
             raise ValueError(f"the cell size must be > 0, got {cell_size!r}")
         if not (np.isfinite(turn_period) and turn_period > 0):

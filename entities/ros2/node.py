@@ -32,11 +32,12 @@ from network.transport import Inbox, Received, add_zenoh_args, open_session, set
 from schema import Cell, Keys, MapRequest, Over, Status, UsageError, WorldMap
 from schema.keys import RosKeys
 from schema.tuning import FINAL_STATUS_WAIT, ROS_CPU_SHARE, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE, ROS_SLOWEST
+from world.grid import CELL_SIZE_M
 
 from ..gcs import OBSERVED_ENDS, Ground
 from .cdr import type_hash
 from .goals import Goal, Goals
-from .model import POSE, Out, Outs, Scene, Snapshot, drone_topic
+from .model import NAMESPACE, POSE, TURN_PERIOD_S, Out, Outs, Scene, Snapshot, drone_topic
 
 #: rmw_zenoh's QoS strings (reliability:durability:history,depth:deadline:lifespan:liveliness), for the tokens.
 QOS_TELEMETRY = "2:2:1,1:,:,:,,"  # best effort, volatile, keep last 1
@@ -47,11 +48,11 @@ QOS_GOALS = "1:2:1,10:,:,:,,"  # reliable, volatile, keep last 10
 def add_ros2_args(parser: argparse.ArgumentParser, *, viewer: bool = True) -> None:
     g = parser.add_argument_group("ROS 2 (docs/ros2.md)")
     g.add_argument("--domain", type=int, default=0, help="the ROS 2 domain id (ROS_DOMAIN_ID; default 0)")
-    g.add_argument("--namespace", default="dronesim", help="prefix of the drones' topics (default dronesim)")
-    g.add_argument("--cell-size", type=float, default=1.0, help="metres a cell (default 1.0)")
+    g.add_argument("--namespace", default=NAMESPACE, help=f"prefix of the drones' topics (default {NAMESPACE})")
+    g.add_argument("--cell-size", type=float, default=CELL_SIZE_M, help=f"metres a cell (default {CELL_SIZE_M})")
     if viewer:
-        g.add_argument("--turn-period", type=float, default=0.1,
-                       help="simulated seconds a turn, the stamps' and /clock's (default 0.1)")
+        g.add_argument("--turn-period", type=float, default=TURN_PERIOD_S,
+                       help=f"simulated seconds a turn, the stamps' and /clock's (default {TURN_PERIOD_S})")
         g.add_argument("--rate", type=float, default=ROS_RATE,
                        help=f"turns a second at most published; faster games are sampled (default {ROS_RATE:g})")
         g.add_argument("--foxglove", metavar="[HOST:]PORT",

@@ -34,7 +34,7 @@ from schema import (
     Welcome,
     is_drone_id,
 )
-from schema.tuning import STATUS_GRACE
+from schema.tuning import STATUS_GRACE, WEB_PACE_S
 from world.grid import World
 
 from ..gcs import Effect, Ground, Station, check_cell
@@ -136,7 +136,7 @@ class GroundState:
     """The live ground station's state around the protocol's `Station` (held: the page's pacing says when it
     answers). `intro` (the coordinator's welcome) starts the page's log. Times are seconds of any monotonic clock."""
 
-    def __init__(self, ground: Ground, *, pace: float = 0.5, title: str = "", intro: str = "") -> None:
+    def __init__(self, ground: Ground, *, pace: float = WEB_PACE_S, title: str = "", intro: str = "") -> None:
         self.station = Station(ground, hold=True)
         self.world = ground.world
         self.title = title

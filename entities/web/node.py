@@ -22,7 +22,7 @@ import zenoh
 from network.signals import over_status, waking
 from network.transport import Inbox, Outbox, open_session, zenoh_config
 from schema import Cell, Keys, Over, UsageError
-from schema.tuning import COMMAND_TIMEOUT
+from schema.tuning import COMMAND_TIMEOUT, WEB_PACE_S
 
 from ..gcs import Ground
 from ..station_link import join, listen, play, publisher
@@ -36,8 +36,9 @@ def add_web_args(parser: argparse.ArgumentParser) -> None:
                    help="serve the ground station as a web page on this address instead of the terminal "
                         "(host 127.0.0.1 unless given; port 0: any free port)")
     g.add_argument("--replay", metavar="JOURNAL", help="with --web: play this journal in the page (no network)")
-    g.add_argument("--pace", type=float, default=0.5,
-                   help="with --web: at most one turn every PACE seconds, so a human can follow (default 0.5)")
+    g.add_argument("--pace", type=float, default=WEB_PACE_S,
+                   help=f"with --web: at most one turn every PACE seconds, so a human can follow "
+                        f"(default {WEB_PACE_S:g})")
     g.add_argument("--linger", type=float, default=0.0,
                    help="with --web: keep serving the final state this many seconds after OVER (default 0); "
                         "with --replay: serve this long (default: until interrupted)")
