@@ -143,6 +143,7 @@ class Game:
     arrived: dict[int, float] = field(default_factory=dict)  # turn -> when its STATUS came (time.monotonic())
     error: str = ""
     over: str = ""
+    ros_user: str = ""  # with `Variant.ros2`: what its ROS 2 user received (benchmarks/ros_user.py's last line)
 
 
 ROLES = ("coordinator", "env", "swarm")
@@ -220,7 +221,8 @@ class Variant:
     hosts: int = 1  # swarm hosts H01, H02, ... (processes "swarm", or "swarm1", "swarm2", ...), drones in id order
     statuses: bool = True  # keep every STATUS (`Game.statuses`; False: only the last, `Game.last_status`)
     env_follows: bool = False  # the environment takes every STATUS (`dronesim env --follow-status`)
-    ros2: bool = False  # a `dronesim ros2` viewer publishes the game to ROS 2 beside it, every topic subscribed
+    ros2: bool = False  # a `dronesim ros2` viewer publishes the game to ROS 2 beside it, to a ROS 2 user process
+    # subscribed to every topic (benchmarks/ros_user.py)
 
 
 def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path | None = None,
@@ -257,6 +259,8 @@ def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path 
                 watch.play(session, keys, scenario_file)
                 stamps, measured_to = watch.stamps, watch.measured_to
             game.codes = procs.wait(60.0)
+            if variant.ros2:
+                game.ros_user = procs.tail("rosuser", 1).removeprefix("ros user: ")
     except Exception as exc:  # noqa: BLE001 - reported in the table, the run goes on
         game.error = f"{type(exc).__name__}: {exc}"
         game.codes = {n: p.poll() for n, p in procs.procs.items()}
@@ -301,7 +305,8 @@ def _launch(procs: Procs, case: Case, scenario_file: Path, logs: Path, variant: 
     else:
         ids = "D01" if case.drones == 1 else f"D01-{drone_id(case.drones)}"
         procs.start("swarm", [*flying, "--id", ids, "--host", "H01", *creds("H01")])
-    if variant.ros2:  # an observer: it hears STATUS and OVER, publishes to ROS 2 at its own rate
+    if variant.ros2:  # an observer: it hears STATUS and OVER, publishes to ROS 2 at its own rate, to a ROS 2 user
+        procs.start("rosuser", [sys.executable, "-m", "benchmarks.ros_user", "--connect", loc])
         procs.start("ros2", [*base, "ros2", *common, "--log-level", "WARNING"])
 
 
@@ -331,8 +336,7 @@ class _Watch:
         log = logging.getLogger("dronesim.bench.gcs")
         if self.variant.upd_listener:  # the environment then follows the ENV phase and reports it
             session.declare_subscriber(keys.upd, lambda _sample: None)
-        if self.variant.ros2:  # a ROS 2 user subscribed to every topic of domain 0 (RViz's are a few)
-            session.declare_subscriber("0/**", lambda _sample: None)
+        if self.variant.ros2:  # (its ROS 2 user, a process of its own as RViz is, subscribes to every topic)
             # the viewer's node token comes once it hears OVER: a game played before would leave it waiting
             if not await_presence(session, RosKeys().node_tokens("dronesim"), 120.0):
                 raise RuntimeError("the ROS 2 viewer did not appear within 120 s")

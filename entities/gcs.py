@@ -37,7 +37,7 @@ from schema import (
     Welcome,
 )
 from schema.tables import drone_name
-from schema.tuning import ANSWER_AHEAD, DONE_RETRY_S, FINAL_STATUS_WAIT, PUT_GAP
+from schema.tuning import ANSWER_AHEAD, DONE_RETRY_MIN_S, DONE_RETRY_S, DONE_RETRY_TURNS, FINAL_STATUS_WAIT, PUT_GAP
 from world.grid import World, build_world, in_bounds
 
 from .tasks import Tasks
@@ -286,8 +286,9 @@ class Station:
     key (schema/acl.py `flood_filters`; a buggy or hostile second session floods it in vain). So the DONEs of its
     own making (`receive`) go out `PUT_GAP` s apart at least, queued until due (`tick`); a phase announced although
     it was answered ahead is answered again (the coordinator announces a phase whose DONE it does not hold); and
-    a phase's DONE goes out again, `DONE_RETRY_S` s later, then twice as long each time, until that turn's STATUS
-    comes (the coordinator takes a repeat of the DONE it holds as nothing new)."""
+    a phase's DONE goes out again, a few turns' time later (`DONE_RETRY_TURNS`, between `DONE_RETRY_MIN_S` and
+    `DONE_RETRY_S` s), then twice as long each time, until that turn's STATUS comes (the coordinator takes a repeat
+    of the DONE it holds as nothing new)."""
 
     def __init__(self, ground: Ground, *, hold: bool = False, quit_at: int | None = None, verbose: bool = False,
                  ahead: int = ANSWER_AHEAD, goals: bool = False, tasks: Tasks | None = None) -> None:
@@ -307,6 +308,8 @@ class Station:
         self._unacked: tuple[SendDone, float, float] | None = None  # a phase's DONE, when it goes out again, and
         # how long after that, until its STATUS comes
         self._ahead_sent: dict[int, SendDone] = {}  # the DONEs answered ahead, until their phase (`_lost`)
+        self._status_at: tuple[int, float] | None = None  # the last STATUS's turn, and when it came
+        self._turn_s: float | None = None  # seconds a turn lately (smoothed), once two STATUS came
         self.pending: int | None = None  # a held GCS phase not answered yet
         self.over: Over | None = None
         self._over_since: float | None = None  # when OVER came, while its turn's STATUS is awaited
@@ -338,6 +341,7 @@ class Station:
                 if self._unacked is not None and msg.turn >= self._unacked[0].msg.turn:
                     self._unacked = None  # its GCS phase is over
             case Status():
+                self._timed(msg.turn, now)
                 return self._status(msg)
             case Over():
                 return self._over(msg, now)
@@ -383,7 +387,9 @@ class Station:
             if isinstance(effect, SendDone):
                 self._outgoing.append(effect)
                 if not effect.ahead:
-                    self._unacked = (effect, now + DONE_RETRY_S, DONE_RETRY_S)
+                    wait = DONE_RETRY_S if self._turn_s is None else (
+                        min(DONE_RETRY_S, max(DONE_RETRY_MIN_S, DONE_RETRY_TURNS * self._turn_s)))
+                    self._unacked = (effect, now + wait, wait)
             else:
                 out.append(effect)
         return self._release(now) + out
@@ -472,6 +478,15 @@ class Station:
         sent = {ahead: SendDone(gcs_done(ahead, {}, self.intent(ahead)), ahead=True) for ahead in turns}
         self._ahead_sent.update(sent)
         return list(sent.values())
+
+    def _timed(self, turn: int, now: float) -> None:
+        """The time of a turn, smoothed over the last few, from the STATUS of `turn` coming at `now`."""
+        last = self._status_at
+        if last is not None and turn > last[0]:
+            took = (now - last[1]) / (turn - last[0])
+            self._turn_s = took if self._turn_s is None else self._turn_s + (took - self._turn_s) / 8
+        if last is None or turn > last[0]:
+            self._status_at = (turn, now)
 
     def _status(self, status: Status) -> list[Effect]:
         if status.turn < self.status_turn:

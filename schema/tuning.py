@@ -107,10 +107,17 @@ PUT_RATE = 10_000.0
 #: instead of at once, well before their phases; a host waits at most this long, only after a word.
 PUT_GAP = 5 / PUT_RATE
 #: Seconds after which a ground station sends its DONE of a phase again if that turn's STATUS has not come (then
-#: twice as long each time): a DONE lost on the way (a router's budget; rare, `PUT_GAP`) must not stall the game.
-#: Not measured: a turn takes milliseconds; a repeat of the DONE the coordinator holds changes nothing, one that
-#: crosses the turn's STATUS is refused as stale (counted).
+#: twice as long each time): a DONE lost on the way (a router's budget, `PUT_GAP`) must not stall the game. At most
+#: `DONE_RETRY_S`; once turns have been timed, `DONE_RETRY_TURNS` turns (the station's smoothed time between two
+#: STATUS), at least `DONE_RETRY_MIN_S`. A repeat of the DONE the coordinator holds changes nothing, one that crosses
+#: the turn's STATUS is refused as stale (counted). Measured (`dronesim bench perf`'s 1000-drone games, about 4.5 ms
+#: a turn, 2 cores at a load average of 8-16 from other work): a loaded station's paced DONEs still reach the router
+#: together at times (its link sends them in one batch) and the budget keeps the first, 2 to 6 times in 1100 turns;
+#: with a fixed 1 s such a turn took 1.01 s (a fifth of a 1000-turn game, in about half the games: the ROS 2 row's
+#: ratio was decided by them), with a fixed 0.1 s, 0.1 s (up to 12 % of a game); now about 20 ms.
 DONE_RETRY_S = 1.0
+DONE_RETRY_TURNS = 4
+DONE_RETRY_MIN_S = 0.02
 
 #: Turns a second no game can exceed: a turn takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor).
 #: An entity refuses a TURN, STATUS or OVER further ahead of the turn it knows than this rate allows since it last
@@ -243,11 +250,12 @@ HEALTH_STALL_S = 60.0
 ROS_RATE = 20.0
 #: The share of a core `dronesim ros2` spends publishing at most: after a turn that took it C seconds of CPU, it
 #: publishes the next no sooner than C / ROS_CPU_SHARE seconds later (and no later than `ROS_SLOWEST` after it).
-#: Measured: a 1000-drone turn costs it about 10 ms (encoding 4, publishing 6), so about 2 turns a second (a small
-#: game's, well under a millisecond, `ROS_RATE`); at 5 % a 1000-drone game on 2 cores shared with other work ran
-#: 13 % slower beside it (`dronesim bench perf`, the ROS 2 mechanism row; with a viewer that never published after
-#: its first turn, no slower).
-ROS_CPU_SHARE = 0.02
+#: Measured: a 1000-drone turn costs it about 10-15 ms (encoding 4, publishing the rest), so about one turn a second
+#: (a small game's, well under a millisecond, `ROS_RATE`); the router (2000 messages to forward) and each ROS 2
+#: subscriber spend about as much again. At 5 % a 1000-drone game on 2 cores shared with other work ran 13 % slower
+#: beside it; at 2 %, with the CPU of all processes 4-8 % higher, the median pair kept 90 % of its turns/s
+#: (`dronesim bench perf`, the ROS 2 mechanism row, load average 14: BENCHMARKS.md).
+ROS_CPU_SHARE = 0.01
 ROS_SLOWEST = 1.0
 #: Seconds between two trails (nav_msgs/Path) of a drone that keeps moving (the last turn's always goes out).
 ROS_PATH_PERIOD = 1.0

@@ -305,7 +305,7 @@ def test_a_script_answers_ahead_up_to_its_next_change() -> None:
 
 from entities.gcs import FINAL_STATUS_WAIT, End, SendDone, Show, Station  # noqa: E402
 from schema import EndReason, Over, Phase, Turn  # noqa: E402
-from schema.tuning import DONE_RETRY_S, PUT_GAP  # noqa: E402
+from schema.tuning import DONE_RETRY_MIN_S, DONE_RETRY_S, DONE_RETRY_TURNS, PUT_GAP  # noqa: E402
 
 
 def ground(plan: list[str] = (), drones=("D01", "D02")) -> Ground:
@@ -485,3 +485,18 @@ def test_a_phases_done_goes_out_again_until_its_turn_is_played() -> None:
     assert station.tick(3 * DONE_RETRY_S) == [first]
     station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 1.0)
     assert station.wake(1.0) is None and station.tick(100.0) == [], "its turn was played"
+
+
+def test_a_lost_done_costs_a_few_turns_time() -> None:
+    """Once turns have been timed (STATUS after STATUS), a phase's DONE goes out again DONE_RETRY_TURNS turns'
+    time later (smoothed), no sooner than DONE_RETRY_MIN_S nor later than DONE_RETRY_S."""
+    def retry_after(turn_s: float) -> float:
+        station = Station(ground(["D01=1,1,1"]), ahead=0)
+        for turn in range(1, 4):
+            station.receive(status(turn, st("D01", (0, 0, 0)), st("D02", (0, 2, 0))), turn * turn_s)
+        station.receive(gcs(4), 3 * turn_s)
+        return station.wake(3 * turn_s)
+
+    assert retry_after(0.05) == pytest.approx(DONE_RETRY_TURNS * 0.05)
+    assert retry_after(0.001) == pytest.approx(DONE_RETRY_MIN_S)
+    assert retry_after(10.0) == pytest.approx(DONE_RETRY_S)

@@ -261,6 +261,7 @@ def test_the_viewer_publishes_the_newest_turn_at_its_rate() -> None:
             return None if turn is None else Received("k", status(turn, [(1, 1, 1), (2, 2, 2)]))
         viewer.tick(now, newest)
     assert sink.turns == [1, 3] and asked == [0.0, 0.1, 0.25, 0.4]  # (0.05: not due; 0.25: turn 3 again)
+    assert (viewer.published, viewer.skipped) == (2, 1), "turn 2 skipped: turn 3 had come when it looked"
     assert not viewer.ended(0.4)
     viewer.over, viewer.over_since = Over(turn=3, sender="SRV", reason=EndReason.TURN_LIMIT), 0.4
     assert viewer.ended(0.4)

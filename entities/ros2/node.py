@@ -3,8 +3,8 @@ live Foxglove WebSocket server with ``--foxglove [HOST:]PORT``. See docs/ros2.md
 
 It is an observer: it hears STATUS and OVER as a ground station does, asks the environment for the map (ENV/MAP,
 a read), and never writes to the game. It publishes each turn while the game goes no faster than ``--rate``,
-else the newest turn at that rate (Zenoh keeps only the newest STATUS for it: nothing queues), with congestion
-control DROP: a slow or absent ROS 2 subscriber never slows the game.
+else the newest turn at that rate (Zenoh keeps only the newest STATUS for it: nothing queues; the turns it
+skipped are counted), with congestion control DROP: a slow or absent ROS 2 subscriber never slows the game.
 
 `RosGraph` is our node in ROS 2's graph: its liveliness tokens, its publishers (rmw_zenoh's attachment on every
 sample) and its goal subscriptions, also used by the ground station's ROS 2 face (`dronesim gcs --ros2`).
@@ -242,6 +242,8 @@ class Viewer:
             raise UsageError(f"--rate must be > 0, got {rate!r}")
         self.scene, self.sinks, self.period, self.log, self.cpu = scene, sinks, 1.0 / rate, logger, cpu
         self.turn = -1  # the last turn published
+        self.published = 0  # turns published
+        self.skipped = 0  # turns not published since the first: a newer STATUS had come when the viewer looked
         self.due = 0.0  # when to look for the newest STATUS again
         self.paths_due = 0.0
         self.over: Over | None = None
@@ -273,6 +275,8 @@ class Viewer:
         outs = self.scene.turn(snap, paths=paths)
         for sink in self.sinks:
             sink.turn(snap, outs)
+        self.skipped += status.turn - self.turn - 1 if self.published else 0
+        self.published += 1
         self.turn = status.turn
         if paths:
             self.paths_due = now + ROS_PATH_PERIOD
@@ -333,7 +337,8 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
             if fox is not None:
                 fox.close()
     end = viewer.over
-    print(f"ros2: published {graph.sent} messages up to turn {viewer.turn} ({graph.unheard} with no subscriber "
+    print(f"ros2: published {graph.sent} messages of {viewer.published} turns up to turn {viewer.turn} "
+          f"({viewer.skipped} turns skipped, a newer one heard first; {graph.unheard} messages with no subscriber "
           "left unsent)"
           + (f"; game over at turn {end.turn}: {end.reason.value}" if end else ""), flush=True)
     if inbox.rejects.total:
