@@ -416,22 +416,27 @@ class Eyes:
     def __init__(self, world: World, radius: int) -> None:
         self.radius = r = radius
         pad = r + 1  # a dead drone may stand one cell outside the world
-        static = np.pad(np.where(world.grid, Seen.BUILDING, Seen.FREE).astype(np.int8), pad,
+        static = np.pad(np.where(world.grid, Seen.BUILDING, Seen.FREE).astype(np.int32), pad,
                         constant_values=Seen.OUTSIDE)
-        self._static = static.ravel()
+        # the padded world flat, as the observations' codes, after a FREE cell and before an UNKNOWN one: one gather
+        # (`np.take`, indices clipped to the ends) reads a whole observation, the cells beyond the radius UNKNOWN
+        # (the last), the drone's own FREE (the first) and the target's offset's three UNKNOWN till written
+        self._flat = np.concatenate([[_FREE], static.ravel(), [_UNKNOWN]]).astype(np.int32)
         self._sx, self._sy = static.shape[1] * static.shape[2], static.shape[2]
         self._strides = np.array([self._sx, self._sy, 1], np.int64)
-        self._origin = (self._sx + self._sy + 1) * pad  # where the world's cell (0, 0, 0) is
+        self._origin = (self._sx + self._sy + 1) * pad + 1  # where the world's cell (0, 0, 0) is
         span = np.arange(-r, r + 1)
         cube = np.stack(np.meshgrid(span, span, span, indexing="ij"), axis=-1).reshape(-1, 3)
         self.cells = len(cube)
-        self._ball = np.flatnonzero((cube ** 2).sum(axis=1) <= r * r)  # the cells of the cube sensed
-        self._offsets = (cube[self._ball] @ self._strides).astype(np.intp)  # each, from the drone's cell
-        self._low = int(self._offsets.min())  # the first, from the drone's cell
-        self._up = self._offsets - self._low  # each, from the first
-        self._centre = self.cells // 2
+        ball = np.flatnonzero((cube ** 2).sum(axis=1) <= r * r)  # the cells of the cube sensed
+        far = 1 << 40  # (beyond either end of the flat world from any cell: clipped to it)
+        self._index = np.full(self.cells + 3, far, np.int64)  # each cell of an observation, from the drone's cell
+        self._index[ball] = cube[ball] @ self._strides
+        self._index[self.cells // 2] = -far
+        # (many drones: a gather of their sensed cells alone, placed in rows of UNKNOWN: a gather of the cube's every
+        # cell, clipped, costs more per drone)
+        self._ball, self._offsets, self._centre = ball, (cube[ball] @ self._strides).astype(np.intp), self.cells // 2
         self._blank = np.full((0, self.cells + 3), _UNKNOWN, np.int32)  # rows to start observations from
-        self._blank_one = np.full(self.cells + 3, _UNKNOWN, np.int32)  # (see_few's, one by one)
         self.world = world
 
     def fits(self, world: World, radius: int) -> bool:
@@ -450,8 +455,8 @@ class Eyes:
     def see(self, pos: np.ndarray, targets: np.ndarray, drones: np.ndarray | None = None) -> np.ndarray:
         """The observations ((m, cells + 3) int32) of drones at `pos` ((m, 3)) with `targets`, among the
         alive drones at `drones` ((k, 3), inside the world; None: the drones at `pos`, all alive). One gather
-        of every drone's sensed cells from the padded world, with the drones marked in it for the while."""
-        cells = self._static
+        of every drone's observation from the padded world, with the drones marked in it for the while."""
+        cells = self._flat
         base = pos @ self._strides + self._origin
         at = base if drones is None else drones @ self._strides + self._origin
         cells[at] = _DRONE
@@ -467,7 +472,7 @@ class Eyes:
         if len(self._blank) < m:
             self._blank = np.full((m, n + 3), _UNKNOWN, np.int32)
         out = self._blank[:m].copy()  # UNKNOWN beyond the radius
-        out[:, self._ball] = window.astype(np.int32)  # (converted first: a converting fancy assignment is slower)
+        out[:, self._ball] = window
         out[:, self._centre] = _FREE
         out[:, n:] = offsets
         return out
@@ -475,29 +480,25 @@ class Eyes:
     def see_few(self, pos: list[Cell], targets: list[Cell], drones: list[Cell]) -> list[np.ndarray] | np.ndarray:
         """`see` of drones given as cells (lists of (x, y, z)), with fewer array operations: for up to
         EYES_ONE_BY_ONE drones, their observations one by one (a list of arrays), else `see`'s rows."""
-        cells, sx, sy, o = self._static, self._sx, self._sy, self._origin
-        # the drones marked in the world for the while (a lone drone that sees itself: its cell is FREE in its view)
+        cells, sx, sy, o = self._flat, self._sx, self._sy, self._origin
+        # the drones marked in the world for the while (a lone drone that sees itself: its own cell reads FREE)
         at = [] if len(drones) == 1 and pos == drones else [x * sx + y * sy + z + o for x, y, z in drones]
-        offsets = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
         for k in at:
             cells[k] = _DRONE
         try:
+            index, n = self._index, self.cells
             if len(pos) <= EYES_ONE_BY_ONE:
-                blank, ball, up, low, n = self._blank_one, self._ball, self._up, self._low + o, self.cells
                 out = []
-                for (x, y, z), d in zip(pos, offsets):
-                    one = blank.copy()
-                    # (a view, one gather, its codes as the observation's: a fancy assignment that converts costs 4x)
-                    one[ball] = cells[x * sx + y * sy + z + low:][up].astype(np.int32)
-                    one[self._centre] = _FREE
-                    one[n:] = d
+                for (x, y, z), (a, b, c) in zip(pos, targets):
+                    one = cells.take(index + (x * sx + y * sy + z + o), mode="clip")
+                    one[n:] = a - x, b - y, c - z
                     out.append(one)
                 return out
             window = cells[np.array([x * sx + y * sy + z + o for x, y, z in pos])[:, None] + self._offsets]
         finally:
             for k in at:
                 cells[k] = _FREE  # an alive drone's cell is free in the static world
-        return self._rows(window, offsets)
+        return self._rows(window, [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)])
 
 
 #: rgb_array colours.
@@ -805,7 +806,10 @@ _MEANING = ("0 hover", "1 +x", "2 -x", "3 +y", "4 -y", "5 +z", "6 -z")
 def checked_actions(rows: list[int], values: list, count: int = len(ACTIONS)) -> list:
     """The actions `values` (`values[k]` for row `rows[k]`) as integers, if each is an integer in 0..count - 1
     (a Python or numpy integer, or a 0-d integer array); else ConfigError for the first that is not."""
-    if set(map(type, values)) <= _INTEGERS and set(values) <= _VALID[count]:  # (the usual case: plain integers)
+    if len(values) == 1:  # (one agent: no sets made)
+        if type(values[0]) is int and 0 <= values[0] < count:
+            return values
+    elif set(map(type, values)) <= _INTEGERS and set(values) <= _VALID[count]:  # (the usual case: plain integers)
         return values
     for row, a in zip(rows, values):
         if type(a) in _BOOLS or not isinstance(a, (int, np.integer, np.ndarray)) or np.ndim(a) != 0 \

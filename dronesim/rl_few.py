@@ -116,7 +116,7 @@ class FewEpisode(EpisodeBase):
         pos, state, say, shown, alive = self._pos, self._state, self._say, self._shown, self._alive
         # the turn, the engine's: every alive drone moves (the acting ones as told, hover by default; the parked
         # ones hover), saying whether its target is reachable
-        moves, notes = [], []
+        moves = []
         for i in alive:
             if a := action.get(i, 0):
                 x, y, z = pos[i]
@@ -124,7 +124,7 @@ class FewEpisode(EpisodeBase):
                 moves.append((x + dx, y + dy, z + dz))
             else:
                 moves.append(pos[i])
-            notes.append(say[i])
+        notes = say if len(alive) == self.n else [say[i] for i in alive]  # (the engine reads them, keeps none)
         aim, targets = self._aim, self._targets
         over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, moves, notes)
         self._aim = []
