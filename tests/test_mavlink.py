@@ -160,7 +160,13 @@ def test_telemetry_presents_an_ardupilot_copter_at_its_cell() -> None:
 
 def test_arm_guided_and_position_targets_become_the_stations_targets() -> None:
     b = bridge()
-    guided(b, 2)
+    effects = b.packet(GCS, [set_mode(2, Mode.GUIDED)])  # a mode, an arming: a HEARTBEAT says each at once
+    assert [h.custom_mode for h in sent(effects, "HEARTBEAT")] == [Mode.GUIDED]
+    effects = b.packet(GCS, [arm(2)])
+    assert [h.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED for h in sent(effects, "HEARTBEAT")] == \
+        [mav.MAV_MODE_FLAG_SAFETY_ARMED]
+    assert not sent(b.packet(GCS, [arm(2)]), "HEARTBEAT")  # (nothing changed: none)
+    assert not sent(b.receive(status(0, D02=row("D02", (1, 2, 0))), 0.1), "HEARTBEAT")  # (a move says nothing new)
     hb = b.vehicles[2].heartbeat()
     assert hb.custom_mode == Mode.GUIDED and hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
     assert hb.system_status == mav.MAV_STATE_ACTIVE
@@ -562,11 +568,12 @@ def test_a_lost_drone_and_an_unreachable_target_are_said_and_in_the_heartbeat() 
     effects = b.receive(status(3, D01=row("D01", (1, 0, 0), target=(5, 5, 1), note=Note.UNREACHABLE)), 1.0)
     (text,) = sent(effects, "STATUSTEXT")
     assert "unreachable" in text.text and text.severity == mav.MAV_SEVERITY_CRITICAL
-    assert b.vehicles[1].heartbeat().system_status == mav.MAV_STATE_CRITICAL
+    assert [h.system_status for h in sent(effects, "HEARTBEAT")] == [mav.MAV_STATE_CRITICAL]  # (at once)
     effects = b.receive(status(4, D01=row("D01", (1, 0, 0), state=DroneState.LOST, cause=Cause.LOST)), 2.0)
     (text,) = sent(effects, "STATUSTEXT")
     assert "D01 is LOST" in text.text and text.severity == mav.MAV_SEVERITY_EMERGENCY
-    assert b.vehicles[1].heartbeat().system_status == mav.MAV_STATE_EMERGENCY
+    assert [h.system_status for h in sent(effects, "HEARTBEAT")] == [mav.MAV_STATE_EMERGENCY]
+    assert not sent(b.receive(status(5, D01=row("D01", (1, 0, 0), state=DroneState.LOST)), 3.0), "HEARTBEAT")
     effects = b.packet(GCS, [arm(1, False)])
     assert acks(effects) == [mav.MAV_RESULT_DENIED] and "lost" in sent(effects, "STATUSTEXT")[0].text
 

@@ -161,7 +161,20 @@ class Vehicle:
         return self.state is DroneState.ALIVE
 
     def observe(self, row: DroneStatus) -> list[Effect]:
-        """The drone's row of a STATUS: its events as STATUSTEXT, a mission's progress."""
+        """The drone's row of a STATUS: its events as STATUSTEXT, a mission's progress; a HEARTBEAT at once if
+        what it says changed (armed, mode, state)."""
+        said = self._said()
+        return self._beat(said, self._observe(row))
+
+    def _said(self) -> tuple[Mode, bool, int]:
+        return self.mode, self.armed, self.system_status()
+
+    def _beat(self, said: tuple[Mode, bool, int], effects: list[Effect]) -> list[Effect]:
+        """`effects`, and a HEARTBEAT if what one says changed since `said`: ground stations see an arming, a
+        mode, a death at once, not at the next telemetry set."""
+        return [*effects, Mav(self.system, self.heartbeat())] if self._said() != said else effects
+
+    def _observe(self, row: DroneStatus) -> list[Effect]:
         was_alive = self.alive
         self.pos, self.state, self.cause, self.note, self.target = row.pos, row.state, row.cause, row.note, row.target
         if not self.alive:
@@ -209,6 +222,10 @@ class Vehicle:
 
     def handle(self, msg: Msg, origin: Origin) -> list[Effect]:
         """A message addressed to this vehicle (its target system checked by the caller)."""
+        said = self._said()
+        return self._beat(said, self._handle(msg, origin))
+
+    def _handle(self, msg: Msg, origin: Origin) -> list[Effect]:
         kind = msg.get_type()
         try:
             match kind:
@@ -318,10 +335,9 @@ class Vehicle:
         return self._enter(mode) if mode is not self.mode else []
 
     def _enter(self, mode: Mode, cell: Cell | None = None) -> list[Effect]:
-        """Fly `mode` (in GUIDED, to `cell` if given): its goal, if armed."""
-        changed = mode is not self.mode
+        """Fly `mode` (in GUIDED, to `cell` if given): its goal, if armed (the new mode's HEARTBEAT: `handle`'s)."""
         self.mode = mode
-        effects: list[Effect] = [Mav(self.system, self.heartbeat())] if changed else []
+        effects: list[Effect] = []
         if not self.armed:
             return effects
         match mode:
@@ -619,14 +635,17 @@ class Vehicle:
             base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
         if self.armed:
             base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        if not self.alive:
-            status = mav.MAV_STATE_EMERGENCY
-        elif self.note is Note.UNREACHABLE and self.target is not None and self.target == self.goal:
-            status = mav.MAV_STATE_CRITICAL
-        else:
-            status = mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
         return mav.MAVLink_heartbeat_message(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base,
-                                             int(self.mode), status, 3)
+                                             int(self.mode), self.system_status(), 3)
+
+    def system_status(self) -> int:
+        """HEARTBEAT's state: EMERGENCY dead or lost, CRITICAL with its target unreachable, else ACTIVE armed and
+        STANDBY disarmed."""
+        if not self.alive:
+            return int(mav.MAV_STATE_EMERGENCY)
+        if self.note is Note.UNREACHABLE and self.target is not None and self.target == self.goal:
+            return int(mav.MAV_STATE_CRITICAL)
+        return int(mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY)
 
     def positions(self, ms: int) -> list[Msg]:
         """What every turn brings: the drone's position, global and local."""
