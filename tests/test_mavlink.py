@@ -210,6 +210,22 @@ def test_takeoff_land_rtl_and_disarm_set_the_targets_of_their_modes() -> None:
     assert w._ground_below((6, 6, 6)) == (6, 6, 4)
 
 
+def test_a_landing_stops_above_a_drone_below() -> None:
+    """The lowest free cell below: a drone there now (on the ground, or hovering) is not free."""
+    b = bridge()
+    guided(b, 2)
+    b.receive(status(3, D01=row("D01", (2, 3, 0)), D02=row("D02", (2, 3, 4)), D03=row("D03", (5, 5, 2))), 1.0)
+    b.packet(GCS, [command(2, mav.MAV_CMD_NAV_LAND)])
+    assert b.vehicles[2].goal == (2, 3, 1)
+    b.receive(status(4, D01=row("D01", (2, 3, 0)), D02=row("D02", (5, 5, 4)), D03=row("D03", (5, 5, 2))), 2.0)
+    b.packet(GCS, [set_mode(2, Mode.GUIDED), command(2, mav.MAV_CMD_NAV_LAND)])
+    assert b.vehicles[2].goal == (5, 5, 3)  # (above D03, hovering)
+    b.receive(status(5, D01=row("D01", (2, 3, 0)), D02=row("D02", (5, 5, 4)),
+                     D03=row("D03", (5, 5, 2), state=DroneState.DEAD, cause=Cause.VERTEX)), 3.0)
+    b.packet(GCS, [set_mode(2, Mode.GUIDED), command(2, mav.MAV_CMD_NAV_LAND)])
+    assert b.vehicles[2].goal == (5, 5, 0)  # (a dead drone holds no cell)
+
+
 def test_modes_the_vehicle_does_not_fly_and_unknown_commands_are_refused() -> None:
     b = bridge()
     effects = b.packet(GCS, [set_mode(1, 15)])  # Plane's GUIDED

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from schema import Intent, Message, Over, Status, Turn, Welcome
+from schema import Cell, Intent, Message, Over, Status, Turn, Welcome
 from schema.errors import Refusal, RemoteInputError, UnknownEntity
 from schema.tables import drone_number
 from schema.tuning import STATUS_GRACE
@@ -45,7 +45,7 @@ class Bridge:
 
     def __init__(self, ground: Ground, geo: Geo, *, period: float, telemetry_period: float, now: float) -> None:
         self.station = Station(ground, hold=True)
-        self.vehicles = {drone_number(d): Vehicle(drone_number(d), d, c, ground.world, geo)
+        self.vehicles = {drone_number(d): Vehicle(drone_number(d), d, c, ground.world, geo, self.held)
                          for d, c in sorted(ground.starts.items()) if drone_number(d) <= MAX_SYSTEM}
         self.unseen = len(ground.starts) - len(self.vehicles)  # drones beyond D255: no system id for them
         self.period, self.telemetry_period, self.boot = period, telemetry_period, now
@@ -56,6 +56,10 @@ class Bridge:
         self._rows: np.ndarray | None = None  # the last STATUS's rows
         self.ignored = 0  # messages of kinds no vehicle acts on
         self.quit = False
+
+    def held(self, cell: Cell) -> bool:
+        """Is an alive drone in `cell` now (the last STATUS's positions; asked by a landing, not every turn)."""
+        return any(v.pos == cell and v.alive for v in self.vehicles.values())
 
     def ms(self, now: float) -> int:
         return int((now - self.boot) * 1000) & 0xFFFFFFFF

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -138,10 +139,12 @@ def text_messages(severity: int, text: str, chunk_id: int) -> list[Msg]:
 
 class Vehicle:
     """Drone `drone` as MAVLink system `system` (component 1). `pos`, `state` and the rest follow the STATUS
-    rows it is given (`observe`); `goal` is what it asked the ground station for last."""
+    rows it is given (`observe`); `goal` is what it asked the ground station for last. `held(cell)`: is that
+    cell another drone's now (a landing stops above it)."""
 
-    def __init__(self, system: int, drone: str, home: Cell, world: World, geo: Geo) -> None:
-        self.system, self.drone, self.home, self.world, self.geo = system, drone, home, world, geo
+    def __init__(self, system: int, drone: str, home: Cell, world: World, geo: Geo,
+                 held: Callable[[Cell], bool] = lambda cell: False) -> None:
+        self.system, self.drone, self.home, self.world, self.geo, self.held = system, drone, home, world, geo, held
         self.pos: Cell = home
         self.state, self.cause, self.note = DroneState.ALIVE, Cause.NONE, Note.NONE
         self.target: Cell | None = None  # the target in force (the last STATUS's)
@@ -377,8 +380,9 @@ class Vehicle:
         return z == 0 or self.world.is_building((x, y, z - 1))
 
     def _ground_below(self, cell: Cell) -> Cell:
+        """The lowest free cell below `cell`: above the ground, a roof, or a drone there now."""
         x, y, z = cell
-        while z > 0 and not self.world.is_building((x, y, z - 1)):
+        while z > 0 and not self.world.is_building((x, y, z - 1)) and not self.held((x, y, z - 1)):
             z -= 1
         return (x, y, z)
 
