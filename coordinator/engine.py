@@ -4,16 +4,8 @@ No network and no clock here: the Zenoh adapter (node.py) feeds it validated mes
 and vanished entities, one at a time, and carries out the effects it returns (publish, reply to a CONNECT,
 journal, count a `Refusal`: an input that cannot be accepted changes nothing). Who may join: admission.py;
 a game restarted from its journal: resume.py (through `Engine.resume`). The stages it goes through and the
-messages each stage takes are two tables that drive it, `TRANSITIONS` and `TAKES` (h11's `_state.py` style).
-
-One turn (the seed's cycle GCS -> D01 -> ENV -> OBS -> GCS):
-
-  stage    the engine publishes           it waits for                      then
-  -------  -----------------------------  --------------------------------  ----------------------
-  GCS      TURN(t, GCS)                   TGT*, DONE from the GCS           DRONES
-  DRONES   TURN(t, DRONES, orders)        one NPS per alive drone           the ENV phase
-  (ENV)    TURN(t, ENV, moves)            - (its UPD is checked on arrival)  the observer
-  (OBS)    STATUS(t)                      -                                 GCS of t+1, or OVER
+messages each stage takes are two tables that drive it, `TRANSITIONS` and `TAKES` (stages.py, in the manner of
+h11's `_state.py`), where one turn's cycle is drawn.
 
 The ENV phase is pipelined: the buildings are static and the engine holds the same world as the
 environment (both build it from the game's WorldSpec), so the observer judges the moves at once
@@ -30,7 +22,6 @@ and working is not taken for a hung one (which says nothing, and is LOST as befo
 
 from __future__ import annotations
 
-import enum
 import itertools
 import logging
 from collections.abc import Callable, Sequence
@@ -76,56 +67,7 @@ from .admission import Roster, id_ranges
 from .config import GameConfig, starts_of
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
 from .journal import TurnLog, TurnRecord, header_of, header_record, over_of, over_record, state_hash, turns
-
-
-class Stage(enum.Enum):
-    ADMITTING = "ADMITTING"
-    RESUMING = "RESUMING"  # restarted from a journal: waiting for the entities to connect again
-    GCS = "GCS"
-    DRONES = "DRONES"
-    OVER = "OVER"
-
-    __hash__ = object.__hash__  # (a member is its one instance; Enum's hash is a Python call, `_enter`'s each turn)
-
-
-class When(enum.Enum):
-    """A message's turn against the engine's: the turn being played, a coming one (up to `AHEAD_MAX` on), or any
-    (its handler checks it)."""
-
-    NOW = "NOW"
-    AHEAD = "AHEAD"
-    ANY = "ANY"
-    OTHER = "OTHER"  # a past turn, or one too far on: taken in no stage
-
-
-#: The state machine, as tables that drive it (in the manner of h11's `_state.py`).
-#: The stage changes: each stage and the stages it may go to. The turn cycle GCS -> DRONES -> GCS (the ENV and OBS
-#: phases are effects of the drones' phase closing); admission (or resuming) opens the first turn's GCS phase, or
-#: its drones' phase when no ground station is there; a GCS phase opens the next one when a whole turn is played
-#: in one call (`play`); any stage ends in OVER (an end, a fault, a signal), which is final.
-TRANSITIONS: dict[Stage, frozenset[Stage]] = {
-    Stage.ADMITTING: frozenset({Stage.GCS, Stage.DRONES, Stage.RESUMING, Stage.OVER}),
-    Stage.RESUMING: frozenset({Stage.GCS, Stage.DRONES, Stage.OVER}),
-    Stage.GCS: frozenset({Stage.DRONES, Stage.GCS, Stage.OVER}),
-    Stage.DRONES: frozenset({Stage.GCS, Stage.OVER}),
-    Stage.OVER: frozenset(),
-}
-
-#: The messages the engine takes, in which stage and for which turn, and the method that takes each
-#: (stage None: any stage; its method checks the stage and turn itself, after the sender). Any other
-#: (stage, message, turn) is stale: refused (`StaleTurn`), changing nothing.
-TAKES: dict[tuple[Stage | None, type[Message], When], str] = {
-    (None, Target, When.ANY): "_target",  # the GCS's targets: WrongSender before StaleTurn
-    (None, Upd, When.ANY): "_upd",  # the environment's report of a recent ENV phase
-    (Stage.GCS, Done, When.NOW): "_gcs_done",  # the GCS phase's end
-    (Stage.GCS, Done, When.AHEAD): "_hold",  # a DONE for a coming GCS phase, held for it
-    (Stage.DRONES, Done, When.AHEAD): "_hold",
-    (Stage.DRONES, Done, When.NOW): "_done_again",  # the GCS phase's DONE again (the station repeats it)
-    (Stage.GCS, Moves, When.NOW): "_hold_moves",  # a swarm host's MOVES before its phase opened, held for it
-    (Stage.DRONES, Nps, When.NOW): "_nps",  # a drone's move
-    (Stage.DRONES, Moves, When.NOW): "_moves_of_host",  # a swarm host's moves
-}
-
+from .stages import TAKES, TRANSITIONS, Stage, When
 
 # --------------------------------------------------------------------------- effects
 

@@ -75,9 +75,10 @@ from world.grid import World
 from . import arbiter
 from .admission import Presences
 from .config import ARBITERS, LOST_AFTER, MAX_TURNS, SIZE, DroneSpec, GameConfig
-from .engine import Engine, Publish, Record, Refusal, ReplyToConnect, Stage
+from .engine import Engine, Publish, Record, Refusal, ReplyToConnect
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
+from .stages import Stage
 
 
 def _key_of(keys: Keys, msg: Message) -> str:

@@ -24,8 +24,9 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from coordinator.config import DroneTable, GameConfig
-from coordinator.engine import Engine, Stage
+from coordinator.engine import Engine
 from coordinator.fleet import ALIVE, CAUSES, NOTES, STATES
+from coordinator.stages import Stage
 from schema import (
     AimTable,
     Cell,

@@ -270,8 +270,8 @@ def test_a_departure_restarts_the_deadline_it_changes() -> None:
 
 
 def test_by_default_the_game_waits_for_its_entities_ten_minutes_then_ends_naming_who_never_came() -> None:
-    from coordinator.engine import Stage
     from coordinator.node import build_parser, game_config
+    from coordinator.stages import Stage
 
     config = game_config(build_parser().parse_args(["--seed", "7"]))
     assert config.admit_deadline == 600.0, "no wait without a deadline, unless asked (--admit-deadline 0)"

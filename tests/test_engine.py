@@ -11,8 +11,9 @@ import pytest
 
 from coordinator import journal
 from coordinator.config import DroneSpec, GameConfig, replace_config
-from coordinator.engine import Engine, Publish, Record, Refusal, ReplyToConnect, Stage
+from coordinator.engine import Engine, Publish, Record, Refusal, ReplyToConnect
 from coordinator.resume import restore
+from coordinator.stages import TAKES, TRANSITIONS, Stage, When
 from entities.gcs import describe
 from entities.web.model import view_of
 from schema import (
@@ -547,6 +548,27 @@ def test_refused_last_counted_target_does_not_stall_the_phase() -> None:
     gcs_done(g, 1)
     refused(g.tgt("D01", (9, 9, 9)), OutOfRange)
     assert g.stage is Stage.DRONES
+
+
+def test_the_tables_drive_the_engine() -> None:
+    """Every stage has its changes in TRANSITIONS, every stage but OVER (final) is left and reached from ADMITTING;
+    every method TAKES names is the engine's; a message of a (stage, turn) that TAKES does not list is refused as
+    stale, changing nothing, and a stage change it does not list is the engine's bug."""
+    assert set(TRANSITIONS) == set(Stage) and TRANSITIONS[Stage.OVER] == frozenset()
+    reached, frontier = {Stage.ADMITTING}, [Stage.ADMITTING]
+    while frontier:
+        new = TRANSITIONS[frontier.pop()] - reached
+        reached |= new
+        frontier += new
+    assert reached == set(Stage)
+    assert all(callable(getattr(Engine, name, None)) for name in TAKES.values())
+    g = Game()  # in the GCS phase: a drone's move is not taken there
+    assert (Stage.GCS, Nps, When.NOW) not in TAKES
+    before = g.snapshot()
+    refused(g.nps("D01", (0, 0, 1)), StaleTurn)
+    assert g.snapshot() == before
+    with pytest.raises(AssertionError):
+        g.engine._enter(Stage.RESUMING)
 
 
 def test_target_outside_the_gcs_phase_is_stale() -> None:

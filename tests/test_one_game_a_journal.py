@@ -8,9 +8,9 @@ import logging
 
 import pytest
 
-from coordinator.engine import Stage
 from coordinator.journal import dumps, held_game
 from coordinator.node import build_parser, cli, game_config, open_game
+from coordinator.stages import Stage
 from dronesim.local import Inputs, simulate
 from entities.gcs import Plan
 
