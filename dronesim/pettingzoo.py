@@ -33,6 +33,7 @@ from dronesim.rl import (
     int_in,
 )
 from dronesim.rl_few import FEW_MAX, FewEpisode
+from entities.autopilots import COOPERATIVE
 from schema.tuning import EPISODE_FEW_DRONES
 
 __all__ = ["DroneParallelEnv", "Expert", "env", "expert_policy", "parallel_env"]
@@ -181,7 +182,7 @@ class DroneParallelEnv(ParallelEnv):
         return "dronesim_v0"
 
 
-def expert_policy(env: DroneParallelEnv, autopilot: str = "dstar"):
+def expert_policy(env: DroneParallelEnv, autopilot: str = COOPERATIVE):
     """A policy for `env` (a `parallel_env`): called with no argument, the actions of every agent for the
     current step, chosen by one of the project's autopilots per drone (see `dronesim.rl.Expert`)."""
     expert = Expert(autopilot)

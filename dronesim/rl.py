@@ -27,6 +27,7 @@ from coordinator.config import DroneTable, GameConfig
 from coordinator.engine import Engine
 from coordinator.fleet import ALIVE, CAUSES, NOTES, STATES
 from coordinator.stages import Stage
+from entities.autopilots import COOPERATIVE
 from schema import (
     AimTable,
     Cell,
@@ -730,7 +731,7 @@ class Expert:
     follows the episode turn by turn, and starts again from the episode's cells when they are not its own (a
     new episode, or another policy's steps)."""
 
-    def __init__(self, autopilot: str = "dstar") -> None:
+    def __init__(self, autopilot: str = COOPERATIVE) -> None:
         from entities.autopilots import pilot_class
 
         self.autopilot = autopilot

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from coordinator.config import MAX_TURNS, DroneSpec, DroneTable, GameConfig
-from entities.autopilots import REGISTRY
+from entities.autopilots import COOPERATIVE, DEFAULT, REGISTRY
 from entities.gcs import Plan
 from schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
 from world.grid import World, build_world, checked_int
@@ -121,7 +121,7 @@ class Scenario:
 
 
 def movingai_scenario(map_path: str | pathlib.Path, scen_path: str | pathlib.Path, agents: int | None = None,
-                      autopilot: str = "dstar", max_turns: int = MAX_TURNS) -> dict:
+                      autopilot: str = COOPERATIVE, max_turns: int = MAX_TURNS) -> dict:
     """The scenario (its JSON form, for `Scenario.from_json` or a file) of the first `agents` agents of a
     MovingAI .scen (all of them: None) on its .map. UsageError if either is unreadable or they disagree."""
     world = World.load(map_path)
@@ -185,7 +185,7 @@ def _entry(d: object, n: int = 0) -> _Entry:
     """The n-th drone entry of a scenario, checked: its id, autopilot and start."""
     if not isinstance(d, dict) or not is_drone_id(d.get("id")):
         raise UsageError(f"drone #{n} needs an id like D01")
-    pilot = d.get("autopilot", "seed")
+    pilot = d.get("autopilot", DEFAULT)
     if not isinstance(pilot, str) or pilot not in REGISTRY:
         raise UsageError(f"{d['id']}: unknown autopilot {pilot!r}; choose one of {', '.join(REGISTRY)}")
     return _Entry((d["id"], *_cell(d.get("start"), f"{d['id']} start"), sys.intern(pilot)))  # (one name string for all)

@@ -26,6 +26,7 @@ from coordinator.config import SIZE, UP_MAX_TURNS
 from dronesim import child_env
 from dronesim.certs import GameCredentials, game_credentials
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
+from entities.autopilots import COOPERATIVE, DEFAULT, REGISTRY
 from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
 from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
@@ -45,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", help="a scenario file: world, drones with starts and autopilots, targets")
     p.add_argument("--drones", type=int, default=1, help="number of drones (default 1)")
     p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: rows of every other cell)')
-    p.add_argument("--autopilot", help="v1, seed or dstar (default seed; with --scen, dstar)")
+    p.add_argument("--autopilot", help=f"{', '.join(REGISTRY)} (default {DEFAULT}; with --scen, {COOPERATIVE})")
     p.add_argument("--swarm", action="store_true", help="fly all drones from one swarm host process")
     p.add_argument("--targets", action="append", default=[], metavar="[Dnn=]x,y,z[@turn]",
                    help="scripted targets; without --targets or --script the ground station is interactive")
@@ -269,7 +270,7 @@ def stop_all(running: list[tuple[str, subprocess.Popen]], signum: int) -> None:
 
 def cli(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    args.autopilot = args.autopilot or ("dstar" if args.scen else "seed")
+    args.autopilot = args.autopilot or (COOPERATIVE if args.scen else DEFAULT)
     try:
         return main(args)
     except UsageError as err:

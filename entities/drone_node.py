@@ -40,7 +40,7 @@ from schema import Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, Role, StepT
 from schema.messages import drone_list, is_host_id
 from schema.tuning import ASK_TIMEOUT_S, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, DECIDING_EVERY_S, PUT_GAP
 
-from .autopilots import REGISTRY, SWARM_MIN, pilot_class
+from .autopilots import DEFAULT, REGISTRY, SWARM_MIN, pilot_class
 from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, SendMoves, Timer
 
 
@@ -197,7 +197,7 @@ def cli(argv: list[str] | None = None) -> int:
     add_zenoh_args(p)
     p.add_argument("--id", default="D01", help="drone id(s): D01, or D01-D08 for a swarm host (default D01)")
     p.add_argument("--host", help="swarm host id Hnn (required when flying several drones)")
-    p.add_argument("--autopilot", default="seed", choices=sorted(REGISTRY), help="default: seed")
+    p.add_argument("--autopilot", default=DEFAULT, choices=sorted(REGISTRY), help=f"default: {DEFAULT}")
     p.add_argument("--swarm-pilot-min", type=int, default=SWARM_MIN, metavar="N",
                    help="a swarm host flies its drones with the autopilot's swarm form (one pilot over arrays, same "
                         f"decisions) when it has one and flies at least N drones (default {SWARM_MIN})")

@@ -12,6 +12,10 @@ from .base import Autopilot, SwarmPilot, run_step
 
 #: name -> class, in the module of that name (imported on first use).
 REGISTRY: dict[str, str] = {"v1": "V1Pilot", "seed": "SeedPilot", "dstar": "DStarPilot", "lrta": "LrtaPilot"}
+#: A drone's autopilot unless told (`--autopilot`, a scenario's drone without one), and the cooperative one where
+#: drones must give way to each other by default (a MovingAI instance, the RL expert).
+DEFAULT = "seed"
+COOPERATIVE = "dstar"
 #: name -> class of the autopilots that also come as one pilot for a whole swarm, over arrays (same decisions as
 #: one instance per drone; a swarm host flies its drones with it).
 SWARMS: dict[str, str] = {"seed": "SeedSwarm", "lrta": "LrtaSwarm"}
