@@ -310,9 +310,11 @@ def test_pymavlink_commands_position_targets_missions_and_bad_input(tmp_path: Pa
             for _ in range(2):
                 conn.port.sendto(frame.pack(conn.mav) * 250, bridge)
             wait_for(conn, "COMMAND_ACK", 1, lambda m: m.result == mav.MAV_RESULT_TEMPORARILY_REJECTED)
+            out = g.finish()  # (the station quits: every vehicle says the game is over)
+            for system in (1, 2, 3):
+                wait_for(conn, "STATUSTEXT", system, lambda m: m.text.startswith("game over: GCS_QUIT"))
         finally:
             conn.close()
-        out = g.finish()
     assert g.targets() == {"D01": [(5, 1, 2)], "D02": [(9, 2, 2)], "D03": [(2, 4, 2), (2, 8, 2), (4, 8, 2)] * 2}
     (rejected,) = [line for line in out.splitlines() if "rejected inputs" in line and "GCS" in line]
     for reason in ("mavlink-garbage", "mavlink1", "mavlink-target", "mavlink-denied", "mavlink-flood"):

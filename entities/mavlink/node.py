@@ -297,6 +297,7 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
             try:
                 with on_stop(signals.append), waking(partial(inbox.post, _WOKEN)):
                     over = play(Flushing(bridge, links), inbox, member, perform, other=other)
+                links.flush()  # (the last effects, the game over's STATUSTEXTs: `play` returns before it waits)
             finally:
                 reader.stop()
                 links.close()
