@@ -35,6 +35,7 @@ WORLD_SEED = 3
 
 
 PHASE_DEADLINE = 60.0  # seconds: a benchmark measures, it does not test deadlines
+JOIN_S = 120.0  # seconds an entity (or the viewer) of a benchmark's game has to join it: a loaded machine starts slowly
 
 
 EVENT_TIMEOUT = 180.0  # seconds without any event from the game before the run is declared stalled
@@ -290,9 +291,9 @@ def _launch(procs: Procs, case: Case, scenario_file: Path, logs: Path, variant: 
     journal = ["--journal", str(logs / "journal.jsonl")] if variant.journal else []
     procs.start("coordinator", [*base, "coordinator", *common, "--scenario", str(scenario_file),
                                 "--phase-deadline", str(PHASE_DEADLINE), *journal, *creds("SRV")])
-    procs.start("env", [*base, "env", *common, "--no-draw", "--connect-timeout", "120", *creds("ENV"),
+    procs.start("env", [*base, "env", *common, "--no-draw", "--connect-timeout", f"{JOIN_S:g}", *creds("ENV"),
                         *["--follow-status"] * variant.env_follows])
-    flying = [*base, "drone", *common, "--autopilot", variant.autopilot, "--connect-timeout", "120"]
+    flying = [*base, "drone", *common, "--autopilot", variant.autopilot, "--connect-timeout", f"{JOIN_S:g}"]
     flying += [] if variant.chart else ["--no-chart"]
     flying += [] if variant.swarm_min is None else ["--swarm-pilot-min", str(variant.swarm_min)]
     if variant.per_drone:
@@ -337,11 +338,13 @@ class _Watch:
         if self.variant.upd_listener:  # the environment then follows the ENV phase and reports it
             session.declare_subscriber(keys.upd, lambda _sample: None)
         if self.variant.ros2:  # (its ROS 2 user, a process of its own as RViz is, subscribes to every topic)
+            from entities.ros2.node import NODE
+
             # the viewer's node token comes once it hears OVER: a game played before would leave it waiting
-            if not await_presence(session, RosKeys().node_tokens("dronesim"), 120.0):
-                raise RuntimeError("the ROS 2 viewer did not appear within 120 s")
+            if not await_presence(session, RosKeys().node_tokens(NODE), JOIN_S):
+                raise RuntimeError(f"the ROS 2 viewer did not appear within {JOIN_S:g} s")
         inbox = listen(session, keys, log)
-        member = join(session, inbox, log, connect_timeout=120.0, grace=COORDINATOR_GRACE_S)
+        member = join(session, inbox, log, connect_timeout=JOIN_S, grace=COORDINATOR_GRACE_S)
         station = Station(Ground.from_welcome(member.welcome, Scenario.load(scenario_file).targets, None),
                           quit_at=self.case.end_turn, ahead=self.variant.ahead)
         send, idle_since, end = publisher(Outbox(session), keys, log, print), time.monotonic(), None

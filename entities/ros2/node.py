@@ -39,6 +39,9 @@ from .cdr import type_hash
 from .goals import Goal, Goals
 from .model import NAMESPACE, POSE, TURN_PERIOD_S, Out, Outs, Scene, Snapshot, drone_topic
 
+#: The ROS 2 node the viewer is in the graph (`ros2 node list`), whose token tells it is there.
+NODE = "dronesim"
+
 #: rmw_zenoh's QoS strings (reliability:durability:history,depth:deadline:lifespan:liveliness), for the tokens.
 QOS_TELEMETRY = "2:2:1,1:,:,:,,"  # best effort, volatile, keep last 1
 QOS_LATCHED = "1:1:1,1:,:,:,,"  # reliable, transient local, keep last 1
@@ -304,7 +307,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.over, Over)
         newest = inbox.newest(keys.status, Status)
-        graph = RosGraph(session, ros, "dronesim")
+        graph = RosGraph(session, ros, NODE)
         sinks: list[Sink] = [RosSink(graph)]
         if fox is not None:
             sinks.append(fox)
