@@ -80,6 +80,7 @@ class DroneTable(Sequence[DroneSpec]):
 
 #: The arbitrations a game may choose: the complete search (coordinator/lacam.py, the default) or PIBT alone.
 ARBITERS = ("lacam", "pibt")
+ARBITER = ARBITERS[0]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -95,7 +96,7 @@ class GameConfig:
     env_grace: float = ENV_GRACE_S  # seconds the game waits for a vanished environment to come back
     link_grace: float = LINK_GRACE_S  # seconds the game holds for the entities after a lost link (a router restart)
     gcs_grace: float = GCS_GRACE_S  # seconds a resumed game waits for its ground station once the others are back
-    arbiter: str = "lacam"  # the cooperative drones' arbitration: ARBITERS (journaled in the header if not lacam)
+    arbiter: str = ARBITER  # the cooperative drones' arbitration: ARBITERS (journaled in the header if not lacam)
     #: Lifelong: the ground station gives a drone a new target each time it reaches its own (entities/tasks.py); the
     #: engine counts the tasks done and the end says how many, and how many a turn (journaled in the header if so).
     lifelong: bool = False

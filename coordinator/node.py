@@ -74,7 +74,7 @@ from world.grid import World
 
 from . import arbiter
 from .admission import Presences
-from .config import ARBITERS, LOST_AFTER, MAX_TURNS, SIZE, DroneSpec, GameConfig
+from .config import ARBITER, ARBITERS, LOST_AFTER, MAX_TURNS, SIZE, DroneSpec, GameConfig
 from .engine import Engine, Publish, Record, Refusal, ReplyToConnect
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
@@ -524,7 +524,7 @@ def build_parser() -> argparse.ArgumentParser:
                         f"ABORTED naming who never came (default {ADMIT_DEADLINE_S:g}; 0: wait forever)")
     p.add_argument("--lost-after", type=int, default=LOST_AFTER,
                    help=f"missed deadlines before a drone is LOST (default {LOST_AFTER})")
-    p.add_argument("--arbiter", choices=ARBITERS, default="lacam",
+    p.add_argument("--arbiter", choices=ARBITERS, default=ARBITER,
                    help="the cooperative drones' arbitration: lacam, the complete search (default), or pibt, PIBT "
                         "alone (docs/cooperation.md)")
     p.add_argument("--lifelong", action="store_true",

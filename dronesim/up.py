@@ -22,7 +22,7 @@ import time
 
 import zenoh
 
-from coordinator.config import SIZE, UP_MAX_TURNS
+from coordinator.config import ARBITERS, SIZE, UP_MAX_TURNS
 from dronesim import child_env
 from dronesim.certs import GameCredentials, game_credentials
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scripted targets; without --targets or --script the ground station is interactive")
     p.add_argument("--script", help="a file of scripted targets")
     p.add_argument("--max-turns", type=int, default=UP_MAX_TURNS, help="the game's turn limit (default %(default)s)")
-    p.add_argument("--arbiter", choices=("lacam", "pibt"),
+    p.add_argument("--arbiter", choices=ARBITERS,
                    help="the cooperative drones' arbitration (default lacam, the complete search; pibt: PIBT alone)")
     p.add_argument("--lifelong", action="store_true",
                    help="a lifelong game: each drone that reaches its target gets a new one from the ground station, "
