@@ -38,7 +38,14 @@ from network.transport import (
 )
 from schema import Ans, Ask, Connect, Keys, Moves, Nps, Over, Phase, Role, StepTable, Turn, UsageError, WorldMap
 from schema.messages import drone_list, is_host_id
-from schema.tuning import ASK_TIMEOUT_S, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, DECIDING_EVERY_S, PUT_GAP
+from schema.tuning import (
+    ASK_TIMEOUT_S,
+    CONNECT_TIMEOUT_S,
+    COORDINATOR_GRACE_S,
+    DECIDING_BUSY,
+    DECIDING_EVERY_S,
+    PUT_GAP,
+)
 
 from .autopilots import DEFAULT, REGISTRY, SWARM_MIN, pilot_class
 from .drone import Answer, DroneProcess, Effect, EnvPresence, Expired, Input, Query, Refusal, SendMoves, Timer
@@ -151,7 +158,7 @@ class Deciding:
     own (the main thread is in the plan); a hung process (stopped, or its main thread blocked) says nothing."""
 
     def __init__(self, core: DroneProcess, send: Callable[..., None], cpu: Callable[[], float], *,
-                 every: float = DECIDING_EVERY_S, busy: float = 0.1) -> None:
+                 every: float = DECIDING_EVERY_S, busy: float = DECIDING_BUSY) -> None:
         self.core, self.send, self.cpu, self.every, self.busy = core, send, cpu, every, busy
         self._last: tuple[int | None, float] = (None, 0.0)  # the turn being decided and the CPU time, at the last look
         self._stop = threading.Event()

@@ -171,6 +171,9 @@ PHASE_CAP_S = 60.0
 #: measured: a planning that takes this long is 100 times a D* swarm turn's usual (BENCHMARKS.md), and the words
 #: are a few dozen bytes.
 DECIDING_EVERY_S = 0.05
+#: The share of `DECIDING_EVERY_S` the main thread's CPU time must have gone on by for a host to say it is still
+#: deciding (entities/drone_node.py `Deciding`): a main thread that waits, or is blocked, says nothing.
+DECIDING_BUSY = 0.1
 #: How long a drones' phase waits, after a host's last word that it is still deciding, for its next word or its moves,
 #: when that is longer than the phase deadline: a word late (a host descheduled on a loaded machine) or lost does
 #: not end a phase the host is known to be working on. Not measured: 20 words.
@@ -236,8 +239,10 @@ WEB_PACE_S = 0.5
 COMMAND_TIMEOUT = 10.0
 #: Seconds between the web ground station's keep-alive comments on an event stream, so a vanished page is noticed.
 KEEPALIVE = 15.0
-#: How long the web ground station waits, as it closes, for its event streams to write what they hold (the end).
+#: How long the web ground station waits, as it closes, for its event streams to write what they hold (the end);
+#: the same when it is stopped (a signal, an error, a replay served to its end), when a person wants it over.
 STREAMS_CLOSE_S = 5.0
+STREAMS_STOP_S = 1.0
 #: The Docker image's health check (docker/healthcheck.py; $DRONESIM_HEALTH_TIMEOUT and $DRONESIM_HEALTH_STALL
 #: override them): how long it waits for the router's answer (a presence token, a web page), and how long an
 #: entity's progress may stand still where it should not before the container is unhealthy.
@@ -267,6 +272,8 @@ ROS_MAP_RETRY = 1.0
 MAVLINK_PERIOD = 0.25
 #: How often each vehicle sends its whole telemetry (HEARTBEAT ... BATTERY_STATUS), on top of each turn's position.
 MAVLINK_TELEMETRY_S = 0.5
+#: How long the MAVLink reader's thread takes at most to notice it is stopped (its sockets' select timeout).
+MAVLINK_STOP_S = 0.2
 #: Messages read but not yet handled, at most (some 850 bytes each, decoded); more are refused (a flood cannot grow
 #: the process).
 MAVLINK_QUEUE = 4096

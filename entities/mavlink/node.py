@@ -28,7 +28,7 @@ from network.signals import Interrupted, Stop, on_stop, waking
 from network.transport import Outbox, open_session, zenoh_config
 from schema import Keys, MalformedMessage, Over, RejectCounter, RemoteInputError, UsageError
 from schema.errors import Refusal
-from schema.tuning import MAVLINK_QUEUE, MAVLINK_TELEMETRY_S
+from schema.tuning import MAVLINK_QUEUE, MAVLINK_STOP_S, MAVLINK_TELEMETRY_S
 
 from ..gcs import Ground
 from ..station_link import join, listen, play, publisher
@@ -177,7 +177,7 @@ class Reader:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            for key, _ in self._selector.select(0.2):  # (the timeout only bounds how long `stop` waits)
+            for key, _ in self._selector.select(MAVLINK_STOP_S):  # (the timeout only bounds how long `stop` waits)
                 port, sock = key.data, key.fileobj
                 while True:
                     try:

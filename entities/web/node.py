@@ -22,7 +22,7 @@ import zenoh
 from network.signals import over_status, waking
 from network.transport import Inbox, Outbox, open_session, zenoh_config
 from schema import Cell, Keys, Over, UsageError
-from schema.tuning import COMMAND_TIMEOUT, WEB_PACE_S
+from schema.tuning import COMMAND_TIMEOUT, STREAMS_STOP_S, WEB_PACE_S
 
 from ..gcs import Ground
 from ..station_link import join, listen, play, publisher
@@ -139,7 +139,7 @@ def run_live(args: argparse.Namespace, logger: logging.Logger, address: tuple[st
             member.close()
         except BaseException:
             backend.close()
-            server.stop(drain=1.0)
+            server.stop(drain=STREAMS_STOP_S)
             raise
     print(state.station.report(draw=False), flush=True)
     try:
@@ -193,7 +193,7 @@ def run_replay(args: argparse.Namespace, logger: logging.Logger, address: tuple[
     try:
         threading.Event().wait(args.linger if args.linger > 0 else None)
     finally:
-        server.stop(drain=1.0)
+        server.stop(drain=STREAMS_STOP_S)
 
 
 def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:

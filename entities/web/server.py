@@ -293,7 +293,7 @@ class WebServer(ThreadingHTTPServer):
         self._thread = threading.Thread(target=self.serve_forever, name="web-gcs-http", daemon=True)
         self._thread.start()
 
-    def stop(self, drain: float = 5.0) -> None:
+    def stop(self, drain: float = STREAMS_CLOSE_S) -> None:
         """Let every SSE stream write what it has (the final state), then stop serving."""
         self.hub.close(drain)
         if self._thread is not None:
