@@ -21,10 +21,13 @@ scenario:
    which takes the whole flood, runs as the game does);
 3. flood (b): the attacker sends 300 ASKs of 32,768 cells from D01 to the environment at once and waits
    for their replies;
-4. flood (c), (d): 200,000 stale DONEs on the ground station's key, 200,000 stale TGTs on D01's (what any peer
+4. flood (c), (d): 2,000,000 stale DONEs on the ground station's key, 2,000,000 stale TGTs on D01's (what any peer
    may do on a plain router; under access control, a buggy ground station: the attacker is a second session of
    the GCS); flood (e): 20,000 CONNECT queries with invented sessions, naming D01, D02... in turn (any peer allowed
-   to connect: a drone under access control), all at once (issue 33);
+   to connect: a drone under access control), all at once (issue 33). The attacker runs in a session of its own
+   (`--attacker-session`), as a program started apart from the game would: Linux schedules each session as a
+   group (autogroup), so it takes its share of the machine as any other program does (in the game's session it
+   took its CPU from the game's share: `--attacker-session game`);
 5. clean again (the machine's speed drifts: the clean speed is the mean of the first and last clean games).
 `--floods nps,done` plays only those floods.
 
@@ -62,7 +65,9 @@ SECTION = "## Floods"
 TARGET = 0.5  # flooded turns/s ÷ clean turns/s, at least
 SIZE = (64, 64, 16)
 DRONES = 16
-FLOODS = {"nps": 200_000, "ask": 300, "done": 200_000, "tgt": 200_000, "connect": 20_000}
+#: (c), (d): 2,000,000 stale DONEs or TGTs: 200,000 went by in 0.1-1.3 s, a few dozen turns, so that their ratio
+#: measured this shared machine's pauses in that fraction of a second more than the flood; these outlast most games.
+FLOODS = {"nps": 200_000, "ask": 300, "done": 2_000_000, "tgt": 2_000_000, "connect": 20_000}
 #: On the secured router, the principal each flood comes as: D01's keys and queries belong to the swarm host flying
 #: it; the ground station's keys (DONE, TGT) to the GCS (a buggy ground station: a second session of it).
 ATTACKERS = {"nps": "H01", "ask": "H01", "connect": "H01", "done": "GCS", "tgt": "GCS"}
@@ -74,6 +79,10 @@ FLOOD_NAMES = {"nps": "{:,} stale NPS", "ask": "{:,} ASKs of 32,768 cells", "don
 #: processes go first on this machine's cores; the router, which takes the whole flood, runs as the game does.
 #: `--attacker-nice 0`: an attacker that shares the game's cores as an equal (on 2 cores it takes one of them).
 ATTACKER_NICE = 19
+#: Where the attacker runs: "own", a session of its own (setsid), as a program started apart from the game is (Linux
+#: schedules each session as a group, autogroup, each with the same share of the machine); "game", the game's session
+#: (this process's): then it is scheduled as one of the game's own processes, and takes its CPU from the game's share.
+ATTACKER_SESSIONS = ("own", "game")
 
 
 #: Each flood's letter in the table.
@@ -104,9 +113,9 @@ def rejections(log: Path) -> str:
 
 
 def play(name: str, flood: str | None, count: int, case: Case, scenario: Path, logs: Path,
-         secured: Secured | None, nice: int = ATTACKER_NICE) -> Played:
-    """One game, with the attacker `flood` (`benchmarks.flooder`, at niceness `nice`) started once its warm-up
-    is over."""
+         secured: Secured | None, nice: int = ATTACKER_NICE, session: str = "own") -> Played:
+    """One game, with the attacker `flood` (`benchmarks.flooder`, at niceness `nice`, in a session of its own or
+    the game's: `ATTACKER_SESSIONS`) started once its warm-up is over."""
     logs.mkdir()
     attackers: list[subprocess.Popen] = []
     went: list[int] = []  # the turn it was told to go at
@@ -121,7 +130,8 @@ def play(name: str, flood: str | None, count: int, case: Case, scenario: Path, l
             a = subprocess.Popen([sys.executable, "-m", "benchmarks.flooder", flood, "--mode", "client", "--connect",
                                   locator, "--root", keys.root, "--count", str(count), *creds],
                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                 env=child_env(), preexec_fn=partial(os.nice, nice))
+                                 env=child_env(), preexec_fn=partial(os.nice, nice),
+                                 start_new_session=session == "own")
             attackers.append(a)
             line = a.stdout.readline() if a.stdout else ""
             if line.strip() != "ready":
@@ -245,7 +255,10 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     secured = None if args.plain else Secured.make(logs / "certs", [d["id"] for d in scen["drones"]], "H01")
     facts["secured"] = secured is not None
     facts["nice"] = args.attacker_nice
+    facts["session"] = args.attacker_session
     floods = [f for f in FLOODS if f in args.floods]
+    facts["games"] = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seven"}.get(len(floods) + 2,
+                                                                                         str(len(floods) + 2))
     plan = [("clean", None), *((f"flood ({LETTERS[f]}): {FLOOD_NAMES[f].format(counts[f])}", f) for f in floods),
             ("clean again", None)]
     rows: list[Row] = []
@@ -253,7 +266,7 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     for k in range(1, args.repeat + 1):
         facts["loads"].append(os.getloadavg()[0])
         games = [play(f"run {k}: {name}" if args.repeat > 1 else name, flood, counts.get(flood or "", 0), case,
-                      scenario, logs / f"run{k}-game{i}", secured, args.attacker_nice)
+                      scenario, logs / f"run{k}-game{i}", secured, args.attacker_nice, args.attacker_session)
                  for i, (name, flood) in enumerate(plan)]
         more, errors = rows_of(games, case)
         rows += more
@@ -272,7 +285,8 @@ def legend(facts: dict) -> str:
     case: Case = facts["case"]
     return (
         f"Legend. One scenario ({case.drones} seed drones on {'x'.join(map(str, case.size))}, {case.warmup} warm-up "
-        f"turns, {case.turns} measured), played four times in this run as `dronesim bench perf` plays a game: a "
+        f"turns, {case.turns} measured), played {facts['games']} times in this run as `dronesim bench perf` plays a "
+        "game: a "
         "loopback `dronesim router` process (" + (
             "the secured router of docs/security.md: TLS, user/password, the access control generated from the key "
             "table for the game's root, every process with its own credentials, the attacker a second "
@@ -284,7 +298,11 @@ def legend(facts: dict) -> str:
         f"attacker process (`benchmarks/flooder.py`, a client of the router, at niceness {facts['nice']}"
         + (": it stands for a client on a host of its own, so the game's processes go first on this machine's "
            "cores, while the router takes the whole flood" if facts["nice"] > 0 else
-           ": it shares this machine's cores with the game as an equal") + ") floods as D01: (a) NPS for turn 1 on "
+           ": it shares this machine's cores with the game as an equal")
+        + ("; in a session of its own, as a program started apart from the game: Linux schedules each session as a "
+           "group, autogroup, so it takes its share of the machine as any other program does"
+           if facts["session"] == "own" else "; in the game's session: scheduled as one of the game's processes, it "
+           "takes its CPU from the game's share") + ") floods as D01: (a) NPS for turn 1 on "
         "D01's own key, as fast as it can; (c), (d) stale DONEs on the ground station's key, stale TGTs on D01's, "
         "as a second session of the GCS; (e) CONNECTs with invented sessions, all at once; (b) ASKs of 32,768 "
         "cells to the environment, all at once, then waits "
@@ -323,6 +341,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--attacker-nice", type=int, default=ATTACKER_NICE,
                         help=f"the attacker's niceness (default {ATTACKER_NICE}: it stands for a client on a host of "
                              "its own; 0: it shares this machine's cores with the game as an equal)")
+    parser.add_argument("--attacker-session", choices=ATTACKER_SESSIONS, default="own",
+                        help="the attacker in a session of its own (default: as a program started apart from the "
+                             "game, scheduled as a group of its own, autogroup) or in the game's (scheduled as one "
+                             "of the game's processes, taking the game's share)")
     parser.add_argument("--floods", default=",".join(FLOODS), type=lambda v: [f for f in v.split(",") if f],
                         help=f"the floods to play, of {','.join(FLOODS)} (default: all)")
     parser.add_argument("--repeat", type=int, default=1, help="play the games this many times (default 1)")

@@ -19,7 +19,11 @@ from network.progress import Progress
 from network.transport import Inbox, Presence, Received, ask_later
 from schema import Connect, Message, Over, Refused, Status, Turn, Welcome
 from schema.errors import RejectCounter, RemoteInputError, UsageError
-from schema.tuning import CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, PROCESS_CHECK_S
+from schema.tuning import CONNECT_GAP, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, PROCESS_CHECK_S
+
+#: When each session (its id, as a CONNECT names it) sent its last CONNECT, or will (`Membership._connect`): the
+#: memberships of one session (the RL backend's station and swarm host) keep `CONNECT_GAP` between theirs too.
+_ASKED: dict[str, float] = {}
 
 
 class NotAdmitted(UsageError):
@@ -67,7 +71,7 @@ class Membership:
         self.session, self.inbox, self.keys, self.log = session, inbox, inbox.keys, logger
         self.hello, self.grace, self.connect_timeout = hello, grace, connect_timeout
         self.token = session.liveliness().declare_token(self.keys.alive(hello.sender, hello.session))
-        self.coordinator, self._present, self._asking = "", False, False
+        self.coordinator, self._present, self._asking, self._closed = "", False, False, False
         # the sessions with a coordinator's presence token, as this loop has heard them (`Presence` events): an
         # answer to CONNECT counts only from one of them, and CONNECT is sent only once one is known (so the
         # genuine answer never comes ahead of its sender's token)
@@ -107,8 +111,22 @@ class Membership:
         return False
 
     def _connect(self) -> None:
-        """Send CONNECT; its answer comes as an `Answered` event."""
+        """Send CONNECT, `CONNECT_GAP` s after this session's last at least (later, from a timer's thread: a router
+        keeps at most `CONNECT_RATE` a second from one session, `schema.acl.flood_filters`); its answer comes as an
+        `Answered` event."""
         self._asking = True
+        wait = _ASKED.get(self.hello.session, float("-inf")) + CONNECT_GAP - time.monotonic()
+        _ASKED[self.hello.session] = time.monotonic() + max(0.0, wait)
+        if wait <= 0:
+            self._ask()
+            return
+        timer = threading.Timer(wait, self._ask)
+        timer.daemon = True
+        timer.start()
+
+    def _ask(self) -> None:
+        if self._closed:
+            return
         ask_later(self.session, self.keys.connect, self.hello, (Welcome, Refused), self.connect_timeout,
                   lambda reply, coordinator, error: self.inbox.post(Answered(reply, coordinator, error)),
                   accept=self._from_coordinator)
@@ -183,6 +201,7 @@ class Membership:
             raise UsageError(f"the coordinator vanished and did not come back within {self.grace:g} s")
 
     def close(self) -> None:
+        self._closed = True
         self.token.undeclare()
 
     def screen(self, event: object, rejects: RejectCounter) -> bool:

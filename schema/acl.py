@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from .errors import UsageError
 from .keys import KEY_TABLE, ROOT, Keys, KeySpec, size_limit
 from .messages import drone_id, drone_list, is_drone_id, is_host_id
-from .tuning import PUT_RATE
+from .tuning import CONNECT_RATE, PUT_RATE
 
 #: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
 ROLES = ("SRV", "ENV", "GCS", "DRONE")
@@ -202,11 +202,13 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
     `access_control` block) the rate of puts is kept key by key for the keys it grants (a session's refused puts
     on another drone's key do not count against its own), and the TGT keys one by one for the drones it names;
     without, for all of a kind at once, and none on the TGT keys (a station may send a TGT for every drone at
-    once: one budget for all would drop them; dronesim's stations send none, their DONE carries the targets)."""
+    once: one budget for all would drop them; dronesim's stations send none, their DONE carries the targets). And
+    the CONNECT queries beyond `CONNECT_RATE` a second from one session (a process asks one at a time,
+    `CONNECT_GAP` apart at least; a query dropped is ended at once, without a reply, and asked again)."""
     import zenoh
 
     sizes: dict[tuple[str, int], list[str]] = {}
-    budgeted = []
+    budgeted, connect = [], []
     granted = None if acl is None else sorted(  # every key expression `acl` lets some subject put on
         {k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
          and "ingress" in rule["flows"] for k in rule["key_exprs"]})
@@ -215,6 +217,8 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
             continue
         exprs = [str(zenoh.KeyExpr.autocanonize(f"{root}/{_PLACEHOLDER.sub('*', spec.template)}")) for root in roots]
         sizes.setdefault((spec.how, size_limit(spec.message)), []).extend(exprs)
+        if spec.template == "SRV/CONNECT":
+            connect += exprs
         if spec.how == "put" and spec.writer == "DRONE" or spec.template == "GCS/DONE":
             budgeted += [k for k in (exprs if granted is None else granted) if any(_includes(x, k) for x in exprs)]
         elif spec.how == "put" and spec.writer == "GCS" and granted is not None:  # TGT: a budget per drone
@@ -224,7 +228,9 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
                  "size_limit": limit} for (how, limit), exprs in sorted(sizes.items())]
     puts = {"id": "puts", "messages": ["put"], "flows": ["ingress"],
             "rules": [{"key_expr": expr, "freq": PUT_RATE} for expr in budgeted]}
-    return {"low_pass_filter": low_pass, "downsampling": [puts]}
+    queries = {"id": "queries", "messages": ["query"], "flows": ["ingress"],
+               "rules": [{"key_expr": expr, "freq": CONNECT_RATE} for expr in connect]}
+    return {"low_pass_filter": low_pass, "downsampling": [puts, queries]}
 
 
 def router_config(block: dict, *, listen: str = "tls/0.0.0.0:7447", certs: str = "certs", mtls: bool = False,

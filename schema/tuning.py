@@ -118,6 +118,18 @@ PUT_GAP = 5 / PUT_RATE
 DONE_RETRY_S = 1.0
 DONE_RETRY_TURNS = 4
 DONE_RETRY_MIN_S = 0.02
+#: CONNECT queries a second a router forwards from one session (its `downsampling` of queries on the CONNECT key,
+#: schema/acl.py `flood_filters`; a query it drops is finished at once, without a reply): a process asks once, and
+#: again only once its last question is over (`CONNECT_GAP` later at least), so a flood of CONNECTs with invented
+#: sessions reaches the coordinator at this rate, each of them refused cheaply, instead of all of them. Measured
+#: (bench flood, issue 33): 20,000 CONNECTs reaching the coordinator cost it and the router about 0.15 ms of CPU
+#: each, refused though they were (the router carries the query, its error reply and its end).
+CONNECT_RATE = 100.0
+#: Seconds at least between two CONNECTs from one session (network/membership.py `Membership`: its first, and each
+#: asked again after an answer that did not admit it or a query the router's budget ended): twice the budget's
+#: interval (two brought together by a link: the second is dropped, and asked again this much later). Not measured:
+#: a process sends one or two (the RL backend: its station and its swarm host, one after the other).
+CONNECT_GAP = 2 / CONNECT_RATE
 
 #: Turns a second no game can exceed: a turn takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor).
 #: An entity refuses a TURN, STATUS or OVER further ahead of the turn it knows than this rate allows since it last

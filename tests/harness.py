@@ -13,6 +13,7 @@ import shutil
 import subprocess
 import sys
 import threading
+import time
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -35,6 +36,19 @@ def embedded_router() -> Iterator[str]:
         yield router_locators(router)[0]
 
 
+
+
+def ask_until_replied(session: zenoh.Session, key: str, payload: bytes | None = None,
+                      timeout: float = TIMEOUT) -> list[zenoh.Reply]:
+    """The replies to a query on `key` (a CONNECT) asked right after another from the same session: a router keeps at
+    most `schema.tuning.CONNECT_RATE` CONNECTs a second from one session (`schema.acl.flood_filters`) and ends a
+    query it drops at once, without a reply; so it is asked again until one comes (or `timeout` s), as an entity
+    does (`network.membership.Membership`)."""
+    end = time.monotonic() + timeout
+    while True:
+        replies = list(session.get(key, payload=payload, timeout=timeout))
+        if replies or time.monotonic() > end:
+            return replies
 
 
 def unique_root() -> str:

@@ -389,6 +389,21 @@ def test_router_config_listens_on_7447_without_multicast():
     assert admin["enabled"] is True and admin["permissions"] == {"read": True, "write": False}
 
 
+def test_the_plain_routers_config_has_the_flood_filters_of_the_key_table():
+    """Issue 33, 6: the insecure opt-out's router (compose.insecure.yaml) budgets floods as every router this project
+    configures does (`schema.acl.flood_filters` for any root: sizes, puts a second, CONNECTs a second); it had
+    none."""
+    import zenoh
+
+    from schema.acl import flood_filters
+
+    conf, generated = zenoh.Config.from_file(str(ZENOHD_CONF)), zenoh.Config()
+    for name, expected in flood_filters(["**"]).items():
+        generated.insert_json5(name, json.dumps(expected))  # (both as zenoh reads them: its defaults filled in)
+        assert json.loads(conf.get_json(name)) == json.loads(generated.get_json(name)), \
+            f"{name} in {ZENOHD_CONF}, one item a line: " + json.dumps(expected)
+
+
 @pytest.mark.parametrize("path,endpoint", [(COMPOSE, ROUTER_ENDPOINT), (COMPOSE_INSECURE, PLAIN_ENDPOINT)],
                          ids=["secured", "insecure"])
 def test_every_dronesim_service_is_an_explicit_client_of_the_router(path, endpoint):

@@ -29,7 +29,7 @@ from schema import (
     decode,
     encode,
 )
-from tests.harness import Cluster, client_config, embedded_router, journal_records
+from tests.harness import Cluster, ask_until_replied, client_config, embedded_router, journal_records
 from world.grid import Building, World
 
 pytestmark = pytest.mark.integration
@@ -190,7 +190,7 @@ def throw_garbage(s: zenoh.Session, keys: Keys, turn: int) -> int:
             s.put(key, g)
     for key in (keys.connect, keys.ask, keys.map):
         for g in garbage[:3]:
-            replies = list(s.get(key, payload=g, timeout=10))
+            replies = ask_until_replied(s, key, g, timeout=10)  # (CONNECTs: the router's budget a session)
             assert replies and all(r.err is not None for r in replies), key
     return 2  # the target outside the world and the one for an unknown drone
 

@@ -6,6 +6,7 @@ refused before they are queued, and the origins take turns (FairQueue)."""
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -14,8 +15,9 @@ from typing import Any
 import pytest
 import zenoh
 
-from network.transport import FairQueue, Inbox, Outbox, Received, _direct, router_locators
+from network.transport import FairQueue, Inbox, Outbox, Received, _direct, router_config, router_locators
 from schema import Ask, Connect, EndReason, Keys, Over, RemoteInputError, Role, Status, StatusTable, Target, encode
+from schema.acl import flood_filters
 from schema.keys import size_limit
 from schema.tables import MAX_DRONE, drone_name
 from tests.harness import client_config, embedded_router, unique_root
@@ -272,12 +274,22 @@ def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_ano
     inbox.close()
 
 
-def test_queries_beyond_those_that_may_wait_are_refused_unread_whatever_sender_they_name(pair) -> None:
+def test_queries_beyond_those_that_may_wait_are_refused_unread_whatever_sender_they_name() -> None:
     """Issue 33, 6: CONNECTs with invented sessions, each naming another sender, got past every budget of one
     origin and cost the coordinator's main thread a decode and an error reply each. With `most`, a query that finds
-    that many queued or held by the main thread (`waiting`) is refused on Zenoh's thread, unread."""
-    inbox, out, keys = pair
-    inbox = Inbox(inbox.session, keys, LOG)
+    that many queued or held by the main thread (`waiting`) is refused on Zenoh's thread, unread. (Through a router
+    without its budget of CONNECTs a session, which would end 4 of the 5 this one session asks at once:
+    test_a_routers_budget_of_connects_a_session_ends_the_rest_at_once_without_a_reply; the coordinator's bound is
+    for CONNECTs from many sessions.)"""
+    keys = Keys(unique_root())
+    conf = router_config("tcp/127.0.0.1:0")
+    conf.insert_json5("downsampling", json.dumps(flood_filters(["**"])["downsampling"][:1]))
+    with zenoh.open(conf) as router, zenoh.open(client_config(router_locators(router)[0])) as a, \
+            zenoh.open(client_config(router_locators(router)[0])) as b:
+        _refused_unread(Inbox(a, keys, LOG), Outbox(b), keys)
+
+
+def _refused_unread(inbox: Inbox, out: Outbox, keys: Keys) -> None:
     held = [1]  # (the main thread holds one already: a CONNECT waiting for its token)
     inbox.serve(keys.connect, Connect, most=3, waiting=lambda: held[0])
     asker = out.session
@@ -305,6 +317,28 @@ def test_queries_beyond_those_that_may_wait_are_refused_unread_whatever_sender_t
         e.query.drop()
     assert [r.ok.payload.to_bytes() for r in replies["D01"]] == [b"ok"]
     inbox.close()
+
+
+def test_a_routers_budget_of_connects_a_session_ends_the_rest_at_once_without_a_reply() -> None:
+    """Issue 33, 6: a router keeps at most CONNECT_RATE CONNECTs a second from one session (`flood_filters`); the
+    rest never reach the coordinator, and each ends at once, without a reply (Zenoh's router ends a query its
+    interceptor drops), so a process asks again. Another session has a budget of its own."""
+    keys = Keys(unique_root())
+    got: list[bytes] = []
+    with embedded_router() as locator, zenoh.open(client_config(locator)) as srv, \
+            zenoh.open(client_config(locator)) as asker, zenoh.open(client_config(locator)) as other:
+        queryable = srv.declare_queryable(keys.connect, _direct(
+            lambda q: (got.append(q.payload.to_bytes() if q.payload else b""), q.reply(q.key_expr, b"ok"), q.drop())))
+        querier = asker.declare_querier(keys.connect)
+        while not querier.matching_status.matching:
+            threading.Event().wait(0.01)
+        querier.undeclare()
+        sent = 200  # at once: closer together than 1 / CONNECT_RATE s, but for a pause of the whole machine
+        flood = [asker.get(keys.connect, payload=b"flood", timeout=30) for _ in range(sent)]
+        answered = sum(1 for replies in flood if any(r.ok is not None for r in replies))
+        assert 1 <= answered < sent and got.count(b"flood") == answered, (answered, got.count(b"flood"))
+        assert [r.ok.payload.to_bytes() for r in other.get(keys.connect, payload=b"other", timeout=30)] == [b"ok"]
+        queryable.undeclare()
 
 
 def test_newest_keeps_the_last_message_queues_no_event_and_checks_it_when_read(pair) -> None:
