@@ -219,7 +219,8 @@ MECHANISMS: tuple[Mechanism, ...] = (
 )
 
 
-#: Games of each mechanism on and off, alternated (on, off, on, off...): the machine's speed drifts.
+#: Games of each mechanism on and off, alternated (on, off, then off, on...): the machine's speed drifts, and the
+#: second game of two may differ from the first (the first's processes ending, a cache warm): each comes first as often.
 MECHANISM_REPEAT = 2
 
 
@@ -249,7 +250,8 @@ def play_mechanisms(selected: Callable[[str], bool], quick: bool, turns: int, lo
             path = logs / f"mechanism-scenario-{drones}-{size_text(size)}.json"
             path.write_text(json.dumps(make_scenario(case)), encoding="utf-8")
             for i in range(1 if quick else max(MECHANISM_REPEAT, m.repeat)):  # (mechanism_legend, m.switch say)
-                for variant, into in ((Variant(), pair.on), (m.off, pair.off)):
+                order = ((Variant(), pair.on), (m.off, pair.off))
+                for variant, into in order[::-1] if i % 2 else order:  # on, off, off, on...: a drift weighs alike
                     folder = logs / f"mechanism-{len(pairs)}-{'off' if variant is m.off else 'on'}-{i}"
                     folder.mkdir()
                     print(f"  mechanism {m.name[:40]}..., {case.name}, {'off' if variant is m.off else 'on'}",
@@ -308,7 +310,7 @@ def mechanism_rows(pairs: list[Pair], selected: Callable[[str], bool]) -> tuple[
             cpu = f"{cpu_off / cpu_on:.2f}x" if cpu_on > 0 and cpu_off > 0 else "below the clock tick"
             cells["gain"] = f"turn {turn:.2f}x, CPU {cpu}"
             if m.off.ros2:  # the switch adds a viewer: the game must keep its speed
-                keeps = 1 / turn  # (each pair, a game with the viewer ÷ the game without played just before it,
+                keeps = 1 / turn  # (each pair, a game with the viewer ÷ the game without played next to it,
                 ratios = [a / b for a, b in zip(on["mean"], off["mean"])]  # shows the spread of the machine)
                 cells["gain"] += (f"; keeps {keeps:.0%} of its turns/s (target ≥ {ROS2_KEEPS:.0%}; pair by pair "
                                   f"{_span([100 * r for r in ratios], '.0f')} %); the ROS 2 user got "
@@ -356,7 +358,7 @@ def mechanism_legend(repeat: int = MECHANISM_REPEAT) -> str:
         "`benchmarks/mechanisms.py`'s MECHANISMS (a function, class or constant, docstring and comments included) and, "
         "where it is woven into shared code, the lines there that name it (a regex over the file), counted when "
         "the table is made. A mechanism with a switch is played with it on and off, alternated "
-        f"({repeat} game{'s' if repeat > 1 else ''} each{': on, off, on, off' if repeat > 1 else ''}), in this run, "
+        f"({repeat} game{'s' if repeat > 1 else ''} each{': on, off, off, on' if repeat > 1 else ''}), in this run, "
         "on the same scenario as the game "
         "rows above (same warm-up and measured turns); each cell is the range over its games. CPU: user + "
         "system time of the coordinator, environment, drone processes, router and this process, summed, "
