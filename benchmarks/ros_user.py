@@ -17,6 +17,7 @@ import threading
 
 import zenoh
 
+from entities.ros2.node import NODE
 from schema.keys import RosKeys
 
 
@@ -46,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
 
     with zenoh.open(conf) as session:
         session.declare_subscriber(f"{args.domain}/**", on_sample)
-        session.liveliness().declare_subscriber(RosKeys(args.domain).node_tokens("dronesim"), on_token, history=True)
+        session.liveliness().declare_subscriber(RosKeys(args.domain).node_tokens(NODE), on_token, history=True)
         print("ros user: subscribed", flush=True)
         ok = gone.wait(args.timeout)
     print(f"ros user: {counts[0]} samples, {counts[1]} bytes; by type: {dict(sorted(kinds.items()))}", flush=True)
