@@ -45,7 +45,7 @@ def measure_floor(rounds: int, warmup: int, logs: Path, *, pubsub: tuple[str, ..
                   query: tuple[str, ...] = ("cb", "th")) -> list[Floor]:
     """Pub/sub and query round trips between this process and a pingpong helper process, the helper
     replying from its callbacks ("cb") or its main thread ("th"): a Floor for each mode asked, pub/sub first."""
-    from network.membership import await_presence
+    from benchmarks.measure import await_presence
 
     root = f"perf{uuid.uuid4().hex[:8]}"
     procs = Procs(logs)

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from benchmarks.measure import Procs, cpu_seconds, loopback_router, proc_status, size_text
+from benchmarks.measure import Procs, await_presence, cpu_seconds, loopback_router, proc_status, size_text
 from coordinator.journal import is_turn
 from network.transport import client_config
 from schema.tuning import ANSWER_AHEAD, COORDINATOR_GRACE_S
@@ -329,7 +329,6 @@ class _Watch:
         from dronesim.scenario import Scenario
         from entities.gcs import End, Ground, SendDone, Station
         from entities.station_link import join, listen, publisher
-        from network.membership import await_presence
         from network.transport import Outbox, Received
         from schema import Turn
         from schema.keys import RosKeys

@@ -10,6 +10,7 @@ import platform
 import re
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -180,3 +181,14 @@ def verdict(value: float, target: float, at_most: bool, what: str) -> str:
         return f"{what}: not measured"
     met = value <= target if at_most else value >= target
     return f"{what}: {'met' if met else 'UNMET'}"
+
+
+def await_presence(session, key: str, timeout: float) -> bool:
+    """Block until a liveliness token matching `key` exists (True) or `timeout` passes (False): a benchmark waiting
+    for a process it started (an entity never waits so: it takes presences as events, network/membership.py)."""
+    seen = threading.Event()
+    sub = session.liveliness().declare_subscriber(key, lambda s: seen.set(), history=True)
+    try:
+        return seen.wait(max(0.0, timeout))
+    finally:
+        sub.undeclare()

@@ -30,16 +30,6 @@ class NotAdmitted(UsageError):
     """The coordinator refused this entity (e.g. its role is already taken)."""
 
 
-def await_presence(session: zenoh.Session, key: str, timeout: float) -> bool:
-    """Block until a liveliness token matching `key` exists (True) or `timeout` passes (False)."""
-    seen = threading.Event()
-    sub = session.liveliness().declare_subscriber(key, lambda s: seen.set(), history=True)
-    try:
-        return seen.wait(max(0.0, timeout))
-    finally:
-        sub.undeclare()
-
-
 @dataclass(frozen=True, slots=True)
 class Answered:
     """The coordinator's answer to this entity's CONNECT, an event of its inbox (posted by the query's callback):

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from network.membership import await_presence
+from benchmarks.measure import await_presence
 from network.transport import client_config, router_config
 from schema import Keys
 from tests.harness import (
