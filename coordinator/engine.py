@@ -66,7 +66,17 @@ from . import arbiter, lacam, observer
 from .admission import Roster, id_ranges
 from .config import GameConfig, starts_of
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
-from .journal import TurnLog, TurnRecord, header_of, header_record, over_of, over_record, state_hash, turns
+from .journal import (
+    TurnLog,
+    TurnRecord,
+    header_of,
+    header_pilots,
+    header_record,
+    over_of,
+    over_record,
+    state_hash,
+    turns,
+)
 from .stages import TAKES, TRANSITIONS, Stage, When
 
 # --------------------------------------------------------------------------- effects
@@ -935,10 +945,10 @@ class Engine:
         theirs, fleet = header_of(records), self.fleet
         if theirs is None:
             raise UsageError("the journal has no header: nothing to resume")
-        for d in theirs.get("drones", []):  # (autopilots are learnt at admission, not configured)
-            i = fleet.index.get(d.get("drone"))
+        for drone, autopilot, cooperative in header_pilots(theirs):  # (learnt at admission, not configured)
+            i = fleet.index.get(drone)
             if i is not None:
-                fleet.learn([i], d.get("autopilot", ""), d.get("cooperative", False))
+                fleet.learn([i], autopilot, cooperative)
         if self.header() != theirs:
             raise UsageError("the journal is of another game (world, drones or limits differ)")
         if (over := over_of(records)) is not None:

@@ -1,8 +1,8 @@
 """The journal, the one home of its record format: written here (`header_record`, `TurnLog`, `over_record`, one
 JSON line each, by `JournalWriter`; a turn's state digest, `state_hash`) and read here (`read`, `header_of`,
-`header_config`, `TurnRecord`, `turns`, `over_of`, `is_turn`, `tracks`) by the engine, resume, `dronesim replay`
-and `export`, the web page's replay and the benchmarks. Lines are canonical JSON (sorted keys, no spaces,
-no timestamps) so two runs of the same scenario give byte-identical journals, whatever the process layout.
+`header_pilots`, `header_config`, `TurnRecord`, `turns`, `over_of`, `is_turn`, `tracks`) by the engine, resume,
+`dronesim replay` and `export`, the web page's replay and the benchmarks. Lines are canonical JSON (sorted keys, no
+spaces, no timestamps) so two runs of the same scenario give byte-identical journals, whatever the process layout.
 
   header  {"record": "header", "format": "dronesim-journal", "version": 1, "world": {size, seed, cells},
            "drones": [{drone, start, autopilot, cooperative}], "max_turns", "lost_after"}
@@ -136,6 +136,14 @@ def header_record(config: GameConfig, size: Cell, drones: Iterable[tuple[str, li
         world["cells"] = config.world.cells.hex()
         header["drones"] = [dict(zip(("drone", "start", "autopilot", "cooperative"), row)) for row in drones]
     return header
+
+
+def header_pilots(header: dict) -> Iterator[tuple[Any, Any, Any]]:
+    """Each drone a header lists (`header_record`): its id, autopilot and whether it cooperates, as written (a
+    header not of the format gives what it holds: compared with the game's own header, it differs)."""
+    for d in header.get("drones", []):
+        if isinstance(d, dict):
+            yield d.get("drone"), d.get("autopilot", ""), d.get("cooperative", False)
 
 
 def header_config(header: dict) -> tuple[GameConfig, dict[str, str]]:
