@@ -184,8 +184,11 @@ PHASE_CAP_S = 60.0
 #: are a few dozen bytes.
 DECIDING_EVERY_S = 0.05
 #: The share of `DECIDING_EVERY_S` the main thread's CPU time must have gone on by for a host to say it is still
-#: deciding (entities/drone_node.py `Deciding`): a main thread that waits, or is blocked, says nothing.
-DECIDING_BUSY = 0.1
+#: deciding (entities/drone_node.py `Deciding`): a main thread that waits, or is blocked, says nothing (it gains a few
+#: microseconds). 2 %: a process gets about 6 % of a core at load 18 on 2 cores, where a full run saw a host's 64 D*
+#: drones hover at the phase deadline twice, each the turn after their targets changed (tests/test_soak.py; at 10 %
+#: a host planning that slowly could not say it was still deciding: the likely cause).
+DECIDING_BUSY = 0.02
 #: How long a drones' phase waits, after a host's last word that it is still deciding, for its next word or its moves,
 #: when that is longer than the phase deadline: a word late (a host descheduled on a loaded machine) or lost does
 #: not end a phase the host is known to be working on. Not measured: 20 words.
