@@ -131,7 +131,7 @@ class DroneParallelEnv(ParallelEnv):
         episode = self.episode
         if episode is None:
             raise ConfigError("step() before reset()")
-        if episode.ended:
+        if not episode.left:  # (`episode.ended`, without its property's call)
             if isinstance(actions, Mapping) and not actions:  # (PettingZoo's convention: nothing to step)
                 return {}, {}, {}, {}, {}
             raise ConfigError("step() after the end of the episode: call reset()")
@@ -143,15 +143,14 @@ class DroneParallelEnv(ParallelEnv):
         except (KeyError, TypeError):
             bad = [a for a in actions if a not in row] if isinstance(actions, dict) else actions
             raise ConfigError(f"actions must map agents to actions; unknown agents: {bad!r}") from None
-        out = episode.act(rows, list(actions.values()))
-        names = self.possible_agents if len(out.rows) == episode.n else [self.possible_agents[i] for i in out.rows]
-        terminated, truncated = out.terminated, out.truncated
+        done, seen, rewards, terminated, truncated, infos = episode.act(rows, list(actions.values()))
+        names = self.possible_agents if len(done) == episode.n else [self.possible_agents[i] for i in done]
         self.agents = [a for a, end, cut in zip(names, terminated, truncated) if not (end or cut)] \
             if True in terminated or True in truncated else names[:]
         if self.render_mode == "human":
             self.render()
-        return (dict(zip(names, out.observations)), dict(zip(names, out.rewards)), dict(zip(names, out.terminated)),
-                dict(zip(names, out.truncated)), dict(zip(names, out.infos)))
+        return (dict(zip(names, seen)), dict(zip(names, rewards)), dict(zip(names, terminated)),
+                dict(zip(names, truncated)), dict(zip(names, infos)))
 
     # ------------------------------------------------------------------ the rest
 

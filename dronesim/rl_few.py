@@ -66,6 +66,7 @@ class FewEpisode(EpisodeBase):
         # unreachable target is noted at the start: as it will be said)
         self.left = n
         self._finish, self._new = config.on_target == "finish", config.on_target == "new"
+        self._actions = config.actions  # (a property: read once)
 
     # ------------------------------------------------------------------ columns (as Episode's)
 
@@ -111,7 +112,7 @@ class FewEpisode(EpisodeBase):
             done = [i for i in rows if not acting[i]]
             if done:
                 raise done_agents(done)
-        action = dict(zip(rows, checked_actions(rows, values, self.config.actions)))
+        action = dict(zip(rows, checked_actions(rows, values, self._actions)))
         t = self.cycle + 1
         pos, state, say, shown, alive = self._pos, self._state, self._say, self._shown, self._alive
         # the turn, the engine's: every alive drone moves (the acting ones as told, hover by default; the parked
@@ -130,13 +131,13 @@ class FewEpisode(EpisodeBase):
         self._aim = []
         fleet = self.engine.fleet  # what the turn did: the drones' cells and states (their rows are ours)
         states, cells = fleet.state.tolist(), fleet.pos.tolist()
-        dead = set()
+        dead: set[int] | tuple[()] = ()  # (a set once one died: most steps none)
         for i in alive:
             x, y, z = cells[i]
             pos[i] = x, y, z
             if states[i] != ALIVE:
                 state[i], self._cause[i] = states[i], int(fleet.cause[i])
-                dead.add(i)
+                dead = {*dead, i}
         if dead:
             self._alive = [i for i in alive if i not in dead]
         self.cycle = t
@@ -185,4 +186,6 @@ class FewEpisode(EpisodeBase):
                     acting[i] = False
             self._rows = [i for i in rows_out if acting[i]]
             self.left -= stops
-        return Outcome(rows_out, self.observe(rows_out), rewards, terminated, truncated, self.infos(rows_out))
+        seen = self.eyes.see_few(pos, targets, pos) if len(rows_out) == len(self._alive) == self.n else \
+            self.observe(rows_out)  # (every drone acting and alive: `observe`'s lists themselves, without its call)
+        return Outcome(rows_out, seen, rewards, terminated, truncated, self.infos(rows_out))
