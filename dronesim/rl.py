@@ -432,9 +432,12 @@ class Eyes:
         self.cells = len(cube)
         ball = np.flatnonzero((cube ** 2).sum(axis=1) <= r * r)  # the cells of the cube sensed
         far = 1 << 40  # (beyond either end of the flat world from any cell: clipped to it)
-        self._index = np.full(self.cells + 3, far, np.int64)  # each cell of an observation, from the drone's cell
-        self._index[ball] = cube[ball] @ self._strides
-        self._index[self.cells // 2] = -far
+        # each cell of an observation, from the cube's first cell (`_shift` before the drone's): a gather from a
+        # slice of the flat world that starts there (no index array added to: a slice costs less than an addition)
+        self._shift = r * (self._sx + self._sy + 1)
+        self._index = np.full(self.cells + 3, far, np.int64)
+        self._index[ball] = cube[ball] @ self._strides + self._shift  # (the drone's own cell: `_shift`, FREE or
+        # marked a drone by `see_few`, which writes FREE there then)
         # (many drones: a gather of their sensed cells alone, placed in rows of UNKNOWN: a gather of the cube's every
         # cell, clipped, costs more per drone)
         self._ball, self._offsets, self._centre = ball, (cube[ball] @ self._strides).astype(np.intp), self.cells // 2
@@ -484,16 +487,19 @@ class Eyes:
         EYES_ONE_BY_ONE drones, their observations one by one (a list of arrays), else `see`'s rows."""
         cells, sx, sy, o = self._flat, self._sx, self._sy, self._origin
         # the drones marked in the world for the while (a lone drone that sees itself: its own cell reads FREE)
-        at = [] if len(drones) == 1 and pos == drones else [x * sx + y * sy + z + o for x, y, z in drones]
+        alone = len(drones) == 1 and pos == drones
+        at = [] if alone else [x * sx + y * sy + z + o for x, y, z in drones]
         for k in at:
             cells[k] = _DRONE
         try:
-            index, n = self._index, self.cells
+            index, n, first = self._index, self.cells, o - self._shift
             if len(pos) <= EYES_ONE_BY_ONE:
                 out = []
                 for (x, y, z), (a, b, c) in zip(pos, targets):
-                    one = cells.take(index + (x * sx + y * sy + z + o), mode="clip")
+                    one = cells[x * sx + y * sy + z + first:].take(index, mode="clip")  # (beyond: the last, UNKNOWN)
                     one[n], one[n + 1], one[n + 2] = a - x, b - y, c - z  # (three items: half a slice's cost)
+                    if not alone:  # (its own cell: marked, or where it died; a lone alive drone's reads FREE)
+                        one[n // 2] = _FREE
                     out.append(one)
                 return out
             window = cells[np.array([x * sx + y * sy + z + o for x, y, z in pos])[:, None] + self._offsets]
