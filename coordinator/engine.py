@@ -1092,8 +1092,9 @@ class Engine:
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
         """An admitted entity's presence token disappeared (its process died or was cut off; a refused impostor's
         token does not count). A vanished environment is waited for (`env_grace`; back, it resyncs from STATUS)."""
-        if self._away is not None and entity in self._away:
-            return []  # the link is down: it is away, not gone (until `link_grace` has passed)
+        if self._away is not None and (entity in self._away or self.roster.sessions.get(entity) in ("", session)):
+            self._away.add(entity)  # the link is down: it is away, not gone (until `link_grace` has passed), also
+            return []  # if it was back (a router continued after a freeze drops the old links after their tokens)
         role = self.roster.leave(entity, session)
         if role is None or self.stage is Stage.OVER:
             return []

@@ -460,6 +460,25 @@ def test_a_router_frozen_past_the_leases_becomes_a_lost_link_whose_grace_counts_
     assert run.engine.turn == 2 and "hovered" not in run.journal.records[-1]
 
 
+def test_an_entity_whose_token_flickers_while_the_game_holds_is_away_again_not_lost() -> None:
+    """A router continued after a freeze past the leases: a drone's token comes back from its old link, then
+    vanishes as the router drops that link (its session connected to no router), then comes back on the new one
+    (seen in a full run: the drone was LOST, its reconnection refused). While the game holds, it is away again."""
+    run = routed(Run(drones=2, phase_deadline=1.0, link_grace=5.0))
+    run.play(1, {"D01": (1, 0, 0)})
+    run.srv.handle(Presence("SRV", ME, False))  # every link goes, every token vanishes
+    run.leave("ENV", "GCS", "D01", "D02")
+    run.srv.handle(Presence("SRV", ME, True))
+    run.srv.handle(Presence("D01", SESSIONS["D01"], True))  # back from its old link...
+    run.srv.handle(Presence("D01", SESSIONS["D01"], False))  # ... which the router then drops
+    run.srv.handle(Sessions(frozenset({ME, "r0"})))  # (the audit: D01's session connected to no router)
+    assert run.engine.holding and run.engine.drones["D01"].state.value == "ALIVE"
+    for e in ("ENV", "GCS", "D01", "D02"):
+        run.srv.handle(Presence(e, SESSIONS[e], True))
+    assert not run.engine.holding and all(d.state.value == "ALIVE" for d in run.engine.drones.values())
+    run.send(Nps(turn=1, sender="D02", pos=(1, 2, 0)))
+    assert run.engine.turn == 2 and "hovered" not in run.journal.records[-1]
+
 def test_without_a_router_that_answers_a_deadline_counts_as_it_passes() -> None:
     """No router (peers), or one whose admin space is closed: nothing tells a frozen router, as before."""
     run = Run(drones=2, phase_deadline=1.0)
