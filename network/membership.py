@@ -21,10 +21,6 @@ from schema import Connect, Message, Over, Refused, Status, Turn, Welcome
 from schema.errors import RejectCounter, RemoteInputError, UsageError
 from schema.tuning import CONNECT_GAP, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, PROCESS_CHECK_S
 
-#: When each session (its id, as a CONNECT names it) sent its last CONNECT, or will (`Membership._connect`): the
-#: memberships of one session (the RL backend's station and swarm host) keep `CONNECT_GAP` between theirs too.
-_ASKED: dict[str, float] = {}
-
 
 class NotAdmitted(UsageError):
     """The coordinator refused this entity (e.g. its role is already taken)."""
@@ -105,8 +101,9 @@ class Membership:
         keeps at most `CONNECT_RATE` a second from one session, `schema.acl.flood_filters`); its answer comes as an
         `Answered` event."""
         self._asking = True
-        wait = _ASKED.get(self.hello.session, float("-inf")) + CONNECT_GAP - time.monotonic()
-        _ASKED[self.hello.session] = time.monotonic() + max(0.0, wait)
+        now = time.monotonic()  # (the session's inbox keeps when its next CONNECT may go, for every membership)
+        wait = self.inbox.next_connect - now
+        self.inbox.next_connect = max(now, self.inbox.next_connect) + CONNECT_GAP
         if wait <= 0:
             self._ask()
             return

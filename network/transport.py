@@ -438,6 +438,9 @@ class Inbox:
         self._held: collections.deque[Any] = collections.deque()  # events given back (`hold`)
         self._asked: collections.Counter[str] = collections.Counter()  # queries queued, by key (`serve`'s `most`)
         self._asking = threading.Lock()  # guards `_asked` (Zenoh's thread adds, the main thread takes)
+        #: when this session's next CONNECT may go out (`network.membership.Membership`: every membership of the
+        #: session, as the RL backend's station and swarm host, keeps `CONNECT_GAP` after the last)
+        self.next_connect = float("-inf")
 
     def run(self, handler: Callable[[Event | None], None], *, timeout: Callable[[], float | None],
             until: Callable[[], bool]) -> None:
