@@ -222,10 +222,10 @@ ROUTER_ANSWER_S = 5.0
 AUDIT_S = 2.0
 #: How long the coordinator waits, after OVER, for entities to leave before it closes anyway (coordinator/node.py).
 LINGER_S = 5.0
-#: The same after a signal (OVER INTERRUPTED): a process manager stops the others too, a person wants it over. Half
-#: a second: with 1 s, a coordinator container stopped with `--timeout 2` on a loaded machine (load 18 on 2 cores)
-#: was killed (exit 137) after its over record, before it had closed.
-STOP_LINGER_S = 0.5
+#: The same after a signal (OVER INTERRUPTED): a process manager stops the others too, a person wants it over. Not
+#: half a second: `docker compose down --timeout 2` then stopped the entities before they had exited on OVER (143);
+#: with 1 s, a coordinator stopped on a machine at load 18 was once killed (137) before it had closed.
+STOP_LINGER_S = 1.0
 #: How long the coordinator holds a vanished presence before it counts: when the router goes away, every token
 #: vanishes, the others' sometimes just before the coordinator's own (which tells a lost link from departures).
 SETTLE_S = 0.5
