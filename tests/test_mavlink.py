@@ -183,6 +183,22 @@ def test_arm_guided_and_position_targets_become_the_stations_targets() -> None:
     assert acks(b.packet(GCS, [arm(2)])) == [mav.MAV_RESULT_ACCEPTED]
 
 
+def test_an_armed_vehicle_entering_guided_holds_its_cell_until_its_takeoff() -> None:
+    """MAVSDK's order for ArduPilot (seen on the wire): arm in the first mode (LOITER), then GUIDED, then
+    NAV_TAKEOFF. Entering GUIDED armed holds where the vehicle is (as ArduCopter does): the station is asked
+    for its own cell, and the takeoff replaces it. When a turn ends between the two commands, the journal
+    records the hold first."""
+    b = bridge()
+    v = b.vehicles[2]
+    b.packet(GCS, [arm(2)])
+    assert (v.mode, v.goal) == (Mode.LOITER, None)  # (LOITER holds: the arming asks for nothing)
+    b.packet(GCS, [set_mode(2, Mode.GUIDED)])
+    assert v.goal == (0, 2, 0)
+    assert {a.drone: a.pos for a in answer(b, 1).msg.targets} == {"D02": (0, 2, 0)}  # the hold, this turn
+    b.packet(GCS, [command(2, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 3.0)])
+    assert {a.drone: a.pos for a in answer(b, 2, in_force={"D02": (0, 2, 0)}).msg.targets} == {"D02": (0, 2, 3)}
+
+
 def test_takeoff_land_rtl_and_disarm_set_the_targets_of_their_modes() -> None:
     b = bridge()
     v = b.vehicles[1]
