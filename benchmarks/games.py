@@ -47,6 +47,8 @@ class Case:
     size: tuple[int, int, int]
     warmup: int
     turns: int  # measured
+    moving: bool = False  # the drones get new targets leg after leg until the end (else, on a big swarm, they stay
+    # at their last target once every floor is flown: see make_scenario)
 
     @property
     def name(self) -> str:
@@ -111,7 +113,7 @@ def make_scenario(case: Case, seed: int = WORLD_SEED) -> dict | None:
     # After nz - 1 legs (small worlds only) several drones stay at their last target; a lone one goes on.
     switches = [1]
     t = 1 + (nz - 1) + half + 2  # the first leg includes the climb from the ground
-    while t <= case.end_turn and (n == 1 or len(switches) < max(1, nz - 1)):  # then every floor is flown: stay
+    while t <= case.end_turn and (n == 1 or case.moving or len(switches) < max(1, nz - 1)):  # else every floor flown
         switches.append(t)
         t += half + 3  # one floor up, then across
     targets = []
@@ -145,9 +147,48 @@ class Game:
     error: str = ""
     over: str = ""
     ros_user: str = ""  # with `Variant.ros2`: what its ROS 2 user received (benchmarks/ros_user.py's last line)
+    windows: list[Window] = field(default_factory=list)  # with `Variant.ros2_windows`: each window measured
 
 
 ROLES = ("coordinator", "env", "swarm")
+
+
+@dataclass(frozen=True, slots=True)
+class Windows:
+    """The ROS 2 viewer attached and detached in turn within one game (`entities.ros2.node.DETACH`/`ATTACH`, sent
+    by this process as a STATUS closes a window): `quads` groups of four windows of `turns` turns each, attached,
+    detached, detached, attached (ABBA: a drift of the machine's speed over a group weighs on both alike), the first
+    `settle` turns of each not measured (the viewer finishing or starting a turn's publishing). They begin after
+    the warm-up, once the viewer has published `published` turns (its start, its publishers declared, is over)."""
+
+    turns: int
+    quads: int
+    settle: int
+    published: int = 3
+
+    @property
+    def count(self) -> int:
+        return 4 * self.quads
+
+    @staticmethod
+    def attached(i: int) -> bool:
+        return i % 4 in (0, 3)
+
+    @property
+    def span(self) -> int:
+        """Turns of the windows, all told."""
+        return self.count * self.turns
+
+
+@dataclass(frozen=True, slots=True)
+class Window:
+    """One window measured: the viewer attached or not, its turns (settling ones excluded), their seconds and the
+    CPU seconds of every process of the game in them."""
+
+    attached: bool
+    turns: int
+    seconds: float
+    cpu: float
 
 
 def shared_memory_configs(folder: Path) -> tuple[Path, Path]:
@@ -224,6 +265,7 @@ class Variant:
     env_follows: bool = False  # the environment takes every STATUS (`dronesim env --follow-status`)
     ros2: bool = False  # a `dronesim ros2` viewer publishes the game to ROS 2 beside it, to a ROS 2 user process
     # subscribed to every topic (benchmarks/ros_user.py)
+    ros2_windows: Windows | None = None  # with `ros2`: the viewer attached and detached in windows of the game
 
 
 def play_distributed(case: Case, scenario_file: Path, logs: Path, profile: Path | None = None,
@@ -322,6 +364,9 @@ class _Watch:
             game, case, variant, procs, pids, on_status
         self.stamps: dict[tuple[str, int], float] = {}
         self.measured_to: list[int] = []
+        self.clocks = [0]  # /clock samples heard (with `ros2_windows`; Zenoh's thread counts)
+        self.window: tuple[int, float, float] | None = None  # the open window's first measured turn, time, CPU
+        self.opened = -1  # the turn whose STATUS opened the window `len(game.windows)`
 
     def play(self, session: zenoh.Session, keys: Any, scenario_file: Path) -> None:
         import logging
@@ -342,6 +387,9 @@ class _Watch:
             # the viewer's node token comes once it hears OVER: a game played before would leave it waiting
             if not await_presence(session, RosKeys().node_tokens(NODE), JOIN_S):
                 raise RuntimeError(f"the ROS 2 viewer did not appear within {JOIN_S:g} s")
+            if self.variant.ros2_windows is not None:  # (one a turn it publishes: when its start is over)
+                session.declare_subscriber(f"{RosKeys().domain}/clock/**", lambda _s: self.clocks.__setitem__(
+                    0, self.clocks[0] + 1))
         inbox = listen(session, keys, log)
         member = join(session, inbox, log, connect_timeout=JOIN_S, grace=COORDINATOR_GRACE_S)
         station = Station(Ground.from_welcome(member.welcome, Scenario.load(scenario_file).targets, None),
@@ -388,6 +436,8 @@ class _Watch:
                 game.last_status = st
                 game.statuses[st.turn] = st if self.variant.statuses else None
                 game.arrived[st.turn] = time.monotonic()  # before on_status, which may start a flood
+                if self.variant.ros2_windows is not None:
+                    self.windows(self.variant.ros2_windows, st.turn, now, station)
                 if self.on_status is not None:
                     self.on_status(st.turn)
                 if st.turn == self.case.warmup:  # CPU time over the measured turns: from here...
@@ -395,10 +445,40 @@ class _Watch:
             case Received(_, Turn() as turn):
                 self.stamps[("GCS", turn.turn)] = now
                 if turn.turn >= self.case.end_turn and not self.measured_to:  # ... to here
+                    if self.variant.ros2_windows is not None:
+                        raise RuntimeError(f"the viewer's windows did not end by turn {self.case.end_turn}")
                     self.measured(self.case.end_turn)
         if isinstance(event, Received):
             effects = station.receive(event.msg, time.monotonic())
         return [*effects, *station.tick(time.monotonic())]
+
+    def windows(self, w: Windows, turn: int, now: float, station: Any) -> None:
+        """At the STATUS of `turn`: the windows' bounds (see `Windows`), the viewer told to detach or attach."""
+        import os
+
+        from entities.ros2.node import ATTACH, DETACH
+
+        game, done = self.game, len(self.game.windows)
+        if done == w.count or turn < self.case.warmup:
+            return
+        cpu = sum(cpu_seconds(pid) for pid in self.pids.values())
+        if self.opened < 0:  # (the viewer starts attached, as the first window is)
+            if self.clocks[0] >= w.published:
+                self.opened = turn
+            return
+        if self.window is None and turn >= self.opened + w.settle:
+            self.window = (turn, now, cpu)
+        elif self.window is not None and turn >= self.opened + w.turns:
+            first, since, cpu0 = self.window
+            game.windows.append(Window(w.attached(done), turn - first, now - since, cpu - cpu0))
+            self.window, self.opened, done = None, turn, done + 1
+            if done == w.count:  # the game ends here
+                station.quit_at = turn + 1
+                self.measured(turn + 1)
+            elif w.attached(done) != w.attached(done - 1):
+                signum = ATTACH if w.attached(done) else DETACH
+                assert signum is not None, "the viewer's windows need POSIX signals"
+                os.kill(int(self.pids["ros2"]), signum)
 
     def measured(self, turn: int) -> None:
         game = self.game

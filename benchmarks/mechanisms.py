@@ -9,14 +9,16 @@ import re
 import statistics
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from benchmarks.games import ROLES, Case, Game, Variant, make_scenario, play_distributed, states_of
+from benchmarks.games import ROLES, Case, Game, Variant, Window, Windows, make_scenario, play_distributed, states_of
 from benchmarks.measure import Row, size_text
 
 #: The share of its turns/s a game keeps with a ROS 2 viewer publishing it (issue 35).
 ROS2_KEEPS = 0.9
+#: How the ROS 2 viewer's cost is measured: attached and detached in windows of one game (`Windows`).
+ROS2_WINDOWS = Windows(turns=400, quads=6, settle=40)
 
 
 #: The repository's root (where the `code` of each mechanism is read).
@@ -81,6 +83,8 @@ class Mechanism:
     warmup: int = 0  # warm-up turns of its 1000-drone games, if more than the game rows' (a process starting)
     turns: int = 0  # measured turns of its 1000-drone games, if more than the game rows' quarter
     repeat: int = 0  # games on and off each, if more than MECHANISM_REPEAT
+    windows: Windows | None = None  # instead of games on and off: one game (its drones moving to the end), `off`
+    # switched in windows of it (only the ROS 2 viewer: `Variant.ros2_windows`)
 
 
 MECHANISMS: tuple[Mechanism, ...] = (
@@ -159,10 +163,14 @@ MECHANISMS: tuple[Mechanism, ...] = (
          "schema/tuning.py::ROS_CPU_SHARE", "schema/tuning.py::ROS_SLOWEST"),
         Variant(ros2=True), ((1000, (64, 64, 16)),),
         f"a `dronesim ros2` viewer publishing the game beside it to a ROS 2 user, a process of its own subscribed "
-        f"to every topic (benchmarks/ros_user.py, its CPU counted); turns/s with it ≥ {ROS2_KEEPS:.0%} of without; "
-        "measured after 100 warm-up turns (its start, 1000 publishers and their graph tokens declared, is not "
-        "the steady cost) over 2000 turns (the viewer publishes about once a second), 5 games each way",
-        warmup=100, turns=2000, repeat=5),
+        f"to every topic (benchmarks/ros_user.py, its CPU counted); turns/s with it ≥ {ROS2_KEEPS:.0%} of without. "
+        f"Measured within one game, its drones given new targets leg after leg to the end (a trail a second for "
+        f"each), after 100 warm-up turns and the viewer's first {ROS2_WINDOWS.published} turns published (its start, "
+        "1000 publishers and their graph tokens declared, is not the steady cost): the viewer attached and detached "
+        f"(SIGUSR2/SIGUSR1: detached, it hears no STATUS and publishes nothing) in windows of {ROS2_WINDOWS.turns} "
+        f"turns, attached, detached, detached, attached (ABBA) {ROS2_WINDOWS.quads} times, a window's first "
+        f"{ROS2_WINDOWS.settle} turns not measured; kept: the median over the groups of attached ÷ detached turns/s",
+        warmup=100, windows=ROS2_WINDOWS),
     Mechanism(
         "Tables (schema version 2+): swarm-sized data as fixed rows checked by numpy",
         ("schema/tables.py",),
@@ -219,6 +227,9 @@ MECHANISMS: tuple[Mechanism, ...] = (
 )
 
 
+#: Turns a windowed game may take beyond its windows' (its warm-up, the viewer's start), at most.
+WINDOWS_SLACK = 3000
+
 #: Games of each mechanism on and off, alternated (on, off, then off, on...): the machine's speed drifts, and the
 #: second game of two may differ from the first (the first's processes ending, a cache warm): each comes first as often.
 MECHANISM_REPEAT = 2
@@ -242,6 +253,20 @@ def play_mechanisms(selected: Callable[[str], bool], quick: bool, turns: int, lo
         if m.off is None or not selected(f"mechanism: {m.name}"):
             continue
         games = ((4, (10, 10, 10)),) if quick else m.games
+        if m.windows is not None and m.off is not None:  # one game, the switch flipped in windows of it
+            for drones, size in games:
+                w = m.windows if not quick else Windows(turns=10, quads=1, settle=2, published=1)
+                case = Case(drones, size, max(5, m.warmup) if not quick else 3, w.span + WINDOWS_SLACK, moving=True)
+                pair = Pair(m, case)
+                path = logs / f"mechanism-scenario-{drones}-{size_text(size)}-moving.json"
+                path.write_text(json.dumps(make_scenario(case)), encoding="utf-8")
+                folder = logs / f"mechanism-{len(pairs)}-windows"
+                folder.mkdir()
+                print(f"  mechanism {m.name[:40]}..., {case.name}, {w.count} windows of one game", file=sys.stderr,
+                      flush=True)
+                pair.off.append(play_distributed(case, path, folder, variant=replace(m.off, ros2_windows=w)))
+                pairs.append(pair)
+            continue
         for drones, size in games:
             case = Case(drones, size, 3, min(turns, 20)) if quick else (
                 Case(drones, size, max(5, m.warmup), max(10, turns // 4, m.turns)) if drones >= 1000
@@ -292,6 +317,9 @@ def mechanism_rows(pairs: list[Pair], selected: Callable[[str], bool]) -> tuple[
             continue
         for k, p in enumerate(by_mechanism.get(m.name, [])):
             cells = {"lines": lines if k == 0 else "″", "switch": m.switch if k == 0 else "″", "game": p.case.name}
+            if m.windows is not None:
+                rows.append(_windowed_row(m, p, cells, errors, k))
+                continue
             failed = [g.error for g in p.on + p.off if g.error]
             ok = not failed and all(c == 0 for g in p.on + p.off for c in g.codes.values())
             if failed:
@@ -326,6 +354,56 @@ def mechanism_rows(pairs: list[Pair], selected: Callable[[str], bool]) -> tuple[
                 errors.append(f"{m.name}, {p.case.name}: the games on and off differ")
             rows.append(Row(m.name if k == 0 else "″", cells, ok=ok and same))
     return rows, errors
+
+
+def window_ratios(windows: list[Window]) -> list[float]:
+    """Turns/s with the viewer attached ÷ detached, in each group of four windows (ABBA: the time of the two attached
+    ones ÷ that of the two detached, their turns alike)."""
+    ratios = []
+    for q in range(0, len(windows) - 3, 4):
+        group = windows[q:q + 4]
+        on = [w for w in group if w.attached]
+        off = [w for w in group if not w.attached]
+        ratios.append((sum(w.turns for w in on) / sum(w.seconds for w in on))
+                      / (sum(w.turns for w in off) / sum(w.seconds for w in off)))
+    return ratios
+
+
+def _windowed_row(m: Mechanism, p: Pair, cells: dict[str, str], errors: list[str], k: int) -> Row:
+    """The row of a mechanism switched in windows of one game (`Mechanism.windows`): the viewer's."""
+    name = m.name if k == 0 else "″"
+    game = p.off[0]
+    failed = game.error or ("" if game.windows and len(game.windows) % 4 == 0 else "no windows measured")
+    if failed:
+        cells["gain"] = "FAILED: " + failed.splitlines()[0]
+        errors.append(f"{m.name}, {p.case.name}: {failed}")
+        return Row(name, cells, ok=False)
+    ok = all(c == 0 for c in game.codes.values())
+    on = [w for w in game.windows if w.attached]
+    off = [w for w in game.windows if not w.attached]
+
+    def tps(ws: list[Window]) -> list[float]:
+        return [w.turns / w.seconds for w in ws]
+
+    def cpu(ws: list[Window]) -> float:
+        return 1e3 * sum(w.cpu for w in ws) / sum(w.turns for w in ws)
+
+    ratios = window_ratios(game.windows)
+    keeps = statistics.median(ratios)
+    cells["tps"] = f"{_span(tps(off), '.0f')} / {_span(tps(on), '.0f')} (windows)"  # (on: no viewer, as above)
+    cells["lat"] = f"{statistics.median(game.latencies) * 1e3:.2f} (all windows)"
+    cells["cpu"] = f"{cpu(off):.2f} / {cpu(on):.2f}"
+    mem = [max(game.memory.get(n, {}).get("VmHWM", 0), 0) / 1024 for n in ROLES]
+    cells["mem"] = ", ".join(f"{v:.0f}" for v in mem) + " (one game)"
+    samples = _samples(game)
+    whole = (sum(w.turns for w in on) / sum(w.seconds for w in on)) / (
+        sum(w.turns for w in off) / sum(w.seconds for w in off))
+    cells["gain"] = (f"keeps {keeps:.0%} of its turns/s attached (median of {len(ratios)} ABBA groups; target ≥ "
+                     f"{ROS2_KEEPS:.0%}; group by group {_span([100 * r for r in ratios], '.0f')} %; all windows "
+                     f"{whole:.0%}), CPU {cpu(on) / cpu(off):.2f}x; the ROS 2 user got {samples} messages")
+    ok = ok and (keeps >= ROS2_KEEPS or p.case.drones < 1000) and (samples > 0 or p.case.drones < 1000)
+    cells["same"] = "one game"
+    return Row(name, cells, ok=ok)
 
 
 def _summary(games: list[Game]) -> dict:
@@ -364,5 +442,8 @@ def mechanism_legend(repeat: int = MECHANISM_REPEAT) -> str:
         "system time of the coordinator, environment, drone processes, router and this process, summed, "
         "per measured turn. Peak: VmHWM, the largest over the games. Gain: off ÷ on of the mean turn and of "
         "the CPU per turn (above 1: the mechanism saves that); for shared memory, the peaks' sum off − on. "
-        "Same game: every drone's state after every turn equal in all the games, on and off."
+        "Same game: every drone's state after every turn equal in all the games, on and off. A mechanism switched "
+        "within one game (the ROS 2 viewer's, attached and detached in windows of its turns: its switch cell says "
+        "how) has each cell over its windows instead, on (no viewer) / off (the viewer attached), the machine's "
+        "drift cancelled group by group of four windows (ABBA)."
     )

@@ -423,6 +423,18 @@ class FairQueue:
         return out
 
 
+@dataclass(frozen=True, slots=True)
+class Newest:
+    """`Inbox.newest`'s reader: call it for the newest message since the last call; `close()` undeclares its
+    subscriber (Zenoh then sends this process nothing more on that key)."""
+
+    read: Callable[[], Received | None]
+    close: Callable[[], None]
+
+    def __call__(self) -> Received | None:
+        return self.read()
+
+
 class Inbox:
     """Events from Zenoh callbacks for the process's main thread (the module's docstring); a flood cannot move
     a game. Each event counts against the budget (`FairQueue`) of its origin: the writer of the key it came on
@@ -486,10 +498,10 @@ class Inbox:
         self._handles.append(sub)
         return sub
 
-    def newest(self, key: str, expect: type[Message]) -> Callable[[], Received | None]:
+    def newest(self, key: str, expect: type[Message]) -> Newest:
         """The newest message on `key`, read only when wanted: Zenoh keeps the last one that came (a ring of one,
         no callback), so none wakes this process. Each call reads the one that came since the last call, checked
-        as `subscribe` checks them (None: none came, or it was refused and counted)."""
+        as `subscribe` checks them (None: none came, or it was refused and counted). Its `close` undeclares it."""
         origin, limit = self.keys.origin_of(key), size_limit(expect)
         ring = self.session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
         self._handles.append(ring)
@@ -504,7 +516,7 @@ class Inbox:
                 return None
             return self._read(_Unread(key, origin, None, sample.payload.to_bytes(), expect))  # type: ignore[return-value]
 
-        return read
+        return Newest(read, lambda: self.unsubscribe(ring))
 
     def unsubscribe(self, sub: zenoh.Subscriber) -> None:
         sub.undeclare()

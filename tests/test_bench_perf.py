@@ -68,6 +68,9 @@ def test_quick_run_prints_the_table_and_every_process_exits_0(capsys, tmp_path):
         assert int(row["lines of code"]) == code_lines(m.code) > 0
         if m.off is None:
             assert row["switched off by"].startswith("not switched off: "), row
+        elif m.windows is not None:  # one game, the switch flipped in windows of it (ABBA)
+            assert row["game"] == "4 drones @ 10x10x10" and row["same game"] == "one game", row
+            assert row["gain (off ÷ on)"].startswith("keeps ") and "ABBA" in row["gain (off ÷ on)"], row
         else:
             assert row["game"] == "4 drones @ 10x10x10" and row["same game"] == "yes", row
             assert row["gain (off ÷ on)"].startswith("turn "), row

@@ -251,6 +251,7 @@ class _Fleet:
     numbers: np.ndarray
     names: list[str]
     topics: list[str]  # the clock's, /tf, the markers', each drone's pose topic
+    path_topics: list[str]  # each drone's path topic
     typenames: list[str]
     tf: Layout
     markers: Layout
@@ -299,6 +300,7 @@ class Scene:
             names = [drone_name(n) for n in snap.numbers.tolist()]
             f = self._fleet = _Fleet(numbers=np.array(snap.numbers), names=names,
                                      topics=["/clock", "/tf", self.markers_topic, *map(self.pose_topic, names)],
+                                     path_topics=[self.path_topic(name) for name in names],
                                      typenames=[CLOCK, TF, MARKERS, *[POSE] * len(names)], tf=tf_layout(names),
                                      markers=markers_layout(len(names), self.cell_size), trails=Trails(len(names)))
         return f
@@ -340,7 +342,7 @@ class Scene:
         for k, drones, cells in f.trails.take():
             rows = path_layout(k).fill({"sec": [[sec] * (k + 1)], "nsec": [[nsec] * (k + 1)],
                                         "xyz": cells.reshape(len(drones), -1) * self.cell_size})
-            topics += [self.path_topic(f.names[i]) for i in drones.tolist()]
+            topics += [f.path_topics[i] for i in drones.tolist()]
             payloads += rows_of(rows)
             self.sent_trails.append((drones, cells))
         return Outs(t, topics, [PATH] * len(topics), payloads)

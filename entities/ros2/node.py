@@ -13,12 +13,14 @@ sample) and its goal subscriptions, also used by the ground station's ROS 2 face
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import logging
+import signal
 import struct
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any, Protocol
@@ -28,7 +30,7 @@ import zenoh
 import zenoh.ext
 
 from network.signals import until_stopped, waking
-from network.transport import Inbox, Received, add_zenoh_args, open_session, setup_logging, zenoh_config
+from network.transport import Inbox, Newest, Received, add_zenoh_args, open_session, setup_logging, zenoh_config
 from schema import Cell, Keys, MapRequest, Over, Status, UsageError, WorldMap
 from schema.keys import RosKeys
 from schema.tuning import FINAL_STATUS_WAIT, ROS_CPU_SHARE, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE, ROS_SLOWEST
@@ -46,6 +48,12 @@ NODE = "dronesim"
 QOS_TELEMETRY = "2:2:1,1:,:,:,,"  # best effort, volatile, keep last 1
 QOS_LATCHED = "1:1:1,1:,:,:,,"  # reliable, transient local, keep last 1
 QOS_GOALS = "1:2:1,10:,:,:,,"  # reliable, volatile, keep last 10
+
+#: The signals that detach the viewer from the game and attach it again (POSIX only): detached, it is subscribed
+#: to no STATUS (Zenoh sends it none) and publishes nothing, its node and publishers staying in ROS 2's graph; once
+#: attached it publishes the newest turn again. A user's pause; `dronesim bench perf` measures the viewer's cost
+#: with it, attached and detached in alternate windows of one game.
+DETACH, ATTACH = getattr(signal, "SIGUSR1", None), getattr(signal, "SIGUSR2", None)
 
 
 def add_ros2_args(parser: argparse.ArgumentParser, *, viewer: bool = True) -> None:
@@ -77,6 +85,10 @@ def ros_keys(args: argparse.Namespace) -> RosKeys:
         raise UsageError(str(err)) from None
 
 
+#: rmw_zenoh's attachment: sequence number, source timestamp (ns), then the publisher's gid (its length, 16 bytes).
+_ATTACHMENT = struct.Struct("<QQB16s")
+
+
 def _gid(zid: str, entity: int) -> bytes:
     """An endpoint's 16-byte id, as rmw_zenoh sends in its attachment: derived from the session and entity ids."""
     return hashlib.blake2b(f"{zid}/{entity}".encode(), digest_size=16).digest()
@@ -88,6 +100,12 @@ class _Publisher:
     token: zenoh.LivelinessToken
     gid: bytes
     seq: int = 0
+    matching: bool = True  # telemetry: someone subscribes (kept by a matching listener: asking Zenoh at each put
+    # costs several µs, a swarm's turn is thousands of puts)
+    listener: Any = None
+
+    def heard(self, status: Any) -> None:
+        self.matching = status.matching  # (on Zenoh's thread)
 
 
 class RosGraph:
@@ -127,17 +145,30 @@ class RosGraph:
                                                      reliability=zenoh.Reliability.BEST_EFFORT)
             token = self._token(self.keys.PUBLISHER, entity, topic, typename, QOS_LATCHED if latched else QOS_TELEMETRY)
             p = self._pubs[(topic, latched)] = _Publisher(pub, token, _gid(self.zid, entity))
+            if not latched:
+                p.listener = pub.declare_matching_listener(p.heard)
+                p.matching = pub.matching_status.matching  # (a change from here on reaches the listener)
         return p
 
     def publish(self, out: Out, *, latched: bool = False) -> None:
         """Publish `out` (telemetry: only if someone subscribes to its topic; a latched sample always, for later)."""
-        p = self._publisher(out.topic, out.typename, latched)
-        if not latched and not p.pub.matching_status.matching:
-            self.unheard += 1
-            return
-        p.pub.put(out.payload, attachment=struct.pack("<QQB16s", p.seq, time.time_ns(), 16, p.gid))
-        p.seq += 1
-        self.sent += 1
+        self.publish_all([out.topic], [out.typename], [out.payload], latched=latched)
+
+    def publish_all(self, topics: Sequence[str], typenames: Sequence[str], payloads: Sequence[bytes], *,
+                    latched: bool = False) -> None:
+        """`publish` each (topic, type, payload), stamped alike: a swarm's turn is thousands of them (a loop of
+        lookups and puts, nothing else)."""
+        pubs, pack, now, sent = self._pubs, _ATTACHMENT.pack, time.time_ns(), 0
+        for topic, typename, payload in zip(topics, typenames, payloads):
+            if (p := pubs.get((topic, latched))) is None:
+                p = self._publisher(topic, typename, latched)
+            if not (latched or p.matching):
+                self.unheard += 1
+                continue
+            p.pub.put(payload, attachment=pack(p.seq, now, 16, p.gid))
+            p.seq += 1
+            sent += 1
+        self.sent += sent
 
     def subscribe(self, topics: dict[str, str], typename: str, on: Callable[[str, bytes], None]) -> None:
         """Subscribe to each of `topics` (topic -> what `on` is told it came for) with a token each, through one
@@ -156,6 +187,8 @@ class RosGraph:
 
     def close(self) -> None:
         for p in self._pubs.values():
+            if p.listener is not None:
+                p.listener.undeclare()
             p.token.undeclare()
             p.pub.undeclare()
         for h in self._handles:
@@ -227,12 +260,10 @@ class RosSink:
         self.graph = graph
 
     def world(self, grid: np.ndarray, outs: Outs) -> None:
-        for out in outs:
-            self.graph.publish(out, latched=True)
+        self.graph.publish_all(outs.topics, outs.typenames, outs.payloads, latched=True)
 
     def turn(self, snap: Snapshot, outs: Outs) -> None:
-        for out in outs:
-            self.graph.publish(out)
+        self.graph.publish_all(outs.topics, outs.typenames, outs.payloads)
 
 
 class Viewer:
@@ -294,6 +325,25 @@ class Viewer:
                                      or now >= self.over_since + FINAL_STATUS_WAIT)
 
 
+@contextlib.contextmanager
+def attaching(wanted: list[bool]) -> Iterator[None]:
+    """While inside (on the main thread): `DETACH` sets ``wanted[0]`` False, `ATTACH` True; the previous handlers
+    come back on leaving. (Inside `waking`, a signal also wakes the loop.)"""
+    def on(signum: int, _frame: object) -> None:
+        wanted[0] = signum == ATTACH
+
+    previous = {s: signal.signal(s, on) for s in (DETACH, ATTACH) if s is not None}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _nothing() -> None:
+    return None
+
+
 def run(args: argparse.Namespace, logger: logging.Logger) -> int:
     conf, keys, scene, ros = zenoh_config(args), Keys(args.root), scene_of(args), ros_keys(args)
     conf.insert_json5("timestamping/enabled", "true")  # a latched topic's cache orders its samples by timestamp
@@ -306,7 +356,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
     with open_session(conf) as session:
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.over, Over)
-        newest = inbox.newest(keys.status, Status)
+        newest: Newest | None = inbox.newest(keys.status, Status)
         graph = RosGraph(session, ros, NODE)
         sinks: list[Sink] = [RosSink(graph)]
         if fox is not None:
@@ -314,16 +364,17 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
         viewer = Viewer(scene, sinks, rate=args.rate, logger=logger)
         print(f"ros2: node /dronesim on domain {ros.domain}, topics under /{args.namespace.strip('/')}"
               + ("; foxglove from the first turn" if fox else ""), flush=True)
-        map_due = 0.0
+        map_due, wanted, detached = 0.0, [True], 0
         try:
-            with waking(partial(inbox.post, None)):
+            with waking(partial(inbox.post, None)), attaching(wanted):
                 while not viewer.ended(time.monotonic()):
                     now = time.monotonic()
                     if not viewer.have_map and now >= map_due:
                         map_due = now + ROS_MAP_RETRY
                         inbox.query(keys.map, MapRequest(turn=0, sender="OBS"), WorldMap, timeout=ROS_MAP_RETRY,
                                     then=MapAnswer)
-                    event = inbox.get(max(0.0, min(viewer.due, map_due if not viewer.have_map else viewer.due) - now))
+                    due = viewer.due if newest is not None else now + ROS_SLOWEST  # (detached: OVER's wait only)
+                    event = inbox.get(max(0.0, min(due, map_due if not viewer.have_map else due) - now))
                     now = time.monotonic()
                     match event:
                         case Received(_, Over() as over) if viewer.over is None:
@@ -333,7 +384,14 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
                                 if isinstance(reply, WorldMap):
                                     viewer.world(world_grid(reply))
                                     break
-                    viewer.tick(now, newest)
+                    if wanted[0] and newest is None:
+                        newest = inbox.newest(keys.status, Status)
+                        logger.info("attached: publishing the game again")
+                    elif not wanted[0] and newest is not None:
+                        newest.close()
+                        newest, detached = None, detached + 1
+                        logger.info("detached: no STATUS heard, nothing published until attached (SIGUSR2)")
+                    viewer.tick(now, newest if newest is not None else _nothing)
         finally:
             graph.close()
             inbox.close()
@@ -342,7 +400,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
     end = viewer.over
     print(f"ros2: published {graph.sent} messages of {viewer.published} turns up to turn {viewer.turn} "
           f"({viewer.skipped} turns skipped, a newer one heard first; {graph.unheard} messages with no subscriber "
-          "left unsent)"
+          "left unsent)" + (f"; detached {detached} times" if detached else "")
           + (f"; game over at turn {end.turn}: {end.reason.value}" if end else ""), flush=True)
     if inbox.rejects.total:
         logger.info("rejected inputs: %s", inbox.rejects.snapshot())
