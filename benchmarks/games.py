@@ -183,12 +183,17 @@ class Windows:
 @dataclass(frozen=True, slots=True)
 class Window:
     """One window measured: the viewer attached or not, its turns (settling ones excluded), their seconds and the
-    CPU seconds of every process of the game in them."""
+    CPU seconds of every process of the game in them (`by` process: the game's, the router, this one, the viewer
+    "ros2" and its user "rosuser")."""
 
     attached: bool
     turns: int
     seconds: float
-    cpu: float
+    by: dict[str, float]
+
+    @property
+    def cpu(self) -> float:
+        return sum(self.by.values())
 
 
 def shared_memory_configs(folder: Path) -> tuple[Path, Path]:
@@ -365,7 +370,7 @@ class _Watch:
         self.stamps: dict[tuple[str, int], float] = {}
         self.measured_to: list[int] = []
         self.clocks = [0]  # /clock samples heard (with `ros2_windows`; Zenoh's thread counts)
-        self.window: tuple[int, float, float] | None = None  # the open window's first measured turn, time, CPU
+        self.window: tuple[int, float, dict[str, float]] | None = None  # the open window's first turn, time, CPU
         self.opened = -1  # the turn whose STATUS opened the window `len(game.windows)`
 
     def play(self, session: zenoh.Session, keys: Any, scenario_file: Path) -> None:
@@ -461,7 +466,7 @@ class _Watch:
         game, done = self.game, len(self.game.windows)
         if done == w.count or turn < self.case.warmup:
             return
-        cpu = sum(cpu_seconds(pid) for pid in self.pids.values())
+        cpu = {name: cpu_seconds(pid) for name, pid in self.pids.items()}
         if self.opened < 0:  # (the viewer starts attached, as the first window is)
             if self.clocks[0] >= w.published:
                 self.opened = turn
@@ -470,7 +475,8 @@ class _Watch:
             self.window = (turn, now, cpu)
         elif self.window is not None and turn >= self.opened + w.turns:
             first, since, cpu0 = self.window
-            game.windows.append(Window(w.attached(done), turn - first, now - since, cpu - cpu0))
+            game.windows.append(Window(w.attached(done), turn - first, now - since,
+                                       {n: cpu[n] - cpu0[n] for n in cpu}))
             self.window, self.opened, done = None, turn, done + 1
             if done == w.count:  # the game ends here
                 station.quit_at = turn + 1

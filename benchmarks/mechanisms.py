@@ -18,7 +18,7 @@ from benchmarks.measure import Row, size_text
 #: The share of its turns/s a game keeps with a ROS 2 viewer publishing it (issue 35).
 ROS2_KEEPS = 0.9
 #: How the ROS 2 viewer's cost is measured: attached and detached in windows of one game (`Windows`).
-ROS2_WINDOWS = Windows(turns=400, quads=6, settle=40)
+ROS2_WINDOWS = Windows(turns=300, quads=12, settle=30)
 
 
 #: The repository's root (where the `code` of each mechanism is read).
@@ -398,9 +398,15 @@ def _windowed_row(m: Mechanism, p: Pair, cells: dict[str, str], errors: list[str
     samples = _samples(game)
     whole = (sum(w.turns for w in on) / sum(w.seconds for w in on)) / (
         sum(w.turns for w in off) / sum(w.seconds for w in off))
+    def share(ws: list[Window], name: str) -> float:  # of a core
+        return sum(w.by.get(name, 0.0) for w in ws) / sum(w.seconds for w in ws)
+
+    extra = {n: share(on, n) - share(off, n) for n in ("ros2", "rosuser", "router")}
     cells["gain"] = (f"keeps {keeps:.0%} of its turns/s attached (median of {len(ratios)} ABBA groups; target ≥ "
                      f"{ROS2_KEEPS:.0%}; group by group {_span([100 * r for r in ratios], '.0f')} %; all windows "
-                     f"{whole:.0%}), CPU {cpu(on) / cpu(off):.2f}x; the ROS 2 user got {samples} messages")
+                     f"{whole:.0%}), CPU a turn {cpu(on) / cpu(off):.2f}x; attached − detached, % of a core: viewer "
+                     f"{100 * extra['ros2']:.1f}, its user {100 * extra['rosuser']:.1f}, router "
+                     f"{100 * extra['router']:.1f}; the ROS 2 user got {samples} messages")
     ok = ok and (keeps >= ROS2_KEEPS or p.case.drones < 1000) and (samples > 0 or p.case.drones < 1000)
     cells["same"] = "one game"
     return Row(name, cells, ok=ok)

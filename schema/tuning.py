@@ -279,6 +279,10 @@ ROS_RATE = 20.0
 #: (`dronesim bench perf`, the ROS 2 mechanism row, load average 14: BENCHMARKS.md).
 ROS_CPU_SHARE = 0.01
 ROS_SLOWEST = 1.0
+#: Seconds to the viewer's next turn from which it drops its STATUS subscription meanwhile (it subscribes again
+#: when the turn is due, a period before it looks): a viewer publishing about once a second then hears a few STATUS
+#: a second, not every one (at 1000 drones some 150 a second; the router copies each to it).
+ROS_LISTEN_GAP = 0.25
 #: Seconds between two trails (nav_msgs/Path) of a drone that keeps moving (the last turn's always goes out).
 ROS_PATH_PERIOD = 1.0
 #: Seconds between two MAP queries of a viewer whose environment has not answered yet (it may not be up).

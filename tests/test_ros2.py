@@ -289,6 +289,54 @@ def test_a_costly_turn_makes_the_viewer_wait() -> None:
     assert viewer.due == pytest.approx(0.25 + ROS_SLOWEST)
 
 
+def test_a_swarm_viewer_listens_only_while_a_turn_is_due() -> None:
+    """`listen`: the STATUS subscription is declared when a turn is due (looked at a period later), kept while the
+    viewer is due again within ROS_LISTEN_GAP (a cheap turn), dropped after a costly one until the next is due, and
+    dropped while detached; OVER heard while not listening ends the viewer at once (the last STATUS went by)."""
+    import logging
+
+    from entities.ros2.node import Viewer, listen
+    from network.transport import Newest, Received
+    from schema import EndReason, Over
+    from schema.tuning import ROS_CPU_SHARE, ROS_LISTEN_GAP
+
+    class Sink:
+        def world(self, grid: np.ndarray, outs: list) -> None: ...
+        def turn(self, snap: Snapshot, outs: list) -> None: ...
+
+    ring: list[Received | None] = []
+    opened, closed = [], []
+
+    def subscribe() -> Newest:
+        opened.append(len(opened))
+        ring.clear()
+        return Newest(lambda: ring.pop() if ring else None, lambda: closed.append(len(opened)))
+
+    clock = [0.0]
+    viewer = Viewer(Scene(), [Sink()], rate=20.0, logger=logging.getLogger("test"), cpu=lambda: clock[0])
+    sub = listen(viewer, None, 0.0, True, subscribe)
+    assert sub is not None and opened == [0] and viewer.due == pytest.approx(0.05) and viewer.published == 0
+    assert listen(viewer, sub, 0.01, True, subscribe) is sub  # not due yet
+    ring.append(Received("k", status(1, [(0, 0, 0)])))
+    assert listen(viewer, sub, 0.05, True, subscribe) is sub and viewer.published == 1  # cheap: due in a period
+    assert viewer.due - 0.05 < ROS_LISTEN_GAP
+    ring.append(Received("k", status(2, [(0, 1, 0)])))
+
+    def costly() -> float:  # the turn's publishing costs 5 ms of CPU
+        clock[0] += 0.005
+        return clock[0]
+    viewer.cpu = costly
+    assert listen(viewer, sub, 0.1, True, subscribe) is None and viewer.published == 2 and closed == [1]
+    assert viewer.due == pytest.approx(0.1 + 0.005 / ROS_CPU_SHARE, abs=0.01)  # (its own CPU, measured twice)
+    assert listen(viewer, None, 0.2, True, subscribe) is None and opened == [0]  # not due: not listening
+    sub = listen(viewer, None, viewer.due, True, subscribe)
+    assert sub is not None and opened == [0, 1]
+    assert listen(viewer, sub, viewer.due, False, subscribe) is None and closed == [1, 2]  # detached
+    viewer.over, viewer.over_since = Over(turn=9, sender="SRV", reason=EndReason.TURN_LIMIT), 1.0
+    viewer.missed_last = True  # (what the loop sets when OVER comes while not listening)
+    assert viewer.ended(1.0)
+
+
 # ------------------------------------------------------------------------------------------ against real peers
 
 

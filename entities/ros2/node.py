@@ -33,7 +33,15 @@ from network.signals import until_stopped, waking
 from network.transport import Inbox, Newest, Received, add_zenoh_args, open_session, setup_logging, zenoh_config
 from schema import Cell, Keys, MapRequest, Over, Status, UsageError, WorldMap
 from schema.keys import RosKeys
-from schema.tuning import FINAL_STATUS_WAIT, ROS_CPU_SHARE, ROS_MAP_RETRY, ROS_PATH_PERIOD, ROS_RATE, ROS_SLOWEST
+from schema.tuning import (
+    FINAL_STATUS_WAIT,
+    ROS_CPU_SHARE,
+    ROS_LISTEN_GAP,
+    ROS_MAP_RETRY,
+    ROS_PATH_PERIOD,
+    ROS_RATE,
+    ROS_SLOWEST,
+)
 from world.grid import CELL_SIZE_M
 
 from ..gcs import OBSERVED_ENDS, Ground
@@ -277,11 +285,12 @@ class Viewer:
         self.scene, self.sinks, self.period, self.log, self.cpu = scene, sinks, 1.0 / rate, logger, cpu
         self.turn = -1  # the last turn published
         self.published = 0  # turns published
-        self.skipped = 0  # turns not published since the first: a newer STATUS had come when the viewer looked
+        self.skipped = 0  # turns not published since the first (a newer STATUS had come, or it was not listening)
         self.due = 0.0  # when to look for the newest STATUS again
         self.paths_due = 0.0
         self.over: Over | None = None
         self.over_since = 0.0
+        self.missed_last = False  # OVER came while the viewer was not listening: the last turn's STATUS went by
         self.have_map = False
 
     def world(self, grid: np.ndarray) -> None:
@@ -321,7 +330,7 @@ class Viewer:
     def ended(self, now: float) -> bool:
         """After OVER, once the last turn's STATUS went out (or `FINAL_STATUS_WAIT` s after OVER)."""
         over = self.over
-        return over is not None and (self.turn >= over.turn or over.reason not in OBSERVED_ENDS
+        return over is not None and (self.turn >= over.turn or over.reason not in OBSERVED_ENDS or self.missed_last
                                      or now >= self.over_since + FINAL_STATUS_WAIT)
 
 
@@ -340,8 +349,29 @@ def attaching(wanted: list[bool]) -> Iterator[None]:
             signal.signal(s, handler)
 
 
-def _nothing() -> None:
-    return None
+def listen(viewer: Viewer, newest: Newest | None, now: float, attached: bool,
+           subscribe: Callable[[], Newest]) -> Newest | None:
+    """The viewer's turn, if one is due, and its STATUS subscription (`newest`, None: none) as it is after it.
+    Zenoh sends the viewer the game's STATUS only while it listens: from when a turn is due until it has published
+    one, and on while it is due again within `ROS_LISTEN_GAP` s (a small game's viewer, publishing at `ROS_RATE`,
+    always listens). A swarm's viewer, publishing about once a second, thus hears a few STATUS a second, not every
+    one (at 1000 drones, some 150 of 20 KB a second that the router would copy to it and it would take in: 3-5 % of
+    a core). The price: the last turn's STATUS, sent just before OVER, is published only if it came while the viewer
+    listened (a swarm's viewer then ends on OVER with a turn up to a second older, `Viewer.missed_last`)."""
+    if not attached:
+        if newest is not None:
+            newest.close()
+        return None
+    if now < viewer.due:
+        return newest
+    if newest is None:  # the next STATUS to come is the newest: look a period later
+        viewer.due = now + viewer.period
+        return subscribe()
+    viewer.tick(now, newest)
+    if viewer.due - now >= ROS_LISTEN_GAP:
+        newest.close()
+        return None
+    return newest
 
 
 def run(args: argparse.Namespace, logger: logging.Logger) -> int:
@@ -356,7 +386,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
     with open_session(conf) as session:
         inbox = Inbox(session, keys, logger)
         inbox.subscribe(keys.over, Over)
-        newest: Newest | None = inbox.newest(keys.status, Status)
+        newest: Newest | None = None  # our STATUS subscription, declared only while a turn is due (see `listen`)
         graph = RosGraph(session, ros, NODE)
         sinks: list[Sink] = [RosSink(graph)]
         if fox is not None:
@@ -364,7 +394,7 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
         viewer = Viewer(scene, sinks, rate=args.rate, logger=logger)
         print(f"ros2: node /dronesim on domain {ros.domain}, topics under /{args.namespace.strip('/')}"
               + ("; foxglove from the first turn" if fox else ""), flush=True)
-        map_due, wanted, detached = 0.0, [True], 0
+        map_due, wanted, attached, detached = 0.0, [True], True, 0
         try:
             with waking(partial(inbox.post, None)), attaching(wanted):
                 while not viewer.ended(time.monotonic()):
@@ -373,25 +403,23 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
                         map_due = now + ROS_MAP_RETRY
                         inbox.query(keys.map, MapRequest(turn=0, sender="OBS"), WorldMap, timeout=ROS_MAP_RETRY,
                                     then=MapAnswer)
-                    due = viewer.due if newest is not None else now + ROS_SLOWEST  # (detached: OVER's wait only)
+                    due = viewer.due if attached else now + ROS_SLOWEST  # (detached: OVER's wait only)
                     event = inbox.get(max(0.0, min(due, map_due if not viewer.have_map else due) - now))
                     now = time.monotonic()
                     match event:
                         case Received(_, Over() as over) if viewer.over is None:
                             viewer.over, viewer.over_since = over, now
+                            viewer.missed_last = newest is None and viewer.turn < over.turn  # (see `listen`)
                         case MapAnswer(replies) if not viewer.have_map:
                             for reply in replies:
                                 if isinstance(reply, WorldMap):
                                     viewer.world(world_grid(reply))
                                     break
-                    if wanted[0] and newest is None:
-                        newest = inbox.newest(keys.status, Status)
-                        logger.info("attached: publishing the game again")
-                    elif not wanted[0] and newest is not None:
-                        newest.close()
-                        newest, detached = None, detached + 1
-                        logger.info("detached: no STATUS heard, nothing published until attached (SIGUSR2)")
-                    viewer.tick(now, newest if newest is not None else _nothing)
+                    if wanted[0] != attached:
+                        attached, detached = wanted[0], detached + (not wanted[0])
+                        logger.info("attached: publishing the game again" if attached else
+                                    "detached: no STATUS heard, nothing published until attached (SIGUSR2)")
+                    newest = listen(viewer, newest, now, attached, lambda: inbox.newest(keys.status, Status))
         finally:
             graph.close()
             inbox.close()
@@ -399,8 +427,9 @@ def run(args: argparse.Namespace, logger: logging.Logger) -> int:
                 fox.close()
     end = viewer.over
     print(f"ros2: published {graph.sent} messages of {viewer.published} turns up to turn {viewer.turn} "
-          f"({viewer.skipped} turns skipped, a newer one heard first; {graph.unheard} messages with no subscriber "
-          "left unsent)" + (f"; detached {detached} times" if detached else "")
+          + ("(not the last: not listening when the game ended) " if viewer.missed_last else "")
+          + f"({viewer.skipped} turns skipped: the game went faster, or detached; {graph.unheard} messages with no "
+          "subscriber left unsent)" + (f"; detached {detached} times" if detached else "")
           + (f"; game over at turn {end.turn}: {end.reason.value}" if end else ""), flush=True)
     if inbox.rejects.total:
         logger.info("rejected inputs: %s", inbox.rejects.snapshot())
