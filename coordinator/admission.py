@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import bisect
 import itertools
 from collections.abc import Iterable, Sequence
 from typing import Generic, TypeVar
@@ -17,6 +18,11 @@ from schema.tuning import CONNECT_WAITING, CONNECT_WAITING_PER_SENDER, PRESENCE_
 from .fleet import ALIVE, STATES, Fleet
 
 Q = TypeVar("Q")  # what a CONNECT is answered through (a Zenoh query in the adapter)
+
+
+def _due(waiting: tuple[float, object, Connect]) -> float:
+    """A waiting CONNECT's deadline."""
+    return waiting[0]
 
 
 class Roster:
@@ -96,7 +102,8 @@ class Presences(Generic[Q]):
 
     def __init__(self, room: int = CONNECT_WAITING, per_sender: int = CONNECT_WAITING_PER_SENDER) -> None:
         self.present: set[tuple[str, str]] = set()
-        self._waiting: list[tuple[float, Q, Connect]] = []
+        self._waiting: list[tuple[float, Q, Connect]] = []  # in order of their deadlines (`due_in`, `expired`: the
+        # coordinator's loop asks for each event it takes; up to `room` wait under a flood of CONNECTs)
         self.room, self.per_sender = room, per_sender  # CONNECTs waiting at most, in all and naming one sender
 
     def connect(self, query: Q, msg: Connect, now: float) -> list[tuple[Q, Connect]]:
@@ -111,7 +118,7 @@ class Presences(Generic[Q]):
         if sum(w[2].sender == msg.sender for w in self._waiting) >= self.per_sender:
             raise RemoteInputError(f"{self.per_sender} CONNECTs from {msg.sender} already wait for their presence "
                                    "token", reason="flood")
-        self._waiting.append((now + PRESENCE_WAIT_S, query, msg))
+        bisect.insort(self._waiting, (now + PRESENCE_WAIT_S, query, msg), key=_due)
         return []
 
     def waiting(self) -> int:
@@ -130,12 +137,15 @@ class Presences(Generic[Q]):
 
     def due_in(self, now: float) -> float | None:
         """Seconds until the first waiting CONNECT expires (None: none waits)."""
-        return max(0.0, min(w[0] for w in self._waiting) - now) if self._waiting else None
+        return max(0.0, self._waiting[0][0] - now) if self._waiting else None
 
     def expired(self, now: float) -> list[tuple[Q, Connect]]:
         """The CONNECTs whose token did not come in time (to be refused)."""
-        gone = [(q, m) for due, q, m in self._waiting if due <= now]
-        self._waiting = [w for w in self._waiting if w[0] > now]
+        if not self._waiting or self._waiting[0][0] > now:
+            return []
+        cut = bisect.bisect_right(self._waiting, now, key=_due)
+        gone = [(q, m) for _, q, m in self._waiting[:cut]]
+        del self._waiting[:cut]
         return gone
 
     def others(self) -> set[str]:

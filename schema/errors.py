@@ -87,6 +87,10 @@ class RejectCounter:
         self._counts: collections.Counter[str] = collections.Counter()
         self._origins: collections.Counter[str] = collections.Counter()
         self._windows: dict[tuple[str, str], _Window] = {}
+        #: the windows holding rejections not logged (a summary due): `due_in` and `flush`, called by a process's
+        #: loop for each event it takes, look at these alone, not at every origin's window (up to `REJECT_ORIGINS`
+        #: under a flood naming a new sender each time)
+        self._holding: dict[tuple[str, str], _Window] = {}
 
     def reject(self, where: str, err: RemoteInputError, origin: str | None = None) -> None:
         """Count `err`, refused at `where` (a key, or what was refused), from `origin` (default: `where`; beyond
@@ -107,8 +111,10 @@ class RejectCounter:
             first = None  # (None: logged now)
             if window.logged > REJECT_LOG_FIRST:
                 window.held += 1
-                window.last = f"{where}: {err}"
+                window.last = (where, err)  # (formatted by `flush`: not for each of a flood's messages)
                 first = window.held == 1
+                if first:
+                    self._holding[(who, err.reason)] = window
         if first is None:
             self._log.warning("rejected %s: %s (%s)", where, excerpt(str(err)), err.reason)
         elif first and self._wake is not None:
@@ -117,20 +123,23 @@ class RejectCounter:
     def due_in(self) -> float | None:
         """Seconds until `flush` has a summary to log (None: none held)."""
         with self._lock:
-            ends = [w.start + REJECT_LOG_WINDOW for w in self._windows.values() if w.held]
-        return None if not ends else max(0.0, min(ends) - self._clock())
+            if not self._holding:
+                return None
+            end = min(w.start for w in self._holding.values()) + REJECT_LOG_WINDOW
+        return max(0.0, end - self._clock())
 
     def flush(self, everything: bool = False) -> None:
         """Log the summary of every window that is over (`everything`: of every window)."""
         now = self._clock()
         with self._lock:
-            over = [(k, w) for k, w in self._windows.items()
-                    if w.held and (everything or now >= w.start + REJECT_LOG_WINDOW)]
+            if not self._holding:
+                return
+            over = [(k, w) for k, w in self._holding.items() if everything or now >= w.start + REJECT_LOG_WINDOW]
             for k, _ in over:
-                del self._windows[k]
+                del self._windows[k], self._holding[k]
         for (who, reason), w in over:
             self._log.warning("rejected %d more from %s (%s) in %.1f s; the last: %s", w.held, who, reason,
-                              now - w.start, excerpt(w.last))
+                              now - w.start, excerpt(f"{w.last[0]}: {w.last[1]}"))
 
     @property
     def total(self) -> int:
@@ -155,7 +164,7 @@ class _Window:
     start: float  # when its first rejection came (the clock's seconds)
     logged: int = 0  # rejections in it
     held: int = 0  # of which not logged
-    last: str = ""  # the last one held
+    last: tuple[str, object] = ("", "")  # the last one held: where, what (the error)
 
 
 def excerpt(text: str) -> str:

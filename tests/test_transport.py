@@ -15,10 +15,12 @@ from typing import Any
 import pytest
 import zenoh
 
-from network.transport import FairQueue, Inbox, Outbox, Received, _direct, router_config, router_locators
+from network.transport import FairQueue, Inbox, Outbox, Received, _direct, _stamp, _turn, router_config, router_locators
 from schema import Ask, Connect, EndReason, Keys, Over, RemoteInputError, Role, Status, StatusTable, Target, encode
 from schema.acl import flood_filters
 from schema.keys import size_limit
+from schema.messages import Message
+from schema.samples import SAMPLES
 from schema.tables import MAX_DRONE, drone_name
 from tests.harness import client_config, embedded_router, unique_root
 
@@ -409,3 +411,30 @@ def test_a_wake_posted_from_another_thread_ends_the_wait_at_once(pair) -> None:
     inbox.post("next")
     assert inbox.get(timeout=3600.0) is None
     assert inbox.get(timeout=3600.0) == "next"
+
+
+def test_the_fast_read_of_a_payloads_turn_says_what_the_unpacker_says() -> None:
+    """Issue 33, 6: a subscription refuses a stale message from its first bytes, read without an Unpacker (`_turn`,
+    for each message of a flood the router lets through); it must say what `_stamp` says of any payload: every
+    sample message, turns of every width, and those bytes cut, mangled or written another way."""
+    import random
+
+    import msgpack
+
+    payloads = [encode(m) for m in SAMPLES.values() if isinstance(m, Message)]
+    for turn in (0, 1, 127, 128, 255, 256, 65_535, 65_536, 2**32 - 1, 2**32, 2**40, 2**64 - 1):
+        payloads.append(encode(Target(turn=turn, sender="GCS", drone="D01", pos=(1, 1, 1))) if turn < 2**63 else
+                        msgpack.packb({"v": 5, "t": "TGT", "turn": turn, "from": "GCS"}))
+    for odd in (-1, True, None, 1.5, "7", [7]):
+        payloads.append(msgpack.packb({"v": 5, "t": "DONE", "turn": odd, "from": "GCS"}))
+    payloads += [msgpack.packb({"v": 5, "t": "DONE", "turn": 1, "turn ": 2}), msgpack.packb({"v": 5, "t": "DONE"}),
+                 b"\x84\xa1v\x05\xa1t\xa4DONE\xa4turn\x01\xa4turn\x09", b"\x83\xa1v\x05\xa1t\xa3N\xb4S\xa4turn\x01"]
+    rnd = random.Random(33)
+    for _ in range(20_000):
+        data = bytearray(rnd.choice(payloads)[:rnd.randint(0, 48)])
+        for _ in range(rnd.randint(0, 2)):
+            if data:
+                data[rnd.randrange(len(data))] = rnd.randrange(256)
+        payloads.append(bytes(data))
+    differ = [p for p in payloads if _turn(p) != _stamp(p)[0] or type(_turn(p)) is not type(_stamp(p)[0])]
+    assert not differ, differ[:5]
