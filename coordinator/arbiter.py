@@ -129,6 +129,15 @@ class OpenCells:
             bits[start // 8:(start + len(u)) // 8] = np.packbits(free, bitorder="little").tobytes()
         self._bits = bytes(bits)
 
+    @classmethod
+    def of(cls, bits: np.ndarray) -> OpenCells:
+        """The open cells of a flat bool array (`array`'s form): a part of the world (coordinator/lacam.py's
+        focused search)."""
+        out = cls.__new__(cls)
+        out._bits = np.packbits(bits, bitorder="little").tobytes()
+        out._count = int(np.count_nonzero(bits))
+        return out
+
     def __getitem__(self, u: int) -> int:
         return self._bits[u >> 3] >> (u & 7) & 1
 

@@ -15,8 +15,10 @@ turn spends a budget of *work units* (a PIBT call costs a unit per drone and `CA
 turns one a level and one per `CELLS_A_UNIT` open cells: never wall-clock time, so that every layout, replay and
 resume does the same work; a call or table begun only if it fits, so the longest turn is bounded; the tables of a
 small world made at the game's start, `Lacam.prepare`) and the drones then take one
-step along the tree from the node they are at towards the goal node if found, else towards the top of the
-search's stack (a step up the tree is a move back: every transition is reversible). The search is complete
+step along the tree from the node they are at towards the goal node if found, else towards the best node known
+(the least sum of distances to the goals; a step up the tree is a move back: every transition is reversible), never
+along the depth-first frontier as the search backtracks. A node's constraints pin the drones away from their goals
+first, then the drones on their goals nearest to them (`Search._pins`), not all in PIBT's order. The search is complete
 whatever the drones do meanwhile, and once it has found the goal the drones walk to it: every drone home.
 
 State and determinism: what the search keeps is a function of the calls' arguments alone (the drones' cells,
@@ -30,12 +32,14 @@ The search runs where it is affordable: at once (new targets, a new search), onc
 from each target over the static world) are made (at the game's start where every cell's fits in `PRECOMPUTE`), and
 never where the tables would exceed `LIMIT` entries (the 256 x 256 x 32 city: plain PIBT). Until the tables are
 made, PIBT plays. A search that has not brought a new high of drones onto their targets for `STALL` turns (twice as
-many each time one is so left) hands the turns back to PIBT until PIBT stalls as long, then a new search starts from
-where the drones are: the search's steps follow its depth first frontier, back up the tree too, which in a dense
-endgame undoes more than PIBT's greedy steps; PIBT's turns know no map (the drones rank their cells by what they
-have learned), the search's distances are the static world's. The patience doubling, some search eventually runs as
-long as it needs: the whole stays complete, for the instances whose search fits in `MEMORY` entries (a search that
-fills it hands back as one without progress does, and never says an instance unsolvable).
+many each time one is so left), or that fills its memory, gives way to a search focused on the drones away from their
+goals (`Lacam._focus`: those within `FOCUS` moves of them or of their goals move, the others stand still as walls;
+a dense endgame is a few drones away among hundreds parked), from where the drones are; a focused one that makes no
+progress, fills its memory or finds no way in its part to one twice as wide, up to the whole world. Where no focus
+can be made (the tables made in the turns: a bigger world) it hands the turns back to PIBT until PIBT stalls as long,
+then a new search starts from where the drones are. The patience doubling, some search eventually runs as long as it
+needs: the whole stays complete, for the instances whose search fits in `MEMORY` entries (a search that fills it
+gives way as one without progress does, and never says an instance unsolvable; nor does a focused one).
 """
 
 from __future__ import annotations
@@ -71,13 +75,17 @@ CELLS_A_UNIT = 32
 PRECOMPUTE = 1 << 22
 #: Distance-table entries (drones x open cells) beyond which the search never runs (int16 entries: 64 MiB).
 LIMIT = 1 << 25
-#: Turns without a new high of drones on their targets after which a search hands back to PIBT (the first time; twice
-#: as many each later time), and after which PIBT hands over to a new search.
+#: Turns without a new high of drones on their targets after which a search gives way to a focused one (or hands back
+#: to PIBT where there is none: the first time; twice as many each later time), and after which PIBT hands over to a
+#: new search.
 STALL = 32
 #: The entries a search may hold (a configuration's cells, priorities and order: 3 a drone; a queued constraint: 2 a
-#: drone it pins): 2^21, about 50 MB. A search that reaches it stops and hands the turns back to PIBT as one without
-#: progress does (docs/cooperation.md, "Memory"): complete only for the instances whose search fits in it.
+#: drone it pins): 2^21, about 50 MB. A search that reaches it stops and gives way as one without progress does
+#: (docs/cooperation.md, "Memory"): complete only for the instances whose search fits in it.
 MEMORY = 1 << 21
+#: The first radius of a focused search (`Lacam._focus`): the drones within so many moves of a drone away from its goal
+#: or of that goal; twice as many each time one makes no progress.
+FOCUS = 4
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
 #: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
@@ -141,10 +149,10 @@ class Graph:
 
 class Node:
     """A configuration of the search: the drones' cells (flat), its parent in the tree, its depth, the drones'
-    PIBT priorities there, its low-level search (the constraints still to try: (drones, cells) pairs) and the
-    order in which its constraints pin drones (highest priority first)."""
+    PIBT priorities there, its low-level search (the constraints still to try: (drones, cells) pairs), PIBT's order
+    (highest priority first) and the order in which its constraints pin drones (`Search._pins`, made when needed)."""
 
-    __slots__ = ("cfg", "parent", "depth", "prio", "tree", "order", "number", "near")
+    __slots__ = ("cfg", "parent", "depth", "prio", "tree", "order", "number", "near", "pins")
 
     def __init__(self, cfg: np.ndarray, parent: Node | None, prio: np.ndarray, number: int) -> None:
         self.cfg, self.parent, self.prio, self.number = cfg, parent, prio, number
@@ -153,6 +161,7 @@ class Node:
         self.order = np.lexsort((np.arange(n), -prio))
         self.tree: deque[tuple[tuple[int, ...], tuple[int, ...]]] = deque([((), ())])
         self.near: list[Node] = [] if parent is None else [parent]  # its neighbours in the configurations' graph
+        self.pins: list[int] | None = None  # the order in which its constraints pin drones (`Search._pins`)
 
 
 def _rewire(a: Node, b: Node) -> None:
@@ -172,15 +181,22 @@ def _rewire(a: Node, b: Node) -> None:
                 queue.append(v)
 
 
+#: A focused search's drones (rows among all), every drone's cells, its part of the world and its radius.
+Focus = tuple[np.ndarray, np.ndarray, OpenCells, int]
+
+
 class Search:
     """One LaCAM search from a configuration to the goal one (`goals`, flat cells): `expand` spends work on it,
     `step` gives the drones' next configuration from the node they are at (`at`)."""
 
     def __init__(self, graph: Graph, size: Cell, start: np.ndarray, goals: np.ndarray, aims: np.ndarray,
-                 dist: np.ndarray, memory: int = MEMORY) -> None:
+                 dist: np.ndarray, memory: int = MEMORY, focus: Focus | None = None) -> None:
         """`aims`: the drones' real targets (flat, -1 for none: PIBT's swap and retreats read them); `dist`: each
-        drone's distance table ((n, F), to its goal); `memory`: the entries it may hold (`MEMORY`)."""
+        drone's distance table ((n, F), to its goal); `memory`: the entries it may hold (`MEMORY`); `focus`: a search
+        over some drones only (`Lacam._focus`): their rows among all, every drone's cells (the others stay there), the
+        part of the world it searches (`graph`'s open cells) and its radius."""
         self.graph, self.size, self.goals, self.dist, self.memory = graph, size, goals, dist, memory
+        self.focus = focus
         self.aims = aims.tolist()
         n = len(start)
         self.rows = np.arange(n)
@@ -193,6 +209,7 @@ class Search:
         self.explored: dict[bytes, Node] = {start.tobytes(): root}
         self.open: list[Node] = [root]
         self.found: Node | None = root if start.tobytes() == self.at_goal else None
+        self.best, self.best_h = root, int(dist[self.rows, graph.index[start]].sum())  # the nearest node to the goal
         self.expansions = 0
         self.held = 3 * n  # the entries it holds (`MEMORY`): the root's
         self.gave: list[int] = []  # the drones that gave way in the last successor (`arbiter.pibt`)
@@ -213,10 +230,20 @@ class Search:
         """The search holds its `memory`'s entries: it expands no more."""
         return self.held >= self.memory
 
+    def whole(self, cfg: np.ndarray) -> np.ndarray:
+        """Every drone's cell in a configuration of the search (a focused one moves some drones only)."""
+        if self.focus is None:
+            return cfg
+        out = self.focus[1].copy()
+        out[self.focus[0]] = cfg
+        return out
+
     def expand(self, work: int, open_: OpenCells) -> int:
         """Spend `work` units at most (but one PIBT call at least, unless the search is over): a call is made only
         if its units fit in what is left; the units spent."""
         spent, n = 0, len(self.goals)
+        if self.focus is not None:
+            open_ = self.focus[2]
         while self.found is None and self.open and not self.full:
             node = self.open[-1]
             if not node.tree:
@@ -230,7 +257,7 @@ class Search:
             node.tree.popleft()
             self.held -= 2 * len(who)
             if len(who) < n:  # the next drone in the node's order gets each of its cells in turn, nearest first
-                i = int(node.order[len(who)])
+                i = self._pin(node, len(who))
                 for v in self._moves(node.cfg[i], i):
                     node.tree.append((who + (i,), where + (v,)))
                     self.held += 2 * len(who) + 2
@@ -257,7 +284,45 @@ class Search:
             self.open.append(child)
             if key == self.at_goal:
                 self.found = child
+            h = int(self.dist[self.rows, self.graph.index[nxt]].sum())
+            if h < self.best_h:
+                self.best, self.best_h = child, h
         return spent
+
+    def _pin(self, node: Node, k: int) -> int:
+        """The drone `node`'s constraints pin k-th (`_pins`; the drones away alone while k is below their count, the
+        drones on their goals ordered only once a constraint reaches them)."""
+        if node.pins is None:
+            order = node.order
+            node.pins = order[node.cfg[order] != self.goals[order]].tolist()
+            self.held += len(node.pins)
+        if k >= len(node.pins) and len(node.pins) < len(node.order):
+            return self._pins(node)[k]
+        return node.pins[k]
+
+    def _pins(self, node: Node) -> list[int]:
+        """The order in which `node`'s constraints pin drones: the drones away from their goals, highest priority
+        first, then those on their goals, nearest (over the open cells) to a drone away first, then by priority."""
+        if node.pins is None or len(node.pins) < len(node.order):
+            g, order = self.graph, node.order
+            away = node.cfg[order] != self.goals[order]
+            first = order[away]
+            self.held -= 0 if node.pins is None else len(node.pins)
+            dist = np.full(len(g.cells) + 1, FAR, np.int64)  # (the last: no neighbour)
+            front = g.index[node.cfg[first]]
+            depth = 0
+            near = np.where(g.near >= 0, g.near, len(g.cells))
+            while len(front):
+                front = front[dist[front] == FAR]
+                dist[front] = depth
+                depth += 1
+                front = np.unique(near[front].ravel())
+                front = front[(front < len(g.cells)) & (dist[front] == FAR)]
+            rest = order[~away]
+            rest = rest[np.argsort(dist[g.index[node.cfg[rest]]], kind="stable")]
+            node.pins = np.concatenate([first, rest]).tolist()
+            self.held += len(order)
+        return node.pins
 
     def _moves(self, cell: int, i: int) -> list[int]:
         """Drone i's cells from `cell` (its open neighbours and itself), nearest to its goal first."""
@@ -316,9 +381,10 @@ class Search:
         return candidates(here, own, self.size, self.aim_array, node.number)
 
     def step(self) -> np.ndarray:
-        """The drones' next configuration: one step along the tree from `at` towards the goal node (or the top of
-        the stack while the goal is not found), which becomes `at`; `at`'s own once there (or the search over)."""
-        aim = self.found if self.found is not None else (self.open[-1] if self.open else self.at)
+        """The drones' next configuration: one step along the tree from `at` towards the goal node (or, while the
+        goal is not found, the best node known: the least sum of distances to the goals), which becomes `at`; `at`'s
+        own once there. Every drone's cells (`whole`)."""
+        aim = self.found if self.found is not None else self.best
         at = self.at
         node: Node | None = aim
         while node is not None and node.depth > at.depth + 1:
@@ -327,7 +393,7 @@ class Search:
             self.at = node
         elif at is not aim and at.parent is not None:
             self.at = at.parent
-        return self.at.cfg
+        return self.whole(self.at.cfg)
 
 
 def _choosing(order: list[int], here: list[int], cand: list[list[int]], fixed: set[int]) -> int:
@@ -360,8 +426,8 @@ class Lacam:
         self._search: Search | None = None
         self._key = b""  # the targets and cooperative drones the record and the search are for
         self._best, self._since = -1, 0  # most drones on their targets at once, and turns since
-        self._patience = stall  # turns without a new high after which the running search hands back to PIBT
-        self._handed = False  # a search handed back (for these targets): the next starts once PIBT stalls
+        self._patience = stall  # turns without a new high after which the running search gives way
+        self._handed = False  # a search handed back to PIBT (for these targets): the next starts once PIBT stalls
         self.unsolvable = False
         self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
         self.full = 0  # searches stopped at their memory (`MEMORY`)
@@ -400,15 +466,19 @@ class Lacam:
             self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
             self._patience, self._handed = self.stall, False
         search = self._search
-        if search is not None and not np.array_equal(search.at.cfg, here):
+        if search is not None and not np.array_equal(search.whole(search.at.cfg), here):
             search = self._search = None
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
-        if search is not None and search.found is None and (self._since >= self._patience or search.full):
-            # no progress for long, or its memory full: PIBT's turns, until PIBT stalls as long
+        if search is not None and search.found is None and (
+                self._since >= self._patience or search.full or (search.focus is not None and search.unsolvable)):
+            # no progress for long, its memory full, or no way within its part of the world: a search focused on the
+            # drones away (wider each time, the whole world at last); where none can be made, PIBT's turns until PIBT
+            # stalls as long
             self.full += search.full
-            search = self._search = None
-            self._patience, self._handed, self._since = 2 * self._patience, True, 0
+            radius = FOCUS if search.focus is None else 2 * search.focus[3]
+            search = self._search = self._focus(size, here, aims, radius)
+            self._patience, self._since, self._handed = 2 * self._patience, 0, search is None
         if search is None:
             if home == n:
                 return None  # every drone home: nothing to search
@@ -421,7 +491,7 @@ class Lacam:
         self.expansions -= search.expansions
         self.spent = search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search)
         self.expansions += search.expansions
-        if search.unsolvable:
+        if search.unsolvable and search.focus is None:
             self.unsolvable = True
         return search.step()
 
@@ -435,6 +505,44 @@ class Lacam:
         self._of, self._tables, self._table_units = open_, {}, 0
         self._graph = g = Graph(open_, size)
         self._every = g.every_distance() if len(g.cells) ** 2 <= PRECOMPUTE else None
+
+    def _focus(self, size: Cell, here: np.ndarray, aims: np.ndarray, radius: int) -> Search | None:
+        """A search from `here` over the drones within `radius` moves (over the open cells) of a drone away from its
+        goal or of that goal, the others standing still, walls to it (their tables made at the game's start: None
+        elsewhere); the radius at least half the farthest such drone's distance, so that its shortest ways are in
+        it. Where that part is the whole world, a search of the whole world (`_start`)."""
+        g, every = self._graph, self._every
+        assert g is not None  # (`prepare`)
+        if every is None:
+            return None
+        hc = g.index[here]
+        if (hc < 0).any():
+            return None
+        ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
+        way = (ac >= 0) & (g.part[np.maximum(ac, 0)] == g.part[hc])
+        goal_c = np.where(way, ac, hc)
+        away = goal_c != hc
+        if not away.any():
+            return None
+        radius = max(radius, (int(every[goal_c[away], hc[away]].max(initial=0)) + 1) // 2)
+        seen = np.zeros(len(g.cells) + 1, bool)  # (the last: no neighbour)
+        front = np.unique(np.concatenate([hc[away], goal_c[away]]))
+        near = np.where(g.near >= 0, g.near, len(g.cells))
+        for _ in range(radius + 1):
+            seen[front] = True
+            front = np.unique(near[front].ravel())
+            front = front[(front < len(g.cells)) & ~seen[front]]
+        part = np.flatnonzero(seen[:-1])
+        if len(part) == len(g.cells):
+            return self._start(size, here, aims)
+        free = np.flatnonzero(seen[hc])
+        bits = np.zeros(len(g.index), bool)
+        bits[g.cells[part]] = True
+        world = OpenCells.of(bits)
+        sub = Graph(world, size)
+        self._search = Search(sub, size, here[free], g.cells[goal_c[free]], np.where(way, aims, -1)[free],
+                              every[goal_c[free]][:, part], self.memory, (free, here, world, radius))
+        return self._search
 
     def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | None:
         """A search from `here` once every drone's distance table is made, None until then: made at the game's start

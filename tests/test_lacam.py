@@ -107,10 +107,28 @@ def test_the_search_proves_a_swap_in_a_closed_corridor_unsolvable_and_finds_one_
         assert bool((cells == targets).all()) is solvable
 
 
-def test_a_search_without_progress_hands_back_to_pibt_and_comes_back_with_more_patience() -> None:
-    """A search that brings no new high of drones home for `stall` turns (twice as many each later time) gives the
-    turns back to PIBT; a new one starts once PIBT has stalled `stall` turns (here the drones hold still in PIBT's
-    turns); the patience doubling, a search eventually runs to the end: the swap with a bay is done."""
+def test_a_search_without_progress_hands_back_to_pibt_and_comes_back_with_more_patience(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where the distance tables are made in the turns (a big world; here forced with PRECOMPUTE = 0), a search
+    that brings no new high of drones home for `stall` turns (twice as many each later time) gives the turns back to
+    PIBT; a new one starts once PIBT has stalled `stall` turns (here the drones hold still in PIBT's turns); the
+    patience doubling, a search eventually runs to the end: the swap with a bay is done. Where they are made at the
+    start, a search without progress gives way to another, focused on the drones away (`Lacam._focus`; here the
+    whole world: a new search from where the drones are), never to PIBT: the drones, which wait at the search's
+    best node meanwhile, make the swap in 12 turns, the search playing every one."""
+    for precompute in (0, lacam.PRECOMPUTE):
+        monkeypatch.setattr(lacam, "PRECOMPUTE", precompute)
+        runs, pauses = _stalling()
+        if precompute:
+            assert runs == [12], runs
+        else:
+            assert len(runs) >= 3 and runs[-1] > runs[0], runs  # handed back, and came back with more patience
+            assert all(p == 2 for p in pauses[1:]), pauses  # PIBT held still for `stall` turns (after the tables)
+
+
+def _stalling() -> tuple[list[int], list[int]]:
+    """The swap with a bay under a search of a PIBT call a turn and a stall of 2 turns: the turns the search played in
+    a row, and those between (PIBT's)."""
     grid = world_of(["....#....", "........."])  # a bay in the middle of a corridor 9 long: the swap needs 12 turns
     size: Cell = grid.shape  # type: ignore[assignment]
     before = np.array([(0, 1, 0), (8, 1, 0)], np.int32)
@@ -127,8 +145,7 @@ def test_a_search_without_progress_hands_back_to_pibt_and_comes_back_with_more_p
     assert (cells == targets).all()
     runs = [len(r) for r in "".join("s" if s else "." for s in searching).split(".") if r]
     pauses = [len(p) for p in "".join("s" if s else "." for s in searching).strip(".").split("s") if p]
-    assert len(runs) >= 3 and runs[-1] > runs[0], runs  # handed back, and came back with more patience
-    assert all(p == 2 for p in pauses[1:]), pauses  # each time PIBT held still for `stall` turns (after the tables)
+    return runs, pauses
 
 
 def _swap(rows: list[str], search: lacam.Lacam, turns: int = 60) -> np.ndarray:
@@ -161,6 +178,51 @@ def test_a_search_that_fills_its_memory_hands_back_and_never_claims_a_proof() ->
     assert enough.unsolvable and enough.full == 0
     solved = lacam.Lacam(memory=1 << 10)  # (the bay: found well within it)
     assert (_swap(["..#..", "....."], solved) == np.array([(4, 1, 0), (0, 1, 0)])).all()
+
+
+def test_the_constraints_pin_the_drones_away_first_then_those_nearest_them() -> None:
+    """A node's low-level search pins first the drones away from their goals (highest priority first), then the
+    drones on their goals, nearest to a drone away first: a parked drone beside one that must pass is pinned by
+    the third constraint, not after every parked drone of higher priority (as by priority alone)."""
+    grid = world_of(["........."])
+    size: Cell = grid.shape  # type: ignore[assignment]
+    cells = np.array([(0, 0, 0), (1, 0, 0), (6, 0, 0), (7, 0, 0), (8, 0, 0)], np.int32)
+    goals = cells.copy()
+    goals[3] = (2, 0, 0)  # drone 3 is away; drone 2 beside it, drones 0, 1 and 4 parked farther
+    open_ = OpenCells(grid)
+    search = lacam.Lacam()
+    search.prepare(size, open_)
+    s = search._start(size, flat_cells(cells, size), flat_cells(goals, size))
+    assert s is not None
+    pins = s._pins(s.at)
+    assert pins[0] == 3 and set(pins[1:3]) == {2, 4} and pins[3:] == [1, 0], pins
+
+
+def test_a_focused_search_moves_the_drones_near_those_away_and_never_claims_a_proof() -> None:
+    """A search focused on the drones away (`Lacam._focus`: the drones within its radius of them or of their goals
+    move, the others stand still as walls) that finds no way within its part of the world proves nothing: the
+    arbitration never says the instance unsolvable on it, and a wider one, which reaches the bay, finds the way."""
+    grid = world_of(["#############.###", "................."])  # the only bay at x = 13
+    size: Cell = grid.shape  # type: ignore[assignment]
+    cells = np.array([(0, 1, 0), (6, 1, 0), (16, 1, 0)], np.int32)
+    goals = np.array([(6, 1, 0), (0, 1, 0), (16, 1, 0)], np.int32)  # a swap; drone 2 parked at the far end
+    open_ = OpenCells(grid)
+    search = lacam.Lacam()
+    search.prepare(size, open_)
+    here, aims = flat_cells(cells, size), flat_cells(goals, size)
+    narrow = search._focus(size, here, aims, 4)
+    assert narrow is not None and narrow.focus is not None
+    assert narrow.focus[0].tolist() == [0, 1]  # drone 2 stands still, and the bay is out of reach
+    while narrow.found is None and narrow.open:
+        narrow.expand(1 << 20, open_)
+    assert narrow.unsolvable and not search.unsolvable
+    assert (narrow.whole(narrow.at.cfg) == here).all()
+    wide = search._focus(size, here, aims, 8)
+    assert wide is not None and wide.focus is not None and wide.focus[0].tolist() == [0, 1]
+    while wide.found is None and wide.open:
+        wide.expand(1 << 20, open_)
+    assert wide.found is not None
+    assert (wide.whole(wide.found.cfg) == aims).all()
 
 
 def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
