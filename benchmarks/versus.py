@@ -1,6 +1,6 @@
 """This tree against an earlier revision, side by side in one run: the RL environment and whole games.
 
-    python3 -m benchmarks.versus REV [--counts 1,16,128,1000] [--seconds 2] [--repeat 3] [--games 16,128,1000]
+    dronesim bench versus REV [--counts 1,16,128,1000] [--seconds 2] [--repeat 3] [--games 16,128,1000]
 
 REV (a commit of this repository, from c3007d0 on: its `benchmarks.rl.ours` takes a policy) is extracted with
 `git archive` into a temporary folder. Every figure is measured in a fresh process of each tree, in the order
@@ -96,7 +96,7 @@ def span(values: list[float], fmt: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python3 -m benchmarks.versus", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="dronesim bench versus", description=__doc__.split("\n\n")[0])
     ap.add_argument("rev", help="the earlier revision (a commit of this repository)")
     ap.add_argument("--counts", default="1,16,128,1000", help="RL agent counts ('' for none)")
     ap.add_argument("--seconds", type=float, default=2.0, help="seconds of stepping per RL figure")
@@ -110,8 +110,13 @@ def main(argv: list[str] | None = None) -> int:
         before, after = Path(tmp) / "before", Path(tmp) / "after"
         before.mkdir()
         after.mkdir()
-        old = extract(args.rev, before)
-        new = extract("HEAD", after)
+        try:
+            old = extract(args.rev, before)
+            new = extract("HEAD", after)
+        except subprocess.CalledProcessError as err:
+            print(f"bench versus: {args.rev!r} is not a revision of {HERE} ({(err.stderr or b'').strip()[:200]!r})",
+                  file=sys.stderr)
+            return 2
         if subprocess.run(["git", "-C", str(HERE), "diff", "--quiet", "HEAD"]).returncode:
             print("(the working tree differs from HEAD: HEAD is measured)", file=sys.stderr)
         rows: list[tuple[str, str, list[tuple]]] = []
@@ -130,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
                 replay_cpu(args.turns, journal), before, after, args.repeat)))
             print(f"{name}: done", file=sys.stderr)
     m = machine()
-    print(f"Command: `python3 -m benchmarks.versus {' '.join(argv if argv is not None else sys.argv[1:])}`; before "
+    print(f"Command: `dronesim bench versus {' '.join(argv if argv is not None else sys.argv[1:])}`; before "
           f"{old[:7]}, after {new[:7]}; {m.get('cpu', '?')}, {time.time() - started:.0f} s, load average (1 min) "
           f"at the end {os.getloadavg()[0]:.1f}.\n")
     print("| row | unit | before | after | after ÷ before (each repeat) | better is |")
