@@ -32,14 +32,14 @@ The search runs where it is affordable: at once (new targets, a new search), onc
 from each target over the static world) are made (at the game's start where every cell's fits in `PRECOMPUTE`), and
 never where the tables would exceed `LIMIT` entries (the 256 x 256 x 32 city: plain PIBT). Until the tables are
 made, PIBT plays. A search that has not brought a new high of drones onto their targets for `STALL` turns (twice as
-many each time one is so left), or that fills its memory, gives way to a search focused on the drones away from their
-goals (`Lacam._focus`: those within `FOCUS` moves of them or of their goals move, the others stand still as walls;
-a dense endgame is a few drones away among hundreds parked), from where the drones are; a focused one that makes no
-progress, fills its memory or finds no way in its part to one twice as wide, up to the whole world. Where no focus
-can be made (the tables made in the turns: a bigger world) it hands the turns back to PIBT until PIBT stalls as long,
-then a new search starts from where the drones are. The patience doubling, some search eventually runs as long as it
-needs: the whole stays complete, for the instances whose search fits in `MEMORY` entries (a search that fills it
-gives way as one without progress does, and never says an instance unsolvable; nor does a focused one).
+many each time one is so left), or that fills its memory, hands the turns back to PIBT until PIBT stalls as long;
+then a search focused on the drones away from their goals starts from where the drones are (`Lacam._focus`: those
+within `FOCUS` moves of them or of their goals move, the others stand still as walls; a dense endgame is a few drones
+away among hundreds parked); the next after a focused one that makes no progress, fills its memory or finds no way in
+its part is twice as wide, up to the whole world (and of the whole world where no focus can be made: the tables made
+in the turns, a bigger world). The patience doubling, some search eventually runs as long as it needs: the whole
+stays complete, for the instances whose search fits in `MEMORY` entries (a search that fills it hands back as one
+without progress does, and never says an instance unsolvable; nor does a focused one).
 """
 
 from __future__ import annotations
@@ -75,16 +75,15 @@ CELLS_A_UNIT = 32
 PRECOMPUTE = 1 << 22
 #: Distance-table entries (drones x open cells) beyond which the search never runs (int16 entries: 64 MiB).
 LIMIT = 1 << 25
-#: Turns without a new high of drones on their targets after which a search gives way to a focused one (or hands back
-#: to PIBT where there is none: the first time; twice as many each later time), and after which PIBT hands over to a
-#: new search.
+#: Turns without a new high of drones on their targets after which a search hands back to PIBT (the first time; twice
+#: as many each later time), and after which PIBT hands over to a new search (focused: `FOCUS`).
 STALL = 32
 #: The entries a search may hold (a configuration's cells, priorities and order: 3 a drone; a queued constraint: 2 a
-#: drone it pins): 2^21, about 50 MB. A search that reaches it stops and gives way as one without progress does
+#: drone it pins): 2^21, about 50 MB. A search that reaches it stops and hands back as one without progress does
 #: (docs/cooperation.md, "Memory"): complete only for the instances whose search fits in it.
 MEMORY = 1 << 21
-#: The first radius of a focused search (`Lacam._focus`): the drones within so many moves of a drone away from its goal
-#: or of that goal; twice as many each time one makes no progress.
+#: The first radius of a focused search (`Lacam._focus`, the search after one without progress): the drones within so
+#: many moves of a drone away from its goal or of that goal; twice as many each time one makes no progress.
 FOCUS = 4
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
@@ -426,8 +425,9 @@ class Lacam:
         self._search: Search | None = None
         self._key = b""  # the targets and cooperative drones the record and the search are for
         self._best, self._since = -1, 0  # most drones on their targets at once, and turns since
-        self._patience = stall  # turns without a new high after which the running search gives way
+        self._patience = stall  # turns without a new high after which the running search hands back to PIBT
         self._handed = False  # a search handed back to PIBT (for these targets): the next starts once PIBT stalls
+        self._radius = 0  # the next search's focus (`_focus`; 0: the whole world)
         self.unsolvable = False
         self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
         self.full = 0  # searches stopped at their memory (`MEMORY`)
@@ -464,7 +464,7 @@ class Lacam:
         key = aims.tobytes()
         if key != self._key:
             self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
-            self._patience, self._handed = self.stall, False
+            self._patience, self._handed, self._radius = self.stall, False, 0
         search = self._search
         if search is not None and not np.array_equal(search.whole(search.at.cfg), here):
             search = self._search = None
@@ -472,19 +472,20 @@ class Lacam:
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
         if search is not None and search.found is None and (
                 self._since >= self._patience or search.full or (search.focus is not None and search.unsolvable)):
-            # no progress for long, its memory full, or no way within its part of the world: a search focused on the
-            # drones away (wider each time, the whole world at last); where none can be made, PIBT's turns until PIBT
-            # stalls as long
+            # no progress for long, its memory full, or no way within its part of the world: PIBT's turns until PIBT
+            # stalls as long, then a search focused on the drones away (wider each time, the whole world at last)
             self.full += search.full
-            radius = FOCUS if search.focus is None else 2 * search.focus[3]
-            search = self._search = self._focus(size, here, aims, radius)
-            self._patience, self._since, self._handed = 2 * self._patience, 0, search is None
+            self._radius = FOCUS if search.focus is None else 2 * search.focus[3]
+            search = self._search = None
+            self._patience, self._handed, self._since = 2 * self._patience, True, 0
         if search is None:
             if home == n:
                 return None  # every drone home: nothing to search
             if n * int(open_.count()) > self.limit or (self._handed and self._since < self.stall):
                 return None
-            search = self._start(size, here, aims)
+            search = self._focus(size, here, aims, self._radius) if self._radius else None
+            if search is None:  # (the first search, or no focus can be made: the whole world)
+                search = self._start(size, here, aims)
             if search is None:
                 return None  # (its graph or tables made this turn: PIBT's turn)
             self._since = 0  # (its patience counts from its start)

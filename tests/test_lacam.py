@@ -109,21 +109,16 @@ def test_the_search_proves_a_swap_in_a_closed_corridor_unsolvable_and_finds_one_
 
 def test_a_search_without_progress_hands_back_to_pibt_and_comes_back_with_more_patience(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """Where the distance tables are made in the turns (a big world; here forced with PRECOMPUTE = 0), a search
-    that brings no new high of drones home for `stall` turns (twice as many each later time) gives the turns back to
-    PIBT; a new one starts once PIBT has stalled `stall` turns (here the drones hold still in PIBT's turns); the
-    patience doubling, a search eventually runs to the end: the swap with a bay is done. Where they are made at the
-    start, a search without progress gives way to another, focused on the drones away (`Lacam._focus`; here the
-    whole world: a new search from where the drones are), never to PIBT: the drones, which wait at the search's
-    best node meanwhile, make the swap in 12 turns, the search playing every one."""
-    for precompute in (0, lacam.PRECOMPUTE):
+    """A search that brings no new high of drones home for `stall` turns (twice as many each later time) gives the
+    turns back to PIBT; a new one starts once PIBT has stalled `stall` turns (here the drones hold still in PIBT's
+    turns): focused on the drones away where the distance tables are made at the start (`Lacam._focus`; here the
+    whole world, which it covers), else of the whole world (here forced with PRECOMPUTE = 0); the patience doubling,
+    a search eventually runs to the end: the swap with a bay is done."""
+    for precompute in (lacam.PRECOMPUTE, 0):
         monkeypatch.setattr(lacam, "PRECOMPUTE", precompute)
         runs, pauses = _stalling()
-        if precompute:
-            assert runs == [12], runs
-        else:
-            assert len(runs) >= 3 and runs[-1] > runs[0], runs  # handed back, and came back with more patience
-            assert all(p == 2 for p in pauses[1:]), pauses  # PIBT held still for `stall` turns (after the tables)
+        assert len(runs) >= 3 and runs[-1] > runs[0], runs  # handed back, and came back with more patience
+        assert all(p == 2 for p in pauses[1:]), pauses  # each time PIBT held still for `stall` turns (after the tables)
 
 
 def _stalling() -> tuple[list[int], list[int]]:
