@@ -394,8 +394,11 @@ class FairQueue:
         self._queues: dict[str, collections.deque[tuple[object, int]]] = {}  # origin -> (event, size), in order
         self._bytes: dict[str, int] = {}  # origin -> bytes of its events queued
         self._lined: dict[str, int] = {}  # origin -> its events in line
-        # an origin per event in line, in order (None: a wake-up); the consumer waits on it, in C, lock-free
+        # an origin per event in line, in order (None: a wake-up); the consumer takes from it, in C, lock-free, and
+        # waits on it (no limit) or on `_ring` (a time limit: see `_next`)
         self._line: queue.SimpleQueue[str | None] = queue.SimpleQueue()
+        self._ring = threading.Event()  # set by a producer while the consumer waits with a time limit
+        self._sleeping = False  # the consumer waits on `_ring`
 
     def full(self, origin: str, size: int = 0) -> str | None:
         """Why an event of `size` bytes from `origin` would be over its budget (None: it would not). A
@@ -420,15 +423,19 @@ class FairQueue:
     def _enter(self, origin: str) -> None:
         self._lined[origin] = self._lined.get(origin, 0) + 1
         self._line.put(origin)
+        if self._sleeping:
+            self._ring.set()
 
     def wake(self) -> None:
         """Make a `take` waiting now return (with nothing)."""
         self._line.put(None)
+        if self._sleeping:
+            self._ring.set()
 
     def take(self, timeout: float | None) -> tuple[bool, object]:
         """(True, the next event), or (False, None) after `timeout` seconds (None: no limit) or a `wake`."""
         try:
-            origin = self._line.get(timeout=timeout)
+            origin = self._line.get() if timeout is None else self._next(timeout)
         except queue.Empty:
             return False, None
         if origin is None:
@@ -443,6 +450,30 @@ class FairQueue:
             elif not waiting:
                 del self._queues[origin], self._bytes[origin], self._lined[origin]
             return True, event
+
+    def _next(self, timeout: float) -> str | None:
+        """The next in line, waiting `timeout` s at most (queue.Empty after). Not `SimpleQueue.get(timeout=...)`:
+        in CPython 3.11 it can wait forever (when an acquire of its lock finds the queue empty, it recomputes the
+        time left, and once the deadline is past a negative time means no limit: `dronesim bench perf`'s ground
+        station once waited so, the game idle, every process waiting for it). An Event's wait has no such flaw;
+        a producer sets it only while the consumer waits (`_sleeping`, set before the consumer looks again: under
+        the GIL, a producer that did not see it put its event before that look)."""
+        try:
+            return self._line.get_nowait()
+        except queue.Empty:
+            if timeout <= 0:
+                raise
+        self._ring.clear()
+        self._sleeping = True
+        try:
+            try:
+                return self._line.get_nowait()
+            except queue.Empty:
+                pass
+            self._ring.wait(timeout)
+        finally:
+            self._sleeping = False
+        return self._line.get_nowait()
 
     def drain(self) -> list[object]:
         """Every event queued, in the order `take` would give them (for the one consumer: never blocks)."""

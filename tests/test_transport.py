@@ -147,6 +147,44 @@ def test_get_with_a_deadline_already_past_returns_at_once(pair) -> None:
 # --------------------------------------------------------------------------- floods (issue 18)
 
 
+def test_a_wait_with_a_time_limit_ends_whatever_came_before() -> None:
+    """`take(timeout)` returns within its time limit after any mix of events put before, during (from another thread)
+    and after waits, wakes and tiny limits. Before, it was `SimpleQueue.get(timeout=...)`, which in CPython 3.11 can
+    wait forever (this mix of 8 steps, seed 1, hung within seconds; `dronesim bench perf`'s ground station once
+    hung so)."""
+    import random
+
+    rng, done = random.Random(1), threading.Event()
+
+    def mix() -> None:
+        for _ in range(1500):
+            q = FairQueue()
+            for _ in range(8):
+                step = rng.choice(["put", "take", "wait", "during", "wake"])
+                if step == "put":
+                    q.put("a", 1)
+                elif step == "wake":
+                    q.wake()
+                elif step == "during":
+                    t = threading.Timer(0.0002, q.put, ("b", 1))
+                    t.start()
+                    q.take(0.01)
+                    t.join()
+                elif step == "take":
+                    q.take(0)
+                else:
+                    q.take(rng.choice([1e-7, 1e-6, 1e-5, 1e-3]))
+        done.set()
+
+    threading.Thread(target=mix, daemon=True).start()
+    assert done.wait(120), "a take with a time limit waited forever"
+    q = FairQueue()
+    started = time.monotonic()
+    assert q.take(0.05) == (False, None) and 0.04 < time.monotonic() - started < 5
+    q.put("a", "x")
+    assert q.take(0.05) == (True, "x") and q.take(0) == (False, None)
+
+
 def test_below_its_share_an_origin_keeps_the_order_of_arrival() -> None:
     q = FairQueue(budget=100, share=3)
     for event in [("GCS", 19), ("D01", 18), ("GCS", 20), ("GCS", 21), ("SRV", 1)]:
