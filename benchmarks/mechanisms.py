@@ -160,7 +160,8 @@ MECHANISMS: tuple[Mechanism, ...] = (
     Mechanism(
         "ROS 2 is published by an observer of its own, never by the game (the newest turn at its rate, DROP)",
         ("entities/ros2/node.py::Viewer", "entities/ros2/node.py:/newest|DROP/", "schema/tuning.py::ROS_RATE",
-         "schema/tuning.py::ROS_CPU_SHARE", "schema/tuning.py::ROS_SLOWEST"),
+         "schema/tuning.py::ROS_CPU_SHARE", "schema/tuning.py::ROS_SLOWEST", "entities/ros2/node.py::listen",
+         "schema/tuning.py::ROS_LISTEN_GAP"),
         Variant(ros2=True), ((1000, (64, 64, 16)),),
         f"a `dronesim ros2` viewer publishing the game beside it to a ROS 2 user, a process of its own subscribed "
         f"to every topic (benchmarks/ros_user.py, its CPU counted); turns/s with it ≥ {ROS2_KEEPS:.0%} of without. "

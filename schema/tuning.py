@@ -270,13 +270,13 @@ HEALTH_STALL_S = 60.0
 #: faster, else the newest at this rate, so that a swarm's viewer costs a bounded share of the machine. Not
 #: measured against a viewer: RViz2 and Foxglove draw at about this rate; the 1000-drone cost is in BENCHMARKS.md.
 ROS_RATE = 20.0
-#: The share of a core `dronesim ros2` spends publishing at most: after a turn that took it C seconds of CPU, it
-#: publishes the next no sooner than C / ROS_CPU_SHARE seconds later (and no later than `ROS_SLOWEST` after it).
-#: Measured: a 1000-drone turn costs it about 10-15 ms (encoding 4, publishing the rest), so about one turn a second
-#: (a small game's, well under a millisecond, `ROS_RATE`); the router (2000 messages to forward) and each ROS 2
-#: subscriber spend about as much again. At 5 % a 1000-drone game on 2 cores shared with other work ran 13 % slower
-#: beside it; at 2 %, with the CPU of all processes 4-8 % higher, the median pair kept 90 % of its turns/s
-#: (`dronesim bench perf`, the ROS 2 mechanism row, load average 14: BENCHMARKS.md).
+#: The share of a core `dronesim ros2` aims to spend publishing: after a turn that took it C seconds of CPU, it
+#: publishes the next no sooner than C / ROS_CPU_SHARE seconds later, but no later than `ROS_SLOWEST` after it, which
+#: wins for a swarm: a 1000-drone turn costs it 13-21 ms (encoding about 1, a put per message the rest), so it is
+#: published once a second and the viewer takes 1.3-1.6 % of a core, not 1 % (a small game's turn, well under a
+#: millisecond, goes out at `ROS_RATE`); its ROS 2 user 0.7-1.0 %, the router 0.1-0.9 %. Measured within one game,
+#: the viewer attached and detached in turn (`dronesim bench perf`'s ROS 2 row, load average 9-14: BENCHMARKS.md),
+#: a 1000-drone game kept 92-101 % of its turns/s beside it. (At 5 % a 1000-drone game ran 13 % slower beside it.)
 ROS_CPU_SHARE = 0.01
 ROS_SLOWEST = 1.0
 #: Seconds to the viewer's next turn from which it drops its STATUS subscription meanwhile (it subscribes again
