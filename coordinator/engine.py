@@ -22,7 +22,6 @@ and working is not taken for a hung one (which says nothing, and is LOST as befo
 
 from __future__ import annotations
 
-import itertools
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -56,7 +55,6 @@ from schema import (
     Welcome,
 )
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
-from schema.messages import MAX_OVER_TEXT
 from schema.tables import code_of, drone_name
 from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, TURN_FEW_DRONES, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
@@ -65,7 +63,7 @@ from world.search import STEPS, is_step, step_lengths
 from . import arbiter, lacam, observer
 from .admission import Roster, id_ranges
 from .config import GameConfig, starts_of
-from .fleet import ALIVE, CAUSES, DEAD, NOTES, REACHED, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
+from .fleet import ALIVE, CAUSES, DEAD, NOTES, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
 from .journal import (
     TurnLog,
     TurnRecord,
@@ -78,6 +76,7 @@ from .journal import (
     turns,
 )
 from .stages import TAKES, TRANSITIONS, Stage, When
+from .verdict import end_reason, named, over_text
 
 # --------------------------------------------------------------------------- effects
 
@@ -376,7 +375,7 @@ class Engine:
         if self.journaled:
             log.state(state_hash(status))
         self._log.debug("turn %d observed: %s", turn, log.record)
-        end = self._end_reason(alive)
+        end = end_reason(fleet, self.arbiter, self.final, turn, self.config.max_turns, alive)
         effects += [Record(log.record), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
         return _drones_first(effects)
 
@@ -614,7 +613,7 @@ class Engine:
             self._proposed[rows], self._said[rows], self._moved[rows] = cells, codes, True
             self._ranked[rows] = 0 if ranked is None else ranked
             turn = self._judge()
-        if end := self._end_reason(turn.alive):
+        if end := end_reason(fleet, self.arbiter, self.final, self.turn, self.config.max_turns, turn.alive):
             self._over(*end)
             return self.end
         self._open_gcs(self.turn + 1)
@@ -891,32 +890,6 @@ class Engine:
         self._turn_log.lost(d)
         self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
 
-    def _end_reason(self, left: int) -> tuple[EndReason, str] | None:
-        """Whether the game ends with the turn just judged (leaving `left` drones alive), and why."""
-        fleet = self.fleet
-        if not left:  # (from the columns: a DroneView each would cost an RL episode's end more than its turn)
-            causes = named([f"{d} {STATES[s].value.lower()} ({CAUSES[c].value.lower()}) at {tuple(p)}"
-                            for d, s, c, p in zip(fleet.ids, fleet.state.tolist(), fleet.cause.tolist(),
-                                                  fleet.pos.tolist())])
-            return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
-        if getattr(self.arbiter, "unsolvable", False):  # (a proof: coordinator/lacam.py)
-            away = (fleet.state == ALIVE) & (fleet.target[:, 0] >= 0) & (fleet.pos != fleet.target).any(axis=1)
-            return EndReason.SETTLED, ("no solution (the search over the drones' configurations proved it): targets "
-                                       "reached, except unreachable for "
-                                       f"{named([fleet.ids[i] for i in np.flatnonzero(away)])}")
-        if self.final:
-            alive = fleet.state == ALIVE
-            notes = fleet.notes()[alive]
-            if np.count_nonzero(notes == REACHED) == len(notes):
-                return EndReason.ALL_REACHED, f"every drone reached its target in {self.turn} turns"
-            if np.count_nonzero((notes == REACHED) | (notes == UNREACHABLE)) == len(notes) and \
-                    not getattr(self.arbiter, "busy", False):  # (the search brings them home: lacam.Lacam)
-                stuck = [fleet.ids[i] for i in alive.nonzero()[0][notes == UNREACHABLE].tolist()]
-                return EndReason.SETTLED, f"targets reached, except unreachable for {named(stuck)}"
-        if self.turn >= self.config.max_turns:
-            return EndReason.TURN_LIMIT, f"turn limit {self.config.max_turns} reached"
-        return None
-
     def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
         """The game ends: its over record closes the journal (a game that never started has none: its journal
         stays empty, free for a new game) and OVER goes out."""
@@ -924,9 +897,7 @@ class Engine:
         started = self.stage is not Stage.ADMITTING
         self._enter(Stage.OVER)
         lifelong = self.config.lifelong and started
-        if lifelong:  # (first: the names an end lists are cut to fit after it)
-            text = f"{self.tasks} tasks done in {turn} turns, {self.tasks / max(turn, 1):.3f} a turn; {text}"
-        text = clipped(text)
+        text = over_text(text, turn, self.tasks if lifelong else None)
         self.end = Over(turn=turn, sender="SRV", reason=reason, text=text, game=self.game)
         self._log.info("game over at turn %d: %s", turn, text)
         record = over_record(turn, reason.value, text, self.tasks if lifelong else None)
@@ -1114,27 +1085,6 @@ class Engine:
             if self.stage is Stage.DRONES:
                 return self._drones_check()
         return []
-
-
-#: Characters of the names an end's text lists (then "and N more"), within `MAX_OVER_TEXT` with room for the rest.
-NAMES_ROOM = MAX_OVER_TEXT - 128
-
-
-def named(items: list[str], room: int = NAMES_ROOM) -> str:
-    """`items` joined by ", ", as many as fit in `room` characters, then "and N more": the text of an OVER (and of
-    its journal record) stays within `MAX_OVER_TEXT` whatever the number of drones it names."""
-    text = ", ".join(items)
-    if len(text) <= room:
-        return text
-    shown = list(itertools.takewhile(lambda n: n < room - 24, itertools.accumulate(len(i) + 2 for i in items)))
-    return f"{', '.join(items[:len(shown)])} and {len(items) - len(shown)} more"
-
-
-def clipped(text: str) -> str:
-    """`text` cut to `MAX_OVER_TEXT` bytes of UTF-8 (ending "..." if cut): an OVER's text (a full disk's error may
-    name a long path)."""
-    data = text.encode()
-    return text if len(data) <= MAX_OVER_TEXT else data[:MAX_OVER_TEXT - 3].decode(errors="ignore") + "..."
 
 
 def opens_drones_phase(effect: Effect) -> bool:
