@@ -29,7 +29,7 @@ stays on its goal; an agent not there at the end costs the game's length) and ma
 also divided by its lower bound (the sum, resp. the largest, of the single-agent optimal lengths); collisions
 (deaths of VERTEX or SWAP: none may happen between cooperative drones); turns per second of the whole
 in-process game (every drone's planning included); and the arbiter's CPU time per turn (process time inside
-`Engine.arbiter`, the garbage collector held off: see `Timed`). POGEMA (benchmarks/pogema.py) is run at the
+`Arbitration.arbiter`, the garbage collector held off: see `Timed`). POGEMA (benchmarks/pogema.py) is run at the
 same agent counts in the same run: its steps per second with random actions on its 64 x 64 grid.
 
 The distributed cities (`city_distributed`, its own subsection "Distributed cities (LRTA*)", which the table's

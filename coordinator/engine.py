@@ -60,10 +60,11 @@ from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, TURN_FEW_DRON
 from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
 from world.search import STEPS, is_step, step_lengths
 
-from . import arbiter, lacam, observer
+from . import observer
 from .admission import Roster, id_ranges
+from .arbitration import Arbitration
 from .config import GameConfig, starts_of
-from .fleet import ALIVE, CAUSES, DEAD, NOTES, STATES, STUCK, UNREACHABLE, Drones, Fleet, cell_of, nonzero
+from .fleet import ALIVE, CAUSES, DEAD, NOTES, STATES, Drones, Fleet, cell_of, nonzero
 from .journal import (
     TurnLog,
     TurnRecord,
@@ -127,7 +128,6 @@ class Engine:
         if self.world.size != self.size:
             raise UsageError(f"the world is {self.world.size}, the game's is {self.size}")
         self._solid = self.world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
-        self._open: arbiter.OpenCells | None = None  # the same, as the arbiter reads it (PIBT's swap; made once needed)
         self.stage, self.turn = Stage.ADMITTING, 0
         self.fleet = Fleet(starts_of(config))
         self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
@@ -142,11 +142,7 @@ class Engine:
         self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
         self._said = np.zeros(n, np.uint8)  # the notes that came with them
         self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
-        self.priority = np.zeros(n, np.int64)  # each drone's for the arbitration (`age`): from the journaled turns
-        self._gave_way = np.zeros(n, bool)  # who gave way this turn (arbiter.pibt)
-        #: The arbitration: the search (lacam.Lacam), arbiter.cooperate (PIBT), or arbiter.fixed (the former rule,
-        #: for the benchmark).
-        self.arbiter: arbiter.Arbiter = lacam.Lacam() if config.arbiter == "lacam" else arbiter.cooperate
+        self.arbitration = Arbitration(config.arbiter, self.world, n)  # the cooperative drones'
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log = TurnLog(0)
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
@@ -292,17 +288,8 @@ class Engine:
         self.fleet.fly(list(range(len(self.fleet))), host, autopilot, False)
         if len(cooperative):
             self.fleet.learn(list(cooperative), autopilot, True)
-        self._prepare()
+        self.arbitration.prepare(self.fleet)
         self._open_gcs(1)
-
-    def _prepare(self) -> None:
-        """The game starts: the arbitration makes what it needs of the static world before the turns (lacam.Lacam's
-        graph and distance tables: outside the turns' budget, and the same decisions whenever they are made). Not
-        in a game without a cooperative drone, which never arbitrates (an RL episode's: its reset would build the
-        world's graph, some 20 ms on 64x64x16, every ~40 steps)."""
-        prepare = getattr(self.arbiter, "prepare", None)
-        if prepare is not None and self.fleet.cooperating:
-            prepare(self.size, self.open_cells())
 
     def header(self) -> dict:
         """The journal's first record: what identifies the game (see resume.py). Without a journal it leaves
@@ -313,7 +300,7 @@ class Engine:
 
     def _start(self) -> list[Effect]:
         """Everyone is there: the game starts (its header opens the journal), or a resumed one goes on."""
-        self._prepare()
+        self.arbitration.prepare(self.fleet)
         if self.stage is Stage.RESUMING:
             self._log.info("entities back: the game resumes at turn %d", self.turn + 1)
             return [Publish(self.status()), *self._gcs_phase(self.turn + 1)]
@@ -375,57 +362,9 @@ class Engine:
         if self.journaled:
             log.state(state_hash(status))
         self._log.debug("turn %d observed: %s", turn, log.record)
-        end = end_reason(fleet, self.arbiter, self.final, turn, self.config.max_turns, alive)
+        end = end_reason(fleet, self.arbitration.arbiter, self.final, turn, self.config.max_turns, alive)
         effects += [Record(log.record), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
         return _drones_first(effects)
-
-    def _arbitrate(self, alive: np.ndarray, before: np.ndarray, proposed: np.ndarray) -> np.ndarray:
-        """`proposed` after the cooperative drones' arbitration; journaled: who did not get its first choice
-        ("yielded") and who gave way ("gave_way": their priority resets)."""
-        fleet = self.fleet
-        ranked = np.where(self._moved[alive], self._ranked[alive], 0)
-        final, yielded, gave_way = self.arbiter(self.size, before, proposed, ranked, fleet.cooperative[alive],
-                                                self.priority[alive], fleet.target[alive], self.open_cells(),
-                                                self.turn)
-        self._gave_way[alive] = gave_way
-        if np.count_nonzero(gave_way) or np.count_nonzero(yielded):
-            self._turn_log.arbitration([fleet.ids[i] for i in alive[gave_way].tolist()],
-                                       [fleet.ids[i] for i in alive[yielded].tolist()])
-        return final
-
-    def open_cells(self) -> arbiter.OpenCells:
-        """The world's open cells as the arbiter reads them (made once needed)."""
-        if self._open is None:
-            self._open = arbiter.OpenCells(self.world.grid)
-        return self._open
-
-    def follow(self, alive: np.ndarray) -> None:
-        """A journaled turn replayed (resume.py), before its moves: the arbitration's search does its work as when
-        the turn was played (its state is a function of the drones' cells and targets: coordinator/lacam.py)."""
-        follow = getattr(self.arbiter, "follow", None)
-        if follow is not None and np.count_nonzero(self.fleet.cooperative[alive]):
-            fleet = self.fleet
-            follow(self.size, fleet.pos[alive], fleet.cooperative[alive], fleet.target[alive], self.open_cells(),
-                   self.turn)
-
-    def age(self, alive: np.ndarray, gave_way: list[int] | None = None) -> None:
-        """The arbitration's priorities after a turn of the `alive` rows: 0 for a drone at rest (on its target or
-        without one) or that gave way this turn (`gave_way` rows, else the arbiter's), arbiter.STUCK for one
-        that says UNREACHABLE or STUCK (held up by drones for long), arbiter.TIE_SPAN more for each other (PIBT's
-        rule), plus a tie-break below TIE_SPAN: its Manhattan distance to its target when it left rest (PIBT2's, the
-        long trips first). resume.py replays it turn by turn."""
-        fleet = self.fleet
-        if gave_way is not None:
-            self._gave_way[gave_way] = True
-        target = fleet.target  # (every row, then the alive ones: fewer operations than selecting first)
-        home = (target[:, 0] < 0) | (fleet.pos == target).all(axis=1)
-        stuck = ~home & ((fleet.note == UNREACHABLE) | (fleet.note == STUCK)) & ~self._gave_way
-        prio, span = self.priority, arbiter.TIE_SPAN
-        far = np.minimum(np.abs(fleet.pos.astype(np.int64) - target).sum(axis=1), span - 1)
-        moving = np.where(prio < span, span + far, prio + span)  # leaving rest now: its tie-break is taken now
-        self.priority[alive] = np.where(home | self._gave_way, 0, np.where(stuck, arbiter.STUCK, moving))[alive]
-        if np.count_nonzero(self._gave_way):
-            self._gave_way[:] = False
 
     def _kind(self, cell: Cell) -> CellKind:
         if not self.world.contains(cell):
@@ -613,7 +552,7 @@ class Engine:
             self._proposed[rows], self._said[rows], self._moved[rows] = cells, codes, True
             self._ranked[rows] = 0 if ranked is None else ranked
             turn = self._judge()
-        if end := end_reason(fleet, self.arbiter, self.final, self.turn, self.config.max_turns, turn.alive):
+        if end := end_reason(fleet, self.arbitration.arbiter, self.final, self.turn, self.config.max_turns, turn.alive):
             self._over(*end)
             return self.end
         self._open_gcs(self.turn + 1)
@@ -755,8 +694,11 @@ class Engine:
             if cell != here:
                 moved.append(i)
         if fleet.cooperating and True in fleet.column(fleet.cooperative, alive):
-            final = self._arbitrate(np.array(alive), np.array([before[i] for i in alive]),
-                                    np.array([after[i] for i in alive]))
+            rows = np.array(alive)
+            final = self.arbitration.decide(fleet, rows, np.array([before[i] for i in alive]),
+                                            np.array([after[i] for i in alive]),
+                                            np.where(self._moved[rows], self._ranked[rows], 0), self.turn,
+                                            self._turn_log)
             after.update(zip(alive, map(tuple, final.tolist())))
             moved = [i for i in every if after[i] != before[i]]
         if not moved:  # where the drones were, alive and apart, they still are
@@ -779,7 +721,7 @@ class Engine:
         if said:
             _set_rows(fleet.note, said, [took[i][1] for i in said])
         if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
-            self.age(np.array(alive, np.intp))
+            self.arbitration.age(fleet, np.array(alive, np.intp))
         if dead:
             self._died(dead, after)
         hovered = [i for i in alive if i not in took] if len(alive) != len(took) else []  # (as the arrays count:
@@ -836,7 +778,9 @@ class Engine:
         after = np.where(took[:, None], self._proposed, before)
         if np.count_nonzero(fleet.cooperative & alive):
             rows = alive.nonzero()[0]
-            after[rows] = self._arbitrate(rows, before[rows], after[rows])
+            after[rows] = self.arbitration.decide(fleet, rows, before[rows], after[rows],
+                                                  np.where(self._moved[rows], self._ranked[rows], 0), self.turn,
+                                                  self._turn_log)
         moved = (after != before).any(axis=1)
         any_moved = np.count_nonzero(moved) > 0
         if any_moved:  # a cell outside the world is the observer's to judge (OUTSIDE), never a building
@@ -851,7 +795,7 @@ class Engine:
         if len(said):
             np.copyto(fleet.note, self._said, where=says)
         if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
-            self.age(alive)
+            self.arbitration.age(fleet, alive)
         hovered = (alive & ~took).nonzero()[0] if hovering else said[:0]
         if hovering or fleet.missing:  # misses in a row: a move starts the count again
             fleet.count_misses(took, alive)
@@ -942,13 +886,13 @@ class Engine:
             self.intent = r.intent
             self.final = self.intent is Intent.FINAL
         self.turn = r.turn
-        self.follow(alive)  # (before the moves, as the arbitration ran)
+        self.arbitration.follow(fleet, alive, self.turn)  # (before the moves, as the arbitration ran)
         for d, p in r.moves.items():
             fleet.pos[row[d]] = p
         for d, n in r.notes.items():
             fleet.note[row[d]] = code_of(n)
         if fleet.cooperating:  # the arbitration's priorities (as `_judge` keeps them)
-            self.age(alive, [row[d] for d in r.gave_way])
+            self.arbitration.age(fleet, alive, [row[d] for d in r.gave_way])
         hovered = np.isin(alive, [row[d] for d in r.hovered])
         took, live = np.zeros(len(fleet), bool), np.zeros(len(fleet), bool)
         took[alive[~hovered]], live[alive] = True, True

@@ -419,7 +419,8 @@ def main(conf: zenoh.Config, game: GameConfig, *, keys: Keys, journal: str | Non
     engine = open_game(game, journal, resume, logger)
     engine.verify_env, engine.journaled = verify_env, journal is not None
     engine.env_followed = False  # until a Matching event says someone follows the ENV phase
-    engine.arbiter = timed = arbiter.Timed(engine.arbiter)  # its CPU, reported at the end (benchmarks read it)
+    # its CPU, reported at the end (benchmarks read it)
+    engine.arbitration.arbiter = timed = arbiter.Timed(engine.arbitration.arbiter)
     with open_session(conf) as session:
         if (other := rival(session, keys)) is not None:
             raise UsageError(f"another coordinator (session {other}) runs on {keys.root}: one game per root")

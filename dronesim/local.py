@@ -67,7 +67,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     """Play the game. `swarm`: the drones flown as `dronesim up --swarm` flies them, one host per
     autopilot sending one MOVES a turn, with the autopilot's swarm form from `swarm_min` drones on (the
     journal is the same; drones that miss or vanish need the layout of a process per drone).
-    `arbiter` (`Engine.arbiter`, e.g. the former `arbiter.fixed`) and `pilot_options` (autopilot name ->
+    `arbiter` (`Arbitration.arbiter`, e.g. the former `arbiter.fixed`) and `pilot_options` (autopilot name ->
     options for each of its instances flown one per drone, e.g. D*'s `known` map) are the benchmark's, and so is
     `journaled` False: the turn records say only their turn (a long game of thousands of drones in less memory)."""
     log = logger or logging.getLogger("dronesim.local")
@@ -77,7 +77,7 @@ def simulate(config: GameConfig, autopilots: Mapping[str, str], inputs: Inputs,
     engine = Engine(config, log, world)
     engine.verify_env, engine.journaled = verify_env, journaled
     if arbiter is not None:  # (the benchmark's; by default the engine's own)
-        engine.arbiter = arbiter
+        engine.arbitration.arbiter = arbiter
     records: list[dict] = []
     statuses: list[Status] = []
     queue: deque = deque()

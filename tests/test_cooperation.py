@@ -287,15 +287,15 @@ def test_a_loop_round_a_block_is_left(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_the_longer_trip_goes_first_among_drones_away_as_long() -> None:
-    """Priorities (`Engine.age`): the turns away from rest first, then the distance to the target when the drone
+    """Priorities (`Arbitration.age`): the turns away from rest first, then the distance to the target when the drone
     left rest (PIBT2's initial distance), then the id: D02, with the longer trip, outranks D01."""
     drones = {"D01": ((0, 0, 0), (3, 0, 0), "dstar"), "D02": ((0, 2, 0), (7, 2, 0), "dstar"),
               "D03": ((5, 1, 0), (5, 1, 0), "dstar")}
     grid = world_of(["........"] * 3)
     records = play(grid, drones, max_turns=3).records
-    first = restore(config(grid, drones, 3), records[:2], LOG).priority.tolist()
+    first = restore(config(grid, drones, 3), records[:2], LOG).arbitration.priority.tolist()
     assert first == [TIE_SPAN + 2, TIE_SPAN + 6, 0]  # one turn away; 2 and 6 moves from the targets then
-    later = restore(config(grid, drones, 3), records[:3], LOG).priority.tolist()
+    later = restore(config(grid, drones, 3), records[:3], LOG).arbitration.priority.tolist()
     assert later == [2 * TIE_SPAN + 2, 2 * TIE_SPAN + 6, 0]  # the tie-break kept until they rest
 
 
@@ -461,8 +461,8 @@ def test_a_cooperative_game_replays_and_resumes(tmp_path: pathlib.Path, using: s
     # a coordinator resumed after any turn has the priorities PIBT's rule gives from the journal alone
     for cut in range(2, len(records) - 1):
         resumed = restore(cfg, records[:cut], LOG)
-        assert resumed.priority.tolist() == _priorities(records[:cut], cfg), f"after {cut - 1} turns"
-        assert cut > 2 or any(resumed.priority), "nobody away from its target after the first turn?"
+        assert resumed.arbitration.priority.tolist() == _priorities(records[:cut], cfg), f"after {cut - 1} turns"
+        assert cut > 2 or any(resumed.arbitration.priority), "nobody away from its target after the first turn?"
 
 
 def _priorities(records: list[dict], cfg: GameConfig) -> list[int]:
@@ -490,7 +490,7 @@ def _priorities(records: list[dict], cfg: GameConfig) -> list[int]:
 
 
 def test_a_drone_that_says_unreachable_away_from_its_target_goes_before_those_at_home() -> None:
-    """PIBT's priorities (`Engine.age`): a drone stuck away from its target (UNREACHABLE) waits behind every
+    """PIBT's priorities (`Arbitration.age`): a drone stuck away from its target (UNREACHABLE) waits behind every
     drone on its way, but goes before those at home, so that once they all rest it pushes through."""
     drones = {"D01": ((0, 1, 0), (0, 1, 0), "dstar"), "D02": ((2, 1, 0), (9, 1, 0), "dstar"),
               "D03": ((4, 1, 0), (8, 1, 0), "dstar"), "D04": ((6, 1, 0), (7, 1, 0), "dstar")}
@@ -498,12 +498,13 @@ def test_a_drone_that_says_unreachable_away_from_its_target_goes_before_those_at
     fleet, alive = engine.fleet, engine.fleet.alive_rows()
     fleet.aim(np.arange(4), np.array([g for _, g, _ in drones.values()]))
     fleet.note[[2, 3]] = code_of(Note.UNREACHABLE)
-    engine.age(alive)
-    assert engine.priority.tolist() == [0, TIE_SPAN + 7, STUCK, STUCK]  # at home, on its way (7 to go), stuck
+    engine.arbitration.age(fleet, alive)
+    priority = engine.arbitration.priority
+    assert priority.tolist() == [0, TIE_SPAN + 7, STUCK, STUCK]  # at home, on its way (7 to go), stuck
     assert 0 < STUCK < TIE_SPAN
     fleet.note[2] = code_of(Note.NONE)  # D03 gets closer again: it leaves rest, its tie-break taken now
-    engine.age(alive)
-    assert engine.priority.tolist() == [0, 2 * TIE_SPAN + 7, TIE_SPAN + 4, STUCK]
+    engine.arbitration.age(fleet, alive)
+    assert priority.tolist() == [0, 2 * TIE_SPAN + 7, TIE_SPAN + 4, STUCK]
 
 
 # --------------------------------------------------------------------------- through real processes

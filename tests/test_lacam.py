@@ -281,7 +281,7 @@ def test_a_resumed_coordinator_has_the_search_that_played() -> None:
     turns = [r for r in records if r.get("record") == "turn"]
     for cut in range(1, len(turns)):
         resumed = restore(cfg, records[:cut + 1], LOG)
-        arb = resumed.arbiter
+        arb = resumed.arbitration.arbiter
         assert isinstance(arb, lacam.Lacam)
         s = arb._search
         assert {**arb.state(), "at": None if s is None else s.at.cfg.tolist()} == states[cut - 1], f"turn {cut}"

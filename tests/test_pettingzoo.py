@@ -347,7 +347,8 @@ def test_an_episode_prepares_no_arbitration(few_drones: int) -> None:
         env.reset(seed=seed)
         env.step({a: 0 for a in env.agents})
         engine = env.episode.engine if few_drones else env._turns.engine
-        assert not engine.fleet.cooperating and engine._open is None and engine.arbiter._graph is None
+        assert not engine.fleet.cooperating and engine.arbitration._open is None
+        assert engine.arbitration.arbiter._graph is None
 
 
 def test_done_agents_cannot_act() -> None:
@@ -481,7 +482,7 @@ def test_turns_from_arrays_are_the_turns_from_messages(n: int, on_target: str) -
     assert any(r < -0.5 for step in a[1:] for r in step[1].values())  # deaths happened
     engines = arrays._turns.engine, messages._turns.engine
     if engines[0] is not None and engines[1] is not None:  # (an episode that ended stops its game)
-        assert engines[0].priority.tolist() == engines[1].priority.tolist()
+        assert engines[0].arbitration.priority.tolist() == engines[1].arbitration.priority.tolist()
 
 
 def test_a_turn_from_arrays_refuses_bad_input() -> None:
