@@ -149,7 +149,7 @@ MECHANISMS: tuple[Mechanism, ...] = (
         "`dronesim env --follow-status`: it takes every STATUS as it comes"),
     Mechanism(
         "Turn records without a journal skip what they would only drop",
-        ("coordinator/engine.py:/journaled/",),
+        ("coordinator/engine.py:/journaled/", "coordinator/judge.py:/journaled/"),
         Variant(journal=True), ((1000, (64, 64, 16)),),
         "`dronesim coordinator --journal FILE` (the gain then includes writing the journal)"),
     Mechanism(
@@ -186,7 +186,7 @@ MECHANISMS: tuple[Mechanism, ...] = (
     Mechanism(
         "A few rows or cells are taken one by one, below a threshold where numpy's fixed cost dominates",
         ("schema/tuning.py::FEW_ROWS", "schema/tuning.py::SURVEY_FEW_CELLS", "schema/tuning.py::CHART_FEW_CELLS",
-         "schema/tuning.py::SMALL_FLEET", "coordinator/engine.py:/FEW_ROWS/",
+         "schema/tuning.py::SMALL_FLEET", "coordinator/engine.py:/FEW_ROWS/", "coordinator/judge.py:/FEW_ROWS/",
          "entities/environment.py:/SURVEY_FEW_CELLS/", "entities/drone.py:/CHART_FEW_CELLS/",
          "coordinator/fleet.py::Fleet.column", "coordinator/fleet.py::nonzero", "coordinator/fleet.py::Fleet.whole",
          "schema/tuning.py::CHECK_FEW_ROWS", "schema/tables.py::Table._why_few", "schema/tables.py:/CHECK_FEW_ROWS/",
@@ -197,12 +197,12 @@ MECHANISMS: tuple[Mechanism, ...] = (
                "answered in 12 µs instead of 46, a 1-row STATUS table checked in 10 µs instead of 34 (a one-drone "
                "turn 5 to 20 % faster, alternated)"),
     Mechanism(
-        "A few drones' turn is played over Python lists (the engine's `_judge_few`, up to TURN_FEW_DRONES)",
-        ("schema/tuning.py::TURN_FEW_DRONES", "coordinator/engine.py::Engine._judge_few",
-         "coordinator/engine.py::Engine._missed", "coordinator/engine.py::Engine._died",
-         "coordinator/engine.py::Engine._journal_few", "coordinator/engine.py::_set_rows",
+        "A few drones' turn is played over Python lists (the judge's `_few`, up to TURN_FEW_DRONES)",
+        ("schema/tuning.py::TURN_FEW_DRONES", "coordinator/judge.py::Judge._few",
+         "coordinator/judge.py::Judge._missed", "coordinator/judge.py::Judge._died",
+         "coordinator/judge.py::Judge._journal_few", "coordinator/judge.py::_set_rows",
          "coordinator/observer.py::deaths_of_moves", "coordinator/observer.py::_meet",
-         "coordinator/engine.py:/TURN_FEW_DRONES|whole|took/"),
+         "coordinator/engine.py:/TURN_FEW_DRONES|whole|took/", "coordinator/judge.py:/TURN_FEW_DRONES|whole|took/"),
         switch="not switched off: a constant (tests/test_engine_turn.py plays random games with the lists always "
                "and the arrays always: the same journals); schema/tuning.py gives its measurement, a whole turn "
                "of 1 drone 10 µs instead of 64, 16: 25 instead of 88, 64: 78 instead of 117"),

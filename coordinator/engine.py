@@ -25,7 +25,6 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -57,14 +56,13 @@ from schema import (
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
 from schema.tables import code_of, drone_name
 from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, TURN_FEW_DRONES, UPD_WINDOW
-from world.grid import World, build_world, in_bounds, inside_rows, linear_rows
+from world.grid import World, build_world, in_bounds, inside_rows
 from world.search import STEPS, is_step, step_lengths
 
-from . import observer
 from .admission import Roster, id_ranges
 from .arbitration import Arbitration
 from .config import GameConfig, starts_of
-from .fleet import ALIVE, CAUSES, DEAD, NOTES, STATES, Drones, Fleet, cell_of, nonzero
+from .fleet import ALIVE, NOTES, STATES, Drones, Fleet, cell_of, nonzero
 from .journal import (
     TurnLog,
     TurnRecord,
@@ -76,6 +74,7 @@ from .journal import (
     state_hash,
     turns,
 )
+from .judge import Cells, Codes, Judge, Rows
 from .stages import TAKES, TRANSITIONS, Stage, When
 from .verdict import end_reason, named, over_text
 
@@ -100,23 +99,6 @@ class Record:
 
 Effect = Publish | ReplyToConnect | Record | Refusal
 
-#: What `Engine.play` takes: rows, cells and Note codes as arrays, or as lists (a few drones' turn).
-Rows = np.ndarray | list[int]
-Cells = np.ndarray | list[Cell]
-Codes = np.ndarray | list[int]
-CAUSE_CODE = {c: code_of(c) for c in Cause}
-
-
-class Moved(NamedTuple):
-    """What a turn did (`Engine._judge`): the drones it moved, their rows and their cells before and after (arrays,
-    or lists), and how many drones are alive after it."""
-
-    rows: Rows
-    src: Cells
-    dst: Cells
-    alive: int
-
-
 class Engine:
     """The coordinator's game: feed it events, carry out the effects it returns."""
 
@@ -127,7 +109,6 @@ class Engine:
         self.world = world if world is not None else build_world(config.world, (d.start for d in config.drones))
         if self.world.size != self.size:
             raise UsageError(f"the world is {self.world.size}, the game's is {self.size}")
-        self._solid = self.world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
         self.stage, self.turn = Stage.ADMITTING, 0
         self.fleet = Fleet(starts_of(config))
         self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
@@ -138,11 +119,9 @@ class Engine:
         n = len(self.fleet)
         self._aimed = np.zeros(n, bool)  # whose target this GCS phase received
         self._aims = np.zeros((n, 3), np.int32)  # those targets (rows where _aimed)
-        self._moved = np.zeros(n, bool)  # whose move this DRONES phase took
-        self._proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where _moved)
-        self._said = np.zeros(n, np.uint8)  # the notes that came with them
-        self._ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
         self.arbitration = Arbitration(config.arbiter, self.world, n)  # the cooperative drones'
+        # the turn's judgement, and the moves the drones' phase took (`Judge.moved`, `proposed`, `said`, `ranked`)
+        self.judge = Judge(self.fleet, self.world, self.arbitration, config.lost_after, logger)
         self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
         self._turn_log = TurnLog(0)
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
@@ -179,7 +158,7 @@ class Engine:
 
     def moves_taken(self) -> dict[str, Cell]:
         """The moves this DRONES phase has taken so far."""
-        return self._by_id(self._moved, self._proposed)
+        return self._by_id(self.judge.moved, self.judge.proposed)
 
     def _by_id(self, rows: np.ndarray, cells: np.ndarray) -> dict[str, Cell]:
         return {self.fleet.ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
@@ -320,7 +299,7 @@ class Engine:
     def _drones_phase(self) -> list[Effect]:
         """The drones' phase of this turn opens: no move taken yet, every alive drone's awaited."""
         self._enter(Stage.DRONES)
-        self._moved[:] = False
+        self.judge.moved[:] = False
         self.deciding = 0
         alive = self.fleet.alive_rows()
         self._awaiting = len(alive)
@@ -348,7 +327,9 @@ class Engine:
         """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), then the observer's
         STATUS and the turn's journal record, and the next turn or the end."""
         turn, fleet, log = self.turn, self.fleet, self._turn_log
-        moved, src, dst, alive = self._judge()
+        moved, src, dst, alive = self.judge(turn, log, self.journaled, self.env_followed or self.verify_env)
+        if self.config.lifelong:
+            self.tasks += fleet.tasks_done()
         effects: list[Effect] = []
         if (self.env_followed or self.verify_env) and len(moved):
             rows = MoveTable.empty(len(moved))
@@ -545,13 +526,16 @@ class Engine:
             self._targets_set(Intent.CONTINUE)
         elif self.intent is not Intent.CONTINUE:  # (else the phase changes nothing: no target, the same intent)
             self._targets_set(Intent.CONTINUE, False)
+        judge, cells_wanted = self.judge, self.env_followed or self.verify_env
         if few and not fleet.cooperating:  # (only the arbitration reads the arrays then)
-            turn = self._judge(took, whole)
+            turn = judge(self.turn, self._turn_log, self.journaled, cells_wanted, took, whole)
         else:
-            self._moved[:] = False  # (the drones' phase, opened and closed at once)
-            self._proposed[rows], self._said[rows], self._moved[rows] = cells, codes, True
-            self._ranked[rows] = 0 if ranked is None else ranked
-            turn = self._judge()
+            judge.moved[:] = False  # (the drones' phase, opened and closed at once)
+            judge.proposed[rows], judge.said[rows], judge.moved[rows] = cells, codes, True
+            judge.ranked[rows] = 0 if ranked is None else ranked
+            turn = judge(self.turn, self._turn_log, self.journaled, cells_wanted)
+        if self.config.lifelong:
+            self.tasks += fleet.tasks_done()
         if end := end_reason(fleet, self.arbitration.arbiter, self.final, self.turn, self.config.max_turns, turn.alive):
             self._over(*end)
             return self.end
@@ -560,7 +544,7 @@ class Engine:
 
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
         """A swarm host's moves, each taken as if sent as an NPS (`whole`: `_host_move`'s checks, as arrays)."""
-        fleet, steps = self.fleet, msg.moves
+        fleet, steps, judge = self.fleet, msg.moves, self.judge
         if not len(steps):
             return self._still_deciding(msg)
         numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
@@ -570,14 +554,14 @@ class Engine:
             step = np.full(n + 1, 2, np.int64)  # each row's step in this MOVES (2: none sent)
             step[rows] = step_lengths(fleet.pos[rows], pos)
             take = (step[:-1] <= 1) & (fleet.host_code == fleet.hosts.get(msg.sender, -2)) & (fleet.state == ALIVE)
-            take &= ~self._moved
+            take &= ~judge.moved
             item = np.zeros(n + 1, np.intp)  # each row's item in this MOVES (where it sent one)
             item[rows] = np.arange(len(rows))
             item = item[:-1]
-            np.copyto(self._proposed, pos[item], where=take[:, None])
-            np.copyto(self._said, notes[item], where=take)
-            np.copyto(self._ranked, steps.column("ranked")[item], where=take)
-            self._moved |= take
+            np.copyto(judge.proposed, pos[item], where=take[:, None])
+            np.copyto(judge.said, notes[item], where=take)
+            np.copyto(judge.ranked, steps.column("ranked")[item], where=take)
+            judge.moved |= take
             taken = int(np.count_nonzero(take))
             self._awaiting -= taken
             return rows[:0] if taken == len(rows) else np.flatnonzero(~np.append(take, False)[rows])
@@ -594,7 +578,7 @@ class Engine:
         if code is None:
             raise WrongSender(f"MOVES from {msg.sender}, which flies no drone of this game")
         fleet = self.fleet
-        if np.count_nonzero((fleet.host_code == code) & (fleet.state == ALIVE) & ~self._moved):
+        if np.count_nonzero((fleet.host_code == code) & (fleet.state == ALIVE) & ~self.judge.moved):
             if not self.deciding:
                 self._log.info("turn %d: %s is still deciding: the drones' phase waits for it (up to %g s)",
                                self.turn, msg.sender, max(self.config.phase_cap, self.config.phase_deadline))
@@ -615,13 +599,14 @@ class Engine:
         i = fleet.index.get(d)
         if i is None or fleet.state[i] != ALIVE:
             raise UnknownEntity(f"NPS from {d}, which is not an alive drone of this game")
-        if self._moved[i]:
+        judge = self.judge
+        if judge.moved[i]:
             raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
         here = cell_of(fleet.pos[i])
         if not is_step(here, pos):
             # refused: the drone may still send a valid move, or hover at the deadline
             raise OutOfRange(f"{d} cannot move from {here} to {pos}: one cell per turn, 6-connectivity")
-        self._proposed[i], self._moved[i], self._said[i], self._ranked[i] = pos, True, code_of(note), ranked
+        judge.proposed[i], judge.moved[i], judge.said[i], judge.ranked[i] = pos, True, code_of(note), ranked
         self._awaiting -= 1
 
     def _drones_check(self) -> list[Effect]:
@@ -644,195 +629,10 @@ class Engine:
         del self._upd_due[turn]
         return []
 
-    def _judge(self, took: dict[int, tuple[Cell, int]] | None = None,
-               whole: tuple[list[int], list[list[int]]] | None = None) -> Moved:
-        """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
-        the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
-        deadlines and the turn's journal record. The drones that moved: their rows, cells before and after.
-        The moves taken: `took` (row -> its cell and note code), or None: the phase's (`_moved`, `_proposed`,
-        `_said`). Up to TURN_FEW_DRONES alive drones, the turn is played over Python's lists (`_judge_few`),
-        else in array operations (`_judge_arrays`): the same turn (tests/test_engine_turn.py). `whole`: the
-        fleet's state and cells as lists (`Fleet.whole`), if the caller read them this turn."""
-        fleet = self.fleet
-        whole = whole or fleet.whole()
-        if whole:
-            alive = []
-            for i, s in enumerate(whole[0]):  # (loops, not comprehensions, in the few drones' turn: Python 3.11
-                if s == ALIVE:  # calls a function for each comprehension, a few drones' whole work)
-                    alive.append(i)
-        else:
-            alive = fleet.alive_rows().tolist()
-        if len(alive) > TURN_FEW_DRONES:
-            if took is not None:  # (a turn of `play`'s with a few moves: they are the phase's, as the arrays read it)
-                self._moved[:] = False
-                for i, (cell, code) in took.items():
-                    self._proposed[i], self._said[i], self._moved[i], self._ranked[i] = cell, code, True, 0
-            return self._judge_arrays()
-        every = alive  # the rows in play: the alive ones, and any whose move was taken before it was LOST
-        if took is None:
-            rows = np.flatnonzero(self._moved).tolist()
-            took = dict(zip(rows, zip(map(tuple, fleet.column(self._proposed, rows)), fleet.column(self._said, rows))))
-            if not took.keys() <= set(alive):  # (it moves, as in the arrays: `_judge_arrays`)
-                every = sorted({*alive, *took})
-        return self._judge_few(alive, every, took, whole[1] if whole else None)
-
-    def _judge_few(self, alive: list[int], every: list[int], took: dict[int, tuple[Cell, int]],
-                   whole: list[list[int]] | None) -> Moved:
-        """`_judge` over lists: `alive`, the alive rows (ascending); `every`, the rows in play (those and any whose
-        move was taken); `took`, the moves taken; `whole`: every drone's cell (None: those of `every` read here)."""
-        fleet = self.fleet
-        pos: list[list[int]] | dict[int, list[int]] = \
-            dict(zip(every, fleet.column(fleet.pos, every))) if whole is None else whole
-        before: dict[int, Cell] = {}
-        after: dict[int, Cell] = {}
-        moved: list[int] = []
-        for i in every:
-            x, y, z = pos[i]
-            here = before[i] = (x, y, z)
-            move = took.get(i)
-            cell = after[i] = here if move is None else move[0]
-            if cell != here:
-                moved.append(i)
-        if fleet.cooperating and True in fleet.column(fleet.cooperative, alive):
-            rows = np.array(alive)
-            final = self.arbitration.decide(fleet, rows, np.array([before[i] for i in alive]),
-                                            np.array([after[i] for i in alive]),
-                                            np.where(self._moved[rows], self._ranked[rows], 0), self.turn,
-                                            self._turn_log)
-            after.update(zip(alive, map(tuple, final.tolist())))
-            moved = [i for i in every if after[i] != before[i]]
-        if not moved:  # where the drones were, alive and apart, they still are
-            dead: dict[int, Cause] = {}
-        elif every is alive:
-            dead = observer.deaths_of_moves(self.size, self._solid, before, after, moved)
-        else:
-            live = set(alive)
-            dead = observer.deaths_of_moves(self.size, self._solid, {i: before[i] for i in alive},
-                                            {i: after[i] for i in alive}, [i for i in moved if i in live])
-        if len(moved) == 1:
-            fleet.pos[moved[0]] = after[moved[0]]
-        elif moved:
-            _set_rows(fleet.pos, moved, [after[i] for i in moved])
-        notes = fleet.note.tolist() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
-        said = []  # (in any order: the journal's is its own)
-        for i, (_, code) in took.items():
-            if code != notes[i]:
-                said.append(i)
-        if said:
-            _set_rows(fleet.note, said, [took[i][1] for i in said])
-        if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
-            self.arbitration.age(fleet, np.array(alive, np.intp))
-        if dead:
-            self._died(dead, after)
-        hovered = [i for i in alive if i not in took] if len(alive) != len(took) else []  # (as the arrays count:
-        lost = 0  # a LOST drone's move taken counts)
-        if hovered or fleet.missing:  # misses in a row: a move starts the count again
-            lost = self._missed(alive, [*took], hovered)
-        if self.config.lifelong:
-            self.tasks += fleet.tasks_done()
-        if self.journaled:  # what the turn did, drone by drone
-            self._journal_few(moved, after, said, took, hovered, dead)
-        left = len(alive) - len(dead) - lost
-        if not (self.env_followed or self.verify_env):  # (nobody reads the moves' cells: `_drones_finish`)
-            return Moved(moved, [], [], left)
-        return Moved(moved, [before[i] for i in moved], [after[i] for i in moved], left)
-
-    def _journal_few(self, moved: list[int], after: dict[int, Cell], said: list[int],
-                     took: dict[int, tuple[Cell, int]], hovered: list[int], dead: dict[int, Cause]) -> None:
-        ids, log = self.fleet.ids, self._turn_log
-        if moved:
-            log.moves([ids[i] for i in moved], [list(after[i]) for i in moved])
-        if said:
-            log.notes([ids[i] for i in said], [NOTES[took[i][1]] for i in said])
-        if hovered:
-            log.hovered([ids[i] for i in hovered])
-        if dead:
-            log.deaths([ids[i] for i in sorted(dead)], [dead[i] for i in sorted(dead)])
-
-    def _missed(self, alive: list[int], took: list[int], hovered: list[int]) -> int:
-        """The misses in a row after a turn (`_judge_few`): 0 for a drone whose move was taken, one more for an alive
-        one that hovered; LOST after `lost_after`. How many were LOST."""
-        fleet, n = self.fleet, len(self.fleet)
-        took_mask, alive_mask = np.zeros(n, bool), np.zeros(n, bool)
-        took_mask[took], alive_mask[alive] = True, True
-        fleet.count_misses(took_mask, alive_mask)
-        lost = [i for i in hovered if fleet.misses[i] >= self.config.lost_after and fleet.state[i] == ALIVE]
-        for i in lost:  # (not one that died this turn)
-            self._lose(i)
-        return len(lost)
-
-    def _died(self, dead: dict[int, Cause], at: dict[int, Cell]) -> None:
-        fleet, rows = self.fleet, sorted(dead)
-        _set_rows(fleet.state, rows, [DEAD] * len(rows))
-        _set_rows(fleet.cause, rows, [CAUSE_CODE[dead[i]] for i in rows])
-        for i in rows:
-            self._log.warning("turn %d: %s died (%s) at %s", self.turn, fleet.ids[i], dead[i].value, at[i])
-
-    def _judge_arrays(self) -> Moved:
-        """`_judge` in array operations, of the phase's moves. Its masks are over every row, dead or alive, as the
-        observer's (`observer.judge`)."""
-        fleet, ids = self.fleet, self.fleet.ids
-        alive, took = fleet.state == ALIVE, self._moved  # (a drone not alive has no move taken)
-        before = fleet.pos.copy()
-        hovering = np.count_nonzero(alive) - np.count_nonzero(took)  # (most turns: none, whose bookkeeping is skipped)
-        after = np.where(took[:, None], self._proposed, before)
-        if np.count_nonzero(fleet.cooperative & alive):
-            rows = alive.nonzero()[0]
-            after[rows] = self.arbitration.decide(fleet, rows, before[rows], after[rows],
-                                                  np.where(self._moved[rows], self._ranked[rows], 0), self.turn,
-                                                  self._turn_log)
-        moved = (after != before).any(axis=1)
-        any_moved = np.count_nonzero(moved) > 0
-        if any_moved:  # a cell outside the world is the observer's to judge (OUTSIDE), never a building
-            inside = inside_rows(after, self.size)
-            building = moved & inside & self._solid[np.where(inside, linear_rows(after, self.size), 0)]
-            cause = observer.judge(self.size, before, after, building, alive)
-        else:  # where the drones were, alive and apart, they still are
-            cause = np.zeros(len(fleet), np.uint8)
-        fleet.pos[:] = after
-        says = took & (self._said != fleet.note)  # (most turns: the notes said before)
-        said = says.nonzero()[0]
-        if len(said):
-            np.copyto(fleet.note, self._said, where=says)
-        if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
-            self.arbitration.age(fleet, alive)
-        hovered = (alive & ~took).nonzero()[0] if hovering else said[:0]
-        if hovering or fleet.missing:  # misses in a row: a move starts the count again
-            fleet.count_misses(took, alive)
-        lost = hovered[fleet.misses[hovered] >= self.config.lost_after] if hovering else hovered
-        died = cause != 0
-        dead = died.nonzero()[0]
-        if len(dead):
-            fleet.state[died] = DEAD
-            np.copyto(fleet.cause, cause, where=died)
-        for i in dead.tolist():
-            self._log.warning("turn %d: %s died (%s) at %s", self.turn, ids[i], CAUSES[fleet.cause[i]].value,
-                              cell_of(fleet.pos[i]))
-        for i in lost.tolist():
-            if fleet.state[i] == ALIVE:
-                self._lose(i)
-        if self.config.lifelong:
-            self.tasks += fleet.tasks_done()
-        log = self._turn_log
-        rows = moved.nonzero()[0]
-        if self.journaled:  # what the turn did, drone by drone
-            if any_moved:
-                log.moves([ids[i] for i in rows.tolist()], after[rows].tolist())
-            if len(said):
-                log.notes([ids[i] for i in said.tolist()], [NOTES[c] for c in fleet.note[said].tolist()])
-            if len(hovered):
-                log.hovered([ids[i] for i in hovered.tolist()])
-            if len(dead):
-                log.deaths([ids[i] for i in dead.tolist()], [CAUSES[c] for c in fleet.cause[dead].tolist()])
-        return Moved(rows, before[rows], after[rows], int(np.count_nonzero(fleet.state == ALIVE)))
-
     def _lose(self, i: int) -> None:
-        d = self.fleet.ids[i]
-        self.fleet.end(i, DroneState.LOST, Cause.LOST)
-        if self.stage is Stage.DRONES and not self._moved[i]:
+        if self.stage is Stage.DRONES and not self.judge.moved[i]:
             self._awaiting -= 1
-        self._turn_log.lost(d)
-        self._log.warning("turn %d: %s is LOST at %s", self.turn, d, cell_of(self.fleet.pos[i]))
+        self.judge.lose(i, self.turn, self._turn_log)
 
     def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
         """The game ends: its over record closes the journal (a game that never started has none: its journal
@@ -891,7 +691,7 @@ class Engine:
             fleet.pos[row[d]] = p
         for d, n in r.notes.items():
             fleet.note[row[d]] = code_of(n)
-        if fleet.cooperating:  # the arbitration's priorities (as `_judge` keeps them)
+        if fleet.cooperating:  # the arbitration's priorities (as `Judge` keeps them)
             self.arbitration.age(fleet, alive, [row[d] for d in r.gave_way])
         hovered = np.isin(alive, [row[d] for d in r.hovered])
         took, live = np.zeros(len(fleet), bool), np.zeros(len(fleet), bool)
@@ -935,7 +735,7 @@ class Engine:
             return self._gcs_finish()
         if stage is Stage.DRONES:
             alive = self.fleet.alive_rows()
-            late = [self.fleet.ids[i] for i in alive[~self._moved[alive]].tolist()]
+            late = [self.fleet.ids[i] for i in alive[~self.judge.moved[alive]].tolist()]
             self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
             return self._drones_finish()
         return []
@@ -1057,13 +857,3 @@ def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one:
     first = refused[0]
     more = f" (and {len(refused) - 1} more: {'; '.join(map(str, refused[1:4]))})" if len(refused) > 1 else ""
     return [Refusal(f"{msg.TAG} from {msg.sender}", type(first)(f"{first}{more}"))]
-
-
-def _set_rows(column: np.ndarray, rows: list[int], values: list) -> None:
-    """column[rows] = values, a few rows one by one (a selection by a list costs as much as FEW_ROWS rows)."""
-    if len(rows) <= FEW_ROWS:
-        for i, v in zip(rows, values):
-            column[i] = v
-    else:
-        column[rows] = values
-

@@ -32,11 +32,11 @@ FEW_ROWS = 8
 #: 313 vs 2.1 (`ndarray.tolist` vs `ndarray.take(...).tolist`).
 SMALL_FLEET = 128
 
-#: Alive drones up to which the engine plays a turn over Python's lists (`Engine._judge_few`: the moves, the
-#: observer's rules drone by drone only when someone may die, the notes, misses and journal), not in array operations
-#: (`Engine._judge_arrays`). A whole turn (`Engine.play`, every drone moving) on 64x64x16, lists vs arrays (CPU time,
-#: best of 7, load 6): 1 drone 10 vs 64 µs, 8: 16 vs 83, 16: 25 vs 88, 32: 46 vs 93, 48: 59 vs 91, 64: 78 vs 117,
-#: 96: 152 vs 136.
+#: Alive drones up to which the engine plays a turn over Python's lists (`Judge._few`, coordinator/judge.py: the
+#: moves, the observer's rules drone by drone only when someone may die, the notes, misses and journal), not in array
+#: operations (`Judge._arrays`). A whole turn (`Engine.play`, every drone moving) on 64x64x16, lists vs arrays (CPU
+#: time, best of 7, load 6): 1 drone 10 vs 64 µs, 8: 16 vs 83, 16: 25 vs 88, 32: 46 vs 93, 48: 59 vs 91, 64: 78 vs
+#: 117, 96: 152 vs 136.
 TURN_FEW_DRONES = 64
 
 #: Turns an ENV phase's report (UPD) may lag behind its turn and still be checked (`--verify-env`). Not measured:

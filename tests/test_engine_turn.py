@@ -1,5 +1,5 @@
-"""The engine's turn has one home (coordinator/engine.py `_judge`) and two ways through it: over Python's lists up
-to TURN_FEW_DRONES alive drones (`_judge_few`), in array operations above (`_judge_arrays`). Random games, each
+"""The engine's turn has one home (coordinator/judge.py `Judge`) and two ways through it: over Python's lists up
+to TURN_FEW_DRONES alive drones (`Judge._few`), in array operations above (`Judge._arrays`). Random games, each
 played with the lists always and with the arrays always, write the same journal byte for byte (a property test);
 the RL environments step through the same turn (tests/test_pettingzoo.py, tests/test_golden_journals.py)."""
 
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from coordinator import engine as engine_module
+from coordinator import judge as judge_module
 from coordinator.config import replace_config
 from coordinator.journal import dumps
 from dronesim.local import Inputs, simulate
@@ -64,12 +65,18 @@ def journal(scenario: Scenario, inputs: Inputs, options: dict) -> str:
     return "".join(dumps(r) + "\n" for r in result.records)
 
 
+def few_drones(monkeypatch: pytest.MonkeyPatch, few: int) -> None:
+    """TURN_FEW_DRONES set to `few` wherever the turn reads it (`Engine.play`'s inputs, the judge's way)."""
+    for module in (engine_module, judge_module):
+        monkeypatch.setattr(module, "TURN_FEW_DRONES", few)
+
+
 @pytest.mark.parametrize("case", range(30))
 def test_a_turn_over_lists_is_the_turn_in_arrays(case: int, monkeypatch: pytest.MonkeyPatch) -> None:
     scenario, inputs, options = random_game(case)
-    monkeypatch.setattr(engine_module, "TURN_FEW_DRONES", 10**6)
+    few_drones(monkeypatch, 10**6)
     lists = journal(scenario, inputs, options)
-    monkeypatch.setattr(engine_module, "TURN_FEW_DRONES", 0)
+    few_drones(monkeypatch, 0)
     arrays = journal(scenario, inputs, options)
     assert lists == arrays
     assert lists.count("\n") > 2  # (a game was played)
@@ -83,7 +90,7 @@ def test_a_drone_lost_after_its_move_was_taken_still_makes_it(few: int, monkeypa
     from schema.tables import code_of
     from tests.test_engine import Game, config, records
 
-    monkeypatch.setattr(engine_module, "TURN_FEW_DRONES", few)
+    few_drones(monkeypatch, few)
     g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4)), ("D03", (2, 2, 2))),
              hosts={"H01": ("D01", "D02"), "D03": ("D03",)})
     g.gcs()
@@ -106,7 +113,7 @@ def test_a_few_moves_among_many_alive_drones_are_made() -> None:
 
     world = World(size=(20, 20, 2), grid=np.zeros((20, 20, 2), bool))
     starts = [(x, y, 0) for x in range(0, 20, 2) for y in range(0, 14, 2)]
-    assert len(starts) > engine_module.TURN_FEW_DRONES
+    assert len(starts) > judge_module.TURN_FEW_DRONES
     game = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()),
                       drones=DroneTable([f"D{i:02d}" for i in range(1, len(starts) + 1)], starts))
     engine = local_game(game, world, QUIET)

@@ -1,5 +1,5 @@
 """Golden journals and episodes: games and RL episodes whose bytes are pinned by their digests, so that a change of
-how a turn is computed (lists for a few drones, arrays for many: coordinator/engine.py; the RL environments) cannot
+how a turn is computed (lists for a few drones, arrays for many: coordinator/judge.py; the RL environments) cannot
 change what a game or an episode is. The digests were taken before the turn had one home (issue 34): each case's
 journal (or episode's steps) must stay byte for byte what it was.
 

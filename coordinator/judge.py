@@ -1,0 +1,251 @@
+"""A turn's judgement (`Judge`): the moves the drones' phase took, made as the phase closes (every turn, from
+messages or from `Engine.play`): arbitrated (coordinator/arbitration.py), judged by the observer's rules
+(coordinator/observer.py), the notes, priorities, missed deadlines, deaths and losses, and what the turn's journal
+record says of them. Over Python's lists up to TURN_FEW_DRONES alive drones, in array operations above: the same
+turn (tests/test_engine_turn.py; docs/performance.md gives the lists' gain). The engine (coordinator/engine.py)
+takes the moves into `Judge.moved`, `proposed`, `said` and `ranked` as they come and calls the judge once."""
+
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple
+
+import numpy as np
+
+from schema import Cause, Cell, DroneState
+from schema.tables import code_of
+from schema.tuning import FEW_ROWS, TURN_FEW_DRONES
+from world.grid import World, inside_rows, linear_rows
+
+from . import observer
+from .arbitration import Arbitration
+from .fleet import ALIVE, CAUSES, DEAD, NOTES, Fleet, cell_of
+from .journal import TurnLog
+
+#: What `Engine.play` takes: rows, cells and Note codes as arrays, or as lists (a few drones' turn).
+Rows = np.ndarray | list[int]
+Cells = np.ndarray | list[Cell]
+Codes = np.ndarray | list[int]
+CAUSE_CODE = {c: code_of(c) for c in Cause}
+
+
+class Moved(NamedTuple):
+    """What a turn did (`Judge`): the drones it moved, their rows and their cells before and after (arrays, or
+    lists), and how many drones are alive after it."""
+
+    rows: Rows
+    src: Cells
+    dst: Cells
+    alive: int
+
+
+class Judge:
+    """The turn's judgement over `fleet` in `world`, its cooperative drones' moves arbitrated by `arbitration`;
+    a hovering drone is LOST after `lost_after` missed deadlines in a row. The moves the current drones' phase took,
+    one row per drone: `moved` (whose), `proposed` (the cells), `said` (the Note codes), `ranked` (the candidates,
+    0: none)."""
+
+    def __init__(self, fleet: Fleet, world: World, arbitration: Arbitration, lost_after: int,
+                 logger: logging.Logger) -> None:
+        n = len(fleet)
+        self.fleet, self.size, self.arbitration, self.lost_after, self._log = \
+            fleet, world.size, arbitration, lost_after, logger
+        self._solid = world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
+        self.moved = np.zeros(n, bool)  # whose move this DRONES phase took
+        self.proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where `moved`)
+        self.said = np.zeros(n, np.uint8)  # the notes that came with them
+        self.ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
+
+    def __call__(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
+                 took: dict[int, tuple[Cell, int]] | None = None,
+                 whole: tuple[list[int], list[list[int]]] | None = None) -> Moved:
+        """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
+        the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
+        deadlines and the turn's journal record. The drones that moved: their rows, cells before and after.
+        The moves taken: `took` (row -> its cell and note code), or None: the phase's (`moved`, `proposed`,
+        `said`). Up to TURN_FEW_DRONES alive drones, the turn is played over Python's lists (`_few`), else in
+        array operations (`_arrays`): the same turn (tests/test_engine_turn.py). `whole`: the fleet's state and
+        cells as lists (`Fleet.whole`), if the caller read them this turn. `turn`, `log`: the turn and its journal
+        record; `journaled`: whether the record says what each drone did; `cells`: whether the moved drones' cells
+        are wanted (if not, the lists' way leaves them out)."""
+        fleet = self.fleet
+        whole = whole or fleet.whole()
+        if whole:
+            alive = []
+            for i, s in enumerate(whole[0]):  # (loops, not comprehensions, in the few drones' turn: Python 3.11
+                if s == ALIVE:  # calls a function for each comprehension, a few drones' whole work)
+                    alive.append(i)
+        else:
+            alive = fleet.alive_rows().tolist()
+        if len(alive) > TURN_FEW_DRONES:
+            if took is not None:  # (a turn of `play`'s with a few moves: they are the phase's, as the arrays read it)
+                self.moved[:] = False
+                for i, (cell, code) in took.items():
+                    self.proposed[i], self.said[i], self.moved[i], self.ranked[i] = cell, code, True, 0
+            return self._arrays(turn, log, journaled)
+        every = alive  # the rows in play: the alive ones, and any whose move was taken before it was LOST
+        if took is None:
+            rows = np.flatnonzero(self.moved).tolist()
+            took = dict(zip(rows, zip(map(tuple, fleet.column(self.proposed, rows)), fleet.column(self.said, rows))))
+            if not took.keys() <= set(alive):  # (it moves, as in the arrays: `_arrays`)
+                every = sorted({*alive, *took})
+        return self._few(alive, every, took, whole[1] if whole else None, turn, log, journaled, cells)
+
+    def _few(self, alive: list[int], every: list[int], took: dict[int, tuple[Cell, int]],
+             whole: list[list[int]] | None, turn: int, log: TurnLog, journaled: bool, cells: bool) -> Moved:
+        """The turn over lists: `alive`, the alive rows (ascending); `every`, the rows in play (those and any whose
+        move was taken); `took`, the moves taken; `whole`: every drone's cell (None: those of `every` read here)."""
+        fleet = self.fleet
+        pos: list[list[int]] | dict[int, list[int]] = \
+            dict(zip(every, fleet.column(fleet.pos, every))) if whole is None else whole
+        before: dict[int, Cell] = {}
+        after: dict[int, Cell] = {}
+        moved: list[int] = []
+        for i in every:
+            x, y, z = pos[i]
+            here = before[i] = (x, y, z)
+            move = took.get(i)
+            cell = after[i] = here if move is None else move[0]
+            if cell != here:
+                moved.append(i)
+        if fleet.cooperating and True in fleet.column(fleet.cooperative, alive):
+            rows = np.array(alive)
+            final = self.arbitration.decide(fleet, rows, np.array([before[i] for i in alive]),
+                                            np.array([after[i] for i in alive]),
+                                            np.where(self.moved[rows], self.ranked[rows], 0), turn, log)
+            after.update(zip(alive, map(tuple, final.tolist())))
+            moved = [i for i in every if after[i] != before[i]]
+        if not moved:  # where the drones were, alive and apart, they still are
+            dead: dict[int, Cause] = {}
+        elif every is alive:
+            dead = observer.deaths_of_moves(self.size, self._solid, before, after, moved)
+        else:
+            live = set(alive)
+            dead = observer.deaths_of_moves(self.size, self._solid, {i: before[i] for i in alive},
+                                            {i: after[i] for i in alive}, [i for i in moved if i in live])
+        if len(moved) == 1:
+            fleet.pos[moved[0]] = after[moved[0]]
+        elif moved:
+            _set_rows(fleet.pos, moved, [after[i] for i in moved])
+        notes = fleet.note.tolist() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
+        said = []  # (in any order: the journal's is its own)
+        for i, (_, code) in took.items():
+            if code != notes[i]:
+                said.append(i)
+        if said:
+            _set_rows(fleet.note, said, [took[i][1] for i in said])
+        if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
+            self.arbitration.age(fleet, np.array(alive, np.intp))
+        if dead:
+            self._died(dead, after, turn)
+        hovered = [i for i in alive if i not in took] if len(alive) != len(took) else []  # (as the arrays count:
+        lost = 0  # a LOST drone's move taken counts)
+        if hovered or fleet.missing:  # misses in a row: a move starts the count again
+            lost = self._missed(alive, [*took], hovered, turn, log)
+        if journaled:  # what the turn did, drone by drone
+            self._journal_few(log, moved, after, said, took, hovered, dead)
+        left = len(alive) - len(dead) - lost
+        if not cells:  # (nobody reads the moves' cells: `Engine._drones_finish`)
+            return Moved(moved, [], [], left)
+        return Moved(moved, [before[i] for i in moved], [after[i] for i in moved], left)
+
+    def _journal_few(self, log: TurnLog, moved: list[int], after: dict[int, Cell], said: list[int],
+                     took: dict[int, tuple[Cell, int]], hovered: list[int], dead: dict[int, Cause]) -> None:
+        ids = self.fleet.ids
+        if moved:
+            log.moves([ids[i] for i in moved], [list(after[i]) for i in moved])
+        if said:
+            log.notes([ids[i] for i in said], [NOTES[took[i][1]] for i in said])
+        if hovered:
+            log.hovered([ids[i] for i in hovered])
+        if dead:
+            log.deaths([ids[i] for i in sorted(dead)], [dead[i] for i in sorted(dead)])
+
+    def _missed(self, alive: list[int], took: list[int], hovered: list[int], turn: int, log: TurnLog) -> int:
+        """The misses in a row after a turn (`_few`): 0 for a drone whose move was taken, one more for an alive
+        one that hovered; LOST after `lost_after`. How many were LOST."""
+        fleet, n = self.fleet, len(self.fleet)
+        took_mask, alive_mask = np.zeros(n, bool), np.zeros(n, bool)
+        took_mask[took], alive_mask[alive] = True, True
+        fleet.count_misses(took_mask, alive_mask)
+        lost = [i for i in hovered if fleet.misses[i] >= self.lost_after and fleet.state[i] == ALIVE]
+        for i in lost:  # (not one that died this turn)
+            self.lose(i, turn, log)
+        return len(lost)
+
+    def _died(self, dead: dict[int, Cause], at: dict[int, Cell], turn: int) -> None:
+        fleet, rows = self.fleet, sorted(dead)
+        _set_rows(fleet.state, rows, [DEAD] * len(rows))
+        _set_rows(fleet.cause, rows, [CAUSE_CODE[dead[i]] for i in rows])
+        for i in rows:
+            self._log.warning("turn %d: %s died (%s) at %s", turn, fleet.ids[i], dead[i].value, at[i])
+
+    def _arrays(self, turn: int, log: TurnLog, journaled: bool) -> Moved:
+        """The turn in array operations, of the phase's moves. Its masks are over every row, dead or alive, as the
+        observer's (`observer.judge`)."""
+        fleet, ids = self.fleet, self.fleet.ids
+        alive, took = fleet.state == ALIVE, self.moved  # (a drone not alive has no move taken)
+        before = fleet.pos.copy()
+        hovering = np.count_nonzero(alive) - np.count_nonzero(took)  # (most turns: none, whose bookkeeping is skipped)
+        after = np.where(took[:, None], self.proposed, before)
+        if np.count_nonzero(fleet.cooperative & alive):
+            rows = alive.nonzero()[0]
+            after[rows] = self.arbitration.decide(fleet, rows, before[rows], after[rows],
+                                                  np.where(self.moved[rows], self.ranked[rows], 0), turn, log)
+        moved = (after != before).any(axis=1)
+        any_moved = np.count_nonzero(moved) > 0
+        if any_moved:  # a cell outside the world is the observer's to judge (OUTSIDE), never a building
+            inside = inside_rows(after, self.size)
+            building = moved & inside & self._solid[np.where(inside, linear_rows(after, self.size), 0)]
+            cause = observer.judge(self.size, before, after, building, alive)
+        else:  # where the drones were, alive and apart, they still are
+            cause = np.zeros(len(fleet), np.uint8)
+        fleet.pos[:] = after
+        says = took & (self.said != fleet.note)  # (most turns: the notes said before)
+        said = says.nonzero()[0]
+        if len(said):
+            np.copyto(fleet.note, self.said, where=says)
+        if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
+            self.arbitration.age(fleet, alive)
+        hovered = (alive & ~took).nonzero()[0] if hovering else said[:0]
+        if hovering or fleet.missing:  # misses in a row: a move starts the count again
+            fleet.count_misses(took, alive)
+        lost = hovered[fleet.misses[hovered] >= self.lost_after] if hovering else hovered
+        died = cause != 0
+        dead = died.nonzero()[0]
+        if len(dead):
+            fleet.state[died] = DEAD
+            np.copyto(fleet.cause, cause, where=died)
+        for i in dead.tolist():
+            self._log.warning("turn %d: %s died (%s) at %s", turn, ids[i], CAUSES[fleet.cause[i]].value,
+                              cell_of(fleet.pos[i]))
+        for i in lost.tolist():
+            if fleet.state[i] == ALIVE:
+                self.lose(i, turn, log)
+        rows = moved.nonzero()[0]
+        if journaled:  # what the turn did, drone by drone
+            if any_moved:
+                log.moves([ids[i] for i in rows.tolist()], after[rows].tolist())
+            if len(said):
+                log.notes([ids[i] for i in said.tolist()], [NOTES[c] for c in fleet.note[said].tolist()])
+            if len(hovered):
+                log.hovered([ids[i] for i in hovered.tolist()])
+            if len(dead):
+                log.deaths([ids[i] for i in dead.tolist()], [CAUSES[c] for c in fleet.cause[dead].tolist()])
+        return Moved(rows, before[rows], after[rows], int(np.count_nonzero(fleet.state == ALIVE)))
+
+    def lose(self, i: int, turn: int, log: TurnLog) -> None:
+        """Drone row `i` is LOST in `turn` (its record `log`)."""
+        d = self.fleet.ids[i]
+        self.fleet.end(i, DroneState.LOST, Cause.LOST)
+        log.lost(d)
+        self._log.warning("turn %d: %s is LOST at %s", turn, d, cell_of(self.fleet.pos[i]))
+
+
+def _set_rows(column: np.ndarray, rows: list[int], values: list) -> None:
+    """column[rows] = values, a few rows one by one (a selection by a list costs as much as FEW_ROWS rows)."""
+    if len(rows) <= FEW_ROWS:
+        for i, v in zip(rows, values):
+            column[i] = v
+    else:
+        column[rows] = values
