@@ -126,7 +126,8 @@ MECHANISMS: tuple[Mechanism, ...] = (
     Mechanism(
         "A swarm host: one process and one MOVES a turn for all its drones",
         ("schema/messages.py::Moves", "schema/messages.py::StepTable", "schema/messages.py::Step",
-         "coordinator/engine.py::Engine._moves_of_host", "coordinator/engine.py::Engine._host_move",
+         "coordinator/engine.py::Engine._moves_of_host", "coordinator/intake.py::Ballot.take_all",
+         "coordinator/intake.py::Ballot.take_hosted",
          "coordinator/admission.py:/host/", "entities/drone_node.py:/host/"),
         Variant(per_drone=True), ((16, (64, 64, 16)),),
         "one process per drone (`dronesim drone --id Dnn`, the seed's layout), each sending its NPS"),
@@ -179,14 +180,14 @@ MECHANISMS: tuple[Mechanism, ...] = (
                "data); measured then: a 128-drone STATUS decoded in about 25 µs instead of 200 as records"),
     Mechanism(
         "The engine's drones are columns (fleet.py; the observer judges a turn in array operations)",
-        ("coordinator/fleet.py", "coordinator/observer.py::judge", "coordinator/engine.py::_in_batch"),
+        ("coordinator/fleet.py", "coordinator/observer.py::judge", "coordinator/intake.py::in_batch"),
         switch="not switched off: the per-drone records it replaced are gone (observer.deaths, the rules drone by "
                "drone, stays as the reference of a property test); measured then: coordinator CPU per turn "
                "1.7 → 1.1 ms at 128 drones, 9 → 3 ms at 1000"),
     Mechanism(
         "A few rows or cells are taken one by one, below a threshold where numpy's fixed cost dominates",
         ("schema/tuning.py::FEW_ROWS", "schema/tuning.py::SURVEY_FEW_CELLS", "schema/tuning.py::CHART_FEW_CELLS",
-         "schema/tuning.py::SMALL_FLEET", "coordinator/engine.py:/FEW_ROWS/", "coordinator/judge.py:/FEW_ROWS/",
+         "schema/tuning.py::SMALL_FLEET", "coordinator/intake.py:/FEW_ROWS/", "coordinator/judge.py:/FEW_ROWS/",
          "entities/environment.py:/SURVEY_FEW_CELLS/", "entities/drone.py:/CHART_FEW_CELLS/",
          "coordinator/fleet.py::Fleet.column", "coordinator/fleet.py::nonzero", "coordinator/fleet.py::Fleet.whole",
          "schema/tuning.py::CHECK_FEW_ROWS", "schema/tables.py::Table._why_few", "schema/tables.py:/CHECK_FEW_ROWS/",

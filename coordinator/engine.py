@@ -23,7 +23,7 @@ and working is not taken for a hung one (which says nothing, and is LOST as befo
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +40,6 @@ from schema import (
     Message,
     Moves,
     MoveTable,
-    Note,
     Nps,
     Over,
     Phase,
@@ -53,16 +52,17 @@ from schema import (
     Upd,
     Welcome,
 )
-from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, UsageError, WrongSender
-from schema.tables import code_of, drone_name
-from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, FEW_ROWS, TURN_FEW_DRONES, UPD_WINDOW
+from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UsageError, WrongSender
+from schema.tables import code_of
+from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, TURN_FEW_DRONES, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows
-from world.search import STEPS, is_step, step_lengths
+from world.search import STEPS, step_lengths
 
 from .admission import Roster, id_ranges
 from .arbitration import Arbitration
 from .config import GameConfig, starts_of
-from .fleet import ALIVE, NOTES, STATES, Drones, Fleet, cell_of, nonzero
+from .fleet import ALIVE, Drones, Fleet, cell_of, nonzero
+from .intake import Aims, Ballot, in_batch
 from .journal import (
     TurnLog,
     TurnRecord,
@@ -117,12 +117,10 @@ class Engine:
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
         n = len(self.fleet)
-        self._aimed = np.zeros(n, bool)  # whose target this GCS phase received
-        self._aims = np.zeros((n, 3), np.int32)  # those targets (rows where _aimed)
+        self.aiming = Aims(self.fleet, self.size)  # the targets this GCS phase received
+        self.ballot = Ballot(self.fleet)  # the moves this drones' phase took
         self.arbitration = Arbitration(config.arbiter, self.world, n)  # the cooperative drones'
-        # the turn's judgement, and the moves the drones' phase took (`Judge.moved`, `proposed`, `said`, `ranked`)
-        self.judge = Judge(self.fleet, self.world, self.arbitration, config.lost_after, logger)
-        self._awaiting = 0  # alive drones whose move this DRONES phase still awaits
+        self.judge = Judge(self.fleet, self.world, self.arbitration, self.ballot, config.lost_after, logger)
         self._turn_log = TurnLog(0)
         self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
         # The adapter's switches: the environment's UPD reports are checked; the turn records say what each drone
@@ -154,11 +152,11 @@ class Engine:
 
     def aims(self) -> dict[str, Cell]:
         """The targets this GCS phase has received so far (once it has ended: none, they are in force, `targets`)."""
-        return self._by_id(self._aimed, self._aims)
+        return self._by_id(self.aiming.aimed, self.aiming.cells)
 
     def moves_taken(self) -> dict[str, Cell]:
         """The moves this DRONES phase has taken so far."""
-        return self._by_id(self.judge.moved, self.judge.proposed)
+        return self._by_id(self.ballot.moved, self.ballot.proposed)
 
     def _by_id(self, rows: np.ndarray, cells: np.ndarray) -> dict[str, Cell]:
         return {self.fleet.ids[i]: cell_of(cells[i]) for i in np.flatnonzero(rows).tolist()}
@@ -299,10 +297,9 @@ class Engine:
     def _drones_phase(self) -> list[Effect]:
         """The drones' phase of this turn opens: no move taken yet, every alive drone's awaited."""
         self._enter(Stage.DRONES)
-        self.judge.moved[:] = False
         self.deciding = 0
         alive = self.fleet.alive_rows()
-        self._awaiting = len(alive)
+        self.ballot.open(self.turn, len(alive))
         orders = self.fleet.orders(alive)
         self._phase_msg = Turn(turn=self.turn, sender="SRV", phase=Phase.DRONES, orders=orders, game=self.game)
         if self._env_missing():  # drones would ASK nobody: the turn waits for the environment
@@ -314,7 +311,7 @@ class Engine:
     def _open_gcs(self, turn: int) -> Done | None:
         """The GCS phase of `turn` begins: nothing received yet; the DONE sent ahead for it, if any."""
         self._enter(Stage.GCS)
-        self.turn = turn  # (no target received yet: `_targets_set` and `_gcs_finish` cleared `_aimed`)
+        self.turn = turn  # (no target received yet: `_targets_set` and `_gcs_finish` cleared them)
         self._tgt_seen, self._done = 0, None
         self._turn_log = TurnLog(turn)
         if not self._early:
@@ -374,18 +371,7 @@ class Engine:
         if self.stage is not Stage.GCS or msg.turn != self.turn:
             raise StaleTurn(f"target for turn {msg.turn} while in {self.stage.value} of turn {self.turn}")
         self._tgt_seen += 1  # counted against the DONE's count even if refused: the phase goes on
-        return [*_in_batch(msg, 1, None, lambda _: self._aim(msg.drone, msg.pos)), *self._gcs_check()]
-
-    def _aim(self, d: str, pos: Cell) -> None:
-        """Keep a target for this GCS phase, or raise (and keep nothing)."""
-        i = self.fleet.index.get(d)
-        if i is None:
-            raise UnknownEntity(f"target for unknown drone {d}")
-        if self.fleet.state[i] != ALIVE:
-            raise UnknownEntity(f"target for {d}, which is {STATES[self.fleet.state[i]].value}")
-        if not in_bounds(pos, self.size):
-            raise OutOfRange(f"target {pos} for {d} is outside the world {self.size}")
-        self._aimed[i], self._aims[i] = True, pos
+        return [*in_batch(msg, 1, None, lambda _: self.aiming.aim(msg.drone, msg.pos)), *self._gcs_check()]
 
     def _hold(self, msg: Done) -> list[Effect]:
         """The GCS's DONE for a coming GCS phase (up to AHEAD_MAX turns on; it had nothing new to say): kept,
@@ -402,7 +388,7 @@ class Engine:
         return []
 
     def _nps(self, msg: Nps) -> list[Effect]:
-        self._move(msg.sender, msg.pos, msg.note, msg.ranked)
+        self.ballot.take(msg.sender, msg.pos, msg.note, msg.ranked)
         return self._drones_check()
 
     def _hold_moves(self, msg: Moves) -> list[Effect]:
@@ -438,18 +424,7 @@ class Engine:
                 return []  # (the same again: a ground station repeats its DONE until the turn is played)
             raise StaleTurn(f"second DONE from the GCS in turn {self.turn}")
         self._done = msg
-        fleet, numbers, pos = self.fleet, msg.targets.numbers, msg.targets.column("pos")
-
-        def whole() -> np.ndarray:  # its targets, each on its own as if sent as a TGT: `_aim`'s checks, as arrays
-            rows = fleet.row_of_number[numbers]
-            ok = (rows >= 0) & inside_rows(pos, self.size)
-            ok[ok] = fleet.state[rows[ok]] == ALIVE
-            self._aimed[rows[ok]], self._aims[rows[ok]] = True, pos[ok]
-            return np.flatnonzero(~ok)
-
-        refused = _in_batch(msg, len(msg.targets), whole,
-                            lambda j: self._aim(drone_name(int(numbers[j])), cell_of(pos[j])))
-        return [*refused, *self._gcs_check()]
+        return [*self.aiming.aim_all(msg), *self._gcs_check()]
 
     def _gcs_check(self) -> list[Effect]:
         """The GCS phase ends when its DONE and all the TGT it counted have arrived (in any order)."""
@@ -458,7 +433,7 @@ class Engine:
     def _gcs_finish(self) -> list[Effect]:
         """The GCS phase ends (also cut short): what arrived of its targets holds if its DONE is in, else none."""
         if self._done is None:
-            self._aimed[:] = False
+            self.aiming.aimed[:] = False
         elif not self._targets_set(self._done.intent):
             return [Record(self._turn_log.record), *self._over(EndReason.GCS_QUIT, "the ground station ended the game")]
         return self._drones_phase()
@@ -467,12 +442,10 @@ class Engine:
         """The GCS phase closes: its targets take force (`aimed`: whether it may have received any), its intent is
         noted; whether the game goes on (not QUIT)."""
         fleet = self.fleet
-        if aimed and nonzero(self._aimed):  # (most GCS phases bring no target)
-            changed = np.flatnonzero(self._aimed & (fleet.target != self._aims).any(axis=1))
-            fleet.aim(changed, self._aims[changed])
+        if aimed and nonzero(self.aiming.aimed):  # (most GCS phases bring no target)
+            changed = self.aiming.take_effect()
             if len(changed) and self.journaled:
-                self._turn_log.targets([fleet.ids[i] for i in changed.tolist()], self._aims[changed].tolist())
-            self._aimed.fill(False)
+                self._turn_log.targets([fleet.ids[i] for i in changed.tolist()], fleet.target[changed].tolist())
         if intent is not self.intent:
             self._turn_log.intent(intent)
             self.intent = intent
@@ -522,7 +495,7 @@ class Engine:
         if not ok:
             raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
         if len(aim_rows):
-            self._aimed[aim_rows], self._aims[aim_rows] = True, aims
+            self.aiming.aimed[aim_rows], self.aiming.cells[aim_rows] = True, aims
             self._targets_set(Intent.CONTINUE)
         elif self.intent is not Intent.CONTINUE:  # (else the phase changes nothing: no target, the same intent)
             self._targets_set(Intent.CONTINUE, False)
@@ -530,9 +503,10 @@ class Engine:
         if few and not fleet.cooperating:  # (only the arbitration reads the arrays then)
             turn = judge(self.turn, self._turn_log, self.journaled, cells_wanted, took, whole)
         else:
-            judge.moved[:] = False  # (the drones' phase, opened and closed at once)
-            judge.proposed[rows], judge.said[rows], judge.moved[rows] = cells, codes, True
-            judge.ranked[rows] = 0 if ranked is None else ranked
+            ballot = self.ballot
+            ballot.moved[:] = False  # (the drones' phase, opened and closed at once)
+            ballot.proposed[rows], ballot.said[rows], ballot.moved[rows] = cells, codes, True
+            ballot.ranked[rows] = 0 if ranked is None else ranked
             turn = judge(self.turn, self._turn_log, self.journaled, cells_wanted)
         if self.config.lifelong:
             self.tasks += fleet.tasks_done()
@@ -543,32 +517,10 @@ class Engine:
         return None
 
     def _moves_of_host(self, msg: Moves) -> list[Effect]:
-        """A swarm host's moves, each taken as if sent as an NPS (`whole`: `_host_move`'s checks, as arrays)."""
-        fleet, steps, judge = self.fleet, msg.moves, self.judge
-        if not len(steps):
+        """A swarm host's moves (`Ballot.take_all`), or none: its word that it is still deciding them."""
+        if not len(msg.moves):
             return self._still_deciding(msg)
-        numbers, pos, notes = steps.numbers, steps.column("pos"), steps.column("note")
-
-        def whole() -> np.ndarray:  # (the MOVES as columns of the fleet's rows: docs/performance.md, Memory)
-            rows, n = fleet.row_of_number[numbers], len(fleet)  # -1, the extra row: a number not of this game
-            step = np.full(n + 1, 2, np.int64)  # each row's step in this MOVES (2: none sent)
-            step[rows] = step_lengths(fleet.pos[rows], pos)
-            take = (step[:-1] <= 1) & (fleet.host_code == fleet.hosts.get(msg.sender, -2)) & (fleet.state == ALIVE)
-            take &= ~judge.moved
-            item = np.zeros(n + 1, np.intp)  # each row's item in this MOVES (where it sent one)
-            item[rows] = np.arange(len(rows))
-            item = item[:-1]
-            np.copyto(judge.proposed, pos[item], where=take[:, None])
-            np.copyto(judge.said, notes[item], where=take)
-            np.copyto(judge.ranked, steps.column("ranked")[item], where=take)
-            judge.moved |= take
-            taken = int(np.count_nonzero(take))
-            self._awaiting -= taken
-            return rows[:0] if taken == len(rows) else np.flatnonzero(~np.append(take, False)[rows])
-
-        refused = _in_batch(msg, len(steps), whole, lambda j: self._host_move(
-            msg.sender, drone_name(int(numbers[j])), cell_of(pos[j]), NOTES[notes[j]], int(steps.column("ranked")[j])))
-        return [*refused, *self._drones_check()]
+        return [*self.ballot.take_all(msg), *self._drones_check()]
 
     def _still_deciding(self, msg: Moves) -> list[Effect]:
         """An empty MOVES: a host whose drones' moves this phase still awaits is deciding them (alive and working,
@@ -577,41 +529,16 @@ class Engine:
         code = self.fleet.hosts.get(msg.sender)
         if code is None:
             raise WrongSender(f"MOVES from {msg.sender}, which flies no drone of this game")
-        fleet = self.fleet
-        if np.count_nonzero((fleet.host_code == code) & (fleet.state == ALIVE) & ~self.judge.moved):
+        if self.ballot.awaits(code):
             if not self.deciding:
                 self._log.info("turn %d: %s is still deciding: the drones' phase waits for it (up to %g s)",
                                self.turn, msg.sender, max(self.config.phase_cap, self.config.phase_deadline))
             self.deciding += 1
         return []
 
-    def _host_move(self, sender: str, d: str, pos: Cell, note: Note, ranked: int) -> None:
-        """Take a move a swarm host sent for one of its drones, or raise (and take nothing)."""
-        i = self.fleet.index.get(d)
-        host = None if i is None else self.fleet.host[i]
-        if host != sender:
-            raise WrongSender(f"MOVES from {sender} for {d}, which {host or 'nobody'} flies")
-        self._move(d, pos, note, ranked)
-
-    def _move(self, d: str, pos: Cell, note: Note, ranked: int) -> None:
-        """Take a drone's move for this phase, or raise (and take nothing)."""
-        fleet = self.fleet
-        i = fleet.index.get(d)
-        if i is None or fleet.state[i] != ALIVE:
-            raise UnknownEntity(f"NPS from {d}, which is not an alive drone of this game")
-        judge = self.judge
-        if judge.moved[i]:
-            raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
-        here = cell_of(fleet.pos[i])
-        if not is_step(here, pos):
-            # refused: the drone may still send a valid move, or hover at the deadline
-            raise OutOfRange(f"{d} cannot move from {here} to {pos}: one cell per turn, 6-connectivity")
-        judge.proposed[i], judge.moved[i], judge.said[i], judge.ranked[i] = pos, True, code_of(note), ranked
-        self._awaiting -= 1
-
     def _drones_check(self) -> list[Effect]:
         """The drones' phase ends once every alive drone has moved (also when none is left alive)."""
-        return self._drones_finish() if self._awaiting <= 0 else []
+        return self._drones_finish() if self.ballot.awaiting <= 0 else []
 
     def _upd(self, msg: Upd) -> list[Effect]:
         """The environment's report of a recent ENV phase, checked against the engine's world (the turn is judged)."""
@@ -630,8 +557,8 @@ class Engine:
         return []
 
     def _lose(self, i: int) -> None:
-        if self.stage is Stage.DRONES and not self.judge.moved[i]:
-            self._awaiting -= 1
+        if self.stage is Stage.DRONES and not self.ballot.moved[i]:
+            self.ballot.awaiting -= 1
         self.judge.lose(i, self.turn, self._turn_log)
 
     def _over(self, reason: EndReason, text: str, turn: int | None = None) -> list[Effect]:
@@ -735,7 +662,7 @@ class Engine:
             return self._gcs_finish()
         if stage is Stage.DRONES:
             alive = self.fleet.alive_rows()
-            late = [self.fleet.ids[i] for i in alive[~self.judge.moved[alive]].tolist()]
+            late = [self.fleet.ids[i] for i in alive[~self.ballot.moved[alive]].tolist()]
             self._log.warning("turn %d: no move from %s in time: hovering", turn, ", ".join(late))
             return self._drones_finish()
         return []
@@ -839,21 +766,3 @@ def _drones_first(effects: list[Effect]) -> list[Effect]:
     """The next turn's drones' phase first (when the next turn's GCS phase was answered ahead): it is what
     the next turn waits for. The rest keeps its order (the ENV phase, STATUS, the GCS phase it informs)."""
     return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves
-
-
-def _in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one: Callable[[int], None]) -> list[Effect]:
-    """Take the `n` items of `msg` (a MOVES's moves, a DONE's targets, a TGT's one) each on its own (`one(j)`
-    takes item j or raises why not, changing nothing): a `Refusal` of `msg` if some were refused, the first one's
-    error naming the others. A batch of more than FEW_ROWS is taken as a whole first (`whole()` takes, in array
-    operations, every item `one` would take, and says which it did not), the rest one by one."""
-    refused = []
-    for j in range(n) if n <= FEW_ROWS or whole is None else whole().tolist():
-        try:
-            one(j)
-        except RemoteInputError as err:
-            refused.append(err)
-    if not refused:
-        return []
-    first = refused[0]
-    more = f" (and {len(refused) - 1} more: {'; '.join(map(str, refused[1:4]))})" if len(refused) > 1 else ""
-    return [Refusal(f"{msg.TAG} from {msg.sender}", type(first)(f"{first}{more}"))]

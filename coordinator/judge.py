@@ -2,8 +2,8 @@
 messages or from `Engine.play`): arbitrated (coordinator/arbitration.py), judged by the observer's rules
 (coordinator/observer.py), the notes, priorities, missed deadlines, deaths and losses, and what the turn's journal
 record says of them. Over Python's lists up to TURN_FEW_DRONES alive drones, in array operations above: the same
-turn (tests/test_engine_turn.py; docs/performance.md gives the lists' gain). The engine (coordinator/engine.py)
-takes the moves into `Judge.moved`, `proposed`, `said` and `ranked` as they come and calls the judge once."""
+turn (tests/test_engine_turn.py; docs/performance.md gives the lists' gain). The moves are those of the phase's
+ballot (coordinator/intake.py), or given whole by `Engine.play`."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from world.grid import World, inside_rows, linear_rows
 from . import observer
 from .arbitration import Arbitration
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, Fleet, cell_of
+from .intake import Ballot
 from .journal import TurnLog
 
 #: What `Engine.play` takes: rows, cells and Note codes as arrays, or as lists (a few drones' turn).
@@ -41,20 +42,13 @@ class Moved(NamedTuple):
 
 class Judge:
     """The turn's judgement over `fleet` in `world`, its cooperative drones' moves arbitrated by `arbitration`;
-    a hovering drone is LOST after `lost_after` missed deadlines in a row. The moves the current drones' phase took,
-    one row per drone: `moved` (whose), `proposed` (the cells), `said` (the Note codes), `ranked` (the candidates,
-    0: none)."""
+    a hovering drone is LOST after `lost_after` missed deadlines in a row. The moves: those `ballot` took."""
 
-    def __init__(self, fleet: Fleet, world: World, arbitration: Arbitration, lost_after: int,
+    def __init__(self, fleet: Fleet, world: World, arbitration: Arbitration, ballot: Ballot, lost_after: int,
                  logger: logging.Logger) -> None:
-        n = len(fleet)
-        self.fleet, self.size, self.arbitration, self.lost_after, self._log = \
-            fleet, world.size, arbitration, lost_after, logger
+        self.fleet, self.size, self.arbitration, self.ballot, self.lost_after, self._log = \
+            fleet, world.size, arbitration, ballot, lost_after, logger
         self._solid = world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
-        self.moved = np.zeros(n, bool)  # whose move this DRONES phase took
-        self.proposed = np.zeros((n, 3), np.int32)  # the moves taken (rows where `moved`)
-        self.said = np.zeros(n, np.uint8)  # the notes that came with them
-        self.ranked = np.zeros(n, np.uint32)  # the candidates that came with them (0: none)
 
     def __call__(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
                  took: dict[int, tuple[Cell, int]] | None = None,
@@ -62,13 +56,13 @@ class Judge:
         """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
         the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
         deadlines and the turn's journal record. The drones that moved: their rows, cells before and after.
-        The moves taken: `took` (row -> its cell and note code), or None: the phase's (`moved`, `proposed`,
-        `said`). Up to TURN_FEW_DRONES alive drones, the turn is played over Python's lists (`_few`), else in
-        array operations (`_arrays`): the same turn (tests/test_engine_turn.py). `whole`: the fleet's state and
-        cells as lists (`Fleet.whole`), if the caller read them this turn. `turn`, `log`: the turn and its journal
-        record; `journaled`: whether the record says what each drone did; `cells`: whether the moved drones' cells
-        are wanted (if not, the lists' way leaves them out)."""
-        fleet = self.fleet
+        The moves taken: `took` (row -> its cell and note code), or None: the phase's (`ballot`). Up to
+        TURN_FEW_DRONES alive drones, the turn is played over Python's lists (`_few`), else in array operations
+        (`_arrays`): the same turn (tests/test_engine_turn.py). `whole`: the fleet's state and cells as lists
+        (`Fleet.whole`), if the caller read them this turn. `turn`, `log`: the turn and its journal record;
+        `journaled`: whether the record says what each drone did; `cells`: whether the moved drones' cells are
+        wanted (if not, the lists' way leaves them out)."""
+        fleet, ballot = self.fleet, self.ballot
         whole = whole or fleet.whole()
         if whole:
             alive = []
@@ -79,14 +73,15 @@ class Judge:
             alive = fleet.alive_rows().tolist()
         if len(alive) > TURN_FEW_DRONES:
             if took is not None:  # (a turn of `play`'s with a few moves: they are the phase's, as the arrays read it)
-                self.moved[:] = False
+                ballot.moved[:] = False
                 for i, (cell, code) in took.items():
-                    self.proposed[i], self.said[i], self.moved[i], self.ranked[i] = cell, code, True, 0
+                    ballot.proposed[i], ballot.said[i], ballot.moved[i], ballot.ranked[i] = cell, code, True, 0
             return self._arrays(turn, log, journaled)
         every = alive  # the rows in play: the alive ones, and any whose move was taken before it was LOST
         if took is None:
-            rows = np.flatnonzero(self.moved).tolist()
-            took = dict(zip(rows, zip(map(tuple, fleet.column(self.proposed, rows)), fleet.column(self.said, rows))))
+            rows = np.flatnonzero(ballot.moved).tolist()
+            proposed = map(tuple, fleet.column(ballot.proposed, rows))
+            took = dict(zip(rows, zip(proposed, fleet.column(ballot.said, rows))))
             if not took.keys() <= set(alive):  # (it moves, as in the arrays: `_arrays`)
                 every = sorted({*alive, *took})
         return self._few(alive, every, took, whole[1] if whole else None, turn, log, journaled, cells)
@@ -112,7 +107,7 @@ class Judge:
             rows = np.array(alive)
             final = self.arbitration.decide(fleet, rows, np.array([before[i] for i in alive]),
                                             np.array([after[i] for i in alive]),
-                                            np.where(self.moved[rows], self.ranked[rows], 0), turn, log)
+                                            np.where(self.ballot.moved[rows], self.ballot.ranked[rows], 0), turn, log)
             after.update(zip(alive, map(tuple, final.tolist())))
             moved = [i for i in every if after[i] != before[i]]
         if not moved:  # where the drones were, alive and apart, they still are
@@ -183,15 +178,15 @@ class Judge:
     def _arrays(self, turn: int, log: TurnLog, journaled: bool) -> Moved:
         """The turn in array operations, of the phase's moves. Its masks are over every row, dead or alive, as the
         observer's (`observer.judge`)."""
-        fleet, ids = self.fleet, self.fleet.ids
-        alive, took = fleet.state == ALIVE, self.moved  # (a drone not alive has no move taken)
+        fleet, ids, ballot = self.fleet, self.fleet.ids, self.ballot
+        alive, took = fleet.state == ALIVE, ballot.moved  # (a drone not alive has no move taken)
         before = fleet.pos.copy()
         hovering = np.count_nonzero(alive) - np.count_nonzero(took)  # (most turns: none, whose bookkeeping is skipped)
-        after = np.where(took[:, None], self.proposed, before)
+        after = np.where(took[:, None], ballot.proposed, before)
         if np.count_nonzero(fleet.cooperative & alive):
             rows = alive.nonzero()[0]
             after[rows] = self.arbitration.decide(fleet, rows, before[rows], after[rows],
-                                                  np.where(self.moved[rows], self.ranked[rows], 0), turn, log)
+                                                  np.where(ballot.moved[rows], ballot.ranked[rows], 0), turn, log)
         moved = (after != before).any(axis=1)
         any_moved = np.count_nonzero(moved) > 0
         if any_moved:  # a cell outside the world is the observer's to judge (OUTSIDE), never a building
@@ -201,10 +196,10 @@ class Judge:
         else:  # where the drones were, alive and apart, they still are
             cause = np.zeros(len(fleet), np.uint8)
         fleet.pos[:] = after
-        says = took & (self.said != fleet.note)  # (most turns: the notes said before)
+        says = took & (ballot.said != fleet.note)  # (most turns: the notes said before)
         said = says.nonzero()[0]
         if len(said):
-            np.copyto(fleet.note, self.said, where=says)
+            np.copyto(fleet.note, ballot.said, where=says)
         if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
             self.arbitration.age(fleet, alive)
         hovered = (alive & ~took).nonzero()[0] if hovering else said[:0]
