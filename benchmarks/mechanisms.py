@@ -101,8 +101,8 @@ MECHANISMS: tuple[Mechanism, ...] = (
         ("entities/gcs.py::turns_to_answer_ahead", "entities/gcs.py::Station._ahead",
          "entities/gcs.py:/ahead|answered/", "coordinator/engine.py::Engine._hold",
          "coordinator/engine.py:/_early|AHEAD_MAX|ahead/", "schema/tuning.py::AHEAD_MAX",
-         "schema/tuning.py::ANSWER_AHEAD", "entities/station_link.py:/ahead/", "coordinator/engine.py::_drones_first",
-         "coordinator/engine.py:/_drones_first/"),
+         "schema/tuning.py::ANSWER_AHEAD", "entities/station_link.py:/ahead/", "coordinator/effects.py::drones_first",
+         "coordinator/engine.py:/drones_first/"),
         Variant(ahead=0), ((1, (64, 64, 16)), (128, (64, 64, 16))),
         "the station answers each phase when it opens (`Station(ahead=0)`)"),
     Mechanism(

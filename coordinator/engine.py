@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -61,6 +60,7 @@ from world.search import STEPS, step_lengths
 from .admission import Roster, id_ranges
 from .arbitration import Arbitration
 from .config import GameConfig, starts_of
+from .effects import Effect, Publish, Record, ReplyToConnect, drones_first
 from .fleet import ALIVE, Drones, Fleet, cell_of, nonzero
 from .intake import Aims, Ballot, in_batch
 from .journal import (
@@ -78,26 +78,6 @@ from .judge import Cells, Codes, Judge, Rows
 from .stages import TAKES, TRANSITIONS, Stage, When
 from .verdict import end_reason, named, over_text
 
-# --------------------------------------------------------------------------- effects
-
-
-@dataclass(frozen=True, slots=True)
-class Publish:
-    msg: Message
-
-
-@dataclass(frozen=True, slots=True)
-class ReplyToConnect:
-    token: object
-    msg: Message
-
-
-@dataclass(frozen=True, slots=True)
-class Record:
-    data: dict  # one journal record (a JSON-able dict, written as one line)
-
-
-Effect = Publish | ReplyToConnect | Record | Refusal
 
 class Engine:
     """The coordinator's game: feed it events, carry out the effects it returns."""
@@ -342,7 +322,7 @@ class Engine:
         self._log.debug("turn %d observed: %s", turn, log.record)
         end = end_reason(fleet, self.arbitration.arbiter, self.final, turn, self.config.max_turns, alive)
         effects += [Record(log.record), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
-        return _drones_first(effects)
+        return drones_first(effects)
 
     def _kind(self, cell: Cell) -> CellKind:
         if not self.world.contains(cell):
@@ -756,13 +736,3 @@ class Engine:
             if self.stage is Stage.DRONES:
                 return self._drones_check()
         return []
-
-
-def opens_drones_phase(effect: Effect) -> bool:
-    return isinstance(effect, Publish) and isinstance(effect.msg, Turn) and effect.msg.phase is Phase.DRONES
-
-
-def _drones_first(effects: list[Effect]) -> list[Effect]:
-    """The next turn's drones' phase first (when the next turn's GCS phase was answered ahead): it is what
-    the next turn waits for. The rest keeps its order (the ENV phase, STATUS, the GCS phase it informs)."""
-    return sorted(effects, key=lambda e: not opens_drones_phase(e))  # stable: only the drones' phase moves

@@ -75,7 +75,8 @@ from world.grid import World
 from . import arbiter
 from .admission import Presences
 from .config import ARBITER, ARBITERS, LOST_AFTER, MAX_TURNS, SIZE, DroneSpec, GameConfig
-from .engine import Engine, Publish, Record, Refusal, ReplyToConnect
+from .effects import Publish, Record, Refusal, ReplyToConnect
+from .engine import Engine
 from .journal import JournalFailed, JournalWriter, held_game, read, repair_tail
 from .resume import restore
 from .stages import Stage

@@ -14,7 +14,8 @@ import numpy as np
 
 from coordinator.arbiter import Arbiter
 from coordinator.config import GameConfig
-from coordinator.engine import Engine, Publish, Record, Refusal, opens_drones_phase
+from coordinator.effects import Publish, Record, Refusal, opens_drones_phase
+from coordinator.engine import Engine
 from coordinator.stages import Stage
 from dronesim.scenario import swarm_hosts
 from entities.autopilots import make_autopilot, make_swarm, pilot_class

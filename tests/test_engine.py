@@ -11,7 +11,8 @@ import pytest
 
 from coordinator import journal
 from coordinator.config import DroneSpec, GameConfig, replace_config
-from coordinator.engine import Engine, Publish, Record, Refusal, ReplyToConnect
+from coordinator.effects import Publish, Record, Refusal, ReplyToConnect
+from coordinator.engine import Engine
 from coordinator.resume import restore
 from coordinator.stages import TAKES, TRANSITIONS, Stage, When
 from entities.gcs import describe

@@ -15,7 +15,7 @@ import pytest
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render_test, seed_test
 
 import dronesim.pettingzoo as dz
-from coordinator.engine import Publish, Refusal
+from coordinator.effects import Publish, Refusal
 from coordinator.fleet import ALIVE
 from dronesim import SOURCE_ROOT, child_env
 from dronesim.rl import ACTIONS, ON_TARGET, Board, ConfigError, Episode, Eyes, LocalTurns, Seen, turn_messages
