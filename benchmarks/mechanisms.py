@@ -100,6 +100,7 @@ MECHANISMS: tuple[Mechanism, ...] = (
         "Answers ahead (a scripted ground station answers the coming phases with nothing new)",
         ("entities/gcs.py::turns_to_answer_ahead", "entities/gcs.py::Station._ahead",
          "entities/gcs.py:/ahead|answered/", "coordinator/engine.py::Engine._hold",
+         "coordinator/intake.py::Ahead",
          "coordinator/engine.py:/_early|AHEAD_MAX|ahead/", "schema/tuning.py::AHEAD_MAX",
          "schema/tuning.py::ANSWER_AHEAD", "entities/station_link.py:/ahead/", "coordinator/effects.py::drones_first",
          "coordinator/engine.py:/drones_first/"),

@@ -62,7 +62,7 @@ from .arbitration import Arbitration
 from .config import GameConfig, starts_of
 from .effects import Effect, Publish, Record, ReplyToConnect, drones_first
 from .fleet import ALIVE, Drones, Fleet, cell_of, nonzero
-from .intake import Aims, Ballot, in_batch
+from .intake import Ahead, Aims, Ballot, in_batch
 from .journal import (
     TurnLog,
     TurnRecord,
@@ -108,8 +108,7 @@ class Engine:
         self.verify_env = self.journaled = self.env_followed = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
-        self._early: dict[int, Done] = {}  # the GCS's DONEs for coming turns, sent ahead
-        self._early_moves: dict[str, Moves] = {}  # swarm hosts' MOVES for this turn, sent before its drones' phase
+        self.ahead = Ahead()  # what came ahead of its phase: DONEs for coming turns, MOVES for this one
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
@@ -294,11 +293,7 @@ class Engine:
         self.turn = turn  # (no target received yet: `_targets_set` and `_gcs_finish` cleared them)
         self._tgt_seen, self._done = 0, None
         self._turn_log = TurnLog(turn)
-        if not self._early:
-            return None
-        early = self._early.pop(turn, None)
-        self._early = {t: d for t, d in self._early.items() if t > turn}
-        return early
+        return self.ahead.done_for(turn) if self.ahead.dones else None
 
     def _drones_finish(self) -> list[Effect]:
         """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), then the observer's
@@ -354,17 +349,8 @@ class Engine:
         return [*in_batch(msg, 1, None, lambda _: self.aiming.aim(msg.drone, msg.pos)), *self._gcs_check()]
 
     def _hold(self, msg: Done) -> list[Effect]:
-        """The GCS's DONE for a coming GCS phase (up to AHEAD_MAX turns on; it had nothing new to say): kept,
-        and taken as that phase opens, checked then like any DONE (no round trip to the ground station)."""
-        if msg.sender != "GCS" or msg.phase is not Phase.GCS:
-            raise WrongSender(f"DONE({msg.phase.value}) ahead from {msg.sender}")
-        if msg.count:
-            raise StaleTurn(f"a DONE ahead for turn {msg.turn} carries its targets itself, it cannot count TGTs")
-        if msg.turn in self._early:
-            if msg == self._early[msg.turn]:
-                return []  # (the same again)
-            raise StaleTurn(f"second DONE ahead for turn {msg.turn}")
-        self._early[msg.turn] = msg
+        """The GCS's DONE for a coming GCS phase (up to AHEAD_MAX turns on): held for it (`Ahead`)."""
+        self.ahead.hold_done(msg)
         return []
 
     def _nps(self, msg: Nps) -> list[Effect]:
@@ -372,22 +358,14 @@ class Engine:
         return self._drones_check()
 
     def _hold_moves(self, msg: Moves) -> list[Effect]:
-        """A swarm host's MOVES for this turn, sent before its drones' phase opened (a host that decides from
-        the STATUS alone sends its DONE and MOVES at once): kept, one per host, taken as the phase opens."""
-        if msg.sender not in self.fleet.hosts:
-            raise WrongSender(f"MOVES ahead from {msg.sender}, which flies no drone of this game")
-        if not len(msg.moves):  # (a host says it is deciding only once the phase it decides is open)
-            raise StaleTurn(f"an empty MOVES from {msg.sender} before turn {msg.turn}'s drones' phase opened")
-        if msg.sender in self._early_moves:
-            raise StaleTurn(f"second MOVES ahead from {msg.sender} for turn {msg.turn}")
-        self._early_moves[msg.sender] = msg
+        """A swarm host's MOVES for this turn, sent before its drones' phase opened: held for it (`Ahead`)."""
+        self.ahead.hold_moves(msg, self.fleet.hosts)
         return []
 
     def _take_early_moves(self) -> list[Effect]:
         """The drones' phase is announced: the MOVES held for it are taken, in the order they came (one after an
         earlier one closed the phase is refused as stale, as it would be if sent then)."""
-        held, self._early_moves = self._early_moves, {}
-        return [e for msg in held.values() for e in self.receive(msg)]
+        return [e for msg in self.ahead.take_moves() for e in self.receive(msg)]
 
     def _done_again(self, msg: Done) -> list[Effect]:
         """A DONE of the turn whose GCS phase has closed: the one taken, again (a ground station repeats its DONE
@@ -444,7 +422,7 @@ class Engine:
         what a caller playing a few drones holds). The turn's OVER if the game ended with it. UsageError, nothing
         changed, if the turn is not the GCS's (or a DONE or MOVES came ahead) or an input would be refused."""
         fleet = self.fleet
-        if self.stage is not Stage.GCS or self._done is not None or self._early or self._early_moves:
+        if self.stage is not Stage.GCS or self._done is not None or self.ahead.dones or self.ahead.moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
                              f"of turn {self.turn}")
         few = len(move_rows) <= TURN_FEW_DRONES
@@ -722,12 +700,12 @@ class Engine:
             return []
         self._log.warning("%s vanished", entity)
         if role is Role.GCS:
-            self._early.clear()  # what it said ahead goes with it
+            self.ahead.dones.clear()  # what it said ahead goes with it
             if self.stage is Stage.GCS:
                 return self._gcs_finish()
         elif role is Role.DRONE:
             fleet = self.fleet
-            self._early_moves.pop(entity, None)
+            self.ahead.moves.pop(entity, None)
             for i in [i for i, host in enumerate(fleet.host) if host == entity]:
                 if self._admitting():
                     fleet.unhost(i)

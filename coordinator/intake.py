@@ -1,16 +1,17 @@
 """What a turn's phases take in, each item checked on its own: the ground station's targets for the GCS phase
-(`Aims`) and the drones' moves for the drones' phase (`Ballot`). An item refused raises (a `RemoteInputError`) and
+(`Aims`), the drones' moves for the drones' phase (`Ballot`), and what came ahead of its phase, held for it
+(`Ahead`). An item refused raises (a `RemoteInputError`) and
 changes nothing; a batch (a DONE's targets, a MOVES's moves) is taken item by item, or for more than FEW_ROWS items
 in array operations first (`in_batch`), and one `Refusal` names those refused. The engine (coordinator/engine.py)
 says when a phase opens and closes; the judge (coordinator/judge.py) reads the ballot as the drones' phase closes."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Container
 
 import numpy as np
 
-from schema import Cell, Done, Message, Moves, Note
+from schema import Cell, Done, Message, Moves, Note, Phase
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UnknownEntity, WrongSender
 from schema.tables import code_of, drone_name
 from schema.tuning import FEW_ROWS
@@ -133,6 +134,50 @@ class Ballot:
         """Whether the phase still awaits a move of an alive drone that host code `host` flies."""
         fleet = self.fleet
         return bool(np.count_nonzero((fleet.host_code == host) & (fleet.state == ALIVE) & ~self.moved))
+
+
+class Ahead:
+    """What came ahead of its phase, held for it: the GCS's DONEs for coming GCS phases (`dones`: turn -> DONE; it
+    had nothing new to say), swarm hosts' MOVES for this turn's drones' phase (`moves`: host -> MOVES, one each; a
+    host that decides from the STATUS alone sends its DONE and MOVES at once). Each is checked like any other as
+    its phase opens (no round trip to the sender)."""
+
+    def __init__(self) -> None:
+        self.dones: dict[int, Done] = {}
+        self.moves: dict[str, Moves] = {}
+
+    def hold_done(self, msg: Done) -> None:
+        """Keep the GCS's DONE for a coming GCS phase, or raise (and keep nothing)."""
+        if msg.sender != "GCS" or msg.phase is not Phase.GCS:
+            raise WrongSender(f"DONE({msg.phase.value}) ahead from {msg.sender}")
+        if msg.count:
+            raise StaleTurn(f"a DONE ahead for turn {msg.turn} carries its targets itself, it cannot count TGTs")
+        if msg.turn in self.dones:
+            if msg == self.dones[msg.turn]:
+                return  # (the same again)
+            raise StaleTurn(f"second DONE ahead for turn {msg.turn}")
+        self.dones[msg.turn] = msg
+
+    def done_for(self, turn: int) -> Done | None:
+        """The GCS phase of `turn` opens: the DONE held for it, if any (those of earlier turns are dropped)."""
+        done = self.dones.pop(turn, None)
+        self.dones = {t: d for t, d in self.dones.items() if t > turn}
+        return done
+
+    def hold_moves(self, msg: Moves, hosts: Container[str]) -> None:
+        """Keep a swarm host's MOVES for this turn's drones' phase (`hosts`: the game's), or raise (keeping none)."""
+        if msg.sender not in hosts:
+            raise WrongSender(f"MOVES ahead from {msg.sender}, which flies no drone of this game")
+        if not len(msg.moves):  # (a host says it is deciding only once the phase it decides is open)
+            raise StaleTurn(f"an empty MOVES from {msg.sender} before turn {msg.turn}'s drones' phase opened")
+        if msg.sender in self.moves:
+            raise StaleTurn(f"second MOVES ahead from {msg.sender} for turn {msg.turn}")
+        self.moves[msg.sender] = msg
+
+    def take_moves(self) -> list[Moves]:
+        """The drones' phase is announced: the MOVES held for it, in the order they came."""
+        held, self.moves = self.moves, {}
+        return list(held.values())
 
 
 def in_batch(msg: Message, n: int, whole: Callable[[], np.ndarray] | None, one: Callable[[int], None]) -> list[Refusal]:

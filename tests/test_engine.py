@@ -1199,12 +1199,12 @@ def test_done_ahead_misuse_is_refused_and_changes_nothing() -> None:
     refused(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, count=1)), StaleTurn, "cannot count")
     refused(g.engine.receive(Done(turn=2, sender="D01", phase=Phase.GCS)), WrongSender)
     refused(g.engine.receive(Done(turn=2 + AHEAD_MAX, sender="GCS", phase=Phase.GCS)), StaleTurn)  # too far ahead
-    assert g.snapshot() == snap and not g.engine._early
+    assert g.snapshot() == snap and not g.engine.ahead.dones
     g.feed(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS)))
     refused(g.engine.receive(Done(turn=2, sender="GCS", phase=Phase.GCS, intent=Intent.QUIT)),
             StaleTurn, "second DONE ahead")
     g.feed(g.engine.vanished("GCS"))
-    assert not g.engine._early, "what a ground station said ahead leaves with it"
+    assert not g.engine.ahead.dones, "what a ground station said ahead leaves with it"
 
 
 def test_answers_ahead_give_the_same_journal() -> None:
@@ -1272,7 +1272,7 @@ def test_moves_ahead_misuse_is_refused_and_changes_nothing() -> None:
     refused(g.engine.receive(Moves(turn=1, sender="D07", moves=(Step(drone="D01", pos=(1, 0, 0)),))),
             WrongSender, "flies no drone")
     refused(g.engine.receive(_host_moves(2, {"D01": (1, 0, 0)})), StaleTurn)  # only the current turn's
-    assert g.snapshot() == snap and not g.engine._early_moves
+    assert g.snapshot() == snap and not g.engine.ahead.moves
     g.feed(g.engine.receive(_host_moves(1, {"D01": (0, 2, 0), "D02": (4, 4, 3)})))  # D01's: two cells
     refused(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0)})), StaleTurn, "second MOVES ahead")
     with pytest.raises(UsageError):  # a turn from arrays cannot jump over what came ahead
@@ -1287,7 +1287,7 @@ def test_moves_ahead_leave_with_their_host_and_wait_for_the_environment() -> Non
     g = _hosted_pair()
     g.feed(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0), "D02": (4, 4, 3)})))
     g.feed(g.engine.vanished("H01"))
-    assert not g.engine._early_moves, "a host's moves leave with it"
+    assert not g.engine.ahead.moves, "a host's moves leave with it"
     g = _hosted_pair()
     g.feed(g.engine.vanished("ENV"))
     g.feed(g.engine.receive(_host_moves(1, {"D01": (1, 0, 0), "D02": (4, 4, 3)})))
@@ -1365,7 +1365,7 @@ def test_a_hosts_word_that_it_is_still_deciding_stretches_the_phase_and_changes_
 def test_a_word_that_it_is_still_deciding_is_not_held_nor_taken_from_a_host_with_nothing_left_to_decide() -> None:
     g = _hosted_pair()
     refused(g.engine.receive(_deciding(1)), StaleTurn, "before turn 1's drones' phase opened")
-    assert not g.engine._early_moves, "never held: the host's real MOVES ahead is still taken"
+    assert not g.engine.ahead.moves, "never held: the host's real MOVES ahead is still taken"
     g.gcs()
     refused(g.engine.receive(_deciding(1, "D07")), WrongSender, "flies no drone")
     refused(g.engine.receive(_deciding(1, "D01")), WrongSender, "flies no drone")  # (H01 flies it)
