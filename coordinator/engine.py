@@ -62,6 +62,7 @@ from .arbitration import Arbitration
 from .config import GameConfig, starts_of
 from .effects import Effect, Publish, Record, ReplyToConnect, drones_first
 from .fleet import ALIVE, Drones, Fleet, cell_of, nonzero
+from .holds import Outage
 from .intake import Ahead, Aims, Ballot, in_batch
 from .journal import (
     TurnLog,
@@ -112,7 +113,7 @@ class Engine:
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
-        self._away: set[str] | None = None  # while the link is down (`link_lost`): the entities not back yet
+        self.outage = Outage(self.roster)  # while the link is down (`link_lost`): the entities not back yet
         #: Words from hosts still deciding this drones' phase (empty MOVES): each one restarts its deadline
         #: (`phase_cap`).
         self.deciding = 0
@@ -158,7 +159,7 @@ class Engine:
     def deadline_key(self) -> tuple[Stage, int, bool, bool, bool, bool]:
         """What the current deadline is measured from: it restarts whenever this changes."""
         return (self.stage, self.turn, self._done is not None, self._env_missing(), self._back_but_gcs(),
-                self._away is not None)
+                self.outage.away is not None)
 
     def _back_but_gcs(self) -> bool:
         """Resuming: the environment and the alive drones are back, the ground station not (yet)."""
@@ -167,7 +168,7 @@ class Engine:
 
     def deadline(self) -> float | None:
         """Seconds the current stage may last before `expire` (None: no deadline)."""
-        if self._away is not None:
+        if self.outage.away is not None:
             return self.config.link_grace
         if self._env_missing():
             return self.config.env_grace
@@ -185,7 +186,7 @@ class Engine:
         last word (the deadline, at least `DECIDING_SILENCE_S`: one word missed or late does not end it), and how
         long it may last in all (`phase_cap`, at least the deadline). None: no such word, or the stage's deadline is
         not the drones' phase's."""
-        if self.stage is not Stage.DRONES or not self.deciding or self._away is not None or self._env_missing():
+        if self.stage is not Stage.DRONES or not self.deciding or self.outage.away is not None or self._env_missing():
             return None
         deadline = self.config.phase_deadline
         return max(deadline, DECIDING_SILENCE_S), max(self.config.phase_cap, deadline)
@@ -597,8 +598,8 @@ class Engine:
         """The deadline of (stage, turn) passed; ignored if the game has moved on since."""
         if stage is not self.stage or turn != self.turn:
             return []
-        if self._away is not None:  # who is not back after a lost link has vanished
-            gone, self._away = sorted(self._away), None
+        if self.outage.away is not None:  # who is not back after a lost link has vanished
+            gone = self.outage.end()
             self._log.warning("%s did not come back within %g s", ", ".join(gone), self.config.link_grace)
             return [e for entity in gone for e in self.vanished(entity)] + self._go_on()
         if self._env_missing():
@@ -647,36 +648,31 @@ class Engine:
         """The coordinator's link is down (its own presence vanished, as every other's does when the router
         restarts): nobody has left, the game holds until every admitted entity is back (`present`) or
         `link_grace` has passed (`expire`: those still away have vanished)."""
-        if self.stage is Stage.OVER or self._away is not None:
+        if self.stage is Stage.OVER or not self.outage.begin(self.entities):
             return []
-        self._away = set(self.entities)
         self._log.warning("the link is down: the game holds up to %g s for %s to come back", self.config.link_grace,
-                          ", ".join(sorted(self._away)) or "its entities")
+                          ", ".join(sorted(self.entities)) or "its entities")
         return []
 
     @property
     def holding(self) -> bool:
         """Whether the game holds for a lost link (`link_lost`)."""
-        return self._away is not None
+        return self.outage.away is not None
 
     def link_back(self) -> list[Effect]:
         """The coordinator reaches its entities again after a hold that no presence ends (a frozen router: no
         token vanished, so none comes back): the hold ends as when the last one is back (`present`)."""
-        if self._away is None:
+        if self.outage.away is None:
             return []
-        self._away = None
+        self.outage.end()
         self._log.warning("the routers answer again: turn %d goes on", self.turn)
         return self._go_on()
 
     def present(self, entity: str, session: str) -> list[Effect]:
         """An entity's presence token is there (again). The last admitted one back after a lost link ends the
         hold: the current STATUS and phase go out again (what was sent during the outage was lost)."""
-        if self._away is None or entity not in self._away or self.roster.sessions.get(entity) not in ("", session):
+        if not self.outage.back(entity, session):
             return []
-        self._away.discard(entity)
-        if self._away:
-            return []
-        self._away = None
         self._log.warning("every entity is back: turn %d goes on", self.turn)
         return self._go_on()
 
@@ -692,9 +688,8 @@ class Engine:
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
         """An admitted entity's presence token disappeared (its process died or was cut off; a refused impostor's
         token does not count). A vanished environment is waited for (`env_grace`; back, it resyncs from STATUS)."""
-        if self._away is not None and (entity in self._away or self.roster.sessions.get(entity) in ("", session)):
-            self._away.add(entity)  # the link is down: it is away, not gone (until `link_grace` has passed), also
-            return []  # if it was back (a router continued after a freeze drops the old links after their tokens)
+        if self.outage.gone(entity, session):  # the link is down: it is away, not gone (until `link_grace`)
+            return []
         role = self.roster.leave(entity, session)
         if role is None or self.stage is Stage.OVER:
             return []
