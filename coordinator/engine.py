@@ -28,12 +28,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from schema import (
-    Cause,
     Cell,
     CellKind,
     Connect,
     Done,
-    DroneState,
     EndReason,
     Intent,
     Message,
@@ -52,7 +50,6 @@ from schema import (
     Welcome,
 )
 from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UsageError, WrongSender
-from schema.tables import code_of
 from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, TURN_FEW_DRONES, UPD_WINDOW
 from world.grid import World, build_world, in_bounds, inside_rows
 from world.search import STEPS, step_lengths
@@ -572,21 +569,7 @@ class Engine:
             self.intent = r.intent
             self.final = self.intent is Intent.FINAL
         self.turn = r.turn
-        self.arbitration.follow(fleet, alive, self.turn)  # (before the moves, as the arbitration ran)
-        for d, p in r.moves.items():
-            fleet.pos[row[d]] = p
-        for d, n in r.notes.items():
-            fleet.note[row[d]] = code_of(n)
-        if fleet.cooperating:  # the arbitration's priorities (as `Judge` keeps them)
-            self.arbitration.age(fleet, alive, [row[d] for d in r.gave_way])
-        hovered = np.isin(alive, [row[d] for d in r.hovered])
-        took, live = np.zeros(len(fleet), bool), np.zeros(len(fleet), bool)
-        took[alive[~hovered]], live[alive] = True, True
-        fleet.count_misses(took, live)
-        for d, cause in r.deaths.items():
-            fleet.end(row[d], DroneState.DEAD, cause)
-        for d in r.lost:
-            fleet.end(row[d], DroneState.LOST, Cause.LOST)
+        self.judge.replay(r, alive)
         if self.config.lifelong:
             self.tasks += fleet.tasks_done()
         if state_hash(self.status(r.turn)) != r.state:

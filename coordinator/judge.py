@@ -21,7 +21,7 @@ from . import observer
 from .arbitration import Arbitration
 from .fleet import ALIVE, CAUSES, DEAD, NOTES, Fleet, cell_of
 from .intake import Ballot
-from .journal import TurnLog
+from .journal import TurnLog, TurnRecord
 
 #: What `Engine.play` takes: rows, cells and Note codes as arrays, or as lists (a few drones' turn).
 Rows = np.ndarray | list[int]
@@ -228,6 +228,27 @@ class Judge:
             if len(dead):
                 log.deaths([ids[i] for i in dead.tolist()], [CAUSES[c] for c in fleet.cause[dead].tolist()])
         return Moved(rows, before[rows], after[rows], int(np.count_nonzero(fleet.state == ALIVE)))
+
+    def replay(self, r: TurnRecord, alive: np.ndarray) -> None:
+        """A journaled turn made again (`Engine.resume`) as this judge made it, from its record `r` (the `alive`
+        rows: those before it): the arbitration's search followed, the moves, notes, priorities, misses, deaths and
+        losses the record says."""
+        fleet, row = self.fleet, self.fleet.index
+        self.arbitration.follow(fleet, alive, r.turn)  # (before the moves, as the arbitration ran)
+        for d, p in r.moves.items():
+            fleet.pos[row[d]] = p
+        for d, n in r.notes.items():
+            fleet.note[row[d]] = code_of(n)
+        if fleet.cooperating:  # the arbitration's priorities (as a turn keeps them)
+            self.arbitration.age(fleet, alive, [row[d] for d in r.gave_way])
+        hovered = np.isin(alive, [row[d] for d in r.hovered])
+        took, live = np.zeros(len(fleet), bool), np.zeros(len(fleet), bool)
+        took[alive[~hovered]], live[alive] = True, True
+        fleet.count_misses(took, live)
+        for d, cause in r.deaths.items():
+            fleet.end(row[d], DroneState.DEAD, cause)
+        for d in r.lost:
+            fleet.end(row[d], DroneState.LOST, Cause.LOST)
 
     def lose(self, i: int, turn: int, log: TurnLog) -> None:
         """Drone row `i` is LOST in `turn` (its record `log`)."""
