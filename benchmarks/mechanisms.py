@@ -90,8 +90,8 @@ class Mechanism:
 MECHANISMS: tuple[Mechanism, ...] = (
     Mechanism(
         "The ENV phase is pipelined (the coordinator judges the moves with its own copy of the world)",
-        ("coordinator/engine.py::Engine._upd", "coordinator/engine.py::Engine._kind",
-         "coordinator/engine.py:/_upd_due|verify_env|UPD_WINDOW/", "coordinator/node.py:/verify.env/",
+        ("coordinator/engine.py::Engine._upd", "coordinator/reports.py::Reports",
+         "coordinator/engine.py:/reports|verify_env/", "coordinator/node.py:/verify.env/",
          "schema/tuning.py::UPD_WINDOW", "entities/environment.py:/_early/"),
         switch="not switched off: without it the ENV phase would close on the environment's verdict, a second "
                "way to end a turn in the engine (the first version's); it saved 2 of that version's 8 hops a turn "

@@ -29,7 +29,6 @@ import numpy as np
 
 from schema import (
     Cell,
-    CellKind,
     Connect,
     Done,
     EndReason,
@@ -49,8 +48,8 @@ from schema import (
     Upd,
     Welcome,
 )
-from schema.errors import OutOfRange, Refusal, RemoteInputError, StaleTurn, UsageError, WrongSender
-from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, TURN_FEW_DRONES, UPD_WINDOW
+from schema.errors import Refusal, RemoteInputError, StaleTurn, UsageError, WrongSender
+from schema.tuning import AHEAD_MAX, DECIDING_SILENCE_S, TURN_FEW_DRONES
 from world.grid import World, build_world, in_bounds, inside_rows
 from world.search import STEPS, step_lengths
 
@@ -73,6 +72,7 @@ from .journal import (
     turns,
 )
 from .judge import Cells, Codes, Judge, Rows
+from .reports import Reports
 from .stages import TAKES, TRANSITIONS, Stage, When
 from .verdict import end_reason, named, over_text
 
@@ -100,7 +100,7 @@ class Engine:
         self.arbitration = Arbitration(config.arbiter, self.world, n)  # the cooperative drones'
         self.judge = Judge(self.fleet, self.world, self.arbitration, self.ballot, config.lost_after, logger)
         self._turn_log = TurnLog(0)
-        self._upd_due: dict[int, MoveTable] = {}  # ENV phases whose report is awaited: turn -> moves
+        self.reports = Reports(self.world)  # the environment's reports (UPD) awaited, checked against the world
         # The adapter's switches: the environment's UPD reports are checked; the turn records say what each drone
         # was told and did (off without a journal); someone follows the ENV phase (else its TURN is not made).
         self.verify_env = self.journaled = self.env_followed = True
@@ -306,7 +306,7 @@ class Engine:
             rows["drone"], rows["src"], rows["dst"] = fleet.numbers[moved], src, dst
             moves = MoveTable(rows)
             if self.verify_env:  # its report may come turns later (nothing waits for it): keep a few
-                self._upd_due = {t: m for t, m in self._upd_due.items() if t > turn - UPD_WINDOW} | {turn: moves}
+                self.reports.expect(turn, moves)
             if self.env_followed:
                 effects.append(Publish(Turn(turn=turn, sender="SRV", phase=Phase.ENV, moves=moves, game=self.game)))
         status = self.status(turn)  # (encoded as it goes out, after the next turn's drones' phase)
@@ -316,11 +316,6 @@ class Engine:
         end = end_reason(fleet, self.arbitration.arbiter, self.final, turn, self.config.max_turns, alive)
         effects += [Record(log.record), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
         return drones_first(effects)
-
-    def _kind(self, cell: Cell) -> CellKind:
-        if not self.world.contains(cell):
-            return CellKind.OUTSIDE
-        return CellKind.BUILDING if self.world.is_building(cell) else CellKind.EMPTY
 
     def receive(self, msg: Message) -> list[Effect]:
         """A message from the network, decoded and addressed correctly: its effects. One that cannot be accepted
@@ -497,19 +492,8 @@ class Engine:
         return self._drones_finish() if self.ballot.awaiting <= 0 else []
 
     def _upd(self, msg: Upd) -> list[Effect]:
-        """The environment's report of a recent ENV phase, checked against the engine's world (the turn is judged)."""
-        if msg.sender != "ENV":
-            raise WrongSender(f"UPD from {msg.sender}")
-        turn, moves = msg.turn, self._upd_due.get(msg.turn)
-        if moves is None:
-            raise StaleTurn(f"UPD for turn {msg.turn}, which had no ENV phase awaiting its report")
-        expected = {c: self._kind(c) for m in moves for c in (m.src, m.dst) if self.world.contains(c)}
-        reported = {c.pos: c.kind for c in msg.cells}
-        if reported != expected:
-            wrong = sorted(c for c in expected.keys() | reported.keys() if reported.get(c) != expected.get(c))
-            raise OutOfRange(f"UPD of turn {turn} disagrees with the world at {wrong[:5]}: the environment's "
-                             "world or drones differ from the coordinator's")
-        del self._upd_due[turn]
+        """The environment's report of a recent ENV phase, checked against the engine's world (`Reports`)."""
+        self.reports.check(msg)
         return []
 
     def _lose(self, i: int) -> None:

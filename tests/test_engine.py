@@ -172,7 +172,7 @@ class Game:
             cells.add(m.src)
             if all(0 <= c < s for c, s in zip(m.dst, SIZE)) and m.dst not in skip:
                 cells.add(m.dst)
-        kinds = {c: self.engine._kind(c) for c in cells}
+        kinds = {c: self.engine.reports.kind(c) for c in cells}
         for c in wrong:
             kinds[c] = CellKind.EMPTY if kinds.get(c) is CellKind.BUILDING else CellKind.BUILDING
         upd = Upd(turn=env.turn, sender=sender, cells=tuple(CellInfo(pos=c, kind=kinds[c]) for c in sorted(kinds)))
@@ -654,7 +654,7 @@ def test_the_env_phase_is_made_only_while_someone_follows_it_or_its_report_is_ch
         effects = g.nps("D01", (1, 0, 0))
         assert any(t.phase is Phase.ENV for t in pubs(effects, Turn)) is announced, (followed, verify)
         assert g.status("D01").pos == (1, 0, 0) and g.stage is Stage.GCS and g.turn == 2
-        assert (1 in g.engine._upd_due) is verify  # a report checked needs the moves kept
+        assert (1 in g.engine.reports.due) is verify  # a report checked needs the moves kept
 
 
 def test_upd_disagreeing_with_the_world_refused() -> None:
