@@ -2,16 +2,17 @@
 
 No network and no clock here: the Zenoh adapter (node.py) feeds it validated messages, expired deadlines
 and vanished entities, one at a time, and carries out the effects it returns (publish, reply to a CONNECT,
-journal, count a `Refusal`: an input that cannot be accepted changes nothing). Who may join: admission.py;
-a game restarted from its journal: resume.py (through `Engine.resume`). The stages it goes through and the
-messages each stage takes are two tables that drive it, `TRANSITIONS` and `TAKES` (stages.py, in the manner of
-h11's `_state.py`), where one turn's cycle is drawn.
+journal, count a `Refusal`: an input that cannot be accepted changes nothing: effects.py). The stages it goes
+through and the messages each stage takes are two tables that drive it, `TRANSITIONS` and `TAKES` (stages.py, in
+the manner of h11's `_state.py`), where one turn's cycle is drawn. The engine says when each phase opens and
+closes; its parts do the work: who may join (admission.py), what a phase takes in, each item checked (intake.py),
+the turn's judgement (judge.py, with the arbitration of arbitration.py), whether the game ends (verdict.py), the
+hold for a lost link (holds.py), the environment's reports (reports.py). A game restarted from its journal:
+resume.py (through `Engine.resume`).
 
-The ENV phase is pipelined: the buildings are static and the engine holds the same world as the
-environment (both build it from the game's WorldSpec), so the observer judges the moves at once
-instead of waiting a round trip for the environment's UPD. The environment still applies every move
-(its ASK answers for turn t+1 need them; it also takes them from STATUS(t)) and reports the changed
-cells; a UPD that disagrees with the engine's world is rejected and counted.
+The ENV phase is pipelined: the engine holds the same world as the environment, so the observer judges the moves
+at once instead of waiting a round trip for the environment's UPD (checked when it comes: reports.py). The
+environment still applies every move (its ASK answers for turn t+1 need them; it also takes them from STATUS(t)).
 
 A deadline ends a stage early: missing drones hover (and are LOST after `lost_after` misses in a row),
 targets stay as they were; a vanished environment holds the drones' phase for `env_grace` seconds. A swarm host
