@@ -298,7 +298,7 @@ class Engine:
         """The drones' phase is over: judge it, announce the ENV phase (the accepted moves), then the observer's
         STATUS and the turn's journal record, and the next turn or the end."""
         turn, fleet, log = self.turn, self.fleet, self._turn_log
-        moved, src, dst, alive = self.judge(turn, log, self.journaled, self.env_followed or self.verify_env)
+        moved, src, dst, alive = self.judge.rule(turn, log, self.journaled, self.env_followed or self.verify_env)
         if self.config.lifelong:
             self.tasks += fleet.tasks_done()
         effects: list[Effect] = []
@@ -453,13 +453,13 @@ class Engine:
             self._targets_set(Intent.CONTINUE, False)
         judge, cells_wanted = self.judge, self.env_followed or self.verify_env
         if few and not fleet.cooperating:  # (only the arbitration reads the arrays then)
-            turn = judge(self.turn, self._turn_log, self.journaled, cells_wanted, took, whole)
+            turn = judge.rule(self.turn, self._turn_log, self.journaled, cells_wanted, took, whole)
         else:
             ballot = self.ballot
             ballot.moved[:] = False  # (the drones' phase, opened and closed at once)
             ballot.proposed[rows], ballot.said[rows], ballot.moved[rows] = cells, codes, True
             ballot.ranked[rows] = 0 if ranked is None else ranked
-            turn = judge(self.turn, self._turn_log, self.journaled, cells_wanted)
+            turn = judge.rule(self.turn, self._turn_log, self.journaled, cells_wanted)
         if self.config.lifelong:
             self.tasks += fleet.tasks_done()
         if end := end_reason(fleet, self.arbitration.arbiter, self.final, self.turn, self.config.max_turns, turn.alive):

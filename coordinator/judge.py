@@ -31,7 +31,7 @@ CAUSE_CODE = {c: code_of(c) for c in Cause}
 
 
 class Moved(NamedTuple):
-    """What a turn did (`Judge`): the drones it moved, their rows and their cells before and after (arrays, or
+    """What a turn did (`Judge.rule`): the drones it moved, their rows and their cells before and after (arrays, or
     lists), and how many drones are alive after it."""
 
     rows: Rows
@@ -50,9 +50,9 @@ class Judge:
             fleet, world.size, arbitration, ballot, lost_after, logger
         self._solid = world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
 
-    def __call__(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
-                 took: dict[int, tuple[Cell, int]] | None = None,
-                 whole: tuple[list[int], list[list[int]]] | None = None) -> Moved:
+    def rule(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
+             took: dict[int, tuple[Cell, int]] | None = None,
+             whole: tuple[list[int], list[list[int]]] | None = None) -> Moved:
         """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
         the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
         deadlines and the turn's journal record. The drones that moved: their rows, cells before and after.
