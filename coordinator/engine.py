@@ -95,23 +95,23 @@ class Engine:
         self.entities = self.roster.roles  # the admitted entities: id -> role
         self.final = False  # the GCS said its plan is complete
         self.end: Over | None = None
-        n = len(self.fleet)
+        # Its parts, each a module of its own:
         self.aiming = Aims(self.fleet, self.size)  # the targets this GCS phase received
         self.ballot = Ballot(self.fleet)  # the moves this drones' phase took
-        self.arbitration = Arbitration(config.arbiter, self.world, n)  # the cooperative drones'
+        self.ahead = Ahead()  # what came ahead of its phase: DONEs for coming turns, MOVES for this one
+        self.arbitration = Arbitration(config.arbiter, self.world, len(self.fleet))  # the cooperative drones'
         self.judge = Judge(self.fleet, self.world, self.arbitration, self.ballot, config.lost_after, logger)
-        self._turn_log = TurnLog(0)
         self.reports = Reports(self.world)  # the environment's reports (UPD) awaited, checked against the world
+        self.outage = Outage(self.roster)  # while the link is down (`link_lost`): the entities not back yet
+        self._turn_log = TurnLog(0)
         # The adapter's switches: the environment's UPD reports are checked; the turn records say what each drone
         # was told and did (off without a journal); someone follows the ENV phase (else its TURN is not made).
         self.verify_env = self.journaled = self.env_followed = True
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
-        self.ahead = Ahead()  # what came ahead of its phase: DONEs for coming turns, MOVES for this one
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
         self._held = False  # that TURN waits for the environment to come back
         self.intent = Intent.CONTINUE  # the GCS's last intent (journaled when it changes)
-        self.outage = Outage(self.roster)  # while the link is down (`link_lost`): the entities not back yet
         #: Words from hosts still deciding this drones' phase (empty MOVES): each one restarts its deadline
         #: (`phase_cap`).
         self.deciding = 0
