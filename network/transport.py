@@ -22,6 +22,7 @@ import queue
 import re
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -379,6 +380,47 @@ def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Mes
     return decode(reply.ok.payload.to_bytes(), expect)
 
 
+class _Overdue:
+    """Wakes a `FairQueue` consumer that waits past its time limit. `SimpleQueue.get(timeout=...)` can wait forever in
+    CPython 3.11: when an acquire of its lock finds the queue empty, it recomputes the time left, and once the
+    deadline is past a negative time means no limit; it then waits for the next event (`dronesim bench perf`'s
+    ground station once waited so, its game idle, every process waiting for it; tests/test_transport.py has a mix
+    of steps that does it). Waiting otherwise (threading's Event or Condition) costs every message a waiting
+    consumer gets 30-50 µs more. So one thread a process looks every `PERIOD` s at the queues whose consumer waits
+    with a time limit and wakes one that is more than a period late (`FairQueue.wake`): a flawed wait lasts a
+    period or two, a sound one is never touched but by a consumer running late (then one spurious wake-up)."""
+
+    PERIOD = 0.1
+    _queues: weakref.WeakSet[FairQueue] = weakref.WeakSet()
+    _lock = threading.Lock()
+    _thread: threading.Thread | None = None
+
+    @classmethod
+    def watch(cls, q: FairQueue) -> None:
+        with cls._lock:
+            cls._queues.add(q)
+            if cls._thread is None:
+                cls._thread = threading.Thread(target=cls._run, name="fairqueue-overdue", daemon=True)
+                cls._thread.start()
+
+    @classmethod
+    def _run(cls) -> None:
+        while True:
+            time.sleep(cls.PERIOD)
+            now = time.monotonic()
+            with cls._lock:
+                late = [q for q in cls._queues if q.overdue(now, cls.PERIOD)]
+            for q in late:
+                q.wake()
+
+
+def _forked() -> None:  # a child forked from a process whose thread looked: its own thread, its own queues
+    _Overdue._thread, _Overdue._queues, _Overdue._lock = None, weakref.WeakSet(), threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forked)
+
+
 class FairQueue:
     """Events by origin, for one consuming thread, with a bound per origin and turns under pressure.
 
@@ -394,11 +436,10 @@ class FairQueue:
         self._queues: dict[str, collections.deque[tuple[object, int]]] = {}  # origin -> (event, size), in order
         self._bytes: dict[str, int] = {}  # origin -> bytes of its events queued
         self._lined: dict[str, int] = {}  # origin -> its events in line
-        # an origin per event in line, in order (None: a wake-up); the consumer takes from it, in C, lock-free, and
-        # waits on it (no limit) or on `_ring` (a time limit: see `_next`)
+        # an origin per event in line, in order (None: a wake-up); the consumer waits on it, in C, lock-free
         self._line: queue.SimpleQueue[str | None] = queue.SimpleQueue()
-        self._ring = threading.Event()  # set by a producer while the consumer waits with a time limit
-        self._sleeping = False  # the consumer waits on `_ring`
+        self._until: float | None = None  # while the consumer waits with a time limit: when it must be back
+        self._watched = False
 
     def full(self, origin: str, size: int = 0) -> str | None:
         """Why an event of `size` bytes from `origin` would be over its budget (None: it would not). A
@@ -423,21 +464,24 @@ class FairQueue:
     def _enter(self, origin: str) -> None:
         self._lined[origin] = self._lined.get(origin, 0) + 1
         self._line.put(origin)
-        if self._sleeping:
-            self._ring.set()
 
     def wake(self) -> None:
         """Make a `take` waiting now return (with nothing)."""
         self._line.put(None)
-        if self._sleeping:
-            self._ring.set()
 
     def take(self, timeout: float | None) -> tuple[bool, object]:
         """(True, the next event), or (False, None) after `timeout` seconds (None: no limit) or a `wake`."""
+        if timeout is not None:
+            self._until = time.monotonic() + timeout
+            if not self._watched:
+                _Overdue.watch(self)
+                self._watched = True
         try:
-            origin = self._line.get() if timeout is None else self._next(timeout)
+            origin = self._line.get(timeout=timeout)
         except queue.Empty:
             return False, None
+        finally:
+            self._until = None
         if origin is None:
             return False, None
         with self._lock:
@@ -451,29 +495,10 @@ class FairQueue:
                 del self._queues[origin], self._bytes[origin], self._lined[origin]
             return True, event
 
-    def _next(self, timeout: float) -> str | None:
-        """The next in line, waiting `timeout` s at most (queue.Empty after). Not `SimpleQueue.get(timeout=...)`:
-        in CPython 3.11 it can wait forever (when an acquire of its lock finds the queue empty, it recomputes the
-        time left, and once the deadline is past a negative time means no limit: `dronesim bench perf`'s ground
-        station once waited so, the game idle, every process waiting for it). An Event's wait has no such flaw;
-        a producer sets it only while the consumer waits (`_sleeping`, set before the consumer looks again: under
-        the GIL, a producer that did not see it put its event before that look)."""
-        try:
-            return self._line.get_nowait()
-        except queue.Empty:
-            if timeout <= 0:
-                raise
-        self._ring.clear()
-        self._sleeping = True
-        try:
-            try:
-                return self._line.get_nowait()
-            except queue.Empty:
-                pass
-            self._ring.wait(timeout)
-        finally:
-            self._sleeping = False
-        return self._line.get_nowait()
+    def overdue(self, now: float, margin: float) -> bool:
+        """The consumer waits with a time limit that passed more than `margin` s ago."""
+        until = self._until
+        return until is not None and now > until + margin
 
     def drain(self) -> list[object]:
         """Every event queued, in the order `take` would give them (for the one consumer: never blocks)."""

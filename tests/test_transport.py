@@ -148,10 +148,10 @@ def test_get_with_a_deadline_already_past_returns_at_once(pair) -> None:
 
 
 def test_a_wait_with_a_time_limit_ends_whatever_came_before() -> None:
-    """`take(timeout)` returns within its time limit after any mix of events put before, during (from another thread)
-    and after waits, wakes and tiny limits. Before, it was `SimpleQueue.get(timeout=...)`, which in CPython 3.11 can
-    wait forever (this mix of 8 steps, seed 1, hung within seconds; `dronesim bench perf`'s ground station once
-    hung so)."""
+    """`take(timeout)` returns, within its time limit or a watchdog's period after it (`_Overdue`), after any mix of
+    events put before, during (from another thread) and after waits, wakes and tiny limits. `SimpleQueue.get(timeout=
+    ...)` alone can wait forever in CPython 3.11 (without the watchdog this mix, seed 1, hung within seconds;
+    `dronesim bench perf`'s ground station once hung so)."""
     import random
 
     rng, done = random.Random(1), threading.Event()
