@@ -93,12 +93,20 @@ ORIGIN_SHARE = 8
 ORIGIN_BYTES = 8 << 20
 
 #: Puts a second a router forwards from one session on a key a drone or the ground station writes (NPS, MOVES,
-#: DONE, TGT: its `downsampling`, schema/acl.py `flood_filters`): a process sends one a turn per key, and a turn
-#: takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor), so 10,000 never drops a real one
-#: (messages closer than 0.1 ms are dropped; a scripted ground station's answers ahead, sent together, may lose all
+#: DONE; TGT at `TGT_RATE`: its `downsampling`, schema/acl.py `flood_filters`): a process sends one a turn per key,
+#: and a turn takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor), so 10,000 never drops a real
+#: one (messages closer than 0.1 ms are dropped; a scripted ground station's answers ahead, sent together, may lose all
 #: but the first: it answers those phases when they are announced, entities/gcs.py `Station`), while a flood
 #: reaches the coordinator at a rate its refusal of stale messages keeps up with.
 PUT_RATE = 10_000.0
+#: TGT puts a second a router forwards from one session on one drone's TGT key, where the access control names each
+#: drone's (schema/acl.py `flood_filters`; a plain router has no budget on them): a station sends at most one TGT a
+#: drone a turn (dronesim's send none: their DONE carries the targets), so a TGT for a drone within 1 ms of the last
+#: one for it is dropped (a station retargeting a drone at every turn of a game above 1,000 turns a second would lose
+#: some). Measured (bench flood, issue 33): a flood of stale TGTs reaches the coordinator at about one put for each
+#: batch the router reads, up to 2,400 a second with `PUT_RATE` (13,367 in a game, which then ran at 0.46 of its
+#: clean speed), each costing it about 55 us; this bounds them to 1,000 a second.
+TGT_RATE = 1_000.0
 #: Seconds at least between two puts a process makes on one of those keys, so that the router's budget of `PUT_RATE`
 #: puts a second keeps them all: a ground station's DONEs (entities/gcs.py `Station`: its answers ahead used to go
 #: out at once), a swarm host's word that it is still deciding and its MOVES (entities/drone_node.py `Effects`). 5

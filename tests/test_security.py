@@ -94,6 +94,7 @@ from schema import (
     decode,
     encode,
 )
+from schema.tuning import PUT_RATE, TGT_RATE
 from tests.harness import Cluster, ask_until_replied, zenohd
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -391,8 +392,10 @@ def test_security_flags_make_the_zenoh_config(kit, monkeypatch, tmp_path):
     assert conf_value(router, "access_control")["default_permission"] == "deny"
     # its budgets of puts a second, key by key for the keys the access control grants (issue 33, 6): the ground
     # station's DONE key and D01's TGT key each have one; a plain router's TGT keys have none (one for all)
-    budgets = {r["key_expr"] for item in conf_value(router, "downsampling") for r in item["rules"]}
-    assert {"sim/D01/NPS", "sim/D01/TGT", "sim/GCS/DONE"} <= budgets
+    budgets = {r["key_expr"]: r["freq"] for item in conf_value(router, "downsampling") for r in item["rules"]}
+    assert {"sim/D01/NPS", "sim/D01/TGT", "sim/GCS/DONE"} <= budgets.keys()
+    # a TGT a drone a turn at most (TGT_RATE), below the other keys' budget: a flood of stale TGTs passes less
+    assert budgets["sim/D01/TGT"] == TGT_RATE < budgets["sim/GCS/DONE"] == budgets["sim/D01/NPS"] == PUT_RATE
     plain = {r["key_expr"] for item in acl.flood_filters(["**"])["downsampling"] for r in item["rules"]}
     assert "**/GCS/DONE" in plain and not any(k.endswith("/TGT") for k in plain)
     assert conf_value(zenoh_config(parse("-m", "router", "--tls-mtls")), "transport/link/tls/enable_mtls") is True
