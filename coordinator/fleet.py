@@ -66,6 +66,10 @@ class Fleet:
         self.misses = np.zeros(n, np.int32)
         self.missing = False  # whether some drone's misses are not 0 (`count_misses`)
         self.small = n <= SMALL_FLEET  # its columns are read whole (`column`, `whole`)
+        # a small fleet's states and cells also as memoryviews (flat): read and written item by item by Python
+        # without numpy's fixed cost per call, ~0.2-0.5 us (`whole`, `put`; docs/performance.md)
+        self._states = self.state.data
+        self._cells = self.pos.reshape(-1).data  # (a view: the C-ordered rows, x y z each)
         self.host: list[str | None] = [None] * n
         self.host_code = np.empty(n, np.int16)  # index of its host in `hosts`, -1: none
         self.host_code.fill(-1)
@@ -100,7 +104,13 @@ class Fleet:
 
     def whole(self) -> tuple[list[int], list[list[int]]] | None:
         """A small fleet's state and cells as lists (None: a large one's, `column` reads a few rows of them)."""
-        return (self.state.tolist(), self.pos.tolist()) if self.small else None
+        return (self._states.tolist(), self.pos.tolist()) if self.small else None
+
+    def put(self, i: int, cell: Cell) -> None:
+        """Drone row `i` is now at `cell` (one row: three items of its memoryview, where numpy's row assignment
+        converts the tuple first)."""
+        k = 3 * i
+        self._cells[k], self._cells[k + 1], self._cells[k + 2] = cell
 
     def alive_rows(self) -> np.ndarray:
         return (self.state == ALIVE).nonzero()[0]

@@ -118,9 +118,10 @@ class Judge:
             live = set(alive)
             dead = observer.deaths_of_moves(self.size, self._solid, {i: before[i] for i in alive},
                                             {i: after[i] for i in alive}, [i for i in moved if i in live])
-        if len(moved) == 1:
-            fleet.pos[moved[0]] = after[moved[0]]
-        elif moved:
+        if len(moved) <= FEW_ROWS:
+            for i in moved:
+                fleet.put(i, after[i])
+        else:
             _set_rows(fleet.pos, moved, [after[i] for i in moved])
         notes = fleet.note.tolist() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
         said = []  # (in any order: the journal's is its own)

@@ -130,7 +130,7 @@ class FewEpisode(EpisodeBase):
         over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, moves, notes)
         self._aim = []
         fleet = self.engine.fleet  # what the turn did: the drones' cells and states (their rows are ours)
-        states, cells = fleet.state.tolist(), fleet.pos.tolist()
+        states, cells = fleet.whole() or (fleet.state.tolist(), fleet.pos.tolist())  # (whole: a small fleet's)
         dead: set[int] | tuple[()] = ()  # (a set once one died: most steps none)
         for i in alive:
             x, y, z = cells[i]
