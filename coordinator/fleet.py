@@ -106,6 +106,10 @@ class Fleet:
         """A small fleet's state and cells as lists (None: a large one's, `column` reads a few rows of them)."""
         return (self._states.tolist(), self.pos.tolist()) if self.small else None
 
+    def states(self) -> list[int]:
+        """Each drone's state code, as a list (read through the memoryview: no numpy call)."""
+        return self._states.tolist()
+
     def put(self, i: int, cell: Cell) -> None:
         """Drone row `i` is now at `cell` (one row: three items of its memoryview, where numpy's row assignment
         converts the tuple first)."""

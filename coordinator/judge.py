@@ -49,6 +49,8 @@ class Judge:
         self.fleet, self.size, self.arbitration, self.ballot, self.lost_after, self._log = \
             fleet, world.size, arbitration, ballot, lost_after, logger
         self._solid = world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
+        self._solid_items = self._solid.data  # the same read item by item (`_few`): a memoryview's item is a Python
+        # bool in ~25 ns, a numpy array's ~300 ns
 
     def rule(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
              took: dict[int, tuple[Cell, int]] | None = None,
@@ -64,7 +66,9 @@ class Judge:
         wanted (if not, the lists' way leaves them out)."""
         fleet, ballot = self.fleet, self.ballot
         whole = whole or fleet.whole()
-        if whole:
+        if whole and whole[0].count(ALIVE) == len(whole[0]):  # (every drone alive: most turns, counted in C)
+            alive = list(range(len(whole[0])))
+        elif whole:
             alive = []
             for i, s in enumerate(whole[0]):  # (loops, not comprehensions, in the few drones' turn: Python 3.11
                 if s == ALIVE:  # calls a function for each comprehension, a few drones' whole work)
@@ -113,10 +117,10 @@ class Judge:
         if not moved:  # where the drones were, alive and apart, they still are
             dead: dict[int, Cause] = {}
         elif every is alive:
-            dead = observer.deaths_of_moves(self.size, self._solid, before, after, moved)
+            dead = observer.deaths_of_moves(self.size, self._solid_items, before, after, moved)
         else:
             live = set(alive)
-            dead = observer.deaths_of_moves(self.size, self._solid, {i: before[i] for i in alive},
+            dead = observer.deaths_of_moves(self.size, self._solid_items, {i: before[i] for i in alive},
                                             {i: after[i] for i in alive}, [i for i in moved if i in live])
         if len(moved) <= FEW_ROWS:
             for i in moved:

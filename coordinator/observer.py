@@ -67,7 +67,7 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     return cause
 
 
-def deaths_of_moves(size: Cell, solid: np.ndarray, before: Mapping[K, Cell], after: Mapping[K, Cell],
+def deaths_of_moves(size: Cell, solid: np.ndarray | memoryview, before: Mapping[K, Cell], after: Mapping[K, Cell],
                     moved: Sequence[K]) -> dict[K, Cause]:
     """`deaths`, for drones of which `moved` changed cell (`solid`: the world's buildings, flat in C order), with
     the rules run only if someone may die: one left the world or entered a building, or two ended in one cell or

@@ -129,16 +129,17 @@ class FewEpisode(EpisodeBase):
         aim, targets = self._aim, self._targets
         over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, moves, notes)
         self._aim = []
-        fleet = self.engine.fleet  # what the turn did: the drones' cells and states (their rows are ours)
-        states, cells = fleet.whole() or (fleet.state.tolist(), fleet.pos.tolist())  # (whole: a small fleet's)
+        # what the turn did: each alive drone is where it moved (a game without cooperative drones takes every
+        # move as given: `Engine.play`), and those the engine's fleet says are no longer alive died there
+        for i, cell in zip(alive, moves):
+            pos[i] = cell
+        fleet = self.engine.fleet  # (its rows are ours)
+        states = fleet.states()
         dead: set[int] | tuple[()] = ()  # (a set once one died: most steps none)
-        for i in alive:
-            x, y, z = cells[i]
-            pos[i] = x, y, z
-            if states[i] != ALIVE:
+        if states.count(ALIVE) < len(alive):
+            dead = {i for i in alive if states[i] != ALIVE}
+            for i in dead:
                 state[i], self._cause[i] = states[i], int(fleet.cause[i])
-                dead = {*dead, i}
-        if dead:
             self._alive = [i for i in alive if i not in dead]
         self.cycle = t
         # the episode's rules, for the rows acting
