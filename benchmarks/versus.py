@@ -82,6 +82,27 @@ def replay_cpu(turns: int, journal: Path) -> Callable[[Path], float]:
     return measure
 
 
+def measure_rows(args: argparse.Namespace, ints: Callable[[str], list[int]], before: Path, after: Path,
+                 tmp: Path) -> list[tuple[str, str, list[tuple]]]:
+    """Every row: (name, unit, each repeat's (before, after, after ÷ before))."""
+    rows: list[tuple[str, str, list[tuple]]] = []
+    for n in ints(args.counts):
+        for policy in ("safe", "random"):
+            name = f"RL local, {n} agent{'s' * (n > 1)}, {policy}"
+            rows.append((name, "steps/s (CPU)", side_by_side(rl_rate(n, args.seconds, policy), before, after,
+                                                             args.repeat)))
+            print(f"{name}: done", file=sys.stderr)
+    for n in ints(args.games):
+        journal = tmp / f"game-{n}.jsonl"
+        name = f"game, {n} drones @ 64x64x16, {args.turns} turns"
+        rows.append((name + ", every process", "CPU ms/turn", side_by_side(
+            game_cpu(n, args.turns, journal), before, after, args.repeat)))
+        rows.append((name + ", replay --verify", "CPU ms/turn", side_by_side(
+            replay_cpu(args.turns, journal), before, after, args.repeat)))
+        print(f"{name}: done", file=sys.stderr)
+    return rows
+
+
 def side_by_side(measure: Callable[[Path], float], before: Path, after: Path, repeat: int) -> list[tuple]:
     """`repeat` times (before, after, after, before): the two means and after ÷ before."""
     out = []
@@ -119,21 +140,11 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         if subprocess.run(["git", "-C", str(HERE), "diff", "--quiet", "HEAD"]).returncode:
             print("(the working tree differs from HEAD: HEAD is measured)", file=sys.stderr)
-        rows: list[tuple[str, str, list[tuple]]] = []
-        for n in ints(args.counts):
-            for policy in ("safe", "random"):
-                name = f"RL local, {n} agent{'s' * (n > 1)}, {policy}"
-                rows.append((name, "steps/s (CPU)", side_by_side(rl_rate(n, args.seconds, policy), before, after,
-                                                                 args.repeat)))
-                print(f"{name}: done", file=sys.stderr)
-        for n in ints(args.games):
-            journal = Path(tmp) / f"game-{n}.jsonl"
-            name = f"game, {n} drones @ 64x64x16, {args.turns} turns"
-            rows.append((name + ", every process", "CPU ms/turn", side_by_side(
-                game_cpu(n, args.turns, journal), before, after, args.repeat)))
-            rows.append((name + ", replay --verify", "CPU ms/turn", side_by_side(
-                replay_cpu(args.turns, journal), before, after, args.repeat)))
-            print(f"{name}: done", file=sys.stderr)
+        try:
+            rows = measure_rows(args, ints, before, after, Path(tmp))
+        except RuntimeError as err:  # (a tree that cannot run a probe: an older CLI, a missing name)
+            print(f"bench versus: {err}", file=sys.stderr)
+            return 1
     m = machine()
     print(f"Command: `dronesim bench versus {' '.join(argv if argv is not None else sys.argv[1:])}`; before "
           f"{old[:7]}, after {new[:7]}; {m.get('cpu', '?')}, {time.time() - started:.0f} s, load average (1 min) "
