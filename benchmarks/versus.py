@@ -12,7 +12,7 @@ the repeats (issue 34: "no row may get worse beyond noise").
   second of CPU time under the safe and the random policy, episodes reset (BENCHMARKS.md, "RL environment").
 - Game rows: `dronesim up --swarm --drones N --size 64,64,16 --turn-period 0 --max-turns T` (the router, the
   coordinator, the environment, a swarm host and the scripted ground station in processes of their own), the CPU
-  seconds of the whole process tree per turn (wall-clock turns/s moves with the other work on a shared machine;
+  seconds of the whole process tree per turn played (wall-clock turns/s moves with the other work on a shared machine;
   the CPU the game needs does not), and `dronesim replay --verify` of the after tree's journal: the same turns
   played again in one process, CPU per turn.
 """
@@ -30,6 +30,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from benchmarks.measure import machine
+from coordinator.journal import is_turn
+from coordinator.journal import read as journal_read
 
 HERE = Path(__file__).resolve().parents[1]
 RL_PROBE = ("import sys; from benchmarks.rl import ours; "
@@ -64,21 +66,26 @@ def rl_rate(n: int, seconds: float, policy: str) -> Callable[[Path], float]:
     return measure
 
 
+def played(journal: Path) -> int:
+    """The turns a journal holds (a game may end before its turn limit: every drone home, or dead)."""
+    return sum(1 for record in journal_read(journal) if is_turn(record))
+
+
 def game_cpu(n: int, turns: int, journal: Path) -> Callable[[Path], float]:
-    """CPU ms per turn of a whole distributed game (every process), `n` drones; writes `journal`."""
+    """CPU ms per turn played of a whole distributed game (every process), `n` drones; writes `journal`."""
     def measure(tree: Path) -> float:
         journal.unlink(missing_ok=True)
         _, cpu = run_in(tree, [sys.executable, "-m", "dronesim", "up", "--swarm", "--drones", str(n), "--size",
                                "64,64,16", "--turn-period", "0", "--max-turns", str(turns), "--quiet",
                                "--journal", str(journal)])
-        return 1000 * cpu / turns
+        return 1000 * cpu / max(1, played(journal))
     return measure
 
 
-def replay_cpu(turns: int, journal: Path) -> Callable[[Path], float]:
+def replay_cpu(journal: Path) -> Callable[[Path], float]:
     def measure(tree: Path) -> float:
         _, cpu = run_in(tree, [sys.executable, "-m", "dronesim", "replay", "--verify", str(journal)])
-        return 1000 * cpu / turns
+        return 1000 * cpu / max(1, played(journal))
     return measure
 
 
@@ -94,11 +101,11 @@ def measure_rows(args: argparse.Namespace, ints: Callable[[str], list[int]], bef
             print(f"{name}: done", file=sys.stderr)
     for n in ints(args.games):
         journal = tmp / f"game-{n}.jsonl"
-        name = f"game, {n} drones @ 64x64x16, {args.turns} turns"
+        name = f"game, {n} drones @ 64x64x16, up to {args.turns} turns"
         rows.append((name + ", every process", "CPU ms/turn", side_by_side(
             game_cpu(n, args.turns, journal), before, after, args.repeat)))
         rows.append((name + ", replay --verify", "CPU ms/turn", side_by_side(
-            replay_cpu(args.turns, journal), before, after, args.repeat)))
+            replay_cpu(journal), before, after, args.repeat)))
         print(f"{name}: done", file=sys.stderr)
     return rows
 

@@ -25,8 +25,8 @@ def test_head_against_itself_gives_every_row(capsys):
     rows = [[c.strip() for c in ln.strip("|").split("|")] for ln in capsys.readouterr().out.splitlines()
             if ln.startswith("| ") and not ln.startswith("| row")]
     assert [r[0] for r in rows] == ["RL local, 1 agent, safe", "RL local, 1 agent, random",
-                                    "game, 1 drones @ 64x64x16, 5 turns, every process",
-                                    "game, 1 drones @ 64x64x16, 5 turns, replay --verify"]
+                                    "game, 1 drones @ 64x64x16, up to 5 turns, every process",
+                                    "game, 1 drones @ 64x64x16, up to 5 turns, replay --verify"]
     for row in rows:
         low, high = (float(x) for x in row[4].split("–"))
         assert 0 < low <= high
