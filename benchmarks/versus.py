@@ -10,7 +10,8 @@ the repeats (issue 34: "no row may get worse beyond noise").
 
 - RL rows: each tree's own `benchmarks.rl.ours("local", n, seconds, policy=...)`, the local backend's steps per
   second of CPU time under the safe and the random policy, episodes reset (BENCHMARKS.md, "RL environment").
-- Game rows: `dronesim up --swarm --drones N --size 64,64,16 --turn-period 0 --max-turns T` (the router, the
+- Game rows: `dronesim up --swarm --drones N --size 64,64,16 --lifelong --turn-period 0 --max-turns T` (a new
+  target for each drone home, so that the game plays to its limit; the router, the
   coordinator, the environment, a swarm host and the scripted ground station in processes of their own), the CPU
   seconds of the whole process tree per turn played (wall-clock turns/s moves with the other work on a shared machine;
   the CPU the game needs does not), and `dronesim replay --verify` of the after tree's journal: the same turns
@@ -76,7 +77,7 @@ def game_cpu(n: int, turns: int, journal: Path) -> Callable[[Path], float]:
     def measure(tree: Path) -> float:
         journal.unlink(missing_ok=True)
         _, cpu = run_in(tree, [sys.executable, "-m", "dronesim", "up", "--swarm", "--drones", str(n), "--size",
-                               "64,64,16", "--turn-period", "0", "--max-turns", str(turns), "--quiet",
+                               "64,64,16", "--lifelong", "--turn-period", "0", "--max-turns", str(turns), "--quiet",
                                "--journal", str(journal)])
         return 1000 * cpu / max(1, played(journal))
     return measure
