@@ -588,7 +588,9 @@ def test_a_dstar_swarm_host_slower_than_the_phase_deadline_keeps_its_drones(rout
         assert set(c.wait_all(timeout=180).values()) == {0}, [p.text for p in c.procs]
     srv.expect(r"turn 1: H01 is still deciding")  # (its planning did outlast the deadline)
     records = journal_records(journal)
-    assert not [r for r in records if r.get("lost")], "no drone LOST"
+    lost = [r for r in records if r.get("lost")]
+    assert not lost, ("no drone LOST: first at turn " + str(lost[0].get("turn")) + "\ncoordinator:\n" + srv.text[-6000:]
+                      + "\nswarm host:\n" + next(p.text[-6000:] for p in c.procs if p.name == "H01"))
     assert records[-1]["reason"] == "TURN_LIMIT"
     gcs.expect("GAME OVER at turn 6: TURN_LIMIT")
 
