@@ -14,7 +14,8 @@ the repeats (issue 34: "no row may get worse beyond noise").
   target for each drone home, so that the game plays to its limit; the router, the
   coordinator, the environment, a swarm host and the scripted ground station in processes of their own), the CPU
   seconds of the whole process tree per turn played (wall-clock turns/s moves with the other work on a shared machine;
-  the CPU the game needs does not), and `dronesim replay --verify` of the after tree's journal: the same turns
+  the CPU the game needs does not), and `dronesim replay --verify` of its journal (the same bytes from either tree:
+  journals must not change): the same turns
   played again in one process, CPU per turn.
 """
 
@@ -84,14 +85,20 @@ def game_cpu(n: int, turns: int, journal: Path) -> Callable[[Path], float]:
 
 
 def replay_cpu(journal: Path) -> Callable[[Path], float]:
+    """CPU ms per turn of `dronesim replay --verify` of `journal` (written by the game rows, read as it is now)."""
+    turns = max(1, played(journal))
+
     def measure(tree: Path) -> float:
         _, cpu = run_in(tree, [sys.executable, "-m", "dronesim", "replay", "--verify", str(journal)])
-        return 1000 * cpu / max(1, played(journal))
+        return 1000 * cpu / turns
     return measure
 
 
-def measure_rows(args: argparse.Namespace, ints: Callable[[str], list[int]], before: Path, after: Path,
-                 tmp: Path) -> list[tuple[str, str, list[tuple]]]:
+def ints(text: str) -> list[int]:
+    return [int(x) for x in text.split(",") if x]
+
+
+def measure_rows(args: argparse.Namespace, before: Path, after: Path, tmp: Path) -> list[tuple[str, str, list[tuple]]]:
     """Every row: (name, unit, each repeat's (before, after, after ÷ before))."""
     rows: list[tuple[str, str, list[tuple]]] = []
     for n in ints(args.counts):
@@ -133,7 +140,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--turns", type=int, default=300, help="turns of each whole game")
     ap.add_argument("--repeat", type=int, default=3, help="repeats (the table gives each ratio's range)")
     args = ap.parse_args(argv)
-    ints = lambda text: [int(x) for x in text.split(",") if x]  # noqa: E731
     started = time.time()
     with tempfile.TemporaryDirectory(prefix="versus-") as tmp:
         before, after = Path(tmp) / "before", Path(tmp) / "after"
@@ -149,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         if subprocess.run(["git", "-C", str(HERE), "diff", "--quiet", "HEAD"]).returncode:
             print("(the working tree differs from HEAD: HEAD is measured)", file=sys.stderr)
         try:
-            rows = measure_rows(args, ints, before, after, Path(tmp))
+            rows = measure_rows(args, before, after, Path(tmp))
         except RuntimeError as err:  # (a tree that cannot run a probe: an older CLI, a missing name)
             print(f"bench versus: {err}", file=sys.stderr)
             return 1
