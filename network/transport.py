@@ -381,44 +381,40 @@ def _answer(key: str, reply: zenoh.Reply, expect: type[Message] | tuple[type[Mes
 
 
 class _Overdue:
-    """Wakes a `FairQueue` consumer that waits past its time limit. `SimpleQueue.get(timeout=...)` can wait forever in
-    CPython 3.11: when an acquire of its lock finds the queue empty, it recomputes the time left, and once the
-    deadline is past a negative time means no limit; it then waits for the next event (`dronesim bench perf`'s
+    """Wakes its `FairQueue`'s consumer when it waits past its time limit. `SimpleQueue.get(timeout=...)` can wait
+    forever in CPython 3.11: when an acquire of its lock finds the queue empty, it recomputes the time left, and once
+    the deadline is past a negative time means no limit; it then waits for the next event (`dronesim bench perf`'s
     ground station once waited so, its game idle, every process waiting for it; tests/test_transport.py has a mix
     of steps that does it). Waiting otherwise (threading's Event or Condition) costs every message a waiting
-    consumer gets 30-50 µs more. So one thread a process looks every `PERIOD` s at the queues whose consumer waits
-    with a time limit and wakes one that is more than a period late (`FairQueue.wake`): a flawed wait lasts a
-    period or two, a sound one is never touched but by a consumer running late (then one spurious wake-up)."""
+    consumer gets 30-50 µs more. So a thread looks every `PERIOD` s whether the queue's consumer, waiting with a
+    time limit, is more than a period late, and wakes it (`FairQueue.wake`): a flawed wait lasts a period or two, a
+    sound one is never touched but by a consumer running late (then one spurious wake-up).
+
+    One per queue (an `Inbox`'s: one per session), from its first wait with a time limit, in the process that
+    waits (a forked child starts its own), until `stop` or the queue is gone: the thread holds it weakly."""
 
     PERIOD = 0.1
-    _queues: weakref.WeakSet[FairQueue] = weakref.WeakSet()
-    _lock = threading.Lock()
-    _thread: threading.Thread | None = None
 
-    @classmethod
-    def watch(cls, q: FairQueue) -> None:
-        with cls._lock:
-            cls._queues.add(q)
-            if cls._thread is None:
-                cls._thread = threading.Thread(target=cls._run, name="fairqueue-overdue", daemon=True)
-                cls._thread.start()
+    def __init__(self, q: FairQueue) -> None:
+        self.pid = os.getpid()
+        self._stopped = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(weakref.ref(q), self._stopped),
+                                       name="fairqueue-overdue", daemon=True)
+        self.thread.start()
 
-    @classmethod
-    def _run(cls) -> None:
+    @staticmethod
+    def _run(ref: weakref.ref[FairQueue], stopped: threading.Event) -> None:
         while True:
-            time.sleep(cls.PERIOD)
-            now = time.monotonic()
-            with cls._lock:
-                late = [q for q in cls._queues if q.overdue(now, cls.PERIOD)]
-            for q in late:
+            time.sleep(_Overdue.PERIOD)  # (not a timed wait on a lock: the flaw it watches for is one)
+            q = ref()
+            if q is None or stopped.is_set():
+                return
+            if q.overdue(time.monotonic(), _Overdue.PERIOD):
                 q.wake()
+            del q  # (the queue is not kept alive by its watcher while it sleeps)
 
-
-def _forked() -> None:  # a child forked from a process whose thread looked: its own thread, its own queues
-    _Overdue._thread, _Overdue._queues, _Overdue._lock = None, weakref.WeakSet(), threading.Lock()
-
-
-os.register_at_fork(after_in_child=_forked)
+    def stop(self) -> None:
+        self._stopped.set()
 
 
 class FairQueue:
@@ -439,7 +435,7 @@ class FairQueue:
         # an origin per event in line, in order (None: a wake-up); the consumer waits on it, in C, lock-free
         self._line: queue.SimpleQueue[str | None] = queue.SimpleQueue()
         self._until: float | None = None  # while the consumer waits with a time limit: when it must be back
-        self._watched = False
+        self._watcher: _Overdue | None = None
 
     def full(self, origin: str, size: int = 0) -> str | None:
         """Why an event of `size` bytes from `origin` would be over its budget (None: it would not). A
@@ -473,9 +469,8 @@ class FairQueue:
         """(True, the next event), or (False, None) after `timeout` seconds (None: no limit) or a `wake`."""
         if timeout is not None:
             self._until = time.monotonic() + timeout
-            if not self._watched:
-                _Overdue.watch(self)
-                self._watched = True
+            if self._watcher is None or self._watcher.pid != os.getpid():
+                self._watcher = _Overdue(self)
         try:
             origin = self._line.get(timeout=timeout)
         except queue.Empty:
@@ -499,6 +494,12 @@ class FairQueue:
         """The consumer waits with a time limit that passed more than `margin` s ago."""
         until = self._until
         return until is not None and now > until + margin
+
+    def close(self) -> None:
+        """Stop watching the consumer's waits (a later wait with a time limit starts a new watcher)."""
+        watcher, self._watcher = self._watcher, None
+        if watcher is not None:
+            watcher.stop()
 
     def drain(self) -> list[object]:
         """Every event queued, in the order `take` would give them (for the one consumer: never blocks)."""
@@ -722,6 +723,7 @@ class Inbox:
         handles, self._handles = self._handles, []
         for handle in handles:
             handle.undeclare()
+        self._events.close()
 
     def post(self, event: object) -> None:
         """Queue an event from another thread of this process (e.g. a web request for the main loop)."""

@@ -185,6 +185,27 @@ def test_a_wait_with_a_time_limit_ends_whatever_came_before() -> None:
     assert q.take(0.05) == (True, "x") and q.take(0) == (False, None)
 
 
+def test_a_queues_watcher_ends_with_the_queue_or_its_close() -> None:
+    """The watchdog is the queue's own (no process-wide state): it ends when its queue is closed or gone, and a
+    closed queue's next wait with a time limit has a new one."""
+    import gc
+
+    q = FairQueue()
+    q.take(0.001)
+    first = q._watcher
+    assert first is not None and first.thread.is_alive()
+    q.close()
+    first.thread.join(5)
+    assert not first.thread.is_alive() and q._watcher is None
+    q.take(0.001)
+    second = q._watcher
+    assert second is not None and second is not first
+    del q, first
+    gc.collect()
+    second.thread.join(5)
+    assert not second.thread.is_alive()
+
+
 def test_below_its_share_an_origin_keeps_the_order_of_arrival() -> None:
     q = FairQueue(budget=100, share=3)
     for event in [("GCS", 19), ("D01", 18), ("GCS", 20), ("GCS", 21), ("SRV", 1)]:
