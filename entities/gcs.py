@@ -395,7 +395,10 @@ class Station:
         return self._release(now) + out
 
     def _release(self, now: float) -> list[Effect]:
-        """The queued DONE due now, if any (the next one PUT_GAP s later)."""
+        """The queued DONE due now, if any (the next one PUT_GAP s later); those of turns already played are
+        dropped (the coordinator would refuse them as stale)."""
+        while self._outgoing and self._outgoing[0].msg.turn <= self.status_turn:
+            self._outgoing.popleft()
         if not self._outgoing or now < self._next_send:
             return []
         self._next_send = now + PUT_GAP
@@ -439,7 +442,13 @@ class Station:
         lost = self._ahead_sent.get(turn)
         for t in [t for t in self._ahead_sent if t <= turn]:
             del self._ahead_sent[t]
-        return None if lost is None else SendDone(lost.msg)
+        if lost is None:
+            return None
+        if lost in self._outgoing:  # not sent yet (paced behind others; the game went faster): it goes out first
+            self._outgoing.remove(lost)
+            self._outgoing.appendleft(lost)
+            return None
+        return SendDone(lost.msg)
 
     def _gcs_phase(self, turn: int) -> list[Effect]:
         if turn <= self.answered or turn == self.pending:  # answered (maybe ahead), or held

@@ -474,6 +474,22 @@ def test_its_dones_go_out_paced_so_that_a_routers_budget_of_puts_keeps_them_all(
     assert sent(station.tick(5.0 + 2 * PUT_GAP)) == [(3, {}, Intent.FINAL)]
 
 
+def test_a_phase_announced_before_its_done_ahead_went_out_gets_that_done_first_and_once() -> None:
+    """A game faster than the station's pacing announces a phase whose DONE ahead is still queued: that DONE goes
+    out next, and only once (a second copy would reach the coordinator turns later, refused as stale: a WARNING in
+    every quick `dronesim up`); a queued DONE of a turn already played is not sent."""
+    station = Station(ground(["D01=1,1,1"]), ahead=2)
+    assert sent(station.receive(gcs(1), 5.0)) == [(1, {"D01": (1, 1, 1)}, Intent.FINAL)]  # 2 and 3 queued
+    assert sent(station.receive(gcs(2), 5.0 + PUT_GAP / 10)) == []
+    out = [station.tick(5.0 + k * PUT_GAP) for k in range(1, 6)]
+    assert [t for effects in out for t, _, _ in sent(effects)] == [2, 3, 4], "2 first, once; then 3 and 4 ahead"
+    station = Station(ground(["D01=1,1,1"]), ahead=2)
+    station.receive(gcs(1), 5.0)
+    station.receive(status(2, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 5.0 + PUT_GAP / 10)
+    later = [t for k in range(1, 6) for t, _, _ in sent(station.tick(5.0 + k * PUT_GAP))]
+    assert 2 not in later and later == sorted(later), later
+
+
 def test_a_phases_done_goes_out_again_until_its_turn_is_played() -> None:
     """A DONE lost on the way must not stall the game: the phase's DONE goes out again DONE_RETRY_S s later, then
     twice as long each time, until that turn's STATUS (the coordinator takes a repeat as nothing new)."""
