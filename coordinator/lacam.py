@@ -85,6 +85,12 @@ MEMORY = 1 << 21
 #: The first radius of a focused search (`Lacam._focus`, the search after one without progress): the drones within so
 #: many moves of a drone away from its goal or of that goal; twice as many each time one makes no progress.
 FOCUS = 4
+#: A found plan is refined (`Search.refine`) while its part beyond the refiner's root has this many steps or more.
+REFINE = 8
+#: Where a refining search starts (`Search.refine`): this fraction of the plan's steps left from the drones on.
+AHEAD = (1, 4)
+#: A refining search's nodes are numbered from its count times this (their tie-breaks differ from the others').
+REFINE_NUMBERS = 1 << 20
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
 #: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
@@ -189,11 +195,12 @@ class Search:
     `step` gives the drones' next configuration from the node they are at (`at`)."""
 
     def __init__(self, graph: Graph, size: Cell, start: np.ndarray, goals: np.ndarray, aims: np.ndarray,
-                 dist: np.ndarray, memory: int = MEMORY, focus: Focus | None = None) -> None:
+                 dist: np.ndarray, memory: int = MEMORY, focus: Focus | None = None, number: int = 0) -> None:
         """`aims`: the drones' real targets (flat, -1 for none: PIBT's swap and retreats read them); `dist`: each
         drone's distance table ((n, F), to its goal); `memory`: the entries it may hold (`MEMORY`); `focus`: a search
         over some drones only (`Lacam._focus`): their rows among all, every drone's cells (the others stay there), the
-        part of the world it searches (`graph`'s open cells) and its radius."""
+        part of the world it searches (`graph`'s open cells) and its radius; `number`: its root's number (the nodes'
+        numbers draw PIBT's tie-breaks: a refining search, `refine`, draws others than the search it refines)."""
         self.graph, self.size, self.goals, self.dist, self.memory = graph, size, goals, dist, memory
         self.focus = focus
         self.aims = aims.tolist()
@@ -202,8 +209,8 @@ class Search:
         self.at_goal = goals.tobytes()
         prio = np.minimum(dist[self.rows, graph.index[start]].astype(np.int64), SPAN - 1)
         self.base = prio
-        self.created = 1
-        root = Node(start, None, np.where(start == goals, prio, prio + SPAN), 0)
+        self.created = number + 1
+        root = Node(start, None, np.where(start == goals, prio, prio + SPAN), number)
         self.at = root  # where the drones are
         self.explored: dict[bytes, Node] = {start.tobytes(): root}
         self.open: list[Node] = [root]
@@ -217,6 +224,13 @@ class Search:
         self.aim_array = aims.astype(np.int64)
         self._cached: tuple[Any, list[int], list[list[int]], list[int]] = (None, [], [], [])
         self.aimed = (self.aims, shape)
+        self.plan: np.ndarray | None = None  # once found: the drones' configurations from `at` to the goal (`refine`)
+        self.t = 0  # the drones' index in `plan`
+        self.refiner: Search | None = None  # a search from a configuration of `plan` ahead of the drones (`refine`)
+        self.ahead = 0  # the refiner's root's index in `plan`
+        self.refined = 0  # refining searches started, and the plan's length when found (`first`)
+        self.first = 0
+        self.refining = 0  # the refiners' PIBT calls
 
     @property
     def unsolvable(self) -> bool:
@@ -237,13 +251,14 @@ class Search:
         out[self.focus[0]] = cfg
         return out
 
-    def expand(self, work: int, open_: OpenCells) -> int:
-        """Spend `work` units at most (but one PIBT call at least, unless the search is over): a call is made only
-        if its units fit in what is left; the units spent."""
+    def expand(self, work: int, open_: OpenCells, most: int = 1 << 62, first: bool = True) -> int:
+        """Spend `work` units at most (but one PIBT call at least if `first`, unless the search is over): a call is
+        made only if its units fit in what is left, and while the search has made fewer than `most` calls; the units
+        spent."""
         spent, n = 0, len(self.goals)
         if self.focus is not None:
             open_ = self.focus[2]
-        while self.found is None and self.open and not self.full:
+        while self.found is None and self.open and not self.full and self.expansions < most:
             node = self.open[-1]
             if not node.tree:
                 self.open.pop()
@@ -251,7 +266,7 @@ class Search:
             who, where = node.tree[0]
             call = self._choosers(node, who, where)
             cost = CALL + n // FIXED + (0 if call is None else len(call[0]))  # (those that choose: `_choosing`)
-            if spent and spent + cost > work:
+            if (spent or not first) and spent + cost > work:
                 break
             node.tree.popleft()
             self.held -= 2 * len(who)
@@ -379,21 +394,81 @@ class Search:
         own = np.take_along_axis(np.where(near >= 0, g.cells[np.maximum(near, 0)], -1), sort, axis=1)
         return candidates(here, own, self.size, self.aim_array, node.number)
 
-    def step(self) -> np.ndarray:
-        """The drones' next configuration: one step along the tree from `at` towards the goal node (or, while the
-        goal is not found, the best node known: the least sum of distances to the goals), which becomes `at`; `at`'s
-        own once there. Every drone's cells (`whole`)."""
+    def _next(self, at: Node) -> Node:
+        """The node after `at` on the way to the goal node (or, while it is not found, the best node known): one step
+        along the tree (down towards it, or up when it is not below `at`); `at` once there."""
         aim = self.found if self.found is not None else self.best
-        at = self.at
         node: Node | None = aim
         while node is not None and node.depth > at.depth + 1:
             node = node.parent
         if node is not None and node.parent is at:
-            self.at = node
-        elif at is not aim and at.parent is not None:
-            self.at = at.parent
+            return node
+        if at is not aim and at.parent is not None:
+            return at.parent
+        return at
+
+    def path(self, at: Node) -> np.ndarray:
+        """The configurations from `at` to the goal node (found), one a step ((k, n), this search's drones)."""
+        out = [at.cfg]
+        while at is not self.found:
+            at = self._next(at)
+            out.append(at.cfg)
+        return np.stack(out)
+
+    def where(self) -> np.ndarray:
+        """Every drone's cells where the search has them now (`whole`)."""
+        return self.whole(self.at.cfg if self.plan is None else self.plan[self.t])
+
+    def step(self) -> np.ndarray:
+        """The drones' next configuration: one step along the tree from `at` towards the goal node (or, while the
+        goal is not found, the best node known: the least sum of distances to the goals), which becomes `at`; `at`'s
+        own once there. Once found, the next of `plan` (`refine`). Every drone's cells (`whole`)."""
+        if self.plan is not None:
+            self.t = min(self.t + 1, len(self.plan) - 1)
+            return self.whole(self.plan[self.t])
+        self.at = self._next(self.at)
         return self.whole(self.at.cfg)
 
+    def refine(self, work: int, open_: OpenCells, first: bool = True) -> int:
+        """Once the goal is found: the drones' way to it (`plan`) made shorter, within `work` units (`expand`'s rule),
+        while they walk it — LaCAM3's refinement done as a search that starts again (Okumura, AAMAS 2024: a solution
+        is improved by planning again from parts of it, the better kept). A new search (`refiner`, its tie-breaks its
+        own) starts from the configuration of the plan halfway between the drones and the goal, with at most as many
+        PIBT calls as the plan has steps from there, less one: if it finds the goal in fewer steps than the plan, its
+        way replaces the plan's from there (the drones reach that configuration later than it is made: a refiner
+        makes a call a turn at least, and has as many turns as calls); whether or not, the next starts halfway again.
+        Each is a function of the plan alone: deterministic. `first`: a call at least (`expand`). The units spent."""
+        if self.found is None:
+            return 0
+        if self.plan is None:  # (the tree is no longer needed: its memory freed)
+            self.plan, self.t = self.path(self.at), 0
+            self.first = len(self.plan) - 1
+            self.found = self.at = self.best = Node(self.found.cfg, None, self.found.prio, self.found.number)
+            self.explored, self.open = {}, []
+        spent = 0
+        while True:
+            r = self.refiner
+            if r is not None and self.t > self.ahead:  # (the drones are past its root: too late)
+                r = self.refiner = None
+            if r is None:
+                ahead = self.t + (len(self.plan) - 1 - self.t) * AHEAD[0] // AHEAD[1]
+                if len(self.plan) - 1 - ahead < REFINE:
+                    return spent
+                self.refined += 1
+                self.ahead = ahead
+                r = self.refiner = Search(self.graph, self.size, self.plan[ahead], self.goals,
+                                          np.array(self.aims, np.int64), self.dist, self.memory, self.focus,
+                                          self.refined * REFINE_NUMBERS)
+            left = len(self.plan) - 1 - self.ahead  # the plan's steps after the refiner's root
+            if r.found is None and r.open and not r.full and r.expansions < left - 1:
+                calls = r.expansions
+                spent += r.expand(work - spent, open_, left - 1, first and not spent)
+                self.refining += r.expansions - calls
+                if r.found is None and r.open and not r.full and r.expansions < left - 1:
+                    return spent  # (its next call does not fit in this turn's units)
+            if r.found is not None and r.found.depth < left and self.t <= self.ahead:
+                self.plan = np.concatenate([self.plan[:self.ahead], r.path(r.at)])
+            self.refiner = None
 
 def _choosing(order: list[int], here: list[int], cand: list[list[int]], fixed: set[int]) -> int:
     """How many of `order`'s drones PIBT must let choose: not the drones at its end whose first candidate is their
@@ -466,7 +541,7 @@ class Lacam:
             self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
             self._patience, self._handed, self._radius = self.stall, False, 0
         search = self._search
-        if search is not None and not np.array_equal(search.whole(search.at.cfg), here):
+        if search is not None and not np.array_equal(search.where(), here):
             search = self._search = None
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
@@ -492,6 +567,9 @@ class Lacam:
         self.expansions -= search.expansions
         self.spent = search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search)
         self.expansions += search.expansions
+        self.expansions -= search.refining
+        self.spent += search.refine(self.work - self.spent, open_, not self.spent)  # (once found: made shorter)
+        self.expansions += search.refining
         if search.unsolvable and search.focus is None:
             self.unsolvable = True
         return search.step()
@@ -585,11 +663,13 @@ class Lacam:
         """A search is bringing the drones home (a drone that says UNREACHABLE meanwhile is not: the engine does
         not settle the game on it)."""
         s = self._search
-        return s is not None and not self.unsolvable and (s.found is None or s.at is not s.found)
+        return s is not None and not self.unsolvable and (s.found is None or s.plan is None or
+                                                           s.t < len(s.plan) - 1)
 
     def state(self) -> dict[str, Any]:
         """A summary of the search (for logs and tests): nodes, PIBT calls, found, unsolvable."""
         s = self._search
         return {"nodes": 0 if s is None else len(s.explored), "held": 0 if s is None else s.held,
-                "expansions": self.expansions, "full": self.full,
+                "expansions": self.expansions, "full": self.full, "first": 0 if s is None else s.first,
+                "plan": 0 if s is None or s.plan is None else len(s.plan) - 1, "refined": 0 if s is None else s.refined,
                 "found": s is not None and s.found is not None, "unsolvable": self.unsolvable}
