@@ -88,7 +88,11 @@ FOCUS = 4
 #: A found plan is refined (`Search.refine`) while its part beyond the refiner's root has this many steps or more.
 REFINE = 8
 #: Where a refining search starts (`Search.refine`): this fraction of the plan's steps left from the drones on.
-AHEAD = (1, 4)
+AHEAD = (1, 3)
+#: A refining search is given up once it has made this many PIBT calls and is behind the plan (`Search._behind`).
+BEHIND = 16
+#: A refining search costs, to make, a unit per BUILD open cells (its part of the world's graph, its root).
+BUILD = 2
 #: A refining search's nodes are numbered from its count times this (their tie-breaks differ from the others').
 REFINE_NUMBERS = 1 << 20
 #: A distance that means "no way" (int16).
@@ -231,6 +235,9 @@ class Search:
         self.refined = 0  # refining searches started, and the plan's length when found (`first`)
         self.first = 0
         self.refining = 0  # the refiners' PIBT calls
+        self._h: np.ndarray | None = None  # the plan's configurations' sums of distances (`_behind`)
+        self._h_of: np.ndarray | None = None
+        self._build = len(graph.cells) // BUILD  # a refiner's units to make (its part of the world's graph)
 
     @property
     def unsolvable(self) -> bool:
@@ -452,23 +459,61 @@ class Search:
                 r = self.refiner = None
             if r is None:
                 ahead = self.t + (len(self.plan) - 1 - self.t) * AHEAD[0] // AHEAD[1]
-                if len(self.plan) - 1 - ahead < REFINE:
+                if len(self.plan) - 1 - ahead < REFINE or (spent and spent + self._build > work):
                     return spent
+                spent += self._build
                 self.refined += 1
                 self.ahead = ahead
-                r = self.refiner = Search(self.graph, self.size, self.plan[ahead], self.goals,
-                                          np.array(self.aims, np.int64), self.dist, self.memory, self.focus,
-                                          self.refined * REFINE_NUMBERS)
+                r = self.refiner = self._refiner(ahead)
             left = len(self.plan) - 1 - self.ahead  # the plan's steps after the refiner's root
-            if r.found is None and r.open and not r.full and r.expansions < left - 1:
+            while r.found is None and r.open and not r.full and r.expansions < left - 1 and not self._behind(r):
                 calls = r.expansions
-                spent += r.expand(work - spent, open_, left - 1, first and not spent)
+                spent += r.expand(work - spent, open_, min(left - 1, calls + 1), first and not spent)
                 self.refining += r.expansions - calls
-                if r.found is None and r.open and not r.full and r.expansions < left - 1:
+                if r.expansions == calls and r.found is None and r.open and not r.full:
                     return spent  # (its next call does not fit in this turn's units)
             if r.found is not None and r.found.depth < left and self.t <= self.ahead:
-                self.plan = np.concatenate([self.plan[:self.ahead], r.path(r.at)])
+                way = r.path(r.at)
+                if r.focus is not None and self.focus is None:  # (its drones only: every drone's cells)
+                    way = np.repeat(self.plan[self.ahead][None, :], len(way), axis=0)
+                    way[:, r.focus[0]] = r.path(r.at)
+                self.plan = np.concatenate([self.plan[:self.ahead], way])
             self.refiner = None
+
+    def _refiner(self, ahead: int) -> Search:
+        """A refining search from the plan's configuration `ahead`: over the drones that move after it, the others
+        (on their goals from there to the end of the plan) standing still, walls to it (as a focused search's); of
+        every drone in a focused search (its plan holds its drones alone). Its calls cost the drones it moves: in the
+        plan's second half most drones are home for good."""
+        number = self.refined * REFINE_NUMBERS
+        assert self.plan is not None
+        aims = np.array(self.aims, np.int64)
+        parked = (self.plan[ahead:] == self.goals).all(axis=0)
+        if self.focus is not None or not parked.any():
+            return Search(self.graph, self.size, self.plan[ahead], self.goals, aims, self.dist, self.memory,
+                          self.focus, number)
+        g = self.graph
+        free = np.flatnonzero(~parked)
+        bits = np.zeros(len(g.index), bool)
+        bits[g.cells] = True
+        bits[self.plan[ahead][parked]] = False
+        world = OpenCells.of(bits)
+        part = g.index[np.flatnonzero(bits)]
+        sub = Graph(world, self.size)
+        return Search(sub, self.size, self.plan[ahead][free], self.goals[free], aims[free],
+                      self.dist[free][:, part], self.memory, (free, self.plan[ahead], world, 0), number)
+
+    def _behind(self, r: Search) -> bool:
+        """The refiner `r` has made BEHIND calls or more and its best node is farther from the goal (sum of distances)
+        than the plan is after as many steps from its root as `r` made calls: unlikely to make the plan shorter."""
+        if r.expansions < BEHIND or self.plan is None:
+            return False
+        if self._h is None or len(self._h) != len(self.plan) or self._h_of is not self.plan:
+            idx = self.graph.index[self.plan]
+            self._h = self.dist[self.rows[None, :], idx].astype(np.int64).sum(axis=1)
+            self._h_of = self.plan
+        return r.best_h > int(self._h[min(self.ahead + r.expansions, len(self.plan) - 1)])
+
 
 def _choosing(order: list[int], here: list[int], cand: list[list[int]], fixed: set[int]) -> int:
     """How many of `order`'s drones PIBT must let choose: not the drones at its end whose first candidate is their
