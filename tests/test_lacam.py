@@ -20,8 +20,9 @@ from dronesim import replay
 from dronesim.local import Inputs, Result, simulate
 from entities.gcs import Plan
 from schema import Cell, EndReason, WorldSpec
+from world import movingai
 from world.grid import World
-from world.search import cells_of, flat_cells
+from world.search import cells_of, flat_cells, padded_steps
 
 LOG = logging.getLogger("test_lacam")
 Drones = dict[str, tuple[Cell, Cell]]
@@ -252,6 +253,48 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
     assert made == list(range(1, len({tuple(t) for t in targets.tolist()}) + 1))  # (a table a turn, then the search)
 
 
+def _refined_walk(size: Cell, open_: OpenCells, here: np.ndarray, aims: np.ndarray) -> tuple[list[np.ndarray], int]:
+    """The drones' configurations walking a found search's plan, a turn's refinement (`Search.refine`) before
+    each step, and the first solution's length."""
+    search = lacam.Lacam()
+    search.prepare(size, open_)
+    s = search._start(size, here, aims)
+    assert s is not None
+    while s.found is None:
+        s.expand(lacam.WORK, open_)
+    walked = [s.where()]
+    while True:
+        s.refine(lacam.WORK, open_)
+        if s.t == len(s.plan if s.plan is not None else ()) - 1:
+            return walked, s.first
+        walked.append(s.step())
+
+
+def test_a_found_plan_is_refined_while_the_drones_walk_it() -> None:
+    """LaCAM's first solution (PIBT's chain) in a crowd of rooms joined by 1-wide doors is long; refining searches
+    from configurations of the plan ahead of the drones make it shorter while they walk it (`Search.refine`):
+    every step a valid move of every drone (to a neighbour or staying, no two in a cell, no swap), the walk ends
+    with every drone home, shorter than the first solution, and is the same in every run."""
+    blocked = movingai.generate("room-32-32-4", 1)
+    cells = movingai.starts_and_goals(movingai.scenario(blocked, 100, 1, "room-32-32-4.map"))
+    grid = movingai.world_grid(blocked)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    open_ = OpenCells(grid)
+    here = flat_cells(np.array([s for s, _ in cells], np.int32), size)
+    aims = flat_cells(np.array([g for _, g in cells], np.int32), size)
+    walked, first = _refined_walk(size, open_, here, aims)
+    assert (walked[0] == here).all() and (walked[-1] == aims).all()
+    assert len(walked) - 1 < first, (len(walked) - 1, first)
+    steps = set(padded_steps(size)[2]) | {0}
+    for a, b in zip(walked, walked[1:]):
+        assert set((b - a).tolist()) <= steps and all(open_[int(u)] for u in b)
+        assert len(np.unique(b)) == len(b)
+        back = dict(zip(b.tolist(), a.tolist()))  # (who came into a cell: no two drones traded theirs)
+        assert not any(back.get(u) == v and u != v for u, v in zip(a.tolist(), b.tolist()))
+    again, _ = _refined_walk(size, open_, here, aims)
+    assert len(again) == len(walked) and all((x == y).all() for x, y in zip(again, walked))
+
+
 def test_same_journal_in_every_layout_and_run() -> None:
     rows, drones = HARD[1][1], HARD[1][2]
     first = play(world_of(rows), drones)
@@ -270,7 +313,7 @@ def test_a_resumed_coordinator_has_the_search_that_played() -> None:
         def __call__(self, *args: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[override]
             out = super().__call__(*args)  # type: ignore[arg-type]
             s = self._search
-            states.append({**self.state(), "at": None if s is None else s.at.cfg.tolist()})
+            states.append({**self.state(), "at": None if s is None else s.where().tolist()})
             return out
 
     result = play(grid, drones, arbiter=Watched())
@@ -284,7 +327,7 @@ def test_a_resumed_coordinator_has_the_search_that_played() -> None:
         arb = resumed.arbitration.arbiter
         assert isinstance(arb, lacam.Lacam)
         s = arb._search
-        assert {**arb.state(), "at": None if s is None else s.at.cfg.tolist()} == states[cut - 1], f"turn {cut}"
+        assert {**arb.state(), "at": None if s is None else s.where().tolist()} == states[cut - 1], f"turn {cut}"
 
 
 def test_flat_cells_round_trip() -> None:
