@@ -588,6 +588,10 @@ class Lacam:
         search = self._search
         if search is not None and not np.array_equal(search.where(), here):
             search = self._search = None
+        piece = search is not None and search.focus is not None and search.plan is not None and \
+            search.t == len(search.plan) - 1  # (a focused search walked: the next piece, at once)
+        if piece:
+            search = self._search = None
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
         if search is not None and search.found is None and (
@@ -601,7 +605,7 @@ class Lacam:
         if search is None:
             if home == n:
                 return None  # every drone home: nothing to search
-            if n * int(open_.count()) > self.limit or (self._handed and self._since < self.stall):
+            if n * int(open_.count()) > self.limit or (self._handed and self._since < self.stall and not piece):
                 return None
             search = self._focus(size, here, aims, self._radius) if self._radius else None
             if search is None:  # (the first search, or no focus can be made: the whole world)
@@ -656,6 +660,7 @@ class Lacam:
             seen[front] = True
             front = np.unique(near[front].ravel())
             front = front[(front < len(g.cells)) & ~seen[front]]
+        seen[:-1] &= self._piece(seen[:-1], near, hc[away])
         part = np.flatnonzero(seen[:-1])
         if len(part) == len(g.cells):
             return self._start(size, here, aims)
@@ -667,6 +672,29 @@ class Lacam:
         self._search = Search(sub, size, here[free], g.cells[goal_c[free]], np.where(way, aims, -1)[free],
                               every[goal_c[free]][:, part], self.memory, (free, here, world, radius))
         return self._search
+
+    @staticmethod
+    def _piece(seen: np.ndarray, near: np.ndarray, away: np.ndarray) -> np.ndarray:
+        """Of the open cells `seen` (a focus: within its radius of a drone away or of its goal), the connected piece
+        a focused search takes first: the one with the fewest drones away (`away`: their open cells), then the fewest
+        cells, then the first cell. Puzzles apart are solved one after the other, each a search of its own (in one,
+        LaCAM's constraints would combine their drones' moves: random-32-32-20 with 400 drones, seed 5, two drones
+        trading places at a dead end, solved in 182 calls alone, not in 5,000 beside a harder one)."""
+        n = len(seen)
+        label = np.where(seen, np.arange(n), n)
+        ext = np.append(label, n)
+        while True:  # (each cell the least number of its piece: the pieces are small)
+            low = np.minimum(label, ext[near].min(axis=1))
+            low = np.where(seen, low, n)
+            if (low == label).all():
+                break
+            label, ext = low, np.append(low, n)
+        pieces, cells = np.unique(label[seen], return_counts=True)
+        count = {int(p): 0 for p in pieces}
+        for c in label[away].tolist():
+            count[c] += 1
+        best = min(zip(pieces.tolist(), cells.tolist()), key=lambda pc: (count[pc[0]], pc[1], pc[0]))[0]
+        return label == best
 
     def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | None:
         """A search from `here` once every drone's distance table is made, None until then: made at the game's start

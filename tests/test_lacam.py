@@ -221,6 +221,37 @@ def test_a_focused_search_moves_the_drones_near_those_away_and_never_claims_a_pr
     assert (wide.whole(wide.found.cfg) == aims).all()
 
 
+def test_a_focused_search_takes_puzzles_apart_one_after_the_other() -> None:
+    """Drones away in two places far apart: the focused search takes the piece of its part of the world with the
+    fewest drones away, then the fewest cells (`Lacam._piece`), the other drones standing still; walked, the next
+    search takes the other piece at once, and every drone gets home."""
+    grid = world_of(["#" * 30, "." * 30])
+    size: Cell = grid.shape  # type: ignore[assignment]
+    cells = np.array([(0, 1, 0), (12, 1, 0), (29, 1, 0)], np.int32)
+    goals = np.array([(1, 1, 0), (12, 1, 0), (27, 1, 0)], np.int32)  # drone 1 parked between the two away
+    open_ = OpenCells(grid)
+    search = lacam.Lacam()
+    search.prepare(size, open_)
+    here, aims = flat_cells(cells, size), flat_cells(goals, size)
+    first = search._focus(size, here, aims, 4)
+    assert first is not None and first.focus is not None and first.focus[0].tolist() == [0]  # (6 cells, not 7)
+    coop = np.ones(3, bool)
+    search._radius, search._key = 4, aims.tobytes()  # (as after a search of the whole world without progress)
+    search._search = first
+    pieces = []
+    for turn in range(1, 12):
+        plan = search.follow(size, cells, coop, goals, open_, turn)
+        assert plan is not None
+        s = search._search
+        assert s is not None and s.focus is not None
+        pieces.append(s.focus[0].tolist())
+        cells = cells_of(plan, size).astype(np.int32)
+        if (plan == aims).all():
+            break
+    assert (cells_of(plan, size) == goals).all()
+    assert pieces[0] == [0] and pieces[-1] == [2], pieces
+
+
 def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
     """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; where the distance
     tables are not made at the game's start (a world too big: here made so), a turn makes those its units hold
