@@ -121,6 +121,7 @@ class Engine:
         #: A lifelong game's tasks done so far: arrivals on a target given (`Fleet.tasks_done`, counted after each
         #: turn's moves, and again as a resumed game replays its journal).
         self.tasks = 0
+        self._here = False  # the game was started here (`start_here`): it may be restarted (`restart`)
 
     # ------------------------------------------------------------------ queries
 
@@ -246,7 +247,34 @@ class Engine:
         self.fleet.fly(list(range(len(self.fleet))), host, autopilot, False)
         if len(cooperative):
             self.fleet.learn(list(cooperative), autopilot, True)
+        self._here = True
         self.arbitration.prepare(self.fleet)
+        self._open_gcs(1)
+
+    def restart(self, starts: np.ndarray | list[Cell]) -> None:
+        """A game started here (`start_here`) begun again at its first turn, its drones at `starts` (a cell per
+        fleet row, in id order): the state a new engine of this game started here would have, without building
+        again what does not change (the world and its tables, the fleet's columns, the entities and who flies
+        which drone; dronesim/rl.py's episodes, one after the other). `config.drones` keeps the first game's
+        starts (only a new engine reads them). UsageError if the game was not started here."""
+        if not self._here:
+            raise UsageError("only a game started here (start_here) is restarted")
+        fleet = self.fleet
+        fleet.restart(starts)
+        self.final, self.end, self.tasks, self.deciding, self.intent = False, None, 0, 0, _CONTINUE
+        self._tgt_seen, self._done, self._phase_msg, self._held = 0, None, None, False
+        self.aiming = Aims(fleet, self.size)
+        self.ballot = Ballot(fleet)
+        self.ahead = Ahead()
+        self.reports = Reports(self.world)
+        if fleet.cooperating:  # (the arbiter's search holds the last game's state: a new one)
+            self.arbitration = Arbitration(self.config.arbiter, self.world, len(fleet))
+            self.arbitration.prepare(fleet)
+        else:  # (no search to forget)
+            self.arbitration.priority.fill(0)
+            self.arbitration.gave_way.fill(False)
+        self.judge = Judge(fleet, self.world, self.arbitration, self.ballot, self.config.lost_after, self._log)
+        self.stage = Stage.ADMITTING  # (a new game's)
         self._open_gcs(1)
 
     def header(self) -> dict:

@@ -81,6 +81,16 @@ class Fleet:
     def __len__(self) -> int:
         return len(self.ids)
 
+    def restart(self, starts: np.ndarray | list[Cell]) -> None:
+        """The same drones, flown as they are, at the start of a new game: at `starts` (a cell per row), alive,
+        without target, note, cause or missed deadline (as a fleet just made; `Engine.restart`)."""
+        self.pos[:] = starts
+        self.state.fill(ALIVE)
+        self.target.fill(-1)
+        for column in (self.note, self.done, self.cause, self.misses):
+            column.fill(0)
+        self.missing = False
+
     @functools.cached_property
     def row_of_number(self) -> np.ndarray:
         """Each drone number's row, -1 for a number not of this game (made once read: a 256 KiB table)."""

@@ -115,7 +115,7 @@ class DroneParallelEnv(ParallelEnv):
         self.episode = None
         turns = self._backend()
         if self.config.num_drones <= self.few_drones and isinstance(turns, LocalTurns):
-            self.episode = FewEpisode(self.config, layout, max_cycles, turns.log, self._eyes)
+            self.episode = FewEpisode(self.config, layout, max_cycles, turns, self._eyes)
         else:
             self.episode = Episode(self.config, layout, turns, max_cycles, self._eyes)
         self._eyes = self.episode.eyes

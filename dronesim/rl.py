@@ -359,6 +359,10 @@ def local_game(game: GameConfig, world: World, logger: logging.Logger) -> Engine
     return engine
 
 
+#: A game's fields but its drones (`LocalTurns._same`).
+_GAME_BUT_DRONES = tuple(f.name for f in dataclasses.fields(GameConfig) if f.name != "drones")
+
+
 class LocalTurns:
     """The engine in this process, its turns played from arrays (`Engine.play`: the same turn as from the
     messages the processes would send, none of them built) and read from its fleet. No environment process:
@@ -371,12 +375,41 @@ class LocalTurns:
         self._rows: np.ndarray | None = None  # the engine's row of each of ours (None: the same)
 
     def start(self, game: GameConfig, world: World) -> Board:
-        engine = local_game(game, world, self.log)
+        engine = self.engine
+        if engine is not None and self._same(engine, world, game):  # (the last episode's game again: restarted)
+            starts = np.array([d.start for d in game.drones], np.int32).reshape(-1, 3)  # (ours: D1, D2, ...)
+            if self._rows is not None:  # (the engine's rows: in id text order)
+                starts[self._rows] = starts.copy()
+            engine.restart(starts)
+        else:
+            engine = local_game(game, world, self.log)
         fleet = engine.fleet
         rows = fleet.row_of_number[1:len(fleet) + 1].astype(np.intp)  # engine rows are in id text order
         self._rows = None if np.array_equal(rows, np.arange(len(fleet))) else rows
         self.engine = engine
         return self._board()
+
+    def few(self, layout: Layout, max_turns: int) -> Engine:
+        """The engine of an episode of up to FEW_MAX drones (dronesim/rl_few.py; its rows, D01 ... D99, are ours):
+        the last episode's restarted (`Engine.restart`) when it played the same world, drones and turn limit, else
+        a new one."""
+        engine = self.engine
+        config = None if engine is None else engine.config
+        if config is None or engine is None or engine.world is not layout.world or \
+                len(engine.fleet) != len(layout.starts) or config.max_turns != max_turns or \
+                config.phase_deadline != PHASE_DEADLINE_S:
+            engine = self.engine = local_game(layout.game(max_turns), layout.world, self.log)
+        else:
+            engine.restart(layout.starts)
+        self._rows = None
+        return engine
+
+    @staticmethod
+    def _same(engine: Engine, world: World, game: GameConfig) -> bool:
+        """Whether `engine` plays `game` in `world` but for its drones' starts (restarted, it plays it)."""
+        theirs = engine.config
+        return engine.world is world and all(getattr(game, f) == getattr(theirs, f) for f in _GAME_BUT_DRONES) \
+            and tuple(d.drone for d in game.drones) == tuple(d.drone for d in theirs.drones)
 
     def _board(self) -> Board:
         """The fleet's columns (in our row order): with the engine's order ours, its columns themselves, valid

@@ -10,8 +10,6 @@ tests/test_pettingzoo.py holds both to the same steps on random worlds and actio
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from coordinator.fleet import ALIVE
@@ -28,10 +26,10 @@ from dronesim.rl import (
     EpisodeBase,
     Eyes,
     Layout,
+    LocalTurns,
     Outcome,
     checked_actions,
     done_agents,
-    local_game,
 )
 from schema import Cell, Note
 from schema.tables import code_of
@@ -45,13 +43,13 @@ class FewEpisode(EpisodeBase):
     """`Episode`'s surface over Python lists, for up to FEW_MAX drones: their rows (drone number - 1) are then
     the id order (the observer's priority order). The columns (arrays) are made from the lists at each read."""
 
-    def __init__(self, config: Config, layout: Layout, max_cycles: int, logger: logging.Logger,
+    def __init__(self, config: Config, layout: Layout, max_cycles: int, turns: LocalTurns,
                  eyes: Eyes | None = None) -> None:
         n = config.num_drones
         if n > FEW_MAX:
             raise ValueError(f"a FewEpisode plays up to {FEW_MAX} drones, not {n}")
         super().__init__(config, layout, max_cycles, eyes)
-        self.engine = local_game(layout.game(max_cycles), self.world, logger)  # (its rows: ours, D01 ... D99)
+        self.engine = turns.few(layout, max_cycles)  # (its rows: ours, D01 ... D99; the last episode's, restarted)
         self._pos: list[Cell] = list(map(tuple, layout.starts.tolist()))
         self._targets: list[Cell] = list(map(tuple, layout.targets.tolist()))
         self._state = [ALIVE] * n

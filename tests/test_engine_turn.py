@@ -123,3 +123,53 @@ def test_a_few_moves_among_many_alive_drones_are_made() -> None:
     engine.play([], [], rows, [(1, 0, 0), (18, 12, 1)], [0, 0])
     moved = np.flatnonzero((fleet.pos != before).any(axis=1)).tolist()
     assert sorted(moved) == sorted(rows) and fleet.pos[rows].tolist() == [[1, 0, 0], [18, 12, 1]]
+
+
+@pytest.mark.parametrize("cooperative", [(), (0, 2)])
+def test_a_restarted_game_is_a_new_game(cooperative: tuple[int, ...]) -> None:
+    """`Engine.restart` (an RL environment's next episode): after turns with targets, moves and a death, the game
+    restarted from new starts is the game a new engine started here from them, turn by turn (their states, each
+    turn's OVER), the cooperative drones' arbitration included."""
+    from coordinator.config import DroneTable, GameConfig
+    from coordinator.engine import Engine
+    from schema import UsageError
+    from world.grid import World
+
+    world = World(size=(6, 6, 2), grid=np.zeros((6, 6, 2), bool))
+    spec = WorldSpec(size=world.size, cells=world.packed())
+
+    def started(starts: list) -> Engine:
+        game = GameConfig(world=spec, drones=DroneTable(["D01", "D02", "D03"], starts), max_turns=6)
+        engine = Engine(game, QUIET, world)
+        engine.verify_env = engine.journaled = engine.env_followed = False
+        engine.start_here("H01", "dstar", cooperative)
+        return engine
+
+    def state(engine: Engine) -> str:
+        f = engine.fleet
+        return repr((engine.stage, engine.turn, engine.final, engine.end, engine.tasks, engine.intent,
+                     f.pos.tolist(), f.state.tolist(), f.target.tolist(), f.note.tolist(), f.done.tolist(),
+                     f.cause.tolist(), f.misses.tolist(), f.missing, f.cooperative.tolist(), f.host, f.autopilot,
+                     engine.arbitration.priority.tolist(), engine.aiming.aimed.tolist(), engine.ballot.moved.tolist()))
+
+    def turns(engine: Engine) -> list:
+        out = []
+        for t in range(7):
+            if engine.end is not None:
+                break
+            alive = engine.fleet.alive_rows().tolist()
+            cells = [tuple(p) for p in engine.fleet.pos[alive].tolist()]
+            moves = [(x + 1, y, z) if t % 2 else (x, min(y + 1, 5), z) for x, y, z in cells]  # (off the world, at last)
+            aims = ([0, 1, 2], [(5, 5, 0), (0, 5, 1), (5, 0, 1)]) if t == 0 else ([], [])
+            out.append((engine.play(*aims, alive, moves, [0] * len(alive)), state(engine)))
+        return out
+
+    old = started([(0, 0, 0), (0, 2, 0), (3, 3, 0)])
+    turns(old)
+    new_starts = [(2, 2, 1), (4, 0, 0), (0, 5, 1)]
+    old.restart(np.array(new_starts))
+    fresh = started(new_starts)
+    assert state(old) == state(fresh)
+    assert turns(old) == turns(fresh)
+    with pytest.raises(UsageError, match="started here"):
+        Engine(GameConfig(world=spec, drones=DroneTable(["D01"], [(0, 0, 0)])), QUIET, world).restart([(1, 1, 1)])

@@ -467,6 +467,27 @@ def test_few_drones_drone_by_drone_are_the_episode_of_the_engine(case: int) -> N
             assert repr(x) == repr(y), f"the paths differ at step {t}"
 
 
+@pytest.mark.parametrize(("n", "few_drones", "on_target"),
+                         [(1, 99, "finish"), (6, 99, "new"), (6, 0, "stay"), (70, 99, "finish")])
+def test_episodes_after_a_reset_are_those_of_a_new_environment(n: int, few_drones: int, on_target: str) -> None:
+    """Each reset restarts the last episode's engine (`Engine.restart`, `LocalTurns`) where the world, the drones and
+    the turn limit are the same: the episodes one after the other in one environment are those of a new environment
+    each, step by step (a given world; and a generated one, a new engine each time)."""
+    for world in (World.from_grid(np.random.default_rng(n).random((10, 10, 3)) < 0.2), None):
+        config = dict(num_drones=n, on_target=on_target, max_cycles=25, seed=3,
+                      **({"world": world} if world is not None else {"size": (10, 10, 3)}))
+        env = dz.parallel_env(**config)
+        env.few_drones = few_drones
+        engines = []
+        for seed in range(4):
+            fresh = dz.parallel_env(**config)
+            fresh.few_drones = few_drones
+            a, b = random_trace(env, seed), random_trace(fresh, seed)
+            engines.append(env._turns.engine)
+            assert repr(a) == repr(b), f"episode {seed} differs"
+        assert len({id(e) for e in engines}) == (1 if world is not None else 4)
+
+
 @pytest.mark.parametrize(("n", "on_target"), [(5, "finish"), (24, "new"), (130, "stay")])
 def test_turns_from_arrays_are_the_turns_from_messages(n: int, on_target: str) -> None:
     """Engine.play (the local backend) and the engine's message path give the same episode, deaths and
