@@ -450,7 +450,7 @@ class Engine:
         if self.stage is not _GCS or self._done is not None or self.ahead.dones or self.ahead.moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
                              f"of turn {self.turn}")
-        few = len(move_rows) <= TURN_FEW_DRONES
+        few, judge, steps = len(move_rows) <= TURN_FEW_DRONES, self.judge, None
         whole = fleet.whole() if few else None  # (the columns as lists, read once for the turn: a small fleet's)
         if len(aim_rows) and not (
                 all(whole[0][i] == ALIVE and in_bounds(c, self.size) for i, c in zip(aim_rows, aims))
@@ -465,12 +465,15 @@ class Engine:
             rows = move_rows if isinstance(move_rows, list) else move_rows.tolist()
             cells = moves if isinstance(moves, list) else list(map(tuple, moves.tolist()))
             codes = notes if isinstance(notes, list) else notes.tolist()
-            state, pos = whole if whole else (fleet.column(fleet.state, rows), fleet.column(fleet.pos, rows))
+            # every alive drone's move, in one pass (most turns of an RL episode's): else each move taken
+            steps = judge.steps(rows, cells, whole) if whole and not fleet.cooperating else None
             ok, took = True, {}
-            for k, i, cell, code in zip(rows if whole else range(len(rows)), rows, cells, codes):
-                (a, b, c), (x, y, z) = cell, pos[k]
-                ok = ok and state[k] == ALIVE and (a - x, b - y, c - z) in STEPS
-                took[i] = cell, code
+            if steps is None:
+                state, pos = whole if whole else (fleet.column(fleet.state, rows), fleet.column(fleet.pos, rows))
+                for k, i, cell, code in zip(rows if whole else range(len(rows)), rows, cells, codes):
+                    (a, b, c), (x, y, z) = cell, pos[k]
+                    ok = ok and state[k] == ALIVE and (a - x, b - y, c - z) in STEPS
+                    took[i] = cell, code
         else:
             rows, cells, codes = move_rows, np.asarray(moves), np.asarray(notes)
             ok = (np.count_nonzero(fleet.state[rows] != ALIVE) == 0
@@ -482,8 +485,11 @@ class Engine:
             self._targets_set(Intent.CONTINUE)
         elif self.intent is not _CONTINUE:  # (else the phase changes nothing: no target, the same intent)
             self._targets_set(Intent.CONTINUE, False)
-        judge, cells_wanted = self.judge, self.env_followed or self.verify_env
-        if few and not fleet.cooperating:  # (only the arbitration reads the arrays then)
+        cells_wanted = self.env_followed or self.verify_env
+        if steps is not None:
+            turn = judge.rule_steps(self.turn, self._turn_log, self.journaled, cells_wanted, steps,
+                                    codes)  # type: ignore[arg-type]  # (a list: `few`)
+        elif few and not fleet.cooperating:  # (only the arbitration reads the arrays then)
             turn = judge.rule(self.turn, self._turn_log, self.journaled, cells_wanted, took, whole)
         else:
             ballot = self.ballot

@@ -13,9 +13,11 @@ from typing import NamedTuple
 import numpy as np
 
 from schema import Cause, Cell, DroneState
+from schema.errors import UsageError
 from schema.tables import code_of
 from schema.tuning import FEW_ROWS, TURN_FEW_DRONES
 from world.grid import World, inside_rows, linear_rows
+from world.search import STEPS
 
 from . import observer
 from .arbitration import Arbitration
@@ -28,6 +30,18 @@ Rows = np.ndarray | list[int]
 Cells = np.ndarray | list[Cell]
 Codes = np.ndarray | list[int]
 CAUSE_CODE = {c: code_of(c) for c in Cause}
+
+
+class Steps(NamedTuple):
+    """Every alive drone's move in a turn of a few drones, read and checked in one pass (`Judge.steps`): the alive
+    rows (ascending), their cells before and after, the rows that changed cell (ascending), and whether one of
+    these left the world or entered a building (the observer's rules must then run)."""
+
+    rows: list[int]
+    before: dict[int, Cell]
+    after: dict[int, Cell]
+    moved: list[int]
+    risky: bool
 
 
 class Moved(NamedTuple):
@@ -51,6 +65,54 @@ class Judge:
         self._solid = world.grid.reshape(-1)  # the buildings, flat (a view: the coordinator holds one world)
         self._solid_items = self._solid.data  # the same read item by item (`_few`): a memoryview's item is a Python
         # bool in ~25 ns, a numpy array's ~300 ns
+        self._every = list(range(len(fleet)))  # every row (`steps`: compared with a caller's rows in C)
+
+    def steps(self, rows: list[int], cells: list[Cell], whole: tuple[list[int], list[list[int]]]) -> Steps | None:
+        """The moves `cells` ((x, y, z) tuples) of the `rows` of a few drones, if these are every alive drone in
+        ascending order (a caller that moves or hovers each, as an RL episode does), read in one pass as the judge
+        reads them (`rule_steps` makes them); `whole`: the fleet's state and cells (`Fleet.whole`). UsageError,
+        nothing changed, if one is not a step (6-connectivity) from its drone's cell. None: other rows (`rule`)."""
+        states, pos = whole
+        n = len(states)
+        if states.count(ALIVE) == n:
+            if len(rows) != n or rows != self._every:
+                return None
+        elif rows != [i for i, s in zip(self._every, states) if s == ALIVE]:
+            return None
+        (nx, ny, nz), solid = self.size, self._solid_items
+        before: dict[int, Cell] = {}
+        after: dict[int, Cell] = {}
+        moved: list[int] = []
+        risky = False
+        for i, cell in zip(rows, cells):
+            x, y, z = pos[i]
+            a, b, c = cell
+            if (a - x, b - y, c - z) not in STEPS:
+                raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
+            here = before[i] = (x, y, z)
+            after[i] = cell
+            if cell != here:
+                moved.append(i)
+                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz) or solid[(a * ny + b) * nz + c]:
+                    risky = True
+        return Steps(rows, before, after, moved, risky)
+
+    def rule_steps(self, turn: int, log: TurnLog, journaled: bool, cells: bool, steps: Steps,
+                   codes: list[int]) -> Moved:
+        """`rule` of the moves `steps` (`steps`), said with the Note `codes` (one per row of `steps`)."""
+        fleet, rows = self.fleet, steps.rows
+        notes = fleet.note.tolist()
+        if rows is self._every or len(rows) == len(notes):  # (every row: compared in C, most turns equal)
+            said = [] if codes == notes else [i for i, code, was in zip(rows, codes, notes) if code != was]
+            says = codes
+        else:
+            said, says = [], [0] * len(notes)
+            for i, code in zip(rows, codes):
+                says[i] = code
+                if code != notes[i]:
+                    said.append(i)
+        return self._settle(rows, rows, steps.before, steps.after, steps.moved, steps.risky, said, says, rows, [],
+                            turn, log, journaled, cells)
 
     def rule(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
              took: dict[int, tuple[Cell, int]] | None = None,
@@ -114,48 +176,58 @@ class Judge:
                                             np.where(self.ballot.moved[rows], self.ballot.ranked[rows], 0), turn, log)
             after.update(zip(alive, map(tuple, final.tolist())))
             moved = [i for i in every if after[i] != before[i]]
+        notes = fleet.note.tolist() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
+        said = []  # (in any order: the journal's is its own)
+        says = {}
+        for i, (_, code) in took.items():
+            if code != notes[i]:
+                said.append(i)
+                says[i] = code
+        hovered = [i for i in alive if i not in took] if len(alive) != len(took) else []  # (as the arrays count:
+        # a LOST drone's move taken counts)
+        return self._settle(alive, every, before, after, moved, None, said, says, [*took], hovered, turn, log,
+                            journaled, cells)
+
+    def _settle(self, alive: list[int], every: list[int], before: dict[int, Cell], after: dict[int, Cell],
+                moved: list[int], risky: bool | None, said: list[int], says: list[int] | dict[int, int],
+                taken: list[int], hovered: list[int], turn: int, log: TurnLog, journaled: bool, cells: bool) -> Moved:
+        """A few drones' turn made (`_few`, `rule_steps`): `alive`, `every`, `before`, `after` as in `_few`;
+        `moved`, the rows that changed cell; `risky`: whether one of them left the world or entered a building
+        (None: not known); `said`, the rows whose note changed, to `says[i]`; `taken`, the rows whose move was
+        taken; `hovered`, the alive rows whose move was not."""
+        fleet = self.fleet
         if not moved:  # where the drones were, alive and apart, they still are
             dead: dict[int, Cause] = {}
         elif every is alive:
-            dead = observer.deaths_of_moves(self.size, self._solid_items, before, after, moved)
+            dead = observer.deaths_of_moves(self.size, self._solid_items, before, after, moved, risky)
         else:
             live = set(alive)
             dead = observer.deaths_of_moves(self.size, self._solid_items, {i: before[i] for i in alive},
                                             {i: after[i] for i in alive}, [i for i in moved if i in live])
-        if len(moved) <= FEW_ROWS:
-            for i in moved:
-                fleet.put(i, after[i])
-        else:
-            _set_rows(fleet.pos, moved, [after[i] for i in moved])
-        notes = fleet.note.tolist() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
-        said = []  # (in any order: the journal's is its own)
-        for i, (_, code) in took.items():
-            if code != notes[i]:
-                said.append(i)
+        fleet.move(moved, after)
         if said:
-            _set_rows(fleet.note, said, [took[i][1] for i in said])
+            _set_rows(fleet.note, said, [says[i] for i in said])
         if fleet.cooperating:  # (priorities are the arbitration's: none without cooperation)
             self.arbitration.age(fleet, np.array(alive, np.intp))
         if dead:
             self._died(dead, after, turn)
-        hovered = [i for i in alive if i not in took] if len(alive) != len(took) else []  # (as the arrays count:
-        lost = 0  # a LOST drone's move taken counts)
+        lost = 0
         if hovered or fleet.missing:  # misses in a row: a move starts the count again
-            lost = self._missed(alive, [*took], hovered, turn, log)
+            lost = self._missed(alive, taken, hovered, turn, log)
         if journaled:  # what the turn did, drone by drone
-            self._journal_few(log, moved, after, said, took, hovered, dead)
+            self._journal_few(log, moved, after, said, says, hovered, dead)
         left = len(alive) - len(dead) - lost
         if not cells:  # (nobody reads the moves' cells: `Engine._drones_finish`)
             return Moved(moved, [], [], left)
         return Moved(moved, [before[i] for i in moved], [after[i] for i in moved], left)
 
     def _journal_few(self, log: TurnLog, moved: list[int], after: dict[int, Cell], said: list[int],
-                     took: dict[int, tuple[Cell, int]], hovered: list[int], dead: dict[int, Cause]) -> None:
+                     says: list[int] | dict[int, int], hovered: list[int], dead: dict[int, Cause]) -> None:
         ids = self.fleet.ids
         if moved:
             log.moves([ids[i] for i in moved], [list(after[i]) for i in moved])
         if said:
-            log.notes([ids[i] for i in said], [NOTES[took[i][1]] for i in said])
+            log.notes([ids[i] for i in said], [NOTES[says[i]] for i in said])
         if hovered:
             log.hovered([ids[i] for i in hovered])
         if dead:

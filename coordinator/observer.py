@@ -68,10 +68,13 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
 
 
 def deaths_of_moves(size: Cell, solid: np.ndarray | memoryview, before: Mapping[K, Cell], after: Mapping[K, Cell],
-                    moved: Sequence[K]) -> dict[K, Cause]:
+                    moved: Sequence[K], risky: bool | None = None) -> dict[K, Cause]:
     """`deaths`, for drones of which `moved` changed cell (`solid`: the world's buildings, flat in C order), with
     the rules run only if someone may die: one left the world or entered a building, or two ended in one cell or
-    swapped cells (most turns, nobody)."""
+    swapped cells (most turns, nobody). `risky`: whether one of `moved` left the world or entered a building, if
+    the caller knows it (None: found here)."""
+    if risky is False and (len(after) < 2 or not _meet(before, after, moved)):
+        return {}
     nx, ny, nz = size
     buildings, outside = set(), False
     for d in moved:

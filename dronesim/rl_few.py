@@ -129,8 +129,11 @@ class FewEpisode(EpisodeBase):
         self._aim = []
         # what the turn did: each alive drone is where it moved (a game without cooperative drones takes every
         # move as given: `Engine.play`), and those the engine's fleet says are no longer alive died there
-        for i, cell in zip(alive, moves):
-            pos[i] = cell
+        if len(alive) == self.n:  # (every drone: its cells are the moves)
+            self._pos = pos = moves
+        else:
+            for i, cell in zip(alive, moves):
+                pos[i] = cell
         fleet = self.engine.fleet  # (its rows are ours)
         states = fleet.states()
         dead: set[int] | tuple[()] = ()  # (a set once one died: most steps none)
