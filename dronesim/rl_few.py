@@ -96,6 +96,9 @@ class FewEpisode(EpisodeBase):
     def infos(self, rows) -> list[dict]:
         """As `Episode.infos`."""
         pos, targets, shown, state, cause = self._pos, self._targets, self._shown, self._state, self._cause
+        if len(rows) == self.n:  # (every row, in order: the lists themselves)
+            return [{"cell": p, "target": t, "note": NOTE_TEXT[note], "state": STATE_TEXT[s], "cause": CAUSE_TEXT[c]}
+                    for p, t, note, s, c in zip(pos, targets, shown, state, cause)]
         return [{"cell": pos[i], "target": targets[i], "note": NOTE_TEXT[shown[i]], "state": STATE_TEXT[state[i]],
                  "cause": CAUSE_TEXT[cause[i]]} for i in rows]
 
@@ -110,14 +113,17 @@ class FewEpisode(EpisodeBase):
             done = [i for i in rows if not acting[i]]
             if done:
                 raise done_agents(done)
-        action = dict(zip(rows, checked_actions(rows, values, self._actions)))
+        values = checked_actions(rows, values, self._actions)
         t = self.cycle + 1
         pos, state, say, shown, alive = self._pos, self._state, self._say, self._shown, self._alive
         # the turn, the engine's: every alive drone moves (the acting ones as told, hover by default; the parked
         # ones hover), saying whether its target is reachable
+        if rows != alive:  # (most steps: every alive drone told, in row order)
+            action = dict(zip(rows, values))
+            values = [action.get(i, 0) for i in alive]
         moves = []
-        for i in alive:
-            if a := action.get(i, 0):
+        for i, a in zip(alive, values):
+            if a:
                 x, y, z = pos[i]
                 dx, dy, dz = ACTIONS[a]
                 moves.append((x + dx, y + dy, z + dz))
