@@ -92,8 +92,12 @@ def _meet(before: Mapping[K, Cell], after: Mapping[K, Cell], moved: Sequence[K])
     """Whether two drones end in one cell, or two movers swap cells."""
     if len(set(after.values())) < len(after):
         return True
-    entering = {after[d]: d for d in moved}
-    return any(before[e] == after[d] for d in moved if (e := entering.get(before[d])) is not None)
+    entering = {after[d]: d for d in moved}  # (one each: no two end in one cell)
+    for d in moved:  # (a loop: a generator's every item costs a call)
+        e = entering.get(before[d])
+        if e is not None and before[e] == after[d]:
+            return True
+    return False
 
 
 def deaths(size: Cell, before: Mapping[K, Cell], after: Mapping[K, Cell], buildings: Set[Cell]) -> dict[K, Cause]:
