@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from .errors import UsageError
 from .keys import KEY_TABLE, ROOT, Keys, KeySpec, size_limit
 from .messages import drone_id, drone_list, is_drone_id, is_host_id
-from .tuning import CONNECT_RATE, PUT_RATE, TGT_RATE
+from .tuning import CONNECT_RATE, PUT_RATE, TGT_BUDGETED, TGT_RATE
 
 #: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
 ROLES = ("SRV", "ENV", "GCS", "DRONE")
@@ -201,9 +201,9 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
     MOVES; DONE, TGT) beyond `PUT_RATE` a second, each session on a budget of its own. With `acl` (an
     `access_control` block) the rate of puts is kept key by key for the keys it grants (a session's refused puts
     on another drone's key do not count against its own), and the TGT keys one by one for the drones it names, at
-    `TGT_RATE` a second (what a station needs: a TGT a drone a turn); without, for all of a kind at once, and none
-    on the TGT keys (a station may send a TGT for every drone at once: one budget for all would drop them;
-    dronesim's stations send none, their DONE carries the targets). And
+    `TGT_RATE` a second (what a station needs: a TGT a drone a turn); without, for all of a kind at once, but the
+    TGT keys one by one for the drones D01 to `TGT_BUDGETED` (a station may send a TGT for every drone at once: one
+    budget for all would drop them; dronesim's stations send none, their DONE carries the targets). And
     the CONNECT queries beyond `CONNECT_RATE` a second from one session (a process asks one at a time,
     `CONNECT_GAP` apart at least; a query dropped is ended at once, without a reply, and asked again)."""
     import zenoh
@@ -224,9 +224,10 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
         if spec.how == "put" and spec.writer == "DRONE" or spec.template == "GCS/DONE":
             budgeted += [(k, PUT_RATE) for k in (exprs if granted is None else granted)
                          if any(_includes(x, k) for x in exprs)]
-        elif spec.how == "put" and spec.writer == "GCS" and granted is not None:  # TGT: a budget per drone
-            budgeted += [(f"{k.rsplit('/', 1)[0]}/{spec.template.split('/', 1)[1]}", TGT_RATE) for k in granted
-                         if k.endswith("/NPS") and "*" not in k]
+        elif spec.how == "put" and spec.writer == "GCS":  # TGT: a budget per drone
+            drones = ([f"{root}/{drone_id(n)}" for root in roots for n in range(1, TGT_BUDGETED + 1)] if granted is None
+                      else [k.rsplit("/", 1)[0] for k in granted if k.endswith("/NPS") and "*" not in k])
+            budgeted += [(f"{d}/{spec.template.split('/', 1)[1]}", TGT_RATE) for d in drones]
     low_pass = [{"id": f"{how}-{limit}", "messages": [how], "flows": ["ingress"], "key_exprs": exprs,
                  "size_limit": limit} for (how, limit), exprs in sorted(sizes.items())]
     puts = {"id": "puts", "messages": ["put"], "flows": ["ingress"],

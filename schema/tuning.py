@@ -99,14 +99,22 @@ ORIGIN_BYTES = 8 << 20
 #: but the first: it answers those phases when they are announced, entities/gcs.py `Station`), while a flood
 #: reaches the coordinator at a rate its refusal of stale messages keeps up with.
 PUT_RATE = 10_000.0
-#: TGT puts a second a router forwards from one session on one drone's TGT key, where the access control names each
-#: drone's (schema/acl.py `flood_filters`; a plain router has no budget on them): a station sends at most one TGT a
+#: TGT puts a second a router forwards from one session on one drone's TGT key (schema/acl.py `flood_filters`: the
+#: drones the access control names, or on a plain router the first `TGT_BUDGETED`): a station sends at most one TGT a
 #: drone a turn (dronesim's send none: their DONE carries the targets), so a TGT for a drone within 1 ms of the last
 #: one for it is dropped (a station retargeting a drone at every turn of a game above 1,000 turns a second would lose
 #: some). Measured (bench flood, issue 33): a flood of stale TGTs reaches the coordinator at about one put for each
 #: batch the router reads, up to 2,400 a second with `PUT_RATE` (13,367 in a game, which then ran at 0.46 of its
 #: clean speed), each costing it about 55 us; this bounds them to 1,000 a second.
 TGT_RATE = 1_000.0
+#: Drones (D01 to D1024) whose TGT key has a budget of its own (`TGT_RATE`) on a router without access control: Zenoh's
+#: `downsampling` keeps one budget a rule and a session, so one rule for every drone's TGT key would drop all but the
+#: first of a station's TGTs sent together, and a plain router does not know the game's drones. Measured (a plain
+#: router, one session putting 100,000 stale TGTs on D01's key, then one TGT for each of 16 other drones at once;
+#: 2 cores at a load average of 8): 0, 1,024 and 4,096 such rules cost the router the same CPU (0.07-0.12 s for
+#: 300,000 puts), 51-70 of the flood passed with the rules (all of them without), the 16 all passed. Drones beyond
+#: have no budget on their TGT key on a plain router (under the access control each has one).
+TGT_BUDGETED = 1024
 #: Seconds at least between two puts a process makes on one of those keys, so that the router's budget of `PUT_RATE`
 #: puts a second keeps them all: a ground station's DONEs (entities/gcs.py `Station`: its answers ahead used to go
 #: out at once), a swarm host's word that it is still deciding and its MOVES (entities/drone_node.py `Effects`). 5

@@ -22,6 +22,7 @@ from schema.keys import size_limit
 from schema.messages import Message
 from schema.samples import SAMPLES
 from schema.tables import MAX_DRONE, drone_name
+from schema.tuning import TGT_BUDGETED, TGT_RATE
 from tests.harness import client_config, embedded_router, unique_root
 
 pytestmark = pytest.mark.integration
@@ -262,16 +263,21 @@ def test_an_origin_over_its_bytes_is_refused_and_its_first_event_never_is() -> N
     assert q.drain() == ["small", "next", "and next"] and q.full("D01", 5000) is None
 
 
-def target(turn: int) -> Target:
-    return Target(turn=turn, sender="GCS", drone="D01", pos=(1, 2, 3))
+#: A drone whose TGT key a plain router has no budget on (`schema.tuning.TGT_BUDGETED`): several TGTs on it, sent
+#: together, all reach the inbox, whose own checks a test looks at.
+UNBUDGETED = drone_name(TGT_BUDGETED + 1)
+
+
+def target(turn: int, drone: str = "D01") -> Target:
+    return Target(turn=turn, sender="GCS", drone=drone, pos=(1, 2, 3))
 
 
 def test_a_message_for_a_turn_before_since_is_refused_before_it_is_queued(pair) -> None:
     inbox, out, keys = pair
-    inbox.subscribe(keys.tgt("D01"), Target, since=lambda: 4)
-    subscribed(out, inbox, keys.tgt("D01"))
+    inbox.subscribe(keys.tgt(UNBUDGETED), Target, since=lambda: 4)
+    subscribed(out, inbox, keys.tgt(UNBUDGETED))
     for turn in range(1, 7):
-        out.put(keys.tgt("D01"), target(turn))
+        out.put(keys.tgt(UNBUDGETED), target(turn, UNBUDGETED))
     got = [inbox.get(10).msg.turn for _ in range(3)]
     assert got == [4, 5, 6] and inbox.drain() == []
     assert inbox.rejects.snapshot() == {"stale-turn": 3}
@@ -281,13 +287,13 @@ def test_a_message_for_a_turn_before_since_is_refused_before_it_is_queued(pair) 
 def test_an_origin_over_its_budget_in_the_inbox_is_refused_unread(pair) -> None:
     _, out, keys = pair
     inbox = Inbox(pair[0].session, keys, LOG, budget=2)
-    inbox.subscribe(keys.tgt("D01"), Target)
+    inbox.subscribe(keys.tgt(UNBUDGETED), Target)
     inbox.subscribe(keys.over, Over)
-    subscribed(out, inbox, keys.tgt("D01"), keys.over)
+    subscribed(out, inbox, keys.tgt(UNBUDGETED), keys.over)
     arrived = threading.Event()  # the OVER, seen by a plain subscriber after the inbox's callbacks ran
     barrier = inbox.session.declare_subscriber(keys.over, _direct(lambda sample: arrived.set()))
     for turn in range(1, 6):
-        out.put(keys.tgt("D01"), target(turn))
+        out.put(keys.tgt(UNBUDGETED), target(turn, UNBUDGETED))
     out.put(keys.over, over(9))  # after them on the same session: once it is here, so are they
     assert arrived.wait(10)
     events: list[Any] = inbox.drain()
@@ -380,6 +386,44 @@ def _refused_unread(inbox: Inbox, out: Outbox, keys: Keys) -> None:
     inbox.close()
 
 
+def test_a_plain_routers_budget_of_tgts_is_a_drones_a_session_the_rest_never_reach_the_coordinator() -> None:
+    """Issue 33, 6: on a router without access control (any peer may put on a drone's TGT key) each of the first
+    `TGT_BUDGETED` drones' TGT key has a budget of `TGT_RATE` puts a second from one session (`flood_filters`): of a
+    flood of stale TGTs for D01 from one session, few reach the coordinator, each refused there as stale and counted
+    against the GCS; that session's TGTs for 16 other drones sent together all pass (a budget a drone, not one for
+    all), and so does another session's TGT for D01 (a budget a session)."""
+    keys = Keys(unique_root())
+    with embedded_router() as locator, zenoh.open(client_config(locator)) as srv, \
+            zenoh.open(client_config(locator)) as station, zenoh.open(client_config(locator)) as other:
+        inbox = Inbox(srv, keys, LOG)
+        inbox.subscribe(keys.any_tgt, Target, since=lambda: 5)
+        arrived = threading.Event()  # a put after the TGTs, from the same session: they came before it
+        barrier = srv.declare_subscriber(keys.over, _direct(lambda sample: arrived.set()))
+        out = Outbox(station)
+        while not out._pub(keys.tgt("D01")).matching_status.matching:
+            arrived.wait(0.01)
+        sent = 2_000  # as fast as it can: closer together than 1 / TGT_RATE s, but for a pause of the whole machine
+        stale = encode(Target(turn=1, sender="GCS", drone="D01", pos=(1, 1, 1)))
+        for _ in range(sent):
+            out._pub(keys.tgt("D01")).put(stale)
+        drones = [drone_name(n) for n in range(2, 18)]
+        for drone in drones:
+            out.put(keys.tgt(drone), Target(turn=5, sender="GCS", drone=drone, pos=(2, 2, 2)))
+        out.put(keys.over, over(1))
+        assert arrived.wait(10)
+        Outbox(other).put(keys.tgt("D01"), Target(turn=5, sender="GCS", drone="D01", pos=(3, 3, 3)))
+        got: list[Any] = [inbox.get(10) for _ in range(len(drones) + 1)]
+        assert sorted(e.msg.drone for e in got) == sorted([*drones, "D01"]), "every TGT sent within its budget came"
+        passed = inbox.rejects.total
+        assert 1 <= passed < sent // 2, passed  # the flood's first, and about one a batch the router read
+        assert inbox.rejects.report() == f"{{'stale-turn': {passed}}}, from {{'GCS': {passed}}}"
+        barrier.undeclare()
+        inbox.close()
+    plain = {r["key_expr"]: r["freq"] for item in flood_filters(["**"])["downsampling"] for r in item["rules"]}
+    assert plain["**/D01/TGT"] == plain[f"**/{drone_name(TGT_BUDGETED)}/TGT"] == TGT_RATE
+    assert f"**/{drone_name(TGT_BUDGETED + 1)}/TGT" not in plain and "**/*/TGT" not in plain
+
+
 def test_a_routers_budget_of_connects_a_session_ends_the_rest_at_once_without_a_reply() -> None:
     """Issue 33, 6: a router keeps at most CONNECT_RATE CONNECTs a second from one session (`flood_filters`); the
     rest never reach the coordinator, and each ends at once, without a reply (Zenoh's router ends a query its
@@ -451,12 +495,13 @@ def test_the_largest_valid_connect_is_within_its_keys_size_limit() -> None:
 def test_a_payload_above_its_keys_size_limit_is_refused_unread(where, request) -> None:
     """The inbox refuses it before reading it; a router this project configures drops it on the way."""
     inbox, out, keys = request.getfixturevalue(where)
+    drone = "D01" if where == "bare" else UNBUDGETED  # (a drone whose TGTs a plain router does not budget)
     if where == "pair":
-        inbox.subscribe(keys.tgt("D01"), Target)
-        subscribed(out, inbox, keys.tgt("D01"))
-    out.session.put(keys.tgt("D01"), b"\x81" * (size_limit(Target) + 1))
-    out.put(keys.tgt("D01"), target(1))  # after it: once this one is here, the big one was dealt with
-    assert inbox.get(10).msg == target(1)
+        inbox.subscribe(keys.tgt(drone), Target)
+        subscribed(out, inbox, keys.tgt(drone))
+    out.session.put(keys.tgt(drone), b"\x81" * (size_limit(Target) + 1))
+    out.put(keys.tgt(drone), target(1, drone))  # after it: once this one is here, the big one was dealt with
+    assert inbox.get(10).msg == target(1, drone)
     expected = {"too-large": 1} if where == "bare" else {}
     assert inbox.rejects.snapshot() == expected
 
