@@ -30,9 +30,16 @@ CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "drones
 
 
 @contextlib.contextmanager
-def embedded_router() -> Iterator[str]:
-    """A router session in this process on tcp/127.0.0.1:<free port>; yields its locator."""
-    with zenoh.open(router_config("tcp/127.0.0.1:0")) as router:
+def embedded_router(*, tgt_budgets: bool = True) -> Iterator[str]:
+    """A router session in this process on tcp/127.0.0.1:<free port>; yields its locator. Without `tgt_budgets`, no
+    budget of puts on the TGT keys (`schema.tuning.TGT_RATE`): for a test that puts several TGTs on one drone's key
+    at once, more than a router lets through, to see what the receiving process does with each."""
+    conf = router_config("tcp/127.0.0.1:0")
+    if not tgt_budgets:
+        puts, *rest = json.loads(conf.get_json("downsampling"))
+        puts["rules"] = [r for r in puts["rules"] if not r["key_expr"].endswith("/TGT")]
+        conf.insert_json5("downsampling", json.dumps([puts, *rest]))
+    with zenoh.open(conf) as router:
         yield router_locators(router)[0]
 
 

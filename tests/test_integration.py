@@ -127,9 +127,18 @@ def test_duplicate_roles_are_refused_with_a_clear_message(cluster, tmp_path):
     assert srv.wait() == 0
 
 
-def test_invalid_targets_and_malformed_messages_change_nothing(router, tmp_path):
+@pytest.fixture
+def unbudgeted_router():
+    """A router without budgets on the TGT keys: throw_garbage puts several TGTs on D01's key at once, more than a
+    router lets through (`schema.tuning.TGT_RATE`), to see each refused by the coordinator."""
+    with embedded_router(tgt_budgets=False) as locator:
+        yield locator
+
+
+def test_invalid_targets_and_malformed_messages_change_nothing(unbudgeted_router, tmp_path):
     """The test plays the GCS itself: it throws bad input at every key, then plays normally; the
     journal must equal a clean run's, and every process must log its rejections and exit 0."""
+    router = unbudgeted_router
 
     def play(root: str, hostile: bool) -> tuple[bytes, Cluster]:
         c = Cluster(router, tmp_path, root=root)
