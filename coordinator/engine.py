@@ -118,6 +118,11 @@ class Engine:
         #: Words from hosts still deciding this drones' phase (empty MOVES): each one restarts its deadline
         #: (`phase_cap`).
         self.deciding = 0
+        #: The hosts that said so this drones' phase, and each host's first MOVES after such a word: the host sends
+        #: it again (the router may drop a MOVES that reaches it with the word: entities/drone_node.py
+        #: `Effects.repeat`), and a repeat of it is nothing new (`receive`).
+        self._said: set[str] = set()
+        self._repeated: dict[str, Moves] = {}
         #: A lifelong game's tasks done so far: arrivals on a target given (`Fleet.tasks_done`, counted after each
         #: turn's moves, and again as a resumed game replays its journal).
         self.tasks = 0
@@ -307,6 +312,7 @@ class Engine:
         """The drones' phase of this turn opens: no move taken yet, every alive drone's awaited."""
         self._enter(Stage.DRONES)
         self.deciding = 0
+        self._said.clear()
         alive = self.fleet.alive_rows()
         self.ballot.open(self.turn, len(alive))
         orders = self.fleet.orders(alive)
@@ -352,6 +358,8 @@ class Engine:
     def receive(self, msg: Message) -> list[Effect]:
         """A message from the network, decoded and addressed correctly: its effects. One that cannot be accepted
         changes nothing but gives a `Refusal` (a refused TGT still counts towards its DONE, a batch's others go on)."""
+        if type(msg) is Moves and self._repeated.get(msg.sender) == msg:
+            return []  # (a host's MOVES after its word, again)
         when = When.NOW if msg.turn == self.turn else \
             When.AHEAD if self.turn < msg.turn <= self.turn + AHEAD_MAX else When.OTHER
         take = TAKES.get((None, type(msg), When.ANY)) or TAKES.get((self.stage, type(msg), when))
@@ -509,6 +517,9 @@ class Engine:
         """A swarm host's moves (`Ballot.take_all`), or none: its word that it is still deciding them."""
         if not len(msg.moves):
             return self._still_deciding(msg)
+        if msg.sender in self._said:
+            self._said.discard(msg.sender)
+            self._repeated[msg.sender] = msg
         return [*self.ballot.take_all(msg), *self._drones_check()]
 
     def _still_deciding(self, msg: Moves) -> list[Effect]:
@@ -523,6 +534,7 @@ class Engine:
                 self._log.info("turn %d: %s is still deciding: the drones' phase waits for it (up to %g s)",
                                self.turn, msg.sender, max(self.config.phase_cap, self.config.phase_deadline))
             self.deciding += 1
+            self._said.add(msg.sender)
         return []
 
     def _drones_check(self) -> list[Effect]:

@@ -44,6 +44,8 @@ from schema.tuning import (
     COORDINATOR_GRACE_S,
     DECIDING_BUSY,
     DECIDING_EVERY_S,
+    DECIDING_SILENCE_S,
+    MOVES_REPEAT_S,
     PUT_GAP,
 )
 
@@ -66,7 +68,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
                             swarm_min=swarm_min, patience=grace, chart=chart)
         effects = Effects(inbox, Outbox(session), ask_timeout=ask_timeout, map_timeout=grace)
         effects.run(core.start())
-        pulse = Deciding(core, effects.send, thread_cpu()) if host else None
+        pulse = Deciding(core, effects.send, thread_cpu(), repeat=effects.repeat) if host else None
         if pulse is not None:
             pulse.start()
 
@@ -112,19 +114,47 @@ class Effects:
         self._timer: tuple[float, int] | None = None  # (when, ref)
         self._sending = threading.Lock()  # the moves go out one at a time (`Deciding` sends from its thread)
         self._sent: dict[str, float] = {}  # key -> when the last put on it went out
+        self._said: dict[str, int | None] = {}  # MOVES key -> the turn of its last put if a word (`Deciding`'s)
+        #: MOVES key -> the MOVES that followed a word, when it first went out and when it goes out again (`repeat`)
+        self._repeats: dict[str, tuple[Moves, float, float] | None] = {}
 
     def send(self, msg: Moves | Nps, unless: Callable[[], bool] = lambda: False) -> None:
         """Publish a swarm host's MOVES or a lone drone's NPS, unless `unless()`, asked once no other is being sent
         (`Deciding`'s word for a turn whose moves have gone out meanwhile is not sent after them), PUT_GAP s at
         least after the last put on its key (the router keeps at most PUT_RATE a second: a MOVES right after a word
-        that the host is still deciding would be dropped)."""
+        that the host is still deciding would be dropped). A host's MOVES after its word for that turn is sent
+        again (`repeat`)."""
         key = (self.keys.moves if isinstance(msg, Moves) else self.keys.nps)(msg.sender)
         with self._sending:
             if not unless():
-                if (wait := self._sent.get(key, float("-inf")) + PUT_GAP - self.clock()) > 0:
-                    self.sleep(wait)
-                self.out.put(key, msg)
-                self._sent[key] = self.clock()
+                self._put(key, msg)
+                if isinstance(msg, Moves):
+                    said = self._said.get(key)
+                    self._said[key] = msg.turn if not len(msg.moves) else None
+                    self._repeats[key] = ((msg, self._sent[key], self._sent[key] + MOVES_REPEAT_S)
+                                          if len(msg.moves) and said == msg.turn else None)
+
+    def _put(self, key: str, msg: Moves | Nps) -> None:
+        if (wait := self._sent.get(key, float("-inf")) + PUT_GAP - self.clock()) > 0:
+            self.sleep(wait)
+        self.out.put(key, msg)
+        self._sent[key] = self.clock()
+
+    def repeat(self) -> None:
+        """Send again, when due, a host's MOVES that followed its word that it was still deciding that turn: on a
+        loaded machine both may reach the router together (its link sends what is queued in one batch), and its
+        budget then keeps the word and drops the MOVES (seen: the coordinator heard the word, never the moves, and
+        its drones were LOST). Again MOVES_REPEAT_S after, then twice as long each time, for as long as the
+        coordinator may still wait for them (DECIDING_SILENCE_S after the word); it takes a repeat of the MOVES it
+        holds as nothing new (coordinator/engine.py `Engine.receive`)."""
+        with self._sending:
+            for key, due in list(self._repeats.items()):
+                if due is None or self.clock() < due[2]:
+                    continue
+                msg, first, at = due
+                self._put(key, msg)
+                later = first + 2 * (at - first)
+                self._repeats[key] = (msg, first, later) if later - first <= DECIDING_SILENCE_S else None
 
     def run(self, effects: list[Effect]) -> None:
         for eff in effects:
@@ -158,8 +188,9 @@ class Deciding:
     own (the main thread is in the plan); a hung process (stopped, or its main thread blocked) says nothing."""
 
     def __init__(self, core: DroneProcess, send: Callable[..., None], cpu: Callable[[], float], *,
-                 every: float = DECIDING_EVERY_S, busy: float = DECIDING_BUSY) -> None:
-        self.core, self.send, self.cpu, self.every, self.busy = core, send, cpu, every, busy
+                 every: float = DECIDING_EVERY_S, busy: float = DECIDING_BUSY,
+                 repeat: Callable[[], None] = lambda: None) -> None:
+        self.core, self.send, self.cpu, self.every, self.busy, self.repeat = core, send, cpu, every, busy, repeat
         self._last: tuple[int | None, float] = (None, 0.0)  # the turn being decided and the CPU time, at the last look
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="deciding", daemon=True)
@@ -176,6 +207,7 @@ class Deciding:
         while not self._stop.wait(self.every):
             if (word := self.look()) is not None:  # (not once that turn's moves went out: they close it)
                 self.send(word, unless=functools.partial(self._decided, word.turn))
+            self.repeat()  # (the moves that followed a word, again: `Effects.repeat`)
 
     def _decided(self, turn: int) -> bool:
         return self.core.deciding() != turn

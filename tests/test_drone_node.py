@@ -15,8 +15,8 @@ from entities.drone import Answer
 from entities.drone_node import Deciding, Effects, thread_cpu
 from entities.environment import Environment
 from network.transport import Inbox, client_config
-from schema import Ans, Ask, Keys, Moves, RemoteInputError, decode, encode
-from schema.tuning import PUT_GAP
+from schema import Ans, Ask, Keys, Moves, RemoteInputError, Step, decode, encode
+from schema.tuning import DECIDING_SILENCE_S, MOVES_REPEAT_S, PUT_GAP
 from world.grid import World
 
 from .harness import embedded_router, unique_root
@@ -170,6 +170,35 @@ def test_a_hosts_moves_go_out_a_put_gap_after_its_word_so_that_the_routers_budge
     now[0] += 1.0
     effects.send(Moves(turn=4, sender="H01", moves=()))
     assert len(slept) == 1, "a put long after the last waits for nothing"
+
+
+def test_a_hosts_moves_after_its_word_go_out_again_while_the_coordinator_may_wait_for_them() -> None:
+    """On a loaded machine a host's word that it is still deciding and its MOVES reached the router in one batch,
+    and its budget dropped the MOVES: a MOVES that followed a word of its turn goes out again MOVES_REPEAT_S later,
+    then twice as long each time, up to DECIDING_SILENCE_S after it; one without a word before it, never."""
+    keys, now = Keys("sim"), [10.0]
+    out = types.SimpleNamespace(sent=[])
+    out.put = lambda key, msg: out.sent.append((round(now[0] - 10.0, 6), msg.turn, len(msg.moves)))
+    effects = Effects(types.SimpleNamespace(keys=keys), out, ask_timeout=1.0, map_timeout=1.0,  # type: ignore[arg-type]
+                      clock=lambda: now[0], sleep=lambda s: now.__setitem__(0, now[0] + s))
+    moves = Moves(turn=3, sender="H01", moves=(Step(drone="D01", pos=(1, 0, 0)),))
+    effects.send(Moves(turn=3, sender="H01", moves=()))
+    now[0] += 0.01
+    effects.send(moves)
+    while now[0] < 12.0:
+        effects.repeat()
+        now[0] += 0.001
+    at = [t for t, *_ in out.sent[2:]]
+    assert out.sent[1:] == [(0.01, 3, 1)] + [(t, 3, 1) for t in at], "its MOVES, again"
+    assert at == pytest.approx([0.01 + MOVES_REPEAT_S * k for k in (1, 2, 4, 8, 16)
+                                if MOVES_REPEAT_S * k <= DECIDING_SILENCE_S], abs=0.0011)
+    del out.sent[:]
+    effects.send(Moves(turn=4, sender="H01", moves=(Step(drone="D01", pos=(2, 0, 0)),)))  # (no word for turn 4)
+    effects.send(Moves(turn=5, sender="H01", moves=()))
+    effects.send(Moves(turn=4, sender="H01", moves=(Step(drone="D01", pos=(2, 0, 0)),)))  # (a word, of turn 5)
+    now[0] += 2.0
+    effects.repeat()
+    assert [turn for _, turn, _ in out.sent] == [4, 5, 4], "none again"
 
 
 def test_the_main_threads_cpu_clock_is_read_from_another_thread() -> None:

@@ -1378,6 +1378,26 @@ def test_a_word_that_it_is_still_deciding_is_not_held_nor_taken_from_a_host_with
     assert g.engine.deciding == 1
 
 
+def test_a_hosts_moves_sent_again_after_its_word_change_nothing_and_are_not_refused() -> None:
+    """A host sends again the MOVES that followed its word that it was still deciding (the router may drop a MOVES
+    that reaches it in one batch with that word: entities/drone_node.py `Effects.repeat`): the MOVES taken, again,
+    is nothing new, in its phase or after it; any other MOVES is refused as before (also the same MOVES again from a
+    host that said nothing: test_a_big_batch_takes_and_refuses_what_moves_one_by_one_would)."""
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))), hosts={"H01": ("D01",), "H02": ("D02",)})
+    g.gcs()
+    g.feed(g.engine.receive(_deciding(1)))
+    moves = _host_moves(1, {"D01": (1, 0, 0)})
+    g.feed(g.engine.receive(moves))
+    snap = g.snapshot()
+    assert g.feed(g.engine.receive(moves)) == [] and g.snapshot() == snap, "in its phase (H02 still awaited)"
+    refused(g.engine.receive(_host_moves(1, {"D01": (0, 1, 0)})))
+    g.feed(g.engine.receive(Moves(turn=1, sender="H02", moves=(Step(drone="D02", pos=(4, 4, 3)),))))
+    assert (g.stage, g.turn) == (Stage.GCS, 2)
+    snap = g.snapshot()
+    assert g.feed(g.engine.receive(moves)) == [] and g.snapshot() == snap, "after it"
+    refused(g.engine.receive(_host_moves(1, {"D01": (2, 0, 0)})), StaleTurn)
+
+
 def test_the_stretch_is_never_shorter_than_the_deadline() -> None:
     g = _hosted_pair(phase_deadline=90.0, phase_cap=5.0)
     g.gcs()
