@@ -118,11 +118,14 @@ class Engine:
         #: Words from hosts still deciding this drones' phase (empty MOVES): each one restarts its deadline
         #: (`phase_cap`).
         self.deciding = 0
-        #: The hosts that said so this drones' phase, and each host's first MOVES after such a word: the host sends
-        #: it again (the router may drop a MOVES that reaches it with the word: entities/drone_node.py
+        #: The hosts that said so this drones' phase, and each host's first MOVES of a turn after such a word: the
+        #: host sends it again (the router may drop a MOVES that reaches it with the word: entities/drone_node.py
         #: `Effects.repeat`), and a repeat of it is nothing new (`receive`).
         self._said: set[str] = set()
         self._repeated: dict[str, Moves] = {}
+        #: The hosts that said so in the last drones' phase: presumed still slow, this one waits for their first word
+        #: as it waits after a word (`stretch`).
+        self._slow: frozenset[str] = frozenset()
         #: A lifelong game's tasks done so far: arrivals on a target given (`Fleet.tasks_done`, counted after each
         #: turn's moves, and again as a resumed game replays its journal).
         self.tasks = 0
@@ -189,11 +192,16 @@ class Engine:
         return self.config.phase_deadline if self._playing() else None
 
     def stretch(self) -> tuple[float, float] | None:
-        """While a host says it is still deciding this drones' phase (`deciding`): how long the phase waits after its
-        last word (the deadline, at least `DECIDING_SILENCE_S`: one word missed or late does not end it), and how
-        long it may last in all (`phase_cap`, at least the deadline). None: no such word, or the stage's deadline is
-        not the drones' phase's."""
-        if self.stage is not Stage.DRONES or not self.deciding or self.outage.away is not None or self._env_missing():
+        """While a host says it is still deciding this drones' phase (`deciding`), or one that said so in the last
+        one still has a move awaited (presumed as slow: its first word may come after the deadline on a loaded
+        machine): how long the phase waits after its last word or its start (the deadline, at least
+        `DECIDING_SILENCE_S`: one word missed or late does not end it), and how long it may last in all
+        (`phase_cap`, at least the deadline). None: no such host, or the stage's deadline is not the drones'
+        phase's."""
+        if self.stage is not Stage.DRONES or self.outage.away is not None or self._env_missing():
+            return None
+        if not self.deciding and not any(self.ballot.awaits(code) for h in self._slow
+                                         if (code := self.fleet.hosts.get(h)) is not None):
             return None
         deadline = self.config.phase_deadline
         return max(deadline, DECIDING_SILENCE_S), max(self.config.phase_cap, deadline)
@@ -312,7 +320,7 @@ class Engine:
         """The drones' phase of this turn opens: no move taken yet, every alive drone's awaited."""
         self._enter(Stage.DRONES)
         self.deciding = 0
-        self._said.clear()
+        self._slow, self._said = frozenset(self._said), set()
         alive = self.fleet.alive_rows()
         self.ballot.open(self.turn, len(alive))
         orders = self.fleet.orders(alive)
@@ -517,8 +525,7 @@ class Engine:
         """A swarm host's moves (`Ballot.take_all`), or none: its word that it is still deciding them."""
         if not len(msg.moves):
             return self._still_deciding(msg)
-        if msg.sender in self._said:
-            self._said.discard(msg.sender)
+        if msg.sender in self._said and getattr(self._repeated.get(msg.sender), "turn", None) != msg.turn:
             self._repeated[msg.sender] = msg
         return [*self.ballot.take_all(msg), *self._drones_check()]
 

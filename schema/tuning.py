@@ -207,14 +207,17 @@ DECIDING_EVERY_S = 0.05
 DECIDING_BUSY = 0.02
 #: How long a drones' phase waits, after a host's last word that it is still deciding, for its next word or its moves,
 #: when that is longer than the phase deadline: a word late (a host descheduled on a loaded machine) or lost does
-#: not end a phase the host is known to be working on. Not measured: 20 words.
-DECIDING_SILENCE_S = 1.0
+#: not end a phase the host is known to be working on; and as long from its start for the first word of a host that
+#: said so in the last drones' phase (coordinator/engine.py `Engine.stretch`). Measured beside 6 busy loops on 2
+#: cores (load 20-25 with other work): a D* swarm host's words 1.09 s apart at worst (its process got 8 ms of CPU
+#: in that second), and no word yet 0.5 s into a phase; twice that.
+DECIDING_SILENCE_S = 2.0
 #: Seconds after which a swarm host sends again a MOVES that followed its word that it was still deciding that turn,
 #: then twice as long each time while the coordinator may still wait for it (up to `DECIDING_SILENCE_S` after it:
 #: entities/drone_node.py `Effects.repeat`): on a loaded machine the word and the MOVES reached the router in one
 #: batch and its budget (`PUT_RATE`) dropped the MOVES (seen under 6 busy loops on 2 cores: the coordinator heard the
 #: word, a subscriber on the router never saw the MOVES, and 40 drones were LOST). The coordinator takes a repeat of
-#: the MOVES it holds as nothing new. Not measured: the host's link sent them 3-50 ms late there; at most 5 repeats
+#: the MOVES it holds as nothing new. Not measured: the host's link sent them 3-50 ms late there; at most 6 repeats
 #: (a few hundred bytes each) for a turn whose planning outlasted `DECIDING_EVERY_S`, none for any other.
 MOVES_REPEAT_S = DECIDING_EVERY_S
 #: How long a game waits for every entity to connect, also when resumed (`--admit-deadline`; 0: forever).

@@ -1359,7 +1359,14 @@ def test_a_hosts_word_that_it_is_still_deciding_stretches_the_phase_and_changes_
     g.feed(g.engine.receive(_host_moves(1, {"D02": (4, 4, 3)})))
     assert (g.stage, g.turn) == (Stage.GCS, 2) and g.engine.stretch() is None
     g.gcs()
-    assert g.engine.deciding == 0 and g.engine.stretch() is None, "each drones' phase starts without a word"
+    assert g.engine.deciding == 0, "each drones' phase starts without a word"
+    assert g.engine.stretch() == (DECIDING_SILENCE_S, 20.0), \
+        "but a host that said so in the last one is presumed as slow: its first word may come after the deadline"
+    g.feed(g.engine.receive(_host_moves(2, {"D01": (2, 0, 0)})))
+    assert g.engine.stretch() == (DECIDING_SILENCE_S, 20.0), "while it has a move awaited"
+    g.feed(g.engine.receive(_host_moves(2, {"D02": (4, 4, 2)})))
+    g.gcs()
+    assert g.engine.stretch() is None, "said nothing in the last one: the deadline as it is"
 
 
 def test_a_word_that_it_is_still_deciding_is_not_held_nor_taken_from_a_host_with_nothing_left_to_decide() -> None:
