@@ -8,7 +8,8 @@ outcome comes back to the core as one event each, and keeps the core's one timer
 
 A swarm host whose planning of a turn goes on for a while says so (`Deciding`, a thread: the main thread is in the
 plan): an empty MOVES every DECIDING_EVERY_S while its main thread computes, so that the coordinator waits for it
-instead of making its drones hover and, turns later, LOST. A hung host computes nothing and says nothing.
+instead of making its drones hover and, turns later, LOST. A hung host computes nothing and says nothing. The MOVES
+that follows such a word goes out again a few times (`Effects.repeat`: the router's budget may drop it).
 """
 
 from __future__ import annotations
