@@ -276,6 +276,7 @@ class Engine:
         fleet.restart(starts)
         self.final, self.end, self.tasks, self.deciding, self.intent = False, None, 0, 0, _CONTINUE
         self._tgt_seen, self._done, self._phase_msg, self._held = 0, None, None, False
+        self._said, self._repeated, self._slow = set(), {}, frozenset()
         self.aiming = Aims(fleet, self.size)
         self.ballot = Ballot(fleet)
         self.ahead = Ahead()
