@@ -130,6 +130,8 @@ class Engine:
         #: turn's moves, and again as a resumed game replays its journal).
         self.tasks = 0
         self._here = False  # the game was started here (`start_here`): it may be restarted (`restart`)
+        #: The cells of the last `play`'s moves (its `move_rows`', in order): the cells its steps led to (`offsets`).
+        self.played: Cells = []
 
     # ------------------------------------------------------------------ queries
 
@@ -455,14 +457,16 @@ class Engine:
         return True
 
     def play(self, aim_rows: Rows, aims: Cells, move_rows: Rows, moves: Cells, notes: Codes,
-             ranked: Codes | None = None) -> Over | None:
+             ranked: Codes | None = None, offsets: bool = False) -> Over | None:
         """One whole turn without messages, for a caller in this process that is the ground station and every
         drone's host (dronesim/rl.py): as if a DONE (CONTINUE) carried the targets `aims` of the rows `aim_rows`,
         then a MOVES the `moves` (cells), `notes` (Note codes) and `ranked` candidates (cooperative drones', as an
         NPS's; None: none) of the rows `move_rows` (each once; the other alive drones hover), with no message
         built and no journal record. Rows, cells and codes as arrays, or as lists (ints, (x, y, z) tuples, ints:
-        what a caller playing a few drones holds). The turn's OVER if the game ended with it. UsageError, nothing
-        changed, if the turn is not the GCS's (or a DONE or MOVES came ahead) or an input would be refused."""
+        what a caller playing a few drones holds). `offsets`: the `moves` are each drone's step (dx, dy, dz), not
+        its cell (an RL episode's actions: the judge's pass over the moves makes them cells; `played` holds them).
+        The turn's OVER if the game ended with it. UsageError, nothing changed, if the turn is not the GCS's (or a
+        DONE or MOVES came ahead) or an input would be refused."""
         fleet = self.fleet
         if self.stage is not _GCS or self._done is not None or self.ahead.dones or self.ahead.moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
@@ -483,20 +487,30 @@ class Engine:
             cells = moves if isinstance(moves, list) else list(map(tuple, moves.tolist()))
             codes = notes if isinstance(notes, list) else notes.tolist()
             # every alive drone's move, in one pass (most turns of an RL episode's): else each move taken
-            steps = judge.steps(rows, cells, whole) if whole and not fleet.cooperating else None
+            steps = judge.steps(rows, cells, whole, offsets) if whole and not fleet.cooperating else None
             ok, took = True, {}
-            if steps is None:
+            if steps is not None:
+                if offsets:
+                    cells = list(steps.after.values())  # (every alive row's, in row order)
+            else:
                 state, pos = whole if whole else (fleet.column(fleet.state, rows), fleet.column(fleet.pos, rows))
+                if offsets:  # (the cells the steps lead to; a step that is not one is refused below)
+                    at = pos if whole else dict(zip(rows, pos))
+                    cells = [(at[i][0] + dx, at[i][1] + dy, at[i][2] + dz) for i, (dx, dy, dz) in zip(rows, cells)]
                 for k, i, cell, code in zip(rows if whole else range(len(rows)), rows, cells, codes):
                     (a, b, c), (x, y, z) = cell, pos[k]
                     ok = ok and state[k] == ALIVE and (a - x, b - y, c - z) in STEPS
                     took[i] = cell, code
         else:
             rows, cells, codes = move_rows, np.asarray(moves), np.asarray(notes)
+            if offsets:
+                cells = fleet.pos[rows] + cells
             ok = (np.count_nonzero(fleet.state[rows] != ALIVE) == 0
                   and step_lengths(fleet.pos[rows], cells).max() <= 1)
         if not ok:
             raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
+        # (lists for a caller that gave its steps as lists)
+        self.played = list(map(tuple, cells.tolist())) if offsets and isinstance(moves, list) and not few else cells
         if len(aim_rows):
             self.aiming.aimed[aim_rows], self.aiming.cells[aim_rows] = True, aims
             self._targets_set(Intent.CONTINUE)

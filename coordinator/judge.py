@@ -67,11 +67,14 @@ class Judge:
         # bool in ~25 ns, a numpy array's ~300 ns
         self._every = list(range(len(fleet)))  # every row (`steps`: compared with a caller's rows in C)
 
-    def steps(self, rows: list[int], cells: list[Cell], whole: tuple[list[int], list[list[int]]]) -> Steps | None:
+    def steps(self, rows: list[int], cells: list[Cell], whole: tuple[list[int], list[list[int]]],
+              offsets: bool = False) -> Steps | None:
         """The moves `cells` ((x, y, z) tuples) of the `rows` of a few drones, if these are every alive drone in
         ascending order (a caller that moves or hovers each, as an RL episode does), read in one pass as the judge
-        reads them (`rule_steps` makes them); `whole`: the fleet's state and cells (`Fleet.whole`). UsageError,
-        nothing changed, if one is not a step (6-connectivity) from its drone's cell. None: other rows (`rule`)."""
+        reads them (`rule_steps` makes them); `whole`: the fleet's state and cells (`Fleet.whole`); `offsets`: the
+        moves are each drone's step (dx, dy, dz), not its cell (the caller's pass from steps to cells is this one).
+        UsageError, nothing changed, if one is not a step (6-connectivity) from its drone's cell. None: other rows
+        (`rule`)."""
         states, pos = whole
         n = len(states)
         if states.count(ALIVE) == n:
@@ -86,9 +89,15 @@ class Judge:
         risky = False
         for i, cell in zip(rows, cells):
             x, y, z = pos[i]
-            a, b, c = cell
-            if (a - x, b - y, c - z) not in STEPS:
-                raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
+            if offsets:
+                if cell not in STEPS:
+                    raise UsageError("a move of more than one cell (6-connectivity)")
+                dx, dy, dz = cell
+                a, b, c = cell = x + dx, y + dy, z + dz
+            else:
+                a, b, c = cell
+                if (a - x, b - y, c - z) not in STEPS:
+                    raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
             here = before[i] = (x, y, z)
             after[i] = cell
             if cell != here:

@@ -37,6 +37,7 @@ from schema.tables import code_of
 #: The most drones a FewEpisode plays: drone D100 would sort before D11 (rows would not be the id order).
 FEW_MAX = 99
 _REACHED = code_of(Note.REACHED)
+_STEP = ACTIONS.__getitem__  # an action's step (dx, dy, dz)
 
 
 class FewEpisode(EpisodeBase):
@@ -121,22 +122,17 @@ class FewEpisode(EpisodeBase):
         if rows != alive:  # (most steps: every alive drone told, in row order)
             action = dict(zip(rows, values))
             values = [action.get(i, 0) for i in alive]
-        moves = []
-        for i, a in zip(alive, values):
-            if a:
-                x, y, z = pos[i]
-                dx, dy, dz = ACTIONS[a]
-                moves.append((x + dx, y + dy, z + dz))
-            else:
-                moves.append(pos[i])
         notes = say if len(alive) == self.n else [say[i] for i in alive]  # (the engine reads them, keeps none)
         aim, targets = self._aim, self._targets
-        over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, moves, notes)
+        # (the actions' steps: the judge's pass over them makes them cells, `Engine.played`)
+        over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, list(map(_STEP, values)),
+                                notes, offsets=True)
+        moves = self.engine.played
         self._aim = []
         # what the turn did: each alive drone is where it moved (a game without cooperative drones takes every
         # move as given: `Engine.play`), and those the engine's fleet says are no longer alive died there
         if len(alive) == self.n:  # (every drone: its cells are the moves)
-            self._pos = pos = moves
+            self._pos = pos = moves  # type: ignore[assignment]  # (a list: the few drones' turn)
         else:
             for i, cell in zip(alive, moves):
                 pos[i] = cell
