@@ -30,6 +30,7 @@ Rows = np.ndarray | list[int]
 Cells = np.ndarray | list[Cell]
 Codes = np.ndarray | list[int]
 CAUSE_CODE = {c: code_of(c) for c in Cause}
+_HOVER = (0, 0, 0)  # the step of a drone that stays
 
 
 class Steps(NamedTuple):
@@ -87,17 +88,26 @@ class Judge:
         after: dict[int, Cell] = {}
         moved: list[int] = []
         risky = False
+        if offsets:  # (a step other than hovering changes the drone's cell)
+            for i, step in zip(rows, cells):
+                if step not in STEPS:
+                    raise UsageError("a move of more than one cell (6-connectivity)")
+                x, y, z = pos[i]
+                here = before[i] = (x, y, z)
+                if step == _HOVER:
+                    after[i] = here
+                    continue
+                dx, dy, dz = step
+                a, b, c = after[i] = x + dx, y + dy, z + dz
+                moved.append(i)
+                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz) or solid[(a * ny + b) * nz + c]:
+                    risky = True
+            return Steps(rows, before, after, moved, risky)
         for i, cell in zip(rows, cells):
             x, y, z = pos[i]
-            if offsets:
-                if cell not in STEPS:
-                    raise UsageError("a move of more than one cell (6-connectivity)")
-                dx, dy, dz = cell
-                a, b, c = cell = x + dx, y + dy, z + dz
-            else:
-                a, b, c = cell
-                if (a - x, b - y, c - z) not in STEPS:
-                    raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
+            a, b, c = cell
+            if (a - x, b - y, c - z) not in STEPS:
+                raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
             here = before[i] = (x, y, z)
             after[i] = cell
             if cell != here:
