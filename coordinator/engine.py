@@ -510,7 +510,8 @@ class Engine:
         if not ok:
             raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
         # (lists for a caller that gave its steps as lists)
-        self.played = list(map(tuple, cells.tolist())) if offsets and isinstance(moves, list) and not few else cells
+        self.played = list(map(tuple, np.asarray(cells).tolist())) if offsets and isinstance(moves, list) and \
+            not few else cells
         if len(aim_rows):
             self.aiming.aimed[aim_rows], self.aiming.cells[aim_rows] = True, aims
             self._targets_set(Intent.CONTINUE)
