@@ -141,6 +141,11 @@ class OpenCells:
     def __getitem__(self, u: int) -> int:
         return self._bits[u >> 3] >> (u & 7) & 1
 
+    @property
+    def bits(self) -> bytes:
+        """The bits themselves (cell u: `bits[u >> 3] >> (u & 7) & 1`), for hot loops that read them inline."""
+        return self._bits
+
     def array(self) -> np.ndarray:
         """Every flat cell's bit, as a bool array (a byte a cell: for the search's graph, coordinator/lacam.py)."""
         return np.unpackbits(np.frombuffer(self._bits, np.uint8), bitorder="little").astype(bool)
@@ -336,28 +341,58 @@ class Corridors:
     steps aside. A cell whose way on is one cell is a corridor, none its end, two or more a junction; a dead end
     held by a drone on its own target counts as closed (`ways`)."""
 
-    __slots__ = ("open", "steps", "now", "goal")
+    __slots__ = ("open", "steps", "now", "goal", "_bits", "_pocket")
 
     def __init__(self, open_: OpenCells, steps: list[int], now: dict[int, int], goal: list[int]) -> None:
         self.open, self.steps, self.now, self.goal = open_, steps, now, goal
+        self._bits = open_.bits  # the open bits read inline (no method call a cell: the swap check is PIBT's hot path)
+        self._pocket: dict[int, bool] = {}  # whether an open cell has one open neighbour, as asked (per PIBT call)
+
+    def _is_pocket(self, u: int) -> bool:
+        """Whether the open cell u has exactly one open neighbour (a dead end), remembered once asked."""
+        out = self._pocket.get(u)
+        if out is None:
+            bits = self._bits
+            n = 0
+            for e in self.steps:
+                w = u + e
+                n += bits[w >> 3] >> (w & 7) & 1
+            out = self._pocket[u] = n == 1
+        return out
 
     def ways(self, v: int, back: int, parked: bool) -> list[int]:
         """The open neighbours of v other than `back` through which a drone can go on (two at most: then v is a
         junction): every open one but a dead end (a pocket one cell deep) held by a drone on its own target, or
         by any drone if not `parked` (to pass there: a drone in a pocket could only come out into v)."""
         out = []
-        is_open, now, goal = self.open, self.now, self.goal
+        bits, now, goal = self._bits, self.now, self.goal
         for d in self.steps:
             u = v + d
-            if u == back or not is_open[u]:
+            if u == back or not bits[u >> 3] >> (u & 7) & 1:
                 continue
             k = now.get(u)
-            if k is not None and (not parked or goal[k] == u) and sum(is_open[u + e] for e in self.steps) == 1:
+            if k is not None and (not parked or goal[k] == u) and self._is_pocket(u):
                 continue
             out.append(u)
             if len(out) == 2:
                 break  # a junction: its other ways do not matter
         return out
+
+    def junction(self, v: int, back: int) -> bool:
+        """`len(self.ways(v, back, True)) >= 2`, without building the list (the swap check's common exit)."""
+        bits, now, goal = self._bits, self.now, self.goal
+        n = 0
+        for d in self.steps:
+            u = v + d
+            if u == back or not bits[u >> 3] >> (u & 7) & 1:
+                continue
+            k = now.get(u)
+            if k is not None and goal[k] == u and self._is_pocket(u):
+                continue
+            if n:
+                return True
+            n = 1
+        return False
 
     def required(self, i: int, j: int, vi: int, vj: int, clear: bool = False) -> bool:
         """Whether pushing j (at vj) on ahead of i (at vi, wanting vj) cannot let i pass: beyond vj is a corridor
@@ -419,19 +454,21 @@ def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int
       stepping back to the junction behind it (k is pulled into i's cell if it has not moved yet)."""
     v = mine[0]
     src = here[i]
-    if corridors is None or v < 0 or v == src or src not in mine or not corridors.open[v]:
+    if corridors is None or v < 0 or v == src or src not in mine or not corridors._bits[v >> 3] >> (v & 7) & 1:
         return mine, -1  # (an offered cell outside the world or in a building leads into no corridor)
     j = now.get(v)
-    if j is not None and j != i and nxt[j] < 0 and src in cand[j]:
+    goal = corridors.goal
+    if j is not None and j != i and nxt[j] < 0:
         theirs = cand[j]
-        wants = v in theirs and theirs.index(src) < theirs.index(v)  # j wants i's cell (or is on its target)
-        if (wants or corridors.goal[j] == v) and corridors.required(i, j, src, v) and corridors.possible(v, src):
-            return _reverse(mine, src), j
-    if len(corridors.ways(v, src, True)) >= 2:
+        if src in theirs:
+            wants = v in theirs and theirs.index(src) < theirs.index(v)  # j wants i's cell (or is on its target)
+            if (wants or goal[j] == v) and corridors.required(i, j, src, v) and corridors.possible(v, src):
+                return _reverse(mine, src), j
+    if corridors.junction(v, src):
         return mine, -1  # v is no corridor
     for d in corridors.steps:
         k = now.get(src + d)
-        if k is None or k == i or here[k] == v or corridors.goal[k] < 0:
+        if k is None or k == i or goal[k] < 0 or here[k] == v:
             continue
         theirs = cand[k]
         if src not in theirs or here[k] not in theirs or theirs.index(src) > theirs.index(here[k]):
