@@ -1868,9 +1868,11 @@ def test_engine_the_cluster_is_secured_by_default_and_the_opt_out_is_a_plain_rou
         assert "D02/TGT" not in said and not stray, (name, said)
     assert p.journal() == host_journals(game), "an attack changed the game"
     p.compose("up", "-d", "--no-deps", "credentials")  # made again, as every `up` does: kept
+    assert int(docker("wait", p.one("credentials")).strip()) == 0  # (`up -d` of it alone returns once it starts)
     assert p.gcs_credentials(tmp_path / "again") == credentials, "`up` again made new credentials"
     p.compose("down", "--volumes", "--timeout", "2")
     p.compose("up", "-d", "--no-deps", "credentials")
+    assert int(docker("wait", p.one("credentials")).strip()) == 0
     fresh = p.gcs_credentials(tmp_path / "fresh")
     assert fresh["ca.pem"] != credentials["ca.pem"] and fresh["GCS.password"] != credentials["GCS.password"]
 
