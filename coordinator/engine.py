@@ -96,20 +96,27 @@ class Engine:
         self.drones = Drones(self.fleet)  # the drones one by one (a read-only view of the fleet)
         self.roster = Roster()
         self.entities = self.roster.roles  # the admitted entities: id -> role
-        self.final = False  # the GCS said its plan is complete
-        self.end: Over | None = None
-        # Its parts, each a module of its own:
-        self.aiming = Aims(self.fleet, self.size)  # the targets this GCS phase received
-        self.ballot = Ballot(self.fleet)  # the moves this drones' phase took
-        self.ahead = Ahead()  # what came ahead of its phase: DONEs for coming turns, MOVES for this one
+        self._begin()
+        # Its parts, each a module of its own (those of one game's course: `_begin`):
         self.arbitration = Arbitration(config.arbiter, self.world, len(self.fleet))  # the cooperative drones'
         self.judge = Judge(self.fleet, self.world, self.arbitration, self.ballot, config.lost_after, logger)
-        self.reports = Reports(self.world)  # the environment's reports (UPD) awaited, checked against the world
         self.outage = Outage(self.roster)  # while the link is down (`link_lost`): the entities not back yet
         self._turn_log = TurnLog(0)
         # The adapter's switches: the environment's UPD reports are checked; the turn records say what each drone
         # was told and did (off without a journal); someone follows the ENV phase (else its TURN is not made).
         self.verify_env = self.journaled = self.env_followed = True
+        self._here = False  # the game was started here (`start_here`): it may be restarted (`restart`)
+        #: The cells of the last `play`'s moves (its `move_rows`', in order): the cells its steps led to (`offsets`).
+        self.played: Cells = []
+
+    def _begin(self) -> None:
+        """The state of a game's course, as at its start (`__init__`, and `restart` for the next game)."""
+        self.final = False  # the GCS said its plan is complete
+        self.end: Over | None = None
+        self.aiming = Aims(self.fleet, self.size)  # the targets this GCS phase received
+        self.ballot = Ballot(self.fleet)  # the moves this drones' phase took
+        self.ahead = Ahead()  # what came ahead of its phase: DONEs for coming turns, MOVES for this one
+        self.reports = Reports(self.world)  # the environment's reports (UPD) awaited, checked against the world
         self._tgt_seen = 0  # TGT messages of this GCS phase
         self._done: Done | None = None  # the GCS's DONE, once it arrived
         self._phase_msg: Turn | None = None  # the TURN that opened the current stage
@@ -129,9 +136,6 @@ class Engine:
         #: A lifelong game's tasks done so far: arrivals on a target given (`Fleet.tasks_done`, counted after each
         #: turn's moves, and again as a resumed game replays its journal).
         self.tasks = 0
-        self._here = False  # the game was started here (`start_here`): it may be restarted (`restart`)
-        #: The cells of the last `play`'s moves (its `move_rows`', in order): the cells its steps led to (`offsets`).
-        self.played: Cells = []
 
     # ------------------------------------------------------------------ queries
 
@@ -276,13 +280,7 @@ class Engine:
             raise UsageError("only a game started here (start_here) is restarted")
         fleet = self.fleet
         fleet.restart(starts)
-        self.final, self.end, self.tasks, self.deciding, self.intent = False, None, 0, 0, _CONTINUE
-        self._tgt_seen, self._done, self._phase_msg, self._held = 0, None, None, False
-        self._said, self._repeated, self._slow = set(), {}, frozenset()
-        self.aiming = Aims(fleet, self.size)
-        self.ballot = Ballot(fleet)
-        self.ahead = Ahead()
-        self.reports = Reports(self.world)
+        self._begin()
         if fleet.cooperating:  # (the arbiter's search holds the last game's state: a new one)
             self.arbitration = Arbitration(self.config.arbiter, self.world, len(fleet))
             self.arbitration.prepare(fleet)
