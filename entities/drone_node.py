@@ -141,15 +141,19 @@ class Effects:
         self.out.put(key, msg)
         self._sent[key] = self.clock()
 
-    def repeat(self) -> None:
+    def repeat(self, deciding: int | None = None) -> None:
         """Send again, when due, a host's MOVES that followed its word that it was still deciding that turn: on a
         loaded machine both may reach the router together (its link sends what is queued in one batch), and its
         budget then keeps the word and drops the MOVES (seen: the coordinator heard the word, never the moves, and
         its drones were LOST). Again MOVES_REPEAT_S after, then twice as long each time, for as long as the
         coordinator may still wait for them (DECIDING_SILENCE_S after the word); it takes a repeat of the MOVES it
-        holds as nothing new (coordinator/engine.py `Engine.receive`)."""
+        holds as nothing new (coordinator/engine.py `Engine.receive`). Not once the host decides a later turn
+        (`deciding`): that turn's TURN came, the coordinator is done with these moves (it would refuse them as
+        stale)."""
         with self._sending:
             for key, due in list(self._repeats.items()):
+                if due is not None and deciding is not None and deciding > due[0].turn:
+                    self._repeats[key] = due = None
                 if due is None or self.clock() < due[2]:
                     continue
                 msg, first, at = due
@@ -190,7 +194,7 @@ class Deciding:
 
     def __init__(self, core: DroneProcess, send: Callable[..., None], cpu: Callable[[], float], *,
                  every: float = DECIDING_EVERY_S, busy: float = DECIDING_BUSY,
-                 repeat: Callable[[], None] = lambda: None) -> None:
+                 repeat: Callable[[int | None], None] = lambda deciding: None) -> None:
         self.core, self.send, self.cpu, self.every, self.busy, self.repeat = core, send, cpu, every, busy, repeat
         self._last: tuple[int | None, float] = (None, 0.0)  # the turn being decided and the CPU time, at the last look
         self._stop = threading.Event()
@@ -208,7 +212,7 @@ class Deciding:
         while not self._stop.wait(self.every):
             if (word := self.look()) is not None:  # (not once that turn's moves went out: they close it)
                 self.send(word, unless=functools.partial(self._decided, word.turn))
-            self.repeat()  # (the moves that followed a word, again: `Effects.repeat`)
+            self.repeat(self.core.deciding())  # (the moves that followed a word, again: `Effects.repeat`)
 
     def _decided(self, turn: int) -> bool:
         return self.core.deciding() != turn

@@ -199,6 +199,14 @@ def test_a_hosts_moves_after_its_word_go_out_again_while_the_coordinator_may_wai
     now[0] += 2.0
     effects.repeat()
     assert [turn for _, turn, _ in out.sent] == [4, 5, 4], "none again"
+    del out.sent[:]
+    effects.send(Moves(turn=6, sender="H01", moves=()))
+    effects.send(Moves(turn=6, sender="H01", moves=(Step(drone="D01", pos=(3, 0, 0)),)))
+    now[0] += 1.0
+    effects.repeat(7)  # (the host decides turn 7: turn 6 is over for the coordinator)
+    now[0] += 1.0
+    effects.repeat(None)
+    assert [turn for _, turn, _ in out.sent] == [6, 6], "not once a later turn is decided"
 
 
 def test_the_main_threads_cpu_clock_is_read_from_another_thread() -> None:
