@@ -440,10 +440,11 @@ class Search:
         """Once the goal is found: the drones' way to it (`plan`) made shorter, within `work` units (`expand`'s rule),
         while they walk it — LaCAM3's refinement done as a search that starts again (Okumura, AAMAS 2024: a solution
         is improved by planning again from parts of it, the better kept). A new search (`refiner`, its tie-breaks its
-        own) starts from the configuration of the plan halfway between the drones and the goal, with at most as many
-        PIBT calls as the plan has steps from there, less one: if it finds the goal in fewer steps than the plan, its
-        way replaces the plan's from there (the drones reach that configuration later than it is made: a refiner
-        makes a call a turn at least, and has as many turns as calls); whether or not, the next starts halfway again.
+        own) starts from the configuration of the plan `AHEAD` of the way from the drones to the goal (a third), with
+        at most as many PIBT calls as the plan has steps from there, less one: if it finds the goal in fewer steps
+        than the plan, its way replaces the plan's from there (the drones reach that configuration later than it is
+        made: a refiner makes a call a turn at least, and has as many turns as calls); whether or not, the next
+        starts as far ahead again.
         Each is a function of the plan alone: deterministic. `first`: a call at least (`expand`). The units spent."""
         if self.found is None:
             return 0
