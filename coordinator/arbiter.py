@@ -378,22 +378,6 @@ class Corridors:
                 break  # a junction: its other ways do not matter
         return out
 
-    def junction(self, v: int, back: int) -> bool:
-        """`len(self.ways(v, back, True)) >= 2`, without building the list (the swap check's common exit)."""
-        bits, now, goal = self._bits, self.now, self.goal
-        n = 0
-        for d in self.steps:
-            u = v + d
-            if u == back or not bits[u >> 3] >> (u & 7) & 1:
-                continue
-            k = now.get(u)
-            if k is not None and goal[k] == u and self._is_pocket(u):
-                continue
-            if n:
-                return True
-            n = 1
-        return False
-
     def required(self, i: int, j: int, vi: int, vj: int, clear: bool = False) -> bool:
         """Whether pushing j (at vj) on ahead of i (at vi, wanting vj) cannot let i pass: beyond vj is a corridor
         up to its end, or up to i's target, with no other drone in it, and j, pushed as far as i drives it,
@@ -454,7 +438,7 @@ def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int
       stepping back to the junction behind it (k is pulled into i's cell if it has not moved yet)."""
     v = mine[0]
     src = here[i]
-    if corridors is None or v < 0 or v == src or src not in mine or not corridors._bits[v >> 3] >> (v & 7) & 1:
+    if corridors is None or v < 0 or v == src or src not in mine or not corridors.open[v]:
         return mine, -1  # (an offered cell outside the world or in a building leads into no corridor)
     j = now.get(v)
     goal = corridors.goal
@@ -464,7 +448,7 @@ def _swapped(i: int, mine: list[int], here: list[int], cand: Rows, nxt: list[int
             wants = v in theirs and theirs.index(src) < theirs.index(v)  # j wants i's cell (or is on its target)
             if (wants or goal[j] == v) and corridors.required(i, j, src, v) and corridors.possible(v, src):
                 return _reverse(mine, src), j
-    if corridors.junction(v, src):
+    if len(corridors.ways(v, src, True)) >= 2:
         return mine, -1  # v is no corridor
     for d in corridors.steps:
         k = now.get(src + d)
