@@ -28,7 +28,10 @@ scenario:
    (`--attacker-session`), as a program started apart from the game would: Linux schedules each session as a
    group (autogroup), so it takes its share of the machine as any other program does (in the game's session it
    took its CPU from the game's share: `--attacker-session game`);
-5. clean again (the machine's speed drifts: the clean speed is the mean of the first and last clean games).
+5. `--floods busy` adds the control (f): the attacker connects as for (e) and sends nothing, a busy loop as long as
+   a CONNECT flood lasts here: what any program taking a core as an equal costs the game on this machine, the ratio
+   each flood's is to be read beside;
+6. clean again (the machine's speed drifts: the clean speed is the mean of the first and last clean games).
 `--floods nps,done` plays only those floods.
 
 For each: turns/s over the measured turns, and turns/s during the flood (over the turns it overlaps:
@@ -68,13 +71,19 @@ DRONES = 16
 #: (c), (d): 2,000,000 stale DONEs or TGTs: 200,000 went by in 0.1-1.3 s, a few dozen turns, so that their ratio
 #: measured this shared machine's pauses in that fraction of a second more than the flood; these outlast most games.
 FLOODS = {"nps": 200_000, "ask": 300, "done": 2_000_000, "tgt": 2_000_000, "connect": 20_000}
+#: The control (not in the default list, `--floods busy`): no message, a busy loop of this many milliseconds (about
+#: as long as a CONNECT flood lasts here): what any program that takes a core as an equal costs the game on this
+#: machine, to set each flood's ratio beside.
+CONTROL = {"busy": 5_000}
+QUICK_CONTROL = {"busy": 300}
 #: On the secured router, the principal each flood comes as: D01's keys and queries belong to the swarm host flying
 #: it; the ground station's keys (DONE, TGT) to the GCS (a buggy ground station: a second session of it).
-ATTACKERS = {"nps": "H01", "ask": "H01", "connect": "H01", "done": "GCS", "tgt": "GCS"}
+ATTACKERS = {"nps": "H01", "ask": "H01", "connect": "H01", "done": "GCS", "tgt": "GCS", "busy": "H01"}
 QUICK_FLOODS = {"nps": 2_000, "ask": 100, "done": 2_000, "tgt": 2_000, "connect": 500}  # --quick: small floods
 #: What each flood sends, for the table.
 FLOOD_NAMES = {"nps": "{:,} stale NPS", "ask": "{:,} ASKs of 32,768 cells", "done": "{:,} stale DONEs",
-               "tgt": "{:,} stale TGTs", "connect": "{:,} CONNECTs with invented sessions"}
+               "tgt": "{:,} stale TGTs", "connect": "{:,} CONNECTs with invented sessions",
+               "busy": "no message, a busy loop of {:,} ms (the control)"}
 #: The attacker's niceness: it stands for a client on a host of its own (an authenticated drone), so the game's
 #: processes go first on this machine's cores; the router, which takes the whole flood, runs as the game does.
 #: `--attacker-nice 0`: an attacker that shares the game's cores as an equal (on 2 cores it takes one of them).
@@ -86,7 +95,7 @@ ATTACKER_SESSIONS = ("own", "game")
 
 
 #: Each flood's letter in the table.
-LETTERS = dict(zip(FLOODS, "abcde"))
+LETTERS = dict(zip([*FLOODS, *CONTROL], "abcdef"))
 
 
 def quick_case() -> Case:
@@ -236,14 +245,15 @@ def rows_of(games: list[Played], case: Case) -> tuple[list[Row], list[str]]:
                     cells["during"] = f"{rate:.1f} ({turns}, {seconds:.2f}{', cut' if cut else ''})"
                     cells["ratio"] = f"{ratio:.2f}"
                     p.ratio = ratio
-                    cells["target"] = "met" if ratio >= TARGET else "MISSED"
+                    cells["target"] = ("control" if p.flood in CONTROL else
+                                       "met" if ratio >= TARGET else "MISSED")
         rows.append(Row(p.name, cells, ok=ok))
     return rows, errors
 
 
 def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     case = quick_case() if args.quick else Case(DRONES, SIZE, 10, args.turns)
-    counts = QUICK_FLOODS if args.quick else FLOODS
+    counts = {**QUICK_FLOODS, **QUICK_CONTROL} if args.quick else {**FLOODS, **CONTROL}
     logs = Path(tempfile.mkdtemp(prefix="dronesim-flood-"))
     facts: dict = {"logs": logs, "case": case, "counts": counts}
     busy0, t0 = busy_seconds(), time.perf_counter()
@@ -256,7 +266,7 @@ def run(args: argparse.Namespace) -> tuple[list[Row], dict]:
     facts["secured"] = secured is not None
     facts["nice"] = args.attacker_nice
     facts["session"] = args.attacker_session
-    floods = [f for f in FLOODS if f in args.floods]
+    floods = [f for f in [*FLOODS, *CONTROL] if f in args.floods]
     facts["games"] = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seven"}.get(len(floods) + 2,
                                                                                          str(len(floods) + 2))
     plan = [("clean", None), *((f"flood ({LETTERS[f]}): {FLOOD_NAMES[f].format(counts[f])}", f) for f in floods),
@@ -304,7 +314,8 @@ def legend(facts: dict) -> str:
            if facts["session"] == "own" else "; in the game's session: scheduled as one of the game's processes, it "
            "takes its CPU from the game's share") + ") floods as D01: (a) NPS for turn 1 on "
         "D01's own key, as fast as it can; (c), (d) stale DONEs on the ground station's key, stale TGTs on D01's, "
-        "as a second session of the GCS; (e) CONNECTs with invented sessions, all at once; (b) ASKs of 32,768 "
+        "as a second session of the GCS; (e) CONNECTs with invented sessions, all at once; (f), the control: "
+        "no message, a busy loop (what any program taking a core as an equal costs the game here); (b) ASKs of 32,768 "
         "cells to the environment, all at once, then waits "
         "for their replies (\"unanswered\": queries that finished with none, having reached the environment after "
         "the game's end, when it had left: only when the flood was cut). Turns/s (measured turns) = 1 ÷ the mean "
@@ -346,15 +357,16 @@ def main(argv: list[str] | None = None) -> int:
                              "game, scheduled as a group of its own, autogroup) or in the game's (scheduled as one "
                              "of the game's processes, taking the game's share)")
     parser.add_argument("--floods", default=",".join(FLOODS), type=lambda v: [f for f in v.split(",") if f],
-                        help=f"the floods to play, of {','.join(FLOODS)} (default: all)")
+                        help=f"the floods to play, of {','.join(FLOODS)} (default: all), and busy: the control, "
+                             "an equal process that sends nothing")
     parser.add_argument("--repeat", type=int, default=1, help="play the games this many times (default 1)")
     parser.add_argument("--keep-logs", action="store_true", help="keep the processes' logs (kept anyway on failure)")
     add_write_args(parser)
     args = parser.parse_args(argv)
     if args.turns < 2 or args.repeat < 1:
         parser.error("--turns must be >= 2 and --repeat >= 1")
-    if not args.floods or set(args.floods) - set(FLOODS):
-        parser.error(f"--floods takes some of {','.join(FLOODS)}")
+    if not args.floods or set(args.floods) - set(FLOODS) - set(CONTROL):
+        parser.error(f"--floods takes some of {','.join([*FLOODS, *CONTROL])}")
     rows, facts = run(args)
     table = render(rows, COLUMNS)
     print(table)
@@ -381,7 +393,7 @@ def main(argv: list[str] | None = None) -> int:
                + ("met." if ok and not missed else
                   "MISSED" + (f" ({', '.join(missed)})" if missed else "")
                   + ("; a game failed or its journal changed" if not ok else "") + "."))
-    ranges = "; ".join(f"flood ({LETTERS[flood]}) ÷ clean: {_span(values)}"
+    ranges = "; ".join(f"{'control' if flood in CONTROL else 'flood'} ({LETTERS[flood]}) ÷ clean: {_span(values)}"
                        for flood, values in facts["ratios"].items() if values)
     verdict += f" Over {args.repeat} run{'s' if args.repeat > 1 else ''}: {ranges}." if ranges else ""
     print(f"\n{load}\n{verdict}", file=sys.stderr)

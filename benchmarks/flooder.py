@@ -11,6 +11,8 @@
   TGT key, as fast as it can: what any peer may do on a plain router, or a buggy ground station under access control.
 * ``connect``: `count` CONNECT queries with invented sessions (naming D01, D02, ... in turn), all at once, waiting
   for every one to finish: what any peer allowed to connect may do (a drone under access control).
+* ``busy``: no message: a busy loop of `count` milliseconds, the control (what any program taking a core as an
+  equal costs the game on this machine, whatever it sends).
 * ``ask``: `count` ASKs of `Ask.MAX_CELLS` cells from D01 to the environment, all sent at once; it waits
   for every query to finish (answered, refused with an error reply, or with no reply: one that reached the
   environment after it left, the game over) up to `--timeout`.
@@ -120,7 +122,19 @@ def flood_connect(session: zenoh.Session, keys: Keys, count: int, timeout: float
     return flood_queries(session, keys.connect, hello, count, timeout)
 
 
-PUTS = {"nps": flood_nps, "done": flood_done, "tgt": flood_tgt}
+def busy(session: zenoh.Session, keys: Keys, count: int) -> dict:
+    """No message: `count` milliseconds of a busy loop (connected as the others are, so that only the sending
+    differs)."""
+    go()
+    first, cpu = time.monotonic(), time.process_time()
+    end = first + count / 1000
+    while time.monotonic() < end:
+        pass
+    return {"sent": 0, "answered": 0, "refused": 0, "unanswered": 0, "first": first, "last": time.monotonic(),
+            "cpu": time.process_time() - cpu}
+
+
+PUTS = {"nps": flood_nps, "done": flood_done, "tgt": flood_tgt, "busy": busy}
 QUERIES = {"ask": flood_ask, "connect": flood_connect}
 KINDS = (*PUTS, *QUERIES)
 
@@ -129,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.flooder", description=__doc__.split("\n")[0])
     p.add_argument("kind", choices=KINDS)
     add_zenoh_args(p)
-    p.add_argument("--count", type=int, required=True, help="messages (nps) or queries (ask) to send")
+    p.add_argument("--count", type=int, required=True, help="messages or queries to send; busy: milliseconds")
     p.add_argument("--timeout", type=float, default=120.0, help="seconds to wait for the ASKs' replies")
     args = p.parse_args(argv)
     with open_session(zenoh_config(args)) as session:
