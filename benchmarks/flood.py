@@ -70,7 +70,7 @@ SIZE = (64, 64, 16)
 DRONES = 16
 #: (c), (d): 2,000,000 stale DONEs or TGTs: 200,000 went by in 0.1-1.3 s, a few dozen turns, so that their ratio
 #: measured this shared machine's pauses in that fraction of a second more than the flood; these outlast most games.
-FLOODS = {"nps": 200_000, "ask": 300, "done": 2_000_000, "tgt": 2_000_000, "connect": 20_000}
+FLOODS = {"nps": 200_000, "ask": 300, "done": 2_000_000, "tgt": 2_000_000, "connect": 20_000, "map": 20_000}
 #: The control (not in the default list, `--floods busy`): no message, a busy loop of this many milliseconds (about
 #: as long as a CONNECT flood lasts here): what any program that takes a core as an equal costs the game on this
 #: machine, to set each flood's ratio beside.
@@ -78,12 +78,14 @@ CONTROL = {"busy": 5_000}
 QUICK_CONTROL = {"busy": 300}
 #: On the secured router, the principal each flood comes as: D01's keys and queries belong to the swarm host flying
 #: it; the ground station's keys (DONE, TGT) to the GCS (a buggy ground station: a second session of it).
-ATTACKERS = {"nps": "H01", "ask": "H01", "connect": "H01", "done": "GCS", "tgt": "GCS", "busy": "H01"}
-QUICK_FLOODS = {"nps": 2_000, "ask": 100, "done": 2_000, "tgt": 2_000, "connect": 500}  # --quick: small floods
+ATTACKERS = {"nps": "H01", "ask": "H01", "connect": "H01", "done": "GCS", "tgt": "GCS", "map": "H01",
+             "busy": "H01"}
+#: --quick: small floods
+QUICK_FLOODS = {"nps": 2_000, "ask": 100, "done": 2_000, "tgt": 2_000, "connect": 500, "map": 500}
 #: What each flood sends, for the table.
 FLOOD_NAMES = {"nps": "{:,} stale NPS", "ask": "{:,} ASKs of 32,768 cells", "done": "{:,} stale DONEs",
                "tgt": "{:,} stale TGTs", "connect": "{:,} CONNECTs with invented sessions",
-               "busy": "no message, a busy loop of {:,} ms (the control)"}
+               "map": "{:,} requests for the map", "busy": "no message, a busy loop of {:,} ms (the control)"}
 #: The attacker's niceness: it stands for a client on a host of its own (an authenticated drone), so the game's
 #: processes go first on this machine's cores; the router, which takes the whole flood, runs as the game does.
 #: `--attacker-nice 0`: an attacker that shares the game's cores as an equal (on 2 cores it takes one of them).
@@ -95,7 +97,7 @@ ATTACKER_SESSIONS = ("own", "game")
 
 
 #: Each flood's letter in the table.
-LETTERS = dict(zip([*FLOODS, *CONTROL], "abcdef"))
+LETTERS = dict(zip([*FLOODS, *CONTROL], "abcdefg"))
 
 
 def quick_case() -> Case:

@@ -11,6 +11,8 @@
   TGT key, as fast as it can: what any peer may do on a plain router, or a buggy ground station under access control.
 * ``connect``: `count` CONNECT queries with invented sessions (naming D01, D02, ... in turn), all at once, waiting
   for every one to finish: what any peer allowed to connect may do (a drone under access control).
+* ``map``: `count` requests for the environment's map (ENV/MAP) from D01, all at once, waiting for every one to
+  finish: what any peer allowed to ask the map may do (a drone or the ground station under access control).
 * ``busy``: no message: a busy loop of `count` milliseconds, the control (what any program taking a core as an
   equal costs the game on this machine, whatever it sends).
 * ``ask``: `count` ASKs of `Ask.MAX_CELLS` cells from D01 to the environment, all sent at once; it waits
@@ -38,7 +40,7 @@ from collections.abc import Callable
 import zenoh
 
 from network.transport import add_zenoh_args, open_session, zenoh_config
-from schema import Ask, Connect, Done, Keys, Nps, Phase, Role, Target, drone_id, encode
+from schema import Ask, Connect, Done, Keys, MapRequest, Nps, Phase, Role, Target, drone_id, encode
 
 SENDER = "D01"
 
@@ -134,8 +136,14 @@ def busy(session: zenoh.Session, keys: Keys, count: int) -> dict:
             "cpu": time.process_time() - cpu}
 
 
+def flood_map(session: zenoh.Session, keys: Keys, count: int, timeout: float) -> dict:
+    """Requests for the environment's whole map from D01 (a process asks once: the map is static)."""
+    request = encode(MapRequest(turn=0, sender=SENDER))
+    return flood_queries(session, keys.map, lambda _: request, count, timeout)
+
+
 PUTS = {"nps": flood_nps, "done": flood_done, "tgt": flood_tgt, "busy": busy}
-QUERIES = {"ask": flood_ask, "connect": flood_connect}
+QUERIES = {"ask": flood_ask, "connect": flood_connect, "map": flood_map}
 KINDS = (*PUTS, *QUERIES)
 
 

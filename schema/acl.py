@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from .errors import UsageError
 from .keys import KEY_TABLE, ROOT, Keys, KeySpec, size_limit
 from .messages import drone_id, drone_list, is_drone_id, is_host_id
-from .tuning import CONNECT_RATE, PUT_RATE, TGT_BUDGETED, TGT_RATE
+from .tuning import CONNECT_RATE, MAP_RATE, PUT_RATE, TGT_BUDGETED, TGT_RATE
 
 #: The roles of the key table (``KeySpec.writer`` / ``KeySpec.readers``).
 ROLES = ("SRV", "ENV", "GCS", "DRONE")
@@ -205,12 +205,16 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
     TGT keys one by one for the drones D01 to `TGT_BUDGETED` (a station may send a TGT for every drone at once: one
     budget for all would drop them; dronesim's stations send none, their DONE carries the targets). And
     the CONNECT queries beyond `CONNECT_RATE` a second from one session (a process asks one at a time,
-    `CONNECT_GAP` apart at least; a query dropped is ended at once, without a reply, and asked again)."""
+    `CONNECT_GAP` apart at least; a query dropped is ended at once, without a reply, and asked again), and the MAP
+    queries beyond `MAP_RATE` a second from one session (a process asks once). The ASK queries have no router budget:
+    a process sends a turn's ASKs together, which a budget of one query an interval would drop; the environment's
+    queue bounds each sender's (network/transport.py `FairQueue`)."""
     import zenoh
 
     sizes: dict[tuple[str, int], list[str]] = {}
     budgeted: list[tuple[str, float]] = []  # (key expression, puts a second)
     connect: list[str] = []
+    maps: list[str] = []
     granted = None if acl is None else sorted(  # every key expression `acl` lets some subject put on
         {k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
          and "ingress" in rule["flows"] for k in rule["key_exprs"]})
@@ -221,6 +225,8 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
         sizes.setdefault((spec.how, size_limit(spec.message)), []).extend(exprs)
         if spec.template == "SRV/CONNECT":
             connect += exprs
+        elif spec.template == "ENV/MAP":
+            maps += exprs
         if spec.how == "put" and spec.writer == "DRONE" or spec.template == "GCS/DONE":
             budgeted += [(k, PUT_RATE) for k in (exprs if granted is None else granted)
                          if any(_includes(x, k) for x in exprs)]
@@ -233,7 +239,8 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
     puts = {"id": "puts", "messages": ["put"], "flows": ["ingress"],
             "rules": [{"key_expr": expr, "freq": rate} for expr, rate in budgeted]}
     queries = {"id": "queries", "messages": ["query"], "flows": ["ingress"],
-               "rules": [{"key_expr": expr, "freq": CONNECT_RATE} for expr in connect]}
+               "rules": [*({"key_expr": expr, "freq": CONNECT_RATE} for expr in connect),
+                         *({"key_expr": expr, "freq": MAP_RATE} for expr in maps)]}
     return {"low_pass_filter": low_pass, "downsampling": [puts, queries]}
 
 

@@ -34,7 +34,8 @@ def test_quick_run_records_the_table_and_the_floods_change_no_journal(capsys, tm
     nps, ask = f"flood (a): {counts['nps']:,} stale NPS", f"flood (b): {counts['ask']} ASKs of 32,768 cells"
     done, tgt = f"flood (c): {counts['done']:,} stale DONEs", f"flood (d): {counts['tgt']:,} stale TGTs"
     connect = f"flood (e): {counts['connect']:,} CONNECTs with invented sessions"
-    assert list(rows) == ["clean", nps, ask, done, tgt, connect, "clean again"]
+    maps = f"flood (f): {counts['map']:,} requests for the map"
+    assert list(rows) == ["clean", nps, ask, done, tgt, connect, maps, "clean again"]
     for row in rows.values():
         assert row["same journal / states"] == "yes / yes", row
         assert row["exit codes"] == "0 / 0 / 0", row
@@ -72,3 +73,11 @@ def test_quick_run_records_the_table_and_the_floods_change_no_journal(capsys, tm
     assert sent == counts["connect"] and answered + refused + unanswered == sent and unanswered > 0, rows[connect]
     seen = re.match(r"\{([^}]*)\}", rows[connect]["rejected by the coordinator"])
     assert sum(int(n) for n in re.findall(r": (\d+)", seen.group(1) if seen else "")) < sent, rows[connect]
+    # requests for the map: the router ends most at once without a reply (its budget of MAP queries a session); the
+    # environment answers those it lets by (the map is no secret), refusing none
+    found = re.fullmatch(r"([\d,]+) / ([\d,]+) / ([\d,]+) \(\d+\.\d\d\)(?:, ([\d,]+) unanswered)?",
+                         rows[maps][attacker])
+    assert found, rows[maps]
+    sent, answered, refused, unanswered = (int((v or "0").replace(",", "")) for v in found.groups())
+    assert sent == counts["map"] and answered + refused + unanswered == sent, rows[maps]
+    assert 1 <= answered < sent and refused == 0 and rows[maps]["rejected by the environment"] == "-", rows[maps]

@@ -346,8 +346,8 @@ def test_queries_beyond_those_that_may_wait_are_refused_unread_whatever_sender_t
     origin and cost the coordinator's main thread a decode and an error reply each. With `most`, a query that finds
     that many queued or held by the main thread (`waiting`) is refused on Zenoh's thread, unread. (Through a router
     without its budget of CONNECTs a session, which would end 4 of the 5 this one session asks at once:
-    test_a_routers_budget_of_connects_a_session_ends_the_rest_at_once_without_a_reply; the coordinator's bound is
-    for CONNECTs from many sessions.)"""
+    test_a_routers_budget_of_connects_or_maps_a_session_ends_the_rest_at_once_without_a_reply; the coordinator's
+    bound is for CONNECTs from many sessions.)"""
     keys = Keys(unique_root())
     conf = router_config("tcp/127.0.0.1:0")
     conf.insert_json5("downsampling", json.dumps(flood_filters(["**"])["downsampling"][:1]))
@@ -424,25 +424,28 @@ def test_a_plain_routers_budget_of_tgts_is_a_drones_a_session_the_rest_never_rea
     assert f"**/{drone_name(TGT_BUDGETED + 1)}/TGT" not in plain and "**/*/TGT" not in plain
 
 
-def test_a_routers_budget_of_connects_a_session_ends_the_rest_at_once_without_a_reply() -> None:
-    """Issue 33, 6: a router keeps at most CONNECT_RATE CONNECTs a second from one session (`flood_filters`); the
-    rest never reach the coordinator, and each ends at once, without a reply (Zenoh's router ends a query its
-    interceptor drops), so a process asks again. Another session has a budget of its own."""
+@pytest.mark.parametrize("kind", ["connect", "map"])
+def test_a_routers_budget_of_connects_or_maps_a_session_ends_the_rest_at_once_without_a_reply(kind: str) -> None:
+    """Issue 33, 6: a router keeps at most CONNECT_RATE CONNECTs (MAP_RATE MAP queries) a second from one session
+    (`flood_filters`); the rest never reach the coordinator (the environment), and each ends at once, without a
+    reply (Zenoh's router ends a query its interceptor drops), so a process asks again. Another session has a
+    budget of its own."""
     keys = Keys(unique_root())
+    key = keys.connect if kind == "connect" else keys.map
     got: list[bytes] = []
     with embedded_router() as locator, zenoh.open(client_config(locator)) as srv, \
             zenoh.open(client_config(locator)) as asker, zenoh.open(client_config(locator)) as other:
-        queryable = srv.declare_queryable(keys.connect, _direct(
+        queryable = srv.declare_queryable(key, _direct(
             lambda q: (got.append(q.payload.to_bytes() if q.payload else b""), q.reply(q.key_expr, b"ok"), q.drop())))
-        querier = asker.declare_querier(keys.connect)
+        querier = asker.declare_querier(key)
         while not querier.matching_status.matching:
             threading.Event().wait(0.01)
         querier.undeclare()
-        sent = 200  # at once: closer together than 1 / CONNECT_RATE s, but for a pause of the whole machine
-        flood = [asker.get(keys.connect, payload=b"flood", timeout=30) for _ in range(sent)]
+        sent = 200  # at once: closer together than 1 / CONNECT_RATE (MAP_RATE) s, but for a pause of the whole machine
+        flood = [asker.get(key, payload=b"flood", timeout=30) for _ in range(sent)]
         answered = sum(1 for replies in flood if any(r.ok is not None for r in replies))
         assert 1 <= answered < sent and got.count(b"flood") == answered, (answered, got.count(b"flood"))
-        assert [r.ok.payload.to_bytes() for r in other.get(keys.connect, payload=b"other", timeout=30)] == [b"ok"]
+        assert [r.ok.payload.to_bytes() for r in other.get(key, payload=b"other", timeout=30)] == [b"ok"]
         queryable.undeclare()
 
 
