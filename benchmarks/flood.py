@@ -24,11 +24,12 @@ scenario:
 4. flood (c), (d): 2,000,000 stale DONEs on the ground station's key, 2,000,000 stale TGTs on D01's (what any peer
    may do on a plain router; under access control, a buggy ground station: the attacker is a second session of
    the GCS); flood (e): 20,000 CONNECT queries with invented sessions, naming D01, D02... in turn (any peer allowed
-   to connect: a drone under access control), all at once (issue 33). The attacker runs in a session of its own
+   to connect: a drone under access control), all at once (issue 33); flood (f): 20,000 requests for the
+   environment's map from D01, all at once (any peer allowed to ask for it). The attacker runs in a session of its own
    (`--attacker-session`), as a program started apart from the game would: Linux schedules each session as a
    group (autogroup), so it takes its share of the machine as any other program does (in the game's session it
    took its CPU from the game's share: `--attacker-session game`);
-5. `--floods busy` adds the control (f): the attacker connects as for (e) and sends nothing, a busy loop as long as
+5. `--floods busy` adds the control (g): the attacker connects as for (e) and sends nothing, a busy loop as long as
    a CONNECT flood lasts here: what any program taking a core as an equal costs the game on this machine, the ratio
    each flood's is to be read beside;
 6. clean again (the machine's speed drifts: the clean speed is the mean of the first and last clean games).
