@@ -6,6 +6,8 @@ bytes each)."""
 from __future__ import annotations
 
 import functools
+import itertools
+from array import array
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
@@ -55,7 +57,7 @@ class Fleet:
         self.index: dict[str, int] = {d: i for i, d in enumerate(self.ids)}
         n = len(self.ids)
         self.numbers = np.array([drone_number(d) for d in self.ids], np.uint16)
-        self.pos = np.array([c for _, c in pairs], np.int32).reshape(n, 3)
+        self._pos = np.array([c for _, c in pairs], np.int32).reshape(n, 3)  # (`pos`)
         self.state = np.empty(n, np.uint8)
         self.state.fill(ALIVE)
         self.target = np.empty((n, 3), np.int32)  # (np.full: three times the time of a small fleet's empty + fill)
@@ -66,10 +68,14 @@ class Fleet:
         self.misses = np.zeros(n, np.int32)
         self.missing = False  # whether some drone's misses are not 0 (`count_misses`)
         self.small = n <= SMALL_FLEET  # its columns are read whole (`column`, `whole`)
-        # a small fleet's states and cells also as memoryviews (flat): read and written item by item by Python
-        # without numpy's fixed cost per call, ~0.2-0.5 us (`whole`, `put`; docs/performance.md)
+        # a small fleet's states as a memoryview: read by Python without numpy's fixed cost per call (`whole`)
         self._states = self.state.data
-        self._cells = self.pos.reshape(-1).data  # (a view: the C-ordered rows, x y z each)
+        #: A small fleet's cells as (x, y, z) tuples, kept from turn to turn while no one reads the array: a turn of
+        #: a few drones reads and moves them in Python (`whole`, `move`) with no list rebuilt and no array item
+        #: written, and `pos` writes the array from them when it is read (docs/performance.md). None: the array
+        #: holds them (a large fleet's always; a small one's after `pos` was read, until `whole` reads it again).
+        self._cells: list[Cell] | None = None
+        self._flat = self._pos.reshape(-1).data  # (the array's items, a view: written from `_cells`)
         self.host: list[str | None] = [None] * n
         self.host_code = np.empty(n, np.int16)  # index of its host in `hosts`, -1: none
         self.host_code.fill(-1)
@@ -81,10 +87,22 @@ class Fleet:
     def __len__(self) -> int:
         return len(self.ids)
 
+    @property
+    def pos(self) -> np.ndarray:
+        """Each drone's cell, (n, 3) int32, in row order: the array itself (a caller may write it). A small fleet's
+        cells moved as tuples since it was last read are written to it first, and the array holds them from then on
+        (`_cells`)."""
+        cells = self._cells
+        if cells is not None:
+            self._cells = None
+            self._flat[:] = array("i", itertools.chain.from_iterable(cells))
+        return self._pos
+
     def restart(self, starts: np.ndarray | list[Cell]) -> None:
         """The same drones, flown as they are, at the start of a new game: at `starts` (a cell per row), alive,
         without target, note, cause or missed deadline (as a fleet just made; `Engine.restart`)."""
-        self.pos[:] = starts
+        self._cells = None
+        self._pos[:] = starts
         self.state.fill(ALIVE)
         self.target.fill(-1)
         for column in (self.note, self.done, self.cause, self.misses):
@@ -112,24 +130,29 @@ class Fleet:
             return [values[i] for i in rows]
         return column.take(rows, 0).tolist()
 
-    def whole(self) -> tuple[list[int], list[list[int]]] | None:
-        """A small fleet's state and cells as lists (None: a large one's, `column` reads a few rows of them)."""
-        return (self._states.tolist(), self.pos.tolist()) if self.small else None
+    def whole(self) -> tuple[list[int], list[Cell]] | None:
+        """A small fleet's states and cells (tuples) as lists, the cells' the fleet's own (do not change it: `move`
+        does); None: a large fleet's (`column` reads a few rows of them)."""
+        if not self.small:
+            return None
+        cells = self._cells
+        if cells is None:  # (the array holds them: read once, kept until someone reads the array)
+            cells = self._cells = list(map(tuple, self._pos.tolist()))  # type: ignore[arg-type]
+        return self._states.tolist(), cells
 
     def states(self) -> list[int]:
         """Each drone's state code, as a list (read through the memoryview: no numpy call)."""
         return self._states.tolist()
 
-    def put(self, i: int, cell: Cell) -> None:
-        """Drone row `i` is now at `cell` (one row: three items of its memoryview, where numpy's row assignment
-        converts the tuple first)."""
-        k = 3 * i
-        self._cells[k], self._cells[k + 1], self._cells[k + 2] = cell
-
     def move(self, rows: list[int], cells: Mapping[int, Cell]) -> None:
-        """Drone rows `rows` are now at their `cells` (`put`, row by row: a selection of rows costs as much as a
-        dozen rows' items)."""
-        items = self._cells
+        """Drone rows `rows` are now at their `cells` (a small fleet's, after `whole`: its list's items; else the
+        array's rows, one by one: a selection of rows costs as much as a dozen rows' items)."""
+        kept = self._cells
+        if kept is not None:
+            for i in rows:
+                kept[i] = cells[i]
+            return
+        items = self._flat
         for i in rows:
             k = 3 * i
             items[k], items[k + 1], items[k + 2] = cells[i]

@@ -67,8 +67,9 @@ class Judge:
         self._solid_items = self._solid.data  # the same read item by item (`_few`): a memoryview's item is a Python
         # bool in ~25 ns, a numpy array's ~300 ns
         self._every = list(range(len(fleet)))  # every row (`steps`: compared with a caller's rows in C)
+        self._alive: tuple[list[int], list[int]] = ([], [])  # the last states `steps` read and their alive rows
 
-    def steps(self, rows: list[int], cells: list[Cell], whole: tuple[list[int], list[list[int]]],
+    def steps(self, rows: list[int], cells: list[Cell], whole: tuple[list[int], list[Cell]],
               offsets: bool = False) -> Steps | None:
         """The moves `cells` ((x, y, z) tuples) of the `rows` of a few drones, if these are every alive drone in
         ascending order (a caller that moves or hovers each, as an RL episode does), read in one pass as the judge
@@ -81,8 +82,13 @@ class Judge:
         if states.count(ALIVE) == n:
             if len(rows) != n or rows != self._every:
                 return None
-        elif rows != [i for i, s in zip(self._every, states) if s == ALIVE]:
-            return None
+        else:  # (the alive rows of the states of the last turn that had the same: compared in C)
+            known, alive = self._alive
+            if states != known:
+                alive = [i for i, s in zip(self._every, states) if s == ALIVE]
+                self._alive = states, alive
+            if rows != alive:
+                return None
         (nx, ny, nz), solid = self.size, self._solid_items
         before: dict[int, Cell] = {}
         after: dict[int, Cell] = {}
@@ -92,11 +98,11 @@ class Judge:
             for i, step in zip(rows, cells):
                 if step not in STEPS:
                     raise UsageError("a move of more than one cell (6-connectivity)")
-                x, y, z = pos[i]
-                here = before[i] = (x, y, z)
+                here = before[i] = pos[i]
                 if step == _HOVER:
                     after[i] = here
                     continue
+                x, y, z = here
                 dx, dy, dz = step
                 a, b, c = after[i] = x + dx, y + dy, z + dz
                 moved.append(i)
@@ -104,11 +110,11 @@ class Judge:
                     risky = True
             return Steps(rows, before, after, moved, risky)
         for i, cell in zip(rows, cells):
-            x, y, z = pos[i]
+            x, y, z = here = pos[i]
             a, b, c = cell
             if (a - x, b - y, c - z) not in STEPS:
                 raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
-            here = before[i] = (x, y, z)
+            before[i] = here
             after[i] = cell
             if cell != here:
                 moved.append(i)
@@ -135,7 +141,7 @@ class Judge:
 
     def rule(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
              took: dict[int, tuple[Cell, int]] | None = None,
-             whole: tuple[list[int], list[list[int]]] | None = None) -> Moved:
+             whole: tuple[list[int], list[Cell]] | None = None) -> Moved:
         """The turn's moves take effect as the drones' phase closes (every turn, from messages or from `play`):
         the moves taken (the others hover), arbitrated, the observer's judgement, the notes, priorities, missed
         deadlines and the turn's journal record. The drones that moved: their rows, cells before and after.
@@ -172,11 +178,11 @@ class Judge:
         return self._few(alive, every, took, whole[1] if whole else None, turn, log, journaled, cells)
 
     def _few(self, alive: list[int], every: list[int], took: dict[int, tuple[Cell, int]],
-             whole: list[list[int]] | None, turn: int, log: TurnLog, journaled: bool, cells: bool) -> Moved:
+             whole: list[Cell] | None, turn: int, log: TurnLog, journaled: bool, cells: bool) -> Moved:
         """The turn over lists: `alive`, the alive rows (ascending); `every`, the rows in play (those and any whose
         move was taken); `took`, the moves taken; `whole`: every drone's cell (None: those of `every` read here)."""
         fleet = self.fleet
-        pos: list[list[int]] | dict[int, list[int]] = \
+        pos: list[Cell] | dict[int, list[int]] = \
             dict(zip(every, fleet.column(fleet.pos, every))) if whole is None else whole
         before: dict[int, Cell] = {}
         after: dict[int, Cell] = {}
