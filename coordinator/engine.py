@@ -106,8 +106,6 @@ class Engine:
         # was told and did (off without a journal); someone follows the ENV phase (else its TURN is not made).
         self.verify_env = self.journaled = self.env_followed = True
         self._here = False  # the game was started here (`start_here`): it may be restarted (`restart`)
-        #: The cells of the last `play`'s moves (its `move_rows`', in order): the cells its steps led to (`offsets`).
-        self.played: Cells = []
 
     def _begin(self) -> None:
         """The state of a game's course, as at its start (`__init__`, and `restart` for the next game)."""
@@ -462,7 +460,8 @@ class Engine:
         NPS's; None: none) of the rows `move_rows` (each once; the other alive drones hover), with no message
         built and no journal record. Rows, cells and codes as arrays, or as lists (ints, (x, y, z) tuples, ints:
         what a caller playing a few drones holds). `offsets`: the `moves` are each drone's step (dx, dy, dz), not
-        its cell (an RL episode's actions: the judge's pass over the moves makes them cells; `played` holds them).
+        its cell (an RL episode's actions: the judge's pass over the moves makes them cells; the fleet's cells,
+        `Fleet.cells`, are where they led).
         The turn's OVER if the game ended with it. UsageError, nothing changed, if the turn is not the GCS's (or a
         DONE or MOVES came ahead) or an input would be refused."""
         fleet = self.fleet
@@ -487,10 +486,7 @@ class Engine:
             # every alive drone's move, in one pass (most turns of an RL episode's): else each move taken
             steps = judge.steps(rows, cells, whole, offsets) if whole and not fleet.cooperating else None
             ok, took = True, {}
-            if steps is not None:
-                if offsets:
-                    cells = list(steps.after.values())  # (every alive row's, in row order)
-            else:
+            if steps is None:
                 state, pos = whole if whole else (fleet.column(fleet.state, rows), fleet.column(fleet.pos, rows))
                 if offsets:  # (the cells the steps lead to; a step that is not one is refused below)
                     at = pos if whole else dict(zip(rows, pos))
@@ -507,9 +503,6 @@ class Engine:
                   and step_lengths(fleet.pos[rows], cells).max() <= 1)
         if not ok:
             raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
-        # (lists for a caller that gave its steps as lists)
-        self.played = list(map(tuple, np.asarray(cells).tolist())) if offsets and isinstance(moves, list) and \
-            not few else cells
         if len(aim_rows):
             self.aiming.aimed[aim_rows], self.aiming.cells[aim_rows] = True, aims
             self._targets_set(Intent.CONTINUE)

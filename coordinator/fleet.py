@@ -131,14 +131,20 @@ class Fleet:
         return column.take(rows, 0).tolist()
 
     def whole(self) -> tuple[list[int], list[Cell]] | None:
-        """A small fleet's states and cells (tuples) as lists, the cells' the fleet's own (do not change it: `move`
-        does); None: a large fleet's (`column` reads a few rows of them)."""
-        if not self.small:
-            return None
+        """A small fleet's states and cells as lists (`cells`); None: a large fleet's (`column` reads a few rows of
+        them)."""
+        return (self._states.tolist(), self.cells()) if self.small else None
+
+    def cells(self) -> list[Cell]:
+        """Each drone's cell as an (x, y, z) tuple, in row order: a small fleet's own list, current until a turn
+        moves a drone (`move` changes its items) or `pos` is read (then a new one is made when next asked for): read
+        it, never change it."""
         cells = self._cells
         if cells is None:  # (the array holds them: read once, kept until someone reads the array)
-            cells = self._cells = list(map(tuple, self._pos.tolist()))  # type: ignore[arg-type]
-        return self._states.tolist(), cells
+            cells = list(map(tuple, self._pos.tolist()))  # type: ignore[arg-type]
+            if self.small:
+                self._cells = cells
+        return cells
 
     def states(self) -> list[int]:
         """Each drone's state code, as a list (read through the memoryview: no numpy call)."""

@@ -31,18 +31,19 @@ Cells = np.ndarray | list[Cell]
 Codes = np.ndarray | list[int]
 CAUSE_CODE = {c: code_of(c) for c in Cause}
 _HOVER = (0, 0, 0)  # the step of a drone that stays
+_NO_CELLS: set[Cell] = set()  # (`Judge.steps`: never changed)
 
 
 class Steps(NamedTuple):
     """Every alive drone's move in a turn of a few drones, read and checked in one pass (`Judge.steps`): the alive
     rows (ascending), their cells before and after, the rows that changed cell (ascending), and whether one of
-    these left the world or entered a building (the observer's rules must then run)."""
+    these left the world and the building cells they entered (`observer.deaths_of_moves`' `found`)."""
 
     rows: list[int]
     before: dict[int, Cell]
     after: dict[int, Cell]
     moved: list[int]
-    risky: bool
+    found: tuple[bool, set[Cell]]
 
 
 class Moved(NamedTuple):
@@ -93,7 +94,7 @@ class Judge:
         before: dict[int, Cell] = {}
         after: dict[int, Cell] = {}
         moved: list[int] = []
-        risky = False
+        outside, buildings = False, _NO_CELLS  # (a set of its own once a drone enters a building)
         if offsets:  # (a step other than hovering changes the drone's cell)
             for i, step in zip(rows, cells):
                 if step not in STEPS:
@@ -104,11 +105,13 @@ class Judge:
                     continue
                 x, y, z = here
                 dx, dy, dz = step
-                a, b, c = after[i] = x + dx, y + dy, z + dz
+                a, b, c = cell = after[i] = x + dx, y + dy, z + dz
                 moved.append(i)
-                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz) or solid[(a * ny + b) * nz + c]:
-                    risky = True
-            return Steps(rows, before, after, moved, risky)
+                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz):
+                    outside = True
+                elif solid[(a * ny + b) * nz + c]:
+                    buildings = {*buildings, cell}
+            return Steps(rows, before, after, moved, (outside, buildings))
         for i, cell in zip(rows, cells):
             x, y, z = here = pos[i]
             a, b, c = cell
@@ -118,9 +121,11 @@ class Judge:
             after[i] = cell
             if cell != here:
                 moved.append(i)
-                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz) or solid[(a * ny + b) * nz + c]:
-                    risky = True
-        return Steps(rows, before, after, moved, risky)
+                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz):
+                    outside = True
+                elif solid[(a * ny + b) * nz + c]:
+                    buildings = {*buildings, cell}
+        return Steps(rows, before, after, moved, (outside, buildings))
 
     def rule_steps(self, turn: int, log: TurnLog, journaled: bool, cells: bool, steps: Steps,
                    codes: list[int]) -> Moved:
@@ -136,7 +141,7 @@ class Judge:
                 says[i] = code
                 if code != notes[i]:
                     said.append(i)
-        return self._settle(rows, rows, steps.before, steps.after, steps.moved, steps.risky, said, says, rows, [],
+        return self._settle(rows, rows, steps.before, steps.after, steps.moved, steps.found, said, says, rows, [],
                             turn, log, journaled, cells)
 
     def rule(self, turn: int, log: TurnLog, journaled: bool, cells: bool,
@@ -214,17 +219,18 @@ class Judge:
                             journaled, cells)
 
     def _settle(self, alive: list[int], every: list[int], before: dict[int, Cell], after: dict[int, Cell],
-                moved: list[int], risky: bool | None, said: list[int], says: list[int] | dict[int, int],
-                taken: list[int], hovered: list[int], turn: int, log: TurnLog, journaled: bool, cells: bool) -> Moved:
+                moved: list[int], found: tuple[bool, set[Cell]] | None, said: list[int],
+                says: list[int] | dict[int, int], taken: list[int], hovered: list[int], turn: int, log: TurnLog,
+                journaled: bool, cells: bool) -> Moved:
         """A few drones' turn made (`_few`, `rule_steps`): `alive`, `every`, `before`, `after` as in `_few`;
-        `moved`, the rows that changed cell; `risky`: whether one of them left the world or entered a building
-        (None: not known); `said`, the rows whose note changed, to `says[i]`; `taken`, the rows whose move was
-        taken; `hovered`, the alive rows whose move was not."""
+        `moved`, the rows that changed cell; `found`: whether one of them left the world and the building cells they
+        entered (None: not known); `said`, the rows whose note changed, to `says[i]`; `taken`, the rows whose move
+        was taken; `hovered`, the alive rows whose move was not."""
         fleet = self.fleet
         if not moved:  # where the drones were, alive and apart, they still are
             dead: dict[int, Cause] = {}
         elif every is alive:
-            dead = observer.deaths_of_moves(self.size, self._solid_items, before, after, moved, risky)
+            dead = observer.deaths_of_moves(self.size, self._solid_items, before, after, moved, found)
         else:
             live = set(alive)
             dead = observer.deaths_of_moves(self.size, self._solid_items, {i: before[i] for i in alive},

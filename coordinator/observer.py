@@ -68,21 +68,22 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
 
 
 def deaths_of_moves(size: Cell, solid: np.ndarray | memoryview, before: Mapping[K, Cell], after: Mapping[K, Cell],
-                    moved: Sequence[K], risky: bool | None = None) -> dict[K, Cause]:
+                    moved: Sequence[K], found: tuple[bool, set[Cell]] | None = None) -> dict[K, Cause]:
     """`deaths`, for drones of which `moved` changed cell (`solid`: the world's buildings, flat in C order), with
     the rules run only if someone may die: one left the world or entered a building, or two ended in one cell or
-    swapped cells (most turns, nobody). `risky`: whether one of `moved` left the world or entered a building, if
-    the caller knows it (None: found here)."""
-    if risky is False and (len(after) < 2 or not _meet(before, after, moved)):
-        return {}
-    nx, ny, nz = size
-    buildings, outside = set(), False
-    for d in moved:
-        x, y, z = cell = after[d]
-        if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
-            outside = True
-        elif solid[(x * ny + y) * nz + z]:
-            buildings.add(cell)
+    swapped cells (most turns, nobody). `found`: whether one of `moved` left the world and the building cells they
+    entered, if the caller knows them (None: found here)."""
+    if found is None:
+        nx, ny, nz = size
+        outside, buildings = False, set()
+        for d in moved:
+            x, y, z = cell = after[d]
+            if not (0 <= x < nx and 0 <= y < ny and 0 <= z < nz):
+                outside = True
+            elif solid[(x * ny + y) * nz + z]:
+                buildings.add(cell)
+    else:
+        outside, buildings = found
     if outside or buildings or len(after) > 1 and _meet(before, after, moved):
         return deaths(size, before, after, buildings)
     return {}

@@ -51,7 +51,7 @@ class FewEpisode(EpisodeBase):
             raise ValueError(f"a FewEpisode plays up to {FEW_MAX} drones, not {n}")
         super().__init__(config, layout, max_cycles, eyes)
         self.engine = turns.few(layout, max_cycles)  # (its rows: ours, D01 ... D99; the last episode's, restarted)
-        self._pos: list[Cell] = list(map(tuple, layout.starts.tolist()))
+        self._pos: list[Cell] = self.engine.fleet.cells()  # (the engine's fleet's: `act`)
         self._targets: list[Cell] = list(map(tuple, layout.targets.tolist()))
         self._state = [ALIVE] * n
         self._cause = [0] * n
@@ -116,7 +116,7 @@ class FewEpisode(EpisodeBase):
                 raise done_agents(done)
         values = checked_actions(rows, values, self._actions)
         t = self.cycle + 1
-        pos, state, say, shown, alive = self._pos, self._state, self._say, self._shown, self._alive
+        state, say, shown, alive = self._state, self._say, self._shown, self._alive
         # the turn, the engine's: every alive drone moves (the acting ones as told, hover by default; the parked
         # ones hover), saying whether its target is reachable
         if rows != alive:  # (most steps: every alive drone told, in row order)
@@ -127,16 +127,11 @@ class FewEpisode(EpisodeBase):
         # (the actions' steps: the judge's pass over them makes them cells, `Engine.played`)
         over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, list(map(_STEP, values)),
                                 notes, offsets=True)
-        moves = self.engine.played
         self._aim = []
-        # what the turn did: each alive drone is where it moved (a game without cooperative drones takes every
-        # move as given: `Engine.play`), and those the engine's fleet says are no longer alive died there
-        if len(alive) == self.n:  # (every drone: its cells are the moves)
-            self._pos = pos = moves  # type: ignore[assignment]  # (a list: the few drones' turn)
-        else:
-            for i, cell in zip(alive, moves):
-                pos[i] = cell
+        # what the turn did: each drone is where the engine's fleet says (its own list of cells, read, never
+        # changed here), and those it says are no longer alive died there
         fleet = self.engine.fleet  # (its rows are ours)
+        self._pos = pos = fleet.cells()
         states = fleet.states()
         dead: set[int] | tuple[()] = ()  # (a set once one died: most steps none)
         if states.count(ALIVE) < len(alive):
