@@ -68,8 +68,8 @@ class Fleet:
         self.misses = np.zeros(n, np.int32)
         self.missing = False  # whether some drone's misses are not 0 (`count_misses`)
         self.small = n <= SMALL_FLEET  # its columns are read whole (`column`, `whole`)
-        # a small fleet's states as a memoryview: read by Python without numpy's fixed cost per call (`whole`)
-        self._states = self.state.data
+        # the states and notes as memoryviews: read as lists without numpy's fixed cost per call (`whole`, `codes`)
+        self._states, self._notes = self.state.data, self.note.data
         #: A small fleet's cells as (x, y, z) tuples, kept from turn to turn while no one reads the array: a turn of
         #: a few drones reads and moves them in Python (`whole`, `move`) with no list rebuilt and no array item
         #: written, and `pos` writes the array from them when it is read (docs/performance.md). None: the array
@@ -149,6 +149,10 @@ class Fleet:
     def states(self) -> list[int]:
         """Each drone's state code, as a list (read through the memoryview: no numpy call)."""
         return self._states.tolist()
+
+    def codes(self) -> list[int]:
+        """Each drone's Note code, as a list (read through the memoryview: no numpy call)."""
+        return self._notes.tolist()
 
     def move(self, rows: list[int], cells: Mapping[int, Cell]) -> None:
         """Drone rows `rows` are now at their `cells` (a small fleet's, after `whole`: its list's items; else the

@@ -8,6 +8,7 @@ ballot (coordinator/intake.py), or given whole by `Engine.play`."""
 from __future__ import annotations
 
 import logging
+from operator import itemgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -96,9 +97,9 @@ class Judge:
         moved: list[int] = []
         outside, buildings = False, _NO_CELLS  # (a set of its own once a drone enters a building)
         if offsets:  # (a step other than hovering changes the drone's cell)
+            if not STEPS.issuperset(cells):  # (each step looked up in C)
+                raise UsageError("a move of more than one cell (6-connectivity)")
             for i, step in zip(rows, cells):
-                if step not in STEPS:
-                    raise UsageError("a move of more than one cell (6-connectivity)")
                 here = before[i] = pos[i]
                 if step == _HOVER:
                     after[i] = here
@@ -131,10 +132,12 @@ class Judge:
                    codes: list[int]) -> Moved:
         """`rule` of the moves `steps` (`steps`), said with the Note `codes` (one per row of `steps`)."""
         fleet, rows = self.fleet, steps.rows
-        notes = fleet.note.tolist()
+        notes = fleet.codes()
         if rows is self._every or len(rows) == len(notes):  # (every row: compared in C, most turns equal)
             said = [] if codes == notes else [i for i, code, was in zip(rows, codes, notes) if code != was]
             says = codes
+        elif len(rows) > 1 and itemgetter(*rows)(notes) == tuple(codes):  # (the rows' notes picked in C: most turns
+            said, says = [], codes  # the same as said)
         else:
             said, says = [], [0] * len(notes)
             for i, code in zip(rows, codes):
@@ -206,7 +209,7 @@ class Judge:
                                             np.where(self.ballot.moved[rows], self.ballot.ranked[rows], 0), turn, log)
             after.update(zip(alive, map(tuple, final.tolist())))
             moved = [i for i in every if after[i] != before[i]]
-        notes = fleet.note.tolist() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
+        notes = fleet.codes() if fleet.small else dict(zip(took, fleet.column(fleet.note, [*took])))
         said = []  # (in any order: the journal's is its own)
         says = {}
         for i, (_, code) in took.items():

@@ -124,7 +124,7 @@ class FewEpisode(EpisodeBase):
             values = [action.get(i, 0) for i in alive]
         notes = say if len(alive) == self.n else [say[i] for i in alive]  # (the engine reads them, keeps none)
         aim, targets = self._aim, self._targets
-        # (the actions' steps: the judge's pass over them makes them cells, `Engine.played`)
+        # (the actions' steps: the judge's pass over them makes them cells, `Engine.play`'s offsets)
         over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, list(map(_STEP, values)),
                                 notes, offsets=True)
         self._aim = []
