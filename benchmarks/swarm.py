@@ -198,13 +198,42 @@ def city_instance(size: Cell, agents: int, seed: int) -> Instance:
                     bridges(~grid))
 
 
-def play(inst: Instance, variant: str) -> Outcome:
+class Traced(lacam.Lacam):
+    """The complete arbitration that keeps a line each time its course changes (`--trace`): which search runs (the
+    whole world's, a focused one: its radius and drones, none: PIBT's turn), whether it found the goal, its nodes,
+    the plan's steps left and refiners, drones home, turns without a new high and the patience."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lines: list[str] = []
+        self._last: tuple[object, ...] = ()
+        self._turn = 0
+
+    def follow(self, size: Cell, before: np.ndarray, cooperative: np.ndarray, targets: np.ndarray,
+               open_: arbiter.OpenCells | None, salt: int | None = None) -> np.ndarray | None:
+        out = super().follow(size, before, cooperative, targets, open_, salt)
+        s, st = self._search, self.state()
+        kind = "PIBT" if out is None else "whole" if s is None or s.focus is None else \
+            f"focus radius {s.focus[3]} drones {len(s.focus[0])}"
+        course = (kind, st["found"], id(s), st["full"], st["unsolvable"])
+        if course != self._last or self._turn % 20 == 0:
+            left = 0 if s is None or s.plan is None else len(s.plan) - 1 - s.t
+            self.lines.append(f"turn {self._turn}: {kind}, found {st['found']}, nodes {st['nodes']}, plan left {left}, "
+                              f"refiners {st['refined']}, full {st['full']}, home {max(0, self._best)}, "
+                              f"since {self._since}, patience {self._patience}")
+            self._last = course
+        self._turn += 1
+        return out
+
+
+def play(inst: Instance, variant: str, trace: bool = False) -> Outcome:
     world = World.from_grid(inst.grid)
     ids = [f"D{k + 1:02d}" for k in range(len(inst.starts))]
     config = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=inst.max_turns,
                         drones=tuple(DroneSpec(drone=d, start=s) for d, s in zip(ids, inst.starts)))
     plan = Plan(tuple(sorted((1, d, g) for d, g in zip(ids, inst.goals))))
-    timed = arbiter.Timed(arbiter.fixed if variant == "fixed" else lacam.Lacam() if variant == "lacam" else
+    complete = Traced() if trace else lacam.Lacam()
+    timed = arbiter.Timed(arbiter.fixed if variant == "fixed" else complete if variant == "lacam" else
                           arbiter.cooperate)
     # the former D* never said it was stuck behind drones: it waited to the turn limit
     options = {"pibt": None, "lacam": None, "pibt+map": {"dstar": {"known": inst.grid}},
@@ -213,6 +242,8 @@ def play(inst: Instance, variant: str) -> Outcome:
     result = simulate(config, dict.fromkeys(ids, "dstar"), Inputs(plan=plan), LOG, verify_env=False,
                       arbiter=timed, pilot_options=options)
     seconds = time.perf_counter() - t0
+    if isinstance(complete, Traced) and variant == "lacam":
+        print("\n".join(f"    {inst.name} {len(ids)}: {line}" for line in complete.lines), file=sys.stderr)
     costs, turns, collisions, at_256, last_move = _costs(result.records, ids, dict(zip(ids, inst.starts)),
                                                         dict(zip(ids, inst.goals)))
     arrived = sum(c is not None for c in costs)
@@ -570,7 +601,8 @@ ANCHOR_LEGEND = (
 
 
 def anchor_compare(families: list[str], agents: tuple[int, ...], seeds: int, seconds: float,
-                   variants: tuple[str, ...] = ("lacam", "pibt")) -> tuple[str, str]:
+                   variants: tuple[str, ...] = ("lacam", "pibt"), only: tuple[int, ...] = (),
+                   trace: bool = False) -> tuple[str, str]:
     """Each instance played by our drones with each of `variants` and solved by the anchor (benchmarks/anchor.py,
     pymapf's LaCAM, in its own environment): a table, one row an instance, and the summary lines."""
     head = ["instance", "agents", "seed", "SoC LB", "makespan LB"]
@@ -581,9 +613,9 @@ def anchor_compare(families: list[str], agents: tuple[int, ...], seeds: int, sec
     done: list[tuple[dict[str, Outcome], anchor.Result | None]] = []
     for family in families:
         for n in agents:
-            for seed in range(1, seeds + 1):
+            for seed in only or range(1, seeds + 1):
                 inst = movingai_instance(family, n, seed)
-                ours = {v: play(inst, v) for v in variants}
+                ours = {v: play(inst, v, trace) for v in variants}
                 g = inst.grid[:, :, 0]
                 rows = [[int(g[x, y]) for x in range(g.shape[0])] for y in range(g.shape[1])]
                 theirs: anchor.Result | None = None
@@ -697,6 +729,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lrta-alone", action="store_true",
                         help="only the distributed city's 10,000 trips flown by LRTA* drones each alone, for cube "
                              "radii 0-2 (the pilot's own quality, docs/cooperation.md)")
+    parser.add_argument("--seed", type=int, action="append", default=[],
+                        help="with --anchor: only this seed (repeatable), e.g. one failing instance alone")
+    parser.add_argument("--trace", action="store_true",
+                        help="with --anchor: print the complete arbitration's course (which search runs when, "
+                             "found, nodes, the plan left, refiners, home, patience) on stderr, a line a change")
     add_write_args(parser)
     args = parser.parse_args(argv)
     agents = (10, 20) if args.quick else tuple(int(a) for a in args.agents.split(","))
@@ -732,7 +769,8 @@ def main(argv: list[str] | None = None) -> int:
         chosen = agents if "--agents" in (argv or sys.argv) else (10,) if args.quick else ANCHOR_AGENTS
         seeds = args.seeds if "--seeds" in (argv or sys.argv) else 1 if args.quick else ANCHOR_SEEDS
         played = tuple(variants) if "--variants" in (argv or sys.argv) else ("lacam", "pibt")
-        body_table, lines = anchor_compare(families, chosen, seeds, args.anchor_seconds, played)
+        body_table, lines = anchor_compare(families, chosen, seeds, args.anchor_seconds, played, tuple(args.seed),
+                                           args.trace)
         print()
         print(body_table)
         print()

@@ -114,3 +114,15 @@ def test_quick_anchor_comparison_writes_its_subsection(tmp_path: pathlib.Path) -
         print("the anchor (pymapf) could not be installed here: its columns are dashes")
     else:
         assert rows[0][14] == "true", rows
+
+
+def test_anchor_trace_of_one_seed(capsys) -> None:
+    """`--anchor --seed N --trace`: one instance alone, with the complete arbitration's course on stderr (which
+    search runs from which turn, found or not), to see why an instance's drones are not home by the limit."""
+    assert cli(["swarm", "--anchor", "--families", "room-32-32-4", "--agents", "20", "--seed", "2",
+                "--variants", "lacam", "--anchor-seconds", "0", "--trace"]) == 0
+    captured = capsys.readouterr()
+    rows = [line for line in captured.out.splitlines() if line.startswith("| room-32-32-4 |")]
+    assert len(rows) == 1 and rows[0].split(" | ")[2] == "2", rows  # that seed alone
+    course = [line for line in captured.err.splitlines() if "room-32-32-4 20: turn " in line]
+    assert course and course[0].split(": ", 1)[1].startswith("turn 0: whole, found "), course
