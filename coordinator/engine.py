@@ -332,7 +332,8 @@ class Engine:
 
     def _open_gcs(self, turn: int) -> Done | None:
         """The GCS phase of `turn` begins: nothing received yet; the DONE sent ahead for it, if any."""
-        self._enter(_GCS)
+        if self.stage is not _GCS:  # (from the GCS phase itself: a turn of `play`'s)
+            self._enter(_GCS)
         self.turn = turn  # (no target received yet: `_targets_set` and `_gcs_finish` cleared them)
         self._tgt_seen, self._done = 0, None
         self._turn_log = TurnLog(turn)
@@ -468,9 +469,9 @@ class Engine:
         if self.stage is not _GCS or self._done is not None or self.ahead.dones or self.ahead.moves:
             raise UsageError(f"a turn from arrays is played from the GCS phase, not from {self.stage.value} "
                              f"of turn {self.turn}")
-        few, judge, steps = len(move_rows) <= TURN_FEW_DRONES, self.judge, None
+        few, judge, steps, aiming = len(move_rows) <= TURN_FEW_DRONES, self.judge, None, len(aim_rows)
         whole = fleet.whole() if few else None  # (the columns as lists, read once for the turn: a small fleet's)
-        if len(aim_rows) and not (
+        if aiming and not (
                 all(whole[0][i] == ALIVE and in_bounds(c, self.size) for i, c in zip(aim_rows, aims))
                 if whole is not None and isinstance(aims, list) else
                 np.count_nonzero(fleet.state[aim_rows] != ALIVE) == 0
@@ -485,8 +486,9 @@ class Engine:
             codes = notes if isinstance(notes, list) else notes.tolist()
             # every alive drone's move, in one pass (most turns of an RL episode's): else each move taken
             steps = judge.steps(rows, cells, whole, offsets) if whole and not fleet.cooperating else None
-            ok, took = True, {}
+            ok = True
             if steps is None:
+                took = {}
                 state, pos = whole if whole else (fleet.column(fleet.state, rows), fleet.column(fleet.pos, rows))
                 if offsets:  # (the cells the steps lead to; a step that is not one is refused below)
                     at = pos if whole else dict(zip(rows, pos))
@@ -503,7 +505,7 @@ class Engine:
                   and step_lengths(fleet.pos[rows], cells).max() <= 1)
         if not ok:
             raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
-        if len(aim_rows):
+        if aiming:
             self.aiming.aimed[aim_rows], self.aiming.cells[aim_rows] = True, aims
             self._targets_set(Intent.CONTINUE)
         elif self.intent is not _CONTINUE:  # (else the phase changes nothing: no target, the same intent)
@@ -520,9 +522,10 @@ class Engine:
             ballot.proposed[rows], ballot.said[rows], ballot.moved[rows] = cells, codes, True
             ballot.ranked[rows] = 0 if ranked is None else ranked
             turn = judge.rule(self.turn, self._turn_log, self.journaled, cells_wanted)
-        if self.config.lifelong:
+        config = self.config
+        if config.lifelong:
             self.tasks += fleet.tasks_done()
-        if end := end_reason(fleet, self.arbitration.arbiter, self.final, self.turn, self.config.max_turns, turn.alive):
+        if end := end_reason(fleet, self.arbitration.arbiter, self.final, self.turn, config.max_turns, turn.alive):
             self._over(*end)
             return self.end
         self._open_gcs(self.turn + 1)

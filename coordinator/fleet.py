@@ -133,7 +133,10 @@ class Fleet:
     def whole(self) -> tuple[list[int], list[Cell]] | None:
         """A small fleet's states and cells as lists (`cells`); None: a large fleet's (`column` reads a few rows of
         them)."""
-        return (self._states.tolist(), self.cells()) if self.small else None
+        if not self.small:
+            return None
+        cells = self._cells  # (kept from the last turn, most turns: `cells`, without its call)
+        return self._states.tolist(), self.cells() if cells is None else cells
 
     def cells(self) -> list[Cell]:
         """Each drone's cell as an (x, y, z) tuple, in row order: a small fleet's own list, current until a turn

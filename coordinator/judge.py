@@ -33,6 +33,7 @@ Codes = np.ndarray | list[int]
 CAUSE_CODE = {c: code_of(c) for c in Cause}
 _HOVER = (0, 0, 0)  # the step of a drone that stays
 _NO_CELLS: set[Cell] = set()  # (`Judge.steps`: never changed)
+_tuple_new = tuple.__new__  # (a NamedTuple made by its class's `__new__` without its call: a Python frame less a turn)
 
 
 class Steps(NamedTuple):
@@ -112,7 +113,7 @@ class Judge:
                     outside = True
                 elif solid[(a * ny + b) * nz + c]:
                     buildings = {*buildings, cell}
-            return Steps(rows, before, after, moved, (outside, buildings))
+            return _tuple_new(Steps, (rows, before, after, moved, (outside, buildings)))
         for i, cell in zip(rows, cells):
             x, y, z = here = pos[i]
             a, b, c = cell
@@ -126,7 +127,7 @@ class Judge:
                     outside = True
                 elif solid[(a * ny + b) * nz + c]:
                     buildings = {*buildings, cell}
-        return Steps(rows, before, after, moved, (outside, buildings))
+        return _tuple_new(Steps, (rows, before, after, moved, (outside, buildings)))
 
     def rule_steps(self, turn: int, log: TurnLog, journaled: bool, cells: bool, steps: Steps,
                    codes: list[int]) -> Moved:
@@ -252,8 +253,8 @@ class Judge:
             self._journal_few(log, moved, after, said, says, hovered, dead)
         left = len(alive) - len(dead) - lost
         if not cells:  # (nobody reads the moves' cells: `Engine._drones_finish`)
-            return Moved(moved, [], [], left)
-        return Moved(moved, [before[i] for i in moved], [after[i] for i in moved], left)
+            return _tuple_new(Moved, (moved, [], [], left))
+        return _tuple_new(Moved, (moved, [before[i] for i in moved], [after[i] for i in moved], left))
 
     def _journal_few(self, log: TurnLog, moved: list[int], after: dict[int, Cell], said: list[int],
                      says: list[int] | dict[int, int], hovered: list[int], dead: dict[int, Cause]) -> None:

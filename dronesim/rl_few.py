@@ -38,6 +38,7 @@ from schema.tables import code_of
 FEW_MAX = 99
 _REACHED = code_of(Note.REACHED)
 _STEP = ACTIONS.__getitem__  # an action's step (dx, dy, dz)
+_tuple_new = tuple.__new__  # (a step's Outcome made without its class's `__new__`'s call: a Python frame less)
 
 
 class FewEpisode(EpisodeBase):
@@ -187,4 +188,4 @@ class FewEpisode(EpisodeBase):
             self.left -= stops
         seen = self.eyes.see_few(pos, targets, pos) if len(rows_out) == len(self._alive) == self.n else \
             self.observe(rows_out)  # (every drone acting and alive: `observe`'s lists themselves, without its call)
-        return Outcome(rows_out, seen, rewards, terminated, truncated, self.infos(rows_out))
+        return _tuple_new(Outcome, (rows_out, seen, rewards, terminated, truncated, self.infos(rows_out)))
