@@ -21,15 +21,19 @@ class TurnClock:
     whatever its turn. (A forged message for the right turn is spoofing: the router's access control stops it.)
     With `skips_status` (the environment, which reads only the newest STATUS, when it needs one), a STATUS of any
     later turn is current too. Given the time (`now`, seconds), nothing is current that is further ahead than a game
-    can have gone since the clock last moved (`TURNS_PER_S_MAX`): one absurd message cannot wedge it."""
+    can have gone (`TURNS_PER_S_MAX`) since the clock's anchor: the coordinator was at turn `known` at most when
+    the entity asked to join (`now` at construction: when its CONNECT left, which the WELCOME naming `known`
+    answered). One absurd message cannot wedge it. (The anchor stays: when a message is read says nothing of when
+    it was sent -- a busy or descheduled process reads a burst of turns at once -- so a clock that moved its anchor
+    to each message's reading refused genuine turns.)"""
 
     def __init__(self, turn: int | None = None, *, game: str = "", skips_status: bool = False,
                  now: float | None = None, known: int = 0) -> None:
         self.turn: int | None = turn or None  # the turn being played (after STATUS(t): t + 1, the next)
         self.game, self.skips_status = game, skips_status
         self._seen: dict[tuple[str, object, int], Message] = {}
-        # (the turn the clock last moved to -- at first, `known`: the WELCOME's --, and when), for `now`'s bound
-        self._moved = (max(turn or 0, known), now)
+        # (a turn the coordinator was at most at a time: the WELCOME's, when the CONNECT left), for `now`'s bound
+        self._anchor = (max(turn or 0, known), now)
 
     def admit(self, msg: Turn | Status | Over, now: float | None = None) -> None:
         """Check `msg` against the clock (StaleTurn if it cannot be current) and advance the clock."""
@@ -37,14 +41,11 @@ class TurnClock:
             raise StaleTurn(f"a {msg.TAG} of game {msg.game or '(none)'}, not this one ({self.game or '(none)'})",
                             reason="foreign-game")
         turn = msg.turn + 1 if isinstance(msg, Status) else msg.turn
-        known, since = self._moved
+        known, since = self._anchor
         if now is not None and since is not None and turn > known + 1 + TURNS_PER_S_MAX * max(0.0, now - since):
             raise StaleTurn(f"{msg.TAG} for turn {msg.turn}: no game gets there from turn {known} in "
                             f"{max(0.0, now - since):.1f} s", reason="future-turn")
-        before = self.turn
         self._advance(msg, turn)
-        if self.turn != before or since is None:
-            self._moved = (self.turn or 0, now)
 
     def _advance(self, msg: Turn | Status | Over, now: int) -> None:
         if self.turn is not None:  # (STATUS(t) makes t + 1 "now"; the end may come at any turn)

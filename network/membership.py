@@ -63,6 +63,7 @@ class Membership:
         # genuine answer never comes ahead of its sender's token)
         self._coordinators: set[str] = set()
         self._lost_since: float | None = None
+        self._asked_at = time.monotonic()  # when the last CONNECT left: its WELCOME's turn anchors the turn clock
         self.progress = Progress.from_environment()  # for a health check (docker/healthcheck.py)
         self.progress.note("connecting", 0, "the coordinator")
         inbox.watch_presence("SRV")
@@ -84,7 +85,7 @@ class Membership:
         self.welcome: Welcome = welcome
         self.progress.note("admitted", welcome.turn)
         # the coordinator's messages pass through its clock (`screen`)
-        self.clock: TurnClock = TurnClock(game=welcome.game, skips_status=skips_status, now=time.monotonic(),
+        self.clock: TurnClock = TurnClock(game=welcome.game, skips_status=skips_status, now=self._asked_at,
                                           known=welcome.turn)
 
     def _from_coordinator(self, replier: str) -> bool:  # (on Zenoh's thread)
@@ -114,6 +115,7 @@ class Membership:
     def _ask(self) -> None:
         if self._closed:
             return
+        self._asked_at = time.monotonic()
         ask_later(self.session, self.keys.connect, self.hello, (Welcome, Refused), self.connect_timeout,
                   lambda reply, coordinator, error: self.inbox.post(Answered(reply, coordinator, error)),
                   accept=self._from_coordinator)
@@ -162,7 +164,7 @@ class Membership:
                 self.welcome = welcome
                 self.progress.note("admitted", welcome.turn)
                 self.clock = TurnClock(welcome.turn, game=welcome.game, skips_status=self.clock.skips_status,
-                                       now=time.monotonic())
+                                       now=self._asked_at)
             return welcome
         if event.entity != "SRV":
             return None

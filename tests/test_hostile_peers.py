@@ -93,6 +93,23 @@ def test_a_turn_far_in_the_future_is_refused_and_the_clock_goes_on() -> None:
     assert late.turn == 50_001
 
 
+def test_a_burst_of_genuine_turns_read_at_once_is_current() -> None:
+    """A busy or descheduled process reads the turns that came meanwhile in one go: when it reads STATUS(54) says
+    nothing of when it was sent. The environment (it takes the newest STATUS) of a game at 300 turns/s, admitted at
+    turn 0 at time 0, reads STATUS(10) and STATUS(54) in the same millisecond, 0.3 s in: both are current (the clock
+    used to measure from when it last moved and refused the second as future-turn, a false rejection in CI under a
+    flood). Yet no game reaches turn 5,000 in 0.3 s."""
+    clock = TurnClock(game="g", skips_status=True, now=0.0, known=0)
+    clock.admit(Turn(turn=1, sender="SRV", phase=Phase.DRONES, game="g"), 0.003)
+    clock.admit(status(10), 0.3)
+    clock.admit(status(54), 0.3)
+    assert clock.turn == 55
+    with pytest.raises(StaleTurn) as err:
+        clock.admit(status(5_000), 0.3)
+    assert err.value.reason == "future-turn"
+    assert clock.turn == 55
+
+
 @pytest.fixture
 def router():
     with embedded_router() as locator:
