@@ -155,8 +155,8 @@ CONNECT_GAP = 2 / CONNECT_RATE
 MAP_RATE = 100.0
 
 #: Turns a second no game can exceed: a turn takes at least a pub/sub round trip (about 0.3 ms, BENCHMARKS.md's floor).
-#: An entity refuses a TURN, STATUS or OVER further ahead of the turn it knows than this rate allows since it last
-#: learnt one (network/clock.py `TurnClock`): one absurd message (a STATUS at turn 2^40 from any peer on a plain
+#: An entity refuses a TURN, STATUS or OVER further ahead of the turn its WELCOME named than this rate allows since
+#: its CONNECT left (network/clock.py `TurnClock`): one absurd message (a STATUS at turn 2^40 from any peer on a plain
 #: router) used to move its clock beyond every real message to come, and wedge it.
 TURNS_PER_S_MAX = 10_000.0
 
