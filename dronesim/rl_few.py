@@ -93,7 +93,9 @@ class FewEpisode(EpisodeBase):
         rows = list(rows)
         if len(rows) == self.n:  # (every row: the lists themselves)
             return self.eyes.see_few(pos, targets, pos if len(alive) == self.n else [pos[i] for i in alive])
-        return self.eyes.see_few([pos[i] for i in rows], [targets[i] for i in rows], [pos[i] for i in alive])
+        # (most steps, the alive drones act: one list of their cells is `see_few`'s drones too)
+        cells = [pos[i] for i in rows]
+        return self.eyes.see_few(cells, [targets[i] for i in rows], cells if rows == alive else [pos[i] for i in alive])
 
     def infos(self, rows) -> list[dict]:
         """As `Episode.infos`."""
