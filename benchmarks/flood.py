@@ -354,7 +354,10 @@ def main(argv: list[str] | None = None) -> int:
                              "of the secured one")
     parser.add_argument("--attacker-nice", type=int, default=ATTACKER_NICE,
                         help=f"the attacker's niceness (default {ATTACKER_NICE}: it stands for a client on a host of "
-                             "its own; 0: it shares this machine's cores with the game as an equal)")
+                             "its own; 0: it shares this machine's cores with the game as an equal). With Linux's "
+                             "autogroup on (/proc/sys/kernel/sched_autogroup_enabled) and the attacker in a session of "
+                             "its own, its niceness ranks it only within its own group and changes nothing: measure a "
+                             "niced attacker with --attacker-session game")
     parser.add_argument("--attacker-session", choices=ATTACKER_SESSIONS, default="own",
                         help="the attacker in a session of its own (default: as a program started apart from the "
                              "game, scheduled as a group of its own, autogroup) or in the game's (scheduled as one "
