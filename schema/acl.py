@@ -194,6 +194,10 @@ def render(block: dict, header: str = "") -> str:
     return json5_document({"access_control": block}, header)
 
 
+#: The queries a router budgets, by key template: queries a second from one session (`flood_filters`).
+QUERY_RATES = {"SRV/CONNECT": CONNECT_RATE, "ENV/MAP": MAP_RATE}
+
+
 def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
     """A router's `low_pass_filter` and `downsampling` blocks, from the key table: on what the router receives
     from each session, the payloads (a put's, a query's) above their key's message's largest valid size
@@ -213,8 +217,7 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
 
     sizes: dict[tuple[str, int], list[str]] = {}
     budgeted: list[tuple[str, float]] = []  # (key expression, puts a second)
-    connect: list[str] = []
-    maps: list[str] = []
+    queried: list[tuple[str, float]] = []  # (key expression, queries a second)
     granted = None if acl is None else sorted(  # every key expression `acl` lets some subject put on
         {k for rule in acl["rules"] if rule["permission"] == "allow" and "put" in rule["messages"]
          and "ingress" in rule["flows"] for k in rule["key_exprs"]})
@@ -223,10 +226,8 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
             continue
         exprs = [str(zenoh.KeyExpr.autocanonize(f"{root}/{_PLACEHOLDER.sub('*', spec.template)}")) for root in roots]
         sizes.setdefault((spec.how, size_limit(spec.message)), []).extend(exprs)
-        if spec.template == "SRV/CONNECT":
-            connect += exprs
-        elif spec.template == "ENV/MAP":
-            maps += exprs
+        if spec.template in QUERY_RATES:
+            queried += [(k, QUERY_RATES[spec.template]) for k in exprs]
         if spec.how == "put" and spec.writer == "DRONE" or spec.template == "GCS/DONE":
             budgeted += [(k, PUT_RATE) for k in (exprs if granted is None else granted)
                          if any(_includes(x, k) for x in exprs)]
@@ -239,8 +240,7 @@ def flood_filters(roots: Sequence[str], acl: dict | None = None) -> dict:
     puts = {"id": "puts", "messages": ["put"], "flows": ["ingress"],
             "rules": [{"key_expr": expr, "freq": rate} for expr, rate in budgeted]}
     queries = {"id": "queries", "messages": ["query"], "flows": ["ingress"],
-               "rules": [*({"key_expr": expr, "freq": CONNECT_RATE} for expr in connect),
-                         *({"key_expr": expr, "freq": MAP_RATE} for expr in maps)]}
+               "rules": [{"key_expr": expr, "freq": rate} for expr, rate in queried]}
     return {"low_pass_filter": low_pass, "downsampling": [puts, queries]}
 
 
