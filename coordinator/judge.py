@@ -97,36 +97,29 @@ class Judge:
         after: dict[int, Cell] = {}
         moved: list[int] = []
         outside, buildings = False, _NO_CELLS  # (a set of its own once a drone enters a building)
-        if offsets:  # (a step other than hovering changes the drone's cell)
-            if not STEPS.issuperset(cells):  # (each step looked up in C)
-                raise UsageError("a move of more than one cell (6-connectivity)")
-            for i, step in zip(rows, cells):
-                here = before[i] = pos[i]
-                if step == _HOVER:
+        if offsets and not STEPS.issuperset(cells):  # (each step looked up in C)
+            raise UsageError("a move of more than one cell (6-connectivity)")
+        for i, move in zip(rows, cells):
+            x, y, z = here = before[i] = pos[i]
+            if offsets:  # (a step other than hovering changes the drone's cell)
+                if move == _HOVER:
                     after[i] = here
                     continue
-                x, y, z = here
-                dx, dy, dz = step
-                a, b, c = cell = after[i] = x + dx, y + dy, z + dz
-                moved.append(i)
-                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz):
-                    outside = True
-                elif solid[(a * ny + b) * nz + c]:
-                    buildings = {*buildings, cell}
-            return _tuple_new(Steps, (rows, before, after, moved, (outside, buildings)))
-        for i, cell in zip(rows, cells):
-            x, y, z = here = pos[i]
-            a, b, c = cell
-            if (a - x, b - y, c - z) not in STEPS:
-                raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
-            before[i] = here
+                dx, dy, dz = move
+                a, b, c = cell = x + dx, y + dy, z + dz
+            else:
+                a, b, c = cell = move
+                if (a - x, b - y, c - z) not in STEPS:
+                    raise UsageError("a move for a drone not alive, or of more than one cell (6-connectivity)")
+                if cell == here:
+                    after[i] = here
+                    continue
             after[i] = cell
-            if cell != here:
-                moved.append(i)
-                if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz):
-                    outside = True
-                elif solid[(a * ny + b) * nz + c]:
-                    buildings = {*buildings, cell}
+            moved.append(i)
+            if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz):
+                outside = True
+            elif solid[(a * ny + b) * nz + c]:
+                buildings = {*buildings, cell}
         return _tuple_new(Steps, (rows, before, after, moved, (outside, buildings)))
 
     def rule_steps(self, turn: int, log: TurnLog, journaled: bool, cells: bool, steps: Steps,
