@@ -113,7 +113,7 @@ class FewEpisode(EpisodeBase):
         if not self.left:
             raise ConfigError("step() after the end of the episode: call reset()")
         acting = self._acting
-        if self.left < self.n:
+        if self.left < self.n and rows != self._rows:  # (most steps, every agent acting acts: compared in C)
             done = [i for i in rows if not acting[i]]
             if done:
                 raise done_agents(done)
