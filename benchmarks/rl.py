@@ -105,31 +105,41 @@ def ours(backend: str, n: int, seconds: float, few_drones: int | None = None, mo
         env.few_drones = few_drones
     env.moves_ahead = moves_ahead
     safe = SafeRandom(RADIUS) if policy == "safe" else None
-    rng = np.random.default_rng(0)
     # the local backend and POGEMA are one process each: their CPU time, which other work on a shared machine
     # does not inflate; the zenoh backend's step spans three processes: wall-clock time
     clock = time.process_time if backend == "local" else time.perf_counter
     try:
-        obs, _ = env.reset(seed=1)
-        steps, spent, resets = 0, 0.0, 0
-        while spent < seconds and (env.agents or safe is None):
-            reset = 0.0
-            if not env.agents:  # (random: every drone died; the reset is timed with the steps)
-                t0 = clock()
-                obs, _ = env.reset()
-                reset = clock() - t0
-                resets += 1
-            agents = env.agents
-            chosen = safe(np.stack([obs[a] for a in agents])) if safe is not None else rng.integers(0, 7, len(agents))
-            actions = dict(zip(agents, chosen.tolist()))
-            t0 = clock()
-            obs = env.step(actions)[0]
-            if steps >= WARMUP:
-                spent += clock() - t0 + reset
-            steps += 1
-        return (steps - WARMUP) / spent if spent else float("nan"), len(env.agents), resets
+        rate, resets = stepping(env, safe, seconds, clock)
+        return rate, len(env.agents), resets
     finally:
         env.close()
+
+
+def stepping(env, safe: SafeRandom | None, seconds: float, clock: Callable[[], float],
+             warmup: int = WARMUP) -> tuple[float, int]:
+    """The benchmark's loop over `env` (reset with seed 1): its agents' actions from `safe`, or uniformly random
+    from `default_rng(0)` (None), every episode reset when its drones are gone (timed with the steps), until
+    `seconds` of `clock` after `warmup` steps (or, with `safe`, until no agent is left). Steps per second after the
+    warm-up, and the resets. (Its source only needs numpy as `np`: `benchmarks.versus` runs it in an earlier tree.)"""
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=1)
+    steps, spent, resets = 0, 0.0, 0
+    while spent < seconds and (env.agents or safe is None):
+        reset = 0.0
+        if not env.agents:  # (random: every drone died; the reset is timed with the steps)
+            t0 = clock()
+            obs, _ = env.reset()
+            reset = clock() - t0
+            resets += 1
+        agents = env.agents
+        chosen = safe(np.stack([obs[a] for a in agents])) if safe is not None else rng.integers(0, 7, len(agents))
+        actions = dict(zip(agents, chosen.tolist()))
+        t0 = clock()
+        obs = env.step(actions)[0]
+        if steps >= warmup:
+            spent += clock() - t0 + reset
+        steps += 1
+    return (steps - warmup) / spent if spent else float("nan"), resets
 
 
 def _range(values: list[float], fmt: str) -> str:

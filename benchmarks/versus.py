@@ -2,14 +2,15 @@
 
     dronesim bench versus REV [--counts 1,16,128,1000] [--seconds 2] [--repeat 3] [--games 16,128,1000]
 
-REV (a commit of this repository, from c3007d0 on: its `benchmarks.rl.ours` takes a policy) is extracted with
+REV (a commit of this repository from before issue 34's restructuring on, `RL_PROBE`) is extracted with
 `git archive` into a temporary folder. Every figure is measured in a fresh process of each tree, in the order
 before, after, after, before within each repeat, so that the machine's drift over a few seconds weighs on both
 sides alike; a repeat's ratio is after ÷ before of the two means, and the table gives each ratio's range over
 the repeats (issue 34: "no row may get worse beyond noise").
 
-- RL rows: each tree's own `benchmarks.rl.ours("local", n, seconds, policy=...)`, the local backend's steps per
-  second of CPU time under the safe and the random policy, episodes reset (BENCHMARKS.md, "RL environment").
+- RL rows: `RL_PROBE` in each tree (the loop of `benchmarks.rl.ours("local", n, seconds, policy=...)`), the local
+  backend's steps per second of CPU time under the safe and the random policy, episodes reset (BENCHMARKS.md, "RL
+  environment").
 - Game rows: `dronesim up --swarm --drones N --size 64,64,16 --lifelong --turn-period 0 --max-turns T` (a new
   target for each drone home, so that the game plays to its limit; the router, the
   coordinator, the environment, a swarm host and the scripted ground station in processes of their own), the CPU
@@ -22,6 +23,7 @@ the repeats (issue 34: "no row may get worse beyond noise").
 from __future__ import annotations
 
 import argparse
+import inspect
 import os
 import resource
 import subprocess
@@ -32,12 +34,34 @@ from collections.abc import Callable
 from pathlib import Path
 
 from benchmarks.measure import machine
+from benchmarks.rl import stepping
 from coordinator.journal import is_turn
 from coordinator.journal import read as journal_read
 
 HERE = Path(__file__).resolve().parents[1]
-RL_PROBE = ("import sys; from benchmarks.rl import ours; "
-            "print(ours('local', int(sys.argv[1]), float(sys.argv[2]), policy=sys.argv[3])[0])")
+#: The RL probe: the benchmark's loop as this tree has it (`benchmarks.rl.stepping`, its source handed over) over
+#: each tree's own `parallel_env` on the benchmark's world, with its safe or uniformly random policy, episodes reset
+#: and timed with the steps, CPU time. It needs of a tree only what every tree since issue 34's restructuring began
+#: has (`parallel_env(world=...)`, `benchmarks.rl`'s `SafeRandom`, `RADIUS`, `SIZE`, `WARMUP`; `World` from
+#: world/grid.py, or entities/world.py before the floors): a tree from before the random policy's rows is measured
+#: on them too.
+RL_PROBE = """
+import sys, time
+import numpy as np
+from benchmarks.rl import RADIUS, SIZE, WARMUP, SafeRandom
+from dronesim.pettingzoo import parallel_env
+try:
+    from entities.world import World
+except ImportError:
+    from world.grid import World
+n, seconds, policy, source = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3], sys.argv[4]
+scope = {"np": np, "WARMUP": WARMUP, "SafeRandom": SafeRandom}
+exec(compile("from __future__ import annotations\\n" + source, "stepping", "exec"), scope)
+env = parallel_env(num_drones=n, world=World.generate(SIZE, np.random.default_rng(1), keep_free=()),
+                   obs_radius=RADIUS, on_target="stay", max_cycles=10**6, seed=1, backend="local")
+print(scope["stepping"](env, SafeRandom(RADIUS) if policy == "safe" else None, seconds, time.process_time)[0])
+env.close()
+"""
 
 
 def extract(rev: str, into: Path) -> str:
@@ -62,8 +86,10 @@ def run_in(tree: Path, argv: list[str]) -> tuple[str, float]:
 
 
 def rl_rate(n: int, seconds: float, policy: str) -> Callable[[Path], float]:
+    source = inspect.getsource(stepping)
+
     def measure(tree: Path) -> float:
-        out, _ = run_in(tree, [sys.executable, "-c", RL_PROBE, str(n), str(seconds), policy])
+        out, _ = run_in(tree, [sys.executable, "-c", RL_PROBE, str(n), str(seconds), policy, source])
         return float(out.split()[-1])
     return measure
 
