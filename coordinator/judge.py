@@ -154,12 +154,14 @@ class Judge:
         `journaled`: whether the record says what each drone did; `cells`: whether the moved drones' cells are
         wanted (if not, the lists' way leaves them out)."""
         fleet, ballot = self.fleet, self.ballot
-        whole = whole or fleet.whole()
-        if whole and whole[0].count(ALIVE) == len(whole[0]):  # (every drone alive: most turns, counted in C)
-            alive = list(range(len(whole[0])))
-        elif whole:
+        # (the states as a list for a small fleet; its cells only once the lists' way is taken: more alive drones
+        # than TURN_FEW_DRONES play in arrays, which would read `pos` back from the tuples every turn)
+        states = whole[0] if whole else fleet.states() if fleet.small else None
+        if states is not None and states.count(ALIVE) == len(states):  # (every drone alive: most turns, in C)
+            alive = list(range(len(states)))
+        elif states is not None:
             alive = []
-            for i, s in enumerate(whole[0]):  # (loops, not comprehensions, in the few drones' turn: Python 3.11
+            for i, s in enumerate(states):  # (loops, not comprehensions, in the few drones' turn: Python 3.11
                 if s == ALIVE:  # calls a function for each comprehension, a few drones' whole work)
                     alive.append(i)
         else:
@@ -177,6 +179,7 @@ class Judge:
             took = dict(zip(rows, zip(proposed, fleet.column(ballot.said, rows))))
             if not took.keys() <= set(alive):  # (it moves, as in the arrays: `_arrays`)
                 every = sorted({*alive, *took})
+        whole = whole or fleet.whole()
         return self._few(alive, every, took, whole[1] if whole else None, turn, log, journaled, cells)
 
     def _few(self, alive: list[int], every: list[int], took: dict[int, tuple[Cell, int]],
