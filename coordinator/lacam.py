@@ -18,8 +18,11 @@ small world made at the game's start, `Lacam.prepare`) and the drones then take 
 step along the tree from the node they are at towards the goal node if found, else towards the best node known
 (the least sum of distances to the goals; a step up the tree is a move back: every transition is reversible), never
 along the depth-first frontier as the search backtracks. A node's constraints pin the drones away from their goals
-first, then the drones on their goals nearest to them (`Search._pins`), not all in PIBT's order. The search is complete
-whatever the drones do meanwhile, and once it has found the goal the drones walk to it: every drone home.
+first, then the drones on their goals nearest to them (`Search._pins`), not all in PIBT's order. PIBT's candidates in
+the whole world's search are guided by scattered paths (`Scatter`, LaCAM3's: paths that meet each other's as little as
+they can in space and time, made at once as the search starts where the tables are made at the game's start): a drone
+on its path tries its next cell first, so that the first chain spreads the drones over several doors. The search is
+complete whatever the drones do meanwhile, and once it has found the goal the drones walk to it: every drone home.
 
 State and determinism: what the search keeps is a function of the calls' arguments alone (the drones' cells,
 targets, whether they cooperate, the world and the turn), never of their offers or of time, so
@@ -45,6 +48,7 @@ without progress does, and never says an instance unsolvable; nor does a focused
 from __future__ import annotations
 
 from collections import deque
+from heapq import heappop, heappush
 from typing import Any
 
 import numpy as np
@@ -52,7 +56,7 @@ import numpy as np
 from schema import Cell
 from world.search import cells_of, flat_cells, levels, padded_steps
 
-from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat
+from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat, tie_breaks
 
 __all__ = ["Lacam", "Search", "Graph"]
 
@@ -95,6 +99,23 @@ BEHIND = 16
 BUILD = 2
 #: A refining search's nodes are numbered from its count times this (their tie-breaks differ from the others').
 REFINE_NUMBERS = 1 << 20
+#: Scattered paths (`Scatter`, LaCAM3's space utilisation): a drone's path may be this many steps longer than its
+#: shortest way (LaCAM3's default), and the paths are planned again, each against the others', for at most this many
+#: rounds (fewer once a round brings no fewer collisions).
+MARGIN = 10
+ROUNDS = 3
+#: A scattered path's search costs a unit per POPS cells it settles (a heap pop and its neighbours' collision counts:
+#: 1.3 µs a cell, about half of what a PIBT call spends on a drone).
+POPS = 2
+#: A drone tries its next cell on its scattered path first while the node's depth is at most HORIZON times its path's
+#: cells (the paths are planned for drones that move every step; in a crowd they are late, and past that, lost).
+HORIZON = 2
+#: The search is guided by scattered paths where every open cell's distance table is made at the game's start
+#: (`PRECOMPUTE`: the 32 x 32 maps), the drones times the open cells are at most SCATTER (400 drones there) and the
+#: drones are CROWD or more (measured at 400; a few dozen drones' first solution is found in a turn or two, and their
+#: games are PIBT's chaos either way: a 24-drone RL episode brought one drone fewer home with it).
+SCATTER = 1 << 19
+CROWD = 100
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
 #: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
@@ -156,6 +177,144 @@ class Graph:
             dist[word[k] * 64 + bit, cells[k]] = min(depth, FAR - 1)
 
 
+class Scatter:
+    """Scattered paths, the guide of the search's configuration generator (LaCAM3's, Okumura, "Engineering LaCAM*",
+    AAMAS 2024, after Han and Yu's space utilisation optimisation, ICRA 2022): a path for each drone from its cell to
+    its goal, at most `MARGIN` steps longer than its shortest way, that meets the others' paths as little as it can in
+    space and time; planned one drone after the other, each against the paths planned so far, and again for a few
+    rounds (`ROUNDS`) while a round meets fewer. A drone on its path tries its path's next cell first (`table`).
+
+    Each path is a best-first search over the open cells (each settled once), ordered by the collisions met on the way
+    (another path in the cell at the same step, a path taking the same edge the other way, a drone parked there on its
+    goal since an earlier step), then by the length through the cell (its distance table: the search stays within the
+    margin), then by the cell's number: deterministic. The drones' order in each round is drawn from the round's number
+    alone (`arbiter.tie_breaks`). A function of the drones' cells and goals alone, never of time; `advance` plans
+    within a budget (a unit per `POPS` cells settled), the search makes them at once as it starts (`Search`): in the
+    turns they came too late to guide the first chain (docs/cooperation.md, "Scattered paths")."""
+
+    __slots__ = ("cells", "near", "start", "goal", "dist", "margin", "rounds", "F", "occ", "moves", "parked", "paths",
+                 "met", "order", "k", "round", "last", "done", "units", "costliest")
+
+    def __init__(self, graph: Graph, start: np.ndarray, goal: np.ndarray, dist: np.ndarray, margin: int = MARGIN,
+                 rounds: int = ROUNDS) -> None:
+        """`start`, `goal`: the drones' open cells (numbered, `Graph`); `dist`: their distance tables ((n, F))."""
+        n = len(start)
+        self.cells = graph.cells
+        self.near = [[v for v in row if v >= 0] for row in graph.near.tolist()]
+        self.start, self.goal, self.dist = start.tolist(), goal.tolist(), dist
+        self.margin, self.rounds = margin, rounds
+        self.F = F = len(graph.cells)
+        longest = int(dist[np.arange(n), start].max(initial=0)) + margin + 1
+        self.occ = [0] * ((longest + 1) * F)  # (step, cell) -> paths there then
+        self.moves: dict[int, int] = {}  # (step, cell, next cell) -> paths taking that edge then
+        self.parked: dict[int, list[int]] = {}  # cell -> the steps from which paths ending there stay there
+        self.paths: list[list[int]] = [[] for _ in range(n)]
+        self.met = [0] * n  # each path's collisions when it was planned
+        self.order = self._order(0)
+        self.k, self.round, self.last = 0, 0, -1
+        self.done = n == 0
+        self.units, self.costliest = 0, 0
+
+    def _order(self, r: int) -> list[int]:
+        n = len(self.start)
+        draw = tie_breaks(r + 1, np.arange(n, dtype=np.int64), np.zeros((n, 1), np.int64))[:, 0]
+        return np.lexsort((np.arange(n), draw)).tolist()
+
+    def advance(self, work: int) -> int:
+        """Plan paths within `work` units (one at least; another only if the costliest so far fits): the units spent."""
+        spent = 0
+        while not self.done and not (spent and spent + self.costliest > work):
+            units = self._plan(self.order[self.k])
+            spent += units
+            self.costliest = max(self.costliest, units)
+            self.k += 1
+            if self.k == len(self.order):  # (a round planned)
+                total = self._collisions()
+                spent += len(self.start)
+                self.round += 1
+                self.done = total == 0 or self.round >= self.rounds or (self.round >= 2 and total >= self.last)
+                self.last, self.k = total, 0
+                self.order = self._order(self.round)
+        self.units += spent
+        return spent
+
+    def _collisions(self) -> int:
+        """The paths' collisions with each other (each pair's counted from both sides): in the same cell at the same
+        step, along the same edge the other way, or through a cell where another has stopped for good."""
+        F, occ, moves, parked = self.F, self.occ, self.moves, self.parked
+        total = 0
+        for path in self.paths:
+            for t in range(1, len(path)):
+                v, u = path[t], path[t - 1]
+                total += occ[t * F + v] - 1 + moves.get(((t - 1) * F + v) * F + u, 0)
+                ends = parked.get(v)
+                if ends:
+                    total += sum(t > e for e in ends)
+        return total
+
+    def _enroll(self, i: int, path: list[int], sign: int) -> None:
+        F, occ, moves = self.F, self.occ, self.moves
+        for t, v in enumerate(path):
+            occ[t * F + v] += sign
+            if t + 1 < len(path):
+                key = (t * F + v) * F + path[t + 1]
+                moves[key] = moves.get(key, 0) + sign
+        if path:
+            ends = self.parked.setdefault(path[-1], [])
+            if sign > 0:
+                ends.append(len(path) - 1)
+            else:
+                ends.remove(len(path) - 1)
+
+    def _plan(self, i: int) -> int:
+        """Drone i's path planned again against the others': the units it cost."""
+        if self.paths[i]:
+            self._enroll(i, self.paths[i], -1)
+        s, goal, F, near, occ, moves, parked = self.start[i], self.goal[i], self.F, self.near, self.occ, self.moves, \
+            self.parked
+        d = self.dist[i].tolist()
+        bound = d[s] + self.margin
+        heap = [(0, d[s], s, 0, -1)]
+        parent: dict[int, int] = {}
+        met = -1
+        while heap:
+            c, _, v, g, p = heappop(heap)
+            if v in parent:
+                continue
+            parent[v] = p
+            if v == goal:
+                met = c
+                break
+            t = g + 1
+            for u in near[v]:
+                du = d[u]
+                if u == s or u in parent or t + du > bound:
+                    continue
+                cc = c + occ[t * F + u] + moves.get((g * F + u) * F + v, 0)
+                ends = parked.get(u)
+                if ends:
+                    cc += sum(t > e for e in ends)
+                heappush(heap, (cc, t + du, u, t, v))
+        path: list[int] = []
+        if met >= 0:
+            v = goal
+            while v >= 0:
+                path.append(v)
+                v = parent[v]
+            path.reverse()
+        self.paths[i], self.met[i] = path, max(met, 0)
+        self._enroll(i, path, 1)
+        return 1 + len(parent) // POPS
+
+    def table(self) -> np.ndarray:
+        """Each drone's next cell on its path from each open cell ((n, F), flat cells; -1 off its path)."""
+        out = np.full((len(self.paths), self.F), -1, np.int64)
+        for i, path in enumerate(self.paths):
+            if len(path) > 1:
+                out[i, path[:-1]] = self.cells[path[1:]]
+        return out
+
+
 class Node:
     """A configuration of the search: the drones' cells (flat), its parent in the tree, its depth, the drones'
     PIBT priorities there, its low-level search (the constraints still to try: (drones, cells) pairs), PIBT's order
@@ -199,7 +358,8 @@ class Search:
     `step` gives the drones' next configuration from the node they are at (`at`)."""
 
     def __init__(self, graph: Graph, size: Cell, start: np.ndarray, goals: np.ndarray, aims: np.ndarray,
-                 dist: np.ndarray, memory: int = MEMORY, focus: Focus | None = None, number: int = 0) -> None:
+                 dist: np.ndarray, memory: int = MEMORY, focus: Focus | None = None, number: int = 0,
+                 scatter: bool = False) -> None:
         """`aims`: the drones' real targets (flat, -1 for none: PIBT's swap and retreats read them); `dist`: each
         drone's distance table ((n, F), to its goal); `memory`: the entries it may hold (`MEMORY`); `focus`: a search
         over some drones only (`Lacam._focus`): their rows among all, every drone's cells (the others stay there), the
@@ -238,6 +398,18 @@ class Search:
         self._h: np.ndarray | None = None  # the plan's configurations' sums of distances (`_behind`)
         self._h_of: np.ndarray | None = None
         self._build = len(graph.cells) // BUILD  # a refiner's units to make (its part of the world's graph)
+        # with `scatter`, the scattered paths' guide (`Scatter`, made at once: the first turn's work is theirs and a
+        # PIBT call, `expand`): each drone's next cell on its path from each open cell ((n, F), flat, -1 off it), the
+        # open cells' numbering, and each path's cells (`HORIZON`)
+        self.guide: tuple[np.ndarray, np.ndarray] | None = None
+        self.horizon = np.zeros(n, np.int64)
+        self.scattered = 0  # its units
+        if scatter:
+            made = Scatter(graph, graph.index[start], graph.index[goals], dist)
+            self.scattered = made.advance(1 << 62)
+            self.guide = (made.table(), graph.index)
+            self.horizon = np.array([len(p) for p in made.paths], np.int64)
+        self._owed = self.scattered  # (the units of the scatter, spent by the first turn's `expand`)
 
     @property
     def unsolvable(self) -> bool:
@@ -265,6 +437,8 @@ class Search:
         spent, n = 0, len(self.goals)
         if self.focus is not None:
             open_ = self.focus[2]
+        spent, self._owed = self._owed, 0  # (the scatter's units: that turn makes a PIBT call, no more)
+        made = spent
         while self.found is None and self.open and not self.full and self.expansions < most:
             node = self.open[-1]
             if not node.tree:
@@ -273,7 +447,7 @@ class Search:
             who, where = node.tree[0]
             call = self._choosers(node, who, where)
             cost = CALL + n // FIXED + (0 if call is None else len(call[0]))  # (those that choose: `_choosing`)
-            if (spent or not first) and spent + cost > work:
+            if (spent > made or not first) and spent + cost > work:
                 break
             node.tree.popleft()
             self.held -= 2 * len(who)
@@ -391,7 +565,8 @@ class Search:
     def _candidates(self, node: Node) -> np.ndarray:
         """Each drone's cells from `node` in the order PIBT tries them ((n, 7), flat, -1 after the last): nearest
         to its goal first, staying before a neighbour as near (as a drone ranks), reordered by
-        `arbiter.candidates` (free cells first, retreats out of the others' way, ties drawn from the node)."""
+        `arbiter.candidates` (free cells first, retreats out of the others' way, ties drawn from the node); with the
+        scattered paths' guide, a drone on its path (within `HORIZON`) tries the path's next cell first (LaCAM3)."""
         g, here = self.graph, node.cfg
         c = g.index[here]
         near = np.concatenate([g.near[c], c[:, None]], axis=1)  # (n, 7): the neighbours, then the cell itself
@@ -399,7 +574,16 @@ class Search:
         rank = np.where(near >= 0, d * 8 + np.array([1, 2, 3, 4, 5, 6, 0]), 1 << 40)
         sort = np.argsort(rank, axis=1, kind="stable")
         own = np.take_along_axis(np.where(near >= 0, g.cells[np.maximum(near, 0)], -1), sort, axis=1)
-        return candidates(here, own, self.size, self.aim_array, node.number)
+        cand = candidates(here, own, self.size, self.aim_array, node.number)
+        if self.guide is None:
+            return cand
+        table, index = self.guide  # (the scattered paths: a drone on its path tries its next cell first)
+        nxt = np.where(node.depth <= HORIZON * self.horizon, table[self.rows, index[here]], -1)
+        hit = (cand == nxt[:, None]) & (nxt >= 0)[:, None]
+        if not hit.any():
+            return cand
+        key = np.where(hit, -1, np.arange(cand.shape[1]))
+        return np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1)
 
     def _next(self, at: Node) -> Node:
         """The node after `at` on the way to the goal node (or, while it is not found, the best node known): one step
@@ -536,8 +720,12 @@ class Lacam:
 
     complete = True
 
-    def __init__(self, work: int = WORK, limit: int = LIMIT, stall: int = STALL, memory: int = MEMORY) -> None:
-        self.work, self.limit, self.stall, self.memory = work, limit, stall, memory
+    def __init__(self, work: int = WORK, limit: int = LIMIT, stall: int = STALL, memory: int = MEMORY,
+                 scatter: bool = True) -> None:
+        """`scatter`: the whole world's searches guided by scattered paths (`Scatter`; False: PIBT's candidates by
+        distance alone, as before)."""
+        self.work, self.limit, self.stall, self.memory, self.scatter = work, limit, stall, memory, scatter
+        self._scattered: bytes | None = None  # the targets the scattered paths were made for (once a world: `_start`)
         self._graph: Graph | None = None
         self._of: OpenCells | None = None
         self._tables: dict[int, np.ndarray] = {}  # goal (numbered open cell) -> its distance table
@@ -631,7 +819,7 @@ class Lacam:
         world does, and the search takes the same decisions."""
         if open_ is self._of:
             return
-        self._of, self._tables, self._table_units = open_, {}, 0
+        self._of, self._tables, self._table_units, self._scattered = open_, {}, 0, None
         self._graph = g = Graph(open_, size)
         self._every = g.every_distance() if len(g.cells) ** 2 <= PRECOMPUTE else None
 
@@ -713,8 +901,14 @@ class Lacam:
             return None  # a drone in a building or outside (it is dying): PIBT
         goal_c = np.where(way, ac, hc)
         if self._every is not None:
+            # the scattered paths: for the first targets in this world (at the game's start; a lifelong game's new
+            # targets, a search a turn, go unguided) and where they are affordable (`SCATTER`)
+            scatter = self.scatter and self._scattered in (None, self._key) and CROWD <= len(here) and \
+                len(here) * len(g.cells) <= SCATTER
+            if scatter:
+                self._scattered = self._key
             self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), self._every[goal_c],
-                                  self.memory)
+                                  self.memory, scatter=scatter)
             return self._search
         spent = 0
         for c in dict.fromkeys(goal_c.tolist()):

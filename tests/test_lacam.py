@@ -253,9 +253,10 @@ def test_a_focused_search_takes_puzzles_apart_one_after_the_other() -> None:
 
 
 def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; where the distance
-    tables are not made at the game's start (a world too big: here made so), a turn makes those its units hold
-    (one at least) and the search starts the turn after the last, PIBT playing meanwhile."""
+    """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; the turn that makes
+    the scattered paths (`Scatter`, at once as the search starts) makes one call besides; where the distance tables
+    are not made at the game's start (a world too big: here made so), a turn makes those its units hold (one at
+    least) and the search starts the turn after the last, PIBT playing meanwhile."""
     rows, drones = DOOR
     grid = world_of(rows)
     size: Cell = grid.shape  # type: ignore[assignment]
@@ -265,8 +266,9 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
     coop, open_ = np.ones(n, bool), OpenCells(grid)
     full = n + n // lacam.FIXED + lacam.CALL  # (a call where every drone chooses: the first ones here)
     start = cells
-    for work in (1, 2 * full, 3 * full - 1, 4 * full):
-        search, cells = lacam.Lacam(work=work), start
+    for work, scatter in [(1, False), (2 * full, False), (3 * full - 1, False), (4 * full, False), (4 * full, True)]:
+        monkeypatch.setattr(lacam, "CROWD", n if scatter else lacam.CROWD)  # (the scatter: a crowd of 6 drones)
+        search, cells = lacam.Lacam(work=work, scatter=scatter), start
         calls = []
         for turn in range(1, 8):
             before = search.expansions
@@ -275,7 +277,11 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
             calls.append(search.expansions - before)
             assert search.spent <= work or calls[-1] == 1, (work, turn, search.spent)
             cells = cells_of(plan, size).astype(np.int32)
-        assert calls[0] == max(1, work // full), calls
+        if scatter:
+            assert calls == [1, 4, 4, 4, 4, 4, 4][:len(calls)] and search._search is not None, calls
+            assert search._search.scattered > 0 and search._search.guide is not None
+        else:
+            assert calls[0] == max(1, work // full), calls
     monkeypatch.setattr(lacam, "PRECOMPUTE", 0)
     search, cells = lacam.Lacam(work=1), start
     made = []
@@ -286,8 +292,9 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
 
 def _refined_walk(size: Cell, open_: OpenCells, here: np.ndarray, aims: np.ndarray) -> tuple[list[np.ndarray], int]:
     """The drones' configurations walking a found search's plan, a turn's refinement (`Search.refine`) before
-    each step, and the first solution's length."""
-    search = lacam.Lacam()
+    each step, and the first solution's length (the search unguided, `scatter=False`: the refiners' own gain; guided by
+    scattered paths, its first solution here is 74 steps, 80 unguided, and no refiner finds a shorter one)."""
+    search = lacam.Lacam(scatter=False)
     search.prepare(size, open_)
     s = search._start(size, here, aims)
     assert s is not None
@@ -324,6 +331,77 @@ def test_a_found_plan_is_refined_while_the_drones_walk_it() -> None:
         assert not any(back.get(u) == v and u != v for u, v in zip(a.tolist(), b.tolist()))
     again, _ = _refined_walk(size, open_, here, aims)
     assert len(again) == len(walked) and all((x == y).all() for x, y in zip(again, walked))
+
+
+#: Two rooms joined by two 1-wide doors, at y = 0 and y = 6; drones cross both ways near the top door.
+DOORS = [".........", "....#....", "....#....", "....#....", "....#....", "....#....", "........."]
+CROSSING = ([(0, 1, 0), (1, 1, 0), (2, 1, 0), (3, 1, 0), (5, 2, 0), (6, 2, 0), (7, 2, 0), (8, 2, 0)],
+            [(5, 1, 0), (6, 1, 0), (7, 1, 0), (8, 1, 0), (0, 2, 0), (1, 2, 0), (2, 2, 0), (3, 2, 0)])
+
+
+def _scattered(margin: int) -> tuple[lacam.Scatter, list[set[int]]]:
+    """The scattered paths of the drones crossing between DOORS' rooms, and the doors (y) each path goes through."""
+    grid = world_of(DOORS)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    arb = lacam.Lacam()
+    arb.prepare(size, OpenCells(grid))
+    g, every = arb._graph, arb._every
+    assert g is not None and every is not None
+    here = g.index[flat_cells(np.array(CROSSING[0], np.int32), size)]
+    aims = g.index[flat_cells(np.array(CROSSING[1], np.int32), size)]
+    scatter = lacam.Scatter(g, here, aims, every[aims], margin)
+    while not scatter.done:
+        scatter.advance(1)
+    doors = [{y for x, y, _ in cells_of(g.cells[np.array(p)], size).tolist() if x == 4} for p in scatter.paths]
+    return scatter, doors
+
+
+def test_scattered_paths_spread_two_flows_over_two_doors() -> None:
+    """LaCAM3's scattered paths (`Scatter`): the drones' paths, planned one after the other against the others' in
+    space and time, for a few rounds: two flows crossing each other's way through the nearer door are spread, one
+    going round by the other door (a detour within the margin), and then meet nowhere. Limited to the shortest ways
+    (margin 0), every path takes the nearer door and they meet."""
+    scatter, doors = _scattered(lacam.MARGIN)
+    assert doors[:4] == [{0}] * 4 and doors[4:] == [{6}] * 4 or doors[:4] == [{6}] * 4 and doors[4:] == [{0}] * 4
+    assert scatter.last == 0 and all(len(p) >= 2 for p in scatter.paths)
+    shortest, doors = _scattered(0)
+    assert doors == [{0}] * 8 and shortest.last > 0
+    again, _ = _scattered(lacam.MARGIN)
+    assert again.paths == scatter.paths  # (deterministic: the rounds' orders drawn from their numbers)
+
+
+def test_the_search_tries_a_drones_scattered_next_cell_first(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The search's configuration generator (`Search._candidates`) puts a drone's next cell on its scattered path
+    first, while the node is within HORIZON times its path's length; without the scatter (`Lacam(scatter=False)`),
+    the cells nearest its goal come first; a drone off its path (here: beyond its horizon) is not guided; fewer drones
+    than `CROWD` are not guided either."""
+    grid = world_of(DOORS)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    open_ = OpenCells(grid)
+    here, aims = (flat_cells(np.array(c, np.int32), size) for c in CROSSING)
+    arb = lacam.Lacam()
+    arb.prepare(size, open_)
+    s = arb._start(size, here, aims)
+    assert s is not None and s.guide is None  # (8 drones: no crowd)
+    monkeypatch.setattr(lacam, "CROWD", len(here))
+    firsts = {}
+    for scatter in (True, False):
+        arb = lacam.Lacam(scatter=scatter)
+        arb.prepare(size, open_)
+        s = arb._start(size, here, aims)
+        assert s is not None and (s.guide is not None) == scatter
+        firsts[scatter] = s._candidates(s.at)[:, 0]
+    assert s.guide is None
+    arb = lacam.Lacam()
+    arb.prepare(size, open_)
+    s = arb._start(size, here, aims)
+    assert s is not None and s.guide is not None
+    table, index = s.guide
+    ahead = table[np.arange(len(here)), index[here]]
+    assert (firsts[True] == ahead).all() and (firsts[True] != firsts[False]).any()
+    far = lacam.Node(s.at.cfg, None, s.at.prio, 0)
+    far.depth = lacam.HORIZON * int(s.horizon.max()) + 1
+    assert (s._candidates(far)[:, 0] == firsts[False]).all()
 
 
 def test_same_journal_in_every_layout_and_run() -> None:
