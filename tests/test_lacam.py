@@ -404,16 +404,21 @@ def test_the_search_tries_a_drones_scattered_next_cell_first(monkeypatch: pytest
     assert (s._candidates(far)[:, 0] == firsts[False]).all()
 
 
-def test_same_journal_in_every_layout_and_run() -> None:
+@pytest.mark.parametrize("crowd", [lacam.CROWD, 1], ids=["unguided", "scattered"])
+def test_same_journal_in_every_layout_and_run(crowd: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(lacam, "CROWD", crowd)  # (1: the search guided by scattered paths, a crowd of one)
     rows, drones = HARD[1][1], HARD[1][2]
     first = play(world_of(rows), drones)
     assert play(world_of(rows), drones).records == first.records
     assert play(world_of(rows), drones, swarm=True).records == first.records
 
 
-def test_a_resumed_coordinator_has_the_search_that_played() -> None:
+@pytest.mark.parametrize("crowd", [lacam.CROWD, 1], ids=["unguided", "scattered"])
+def test_a_resumed_coordinator_has_the_search_that_played(crowd: int, monkeypatch: pytest.MonkeyPatch) -> None:
     """The search's state is a function of the journal: a coordinator restored after any turn (resume.py
-    replays each turn's work) holds the same search as the one that played that turn, and plays on alike."""
+    replays each turn's work) holds the same search as the one that played that turn, and plays on alike; with
+    the scattered paths too (made again by the replay of the turn that made them)."""
+    monkeypatch.setattr(lacam, "CROWD", crowd)
     rows, drones = DOOR
     grid = world_of(rows)
     states: list[dict] = []
@@ -422,7 +427,8 @@ def test_a_resumed_coordinator_has_the_search_that_played() -> None:
         def __call__(self, *args: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[override]
             out = super().__call__(*args)  # type: ignore[arg-type]
             s = self._search
-            states.append({**self.state(), "at": None if s is None else s.where().tolist()})
+            states.append({**self.state(), "at": None if s is None else s.where().tolist(),
+                           "guided": s is not None and s.guide is not None})
             return out
 
     result = play(grid, drones, arbiter=Watched())
@@ -436,7 +442,9 @@ def test_a_resumed_coordinator_has_the_search_that_played() -> None:
         arb = resumed.arbitration.arbiter
         assert isinstance(arb, lacam.Lacam)
         s = arb._search
-        assert {**arb.state(), "at": None if s is None else s.where().tolist()} == states[cut - 1], f"turn {cut}"
+        assert {**arb.state(), "at": None if s is None else s.where().tolist(),
+                "guided": s is not None and s.guide is not None} == states[cut - 1], f"turn {cut}"
+    assert any(st["guided"] for st in states) == (crowd <= len(drones))
 
 
 def test_flat_cells_round_trip() -> None:
