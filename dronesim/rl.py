@@ -46,7 +46,7 @@ from schema import (
 )
 from schema.messages import AROUND
 from schema.tables import MAX_DRONE, code_of, drone_name
-from schema.tuning import EYES_ONE_BY_ONE, PHASE_DEADLINE_S, RL_WAIT_S
+from schema.tuning import EYES_CUBE_GATHER, EYES_ONE_BY_ONE, PHASE_DEADLINE_S, RL_WAIT_S
 from world.grid import Regions, World, checked_int, inside_rows, pick_cell
 
 #: The actions: hover, then one cell along +x, -x, +y, -y, +z, -z (the engine's 6-connectivity).
@@ -519,7 +519,7 @@ class Eyes:
     def see_few(self, pos: list[Cell], targets: list[Cell], drones: list[Cell]) -> list[np.ndarray] | np.ndarray:
         """`see` of drones given as cells (lists of (x, y, z)), with fewer array operations: for up to
         EYES_ONE_BY_ONE drones, their observations one by one (a list of arrays), else as `see`'s rows, in one
-        gather."""
+        gather (of each drone's whole cube up to EYES_CUBE_GATHER drones, of the sensed cells alone above)."""
         cells, sx, sy, o = self._flat, self._sx, self._sy, self._origin
         # the drones marked in the world for the while (a lone drone that sees itself: its own cell reads FREE), item
         # by item through a memoryview (a numpy item costs ~3 times as much)
@@ -539,14 +539,19 @@ class Eyes:
                         one[n // 2] = _FREE
                     out.append(one)
                 return out
-            # every observation in one gather, as a lone one's (the cube's every cell, clipped: beyond, UNKNOWN)
-            start = np.array(at if pos is drones else [x * sx + y * sy + z + o for x, y, z in pos]) + (first - o)
-            rows = cells.take(start[:, None] + index, mode="clip")
+            base = np.array(at if pos is drones else [x * sx + y * sy + z + o for x, y, z in pos])
+            if len(pos) > EYES_CUBE_GATHER:  # their sensed cells in one gather, placed in rows of UNKNOWN (`see`'s)
+                window = cells[base[:, None] + self._offsets]
+            else:  # every observation in one gather, as a lone one's (the cube's every cell, clipped: beyond, UNKNOWN)
+                rows = cells.take((base + (first - o))[:, None] + index, mode="clip")
         finally:
             for k in at:
                 items[k] = _FREE  # an alive drone's cell is free in the static world
+        offsets = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
+        if len(pos) > EYES_CUBE_GATHER:
+            return self._rows(window, offsets)
         rows[:, n // 2] = _FREE  # (its own cell: marked, or where it died)
-        rows[:, n:] = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
+        rows[:, n:] = offsets
         return rows
 
 

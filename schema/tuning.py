@@ -179,6 +179,12 @@ PACK_BUFFER = 1024
 #: one gather. Radius 2 on 64x64x16, one by one vs one gather (CPU time, best of 7, load 5): 1 drone 5.4 vs 8.0 µs,
 #: 2: 8.4 vs 10.7, 3: 7.9 vs 10.4, 4: 15.4 vs 12.5, 6: 22.9 vs 15.0, 8: 31.6 vs 17.2.
 EYES_ONE_BY_ONE = 3
+#: Observations up to which `Eyes.see_few`'s one gather reads each drone's whole cube (clipped: the cells beyond the
+#: radius read UNKNOWN, three numpy calls); above, it gathers the sensed cells alone and places them in rows of
+#: UNKNOWN (`Eyes._rows`, four calls, a quarter of the items at radius 2). Measured (callgrind instructions a step of
+#: `benchmarks.rl`'s loop, safe policy, radius 2 on 64x64x16), the cube's gather vs the sensed cells': 4 drones 414.9k
+#: vs 421.7k, 8: 529.5k vs 531.0k, 16: 755.7k vs 746.6k, 64: 2128.3k vs 2082.8k.
+EYES_CUBE_GATHER = 8
 
 #: Drones up to which a local RL episode keeps its rules over Python lists (`dronesim.rl_few.FewEpisode`, at most
 #: 99), not in array operations (`Episode`); both play each turn through `Engine.play`. `dronesim bench rl
