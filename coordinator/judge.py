@@ -179,8 +179,8 @@ class Judge:
             took = dict(zip(rows, zip(proposed, fleet.column(ballot.said, rows))))
             if not took.keys() <= set(alive):  # (it moves, as in the arrays: `_arrays`)
                 every = sorted({*alive, *took})
-        whole = whole or fleet.whole()
-        return self._few(alive, every, took, whole[1] if whole else None, turn, log, journaled, cells)
+        where = whole[1] if whole else fleet.cells() if fleet.small else None  # (the states are read above)
+        return self._few(alive, every, took, where, turn, log, journaled, cells)
 
     def _few(self, alive: list[int], every: list[int], took: dict[int, tuple[Cell, int]],
              whole: list[Cell] | None, turn: int, log: TurnLog, journaled: bool, cells: bool) -> Moved:
