@@ -540,16 +540,14 @@ class Eyes:
                     out.append(one)
                 return out
             base = np.array(at if pos is drones else [x * sx + y * sy + z + o for x, y, z in pos])
+            offsets = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
             if len(pos) > EYES_CUBE_GATHER:  # their sensed cells in one gather, placed in rows of UNKNOWN (`see`'s)
-                window = cells[base[:, None] + self._offsets]
-            else:  # every observation in one gather, as a lone one's (the cube's every cell, clipped: beyond, UNKNOWN)
-                rows = cells.take((base + (first - o))[:, None] + index, mode="clip")
+                return self._rows(cells[base[:, None] + self._offsets], offsets)
+            # every observation in one gather, as a lone one's (the cube's every cell, clipped: beyond, UNKNOWN)
+            rows = cells.take((base + (first - o))[:, None] + index, mode="clip")
         finally:
             for k in at:
                 items[k] = _FREE  # an alive drone's cell is free in the static world
-        offsets = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
-        if len(pos) > EYES_CUBE_GATHER:
-            return self._rows(window, offsets)
         rows[:, n // 2] = _FREE  # (its own cell: marked, or where it died)
         rows[:, n:] = offsets
         return rows
