@@ -193,7 +193,7 @@ class Scatter:
     turns they came too late to guide the first chain (docs/cooperation.md, "Scattered paths")."""
 
     __slots__ = ("cells", "near", "start", "goal", "dist", "margin", "rounds", "F", "occ", "moves", "parked", "paths",
-                 "met", "order", "k", "round", "last", "done", "units", "costliest")
+                 "order", "k", "round", "last", "done", "costliest")
 
     def __init__(self, graph: Graph, start: np.ndarray, goal: np.ndarray, dist: np.ndarray, margin: int = MARGIN,
                  rounds: int = ROUNDS) -> None:
@@ -209,11 +209,10 @@ class Scatter:
         self.moves: dict[int, int] = {}  # (step, cell, next cell) -> paths taking that edge then
         self.parked: dict[int, list[int]] = {}  # cell -> the steps from which paths ending there stay there
         self.paths: list[list[int]] = [[] for _ in range(n)]
-        self.met = [0] * n  # each path's collisions when it was planned
         self.order = self._order(0)
         self.k, self.round, self.last = 0, 0, -1
         self.done = n == 0
-        self.units, self.costliest = 0, 0
+        self.costliest = 0
 
     def _order(self, r: int) -> list[int]:
         n = len(self.start)
@@ -235,7 +234,6 @@ class Scatter:
                 self.done = total == 0 or self.round >= self.rounds or (self.round >= 2 and total >= self.last)
                 self.last, self.k = total, 0
                 self.order = self._order(self.round)
-        self.units += spent
         return spent
 
     def _collisions(self) -> int:
@@ -302,7 +300,7 @@ class Scatter:
                 path.append(v)
                 v = parent[v]
             path.reverse()
-        self.paths[i], self.met[i] = path, max(met, 0)
+        self.paths[i] = path
         self._enroll(i, path, 1)
         return 1 + len(parent) // POPS
 
