@@ -477,10 +477,10 @@ class Station:
         return self.answer(turn, self.intent(turn))
 
     def _ahead(self, turn: int) -> list[Effect]:
-        """A script with nothing new in the turns after `turn` answers them now, in batches: once half of
-        its answers ahead have been used, it answers up to `ahead` turns on again (its DONEs then travel
-        and wake the coordinator together)."""
-        if not self.scripted or self.answered - turn > self.ahead // 2:
+        """A script with nothing new in the turns after `turn` answers them now, up to `ahead` turns on: once
+        topped up, one more at each STATUS (its DONEs go out `PUT_GAP` apart, so a batch would not travel together,
+        and its last ones would come after their phases in a fast game)."""
+        if not self.scripted or self.answered - turn >= self.ahead:
             return []
         turns = turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead)
         self.answered = max([self.answered, *turns])

@@ -43,10 +43,14 @@ TURN_FEW_DRONES = 64
 #: a bound on the moves kept for it.
 UPD_WINDOW = 8
 
-#: GCS phases a scripted ground station answers ahead when its plan has nothing new for them, half of them at a
-#: time (`Station._ahead`): off a turn's critical path (one hop saved a turn: docs/performance.md, "Answers
-#: ahead"), and most turns carry no DONE. A one-drone turn on 64x64x16, 2 ahead one at a time vs 8 four at a time,
-#: 5 pairs alternated: 1.16-1.53 vs 1.12-1.26 ms (median), coordinator CPU 0.7 vs 0.6 ms a turn.
+#: GCS phases a scripted ground station answers ahead when its plan has nothing new for them (`Station._ahead`):
+#: off a turn's critical path (one hop saved a turn: docs/performance.md, "Answers ahead"). Once it has, one more at
+#: each STATUS. Measured before `PUT_GAP`: a one-drone turn on 64x64x16, 2 ahead one at a time vs 8 four at a time,
+#: 5 pairs alternated: 1.16-1.53 vs 1.12-1.26 ms (median), coordinator CPU 0.7 vs 0.6 ms a turn (the four then
+#: travelled together). Since the station's DONEs go out `PUT_GAP` apart, four at a time came late in a fast game
+#: (its phase announced, a round trip more: 37 GCS phases heard in a 611-turn one-drone game on 64x64x16 against
+#: 22 one at a time, 19 with the plan's changes alone; 48 vs 34 with 128 drones, BENCHMARKS.md "Against the tree
+#: before issue 34").
 ANSWER_AHEAD = 8
 
 #: Cells (asked, neighbours included) up to which the environment answers an ASK cell by cell in Python, not in

@@ -361,15 +361,17 @@ def test_a_script_answers_its_phase_at_once_and_the_phases_with_nothing_new_ahea
                                                   (6, {}, Intent.FINAL), (7, {}, Intent.FINAL)]
 
 
-def test_a_script_answers_ahead_in_batches_once_half_of_its_answers_ahead_are_used() -> None:
+def test_a_script_keeps_its_answers_ahead_topped_up_one_a_status() -> None:
+    """Its DONEs go out PUT_GAP apart (a router's budget), so a batch would not travel together: once it has answered
+    `ahead` phases, each STATUS brings one more, up to its plan's next change."""
     station = Station(ground(["D01=1,1,1", "D02=2,2,2@12"]), ahead=8)
     assert [t for t, _, _ in sent(heard(station, gcs(1)))] == list(range(1, 10))  # its phase and 8 ahead
-    for t in (1, 2, 3):  # turns 2, 3, 4 begin: 7, 6, 5 turns still answered ahead
+    for t in (1, 2):  # turns 2 and 3 begin: one more each, 8 still answered ahead
         assert sent(heard(station, status(t, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))) \
-            == []
-    # turn 5 begins: only 4 answered ahead (6 to 9); it answers up to its plan's next change at once
-    assert sent(heard(station, status(4, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))) \
-        == [(10, {}, Intent.CONTINUE), (11, {}, Intent.CONTINUE)]
+            == [(9 + t, {}, Intent.CONTINUE)]
+    # turn 4 begins: 12 brings a change, so nothing more until its phase
+    assert sent(heard(station, status(3, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))))) == []
+    assert [t for t, _, _ in sent(heard(station, gcs(12)))] == list(range(12, 21))
 
 
 def test_a_script_told_to_answer_nothing_ahead_answers_each_phase_in_it() -> None:
