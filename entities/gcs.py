@@ -79,9 +79,10 @@ def gcs_done(turn: int, targets: Mapping[str, Cell], intent: Intent,
 def turns_to_answer_ahead(plan: Plan, turn: int, answered: int, *, last: int | None = None,
                           horizon: int = ANSWER_AHEAD) -> list[int]:
     """The turns after `turn` a scripted station can answer now: up to `horizon` of them, before the
-    plan's next change (and before `last`), except those already answered (up to `answered`)."""
-    quiet = takewhile(lambda u: not plan.at(u) and (last is None or u < last), range(turn + 1, turn + horizon + 1))
-    return [u for u in quiet if u > answered]
+    plan's next change (and before `last`), except those already answered (up to `answered`: none of them brings a
+    change, so the plan is read from the first turn not answered on)."""
+    return list(takewhile(lambda u: not plan.at(u) and (last is None or u < last),
+                          range(max(turn, answered) + 1, turn + horizon + 1)))
 
 
 def _plan_items(texts: Iterable[str], size: Cell, default_drone: str,
