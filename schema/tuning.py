@@ -287,6 +287,13 @@ CONNECT_WAITING_PER_SENDER = 4
 STOP_S = 3.0
 #: How long a process still running after `STOP_S` has to end on SIGTERM before it is killed.
 KILL_S = 1.0
+#: How long the RL zenoh backend goes on reading, once the coordinator's or the environment's presence token has
+#: vanished, for the game's OVER (dronesim/rl_zenoh.py `_Game._event`): a process that ends at the game's end leaves
+#: on OVER, and its token's removal (a declaration, sent at a higher priority than data) may reach this process
+#: before the last STATUS and OVER do (seen once in CI: "the environment left the game" at a game's last turn). Not
+#: measured: those messages are already on their way, a few ms behind; a process that left mid-game is reported
+#: this much later.
+LEFT_GRACE_S = 1.0
 #: How long a ground station waits, after OVER, for the last turn's STATUS (sent before OVER, but on another key;
 #: entities/gcs.py).
 FINAL_STATUS_WAIT = 5.0

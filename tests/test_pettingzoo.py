@@ -684,3 +684,57 @@ def test_bad_reset() -> None:
     env.max_cycles = 0
     with pytest.raises(ConfigError, match="max_cycles"):
         env.reset()
+
+
+class _Events:
+    """An inbox that hands out `events`, then nothing (waiting out the timeout, as an empty inbox does)."""
+
+    def __init__(self, events: list) -> None:
+        self.events = list(events)
+
+    def get(self, timeout: float):
+        import time
+
+        if self.events:
+            return self.events.pop(0)
+        time.sleep(timeout)
+        return None
+
+
+def _game_reading(events: list):
+    from dronesim.rl_zenoh import _Game
+
+    game = _Game.__new__(_Game)
+    game.inbox, game.procs, game.over, game.left, game.deadline = _Events(events), {}, None, None, 5.0
+    return game
+
+
+def test_a_process_leaving_at_the_games_end_is_not_a_failure_when_its_over_follows() -> None:
+    """The environment leaves on OVER, and its token's removal may overtake the last STATUS and OVER on the way to the
+    backend (seen in CI at a game's last turn): they are read, and the game ends as it should."""
+    import time
+
+    from dronesim.rl import BackendError
+    from dronesim.rl_zenoh import _Game
+    from network.transport import Presence, Received
+    from schema import EndReason, Over, Status
+
+    last = Status(turn=40, sender="SRV", game="g", drones=())
+    over = Over(turn=40, sender="SRV", game="g", reason=EndReason.TURN_LIMIT, text="the end")
+    game = _game_reading([Presence(entity="ENV", session="s", alive=False), Received("k", last), Received("k", over)])
+    assert _Game._status(game, 40, time.monotonic() + 5.0) == last
+    with pytest.raises(BackendError, match="the game ended before"):
+        _Game._status(game, 41, time.monotonic() + 5.0)
+    assert game.over == over
+
+
+def test_a_process_leaving_mid_game_is_reported_within_the_grace() -> None:
+    import time
+
+    from dronesim.rl import BackendError
+    from dronesim.rl_zenoh import _Game
+    from network.transport import Presence
+
+    game = _game_reading([Presence(entity="ENV", session="s", alive=False)])
+    with pytest.raises(BackendError, match="the environment left the game"):
+        _Game._status(game, 3, time.monotonic() + 5.0)
