@@ -123,8 +123,8 @@ class _Game:
         self.inbox = Inbox(self.session, self.keys, self.log)
         self.out = Outbox(self.session)
         self.members: list[Membership] = []  # the ground station's and the swarm host's admissions
-        self.left: tuple[str, float] | None = None  # a role whose presence vanished before OVER, and until when its
-        # OVER may still come (`_event`)
+        self.vanished: tuple[str, float] | None = None  # a role whose presence token vanished before OVER, and until
+        # when its OVER may still come (`_event`)
 
     def _start(self, name: str, argv: list[str]) -> None:
         log = open(self.logs / f"{self.root}.{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed in end()
@@ -152,20 +152,20 @@ class _Game:
         """The next event, checking the processes while none comes; BackendError past `end`."""
         while True:
             now = time.monotonic()
-            if self.left is not None and now >= self.left[1] and self.over is None:
-                raise BackendError(f"the {ROLES[self.left[0]]} left the game (its presence token vanished)")
+            if self.vanished is not None and now >= self.vanished[1] and self.over is None:
+                raise BackendError(f"the {ROLES[self.vanished[0]]} left the game (its presence token vanished)")
             left = end - now
             if left <= 0:
                 raise BackendError(f"no {waiting_for} within {self.deadline:g} s: the game's processes stopped "
                                    "answering")
-            grace = [] if self.left is None else [max(0.0, self.left[1] - now)]
+            grace = [] if self.vanished is None else [max(0.0, self.vanished[1] - now)]
             event = self.inbox.get(min(left, PROCESS_CHECK_S, *grace))
             if event is None:
                 self._check()
                 continue
             if isinstance(event, Presence) and not event.alive and event.entity in ROLES and self.over is None:
                 self._check()  # (a process ending at the game's end: its OVER may still be on its way)
-                self.left = self.left or (event.entity, time.monotonic() + LEFT_GRACE_S)
+                self.vanished = self.vanished or (event.entity, time.monotonic() + LEFT_GRACE_S)
                 continue
             return event
 

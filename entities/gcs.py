@@ -481,7 +481,7 @@ class Station:
         """A script with nothing new in the turns after `turn` answers them now, up to `ahead` turns on: once
         topped up, one more at each STATUS (its DONEs go out `PUT_GAP` apart, so a batch would not travel together,
         and its last ones would come after their phases in a fast game)."""
-        if not self.scripted or self.answered - turn >= self.ahead:
+        if not self.scripted:
             return []
         turns = turns_to_answer_ahead(self.plan, turn, self.answered, last=self.quit_at, horizon=self.ahead)
         self.answered = max([self.answered, *turns])

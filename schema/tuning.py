@@ -49,8 +49,8 @@ UPD_WINDOW = 8
 #: 5 pairs alternated: 1.16-1.53 vs 1.12-1.26 ms (median), coordinator CPU 0.7 vs 0.6 ms a turn (the four then
 #: travelled together). Since the station's DONEs go out `PUT_GAP` apart, four at a time came late in a fast game
 #: (its phase announced, a round trip more: 37 GCS phases heard in a 611-turn one-drone game on 64x64x16 against
-#: 22 one at a time, 19 with the plan's changes alone; 48 vs 34 with 128 drones, BENCHMARKS.md "Against the tree
-#: before issue 34").
+#: 22 one at a time, 19 with the plan's changes alone; 48 vs 34 with 128 drones, BENCHMARKS.md "Since: the ground
+#: station's answers ahead one a STATUS").
 ANSWER_AHEAD = 8
 
 #: Cells (asked, neighbours included) up to which the environment answers an ASK cell by cell in Python, not in

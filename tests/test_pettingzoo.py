@@ -705,7 +705,7 @@ def _game_reading(events: list):
     from dronesim.rl_zenoh import _Game
 
     game = _Game.__new__(_Game)
-    game.inbox, game.procs, game.over, game.left, game.deadline = _Events(events), {}, None, None, 5.0
+    game.inbox, game.procs, game.over, game.vanished, game.deadline = _Events(events), {}, None, None, 5.0
     return game
 
 
