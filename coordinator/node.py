@@ -462,8 +462,9 @@ def listening(session: zenoh.Session, keys: Keys, engine: Engine, logger: loggin
     for key, kind in [(keys.any_tgt, Target), (keys.gcs_done, Done), (keys.any_nps, Nps),
                       (keys.any_moves, Moves)] + [(keys.upd, Upd)] * verify_env:
         # (UPD: each ENV phase's report, checked against the engine's world; the others are refused
-        # unread when they are for a turn before the engine's: stale)
-        inbox.subscribe(key, kind, since=None if kind is Upd else lambda: engine.turn)
+        # unread when they are for a turn before the engine's: stale; a DONE for a later turn, an answer ahead, is
+        # taken when the loop next wakes, before what woke it: it wakes the loop for nothing else, once a turn)
+        inbox.subscribe(key, kind, since=None if kind is Upd else lambda: engine.turn, ahead_quiet=kind is Done)
     inbox.watch_presence()
     return inbox
 

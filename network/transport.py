@@ -35,7 +35,7 @@ from schema.acl import flood_filters
 from schema.errors import MalformedMessage, RejectCounter, RemoteInputError, StaleTurn, UsageError, WrongSender, excerpt
 from schema.keys import ROOT, size_limit
 from schema.messages import is_entity_id
-from schema.tuning import AUDIT_S, ORIGIN_BYTES, ORIGIN_QUEUE, ORIGIN_SHARE, ROUTER_ANSWER_S
+from schema.tuning import AUDIT_S, ORIGIN_BYTES, ORIGIN_QUEUE, ORIGIN_SHARE, QUIET_MOST, ROUTER_ANSWER_S
 
 
 def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
@@ -424,10 +424,12 @@ class FairQueue:
     time: the rest wait and join the end of the line one by one, as its events are taken. So one origin's burst
     delays another origin's next event by at most `share` of its own, and below that nothing is reordered. At
     most `budget` events and `budget_bytes` bytes (the payloads they came as) are queued per origin: `put`
-    raises a `flood` RemoteInputError beyond. Thread-safe."""
+    raises a `flood` RemoteInputError beyond. An event put `quiet` does not wake the consumer: it is taken first
+    when the consumer next takes one (at most `quiet` of them are so kept). Thread-safe."""
 
-    def __init__(self, budget: int = ORIGIN_QUEUE, budget_bytes: int = ORIGIN_BYTES, share: int = ORIGIN_SHARE) -> None:
-        self.budget, self.budget_bytes, self.share = budget, budget_bytes, share
+    def __init__(self, budget: int = ORIGIN_QUEUE, budget_bytes: int = ORIGIN_BYTES, share: int = ORIGIN_SHARE,
+                 quiet: int = QUIET_MOST) -> None:
+        self.budget, self.budget_bytes, self.share, self.quiet = budget, budget_bytes, share, quiet
         self._lock = threading.Lock()  # guards the three below and the order of entries into the line
         self._queues: dict[str, collections.deque[tuple[object, int]]] = {}  # origin -> (event, size), in order
         self._bytes: dict[str, int] = {}  # origin -> bytes of its events queued
@@ -436,6 +438,9 @@ class FairQueue:
         self._line: queue.SimpleQueue[str | None] = queue.SimpleQueue()
         self._until: float | None = None  # while the consumer waits with a time limit: when it must be back
         self._watcher: _Overdue | None = None
+        # the quiet events, in order of arrival (taken before the line; the consumer alone pops them)
+        self._quiet: collections.deque[object] = collections.deque()
+        self._woken_by: str | None = None  # an origin taken from the line while quiet events came: its turn is next
 
     def full(self, origin: str, size: int = 0) -> str | None:
         """Why an event of `size` bytes from `origin` would be over its budget (None: it would not). A
@@ -448,10 +453,15 @@ class FairQueue:
             return f"{held} bytes from {origin} are already waiting"
         return None
 
-    def put(self, origin: str, event: object, size: int = 0, *, budgeted: bool = True) -> None:
+    def put(self, origin: str, event: object, size: int = 0, *, budgeted: bool = True, quiet: bool = False) -> None:
+        """Queue `event` from `origin`; `quiet`: the consumer need not wake for it (a ground station's answer ahead, for
+        a turn to come): it takes it before any other when it next takes one, unless `quiet` are already so kept."""
         with self._lock:
             if budgeted and (why := self.full(origin, size)) is not None:
                 raise RemoteInputError(why, reason="flood")
+            if quiet and len(self._quiet) < self.quiet:
+                self._quiet.append(event)
+                return
             self._queues.setdefault(origin, collections.deque()).append((event, size))
             self._bytes[origin] = self._bytes.get(origin, 0) + size
             if self._lined.get(origin, 0) < self.share:
@@ -466,17 +476,26 @@ class FairQueue:
         self._line.put(None)
 
     def take(self, timeout: float | None) -> tuple[bool, object]:
-        """(True, the next event), or (False, None) after `timeout` seconds (None: no limit) or a `wake`."""
-        if timeout is not None:
-            self._until = time.monotonic() + timeout
-            if self._watcher is None or self._watcher.pid != os.getpid():
-                self._watcher = _Overdue(self)
-        try:
-            origin = self._line.get(timeout=timeout)
-        except queue.Empty:
-            return False, None
-        finally:
-            self._until = None
+        """(True, the next event), or (False, None) after `timeout` seconds (None: no limit) or a `wake`. The quiet
+        events come first, those that came while it waited included (before the event that woke it)."""
+        if self._quiet:
+            return True, self._quiet.popleft()
+        if (origin := self._woken_by) is not None:
+            self._woken_by = None
+        else:
+            if timeout is not None:
+                self._until = time.monotonic() + timeout
+                if self._watcher is None or self._watcher.pid != os.getpid():
+                    self._watcher = _Overdue(self)
+            try:
+                origin = self._line.get(timeout=timeout)
+            except queue.Empty:
+                return False, None
+            finally:
+                self._until = None
+            if origin is not None and self._quiet:  # they came first
+                self._woken_by = origin
+                return True, self._quiet.popleft()
         if origin is None:
             return False, None
         with self._lock:
@@ -504,7 +523,7 @@ class FairQueue:
     def drain(self) -> list[object]:
         """Every event queued, in the order `take` would give them (for the one consumer: never blocks)."""
         out: list[object] = []
-        while not self._line.empty():
+        while self._quiet or self._woken_by is not None or not self._line.empty():
             got, event = self.take(None)
             if got:
                 out.append(event)
@@ -560,9 +579,10 @@ class Inbox:
             raise RemoteInputError(why, reason="flood")
 
     def subscribe(self, key: str, expect: type[Message] | tuple[type[Message], ...], *,
-                  since: Callable[[], int] | None = None) -> zenoh.Subscriber:
+                  since: Callable[[], int] | None = None, ahead_quiet: bool = False) -> zenoh.Subscriber:
         """Messages on `key` become `Received` events (until `unsubscribe`); with `since`, those stamped with
-        a turn before `since()` are refused as stale."""
+        a turn before `since()` are refused as stale, and with `ahead_quiet` those stamped with a later turn do not
+        wake the main thread (`FairQueue.put`'s `quiet`: it takes them before the event it next wakes for)."""
         limit = max(size_limit(t) for t in (expect if isinstance(expect, tuple) else (expect,)))
         origins: dict[str, str] = {}  # key -> its origin, for the first `KEYS_REMEMBERED` keys it came on
 
@@ -580,9 +600,13 @@ class Inbox:
                 budgeted = _budgeted(origin)
                 self._admit(origin, len(payload), limit, budgeted)
                 data = payload.to_bytes()
-                if since is not None and type(turn := _turn(data)) is int and turn < (now := since()):
-                    raise StaleTurn(f"a message for turn {turn}, before turn {now}")
-                self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=budgeted)
+                quiet = False
+                if since is not None and type(turn := _turn(data)) is int:
+                    if turn < (now := since()):
+                        raise StaleTurn(f"a message for turn {turn}, before turn {now}")
+                    quiet = ahead_quiet and turn > now
+                self._events.put(origin, _Unread(k, origin, None, data, expect), len(data), budgeted=budgeted,
+                                 quiet=quiet)
             except RemoteInputError as err:
                 self.rejects.reject(k, err, origin)
             except Exception:  # a bug: log it, never let Zenoh swallow it silently

@@ -272,6 +272,46 @@ def target(turn: int, drone: str = "D01") -> Target:
     return Target(turn=turn, sender="GCS", drone=drone, pos=(1, 2, 3))
 
 
+def test_a_quiet_event_wakes_no_one_and_comes_before_what_wakes_the_consumer() -> None:
+    """An event put `quiet` (a ground station's answer ahead) puts nothing in the line a waiting consumer is woken by;
+    the consumer takes it first at its next take, before the event that woke it, whichever came first."""
+    q, got = FairQueue(), []
+    consumer = threading.Thread(target=lambda: got.extend([q.take(30), q.take(30), q.take(0)]), daemon=True)
+    consumer.start()
+    q.put("GCS", "ahead 9", quiet=True)
+    assert q._line.qsize() == 0, "a quiet event must not wake the consumer"
+    q.put("H01", "moves 1")  # wakes it
+    consumer.join(10)
+    assert got == [(True, "ahead 9"), (True, "moves 1"), (False, None)]
+    q.put("H01", "moves 2")
+    q.put("GCS", "ahead 10", quiet=True)
+    assert q.take(0) == (True, "ahead 10") and q.take(0) == (True, "moves 2")
+
+
+def test_quiet_events_beyond_their_bound_wake_the_consumer_and_keep_their_order() -> None:
+    q = FairQueue(budget=100, quiet=2)
+    for n in range(4):
+        q.put("GCS", ("ahead", n), quiet=True)
+    assert q._line.qsize() == 2, "the two beyond the bound are in the line"
+    q.put("H01", "moves")
+    assert q.drain() == [("ahead", 0), ("ahead", 1), ("ahead", 2), ("ahead", 3), "moves"]
+    with pytest.raises(RemoteInputError, match="already waiting"):  # a quiet one is refused over its budget too
+        FairQueue(budget=0).put("GCS", "x", quiet=True)
+
+
+def test_a_message_for_a_later_turn_than_since_is_quiet_with_ahead_quiet(pair) -> None:
+    """The coordinator's DONE subscription: an answer ahead (a turn after `since()`) is queued quiet, one for the
+    turn now wakes the main thread; both are taken, the answer ahead first."""
+    inbox, out, keys = pair
+    inbox.subscribe(keys.tgt(UNBUDGETED), Target, since=lambda: 4, ahead_quiet=True)
+    subscribed(out, inbox, keys.tgt(UNBUDGETED))
+    out.put(keys.tgt(UNBUDGETED), target(6, UNBUDGETED))
+    out.put(keys.tgt(UNBUDGETED), target(4, UNBUDGETED))
+    first = inbox.get(10)
+    assert first is not None and first.msg.turn == 6, "the quiet one, though it wakes no one, comes first"
+    assert inbox.get(10).msg.turn == 4 and inbox.drain() == []
+
+
 def test_a_message_for_a_turn_before_since_is_refused_before_it_is_queued(pair) -> None:
     inbox, out, keys = pair
     inbox.subscribe(keys.tgt(UNBUDGETED), Target, since=lambda: 4)
