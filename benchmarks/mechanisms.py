@@ -103,8 +103,8 @@ MECHANISMS: tuple[Mechanism, ...] = (
          "coordinator/intake.py::Ahead",
          "coordinator/engine.py:/_early|AHEAD_MAX|ahead/", "schema/tuning.py::AHEAD_MAX",
          "schema/tuning.py::ANSWER_AHEAD", "entities/station_link.py:/ahead/", "coordinator/effects.py::drones_first",
-         "coordinator/engine.py:/drones_first/", "schema/tuning.py::QUIET_MOST", "network/transport.py:/quiet|_woken_by/",
-         "coordinator/node.py:/ahead_quiet|answer ahead/"),
+         "coordinator/engine.py:/drones_first/", "schema/tuning.py::QUIET_MOST",
+         "network/transport.py:/quiet|_woken_by/", "coordinator/node.py:/ahead_quiet|answer ahead/"),
         Variant(ahead=0), ((1, (64, 64, 16)), (128, (64, 64, 16))),
         "the station answers each phase when it opens (`Station(ahead=0)`)"),
     Mechanism(
