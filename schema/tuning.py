@@ -93,11 +93,10 @@ ORIGIN_QUEUE = 1024
 ORIGIN_SHARE = 8
 #: Events a process may hold queued without waking its main thread (network/transport.py `FairQueue.put`'s `quiet`:
 #: a ground station's answers ahead, for turns to come, which the coordinator takes when it next wakes, before the
-#: event it wakes for); beyond, they wake it as the others do. Measured (`dronesim bench perf`, 128 drones, issue 34):
-#: the coordinator woke for each answer ahead, one a turn since issue 33's budget of puts a second (`PUT_RATE`) ended
-#: their batches; quiet, the 128-drone rows went from 0.90-0.97 of their speed without that budget to 1.04-1.09 of
-#: their speed with it woken for (BENCHMARKS.md, "Answers ahead taken without waking"). A station holds at most
-#: `ANSWER_AHEAD` ahead, one more a STATUS: a few suffice.
+#: event it wakes for); beyond, they wake it as the others do. Since issue 33's budget of puts a second (`PUT_RATE`)
+#: the answers ahead come one a turn, and each woke the coordinator. Measured (`dronesim bench perf`, 128 drones, five
+#: rounds, issue 34): quiet, turns/s 1.09 (64x64x16) and 1.04 (256x256x32) times those with a wake for each (means;
+#: BENCHMARKS.md, "Answers ahead taken without waking"). A station sends one answer ahead a STATUS: a few suffice.
 QUIET_MOST = 4
 #: Bytes (as payloads) of the events from one origin a process may hold queued beyond its first (which its key's
 #: size limit bounds). Not measured: about 13 of the largest ASKs (525 KB, `schema.keys.size_limit`), far above a
