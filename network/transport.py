@@ -425,11 +425,11 @@ class FairQueue:
     delays another origin's next event by at most `share` of its own, and below that nothing is reordered. At
     most `budget` events and `budget_bytes` bytes (the payloads they came as) are queued per origin: `put`
     raises a `flood` RemoteInputError beyond. An event put `quiet` does not wake the consumer: it is taken first
-    when the consumer next takes one (at most `quiet` of them are so kept). Thread-safe."""
+    when the consumer next takes one (at most `quiet_most` of them are so kept). Thread-safe."""
 
     def __init__(self, budget: int = ORIGIN_QUEUE, budget_bytes: int = ORIGIN_BYTES, share: int = ORIGIN_SHARE,
-                 quiet: int = QUIET_MOST) -> None:
-        self.budget, self.budget_bytes, self.share, self.quiet = budget, budget_bytes, share, quiet
+                 quiet_most: int = QUIET_MOST) -> None:
+        self.budget, self.budget_bytes, self.share, self.quiet_most = budget, budget_bytes, share, quiet_most
         self._lock = threading.Lock()  # guards the three below and the order of entries into the line
         self._queues: dict[str, collections.deque[tuple[object, int]]] = {}  # origin -> (event, size), in order
         self._bytes: dict[str, int] = {}  # origin -> bytes of its events queued
@@ -454,12 +454,12 @@ class FairQueue:
         return None
 
     def put(self, origin: str, event: object, size: int = 0, *, budgeted: bool = True, quiet: bool = False) -> None:
-        """Queue `event` from `origin`; `quiet`: the consumer need not wake for it (a ground station's answer ahead, for
-        a turn to come): it takes it before any other when it next takes one, unless `quiet` are already so kept."""
+        """Queue `event` from `origin`; `quiet`: the consumer need not wake for it (a ground station's answer ahead,
+        for a turn to come): it takes it before any other when it next takes one, unless `quiet_most` already are."""
         with self._lock:
             if budgeted and (why := self.full(origin, size)) is not None:
                 raise RemoteInputError(why, reason="flood")
-            if quiet and len(self._quiet) < self.quiet:
+            if quiet and len(self._quiet) < self.quiet_most:
                 self._quiet.append(event)
                 return
             self._queues.setdefault(origin, collections.deque()).append((event, size))

@@ -31,7 +31,7 @@ def test_head_against_itself_measures_each_role_asked(capsys):
 
 
 def test_an_unknown_revision_or_role_is_refused(capsys):
-    assert instructions.main(["no-such-revision-anywhere", "--row", "x", "--roles", "env"]) in (2,)
+    assert instructions.main(["no-such-revision-anywhere", "--row", "x", "--roles", "env"]) == 2
     assert "'no-such-revision-anywhere' is not a revision" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_:
         instructions.main(["HEAD", "--row", "x", "--roles", "gcs"])

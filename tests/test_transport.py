@@ -289,7 +289,7 @@ def test_a_quiet_event_wakes_no_one_and_comes_before_what_wakes_the_consumer() -
 
 
 def test_quiet_events_beyond_their_bound_wake_the_consumer_and_keep_their_order() -> None:
-    q = FairQueue(budget=100, quiet=2)
+    q = FairQueue(budget=100, quiet_most=2)
     for n in range(4):
         q.put("GCS", ("ahead", n), quiet=True)
     assert q._line.qsize() == 2, "the two beyond the bound are in the line"
