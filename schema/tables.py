@@ -115,9 +115,11 @@ def ranked_ok(value: object) -> bool:
     return True
 
 
-#: Every valid ranking (`ranked_ok`), sorted: each ordered choice of distinct steps, packed (13,700; 54 KiB).
-_RANKINGS = np.sort(np.fromiter((rank_steps(p) for k in range(len(RANK_STEPS) + 1)
-                                 for p in itertools.permutations(RANK_STEPS, k)), np.int32))
+@functools.cache
+def _rankings() -> frozenset[int]:
+    """Every valid ranking (`ranked_ok`): each ordered choice of distinct steps, packed (13,700; about 0.9 MiB as a
+    set, made on first use: only the processes that check steps pay it)."""
+    return frozenset(rank_steps(p) for k in range(len(RANK_STEPS) + 1) for p in itertools.permutations(RANK_STEPS, k))
 
 
 def optional_cell(c: list[int]) -> tuple[int, int, int] | None:
@@ -241,11 +243,11 @@ class Table:
         """Why some row of `rows` (at least one) is not valid, the first column's reason; None if all are."""
         for name, kind in cls.LAYOUT:
             col = rows[name]
-            if kind is Col.DRONE:
-                if col.min() < 1 or col.max() > MAX_DRONE:
+            if kind is Col.DRONE:  # sorted (tables come in ids' order, D10 before D9): the least, then the steps
+                ranked = np.sort(col)  # (a u16 is at most MAX_DRONE)
+                if ranked[0] < 1:
                     return _WHY_NUMBER
-                ordered = len(col) == 1 or np.subtract(col[1:], col[:-1], dtype=np.int32).min() > 0  # (at once)
-                if not ordered and len(np.unique(col)) != len(col):
+                if not np.subtract(ranked[1:], ranked[:-1]).all():  # a repeat is a step of 0
                     return _WHY_ONCE
             elif isinstance(kind, Col):
                 if not _column_ok(col, kind):
@@ -367,19 +369,18 @@ def _cell_ok(value: object, lo: int) -> bool:
 
 
 def _column_ok(col: np.ndarray, kind: Col) -> bool:
-    """A cell or ranking column valid, with numpy. A ranking: each value among the valid rankings (a bisection
-    each). A cell: a u32 view of an i32 turns negative values into huge ones, so one maximum checks both bounds.
+    """A cell or ranking column valid, with as few numpy calls as it can: each costs tens of microseconds on a
+    thread just woken, as a process is at each message (docs/performance.md, "Tables' checks"). A ranking: its
+    values, as Python ints, all among the valid rankings (a set). A cell: its least and greatest coordinates.
     No mask of one byte a row: numpy keeps freed buffers under 1 KiB, up to 7 of each size, and tables of every
     size come (docs/performance.md, Memory)."""
     if kind is Col.RANKED:
-        at = np.searchsorted(_RANKINGS, col).clip(max=len(_RANKINGS) - 1)
-        return not np.count_nonzero(_RANKINGS[at] - col)
+        return _rankings().issuperset(col.tolist())
     lo = _LOWEST[kind]
-    if kind is not Col.OPTIONAL:
-        return bool((col - lo if lo else col).view(np.uint32).max() <= MAX_COORD - lo)
-    u = np.ascontiguousarray(col).view(np.uint32) + np.uint32(1)  # an absent cell's -1 is 0 (u32 wraps)
-    if u.max() > MAX_COORD + 1:
-        return False
+    least, most = col.min(), col.max()
+    if kind is not Col.OPTIONAL or least >= 0 or least < -1 or most > MAX_COORD:  # (an optional one: none absent)
+        return bool(least >= lo and most <= MAX_COORD)
+    u = np.ascontiguousarray(col).view(np.uint32) + np.uint32(1)  # some -1: an absent cell's is 0 (u32 wraps)
     # all three absent or none: as many rows with no coordinate absent as rows with one present (column by
     # column: a reduction over each row's three values costs ten times as much)
     x, y, z = u[:, 0], u[:, 1], u[:, 2]
