@@ -370,7 +370,7 @@ def _cell_ok(value: object, lo: int) -> bool:
 
 def _column_ok(col: np.ndarray, kind: Col) -> bool:
     """A cell or ranking column valid, with as few numpy calls as it can: each costs tens of microseconds on a
-    thread just woken, as a process is at each message (docs/performance.md, "Tables' checks"). A ranking: its
+    thread just woken, as a process is at each message (docs/performance.md, the Tables row). A ranking: its
     values, as Python ints, all among the valid rankings (a set). A cell: its least and greatest coordinates.
     No mask of one byte a row: numpy keeps freed buffers under 1 KiB, up to 7 of each size, and tables of every
     size come (docs/performance.md, Memory)."""
