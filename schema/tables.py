@@ -244,10 +244,10 @@ class Table:
         for name, kind in cls.LAYOUT:
             col = rows[name]
             if kind is Col.DRONE:  # sorted (tables come in ids' order, D10 before D9): the least, then the steps
-                ranked = np.sort(col)  # (a u16 is at most MAX_DRONE)
-                if ranked[0] < 1:
+                numbers = np.sort(col)  # (a u16 is at most MAX_DRONE)
+                if numbers[0] < 1:
                     return _WHY_NUMBER
-                if not np.subtract(ranked[1:], ranked[:-1]).all():  # a repeat is a step of 0
+                if not np.subtract(numbers[1:], numbers[:-1]).all():  # a repeat is a step of 0
                     return _WHY_ONCE
             elif isinstance(kind, Col):
                 if not _column_ok(col, kind):
@@ -378,7 +378,7 @@ def _column_ok(col: np.ndarray, kind: Col) -> bool:
         return _rankings().issuperset(col.tolist())
     lo = _LOWEST[kind]
     least, most = col.min(), col.max()
-    if kind is not Col.OPTIONAL or least >= 0 or least < -1 or most > MAX_COORD:  # (an optional one: none absent)
+    if kind is not Col.OPTIONAL or least != -1 or most > MAX_COORD:  # (optional: none absent, or out of bounds)
         return bool(least >= lo and most <= MAX_COORD)
     u = np.ascontiguousarray(col).view(np.uint32) + np.uint32(1)  # some -1: an absent cell's is 0 (u32 wraps)
     # all three absent or none: as many rows with no coordinate absent as rows with one present (column by
