@@ -243,6 +243,10 @@ class Engine:
             # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
             awaited = fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
             return effects + ([] if self.roster.missing(fleet, awaited) else self._start())
+        # the last of those back after a lost link to connect again: what went out when the hold ended goes out once
+        # more (then it may not have reached them: `Outage`)
+        if self.outage.rejoined(msg.sender):  # (or one that vanished meanwhile, admitted anew)
+            return effects + self._go_on()
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
         # A returning environment or ground station takes up the phase in progress.
         if msg.role is Role.ENV and self._held and self._phase_msg is not None:
@@ -728,6 +732,13 @@ class Engine:
         if role is None or self.stage is Stage.OVER:
             return []
         self._log.warning("%s vanished", entity)
+        effects = self._left(entity, role)
+        if self.outage.rejoined(entity):  # the last one awaited to connect again after a lost link (`connect`)
+            effects += self._go_on()
+        return effects
+
+    def _left(self, entity: str, role: Role) -> list[Effect]:
+        """What an admitted entity's leaving changes (`vanished`)."""
         if role is Role.GCS:
             self.ahead.dones.clear()  # what it said ahead goes with it
             if self.stage is Stage.GCS:

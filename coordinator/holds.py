@@ -1,7 +1,7 @@
 """The hold for a lost link (`Outage`): when the coordinator's own presence vanishes (a router restarted, frozen,
 or cut), nobody has left; the game holds until every admitted entity is back or `link_grace` has passed
 (coordinator/engine.py: `Engine.link_lost`, `present`, `link_back`, `vanished`, `expire`). Pure bookkeeping of who
-is still away: no clock of its own."""
+is still away, and then of who has not connected again yet: no clock of its own."""
 
 from __future__ import annotations
 
@@ -11,17 +11,23 @@ from .admission import Roster
 
 
 class Outage:
-    """Who of the entities admitted in `roster` is not back yet while the link is down (`away`; None: no hold)."""
+    """Who of the entities admitted in `roster` is not back yet while the link is down (`away`; None: no hold), and,
+    once the hold has ended with every presence token back, who has not connected again yet (`rejoining`): a token
+    back says the entity's link is up, not that the router has its subscriptions yet (what went out at once, the
+    phase again, may not reach it), while its CONNECT, sent on that link after them, does say so."""
 
     def __init__(self, roster: Roster) -> None:
         self.roster = roster
         self.away: set[str] | None = None
+        self.rejoining: set[str] = set()
+        self._held: frozenset[str] = frozenset()  # who was away when the hold began
 
     def begin(self, entities: Iterable[str]) -> bool:
         """The link is down: `entities` (the admitted ones) are away. False if a hold was on already."""
         if self.away is not None:
             return False
         self.away = set(entities)
+        self._held, self.rejoining = frozenset(self.away), set()
         return True
 
     def back(self, entity: str, session: str) -> bool:
@@ -32,8 +38,17 @@ class Outage:
         self.away.discard(entity)
         if self.away:
             return False
-        self.away = None
+        self.away, self.rejoining = None, set(self._held)
         return True
+
+    def rejoined(self, entity: str) -> bool:
+        """`entity` was admitted again: whether it was the last one of those back with their tokens to connect again
+        (the phase in progress, sent again when the hold ended, then goes out once more: now every one of them
+        hears it)."""
+        if entity not in self.rejoining:
+            return False
+        self.rejoining.discard(entity)
+        return not self.rejoining
 
     def gone(self, entity: str, session: str) -> bool:
         """`entity`'s presence token vanished (from `session`): whether the hold takes it as away, not gone (until
@@ -47,5 +62,5 @@ class Outage:
     def end(self) -> list[str]:
         """The hold ends (the last one back, the routers answer again, or `link_grace` has passed): those still away,
         sorted."""
-        gone, self.away = sorted(self.away or ()), None
+        gone, self.away, self.rejoining = sorted(self.away or ()), None, set()
         return gone

@@ -88,6 +88,8 @@ class Ballot:
         if i is None or fleet.state[i] != ALIVE:
             raise UnknownEntity(f"NPS from {d}, which is not an alive drone of this game")
         if self.moved[i]:
+            if cell_of(self.proposed[i]) == pos and (self.said[i], self.ranked[i]) == (code_of(note), ranked):
+                return  # the same again (its TURN was sent again: `Engine.connect`)
             raise StaleTurn(f"second NPS from {d} in turn {self.turn}")
         here = cell_of(fleet.pos[i])
         if not is_step(here, pos):

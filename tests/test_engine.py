@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import re
@@ -384,6 +385,43 @@ def test_a_restarted_environment_rejoins_and_takes_up_the_phase() -> None:
     assert isinstance(reply(effects), Welcome)
     assert pubs(effects) == [g.engine.status()], "it resyncs from the last STATUS; the DRONES turn is already out"
     assert g.engine.status().turn == g.turn - 1
+
+
+def test_after_a_lost_link_the_phase_goes_out_again_once_every_entity_has_connected_again() -> None:
+    """Every presence token back ends the hold and the phase goes out again; but a token back does not say that the
+    router has the entity's subscriptions yet (seen: a drone never heard that TURN and hovered). The last of them to
+    connect again has it sent once more, and a drone that answers it with its move again is not refused."""
+    entities = {"ENV": (Role.ENV, ()), "GCS": (Role.GCS, ()), "D01": (Role.DRONE, ("D01",)),
+                "D02": (Role.DRONE, ("D02",))}
+
+    def hello(who: str) -> list:  # each process's CONNECT, the same session each time
+        role, drones = entities[who]
+        msg = Connect(turn=0, sender=who, role=role, drones=drones, autopilot="seed" if drones else "",
+                      session=f"z{who.lower()}")
+        return g.engine.connect(msg, Token(who))
+
+    g = Game(config(("D01", (0, 0, 0)), ("D02", (4, 4, 4))), hosts={}, gcs=False)
+    g.engine.entities.pop("ENV")
+    for who in entities:
+        g.feed(hello(who))
+    g.gcs()
+    g.nps("D02", (4, 4, 3))
+    phase = pubs(g.effects, Turn)[-1]
+    assert phase.phase is Phase.DRONES and g.stage is Stage.DRONES
+    assert g.engine.link_lost() == []
+    for who in entities:
+        assert g.engine.vanished(who, f"z{who.lower()}") == [], "away, not gone"
+    back = [e for who in entities for e in g.engine.present(who, f"z{who.lower()}")]
+    assert pubs(back) == [g.engine.status(), phase]
+    for who in ("GCS", "D01", "ENV"):
+        effects = hello(who)
+        assert isinstance(reply(effects), Welcome) and pubs(effects) == [g.engine.status()]
+    last = hello("D02")
+    assert pubs(last) == [g.engine.status(), phase], "the last one to connect again: the phase once more"
+    assert g.nps("D02", (4, 4, 3)) == [], "the same move again: nothing, not refused"
+    refused(g.nps("D02", (3, 4, 4)), StaleTurn, "second NPS")
+    assert g.engine.moves_taken() == {"D02": (4, 4, 3)}
+    assert pubs(hello("D01")) == [g.engine.status()], "only once"
 
 
 def test_drone_host_vanishing_during_admission_frees_its_drones() -> None:
@@ -1129,20 +1167,24 @@ def test_a_big_batch_takes_and_refuses_what_moves_one_by_one_would(size: int) ->
             steps.append(Step(drone=d, pos=(x, y, z + (2 if jump else 1)), note=Note.REACHED if n % 2 else Note.NONE))
         steps.append(Step(drone=starts[size][0], pos=(0, 0, 4)))  # H02's drone: spoofed
         steps.append(Step(drone="D99", pos=(0, 0, 4)))  # not in this game
-        errors: list[list[str]] = [[], []]
-        for again in (0, 1):  # the same moves sent twice: the second time, the moves taken are refused
-            for batch in [steps] if batched else [[st] for st in steps]:
+        other = [dataclasses.replace(st, note=Note.NONE if st.note is Note.REACHED else Note.REACHED) for st in steps]
+        errors: list[list[str]] = [[], [], []]
+        # the moves, then the same with other notes (the moves taken are refused), then the same again (those taken
+        # are nothing: a host answers a TURN sent again with the same moves)
+        for again, sent in enumerate((steps, other, steps)):
+            for batch in [sent] if batched else [[st] for st in sent]:
                 effects = g.feed(g.engine.receive(Moves(turn=1, sender="H01", moves=tuple(batch))))
                 errors[again] += [str(e.err) for e in effects if isinstance(e, Refusal)]
         return g.engine.moves_taken(), errors
 
-    taken, (errors, errors_again) = play(batched=True)
-    one_by_one, (each, each_again) = play(batched=False)
+    taken, (errors, errors_again, errors_same) = play(batched=True)
+    one_by_one, (each, each_again, each_same) = play(batched=False)
     assert taken == one_by_one and len(taken) == size - len(range(3, size, 7))
     assert errors[0].startswith(each[0]) and f"and {len(each) - 1} more" in errors[0]
     assert "D99, which nobody flies" in each[-1] and f"{starts[size][0]}, which H02 flies" in each[-2]
     assert len(each_again) == size + 2 and sum("second NPS" in e for e in each_again) == len(taken)
     assert errors_again[0].startswith(each_again[0]) and f"and {len(each_again) - 1} more" in errors_again[0]
+    assert each_same == each and errors_same == errors, "the same moves again: only what was refused is refused"
 
 
 def test_batches_give_the_same_journal_as_single_messages() -> None:
