@@ -47,6 +47,7 @@ without progress does, and never says an instance unsolvable; nor does a focused
 
 from __future__ import annotations
 
+from bisect import bisect_left, insort
 from collections import deque
 from heapq import heappop, heappush
 from typing import Any
@@ -105,7 +106,8 @@ REFINE_NUMBERS = 1 << 20
 MARGIN = 10
 ROUNDS = 3
 #: A scattered path's search costs a unit per POPS cells it settles (a heap pop and its neighbours' collision counts:
-#: 1.3 µs a cell, about half of what a PIBT call spends on a drone).
+#: 1.3 µs a cell when set, about 0.8 since, docs/performance.md, "The scattered paths' search made cheaper"; a unit
+#: is about what a PIBT call spends on a drone).
 POPS = 2
 #: A drone tries its next cell on its scattered path first while the node's depth is at most HORIZON times its path's
 #: cells (the paths are planned for drones that move every step; in a crowd they are late, and past that, lost).
@@ -207,7 +209,8 @@ class Scatter:
         longest = int(dist[np.arange(n), start].max(initial=0)) + margin + 1
         self.occ = [0] * ((longest + 1) * F)  # (step, cell) -> paths there then
         self.moves: dict[int, int] = {}  # (step, cell, next cell) -> paths taking that edge then
-        self.parked: dict[int, list[int]] = {}  # cell -> the steps from which paths ending there stay there
+        self.parked: list[list[int]] = [[] for _ in range(F)]  # cell -> the steps from which paths ending there stay
+        # there, sorted (those before a step: `bisect_left`)
         self.paths: list[list[int]] = [[] for _ in range(n)]
         self.order = self._order(0)
         self.k, self.round, self.last = 0, 0, -1
@@ -245,9 +248,9 @@ class Scatter:
             for t in range(1, len(path)):
                 v, u = path[t], path[t - 1]
                 total += occ[t * F + v] - 1 + moves.get(((t - 1) * F + v) * F + u, 0)
-                ends = parked.get(v)
+                ends = parked[v]
                 if ends:
-                    total += sum(t > e for e in ends)
+                    total += bisect_left(ends, t)
         return total
 
     def _enroll(self, i: int, path: list[int], sign: int) -> None:
@@ -258,9 +261,9 @@ class Scatter:
                 key = (t * F + v) * F + path[t + 1]
                 moves[key] = moves.get(key, 0) + sign
         if path:
-            ends = self.parked.setdefault(path[-1], [])
+            ends = self.parked[path[-1]]
             if sign > 0:
-                ends.append(len(path) - 1)
+                insort(ends, len(path) - 1)
             else:
                 ends.remove(len(path) - 1)
 
@@ -273,25 +276,29 @@ class Scatter:
         d = self.dist[i].tolist()
         bound = d[s] + self.margin
         heap = [(0, d[s], s, 0, -1)]
-        parent: dict[int, int] = {}
-        met = -1
+        parent = [-2] * F  # each settled cell's parent (-1: none, the start; -2: not settled)
+        settled, met = 0, -1
         while heap:
             c, _, v, g, p = heappop(heap)
-            if v in parent:
+            if parent[v] != -2:
                 continue
             parent[v] = p
+            settled += 1
             if v == goal:
                 met = c
                 break
             t = g + 1
+            tF, gF = t * F, g * F
             for u in near[v]:
                 du = d[u]
-                if u == s or u in parent or t + du > bound:
+                if parent[u] != -2 or t + du > bound:
                     continue
-                cc = c + occ[t * F + u] + moves.get((g * F + u) * F + v, 0)
-                ends = parked.get(u)
+                cc = c + occ[tF + u]
+                if occ[gF + u]:  # (a path takes the edge the other way only if one is in u at g)
+                    cc += moves.get((gF + u) * F + v, 0)
+                ends = parked[u]
                 if ends:
-                    cc += sum(t > e for e in ends)
+                    cc += bisect_left(ends, t)
                 heappush(heap, (cc, t + du, u, t, v))
         path: list[int] = []
         if met >= 0:
@@ -302,7 +309,7 @@ class Scatter:
             path.reverse()
         self.paths[i] = path
         self._enroll(i, path, 1)
-        return 1 + len(parent) // POPS
+        return 1 + settled // POPS
 
     def table(self) -> np.ndarray:
         """Each drone's next cell on its path from each open cell ((n, F), flat cells; -1 off its path)."""
