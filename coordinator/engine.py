@@ -243,10 +243,9 @@ class Engine:
             # resuming: the alive drones (and the ground station, which may have left for good: `gcs_grace`)
             awaited = fleet.alive_rows().tolist() if self.stage is Stage.RESUMING else None
             return effects + ([] if self.roster.missing(fleet, awaited) else self._start())
-        # the last of those back after a lost link to connect again: what went out when the hold ended goes out once
-        # more (then it may not have reached them: `Outage`)
-        if self.outage.rejoined(msg.sender):  # (or one that vanished meanwhile, admitted anew)
-            return effects + self._go_on()
+        # the last of those back after a lost link to connect again (or one that vanished meanwhile, admitted anew):
+        # what went out when the hold ended goes out once more (then it may not have reached them: `Outage`)
+        last = self.outage.rejoined(msg.sender)
         effects.append(Publish(self.status()))  # a late joiner sees the state at once
         # A returning environment or ground station takes up the phase in progress.
         if msg.role is Role.ENV and self._held and self._phase_msg is not None:
@@ -254,6 +253,8 @@ class Engine:
             effects += [Publish(self._phase_msg), *self._take_early_moves()]
         elif self._phase_msg is not None and (msg.role, self.stage) == (Role.GCS, Stage.GCS):
             effects.append(Publish(self._phase_msg))
+        elif last:
+            effects += self._phase_again()
         return effects
 
     def start_here(self, host: str, autopilot: str, cooperative: Sequence[int] = ()) -> None:
@@ -718,10 +719,13 @@ class Engine:
         """What an entity that missed messages needs to go on with the current turn."""
         if not self._playing():
             return []
-        effects: list[Effect] = [Publish(self.status())]
-        if self._phase_msg is not None and self._phase_msg.turn == self.turn and not self._held:
-            effects.append(Publish(self._phase_msg))
-        return effects
+        return [Publish(self.status()), *self._phase_again()]
+
+    def _phase_again(self) -> list[Effect]:
+        """The phase in progress sent again (none while it waits for the environment)."""
+        if self._playing() and self._phase_msg is not None and self._phase_msg.turn == self.turn and not self._held:
+            return [Publish(self._phase_msg)]
+        return []
 
     def vanished(self, entity: str, session: str = "") -> list[Effect]:
         """An admitted entity's presence token disappeared (its process died or was cut off; a refused impostor's
