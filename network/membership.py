@@ -156,11 +156,13 @@ class Membership:
             try:
                 welcome = self._answered(event)
             except NotAdmitted as err:
+                self._lost_since = None  # (a coordinator answered: it is back, the entity waits for its OVER)
                 self.log.warning("%s: %s takes no further part and leaves at the end of the game",
                                  err, self.hello.sender)
                 self.progress.note("refused", self.welcome.turn, str(err))
                 return None
             if welcome is not None:
+                self._lost_since = None  # (admitted again: the grace is over)
                 self.welcome = welcome
                 self.progress.note("admitted", welcome.turn)
                 self.clock = TurnClock(welcome.turn, game=welcome.game, skips_status=self.clock.skips_status,
@@ -170,7 +172,8 @@ class Membership:
             return None
         self._track(event)
         if event.alive and self._lost_since is not None:
-            self._lost_since = None
+            # its grace runs on until a coordinator admits this entity again: a token alone may be anyone's (a
+            # foreign one appearing just after the coordinator died kept the entities waiting without end)
             self.log.warning("the coordinator is back: connecting again")
             if not self._asking:
                 self._connect()
