@@ -20,14 +20,14 @@ class Outage:
         self.roster = roster
         self.away: set[str] | None = None
         self.rejoining: set[str] = set()
-        self._held: frozenset[str] = frozenset()  # who was away when the hold began
+        self._began: frozenset[str] = frozenset()  # who was away when the hold began
 
     def begin(self, entities: Iterable[str]) -> bool:
         """The link is down: `entities` (the admitted ones) are away. False if a hold was on already."""
         if self.away is not None:
             return False
         self.away = set(entities)
-        self._held, self.rejoining = frozenset(self.away), set()
+        self._began, self.rejoining = frozenset(self.away), set()
         return True
 
     def back(self, entity: str, session: str) -> bool:
@@ -38,7 +38,7 @@ class Outage:
         self.away.discard(entity)
         if self.away:
             return False
-        self.away, self.rejoining = None, set(self._held)
+        self.away, self.rejoining = None, set(self._began)
         return True
 
     def rejoined(self, entity: str) -> bool:

@@ -40,8 +40,9 @@ class Membership:
     """An entity's admission, kept through a coordinator restart or a cut link. It declares the entity's
     presence token, connects, and watches the token of the coordinator that admitted it (the session that
     answered its CONNECT: another token under the coordinator's name holds nothing): when it has gone, it
-    waits up to `grace` seconds for a coordinator to appear and then connects again (the coordinator re-admits
-    the same process, or resumes a game from its journal). Refused then (a drone declared LOST meanwhile), the
+    waits up to `grace` seconds to be admitted again, connecting again as soon as a coordinator's token appears
+    (the coordinator re-admits the same process, or resumes a game from its journal); only an answer ends the
+    wait, never a token alone, which may be anyone's. Refused then (a drone declared LOST meanwhile), the
     entity takes no further part: it says so and leaves at OVER. Admission is events on the entity's main loop,
     never a blocking wait: the CONNECT's answer comes as an `Answered` event of the inbox, the coordinator's
     presence as `Presence` events (a signal wakes the loop at once). Feed it every `Presence` and `Answered`
@@ -184,7 +185,7 @@ class Membership:
         return None
 
     def timeout(self) -> float | None:
-        """How long the inbox may wait for the next event (None: no limit while the coordinator is there)."""
+        """How long the inbox may wait for the next event (None: no limit while admitted)."""
         return None if self._lost_since is None else max(0.0, self._lost_since + self.grace - time.monotonic())
 
     def check(self) -> None:
