@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import signal
 import socket
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -57,19 +59,54 @@ def exit_status(signum: int) -> int:
     return 128 + signum
 
 
+#: The signals that stop a process of a game.
+STOPPING = (signal.SIGINT, signal.SIGTERM)
+
+
+@dataclass(frozen=True, slots=True)
+class _Posting:
+    """`on_stop`'s handler."""
+
+    post: Callable[[Interrupted], None]
+
+    def __call__(self, signum: int, _frame: object) -> None:
+        self.post(Interrupted(signum))
+
+
 @contextlib.contextmanager
 def on_stop(post: Callable[[Interrupted], None]) -> Iterator[None]:
     """While inside (on the main thread): SIGINT and SIGTERM call `post(Interrupted(signum))` instead of
     raising KeyboardInterrupt or ending the process; the previous handlers come back on leaving. `post`
     runs on the main thread between two bytecodes: it hands the event over (e.g. `Inbox.post`), or raises
     `Stop` to unwind what the main thread is waiting in."""
-    previous = {s: signal.signal(s, lambda signum, _frame: post(Interrupted(signum)))
-                for s in (signal.SIGINT, signal.SIGTERM)}
+    handler = _Posting(post)
+    previous = {s: signal.signal(s, handler) for s in STOPPING}
     try:
         yield
     finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+        for s, before in previous.items():
+            if signal.getsignal(s) is handler:  # (not if `closing` has taken over since)
+                signal.signal(s, before)
+
+
+def closing(status: int) -> None:
+    """Called by an entity once its game is over, before it closes (its presence, its session, the interpreter):
+    from then until it exits, SIGINT and SIGTERM end it at once with `status`, its game's, not with 130/143.
+    It was not stopped, it was leaving: a cluster's `docker compose stop` or `down` signals the entities as soon as
+    the coordinator has seen their presence go, which can be while they close. Only in a process whose signals
+    `on_stop` handles (an entity's command, `until_stopped`): a game played in a test's process leaves them be."""
+    if threading.current_thread() is not threading.main_thread() or not isinstance(
+            signal.getsignal(signal.SIGTERM), _Posting):
+        return
+
+    def leave(_signum: int, _frame: object) -> None:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):  # (a closed stream, a write that the signal interrupted)
+                stream.flush()
+        os._exit(status)
+
+    for s in STOPPING:
+        signal.signal(s, leave)
 
 
 def until_stopped(run: Callable[[], object], logger: logging.Logger) -> int:

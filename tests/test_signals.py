@@ -51,3 +51,40 @@ def test_a_signal_that_lands_while_a_message_is_decoded_is_not_taken_for_a_bad_p
     monkeypatch.setattr(msgpack, "unpackb", interrupted)
     with pytest.raises(Stop):
         decode(b"\x80")
+
+
+ENDED = """
+import logging, os, signal, sys, threading
+from network.signals import closing, until_stopped
+
+def run():
+    if sys.argv[1] == "over":
+        closing(75)  # the game is over (its status: 75), the process is closing
+    os.kill(os.getpid(), signal.SIGTERM)
+    threading.Event().wait(60)
+
+sys.exit(until_stopped(run, logging.getLogger("test")))
+"""
+
+
+def test_a_signal_once_the_game_is_over_ends_the_process_with_the_games_status(tmp_path) -> None:
+    """Issue 33, 1: `docker compose down` signals the entities as soon as the coordinator has seen their presence
+    go, which can be while they close: they leave with their game's status (here 75), not 143, which says
+    "stopped". Before the end, a signal stops them (143)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    for when, status in (("over", 75), ("playing", 143)):
+        p = subprocess.run([sys.executable, "-c", ENDED, when], cwd=root, capture_output=True, text=True, timeout=60)
+        assert p.returncode == status, (when, p.stderr)
+
+
+def test_closing_leaves_the_handlers_of_a_process_that_is_not_an_entitys_command() -> None:
+    """A game played in a test's process (no `until_stopped`): `closing` changes none of its handlers."""
+    from network.signals import closing
+
+    before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    closing(0)
+    assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
