@@ -370,6 +370,25 @@ def test_scattered_paths_spread_two_flows_over_two_doors() -> None:
     assert again.paths == scatter.paths  # (deterministic: the rounds' orders drawn from their numbers)
 
 
+@pytest.mark.parametrize("family,agents,seed", [("room-32-32-4", 80, 3), ("maze-32-32-2", 60, 1),
+                                                 ("random-32-32-20", 120, 2)])
+def test_the_compiled_scatter_of_the_benchmark_makes_the_paths_python_makes(tmp_path, family, agents, seed) -> None:
+    """benchmarks/compiled_scatter.py measures what a compiled `Scatter` would give (issue 37): its C port must make
+    the very paths, rounds included, or its times say nothing."""
+    from benchmarks.compiled_scatter import c_paths, compiled, instance
+
+    try:
+        lib = compiled(tmp_path)
+    except RuntimeError as err:
+        pytest.skip(f"the C port cannot be compiled here: {err}")
+    graph, start, goal, dist = instance(family, agents, seed)
+    made = lacam.Scatter(graph, start, goal, dist)
+    made.advance(1 << 62)
+    paths, ran, settled = c_paths(lib, graph, start, goal, dist)
+    assert (paths, ran) == (made.paths, made.round) and settled > 0
+    assert sum(map(len, paths)) > agents  # (paths were made: not two empty lists)
+
+
 def test_the_search_tries_a_drones_scattered_next_cell_first(monkeypatch: pytest.MonkeyPatch) -> None:
     """The search's configuration generator (`Search._candidates`) puts a drone's next cell on its scattered path
     first, while the node is within HORIZON times its path's length; without the scatter (`Lacam(scatter=False)`),

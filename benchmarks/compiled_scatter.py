@@ -1,0 +1,296 @@
+"""The scattered paths' search compiled: `lacam.Scatter` against a C port of it, the same paths (issue 37).
+
+    dronesim bench compiled-scatter [--families F,...] [--seeds 5] [--agents 400] [--repeat 3]
+
+An experiment, not a mechanism: games run `lacam.Scatter`, in Python; its turn is the game's longest (docs/
+cooperation.md, "Scattered paths"). This measures what a compiled one would give before anyone builds it. `SOURCE`
+is `Scatter.advance` with an unbounded budget written again in C, step for step: the same best-first search (a
+binary heap ordered as Python orders its tuples: collisions, length, cell, step, parent), the edges' counts in a
+hash table (`moves`), the parked drones' end steps sorted per cell (`parked`), the rounds in the orders
+`Scatter._order` draws, stopped as `advance` stops them. It is compiled by the system's C compiler (`cc`) into a
+temporary folder and called through ctypes. Each instance's paths must equal Python's, else exit 1. Times: process
+CPU of the whole call (the C side's set-up included), Python and C alternated, the best of `--repeat`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.swarm import movingai_instance
+from coordinator import lacam
+from coordinator.arbiter import OpenCells
+from world import movingai
+from world.search import flat_cells
+
+SOURCE = r"""
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct { int64_t c, f, v, g, p; } item;  /* (collisions, length, cell, step, parent), as Python's tuple */
+static int less(const item *a, const item *b) {
+    if (a->c != b->c) return a->c < b->c;
+    if (a->f != b->f) return a->f < b->f;
+    if (a->v != b->v) return a->v < b->v;
+    if (a->g != b->g) return a->g < b->g;
+    return a->p < b->p;
+}
+static item *heap; static int64_t heap_n, heap_cap;
+static void push(item x) {
+    if (heap_n == heap_cap) {
+        heap_cap = heap_cap ? 2 * heap_cap : 1024;
+        heap = realloc(heap, heap_cap * sizeof(item));
+    }
+    int64_t i = heap_n++;
+    while (i > 0) { int64_t up = (i - 1) / 2; if (!less(&x, &heap[up])) break; heap[i] = heap[up]; i = up; }
+    heap[i] = x;
+}
+static item pop(void) {
+    item top = heap[0], x = heap[--heap_n];
+    int64_t i = 0;
+    for (;;) {
+        int64_t l = 2 * i + 1, r = l + 1, m = i; const item *best = &x;
+        if (l < heap_n && less(&heap[l], best)) { m = l; best = &heap[l]; }
+        if (r < heap_n && less(&heap[r], best)) { m = r; best = &heap[r]; }
+        if (m == i) break;
+        heap[i] = heap[m]; i = m;
+    }
+    heap[i] = x;
+    return top;
+}
+
+/* moves: (step, cell, next cell) -> paths taking that edge then (open addressing) */
+typedef struct { int64_t key; int32_t count; } slot;
+static slot *table; static int64_t table_cap, table_n;
+static int64_t hashed(int64_t k) { return (int64_t)(((uint64_t)k * 0x9E3779B97F4A7C15ull) >> 1); }
+static int32_t moves_get(int64_t k) {
+    for (int64_t i = hashed(k) & (table_cap - 1); table[i].key != -1; i = (i + 1) & (table_cap - 1))
+        if (table[i].key == k) return table[i].count;
+    return 0;
+}
+static void moves_add(int64_t k, int32_t d) {
+    if (2 * (table_n + 1) > table_cap) {
+        int64_t old_cap = table_cap; slot *old = table;
+        table_cap = old_cap ? 2 * old_cap : 1 << 16; table_n = 0;
+        table = malloc(table_cap * sizeof(slot));
+        for (int64_t i = 0; i < table_cap; i++) table[i].key = -1;
+        for (int64_t i = 0; i < old_cap; i++) if (old[i].key != -1) {
+            int64_t j = hashed(old[i].key) & (table_cap - 1);
+            while (table[j].key != -1) j = (j + 1) & (table_cap - 1);
+            table[j] = old[i]; table_n++;
+        }
+        free(old);
+    }
+    int64_t i = hashed(k) & (table_cap - 1);
+    for (; table[i].key != -1; i = (i + 1) & (table_cap - 1)) if (table[i].key == k) { table[i].count += d; return; }
+    table[i].key = k; table[i].count = d; table_n++;
+}
+
+/* parked: cell -> the steps from which paths ending there stay there, sorted */
+static int32_t **ends; static int32_t *ends_n, *ends_cap;
+static int64_t before_step(int64_t u, int64_t t) {  /* bisect_left */
+    int64_t lo = 0, hi = ends_n[u];
+    while (lo < hi) { int64_t m = (lo + hi) / 2; if (ends[u][m] < t) lo = m + 1; else hi = m; }
+    return lo;
+}
+static void park(int64_t u, int32_t t, int sign) {
+    int64_t k = before_step(u, t);
+    if (sign > 0) {
+        if (ends_n[u] == ends_cap[u]) {
+            ends_cap[u] = ends_cap[u] ? 2 * ends_cap[u] : 4;
+            ends[u] = realloc(ends[u], ends_cap[u] * 4);
+        }
+        memmove(ends[u] + k + 1, ends[u] + k, (ends_n[u] - k) * 4); ends[u][k] = t; ends_n[u]++;
+    } else {
+        memmove(ends[u] + k, ends[u] + k + 1, (ends_n[u] - k - 1) * 4); ends_n[u]--;
+    }
+}
+
+static int64_t F, N; static int32_t *occ; static const int64_t *near;
+static int64_t **paths, *path_n, *parent;
+
+static void enroll(int64_t i, int sign) {
+    const int64_t *p = paths[i]; int64_t n = path_n[i];
+    for (int64_t t = 0; t < n; t++) {
+        occ[t * F + p[t]] += sign;
+        if (t + 1 < n) moves_add((t * F + p[t]) * F + p[t + 1], sign);
+    }
+    if (n) park(p[n - 1], (int32_t)(n - 1), sign);
+}
+
+static int64_t plan(int64_t i, int64_t s, int64_t goal, const int16_t *d, int64_t margin) {
+    if (path_n[i]) enroll(i, -1);
+    int64_t bound = d[s] + margin, settled = 0, met = -1;
+    for (int64_t k = 0; k < F; k++) parent[k] = -2;
+    heap_n = 0;
+    push((item){0, d[s], s, 0, -1});
+    while (heap_n) {
+        item it = pop();
+        int64_t v = it.v;
+        if (parent[v] != -2) continue;
+        parent[v] = it.p; settled++;
+        if (v == goal) { met = it.c; break; }
+        int64_t t = it.g + 1, tF = t * F, gF = it.g * F;
+        for (int k = 0; k < 6; k++) {
+            int64_t u = near[v * 6 + k];
+            if (u < 0 || parent[u] != -2 || t + d[u] > bound) continue;
+            int64_t cc = it.c + occ[tF + u];
+            if (occ[gF + u]) cc += moves_get((gF + u) * F + v);
+            if (ends_n[u]) cc += before_step(u, t);
+            push((item){cc, t + d[u], u, t, v});
+        }
+    }
+    free(paths[i]); paths[i] = 0; path_n[i] = 0;
+    if (met >= 0) {
+        int64_t n = 0;
+        for (int64_t v = goal; v >= 0; v = parent[v]) n++;
+        paths[i] = malloc(n * 8); path_n[i] = n;
+        for (int64_t v = goal, k = n; v >= 0; v = parent[v]) paths[i][--k] = v;
+    }
+    enroll(i, 1);
+    return settled;
+}
+
+static int64_t collisions(void) {
+    int64_t total = 0;
+    for (int64_t i = 0; i < N; i++) {
+        const int64_t *p = paths[i];
+        for (int64_t t = 1; t < path_n[i]; t++) {
+            int64_t v = p[t], u = p[t - 1];
+            total += occ[t * F + v] - 1 + moves_get(((t - 1) * F + v) * F + u);
+            if (ends_n[v]) total += before_step(v, t);
+        }
+    }
+    return total;
+}
+
+/* Scatter(...).advance(unbounded): the rounds run (`orders`: rounds x n drones), the cells settled in `settled` */
+int64_t scatter(int64_t f, int64_t n, int64_t longest, const int64_t *near_, const int64_t *start,
+                const int64_t *goal, const int16_t *dist, int64_t margin, int64_t rounds, const int64_t *orders,
+                int64_t *settled) {
+    F = f; N = n; near = near_;
+    occ = calloc((longest + 1) * f, 4); paths = calloc(n, sizeof(int64_t *)); path_n = calloc(n, 8);
+    parent = malloc(f * 8); ends = calloc(f, sizeof(int32_t *)); ends_n = calloc(f, 4); ends_cap = calloc(f, 4);
+    table = 0; table_cap = 0; table_n = 0; moves_add(-2, 0);
+    int64_t last = -1, r = 0; *settled = 0;
+    for (;;) {
+        for (int64_t k = 0; k < n; k++) {
+            int64_t i = orders[r * n + k];
+            *settled += plan(i, start[i], goal[i], dist + i * f, margin);
+        }
+        int64_t total = collisions(); r++;
+        if (total == 0 || r >= rounds || (r >= 2 && total >= last)) break;
+        last = total;
+    }
+    return r;
+}
+
+int64_t path_length(int64_t i) { return path_n[i]; }
+void path_cells(int64_t i, int64_t *out) { memcpy(out, paths[i], path_n[i] * 8); }
+void release(void) {
+    for (int64_t i = 0; i < N; i++) free(paths[i]);
+    for (int64_t u = 0; u < F; u++) free(ends[u]);
+    free(occ); free(paths); free(path_n); free(parent); free(ends); free(ends_n); free(ends_cap);
+    free(table); free(heap);
+    heap = 0; heap_n = heap_cap = 0;
+}
+"""
+
+
+def compiled(folder: Path) -> ctypes.CDLL:
+    """`SOURCE` compiled by the system's C compiler in `folder`; RuntimeError if there is none or it fails."""
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise RuntimeError("no C compiler (cc, gcc) on the PATH")
+    src, lib = folder / "scatter.c", folder / "scatter.so"
+    src.write_text(SOURCE)
+    done = subprocess.run([cc, "-O2", "-shared", "-fPIC", "-o", str(lib), str(src)], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{cc} failed: {done.stderr.strip()}")
+    out = ctypes.CDLL(str(lib))
+    i64, ptr = ctypes.c_int64, ctypes.c_void_p
+    out.scatter.argtypes = [i64, i64, i64, ptr, ptr, ptr, ptr, i64, i64, ptr, ptr]
+    out.scatter.restype = i64
+    out.path_length.argtypes, out.path_length.restype = [i64], i64
+    out.path_cells.argtypes = [i64, ptr]
+    return out
+
+
+def c_paths(lib: ctypes.CDLL, graph: lacam.Graph, start: np.ndarray, goal: np.ndarray, dist: np.ndarray,
+            margin: int = lacam.MARGIN, rounds: int = lacam.ROUNDS) -> tuple[list[list[int]], int, int]:
+    """`lacam.Scatter(graph, start, goal, dist, margin, rounds)`'s paths once advanced to its end, made by `lib`;
+    the rounds it ran and the cells it settled."""
+    n, f = len(start), len(graph.cells)
+    longest = int(dist[np.arange(n), start].max(initial=0)) + margin + 1
+    near = np.ascontiguousarray(graph.near, np.int64)
+    d16 = np.ascontiguousarray(dist, np.int16)
+    first = lacam.Scatter(graph, start, goal, dist, margin, rounds)  # (its orders: `_order`, nothing planned)
+    orders = np.array([first._order(r) for r in range(rounds)], np.int64).reshape(rounds, n)
+    s, g = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(goal, np.int64)
+    settled = ctypes.c_int64()
+    ran = lib.scatter(f, n, longest, near.ctypes.data, s.ctypes.data, g.ctypes.data, d16.ctypes.data, margin,
+                      rounds, orders.ctypes.data, ctypes.byref(settled))
+    paths = []
+    for i in range(n):
+        cells = np.zeros(lib.path_length(i), np.int64)
+        lib.path_cells(i, cells.ctypes.data)
+        paths.append(cells.tolist())
+    lib.release()
+    return paths, int(ran), settled.value
+
+
+def instance(family: str, agents: int, seed: int) -> tuple[lacam.Graph, np.ndarray, np.ndarray, np.ndarray]:
+    """A benchmark instance's graph, its drones' open cells and goals (numbered) and their distance tables."""
+    inst = movingai_instance(family, agents, seed)
+    size = inst.grid.shape
+    arb = lacam.Lacam()
+    arb.prepare(size, OpenCells(inst.grid))
+    graph, every = arb._graph, arb._every
+    assert graph is not None and every is not None
+    start = graph.index[flat_cells(np.array(inst.starts, np.int32), size)]
+    goal = graph.index[flat_cells(np.array(inst.goals, np.int32), size)]
+    return graph, start, goal, every[goal]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="dronesim bench compiled-scatter", description=__doc__.split("\n")[0])
+    p.add_argument("--families", default=",".join(movingai.FAMILIES))
+    p.add_argument("--seeds", type=int, default=5, help="seeds 1..N of each family (default 5)")
+    p.add_argument("--agents", type=int, default=400)
+    p.add_argument("--repeat", type=int, default=3, help="the best of this many timings each (default 3)")
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="dronesim-scatter-") as tmp:
+        lib = compiled(Path(tmp))
+        print("| instance | rounds | cells settled | Python ms | C ms | Python ÷ C | the same paths |")
+        print("|---|---|---|---|---|---|---|")
+        differ = 0
+        for family in [f for f in args.families.split(",") if f]:
+            for seed in range(1, args.seeds + 1):
+                graph, start, goal, dist = instance(family, args.agents, seed)
+                py_ms, c_ms = [], []
+                for _ in range(args.repeat):
+                    t0 = time.process_time()
+                    made = lacam.Scatter(graph, start, goal, dist)
+                    made.advance(1 << 62)
+                    py_ms.append(1000 * (time.process_time() - t0))
+                    t0 = time.process_time()
+                    paths, ran, settled = c_paths(lib, graph, start, goal, dist)
+                    c_ms.append(1000 * (time.process_time() - t0))
+                same = paths == made.paths and ran == made.round
+                differ += not same
+                print(f"| {family} seed {seed}, {args.agents} drones | {ran} | {settled:,} | {min(py_ms):.0f} | "
+                      f"{min(c_ms):.1f} | {min(py_ms) / min(c_ms):.1f} | {'yes' if same else 'NO'} |", flush=True)
+    return 1 if differ else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
