@@ -173,21 +173,22 @@ static int64_t collisions(void) {
     return total;
 }
 
-/* Scatter(...).advance(unbounded): the rounds run (`orders`: rounds x n drones), the cells settled in `settled` */
+/* Scatter(...).advance(unbounded): the rounds run (`orders`: rounds x n drones); the cells settled in `settled`, the
+   work units spent in `units` (advance's: a unit a path and one per `pops` cells it settled, n a round's count) */
 int64_t scatter(int64_t f, int64_t n, int64_t longest, const int64_t *near_, const int64_t *start,
                 const int64_t *goal, const int16_t *dist, int64_t margin, int64_t rounds, const int64_t *orders,
-                int64_t *settled) {
+                int64_t pops, int64_t *settled, int64_t *units) {
     F = f; N = n; near = near_;
     occ = calloc((longest + 1) * f, 4); paths = calloc(n, sizeof(int64_t *)); path_n = calloc(n, 8);
     parent = malloc(f * 8); ends = calloc(f, sizeof(int32_t *)); ends_n = calloc(f, 4); ends_cap = calloc(f, 4);
     table = 0; table_cap = 0; table_n = 0; moves_add(-2, 0);
-    int64_t last = -1, r = 0; *settled = 0;
+    int64_t last = -1, r = 0; *settled = 0; *units = 0;
     for (;;) {
         for (int64_t k = 0; k < n; k++) {
-            int64_t i = orders[r * n + k];
-            *settled += plan(i, start[i], goal[i], dist + i * f, margin);
+            int64_t i = orders[r * n + k], cells = plan(i, start[i], goal[i], dist + i * f, margin);
+            *settled += cells; *units += 1 + cells / pops;
         }
-        int64_t total = collisions(); r++;
+        int64_t total = collisions(); r++; *units += n;
         if (total == 0 || r >= rounds || (r >= 2 && total >= last)) break;
         last = total;
     }
@@ -218,7 +219,7 @@ def compiled(folder: Path) -> ctypes.CDLL:
         raise RuntimeError(f"{cc} failed: {done.stderr.strip()}")
     out = ctypes.CDLL(str(lib))
     i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    out.scatter.argtypes = [i64, i64, i64, ptr, ptr, ptr, ptr, i64, i64, ptr, ptr]
+    out.scatter.argtypes = [i64, i64, i64, ptr, ptr, ptr, ptr, i64, i64, ptr, i64, ptr, ptr]
     out.scatter.restype = i64
     out.path_length.argtypes, out.path_length.restype = [i64], i64
     out.path_cells.argtypes = [i64, ptr]
@@ -226,9 +227,9 @@ def compiled(folder: Path) -> ctypes.CDLL:
 
 
 def c_paths(lib: ctypes.CDLL, graph: lacam.Graph, start: np.ndarray, goal: np.ndarray, dist: np.ndarray,
-            margin: int = lacam.MARGIN, rounds: int = lacam.ROUNDS) -> tuple[list[list[int]], int, int]:
+            margin: int = lacam.MARGIN, rounds: int = lacam.ROUNDS) -> tuple[list[list[int]], int, int, int]:
     """`lacam.Scatter(graph, start, goal, dist, margin, rounds)`'s paths once advanced to its end, made by `lib`;
-    the rounds it ran and the cells it settled."""
+    the rounds it ran, the cells it settled and the work units it spent (what `advance` returns)."""
     n, f = len(start), len(graph.cells)
     longest = int(dist[np.arange(n), start].max(initial=0)) + margin + 1
     near = np.ascontiguousarray(graph.near, np.int64)
@@ -236,16 +237,16 @@ def c_paths(lib: ctypes.CDLL, graph: lacam.Graph, start: np.ndarray, goal: np.nd
     first = lacam.Scatter(graph, start, goal, dist, margin, rounds)  # (its orders: `_order`, nothing planned)
     orders = np.array([first._order(r) for r in range(rounds)], np.int64).reshape(rounds, n)
     s, g = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(goal, np.int64)
-    settled = ctypes.c_int64()
+    settled, units = ctypes.c_int64(), ctypes.c_int64()
     ran = lib.scatter(f, n, longest, near.ctypes.data, s.ctypes.data, g.ctypes.data, d16.ctypes.data, margin,
-                      rounds, orders.ctypes.data, ctypes.byref(settled))
+                      rounds, orders.ctypes.data, lacam.POPS, ctypes.byref(settled), ctypes.byref(units))
     paths = []
     for i in range(n):
         cells = np.zeros(lib.path_length(i), np.int64)
         lib.path_cells(i, cells.ctypes.data)
         paths.append(cells.tolist())
     lib.release()
-    return paths, int(ran), settled.value
+    return paths, int(ran), settled.value, units.value
 
 
 def instance(family: str, agents: int, seed: int) -> tuple[lacam.Graph, np.ndarray, np.ndarray, np.ndarray]:
@@ -280,12 +281,12 @@ def main(argv: list[str] | None = None) -> int:
                 for _ in range(args.repeat):
                     t0 = time.process_time()
                     made = lacam.Scatter(graph, start, goal, dist)
-                    made.advance(1 << 62)
+                    spent = made.advance(1 << 62)
                     py_ms.append(1000 * (time.process_time() - t0))
                     t0 = time.process_time()
-                    paths, ran, settled = c_paths(lib, graph, start, goal, dist)
+                    paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
                     c_ms.append(1000 * (time.process_time() - t0))
-                same = paths == made.paths and ran == made.round
+                same = (paths, ran, units) == (made.paths, made.round, spent)
                 differ += not same
                 print(f"| {family} seed {seed}, {args.agents} drones | {ran} | {settled:,} | {min(py_ms):.0f} | "
                       f"{min(c_ms):.1f} | {min(py_ms) / min(c_ms):.1f} | {'yes' if same else 'NO'} |", flush=True)

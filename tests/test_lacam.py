@@ -374,7 +374,7 @@ def test_scattered_paths_spread_two_flows_over_two_doors() -> None:
                                                  ("random-32-32-20", 120, 2)])
 def test_the_compiled_scatter_of_the_benchmark_makes_the_paths_python_makes(tmp_path, family, agents, seed) -> None:
     """benchmarks/compiled_scatter.py measures what a compiled `Scatter` would give (issue 37): its C port must make
-    the very paths, rounds included, or its times say nothing."""
+    the very paths, rounds and work units included, or its times say nothing."""
     from benchmarks.compiled_scatter import c_paths, compiled, instance
 
     try:
@@ -383,9 +383,9 @@ def test_the_compiled_scatter_of_the_benchmark_makes_the_paths_python_makes(tmp_
         pytest.skip(f"the C port cannot be compiled here: {err}")
     graph, start, goal, dist = instance(family, agents, seed)
     made = lacam.Scatter(graph, start, goal, dist)
-    made.advance(1 << 62)
-    paths, ran, settled = c_paths(lib, graph, start, goal, dist)
-    assert (paths, ran) == (made.paths, made.round) and settled > 0
+    spent = made.advance(1 << 62)
+    paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
+    assert (paths, ran, units) == (made.paths, made.round, spent) and settled > 0
     assert sum(map(len, paths)) > agents  # (paths were made: not two empty lists)
 
 
