@@ -207,6 +207,9 @@ void release(void) {
 """
 
 
+_PYTHON = lacam.Scatter  # (the rounds' orders are its: a game played with the C port in its place draws the same)
+
+
 def compiled(folder: Path) -> ctypes.CDLL:
     """`SOURCE` compiled by the system's C compiler in `folder`; RuntimeError if there is none or it fails."""
     cc = shutil.which("cc") or shutil.which("gcc")
@@ -234,7 +237,7 @@ def c_paths(lib: ctypes.CDLL, graph: lacam.Graph, start: np.ndarray, goal: np.nd
     longest = int(dist[np.arange(n), start].max(initial=0)) + margin + 1
     near = np.ascontiguousarray(graph.near, np.int64)
     d16 = np.ascontiguousarray(dist, np.int16)
-    first = lacam.Scatter(graph, start, goal, dist, margin, rounds)  # (its orders: `_order`, nothing planned)
+    first = _PYTHON(graph, start, goal, dist, margin, rounds)  # (its orders: `_order`, nothing planned)
     orders = np.array([first._order(r) for r in range(rounds)], np.int64).reshape(rounds, n)
     s, g = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(goal, np.int64)
     settled, units = ctypes.c_int64(), ctypes.c_int64()
