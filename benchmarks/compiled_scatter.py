@@ -71,7 +71,12 @@ static item pop(void) {
 /* moves: (step, cell, next cell) -> paths taking that edge then (open addressing) */
 typedef struct { int64_t key; int32_t count; } slot;
 static slot *table; static int64_t table_cap, table_n;
-static int64_t hashed(int64_t k) { return (int64_t)(((uint64_t)k * 0x9E3779B97F4A7C15ull) >> 1); }
+static int64_t hashed(int64_t k) {  /* splitmix64's finaliser: every bit of the key in the low bits */
+    uint64_t x = (uint64_t)k;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+    return (int64_t)((x ^ (x >> 31)) >> 1);
+}
 static int32_t moves_get(int64_t k) {
     for (int64_t i = hashed(k) & (table_cap - 1); table[i].key != -1; i = (i + 1) & (table_cap - 1))
         if (table[i].key == k) return table[i].count;
