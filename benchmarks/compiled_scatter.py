@@ -7,7 +7,7 @@ cooperation.md, "Scattered paths"). This measures what a compiled one would give
 is `Scatter.advance` with an unbounded budget written again in C, step for step: the same best-first search (a
 binary heap ordered as Python orders its tuples: collisions, length, cell, step, parent), the edges' counts in a
 hash table (`moves`), the parked drones' end steps sorted per cell (`parked`), the rounds in the orders
-`Scatter._order` draws, stopped as `advance` stops them. It is compiled by the system's C compiler (`cc`) into a
+`lacam.scatter_order` draws, stopped as `advance` stops them. It is compiled by the system's C compiler (`cc`) into a
 temporary folder and called through ctypes. Each instance's paths must equal Python's, else exit 1. Times: process
 CPU of the whole call (the C side's set-up included), Python and C alternated, the best of `--repeat`.
 """
@@ -212,9 +212,6 @@ void release(void) {
 """
 
 
-_PYTHON = lacam.Scatter  # (the rounds' orders are its: a game played with the C port in its place draws the same)
-
-
 def compiled(folder: Path) -> ctypes.CDLL:
     """`SOURCE` compiled by the system's C compiler in `folder`; RuntimeError if there is none or it fails."""
     cc = shutil.which("cc") or shutil.which("gcc")
@@ -242,8 +239,7 @@ def c_paths(lib: ctypes.CDLL, graph: lacam.Graph, start: np.ndarray, goal: np.nd
     longest = int(dist[np.arange(n), start].max(initial=0)) + margin + 1
     near = np.ascontiguousarray(graph.near, np.int64)
     d16 = np.ascontiguousarray(dist, np.int16)
-    first = _PYTHON(graph, start, goal, dist, margin, rounds)  # (its orders: `_order`, nothing planned)
-    orders = np.array([first._order(r) for r in range(rounds)], np.int64).reshape(rounds, n)
+    orders = np.array([lacam.scatter_order(n, r) for r in range(rounds)], np.int64).reshape(rounds, n)
     s, g = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(goal, np.int64)
     settled, units = ctypes.c_int64(), ctypes.c_int64()
     ran = lib.scatter(f, n, longest, near.ctypes.data, s.ctypes.data, g.ctypes.data, d16.ctypes.data, margin,

@@ -179,6 +179,13 @@ class Graph:
             dist[word[k] * 64 + bit, cells[k]] = min(depth, FAR - 1)
 
 
+def scatter_order(n: int, r: int) -> list[int]:
+    """The order in which `Scatter` plans its `n` drones' paths in round `r` (0, 1, ...): drawn from the round's number
+    alone (`arbiter.tie_breaks`), the drones' numbers breaking ties."""
+    draw = tie_breaks(r + 1, np.arange(n, dtype=np.int64), np.zeros((n, 1), np.int64))[:, 0]
+    return np.lexsort((np.arange(n), draw)).tolist()
+
+
 class Scatter:
     """Scattered paths, the guide of the search's configuration generator (LaCAM3's, Okumura, "Engineering LaCAM*",
     AAMAS 2024, after Han and Yu's space utilisation optimisation, ICRA 2022): a path for each drone from its cell to
@@ -212,15 +219,10 @@ class Scatter:
         self.parked: list[list[int]] = [[] for _ in range(F)]  # cell -> the steps from which paths ending there stay
         # there, sorted (those before a step: `bisect_left`)
         self.paths: list[list[int]] = [[] for _ in range(n)]
-        self.order = self._order(0)
+        self.order = scatter_order(n, 0)
         self.k, self.round, self.last = 0, 0, -1
         self.done = n == 0
         self.costliest = 0
-
-    def _order(self, r: int) -> list[int]:
-        n = len(self.start)
-        draw = tie_breaks(r + 1, np.arange(n, dtype=np.int64), np.zeros((n, 1), np.int64))[:, 0]
-        return np.lexsort((np.arange(n), draw)).tolist()
 
     def advance(self, work: int) -> int:
         """Plan paths within `work` units (one at least; another only if the costliest so far fits): the units spent."""
@@ -236,7 +238,7 @@ class Scatter:
                 self.round += 1
                 self.done = total == 0 or self.round >= self.rounds or (self.round >= 2 and total >= self.last)
                 self.last, self.k = total, 0
-                self.order = self._order(self.round)
+                self.order = scatter_order(len(self.start), self.round)
         return spent
 
     def _collisions(self) -> int:

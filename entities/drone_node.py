@@ -25,7 +25,7 @@ from collections.abc import Callable
 import zenoh
 
 from network.membership import Answered, Membership, add_entity_args
-from network.signals import closing, over_status, until_stopped
+from network.signals import closing, until_stopped
 from network.transport import (
     Inbox,
     Outbox,
@@ -100,7 +100,7 @@ def main(conf: zenoh.Config, *, drones: tuple[str, ...], autopilot: str, keys: K
             if pulse is not None:
                 pulse.stop()
         assert core.over is not None
-        closing(over_status(core.over))  # (a signal from now on: the game's status, not 143)
+        closing(core.over)  # (a signal from now on: the game's status, not 143)
         member.close()
         return core.over
 

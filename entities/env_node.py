@@ -16,7 +16,7 @@ from collections.abc import Callable
 import zenoh
 
 from network.membership import Answered, Membership, add_entity_args
-from network.signals import closing, over_status, until_stopped
+from network.signals import closing, until_stopped
 from network.transport import (
     Asked,
     Event,
@@ -72,7 +72,7 @@ def main(conf: zenoh.Config, *, keys: Keys, logger: logging.Logger, draw: bool =
 
         effects.out.watch(keys.upd, inbox)  # (a first Matching event at once if someone already listens)
         inbox.run(handle, timeout=member.timeout, until=lambda: env.over is not None)
-        closing(over_status(env.over))  # (a signal from now on: the game's status, not 143)
+        closing(env.over)  # (a signal from now on: the game's status, not 143)
         for event in inbox.drain():  # the queries still queued at the end get their answer
             handle(event)
         member.close()

@@ -20,7 +20,7 @@ from functools import partial
 from typing import TextIO
 
 from network.membership import add_entity_args
-from network.signals import closing, over_status, until_stopped, waking
+from network.signals import closing, until_stopped, waking
 from network.transport import (
     Outbox,
     add_zenoh_args,
@@ -147,7 +147,7 @@ def main(args: argparse.Namespace, logger: logging.Logger) -> Over:
                     screen.show(f"ROS 2 goals on {drone_topic(args.namespace, '<Dnn>', 'goal_pose')} (domain "
                                 f"{args.domain}) are targets typed here")
             over = play(console or station, inbox, member, face.perform, other=face.other)
-            closing(over_status(over))  # (a signal from now on: the game's status, not 143)
+            closing(over)  # (a signal from now on: the game's status, not 143)
         screen.show(station.report(draw=draw))
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.snapshot())

@@ -89,15 +89,17 @@ def on_stop(post: Callable[[Interrupted], None]) -> Iterator[None]:
                 signal.signal(s, before)
 
 
-def closing(status: int) -> None:
-    """Called by an entity once its game is over, before it closes (its presence, its session, the interpreter):
-    from then until it exits, SIGINT and SIGTERM end it at once with `status`, its game's, not with 130/143.
+def closing(over: object) -> None:
+    """Called by an entity once its game is over (`over`: the OVER that ended it), before it closes (its presence, its
+    session, the interpreter): from then until it exits, SIGINT and SIGTERM end it at once with its game's status
+    (`over_status`), not with 130/143.
     It was not stopped, it was leaving: a cluster's `docker compose stop` or `down` signals the entities as soon as
     the coordinator has seen their presence go, which can be while they close. Only in a process whose signals
     `on_stop` handles (an entity's command, `until_stopped`): a game played in a test's process leaves them be."""
     if threading.current_thread() is not threading.main_thread() or not isinstance(
             signal.getsignal(signal.SIGTERM), _Posting):
         return
+    status = over_status(over)
 
     def leave(_signum: int, _frame: object) -> None:
         for stream in (sys.stdout, sys.stderr):

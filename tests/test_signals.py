@@ -56,10 +56,11 @@ def test_a_signal_that_lands_while_a_message_is_decoded_is_not_taken_for_a_bad_p
 ENDED = """
 import logging, os, signal, sys, threading
 from network.signals import closing, until_stopped
+from schema import EndReason, Over
 
 def run():
-    if sys.argv[1] == "over":
-        closing(75)  # the game is over (its status: 75), the process is closing
+    if sys.argv[1] == "over":  # the game is over (its journal could not be written: status 75), the process closes
+        closing(Over(turn=3, sender="SRV", reason=EndReason.JOURNAL_FAILED, text="disk full"))
     os.kill(os.getpid(), signal.SIGTERM)
     threading.Event().wait(60)
 
@@ -86,5 +87,5 @@ def test_closing_leaves_the_handlers_of_a_process_that_is_not_an_entitys_command
     from network.signals import closing
 
     before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
-    closing(0)
+    closing(None)
     assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before

@@ -24,7 +24,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from network.signals import Interrupted, Stop, closing, on_stop, over_status, waking
+from network.signals import Interrupted, Stop, closing, on_stop, waking
 from network.transport import Outbox, open_session, zenoh_config
 from schema import Keys, MalformedMessage, Over, RejectCounter, RemoteInputError, UsageError
 from schema.errors import Refusal
@@ -297,7 +297,7 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
             try:
                 with on_stop(signals.append), waking(partial(inbox.post, _WOKEN)):
                     over = play(Flushing(bridge, links), inbox, member, perform, other=other)
-                closing(over_status(over))  # (a signal from now on: the game's status, not 143)
+                closing(over)  # (a signal from now on: the game's status, not 143)
                 links.flush()  # (the last effects, the game over's STATUSTEXTs: `play` returns before it waits)
             finally:
                 reader.stop()
