@@ -42,7 +42,7 @@ class Steps(NamedTuple):
     these left the world and the building cells they entered (`observer.deaths_of_moves`' `found`)."""
 
     rows: list[int]
-    before: dict[int, Cell]
+    before: list[Cell]
     after: dict[int, Cell]
     moved: list[int]
     found: tuple[bool, set[Cell]]
@@ -93,14 +93,13 @@ class Judge:
             if rows != alive:
                 return None
         (nx, ny, nz), solid = self.size, self._solid_items
-        before: dict[int, Cell] = {}
         after: dict[int, Cell] = {}
         moved: list[int] = []
         outside, buildings = False, _NO_CELLS  # (a set of its own once a drone enters a building)
         if offsets and not STEPS.issuperset(cells):  # (each step looked up in C)
             raise UsageError("a move of more than one cell (6-connectivity)")
         for i, move in zip(rows, cells):
-            x, y, z = here = before[i] = pos[i]
+            x, y, z = here = pos[i]
             if offsets:  # (a step other than hovering changes the drone's cell)
                 if move == _HOVER:
                     after[i] = here
@@ -120,7 +119,7 @@ class Judge:
                 outside = True
             elif solid[(a * ny + b) * nz + c]:
                 buildings = {*buildings, cell}
-        return _tuple_new(Steps, (rows, before, after, moved, (outside, buildings)))
+        return _tuple_new(Steps, (rows, pos, after, moved, (outside, buildings)))
 
     def rule_steps(self, turn: int, log: TurnLog, journaled: bool, cells: bool, steps: Steps,
                    codes: list[int]) -> Moved:
@@ -218,14 +217,15 @@ class Judge:
         return self._settle(alive, every, before, after, moved, None, said, says, [*took], hovered, turn, log,
                             journaled, cells)
 
-    def _settle(self, alive: list[int], every: list[int], before: dict[int, Cell], after: dict[int, Cell],
-                moved: list[int], found: tuple[bool, set[Cell]] | None, said: list[int],
+    def _settle(self, alive: list[int], every: list[int], before: dict[int, Cell] | list[Cell],
+                after: dict[int, Cell], moved: list[int], found: tuple[bool, set[Cell]] | None, said: list[int],
                 says: list[int] | dict[int, int], taken: list[int], hovered: list[int], turn: int, log: TurnLog,
                 journaled: bool, cells: bool) -> Moved:
-        """A few drones' turn made (`_few`, `rule_steps`): `alive`, `every`, `before`, `after` as in `_few`;
-        `moved`, the rows that changed cell; `found`: whether one of them left the world and the building cells they
-        entered (None: not known); `said`, the rows whose note changed, to `says[i]`; `taken`, the rows whose move
-        was taken; `hovered`, the alive rows whose move was not."""
+        """A few drones' turn made (`_few`, `rule_steps`): `alive`, `every`, `before`, `after` as in `_few`
+        (`before` may also be every drone's cell by row: the fleet's list, `steps`'); `moved`, the rows that changed
+        cell; `found`: whether one of them left the world and the building cells they entered (None: not known);
+        `said`, the rows whose note changed, to `says[i]`; `taken`, the rows whose move was taken; `hovered`, the
+        alive rows whose move was not."""
         fleet = self.fleet
         if not moved:  # where the drones were, alive and apart, they still are
             dead: dict[int, Cause] = {}
@@ -235,6 +235,7 @@ class Judge:
             live = set(alive)
             dead = observer.deaths_of_moves(self.size, self._solid_items, {i: before[i] for i in alive},
                                             {i: after[i] for i in alive}, [i for i in moved if i in live])
+        src = [before[i] for i in moved] if cells else []  # (`before` may be the fleet's list, which the moves change)
         fleet.move(moved, after)
         if said:
             _set_rows(fleet.note, said, [says[i] for i in said])
@@ -250,7 +251,7 @@ class Judge:
         left = len(alive) - len(dead) - lost
         if not cells:  # (nobody reads the moves' cells: `Engine._drones_finish`)
             return _tuple_new(Moved, (moved, [], [], left))
-        return _tuple_new(Moved, (moved, [before[i] for i in moved], [after[i] for i in moved], left))
+        return _tuple_new(Moved, (moved, src, [after[i] for i in moved], left))
 
     def _journal_few(self, log: TurnLog, moved: list[int], after: dict[int, Cell], said: list[int],
                      says: list[int] | dict[int, int], hovered: list[int], dead: dict[int, Cause]) -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Mapping, Sequence, Set
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -23,6 +23,13 @@ from world.grid import in_bounds, inside_rows, linear_rows
 
 _OUTSIDE, _BUILDING, _VERTEX, _SWAP = (code_of(c) for c in (Cause.OUTSIDE, Cause.BUILDING, Cause.VERTEX, Cause.SWAP))
 K = TypeVar("K", str, int)  # what `deaths` knows a drone by: its id, or its row
+_K = TypeVar("_K", contravariant=True)
+
+
+class Where(Protocol[_K]):
+    """Each drone's cell by what `deaths` knows it by: a mapping, or a list by row."""
+
+    def __getitem__(self, key: _K, /) -> Cell: ...
 
 
 def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarray,
@@ -67,7 +74,7 @@ def judge(size: Cell, before: np.ndarray, after: np.ndarray, building: np.ndarra
     return cause
 
 
-def deaths_of_moves(size: Cell, solid: np.ndarray | memoryview, before: Mapping[K, Cell], after: Mapping[K, Cell],
+def deaths_of_moves(size: Cell, solid: np.ndarray | memoryview, before: Where[K], after: Mapping[K, Cell],
                     moved: Sequence[K], found: tuple[bool, set[Cell]] | None = None) -> dict[K, Cause]:
     """`deaths`, for drones of which `moved` changed cell (`solid`: the world's buildings, flat in C order), with
     the rules run only if someone may die: one left the world or entered a building, or two ended in one cell or
@@ -89,7 +96,7 @@ def deaths_of_moves(size: Cell, solid: np.ndarray | memoryview, before: Mapping[
     return {}
 
 
-def _meet(before: Mapping[K, Cell], after: Mapping[K, Cell], moved: Sequence[K]) -> bool:
+def _meet(before: Where[K], after: Mapping[K, Cell], moved: Sequence[K]) -> bool:
     """Whether two drones end in one cell, or two movers swap cells."""
     if len(set(after.values())) < len(after):
         return True
@@ -101,7 +108,7 @@ def _meet(before: Mapping[K, Cell], after: Mapping[K, Cell], moved: Sequence[K])
     return False
 
 
-def deaths(size: Cell, before: Mapping[K, Cell], after: Mapping[K, Cell], buildings: Set[Cell]) -> dict[K, Cause]:
+def deaths(size: Cell, before: Where[K], after: Mapping[K, Cell], buildings: Set[Cell]) -> dict[K, Cause]:
     """Which of the drones alive at the start of the turn die, and why: the rules drone by drone. `before` and
     `after`: every alive drone's cell at the start and end of the turn (a hovering drone's are the same);
     `buildings`: the building cells among the `after` cells."""

@@ -18,6 +18,7 @@ import functools
 import logging
 import math
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 from typing import NamedTuple, Protocol
 
@@ -516,10 +517,34 @@ class Eyes:
         out[:, n:] = offsets
         return out
 
-    def see_few(self, pos: list[Cell], targets: list[Cell], drones: list[Cell]) -> list[np.ndarray] | np.ndarray:
+    def see_few(self, pos: list[Cell], targets: np.ndarray, drones: list[Cell]) -> list[np.ndarray] | np.ndarray:
         """`see` of drones given as cells (lists of (x, y, z)), with fewer array operations: for up to
         EYES_ONE_BY_ONE drones, their observations one by one (a list of arrays), else as `see`'s rows, in one
-        gather (of each drone's whole cube up to EYES_CUBE_GATHER drones, of the sensed cells alone above)."""
+        gather (of each drone's whole cube up to EYES_CUBE_GATHER drones, of the sensed cells alone above).
+        `targets`: the drones' targets, (m, 3) intp (an array: its offsets are one subtraction, where a list of
+        tuples would be converted item by item)."""
+        cells, o, n = self._flat, self._origin, self.cells
+        if len(pos) <= EYES_ONE_BY_ONE:
+            return self._one_by_one(pos, targets, drones)
+        # (the cells as an array: from their items in one pass, ~2.5 times cheaper than from the tuples)
+        here = np.fromiter(chain.from_iterable(pos), np.intp, 3 * len(pos)).reshape(-1, 3)
+        base = here @ self._strides + o
+        at = base if drones is pos else \
+            np.fromiter(chain.from_iterable(drones), np.intp, 3 * len(drones)).reshape(-1, 3) @ self._strides + o
+        cells[at] = _DRONE  # the drones marked in the world for the while
+        try:
+            if len(pos) > EYES_CUBE_GATHER:  # their sensed cells in one gather, placed in rows of UNKNOWN (`see`'s)
+                return self._rows(cells[base[:, None] + self._offsets], targets - here)
+            # every observation in one gather, as a lone one's (the cube's every cell, clipped: beyond, UNKNOWN)
+            rows = cells.take((base - self._shift)[:, None] + self._index, mode="clip")
+        finally:
+            cells[at] = _FREE  # an alive drone's cell is free in the static world
+        rows[:, n // 2] = _FREE  # (its own cell: marked, or where it died)
+        rows[:, n:] = targets - here
+        return rows
+
+    def _one_by_one(self, pos: list[Cell], targets: np.ndarray, drones: list[Cell]) -> list[np.ndarray]:
+        """`see_few`'s observations of up to EYES_ONE_BY_ONE drones, one by one (a list of arrays)."""
         cells, sx, sy, o = self._flat, self._sx, self._sy, self._origin
         # the drones marked in the world for the while (a lone drone that sees itself: its own cell reads FREE), item
         # by item through a memoryview (a numpy item costs ~3 times as much)
@@ -530,27 +555,17 @@ class Eyes:
             items[k] = _DRONE
         try:
             index, n, first = self._index, self.cells, o - self._shift
-            if len(pos) <= EYES_ONE_BY_ONE:
-                out = []
-                for (x, y, z), (a, b, c) in zip(pos, targets):
-                    one = cells[x * sx + y * sy + z + first:].take(index, mode="clip")  # (beyond: the last, UNKNOWN)
-                    one[n], one[n + 1], one[n + 2] = a - x, b - y, c - z  # (three items: half a slice's cost)
-                    if not alone:  # (its own cell: marked, or where it died; a lone alive drone's reads FREE)
-                        one[n // 2] = _FREE
-                    out.append(one)
-                return out
-            base = np.array(at if pos is drones else [x * sx + y * sy + z + o for x, y, z in pos])
-            offsets = [(a - x, b - y, c - z) for (x, y, z), (a, b, c) in zip(pos, targets)]
-            if len(pos) > EYES_CUBE_GATHER:  # their sensed cells in one gather, placed in rows of UNKNOWN (`see`'s)
-                return self._rows(cells[base[:, None] + self._offsets], offsets)
-            # every observation in one gather, as a lone one's (the cube's every cell, clipped: beyond, UNKNOWN)
-            rows = cells.take((base + (first - o))[:, None] + index, mode="clip")
+            out = []
+            for (x, y, z), (a, b, c) in zip(pos, targets.tolist()):
+                one = cells[x * sx + y * sy + z + first:].take(index, mode="clip")  # (beyond: the last, UNKNOWN)
+                one[n], one[n + 1], one[n + 2] = a - x, b - y, c - z  # (three items: half a slice's cost)
+                if not alone:  # (its own cell: marked, or where it died; a lone alive drone's reads FREE)
+                    one[n // 2] = _FREE
+                out.append(one)
+            return out
         finally:
             for k in at:
                 items[k] = _FREE  # an alive drone's cell is free in the static world
-        rows[:, n // 2] = _FREE  # (its own cell: marked, or where it died)
-        rows[:, n:] = offsets
-        return rows
 
 
 #: rgb_array colours.

@@ -10,6 +10,8 @@ tests/test_pettingzoo.py holds both to the same steps on random worlds and actio
 
 from __future__ import annotations
 
+from operator import eq
+
 import numpy as np
 
 from coordinator.fleet import ALIVE
@@ -54,6 +56,7 @@ class FewEpisode(EpisodeBase):
         self.engine = turns.few(layout, max_cycles)  # (its rows: ours, D01 ... D99; the last episode's, restarted)
         self._pos: list[Cell] = self.engine.fleet.cells()  # (the engine's fleet's: `act`)
         self._targets: list[Cell] = list(map(tuple, layout.targets.tolist()))
+        self._goals = layout.targets.astype(np.intp)  # (the same, as an array: the observations' offsets)
         self._state = [ALIVE] * n
         self._cause = [0] * n
         self._on = [False] * n  # an acting row was on its target at the last turn (its arrival is rewarded)
@@ -89,13 +92,13 @@ class FewEpisode(EpisodeBase):
     # ------------------------------------------------------------------ reading
 
     def observe(self, rows) -> list[np.ndarray] | np.ndarray:
-        pos, targets, alive = self._pos, self._targets, self._alive
+        pos, alive = self._pos, self._alive
         rows = list(rows)
         if len(rows) == self.n:  # (every row: the lists themselves)
-            return self.eyes.see_few(pos, targets, pos if len(alive) == self.n else [pos[i] for i in alive])
+            return self.eyes.see_few(pos, self._goals, pos if len(alive) == self.n else [pos[i] for i in alive])
         # (most steps, the alive drones act: one list of their cells is `see_few`'s drones too)
         cells = [pos[i] for i in rows]
-        return self.eyes.see_few(cells, [targets[i] for i in rows], cells if rows == alive else [pos[i] for i in alive])
+        return self.eyes.see_few(cells, self._goals[rows], cells if rows == alive else [pos[i] for i in alive])
 
     def infos(self, rows) -> list[dict]:
         """As `Episode.infos`."""
@@ -148,23 +151,29 @@ class FewEpisode(EpisodeBase):
         targets, was_on, finish = self._targets, self._on, self._finish
         nothing, arrived, died = self.rewards
         rewards, terminated, arrivals = [], [], []
-        for i in rows_out:
-            gone = i in dead
-            if gone or pos[i] != targets[i]:
-                was_on[i] = False
-                shown[i] = say[i]
-                rewards.append(died if gone else nothing)
-                terminated.append(gone)
-            else:
-                shown[i] = _REACHED
-                if was_on[i]:
-                    rewards.append(nothing)
-                    terminated.append(False)
+        if not dead and len(rows_out) == self.n and not any(map(eq, pos, targets)):
+            # (most steps: every drone acting and alive, none on its target: the rules below for every row at once)
+            was_on[:] = [False] * self.n
+            shown[:] = say
+            rewards, terminated = [nothing] * self.n, [False] * self.n
+        else:
+            for i in rows_out:
+                gone = i in dead
+                if gone or pos[i] != targets[i]:
+                    was_on[i] = False
+                    shown[i] = say[i]
+                    rewards.append(died if gone else nothing)
+                    terminated.append(gone)
                 else:
-                    was_on[i] = True
-                    rewards.append(arrived)
-                    terminated.append(finish)
-                    arrivals.append(i)
+                    shown[i] = _REACHED
+                    if was_on[i]:
+                        rewards.append(nothing)
+                        terminated.append(False)
+                    else:
+                        was_on[i] = True
+                        rewards.append(arrived)
+                        terminated.append(finish)
+                        arrivals.append(i)
         if t >= self.max_cycles:
             truncated = [not end for end in terminated]
             stops = len(rows_out)
@@ -174,7 +183,7 @@ class FewEpisode(EpisodeBase):
         if over is not None and stops < len(rows_out):
             raise BackendError(f"the game ended at turn {t} ({over.reason.value}: {over.text})")
         if self._new and arrivals:
-            others = np.array(targets, np.int32)
+            others = self._goals  # (each new target written in it as it is drawn)
             for i in arrivals:
                 new, ok = self.layout.new_target(i, np.array(pos[i], np.int32), others)
                 others[i] = new
@@ -188,6 +197,6 @@ class FewEpisode(EpisodeBase):
                     acting[i] = False
             self._rows = [i for i in rows_out if acting[i]]
             self.left -= stops
-        seen = self.eyes.see_few(pos, targets, pos) if len(rows_out) == len(self._alive) == self.n else \
+        seen = self.eyes.see_few(pos, self._goals, pos) if len(rows_out) == len(self._alive) == self.n else \
             self.observe(rows_out)  # (every drone acting and alive: `observe`'s lists themselves, without its call)
         return _tuple_new(Outcome, (rows_out, seen, rewards, terminated, truncated, self.infos(rows_out)))

@@ -161,7 +161,7 @@ def test_observation_cells(form: str) -> None:
     def see(pos: list, drones: list) -> np.ndarray:
         targets = [(0, 0, 0)] * len(pos)
         if form == "cells":
-            return np.asarray(eyes.see_few(pos, targets, drones))[0]
+            return np.asarray(eyes.see_few(pos, np.array(targets, np.intp), drones))[0]
         return eyes.see(*(np.array(c, np.int32).reshape(-1, 3) for c in (pos, targets, drones)))[0]
 
     obs = see([(2, 2, 1)], [(2, 2, 1), (2, 3, 1)])  # the second drone at +y of the first
