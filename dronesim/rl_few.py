@@ -104,8 +104,9 @@ class FewEpisode(EpisodeBase):
         """As `Episode.infos`."""
         pos, targets, shown, state, cause = self._pos, self._targets, self._shown, self._state, self._cause
         if len(rows) == self.n:  # (every row, in order: the lists themselves)
-            return [{"cell": p, "target": t, "note": NOTE_TEXT[note], "state": STATE_TEXT[s], "cause": CAUSE_TEXT[c]}
-                    for p, t, note, s, c in zip(pos, targets, shown, state, cause)]
+            return [{"cell": p, "target": t, "note": note, "state": s, "cause": c} for p, t, note, s, c in zip(
+                pos, targets, map(NOTE_TEXT.__getitem__, shown), map(STATE_TEXT.__getitem__, state),
+                map(CAUSE_TEXT.__getitem__, cause))]
         return [{"cell": pos[i], "target": targets[i], "note": NOTE_TEXT[shown[i]], "state": STATE_TEXT[state[i]],
                  "cause": CAUSE_TEXT[cause[i]]} for i in rows]
 
