@@ -100,9 +100,7 @@ def _meet(before: Where[K], after: Mapping[K, Cell], moved: Sequence[K]) -> bool
     """Whether two drones end in one cell, or two movers swap cells."""
     if len(set(after.values())) < len(after):
         return True
-    entering = dict(zip(map(after.__getitem__, moved), moved))  # (one each: no two end in one cell)
-    if entering.keys().isdisjoint(map(before.__getitem__, moved)):  # (most turns, no mover leaves a cell another
-        return False  # enters: no swap, looked for in C)
+    entering = {after[d]: d for d in moved}  # (one each: no two end in one cell)
     for d in moved:  # (a loop: a generator's every item costs a call)
         e = entering.get(before[d])
         if e is not None and before[e] == after[d]:

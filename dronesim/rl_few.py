@@ -39,7 +39,6 @@ from schema.tables import code_of
 #: The most drones a FewEpisode plays: drone D100 would sort before D11 (rows would not be the id order).
 FEW_MAX = 99
 _REACHED = code_of(Note.REACHED)
-_STEP = ACTIONS.__getitem__  # an action's step (dx, dy, dz)
 _tuple_new = tuple.__new__  # (a step's Outcome made without its class's `__new__`'s call: a Python frame less)
 
 
@@ -103,10 +102,6 @@ class FewEpisode(EpisodeBase):
     def infos(self, rows) -> list[dict]:
         """As `Episode.infos`."""
         pos, targets, shown, state, cause = self._pos, self._targets, self._shown, self._state, self._cause
-        if len(rows) == self.n:  # (every row, in order: the lists themselves)
-            return [{"cell": p, "target": t, "note": note, "state": s, "cause": c} for p, t, note, s, c in zip(
-                pos, targets, map(NOTE_TEXT.__getitem__, shown), map(STATE_TEXT.__getitem__, state),
-                map(CAUSE_TEXT.__getitem__, cause))]
         return [{"cell": pos[i], "target": targets[i], "note": NOTE_TEXT[shown[i]], "state": STATE_TEXT[state[i]],
                  "cause": CAUSE_TEXT[cause[i]]} for i in rows]
 
@@ -132,7 +127,7 @@ class FewEpisode(EpisodeBase):
         notes = say if len(alive) == self.n else [say[i] for i in alive]  # (the engine reads them, keeps none)
         aim, targets = self._aim, self._targets
         # (the actions' steps: the judge's pass over them makes them cells, `Engine.play`'s offsets)
-        over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, list(map(_STEP, values)),
+        over = self.engine.play(aim, [targets[i] for i in aim] if aim else [], alive, [ACTIONS[a] for a in values],
                                 notes, offsets=True)
         self._aim = []
         # what the turn did: each drone is where the engine's fleet says (its own list of cells, read, never
