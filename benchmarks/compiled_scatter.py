@@ -9,7 +9,9 @@ binary heap ordered as Python orders its tuples: collisions, length, cell, step,
 hash table (`moves`), the parked drones' end steps sorted per cell (`parked`), the rounds in the orders
 `lacam.scatter_order` draws, stopped as `advance` stops them. It is compiled by the system's C compiler (`cc`) into a
 temporary folder and called through ctypes. Each instance's paths must equal Python's, else exit 1. Times: process
-CPU of the whole call (the C side's set-up included), Python and C alternated, the best of `--repeat`.
+CPU of the whole call (the C side's set-up included), Python and C alternated, the best of `--repeat`. The C port
+twice: its queue as heapq's (every entry pushed, a settled cell's later entries popped and skipped) and an indexed heap
+(one entry a cell, decreased when a lesser key is offered: the same cells popped in the same order).
 """
 
 from __future__ import annotations
@@ -45,7 +47,9 @@ static int less(const item *a, const item *b) {
     return a->p < b->p;
 }
 static item *heap; static int64_t heap_n, heap_cap;
-static void push(item x) {
+#ifndef INDEXED
+/* the queue as Python's heapq holds it: every entry pushed, a cell's later (worse) entries popped and skipped */
+static void offer(item x) {
     if (heap_n == heap_cap) {
         heap_cap = heap_cap ? 2 * heap_cap : 1024;
         heap = realloc(heap, heap_cap * sizeof(item));
@@ -54,6 +58,7 @@ static void push(item x) {
     while (i > 0) { int64_t up = (i - 1) / 2; if (!less(&x, &heap[up])) break; heap[i] = heap[up]; i = up; }
     heap[i] = x;
 }
+static void forget(int64_t f) { (void)f; }
 static item pop(void) {
     item top = heap[0], x = heap[--heap_n];
     int64_t i = 0;
@@ -67,6 +72,44 @@ static item pop(void) {
     heap[i] = x;
     return top;
 }
+#else
+/* an indexed heap: one entry a cell, its least key offered so far (decrease-key); a cell's entries are popped in the
+   same order as the lazy heap's first entry of each cell (the keys hold the cell: no two cells' keys are equal) */
+static int64_t *where, where_cap;  /* cell -> its entry's place in the heap, -1: none */
+static void place(int64_t i, item x) { heap[i] = x; where[x.v] = i; }
+static void up_from(int64_t i, item x) {
+    while (i > 0) { int64_t up = (i - 1) / 2; if (!less(&x, &heap[up])) break; place(i, heap[up]); i = up; }
+    place(i, x);
+}
+static void offer(item x) {
+    int64_t i = where[x.v];
+    if (i >= 0) { if (less(&x, &heap[i])) up_from(i, x); return; }
+    if (heap_n == heap_cap) {
+        heap_cap = heap_cap ? 2 * heap_cap : 1024;
+        heap = realloc(heap, heap_cap * sizeof(item));
+    }
+    up_from(heap_n++, x);
+}
+static void forget(int64_t f) {  /* a new search: no cell in the heap */
+    if (where_cap < f) { where = realloc(where, f * 8); where_cap = f; }
+    for (int64_t k = 0; k < f; k++) where[k] = -1;
+}
+static item pop(void) {
+    item top = heap[0], x = heap[--heap_n];
+    where[top.v] = -1;
+    if (!heap_n) return top;
+    int64_t i = 0;
+    for (;;) {
+        int64_t l = 2 * i + 1, r = l + 1, m = i; const item *best = &x;
+        if (l < heap_n && less(&heap[l], best)) { m = l; best = &heap[l]; }
+        if (r < heap_n && less(&heap[r], best)) { m = r; best = &heap[r]; }
+        if (m == i) break;
+        place(i, heap[m]); i = m;
+    }
+    place(i, x);
+    return top;
+}
+#endif
 
 /* moves: (step, cell, next cell) -> paths taking that edge then (open addressing) */
 typedef struct { int64_t key; int32_t count; } slot;
@@ -136,8 +179,8 @@ static int64_t plan(int64_t i, int64_t s, int64_t goal, const int16_t *d, int64_
     if (path_n[i]) enroll(i, -1);
     int64_t bound = d[s] + margin, settled = 0, met = -1;
     for (int64_t k = 0; k < F; k++) parent[k] = -2;
-    heap_n = 0;
-    push((item){0, d[s], s, 0, -1});
+    heap_n = 0; forget(F);
+    offer((item){0, d[s], s, 0, -1});
     while (heap_n) {
         item it = pop();
         int64_t v = it.v;
@@ -151,7 +194,7 @@ static int64_t plan(int64_t i, int64_t s, int64_t goal, const int16_t *d, int64_
             int64_t cc = it.c + occ[tF + u];
             if (occ[gF + u]) cc += moves_get((gF + u) * F + v);
             if (ends_n[u]) cc += before_step(u, t);
-            push((item){cc, t + d[u], u, t, v});
+            offer((item){cc, t + d[u], u, t, v});
         }
     }
     free(paths[i]); paths[i] = 0; path_n[i] = 0;
@@ -208,18 +251,23 @@ void release(void) {
     free(occ); free(paths); free(path_n); free(parent); free(ends); free(ends_n); free(ends_cap);
     free(table); free(heap);
     heap = 0; heap_n = heap_cap = 0;
+#ifdef INDEXED
+    free(where); where = 0; where_cap = 0;
+#endif
 }
 """
 
 
-def compiled(folder: Path) -> ctypes.CDLL:
-    """`SOURCE` compiled by the system's C compiler in `folder`; RuntimeError if there is none or it fails."""
+def compiled(folder: Path, indexed: bool = False) -> ctypes.CDLL:
+    """`SOURCE` compiled by the system's C compiler in `folder` (`indexed`: its queue an indexed heap, one entry a
+    cell, not heapq's lazy one); RuntimeError if there is none or it fails."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         raise RuntimeError("no C compiler (cc, gcc) on the PATH")
-    src, lib = folder / "scatter.c", folder / "scatter.so"
+    src, lib = folder / "scatter.c", folder / ("scatter-indexed.so" if indexed else "scatter.so")
     src.write_text(SOURCE)
-    done = subprocess.run([cc, "-O2", "-shared", "-fPIC", "-o", str(lib), str(src)], capture_output=True, text=True)
+    done = subprocess.run([cc, "-O2", "-shared", "-fPIC", *(["-DINDEXED"] if indexed else []), "-o", str(lib),
+                           str(src)], capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{cc} failed: {done.stderr.strip()}")
     out = ctypes.CDLL(str(lib))
@@ -274,26 +322,32 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeat", type=int, default=3, help="the best of this many timings each (default 3)")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="dronesim-scatter-") as tmp:
-        lib = compiled(Path(tmp))
-        print("| instance | rounds | cells settled | Python ms | C ms | Python ÷ C | the same paths |")
-        print("|---|---|---|---|---|---|---|")
+        lazy, indexed = compiled(Path(tmp)), compiled(Path(tmp), indexed=True)
+        print("| instance | rounds | cells settled | Python ms | C ms | C, indexed heap, ms | Python ÷ C | "
+              "Python ÷ C indexed | the same paths |")
+        print("|---|---|---|---|---|---|---|---|---|")
         differ = 0
         for family in [f for f in args.families.split(",") if f]:
             for seed in range(1, args.seeds + 1):
                 graph, start, goal, dist = instance(family, args.agents, seed)
-                py_ms, c_ms = [], []
+                py_ms: list[float] = []
+                c_ms: list[float] = []
+                ci_ms: list[float] = []
+                same = True
                 for _ in range(args.repeat):
                     t0 = time.process_time()
                     made = lacam.Scatter(graph, start, goal, dist)
                     spent = made.advance(1 << 62)
                     py_ms.append(1000 * (time.process_time() - t0))
-                    t0 = time.process_time()
-                    paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
-                    c_ms.append(1000 * (time.process_time() - t0))
-                same = (paths, ran, units) == (made.paths, made.round, spent)
+                    for lib, ms in ((lazy, c_ms), (indexed, ci_ms)):
+                        t0 = time.process_time()
+                        paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
+                        ms.append(1000 * (time.process_time() - t0))
+                        same = same and (paths, ran, units) == (made.paths, made.round, spent)
                 differ += not same
                 print(f"| {family} seed {seed}, {args.agents} drones | {ran} | {settled:,} | {min(py_ms):.0f} | "
-                      f"{min(c_ms):.1f} | {min(py_ms) / min(c_ms):.1f} | {'yes' if same else 'NO'} |", flush=True)
+                      f"{min(c_ms):.1f} | {min(ci_ms):.1f} | {min(py_ms) / min(c_ms):.1f} | "
+                      f"{min(py_ms) / min(ci_ms):.1f} | {'yes' if same else 'NO'} |", flush=True)
     return 1 if differ else 0
 
 

@@ -378,15 +378,16 @@ def test_the_compiled_scatter_of_the_benchmark_makes_the_paths_python_makes(tmp_
     from benchmarks.compiled_scatter import c_paths, compiled, instance
 
     try:
-        lib = compiled(tmp_path)
+        libs = compiled(tmp_path), compiled(tmp_path, indexed=True)  # (its queue as heapq's, and an indexed heap)
     except RuntimeError as err:
         pytest.skip(f"the C port cannot be compiled here: {err}")
     graph, start, goal, dist = instance(family, agents, seed)
     made = lacam.Scatter(graph, start, goal, dist)
     spent = made.advance(1 << 62)
-    paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
-    assert (paths, ran, units) == (made.paths, made.round, spent) and settled > 0
-    assert sum(map(len, paths)) > agents  # (paths were made: not two empty lists)
+    for lib in libs:
+        paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
+        assert (paths, ran, units) == (made.paths, made.round, spent) and settled > 0
+        assert sum(map(len, paths)) > agents  # (paths were made: not two empty lists)
 
 
 def test_the_search_tries_a_drones_scattered_next_cell_first(monkeypatch: pytest.MonkeyPatch) -> None:
