@@ -10,8 +10,9 @@ hash table (`moves`), the parked drones' end steps sorted per cell (`parked`), t
 `lacam.scatter_order` draws, stopped as `advance` stops them. It is compiled by the system's C compiler (`cc`) into a
 temporary folder and called through ctypes. Each instance's paths must equal Python's, else exit 1. Times: process
 CPU of the whole call (the C side's set-up included), Python and C alternated, the best of `--repeat`. The C port
-twice: its queue as heapq's (every entry pushed, a settled cell's later entries popped and skipped) and an indexed heap
-(one entry a cell, decreased when a lesser key is offered: the same cells popped in the same order).
+twice: as Python's structures (its queue as heapq's: every entry pushed, a settled cell's later entries popped and
+skipped; the edges' counts in a hash table) and tuned (an indexed heap: one entry a cell, decreased when a lesser key
+is offered, the same cells popped in the same order; the edges' counts an array by step, cell and direction).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ static int less(const item *a, const item *b) {
     return a->p < b->p;
 }
 static item *heap; static int64_t heap_n, heap_cap;
-#ifndef INDEXED
+#ifndef TUNED
 /* the queue as Python's heapq holds it: every entry pushed, a cell's later (worse) entries popped and skipped */
 static void offer(item x) {
     if (heap_n == heap_cap) {
@@ -111,7 +112,11 @@ static item pop(void) {
 }
 #endif
 
-/* moves: (step, cell, next cell) -> paths taking that edge then (open addressing) */
+static int64_t F, N; static int32_t *occ; static const int64_t *near;
+
+/* moves: paths taking the edge from cell a at step t to its neighbour b at t + 1 (`moved`, `move`) */
+#ifndef TUNED
+/* as Python's dict: (step, cell, next cell) -> the count (open addressing) */
 typedef struct { int64_t key; int32_t count; } slot;
 static slot *table; static int64_t table_cap, table_n;
 static int64_t hashed(int64_t k) {  /* splitmix64's finaliser: every bit of the key in the low bits */
@@ -142,6 +147,29 @@ static void moves_add(int64_t k, int32_t d) {
     for (; table[i].key != -1; i = (i + 1) & (table_cap - 1)) if (table[i].key == k) { table[i].count += d; return; }
     table[i].key = k; table[i].count = d; table_n++;
 }
+#define OPP(k) (-1)
+static int32_t moved(int64_t t, int64_t a, int64_t b, int k) { (void)k; return moves_get((t * F + a) * F + b); }
+static void move(int64_t t, int64_t a, int64_t b, int32_t d) { moves_add((t * F + a) * F + b, d); }
+static void moves_open(int64_t longest) { (void)longest; table = 0; table_cap = 0; table_n = 0; moves_add(-2, 0); }
+static void moves_close(void) { free(table); table = 0; }
+#else
+/* a count a (step, cell, direction): no hashing, no probing ((longest + 1) x F x 6 counts) */
+static int32_t *edge; static int opp[6];  /* opp[k]: the direction back along direction k */
+#define OPP(k) opp[k]
+static int dir_of(int64_t a, int64_t b) { for (int k = 0; k < 6; k++) if (near[a * 6 + k] == b) return k; return -1; }
+static int32_t moved(int64_t t, int64_t a, int64_t b, int k) {
+    return edge[(t * F + a) * 6 + (k >= 0 ? k : dir_of(a, b))];
+}
+static void move(int64_t t, int64_t a, int64_t b, int32_t d) { edge[(t * F + a) * 6 + dir_of(a, b)] += d; }
+static void moves_open(int64_t longest) {
+    edge = calloc((longest + 1) * F * 6, 4);
+    for (int k = 0; k < 6; k++) {
+        opp[k] = -1;
+        for (int64_t v = 0; v < F && opp[k] < 0; v++) if (near[v * 6 + k] >= 0) opp[k] = dir_of(near[v * 6 + k], v);
+    }
+}
+static void moves_close(void) { free(edge); edge = 0; }
+#endif
 
 /* parked: cell -> the steps from which paths ending there stay there, sorted */
 static int32_t **ends; static int32_t *ends_n, *ends_cap;
@@ -163,14 +191,13 @@ static void park(int64_t u, int32_t t, int sign) {
     }
 }
 
-static int64_t F, N; static int32_t *occ; static const int64_t *near;
 static int64_t **paths, *path_n, *parent;
 
 static void enroll(int64_t i, int sign) {
     const int64_t *p = paths[i]; int64_t n = path_n[i];
     for (int64_t t = 0; t < n; t++) {
         occ[t * F + p[t]] += sign;
-        if (t + 1 < n) moves_add((t * F + p[t]) * F + p[t + 1], sign);
+        if (t + 1 < n) move(t, p[t], p[t + 1], sign);
     }
     if (n) park(p[n - 1], (int32_t)(n - 1), sign);
 }
@@ -192,7 +219,7 @@ static int64_t plan(int64_t i, int64_t s, int64_t goal, const int16_t *d, int64_
             int64_t u = near[v * 6 + k];
             if (u < 0 || parent[u] != -2 || t + d[u] > bound) continue;
             int64_t cc = it.c + occ[tF + u];
-            if (occ[gF + u]) cc += moves_get((gF + u) * F + v);
+            if (occ[gF + u]) cc += moved(it.g, u, v, OPP(k));
             if (ends_n[u]) cc += before_step(u, t);
             offer((item){cc, t + d[u], u, t, v});
         }
@@ -214,7 +241,7 @@ static int64_t collisions(void) {
         const int64_t *p = paths[i];
         for (int64_t t = 1; t < path_n[i]; t++) {
             int64_t v = p[t], u = p[t - 1];
-            total += occ[t * F + v] - 1 + moves_get(((t - 1) * F + v) * F + u);
+            total += occ[t * F + v] - 1 + moved(t - 1, v, u, -1);
             if (ends_n[v]) total += before_step(v, t);
         }
     }
@@ -229,7 +256,7 @@ int64_t scatter(int64_t f, int64_t n, int64_t longest, const int64_t *near_, con
     F = f; N = n; near = near_;
     occ = calloc((longest + 1) * f, 4); paths = calloc(n, sizeof(int64_t *)); path_n = calloc(n, 8);
     parent = malloc(f * 8); ends = calloc(f, sizeof(int32_t *)); ends_n = calloc(f, 4); ends_cap = calloc(f, 4);
-    table = 0; table_cap = 0; table_n = 0; moves_add(-2, 0);
+    moves_open(longest);
     int64_t last = -1, r = 0; *settled = 0; *units = 0;
     for (;;) {
         for (int64_t k = 0; k < n; k++) {
@@ -249,24 +276,25 @@ void release(void) {
     for (int64_t i = 0; i < N; i++) free(paths[i]);
     for (int64_t u = 0; u < F; u++) free(ends[u]);
     free(occ); free(paths); free(path_n); free(parent); free(ends); free(ends_n); free(ends_cap);
-    free(table); free(heap);
+    moves_close(); free(heap);
     heap = 0; heap_n = heap_cap = 0;
-#ifdef INDEXED
+#ifdef TUNED
     free(where); where = 0; where_cap = 0;
 #endif
 }
 """
 
 
-def compiled(folder: Path, indexed: bool = False) -> ctypes.CDLL:
-    """`SOURCE` compiled by the system's C compiler in `folder` (`indexed`: its queue an indexed heap, one entry a
-    cell, not heapq's lazy one); RuntimeError if there is none or it fails."""
+def compiled(folder: Path, tuned: bool = False) -> ctypes.CDLL:
+    """`SOURCE` compiled by the system's C compiler in `folder` (`tuned`: its queue an indexed heap, one entry a
+    cell, not heapq's lazy one, and its edges' counts an array, not a hash table); RuntimeError if there is none or
+    it fails."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         raise RuntimeError("no C compiler (cc, gcc) on the PATH")
-    src, lib = folder / "scatter.c", folder / ("scatter-indexed.so" if indexed else "scatter.so")
+    src, lib = folder / "scatter.c", folder / ("scatter-tuned.so" if tuned else "scatter.so")
     src.write_text(SOURCE)
-    done = subprocess.run([cc, "-O2", "-shared", "-fPIC", *(["-DINDEXED"] if indexed else []), "-o", str(lib),
+    done = subprocess.run([cc, "-O2", "-shared", "-fPIC", *(["-DTUNED"] if tuned else []), "-o", str(lib),
                            str(src)], capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{cc} failed: {done.stderr.strip()}")
@@ -322,9 +350,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeat", type=int, default=3, help="the best of this many timings each (default 3)")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="dronesim-scatter-") as tmp:
-        lazy, indexed = compiled(Path(tmp)), compiled(Path(tmp), indexed=True)
-        print("| instance | rounds | cells settled | Python ms | C ms | C, indexed heap, ms | Python ÷ C | "
-              "Python ÷ C indexed | the same paths |")
+        plain, tuned = compiled(Path(tmp)), compiled(Path(tmp), tuned=True)
+        print("| instance | rounds | cells settled | Python ms | C ms | C tuned ms | Python ÷ C | Python ÷ C tuned | "
+              "the same paths |")
         print("|---|---|---|---|---|---|---|---|---|")
         differ = 0
         for family in [f for f in args.families.split(",") if f]:
@@ -339,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
                     made = lacam.Scatter(graph, start, goal, dist)
                     spent = made.advance(1 << 62)
                     py_ms.append(1000 * (time.process_time() - t0))
-                    for lib, ms in ((lazy, c_ms), (indexed, ci_ms)):
+                    for lib, ms in ((plain, c_ms), (tuned, ci_ms)):
                         t0 = time.process_time()
                         paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
                         ms.append(1000 * (time.process_time() - t0))

@@ -378,7 +378,7 @@ def test_the_compiled_scatter_of_the_benchmark_makes_the_paths_python_makes(tmp_
     from benchmarks.compiled_scatter import c_paths, compiled, instance
 
     try:
-        libs = compiled(tmp_path), compiled(tmp_path, indexed=True)  # (its queue as heapq's, and an indexed heap)
+        libs = compiled(tmp_path), compiled(tmp_path, tuned=True)  # (as Python's structures, and tuned)
     except RuntimeError as err:
         pytest.skip(f"the C port cannot be compiled here: {err}")
     graph, start, goal, dist = instance(family, agents, seed)
