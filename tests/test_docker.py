@@ -2050,13 +2050,20 @@ def test_engine_stop_or_down_mid_game_ends_it_interrupted_with_its_over_record(p
         p.compose("up", "-d")
         coordinator = p.one("coordinator")
         p.follow(p.one("gcs"), "gcs").expect(r"^turn 3:", ENGINE_TIMEOUT)
+        srv = p.follow(coordinator, "coordinator")
         entities = {i for i in p.entities().values() if i != coordinator}
         p.compose(how, "--timeout", "2")
         assert p.died(coordinator) == 143, (how, p.logs(coordinator) if how == "stop" else "")
         over = records(p.volume_file())[-1]
         assert over["record"] == "over" and over["reason"] == "INTERRUPTED", (how, over)
         assert "SIGTERM" in over["text"], (how, over)
-        assert {p.died(i) for i in entities} == {0}, how  # they saw the end
+        codes = {p.died(i) for i in entities}
+        srv.wait()  # (its output read to the end)
+        # they saw the end: 0. The coordinator waits STOP_LINGER_S for their presence to go; if one is still there
+        # then (a loaded machine), it says so and exits, and compose signals that one, which may not have seen OVER
+        # yet: stopped, 143 (item 1), and only then
+        gave_up = any("stopped: not waiting for" in line for line in srv.err + srv.out)
+        assert codes == {0} or gave_up and codes == {0, 143}, (how, codes, srv.text)
 
 
 FAKE_CARGO = """#!/bin/sh
