@@ -50,40 +50,28 @@ static int less(const item *a, const item *b) {
 static item *heap; static int64_t heap_n, heap_cap;
 #ifndef TUNED
 /* the queue as Python's heapq holds it: every entry pushed, a cell's later (worse) entries popped and skipped */
-static void offer(item x) {
-    if (heap_n == heap_cap) {
-        heap_cap = heap_cap ? 2 * heap_cap : 1024;
-        heap = realloc(heap, heap_cap * sizeof(item));
-    }
-    int64_t i = heap_n++;
-    while (i > 0) { int64_t up = (i - 1) / 2; if (!less(&x, &heap[up])) break; heap[i] = heap[up]; i = up; }
-    heap[i] = x;
-}
+static void place(int64_t i, item x) { heap[i] = x; }
+static int64_t entry(int64_t v) { (void)v; return -1; }  /* (every offer a new entry) */
 static void forget(int64_t f) { (void)f; }
-static item pop(void) {
-    item top = heap[0], x = heap[--heap_n];
-    int64_t i = 0;
-    for (;;) {
-        int64_t l = 2 * i + 1, r = l + 1, m = i; const item *best = &x;
-        if (l < heap_n && less(&heap[l], best)) { m = l; best = &heap[l]; }
-        if (r < heap_n && less(&heap[r], best)) { m = r; best = &heap[r]; }
-        if (m == i) break;
-        heap[i] = heap[m]; i = m;
-    }
-    heap[i] = x;
-    return top;
-}
+static void taken(int64_t v) { (void)v; }
 #else
 /* an indexed heap: one entry a cell, its least key offered so far (decrease-key); a cell's entries are popped in the
    same order as the lazy heap's first entry of each cell (the keys hold the cell: no two cells' keys are equal) */
 static int64_t *where, where_cap;  /* cell -> its entry's place in the heap, -1: none */
 static void place(int64_t i, item x) { heap[i] = x; where[x.v] = i; }
+static int64_t entry(int64_t v) { return where[v]; }
+static void forget(int64_t f) {  /* a new search: no cell in the heap */
+    if (where_cap < f) { where = realloc(where, f * 8); where_cap = f; }
+    for (int64_t k = 0; k < f; k++) where[k] = -1;
+}
+static void taken(int64_t v) { where[v] = -1; }
+#endif
 static void up_from(int64_t i, item x) {
     while (i > 0) { int64_t up = (i - 1) / 2; if (!less(&x, &heap[up])) break; place(i, heap[up]); i = up; }
     place(i, x);
 }
 static void offer(item x) {
-    int64_t i = where[x.v];
+    int64_t i = entry(x.v);
     if (i >= 0) { if (less(&x, &heap[i])) up_from(i, x); return; }
     if (heap_n == heap_cap) {
         heap_cap = heap_cap ? 2 * heap_cap : 1024;
@@ -91,13 +79,9 @@ static void offer(item x) {
     }
     up_from(heap_n++, x);
 }
-static void forget(int64_t f) {  /* a new search: no cell in the heap */
-    if (where_cap < f) { where = realloc(where, f * 8); where_cap = f; }
-    for (int64_t k = 0; k < f; k++) where[k] = -1;
-}
 static item pop(void) {
     item top = heap[0], x = heap[--heap_n];
-    where[top.v] = -1;
+    taken(top.v);
     if (!heap_n) return top;
     int64_t i = 0;
     for (;;) {
@@ -110,7 +94,6 @@ static item pop(void) {
     place(i, x);
     return top;
 }
-#endif
 
 static int64_t F, N; static int32_t *occ; static const int64_t *near;
 
