@@ -54,6 +54,7 @@ static void place(int64_t i, item x) { heap[i] = x; }
 static int64_t entry(int64_t v) { (void)v; return -1; }  /* (every offer a new entry) */
 static void forget(int64_t f) { (void)f; }
 static void taken(int64_t v) { (void)v; }
+static void queue_close(void) {}
 #else
 /* an indexed heap: one entry a cell, its least key offered so far (decrease-key); a cell's entries are popped in the
    same order as the lazy heap's first entry of each cell (the keys hold the cell: no two cells' keys are equal) */
@@ -65,6 +66,7 @@ static void forget(int64_t f) {  /* a new search: no cell in the heap */
     for (int64_t k = 0; k < f; k++) where[k] = -1;
 }
 static void taken(int64_t v) { where[v] = -1; }
+static void queue_close(void) { free(where); where = 0; where_cap = 0; }
 #endif
 static void up_from(int64_t i, item x) {
     while (i > 0) { int64_t up = (i - 1) / 2; if (!less(&x, &heap[up])) break; place(i, heap[up]); i = up; }
@@ -259,11 +261,8 @@ void release(void) {
     for (int64_t i = 0; i < N; i++) free(paths[i]);
     for (int64_t u = 0; u < F; u++) free(ends[u]);
     free(occ); free(paths); free(path_n); free(parent); free(ends); free(ends_n); free(ends_cap);
-    moves_close(); free(heap);
+    moves_close(); queue_close(); free(heap);
     heap = 0; heap_n = heap_cap = 0;
-#ifdef TUNED
-    free(where); where = 0; where_cap = 0;
-#endif
 }
 """
 

@@ -38,8 +38,9 @@ _tuple_new = tuple.__new__  # (a NamedTuple made by its class's `__new__` withou
 
 class Steps(NamedTuple):
     """Every alive drone's move in a turn of a few drones, read and checked in one pass (`Judge.steps`): the alive
-    rows (ascending), their cells before and after, the rows that changed cell (ascending), and whether one of
-    these left the world and the building cells they entered (`observer.deaths_of_moves`' `found`)."""
+    rows (ascending), every drone's cell before by row (the fleet's own list, which `Fleet.move` then changes), the
+    alive ones' cells after, the rows that changed cell (ascending), and whether one of these left the world and the
+    building cells they entered (`observer.deaths_of_moves`' `found`)."""
 
     rows: list[int]
     before: list[Cell]

@@ -523,14 +523,12 @@ class Eyes:
         gather (of each drone's whole cube up to EYES_CUBE_GATHER drones, of the sensed cells alone above).
         `targets`: the drones' targets, (m, 3) intp (an array: its offsets are one subtraction, where a list of
         tuples would be converted item by item)."""
-        cells, o, n = self._flat, self._origin, self.cells
         if len(pos) <= EYES_ONE_BY_ONE:
             return self._one_by_one(pos, targets, drones)
-        # (the cells as an array: from their items in one pass, ~2.5 times cheaper than from the tuples)
-        here = np.fromiter(chain.from_iterable(pos), np.intp, 3 * len(pos)).reshape(-1, 3)
+        cells, o, n = self._flat, self._origin, self.cells
+        here = cells_array(pos)
         base = here @ self._strides + o
-        at = base if drones is pos else \
-            np.fromiter(chain.from_iterable(drones), np.intp, 3 * len(drones)).reshape(-1, 3) @ self._strides + o
+        at = base if drones is pos else cells_array(drones) @ self._strides + o
         cells[at] = _DRONE  # the drones marked in the world for the while
         try:
             if len(pos) > EYES_CUBE_GATHER:  # their sensed cells in one gather, placed in rows of UNKNOWN (`see`'s)
@@ -566,6 +564,12 @@ class Eyes:
         finally:
             for k in at:
                 items[k] = _FREE  # an alive drone's cell is free in the static world
+
+
+def cells_array(cells: list[Cell]) -> np.ndarray:
+    """Cells ((x, y, z) tuples) as an (n, 3) intp array, read from their items in one pass (~2.5 times cheaper than
+    `np.array` of the tuples, which numpy parses one by one)."""
+    return np.fromiter(chain.from_iterable(cells), np.intp, 3 * len(cells)).reshape(-1, 3)
 
 
 #: rgb_array colours.
