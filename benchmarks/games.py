@@ -49,6 +49,7 @@ class Case:
     turns: int  # measured
     moving: bool = False  # the drones get new targets leg after leg until the end (else, on a big swarm, they stay
     # at their last target once every floor is flown: see make_scenario)
+    autopilot: str = "seed"  # every drone's (seed drones may crash into each other: a game may end early)
 
     @property
     def name(self) -> str:
@@ -129,7 +130,8 @@ def make_scenario(case: Case, seed: int = WORLD_SEED) -> dict | None:
             targets.append(f"{drone_id(i + 1)}={cell[0]},{cell[1]},{cell[2]}@{t0}")
     return {"format": "dronesim-scenario", "version": 1,
             "world": {"size": list(case.size), "seed": seed},
-            "drones": [{"id": drone_id(i + 1), "start": list(s), "autopilot": "seed"} for i, s in enumerate(starts)],
+            "drones": [{"id": drone_id(i + 1), "start": list(s), "autopilot": case.autopilot}
+                       for i, s in enumerate(starts)],
             "targets": targets, "max_turns": case.end_turn + 10}
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from benchmarks.games import ROLES, Case, Game, Variant, Window, Windows, make_scenario, play_distributed, states_of
 from benchmarks.measure import Row, size_text
+from entities.autopilots import COOPERATIVE
 
 #: The share of its turns/s a game keeps with a ROS 2 viewer publishing it (issue 35).
 ROS2_KEEPS = 0.9
@@ -260,7 +261,10 @@ def play_mechanisms(selected: Callable[[str], bool], quick: bool, turns: int, lo
         if m.windows is not None and m.off is not None:  # one game, the switch flipped in windows of it
             for drones, size in games:
                 w = m.windows if not quick else Windows(turns=10, quads=1, settle=2, published=1)
-                case = Case(drones, size, max(5, m.warmup) if not quick else 3, w.span + WINDOWS_SLACK, moving=True)
+                # --quick: cooperative drones, which never crash: the 4 seed drones' game ends (all crashed) on turn
+                # 243, within a second, before a viewer that spent its CPU share on its first turn publishes again
+                case = Case(drones, size, max(5, m.warmup) if not quick else 3, w.span + WINDOWS_SLACK, moving=True,
+                            autopilot=COOPERATIVE if quick else "seed")
                 pair = Pair(m, case)
                 path = logs / f"mechanism-scenario-{drones}-{size_text(size)}-moving.json"
                 path.write_text(json.dumps(make_scenario(case)), encoding="utf-8")
