@@ -11,6 +11,7 @@ by line: memory is bounded by the largest turn, not the game.
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 import sys
 from collections.abc import Iterator
@@ -21,6 +22,7 @@ import numpy as np
 from coordinator.journal import header_config, is_turn, read
 from entities.ros2.model import NAMESPACE, TURN_PERIOD_S, Scene, Snapshot
 from schema import UsageError
+from schema.errors import excerpt
 from schema.tables import drone_number
 from world.grid import CELL_SIZE_M, build_world
 
@@ -67,7 +69,8 @@ def snapshots(records: Iterator[dict],
 def export(journal: str, out: pathlib.Path, *, namespace: str = NAMESPACE, cell_size: float = CELL_SIZE_M,
            turn_period: float = TURN_PERIOD_S, path_every: int = 50, scene: bool = True,
            compression: str = "zstd") -> tuple[int, int]:
-    """Write the MCAP file (without `scene`: only the ROS 2 topics); (turns, messages)."""
+    """Write the MCAP file (without `scene`: only the ROS 2 topics); (turns, messages). A journal refused on the way
+    (UsageError) leaves `out` as it was: the file is written beside it and takes its name once whole."""
     import foxglove
     from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
@@ -87,25 +90,30 @@ def export(journal: str, out: pathlib.Path, *, namespace: str = NAMESPACE, cell_
         raise UsageError(str(err)) from None
     context = foxglove.Context()
     turns = 0
-    with foxglove.open_mcap(out, allow_overwrite=True, context=context,
-                            writer_options=MCAPWriteOptions(profile="ros2", compression_threads=1, chunk_size=CHUNK,
-                                                            compression={"zstd": MCAPCompression.Zstd,
-                                                                         "lz4": MCAPCompression.Lz4,
-                                                                         "none": None}[compression])):
-        sink = FoxgloveSink(context, ros, with_scene=scene)
-        sink.world(world.grid, ros.buildings(world.grid))
-        last = None
-        try:
-            for snap, _ in snapshots(records, [(d.drone, d.start) for d in config.drones]):
-                if snap is None:
-                    continue
-                sink.turn(snap, ros.turn(snap, paths=snap.turn % path_every == 0))
-                last, turns = snap, turns + 1
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise UsageError(f"{journal}: bad journal record: {exc!r}") from None
-        if last is not None and len(paths := ros.paths(last.turn)):  # every trail as it ends
-            sink.log(paths)
-            sink.trails(last.turn)
+    part = out.with_name(f".{out.name}.{os.getpid()}.part")  # (`out` replaced by a whole file only: `os.replace`)
+    try:
+        with foxglove.open_mcap(part, allow_overwrite=True, context=context,
+                                writer_options=MCAPWriteOptions(profile="ros2", compression_threads=1, chunk_size=CHUNK,
+                                                                compression={"zstd": MCAPCompression.Zstd,
+                                                                             "lz4": MCAPCompression.Lz4,
+                                                                             "none": None}[compression])):
+            sink = FoxgloveSink(context, ros, with_scene=scene)
+            sink.world(world.grid, ros.buildings(world.grid))
+            last = None
+            try:
+                for snap, _ in snapshots(records, [(d.drone, d.start) for d in config.drones]):
+                    if snap is None:
+                        continue
+                    sink.turn(snap, ros.turn(snap, paths=snap.turn % path_every == 0))
+                    last, turns = snap, turns + 1
+            except (KeyError, TypeError, ValueError, IndexError, OverflowError) as exc:
+                raise UsageError(f"{journal}: bad journal record: {excerpt(repr(exc))}") from None
+            if last is not None and len(paths := ros.paths(last.turn)):  # every trail as it ends
+                sink.log(paths)
+                sink.trails(last.turn)
+        os.replace(part, out)
+    finally:
+        part.unlink(missing_ok=True)
     return turns, sink.logged
 
 

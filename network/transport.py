@@ -753,6 +753,16 @@ class Inbox:
         """Queue an event from another thread of this process (e.g. a web request for the main loop)."""
         self._events.put("local", event, budgeted=False)  # (this process's own origin: never refused)
 
+    def post_from(self, where: str, origin: str, event: object, size: int, limit: int) -> None:
+        """Queue an event made of a remote input this process heard outside this inbox (a ROS 2 goal on a topic it
+        subscribed to itself), from the thread that heard it: refused unread and counted in `rejects` (at `where`,
+        from `origin`) above `limit` bytes or beyond `origin`'s budget, as `subscribe` refuses a game key's."""
+        try:
+            self._admit(origin, size, limit, True)
+            self._events.put(origin, event, size)
+        except RemoteInputError as err:
+            self.rejects.reject(where, err, origin)
+
     # the main thread
 
     def drain(self) -> list[Event]:

@@ -92,9 +92,9 @@ class RejectCounter:
         #: under a flood naming a new sender each time)
         self._holding: dict[tuple[str, str], _Window] = {}
 
-    def reject(self, where: str, err: RemoteInputError, origin: str | None = None) -> None:
+    def reject(self, where: str, err: RemoteInputError, origin: str | None = None) -> bool:
         """Count `err`, refused at `where` (a key, or what was refused), from `origin` (default: `where`; beyond
-        `REJECT_ORIGINS` origins named apart, "(others)")."""
+        `REJECT_ORIGINS` origins named apart, "(others)"). True if it was logged now (not held for a summary)."""
         who, now = origin or where, self._clock()
         with self._lock:
             if who not in self._origins and len(self._origins) >= REJECT_ORIGINS:
@@ -119,6 +119,7 @@ class RejectCounter:
             self._log.warning("rejected %s: %s (%s)", where, excerpt(str(err)), err.reason)
         elif first and self._wake is not None:
             self._wake()
+        return first is None
 
     def due_in(self) -> float | None:
         """Seconds until `flush` has a summary to log (None: none held)."""

@@ -343,6 +343,9 @@ ROS_SLOWEST = 1.0
 ROS_LISTEN_GAP = 0.25
 #: Seconds between two trails (nav_msgs/Path) of a drone that keeps moving (the last turn's always goes out).
 ROS_PATH_PERIOD = 1.0
+#: Bytes at most of a ROS 2 goal (a geometry_msgs/msg/PoseStamped, 80 bytes or so with the frame "map"): a bigger
+#: one is refused unread (`too-large`), as an oversized message on a game key is.
+ROS_GOAL_BYTES = 4096
 #: Seconds between two MAP queries of a viewer whose environment has not answered yet (it may not be up).
 ROS_MAP_RETRY = 1.0
 

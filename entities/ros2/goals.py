@@ -8,11 +8,17 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 from schema import Cell, UsageError
+from schema.errors import excerpt
 from world.grid import World
 
 from ..gcs import check_cell
 from .cdr import deserialize
 from .model import FRAME, POSE
+
+
+def reason(err: UsageError) -> str:
+    """The reason of a goal's refusal: its text up to the first colon ("outside the world", "malformed", ...)."""
+    return str(err).split(":", 1)[0]
 
 
 @dataclass(frozen=True, slots=True)
@@ -34,19 +40,20 @@ class Goals:
     taken: int = 0
 
     def read(self, goal: Goal) -> tuple[str, Cell]:
-        """(drone, cell) of a goal; UsageError (its reason counted in `refused`) if it cannot be one."""
+        """(drone, cell) of a goal; UsageError (its reason counted in `refused`, its text an excerpt: a goal's frame
+        or numbers may be long) if it cannot be one."""
         try:
             cell = self._cell(goal)
         except UsageError as err:
-            self.refused[str(err).split(":", 1)[0]] += 1
-            raise
+            self.refused[reason(err)] += 1
+            raise UsageError(excerpt(str(err))) from None
         self.taken += 1
         return goal.drone, cell
 
     def refuse(self, err: UsageError) -> None:
         """A goal read well, then refused by the ground station (its drone gone, the game over): counted so."""
         self.taken -= 1
-        self.refused[str(err).split(":", 1)[0]] += 1
+        self.refused[reason(err)] += 1
 
     def _cell(self, goal: Goal) -> Cell:
         if goal.drone not in self.drones:
@@ -62,7 +69,10 @@ class Goals:
             raise UsageError(f"other frame: {frame!r}, goals are in {FRAME!r}")
         if not all(map(math.isfinite, xyz)):
             raise UsageError(f"not finite: {xyz}")
-        cell = tuple(round(v / self.cell_size) for v in xyz)
+        scaled = [v / self.cell_size for v in xyz]
+        if not all(map(math.isfinite, scaled)):  # (finite metres, but beyond a float in cells: far outside)
+            raise UsageError(f"outside the world: {xyz} m is beyond any cell of {self.cell_size} m")
+        cell = tuple(round(v) for v in scaled)
         try:
             return check_cell((cell[0], cell[1], cell[2]), self.world.size, self.world)
         except UsageError as err:

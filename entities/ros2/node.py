@@ -31,11 +31,12 @@ import zenoh.ext
 
 from network.signals import until_stopped, waking
 from network.transport import Inbox, Newest, Received, add_zenoh_args, open_session, setup_logging, zenoh_config
-from schema import Cell, Keys, MapRequest, Over, Status, UsageError, WorldMap
+from schema import Cell, Keys, MapRequest, Over, RemoteInputError, Status, UsageError, WorldMap
 from schema.keys import RosKeys
 from schema.tuning import (
     FINAL_STATUS_WAIT,
     ROS_CPU_SHARE,
+    ROS_GOAL_BYTES,
     ROS_LISTEN_GAP,
     ROS_MAP_RETRY,
     ROS_PATH_PERIOD,
@@ -46,7 +47,7 @@ from world.grid import CELL_SIZE_M
 
 from ..gcs import OBSERVED_ENDS, Ground
 from .cdr import type_hash
-from .goals import Goal, Goals
+from .goals import Goal, Goals, reason
 from .model import NAMESPACE, POSE, TURN_PERIOD_S, Out, Outs, Scene, Snapshot, drone_topic
 
 #: The ROS 2 node the viewer is in the graph (`ros2 node list`), whose token tells it is there.
@@ -214,13 +215,18 @@ def take_goals(args: argparse.Namespace, session: zenoh.Session, inbox: Inbox, g
     a UsageError); what became of it is logged and `say`-ed (a refusal counted by reason). True for a goal."""
     goals = Goals(ground.world, frozenset(ground.starts), args.cell_size)
     graph = RosGraph(session, ros_keys(args), "dronesim_gcs")
-    graph.subscribe({drone_topic(args.namespace, d, "goal_pose"): d for d in ground.starts}, POSE,
-                    lambda drone, payload: inbox.post(Goal(drone, payload)))
+    topic = {d: drone_topic(args.namespace, d, "goal_pose") for d in ground.starts}
+
+    def heard(drone: str, payload: bytes) -> None:  # (on Zenoh's thread: each drone's goals a budget of their own)
+        inbox.post_from(topic[drone], f"ros2/{drone}", Goal(drone, payload), len(payload), ROS_GOAL_BYTES)
+
+    graph.subscribe({t: d for d, t in topic.items()}, POSE, heard)
     logger.info("taking ROS 2 goals on %s, domain %d", drone_topic(args.namespace, "<Dnn>", "goal_pose"), args.domain)
 
     def refused(drone: str, err: UsageError) -> bool:
-        logger.warning("refused a ROS 2 goal for %s: %s (refused so far: %s)", drone, err, dict(goals.refused))
-        say(f"refused a ROS 2 goal for {drone}: {err}")
+        why = RemoteInputError(str(err), reason=reason(err).replace(" ", "-"))
+        if inbox.rejects.reject(topic[drone], why, f"ros2/{drone}"):  # (a flood's: a few, then a summary)
+            say(f"refused a ROS 2 goal for {drone}: {err} (refused so far: {dict(goals.refused)})")
         return True
 
     def take(event: object) -> bool:
