@@ -344,6 +344,22 @@ def test_an_origin_over_its_budget_in_the_inbox_is_refused_unread(pair) -> None:
     inbox.close()
 
 
+def test_events_posted_from_a_remote_input_are_budgeted_by_origin_and_size(pair) -> None:
+    """`Inbox.post_from` (a ROS 2 goal heard on the station's own subscriber): beyond the origin's budget or above
+    the size limit, refused unread and counted; another origin's events are not refused; `post` never is."""
+    inbox = Inbox(pair[0].session, pair[2], LOG, budget=2)
+    for k in range(4):
+        inbox.post_from("goal/D01", "ros2/D01", ("D01", k), 80, 4096)
+    inbox.post_from("goal/D02", "ros2/D02", ("D02", 0), 80, 4096)
+    inbox.post_from("goal/D02", "ros2/D02", ("D02", 1), 5000, 4096)
+    for k in range(3):
+        inbox.post(("local", k))
+    assert inbox.drain() == [("D01", 0), ("D01", 1), ("D02", 0), ("local", 0), ("local", 1), ("local", 2)]
+    assert inbox.rejects.snapshot() == {"flood": 2, "too-large": 1}
+    assert inbox.rejects.report() == "{'flood': 2, 'too-large': 1}, from {'ros2/D01': 2, 'ros2/D02': 1}"
+    inbox.close()
+
+
 @pytest.mark.parametrize("flooder", ["D01", "SRV"])
 def test_asks_are_counted_against_their_sender_one_flooding_cannot_crowd_out_another(pair, flooder: str) -> None:
     """Also when the flooder names itself SRV: a query's sender is its payload's claim, and only a key proves the
