@@ -16,7 +16,7 @@ from collections.abc import Iterable
 from coordinator.config import GameConfig
 from coordinator.journal import Track, dumps, header_config, is_over, over_of, read, tracks, turns
 from entities.gcs import Plan
-from schema import Cell, UsageError
+from schema import Cell, EndReason, UsageError
 from world.grid import World, build_world
 
 from .local import Inputs, simulate
@@ -52,18 +52,35 @@ def summary(tr: dict[str, Track], over: dict | None) -> str:
     return "\n".join(lines)
 
 
+#: Ends that come from outside the game's inputs (a signal to the coordinator, the environment's process gone for
+#: good): a re-simulation cannot replay them, so `verify` checks what came before them (`stopped_after`).
+OUTSIDE_ENDS = frozenset({EndReason.INTERRUPTED.value, EndReason.ABORTED.value})
+
+
+def stopped_after(records: list[dict]) -> int | None:
+    """The last turn of a game ended from outside (`OUTSIDE_ENDS`: its over record's turn), else None."""
+    last = records[-1]
+    return int(last["turn"]) if is_over(last) and last.get("reason") in OUTSIDE_ENDS else None
+
+
 def verify(path: str, records: list[dict], config: GameConfig, autopilots: dict[str, str]) -> str | None:
     """None if a fresh in-process re-simulation writes exactly this journal; else the first difference. A game
-    the journal leaves unfinished (no over record: a crash, a full disk) is checked as far as it goes."""
+    the journal leaves unfinished (no over record: a crash, a full disk) is checked as far as it goes, and so is
+    a game ended from outside (`stopped_after`) up to its over record, which must close the last turn played."""
     quiet = logging.getLogger("dronesim.replay.verify")
     result = simulate(config, autopilots, inputs_of(records, config.world.size), quiet)
-    if not is_over(records[-1]):
-        result.records[len(records):] = []
-    for n, (mine, theirs) in enumerate(zip(records, result.records), 1):
+    stopped = stopped_after(records)
+    played = records[:-1] if stopped is not None else records
+    if stopped is not None or not is_over(records[-1]):
+        result.records[len(played):] = []
+    for n, (mine, theirs) in enumerate(zip(played, result.records), 1):
         if dumps(mine) != dumps(theirs):
             return f"{path}:{n}: journal has\n  {dumps(mine)}\nre-simulation gives\n  {dumps(theirs)}"
-    if len(records) != len(result.records):
-        return f"{path}: journal has {len(records)} records, re-simulation gives {len(result.records)}"
+    if len(played) != len(result.records):
+        return f"{path}: journal has {len(played)} records, re-simulation gives {len(result.records)}"
+    last = max((r.turn for r in turns(played)), default=0)
+    if stopped is not None and stopped != last:
+        return f"{path}: its over record ({records[-1]['reason']}) is at turn {stopped}, its last turn is {last}"
     return None
 
 
@@ -98,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"VERIFY FAILED: {diff}")
                 return 1
             unfinished = "" if over else f"; the game is unfinished: its last turn is {t}"
+            if (stopped := stopped_after(records)) is not None:
+                unfinished = f"; the game was ended from outside ({records[-1]['reason']}) after turn {stopped}: its " \
+                    "over record is checked to close that turn, the re-simulation cannot replay the stop"
             print(f"verified: a fresh re-simulation writes this journal byte for byte ({len(records)} records"
                   f"{unfinished})")
     except UsageError as err:

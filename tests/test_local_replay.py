@@ -182,6 +182,25 @@ def test_verify_reports_missing_and_extra_records(tmp_path: pathlib.Path, swarm_
     assert "records" in replay.verify("j", longer, config, autopilots)
 
 
+@pytest.mark.parametrize("reason", ["INTERRUPTED", "ABORTED"])
+def test_verify_checks_a_game_ended_from_outside_up_to_its_over_record(swarm_run: Result, reason: str) -> None:
+    """A coordinator stopped by a signal (INTERRUPTED) or left by its environment (ABORTED) after turn t: its
+    journal verifies up to t (the re-simulation cannot replay the stop, and plays on); an over record that does not
+    close the last turn played, or a turn tampered before it, fails."""
+    config, autopilots = replay.header_config(swarm_run.records[0])
+    t = 5
+    played = [r for r in swarm_run.records if not journal.is_over(r) and r.get("turn", 0) <= t]
+    over = {"record": "over", "reason": reason, "text": "the coordinator was stopped (SIGINT)", "turn": t}
+    assert replay.verify("j", [*played, over], config, autopilots) is None
+    assert "is at turn 4, its last turn is 5" in replay.verify("j", [*played, {**over, "turn": 4}], config,
+                                                               autopilots)
+    tampered = json.loads(json.dumps(played))
+    tampered[-1]["state"] = "0" * 16
+    assert replay.verify("j", [*tampered, over], config, autopilots).startswith(f"j:{len(played)}:")
+    quit_early = [*played, {**over, "reason": "GCS_QUIT"}]  # an end the inputs say: replayed, not taken as said
+    assert replay.verify("j", quit_early, config, autopilots) is not None
+
+
 # --------------------------------------------------------------------------- replay main
 
 
