@@ -30,6 +30,7 @@ from dronesim.rl import (
     Seen,
     Terrain,
     Turns,
+    checked_actions,
     int_in,
 )
 from dronesim.rl_few import FEW_MAX, FewEpisode
@@ -110,9 +111,9 @@ class DroneParallelEnv(ParallelEnv):
         else:
             episode_seed = int(self._episodes.integers(2**31))
         self._seeded = True
+        self.episode, self.agents = None, []  # (a layout that cannot be drawn leaves no episode to step on)
         layout = Layout.draw(self.config, episode_seed, self._terrain)
         self._terrain = layout.terrain  # (the next episode's, if it has the same world: a given one)
-        self.episode = None
         turns = self._backend()
         if self.config.num_drones <= self.few_drones and isinstance(turns, LocalTurns):
             self.episode = FewEpisode(self.config, layout, max_cycles, turns, self._eyes)
@@ -207,13 +208,29 @@ class _ToAEC(parallel_to_aec_wrapper):
 
     def step(self, action):
         agent = self.agent_selection
-        if action is not None and (self.terminations.get(agent) or self.truncations.get(agent)):
-            why = "terminated" if self.terminations.get(agent) else "truncated"
-            raise ConfigError(f"{agent} is {why}: its last step takes None (env.step(None)), not {action!r}")
+        if self.terminations.get(agent) or self.truncations.get(agent):
+            if action is not None:
+                why = "terminated" if self.terminations.get(agent) else "truncated"
+                raise ConfigError(f"{agent} is {why}: its last step takes None (env.step(None)), not {action!r}")
+        else:  # (checked now: the wrapper would keep a bad action and fail at the last agent's step, every time)
+            checked_actions([self.env.possible_agents.index(agent)], [action], self.action_space(agent).n)
         super().step(action)
+
+
+class _Enforcing(OrderEnforcingWrapper):
+    """PettingZoo's `OrderEnforcingWrapper`, but `max_cycles` is the parallel environment's (read at each reset),
+    set as on `parallel_env` (set on the wrapper, it was its own and changed nothing)."""
+
+    @property
+    def max_cycles(self) -> int:
+        return self.unwrapped.max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self.unwrapped.max_cycles = value
 
 
 def env(**config: object):
     """The game as a PettingZoo AECEnv (PettingZoo's `parallel_to_aec` of `parallel_env`, with a clear error
-    for an action given to an agent that is done)."""
-    return OrderEnforcingWrapper(_ToAEC(parallel_env(**config)))
+    for an action outside the action space or given to an agent that is done, at once)."""
+    return _Enforcing(_ToAEC(parallel_env(**config)))

@@ -267,10 +267,13 @@ class Layout:
         """A new target for drone row `i` at `here` (the lifelong variant): a free cell of its start's
         component other than `here` and the other targets (`others`, (n, 3)), drawn from the episode's
         generator; (the cell, whether it is reachable)."""
-        size = self.world.size
-        cells = self.terrain.members(int(self.comp[i]))
+        size, comp = self.world.size, int(self.comp[i])
+        cells = self.terrain.members(comp)
         used = {tuple(c) for c in others.tolist()} | {tuple(here.tolist())}
-        if len(cells) > len(used):
+        label = self.terrain.label
+        inside = sum(1 for c in used if all(0 <= v < n for v, n in zip(c, size))
+                     and label[np.ravel_multi_index(c, size)] == comp)  # (the used cells of its component alone)
+        if len(cells) > inside:
             while True:
                 cell = np.array(np.unravel_index(int(cells[self.rng.integers(len(cells))]), size), np.int32)
                 if tuple(cell.tolist()) not in used:
@@ -770,7 +773,7 @@ class Episode(EpisodeBase):
         if len(self.aim_next):
             for i in self.aim_next.tolist():
                 self.targets[i], self.reachable[i] = self.layout.new_target(i, self.pos[i], self.targets)
-                self.on[i] = False
+                self.on[i] = bool((self.targets[i] == self.pos[i]).all())  # (nowhere else to go: no new arrival)
             self._say = self._notes()
         observations = self.observe(rows, everyone and not died)  # (the dead are not seen)
         infos = self.infos(rows)

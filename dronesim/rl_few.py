@@ -185,7 +185,7 @@ class FewEpisode(EpisodeBase):
                 others[i] = new
                 targets[i] = int(new[0]), int(new[1]), int(new[2])
                 say[i] = NONE_NOTE if ok else UNREACHABLE_NOTE
-                was_on[i] = False
+                was_on[i] = targets[i] == pos[i]  # (nowhere else to go: no new arrival)
             self._aim = arrivals
         if stops:
             for i, end, cut in zip(rows_out, terminated, truncated):

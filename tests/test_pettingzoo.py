@@ -114,6 +114,24 @@ def test_new_targets_are_drawn_on_arrival() -> None:
     assert len(seen) >= 5 and all(a != b for a, b in zip(seen, seen[1:]))
 
 
+@pytest.mark.parametrize("few_drones", [99, 0])
+def test_a_new_target_is_a_free_cell_of_its_own_pocket_and_hovering_earns_nothing(few_drones: int) -> None:
+    """Lifelong, a drone whose pocket of free cells is small (here two: its start and its target) gets the pocket's
+    other cell on arrival, whatever the number of targets elsewhere in the world; hovering there earns nothing (it
+    once got its own cell back as its 'new' target and +1 a step for staying on it)."""
+    env = dz.parallel_env(num_drones=6, size=(5, 5, 2), on_target="new", max_cycles=30)
+    env.few_drones = few_drones
+    obs, infos = env.reset(seed=5)
+    start, first = infos["drone_1"]["cell"], infos["drone_1"]["target"]
+    delta = tuple(b - a for a, b in zip(start, first))  # (the pocket is two cells side by side)
+    obs, rewards, _, _, infos = env.step({"drone_1": ACTIONS.index(delta)})
+    assert rewards["drone_1"] == 1.0 and infos["drone_1"]["cell"] == first
+    assert infos["drone_1"]["target"] == start  # the pocket's other cell
+    for _ in range(3):
+        obs, rewards, _, _, infos = env.step({"drone_1": 0})
+        assert rewards["drone_1"] == 0.0 and infos["drone_1"]["cell"] == first
+
+
 def test_death_by_leaving_the_world() -> None:
     env = dz.parallel_env(world=corridor(6), num_drones=1, seed=1, reward_death=-5.0)
     _, infos = env.reset()
@@ -319,6 +337,41 @@ def test_bad_steps() -> None:
     assert env.observation_space("drone_1") is env.observation_space("drone_1")
     assert env.action_space("drone_2") is env.action_space("drone_2")
     assert env.action_space("drone_2").n == len(ACTIONS) == 7  # (a world of several floors)
+
+
+@pytest.mark.parametrize("action", [99, -1, None, 2.0])
+def test_the_aec_form_refuses_an_action_outside_the_space_at_once_and_plays_on(action: object) -> None:
+    """AEC: a bad action for a live agent is refused when given (ConfigError), not kept by PettingZoo's converter
+    to fail at the last agent's step, and every step after, until a reset."""
+    aec = dz.env(num_drones=2, size=(6, 6, 2), seed=1)
+    aec.reset(seed=1)
+    first = aec.agent_selection
+    with pytest.raises(ConfigError, match=f"for {first} is outside Discrete"):
+        aec.step(action)
+    assert aec.agent_selection == first
+    aec.step(0)
+    aec.step(0)  # (the last agent's: the turn is played)
+    assert aec.unwrapped.episode.cycle == 1
+
+
+def test_max_cycles_set_on_the_aec_form_is_the_episodes() -> None:
+    aec = dz.env(num_drones=2, size=(8, 8, 2), seed=1)
+    aec.max_cycles = 3
+    aec.reset(seed=1)
+    for _ in aec.agent_iter():
+        _, _, term, trunc, _ = aec.last()
+        aec.step(None if term or trunc else 0)
+    assert aec.unwrapped.max_cycles == 3 and aec.unwrapped.episode.cycle == 3
+
+
+def test_a_reset_that_cannot_draw_its_layout_leaves_no_episode() -> None:
+    env = dz.parallel_env(num_drones=8, size=(4, 4, 2))
+    env.reset(seed=1)
+    with pytest.raises(ConfigError, match="too few for 8 drones"):
+        env.reset(seed=7)  # (this seed's world has 14 free cells)
+    assert env.agents == []
+    with pytest.raises(ConfigError, match="before reset"):
+        env.step({"drone_1": 0})
 
 
 @pytest.mark.parametrize("few_drones", [99, 0])
