@@ -17,7 +17,7 @@ from entities.gcs import Ground, Plan, SendDone  # noqa: E402
 from entities.mavlink.bridge import COMMANDS_PER_TURN, Bridge  # noqa: E402
 from entities.mavlink.geo import DEFAULT_ORIGIN, BadPosition, Geo  # noqa: E402
 from entities.mavlink.node import Links, Packet, Reader, decode_datagram  # noqa: E402
-from entities.mavlink.vehicle import MISSION_LIMIT, Goal, Mav, Mode, Origin, Vehicle  # noqa: E402
+from entities.mavlink.vehicle import MISSION_LIMIT, UPLOAD_TIMEOUT_S, Goal, Mav, Mode, Origin, Vehicle  # noqa: E402
 from schema import (  # noqa: E402
     Cause,
     DroneState,
@@ -320,7 +320,7 @@ def test_wrong_target_systems_are_refused_and_counted() -> None:
     assert acks(effects) == [mav.MAV_RESULT_ACCEPTED] and b.vehicles[3].armed
     assert effects[0].to == Origin(3, ("127.0.0.1", 5000))  # answered where it came from
     heartbeat = wire(mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))  # a ground station's: nothing to do
-    assert b.packet(GCS, [heartbeat]) == [] and b.ignored == 1
+    assert b.packet(GCS, [heartbeat]) == [] and b.ignored == {"HEARTBEAT": 1}  # (counted, reported at the end)
 
 
 def test_a_dead_drone_takes_no_commands_and_says_why_once() -> None:
@@ -353,6 +353,20 @@ def test_a_command_flood_is_denied_beyond_its_budget_a_turn() -> None:
     assert acks(b.packet(GCS, [arm(1, False)])) == [mav.MAV_RESULT_ACCEPTED]
 
 
+@pytest.mark.parametrize("param1", [math.nan, math.inf, -math.inf, 1e20, -1.0, 0.5, 2.0, 21196.0])
+def test_arm_disarm_takes_exactly_0_or_1_and_nothing_else_disarms(param1: float) -> None:
+    """COMPONENT_ARM_DISARM's param1 is 1 (arm) or 0 (disarm): anything else is DENIED, counted, and a drone
+    in flight stays armed, on its way."""
+    b = bridge()
+    guided(b, 1)
+    b.packet(GCS, [local_target(1, 3, 0, -2)])
+    effects = b.packet(GCS, [command(1, mav.MAV_CMD_COMPONENT_ARM_DISARM, param1)])
+    assert acks(effects) == [mav.MAV_RESULT_DENIED] and refusals(effects) == ["mavlink-denied"]
+    assert "param1" in sent(effects, "STATUSTEXT")[0].text
+    assert b.vehicles[1].armed and b.vehicles[1].goal == (3, 0, 2)
+    assert acks(b.packet(GCS, [arm(1, False)])) == [mav.MAV_RESULT_ACCEPTED] and not b.vehicles[1].armed
+
+
 def test_datagrams_that_are_not_mavlink_2_are_refused() -> None:
     heartbeat = mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)
     good = heartbeat.pack(mav.MAVLink(None, srcSystem=255))
@@ -370,6 +384,19 @@ def test_datagrams_that_are_not_mavlink_2_are_refused() -> None:
                     bytes(range(256)) * 4]:
         with pytest.raises(RemoteInputError) as err:
             decode_datagram(garbage)
+        assert err.value.reason == "mavlink-garbage"
+
+
+def test_frames_of_message_ids_pymavlink_does_not_know_are_garbage() -> None:
+    """pymavlink cannot check the checksum of a message id it does not know (it yields MAVLink_unknown): any
+    0xFD and a dozen bytes would pass. Such a frame makes its datagram garbage, refused and counted."""
+    import struct
+
+    unknown = struct.pack("<BBBBBBBHB", 0xFD, 1, 0, 0, 0, 255, 190, 0xBCDE, 0x0A) + b"\x01\x00\x00"
+    good = mav.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(mav.MAVLink(None, srcSystem=255))
+    for datagram in [unknown, good + unknown, unknown * 100]:
+        with pytest.raises(RemoteInputError) as err:
+            decode_datagram(datagram)
         assert err.value.reason == "mavlink-garbage"
 
 
@@ -416,7 +443,8 @@ def test_the_reader_refuses_garbage_and_floods_and_keeps_reading(logger) -> None
             reader.taken(got[0])
             client.sendto(good * 2, gcs_port)  # one message was taken: no room for a datagram of two
             assert rejects.seen.acquire(timeout=10)
-            client.sendto(good, gcs_port)  # but for one
+            reader.taken(got[1])  # (after a datagram found no room, none is read until the main thread takes one)
+            client.sendto(good, gcs_port)  # room for one
             assert arrived.acquire(timeout=10)
         finally:
             reader.stop()
@@ -452,6 +480,74 @@ def test_the_readers_bound_is_in_messages_so_memory_stays_bounded_under_a_flood(
         finally:
             reader._selector.close()
             links.close()
+
+
+def test_a_reader_without_room_refuses_datagrams_unread_until_the_main_thread_takes_one() -> None:
+    """A datagram that finds no room (its messages would pass the bound) was decoded to learn that; the next
+    ones are refused unread -- a flood costs a read, not a decode, however the waiting count sits below the
+    bound -- until the main thread takes a packet."""
+    good = arm(1).pack(CLIENT)
+    links = Links(("127.0.0.1", 9), 30000, [1])
+    got: list[Packet] = []
+    rejects = RejectCounter(logging.getLogger("dronesim.tests"))
+    reader = Reader(links, got.append, rejects, limit=3)  # (not started: datagrams handed to it one by one)
+    origin = Origin(0, ("127.0.0.1", 9))
+    try:
+        reader._datagram(origin, good * 2)
+        reader._datagram(origin, good * 2)  # 2 waiting of 3: no room for 2 more
+        assert len(got) == 1 and rejects.snapshot() == {"mavlink-flood": 1}
+        reader._datagram(origin, b"\xfd\x09garbage")  # not decoded: refused as the flood it is part of
+        reader._datagram(origin, good)  # (one would fit: refused all the same until a packet is taken)
+        assert len(got) == 1 and rejects.snapshot() == {"mavlink-flood": 3}
+        reader.taken(got[0])
+        reader._datagram(origin, good)
+        reader._datagram(origin, b"\xfd\x09garbage")  # read again: garbage is garbage
+        assert len(got) == 2 and rejects.snapshot() == {"mavlink-flood": 3, "mavlink-garbage": 1}
+    finally:
+        reader._selector.close()
+        links.close()
+
+
+def test_the_reader_stops_at_once_under_a_flood_that_never_ends(logger) -> None:
+    """A flood that never lets the socket go empty (each datagram read brings another) does not hold `stop`
+    up: the ground station exits, and a second Ctrl-C stops it, whatever a client keeps sending."""
+    feeding = threading.Event()
+    feeding.set()
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as client:
+        client.bind(("127.0.0.1", 0))
+        links = Links(client.getsockname(), 30000, [1])
+        port = links.sockets[1].getsockname()
+        read = threading.Semaphore(0)
+
+        class Feeding(RejectCounter):
+            def reject(self, *args, **kwargs) -> None:
+                super().reject(*args, **kwargs)
+                if feeding.is_set():  # one datagram read, one more sent: the socket never empties
+                    client.sendto(b"\xfd\x09garbage", port)
+                read.release()
+
+        rejects = Feeding(logger)
+        reader = Reader(links, lambda packet: None, rejects)
+        for _ in range(20):
+            client.sendto(b"\xfd\x09garbage", port)
+        stopping = threading.Thread(target=reader.stop, daemon=True)
+        reader.start()
+        try:
+            for _ in range(100):  # (well past the first 20: the flood feeds itself)
+                assert read.acquire(timeout=10)
+            stopping.start()
+            stopping.join(timeout=60)  # (a guard against a hang, not a measure: it returns at once)
+            stopped = not stopping.is_alive()
+        finally:
+            feeding.clear()  # (a reader that did not stop finds its socket empty now, and stops)
+            if stopping.ident is None:  # (not started: an assertion above failed)
+                reader.stop()
+            else:
+                stopping.join(timeout=60)
+            links.close()
+    assert stopped, "Reader.stop waited for the flood to end"
+    assert rejects.snapshot()["mavlink-garbage"] >= 100
 
 
 # ---------------------------------------------------------------------------------------------- missions
@@ -538,6 +634,115 @@ def test_bad_missions_are_refused_whole_and_keep_the_mission_in_force() -> None:
     fence = wire(mav.MAVLink_mission_count_message(2, 1, 3, mav.MAV_MISSION_TYPE_FENCE))
     assert sent(b.packet(GCS, [fence]), "MISSION_ACK")[0].type == mav.MAV_MISSION_UNSUPPORTED
     assert MISSION_LIMIT < 10_000
+
+
+def test_a_landing_item_outside_the_world_or_in_a_frame_not_flown_refuses_the_mission_whole() -> None:
+    """A NAV_LAND at a latitude and longitude is checked at the upload as waypoints are (its altitude is the
+    drone's when it lands): outside the world or in a frame not supported, the mission is refused whole."""
+    b = bridge()
+    v = b.vehicles[2]
+    upload(b, [item(0, (0, 2, 0)), item(1, (2, 2, 1))])
+    kept = list(v.mission)
+
+    def land(frame: int, x: int, y: int):
+        return wire(mav.MAVLink_mission_item_int_message(2, 1, 1, frame, mav.MAV_CMD_NAV_LAND, 0, 1, 0, 0, 0, 0,
+                                                         x, y, 0.0))
+
+    rel = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    lat, lon, _ = GEO.wgs84((0, 40, 0))
+    for bad, result in [(land(rel, 900_000_000, 10), mav.MAV_MISSION_DENIED),  # (as a waypoint there)
+                        (land(rel, round(lat * 1e7), round(lon * 1e7)), mav.MAV_MISSION_DENIED),
+                        (land(mav.MAV_FRAME_LOCAL_NED, -20_000, 10_000), mav.MAV_MISSION_DENIED),
+                        (land(200, 5, 5), mav.MAV_MISSION_UNSUPPORTED_FRAME)]:
+        effects = upload(b, [item(0, (0, 2, 0)), bad])
+        assert [a.type for a in sent(effects, "MISSION_ACK")] == [result]
+        assert refusals(effects) == ["mavlink-denied"] and "mission item 1" in sent(effects, "STATUSTEXT")[0].text
+        assert v.mission == kept
+    lat, lon, _ = GEO.wgs84((6, 6, 0))  # on the building's roof, where the drone is, inside the world: taken
+    for good in [land(rel, round(lat * 1e7), round(lon * 1e7)), land(200, 0, 0), land(mav.MAV_FRAME_LOCAL_NED,
+                                                                                          30_000, 10_000)]:
+        assert [a.type for a in sent(upload(b, [item(0, (0, 2, 0)), good]), "MISSION_ACK")] == \
+            [mav.MAV_MISSION_ACCEPTED]
+
+
+def goto(system: int, cell, client=CLIENT):
+    """ArduPilot's guided goto: MISSION_ITEM_INT with current 2 (MAVProxy's `guided`)."""
+    lat, lon, alt = GEO.wgs84(cell)
+    return decode_datagram(mav.MAVLink_mission_item_int_message(
+        system, 1, 0, mav.MAV_FRAME_GLOBAL_INT, mav.MAV_CMD_NAV_WAYPOINT, 2, 1, 0, 0, 0, 0, round(lat * 1e7),
+        round(lon * 1e7), alt).pack(client))[0]
+
+
+def test_an_upload_left_unfinished_is_dropped_after_its_timeout_and_never_takes_a_guided_goto() -> None:
+    """A client gone mid-upload: the upload is dropped `UPLOAD_TIMEOUT_S` after it last moved (ArduPilot's 8 s),
+    its uploader told (MISSION_ACK OPERATION_CANCELLED), counted, the mission in force kept; meanwhile a guided
+    goto (current 2) from another client is flown, never taken as an item of it."""
+    b = Bridge(Ground(WORLD, dict(STARTS), Plan(())), GEO, period=0.0, telemetry_period=100.0, now=0.0)
+    v = b.vehicles[2]
+    guided(b, 2)
+    upload(b, [item(0, (0, 2, 0)), item(1, (2, 2, 1))])
+    kept = list(v.mission)
+    other = Origin(2, ("127.0.0.1", 6000))
+    b.packet(GCS, [wire(mav.MAVLink_mission_count_message(2, 1, 3))], 10.0)
+    assert sent(b.packet(GCS, [item(0, (0, 2, 0))], 12.0), "MISSION_REQUEST_INT")[0].seq == 1  # (it moved at 12)
+    effects = b.packet(other, [goto(2, (3, 2, 1))], 13.0)
+    assert v.goal == (3, 2, 1) and not refusals(effects) and not sent(effects, "MISSION_REQUEST_INT")
+    assert v.upload is not None and len(v.upload.items) == 1  # (the goto is no item of it)
+    b.tick(13.0)  # (telemetry: the next in 100 s)
+    assert b.wake(13.0) == pytest.approx(12.0 + UPLOAD_TIMEOUT_S - 13.0)  # (woken to drop it in time)
+    assert not sent(b.tick(12.0 + UPLOAD_TIMEOUT_S - 0.5), "MISSION_ACK") and v.upload is not None
+    effects = b.tick(12.0 + UPLOAD_TIMEOUT_S)
+    (cancelled,) = [e for e in effects if isinstance(e, Mav) and e.msg.get_type() == "MISSION_ACK"]
+    assert cancelled.msg.type == mav.MAV_MISSION_OPERATION_CANCELLED and cancelled.to == GCS
+    assert refusals(effects) == ["mavlink-timeout"] and "upload cancelled" in sent(effects, "STATUSTEXT")[0].text
+    assert v.upload is None and v.mission == kept and not b.uploading
+    effects = b.packet(GCS, [item(1, (2, 2, 1))], 21.0)  # the uploader back, too late: outside an upload
+    assert refusals(effects) == ["mavlink-denied"] and v.mission == kept
+    # an upload also lapses at the next message for its vehicle (whatever the ticks): another client's is taken
+    b.packet(GCS, [wire(mav.MAVLink_mission_count_message(2, 1, 3))], 30.0)
+    effects = b.packet(other, [wire(mav.MAVLink_mission_count_message(2, 1, 2))], 30.0 + UPLOAD_TIMEOUT_S)
+    assert [(e.msg.get_type(), e.to) for e in effects if isinstance(e, Mav) and e.msg.get_type().startswith(
+        "MISSION_")] == [("MISSION_ACK", GCS), ("MISSION_REQUEST_INT", other)]
+    assert v.upload is not None and v.upload.origin == other
+
+
+def test_only_the_uploader_uploads_while_its_upload_is_under_way() -> None:
+    """Another client's items, MISSION_COUNT or clear during an upload are refused (MISSION_ACK DENIED to it,
+    as ArduPilot answers), counted, and change nothing: the uploader's mission is the one taken. A client
+    that sends from the uploader's address under another system id is another client."""
+    b = bridge()
+    v = b.vehicles[2]
+    upload(b, [item(0, (0, 2, 0)), item(1, (2, 2, 1))])
+    kept = list(v.mission)
+    other = Origin(2, ("127.0.0.1", 6000))
+    spoof = mav.MAVLink(None, srcSystem=254, srcComponent=190)
+
+    def from_other(msg, client=CLIENT):
+        return decode_datagram(msg.pack(client))[0]
+
+    assert sent(b.packet(GCS, [wire(mav.MAVLink_mission_count_message(2, 1, 3))]), "MISSION_REQUEST_INT")
+    lat, lon, alt = GEO.wgs84((9, 9, 3))
+    theirs = mav.MAVLink_mission_item_int_message(2, 1, 0, mav.MAV_FRAME_GLOBAL_INT, mav.MAV_CMD_NAV_WAYPOINT, 0,
+                                                  1, 0, 0, 0, 0, round(lat * 1e7), round(lon * 1e7), alt)
+    for origin, msg in [(other, from_other(theirs)), (GCS, from_other(theirs, spoof)),
+                        (other, from_other(mav.MAVLink_mission_count_message(2, 1, 2))),
+                        (other, from_other(mav.MAVLink_mission_clear_all_message(2, 1)))]:
+        effects = b.packet(origin, [msg])
+        assert refusals(effects) == ["mavlink-sender"]
+        assert [(e.msg.type, e.to) for e in effects if isinstance(e, Mav)] == [(mav.MAV_MISSION_DENIED, origin)]
+        assert v.upload is not None and v.upload.origin == GCS and v.upload.items == [] and v.mission == kept
+    effects = b.packet(GCS, [item(0, (0, 2, 0))])
+    effects = b.packet(GCS, [item(1, (3, 2, 1))])
+    effects = b.packet(GCS, [item(2, (3, 5, 1))])
+    assert [(a.type, e.to) for e in effects if isinstance(e, Mav) and (a := e.msg).get_type() == "MISSION_ACK"] == \
+        [(mav.MAV_MISSION_ACCEPTED, GCS)]
+    assert [(it.x, it.y) for it in v.mission] == [(item(s, c).x, item(s, c).y)
+                                                  for s, c in enumerate([(0, 2, 0), (3, 2, 1), (3, 5, 1)])]
+    # the uploader may start again (a new MISSION_COUNT restarts its upload), as in ArduPilot
+    b.packet(GCS, [wire(mav.MAVLink_mission_count_message(2, 1, 3))])
+    b.packet(GCS, [item(0, (0, 2, 0))])
+    assert sent(b.packet(GCS, [wire(mav.MAVLink_mission_count_message(2, 1, 2))]), "MISSION_REQUEST_INT")[0].seq == 0
+    assert v.upload is not None and (v.upload.count, v.upload.items) == (2, [])
 
 
 def test_a_mission_goes_on_from_an_item_the_drone_is_on_already() -> None:

@@ -248,10 +248,13 @@ def test_pymavlink_commands_position_targets_missions_and_bad_input(tmp_path: Pa
             (bridge,) = conn.clients  # (the fleet writes from one socket: bad input goes there)
             conn.port.sendto(b"\xfd\x05garbage that is not a frame", bridge)
             conn.port.sendto(bytes(range(256)), bridge)
+            conn.port.sendto(b"\xfd\x01\x00\x00\x00\xff\xbe\xde\xbc\x0a\x01\x00\x00", bridge)  # (an unknown id)
             v1 = mav.MAVLink(None, srcSystem=255)
             conn.port.sendto(mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0,
                                                               0, 0, 0).pack(v1, force_mavlink1=True), bridge)
             conn.mav.command_long_send(9, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)  # no system 9
+            assert command(conn, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, math.nan) == mav.MAV_RESULT_DENIED  # (armed)
+            conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # (ignored: counted)
             assert command(conn, 1, mav.MAV_CMD_DO_REPOSITION, -1, 1, 0, 0, math.nan, math.nan, 1e9) == \
                 mav.MAV_RESULT_DENIED
             conn.mav.set_position_target_local_ned_send(0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b110111111000,
@@ -319,6 +322,8 @@ def test_pymavlink_commands_position_targets_missions_and_bad_input(tmp_path: Pa
     (rejected,) = [line for line in out.splitlines() if "rejected inputs" in line and "GCS" in line]
     for reason in ("mavlink-garbage", "mavlink1", "mavlink-target", "mavlink-denied", "mavlink-flood"):
         assert reason in rejected
+    (ignored,) = [line for line in out.splitlines() if "MAVLink messages ignored" in line and "GCS" in line]
+    assert "HEARTBEAT" in ignored
 
 
 # ---------------------------------------------------------------------------------------------- MAVSDK

@@ -9,10 +9,13 @@ to send (`Mav`), the station's DONE (`SendDone`), refusals. Times are seconds of
   targets the vehicles asked for since; the game never waits for a client.
 - Telemetry: every STATUS brings the position of each vehicle whose row changed (moved, reached, died); the
   whole set, every vehicle's, goes every `telemetry_period`.
-- A flood: each vehicle takes at most `COMMANDS_PER_TURN` commands a turn; the rest are DENIED, counted."""
+- A flood: each vehicle takes at most `COMMANDS_PER_TURN` commands a turn; the rest are DENIED, counted.
+- Uploads: a mission upload left waiting `UPLOAD_TIMEOUT_S` for its next item is dropped (its uploader gone),
+  at the next `tick` or message for that vehicle."""
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
@@ -26,7 +29,7 @@ from schema.tuning import STATUS_GRACE
 
 from ..gcs import Ground, Station
 from .geo import Geo
-from .vehicle import Goal, Mav, Origin, Vehicle, ack
+from .vehicle import UPLOAD_TIMEOUT_S, Goal, Mav, Origin, Vehicle, ack
 
 #: MAVLink's largest system id: drones past D255 fly on, not MAVLink vehicles (their targets from elsewhere).
 MAX_SYSTEM = 255
@@ -54,7 +57,9 @@ class Bridge:
         self.next_telemetry = now
         self.commands = dict.fromkeys(self.vehicles, 0)  # commands taken this turn, by vehicle
         self._rows: np.ndarray | None = None  # the last STATUS's rows
-        self.ignored = 0  # messages of kinds no vehicle acts on
+        self.ignored: Counter[str] = Counter()  # messages of kinds no vehicle acts on (heartbeats...), by kind
+        self.uploading: set[int] = set()  # the systems with a mission upload under way
+        self.now = now  # the latest time given (`packet`'s, when none is)
         self.quit = False
 
     def held(self, cell: Cell) -> bool:
@@ -70,6 +75,7 @@ class Bridge:
         return self.station.admitted(welcome)
 
     def receive(self, msg: Message, now: float) -> Sequence[object]:
+        self.now = max(self.now, now)
         effects: list[Any] = []
         match msg:
             case Turn():
@@ -130,10 +136,16 @@ class Bridge:
         waits = [w for w in (self.due(now), self.station.wake(now)) if w is not None]
         if self.station.over is None:
             waits.append(max(0.0, self.next_telemetry - now))
+        uploads = (self.vehicles[n].upload for n in self.uploading)
+        waits += [max(0.0, up.last + UPLOAD_TIMEOUT_S - now) for up in uploads if up is not None]
         return min(waits, default=None)
 
     def tick(self, now: float) -> Sequence[object]:
+        self.now = max(self.now, now)
         effects: list[Any] = []
+        if self.uploading:  # (uploads left waiting too long: dropped)
+            effects += [e for n in sorted(self.uploading) for e in self.vehicles[n].expire(now)]
+            self.uploading = {n for n in self.uploading if self.vehicles[n].upload is not None}
         if self.station.over is None and now >= self.next_telemetry:
             self.next_telemetry = now + self.telemetry_period
             ms = self.ms(now)
@@ -146,17 +158,20 @@ class Bridge:
 
     # ------------------------------------------------------------------ the clients
 
-    def packet(self, origin: Origin, messages: Sequence[Any]) -> list[Any]:
-        """The messages of one datagram, decoded (MAVLink 2), that came from `origin`."""
+    def packet(self, origin: Origin, messages: Sequence[Any], now: float | None = None) -> list[Any]:
+        """The messages of one datagram, decoded (MAVLink 2), that came from `origin` at `now` (None: the
+        latest time the bridge was given)."""
+        if now is not None:
+            self.now = max(self.now, now)
         effects: list[Any] = []
         for msg in messages:
-            effects += self._message(origin, msg)
+            effects += self._message(origin, msg, self.now)
         return self._goals(effects)
 
-    def _message(self, origin: Origin, msg: Any) -> list[Any]:
+    def _message(self, origin: Origin, msg: Any, now: float) -> list[Any]:
         kind = msg.get_type()
         if kind not in HANDLED:
-            self.ignored += 1
+            self.ignored[kind] += 1  # (the kinds pymavlink knows: a bounded set; unknown ids are refused before)
             return []
         system = msg.target_system
         if origin.port:  # a vehicle's own API port
@@ -179,7 +194,10 @@ class Bridge:
                 return [*_denied(vehicle, msg, origin, mav.MAV_RESULT_TEMPORARILY_REJECTED),
                         _refuse(f"{kind} for {vehicle.drone}", RemoteInputError(
                             f"more than {COMMANDS_PER_TURN} commands in one turn", reason="mavlink-flood"))]
-        return vehicle.handle(msg, origin)
+        effects = vehicle.handle(msg, origin, now)
+        if vehicle.upload is not None:
+            self.uploading.add(system)
+        return effects
 
 
 def _refuse(what: str, err: RemoteInputError) -> Refusal:

@@ -40,6 +40,9 @@ from .vehicle import Mav, Origin
 MAVLINK1_MAGIC = 0xFE
 _WOKEN = object()  # a signal came: the main thread looks at what it asked
 DATAGRAM_MAX = 65535
+#: The most datagrams read from one socket before the reader looks at the others and at `Reader.stop`: a
+#: flood on one socket neither starves the others nor holds the reader (and the process's exit) up.
+READS_A_ROUND = 64
 #: The most bytes of frames sent in one datagram (under an Ethernet MTU: no IP fragments).
 DATAGRAM_PACK = 1400
 
@@ -64,6 +67,10 @@ def decode_datagram(data: bytes) -> tuple[Any, ...]:
     if not messages or parser.buf_len() or any(m.get_type() == "BAD_DATA" for m in messages):
         raise MalformedMessage(f"a datagram of {len(data)} bytes that is not MAVLink frames: {data[:16].hex()}",
                                reason="mavlink-garbage")
+    unknown = [m for m in messages if isinstance(m, mav.MAVLink_unknown)]
+    if unknown:  # (an id pymavlink does not know: its checksum cannot be checked, any 0xFD and 12 bytes pass)
+        raise MalformedMessage(f"a datagram of {len(data)} bytes with a frame of a message id pymavlink does not "
+                               f"know ({unknown[0].get_type()})", reason="mavlink-garbage")
     if any(m.get_msgbuf()[0] == MAVLINK1_MAGIC for m in messages):
         raise RemoteInputError("a MAVLink 1 frame: vehicles speak MAVLink 2", reason="mavlink1")
     return tuple(messages)
@@ -150,13 +157,17 @@ class Links:
 class Reader:
     """The thread that reads every socket: each datagram decoded on its own and posted (`post`) as a `Packet`,
     at most `limit` messages waiting for the main thread (`taken` frees a packet's); the rest refused and
-    counted. Messages, not datagrams: a datagram of 64 KiB holds up to 5,000 frames, some 4 MB decoded."""
+    counted. Messages, not datagrams: a datagram of 64 KiB holds up to 5,000 frames, some 4 MB decoded. Once a
+    datagram finds no room, the next are refused unread (no decode) until the main thread takes a packet: a
+    flood costs the reader a read a datagram. It reads at most `READS_A_ROUND` datagrams of a socket in a row
+    and looks at `stop` before each: `stop` returns at once whatever the flood."""
 
     def __init__(self, links: Links, post: Callable[[object], None], rejects: RejectCounter,
                  limit: int = MAVLINK_QUEUE) -> None:
         self.links, self.post, self.rejects, self.limit = links, post, rejects, limit
         self._lock = threading.Lock()
         self._waiting = 0
+        self._full = False  # a datagram found no room: refuse unread until the main thread takes a packet
         self._stop = threading.Event()
         self._selector = selectors.DefaultSelector()
         for port, sock in links.sockets.items():
@@ -174,30 +185,38 @@ class Reader:
     def taken(self, packet: Packet) -> None:
         with self._lock:
             self._waiting -= len(packet.messages)
+            self._full = False
 
     def _run(self) -> None:
         while not self._stop.is_set():
             for key, _ in self._selector.select(MAVLINK_STOP_S):  # (the timeout only bounds how long `stop` waits)
-                port, sock = key.data, key.fileobj
-                while True:
-                    try:
-                        data, addr = sock.recvfrom(DATAGRAM_MAX)  # type: ignore[union-attr]
-                    except (BlockingIOError, InterruptedError):
-                        break
-                    except OSError:  # (an ICMP error of an earlier send: nothing to read)
-                        continue
-                    self._datagram(Origin(port, addr[:2]), data)
+                self._read(key.data, key.fileobj)  # type: ignore[arg-type]
+
+    def _read(self, port: int, sock: socket.socket) -> None:
+        """Up to `READS_A_ROUND` datagrams of `sock` (until it is empty, or `stop`)."""
+        for _ in range(READS_A_ROUND):
+            if self._stop.is_set():
+                return
+            try:
+                data, addr = sock.recvfrom(DATAGRAM_MAX)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:  # (an ICMP error of an earlier send: nothing to read)
+                continue
+            self._datagram(Origin(port, addr[:2]), data)
 
     def _datagram(self, origin: Origin, data: bytes) -> None:
         where = f"MAVLink datagram from {origin.addr[0]}:{origin.addr[1]}"
         try:
             with self._lock:
-                full = self._waiting >= self.limit
+                full = self._full or self._waiting >= self.limit
             if not full:  # (a flood is refused before it costs a decode)
                 packet = Packet(origin, decode_datagram(data))
                 with self._lock:
                     full = self._waiting + len(packet.messages) > self.limit
-                    if not full:
+                    if full:
+                        self._full = True
+                    else:
                         self._waiting += len(packet.messages)
             if full:
                 raise RemoteInputError(f"more than {self.limit} messages waiting", reason="mavlink-flood")
@@ -276,7 +295,7 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
                     for msg in event.messages:
                         logger.debug("from %s:%d (port %d): %s", *event.origin.addr, event.origin.port, msg)
                 try:
-                    effects = bridge.packet(event.origin, event.messages)
+                    effects = bridge.packet(event.origin, event.messages, time.monotonic())
                 except Exception:  # a bug: logged, the datagram refused, the game goes on
                     logger.exception("error handling a datagram from %s:%d", *event.origin.addr)
                     inbox.rejects.reject("MAVLink datagram", RemoteInputError("not handled: an error (logged)",
@@ -304,6 +323,9 @@ def run_mavlink(args: argparse.Namespace, logger: logging.Logger) -> Over:
                 links.close()
         if inbox.rejects.total:
             logger.info("rejected inputs: %s", inbox.rejects.report())
+        if bridge.ignored:
+            logger.info("MAVLink messages ignored (kinds no vehicle acts on): %s",
+                        ", ".join(f"{kind} {n}" for kind, n in bridge.ignored.most_common()))
         member.close()
     print(bridge.station.report(draw=False), flush=True)
     return over

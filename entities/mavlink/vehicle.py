@@ -20,7 +20,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from schema import Cause, Cell, DroneState, DroneStatus, Note, UsageError
-from schema.errors import OutOfRange, Refusal
+from schema.errors import OutOfRange, Refusal, RemoteInputError, WrongSender
 from world.grid import World
 
 from ..gcs import check_cell
@@ -47,6 +47,11 @@ TAKEOFF_DEFAULT_M = 2.5
 TEXT_CHUNK = 50
 #: The first mission item flown (item 0 is home, as in ArduPilot's missions).
 FIRST_ITEM = 1
+#: Seconds an upload waits for its next item before it is dropped (MISSION_ACK OPERATION_CANCELLED to the
+#: uploader), as ArduPilot's (upload_timeout_ms): a client gone mid-upload does not hold the vehicle's uploads.
+UPLOAD_TIMEOUT_S = 8.0
+#: MISSION_ITEM(_INT)'s `current` of ArduPilot's guided goto (never an item of an upload).
+GUIDED_GOTO = 2
 
 NAV_ITEMS = frozenset({mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_LAND,
                        mav.MAV_CMD_NAV_RETURN_TO_LAUNCH})
@@ -114,6 +119,23 @@ class Item:
     z: float
 
 
+@dataclass(slots=True)
+class Upload:
+    """A mission upload under way: `count` items expected, `items` so far, from `origin` and the MAVLink
+    `sender` (system, component) that sent the MISSION_COUNT (its items alone are taken), which last moved it
+    (the count, an item taken) at `last` (seconds of the caller's clock)."""
+
+    count: int
+    items: list[Item]
+    origin: Origin
+    sender: tuple[int, int]
+    last: float
+
+    def by(self, msg: Msg, origin: Origin) -> bool:
+        """Does `msg` (from `origin`) come from the uploader?"""
+        return origin == self.origin and sender_of(msg) == self.sender
+
+
 def item_of(msg: Msg) -> Item:
     """A MISSION_ITEM_INT or MISSION_ITEM (floats: scaled as MISSION_ITEM_INT's integers) as an `Item`."""
     x, y = msg.x, msg.y
@@ -153,7 +175,7 @@ class Vehicle:
         self.goal: Cell | None = None  # what this vehicle wants flown to (None: nothing asked yet)
         self.mission: list[Item] = []
         self.current = FIRST_ITEM  # the mission item flown (or to fly) in AUTO
-        self.upload: tuple[int, list[Item], Origin] | None = None  # (count, items so far, uploader)
+        self.upload: Upload | None = None  # a mission upload under way
         self._reported: tuple[Cell | None, Note] = (None, Note.NONE)  # the (target, note) last said in a STATUSTEXT
         self._chunk = 0
 
@@ -223,12 +245,27 @@ class Vehicle:
 
     # ------------------------------------------------------------------ what a client says
 
-    def handle(self, msg: Msg, origin: Origin) -> list[Effect]:
-        """A message addressed to this vehicle (its target system checked by the caller)."""
+    def handle(self, msg: Msg, origin: Origin, now: float) -> list[Effect]:
+        """A message addressed to this vehicle (its target system checked by the caller), at `now` (seconds of
+        the caller's monotonic clock: an upload left waiting `UPLOAD_TIMEOUT_S` is dropped first)."""
         said = self._said()
-        return self._beat(said, self._handle(msg, origin))
+        effects = self.expire(now)
+        return self._beat(said, effects + self._handle(msg, origin, now))
 
-    def _handle(self, msg: Msg, origin: Origin) -> list[Effect]:
+    def expire(self, now: float) -> list[Effect]:
+        """Drop an upload that has waited `UPLOAD_TIMEOUT_S` for its next item, as ArduPilot does: MISSION_ACK
+        OPERATION_CANCELLED to its uploader, said and counted; the mission in force is kept."""
+        up = self.upload
+        if up is None or now < up.last + UPLOAD_TIMEOUT_S:
+            return []
+        self.upload = None
+        text = f"{self.drone}: mission upload cancelled: no item {len(up.items)} in {UPLOAD_TIMEOUT_S:g} s"
+        err = RemoteInputError(text, reason="mavlink-timeout")
+        return [Refusal(f"{self.drone} mission upload from {up.origin.addr}", err),
+                *self.say(mav.MAV_SEVERITY_WARNING, text),
+                *self._mission_ack(up.origin, mav.MAV_MISSION_OPERATION_CANCELLED)]
+
+    def _handle(self, msg: Msg, origin: Origin, now: float) -> list[Effect]:
         kind = msg.get_type()
         try:
             match kind:
@@ -241,7 +278,7 @@ class Vehicle:
                 case "MISSION_COUNT" | "MISSION_ITEM_INT" | "MISSION_ITEM" | "MISSION_REQUEST_LIST" | \
                         "MISSION_REQUEST_INT" | "MISSION_REQUEST" | "MISSION_CLEAR_ALL" | "MISSION_SET_CURRENT" | \
                         "MISSION_ACK":
-                    return self._mission(kind, msg, origin)
+                    return self._mission(kind, msg, origin, now)
                 case "PARAM_REQUEST_LIST" | "PARAM_REQUEST_READ" | "PARAM_SET":
                     return self._parameter(kind, msg, origin)
         except Denied as err:  # (a message without an answer of its own: said in a STATUSTEXT)
@@ -270,6 +307,8 @@ class Vehicle:
         p = (msg.param1, msg.param2, msg.param3, msg.param4)
         match cmd:
             case mav.MAV_CMD_COMPONENT_ARM_DISARM:
+                if p[0] not in (0.0, 1.0):  # (NaN, 1e20, -1...: no meaning, not a disarm)
+                    raise Denied(f"COMPONENT_ARM_DISARM param1 {p[0]:g}: 1 arms, 0 disarms")
                 return self._arm(p[0] == 1)
             case mav.MAV_CMD_DO_SET_MODE:
                 return self._set_mode(p[0], p[1])
@@ -392,13 +431,28 @@ class Vehicle:
         """The cell of a position in `frame` (if `scaled`, as MISSION_ITEM_INT and COMMAND_INT carry it: latitude
         and longitude in degrees * 1e7, local x and y in metres * 1e4), checked against the world (`Denied` if
         outside, in a building, or not a number)."""
+        return self._checked(self._cell(frame, x, y, z, scaled=scaled))
+
+    def _column(self, frame: int, x: float, y: float) -> tuple[int, int]:
+        """The (x, y) of a position in `frame` (as MISSION_ITEM_INT carries it) whatever its altitude (a landing
+        there: the altitude is the drone's when it flies it), checked to be inside the world (`Denied` if not)."""
+        cx, cy, _ = self._cell(frame, x, y, self._altitude_here(frame), scaled=True)
+        try:
+            check_cell((cx, cy, 0), self.world.size)  # (on the ground: a roof's column is a landing's too)
+        except UsageError as err:
+            raise Denied(f"target refused: {err}") from None
+        return cx, cy
+
+    def _cell(self, frame: int, x: float, y: float, z: float, *, scaled: bool) -> Cell:
+        """The cell of a position in `frame`, not checked against the world (`Denied` if not a number, of a
+        frame not supported, or beyond any world)."""
         try:
             if frame in AMSL_FRAMES | RELATIVE_FRAMES:
                 lat, lon = (x / 1e7, y / 1e7) if scaled else (x, y)
                 alt = z + (self.geo.amsl(self.home[2]) if frame in RELATIVE_FRAMES else 0.0)
                 cell = self.geo.cell_of_wgs84(lat, lon, alt)
             elif scaled:
-                return self.position(frame, x / 1e4, y / 1e4, z, scaled=False)
+                return self._cell(frame, x / 1e4, y / 1e4, z, scaled=False)
             elif frame == mav.MAV_FRAME_LOCAL_NED:
                 cell = self.geo.cell_of_ned(x, y, z)
             elif frame in OFFSET_FRAMES:  # (the drone's yaw is 0: its body frame is NED)
@@ -409,7 +463,7 @@ class Vehicle:
                              mav.MAV_MISSION_UNSUPPORTED_FRAME)
         except BadPosition as err:
             raise Denied(f"target refused: {err}", mission=mav.MAV_MISSION_INVALID_PARAM5_X) from None
-        return self._checked(cell)
+        return cell
 
     def _command_position(self, msg: Msg) -> Cell:
         """DO_REPOSITION's position: COMMAND_INT's in its frame, COMMAND_LONG's above home (as ArduPilot takes
@@ -471,20 +525,24 @@ class Vehicle:
 
     # ------------------------------------------------------------------ the mission protocol
 
-    def _mission(self, kind: str, msg: Msg, origin: Origin) -> list[Effect]:
+    def _mission(self, kind: str, msg: Msg, origin: Origin, now: float) -> list[Effect]:
         if getattr(msg, "mission_type", 0) != mav.MAV_MISSION_TYPE_MISSION and kind != "MISSION_ACK":
             return self._mission_ack(origin, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)
+        changes_upload = kind in ("MISSION_COUNT", "MISSION_CLEAR_ALL") or (
+            kind in ("MISSION_ITEM_INT", "MISSION_ITEM") and msg.current != GUIDED_GOTO)
+        if changes_upload and self.upload is not None and not self.upload.by(msg, origin):
+            return self._not_uploader(kind, msg, origin)  # (as ArduPilot: MISSION_ACK DENIED, to the sender)
         match kind:
             case "MISSION_COUNT":
-                return self._upload_start(msg.count, origin)
+                return self._upload_start(msg, origin, now)
             case "MISSION_ITEM_INT" | "MISSION_ITEM":
-                if msg.current == 2 and self.upload is None:  # ArduPilot's guided goto (MAVProxy's old `guided`)
+                if msg.current == GUIDED_GOTO:  # ArduPilot's guided goto (MAVProxy's old `guided`), upload or not
                     if self.mode is not Mode.GUIDED:
                         raise Denied("a guided goto outside GUIDED")
                     self._require_armed()
                     item = item_of(msg)
                     return self._aim(self.position(item.frame, item.x, item.y, item.z, scaled=True))
-                return self._upload_item(msg, origin)
+                return self._upload_item(msg, now)
             case "MISSION_REQUEST_LIST":
                 return [Mav(self.system, mav.MAVLink_mission_count_message(origin_system(msg), 0, len(self.mission)),
                             origin)]
@@ -515,7 +573,18 @@ class Vehicle:
     def _mission_ack(self, origin: Origin, result: int, mission_type: int = 0) -> list[Effect]:
         return [Mav(self.system, mav.MAVLink_mission_ack_message(0, 0, result, mission_type), origin)]
 
-    def _upload_start(self, count: int, origin: Origin) -> list[Effect]:
+    def _not_uploader(self, kind: str, msg: Msg, origin: Origin) -> list[Effect]:
+        """A mission message that would change an upload under way, from another client than its uploader:
+        refused (MISSION_ACK DENIED to the sender, as ArduPilot answers it), counted; the upload goes on."""
+        assert self.upload is not None
+        up = self.upload
+        err = WrongSender(f"a {kind} from {origin.addr} (system {sender_of(msg)[0]}) while {up.origin.addr} "
+                          f"(system {up.sender[0]}) uploads a mission", reason="mavlink-sender")
+        return [Refusal(f"{self.drone} {kind}", err), *self._mission_ack(origin, mav.MAV_MISSION_DENIED)]
+
+    def _upload_start(self, msg: Msg, origin: Origin, now: float) -> list[Effect]:
+        """A MISSION_COUNT (from the uploader if an upload is under way: it starts again, as in ArduPilot)."""
+        count = msg.count
         if count > MISSION_LIMIT:
             self.upload = None
             err = Denied(f"a mission of {count} items: at most {MISSION_LIMIT}")
@@ -524,22 +593,24 @@ class Vehicle:
         if count == 0:
             self.upload = None
             return self._mission(  # (as a clear)
-                "MISSION_CLEAR_ALL", mav.MAVLink_mission_clear_all_message(self.system, 1), origin)
-        self.upload = (count, [], origin)
+                "MISSION_CLEAR_ALL", mav.MAVLink_mission_clear_all_message(self.system, 1), origin, now)
+        self.upload = Upload(count, [], origin, sender_of(msg), now)
         return self._request(0, origin)
 
     def _request(self, seq: int, origin: Origin) -> list[Effect]:
         return [Mav(self.system, mav.MAVLink_mission_request_int_message(0, 0, seq), origin)]
 
-    def _upload_item(self, msg: Msg, origin: Origin) -> list[Effect]:
+    def _upload_item(self, msg: Msg, now: float) -> list[Effect]:
+        """An item of the upload under way, from its uploader (checked by the caller)."""
         if self.upload is None:
             raise Denied(f"mission item {msg.seq} outside an upload")
-        count, items, uploader = self.upload
+        count, items, uploader = self.upload.count, self.upload.items, self.upload.origin
         if msg.seq != len(items):  # (a repeat, or one ahead: ask again for the one expected)
             return self._request(len(items), uploader)
         try:
             items.append(item_of(msg))
             if len(items) < count:
+                self.upload.last = now
                 return self._request(len(items), uploader)
             self.upload = None
             for it in items[FIRST_ITEM:]:
@@ -557,13 +628,15 @@ class Vehicle:
         if it.command not in NAV_ITEMS:
             raise Denied(f"mission item {it.seq}: command {it.command} is not flown (NAV_WAYPOINT, NAV_TAKEOFF, "
                          "NAV_LAND, NAV_RETURN_TO_LAUNCH)", mission=mav.MAV_MISSION_UNSUPPORTED)
-        if it.command == mav.MAV_CMD_NAV_WAYPOINT:
-            try:
-                self.position(it.frame, it.x, it.y, it.z, scaled=True)
-            except Denied as err:
-                raise Denied(f"mission item {it.seq}: {err.text}", mission=err.mission) from None
-        elif not math.isfinite(it.z) and it.command == mav.MAV_CMD_NAV_TAKEOFF:
+        if not math.isfinite(it.z) and it.command == mav.MAV_CMD_NAV_TAKEOFF:
             raise Denied(f"mission item {it.seq}: altitude not a number", mission=mav.MAV_MISSION_INVALID_PARAM7)
+        try:
+            if it.command == mav.MAV_CMD_NAV_WAYPOINT:
+                self.position(it.frame, it.x, it.y, it.z, scaled=True)
+            elif it.command == mav.MAV_CMD_NAV_LAND and (it.x, it.y) != (0, 0):  # (0, 0: where the drone is)
+                self._column(it.frame, it.x, it.y)  # (its altitude, the drone's when it lands, is not checked)
+        except Denied as err:
+            raise Denied(f"mission item {it.seq}: {err.text}", mission=err.mission) from None
 
     def _set_current(self, seq: int) -> list[Effect]:
         if not FIRST_ITEM <= seq < len(self.mission):
@@ -709,6 +782,11 @@ def whole(value: float, default: int = -1) -> int:
 def ack(command: int, result: int, msg: Msg) -> Msg:
     """The COMMAND_ACK of `command` (of `msg`), to its sender."""
     return mav.MAVLink_command_ack_message(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+
+
+def sender_of(msg: Msg) -> tuple[int, int]:
+    """The (system, component) ids a message's sender gave itself."""
+    return int(msg.get_srcSystem()), int(msg.get_srcComponent())
 
 
 def origin_system(msg: Msg) -> int:
