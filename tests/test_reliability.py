@@ -299,6 +299,9 @@ def test_a_signal_to_dronesim_up_ends_the_game_interrupted_and_stops_every_proce
             "every child stopped"
     over = journal_records(journal)[-1]
     assert over["record"] == "over" and over["reason"] == "INTERRUPTED"
+    from dronesim import replay
+
+    assert replay.main([str(journal), "--verify"]) == 0  # (every turn before the stop, byte for byte)
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
