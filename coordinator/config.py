@@ -14,7 +14,15 @@ import numpy as np
 
 from schema import Cell, UsageError, WorldSpec
 from schema.messages import is_drone_id
-from schema.tuning import ADMIT_DEADLINE_S, ENV_GRACE_S, GCS_GRACE_S, LINK_GRACE_S, PHASE_CAP_S, PHASE_DEADLINE_S
+from schema.tuning import (
+    ADMIT_DEADLINE_S,
+    ENV_GRACE_S,
+    GCS_GRACE_S,
+    LINK_GRACE_S,
+    MAX_WAIT_S,
+    PHASE_CAP_S,
+    PHASE_DEADLINE_S,
+)
 from world.grid import inside_rows, linear_rows
 
 from .fleet import cell_of
@@ -119,11 +127,16 @@ class GameConfig:
             raise UsageError("two drones cannot start in the same cell")
         if self.max_turns < 1 or self.lost_after < 1:
             raise UsageError("max_turns and lost_after must be >= 1")
+        waits = [w for w in (self.phase_deadline, self.phase_cap, self.gcs_deadline, self.admit_deadline,
+                             self.env_grace, self.link_grace, self.gcs_grace) if w is not None]
         if not (self.phase_deadline > 0 and self.phase_cap > 0
                 and (self.gcs_deadline is None or self.gcs_deadline > 0)
                 and (self.admit_deadline is None or self.admit_deadline > 0)
                 and min(self.env_grace, self.link_grace, self.gcs_grace) >= 0):
             raise UsageError("deadlines must be positive (the GCS's and admission's: or none) and graces >= 0")
+        if not all(w <= MAX_WAIT_S for w in waits):  # (nan and a negative one are refused above)
+            raise UsageError(f"deadlines and graces must be at most {MAX_WAIT_S:g} seconds (a day), got "
+                             f"{max(waits):g}")
 
 
 @functools.lru_cache(maxsize=8)

@@ -107,7 +107,7 @@ def read(path: str | os.PathLike[str]) -> Iterator[dict]:
                     continue
                 try:
                     record = json.loads(line)
-                except json.JSONDecodeError:
+                except (ValueError, RecursionError):  # (not JSON, an integer of 4300 digits, nested too deeply)
                     if not line.endswith("\n"):  # the last line, without its newline: torn by a crash
                         return
                     record = None

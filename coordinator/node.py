@@ -57,7 +57,7 @@ from schema import (
     drone_id,
     encode,
 )
-from schema.errors import RemoteInputError, WrongSender, excerpt
+from schema.errors import RemoteInputError, WrongSender, excerpt, seconds
 from schema.messages import WorldSpec
 from schema.tuning import (
     ADMIT_DEADLINE_S,
@@ -516,13 +516,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--drones", type=int, default=1, help="number of drones D01..Dnn (default 1)")
     p.add_argument("--starts", default="", help='start cells "x,y,z;x,y,z" (default: rows of every other cell)')
     p.add_argument("--max-turns", type=int, default=MAX_TURNS, help=f"the game's turn limit (default {MAX_TURNS})")
-    p.add_argument("--phase-deadline", type=float, default=PHASE_DEADLINE_S,
+    p.add_argument("--phase-deadline", type=seconds, default=PHASE_DEADLINE_S,
                    help=f"seconds for drones and ENV per phase (default {PHASE_DEADLINE_S:g})")
-    p.add_argument("--phase-cap", type=float, default=PHASE_CAP_S, metavar="SECONDS",
+    p.add_argument("--phase-cap", type=seconds, default=PHASE_CAP_S, metavar="SECONDS",
                    help="how long a drones' phase may last in all while a swarm host says it is still deciding (its "
                         f"deadline counts again from each such word; default {PHASE_CAP_S:g})")
-    p.add_argument("--gcs-deadline", type=float, default=0.0, help="seconds for the GCS phase (0: wait)")
-    p.add_argument("--admit-deadline", type=float, default=ADMIT_DEADLINE_S, metavar="SECONDS",
+    p.add_argument("--gcs-deadline", type=seconds, default=0.0, help="seconds for the GCS phase (0: wait)")
+    p.add_argument("--admit-deadline", type=seconds, default=ADMIT_DEADLINE_S, metavar="SECONDS",
                    help="how long the game waits for every entity to connect (also when resumed), then ends "
                         f"ABORTED naming who never came (default {ADMIT_DEADLINE_S:g}; 0: wait forever)")
     p.add_argument("--lost-after", type=int, default=LOST_AFTER,
@@ -533,16 +533,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lifelong", action="store_true",
                    help="a lifelong game: its ground station gives each drone a new target when it reaches its own "
                         "(dronesim gcs --lifelong SEED); the end says the tasks done and the tasks a turn")
-    p.add_argument("--gcs-grace", type=float, default=GCS_GRACE_S, metavar="SECONDS",
+    p.add_argument("--gcs-grace", type=seconds, default=GCS_GRACE_S, metavar="SECONDS",
                    help="with --resume: how long the game waits for its ground station once the environment "
                         f"and the drones are back (default {GCS_GRACE_S:g})")
-    p.add_argument("--link-grace", type=float, default=LINK_GRACE_S, metavar="SECONDS",
+    p.add_argument("--link-grace", type=seconds, default=LINK_GRACE_S, metavar="SECONDS",
                    help="how long the game holds when the coordinator's link is down (every presence vanished at "
                         "once, e.g. a router restart; or no router answers, e.g. one frozen) for its entities to come "
                         f"back (default {LINK_GRACE_S:g})")
     p.add_argument("--journal", help="write the game's journal to this file, missing or empty (a journal holds one "
                                      "game; --resume takes up an unfinished one)")
-    p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
+    p.add_argument("--pace", type=seconds, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS (default 0: as fast as the entities answer)")
     p.add_argument("--verify-env", action="store_true",
                    help="check the environment's UPD of every ENV phase against the coordinator's world "
@@ -580,11 +580,14 @@ def game_config(args: argparse.Namespace, scenario: ScenarioReader | None = None
             raise UsageError("--scenario is read by the dronesim command: dronesim coordinator --scenario FILE")
         return scenario(args.scenario, **deadlines)
 
-    if args.world:
-        world = World.load(args.world)
-        spec = WorldSpec(size=world.size, cells=world.packed())
-    else:
-        spec = WorldSpec(size=parse_size(args.size), seed=args.seed)
+    try:
+        if args.world:
+            world = World.load(args.world)
+            spec = WorldSpec(size=world.size, cells=world.packed())
+        else:
+            spec = WorldSpec(size=parse_size(args.size), seed=args.seed)
+    except RemoteInputError as err:  # WorldSpec's own checks (sizes, cells, seed >= 0), as `Scenario.from_json`'s
+        raise UsageError(f"bad world: {err}") from None
     drones = parse_starts(args.starts, args.drones, spec.size, world.is_building if args.world else None)
     return GameConfig(world=spec, drones=drones, max_turns=args.max_turns, **deadlines)
 

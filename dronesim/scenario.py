@@ -30,7 +30,7 @@ from coordinator.config import MAX_TURNS, DroneSpec, DroneTable, GameConfig
 from entities.autopilots import COOPERATIVE, DEFAULT, REGISTRY
 from entities.gcs import Plan
 from schema import Cell, RemoteInputError, UsageError, WorldSpec, is_drone_id
-from world.grid import World, build_world, checked_int
+from world.grid import World, build_world, checked_int, json_problem
 from world.movingai import read_scen
 
 FORMAT = "dronesim-scenario"
@@ -68,8 +68,9 @@ class Scenario:
         path = pathlib.Path(path)
         try:
             data = _parse(path, plan)
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise UsageError(f"cannot read scenario {path}: {exc}") from None
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:  # (ValueError: not JSON, or an
+            # integer of more than 4300 digits; RecursionError: nested too deeply)
+            raise UsageError(f"cannot read scenario {path}: {json_problem(exc)}") from None
         try:
             return cls.from_json(data, base=path.parent, plan=plan)
         except UsageError as err:
@@ -124,6 +125,8 @@ def movingai_scenario(map_path: str | pathlib.Path, scen_path: str | pathlib.Pat
                       autopilot: str = COOPERATIVE, max_turns: int = MAX_TURNS) -> dict:
     """The scenario (its JSON form, for `Scenario.from_json` or a file) of the first `agents` agents of a
     MovingAI .scen (all of them: None) on its .map. UsageError if either is unreadable or they disagree."""
+    if agents is not None and agents < 1:  # (a negative one sliced off the last agents)
+        raise UsageError(f"the number of agents must be >= 1 (or all of them), got {agents}")
     world = World.load(map_path)
     try:
         entries = read_scen(pathlib.Path(scen_path).read_text(encoding="utf-8"))[:agents]  # (all of them: None)

@@ -14,6 +14,7 @@ import json
 import pathlib
 import queue
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -22,17 +23,20 @@ import time
 
 import zenoh
 
-from coordinator.config import ARBITERS, SIZE, UP_MAX_TURNS
+from coordinator.config import ARBITERS, SIZE, UP_MAX_TURNS, GameConfig
 from dronesim import child_env
 from dronesim.certs import GameCredentials, game_credentials
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
 from entities.autopilots import COOPERATIVE, DEFAULT, REGISTRY
+from entities.gcs import Plan
 from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
 from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
 from schema import UsageError, drone_id
+from schema.errors import seconds
 from schema.keys import ROOT
 from schema.tuning import KILL_S, PHASE_DEADLINE_S, STOP_S, UP_ADMIT_DEADLINE_S
+from world.grid import build_world
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -58,9 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a lifelong game: each drone that reaches its target gets a new one from the ground station, "
                         "drawn with --seed (entities/tasks.py), until --max-turns; the end says the tasks done and "
                         "the tasks a turn")
-    p.add_argument("--pace", type=float, default=0.0, metavar="SECONDS",
+    p.add_argument("--pace", type=seconds, default=0.0, metavar="SECONDS",
                    help="start a turn at most every SECONDS, to watch the game (default: full speed)")
-    p.add_argument("--phase-deadline", type=float, metavar="SECONDS",
+    p.add_argument("--phase-deadline", type=seconds, metavar="SECONDS",
                    help="seconds the drones (and the environment) have for each phase "
                         f"(default: the coordinator's, {PHASE_DEADLINE_S:g})")
     p.add_argument("--journal", help="write the journal to this file")
@@ -138,18 +142,61 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
 
 
 def check_game(args: argparse.Namespace) -> None:
-    """Refuse here, before any process starts, a game the coordinator would refuse with the flags it will be
-    given (a UsageError: drones that do not fit, a start in a building, a bad world file...)."""
+    """Refuse here, before any process starts, a game the coordinator or the ground station would refuse with the
+    flags they will be given (a UsageError: drones that do not fit, a start in a building, a bad world file, a bad
+    target or script, a --web address that cannot be served...): else every process starts, and the game is stopped
+    once the one that refuses has said so."""
     from coordinator import node as coordinator
 
-    from .roles import game_of_scenario
+    scenarios: list[Scenario] = []
 
-    coordinator.game_config(coordinator.build_parser().parse_args(coordinator_flags(args, "tcp/127.0.0.1:0")),
-                            game_of_scenario)
+    def scenario(path: str, **deadlines: object) -> GameConfig:  # (read once, with its targets, as the GCS reads it)
+        scenarios.append(Scenario.load(path))
+        return scenarios[-1].game_config(**deadlines)
+
+    config = coordinator.game_config(coordinator.build_parser().parse_args(coordinator_flags(args, "tcp/127.0.0.1:0")),
+                                     scenario)
+    lifelong = args.lifelong or any(s.lifelong is not None for s in scenarios)
+    if lifelong and (args.web or args.mavlink or args.ros2):
+        raise UsageError("--lifelong is the scripted ground station's (not with --web, --mavlink or --ros2)")
+    check_plan(args, config)
+    if args.web:
+        check_web(args.web)
+
+
+def check_plan(args: argparse.Namespace, config: GameConfig) -> None:
+    """The ground station's plan, checked as it will check it (`entities.gcs.Ground.from_welcome`): the --script
+    file (which then stands for the targets), else the --targets (after a scenario's, which `Scenario.load` checked),
+    against the world and the game's drones."""
+    if not args.script and not args.targets:
+        return
+    world = build_world(config.world, (d.start for d in config.drones))  # (as every process builds it)
+    size, first = config.world.size, config.drones[0].drone
+    named = Plan.load(args.script, size, world).drones() if args.script else \
+        Plan.drones_of(args.targets, size, first, world)
+    if unknown := named - {d.drone for d in config.drones}:
+        raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies "
+                         f"{', '.join(d.drone for d in config.drones)}")
+
+
+def check_web(text: str) -> None:
+    """The --web address: well formed, and one the ground station can listen on (bound here and released: a port
+    taken since is the ground station's own error, which stops the game, `supervise`)."""
+    from entities.web.server import parse_address
+
+    host, port = parse_address(text)
+    try:
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as sock:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # (as the page's server binds)
+            sock.bind((host, port))
+    except OSError as exc:
+        raise UsageError(f"cannot serve the web ground station on {host}:{port}: {exc}") from None
 
 
 def main(args: argparse.Namespace) -> int:
     if args.scen:  # a MovingAI instance: played as the scenario it makes (a file the processes read)
+        if args.agents is not None and args.agents < 1:
+            raise UsageError(f"--agents must be >= 1 (default: all of the .scen's), got {args.agents}")
         if not args.world or args.scenario:
             raise UsageError("--scen needs --world FILE.map (and no --scenario)")
         data = movingai_scenario(args.world, args.scen, args.agents, args.autopilot, args.max_turns)
@@ -215,13 +262,26 @@ def play(args: argparse.Namespace, creds: GameCredentials | None) -> int:
                     proc.kill()
                     proc.wait()
             return exit_status(sig.signum)
-        if failed := {n: c for n, c in codes.items() if c != 0}:
-            print(f"dronesim up: processes failed: {failed}", file=sys.stderr)
-            return 1
-        print(f"dronesim up: all {len(codes)} processes exited 0", flush=True)
-        return 0
+        return ending(codes)
 
 
+def ending(codes: dict[str, int]) -> int:
+    """This command's exit status, and its last line, from its processes' (`supervise`'s: in the order they
+    ended): 0 if each exited 0; `USAGE_STATUS` if the first vital one to fail refused its input (it said why on a
+    line of its own, and the game was stopped: a usage error, as if this command had refused it); else 1."""
+    if failed := {n: c for n, c in codes.items() if c != 0}:
+        first = next((n for n in failed if n in VITAL), None)
+        if first is not None and failed[first] == USAGE_STATUS:
+            print(f"dronesim up: {first} refused its input (its error above): the game was stopped", file=sys.stderr)
+            return USAGE_STATUS
+        print(f"dronesim up: processes failed: {failed}", file=sys.stderr)
+        return 1
+    print(f"dronesim up: all {len(codes)} processes exited 0", flush=True)
+    return 0
+
+
+#: A process's exit status for a usage error (a bad flag or file: `UsageError`), this command's own too.
+USAGE_STATUS = 2
 #: The processes without which the game cannot go on: one of them failing stops the game at once (a drone
 #: that fails is LOST and the others play on; a ground station that refuses its targets exits 2).
 VITAL = ("SRV", "GCS")
@@ -275,4 +335,4 @@ def cli(argv: list[str] | None = None) -> int:
         return main(args)
     except UsageError as err:
         print(f"dronesim up: {err}", file=sys.stderr)
-        return 2
+        return USAGE_STATUS

@@ -126,7 +126,7 @@ class Plan:
     def load(cls, path: str, size: Cell, world: World | None = None) -> Plan:
         try:
             lines = pathlib.Path(path).read_text(encoding="utf-8").splitlines()
-        except OSError as exc:
+        except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read the target script {path}: {exc}") from None
         return cls.parse((ln.split("#", 1)[0] for ln in lines), size, world=world)
 

@@ -18,7 +18,7 @@ from network.clock import TurnClock
 from network.progress import Progress
 from network.transport import Inbox, Presence, Received, ask_later
 from schema import Connect, Message, Over, Refused, Status, Turn, Welcome
-from schema.errors import RejectCounter, RemoteInputError, UsageError
+from schema.errors import RejectCounter, RemoteInputError, UsageError, seconds
 from schema.tuning import CONNECT_GAP, CONNECT_TIMEOUT_S, COORDINATOR_GRACE_S, PROCESS_CHECK_S
 
 
@@ -212,7 +212,7 @@ class Membership:
 def add_entity_args(parser) -> None:
     """Flags every entity process shares."""
     g = parser.add_argument_group("membership")
-    g.add_argument("--connect-timeout", type=float, default=CONNECT_TIMEOUT_S,
+    g.add_argument("--connect-timeout", type=seconds, default=CONNECT_TIMEOUT_S,
                    help=f"seconds to wait for the coordinator to admit this entity (default {CONNECT_TIMEOUT_S:g})")
-    g.add_argument("--grace", type=float, default=COORDINATOR_GRACE_S,
+    g.add_argument("--grace", type=seconds, default=COORDINATOR_GRACE_S,
                    help=f"seconds to wait for a vanished coordinator to come back (default {COORDINATOR_GRACE_S:g})")

@@ -32,7 +32,16 @@ import zenoh
 
 from schema import Keys, Message, Target, Turn, decode, encode
 from schema.acl import flood_filters
-from schema.errors import MalformedMessage, RejectCounter, RemoteInputError, StaleTurn, UsageError, WrongSender, excerpt
+from schema.errors import (
+    MalformedMessage,
+    RejectCounter,
+    RemoteInputError,
+    StaleTurn,
+    UsageError,
+    WrongSender,
+    excerpt,
+    seconds,
+)
 from schema.keys import ROOT, size_limit
 from schema.messages import is_entity_id
 from schema.tuning import AUDIT_S, ORIGIN_BYTES, ORIGIN_QUEUE, ORIGIN_SHARE, QUIET_MOST, ROUTER_ANSWER_S
@@ -47,7 +56,7 @@ def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("-l", "--listen", action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to listen on (repeatable)")
     g.add_argument("-c", "--config", metavar="FILE", help="a zenoh JSON5 configuration file")
-    g.add_argument("--lease", type=float, metavar="SECONDS",
+    g.add_argument("--lease", type=seconds, metavar="SECONDS",
                    help="link lease (transport/link/tx/lease): a hung or cut-off process is declared gone after "
                         "about 0.75 x this (zenoh's default: 10)")
     g.add_argument("--root", default=ROOT, help=f"key expression root of this simulation (default: {ROOT})")

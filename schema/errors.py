@@ -5,18 +5,32 @@ clear message; bad remote input (`RemoteInputError`) is caught by the adapters, 
 
 from __future__ import annotations
 
+import argparse
 import collections
 import dataclasses
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
 
-from .tuning import REJECT_EXCERPT, REJECT_LOG_FIRST, REJECT_LOG_WINDOW, REJECT_ORIGINS
+from .tuning import MAX_WAIT_S, REJECT_EXCERPT, REJECT_LOG_FIRST, REJECT_LOG_WINDOW, REJECT_ORIGINS
 
 
 class UsageError(Exception):
     """Local misuse: a wrong argument, an unreadable file, an impossible configuration."""
+
+
+def seconds(text: str) -> float:
+    """argparse's type of a flag that gives a wait (a deadline, a grace, a pace, a lease): a number of seconds in
+    0..`MAX_WAIT_S`, not nan nor inf (argparse ends the command with its usage and this error, status 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (math.isfinite(value) and 0 <= value <= MAX_WAIT_S):
+        raise argparse.ArgumentTypeError(f"{text!r}: seconds must be in 0..{MAX_WAIT_S:g} (a day)")
+    return value
 
 
 class RemoteInputError(Exception):

@@ -46,6 +46,12 @@ SCHEMA_VERSION = 5
 MAX_TURN = 1 << 40
 #: Largest payload any receiver decodes; bigger ones are rejected before parsing.
 MAX_PAYLOAD = 1 << 22
+#: Most cells a world may have (nx * ny * nz), checked with its size before anything is allocated for it: the
+#: largest world the project makes is the 512 x 512 x 64 of `dronesim bench perf`'s generation (2^24 cells), eight
+#: times the largest played (the 256 x 256 x 32 city, 2^21). Its packed map, 2 MiB, is the largest that travels in
+#: one MAP or WELCOME (a map of 2^25 cells exceeds `MAX_PAYLOAD`), and every process holds a few bytes a cell (a
+#: grid, labels, padded copies): a size of 65536^3 passed every other check and cost 16 GiB before it failed.
+MAX_CELLS = 1 << 24
 #: Largest text (in UTF-8 bytes) an OVER carries: the whole OVER stays under its key's size limit
 #: (`schema.keys.ENVELOPE`, which every receiver enforces unread). A longer one never reached anyone: the end of a
 #: game that named its hundred lost drones one by one.
@@ -194,8 +200,10 @@ def _check_world(size: Cell, bits: bytes, name: str, *, optional: bool = False) 
     """A world's size and its building cells, one bit each (packed; `optional`: or none)."""
     _check_cell(size, "size")
     _check(all(s >= 1 for s in size), "world sizes must be >= 1")
-    _check(isinstance(bits, bytes), f"{name} must be bytes")
     n = size[0] * size[1] * size[2]
+    _check(n <= MAX_CELLS, f"a world of {size[0]} x {size[1]} x {size[2]} cells exceeds the {MAX_CELLS} cells a world "
+                           "may have")
+    _check(isinstance(bits, bytes), f"{name} must be bytes")
     _check(optional and not bits or len(bits) == (n + 7) // 8, f"{name} must hold one bit per cell")
 
 

@@ -211,6 +211,11 @@ EPISODE_FEW_DRONES = 64
 # round trip through a router is about 0.5 ms, a token's disappearance a few ms: BENCHMARKS.md, docs/reliability.md)
 # and short enough that a person waiting does not give up.
 
+#: The longest wait a flag or a game's configuration may give (a deadline, a grace, a pace, a lease...: checked by
+#: `schema.errors.seconds` and `GameConfig`): a day. Not a tuning: a bound on input. Nobody waits a day for a turn,
+#: so a longer one is a typo; and inf or 1e300 seconds overflowed the clock it is added to (a timeout beyond
+#: `threading.TIMEOUT_MAX`, a time beyond time_t): an OverflowError mid-game, after every process had started.
+MAX_WAIT_S = 86400.0
 #: How long the drones (and the environment) have to answer a turn's phase before the missing ones hover
 #: (`GameConfig.phase_deadline`, `--phase-deadline`).
 PHASE_DEADLINE_S = 5.0

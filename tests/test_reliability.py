@@ -269,20 +269,19 @@ def test_a_paced_game_whose_last_drone_is_killed_ends_with_over_and_its_record(t
     assert journal_records(journal)[-1]["reason"] == "NO_DRONE_ALIVE"
 
 
-def test_dronesim_up_stops_the_game_when_its_ground_station_refuses_a_target(tmp_path):
-    """A target inside a building: the ground station refuses it and exits 2; `up` stops the game at once
-    (OVER INTERRUPTED, with its record) instead of letting it run without a ground station to its limit."""
+def test_dronesim_up_refuses_a_target_its_ground_station_would_refuse_before_any_process_starts(tmp_path):
+    """A target inside a building: `up` refuses it as its ground station would (exit 2, one line), before any
+    process starts: no game, no journal. (A ground station that refuses its input once started, a port taken since
+    `up` looked, stops the game and makes `up` exit 2: tests/test_cli_inputs.py.)"""
     world = tmp_path / "block.json"
     world.write_text('{"format": "dronesim-world", "version": 1, "size": [10, 10, 10], '
                      '"buildings": [[4, 4, 3, 3, 5]]}')
     with dronesim_up(tmp_path, "--world", str(world), "--starts", "0,0,0", "--pace", "0.2",
                      "--max-turns", "100000", "--targets", "5,5,0") as (up, journal):
-        assert up.wait() == 1, up.text
+        assert up.wait() == 2, up.text
         assert "inside a building" in up.text, up.text
-        assert "dronesim up: GCS exited 2: stopping the game" in up.text
-        assert "Traceback" not in up.text
-    over = journal_records(journal)[-1]
-    assert over["record"] == "over" and over["reason"] == "INTERRUPTED", over
+        assert "Traceback" not in up.text and "GAME" not in up.text
+    assert not journal.exists() or not journal.read_text()
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from schema import Cell, CellInfo, CellKind, UsageError
-from schema.messages import AROUND, MAX_COORD, WorldSpec
+from schema.messages import AROUND, MAX_CELLS, MAX_COORD, WorldSpec
 
 from .movingai import read_map, world_grid
 from .search import components, levels, padded_cell, padded_steps
@@ -102,6 +102,9 @@ def _size(value: object) -> Cell:
     size = _cell(value, "world size")
     if not all(1 <= s <= MAX_COORD for s in size):
         raise UsageError(f"world sizes must be in 1..{MAX_COORD}, got {size}")
+    if size[0] * size[1] * size[2] > MAX_CELLS:  # (before anything of that size is allocated)
+        raise UsageError(f"a world of {size[0]} x {size[1]} x {size[2]} cells exceeds the {MAX_CELLS} cells a world "
+                         "may have")
     return size
 
 
@@ -351,12 +354,13 @@ class World:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read world file {str(path)!r}: {exc}") from None
+        movingai = Path(path).suffix == ".map"
         try:
-            if Path(path).suffix == ".map":
-                return cls.from_grid(world_grid(read_map(text)))
-            return cls.from_json(json.loads(text))
-        except json.JSONDecodeError as exc:
-            raise UsageError(f"world file {str(path)!r} is not valid JSON: {exc}") from None
+            data = None if movingai else json.loads(text)
+        except (ValueError, RecursionError) as exc:  # (not JSON, an integer of 4300 digits, nested too deeply)
+            raise UsageError(f"world file {str(path)!r} is not valid JSON: {json_problem(exc)}") from None
+        try:
+            return cls.from_grid(world_grid(read_map(text))) if movingai else cls.from_json(data)  # type: ignore[arg-type]
         except UsageError as exc:
             raise UsageError(f"world file {str(path)!r}: {exc}") from None
 
@@ -478,6 +482,14 @@ class Regions:
         if cells is None:
             cells = self._members[comp] = np.flatnonzero(self.label == comp)
         return cells
+
+
+def json_problem(exc: Exception) -> str:
+    """What is wrong with a file `json.loads` refused: its ValueError (not JSON; an integer longer than Python
+    converts, 4300 digits), or its RecursionError (arrays or objects nested too deeply), said in one line."""
+    if isinstance(exc, RecursionError):
+        return "its arrays or objects are nested too deeply"
+    return str(exc).split("; use sys.set_int_max_str_digits")[0]  # (an integer's: not the advice that follows)
 
 
 def _json_ints(value: object, n: int, what: str) -> list[int]:

@@ -37,6 +37,7 @@ from functools import partial
 import numpy as np
 
 from schema import UsageError
+from schema.messages import MAX_CELLS
 
 from .search import components, levels, padded_cell, padded_steps
 
@@ -70,6 +71,8 @@ def read_map(text: str) -> np.ndarray:
         raise UsageError(".map: needs integer 'height' and 'width'") from None
     if not (1 <= height <= 65536 and 1 <= width <= 65536):
         raise UsageError(f".map: {width} x {height} is not a size")
+    if width * height > MAX_CELLS:  # (before its grid is allocated)
+        raise UsageError(f".map: {width} x {height} exceeds the {MAX_CELLS} cells a world may have")
     rows = lines[k + 1:k + 1 + height]
     if len(rows) != height:
         raise UsageError(f".map: {height} rows announced, {len(rows)} given")
