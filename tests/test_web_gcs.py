@@ -23,6 +23,7 @@ from coordinator.journal import dumps
 from dronesim.local import Inputs, simulate
 from entities.gcs import Ground, Plan, SendDone
 from entities.web import node as web_node
+from entities.web import server as web_server
 from entities.web.model import GroundState, Rejected, parse_cell, world_json
 from entities.web.replay import Replay
 from entities.web.server import Hub, WebServer, parse_address
@@ -90,7 +91,8 @@ def test_parse_cell_accepts_text_forms(text, cell):
 
 
 @pytest.mark.parametrize("bad", ["1,2", "a,b,c", "1,2,3,4", "", [1, 2], [1, 2, 3.0], [True, 0, 0], {"x": 1}, None,
-                                 ["1", "2", "3"]])
+                                 ["1", "2", "3"], "\uff11,2,3", "9" * 5000 + ",1,0", "1234567890,0,0",
+                                 [10 ** 9, 0, 0], [0, -(10 ** 40), 0]])
 def test_parse_cell_refuses_anything_else_with_400(bad):
     with pytest.raises(Rejected) as err:
         parse_cell(bad)
@@ -274,7 +276,7 @@ def test_scripted_targets_keep_the_turns_going_until_their_last_turn():
     assert g.pending is None and g.due(0.0) is None
 
 
-@pytest.mark.parametrize("value", [-1, 11, "fast", None, True])
+@pytest.mark.parametrize("value", [-1, 11, "fast", None, True, 10 ** 400, float("nan"), float("inf")])
 def test_pace_is_checked(value):
     with pytest.raises(Rejected) as err:
         started().control("pace", value)
@@ -482,6 +484,11 @@ def test_refusals_of_the_backend_keep_their_status_and_message(served):
     ("POST", "/api/target", '{"drone": "D01", "cell": [1.5, 1, 0]}', None, 400, "three integers"),
     ("POST", "/api/target", '{"drone": "D01", "cell": "1,x,0"}', None, 400, "not x,y,z"),
     ("POST", "/api/target", '{"drone": "D01", "cell": [1, 1, 0], "turn": 3}', None, 400, "unknown fields"),
+    ("POST", "/api/target", '{"drone": "D01", "cell": [' + "9" * 5000 + ", 1, 0]}", None, 400, "too many digits"),
+    ("POST", "/api/target", '{"drone": "D01", "cell": "' + "9" * 5000 + ',1,0"}', None, 400, "not x,y,z"),
+    ("POST", "/api/target", '{"drone": "D01", "cell": "\uff11,1,0"}', None, 400, "not x,y,z"),
+    ("POST", "/api/target", '{"drone": "D01", "cell": ' + "[" * 5000 + "]" * 5000 + "}", None, 400, "nested too deep"),
+    ("POST", "/api/control", '{"action": "pause"}', {"Origin": "http://[::1"}, 400, "bad Origin"),
     ("POST", "/api/control", '{"action": "explode"}', None, 400, "unknown action"),
     ("POST", "/api/control", '{}', None, 400, "unknown action"),
     ("POST", "/api/target", '{"drone": "D01", "cell": [1, 1, 0]}', {"Content-Type": "text/plain"}, 415, "JSON"),
@@ -496,19 +503,21 @@ def test_refusals_of_the_backend_keep_their_status_and_message(served):
     ("DELETE", "/api/state", None, None, 405, "use GET"),
     ("BREW", "/", None, None, 501, "Unsupported method"),
 ])
-def test_bad_http_input_gets_a_4xx_json_error(served, method, path, body, headers, code, fragment):
+def test_bad_http_input_gets_a_4xx_json_error(served, caplog, method, path, body, headers, code, fragment):
     server, backend, _ = served
     got, data = json_call(server, method, path, body, headers)
     assert got == code and fragment in data["error"], data
     assert backend.calls == []
     assert json_call(server, "GET", "/api/world")[0] == 200  # and the server goes on
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info]  # no traceback
 
 
 def test_missing_or_bad_content_length(served):
     server, _, _ = served
     for head, code in ((b"", 411), (b"Content-Length: banana\r\n", 400), (b"Content-Length: -5\r\n", 400)):
         with socket.create_connection(server.server_address[:2], timeout=10) as s:
-            s.sendall(b"POST /api/target HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n" + head + b"\r\n")
+            s.sendall(b"POST /api/target HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n" + head
+                      + b"\r\n")
             reply = s.makefile("rb").read().decode()
         assert reply.startswith(f"HTTP/1.0 {code}"), reply
         assert json.loads(reply.split("\r\n\r\n", 1)[1])["error"]
@@ -603,6 +612,154 @@ def test_a_vanished_page_is_forgotten(served):
         if hub.subscribers == 0:
             break
     assert hub.close(10.0)
+
+
+def raw(server: WebServer, request: bytes) -> bytes:
+    """What the server answers to `request`, sent as it is, until it closes the connection."""
+    with socket.create_connection(server.server_address[:2], timeout=10) as s:
+        s.sendall(request)
+        return s.makefile("rb").read()
+
+
+def test_a_bad_absolute_url_gets_400(served, caplog):
+    server, _, _ = served
+    reply = raw(server, b"GET http://[::1/api/state HTTP/1.0\r\n\r\n").decode()
+    assert reply.startswith("HTTP/1.0 400"), reply
+    assert "bad request target" in json.loads(reply.split("\r\n\r\n", 1)[1])["error"]
+    assert not [r for r in caplog.records if r.exc_info]
+
+
+def test_a_client_that_hangs_up_before_its_error_is_no_traceback(served, caplog):
+    server, _, _ = served
+    ours, theirs = socket.socketpair()
+    theirs.sendall(b"\x16\x03\x01 some bytes of a TLS hello")  # no end of line, then gone
+    theirs.close()
+    web_server._Handler(ours, ("127.0.0.1", 1), server)  # answers 400 to nobody: no BrokenPipeError out of it
+    ours.close()
+    assert server.rejects.snapshot() == {"http-400": 1}
+    assert not [r for r in caplog.records if r.exc_info]
+
+
+def test_a_broken_connection_is_routine_and_a_bug_is_logged(served, caplog):
+    server, _, _ = served
+    for exc in (ConnectionResetError(104, "reset"), RuntimeError("a bug")):
+        try:
+            raise exc
+        except Exception:
+            server.handle_error(None, ("127.0.0.1", 1))
+    assert [(r.levelno, bool(r.exc_info)) for r in caplog.records if r.levelno >= logging.INFO] == \
+        [(logging.ERROR, True)]
+
+
+def test_a_burst_of_connections_waits_in_the_backlog():
+    server = WebServer(("127.0.0.1", 0), FakeBackend(), Hub(), LOG)  # listening, not accepting yet
+    try:
+        burst = [socket.create_connection(server.server_address[:2], timeout=10) for _ in range(100)]
+        for s in burst:  # (with socketserver's backlog of 5, the 7th connection timed out)
+            s.close()
+    finally:
+        server.server_close()
+
+
+def test_an_idle_or_half_sent_request_is_closed(served, monkeypatch):
+    server, backend, _ = served
+    monkeypatch.setattr(web_server._Handler, "timeout", 0.05)
+    assert raw(server, b"") == b""  # connected, never a word
+    assert raw(server, b"GET /api/state HTTP/1.1\r\nHost: 127.0.0.1\r\n") == b""  # headers never ended
+    half_body = b"POST /api/control HTTP/1.0\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{"
+    assert raw(server, half_body) == b""
+    assert server.rejects.snapshot() == {"timeout": 3} and backend.calls == []
+    assert json_call(server, "GET", "/api/world")[0] == 200
+
+
+def test_connections_beyond_the_cap_are_refused_at_once(served, monkeypatch):
+    server, _, _ = served
+    monkeypatch.setattr(web_server, "MAX_CONNECTIONS", 2)
+    address = server.server_address[:2]
+    held = [socket.create_connection(address, timeout=10) for _ in range(2)]
+    for s in held:  # half-sent: each holds its place
+        s.sendall(b"GET /api/world HTTP/1.0\r\n")
+    reply = raw(server, b"").decode()  # accepted after them (in order): refused, not left waiting
+    assert reply.startswith("HTTP/1.0 503"), reply
+    assert "busy" in json.loads(reply.split("\r\n\r\n", 1)[1])["error"]
+    assert server.rejects.snapshot() == {"busy": 1}
+    for s in held:  # their requests end: their places are free
+        s.sendall(b"\r\n")
+        assert s.makefile("rb").read().startswith(b"HTTP/1.0 200")
+        s.close()
+    assert json_call(server, "GET", "/api/world")[0] == 200
+
+
+def test_an_event_stream_outlives_the_idle_timeout(served, monkeypatch):
+    server, _, hub = served
+    monkeypatch.setattr(web_server._Handler, "timeout", 0.05)
+    monkeypatch.setattr(web_server, "KEEPALIVE", 0.2)  # (nothing to send for longer than the timeout)
+    hub.publish({"seq": 1})
+    with socket.create_connection(server.server_address[:2], timeout=10) as s:
+        s.sendall(b"GET /api/events HTTP/1.0\r\n\r\n")
+        lines = s.makefile("rb")
+        while lines.readline() != b": keepalive\n":
+            pass
+        while lines.readline() != b": keepalive\n":
+            pass
+        hub.publish({"seq": 2})
+        while not (line := lines.readline()).startswith(b"data: "):
+            pass
+        assert json.loads(line[6:]) == {"seq": 2}
+
+
+def test_a_stream_that_falls_behind_holds_only_the_newest_state():
+    hub = Hub()
+    stream = hub.subscribe()
+    for n in range(1000):  # a page that reads nothing: one state held, not a thousand
+        hub.publish({"seq": n})
+    assert hub.next(stream, 0) == ('{"seq":999}', False)
+    assert hub.next(stream, 0) == (None, False)
+    hub.publish({"seq": 1000})
+    threading.Thread(target=hub.close, args=(10.0,)).start()
+    assert hub.next(stream, 10) == ('{"seq":1000}', True)  # the final state, then the end
+    hub.unsubscribe(stream)
+
+
+def test_a_page_that_stops_reading_is_dropped(served, monkeypatch):
+    server, _, hub = served
+    assert web_server._Handler.timeout == web_server.IDLE_TIMEOUT  # (a page is dropped after it; shortened here)
+    monkeypatch.setattr(web_server._Handler, "timeout", 0.2)
+    hub.publish({"pad": "x" * (16 << 20)})  # more than the kernel's buffers hold
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        s.settimeout(10)
+        s.connect(server.server_address[:2])
+        s.sendall(b"GET /api/events HTTP/1.0\r\n\r\n")
+        head = b""
+        while b"retry: 1000" not in head:  # subscribed; then it reads nothing more
+            head += s.recv(1024)
+        assert hub.close(10.0)  # its stream timed out writing, and ended
+    assert hub.subscribers == 0 and server.rejects.snapshot() == {"timeout": 1}
+
+
+def rebinding_post(server: WebServer, host: str):
+    return json_call(server, "POST", "/api/control", '{"action": "pause"}', {"Host": host, "Origin": f"http://{host}"})
+
+
+def test_a_foreign_host_is_refused_dns_rebinding(served):
+    server, backend, _ = served
+    port = server.server_address[1]
+    for host in (f"attacker.example:{port}", "attacker.example", f"127.0.0.1.nip.io:{port}", f"localhost.evil:{port}"):
+        code, body = rebinding_post(server, host)
+        assert code == 403 and "not a name of this ground station" in body["error"], (host, body)
+        assert json_call(server, "GET", "/api/state", headers={"Host": host})[0] == 403
+    assert backend.calls == []
+    assert server.rejects.snapshot() == {"http-403": 8}
+
+
+@pytest.mark.parametrize("name", ["127.0.0.1", "[::1]", "localhost", "LocalHost.", "app.localhost", "192.0.2.7",
+                                  "[2001:db8::7]", socket.gethostname()])
+def test_the_page_opens_by_an_ip_address_localhost_or_this_machines_name(served, name):
+    server, backend, _ = served
+    host = f"{name}:{server.server_address[1]}"
+    assert json_call(server, "GET", "/api/world", headers={"Host": host})[0] == 200
+    assert rebinding_post(server, host)[0] == 200 and backend.calls == [("pause", {"value": None})]
 
 
 def test_replay_backend_serves_frames_and_refuses_commands(tmp_path):

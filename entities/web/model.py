@@ -34,6 +34,7 @@ from schema import (
     Welcome,
     is_drone_id,
 )
+from schema.errors import excerpt
 from schema.tuning import STATUS_GRACE, WEB_PACE_S
 from world.grid import World
 
@@ -74,20 +75,28 @@ def fmt(cell: Iterable[int] | None) -> str:
     return "none" if cell is None else "(" + ", ".join(str(c) for c in cell) + ")"
 
 
-_CELL_TEXT = re.compile(r"\s*\(?\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*[, ]\s*(-?\d+)\s*\)?\s*\Z")
+#: The most digits of a coordinate: no world is a billion cells wide. It bounds `int()` (which refuses more than
+#: 4300 digits with a ValueError) and the messages that quote a cell.
+MAX_DIGITS = 9
+_NUMBER = rf"(-?[0-9]{{1,{MAX_DIGITS}}})"  # (ASCII digits only: \d would take any script's, like "１")
+_CELL_TEXT = re.compile(rf"\s*\(?\s*{_NUMBER}\s*[, ]\s*{_NUMBER}\s*[, ]\s*{_NUMBER}\s*\)?\s*\Z", re.ASCII)
 
 
 def parse_cell(value: object) -> Cell:
-    """A cell given as ``[x, y, z]`` (three integers) or ``"x,y,z"`` / ``"x y z"``; `Rejected` (400) if
-    it is neither. Bounds are checked against the world by `GroundState.set_target`."""
+    """A cell given as ``[x, y, z]`` (three integers) or ``"x,y,z"`` / ``"x y z"``, of at most `MAX_DIGITS`
+    digits each; `Rejected` (400) if it is neither. Bounds are checked against the world by
+    `GroundState.set_target`."""
     if isinstance(value, str):
         m = _CELL_TEXT.match(value)
         if not m:
-            raise Rejected(f"{value!r} is not x,y,z (three integers)", 400)
+            raise Rejected(f"{excerpt(repr(value))} is not x,y,z (three integers of at most {MAX_DIGITS} digits)",
+                           400)
         return (int(m[1]), int(m[2]), int(m[3]))
-    if isinstance(value, (list, tuple)) and len(value) == 3 and all(type(v) is int for v in value):
+    if isinstance(value, (list, tuple)) and len(value) == 3 and \
+            all(type(v) is int and abs(v) < 10 ** MAX_DIGITS for v in value):
         return (value[0], value[1], value[2])
-    raise Rejected(f"a cell must be [x, y, z] (three integers) or \"x,y,z\", got {value!r}", 400)
+    raise Rejected(f"a cell must be [x, y, z] (three integers of at most {MAX_DIGITS} digits) or \"x,y,z\", "
+                   f"got {excerpt(repr(value))}", 400)
 
 
 def world_json(world: World, *, mode: str, title: str = "") -> dict:
@@ -173,9 +182,13 @@ class GroundState:
     @staticmethod
     def _check_pace(value: object) -> float:
         lo, hi = PACE_RANGE
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= float(value) <= hi:
-            raise Rejected(f"pace must be a number of seconds in {lo:g}..{hi:g}, got {value!r}", 400)
-        return float(value)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            try:
+                if lo <= float(value) <= hi:
+                    return float(value)
+            except OverflowError:  # (an integer of hundreds of digits is no float)
+                pass
+        raise Rejected(f"pace must be a number of seconds in {lo:g}..{hi:g}, got {excerpt(repr(value))}", 400)
 
     def note(self, kind: str, text: str) -> None:
         """An event from outside the game's messages (connection, the human's commands...)."""
@@ -225,7 +238,7 @@ class GroundState:
         if self.station.over is not None:
             raise Rejected("the game is over: no more targets", 409)
         if not isinstance(drone, str) or not is_drone_id(drone):
-            raise Rejected(f"{drone!r} is not a drone id (like D01)", 400)
+            raise Rejected(f"{excerpt(repr(drone))} is not a drone id (like D01)", 400)
         view = self.drones.get(drone)
         if view is None:
             raise Rejected(f"unknown drone {drone}: this game flies {', '.join(self.drones)}")
