@@ -364,7 +364,8 @@ class Engine:
         if self.journaled:
             log.state(state_hash(status))
         self._log.debug("turn %d observed: %s", turn, log.record)
-        end = end_reason(fleet, self.arbitration.arbiter, self.final, turn, self.config.max_turns, alive)
+        end = end_reason(fleet, self.arbitration.arbiter, self.final, turn, self.config.max_turns, alive,
+                         self.config.lifelong)
         effects += [Record(log.record), Publish(status), *(self._over(*end) if end else self._gcs_phase(turn + 1))]
         return drones_first(effects)
 
@@ -530,7 +531,8 @@ class Engine:
         config = self.config
         if config.lifelong:
             self.tasks += fleet.tasks_done()
-        if end := end_reason(fleet, self.arbitration.arbiter, self.final, self.turn, config.max_turns, turn.alive):
+        if end := end_reason(fleet, self.arbitration.arbiter, self.final, self.turn, config.max_turns, turn.alive,
+                             config.lifelong):
             self._over(*end)
             return self.end
         self._open_gcs(self.turn + 1)

@@ -48,7 +48,7 @@ without progress does, and never says an instance unsolvable; nor does a focused
 from __future__ import annotations
 
 from bisect import bisect_left, insort
-from collections import deque
+from collections import Counter, deque
 from heapq import heappop, heappush
 from typing import Any
 
@@ -360,19 +360,53 @@ def _rewire(a: Node, b: Node) -> None:
 Focus = tuple[np.ndarray, np.ndarray, OpenCells, int]
 
 
+def stand_ins(graph: Graph, goal: np.ndarray, way: np.ndarray) -> np.ndarray:
+    """The search's goals (numbered open cells), `goal`'s with the stand-in goal of each drone without a target it
+    can reach (`way` False: its own cell) moved off the others' goals: to the nearest open cell no other drone has as
+    its goal (breadth first over the open cells, in `Graph.near`'s order; drones in row order). Else the goal
+    configuration would hold two drones in one cell -- a drone that gave up, parked on another's target -- and no
+    search could reach it (a search with stand-ins is no proof either way: `Search.exact`)."""
+    taken = Counter(goal.tolist())
+    clash = [i for i in np.flatnonzero(~way).tolist() if taken[int(goal[i])] > 1]
+    if not clash:
+        return goal
+    out = goal.copy()
+    near = graph.near.tolist()
+    for i in clash:
+        start = int(out[i])
+        if taken[start] <= 1:  # (freed by an earlier stand-in's move)
+            continue
+        seen, queue = {start}, deque([start])
+        while queue:
+            v = queue.popleft()
+            if not taken[v]:
+                taken[start] -= 1
+                taken[v] += 1
+                out[i] = v
+                break
+            for u in near[v]:
+                if u >= 0 and u not in seen:
+                    seen.add(u)
+                    queue.append(u)
+    return out
+
+
 class Search:
     """One LaCAM search from a configuration to the goal one (`goals`, flat cells): `expand` spends work on it,
     `step` gives the drones' next configuration from the node they are at (`at`)."""
 
     def __init__(self, graph: Graph, size: Cell, start: np.ndarray, goals: np.ndarray, aims: np.ndarray,
                  dist: np.ndarray, memory: int = MEMORY, focus: Focus | None = None, number: int = 0,
-                 scatter: bool = False) -> None:
-        """`aims`: the drones' real targets (flat, -1 for none: PIBT's swap and retreats read them); `dist`: each
+                 scatter: bool = False, exact: bool = True) -> None:
+        """`exact`: every drone's goal is its target (False: some drone, without a target it can reach, has its cell
+        as a stand-in goal: a search that runs out of nodes then proves nothing of the game, `unsolvable`);
+        `aims`: the drones' real targets (flat, -1 for none: PIBT's swap and retreats read them); `dist`: each
         drone's distance table ((n, F), to its goal); `memory`: the entries it may hold (`MEMORY`); `focus`: a search
         over some drones only (`Lacam._focus`): their rows among all, every drone's cells (the others stay there), the
         part of the world it searches (`graph`'s open cells) and its radius; `number`: its root's number (the nodes'
         numbers draw PIBT's tie-breaks: a refining search, `refine`, draws others than the search it refines)."""
         self.graph, self.size, self.goals, self.dist, self.memory = graph, size, goals, dist, memory
+        self.exact = exact
         self.focus = focus
         self.aims = aims.tolist()
         n = len(start)
@@ -420,8 +454,9 @@ class Search:
 
     @property
     def unsolvable(self) -> bool:
-        """The search is over and found no way: no configuration sequence brings every drone home (never said by a
-        search that reached its memory: it stops there, `full`)."""
+        """The search is over and found no way to its goal configuration (never said by a search that reached its
+        memory: it stops there, `full`). No configuration sequence then brings every drone home if the search is
+        `exact` and of the whole world; else the goal was stricter than the game's."""
         return self.found is None and not self.open and not self.full
 
     @property
@@ -791,8 +826,9 @@ class Lacam:
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
         if search is not None and search.found is None and (
-                self._since >= self._patience or search.full or (search.focus is not None and search.unsolvable)):
-            # no progress for long, its memory full, or no way within its part of the world: PIBT's turns until PIBT
+                self._since >= self._patience or search.full or search.unsolvable):
+            # no progress for long, its memory full, or no way to its goal (within its part of the world, or with a
+            # drone's stand-in goal; a lifelong game's, whose ground station plays on): PIBT's turns until PIBT
             # stalls as long, then a search focused on the drones away (wider each time, the whole world at last)
             self.full += search.full
             self._radius = FOCUS if search.focus is None else 2 * search.focus[3]
@@ -815,7 +851,7 @@ class Lacam:
         self.expansions -= search.refining
         self.spent += search.refine(self.work - self.spent, open_, not self.spent)  # (once found: made shorter)
         self.expansions += search.refining
-        if search.unsolvable and search.focus is None:
+        if search.unsolvable and search.focus is None and search.exact:  # (a proof: the game's own goal)
             self.unsolvable = True
         return search.step()
 
@@ -844,7 +880,7 @@ class Lacam:
             return None
         ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
         way = (ac >= 0) & (g.part[np.maximum(ac, 0)] == g.part[hc])
-        goal_c = np.where(way, ac, hc)
+        goal_c = stand_ins(g, np.where(way, ac, hc), way)
         away = goal_c != hc
         if not away.any():
             return None
@@ -906,7 +942,7 @@ class Lacam:
         way[way] = g.part[ac[way]] == g.part[hc[way]]
         if (hc < 0).any():
             return None  # a drone in a building or outside (it is dying): PIBT
-        goal_c = np.where(way, ac, hc)
+        goal_c = stand_ins(g, np.where(way, ac, hc), way)
         if self._every is not None:
             # the scattered paths: for the first targets in this world (at the game's start; a lifelong game's new
             # targets, a search a turn, go unguided) and where they are affordable (`SCATTER`)
@@ -915,7 +951,7 @@ class Lacam:
             if scatter:
                 self._scattered = self._key
             self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), self._every[goal_c],
-                                  self.memory, scatter=scatter)
+                                  self.memory, scatter=scatter, exact=bool(way.all()))
             return self._search
         spent = 0
         for c in dict.fromkeys(goal_c.tolist()):
@@ -930,7 +966,8 @@ class Lacam:
         if len(self._tables) > 4 * len(here):  # (new targets keep coming: keep the tables in use)
             self._tables = {c: self._tables[c] for c in dict.fromkeys(goal_c.tolist())}
         dist = np.stack([self._tables[c] for c in goal_c.tolist()])
-        self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), dist, self.memory)
+        self._search = Search(g, size, here, g.cells[goal_c], np.where(way, aims, -1), dist, self.memory,
+                              exact=bool(way.all()))
         return self._search
 
     @property

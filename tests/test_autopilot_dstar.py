@@ -142,15 +142,22 @@ def test_registry_and_trivial_cases() -> None:
     pilot = make_autopilot("dstar", world_size=(4, 4, 4))
     assert isinstance(pilot, DStarPilot) and pilot.name == "dstar"
     grid = Grid((4, 4, 4))
-    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), None)  # no target: it offers its own cell only,
-    assert decision == Decision(pos=(1, 1, 1), ranked=rank_steps([STAY])) and asks == 0  # knowing nothing
-    # on its target, it offers its cell first, then its free neighbours (asked once, to be pushed aside)
+    # no target: its cell first, then its free neighbours (asked once: a drone at rest may be in another's way; it
+    # once offered its own cell alone, knowing nothing, and nobody could pass it)
+    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), None)
+    assert decision == Decision(pos=(1, 1, 1), ranked=rank_steps([STAY, *AROUND])) and asks == 1
+    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), None)
+    assert decision.ranked == rank_steps([STAY, *AROUND]) and asks == 0
+    # on its target, the same (its neighbours known by now: not asked again)
     decision, asks, _ = step_once(pilot, grid, (1, 1, 1), (1, 1, 1))
+    assert decision == Decision(pos=(1, 1, 1), note=Note.REACHED, ranked=rank_steps([STAY, *AROUND])) and asks == 0
+    parked = make_autopilot("dstar", world_size=(4, 4, 4))  # (knowing nothing: asked once, to be pushed aside)
+    decision, asks, _ = step_once(parked, grid, (1, 1, 1), (1, 1, 1))
     assert decision == Decision(pos=(1, 1, 1), note=Note.REACHED, ranked=rank_steps([STAY, *AROUND])) and asks == 1
     decision, asks, _ = step_once(pilot, grid, (1, 1, 1), (1, 1, 1))
     assert decision.ranked == rank_steps([STAY, *AROUND]) and asks == 0
-    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), (9, 1, 1))  # outside the world
-    assert (decision.pos, decision.note) == ((1, 1, 1), Note.UNREACHABLE)
+    decision, asks, _ = step_once(pilot, grid, (1, 1, 1), (9, 1, 1))  # outside the world: at rest, as above
+    assert (decision.pos, decision.note, decision.ranked) == ((1, 1, 1), Note.UNREACHABLE, rank_steps([STAY, *AROUND]))
 
 
 def test_open_world_flies_an_optimal_path() -> None:

@@ -84,6 +84,46 @@ def test_a_door_between_two_rooms() -> None:
     assert result.over.turn <= play(world_of(rows), drones, using="pibt").over.turn + 2
 
 
+#: A drone whose target it cannot reach (walled off, enclosed, or none) in another's way: each has a way home for the
+#: other, and the game must end SETTLED naming the first alone. (Found by probing: its stand-in goal, its own cell,
+#: made the search "prove" no solution, or hold two drones in one goal cell; and a D* drone that gave up offered its
+#: own cell alone, so nothing could push it.)
+AT_REST: list[tuple[str, np.ndarray, Drones]] = [
+    ("walled-off target in a corridor", world_of(["......#."]).transpose(1, 0, 2),
+     {"D01": ((0, 3, 0), (0, 7, 0)), "D02": ((0, 0, 0), (0, 4, 0))}),
+    ("walled-off target beside a bay", world_of(["......#.", "##.#####"]).transpose(1, 0, 2),
+     {"D01": ((0, 3, 0), (0, 7, 0)), "D02": ((0, 0, 0), (0, 5, 0))}),
+]
+
+
+@pytest.mark.parametrize("name", [name for name, _, _ in AT_REST])
+def test_a_drone_that_cannot_reach_its_target_is_no_proof_and_steps_aside(name: str) -> None:
+    _, grid, drones = next(case for case in AT_REST if case[0] == name)
+    result = play(grid, drones, 100)
+    assert (result.over.reason, result.over.text) == (EndReason.SETTLED, "targets reached, except unreachable for D01")
+    assert result.over.turn < 20
+
+
+def test_a_drone_that_gave_up_on_another_ones_target_steps_off_it() -> None:
+    """D01's target is enclosed (walls round it and above), D02's is D01's start: D01's stand-in goal moves off
+    D02's (`lacam.stand_ins`), else the goal configuration holds both in one cell and D02 never arrives."""
+    grid = np.zeros((3, 3, 2), bool)
+    grid[0, 1, 0] = grid[2, 1, 0] = grid[1, 0, 0] = grid[1, 2, 0] = grid[1, 1, 1] = True
+    result = play(grid, {"D01": ((0, 0, 0), (1, 1, 0)), "D02": ((2, 2, 0), (0, 0, 0))}, 100)
+    assert (result.over.reason, result.over.text) == (EndReason.SETTLED, "targets reached, except unreachable for D01")
+
+
+def test_a_lifelong_game_goes_on_when_its_targets_have_no_solution() -> None:
+    """Two drones in a 1 x 5 corridor drawn targets that would have them pass each other: no solution for those
+    targets, which a game ends on (SETTLED); a lifelong game plays on to its limit (its drones' next tasks)."""
+    world = World.from_grid(np.zeros((1, 5, 1), bool))
+    config = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=60, lifelong=True,
+                        drones=(DroneSpec(drone="D01", start=(0, 0, 0)), DroneSpec(drone="D02", start=(0, 4, 0))))
+    plan = Plan(((1, "D01", (0, 3, 0)), (1, "D02", (0, 1, 0))))  # (they must pass each other: impossible)
+    result = simulate(config, dict.fromkeys(("D01", "D02"), "dstar"), Inputs(plan=plan), LOG)
+    assert result.over.reason is EndReason.TURN_LIMIT and result.over.turn == 60
+
+
 def test_the_search_proves_a_swap_in_a_closed_corridor_unsolvable_and_finds_one_with_a_bay() -> None:
     for rows, solvable in ((["....."], False), (["..#..", "....."], True)):
         grid = world_of(rows)

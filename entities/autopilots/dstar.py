@@ -60,7 +60,7 @@ side-steps. Other drones block their cell for this step only: they never enter t
 from __future__ import annotations
 
 from array import array
-from collections.abc import Mapping
+from collections.abc import Generator, Mapping
 from heapq import heapify, heappop, heappush
 from typing import ClassVar
 
@@ -72,7 +72,7 @@ from schema.tables import rank_steps
 from world.grid import in_bounds
 from world.search import breadth_first, padded_steps
 
-from .base import Decision, Sensing
+from .base import Answers, Decision, Sensing
 
 UNKNOWN, FREE, BLOCKED = 0, 1, 2
 #: Farther than any cell (a C int holds it, and any distance plus one). Each pilot's g and rhs hold one int for every
@@ -329,16 +329,14 @@ class DStarPilot:
             return Decision(pos=pos, note=Note.NONE if target is None else Note.UNREACHABLE)
         s = self._index(pos)
         if target is None:
-            return Decision(pos=pos, ranked=self._aside(s))
+            return Decision(pos=pos, ranked=(yield from self._rest(s)))
         target = (int(target[0]), int(target[1]), int(target[2]))
-        if pos == target:  # parked: it may be pushed aside, to its free neighbours (asked once)
+        if pos == target:  # parked: it may be pushed aside, to its free neighbours
             self._restart()
             self._home = target == self._target
-            if unknown := tuple(self._cell(s + d) for d in self._offs if self._state[s + d] == UNKNOWN):
-                self._learn((yield unknown), s)
-            return Decision(pos=pos, note=Note.REACHED, ranked=self._aside(s))
+            return Decision(pos=pos, note=Note.REACHED, ranked=(yield from self._rest(s)))
         if not in_bounds(target, self.size):
-            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
+            return Decision(pos=pos, note=Note.UNREACHABLE, ranked=(yield from self._rest(s)))
         if target != self._target:
             self._reset(target, s)
         elif self._home:
@@ -346,7 +344,7 @@ class DStarPilot:
         self._home = False
         goal, state = self._goal, self._state
         if self._unreachable or state[goal] == BLOCKED:
-            return self._give_up(pos, s)
+            return (yield from self._give_up(pos, s))
         if s != self._last:  # the drone moved: the heuristic's origin shifts
             self._km += self._h(self._last, s)
             self._last = s
@@ -360,7 +358,7 @@ class DStarPilot:
         drones: set[int] = set()
         changed = self._learn((yield cells), s, (sensed, drones)) if cells else False
         if state[goal] == BLOCKED:
-            return self._give_up(pos, s)
+            return (yield from self._give_up(pos, s))
         if changed:
             self._compute(s)
             more = self._unknown_ahead(s) if self.rounds > 1 else []  # round 2: the repaired path's
@@ -368,7 +366,7 @@ class DStarPilot:
                 self._compute(s)
         g = self._g
         if g[s] >= INF:
-            return self._give_up(pos, s)
+            return (yield from self._give_up(pos, s))
         if g[s] < self._low:
             self._low, self._since = g[s], 0
             self._avoid, self._round, self._tried = -1, None, False
@@ -409,10 +407,19 @@ class DStarPilot:
             self._waited = 0
         return Decision(pos=self._cell(nxt), note=note, ranked=self._ranking(s, sensed))
 
-    def _give_up(self, pos: Cell, s: int) -> Decision:
+    def _give_up(self, pos: Cell, s: int) -> Sensing:
         """The target is unreachable, for good: the world is static, nothing new can be learnt by hovering."""
         self._unreachable = True
-        return Decision(pos=pos, note=Note.UNREACHABLE, ranked=self._aside(s))
+        return Decision(pos=pos, note=Note.UNREACHABLE, ranked=(yield from self._rest(s)))
+
+    def _rest(self, s: int) -> Generator[tuple[Cell, ...], Answers, int]:
+        """`_aside`'s candidates, its unknown neighbours asked about first (once: then they are known): a drone at
+        rest (parked, without a target, or that gave its own up) may have to step aside for another, and can only
+        offer the cells it knows are free (one that never asked offered its own cell alone: a drone that had to
+        pass it never did)."""
+        if unknown := tuple(self._cell(s + d) for d in self._offs if self._state[s + d] == UNKNOWN):
+            self._learn((yield unknown), s)
+        return self._aside(s)
 
     # ------------------------------------------------------------------ candidates for the arbiter
 
