@@ -28,7 +28,7 @@ from dronesim import child_env
 from dronesim.certs import GameCredentials, game_credentials
 from dronesim.scenario import Scenario, movingai_scenario, swarm_hosts
 from entities.autopilots import COOPERATIVE, DEFAULT, REGISTRY
-from entities.gcs import Plan
+from entities.gcs import Ground
 from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
 from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
@@ -165,18 +165,13 @@ def check_game(args: argparse.Namespace) -> None:
 
 
 def check_plan(args: argparse.Namespace, config: GameConfig) -> None:
-    """The ground station's plan, checked as it will check it (`entities.gcs.Ground.from_welcome`): the --script
-    file (which then stands for the targets), else the --targets (after a scenario's, which `Scenario.load` checked),
+    """The ground station's plan, checked as it will check it (`entities.gcs.Ground.plan_of`): the --script file
+    (which then stands for the targets), else the --targets (after a scenario's, which `Scenario.load` checked),
     against the world and the game's drones."""
     if not args.script and not args.targets:
         return
     world = build_world(config.world, (d.start for d in config.drones))  # (as every process builds it)
-    size, first = config.world.size, config.drones[0].drone
-    named = Plan.load(args.script, size, world).drones() if args.script else \
-        Plan.drones_of(args.targets, size, first, world)
-    if unknown := named - {d.drone for d in config.drones}:
-        raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies "
-                         f"{', '.join(d.drone for d in config.drones)}")
+    Ground.plan_of(world, [d.drone for d in config.drones], args.targets, args.script)
 
 
 def check_web(text: str) -> None:

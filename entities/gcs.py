@@ -228,12 +228,20 @@ class Ground:
 
     @classmethod
     def from_welcome(cls, welcome: Welcome, plan_texts: Iterable[str], script: str | None) -> Ground:
-        size, starts = welcome.world.size, welcome.starts.cells()
+        starts = welcome.starts.cells()
         world = build_world(welcome.world, starts.values())
-        plan = Plan.load(script, size, world) if script else Plan.parse(plan_texts, size, next(iter(starts)), world)
-        if unknown := plan.drones() - starts.keys():
-            raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(starts)}")
-        return cls(world, starts, plan)
+        return cls(world, starts, cls.plan_of(world, list(starts), plan_texts, script))
+
+    @staticmethod
+    def plan_of(world: World, drones: Sequence[str], plan_texts: Iterable[str], script: str | None) -> Plan:
+        """The plan of a ground station of the game of `drones` (in order) in `world`: its `script`'s, else its
+        targets', every item checked against both (UsageError; `dronesim up` checks it so before any process
+        starts)."""
+        size = world.size
+        plan = Plan.load(script, size, world) if script else Plan.parse(plan_texts, size, drones[0], world)
+        if unknown := plan.drones() - set(drones):
+            raise UsageError(f"the plan names {', '.join(sorted(unknown))}; this game flies {', '.join(drones)}")
+        return plan
 
 
 #: End reasons whose last turn produced a STATUS (the others end a turn before its STATUS).

@@ -22,7 +22,7 @@ import zenoh
 from network.signals import over_status, waking
 from network.transport import Inbox, Outbox, open_session, zenoh_config
 from schema import Cell, Keys, Over, UsageError
-from schema.tuning import COMMAND_TIMEOUT, STREAMS_STOP_S, WEB_PACE_S
+from schema.tuning import COMMAND_TIMEOUT, MAX_WAIT_S, STREAMS_STOP_S, WEB_PACE_S
 
 from ..gcs import Ground
 from ..station_link import join, listen, play, publisher
@@ -204,8 +204,8 @@ def run_web(args: argparse.Namespace, logger: logging.Logger) -> int:
     if args.web is None:
         raise UsageError("--replay needs --web [HOST:]PORT")
     address = parse_address(args.web)
-    if args.linger < 0:
-        raise UsageError(f"--linger must be >= 0, got {args.linger:g}")
+    if not 0 <= args.linger <= MAX_WAIT_S:  # (nan too: kept forever; inf overflowed the wait)
+        raise UsageError(f"--linger must be in 0..{MAX_WAIT_S:g} seconds (a day), got {args.linger:g}")
     run = run_live if args.replay is None else run_replay
     return over_status(run(args, logger, address))
 
