@@ -271,9 +271,11 @@ class Layout:
         cells = self.terrain.members(comp)
         used = {tuple(c) for c in others.tolist()} | {tuple(here.tolist())}
         label = self.terrain.label
-        inside = sum(1 for c in used if all(0 <= v < n for v, n in zip(c, size))
-                     and label[np.ravel_multi_index(c, size)] == comp)  # (the used cells of its component alone)
-        if len(cells) > inside:
+        # a free cell is left if its component has more cells than every used cell (the usual case, at once), else
+        # than its own used cells (counted only then: a drone's arrival in a swarm's step costs no pass over all)
+        if len(cells) > len(used) or len(cells) > sum(
+                1 for c in used if all(0 <= v < n for v, n in zip(c, size))
+                and label[np.ravel_multi_index(c, size)] == comp):
             while True:
                 cell = np.array(np.unravel_index(int(cells[self.rng.integers(len(cells))]), size), np.int32)
                 if tuple(cell.tolist()) not in used:
