@@ -43,6 +43,10 @@ its part is twice as wide, up to the whole world (and of the whole world where n
 in the turns, a bigger world). The patience doubling, some search eventually runs as long as it needs: the whole
 stays complete, for the instances whose search fits in `MEMORY` entries (a search that fills it hands back as one
 without progress does, and never says an instance unsolvable; nor does a focused one).
+
+Small puzzles (the whole world's, or a focused one's: few drones in a small part, `exact.fits`) are not LaCAM's: an
+exact breadth-first search over their configurations (coordinator/exact.py) finds a way as short as any, or proves
+that none exists, in a few turns where LaCAM's proof takes hundreds; it runs over turns within the same budget.
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ from schema import Cell
 from world.search import cells_of, flat_cells, levels, padded_steps
 
 from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat, tie_breaks
+from .exact import CANDIDATES, Exact, fits
 
 __all__ = ["Lacam", "Search", "Graph"]
 
@@ -394,6 +399,8 @@ def stand_ins(graph: Graph, goal: np.ndarray, way: np.ndarray) -> np.ndarray:
 class Search:
     """One LaCAM search from a configuration to the goal one (`goals`, flat cells): `expand` spends work on it,
     `step` gives the drones' next configuration from the node they are at (`at`)."""
+
+    bounded = False  # (its work is not bounded: handed back to PIBT after turns without progress, `Lacam.follow`)
 
     def __init__(self, graph: Graph, size: Cell, start: np.ndarray, goals: np.ndarray, aims: np.ndarray,
                  dist: np.ndarray, memory: int = MEMORY, focus: Focus | None = None, number: int = 0,
@@ -763,17 +770,19 @@ class Lacam:
     complete = True
 
     def __init__(self, work: int = WORK, limit: int = LIMIT, stall: int = STALL, memory: int = MEMORY,
-                 scatter: bool = True) -> None:
+                 scatter: bool = True, small: int = CANDIDATES) -> None:
         """`scatter`: the whole world's searches guided by scattered paths (`Scatter`; False: PIBT's candidates by
-        distance alone, as before)."""
+        distance alone, as before); `small`: the candidates beyond which a puzzle is LaCAM's, not an exact search's
+        (`exact.fits`; 0: LaCAM's always)."""
         self.work, self.limit, self.stall, self.memory, self.scatter = work, limit, stall, memory, scatter
+        self.small = small
         self._scattered: bytes | None = None  # the targets the scattered paths were made for (once a world: `_start`)
         self._graph: Graph | None = None
         self._of: OpenCells | None = None
         self._tables: dict[int, np.ndarray] = {}  # goal (numbered open cell) -> its distance table
         self._table_units = 0  # the units of the costliest table made so far (in this world)
         self._every: np.ndarray | None = None  # every open cell's table (`PRECOMPUTE`), made by `prepare`
-        self._search: Search | None = None
+        self._search: Search | Exact | None = None
         self._key = b""  # the targets and cooperative drones the record and the search are for
         self._best, self._since = -1, 0  # most drones on their targets at once, and turns since
         self._patience = stall  # turns without a new high after which the running search hands back to PIBT
@@ -826,7 +835,7 @@ class Lacam:
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
         if search is not None and search.found is None and (
-                self._since >= self._patience or search.full or search.unsolvable):
+                (self._since >= self._patience and not search.bounded) or search.full or search.unsolvable):
             # no progress for long, its memory full, or no way to its goal (within its part of the world, or with a
             # drone's stand-in goal; a lifelong game's, whose ground station plays on): PIBT's turns until PIBT
             # stalls as long, then a search focused on the drones away (wider each time, the whole world at last)
@@ -866,7 +875,7 @@ class Lacam:
         self._graph = g = Graph(open_, size)
         self._every = g.every_distance() if len(g.cells) ** 2 <= PRECOMPUTE else None
 
-    def _focus(self, size: Cell, here: np.ndarray, aims: np.ndarray, radius: int) -> Search | None:
+    def _focus(self, size: Cell, here: np.ndarray, aims: np.ndarray, radius: int) -> Search | Exact | None:
         """A search from `here` over the drones within `radius` moves (over the open cells) of a drone away from its
         goal or of that goal, the others standing still, walls to it (their tables made at the game's start: None
         elsewhere); the radius at least half the farthest such drone's distance, so that its shortest ways are in
@@ -901,6 +910,10 @@ class Lacam:
         bits[g.cells[part]] = True
         world = OpenCells.of(bits)
         sub = Graph(world, size)
+        goals = sub.index[g.cells[goal_c[free]]]
+        if fits(sub.near, len(free), self.small) and (goals >= 0).all():  # (a small puzzle: searched whole)
+            self._search = Exact(sub.near, sub.cells, sub.index[here[free]], goals, (free, here, world, radius))
+            return self._search
         self._search = Search(sub, size, here[free], g.cells[goal_c[free]], np.where(way, aims, -1)[free],
                               every[goal_c[free]][:, part], self.memory, (free, here, world, radius))
         return self._search
@@ -928,7 +941,7 @@ class Lacam:
         best = min(zip(pieces.tolist(), cells.tolist()), key=lambda pc: (count[pc[0]], pc[1], pc[0]))[0]
         return label == best
 
-    def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | None:
+    def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | Exact | None:
         """A search from `here` once every drone's distance table is made, None until then: made at the game's start
         (`prepare`) in a small world, else in turns of `work` units (one at least a turn; another only if the
         costliest so far fits in what is left), the search starting on the turn after the last. A drone whose
@@ -942,6 +955,9 @@ class Lacam:
         way[way] = g.part[ac[way]] == g.part[hc[way]]
         if (hc < 0).any():
             return None  # a drone in a building or outside (it is dying): PIBT
+        if fits(g.near, len(here), self.small):  # (a small puzzle searched whole: its way shortest, or a proof)
+            self._search = Exact(g.near, g.cells, hc, np.where(way, ac, -1))
+            return self._search
         goal_c = stand_ins(g, np.where(way, ac, hc), way)
         if self._every is not None:
             # the scattered paths: for the first targets in this world (at the game's start; a lifelong game's new

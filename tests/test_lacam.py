@@ -169,7 +169,7 @@ def _stalling() -> tuple[list[int], list[int]]:
     size: Cell = grid.shape  # type: ignore[assignment]
     before = np.array([(0, 1, 0), (8, 1, 0)], np.int32)
     targets = before[::-1].copy()
-    search, open_, cells = lacam.Lacam(work=1, stall=2), OpenCells(grid), before  # (a PIBT call a turn)
+    search, open_, cells = lacam.Lacam(work=1, stall=2, small=0), OpenCells(grid), before  # (a PIBT call a turn)
     searching: list[bool] = []
     for turn in range(1, 200):
         plan = search.follow(size, cells, np.ones(2, bool), targets, open_, turn)
@@ -205,14 +205,14 @@ def test_a_search_that_fills_its_memory_hands_back_and_never_claims_a_proof() ->
     """A search holds `memory` entries at most (its configurations and queued constraints): one that reaches it
     stops, the turns go back to PIBT (`full` counts it), and it never says the instance is unsolvable; with the
     memory the proof needs, the same closed corridor is proved unsolvable."""
-    small = lacam.Lacam(stall=2, memory=40)
+    small = lacam.Lacam(stall=2, memory=40, small=0)
     _swap(["....."], small)
     assert small.full >= 1 and not small.unsolvable
     assert small._search is None or small._search.held <= 40 + 3 * 2 + 7 * 2 * 2  # (one expansion past it at most)
-    enough = lacam.Lacam(stall=2)
+    enough = lacam.Lacam(stall=2, small=0)
     _swap(["....."], enough)
     assert enough.unsolvable and enough.full == 0
-    solved = lacam.Lacam(memory=1 << 10)  # (the bay: found well within it)
+    solved = lacam.Lacam(memory=1 << 10, small=0)  # (the bay: found well within it)
     assert (_swap(["..#..", "....."], solved) == np.array([(4, 1, 0), (0, 1, 0)])).all()
 
 
@@ -226,7 +226,7 @@ def test_the_constraints_pin_the_drones_away_first_then_those_nearest_them() -> 
     goals = cells.copy()
     goals[3] = (2, 0, 0)  # drone 3 is away; drone 2 beside it, drones 0, 1 and 4 parked farther
     open_ = OpenCells(grid)
-    search = lacam.Lacam()
+    search = lacam.Lacam(small=0)  # (LaCAM's search, not the exact one of a small puzzle)
     search.prepare(size, open_)
     s = search._start(size, flat_cells(cells, size), flat_cells(goals, size))
     assert s is not None
@@ -243,7 +243,7 @@ def test_a_focused_search_moves_the_drones_near_those_away_and_never_claims_a_pr
     cells = np.array([(0, 1, 0), (6, 1, 0), (16, 1, 0)], np.int32)
     goals = np.array([(6, 1, 0), (0, 1, 0), (16, 1, 0)], np.int32)  # a swap; drone 2 parked at the far end
     open_ = OpenCells(grid)
-    search = lacam.Lacam()
+    search = lacam.Lacam(small=0)  # (LaCAM's search, not the exact one of a small puzzle)
     search.prepare(size, open_)
     here, aims = flat_cells(cells, size), flat_cells(goals, size)
     narrow = search._focus(size, here, aims, 4)

@@ -1,0 +1,283 @@
+"""An exact search over the drones' configurations, for the puzzles small enough to search whole: breadth first
+from where the drones are, every joint move of every configuration (vertex and swap conflicts forbidden), until a
+configuration with every drone that has a way home at home (docs/cooperation.md, "Small puzzles: the exact search").
+
+LaCAM (coordinator/lacam.py) finds a way lazily, one PIBT call at a time under constraints: quick where there is
+room, but on a 1-wide corridor with a bay or two its proof that no way exists, or its way through a reversal,
+takes every constraint of every configuration (up to 1 + m + m^2 + ... + m^n calls a configuration for n drones of
+m moves each) and hundreds of turns. Where the configurations are few, a breadth-first search over them is both
+quicker and better: its way is as short as any (the least makespan), and when it runs out of configurations it is a
+proof that none exists. `fits` says where (`CANDIDATES`); `Exact` is the search, with a `lacam.Search`'s interface so
+that `lacam.Lacam` runs either over turns within its work budget.
+
+Pure: numpy over the world's open cells numbered 0..F-1 and their neighbours (`lacam.Graph`'s `near`, -1 for none);
+a function of its arguments alone (every layout, replay and resume does the same work). Each level is expanded in
+chunks of configurations whose candidates fit in the turn's work; within a level, configurations are in the order of
+their codes (each drone's cell a digit in base F), so a configuration's parent is the first that reaches it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Exact", "fits", "settle", "CANDIDATES"]
+
+#: Joint moves (candidates: a configuration's drones' moves combined, before the conflicts are struck out) an exact
+#: search may have to make at most, counted as the placements of the drones on the open cells times the mean moves a
+#: cell to the power of the drones (an upper bound: it visits only the configurations it reaches). Beyond it, LaCAM.
+CANDIDATES = 1 << 24
+#: Candidates a work unit (lacam.WORK's: about what a PIBT call spends on a drone); docs/performance.md.
+A_UNIT = 128
+
+
+def fits(near: np.ndarray, drones: int, most: int = CANDIDATES) -> bool:
+    """An exact search over `drones` drones on the open cells of `near` ((F, k), each cell's open neighbours, -1 for
+    none) makes at most `most` candidates, and its configurations' codes fit an int64."""
+    F = len(near)
+    if drones < 1 or drones > F or drones * float(np.log2(max(F, 2))) > 62:
+        return False
+    moves = 1 + float((near >= 0).sum()) / F  # (the mean moves a cell: its neighbours and staying)
+    bound = moves ** drones
+    for k in range(drones):  # (the placements: F (F-1) ... (F-n+1))
+        bound *= F - k
+        if bound > most:
+            return False
+    return True
+
+
+def settle(plan: np.ndarray) -> np.ndarray:
+    """`plan` ((steps, drones): each drone's cell a step) with fewer moves, as long, still legal (no two in a cell,
+    none trading cells): a breadth-first way is as short as any in steps, not in moves (a drone may wait at the start
+    for nothing, or a parked one step out and back). Each drone's detours cut (in a cell at two steps and nobody else
+    there between them: it stays), then each move made as early as it can be (a wait followed by a move: the move
+    first, where its cell is free then and nobody comes the other way), until none can be."""
+    out = plan.copy()
+    steps, n = out.shape
+    for i in range(n):
+        others = np.delete(out, i, axis=1)
+        t = 0
+        while t < steps - 1:
+            c = out[t, i]
+            taken = np.flatnonzero((others[t + 1:] == c).any(axis=1))
+            free = steps - 1 - t if not len(taken) else int(taken[0])  # (steps after t with nobody else in c)
+            back = np.flatnonzero(out[t + 1:t + 2 + free, i] == c)
+            if len(back):
+                u = t + 1 + int(back[-1])
+                out[t + 1:u, i] = c
+                t = u
+            else:
+                t += 1
+    rows = out.tolist()
+    moved = True
+    while moved:
+        moved = False
+        for t in range(steps - 2):
+            now, nxt, after = rows[t], rows[t + 1], rows[t + 2]
+            for i in range(n):
+                c, d = now[i], after[i]
+                if nxt[i] != c or d == c or d in nxt or any(now[j] == d and nxt[j] == c for j in range(n)):
+                    continue
+                nxt[i] = d
+                moved = True
+    return np.array(rows, plan.dtype)
+
+
+class _Tree:
+    """One breadth-first search's levels from its root: each level's codes (sorted) and each one's parent's index in
+    the level before; every code reached (`seen`, sorted); the next level's codes and parents as its chunks come."""
+
+    __slots__ = ("levels", "seen", "done", "pending", "over")
+
+    def __init__(self, root: np.ndarray) -> None:
+        self.levels: list[tuple[np.ndarray, np.ndarray]] = [(root, np.array([-1]))]
+        self.seen = root.copy()
+        self.done = 0  # configurations of the last level expanded so far
+        self.pending: list[tuple[np.ndarray, np.ndarray]] = []
+        self.over = False  # no configuration is left to reach
+
+    def add(self, codes: np.ndarray, parents: np.ndarray) -> int:
+        """A chunk's successors (`codes` unique and sorted, their parents' index in the last level): those not seen
+        kept for the next level; how many."""
+        pos = np.minimum(np.searchsorted(self.seen, codes), len(self.seen) - 1)
+        new = self.seen[pos] != codes
+        self.pending.append((codes[new], parents[new]))
+        return int(new.sum())
+
+    def close(self) -> np.ndarray:
+        """The last level is expanded: the next (its configurations reached first, in the order of their codes),
+        empty and `over` if there is none."""
+        codes = np.concatenate([c for c, _ in self.pending]) if self.pending else np.empty(0, np.int64)
+        parents = np.concatenate([p for _, p in self.pending]) if self.pending else np.empty(0, np.int64)
+        self.pending, self.done = [], 0
+        codes, first = np.unique(codes, return_index=True)
+        if not len(codes):
+            self.over = True
+            return codes
+        self.levels.append((codes, parents[first]))
+        self.seen = np.union1d(self.seen, codes)
+        return codes
+
+    def path(self, code: int) -> list[int]:
+        """The codes from the root to `code` (reached)."""
+        level = next(k for k, (codes, _) in enumerate(self.levels) if codes[min(
+            int(np.searchsorted(codes, code)), len(codes) - 1)] == code)
+        index = int(np.searchsorted(self.levels[level][0], code))
+        out = []
+        for codes, parents in reversed(self.levels[:level + 1]):
+            out.append(int(codes[index]))
+            index = int(parents[index])
+        return out[::-1]
+
+
+class Exact:
+    """A breadth-first search over configurations from `start` to one where each drone i with a goal (`goals[i]`
+    >= 0; numbered open cells) is on it, the others anywhere: a way as short as any, or a proof that there is none.
+    Where every drone has a goal, it searches from both ends (the moves are reversible: a way back from the goal
+    configuration is a way to it), a level at a time of the side whose last level is the smaller, until they meet.
+
+    Its interface is `lacam.Search`'s as `lacam.Lacam` reads it: `expand` spends work, `step` gives the drones' next
+    configuration (they hold still until it is found: a turn's work is bounded, `fits` bounds the turns), `where`,
+    `found`, `plan` and `t`, `unsolvable`, `focus`, `exact`, `full` (never: `fits` bounds its memory)."""
+
+    bounded = True  # (its work is bounded: never handed back to PIBT for want of progress, `lacam.Lacam.follow`)
+
+    def __init__(self, near: np.ndarray, cells: np.ndarray, start: np.ndarray, goals: np.ndarray,
+                 focus: tuple[np.ndarray, np.ndarray, object, int] | None = None, exact: bool = True) -> None:
+        """`near`: each open cell's open neighbours ((F, k), numbered, -1 for none); `cells`: their flat cells
+        (`lacam.Graph.cells`); `start`: the drones' open cells (numbered); `goals`: theirs (-1: anywhere); `focus`:
+        as `lacam.Search`'s (the drones searched are its rows among all, the others stand still); `exact`: the
+        search is of the game's own goal (a proof when it finds none)."""
+        F, n = len(near), len(start)
+        self.cells, self.focus, self.exact = cells, focus, exact
+        self.moves = np.concatenate([np.arange(F)[:, None], near], axis=1)  # (F, 1 + k): staying first
+        self.count = (self.moves >= 0).sum(axis=1)
+        self.powers = F ** np.arange(n, dtype=np.int64)
+        self.goals, self.aimed = goals.astype(np.int64), np.flatnonzero(goals >= 0)
+        self.trees = [_Tree(self._code(start.astype(np.int64)[None, :]))]
+        if len(self.aimed) == n:  # (the goal configuration: a search back from it too)
+            self.trees.append(_Tree(self._code(self.goals[None, :])))
+        self.side = 0  # the tree being expanded
+        self.found: int | None = None  # once found: the way's length
+        self.plan: np.ndarray | None = None  # once found: the configurations from the start to the goal (flat cells)
+        self.t = 0
+        self.start = cells[start]
+        self.expansions = self.refining = self.refined = self.first = 0
+        self.held = 2 * n
+        if self._home(start[None, :])[0]:
+            self._walk([int(self.trees[0].seen[0])])
+
+    @property
+    def explored(self) -> np.ndarray:
+        return self.trees[0].seen
+
+    @property
+    def full(self) -> bool:
+        return False
+
+    @property
+    def over(self) -> bool:
+        return any(tree.over for tree in self.trees)
+
+    @property
+    def unsolvable(self) -> bool:
+        """Every configuration reachable from one end is searched and none is the other end (every drone with a
+        goal at home)."""
+        return self.found is None and self.over
+
+    def _code(self, cfg: np.ndarray) -> np.ndarray:
+        return (cfg * self.powers).sum(axis=1)
+
+    def _cfg(self, codes: np.ndarray) -> np.ndarray:
+        return (codes[:, None] // self.powers) % len(self.moves)
+
+    def _home(self, cfg: np.ndarray) -> np.ndarray:
+        return (cfg[:, self.aimed] == self.goals[self.aimed]).all(axis=1)
+
+    def expand(self, work: int, open_: object = None, most: int = 1 << 62, first: bool = True) -> int:
+        """Spend `work` units at most (a configuration at least if `first`, unless the search is over): the units
+        spent."""
+        spent = 0
+        while self.found is None and not self.over:
+            tree = self.trees[self.side]
+            codes = tree.levels[-1][0]
+            if tree.done == len(codes):
+                self._close(tree)
+                continue
+            cfg = self._cfg(codes[tree.done:])
+            cost = np.cumsum(self.count[cfg].prod(axis=1)) // A_UNIT + 1
+            take = int(np.searchsorted(cost, work - spent, side="right"))
+            if not take:
+                if spent or not first:
+                    break
+                take = 1
+            spent += int(cost[take - 1])
+            codes, parents = self._successors(cfg[:take])
+            self.held += 2 * tree.add(codes, parents + tree.done)
+            tree.done += take
+            self.expansions += take
+        return spent
+
+    def _successors(self, cfg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The configurations one joint move from `cfg`'s (their codes, unique and sorted, and the index in `cfg` of
+        the first that reaches each)."""
+        src = np.arange(len(cfg))
+        nxt = np.empty((len(cfg), 0), np.int64)
+        for i in range(cfg.shape[1]):  # (drone by drone: each move against the moves of the drones before it)
+            options = self.moves[cfg[src, i]]
+            r, c = np.nonzero(options >= 0)
+            src, v = src[r], options[r, c]
+            nxt = np.concatenate([nxt[r], v[:, None]], axis=1)
+            ok = (nxt[:, :i] != v[:, None]).all(axis=1)  # (no two in a cell)
+            ok &= ~((nxt[:, :i] == cfg[src, i][:, None]) & (v[:, None] == cfg[src, :i])).any(axis=1)  # (no swap)
+            src, nxt = src[ok], nxt[ok]
+        codes, first = np.unique(self._code(nxt), return_index=True)
+        return codes, src[first]
+
+    def _close(self, tree: _Tree) -> None:
+        """`tree`'s level is expanded: the next; the way if it meets the other end (the goal, or the other tree),
+        else the next level is of the tree whose last level is the smaller."""
+        codes = tree.close()
+        if len(self.trees) == 1:
+            home = np.flatnonzero(self._home(self._cfg(codes)))
+            if len(home):
+                self._walk(tree.path(int(codes[home[0]])))
+                return
+        else:
+            other = self.trees[1 - self.side]
+            pos = np.minimum(np.searchsorted(other.seen, codes), len(other.seen) - 1)
+            met = codes[other.seen[pos] == codes]
+            if len(met):
+                ways = (tree.path(int(met[0])), other.path(int(met[0])))
+                self._walk(ways[0] + ways[1][-2::-1] if self.side == 0 else ways[1] + ways[0][-2::-1])
+                return
+            sizes = [len(t.levels[-1][0]) for t in self.trees]
+            self.side = int(sizes[1] < sizes[0])
+
+    def _walk(self, way: list[int]) -> None:
+        """The plan: the configurations of `way` (codes, from the start to the goal); the trees no longer kept."""
+        self.plan = self.cells[settle(self._cfg(np.array(way, np.int64)))]
+        self.found = self.first = len(self.plan) - 1
+        self.trees = [self.trees[0]]
+        self.trees[0].levels, self.trees[0].pending = [], []
+
+    def refine(self, work: int, open_: object = None, first: bool = True) -> int:
+        """Nothing to refine: its way is as short as any. No units."""
+        return 0
+
+    def whole(self, cfg: np.ndarray) -> np.ndarray:
+        """Every drone's cell in a configuration of the search (a focused one moves some drones only)."""
+        if self.focus is None:
+            return cfg
+        out = self.focus[1].copy()
+        out[self.focus[0]] = cfg
+        return out
+
+    def where(self) -> np.ndarray:
+        """Every drone's cells where the search has them now."""
+        return self.whole(self.start if self.plan is None else self.plan[self.t])
+
+    def step(self) -> np.ndarray:
+        """The drones' next configuration: the next of the plan once found, else where they are."""
+        if self.plan is not None:
+            self.t = min(self.t + 1, len(self.plan) - 1)
+        return self.where()
