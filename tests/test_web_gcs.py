@@ -690,6 +690,29 @@ def test_connections_beyond_the_cap_are_refused_at_once(served, monkeypatch):
     assert json_call(server, "GET", "/api/world")[0] == 200
 
 
+def test_one_client_address_holds_at_most_its_share_of_the_connections(served, monkeypatch):
+    """A host holding connections half-sent (slowloris) fills its own share (`PER_CLIENT`), not every place: another
+    address is still served; its places come back as its requests end."""
+    server, _, _ = served
+    monkeypatch.setattr(web_server, "MAX_CONNECTIONS", 8)
+    monkeypatch.setattr(web_server, "PER_CLIENT", 2)
+    address = server.server_address[:2]
+    held = [socket.create_connection(address, timeout=10) for _ in range(2)]
+    for s in held:
+        s.sendall(b"GET /api/world HTTP/1.0\r\n")
+    reply = raw(server, b"").decode()  # a third from 127.0.0.1: refused at once
+    assert reply.startswith("HTTP/1.0 503") and "from 127.0.0.1" in json.loads(reply.split("\r\n\r\n", 1)[1])["error"]
+    with socket.create_connection(address, timeout=10, source_address=("127.0.0.2", 0)) as other:
+        other.sendall(b"GET /api/world HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n")
+        assert other.makefile("rb").read().startswith(b"HTTP/1.0 200")  # another address: served
+    assert server.rejects.snapshot() == {"busy": 1}
+    for s in held:
+        s.sendall(b"\r\n")
+        assert s.makefile("rb").read().startswith(b"HTTP/1.0 200")
+        s.close()
+    assert json_call(server, "GET", "/api/world")[0] == 200
+
+
 def test_an_event_stream_outlives_the_idle_timeout(served, monkeypatch):
     server, _, hub = served
     monkeypatch.setattr(web_server._Handler, "timeout", 0.05)

@@ -12,6 +12,7 @@ import logging
 import socket
 import sys
 import threading
+from collections import Counter
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import Any, Protocol
@@ -41,6 +42,9 @@ WRITE_PIECE = 64 * 1024
 #: threads fit under a small memory limit (each reserves a stack, and maybe a malloc arena: some 20 MiB of
 #: address space; half-sent requests by the hundred used to start a thread each, for ever, until none could start).
 MAX_CONNECTIONS = 64
+#: Connections served at once from one client address: four pages' worth (a page holds at most 7), half the places,
+#: so that one host holding connections half-sent or unread (slowloris) leaves the other half to everyone else.
+PER_CLIENT = 32
 #: Our refusals that no page of ours causes (a client's bug, a probe, an attack): each counted and logged (bounded,
 #: `RejectCounter`), as the base class's (`send_error`). A human's refused target (422) or a replay's 409 are
 #: answers, not noise.
@@ -348,6 +352,7 @@ class WebServer(ThreadingHTTPServer):
         self.rejects = RejectCounter(logger)  # refused requests and connections, by reason and client
         self._lock = threading.Lock()
         self._connections = 0  # being served, a thread each (`MAX_CONNECTIONS`)
+        self._by_client: Counter[str] = Counter()  # of them, from each client address (`PER_CLIENT`)
         machine = socket.gethostname().lower()
         self._names = {"localhost", address[0].lower().rstrip("."), machine, machine.split(".")[0]} - {""}
         if ":" in address[0]:
@@ -383,32 +388,43 @@ class WebServer(ThreadingHTTPServer):
         self.rejects.reject("HTTP", RemoteInputError(text, reason=reason), client)
 
     def process_request(self, request: Any, client_address: Any) -> None:
-        """A thread for the connection; beyond `MAX_CONNECTIONS`, a 503 at once and the connection closed."""
+        """A thread for the connection; beyond `MAX_CONNECTIONS`, or `PER_CLIENT` from its address, a 503 at once
+        and the connection closed."""
+        client = client_address[0]
         with self._lock:
-            busy = self._connections >= MAX_CONNECTIONS
-            self._connections += not busy
+            if self._connections >= MAX_CONNECTIONS:
+                busy = f"{MAX_CONNECTIONS} connections open"
+            elif self._by_client[client] >= PER_CLIENT:
+                busy = f"{PER_CLIENT} connections open from {client}"
+            else:
+                busy = ""
+                self._connections += 1
+                self._by_client[client] += 1
         if busy:
-            self._refuse(request, client_address[0])
+            self._refuse(request, client, busy)
             return
         try:
             super().process_request(request, client_address)
         except BaseException:  # no thread started: its place is free again
-            self._served()
+            self._served(client)
             raise
 
     def finish_request(self, request: Any, client_address: Any) -> None:
         try:
             super().finish_request(request, client_address)
         finally:
-            self._served()  # (before the socket is closed: a client that sees the end finds the place free)
+            self._served(client_address[0])  # (before the socket is closed: a client that sees the end finds it free)
 
-    def _served(self) -> None:
+    def _served(self, client: str) -> None:
         with self._lock:
             self._connections -= 1
+            self._by_client[client] -= 1
+            if not self._by_client[client]:
+                del self._by_client[client]
 
-    def _refuse(self, request: socket.socket, client: str) -> None:
+    def _refuse(self, request: socket.socket, client: str, busy: str) -> None:
         """Answer 503 without ever waiting (this thread accepts every connection): the socket's buffer is empty."""
-        body = json.dumps({"error": f"busy: {MAX_CONNECTIONS} connections already; try again"}).encode()
+        body = json.dumps({"error": f"busy: {busy} already; try again"}).encode()
         head = (f"HTTP/1.0 503 Service Unavailable\r\nContent-Type: application/json\r\nContent-Length: {len(body)}"
                 f"\r\nRetry-After: 1\r\nConnection: close\r\n\r\n").encode()
         try:
@@ -417,7 +433,7 @@ class WebServer(ThreadingHTTPServer):
             request.recv(MAX_BODY)  # what came of the request: closing on unread bytes would reset, maybe unread
         except OSError:
             pass
-        self.refused(client, "busy", f"{MAX_CONNECTIONS} connections open: one more refused")
+        self.refused(client, "busy", f"{busy}: one more refused")
         self.shutdown_request(request)
 
     def handle_error(self, request: Any, client_address: Any) -> None:
