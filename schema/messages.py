@@ -196,13 +196,17 @@ def _check_sender(value: object) -> None:
         raise MalformedMessage(f"sender must be ENV, GCS, SRV, OBS, Dnn or Hnn, got {value!r}")
 
 
+def oversized(size: Cell) -> str:
+    """Why a world of `size` cannot be (more than `MAX_CELLS` cells)."""
+    return f"a world of {size[0]} x {size[1]} x {size[2]} cells exceeds the {MAX_CELLS} cells a world may have"
+
+
 def _check_world(size: Cell, bits: bytes, name: str, *, optional: bool = False) -> None:
     """A world's size and its building cells, one bit each (packed; `optional`: or none)."""
     _check_cell(size, "size")
     _check(all(s >= 1 for s in size), "world sizes must be >= 1")
     n = size[0] * size[1] * size[2]
-    _check(n <= MAX_CELLS, f"a world of {size[0]} x {size[1]} x {size[2]} cells exceeds the {MAX_CELLS} cells a world "
-                           "may have")
+    _check(n <= MAX_CELLS, oversized(size))
     _check(isinstance(bits, bytes), f"{name} must be bytes")
     _check(optional and not bits or len(bits) == (n + 7) // 8, f"{name} must hold one bit per cell")
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from schema import Cell, CellInfo, CellKind, UsageError
-from schema.messages import AROUND, MAX_CELLS, MAX_COORD, WorldSpec
+from schema.messages import AROUND, MAX_CELLS, MAX_COORD, WorldSpec, oversized
 
 from .movingai import read_map, world_grid
 from .search import components, levels, padded_cell, padded_steps
@@ -103,8 +103,7 @@ def _size(value: object) -> Cell:
     if not all(1 <= s <= MAX_COORD for s in size):
         raise UsageError(f"world sizes must be in 1..{MAX_COORD}, got {size}")
     if size[0] * size[1] * size[2] > MAX_CELLS:  # (before anything of that size is allocated)
-        raise UsageError(f"a world of {size[0]} x {size[1]} x {size[2]} cells exceeds the {MAX_CELLS} cells a world "
-                         "may have")
+        raise UsageError(oversized(size))
     return size
 
 
