@@ -45,6 +45,16 @@ def fits(near: np.ndarray, drones: int, most: int = CANDIDATES) -> bool:
     return True
 
 
+def whole(focus: tuple[np.ndarray, np.ndarray, object, int] | None, cfg: np.ndarray) -> np.ndarray:
+    """Every drone's cell in a configuration `cfg` of a search (of every drone; or `focus`ed: its drones' rows among
+    all, every drone's cells, the others standing still there)."""
+    if focus is None:
+        return cfg
+    out = focus[1].copy()
+    out[focus[0]] = cfg
+    return out
+
+
 def settle(plan: np.ndarray) -> np.ndarray:
     """`plan` ((steps, drones): each drone's cell a step) with fewer moves, as long, still legal (no two in a cell,
     none trading cells): a breadth-first way is as short as any in steps, not in moves (a drone may wait at the start
@@ -266,11 +276,7 @@ class Exact:
 
     def whole(self, cfg: np.ndarray) -> np.ndarray:
         """Every drone's cell in a configuration of the search (a focused one moves some drones only)."""
-        if self.focus is None:
-            return cfg
-        out = self.focus[1].copy()
-        out[self.focus[0]] = cfg
-        return out
+        return whole(self.focus, cfg)
 
     def where(self) -> np.ndarray:
         """Every drone's cells where the search has them now."""

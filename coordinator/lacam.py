@@ -62,7 +62,7 @@ from schema import Cell
 from world.search import cells_of, flat_cells, levels, padded_steps
 
 from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat, tie_breaks
-from .exact import CANDIDATES, Exact, fits
+from .exact import CANDIDATES, Exact, fits, whole
 
 __all__ = ["Lacam", "Search", "Graph"]
 
@@ -473,11 +473,7 @@ class Search:
 
     def whole(self, cfg: np.ndarray) -> np.ndarray:
         """Every drone's cell in a configuration of the search (a focused one moves some drones only)."""
-        if self.focus is None:
-            return cfg
-        out = self.focus[1].copy()
-        out[self.focus[0]] = cfg
-        return out
+        return whole(self.focus, cfg)
 
     def expand(self, work: int, open_: OpenCells, most: int = 1 << 62, first: bool = True) -> int:
         """Spend `work` units at most (but one PIBT call at least if `first`, unless the search is over): a call is
