@@ -164,7 +164,8 @@ class Exact:
         self.powers = F ** np.arange(n, dtype=np.int64)
         self.goals, self.aimed = goals.astype(np.int64), np.flatnonzero(goals >= 0)
         self.trees = [_Tree(self._code(start.astype(np.int64)[None, :]))]
-        if len(self.aimed) == n:  # (the goal configuration: a search back from it too)
+        if len(self.aimed) == n and len(np.unique(self.goals)) == n:  # (the goal configuration, if there is one
+            # -- two drones may share a target --: a search back from it too)
             self.trees.append(_Tree(self._code(self.goals[None, :])))
         self.side = 0  # the tree being expanded
         self.found: int | None = None  # once found: the way's length

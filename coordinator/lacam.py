@@ -798,9 +798,10 @@ class Lacam:
         here = flat_cells(before, size)
         wants = flat_cells(proposed, size)
         own = offered(here, ranked, wants, size)
-        if not ((plan == here) | (own == plan[:, None]).any(axis=1)).all():
+        if not ((plan == here) | (own == plan[:, None]).any(axis=1)).all() or len(np.unique(plan)) < len(plan):
             # (the drones will not be where the search thinks, unless PIBT sends them there: it then goes on, else
-            # starts again, as `follow` sees next turn from their cells alone)
+            # starts again, as `follow` sees next turn from their cells alone; a step that would put two drones in one
+            # cell is a bug, never played)
             return cooperate(size, before, proposed, ranked, cooperative, priority, targets, open_, salt)
         first = ranked.astype(np.int64) & 7
         yielded = plan != np.where(first > 0, here + steps_flat(size)[first], wants)

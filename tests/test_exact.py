@@ -166,3 +166,15 @@ def test_settle_cuts_detours_and_moves_early_and_keeps_the_plan_legal() -> None:
     assert settled[0].tolist() == [0, 2] and settled[-1].tolist() == [3, 4]
     for a, b in zip(settled[:-1], settled[1:]):
         assert b[0] != b[1] and not (b[0] == a[1] and b[1] == a[0])
+
+
+@pytest.mark.parametrize("rows", [["#.#####", "......."], ["....", "....", "...."]])
+def test_two_drones_given_one_target_never_meet_there(rows: list[str]) -> None:
+    """No configuration has both home: the search from the goal's end is not made (its root would hold two drones in
+    one cell, and a way through it would put them there); the search runs out, a proof, and nobody collides."""
+    width = len(rows[0]) - 1
+    drones: Drones = {"D01": ((0, len(rows) - 1, 0), (width // 2 + 1, len(rows) - 1, 0)),
+                      "D02": ((width, len(rows) - 1, 0), (width // 2 + 1, len(rows) - 1, 0))}
+    result = play(world_of(rows), drones, 100)
+    assert not any(r.get("deaths") for r in result.records), result.over.text
+    assert result.over.reason is EndReason.SETTLED and result.over.text.startswith("no solution"), result.over.text
