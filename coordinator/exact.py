@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Exact", "fits", "settle", "CANDIDATES"]
+__all__ = ["Exact", "fits", "settle", "settle_one", "CANDIDATES"]
 
 #: Joint moves (candidates: a configuration's drones' moves combined, before the conflicts are struck out) an exact
 #: search may have to make at most, counted as the placements of the drones on the open cells times the mean moves a
 #: cell to the power of the drones (an upper bound: it visits only the configurations it reaches). Beyond it, LaCAM.
-CANDIDATES = 1 << 24
+CANDIDATES = 1 << 25
 #: Candidates a work unit (lacam.WORK's: about what a PIBT call spends on a drone); docs/performance.md.
 A_UNIT = 128
 
@@ -55,61 +55,85 @@ def whole(focus: tuple[np.ndarray, np.ndarray, object, int] | None, cfg: np.ndar
     return out
 
 
-def settle(plan: np.ndarray) -> np.ndarray:
-    """`plan` ((steps, drones): each drone's cell a step) with fewer moves, as long, still legal (no two in a cell,
-    none trading cells): a breadth-first way is as short as any in steps, not in moves (a drone may wait at the start
-    for nothing, or a parked one step out and back). Each drone's detours cut (in a cell at two steps and nobody else
-    there between them: it stays), then each move made as early as it can be (a wait followed by a move: the move
-    first, where its cell is free then and nobody comes the other way), until none can be."""
+def settle(plan: np.ndarray, moves: np.ndarray) -> tuple[np.ndarray, int]:
+    """`plan` ((steps, drones): each drone's open cell a step) with each drone home as early as it can be, its way
+    made again against the others' (a breadth-first way is as short as any in steps, not in moves: a drone one step
+    from home may wander until the last, a parked one step out and back for nothing), and the units it cost. Drone by
+    drone: the earliest step from which it can be in its last cell to the end, by a way through space and time that
+    never meets another drone's cell, nor trades cells with one (staying preferred at each step); its way is one such,
+    so the plan stays legal and as long. `moves`: each open cell's moves ((F, 1 + k): itself, then its neighbours, -1
+    for none)."""
     out = plan.copy()
-    steps, n = out.shape
-    for i in range(n):
-        others = np.delete(out, i, axis=1)
-        t = 0
-        while t < steps - 1:
-            c = out[t, i]
-            taken = np.flatnonzero((others[t + 1:] == c).any(axis=1))
-            free = steps - 1 - t if not len(taken) else int(taken[0])  # (steps after t with nobody else in c)
-            back = np.flatnonzero(out[t + 1:t + 2 + free, i] == c)
-            if len(back):
-                u = t + 1 + int(back[-1])
-                out[t + 1:u, i] = c
-                t = u
-            else:
-                t += 1
-    rows = out.tolist()
-    moved = True
-    while moved:
-        moved = False
-        for t in range(steps - 2):
-            now, nxt, after = rows[t], rows[t + 1], rows[t + 2]
-            for i in range(n):
-                c, d = now[i], after[i]
-                if nxt[i] != c or d == c or d in nxt or any(now[j] == d and nxt[j] == c for j in range(n)):
-                    continue
-                nxt[i] = d
-                moved = True
-    return np.array(rows, plan.dtype)
+    units = 0
+    for i in range(out.shape[1]):
+        units += settle_one(out, i, moves)
+    return out, units
+
+
+def settle_one(out: np.ndarray, i: int, moves: np.ndarray) -> int:
+    """Drone i's way in the plan `out` made again (in place), as `settle` does: the units it cost."""
+    steps, F, units = len(out), len(moves), 0
+    others = np.delete(out, i, axis=1)
+    last = out[-1, i]
+    taken = np.flatnonzero((others == last).any(axis=1))
+    free_from = int(taken[-1]) + 1 if len(taken) else 0  # (from this step on, nobody else in its last cell)
+    parent = np.full((steps, F), -1, np.int64)
+    parent[0, out[0, i]] = out[0, i]
+    arrive = 0 if free_from == 0 and out[0, i] == last else -1
+    for t in range(steps - 1):
+        if arrive >= 0:
+            break
+        cur = np.flatnonzero(parent[t] >= 0)
+        src = np.tile(cur, moves.shape[1])  # (column by column: staying first)
+        dst = moves[cur].T.ravel()
+        ok = dst >= 0
+        ok[ok] &= ~np.isin(dst[ok], others[t + 1])  # (nobody else there then)
+        moved = others[t] != others[t + 1]
+        for a, b in zip(others[t][moved].tolist(), others[t + 1][moved].tolist()):
+            ok &= ~((src == b) & (dst == a))  # (nobody coming the other way)
+        dst, first = np.unique(dst[ok], return_index=True)
+        parent[t + 1, dst] = src[ok][first]
+        units += 1 + len(src) // A_UNIT
+        if t + 1 >= free_from and parent[t + 1, last] >= 0:
+            arrive = t + 1
+    if arrive < 0:
+        return units  # (none sooner: its own way stays)
+    way = [last]
+    for t in range(arrive, 0, -1):
+        way.append(int(parent[t, way[-1]]))
+    out[:arrive + 1, i] = way[::-1]
+    out[arrive + 1:, i] = last
+    return units
+
+
+def _among(codes: np.ndarray, sorted_: np.ndarray) -> np.ndarray:
+    """Which of `codes` are in `sorted_` (sorted)."""
+    if not len(sorted_):
+        return np.zeros(len(codes), bool)
+    return sorted_[np.minimum(np.searchsorted(sorted_, codes), len(sorted_) - 1)] == codes
 
 
 class _Tree:
     """One breadth-first search's levels from its root: each level's codes (sorted) and each one's parent's index in
-    the level before; every code reached (`seen`, sorted); the next level's codes and parents as its chunks come."""
+    the level before; the next level's codes and parents as its chunks come. The configurations' graph is undirected
+    (every move can be undone), so a successor of a level's configuration is in the level before, that level or the
+    next: those are all a new one is checked against (never everything seen: its cost would grow with each level)."""
 
-    __slots__ = ("levels", "seen", "done", "pending", "over")
+    __slots__ = ("levels", "done", "pending", "over", "count")
 
     def __init__(self, root: np.ndarray) -> None:
         self.levels: list[tuple[np.ndarray, np.ndarray]] = [(root, np.array([-1]))]
-        self.seen = root.copy()
         self.done = 0  # configurations of the last level expanded so far
         self.pending: list[tuple[np.ndarray, np.ndarray]] = []
         self.over = False  # no configuration is left to reach
+        self.count = 1  # configurations reached
 
     def add(self, codes: np.ndarray, parents: np.ndarray) -> int:
-        """A chunk's successors (`codes` unique and sorted, their parents' index in the last level): those not seen
-        kept for the next level; how many."""
-        pos = np.minimum(np.searchsorted(self.seen, codes), len(self.seen) - 1)
-        new = self.seen[pos] != codes
+        """A chunk's successors (`codes` unique and sorted, their parents' index in the last level): those not in the
+        last two levels kept for the next level; how many."""
+        new = ~_among(codes, self.levels[-1][0])
+        if len(self.levels) > 1:
+            new &= ~_among(codes, self.levels[-2][0])
         self.pending.append((codes[new], parents[new]))
         return int(new.sum())
 
@@ -124,13 +148,19 @@ class _Tree:
             self.over = True
             return codes
         self.levels.append((codes, parents[first]))
-        self.seen = np.union1d(self.seen, codes)
+        self.count += len(codes)
         return codes
+
+    def reached(self, codes: np.ndarray) -> np.ndarray:
+        """Which of `codes` this tree has reached (in any level)."""
+        out = np.zeros(len(codes), bool)
+        for level, _ in self.levels:
+            out |= _among(codes, level)
+        return out
 
     def path(self, code: int) -> list[int]:
         """The codes from the root to `code` (reached)."""
-        level = next(k for k, (codes, _) in enumerate(self.levels) if codes[min(
-            int(np.searchsorted(codes, code)), len(codes) - 1)] == code)
+        level = next(k for k, (codes, _) in enumerate(self.levels) if _among(np.array([code]), codes)[0])
         index = int(np.searchsorted(self.levels[level][0], code))
         out = []
         for codes, parents in reversed(self.levels[:level + 1]):
@@ -174,12 +204,16 @@ class Exact:
         self.start = cells[start]
         self.expansions = self.refining = self.refined = self.first = 0
         self.held = 2 * n
+        self._way: np.ndarray | None = None  # the way found, each drone's settled in turn (`_settle`)
+        self._settled = 0
         if self._home(start[None, :])[0]:
-            self._walk([int(self.trees[0].seen[0])])
+            self._walk([int(self.trees[0].levels[0][0][0])])
+            self._settle(0, True)
 
     @property
-    def explored(self) -> np.ndarray:
-        return self.trees[0].seen
+    def explored(self) -> range:
+        """The configurations reached (a range of their count: `lacam.Lacam.state` reads its length)."""
+        return range(sum(tree.count for tree in self.trees))
 
     @property
     def full(self) -> bool:
@@ -208,13 +242,21 @@ class Exact:
         """Spend `work` units at most (a configuration at least if `first`, unless the search is over): the units
         spent."""
         spent = 0
+        if self._way is not None:
+            return self._settle(work, first)
         while self.found is None and not self.over:
             tree = self.trees[self.side]
             codes = tree.levels[-1][0]
-            if tree.done == len(codes):
+            if tree.done == len(codes):  # (its cost: the next level's unique codes, and the other tree's levels
+                # each checked for a meeting, a searchsorted each)
+                closing = 1 + sum(len(c) for c, _ in tree.pending) // A_UNIT + \
+                    (len(self.trees[1 - self.side].levels) if len(self.trees) > 1 else 0)
+                if (spent or not first) and spent + closing > work:
+                    break
+                spent += closing
                 self._close(tree)
                 continue
-            cfg = self._cfg(codes[tree.done:])
+            cfg = self._cfg(codes[tree.done:tree.done + max(1, (work - spent) * A_UNIT)])  # (those that may fit)
             cost = np.cumsum(self.count[cfg].prod(axis=1)) // A_UNIT + 1
             take = int(np.searchsorted(cost, work - spent, side="right"))
             if not take:
@@ -226,6 +268,8 @@ class Exact:
             self.held += 2 * tree.add(codes, parents + tree.done)
             tree.done += take
             self.expansions += take
+        if self._way is not None:  # (found: settled in what is left of the work)
+            spent += self._settle(work - spent, False)
         return spent
 
     def _successors(self, cfg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -255,8 +299,7 @@ class Exact:
                 return
         else:
             other = self.trees[1 - self.side]
-            pos = np.minimum(np.searchsorted(other.seen, codes), len(other.seen) - 1)
-            met = codes[other.seen[pos] == codes]
+            met = codes[other.reached(codes)]
             if len(met):
                 ways = (tree.path(int(met[0])), other.path(int(met[0])))
                 self._walk(ways[0] + ways[1][-2::-1] if self.side == 0 else ways[1] + ways[0][-2::-1])
@@ -265,11 +308,26 @@ class Exact:
             self.side = int(sizes[1] < sizes[0])
 
     def _walk(self, way: list[int]) -> None:
-        """The plan: the configurations of `way` (codes, from the start to the goal); the trees no longer kept."""
-        self.plan = self.cells[settle(self._cfg(np.array(way, np.int64)))]
-        self.found = self.first = len(self.plan) - 1
+        """The way found: the configurations of `way` (codes, from the start to the goal), to be settled (`_settle`:
+        each drone home as early as it can be) before the drones take it; the trees no longer kept."""
+        self._way = self._cfg(np.array(way, np.int64))
+        self.found = self.first = len(way) - 1
         self.trees = [self.trees[0]]
         self.trees[0].levels, self.trees[0].pending = [], []
+
+    def _settle(self, work: int, first: bool) -> int:
+        """Settle the found way's drones one after the other (`settle_one`) within `work` units (a drone at least if
+        `first`); the plan once every drone's is. The units spent."""
+        way, spent = self._way, 0
+        assert way is not None
+        cost = len(way) * (1 + self.moves.size // A_UNIT)  # (a drone's at most: a layer of space and time a step)
+        while self._settled < way.shape[1]:
+            if (spent or not first) and spent + cost > work:
+                return spent
+            spent += settle_one(way, self._settled, self.moves)
+            self._settled += 1
+        self.plan, self._way = self.cells[way], None
+        return spent
 
     def refine(self, work: int, open_: object = None, first: bool = True) -> int:
         """Nothing to refine: its way is as short as any. No units."""

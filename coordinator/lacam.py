@@ -952,6 +952,9 @@ class Lacam:
         way[way] = g.part[ac[way]] == g.part[hc[way]]
         if (hc < 0).any():
             return None  # a drone in a building or outside (it is dying): PIBT
+        if len(np.unique(ac[way])) < np.count_nonzero(way):  # two drones share a target: no configuration has both
+            self.unsolvable = True  # home (a proof without a search)
+            return None
         if fits(g.near, len(here), self.small):  # (a small puzzle searched whole: its way shortest, or a proof)
             self._search = Exact(g.near, g.cells, hc, np.where(way, ac, -1))
             return self._search

@@ -20,16 +20,17 @@ NAMES_ROOM = MAX_OVER_TEXT - 128
 def end_reason(fleet: Fleet, arbiter: object, final: bool, turn: int, max_turns: int,
                left: int, lifelong: bool = False) -> tuple[EndReason, str] | None:
     """Whether the game ends with `turn`, just judged (leaving `left` drones alive), and why: no drone alive, the
-    arbitration's search proved there is no solution (`arbiter.unsolvable`: coordinator/lacam.py; not in a
-    `lifelong` game, whose drones get new targets as each arrives: it goes on to its limit), the ground
-    station's plan is complete (`final`) and every alive drone reached its target or says it cannot, or the turn
-    limit. None: the game goes on."""
+    arbitration's search proved there is no solution (`arbiter.unsolvable`: coordinator/lacam.py; once the ground
+    station's plan is `final`, and not in a `lifelong` game, whose drones get new targets as each arrives: it goes on
+    to its limit), the ground station's plan is complete (`final`) and every alive drone reached its target or says it
+    cannot, or the turn limit. None: the game goes on."""
     if not left:  # (from the columns: a DroneView each would cost an RL episode's end more than its turn)
         causes = named([f"{d} {STATES[s].value.lower()} ({CAUSES[c].value.lower()}) at {tuple(p)}"
                         for d, s, c, p in zip(fleet.ids, fleet.state.tolist(), fleet.cause.tolist(),
                                               fleet.pos.tolist())])
         return EndReason.NO_DRONE_ALIVE, f"no drone alive: {causes}"
-    if not lifelong and getattr(arbiter, "unsolvable", False):  # (a proof: coordinator/lacam.py)
+    if not lifelong and final and getattr(arbiter, "unsolvable", False):  # (a proof: coordinator/lacam.py; of
+        # these targets, which a ground station whose plan is not final may still change)
         away = (fleet.state == ALIVE) & (fleet.target[:, 0] >= 0) & (fleet.pos != fleet.target).any(axis=1)
         return EndReason.SETTLED, ("no solution (the search over the drones' configurations proved it): targets "
                                    "reached, except unreachable for "

@@ -16,8 +16,12 @@ import pytest
 
 from coordinator import exact, lacam
 from coordinator.arbiter import OpenCells
-from schema import EndReason
+from coordinator.config import DroneSpec, GameConfig
+from dronesim.local import Inputs, simulate
+from entities.gcs import Plan
+from schema import EndReason, WorldSpec
 from tests.test_lacam import Drones, play, world_of
+from world.grid import World
 from world.search import flat_cells
 
 LOG = logging.getLogger("test_exact")
@@ -153,31 +157,30 @@ def test_fits_bounds_the_candidates() -> None:
     assert not exact.fits(near, 13)  # (more drones than cells)
 
 
-def test_settle_cuts_detours_and_moves_early_and_keeps_the_plan_legal() -> None:
-    """A way as short as any in steps may wait for nothing or step out and back: `settle` makes each drone's moves
-    as few and as early as it can, the plan as long and legal."""
+def _line(cells: int) -> np.ndarray:
+    """The moves of a corridor of `cells` open cells numbered along it (itself, then its neighbours)."""
+    return np.array([[c, c - 1 if c else -1, c + 1 if c + 1 < cells else -1] for c in range(cells)])
+
+
+def test_settle_brings_each_drone_home_as_early_as_it_can_and_keeps_the_plan_legal() -> None:
+    """A way as short as any in steps may wait for nothing or step out and back: `settle` makes each drone's way
+    again, home as early as it can be, the plan as long and legal."""
     # drone 0 waits two steps then walks 0 -> 2; drone 1, parked at 5, steps out to 4 and back for nothing
     plan = np.array([[0, 5], [0, 4], [0, 5], [1, 5], [2, 5]])
-    assert exact.settle(plan).tolist() == [[0, 5], [1, 5], [2, 5], [2, 5], [2, 5]]
-    # drone 1 must wait for drone 0 to pass: 0 walks 0 -> 3 through 1 and 2; 1 walks 2 -> 4 ... its moves are
-    # made early only where its next cell is free
-    plan = np.array([[0, 2], [1, 2], [1, 3], [2, 4], [3, 4]])
-    settled = exact.settle(plan)
-    assert settled[0].tolist() == [0, 2] and settled[-1].tolist() == [3, 4]
-    for a, b in zip(settled[:-1], settled[1:]):
-        assert b[0] != b[1] and not (b[0] == a[1] and b[1] == a[0])
+    assert exact.settle(plan, _line(6))[0].tolist() == [[0, 5], [1, 5], [2, 5], [2, 5], [2, 5]]
+    # drone 1 follows drone 0 along the corridor, a step behind at best: as it was
+    plan = np.array([[1, 0], [2, 1], [3, 2], [4, 3]])
+    assert exact.settle(plan, _line(5))[0].tolist() == plan.tolist()
 
 
-@pytest.mark.parametrize("rows", [["#.#####", "......."], ["....", "....", "...."]])
-def test_two_drones_given_one_target_never_meet_there(rows: list[str]) -> None:
-    """No configuration has both home: the search from the goal's end is not made (its root would hold two drones in
-    one cell, and a way through it would put them there); the search runs out, a proof, and nobody collides."""
-    width = len(rows[0]) - 1
-    drones: Drones = {"D01": ((0, len(rows) - 1, 0), (width // 2 + 1, len(rows) - 1, 0)),
-                      "D02": ((width, len(rows) - 1, 0), (width // 2 + 1, len(rows) - 1, 0))}
-    result = play(world_of(rows), drones, 100)
-    assert not any(r.get("deaths") for r in result.records), result.over.text
-    assert result.over.reason is EndReason.SETTLED and result.over.text.startswith("no solution"), result.over.text
+def test_a_short_trip_is_not_stretched_to_the_plans_length() -> None:
+    """Two drones in an open 3 x 3 room: the far one needs 4 steps, the near one 1; the near one is home at step 1
+    (the way the search found may have it wander until the last step)."""
+    search, g = _search(["...", "...", "..."], [(0, 0), (1, 1)], [(2, 2), (1, 0)])
+    while search.found is None:
+        search.expand(lacam.WORK)
+    plan = g.index[search.plan]
+    assert len(plan) == 5 and (plan[1:, 1] == plan[-1, 1]).all()
 
 
 #: The instances of BENCHMARKS.md's "LaCAM: small puzzles searched whole": (name, rows, drones, least makespan or
@@ -207,3 +210,36 @@ def test_the_named_puzzles(name: str) -> None:
         assert result.over.text.startswith("no solution") and result.over.turn <= 5, result.over
     else:
         assert result.over.reason is EndReason.ALL_REACHED and result.over.turn <= best + 5, result.over
+
+
+def test_a_proof_ends_the_game_only_once_the_ground_stations_plan_is_final() -> None:
+    """Targets with no solution (two drones must pass in a closed 1 x 5 corridor), corrected at turn 4, the plan
+    final only then: the proof of the first targets does not end the game (found probing: it ended at turn 1)."""
+    world = World.from_grid(np.zeros((1, 5, 1), bool))
+    config = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=100,
+                        drones=(DroneSpec(drone="D01", start=(0, 0, 0)), DroneSpec(drone="D02", start=(0, 4, 0))))
+    plan = Plan(((1, "D01", (0, 3, 0)), (1, "D02", (0, 1, 0)), (4, "D01", (0, 1, 0)), (4, "D02", (0, 3, 0))))
+    result = simulate(config, dict.fromkeys(("D01", "D02"), "dstar"), Inputs(plan=plan), LOG)
+    assert result.over.reason is EndReason.ALL_REACHED and result.over.turn == 4, result.over
+
+
+def test_two_drones_given_one_target_in_a_crowd_are_proved_at_once() -> None:
+    """Too many drones for the exact search, two of them given one target: no configuration has both home, said
+    without a search (LaCAM ran to the turn limit on such games)."""
+    rows = ["......"] * 6
+    drones: Drones = {f"D{i + 1:02d}": ((i, 0, 0), (5 - i, 5, 0)) for i in range(6)}
+    drones["D07"] = ((0, 2, 0), (0, 5, 0))  # (D06's target too)
+    result = play(world_of(rows), drones, 200)
+    assert result.over.text.startswith("no solution") and result.over.turn <= 3, result.over
+    assert not any(r.get("deaths") for r in result.records)
+
+
+def test_a_search_that_runs_out_reached_each_configuration_once() -> None:
+    """Each level is checked for repeats against the level before and itself only (the configurations' graph is
+    undirected): an exhausted search counts every configuration it can reach once. Drone 0 cannot pass drone 1 in a
+    closed corridor of 12 (drone 1's goal: anywhere), so it reaches every pair of cells with drone 0 first: 66. Each
+    call spends the work it is given at most."""
+    search, _ = _search(["." * 12], [(0, 0), (2, 0)], [(11, 0), None])
+    while not search.unsolvable:
+        assert search.expand(lacam.WORK // 50) <= lacam.WORK // 50
+    assert len(search.explored) == 66
