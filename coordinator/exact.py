@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Exact", "fits", "settle", "settle_one", "CANDIDATES"]
+__all__ = ["Exact", "fits", "tried", "settle", "settle_one", "CANDIDATES", "TRY"]
 
 #: Joint moves (candidates: a configuration's drones' moves combined, before the conflicts are struck out) an exact
 #: search may have to make at most, counted as the placements of the drones on the open cells times the mean moves a
@@ -28,18 +28,35 @@ __all__ = ["Exact", "fits", "settle", "settle_one", "CANDIDATES"]
 CANDIDATES = 1 << 25
 #: Candidates a work unit (lacam.WORK's: about what a PIBT call spends on a drone); docs/performance.md.
 A_UNIT = 128
+#: Configurations (the placements of the drones on the open cells) up to which a puzzle that `fits` does not admit is
+#: tried all the same, within TRY units in all (about 128 turns of lacam.WORK): in a 1-wide corridor the drones block
+#: each other's moves, so the joint moves are far fewer than `fits`' bound (six drones on 13 cells: found in 71 turns,
+#: where LaCAM had not in 500). A search that runs out of them gives up (`Exact.gave_up`): LaCAM's then.
+TRIED = 1 << 21
+TRY = 128 * 1260
 
 
 def fits(near: np.ndarray, drones: int, most: int = CANDIDATES) -> bool:
     """An exact search over `drones` drones on the open cells of `near` ((F, k), each cell's open neighbours, -1 for
-    none) makes at most `most` candidates, and its configurations' codes fit an int64."""
+    none) makes at most `most` candidates, and its configurations' codes fit an int64: it is searched to its end."""
     F = len(near)
-    if drones < 1 or drones > F or drones * float(np.log2(max(F, 2))) > 62:
-        return False
-    moves = 1 + float((near >= 0).sum()) / F  # (the mean moves a cell: its neighbours and staying)
-    bound = moves ** drones
-    for k in range(drones):  # (the placements: F (F-1) ... (F-n+1))
-        bound *= F - k
+    return _coded(F, drones) and _within(F, drones, (1 + float((near >= 0).sum()) / F) ** drones, most)
+
+
+def tried(near: np.ndarray, drones: int, most: int = TRIED) -> bool:
+    """An exact search over `drones` drones on the open cells of `near` reaches at most `most` configurations, and
+    their codes fit an int64: it is worth trying within `TRY` units, where `fits` does not admit it."""
+    return _coded(len(near), drones) and _within(len(near), drones, 1.0, most)
+
+
+def _coded(cells: int, drones: int) -> bool:
+    return 1 <= drones <= cells and drones * float(np.log2(max(cells, 2))) <= 62
+
+
+def _within(cells: int, drones: int, bound: float, most: float) -> bool:
+    """`bound` times the placements of `drones` drones on `cells` cells (F (F-1) ... (F-n+1)) is at most `most`."""
+    for k in range(drones):
+        bound *= cells - k
         if bound > most:
             return False
     return True
@@ -182,11 +199,13 @@ class Exact:
     bounded = True  # (its work is bounded: never handed back to PIBT for want of progress, `lacam.Lacam.follow`)
 
     def __init__(self, near: np.ndarray, cells: np.ndarray, start: np.ndarray, goals: np.ndarray,
-                 focus: tuple[np.ndarray, np.ndarray, object, int] | None = None, exact: bool = True) -> None:
+                 focus: tuple[np.ndarray, np.ndarray, object, int] | None = None, exact: bool = True,
+                 cap: int | None = None) -> None:
         """`near`: each open cell's open neighbours ((F, k), numbered, -1 for none); `cells`: their flat cells
         (`lacam.Graph.cells`); `start`: the drones' open cells (numbered); `goals`: theirs (-1: anywhere); `focus`:
         as `lacam.Search`'s (the drones searched are its rows among all, the others stand still); `exact`: the
-        search is of the game's own goal (a proof when it finds none)."""
+        search is of the game's own goal (a proof when it finds none); `cap`: the units it may spend in all before it
+        gives up (`gave_up`; None: no end but its own, as `fits` admits)."""
         F, n = len(near), len(start)
         self.cells, self.focus, self.exact = cells, focus, exact
         self.moves = np.concatenate([np.arange(F)[:, None], near], axis=1)  # (F, 1 + k): staying first
@@ -204,6 +223,7 @@ class Exact:
         self.start = cells[start]
         self.expansions = self.refining = self.refined = self.first = 0
         self.held = 2 * n
+        self.cap, self.total = cap, 0  # (the units spent so far)
         self._way: np.ndarray | None = None  # the way found, each drone's settled in turn (`_settle`)
         self._settled = 0
         if self._home(start[None, :])[0]:
@@ -244,6 +264,10 @@ class Exact:
         spent = 0
         if self._way is not None:
             return self._settle(work, first)
+        if self.cap is not None:  # (what is left of its cap)
+            work = min(work, self.cap - self.total)
+            if work <= 0:
+                return 0
         while self.found is None and not self.over:
             tree = self.trees[self.side]
             codes = tree.levels[-1][0]
@@ -270,7 +294,13 @@ class Exact:
             self.expansions += take
         if self._way is not None:  # (found: settled in what is left of the work)
             spent += self._settle(work - spent, False)
+        self.total += spent
         return spent
+
+    @property
+    def gave_up(self) -> bool:
+        """It spent its `cap` and neither found a way nor ran out of configurations."""
+        return self.cap is not None and self.total >= self.cap and self.found is None and not self.over
 
     def _successors(self, cfg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The configurations one joint move from `cfg`'s (their codes, unique and sorted, and the index in `cfg` of

@@ -62,7 +62,7 @@ from schema import Cell
 from world.search import cells_of, flat_cells, levels, padded_steps
 
 from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat, tie_breaks
-from .exact import CANDIDATES, Exact, fits, whole
+from .exact import CANDIDATES, TRY, Exact, fits, tried, whole
 
 __all__ = ["Lacam", "Search", "Graph"]
 
@@ -784,6 +784,7 @@ class Lacam:
         self._patience = stall  # turns without a new high after which the running search hands back to PIBT
         self._handed = False  # a search handed back to PIBT (for these targets): the next starts once PIBT stalls
         self._radius = 0  # the next search's focus (`_focus`; 0: the whole world)
+        self._tried = False  # an exact search tried for these targets gave up (`_whole`): LaCAM's from then on
         self.unsolvable = False
         self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
         self.full = 0  # searches stopped at their memory (`MEMORY`)
@@ -821,7 +822,7 @@ class Lacam:
         key = aims.tobytes()
         if key != self._key:
             self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
-            self._patience, self._handed, self._radius = self.stall, False, 0
+            self._patience, self._handed, self._radius, self._tried = self.stall, False, 0, False
         search = self._search
         if search is not None and not np.array_equal(search.where(), here):
             search = self._search = None
@@ -857,6 +858,8 @@ class Lacam:
         self.expansions -= search.refining
         self.spent += search.refine(self.work - self.spent, open_, not self.spent)  # (once found: made shorter)
         self.expansions += search.refining
+        if isinstance(search, Exact) and search.gave_up:  # (LaCAM's search from the next turn, where they are)
+            self._tried, self._search = True, None
         if search.unsolvable and search.focus is None and search.exact:  # (a proof: the game's own goal)
             self.unsolvable = True
         return search.step()
@@ -908,12 +911,22 @@ class Lacam:
         world = OpenCells.of(bits)
         sub = Graph(world, size)
         goals = sub.index[g.cells[goal_c[free]]]
-        if fits(sub.near, len(free), self.small) and (goals >= 0).all():  # (a small puzzle: searched whole)
-            self._search = Exact(sub.near, sub.cells, sub.index[here[free]], goals, (free, here, world, radius))
+        whole, cap = self._whole(sub.near, len(free))
+        if whole and (goals >= 0).all():  # (a small puzzle: searched whole)
+            self._search = Exact(sub.near, sub.cells, sub.index[here[free]], goals, (free, here, world, radius),
+                                 cap=cap)
             return self._search
         self._search = Search(sub, size, here[free], g.cells[goal_c[free]], np.where(way, aims, -1)[free],
                               every[goal_c[free]][:, part], self.memory, (free, here, world, radius))
         return self._search
+
+    def _whole(self, near: np.ndarray, drones: int) -> tuple[bool, int | None]:
+        """Whether a puzzle of `drones` drones on the open cells of `near` is searched whole (`exact.Exact`), and the
+        units it may spend: to its end where `exact.fits` admits it (None), `exact.TRY` where `exact.tried` does and
+        no such try has given up for these targets; else LaCAM's."""
+        if fits(near, drones, self.small):
+            return True, None
+        return bool(self.small) and not self._tried and tried(near, drones), TRY
 
     @staticmethod
     def _piece(seen: np.ndarray, near: np.ndarray, away: np.ndarray) -> np.ndarray:
@@ -955,8 +968,9 @@ class Lacam:
         if len(np.unique(ac[way])) < np.count_nonzero(way):  # two drones share a target: no configuration has both
             self.unsolvable = True  # home (a proof without a search)
             return None
-        if fits(g.near, len(here), self.small):  # (a small puzzle searched whole: its way shortest, or a proof)
-            self._search = Exact(g.near, g.cells, hc, np.where(way, ac, -1))
+        whole, cap = self._whole(g.near, len(here))
+        if whole:  # (a small puzzle searched whole: its way shortest, or a proof)
+            self._search = Exact(g.near, g.cells, hc, np.where(way, ac, -1), cap=cap)
             return self._search
         goal_c = stand_ins(g, np.where(way, ac, hc), way)
         if self._every is not None:

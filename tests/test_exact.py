@@ -243,3 +243,41 @@ def test_a_search_that_runs_out_reached_each_configuration_once() -> None:
     while not search.unsolvable:
         assert search.expand(lacam.WORK // 50) <= lacam.WORK // 50
     assert len(search.explored) == 66
+
+
+#: Five drones on a corridor of 12 with two bays (least makespan 17): beyond `exact.fits`' bound (the drones block
+#: each other's moves: its joint moves are far fewer), tried within `exact.TRY`; LaCAM had not brought them home in
+#: 500 turns.
+TRIED: tuple[list[str], Drones] = (
+    ["###.#######.", "............"],
+    {"D01": ((1, 1, 0), (9, 1, 0)), "D02": ((3, 1, 0), (8, 1, 0)), "D03": ((11, 1, 0), (11, 1, 0)),
+     "D04": ((6, 1, 0), (4, 1, 0)), "D05": ((10, 1, 0), (3, 0, 0))})
+
+
+def test_a_puzzle_beyond_the_bound_is_tried_whole_and_brought_home() -> None:
+    rows, drones = TRIED
+    grid = world_of(rows)
+    near = lacam.Graph(OpenCells(grid), grid.shape).near
+    assert not exact.fits(near, len(drones)) and exact.tried(near, len(drones))
+    result = play(grid, drones, 500)
+    assert result.over.reason is EndReason.ALL_REACHED and result.over.turn <= 4 * 17, result.over
+
+
+def test_a_try_that_gives_up_hands_over_to_lacam(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A tried exact search that spends its units without an end gives up: LaCAM's search from where the drones held,
+    and no exact search again for these targets."""
+    monkeypatch.setattr(lacam, "TRY", 3 * lacam.WORK)  # (three turns)
+    rows, drones = TRIED
+    arb = lacam.Lacam()
+    kinds: list[str] = []
+    original = arb.follow
+
+    def follow(*args: object) -> object:
+        out = original(*args)  # type: ignore[arg-type]
+        kinds.append(type(arb._search).__name__)
+        return out
+    monkeypatch.setattr(arb, "follow", follow)
+    play(world_of(rows), drones, 40, arbiter=arb)
+    kinds = [k for k in kinds if k != "NoneType"]  # (turns without a search: PIBT's)
+    assert kinds[0] == "Exact" and "Search" in kinds, kinds
+    assert "Exact" not in kinds[kinds.index("Search"):]
