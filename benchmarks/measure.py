@@ -97,12 +97,12 @@ class Router:
 def loopback_router(config: Path | None = None, *, scheme: str = "tcp", flags: Sequence[str] = ()) -> Iterator[Router]:
     """A Zenoh router process (`dronesim router`) on <scheme>/127.0.0.1:<free port>, loopback only, as in a
     deployment: no entity shares its process (an entity's Python callbacks run on Zenoh's threads and
-    would hold up a router living in the same process); `config`: its zenoh configuration file; `flags`:
-    more of `dronesim router`'s (e.g. `Secured.router_flags`)."""
+    would hold up a router living in the same process), in a session of its own (as `Procs`); `config`: its zenoh
+    configuration file; `flags`: more of `dronesim router`'s (e.g. `Secured.router_flags`)."""
     conf = ["--config", str(config)] if config is not None else []
     p = subprocess.Popen([sys.executable, "-m", "dronesim", "router", "--listen", f"{scheme}/127.0.0.1:0", *conf,
                           *flags, "--log-level", "WARNING"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                         text=True, env=child_env())
+                         text=True, env=child_env(), start_new_session=True)
     try:
         line = p.stdout.readline() if p.stdout else ""
         found = re.search(rf"listening on ({scheme}/127\.0\.0\.1:\d+)", line)
@@ -119,7 +119,9 @@ def loopback_router(config: Path | None = None, *, scheme: str = "tcp", flags: S
 
 
 class Procs:
-    """Child processes with their output in log files (no reader threads in this process)."""
+    """Child processes with their output in log files (no reader threads in this process), each in a session of its
+    own as `dronesim up` starts the game's processes (Linux schedules each session as a group, autogroup: measured in
+    one session, the game's processes shared one group's share of the machine, which no deployment does)."""
 
     def __init__(self, logs: Path) -> None:
         self.logs = logs
@@ -130,7 +132,7 @@ class Procs:
         log = open(self.logs / f"{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
         self._files.append(log)
         p = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                             env=child_env(PYTHONUNBUFFERED="1"))
+                             env=child_env(PYTHONUNBUFFERED="1"), start_new_session=True)
         self.procs[name] = p
         return p
 
