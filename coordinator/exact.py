@@ -26,14 +26,14 @@ __all__ = ["Exact", "fits", "tried", "settle", "settle_one", "CANDIDATES", "TRY"
 #: search may have to make at most, counted as the placements of the drones on the open cells times the mean moves a
 #: cell to the power of the drones (an upper bound: it visits only the configurations it reaches). Beyond it, LaCAM.
 CANDIDATES = 1 << 25
-#: Candidates a work unit (lacam.WORK's: about what a PIBT call spends on a drone); docs/performance.md.
+#: Candidates a work unit (lacam.WORK's: about what a PIBT call spends on a drone; measured, docs/cooperation.md).
 A_UNIT = 128
 #: Configurations (the placements of the drones on the open cells) up to which a puzzle that `fits` does not admit is
 #: tried all the same, within TRY units in all (about 128 turns of lacam.WORK): in a 1-wide corridor the drones block
 #: each other's moves, so the joint moves are far fewer than `fits`' bound (six drones on 13 cells: found in 71 turns,
-#: where LaCAM had not in 500). A search that runs out of them gives up (`Exact.gave_up`): LaCAM's then.
+#: where LaCAM had not in 500). A search that spends them without an end gives up (`Exact.gave_up`): LaCAM's then.
 TRIED = 1 << 21
-TRY = 128 * 1260
+TRY = 128 * 1260  # (lacam.WORK, which imports this module, is 1260)
 
 
 def fits(near: np.ndarray, drones: int, most: int = CANDIDATES) -> bool:
