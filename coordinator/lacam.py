@@ -123,6 +123,10 @@ HORIZON = 2
 #: games are PIBT's chaos either way: a 24-drone RL episode brought one drone fewer home with it).
 SCATTER = 1 << 19
 CROWD = 100
+#: Turns without progress (no new low of the drones' sum of distances to their targets) after which a small puzzle is
+#: searched whole (`exact.Exact`): LaCAM first, whose first step costs no wait; where it is stuck (a corridor's
+#: drones backing off in turn), the exact search. Two drones crossing a 10 x 10 x 10 world never wait for it.
+EXACT_AFTER = 4
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
 #: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
@@ -785,6 +789,8 @@ class Lacam:
         self._handed = False  # a search handed back to PIBT (for these targets): the next starts once PIBT stalls
         self._radius = 0  # the next search's focus (`_focus`; 0: the whole world)
         self._tried = False  # an exact search tried for these targets gave up (`_whole`): LaCAM's from then on
+        self._low, self._flat = 1 << 62, 0  # the drones' least sum of distances to their targets, turns since it
+        # was (`_progress`)
         self.unsolvable = False
         self.expansions = 0  # PIBT calls of every search so far (for the benchmark)
         self.full = 0  # searches stopped at their memory (`MEMORY`)
@@ -823,6 +829,7 @@ class Lacam:
         if key != self._key:
             self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
             self._patience, self._handed, self._radius, self._tried = self.stall, False, 0, False
+            self._low, self._flat = 1 << 62, 0
         search = self._search
         if search is not None and not np.array_equal(search.where(), here):
             search = self._search = None
@@ -832,6 +839,10 @@ class Lacam:
             search = self._search = None
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
+        self._progress(here, aims)
+        if isinstance(search, Search) and search.focus is None and search.found is None and \
+                self._graph is not None and self._whole(self._graph.near, n)[0]:
+            search = self._search = None  # (LaCAM stuck on a small puzzle: the exact search, from here)
         if search is not None and search.found is None and (
                 (self._since >= self._patience and not search.bounded) or search.full or search.unsolvable):
             # no progress for long, its memory full, or no way to its goal (within its part of the world, or with a
@@ -839,8 +850,11 @@ class Lacam:
             # stalls as long, then a search focused on the drones away (wider each time, the whole world at last)
             self.full += search.full
             self._radius = FOCUS if search.focus is None else 2 * search.focus[3]
-            search = self._search = None
             self._patience, self._handed, self._since = 2 * self._patience, True, 0
+            if search.unsolvable and not search.exact and self._graph is not None and \
+                    self._small(self._graph.near, n)[0]:  # (a stand-in's goal, stricter than the game's: the exact
+                self._handed = False  # search's, not PIBT's turns, for a small puzzle)
+            search = self._search = None
         if search is None:
             if home == n:
                 return None  # every drone home: nothing to search
@@ -903,7 +917,7 @@ class Lacam:
             front = front[(front < len(g.cells)) & ~seen[front]]
         seen[:-1] &= self._piece(seen[:-1], near, hc[away])
         part = np.flatnonzero(seen[:-1])
-        if len(part) == len(g.cells):
+        if len(part) == int(np.isin(g.part, g.part[hc]).sum()):  # (every cell the drones can reach: the whole)
             return self._start(size, here, aims)
         free = np.flatnonzero(seen[hc])
         bits = np.zeros(len(g.index), bool)
@@ -922,11 +936,31 @@ class Lacam:
 
     def _whole(self, near: np.ndarray, drones: int) -> tuple[bool, int | None]:
         """Whether a puzzle of `drones` drones on the open cells of `near` is searched whole (`exact.Exact`), and the
-        units it may spend: to its end where `exact.fits` admits it (None), `exact.TRY` where `exact.tried` does and
-        no such try has given up for these targets; else LaCAM's."""
+        units it may spend: once the drones have made no progress for `EXACT_AFTER` turns (`_progress`: where they
+        do, LaCAM's way costs no wait), to its end where `exact.fits` admits it (None), `exact.TRY` where
+        `exact.tried` does and no such try has given up for these targets; else LaCAM's."""
+        if self._flat < EXACT_AFTER:
+            return False, None
+        return self._small(near, drones)
+
+    def _small(self, near: np.ndarray, drones: int) -> tuple[bool, int | None]:
+        """`_whole`'s answer, progress or not."""
         if fits(near, drones, self.small):
             return True, None
         return bool(self.small) and not self._tried and tried(near, drones), TRY
+
+    def _progress(self, here: np.ndarray, aims: np.ndarray) -> None:
+        """Count the turns since the drones' sum of distances to their targets (those they can reach) was last at a
+        new low (`_flat`), where the world's every distance table is made (`prepare`)."""
+        g, every = self._graph, self._every
+        if g is None or every is None:
+            return
+        hc = g.index[here]
+        ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
+        way = (ac >= 0) & (hc >= 0)
+        way[way] = g.part[ac[way]] == g.part[hc[way]]
+        h = int(every[ac[way], hc[way]].astype(np.int64).sum())
+        self._low, self._flat = (h, 0) if h < self._low else (self._low, self._flat + 1)
 
     @staticmethod
     def _piece(seen: np.ndarray, near: np.ndarray, away: np.ndarray) -> np.ndarray:
