@@ -153,6 +153,15 @@ class Graph:
                 for reached in levels(bits, [int(self.cells[root])], steps):
                     self.part[self.index[reached]] = root
 
+    def ways(self, here: np.ndarray, aims: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The drones' open cells (numbered; -1 off them), their targets' (-1 for none or a building), and whether
+        each has a way there over the static world (both open, in one component)."""
+        hc = self.index[here]
+        ac = np.where(aims >= 0, self.index[np.maximum(aims, 0)], -1)
+        way = (ac >= 0) & (hc >= 0)
+        way[way] = self.part[ac[way]] == self.part[hc[way]]
+        return hc, ac, way
+
     def distances(self, goal: int) -> tuple[np.ndarray, int]:
         """Each open cell's distance to open cell `goal` (numbered), FAR where none (a breadth-first search), and its
         work units (`CELLS_A_UNIT`)."""
@@ -898,11 +907,9 @@ class Lacam:
         assert g is not None  # (`prepare`)
         if every is None:
             return None
-        hc = g.index[here]
+        hc, ac, way = g.ways(here, aims)
         if (hc < 0).any():
             return None
-        ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
-        way = (ac >= 0) & (g.part[np.maximum(ac, 0)] == g.part[hc])
         goal_c = stand_ins(g, np.where(way, ac, hc), way)
         away = goal_c != hc
         if not away.any():
@@ -955,10 +962,7 @@ class Lacam:
         g, every = self._graph, self._every
         if g is None or every is None:
             return
-        hc = g.index[here]
-        ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
-        way = (ac >= 0) & (hc >= 0)
-        way[way] = g.part[ac[way]] == g.part[hc[way]]
+        hc, ac, way = g.ways(here, aims)
         h = int(every[ac[way], hc[way]].astype(np.int64).sum())
         self._low, self._flat = (h, 0) if h < self._low else (self._low, self._flat + 1)
 
@@ -993,10 +997,7 @@ class Lacam:
         to come back there)."""
         g = self._graph
         assert g is not None  # (`prepare`)
-        hc = g.index[here]
-        ac = np.where(aims >= 0, g.index[np.maximum(aims, 0)], -1)
-        way = (ac >= 0) & (hc >= 0)
-        way[way] = g.part[ac[way]] == g.part[hc[way]]
+        hc, ac, way = g.ways(here, aims)
         if (hc < 0).any():
             return None  # a drone in a building or outside (it is dying): PIBT
         if len(np.unique(ac[way])) < np.count_nonzero(way):  # two drones share a target: no configuration has both
