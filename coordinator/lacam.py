@@ -51,6 +51,8 @@ that none exists, in a few turns where LaCAM's proof takes hundreds; it runs ove
 
 from __future__ import annotations
 
+import ctypes
+import weakref
 from bisect import bisect_left, insort
 from collections import Counter, deque
 from heapq import heappop, heappush
@@ -62,6 +64,7 @@ from schema import Cell
 from world.search import cells_of, flat_cells, levels, padded_steps
 
 from .arbiter import OpenCells, candidates, cooperate, offered, pibt, steps_flat, tie_breaks
+from .compiled import scatter_library
 from .exact import CANDIDATES, TRY, Exact, fits, tried, whole
 
 __all__ = ["Lacam", "Search", "Graph"]
@@ -123,6 +126,11 @@ HORIZON = 2
 #: games are PIBT's chaos either way: a 24-drone RL episode brought one drone fewer home with it).
 SCATTER = 1 << 19
 CROWD = 100
+#: The scattered paths are made in the search's first turns, SCATTER_WORK of their units a turn (another path only if
+#: the costliest so far fits), the drones holding until they are all made: 3 or 4 turns at 400 drones on the 32 x 32
+#: maps, each about 10 to 15 ms compiled (coordinator/scatter.c; 60 to 120 in Python), within the 20 ms bound of a
+#: turn (made at once, the turn took 116 to 185 ms in Python, BENCHMARKS.md, "LaCAM: the scattered paths compiled").
+SCATTER_WORK = 32_000
 #: Turns without progress (no new low of the drones' sum of distances to their targets) after which a small puzzle is
 #: searched whole (`exact.Exact`): LaCAM first, whose first step costs no wait; where it is stuck (a corridor's
 #: drones backing off in turn), the exact search. Two drones crossing a 10 x 10 x 10 world never wait for it.
@@ -220,27 +228,40 @@ class Scatter:
     turns they came too late to guide the first chain (docs/cooperation.md, "Scattered paths")."""
 
     __slots__ = ("cells", "near", "start", "goal", "dist", "margin", "rounds", "F", "occ", "moves", "parked", "paths",
-                 "order", "k", "round", "last", "done", "costliest")
+                 "order", "k", "round", "last", "done", "costliest", "lib", "ctx", "_arrays", "_release", "__weakref__")
 
     def __init__(self, graph: Graph, start: np.ndarray, goal: np.ndarray, dist: np.ndarray, margin: int = MARGIN,
-                 rounds: int = ROUNDS) -> None:
-        """`start`, `goal`: the drones' open cells (numbered, `Graph`); `dist`: their distance tables ((n, F))."""
+                 rounds: int = ROUNDS, compiled: bool = True) -> None:
+        """`start`, `goal`: the drones' open cells (numbered, `Graph`); `dist`: their distance tables ((n, F));
+        `compiled`: the search compiled (coordinator/scatter.c, `compiled.scatter_library`) where this machine has it,
+        else (and with False) Python's: the same paths and units."""
         n = len(start)
         self.cells = graph.cells
-        self.near = [[v for v in row if v >= 0] for row in graph.near.tolist()]
         self.start, self.goal, self.dist = start.tolist(), goal.tolist(), dist
         self.margin, self.rounds = margin, rounds
         self.F = F = len(graph.cells)
         longest = int(dist[np.arange(n), start].max(initial=0)) + margin + 1
-        self.occ = [0] * ((longest + 1) * F)  # (step, cell) -> paths there then
-        self.moves: dict[int, int] = {}  # (step, cell, next cell) -> paths taking that edge then
-        self.parked: list[list[int]] = [[] for _ in range(F)]  # cell -> the steps from which paths ending there stay
-        # there, sorted (those before a step: `bisect_left`)
         self.paths: list[list[int]] = [[] for _ in range(n)]
         self.order = scatter_order(n, 0)
         self.k, self.round, self.last = 0, 0, -1
         self.done = n == 0
         self.costliest = 0
+        self.lib = scatter_library() if compiled and n else None
+        self.ctx: int | None = None
+        if self.lib is not None:  # (its state in C; the arrays it reads kept alive as long as it lives)
+            near = np.ascontiguousarray(graph.near, np.int64)
+            d16 = np.ascontiguousarray(dist, np.int16)
+            self._arrays = (near, d16)
+            self.ctx = self.lib.sc_new(F, n, near.shape[1], longest, near.ctypes.data, d16.ctypes.data, margin)
+            if self.ctx:
+                self._release = weakref.finalize(self, self.lib.sc_free, ctypes.c_void_p(self.ctx))
+                return
+            self.lib, self.ctx = None, None  # (no memory for it: Python's)
+        self.near = [[v for v in row if v >= 0] for row in graph.near.tolist()]
+        self.occ = [0] * ((longest + 1) * F)  # (step, cell) -> paths there then
+        self.moves: dict[int, int] = {}  # (step, cell, next cell) -> paths taking that edge then
+        self.parked: list[list[int]] = [[] for _ in range(F)]  # cell -> the steps from which paths ending there stay
+        # there, sorted (those before a step: `bisect_left`)
 
     def advance(self, work: int) -> int:
         """Plan paths within `work` units (one at least; another only if the costliest so far fits): the units spent."""
@@ -257,11 +278,26 @@ class Scatter:
                 self.done = total == 0 or self.round >= self.rounds or (self.round >= 2 and total >= self.last)
                 self.last, self.k = total, 0
                 self.order = scatter_order(len(self.start), self.round)
+        if self.done and self.ctx is not None:  # (the paths out of C, its memory freed)
+            self._fetch()
         return spent
+
+    def _fetch(self) -> None:
+        lib, ctx = self.lib, self.ctx
+        assert lib is not None and ctx is not None
+        for i in range(len(self.paths)):
+            cells = np.zeros(lib.sc_path_length(ctx, i), np.int64)
+            lib.sc_path_cells(ctx, i, cells.ctypes.data)
+            self.paths[i] = cells.tolist()
+        self._release()
+        self.ctx = None
 
     def _collisions(self) -> int:
         """The paths' collisions with each other (each pair's counted from both sides): in the same cell at the same
         step, along the same edge the other way, or through a cell where another has stopped for good."""
+        if self.ctx is not None:
+            assert self.lib is not None
+            return int(self.lib.sc_collisions(self.ctx))
         F, occ, moves, parked = self.F, self.occ, self.moves, self.parked
         total = 0
         for path in self.paths:
@@ -289,6 +325,12 @@ class Scatter:
 
     def _plan(self, i: int) -> int:
         """Drone i's path planned again against the others': the units it cost."""
+        if self.ctx is not None:
+            assert self.lib is not None
+            settled = int(self.lib.sc_plan(self.ctx, i, self.start[i], self.goal[i]))
+            if settled < 0:
+                raise MemoryError("the scattered paths' search ran out of memory")
+            return 1 + settled // POPS
         if self.paths[i]:
             self._enroll(i, self.paths[i], -1)
         s, goal, F, near, occ, moves, parked = self.start[i], self.goal[i], self.F, self.near, self.occ, self.moves, \
@@ -459,18 +501,26 @@ class Search:
         self._h: np.ndarray | None = None  # the plan's configurations' sums of distances (`_behind`)
         self._h_of: np.ndarray | None = None
         self._build = len(graph.cells) // BUILD  # a refiner's units to make (its part of the world's graph)
-        # with `scatter`, the scattered paths' guide (`Scatter`, made at once: the first turn's work is theirs and a
-        # PIBT call, `expand`): each drone's next cell on its path from each open cell ((n, F), flat, -1 off it), the
-        # open cells' numbering, and each path's cells (`HORIZON`)
+        # with `scatter`, the scattered paths' guide (`Scatter`, made in the search's first turns, `SCATTER_WORK`
+        # units a turn, the drones holding meanwhile: `expand`): each drone's next cell on its path from each open
+        # cell ((n, F), flat, -1 off it), the open cells' numbering, and each path's cells (`HORIZON`)
         self.guide: tuple[np.ndarray, np.ndarray] | None = None
         self.horizon = np.zeros(n, np.int64)
         self.scattered = 0  # its units
-        if scatter:
-            made = Scatter(graph, graph.index[start], graph.index[goals], dist)
-            self.scattered = made.advance(1 << 62)
-            self.guide = (made.table(), graph.index)
+        self._scatter = Scatter(graph, graph.index[start], graph.index[goals], dist) if scatter else None
+
+    def _guide(self) -> int:
+        """The scattered paths made further, `SCATTER_WORK` units (a path at least): the guide once they are all made.
+        The units spent."""
+        made = self._scatter
+        assert made is not None
+        spent = made.advance(SCATTER_WORK)
+        self.scattered += spent
+        if made.done:
+            self.guide = (made.table(), self.graph.index)
             self.horizon = np.array([len(p) for p in made.paths], np.int64)
-        self._owed = self.scattered  # (the units of the scatter, spent by the first turn's `expand`)
+            self._scatter = None
+        return spent
 
     @property
     def unsolvable(self) -> bool:
@@ -495,8 +545,8 @@ class Search:
         spent, n = 0, len(self.goals)
         if self.focus is not None:
             open_ = self.focus[2]
-        spent, self._owed = self._owed, 0  # (the scatter's units: that turn makes a PIBT call, no more)
-        made = spent
+        if self._scatter is not None:  # (the guide first: no PIBT call until it is made)
+            return self._guide()
         while self.found is None and self.open and not self.full and self.expansions < most:
             node = self.open[-1]
             if not node.tree:
@@ -505,7 +555,7 @@ class Search:
             who, where = node.tree[0]
             call = self._choosers(node, who, where)
             cost = CALL + n // FIXED + (0 if call is None else len(call[0]))  # (those that choose: `_choosing`)
-            if (spent > made or not first) and spent + cost > work:
+            if (spent or not first) and spent + cost > work:
                 break
             node.tree.popleft()
             self.held -= 2 * len(who)
@@ -876,7 +926,8 @@ class Lacam:
                 return None  # (its graph or tables made this turn: PIBT's turn)
             self._since = 0  # (its patience counts from its start)
         self.expansions -= search.expansions
-        self.spent = search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search)
+        self.spent = search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search,
+        # but while the scattered paths that guide it are made, `SCATTER_WORK`)
         self.expansions += search.expansions
         self.expansions -= search.refining
         self.spent += search.refine(self.work - self.spent, open_, not self.spent)  # (once found: made shorter)
@@ -897,6 +948,8 @@ class Lacam:
         self._of, self._tables, self._table_units, self._scattered = open_, {}, 0, None
         self._graph = g = Graph(open_, size)
         self._every = g.every_distance() if len(g.cells) ** 2 <= PRECOMPUTE else None
+        if self._every is not None and self.scatter:
+            scatter_library()  # (built now if it is to be, not in a turn)
 
     def _focus(self, size: Cell, here: np.ndarray, aims: np.ndarray, radius: int) -> Search | Exact | None:
         """A search from `here` over the drones within `radius` moves (over the open cells) of a drone away from its

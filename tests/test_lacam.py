@@ -12,9 +12,10 @@ import logging
 import numpy as np
 import pytest
 
-from coordinator import lacam
+from coordinator import compiled, lacam
 from coordinator.arbiter import OpenCells
 from coordinator.config import DroneSpec, GameConfig
+from coordinator.exact import Exact
 from coordinator.resume import restore
 from dronesim import replay
 from dronesim.local import Inputs, Result, simulate
@@ -293,10 +294,11 @@ def test_a_focused_search_takes_puzzles_apart_one_after_the_other() -> None:
 
 
 def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; the turn that makes
-    the scattered paths (`Scatter`, at once as the search starts) makes one call besides; where the distance tables
-    are not made at the game's start (a world too big: here made so), a turn makes those its units hold (one at
-    least) and the search starts the turn after the last, PIBT playing meanwhile."""
+    """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; the turns that make
+    the scattered paths (`Scatter`, as the search starts: `SCATTER_WORK` units a turn, a path at least) make none, the
+    drones holding; where the distance tables are not made at the game's start (a world too big: here made so), a
+    turn makes those its units hold (one at least) and the search starts the turn after the last, PIBT playing
+    meanwhile."""
     rows, drones = DOOR
     grid = world_of(rows)
     size: Cell = grid.shape  # type: ignore[assignment]
@@ -306,20 +308,35 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
     coop, open_ = np.ones(n, bool), OpenCells(grid)
     full = n + n // lacam.FIXED + lacam.CALL  # (a call where every drone chooses: the first ones here)
     start = cells
-    for work, scatter in [(1, False), (2 * full, False), (3 * full - 1, False), (4 * full, False), (4 * full, True)]:
+    for work, scatter, spread in [(1, False, 0), (2 * full, False, 0), (3 * full - 1, False, 0), (4 * full, False, 0),
+                                  (4 * full, True, lacam.SCATTER_WORK), (4 * full, True, 1)]:
         monkeypatch.setattr(lacam, "CROWD", n if scatter else lacam.CROWD)  # (the scatter: a crowd of 6 drones)
+        monkeypatch.setattr(lacam, "SCATTER_WORK", spread)  # (1: a path a turn)
         search, cells = lacam.Lacam(work=work, scatter=scatter), start
-        calls = []
-        for turn in range(1, 8):
+        calls, held = [], []
+        for turn in range(1, 30):
             before = search.expansions
             plan = search.follow(size, cells, coop, targets, open_, turn)  # (the tables made before the turns)
             assert plan is not None
             calls.append(search.expansions - before)
-            assert search.spent <= work or calls[-1] == 1, (work, turn, search.spent)
+            s = search._search
+            if s is not None and s.found is not None:
+                calls.pop()  # (walking the plan found: no call)
+                break
+            guiding = isinstance(s, lacam.Search) and s._scatter is not None
+            if calls[-1] == 0:
+                assert scatter and (guiding or s is not None and s.guide is not None), turn
+                held.append(bool((cells_of(plan, size) == cells).all()))
+            else:
+                assert search.spent <= work or calls[-1] == 1, (work, turn, search.spent)
             cells = cells_of(plan, size).astype(np.int32)
         if scatter:
-            assert calls == [1, 4, 4, 4, 4, 4, 4][:len(calls)] and search._search is not None, calls
-            assert search._search.scattered > 0 and search._search.guide is not None
+            k = calls.index(4)
+            assert k >= 1 and calls[:k] == [0] * k and calls[k:] == [4] * len(calls[k:]) and held == [True] * k, calls
+            assert len(calls) - k >= 3, calls
+            assert k % n == 0 and k >= n if spread == 1 else k == 1, calls  # (6 drones' paths, a round or more: in
+            # one turn, or a path a turn)
+            assert s is not None and s.scattered > 0 and s.guide is not None
         else:
             assert calls[0] == max(1, work // full), calls
     monkeypatch.setattr(lacam, "PRECOMPUTE", 0)
@@ -410,24 +427,58 @@ def test_scattered_paths_spread_two_flows_over_two_doors() -> None:
     assert again.paths == scatter.paths  # (deterministic: the rounds' orders drawn from their numbers)
 
 
-@pytest.mark.parametrize("family,agents,seed", [("room-32-32-4", 80, 3), ("maze-32-32-2", 60, 1),
-                                                 ("random-32-32-20", 120, 2)])
-def test_the_compiled_scatter_of_the_benchmark_makes_the_paths_python_makes(tmp_path, family, agents, seed) -> None:
-    """benchmarks/compiled_scatter.py measures what a compiled `Scatter` would give (issue 37): its C port must make
-    the very paths, rounds and work units included, or its times say nothing."""
-    from benchmarks.compiled_scatter import c_paths, compiled, instance
+@pytest.mark.parametrize("family,agents,seed,margin", [("room-32-32-4", 80, 3, lacam.MARGIN),
+                                                        ("maze-32-32-2", 60, 1, lacam.MARGIN),
+                                                        ("random-32-32-20", 120, 2, lacam.MARGIN),
+                                                        ("warehouse-32-32", 200, 4, 0), ("empty-32-32", 150, 5, 3)])
+def test_the_compiled_scatter_makes_the_paths_python_makes_whole_or_a_turn_at_a_time(family, agents, seed,
+                                                                                     margin) -> None:
+    """`Scatter` compiled (coordinator/scatter.c, where the machine can build it) and in Python make the very paths,
+    rounds and work units, whole or `SCATTER_WORK` units a turn (or a path a turn): a game's decisions never depend on
+    which ran."""
+    from benchmarks.compiled_scatter import instance
 
-    try:
-        libs = compiled(tmp_path), compiled(tmp_path, tuned=True)  # (as Python's structures, and tuned)
-    except RuntimeError as err:
-        pytest.skip(f"the C port cannot be compiled here: {err}")
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
     graph, start, goal, dist = instance(family, agents, seed)
-    made = lacam.Scatter(graph, start, goal, dist)
-    spent = made.advance(1 << 62)
-    for lib in libs:
-        paths, ran, settled, units = c_paths(lib, graph, start, goal, dist)
-        assert (paths, ran, units) == (made.paths, made.round, spent) and settled > 0
-        assert sum(map(len, paths)) > agents  # (paths were made: not two empty lists)
+    py = lacam.Scatter(graph, start, goal, dist, margin, compiled=False)
+    spent = py.advance(1 << 62)
+    assert py.lib is None and sum(map(len, py.paths)) > agents  # (paths were made: not empty lists)
+    for turn in (1 << 62, lacam.SCATTER_WORK, 1):
+        c = lacam.Scatter(graph, start, goal, dist, margin)
+        assert c.lib is not None
+        units = turns = 0
+        while not c.done:
+            units += c.advance(turn)
+            turns += 1
+        assert (c.paths, c.round, c.last, units) == (py.paths, py.round, py.last, spent), turn
+        assert turn != 1 or turns == agents * c.round  # (a path a turn)
+        assert c.ctx is None  # (its memory freed once the paths are out)
+
+
+def test_the_compiled_search_is_off_where_the_environment_says_so_and_python_then_plans(monkeypatch) -> None:
+    """`DRONESIM_COMPILED=0`: no library, `Scatter` runs Python's search (the same paths)."""
+    monkeypatch.setenv(compiled.ENV, "0")
+    compiled.scatter_library.cache_clear()
+    try:
+        assert compiled.scatter_library() is None
+        scatter, doors = _scattered(lacam.MARGIN)
+        assert scatter.lib is None and scatter.last == 0 and doors[0] in ({0}, {6})
+    finally:
+        monkeypatch.delenv(compiled.ENV)
+        compiled.scatter_library.cache_clear()
+
+
+def test_a_cache_folder_others_may_write_is_not_used(tmp_path, monkeypatch) -> None:
+    """The compiled library is loaded from this user's own cache folder only: one others may write (a library
+    there could be anyone's) is passed over for a temporary folder of this process's."""
+    shared = tmp_path / "dronesim"
+    shared.mkdir(mode=0o777)
+    shared.chmod(0o777)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert compiled._cache() is None
+    shared.chmod(0o700)
+    assert compiled._cache() == shared
 
 
 def test_the_search_tries_a_drones_scattered_next_cell_first(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -448,13 +499,13 @@ def test_the_search_tries_a_drones_scattered_next_cell_first(monkeypatch: pytest
     for scatter in (True, False):
         arb = lacam.Lacam(scatter=scatter)
         arb.prepare(size, open_)
-        s = arb._start(size, here, aims)
+        s = _guided(arb._start(size, here, aims), open_)
         assert s is not None and (s.guide is not None) == scatter
         firsts[scatter] = s._candidates(s.at)[:, 0]
     assert s.guide is None
     arb = lacam.Lacam()
     arb.prepare(size, open_)
-    s = arb._start(size, here, aims)
+    s = _guided(arb._start(size, here, aims), open_)
     assert s is not None and s.guide is not None
     table, index = s.guide
     ahead = table[np.arange(len(here)), index[here]]
@@ -462,6 +513,13 @@ def test_the_search_tries_a_drones_scattered_next_cell_first(monkeypatch: pytest
     far = lacam.Node(s.at.cfg, None, s.at.prio, 0)
     far.depth = lacam.HORIZON * int(s.horizon.max()) + 1
     assert (s._candidates(far)[:, 0] == firsts[False]).all()
+
+
+def _guided(s: lacam.Search | Exact | None, open_: OpenCells) -> lacam.Search | Exact | None:
+    """`s` once its scattered paths are made (the turns that make them: `Search.expand`), if it makes any."""
+    while isinstance(s, lacam.Search) and s._scatter is not None:
+        s.expand(lacam.WORK, open_)
+    return s
 
 
 @pytest.mark.parametrize("crowd", [lacam.CROWD, 1], ids=["unguided", "scattered"])
