@@ -127,10 +127,11 @@ HORIZON = 2
 SCATTER = 1 << 19
 CROWD = 100
 #: The scattered paths are made in the search's first turns, SCATTER_WORK of their units a turn (another path only if
-#: the costliest so far fits), the drones holding until they are all made: 3 or 4 turns at 400 drones on the 32 x 32
-#: maps, each about 10 to 15 ms compiled (coordinator/scatter.c; 60 to 120 in Python), within the 20 ms bound of a
-#: turn (made at once, the turn took 116 to 185 ms in Python, BENCHMARKS.md, "LaCAM: the scattered paths compiled").
-SCATTER_WORK = 32_000
+#: the costliest so far fits), the drones holding until they are all made: 4 or 5 turns at 400 drones on the 32 x 32
+#: maps, each about as long as a turn of the search's (10 ms or so compiled, coordinator/scatter.c; 50 to 90 in
+#: Python): within the 20 ms bound of a turn, where made at once their turn took 116 to 390 ms (BENCHMARKS.md, "LaCAM:
+#: the scattered paths compiled and made over turns").
+SCATTER_WORK = 24_000
 #: Turns without progress (no new low of the drones' sum of distances to their targets) after which a small puzzle is
 #: searched whole (`exact.Exact`): LaCAM first, whose first step costs no wait; where it is stuck (a corridor's
 #: drones backing off in turn), the exact search. Two drones crossing a 10 x 10 x 10 world never wait for it.
