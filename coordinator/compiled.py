@@ -84,7 +84,10 @@ def scatter_library() -> ctypes.CDLL | None:
         name = f"scatter-{hashlib.sha256(source).hexdigest()[:16]}.so"
         folder = _cache()
         if folder is not None and (folder / name).is_file():
-            return _typed(ctypes.CDLL(str(folder / name)))
+            try:
+                return _typed(ctypes.CDLL(str(folder / name)))
+            except (OSError, AttributeError) as exc:  # (not a library of ours: built again in its place)
+                _LOG.info("the cached %s does not load (%s): built again", folder / name, exc)
         if folder is None:
             folder = Path(tempfile.mkdtemp(prefix="dronesim-"))
         return _typed(ctypes.CDLL(str(_build(source, folder, name))))

@@ -247,7 +247,7 @@ class Scatter:
         self.k, self.round, self.last = 0, 0, -1
         self.done = n == 0
         self.costliest = 0
-        self.lib = scatter_library() if compiled and n else None
+        self.lib = scatter_library() if compiled and n and dist.dtype == np.int16 else None  # (its tables' type)
         self.ctx: int | None = None
         if self.lib is not None:  # (its state in C; the arrays it reads kept alive as long as it lives)
             near = np.ascontiguousarray(graph.near, np.int64)

@@ -8,6 +8,11 @@ every layout, `replay --verify` re-simulates them, and a resumed coordinator's s
 from __future__ import annotations
 
 import logging
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -466,6 +471,28 @@ def test_the_compiled_search_is_off_where_the_environment_says_so_and_python_the
         assert scatter.lib is None and scatter.last == 0 and doors[0] in ({0}, {6})
     finally:
         monkeypatch.delenv(compiled.ENV)
+        compiled.scatter_library.cache_clear()
+
+
+def test_a_cached_library_that_does_not_load_is_built_again(tmp_path, monkeypatch) -> None:
+    """A file in the cache where the library should be that is not one (cut short, overwritten) is built again in
+    its place, never a reason to run Python's search for ever."""
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        pytest.skip("no C compiler on the PATH: nothing to build")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    compiled.scatter_library.cache_clear()
+    try:
+        lib = compiled.scatter_library()
+        assert lib is not None
+        (built,) = (tmp_path / "dronesim").glob("scatter-*.so")
+        built.unlink()  # (a new file: the loaded one stays mapped as it was)
+        built.write_bytes(b"not a library")
+        loads = "from coordinator import compiled; raise SystemExit(compiled.scatter_library() is None)"
+        done = subprocess.run([sys.executable, "-c", loads], cwd=Path(__file__).resolve().parents[1], timeout=300,
+                              capture_output=True, text=True, env={**os.environ, "XDG_CACHE_HOME": str(tmp_path)})
+        assert done.returncode == 0 and built.read_bytes()[:4] == b"\x7fELF", done.stderr  # (a new process: this one
+        # holds the first library under that name)
+    finally:
         compiled.scatter_library.cache_clear()
 
 
