@@ -20,8 +20,9 @@ step along the tree from the node they are at towards the goal node if found, el
 along the depth-first frontier as the search backtracks. A node's constraints pin the drones away from their goals
 first, then the drones on their goals nearest to them (`Search._pins`), not all in PIBT's order. PIBT's candidates in
 the whole world's search are guided by scattered paths (`Scatter`, LaCAM3's: paths that meet each other's as little as
-they can in space and time, made at once as the search starts where the tables are made at the game's start): a drone
-on its path tries its next cell first, so that the first chain spreads the drones over several doors. The search is
+they can in space and time, made in the search's first turns, the drones holding, where the tables are made at the
+game's start; compiled where the machine can build it, coordinator/scatter.c): a drone on its path tries its next cell
+first, so that the first chain spreads the drones over several doors. The search is
 complete whatever the drones do meanwhile, and once it has found the goal the drones walk to it: every drone home.
 
 State and determinism: what the search keeps is a function of the calls' arguments alone (the drones' cells,
@@ -225,8 +226,10 @@ class Scatter:
     goal since an earlier step), then by the length through the cell (its distance table: the search stays within the
     margin), then by the cell's number: deterministic. The drones' order in each round is drawn from the round's number
     alone (`arbiter.tie_breaks`). A function of the drones' cells and goals alone, never of time; `advance` plans
-    within a budget (a unit per `POPS` cells settled), the search makes them at once as it starts (`Search`): in the
-    turns they came too late to guide the first chain (docs/cooperation.md, "Scattered paths")."""
+    within a budget (a unit per `POPS` cells settled), the search makes them in its first turns, `SCATTER_WORK` units
+    a turn, the drones holding, before its first PIBT call (`Search.expand`): made while the drones moved they came
+    too late to guide the first chain (docs/cooperation.md, "Scattered paths"). `_plan` and `_collisions` run compiled
+    (coordinator/scatter.c, `compiled.scatter_library`) where the machine can build it: the same paths and units."""
 
     __slots__ = ("cells", "near", "start", "goal", "dist", "margin", "rounds", "F", "occ", "moves", "parked", "paths",
                  "order", "k", "round", "last", "done", "costliest", "lib", "ctx", "_arrays", "_release", "__weakref__")
