@@ -94,6 +94,12 @@ def dronesim(*args: str) -> list[str]:
     return [sys.executable, "-m", "dronesim", *args]
 
 
+def exit_status(returncode: int) -> int:
+    """The status this process passes on for its child's `returncode`: a child killed by signal N (-N) as shells and
+    Docker report it, 128 + N (SIGTERM: 143); `sys.exit(-15)` would say 241."""
+    return 128 - returncode if returncode < 0 else returncode
+
+
 def claim(argv: list[str]) -> int:
     """Fly the first drone id the coordinator admits (see the module's doc); the drone's exit code."""
     proc: subprocess.Popen | None = None
@@ -130,7 +136,7 @@ def claim(argv: list[str]) -> int:
                 continue
             sys.stderr.write(line)
             sys.stderr.flush()
-        code = proc.wait()
+        code = exit_status(proc.wait())
         if refusal and (code == 0 or stopping or not TAKEN.search(refusal)):
             print(refusal, file=sys.stderr, flush=True)  # (a taken id is expected: the line below says it)
         if code == 0 or stopping or not refusal:

@@ -4,6 +4,7 @@ game cleanly; the process then exits with the status shells expect (128 + the si
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import logging
 import os
@@ -109,6 +110,16 @@ def closing(over: object) -> None:
 
     for s in STOPPING:
         signal.signal(s, leave)
+    atexit.unregister(_ignore_stopping)  # (once, however often the game ends)
+    atexit.register(_ignore_stopping)
+
+
+def _ignore_stopping() -> None:
+    """The last of `closing`: as the interpreter finalizes, it puts the default action back on the signals that had
+    a Python handler (`leave` included), and a SIGTERM then would end the process as killed (-15: 143) while it frees
+    its objects (Zenoh's among them). Ignored instead (that it keeps): the process is exiting with its status anyway."""
+    for s in STOPPING:
+        signal.signal(s, signal.SIG_IGN)
 
 
 def until_stopped(run: Callable[[], object], logger: logging.Logger) -> int:

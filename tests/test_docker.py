@@ -25,6 +25,7 @@ import queue
 import re
 import shlex
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -884,6 +885,22 @@ def test_entrypoint_names_each_containers_entity():
     assert ep.TAKEN.search("dronesim drone: connection refused: D01 is already connected")
     assert ep.TAKEN.search("dronesim drone: connection refused: drone D02 is already taken by H01")
     assert ep.UNKNOWN.search("dronesim drone: connection refused: unknown drone D04: this game flies D01, D02")
+
+
+def test_entrypoint_passes_on_a_drone_killed_by_a_signal_as_shells_do(tmp_path, monkeypatch):
+    """The CI run of 2026-12-01: a claimed drone killed by SIGTERM (-15) left its container with 241, which says
+    nothing; a drone run directly would have left it with 143, as it now does."""
+    ep = load_script(ENTRYPOINT)
+    monkeypatch.setenv("DRONESIM_STATE", str(tmp_path / "state.json"))
+    monkeypatch.setattr(ep, "dronesim", lambda *args: [sys.executable, "-c",
+                                                       "import os, signal; os.kill(os.getpid(), signal.SIGTERM)"])
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)}
+    try:
+        assert ep.claim(["--id", "auto"]) == 143
+    finally:  # (claim passes the container's signals on to its drone: this process's come back)
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+    assert [ep.exit_status(c) for c in (0, 2, 75, -9, -2)] == [0, 2, 75, 137, 130]
 
 
 def test_health_check_without_an_entity_is_healthy(tmp_path):

@@ -82,6 +82,39 @@ def test_a_signal_once_the_game_is_over_ends_the_process_with_the_games_status(t
         assert p.returncode == status, (when, p.stderr)
 
 
+FINALIZING = """
+import logging, os, signal, sys
+from network.signals import closing, until_stopped
+from schema import EndReason, Over
+
+class Late:  # freed as the interpreter finalizes its modules, after it has put back the signals' default actions
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+late = Late()
+
+def run():
+    over = Over(turn=3, sender="SRV", reason=EndReason.JOURNAL_FAILED, text="disk full")
+    closing(over)
+    return over
+
+sys.exit(until_stopped(run, logging.getLogger("test")))
+"""
+
+
+def test_a_signal_while_the_interpreter_finalizes_after_the_game_leaves_the_games_status(tmp_path) -> None:
+    """The CI run of 2026-12-01: `docker compose stop` signalled a drone and the environment while their
+    interpreters freed their objects, once Python had put the default action back on SIGTERM: killed (-15, 143),
+    though their game was over. `closing` has the signals ignored from there on: the status stays the game's."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    p = subprocess.run([sys.executable, "-c", FINALIZING], cwd=root, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 75, p.stderr
+
+
 def test_closing_leaves_the_handlers_of_a_process_that_is_not_an_entitys_command() -> None:
     """A game played in a test's process (no `until_stopped`): `closing` changes none of its handlers."""
     from network.signals import closing
