@@ -9,6 +9,7 @@ the exit status is 0 only if every process exited 0.
 from __future__ import annotations
 
 import argparse
+import collections
 import contextlib
 import json
 import pathlib
@@ -20,6 +21,8 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import zenoh
 
@@ -34,8 +37,8 @@ from network.signals import Stop, exit_status, on_stop, stop, waking
 from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
 from schema import UsageError, drone_id
 from schema.errors import seconds
-from schema.keys import ROOT
-from schema.tuning import KILL_S, PHASE_DEADLINE_S, STOP_S, UP_ADMIT_DEADLINE_S
+from schema.keys import ROOT, Keys
+from schema.tuning import KILL_S, PHASE_DEADLINE_S, STOP_S, UP_ADMIT_DEADLINE_S, UP_ADMIT_PER_PROCESS_S, UP_START_WINDOW
 from world.grid import build_world
 
 
@@ -109,10 +112,15 @@ def _common(args: argparse.Namespace, locator: str) -> list[str]:
     return ["--mode", "client", "--connect", locator, "--root", args.root, "--log-level", args.log_level]
 
 
-def coordinator_flags(args: argparse.Namespace, locator: str) -> list[str]:
-    """The coordinator's flags (after `dronesim coordinator`): the game it plays."""
+def admit_deadline(processes: int) -> float:
+    """How long the game waits for its `processes` to connect: they start `UP_START_WINDOW` at a time."""
+    return UP_ADMIT_DEADLINE_S + UP_ADMIT_PER_PROCESS_S * processes
+
+
+def coordinator_flags(args: argparse.Namespace, locator: str, processes: int = 0) -> list[str]:
+    """The coordinator's flags (after `dronesim coordinator`): the game it plays, with its `processes` besides."""
     return [*_common(args, locator), "--seed", str(args.seed), "--size", args.size, "--drones", str(args.drones),
-            "--max-turns", str(args.max_turns), "--admit-deadline", f"{UP_ADMIT_DEADLINE_S:g}",
+            "--max-turns", str(args.max_turns), "--admit-deadline", f"{admit_deadline(processes):g}",
             "--pace", str(args.pace),
             *_passed(args, "world", "starts", "journal", "scenario", "arbiter", "lifelong"),
             *(["--phase-deadline", str(args.phase_deadline)] if args.phase_deadline is not None else [])]
@@ -121,8 +129,7 @@ def coordinator_flags(args: argparse.Namespace, locator: str) -> list[str]:
 def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str]]]:
     """(name, argv) of every entity process, connected as clients to `locator`."""
     base, common = [sys.executable, "-m", "dronesim"], _common(args, locator)
-    procs = [("SRV", [*base, "coordinator", *coordinator_flags(args, locator)]),
-             ("ENV", [*base, "env", *common, "--no-draw"])]
+    procs = [("ENV", [*base, "env", *common, "--no-draw"])]
     pilots = (Scenario.load(args.scenario).autopilots if args.scenario
               else {drone_id(n): args.autopilot for n in range(1, args.drones + 1)})
     if args.swarm:  # one swarm host per autopilot
@@ -138,7 +145,7 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
                                                              "ros2"), *lifelong, *mavlink]))
     if args.ros2 or args.foxglove:  # the viewer: ROS 2 topics, Foxglove live
         procs.append(("ROS2", [*base, "ros2", *common, *_passed(args, "foxglove")]))
-    return procs
+    return [("SRV", [*base, "coordinator", *coordinator_flags(args, locator, len(procs))]), *procs]
 
 
 def check_game(args: argparse.Namespace) -> None:
@@ -238,15 +245,26 @@ def play(args: argparse.Namespace, creds: GameCredentials | None) -> int:
             f"seed {args.seed}, {args.drones} drone(s), autopilot {args.autopilot}"
         print(f"dronesim up: router on {locator}, {what}", flush=True)
         running: list[tuple[str, subprocess.Popen]] = []
+
+        def launch(name: str, argv: list[str]) -> subprocess.Popen:
+            if creds is not None:  # (the viewer reads what the ground station may read)
+                argv = [*argv, *creds.flags("GCS" if name == "ROS2" else name)]
+            console = name == "GCS" and interactive  # it reads the terminal: it stays in its group
+            return subprocess.Popen(argv, stdin=None if console else subprocess.DEVNULL, env=child_env(),
+                                    start_new_session=not console)
+
+        events: queue.SimpleQueue[Present | Ended | None] = queue.SimpleQueue()
+        keys = Keys(args.root)
+
+        def on_token(sample: zenoh.Sample) -> None:  # (on Zenoh's thread: a key not ours is nobody's presence)
+            with contextlib.suppress(ValueError):
+                if sample.kind == zenoh.SampleKind.PUT:
+                    events.put(Present(keys.presence_of(str(sample.key_expr))[0]))
+
+        presence = router.liveliness().declare_subscriber(keys.any_alive, on_token)
         try:
             with on_stop(stop):
-                for name, argv in commands(args, locator):
-                    if creds is not None:  # (the viewer reads what the ground station may read)
-                        argv = [*argv, *creds.flags("GCS" if name == "ROS2" else name)]
-                    console = name == "GCS" and interactive  # it reads the terminal: it stays in its group
-                    running.append((name, subprocess.Popen(argv, stdin=None if console else subprocess.DEVNULL,
-                                                           env=child_env(), start_new_session=not console)))
-                codes = supervise(running)
+                codes = supervise(commands(args, locator), launch, running, events, UP_START_WINDOW)
         except Stop as sig:
             print(f"dronesim up: {signal.Signals(sig.signum).name}: stopping the game", file=sys.stderr, flush=True)
             try:
@@ -257,6 +275,8 @@ def play(args: argparse.Namespace, creds: GameCredentials | None) -> int:
                     proc.kill()
                     proc.wait()
             return exit_status(sig.signum)
+        finally:
+            presence.undeclare()
         return ending(codes)
 
 
@@ -282,25 +302,55 @@ USAGE_STATUS = 2
 VITAL = ("SRV", "GCS")
 
 
-def supervise(running: list[tuple[str, subprocess.Popen]]) -> dict[str, int]:
-    """Wait for every process to exit and return their exit codes. If a vital one fails while others still run, the
-    game is stopped at once (`stop_all`, as on Ctrl-C) instead of running on without it to its turn limit."""
-    done: queue.SimpleQueue[tuple[str, int] | None] = queue.SimpleQueue()
-    for name, proc in running:
-        threading.Thread(target=lambda n=name, p=proc: done.put((n, p.wait())), name=f"wait-{name}",
-                         daemon=True).start()
-    codes: dict[str, int] = {}
-    with waking(lambda: done.put(None)):  # a signal's handler runs at once, even while blocked in get()
+@dataclass(frozen=True, slots=True)
+class Present:
+    """A presence token of `entity` appeared: its process has connected (`supervise`'s event)."""
+
+    entity: str
+
+
+@dataclass(frozen=True, slots=True)
+class Ended:
+    """The process `name` exited with `code` (`supervise`'s event)."""
+
+    name: str
+    code: int
+
+
+def supervise(todo: list[tuple[str, list[str]]], launch: Callable[[str, list[str]], subprocess.Popen],
+              running: list[tuple[str, subprocess.Popen]], events: queue.SimpleQueue[Present | Ended | None],
+              window: int) -> dict[str, int]:
+    """Start the processes `todo` (name, argv) in order, each with `launch`, into `running`, at most `window` at a time
+    that have not connected yet (no `Present` event of theirs) and still run; wait for every process to exit and
+    return their exit codes. If a vital one fails while others still run, none more is started and the game is
+    stopped at once (`stop_all`, as on Ctrl-C) instead of running on without it to its turn limit."""
+    waiting, connecting, codes = collections.deque(todo), set[str](), dict[str, int]()
+
+    def start() -> None:
+        while waiting and len(connecting) < window:
+            name, argv = waiting.popleft()
+            proc = launch(name, argv)
+            running.append((name, proc))
+            connecting.add(name)
+            threading.Thread(target=lambda n=name, p=proc: events.put(Ended(n, p.wait())), name=f"wait-{name}",
+                             daemon=True).start()
+
+    with waking(lambda: events.put(None)):  # a signal's handler runs at once, even while blocked in get()
+        start()
         while len(codes) < len(running):
-            if (item := done.get()) is None:
-                continue
-            name, code = item
-            codes[name] = code
-            left = [(n, p) for n, p in running if n not in codes]
-            if code != 0 and name in VITAL and left:
-                print(f"dronesim up: {name} exited {code}: stopping the game", file=sys.stderr, flush=True)
-                stop_all(left, signal.SIGTERM)
-                codes.update((n, p.wait()) for n, p in left)
+            match events.get():
+                case Present(entity):
+                    connecting.discard(entity)
+                case Ended(name, code):
+                    connecting.discard(name)
+                    codes[name] = code
+                    left = [(n, p) for n, p in running if n not in codes]
+                    if code != 0 and name in VITAL and (left or waiting):
+                        print(f"dronesim up: {name} exited {code}: stopping the game", file=sys.stderr, flush=True)
+                        waiting.clear()
+                        stop_all(left, signal.SIGTERM)
+                        codes.update((n, p.wait()) for n, p in left)
+            start()
     return codes
 
 

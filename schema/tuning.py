@@ -251,8 +251,14 @@ DECIDING_SILENCE_S = 2.0
 MOVES_REPEAT_S = DECIDING_EVERY_S
 #: How long a game waits for every entity to connect, also when resumed (`--admit-deadline`; 0: forever).
 ADMIT_DEADLINE_S = 600.0
-#: The same for the game `dronesim up` plays: it starts every entity itself, on this machine.
+#: The same for the game `dronesim up` plays: it starts every entity itself, on this machine, `UP_START_WINDOW` at a
+#: time, so the deadline grows by `UP_ADMIT_PER_PROCESS_S` a process (400 drones, one process each: 260 s).
 UP_ADMIT_DEADLINE_S = 60.0
+UP_ADMIT_PER_PROCESS_S = 0.5
+#: How many of its processes `dronesim up` has started at most that have not connected yet (no presence token seen)
+#: and still run. Started all at once, 400 drones' sessions overran the router's pending handshakes (Zenoh's
+#: `accept_pending`, 100) and timeouts on 2 cores: refused or stuck, they never connected, and the game ended ABORTED.
+UP_START_WINDOW = 16
 #: How long a game waits for a vanished environment to come back (`GameConfig.env_grace`).
 ENV_GRACE_S = 30.0
 #: How long a game holds after the coordinator's link is lost, e.g. a router restart (`--link-grace`).

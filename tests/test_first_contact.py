@@ -102,3 +102,86 @@ def test_a_zenoh_pettingzoo_env_left_open_does_not_keep_python_alive(form: str, 
         pytest.fail(f"the script did not exit: {out} {err[-2000:]}")
     assert "mid-episode" in out, err[-2000:]
     assert proc.returncode == (1 if ending == "raise" else 0), err[-2000:]
+
+
+class FakeProcess:
+    """A process `supervise` starts: it runs until `end(code)`."""
+
+    def __init__(self) -> None:
+        import threading
+        self._ended, self.returncode = threading.Event(), None
+
+    def end(self, code: int) -> None:
+        self.returncode = code
+        self._ended.set()
+
+    def wait(self, timeout: float | None = None) -> int:
+        self._ended.wait(timeout)
+        return self.returncode
+
+    def poll(self) -> int | None:
+        return self.returncode
+
+    def send_signal(self, signum: int) -> None:
+        self.end(128 + signum)
+
+
+def test_dronesim_up_starts_its_processes_a_window_at_a_time() -> None:
+    """`dronesim up --drones 400` started every process at once: their sessions overran the router's pending
+    handshakes on 2 cores, a hundred never connected and the game ended ABORTED. At most `window` of them are now
+    started and neither connected (a presence token seen) nor ended; each that connects or ends lets the next start."""
+    import queue
+    import threading
+
+    from dronesim.up import Present, supervise
+
+    names = ["SRV", "ENV", *(f"D{i:02d}" for i in range(1, 7)), "GCS"]
+    window, released = 3, set[str]()
+    started: queue.SimpleQueue[tuple[str, FakeProcess]] = queue.SimpleQueue()
+    events: queue.SimpleQueue = queue.SimpleQueue()
+
+    def launch(name: str, argv: list[str]) -> FakeProcess:
+        unreleased = [n for n, _ in running if n not in released]
+        assert len(unreleased) < window, (name, unreleased)  # (a launch beyond the window fails the run)
+        proc = FakeProcess()
+        started.put((name, proc))
+        return proc
+
+    running: list = []
+    codes: dict = {}
+    t = threading.Thread(target=lambda: codes.update(supervise([(n, [n]) for n in names], launch, running, events,
+                                                               window)))
+    t.start()
+    procs = dict(started.get(timeout=60) for _ in range(window))
+    assert list(procs) == names[:window]
+    for name in names[window:]:  # each presence, then each end, lets one more start, in order
+        first = next(n for n in procs if n not in released)
+        released.add(first)
+        if len(released) % 2:
+            events.put(Present(first))
+        else:
+            procs[first].end(0)  # (its waiting thread says so)
+        new, proc = started.get(timeout=60)
+        assert new == name
+        procs[new] = proc
+    for name, proc in procs.items():
+        released.add(name)
+        proc.end(0)
+    t.join(60)
+    assert codes == dict.fromkeys(names, 0)
+    assert started.empty()
+
+
+def test_dronesim_up_with_a_window_of_one_sees_each_process_connect_through_its_secured_router() -> None:
+    """The window is released by the presence tokens `dronesim up`'s own router sees through the game's TLS and
+    access control: one process at a time, the game plays to its end."""
+    code = textwrap.dedent("""
+        import sys
+        import dronesim.up as up
+        up.UP_START_WINDOW = 1
+        sys.exit(up.cli(["--seed", "7", "--drones", "3", "--targets", "9,9,0", "--quiet", "--max-turns", "40"]))
+    """)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                       stdin=subprocess.DEVNULL, env=child_env())
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "all 6 processes exited 0" in p.stdout
