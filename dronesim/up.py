@@ -143,7 +143,8 @@ def commands(args: argparse.Namespace, locator: str) -> list[tuple[str, list[str
     lifelong = ["--lifelong", str(args.seed)] if args.lifelong else []  # (its targets drawn with the game's seed)
     procs.append(("GCS", [*base, "gcs", *common, *_passed(args, "scenario", "targets", "script", "quiet", "web",
                                                              "ros2"), *lifelong, *mavlink]))
-    if args.ros2 or args.foxglove:  # the viewer: ROS 2 topics, Foxglove live
+    if args.ros2 or args.foxglove:  # the viewer: ROS 2 topics, Foxglove live (last: it has no presence token of ours,
+        # and holds its place in `supervise`'s window until it ends)
         procs.append(("ROS2", [*base, "ros2", *common, *_passed(args, "foxglove")]))
     return [("SRV", [*base, "coordinator", *coordinator_flags(args, locator, len(procs))]), *procs]
 
