@@ -117,7 +117,9 @@ def closing(over: object) -> None:
 def _ignore_stopping() -> None:
     """The last of `closing`: as the interpreter finalizes, it puts the default action back on the signals that had
     a Python handler (`leave` included), and a SIGTERM then would end the process as killed (-15: 143) while it frees
-    its objects (Zenoh's among them). Ignored instead (that it keeps): the process is exiting with its status anyway."""
+    its objects (Zenoh's among them). Ignored instead (that it keeps): the process is exiting with its status anyway.
+    (One that hung from there on would end only by SIGKILL: Docker's after its stop timeout, `dronesim up`'s after
+    `KILL_S`.)"""
     for s in STOPPING:
         signal.signal(s, signal.SIG_IGN)
 
