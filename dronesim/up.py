@@ -12,8 +12,8 @@ import argparse
 import collections
 import contextlib
 import json
+import logging
 import pathlib
-import queue
 import signal
 import socket
 import subprocess
@@ -34,12 +34,15 @@ from entities.autopilots import COOPERATIVE, DEFAULT, REGISTRY
 from entities.gcs import Ground
 from entities.mavlink.options import MAVLINK_FLAGS, add_mavlink_args
 from network.signals import Stop, exit_status, on_stop, stop, waking
-from network.transport import add_zenoh_args, apply_flags, open_session, router_config, router_locators
+from network.transport import Inbox, Presence, add_zenoh_args, apply_flags, open_session, router_config, router_locators
 from schema import UsageError, drone_id
 from schema.errors import seconds
 from schema.keys import ROOT, Keys
 from schema.tuning import KILL_S, PHASE_DEADLINE_S, STOP_S, UP_ADMIT_DEADLINE_S, UP_ADMIT_PER_PROCESS_S, UP_START_WINDOW
 from world.grid import build_world
+
+#: The rejections its router's presence watch counts, if any (`Inbox`).
+LOG = logging.getLogger("dronesim.up")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -254,15 +257,8 @@ def play(args: argparse.Namespace, creds: GameCredentials | None) -> int:
             return subprocess.Popen(argv, stdin=None if console else subprocess.DEVNULL, env=child_env(),
                                     start_new_session=not console)
 
-        events: queue.SimpleQueue[Present | Ended | None] = queue.SimpleQueue()
-        keys = Keys(args.root)
-
-        def on_token(sample: zenoh.Sample) -> None:  # (on Zenoh's thread: a key not ours is nobody's presence)
-            with contextlib.suppress(ValueError):
-                if sample.kind == zenoh.SampleKind.PUT:
-                    events.put(Present(keys.presence_of(str(sample.key_expr))[0]))
-
-        presence = router.liveliness().declare_subscriber(keys.any_alive, on_token)
+        events = Inbox(router, Keys(args.root), LOG)
+        events.watch_presence()  # (the processes' presence tokens: `supervise`'s window)
         try:
             with on_stop(stop):
                 codes = supervise(commands(args, locator), launch, running, events, UP_START_WINDOW)
@@ -277,7 +273,7 @@ def play(args: argparse.Namespace, creds: GameCredentials | None) -> int:
                     proc.wait()
             return exit_status(sig.signum)
         finally:
-            presence.undeclare()
+            events.close()
         return ending(codes)
 
 
@@ -304,13 +300,6 @@ VITAL = ("SRV", "GCS")
 
 
 @dataclass(frozen=True, slots=True)
-class Present:
-    """A presence token of `entity` appeared: its process has connected (`supervise`'s event)."""
-
-    entity: str
-
-
-@dataclass(frozen=True, slots=True)
 class Ended:
     """The process `name` exited with `code` (`supervise`'s event)."""
 
@@ -319,12 +308,12 @@ class Ended:
 
 
 def supervise(todo: list[tuple[str, list[str]]], launch: Callable[[str, list[str]], subprocess.Popen],
-              running: list[tuple[str, subprocess.Popen]], events: queue.SimpleQueue[Present | Ended | None],
-              window: int) -> dict[str, int]:
+              running: list[tuple[str, subprocess.Popen]], events: Inbox, window: int) -> dict[str, int]:
     """Start the processes `todo` (name, argv) in order, each with `launch`, into `running`, at most `window` at a time
-    that have not connected yet (no `Present` event of theirs) and still run; wait for every process to exit and
-    return their exit codes. If a vital one fails while others still run, none more is started and the game is
-    stopped at once (`stop_all`, as on Ctrl-C) instead of running on without it to its turn limit."""
+    that have not connected yet (no `Presence` event of theirs from `events`, which watches the presence tokens) and
+    still run; wait for every process to exit and return their exit codes. If a vital one fails while others still
+    run, none more is started and the game is stopped at once (`stop_all`, as on Ctrl-C) instead of running on
+    without it to its turn limit."""
     waiting, connecting, codes = collections.deque(todo), set[str](), dict[str, int]()
 
     def start() -> None:
@@ -333,14 +322,14 @@ def supervise(todo: list[tuple[str, list[str]]], launch: Callable[[str, list[str
             proc = launch(name, argv)
             running.append((name, proc))
             connecting.add(name)
-            threading.Thread(target=lambda n=name, p=proc: events.put(Ended(n, p.wait())), name=f"wait-{name}",
+            threading.Thread(target=lambda n=name, p=proc: events.post(Ended(n, p.wait())), name=f"wait-{name}",
                              daemon=True).start()
 
-    with waking(lambda: events.put(None)):  # a signal's handler runs at once, even while blocked in get()
+    with waking(lambda: events.post(None)):  # a signal's handler runs at once, even while blocked in get()
         start()
         while len(codes) < len(running):
             match events.get():
-                case Present(entity):
+                case Presence(entity, _, True):
                     connecting.discard(entity)
                 case Ended(name, code):
                     connecting.discard(name)

@@ -104,6 +104,20 @@ def test_a_zenoh_pettingzoo_env_left_open_does_not_keep_python_alive(form: str, 
     assert proc.returncode == (1 if ending == "raise" else 0), err[-2000:]
 
 
+class Events:
+    """What `supervise` uses of an `Inbox`: events posted from any thread, taken in order."""
+
+    def __init__(self) -> None:
+        import queue
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+
+    def post(self, event: object) -> None:
+        self._queue.put(event)
+
+    def get(self, timeout: float | None = None) -> object:
+        return self._queue.get(timeout=timeout)
+
+
 class FakeProcess:
     """A process `supervise` starts: it runs until `end(code)`."""
 
@@ -133,12 +147,13 @@ def test_dronesim_up_starts_its_processes_a_window_at_a_time() -> None:
     import queue
     import threading
 
-    from dronesim.up import Present, supervise
+    from dronesim.up import supervise
+    from network.transport import Presence
 
     names = ["SRV", "ENV", *(f"D{i:02d}" for i in range(1, 7)), "GCS"]
     window, released = 3, set[str]()
     started: queue.SimpleQueue[tuple[str, FakeProcess]] = queue.SimpleQueue()
-    events: queue.SimpleQueue = queue.SimpleQueue()
+    events = Events()  # (an `Inbox`'s: the events posted, presences among them)
 
     def launch(name: str, argv: list[str]) -> FakeProcess:
         unreleased = [n for n, _ in running if n not in released]
@@ -158,7 +173,7 @@ def test_dronesim_up_starts_its_processes_a_window_at_a_time() -> None:
         first = next(n for n in procs if n not in released)
         released.add(first)
         if len(released) % 2:
-            events.put(Present(first))
+            events.post(Presence(first, "s1", True))
         else:
             procs[first].end(0)  # (its waiting thread says so)
         new, proc = started.get(timeout=60)
