@@ -185,18 +185,29 @@ def measured_rate(game: Game, case: Case) -> float:
     return 1 / statistics.fmean(game.latencies) if game.latencies else float("nan")
 
 
-def flood_rate(game: Game, case: Case, first: float, last: float) -> tuple[float, int, float, bool]:
-    """(turns/s, turns, seconds, cut) over the turns the flood overlaps: from the last turn begun at or
-    before its first message to the first begun at or after its last message or reply (a turn begins when
-    the STATUS of the one before arrives); `cut`: the flood outlasted the measured turns (then up to the last)."""
+def flood_window(game: Game, case: Case, first: float, last: float) -> tuple[list[float], bool]:
+    """The STATUS arrival times bounding the turns the flood overlaps: from the last turn begun at or before its
+    first message to the first begun at or after its last message or reply (a turn begins when the STATUS of the
+    one before arrives); and whether it was cut: the flood outlasted the measured turns (then up to the last)."""
     stamps = sorted(game.arrived[t] for t in range(case.warmup, case.end_turn) if t in game.arrived)
     before = [s for s in stamps if s <= first]
     lo = before[-1] if before else stamps[0]
     after = [s for s in stamps if s >= last and s > lo]  # a flood within one turn: that turn
     hi = after[0] if after else stamps[-1]
-    turns = sum(lo < s <= hi for s in stamps)
-    seconds = hi - lo
-    return (turns / seconds if seconds > 0 else float("nan")), turns, seconds, not after
+    return [s for s in stamps if lo <= s <= hi], not after
+
+
+def flood_rate(game: Game, case: Case, first: float, last: float) -> tuple[float, int, float, bool]:
+    """(turns/s, turns, seconds, cut) over the turns the flood overlaps (`flood_window`)."""
+    window, cut = flood_window(game, case, first, last)
+    turns, seconds = sum(s > window[0] for s in window), window[-1] - window[0]
+    return (turns / seconds if seconds > 0 else float("nan")), turns, seconds, cut
+
+
+def longest_turn(game: Game, case: Case, first: float, last: float) -> float:
+    """Seconds of the longest of the turns the flood overlaps (`flood_window`)."""
+    window, _ = flood_window(game, case, first, last)
+    return max((b - a for a, b in zip(window, window[1:])), default=float("nan"))
 
 
 def _states(game: Game) -> dict[int, object]:
@@ -208,6 +219,7 @@ COLUMNS = (
     ("ratio", "÷ clean"), ("target", f"target ≥ {TARGET:g}"), ("same", "same journal / states"),
     ("attacker", "attacker: sent / answered / refused (its CPU s)"), ("srv", "rejected by the coordinator"),
     ("env", "rejected by the environment"), ("cpu", "CPU ms per turn: router / coordinator / environment"),
+    ("resent", "station's DONEs sent again: announced / timed out"), ("longest", "longest turn in the flood (ms)"),
     ("codes", "exit codes"),
 )
 
@@ -227,6 +239,7 @@ def rows_of(games: list[Played], case: Case) -> tuple[list[Row], list[str]]:
             errors.append(f"{p.name}: {g.error}")
         else:
             cells["tps"] = f"{measured_rate(g, case):.1f}"
+            cells["resent"] = f"{g.resent.get('announced', 0)} / {g.resent.get('timed out', 0)}"
             cells["cpu"] = " / ".join(f"{g.cpu.get(n, float('nan')) * 1e3:.2f}"
                                       for n in ("router", "coordinator", "env"))
             if reference is not None:
@@ -247,6 +260,7 @@ def rows_of(games: list[Played], case: Case) -> tuple[list[Row], list[str]]:
                     ratio = rate / clean_rate
                     cells["during"] = f"{rate:.1f} ({turns}, {seconds:.2f}{', cut' if cut else ''})"
                     cells["ratio"] = f"{ratio:.2f}"
+                    cells["longest"] = f"{longest_turn(g, case, a['first'], a['last']) * 1e3:.1f}"
                     p.ratio = ratio
                     cells["target"] = ("control" if p.flood in CONTROL else
                                        "met" if ratio >= TARGET else "MISSED")
@@ -333,7 +347,11 @@ def legend(facts: dict) -> str:
         "every message of the flood and drops most) and the game's processes, so on a machine of few cores a "
         "flood costs the game CPU as well as whatever reaches it (the attacker's CPU seconds ÷ the flood's "
         "seconds: the cores it took; `--attacker-nice 0` measures an attacker that takes them as an equal). "
-        "Exit codes: coordinator / environment / swarm host."
+        "Station's DONEs sent again (the whole game): \"announced\", an answer ahead lost on the way (its phase "
+        "announced all the same, answered again: a round trip), \"timed out\", a phase's DONE whose STATUS did not "
+        "come in time (`DONE_RETRY_TURNS` turns, 20 ms at least, then twice as long), `entities.gcs.Station.resent`: "
+        "a router's budget of puts a session keeps the first of DONEs that travel together. Longest turn: the longest "
+        "of the turns the flood overlaps. Exit codes: coordinator / environment / swarm host."
     )
 
 

@@ -150,6 +150,7 @@ class Game:
     over: str = ""
     ros_user: str = ""  # with `Variant.ros2`: what its ROS 2 user received (benchmarks/ros_user.py's last line)
     windows: list[Window] = field(default_factory=list)  # with `Variant.ros2_windows`: each window measured
+    resent: dict[str, int] = field(default_factory=dict)  # the station's DONEs sent again (`Station.resent`)
 
 
 ROLES = ("coordinator", "env", "swarm")
@@ -419,6 +420,7 @@ class _Watch:
                     if not self.measured_to and self.case.warmup in self.game.statuses:  # over before its end
                         self.measured(max(self.game.statuses) + 1)
         self.game.over = f"{end.over.reason.value} at turn {end.over.turn}"
+        self.game.resent = dict(station.resent)
         member.close()
 
     def idle(self, since: float) -> None:

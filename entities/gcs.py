@@ -319,6 +319,9 @@ class Station:
         self._ahead_sent: dict[int, SendDone] = {}  # the DONEs answered ahead, until their phase (`_lost`)
         self._status_at: tuple[int, float] | None = None  # the last STATUS's turn, and when it came
         self._turn_s: float | None = None  # seconds a turn lately (smoothed), once two STATUS came
+        #: DONEs sent again: "announced" (answered ahead, its phase announced all the same: lost on the way),
+        #: "timed out" (a phase's DONE whose STATUS did not come in time)
+        self.resent: Counter[str] = Counter()
         self.pending: int | None = None  # a held GCS phase not answered yet
         self.over: Over | None = None
         self._over_since: float | None = None  # when OVER came, while its turn's STATUS is awaited
@@ -383,6 +386,7 @@ class Station:
         if self._unacked is not None and self.over is None and now >= self._unacked[1]:
             done, _, wait = self._unacked
             self._unacked = (done, now + 2 * wait, 2 * wait)
+            self.resent["timed out"] += 1
             self._outgoing.append(done)
         effects += self._release(now)
         since = self._over_since
@@ -457,6 +461,7 @@ class Station:
             self._outgoing.remove(lost)
             self._outgoing.appendleft(lost)
             return None
+        self.resent["announced"] += 1
         return SendDone(lost.msg)
 
     def _gcs_phase(self, turn: int) -> list[Effect]:

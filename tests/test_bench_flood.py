@@ -40,8 +40,11 @@ def test_quick_run_records_the_table_and_the_floods_change_no_journal(capsys, tm
         assert row["same journal / states"] == "yes / yes", row
         assert row["exit codes"] == "0 / 0 / 0", row
         assert re.fullmatch(r"\d+\.\d", row["turns/s (measured turns)"]), row
+        # the station's own DONEs sent again, as the game went (a router's budget may drop those that travel together)
+        assert re.fullmatch(r"\d+ / \d+", row["station's DONEs sent again: announced / timed out"]), row
     for name in (nps, ask):
         assert re.fullmatch(r"\d+\.\d\d", rows[name]["÷ clean"]), rows[name]
+        assert re.fullmatch(r"\d+\.\d", rows[name]["longest turn in the flood (ms)"]), rows[name]
         assert rows[name][f"target ≥ {flood.TARGET:g}"] in ("met", "MISSED"), rows[name]
     attacker = "attacker: sent / answered / refused (its CPU s)"
     found = re.fullmatch(r"([\d,]+) / ([\d,]+) / ([\d,]+) \(\d+\.\d\d\)(?:, ([\d,]+) unanswered)?",

@@ -355,8 +355,10 @@ def test_a_script_answers_its_phase_at_once_and_the_phases_with_nothing_new_ahea
         == [(4, {}, Intent.CONTINUE)]
     # announced all the same: its DONE ahead was lost on the way (a router's budget kept the first of a burst), so
     # it answers again (and nothing more ahead: 5 brings a change)
+    assert station.resent["announced"] == 0
     assert sent(heard(station, gcs(3))) == [(3, {}, Intent.CONTINUE)]
     assert heard(station, gcs(3)) == [], "the phase announced again (after a lost link): answered once more"
+    assert station.resent == {"announced": 1}, "counted (bench flood shows it)"
     assert sent(heard(station, gcs(5))) == [(5, {"D02": (2, 2, 2)}, Intent.FINAL),
                                                   (6, {}, Intent.FINAL), (7, {}, Intent.FINAL)]
 
@@ -503,6 +505,7 @@ def test_a_phases_done_goes_out_again_until_its_turn_is_played() -> None:
     assert station.tick(3 * DONE_RETRY_S) == [first]
     station.receive(status(1, st("D01", (1, 0, 0), target=(1, 1, 1)), st("D02", (0, 2, 0))), 1.0)
     assert station.wake(1.0) is None and station.tick(100.0) == [], "its turn was played"
+    assert station.resent == {"timed out": 2}, "each counted (bench flood shows them)"
 
 
 def test_a_lost_done_costs_a_few_turns_time() -> None:
