@@ -64,7 +64,6 @@ from benchmarks.games import Case, Game, Secured, Variant, make_scenario, play_d
 from benchmarks.measure import Row, busy_seconds, render
 from dronesim import child_env
 from schema import Keys
-from schema.tuning import DONE_RETRY_MIN_S
 
 SECTION = "## Floods"
 TARGET = 0.5  # flooded turns/s ÷ clean turns/s, at least
@@ -198,14 +197,16 @@ def flood_window(game: Game, case: Case, first: float, last: float) -> tuple[lis
     return [s for s in stamps if lo <= s <= hi], not after
 
 
-def flood_rate(window: list[float]) -> tuple[float, int, float]:
-    """(turns/s, turns, seconds) over a `flood_window`'s turns."""
+def flood_rate(game: Game, case: Case, first: float, last: float) -> tuple[float, int, float, bool]:
+    """(turns/s, turns, seconds, cut) over the turns the flood overlaps (`flood_window`)."""
+    window, cut = flood_window(game, case, first, last)
     turns, seconds = sum(s > window[0] for s in window), window[-1] - window[0]
-    return (turns / seconds if seconds > 0 else float("nan")), turns, seconds
+    return (turns / seconds if seconds > 0 else float("nan")), turns, seconds, cut
 
 
-def longest_turn(window: list[float]) -> float:
-    """Seconds of the longest of a `flood_window`'s turns."""
+def longest_turn(game: Game, case: Case, first: float, last: float) -> float:
+    """Seconds of the longest of the turns the flood overlaps (`flood_window`)."""
+    window, _ = flood_window(game, case, first, last)
     return max((b - a for a, b in zip(window, window[1:])), default=float("nan"))
 
 
@@ -255,12 +256,11 @@ def rows_of(games: list[Played], case: Case) -> tuple[list[Row], list[str]]:
                 cells["attacker"] = f"{a['sent']:,} / {a['answered']:,} / {a['refused']:,} ({a['cpu']:.2f})" + (
                     f", {a['unanswered']:,} unanswered" if a.get("unanswered") else "")
                 if not g.error:
-                    window, cut = flood_window(g, case, a["first"], a["last"])
-                    rate, turns, seconds = flood_rate(window)
+                    rate, turns, seconds, cut = flood_rate(g, case, a["first"], a["last"])
                     ratio = rate / clean_rate
                     cells["during"] = f"{rate:.1f} ({turns}, {seconds:.2f}{', cut' if cut else ''})"
                     cells["ratio"] = f"{ratio:.2f}"
-                    cells["longest"] = f"{longest_turn(window) * 1e3:.1f}"
+                    cells["longest"] = f"{longest_turn(g, case, a['first'], a['last']) * 1e3:.1f}"
                     p.ratio = ratio
                     cells["target"] = ("control" if p.flood in CONTROL else
                                        "met" if ratio >= TARGET else "MISSED")
@@ -349,8 +349,7 @@ def legend(facts: dict) -> str:
         "seconds: the cores it took; `--attacker-nice 0` measures an attacker that takes them as an equal). "
         "Station's DONEs sent again (the whole game): \"announced\", an answer ahead lost on the way (its phase "
         "announced all the same, answered again: a round trip), \"timed out\", a phase's DONE whose STATUS did not "
-        f"come in time (`DONE_RETRY_TURNS` turns, {DONE_RETRY_MIN_S * 1e3:g} ms at least, then twice as long), "
-        "`entities.gcs.Station.resent`: "
+        "come in time (`DONE_RETRY_TURNS` turns, 20 ms at least, then twice as long), `entities.gcs.Station.resent`: "
         "a router's budget of puts a session keeps the first of DONEs that travel together. Longest turn: the longest "
         "of the turns the flood overlaps. Exit codes: coordinator / environment / swarm host."
     )
