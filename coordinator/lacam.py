@@ -137,6 +137,21 @@ SCATTER_WORK = 24_000
 #: searched whole (`exact.Exact`): LaCAM first, whose first step costs no wait; where it is stuck (a corridor's
 #: drones backing off in turn), the exact search. Two drones crossing a 10 x 10 x 10 world never wait for it.
 EXACT_AFTER = 4
+#: The endgame (`Lacam._endgame`): at most one drone in so many away from its target (and `ENDGAME_FEW` at least), and
+#: no new high of drones on their targets for `ENDGAME_AFTER` turns: the whole world's search, which has not found its
+#: goal, hands over to a focused search at once, without its patience's turns nor PIBT's.
+ENDGAME_SHARE = 32
+ENDGAME_FEW = 2
+ENDGAME_AFTER = STALL // 2
+#: The rungs of a focused search's ladder (`Lacam._rung`): a cell where a drone stands on its target costs so many
+#: moves to enter (a free cell one): a rung's part grows through free space before it takes in parked drones.
+RUNG_PARKED = 2
+#: A rung's exact search gets this share of a turn's units: its joint moves cost more than `exact.A_UNIT` says at the
+#: 4 to 6 drones of a rung (about 150 to 180 ns each, 20 µs a unit, against 4.8 µs for a unit of LaCAM's PIBT calls:
+#: random-32-32-20 with 400 drones, seed 2, turns of 27 to 37 ms with the whole `WORK`).
+RUNG_SHARE = 4
+#: The units an exact search of a rung may spend before it gives up (the ladder then ends): 64 turns of its share.
+RUNG_TRY = 16 * 1260
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
 #: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
@@ -851,6 +866,10 @@ class Lacam:
         self._patience = stall  # turns without a new high after which the running search hands back to PIBT
         self._handed = False  # a search handed back to PIBT (for these targets): the next starts once PIBT stalls
         self._radius = 0  # the next search's focus (`_focus`; 0: the whole world)
+        self._rung = 1  # the next rung of the focused searches' ladder (`_rung_search`; 0: none, LaCAM's focus)
+        self._rung_cells = 0  # the cells of the last rung's part
+        self._seed: np.ndarray | None = None  # the drones (rows) whose puzzle the ladder solves (its first rung's)
+        self._on_rung: Exact | None = None  # the exact search of a rung, while it runs
         self._tried = False  # an exact search tried for these targets gave up (`_whole`): LaCAM's from then on
         self._low, self._flat = 1 << 62, 0  # the drones' least sum of distances to their targets, turns since it
         # was (`_progress`)
@@ -892,6 +911,7 @@ class Lacam:
         if key != self._key:
             self._key, self._search, self._best, self._since, self.unsolvable = key, None, -1, 0, False
             self._patience, self._handed, self._radius, self._tried = self.stall, False, 0, False
+            self._ladder()
             self._low, self._flat = 1 << 62, 0
         search = self._search
         if search is not None and not np.array_equal(search.where(), here):
@@ -900,44 +920,61 @@ class Lacam:
             search.t == len(search.plan) - 1  # (a focused search walked: the next piece, at once)
         if piece:
             search = self._search = None
+            self._ladder()  # (the next piece: its ladder)
         home = int(np.count_nonzero(here == aims))
         self._best, self._since = (home, 0) if home > self._best else (self._best, self._since + 1)
         self._progress(here, aims)
         if isinstance(search, Search) and search.focus is None and search.found is None and \
                 self._graph is not None and self._whole(self._graph.near, n)[0]:
             search = self._search = None  # (LaCAM stuck on a small puzzle: the exact search, from here)
-        if search is not None and search.found is None and (
-                (self._since >= self._patience and not search.bounded) or search.full or search.unsolvable):
+        endgame = search is not None and search.found is None and self._endgame(search, n - home)
+        if search is not None and search is self._on_rung and search.unsolvable:
+            self._rung += 1  # (no way within the rung's part, which proves nothing: the next rung, at once)
+            search = self._search = self._on_rung = None
+            self._handed = False
+        elif search is not None and search.found is None and (
+                (self._since >= self._patience and not search.bounded) or search.full or search.unsolvable or endgame):
             # no progress for long, its memory full, or no way to its goal (within its part of the world, or with a
             # drone's stand-in goal; a lifelong game's, whose ground station plays on): PIBT's turns until PIBT
             # stalls as long, then a search focused on the drones away (wider each time, the whole world at last)
             self.full += search.full
             self._radius = FOCUS if search.focus is None else 2 * search.focus[3]
+            if search.focus is None:
+                self._ladder()
             self._patience, self._handed, self._since = 2 * self._patience, True, 0
             if search.unsolvable and not search.exact and self._graph is not None and \
                     self._small(self._graph.near, n)[0]:  # (a stand-in's goal, stricter than the game's: the exact
                 self._handed = False  # search's, not PIBT's turns, for a small puzzle)
+            if endgame:
+                self._handed = False  # (a focused search at once)
             search = self._search = None
         if search is None:
             if home == n:
                 return None  # every drone home: nothing to search
             if n * int(open_.count()) > self.limit or (self._handed and self._since < self.stall and not piece):
                 return None
-            search = self._focus(size, here, aims, self._radius) if self._radius else None
+            search = self._rung_search(size, here, aims) if self._radius and self._rung else None
+            if search is None:
+                search = self._focus(size, here, aims, self._radius) if self._radius else None
             if search is None:  # (the first search, or no focus can be made: the whole world)
                 search = self._start(size, here, aims)
             if search is None:
                 return None  # (its graph or tables made this turn: PIBT's turn)
             self._since = 0  # (its patience counts from its start)
         self.expansions -= search.expansions
-        self.spent = search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search,
-        # but while the scattered paths that guide it are made, `SCATTER_WORK`)
+        self.spent = search.expand(self.work // RUNG_SHARE if search is self._on_rung else self.work, open_)  # (at
+        # least one PIBT call: the drones never wait for the search, but while the scattered paths that guide it are
+        # made, `SCATTER_WORK`)
         self.expansions += search.expansions
         self.expansions -= search.refining
         self.spent += search.refine(self.work - self.spent, open_, not self.spent)  # (once found: made shorter)
         self.expansions += search.refining
         if isinstance(search, Exact) and search.gave_up:  # (LaCAM's search from the next turn, where they are)
-            self._tried, self._search = True, None
+            if search is self._on_rung:
+                self._rung, self._search, self._on_rung = 0, None, None  # (the ladder ends: LaCAM's focus, at
+                self._handed = False  # once)
+            else:
+                self._tried, self._search = True, None
         if search.unsolvable and search.focus is None and search.exact:  # (a proof: the game's own goal)
             self.unsolvable = True
         return search.step()
@@ -998,6 +1035,98 @@ class Lacam:
                               every[goal_c[free]][:, part], self.memory, (free, here, world, radius))
         return self._search
 
+    def _endgame(self, search: Search | Exact, away: int) -> bool:
+        """The whole world's search is in its endgame: a few drones away (`ENDGAME_SHARE`, `ENDGAME_FEW`) among many
+        on their targets, and no new high for `ENDGAME_AFTER` turns. Its chain from the start has brought them there;
+        what is left is a puzzle or two of a few drones, which a focused search solves in a few turns, while the whole
+        world's spends its calls on every drone (random-32-32-20 with 400 drones, seeds 2, 3 and 5: 396 to 398 home by
+        turn 105, then 32 turns of the search's patience and 32 to 64 of PIBT's before the focused search)."""
+        return search.focus is None and not search.bounded and self._since >= ENDGAME_AFTER and \
+            0 < away <= max(ENDGAME_FEW, len(search.goals) // ENDGAME_SHARE) and self._every is not None
+
+    def _ladder(self) -> None:
+        """The focused searches start again from the ladder's first rung (`_rung_search`), for a puzzle to choose."""
+        self._rung, self._rung_cells, self._seed = 1, 0, None
+
+    def _rung_search(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Exact | None:
+        """The exact search of the ladder's next rung, or None once the ladder is over (`_rung` 0: LaCAM's focus).
+
+        The ladder solves one puzzle, its seed: the drones away that stand together (`_piece` of their cells and
+        goals alone: the fewest drones away, then the fewest cells). Rung R's part: the open cells within R of a seed
+        drone or of its goal, a cell where another drone stands costing `RUNG_PARKED` moves to enter (a free cell
+        one), the piece the seed is in; its drones move, the seed's to their goals, every other back to its cell,
+        the drones outside stand still. A puzzle in a crowd is solved by the few drones beside free space, not by
+        the many in the crowd: the ball of `_focus` takes in every parked drone around and its joint moves are too
+        many for an exact search, while LaCAM's constraints are slow to find the few moves that matter
+        (random-32-32-20 with 400 drones, seed 5: two drones trading places in a 1-wide passage between two 2 x 2
+        blocks, one with parked drones and the other with free cells: 18,539 PIBT calls in the ball of radius 4, 10
+        drones on 18 cells; rung 5, 6 drones on 11 cells, found in 7 turns' units). Each rung's part is searched
+        whole (`exact.Exact`, at most `RUNG_TRY` units); one that has no way within its part (no proof of anything)
+        gives way to the next at once; the ladder ends where a rung's part is too big for an exact search (`_small`:
+        a single configuration's joint moves could then outgrow a turn), is every cell, or a rung gives up. The next
+        puzzle climbs a ladder of its own."""
+        g, every = self._graph, self._every
+        assert g is not None  # (`prepare`)
+        hc, ac, way = g.ways(here, aims)
+        if every is None or (hc < 0).any() or not self.small:
+            self._rung = 0
+            return None
+        goal_c = stand_ins(g, np.where(way, ac, hc), way)
+        away = goal_c != hc
+        F = len(g.cells)
+        near = np.where(g.near >= 0, g.near, F)
+        if self._seed is None:
+            on = np.zeros(F, bool)
+            on[np.concatenate([hc[away], goal_c[away]])] = True
+            if not on.any():
+                self._rung = 0
+                return None
+            self._seed = np.flatnonzero(away & self._piece(on, near, hc[away])[hc])
+        seed = self._seed
+        mine = np.zeros(len(hc), bool)
+        mine[seed] = True
+        enter = np.ones(F + 1, np.int64)
+        enter[hc[~mine]] = RUNG_PARKED
+        enter[F] = F  # (no neighbour: never entered)
+        start = np.unique(np.concatenate([hc[seed], goal_c[seed]]))
+        whole = int(np.isin(g.part, g.part[hc]).sum())
+        while self._rung:
+            cost = np.full(F + 1, F, np.int64)
+            cost[start] = 0
+            for d in range(self._rung):  # (Dijkstra by levels: every cost is a whole number of moves)
+                beyond = near[np.flatnonzero(cost[:F] == d)].ravel()
+                np.minimum.at(cost, beyond, d + enter[beyond])
+            seen = cost[:F] <= self._rung
+            seen &= self._piece(seen, near, hc[seed])
+            part = np.flatnonzero(seen)
+            free = np.flatnonzero(seen[hc])
+            if len(part) == whole:
+                break  # (every cell)
+            if len(part) == self._rung_cells:
+                self._rung += 1  # (the same part as the last rung's)
+                continue
+            self._rung_cells = len(part)
+            world = OpenCells.of(self._bits(g, part))
+            sub = Graph(world, size)
+            if not self._small(sub.near, len(free))[0]:
+                break  # (too many configurations for an exact search)
+            goals = sub.index[g.cells[np.where(mine, goal_c, hc)[free]]]
+            if not (goals >= 0).all():
+                self._rung += 1  # (a seed drone's goal outside the part)
+                continue
+            self._search = self._on_rung = Exact(sub.near, sub.cells, sub.index[here[free]], goals,
+                                                 (free, here, world, self._rung), cap=RUNG_TRY)
+            return self._on_rung
+        self._rung = 0  # (LaCAM's focus)
+        return None
+
+    @staticmethod
+    def _bits(g: Graph, part: np.ndarray) -> np.ndarray:
+        """Every flat cell's bit, set on the open cells `part` (numbered) of `g`."""
+        bits = np.zeros(len(g.index), bool)
+        bits[g.cells[part]] = True
+        return bits
+
     def _whole(self, near: np.ndarray, drones: int) -> tuple[bool, int | None]:
         """Whether a puzzle of `drones` drones on the open cells of `near` is searched whole (`exact.Exact`), and the
         units it may spend: once the drones have made no progress for `EXACT_AFTER` turns (`_progress`: where they
@@ -1026,10 +1155,10 @@ class Lacam:
     @staticmethod
     def _piece(seen: np.ndarray, near: np.ndarray, away: np.ndarray) -> np.ndarray:
         """Of the open cells `seen` (a focus: within its radius of a drone away or of its goal), the connected piece
-        a focused search takes first: the one with the fewest drones away (`away`: their open cells), then the fewest
-        cells, then the first cell. Puzzles apart are solved one after the other, each a search of its own (in one,
-        LaCAM's constraints would combine their drones' moves: random-32-32-20 with 400 drones, seed 5, two drones
-        trading places at a dead end, solved in 182 calls alone, not in 5,000 beside a harder one)."""
+        a focused search takes first: the one with the fewest drones away (`away`: their open cells; one at least),
+        then the fewest cells, then the first cell. Puzzles apart are solved one after the other, each a search of its
+        own (in one, LaCAM's constraints would combine their drones' moves: random-32-32-20 with 400 drones, seed 5,
+        two drones trading places at a dead end, solved in 182 calls alone, not in 5,000 beside a harder one)."""
         n = len(seen)
         label = np.where(seen, np.arange(n), n)
         ext = np.append(label, n)
@@ -1043,7 +1172,8 @@ class Lacam:
         count = {int(p): 0 for p in pieces}
         for c in label[away].tolist():
             count[c] += 1
-        best = min(zip(pieces.tolist(), cells.tolist()), key=lambda pc: (count[pc[0]], pc[1], pc[0]))[0]
+        best = min(zip(pieces.tolist(), cells.tolist()),
+                   key=lambda pc: (not count[pc[0]], count[pc[0]], pc[1], pc[0]))[0]
         return label == best
 
     def _start(self, size: Cell, here: np.ndarray, aims: np.ndarray) -> Search | Exact | None:

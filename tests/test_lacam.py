@@ -298,6 +298,98 @@ def test_a_focused_search_takes_puzzles_apart_one_after_the_other() -> None:
     assert pieces[0] == [0] and pieces[-1] == [2], pieces
 
 
+def _endgame(monkeypatch: pytest.MonkeyPatch, after: int) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Two drones trade places at the start of a corridor 32 long (a bay at x = 5), two others parked far away,
+    under LaCAM's search (not the exact one), a few PIBT calls a turn: each turn's course ('s' the whole world's
+    search, 'f' a focused one, '.' PIBT's turn: the drones hold still), the drones' cells at the end and their
+    targets."""
+    monkeypatch.setattr(lacam, "ENDGAME_AFTER", after)
+    grid = world_of(["#####.##########################", "." * 32])
+    size: Cell = grid.shape  # type: ignore[assignment]
+    cells = np.array([(0, 1, 0), (3, 1, 0), (20, 1, 0), (31, 1, 0)], np.int32)
+    targets = np.array([(3, 1, 0), (0, 1, 0), (20, 1, 0), (31, 1, 0)], np.int32)
+    search, open_ = lacam.Lacam(work=200, small=0), OpenCells(grid)
+    course: list[str] = []
+    for turn in range(1, 300):
+        plan = search.follow(size, cells, np.ones(4, bool), targets, open_, turn)
+        s = search._search
+        course.append("." if plan is None else "s" if s is None or s.focus is None else "f")
+        if plan is not None:
+            cells = cells_of(plan, size).astype(np.int32)
+        if (cells == targets).all():
+            break
+    return course, cells, targets
+
+
+def test_in_the_endgame_a_focused_search_starts_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A few drones away among drones on their targets (`lacam.ENDGAME_SHARE`), no new high for `ENDGAME_AFTER`
+    turns: the whole world's search, which has not found its goal, hands over to a search focused on them at once,
+    without its patience's turns (`STALL`) nor PIBT's; the drones get home. Without the rule (ENDGAME_AFTER past the
+    patience), the same search waits for both before focusing."""
+    course, cells, targets = _endgame(monkeypatch, lacam.ENDGAME_AFTER)
+    assert (cells == targets).all()
+    assert "." not in course and "f" in course, "".join(course)
+    assert course.index("f") <= lacam.ENDGAME_AFTER + 1, "".join(course)
+    course, cells, targets = _endgame(monkeypatch, 1 << 20)
+    assert "." in course and course.index("f") >= 2 * lacam.STALL, "".join(course)
+
+
+#: Two drones trading places in a 1-wide passage between two 2 x 2 blocks, eight drones parked on their targets
+#: around them (random-32-32-20 with 400 drones, seed 5, the part of its endgame that LaCAM's focus took in): the
+#: passage's ends are cut off but for the block on the left, whose free cells let them pass.
+CROWDED = (["##.#...###", "#....#...#", "##..#...##", "###.##.###"],
+           [(4, 0, 0), (5, 0, 0), (2, 0, 0), (6, 0, 0), (2, 1, 0), (4, 1, 0), (6, 1, 0), (5, 2, 0), (6, 2, 0),
+            (7, 2, 0)])
+
+
+def _crowded(turns: int = 40) -> tuple[bool, list[str]]:
+    """The crowded swap played by the focused searches from its start (as after a search of the whole world without
+    progress): every drone home within `turns`, and each turn's search (its kind and drones)."""
+    rows, parked = CROWDED
+    grid = world_of(rows)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    cells = np.array(parked, np.int32)
+    targets = cells.copy()
+    targets[[0, 1]] = targets[[1, 0]]
+    open_, coop = OpenCells(grid), np.ones(len(cells), bool)
+    search = lacam.Lacam()
+    search.prepare(size, open_)
+    search._radius, search._key = lacam.FOCUS, flat_cells(targets, size).tobytes()
+    kinds: list[str] = []
+    for turn in range(1, turns):
+        plan = search.follow(size, cells, coop, targets, open_, turn)
+        s = search._search
+        drones = 0 if s is None or s.focus is None else len(s.focus[0])
+        kinds.append("PIBT" if plan is None or s is None else f"{type(s).__name__} {drones}")
+        if plan is not None:
+            cells = cells_of(plan, size).astype(np.int32)
+        if (cells == targets).all():
+            return True, kinds
+    return False, kinds
+
+
+def test_a_puzzle_in_a_crowd_is_solved_on_the_ladder_of_exact_searches() -> None:
+    """The focused searches' ladder (`Lacam._rung_search`): parts that grow through free cells before parked drones
+    (a parked drone's cell costs `RUNG_PARKED` moves), each searched whole while it is small; a part without a way
+    gives way to the next at once. The crowded swap is solved by a part of 6 of its 10 drones (its least makespan:
+    the exact search's), where the ball of the focus takes in all 10, too many joint moves for an exact search
+    (LaCAM's, then: 18,539 PIBT calls in the game's endgame)."""
+    home, kinds = _crowded()
+    assert home, kinds
+    assert all(k.startswith("Exact") for k in kinds) and "Exact 6" in kinds, kinds  # (home within 40 turns)
+    rows, parked = CROWDED
+    grid = world_of(rows)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    search = lacam.Lacam()
+    search.prepare(size, OpenCells(grid))
+    here = flat_cells(np.array(parked, np.int32), size)
+    aims = here.copy()
+    aims[[0, 1]] = aims[[1, 0]]
+    search._flat = lacam.EXACT_AFTER  # (no progress: an exact search where the puzzle is small)
+    ball = search._focus(size, here, aims, lacam.FOCUS)
+    assert isinstance(ball, lacam.Search) and ball.focus is None and len(ball.goals) == 10
+
+
 def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
     """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; the turns that make
     the scattered paths (`Scatter`, as the search starts: `SCATTER_WORK` units a turn, a path at least) make none, the
