@@ -2,7 +2,8 @@
 compiler into the user's cache and loaded through ctypes. `lacam.Scatter` runs it where `scatter_library` gives one
 and its own Python otherwise: the same paths and work units either way (the C file is `Scatter`'s search step for
 step), so a game's decisions, its journal, replay and resume never depend on which ran; only the time does
-(docs/cooperation.md, "Scattered paths"; docs/performance.md).
+(docs/cooperation.md, "Scattered paths"; docs/performance.md). The same library holds the exact search's joint moves
+(`exact.Exact._successors`, `ex_successors`): the same configurations, in the same order, as its Python.
 
 `DRONESIM_COMPILED=0` in the environment turns it off (Python's alone). A library is built where the source's hash
 names it, in `$XDG_CACHE_HOME/dronesim` (else ~/.cache/dronesim), a folder of this user's that nobody else may write;
@@ -70,6 +71,7 @@ def _typed(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.sc_path_length.argtypes, lib.sc_path_length.restype = [ptr, i64], i64
     lib.sc_path_cells.argtypes, lib.sc_path_cells.restype = [ptr, i64, ptr], None
     lib.sc_free.argtypes, lib.sc_free.restype = [ptr], None
+    lib.ex_successors.argtypes, lib.ex_successors.restype = [i64, i64, ptr, i64, ptr, ptr, ptr, ptr, i64], i64
     return lib
 
 

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .compiled import scatter_library
+
 __all__ = ["Exact", "fits", "tried", "settle", "settle_one", "CANDIDATES", "TRY"]
 
 #: Joint moves (candidates: a configuration's drones' moves combined, before the conflicts are struck out) an exact
@@ -208,7 +210,9 @@ class Exact:
         gives up (`gave_up`; None: no end but its own, as `fits` admits)."""
         F, n = len(near), len(start)
         self.cells, self.focus, self.exact = cells, focus, exact
-        self.moves = np.concatenate([np.arange(F)[:, None], near], axis=1)  # (F, 1 + k): staying first
+        self.moves = np.ascontiguousarray(np.concatenate([np.arange(F)[:, None], near], axis=1), np.int64)  # (F, 1 +
+        # k): staying first
+        self.lib = scatter_library()  # (its joint moves compiled where the machine can: `_successors`)
         self.count = (self.moves >= 0).sum(axis=1)
         self.powers = F ** np.arange(n, dtype=np.int64)
         self.goals, self.aimed = goals.astype(np.int64), np.flatnonzero(goals >= 0)
@@ -304,7 +308,22 @@ class Exact:
 
     def _successors(self, cfg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The configurations one joint move from `cfg`'s (their codes, unique and sorted, and the index in `cfg` of
-        the first that reaches each)."""
+        the first that reaches each): compiled (coordinator/scatter.c, `ex_successors`) where the machine has it, the
+        same configurations in the same order as Python's below, some ten times as fast."""
+        if self.lib is not None and cfg.shape[1] <= 64:
+            cfg = np.ascontiguousarray(cfg, np.int64)
+            cap = int(self.count[cfg].prod(axis=1).sum())
+            out, src = np.empty(cap, np.int64), np.empty(cap, np.int64)
+            m = self.lib.ex_successors(len(cfg), cfg.shape[1], cfg.ctypes.data, self.moves.shape[1],
+                                       self.moves.ctypes.data, self.powers.ctypes.data, out.ctypes.data,
+                                       src.ctypes.data, cap)
+            if m >= 0:
+                codes, first = np.unique(out[:m], return_index=True)
+                return codes, src[first]
+        return self._successors_python(cfg)
+
+    def _successors_python(self, cfg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`_successors` in Python: drone by drone, each move against the moves of the drones before it."""
         src = np.arange(len(cfg))
         nxt = np.empty((len(cfg), 0), np.int64)
         for i in range(cfg.shape[1]):  # (drone by drone: each move against the moves of the drones before it)

@@ -146,11 +146,7 @@ ENDGAME_AFTER = STALL // 2
 #: The rungs of a focused search's ladder (`Lacam._rung`): a cell where a drone stands on its target costs so many
 #: moves to enter (a free cell one): a rung's part grows through free space before it takes in parked drones.
 RUNG_PARKED = 2
-#: A rung's exact search gets this share of a turn's units: its joint moves cost more than `exact.A_UNIT` says at the
-#: 4 to 6 drones of a rung (about 150 to 180 ns each, 20 µs a unit, against 4.8 µs for a unit of LaCAM's PIBT calls:
-#: random-32-32-20 with 400 drones, seed 2, turns of 27 to 37 ms with the whole `WORK`).
-RUNG_SHARE = 4
-#: The units an exact search of a rung may spend before it gives up (the ladder then ends): 64 turns of its share.
+#: The units an exact search of a rung may spend before it gives up (the ladder then ends): 16 turns' `WORK`.
 RUNG_TRY = 16 * 1260
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
@@ -962,9 +958,8 @@ class Lacam:
                 return None  # (its graph or tables made this turn: PIBT's turn)
             self._since = 0  # (its patience counts from its start)
         self.expansions -= search.expansions
-        self.spent = search.expand(self.work // RUNG_SHARE if search is self._on_rung else self.work, open_)  # (at
-        # least one PIBT call: the drones never wait for the search, but while the scattered paths that guide it are
-        # made, `SCATTER_WORK`)
+        self.spent = search.expand(self.work, open_)  # (at least one PIBT call: the drones never wait for the search,
+        # but while the scattered paths that guide it are made, `SCATTER_WORK`)
         self.expansions += search.expansions
         self.expansions -= search.refining
         self.spent += search.refine(self.work - self.spent, open_, not self.spent)  # (once found: made shorter)

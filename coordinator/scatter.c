@@ -239,3 +239,45 @@ int64_t sc_path_length(const ctx *s, int64_t i) { return s->path_n[i]; }
 void sc_path_cells(const ctx *s, int64_t i, int64_t *out) {
     if (s->path_n[i]) memcpy(out, s->paths[i], (size_t)s->path_n[i] * sizeof(int64_t));
 }
+
+/* The exact search's joint moves (coordinator/exact.py's `Exact._successors`), compiled in the same library: every
+   configuration one joint move from each of `rows` configurations `cfg` ((rows, n), numbered open cells), drone by
+   drone each drone's moves (`moves`, (F, k): staying first, then the neighbours, -1 for none) in order, no two drones
+   in a cell and none trading cells with another. Each is written as its code (the sum of cell x `powers`) and its
+   source row, in the order Python's expansion makes them (source row by row, then the moves in order): Python then
+   takes the first of each code alike. Returns how many, or -1 if they would pass `cap`. No state. */
+static int64_t joint(int64_t n, int64_t k, const int64_t *moves, const int64_t *powers, const int64_t *from,
+                     int64_t *nxt, int64_t i, int64_t code, int64_t src, int64_t *codes, int64_t *srcs, int64_t m,
+                     int64_t cap) {
+    if (i == n) {
+        if (m >= cap) return -1;
+        codes[m] = code;
+        srcs[m] = src;
+        return m + 1;
+    }
+    const int64_t *opt = moves + from[i] * k;
+    for (int64_t c = 0; c < k; c++) {
+        int64_t v = opt[c];
+        if (v < 0) continue;
+        int ok = 1;
+        for (int64_t j = 0; j < i && ok; j++)
+            if (nxt[j] == v || (nxt[j] == from[i] && v == from[j])) ok = 0;
+        if (!ok) continue;
+        nxt[i] = v;
+        m = joint(n, k, moves, powers, from, nxt, i + 1, code + v * powers[i], src, codes, srcs, m, cap);
+        if (m < 0) return -1;
+    }
+    return m;
+}
+
+int64_t ex_successors(int64_t rows, int64_t n, const int64_t *cfg, int64_t k, const int64_t *moves,
+                      const int64_t *powers, int64_t *codes, int64_t *srcs, int64_t cap) {
+    int64_t nxt[64];
+    int64_t m = 0;
+    if (n > 64) return -1;
+    for (int64_t r = 0; r < rows; r++) {
+        m = joint(n, k, moves, powers, cfg + r * n, nxt, 0, 0, r, codes, srcs, m, cap);
+        if (m < 0) return -1;
+    }
+    return m;
+}

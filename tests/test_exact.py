@@ -302,3 +302,38 @@ def test_a_drone_whose_target_is_cut_off_is_no_obstacle_to_a_proof() -> None:
     drones: Drones = {"D01": ((0, 0, 0), (0, 1, 0)), "D02": ((0, 1, 0), (2, 1, 0))}
     result = play(world_of([".#.", ".#."]), drones, 200)
     assert result.over.text.startswith("no solution") and result.over.turn <= 20, result.over
+
+
+@pytest.mark.parametrize("kind, seed", [("corridor", 5), ("room", 9)])
+def test_the_compiled_joint_moves_are_pythons(kind: str, seed: int) -> None:
+    """`Exact._successors` compiled (coordinator/scatter.c's `ex_successors`, where the machine can build it) makes the
+    configurations Python's makes, with the same parents, level after level, and the whole search the same plan: a
+    game's decisions never depend on which ran."""
+    from coordinator import compiled
+
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
+    for rows, starts, goals in instances(kind, seed, 12):
+        grid = world_of(rows)
+        size = grid.shape
+        graph = lacam.Graph(OpenCells(grid), size)  # type: ignore[arg-type]
+        start = graph.index[flat_cells(np.array([(x, y, 0) for x, y in starts]), size)]  # type: ignore[arg-type]
+        goal = graph.index[flat_cells(np.array([(x, y, 0) for x, y in goals]), size)]  # type: ignore[arg-type]
+        plans = []
+        for lib in (True, False):
+            search = exact.Exact(graph.near, graph.cells, start, goal)
+            assert search.lib is not None
+            if not lib:
+                search.lib = None
+            cfg = np.asarray(start, np.int64)[None, :]
+            for _ in range(3):  # (a few levels, every configuration of each)
+                codes, parents = search._successors(cfg)
+                python = search._successors_python(cfg)
+                assert np.array_equal(codes, python[0]) and np.array_equal(parents, python[1])
+                cfg = search._cfg(codes)
+            while search.found is None and not search.unsolvable:
+                search.expand(1 << 30)
+            while search.found is not None and search.plan is None:
+                search.expand(1 << 30)
+            plans.append(None if search.plan is None else search.plan.tolist())
+        assert plans[0] == plans[1]
