@@ -2,6 +2,10 @@
 (coordinator/scatter.c, `coordinator.compiled`), the same paths (issue 37).
 
     dronesim bench compiled-scatter [--families F,...] [--seeds 5] [--agents 400] [--repeat 3] [--turn UNITS]
+    dronesim bench compiled-scatter --exact [--seeds 5] [--repeat 3]
+
+`--exact`: the exact search's joint moves instead (`exact.Exact._successors`, compiled in the same library as
+`ex_successors`), on seeded rooms of 4 or 5 drones searched whole, Python against compiled: the same plans and units.
 
 Games run the compiled search where the machine can build it (a C compiler), Python's where it cannot: both must make
 the very paths, rounds and work units, or a game's decisions would depend on the machine (exit 1 if not). Times:
@@ -38,6 +42,51 @@ def instance(family: str, agents: int, seed: int) -> tuple[lacam.Graph, np.ndarr
     return graph, start, goal, every[goal]
 
 
+def room(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A seeded room of 5 x 4 cells, a quarter of them buildings, with 4 or 5 drones (the size of a rung of
+    `lacam.Lacam`'s ladder): its open cells' neighbours and flat cells (`lacam.Graph`), the drones' open cells and
+    goals (numbered)."""
+    rng = np.random.default_rng(seed)
+    while True:
+        grid = (rng.random((5, 4)) < 0.25)[:, :, None]
+        graph = lacam.Graph(OpenCells(grid), grid.shape)
+        n = int(rng.integers(4, 6))
+        if len(graph.cells) >= n + 4 and len(np.unique(graph.part)) == 1:
+            cells = rng.permutation(len(graph.cells))
+            return graph.near, graph.cells, cells[:n], rng.permutation(cells[:n])
+
+
+def exact_moves(seeds: int, repeat: int) -> int:
+    """`--exact`: Python's joint moves against the compiled ones, each room searched whole; exit 1 if a plan or the
+    units differ."""
+    from coordinator.exact import Exact
+
+    print("| room | drones | open cells | configurations | units | Python ms | C ms | Python ÷ C | the same plan |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    differ = 0
+    for seed in range(1, seeds + 1):
+        near, cells, start, goal = room(seed)
+        ms: dict[bool, list[float]] = {True: [], False: []}
+        out: dict[bool, tuple[object, int, int]] = {}
+        for _ in range(repeat):
+            for compiled in (False, True):
+                search = Exact(near, cells, start, goal)
+                if not compiled:
+                    search.lib = None
+                t0, units = time.process_time(), 0
+                while search.plan is None and not search.unsolvable:
+                    units += search.expand(1 << 40)
+                ms[compiled].append(1000 * (time.process_time() - t0))
+                plan = None if search.plan is None else search.plan.tolist()
+                out[compiled] = (plan, units, sum(tree.count for tree in search.trees))
+        same = out[True][:2] == out[False][:2]
+        differ += not same
+        print(f"| seed {seed} | {len(start)} | {len(cells)} | {out[False][2]:,} | {out[False][1]:,} | "
+              f"{min(ms[False]):.0f} | {min(ms[True]):.1f} | {min(ms[False]) / min(ms[True]):.1f} | "
+              f"{'yes' if same else 'NO'} |", flush=True)
+    return 1 if differ else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="dronesim bench compiled-scatter", description=__doc__.split("\n")[0])
     p.add_argument("--families", default=",".join(movingai.FAMILIES))
@@ -46,10 +95,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeat", type=int, default=3, help="the best of this many timings each (default 3)")
     p.add_argument("--turn", type=int, default=lacam.SCATTER_WORK,
                    help=f"the units a turn makes (default lacam.SCATTER_WORK, {lacam.SCATTER_WORK})")
+    p.add_argument("--exact", action="store_true", help="the exact search's joint moves instead (seeded rooms)")
     args = p.parse_args(argv)
     if scatter_library() is None:
         print("the compiled search cannot be had here (no C compiler, or DRONESIM_COMPILED=0)", file=sys.stderr)
         return 1
+    if args.exact:
+        return exact_moves(args.seeds, args.repeat)
     print("| instance | rounds | cells' units | Python ms | C ms | Python ÷ C | turns | longest turn, C ms | "
           "the same paths |")
     print("|---|---|---|---|---|---|---|---|---|")

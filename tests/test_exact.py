@@ -337,3 +337,16 @@ def test_the_compiled_joint_moves_are_pythons(kind: str, seed: int) -> None:
                 search.expand(1 << 30)
             plans.append(None if search.plan is None else search.plan.tolist())
         assert plans[0] == plans[1]
+
+
+def test_the_joint_moves_benchmark_plays_python_against_compiled(capsys: pytest.CaptureFixture[str]) -> None:
+    """`dronesim bench compiled-scatter --exact`: a seeded room searched whole by each, the same plan and units (its
+    exit code says so)."""
+    from benchmarks import compiled_scatter
+    from coordinator import compiled
+
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
+    assert compiled_scatter.main(["--exact", "--seeds", "1", "--repeat", "1"]) == 0
+    rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("| seed")]
+    assert len(rows) == 1 and rows[0].endswith("| yes |"), rows
