@@ -143,11 +143,11 @@ EXACT_AFTER = 4
 ENDGAME_SHARE = 32
 ENDGAME_FEW = 2
 ENDGAME_AFTER = STALL // 2
-#: The rungs of a focused search's ladder (`Lacam._rung`): a cell where a drone stands on its target costs so many
-#: moves to enter (a free cell one): a rung's part grows through free space before it takes in parked drones.
+#: The rungs of a focused search's ladder (`Lacam._rung_search`): a cell where a drone other than the puzzle's stands
+#: costs so many moves to enter (a free cell one): a rung's part grows through free space before it takes in drones.
 RUNG_PARKED = 2
 #: The units an exact search of a rung may spend before it gives up (the ladder then ends): 16 turns' `WORK`.
-RUNG_TRY = 16 * 1260
+RUNG_TRY = 16 * WORK
 #: A distance that means "no way" (int16).
 FAR = np.iinfo(np.int16).max
 #: A priority is the node depths since the drone was last on its goal times SPAN, plus its distance at the root.
