@@ -984,8 +984,9 @@ class Lacam:
         self._of, self._tables, self._table_units, self._scattered = open_, {}, 0, None
         self._graph = g = Graph(open_, size)
         self._every = g.every_distance() if len(g.cells) ** 2 <= PRECOMPUTE else None
-        if self._every is not None and self.scatter:
-            scatter_library()  # (built now if it is to be, not in a turn)
+        if self._every is not None and (self.scatter or self.small):
+            scatter_library()  # (built now if it is to be, not in a turn: the scattered paths' search and the exact
+            # search's joint moves, which run only where the tables are made now)
 
     def _focus(self, size: Cell, here: np.ndarray, aims: np.ndarray, radius: int) -> Search | Exact | None:
         """A search from `here` over the drones within `radius` moves (over the open cells) of a drone away from its
@@ -1016,9 +1017,7 @@ class Lacam:
         if len(part) == int(np.isin(g.part, g.part[hc]).sum()):  # (every cell the drones can reach: the whole)
             return self._start(size, here, aims)
         free = np.flatnonzero(seen[hc])
-        bits = np.zeros(len(g.index), bool)
-        bits[g.cells[part]] = True
-        world = OpenCells.of(bits)
+        world = OpenCells.of(self._bits(g, part))
         sub = Graph(world, size)
         goals = sub.index[g.cells[goal_c[free]]]
         whole, cap = self._whole(sub.near, len(free))
