@@ -5,13 +5,19 @@ step), so a game's decisions, its journal, replay and resume never depend on whi
 (docs/cooperation.md, "Scattered paths"; docs/performance.md). The same library holds the exact search's joint moves
 (`exact.Exact._successors`, `ex_successors`): the same configurations, in the same order, as its Python.
 
-`DRONESIM_COMPILED=0` in the environment turns it off (Python's alone). A library is built where the source's hash
-names it, in `$XDG_CACHE_HOME/dronesim` (else ~/.cache/dronesim), a folder of this user's that nobody else may write;
-where there is none, in a temporary folder of this process's. No compiler, a failed build or a library that does not
-load: None, said once in the log."""
+`DRONESIM_COMPILED=0` in the environment turns it off (Python's alone). A library is named by the source's hash. One
+shipped in the package's own folder (`SHIPPED`: the Docker image's, put there at its build by `ship`, for its runtime
+has no C compiler) is loaded first; else one is built in `$XDG_CACHE_HOME/dronesim` (else ~/.cache/dronesim), a folder
+of this user's that nobody else may write; where there is none, in a temporary folder of this process's. No compiler,
+a failed build or a library that does not load: None, said once in the log.
+
+`python -m coordinator.compiled --build DIR` builds the library into DIR with this machine's C compiler
+(docker/offline.sh, on the host, into the wheelhouse); `--ship DIR` puts DIR's library for this source (else one built
+here) in the package's folder if it loads here (docker/Dockerfile's build stage)."""
 
 from __future__ import annotations
 
+import argparse
 import ctypes
 import functools
 import hashlib
@@ -24,12 +30,20 @@ import tempfile
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["scatter_library", "ENV"]
+__all__ = ["scatter_library", "ENV", "SHIPPED", "ship"]
 
 #: The environment variable that turns the compiled search off ("0").
 ENV = "DRONESIM_COMPILED"
 
 _LOG = logging.getLogger("dronesim.compiled")
+#: The package's own folder, where an image's build puts the library (`ship`): as trusted as the code beside it.
+SHIPPED = Path(__file__).resolve().parent
+
+
+def _source() -> tuple[bytes, str]:
+    """coordinator/scatter.c and its library's name (the source's hash: a library is never another source's)."""
+    source = resources.files("coordinator").joinpath("scatter.c").read_bytes()
+    return source, f"scatter-{hashlib.sha256(source).hexdigest()[:16]}.so"
 
 
 def _cache() -> Path | None:
@@ -82,8 +96,12 @@ def scatter_library() -> ctypes.CDLL | None:
     if os.environ.get(ENV, "1") == "0":
         return None
     try:
-        source = resources.files("coordinator").joinpath("scatter.c").read_bytes()
-        name = f"scatter-{hashlib.sha256(source).hexdigest()[:16]}.so"
+        source, name = _source()
+        if (SHIPPED / name).is_file():
+            try:
+                return _typed(ctypes.CDLL(str(SHIPPED / name)))
+            except (OSError, AttributeError) as exc:  # (another machine's: built here instead)
+                _LOG.info("the shipped %s does not load (%s)", SHIPPED / name, exc)
         folder = _cache()
         if folder is not None and (folder / name).is_file():
             try:
@@ -96,3 +114,55 @@ def scatter_library() -> ctypes.CDLL | None:
     except (OSError, RuntimeError, subprocess.SubprocessError, AttributeError) as exc:
         _LOG.info("the scattered paths' search runs in Python: %s", exc)
         return None
+
+
+def ship(folder: Path, into: Path) -> Path | None:
+    """This source's library from `folder` (docker/offline.sh builds it there on the host), else one built now,
+    copied into `into` (the package's folder, `SHIPPED`) if it loads in this process (a host's library may need a
+    newer C library than the image's); None where there is none (said why: the search then runs in Python)."""
+    source, name = _source()
+    made = folder / name
+    with tempfile.TemporaryDirectory(prefix="dronesim-ship-") as tmp:
+        try:
+            if not made.is_file():
+                made = _build(source, Path(tmp), name)
+            shutil.copyfile(made, into / f".{name}.part")
+            _typed(ctypes.CDLL(str(into / f".{name}.part")))
+        except (OSError, RuntimeError, subprocess.SubprocessError, AttributeError) as exc:
+            (into / f".{name}.part").unlink(missing_ok=True)
+            print(f"compiled: no library shipped ({exc}): the search runs in Python (the same games, slower)")
+            return None
+    os.replace(into / f".{name}.part", into / name)
+    print(f"compiled: shipped {into / name}")
+    return into / name
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`--build DIR` / `--ship DIR` (the module's doc). Exit 0 whether or not a library is had: without one the
+    search runs in Python, the same games (a build that cannot find a compiler says so and goes on)."""
+    parser = argparse.ArgumentParser(prog="python -m coordinator.compiled", description=__doc__.split("\n\n")[0])
+    what = parser.add_mutually_exclusive_group(required=True)
+    what.add_argument("--build", type=Path, metavar="DIR", help="build the library into DIR (this machine's cc)")
+    what.add_argument("--ship", type=Path, metavar="DIR",
+                      help="put DIR's library (else one built here) in the package's folder if it loads")
+    args = parser.parse_args(argv)
+    if args.ship is not None:
+        ship(args.ship, SHIPPED)
+        return 0
+    source, name = _source()
+    try:
+        args.build.mkdir(parents=True, exist_ok=True)
+        for old in args.build.glob("scatter-*.so"):  # (an older source's: never loaded, but each a new build context)
+            if old.name != name:
+                old.unlink()
+        if (args.build / name).is_file():
+            print(f"compiled: {args.build / name} is there")  # (not built again: an image's build cache holds)
+        else:
+            print(f"compiled: built {_build(source, args.build, name)}")
+    except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
+        print(f"compiled: not built ({exc}): an image built without it runs the search in Python")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

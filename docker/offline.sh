@@ -125,6 +125,10 @@ else
   say "$WHEELHOUSE: $(cd "$WHEELHOUSE" && ls *.whl | xargs)"
 fi
 
+# the search's compiled library, built by this machine's C compiler into the wheelhouse: the image's runtime has none
+# (docker/Dockerfile ships it if it loads there; without, the search runs in Python: the same games, slower turns)
+PYTHONPATH=. python3 -m coordinator.compiled --build "$WHEELHOUSE" | sed 's/^/offline: /'
+
 {
   echo "# Written by docker/offline.sh: the local base images and wheelhouse (docs/docker.md, Offline)."
   echo "PYTHON_IMAGE=$PYTHON_IMAGE"

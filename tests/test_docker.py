@@ -855,6 +855,20 @@ def test_the_build_stage_runs_here(tmp_path):
         f"the installed wheel does not import: {failed}"
     p = run(str(venv / "bin" / "python"), "-m", "dronesim", "--help", cwd=tmp_path)
     assert p.returncode == 0 and "coordinator" in p.stdout
+    # the search's compiled library: the wheelhouse's (docker/offline.sh, this machine's compiler), put in the
+    # installed package if it loads, and loaded from there where there is no compiler and no cache
+    wheelhouse = tmp_path / "wheelhouse"
+    p = run(sys.executable, "-m", "coordinator.compiled", "--build", str(wheelhouse), cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    p = run(str(venv / "bin" / "python"), "-P", "-m", "coordinator.compiled", "--ship", str(wheelhouse), cwd="/")
+    assert p.returncode == 0, p.stderr
+    built = sorted(f.name for f in wheelhouse.glob("scatter-*.so"))
+    shipped = sorted(f.name for f in (venv / "lib" / "python3.11" / "site-packages" / "coordinator").glob("*.so"))
+    assert shipped == built and (built or shutil.which("cc") is None and shutil.which("gcc") is None), p.stdout
+    loads = "from coordinator import compiled; raise SystemExit(compiled.scatter_library() is None)"
+    p = run(str(venv / "bin" / "python"), "-c", loads, cwd="/",
+            env={**os.environ, "XDG_CACHE_HOME": str(tmp_path / "nocache"), "PATH": str(tmp_path / "nobin")})
+    assert (p.returncode == 0) == bool(built), p.stderr
     for pkg_data, patterns in pyproject()["tool"]["setuptools"].get("package-data", {}).items():
         src_dir = ROOT.joinpath(*pkg_data.split("."))  # every package is its folder
         for pattern in patterns:
@@ -1612,6 +1626,17 @@ def test_engine_up_plays_a_scripted_game_healthy_and_like_dronesim_up(projects, 
 
 
 @docker_engine
+@pytest.mark.slow
+def test_engine_the_image_runs_the_search_compiled(engine):
+    """The image's runtime has no C compiler: its build ships the search's library (built on the host by
+    docker/offline.sh into the wheelhouse, `python -m coordinator.compiled --ship`), which its user loads from the
+    installed package, so that the search's turns are as short in the cluster as on the host."""
+    code = ("import shutil; from coordinator import compiled; lib = compiled.scatter_library(); "
+            "print(shutil.which('cc') or shutil.which('gcc'), lib is not None and str(compiled.SHIPPED) in lib._name)")
+    out = docker("run", "--rm", "--entrypoint", "/opt/dronesim/bin/python", engine.image, "-c", code).split()
+    assert out == ["None", "True"], out
+
+
 @pytest.mark.slow
 def test_engine_scaled_replicas_claim_their_own_ids_and_the_swarm_profile_plays_the_same(projects):
     """`up --scale drone=8`: eight replicas of one command, each flying its own drone id; the `swarm`

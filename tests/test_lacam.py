@@ -588,6 +588,54 @@ def test_a_cached_library_that_does_not_load_is_built_again(tmp_path, monkeypatc
         compiled.scatter_library.cache_clear()
 
 
+def test_a_library_shipped_in_the_package_is_loaded_first_and_one_that_does_not_load_is_not_shipped(
+        tmp_path, monkeypatch, capsys) -> None:
+    """The Docker image's runtime has no C compiler: its build puts the library in the package's folder
+    (`compiled.ship`, from the wheelhouse docker/offline.sh builds it into: `--build`), and that one is loaded with no
+    compiler and no cache. A file there that is no library is never shipped (nor a half-copied one left), and one
+    shipped that does not load (another machine's) is passed over for a library built here."""
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        pytest.skip("no C compiler on the PATH: nothing to build or ship")
+    wheelhouse, package, cache = tmp_path / "wheelhouse", tmp_path / "package", tmp_path / "cache"
+    package.mkdir()
+    stale = wheelhouse / "scatter-0000000000000000.so"  # (an older source's library)
+    wheelhouse.mkdir()
+    stale.write_bytes(b"old")
+    assert compiled.main(["--build", str(wheelhouse)]) == 0
+    assert compiled.main(["--build", str(wheelhouse)]) == 0  # (there already: not built again)
+    said = capsys.readouterr().out.splitlines()
+    assert said[0].startswith("compiled: built") and said[1].endswith("is there") and not stale.exists()
+    (name,) = [f.name for f in wheelhouse.glob("scatter-*.so")]
+    monkeypatch.setenv("PATH", str(tmp_path / "nobin"))  # (no compiler from here on)
+    assert compiled.ship(wheelhouse, package) == package / name
+    monkeypatch.setattr(compiled, "SHIPPED", package)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+    compiled.scatter_library.cache_clear()
+    try:
+        lib = compiled.scatter_library()
+        assert lib is not None and lib._name == str(package / name) and not cache.exists()
+        other, elsewhere = tmp_path / "other", tmp_path / "elsewhere"
+        other.mkdir()
+        elsewhere.mkdir()
+        (other / name).write_bytes(b"not a library")
+        assert compiled.ship(other, elsewhere) is None
+        assert list(elsewhere.iterdir()) == []  # (nothing shipped, no part left)
+        (package / name).unlink()  # (a new file: the loaded one stays mapped as it was)
+        (package / name).write_bytes(b"not a library")
+        monkeypatch.undo()
+        monkeypatch.setattr(compiled, "SHIPPED", package)
+        monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+        loads = ("import sys; from pathlib import Path; from coordinator import compiled; "
+                 "compiled.SHIPPED = Path(sys.argv[1]); lib = compiled.scatter_library(); "
+                 "raise SystemExit(lib is None or not lib._name.startswith(sys.argv[2]))")
+        done = subprocess.run([sys.executable, "-c", loads, str(package), str(cache)], timeout=300, capture_output=True,
+                              text=True, cwd=Path(__file__).resolve().parents[1],
+                              env={**os.environ, "XDG_CACHE_HOME": str(cache)})
+        assert done.returncode == 0, done.stderr  # (a new process: built in the cache instead)
+    finally:
+        compiled.scatter_library.cache_clear()
+
+
 def test_a_cache_folder_others_may_write_is_not_used(tmp_path, monkeypatch) -> None:
     """The compiled library is loaded from this user's own cache folder only: one others may write (a library
     there could be anyone's) is passed over for a temporary folder of this process's."""
