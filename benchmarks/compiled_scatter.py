@@ -7,6 +7,11 @@
 `--exact`: the exact search's joint moves instead (`exact.Exact._successors`, compiled in the same library as
 `ex_successors`), on seeded rooms of 4 or 5 drones searched whole, Python against compiled: the same plans and units.
 
+`--pibt`: the complete arbitration's search, its PIBT calls in Python (`arbiter.pibt`) against compiled (`pb_pibt`,
+`lacam.pibt_compiled`): a whole world's search from the instance's start, `--calls` calls each way, the same nodes in
+the same order (exit 1 if not); process CPU a call of the whole expansion (the node's candidates and the rest of the
+call included: what a turn's work units buy), and of PIBT's own part.
+
 Games run the compiled search where the machine can build it (a C compiler), Python's where it cannot: both must make
 the very paths, rounds and work units, or a game's decisions would depend on the machine (exit 1 if not). Times:
 process CPU of the whole scatter (`advance` to its end), Python and C alternated, the best of `--repeat`; and, as the
@@ -87,6 +92,56 @@ def exact_moves(seeds: int, repeat: int) -> int:
     return 1 if differ else 0
 
 
+def pibt_calls(families: list[str], seeds: int, agents: int, calls: int, repeat: int) -> int:
+    """`--pibt`: the search's expansion with PIBT's calls in Python and compiled; exit 1 if the nodes differ."""
+    print("| instance | calls | Python ms a call (PIBT's part) | C ms a call (PIBT's part) | Python ÷ C | "
+          "the same nodes |")
+    print("|---|---|---|---|---|---|")
+    differ = 0
+    for family in families:
+        for seed in range(1, seeds + 1):
+            inst = movingai_instance(family, agents, seed)
+            size = inst.grid.shape
+            open_ = OpenCells(inst.grid)
+            arb = lacam.Lacam()
+            arb.prepare(size, open_)
+            graph, every = arb._graph, arb._every
+            assert graph is not None and every is not None
+            here = flat_cells(np.array(inst.starts, np.int32), size)
+            aims = flat_cells(np.array(inst.goals, np.int32), size)
+            times: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+            nodes: dict[bool, list[bytes]] = {}
+            for _ in range(repeat):
+                for compiled in (False, True):
+                    search = lacam.Search(graph, size, here, aims, aims, every[graph.index[aims]])
+                    if not compiled:
+                        search._lib = None
+                    spent = [0.0]
+                    inner = lacam.pibt_compiled if compiled else lacam.pibt
+
+                    def timed(*a: object, _f: object = inner, _s: list[float] = spent) -> object:
+                        t = time.process_time()
+                        out = _f(*a)  # type: ignore[operator]
+                        _s[0] += time.process_time() - t
+                        return out
+
+                    setattr(lacam, "pibt_compiled" if compiled else "pibt", timed)
+                    try:
+                        t0 = time.process_time()
+                        search.expand(1 << 62, open_, most=calls)
+                        total = time.process_time() - t0
+                    finally:
+                        setattr(lacam, "pibt_compiled" if compiled else "pibt", inner)
+                    times[compiled].append((1000 * total / search.expansions, 1000 * spent[0] / search.expansions))
+                    nodes[compiled] = [k for k in search.explored]
+            same = nodes[True] == nodes[False]
+            differ += not same
+            (py, py_own), (c, c_own) = min(times[False]), min(times[True])
+            print(f"| {family} seed {seed}, {agents} drones | {calls} | {py:.2f} ({py_own:.2f}) | "
+                  f"{c:.2f} ({c_own:.2f}) | {py / c:.1f} | {'yes' if same else 'NO'} |", flush=True)
+    return 1 if differ else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="dronesim bench compiled-scatter", description=__doc__.split("\n")[0])
     p.add_argument("--families", default=",".join(movingai.FAMILIES))
@@ -96,12 +151,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--turn", type=int, default=lacam.SCATTER_WORK,
                    help=f"the units a turn makes (default lacam.SCATTER_WORK, {lacam.SCATTER_WORK})")
     p.add_argument("--exact", action="store_true", help="the exact search's joint moves instead (seeded rooms)")
+    p.add_argument("--pibt", action="store_true", help="the search's PIBT calls instead (Python against compiled)")
+    p.add_argument("--calls", type=int, default=200, help="--pibt: the calls of each search (default 200)")
     args = p.parse_args(argv)
     if scatter_library() is None:
         print("the compiled search cannot be had here (no C compiler, or DRONESIM_COMPILED=0)", file=sys.stderr)
         return 1
     if args.exact:
         return exact_moves(args.seeds, args.repeat)
+    if args.pibt:
+        return pibt_calls([f for f in args.families.split(",") if f], args.seeds, args.agents, args.calls, args.repeat)
     print("| instance | rounds | cells' units | Python ms | C ms | Python ÷ C | turns | longest turn, C ms | "
           "the same paths |")
     print("|---|---|---|---|---|---|---|---|---|")

@@ -86,6 +86,11 @@ def _typed(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.sc_path_cells.argtypes, lib.sc_path_cells.restype = [ptr, i64, ptr], None
     lib.sc_free.argtypes, lib.sc_free.restype = [ptr], None
     lib.ex_successors.argtypes, lib.ex_successors.restype = [i64, i64, ptr, i64, ptr, ptr, ptr, ptr, i64], i64
+    lib.pb_pibt.argtypes = [i64, i64, ptr, ptr, ptr, i64, ptr, ctypes.c_char_p, i64, ptr, i64, ptr, ptr, i64, i64, ptr]
+    lib.pb_pibt.restype = i64
+    lib.pb_candidates.argtypes = [i64, i64, ptr, ptr, ptr, i64, ptr, ptr, ptr, i64, ctypes.c_uint64, i64, i64, i64,
+                                  ptr, ptr]
+    lib.pb_candidates.restype = i64
     return lib
 
 

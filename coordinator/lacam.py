@@ -466,6 +466,31 @@ def stand_ins(graph: Graph, goal: np.ndarray, way: np.ndarray) -> np.ndarray:
     return out
 
 
+def pibt_compiled(lib: ctypes.CDLL, here: np.ndarray, cand: np.ndarray, order: list[int], taken: list[int],
+                  open_: OpenCells | None, steps: np.ndarray, goal: np.ndarray, aim: np.ndarray | None,
+                  shape: Cell) -> tuple[np.ndarray, list[int]] | None:
+    """`arbiter.pibt` compiled (`pb_pibt` in coordinator/scatter.c, step for step): `here` (n,) and `cand` ((n, k), -1
+    after the last) as arrays, `goal` the drones' targets for the swap (with `open_`; None: no swap), `aim` for a pushed
+    drone's retreats (None: unknown), `shape` the padded world's. The next cells ((n,), -1 for a drone that neither
+    chose nor was taken) and the drones that gave way, as Python's; None where the library cannot run it."""
+    n, k = cand.shape
+    here = np.ascontiguousarray(here, np.int64)
+    cand = np.ascontiguousarray(cand, np.int64)
+    order_a = np.array(order, np.int64)
+    nxt = np.array(taken, np.int64)
+    gave = np.empty(max(n, 1), np.int64)
+    goal = np.ascontiguousarray(goal, np.int64)
+    aim_a = None if aim is None else np.ascontiguousarray(aim, np.int64)
+    bits = None if open_ is None else open_.bits
+    cells = shape[0] * shape[1] * shape[2]
+    got = lib.pb_pibt(n, k, here.ctypes.data, cand.ctypes.data, order_a.ctypes.data, len(order_a), nxt.ctypes.data,
+                      bits, cells, steps.ctypes.data, len(steps), goal.ctypes.data,
+                      None if aim_a is None else aim_a.ctypes.data, shape[1], shape[2], gave.ctypes.data)
+    if got < 0:
+        return None
+    return nxt, gave[:got].tolist()
+
+
 class Search:
     """One LaCAM search from a configuration to the goal one (`goals`, flat cells): `expand` spends work on it,
     `step` gives the drones' next configuration from the node they are at (`at`)."""
@@ -503,8 +528,11 @@ class Search:
         self.gave: list[int] = []  # the drones that gave way in the last successor (`arbiter.pibt`)
         shape = (size[0] + 2, size[1] + 2, size[2] + 2)
         self.steps = list(padded_steps(size)[2])
+        self._steps = np.array(self.steps, np.int64)
+        self._lib = scatter_library()  # (PIBT's calls compiled where the machine can: `_successor`)
         self.aim_array = aims.astype(np.int64)
-        self._cached: tuple[Any, list[int], list[list[int]], list[int]] = (None, [], [], [])
+        self._cached: tuple[Any, list[int], list[list[int]], list[int], np.ndarray] = \
+            (None, [], [], [], np.zeros((0, 0), np.int64))
         self.aimed = (self.aims, shape)
         self.plan: np.ndarray | None = None  # once found: the drones' configurations from `at` to the goal (`refine`)
         self.t = 0  # the drones' index in `plan`
@@ -662,8 +690,9 @@ class Search:
             if len(np.unique(fixed)) < len(fixed):
                 return None
         if self._cached[0] is not node:  # (a node is often tried again at once, under its next constraint)
-            self._cached = (node, node.cfg.tolist(), self._candidates(node).tolist(), node.order.tolist())
-        _, here_list, cand, order_all = self._cached
+            cand_array = self._candidates(node)
+            self._cached = (node, node.cfg.tolist(), cand_array.tolist(), node.order.tolist(), cand_array)
+        _, here_list, cand, order_all, _ = self._cached
         order = [i for i in order_all if taken[i] < 0] if who else order_all
         return order[:_choosing(order, here_list, cand, set(where))], taken.tolist()
 
@@ -671,9 +700,14 @@ class Search:
         """PIBT's next configuration from `node` (`_choosers`' call); None if there is none."""
         here = node.cfg
         n = len(here)
-        _, here_list, cand, _ = self._cached
-        chosen, gave = pibt(here_list, cand, call[0], call[1], (open_, self.steps, self.aims), self.aimed)
-        nxt = np.array(chosen, np.int64)
+        _, here_list, cand, _, cand_array = self._cached
+        made = None if self._lib is None else pibt_compiled(self._lib, here, cand_array, call[0], call[1], open_,
+                                                            self._steps, self.aim_array, self.aim_array,
+                                                            self.aimed[1])
+        if made is None:
+            chosen, gave = pibt(here_list, cand, call[0], call[1], (open_, self.steps, self.aims), self.aimed)
+            made = np.array(chosen, np.int64), gave
+        nxt, gave = made
         nxt = np.where(nxt < 0, here, nxt)  # (the drones of the order's end that would stay: `_choosing`)
         if len(np.unique(nxt)) < n:
             return None
@@ -692,6 +726,10 @@ class Search:
         scattered paths' guide, a drone on its path (within `HORIZON`) tries the path's next cell first (LaCAM3)."""
         g, here = self.graph, node.cfg
         c = g.index[here]
+        if self._lib is not None and self.dist.dtype == np.int16 and g.near.shape[1] == 6:
+            made = self._candidates_compiled(node, c)
+            if made is not None:
+                return made
         near = np.concatenate([g.near[c], c[:, None]], axis=1)  # (n, 7): the neighbours, then the cell itself
         d = np.where(near >= 0, self.dist[self.rows[:, None], np.maximum(near, 0)], FAR).astype(np.int64)
         rank = np.where(near >= 0, d * 8 + np.array([1, 2, 3, 4, 5, 6, 0]), 1 << 40)
@@ -707,6 +745,27 @@ class Search:
             return cand
         key = np.where(hit, -1, np.arange(cand.shape[1]))
         return np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1)
+
+    def _candidates_compiled(self, node: Node, c: np.ndarray) -> np.ndarray | None:
+        """`_candidates` compiled (`pb_candidates` in coordinator/scatter.c, the same rows); None if it cannot run."""
+        assert self._lib is not None
+        g, here, n = self.graph, np.ascontiguousarray(node.cfg, np.int64), len(node.cfg)
+        guide = None
+        if self.guide is not None:
+            table, index = self.guide
+            guide = np.ascontiguousarray(np.where(node.depth <= HORIZON * self.horizon, table[self.rows, index[here]],
+                                                  -1), np.int64)
+        dist = np.ascontiguousarray(self.dist)
+        shape = self.aimed[1]
+        out = np.empty((n, g.near.shape[1] + 1), np.int64)
+        seed = node.number * 0x9E3779B97F4A7C15 % (1 << 64)  # (`arbiter.tie_breaks`' seed)
+        got = self._lib.pb_candidates(n, g.near.shape[1], np.ascontiguousarray(c, np.int64).ctypes.data,
+                                      np.ascontiguousarray(g.near, np.int64).ctypes.data, dist.ctypes.data,
+                                      dist.shape[1], np.ascontiguousarray(g.cells, np.int64).ctypes.data,
+                                      here.ctypes.data, self.aim_array.ctypes.data, 1, seed, shape[1], shape[2],
+                                      shape[0] * shape[1] * shape[2], None if guide is None else guide.ctypes.data,
+                                      out.ctypes.data)
+        return None if got < 0 else out
 
     def _next(self, at: Node) -> Node:
         """The node after `at` on the way to the goal node (or, while it is not found, the best node known): one step

@@ -281,3 +281,409 @@ int64_t ex_successors(int64_t rows, int64_t n, const int64_t *cfg, int64_t k, co
     }
     return m;
 }
+
+/* PIBT's call over flat cells (coordinator/arbiter.py's `pibt`, with its `Corridors`, `_swapped`, `_reverse`, `_pull`
+   and `_out_of_the_way`), compiled in the same library for the complete arbitration's search (coordinator/lacam.py's
+   `Search._successor`): step for step Python's, the same cells tried in the same order, so the same next cells and the
+   same drones that gave way (tests/test_lacam.py checks both against each other on random crowds). Python's dicts and
+   sets are arrays over the flat cells made for the call (a drone's number + 1, 0 for none; a walk's cells marked with
+   its stamp); the push chain a stack of frames, each with its own list of cells to try. No state. */
+
+#define PB_MOST 16
+
+typedef struct { int64_t i, len, k, pull; int64_t mine[PB_MOST]; } pb_frame;
+
+typedef struct {
+    int64_t n, W, C, S, Y, Z;
+    const int64_t *here, *cand, *goal, *aim, *steps;
+    const uint8_t *bits;  /* the open cells (NULL: no swap) */
+    int64_t *nxt;
+    int32_t *now, *claimed, *wr, *wb;  /* cell -> drone + 1; walks' stamps (`required`, `beyond`) */
+    int32_t sr, sb;
+} pb;
+
+static int pb_open(const pb *p, int64_t u) { return u >= 0 && u < p->C && (p->bits[u >> 3] >> (u & 7) & 1); }
+static int64_t pb_now(const pb *p, int64_t u) { return u >= 0 && u < p->C ? (int64_t)p->now[u] - 1 : -1; }
+static int64_t pb_claimed(const pb *p, int64_t u) { return u >= 0 && u < p->C ? (int64_t)p->claimed[u] - 1 : -1; }
+
+static int64_t pb_index(const int64_t *xs, int64_t n, int64_t x) {
+    for (int64_t k = 0; k < n; k++)
+        if (xs[k] == x) return k;
+    return -1;
+}
+
+static int64_t pb_manhattan(const pb *p, int64_t u, int64_t v) {
+    int64_t uz = u % p->Z, vz = v % p->Z, uxy = u / p->Z, vxy = v / p->Z;
+    int64_t dx = uxy / p->Y - vxy / p->Y, dy = uxy % p->Y - vxy % p->Y, dz = uz - vz;
+    return (dx < 0 ? -dx : dx) + (dy < 0 ? -dy : dy) + (dz < 0 ? -dz : dz);
+}
+
+static int pb_pocket(const pb *p, int64_t u) {  /* `Corridors._is_pocket` */
+    int n = 0;
+    for (int64_t s = 0; s < p->S; s++) n += pb_open(p, u + p->steps[s]);
+    return n == 1;
+}
+
+static int pb_ways(const pb *p, int64_t v, int64_t back, int parked, int64_t out[2]) {  /* `Corridors.ways` */
+    int m = 0;
+    for (int64_t s = 0; s < p->S; s++) {
+        int64_t u = v + p->steps[s];
+        if (u == back || !pb_open(p, u)) continue;
+        int64_t k = pb_now(p, u);
+        if (k >= 0 && (!parked || p->goal[k] == u) && pb_pocket(p, u)) continue;
+        out[m++] = u;
+        if (m == 2) break;
+    }
+    return m;
+}
+
+static int pb_beyond(pb *p, int64_t a, int64_t b, int64_t g, int parked, int64_t dead) {  /* `Corridors.beyond` */
+    int32_t st = ++p->sb;
+    p->wb[b] = st;
+    for (;;) {
+        int64_t on[2];
+        int m = pb_ways(p, b, a, parked, on);
+        if (m != 1) return m >= 2;
+        a = b;
+        b = on[0];
+        if (b == g) return 1;
+        if (p->wb[b] == st || b == dead) return 0;
+        p->wb[b] = st;
+    }
+}
+
+static int pb_required(pb *p, int64_t i, int64_t j, int64_t vi, int64_t vj, int clear) {  /* `Corridors.required` */
+    int64_t gi = p->goal[i], gj = p->goal[j], a = vi, b = vj, on[2];
+    if (gj < 0) return 0;
+    int32_t st = ++p->sr;
+    p->wr[b] = st;
+    while (a != gi) {
+        int m = pb_ways(p, b, a, 1, on);
+        if (m >= 2) return 0;
+        if (m == 0) break;
+        a = b;
+        b = on[0];
+        if (p->wr[b] == st || pb_now(p, b) >= 0) return 0;
+        p->wr[b] = st;
+    }
+    if (clear) return (gi == a || gi == b) && gj != b && !pb_beyond(p, a, b, gj, 1, -1);
+    if (gj == vj) return b != vj && !pb_beyond(p, a, b, gj, 1, -1);
+    return gj != vi && p->wr[gj] != st;
+}
+
+static void pb_copy(pb_frame *f, const int64_t *mine, int64_t len) {
+    memcpy(f->mine, mine, (size_t)len * sizeof(int64_t));
+    f->len = len;
+}
+
+static void pb_reverse(pb_frame *f, const int64_t *mine, int64_t len, int64_t src) {  /* `_reverse` */
+    int64_t cut = pb_index(mine, len, src), m = 0, out[PB_MOST];
+    for (int64_t k = cut + 1; k < len; k++)
+        if (mine[k] >= 0) out[m++] = mine[k];
+    out[m++] = src;
+    for (int64_t k = 0; k < cut; k++) out[m++] = mine[k];
+    pb_copy(f, out, m);
+}
+
+/* `_swapped`: the frame's cells to try (from `mine`) and the drone it pulls. */
+static void pb_swapped(pb *p, int64_t i, const int64_t *mine, int64_t len, pb_frame *f) {
+    int64_t v = len ? mine[0] : -1, src = p->here[i], on[2];
+    f->pull = -1;
+    if (!p->bits || v < 0 || v == src || pb_index(mine, len, src) < 0 || !pb_open(p, v)) {
+        pb_copy(f, mine, len);
+        return;
+    }
+    int64_t j = pb_now(p, v);
+    if (j >= 0 && j != i && p->nxt[j] < 0) {
+        const int64_t *theirs = p->cand + j * p->W;
+        int64_t at_src = pb_index(theirs, p->W, src);
+        if (at_src >= 0) {
+            int64_t at_v = pb_index(theirs, p->W, v);
+            int wants = at_v >= 0 && at_src < at_v;
+            if ((wants || p->goal[j] == v) && pb_required(p, i, j, src, v, 0) && pb_beyond(p, v, src, -1, 0, v)) {
+                pb_reverse(f, mine, len, src);
+                f->pull = j;
+                return;
+            }
+        }
+    }
+    if (pb_ways(p, v, src, 1, on) >= 2) {
+        pb_copy(f, mine, len);
+        return;
+    }
+    for (int64_t s = 0; s < p->S; s++) {
+        int64_t k = pb_now(p, src + p->steps[s]);
+        if (k < 0 || k == i || p->goal[k] < 0 || p->here[k] == v) continue;
+        const int64_t *theirs = p->cand + k * p->W;
+        int64_t a = pb_index(theirs, p->W, src), b = pb_index(theirs, p->W, p->here[k]);
+        if (a < 0 || b < 0 || a > b) continue;
+        if (pb_required(p, k, i, src, v, 1) && pb_beyond(p, v, src, -1, 0, v)) {
+            pb_reverse(f, mine, len, src);
+            f->pull = p->nxt[k] < 0 ? k : -1;
+            return;
+        }
+    }
+    pb_copy(f, mine, len);
+}
+
+/* `_out_of_the_way`: the pushed drone's cells (its row `mine`, at `src`; its pusher enters from `leaves`, heading for
+   `goal`, -2 when its aim is unknown). */
+static void pb_out_of_the_way(const pb *p, const int64_t *mine, int64_t len, int64_t src, int64_t enters,
+                              int64_t leaves, int64_t goal, int64_t *out, int64_t *out_len) {
+    int64_t cut = pb_index(mine, len, src), later[PB_MOST], nl = 0, m = 0;
+    if (cut < 0) {
+        memcpy(out, mine, (size_t)len * sizeof(int64_t));
+        *out_len = len;
+        return;
+    }
+    int64_t ahead = enters - leaves + enters;
+    for (int64_t k = cut + 1; k < len; k++)
+        if (mine[k] == ahead) later[nl++] = mine[k];
+    if (goal >= 0) {
+        int64_t near = pb_manhattan(p, enters, goal);
+        if (near < pb_manhattan(p, leaves, goal)) {
+            nl = 0;
+            for (int64_t k = cut + 1; k < len; k++)
+                if (mine[k] >= 0 && (mine[k] == ahead || pb_manhattan(p, mine[k], goal) < near)) later[nl++] = mine[k];
+        }
+    }
+    if (!nl) {
+        memcpy(out, mine, (size_t)len * sizeof(int64_t));
+        *out_len = len;
+        return;
+    }
+    for (int64_t k = 0; k < len; k++)
+        if (mine[k] >= 0 && pb_index(later, nl, mine[k]) < 0) out[m++] = mine[k];
+    for (int64_t k = 0; k < nl; k++) out[m++] = later[k];
+    *out_len = m;
+}
+
+static void pb_pull(pb *p, int64_t i, int64_t j) {  /* `_pull` */
+    int64_t src = p->here[i];
+    if (p->nxt[j] < 0 && pb_claimed(p, src) < 0 && pb_index(p->cand + j * p->W, p->W, src) >= 0) {
+        p->nxt[j] = src;
+        p->claimed[src] = (int32_t)(j + 1);
+    }
+}
+
+/* `pibt`: `nxt` ((n,): the taken cells in, -1 for the drones that choose; their next cells out), `here` (n,), `cand`
+   ((n, W), -1 after the last), `order` the drones that choose, highest priority first; `bits` the open cells over `C`
+   flat cells (NULL: no swap), `steps` (S,) the flat moves, `goal` (n,) each drone's target for the swap (-1: none),
+   `aim` (n,) each drone's target for a pushed drone's retreats (NULL: unknown), `Y`, `Z` the padded shape's last two.
+   Writes the drones that gave way into `gave` and returns how many; -1 if it cannot run (W too big, no memory). */
+int64_t pb_pibt(int64_t n, int64_t W, const int64_t *here, const int64_t *cand, const int64_t *order, int64_t n_order,
+                int64_t *nxt, const uint8_t *bits, int64_t C, const int64_t *steps, int64_t S, const int64_t *goal,
+                const int64_t *aim, int64_t Y, int64_t Z, int64_t *gave) {
+    if (W > PB_MOST || n <= 0) return n <= 0 ? 0 : -1;
+    pb p = {n, W, C, S, Y, Z, here, cand, goal, aim, steps, bits, nxt, NULL, NULL, NULL, NULL, 0, 0};
+    p.now = calloc((size_t)C, sizeof(int32_t));
+    p.claimed = calloc((size_t)C, sizeof(int32_t));
+    p.wr = calloc((size_t)C, sizeof(int32_t));
+    p.wb = calloc((size_t)C, sizeof(int32_t));
+    uint8_t *tree = calloc((size_t)n, 1);
+    int64_t *members = malloc((size_t)n * sizeof(int64_t));
+    pb_frame *stack = malloc((size_t)(n + 1) * sizeof(pb_frame));
+    int64_t ng = -1;
+    if (!p.now || !p.claimed || !p.wr || !p.wb || !tree || !members || !stack) goto done;
+    for (int64_t i = 0; i < n; i++) p.now[here[i]] = (int32_t)(i + 1);
+    for (int64_t i = 0; i < n; i++)
+        if (nxt[i] >= 0) p.claimed[nxt[i]] = (int32_t)(i + 1);
+    ng = 0;
+    for (int64_t r = 0; r < n_order; r++) {
+        int64_t root = order[r];
+        if (nxt[root] >= 0) continue;  /* moved already, pushed by a drone of higher priority */
+        int64_t top = 0, nm = 0;
+        stack[0].i = root;
+        stack[0].k = 0;
+        pb_swapped(&p, root, cand + root * W, W, &stack[0]);
+        tree[root] = 1;
+        members[nm++] = root;
+        int contested = 0, led = stack[0].pull >= 0, ok = -1;  /* ok: -1 None, 0 False, 1 True */
+        while (top >= 0) {
+            pb_frame *fr = &stack[top];
+            int64_t i = fr->i, k = fr->k, pull = fr->pull;
+            if (ok == 1) {
+                if (pull >= 0 && k == 1) pb_pull(&p, i, pull);
+                top--;
+                continue;
+            }
+            ok = -1;
+            int64_t src = here[i];
+            int pushed = 0;
+            while (k < fr->len) {
+                int64_t v = fr->mine[k++];
+                if (v < 0) break;
+                int64_t c = pb_claimed(&p, v);
+                if (c >= 0) {
+                    contested = contested || !tree[c];
+                    continue;
+                }
+                int64_t j = pb_now(&p, v);
+                if (j >= 0 && j != i && nxt[j] == src) {  /* a swap */
+                    contested = contested || !tree[j];
+                    continue;
+                }
+                nxt[i] = v;
+                p.claimed[v] = (int32_t)(i + 1);
+                if (j >= 0 && j != i && nxt[j] < 0) {  /* priority inheritance: j must make room */
+                    fr->k = k;
+                    int64_t theirs[PB_MOST], nt = 0;
+                    pb_out_of_the_way(&p, cand + j * W, W, here[j], v, src, aim ? aim[i] : -2, theirs, &nt);
+                    pb_frame *child = &stack[++top];
+                    child->i = j;
+                    child->k = 0;
+                    pb_swapped(&p, j, theirs, nt, child);
+                    if (!tree[j]) {
+                        tree[j] = 1;
+                        members[nm++] = j;
+                    }
+                    pushed = 1;
+                    break;
+                }
+                if (pull >= 0 && k == 1) pb_pull(&p, i, pull);
+                ok = 1;
+                break;
+            }
+            if (pushed) continue;
+            if (ok != 1) {  /* every candidate failed: it stays */
+                nxt[i] = src;
+                p.claimed[src] = (int32_t)(i + 1);
+                ok = 0;
+            }
+            top--;
+        }
+        if (!contested && !led && nxt[root] != cand[root * W]) gave[ng++] = root;
+        for (int64_t m = 0; m < nm; m++) tree[members[m]] = 0;
+    }
+done:
+    free(p.now);
+    free(p.claimed);
+    free(p.wr);
+    free(p.wb);
+    free(tree);
+    free(members);
+    free(stack);
+    return ng;
+}
+
+/* A search node's candidates (coordinator/lacam.py's `Search._candidates` with coordinator/arbiter.py's `candidates`,
+   `hindrance` and `tie_breaks`), compiled for the same search: each drone's cells (its open neighbours and its own)
+   ranked by its distance table, then reordered as the arbiter orders them, then its scattered path's next cell first.
+   The same rows as Python's (tests/test_lacam.py): every key as Python's numpy computes it, each row sorted stably.
+   `c` (n,) the drones' numbered cells, `near` (F, K) the numbered neighbours (-1: none), `dist` (n, F) int16 tables,
+   `cells` (F,) numbered -> flat, `here` (n,) flat, `targets` (n,) flat or -1 (NULL: none), `salted`/`seed` the
+   tie-breaks' (`tie_breaks`' seed, Python's salt already mixed), `Y`, `Z` the padded shape's last two, `C` the flat
+   cells, `guide` (n,) each drone's scattered next cell or -1 (NULL: none); `out` (n, K + 1). 0, or -1 without memory. */
+
+#define TIE_BITS 16
+#define M2 0xBF58476D1CE4E5B9ULL
+#define M3 0x94D049BB133111EBULL
+
+static void pb_sort(int64_t *key, int64_t *val, int64_t m) {  /* stable: insertion */
+    for (int64_t a = 1; a < m; a++) {
+        int64_t k = key[a], v = val[a], b = a - 1;
+        while (b >= 0 && key[b] > k) {
+            key[b + 1] = key[b];
+            val[b + 1] = val[b];
+            b--;
+        }
+        key[b + 1] = k;
+        val[b + 1] = v;
+    }
+}
+
+int64_t pb_candidates(int64_t n, int64_t K, const int64_t *c, const int64_t *near, const int16_t *dist, int64_t F,
+                      const int64_t *cells, const int64_t *here, const int64_t *targets, int64_t salted,
+                      uint64_t seed, int64_t Y, int64_t Z, int64_t C, const int64_t *guide, int64_t *out) {
+    const int64_t W = K + 1;
+    int32_t *at = calloc((size_t)C, sizeof(int32_t));  /* cell -> drone + 1 */
+    uint8_t *aimed = calloc((size_t)C, 1);              /* cell -> some drone's target */
+    int64_t *hind = calloc((size_t)(n * W), sizeof(int64_t));
+    int64_t *stay_at = malloc((size_t)n * sizeof(int64_t));
+    if (!at || !aimed || !hind || !stay_at) {
+        free(at); free(aimed); free(hind); free(stay_at);
+        return -1;
+    }
+    pb geo = {0};
+    geo.Y = Y;
+    geo.Z = Z;
+    for (int64_t i = 0; i < n; i++) at[here[i]] = (int32_t)(i + 1);
+    if (targets)
+        for (int64_t i = 0; i < n; i++)
+            if (targets[i] >= 0) aimed[targets[i]] = 1;
+    /* each drone's own order: nearest to its goal first, staying before a neighbour as near (`rank`) */
+    for (int64_t i = 0; i < n; i++) {
+        int64_t key[PB_MOST], val[PB_MOST];
+        const int64_t *nb = near + c[i] * K;
+        for (int64_t k = 0; k < W; k++) {
+            int64_t v = k < K ? nb[k] : c[i];
+            key[k] = v >= 0 ? (int64_t)dist[i * F + v] * 8 + (k < K ? k + 1 : 0) : ((int64_t)1 << 40);
+            val[k] = v >= 0 ? cells[v] : -1;
+        }
+        pb_sort(key, val, W);
+        int64_t *row = out + i * W;
+        stay_at[i] = W;  /* (Python's MOST: no cell is its own) */
+        for (int64_t k = 0; k < W; k++) {
+            row[k] = val[k];
+            if (stay_at[i] == W && val[k] == here[i]) stay_at[i] = k;
+        }
+    }
+    /* `hindrance`: a drone j that wants (ranks before staying) a cell another drone i stands in, j with a target:
+       i's candidates closer (Manhattan) to j's target than i's cell, other than j's cell, count once each */
+    if (targets) {
+        for (int64_t j = 0; j < n; j++) {
+            if (targets[j] < 0) continue;
+            const int64_t *row = out + j * W;
+            for (int64_t k = 0; k < stay_at[j] && k < W; k++) {
+                int64_t v = row[k];
+                if (v < 0 || v == here[j] || !at[v]) continue;
+                int64_t i = at[v] - 1, goal = targets[j], mine = pb_manhattan(&geo, here[i], goal);
+                const int64_t *theirs = out + i * W;
+                for (int64_t kk = 0; kk < W; kk++) {
+                    int64_t u = theirs[kk];
+                    if (u >= 0 && u != here[j] && pb_manhattan(&geo, u, goal) < mine) hind[i * W + kk]++;
+                }
+            }
+        }
+    }
+    /* `candidates`' keys, each row sorted stably, then the scattered path's next cell first */
+    for (int64_t i = 0; i < n; i++) {
+        int64_t key[PB_MOST], val[PB_MOST];
+        int64_t *row = out + i * W, w = stay_at[i];
+        int ranks_stay = w < W;
+        for (int64_t k = 0; k < W; k++) {
+            int64_t v = row[k], major = 0, minor = k;
+            if (ranks_stay) {
+                int occupied = v >= 0 && at[v] && v != here[i];
+                int theirs = targets && v >= 0 && aimed[v] && v != targets[i];
+                int64_t h = k > w ? (hind[i * W + k] < 7 ? hind[i * W + k] : 7) : 0;
+                major = (k > w) * 512 + (k == w) * 256 + occupied * 128 + h * 8 + theirs * 4;
+                if (salted && k > w) {
+                    uint64_t x = seed + (uint64_t)here[i] * M2 + (uint64_t)v * M3;
+                    x ^= x >> 30;
+                    x *= M2;
+                    x ^= x >> 27;
+                    x *= M3;
+                    x ^= x >> 31;
+                    minor = (int64_t)(x >> (64 - TIE_BITS));
+                }
+            }
+            key[k] = v < 0 ? ((int64_t)1024 << TIE_BITS) : (major << TIE_BITS) + minor;
+            val[k] = v;
+        }
+        pb_sort(key, val, W);
+        int64_t first = guide ? guide[i] : -1, hit = -1;
+        for (int64_t k = 0; k < W && first >= 0; k++)
+            if (val[k] == first) hit = k;
+        if (hit > 0) {
+            for (int64_t k = hit; k > 0; k--) val[k] = val[k - 1];
+            val[0] = first;
+        }
+        memcpy(row, val, (size_t)W * sizeof(int64_t));
+    }
+    free(at);
+    free(aimed);
+    free(hind);
+    free(stay_at);
+    return 0;
+}

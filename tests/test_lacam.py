@@ -553,6 +553,137 @@ def test_the_compiled_scatter_makes_the_paths_python_makes_whole_or_a_turn_at_a_
         assert c.ctx is None  # (its memory freed once the paths are out)
 
 
+def _pibt_case(rng: np.random.Generator) -> tuple[list[int], list[list[int]], list[int], list[int], OpenCells,
+                                                  list[int], list[int], tuple[int, int, int]]:
+    """A random crowd for PIBT's call in a small world of corridors and dead ends (a third of the cells buildings):
+    each drone's candidates its open neighbours and its cell in a random order (-1 after the last), some drones
+    taken to cells of their own, the others choosing in a random order (some left out: the order's end), targets
+    for some (the swap's and the retreats')."""
+    size = (int(rng.integers(3, 9)), int(rng.integers(3, 9)), 1)
+    blocked = rng.random(size) < 0.33
+    open_ = OpenCells(blocked)
+    shape = (size[0] + 2, size[1] + 2, size[2] + 2)
+    cells = np.flatnonzero(open_.array()[:shape[0] * shape[1] * shape[2]])
+    n = int(rng.integers(1, min(len(cells), 14) + 1)) if len(cells) else 0
+    here = rng.permutation(cells)[:n].tolist()
+    steps = [int(d) for d in lacam.padded_steps(size)[2]]
+    cand = []
+    for c in here:
+        row = [c] + [c + d for d in steps if open_[c + d] or rng.random() < 0.1]
+        rng.shuffle(row)
+        cand.append(row + [-1] * (7 - len(row)))
+    taken = [-1] * n
+    free = [c for c in cells.tolist() if c not in here]
+    for i in range(n):
+        if rng.random() < 0.15 and free:
+            taken[i] = free.pop(int(rng.integers(len(free))))
+    order = [i for i in rng.permutation(n).tolist() if taken[i] < 0 and rng.random() < 0.9]
+    goal = [int(rng.choice(cells)) if rng.random() < 0.7 else -1 for _ in range(n)]
+    return here, cand, order, taken, open_, steps, goal, shape
+
+
+def test_the_compiled_pibt_call_is_pythons() -> None:
+    """PIBT's call compiled (`pb_pibt` in coordinator/scatter.c, `lacam.pibt_compiled`) gives the next cells and the
+    drones that gave way `arbiter.pibt` gives, with the swap and the retreats' aims and without, on 3,000 random
+    crowds in worlds of corridors and dead ends (where the swap and the clear operation change the outcome): the
+    search's decisions never depend on which ran."""
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
+    from coordinator.arbiter import pibt
+
+    lib = compiled.scatter_library()
+    rng = np.random.default_rng(37)
+    swapped = 0
+    for case in range(3000):
+        here, cand, order, taken, open_, steps, goal, shape = _pibt_case(rng)
+        if not here:
+            continue
+        world = None if case % 4 == 0 else (open_, steps, goal)
+        aims = None if case % 3 == 0 else (goal, shape)
+        want = pibt(here, cand, order, taken, world, aims)
+        got = lacam.pibt_compiled(lib, np.array(here), np.array(cand), order, taken, None if world is None else open_,
+                                  np.array(steps, np.int64), np.array(goal), None if aims is None else np.array(goal),
+                                  shape)
+        assert got is not None
+        assert (got[0].tolist(), got[1]) == (list(want[0]), want[1]), case
+        swapped += world is not None and want != pibt(here, cand, order, taken, None, aims)
+    assert swapped > 20  # (the swap and the clear operation changed the call's outcome: 45 times here)
+
+
+def test_the_compiled_candidates_are_pythons() -> None:
+    """A node's candidates compiled (`pb_candidates`, `Search._candidates_compiled`: the drones' own order by their
+    tables, the arbiter's reordering with the hindrance and the node's tie-breaks, the scattered path's next cell first)
+    are Python's, on every node of a guided whole world's search of a crowded room and of random obstacles."""
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
+    from benchmarks.swarm import movingai_instance
+    from world.search import flat_cells
+
+    checked = 0
+    for family in ("room-32-32-4", "random-32-32-20"):
+        inst = movingai_instance(family, 150, 2)
+        size = inst.grid.shape
+        open_ = OpenCells(inst.grid)
+        arb = lacam.Lacam()
+        arb.prepare(size, open_)
+        assert arb._graph is not None and arb._every is not None
+        here = flat_cells(np.array(inst.starts, np.int32), size)
+        aims = flat_cells(np.array(inst.goals, np.int32), size)
+        search = lacam.Search(arb._graph, size, here, aims, aims, arb._every[arb._graph.index[aims]], scatter=True)
+        while search.guide is None:
+            search.expand(1 << 62, open_)
+        search.expand(1 << 62, open_, most=60)
+        assert search._lib is not None
+        for node in list(search.explored.values()):
+            got = search._candidates(node)
+            search._lib = None
+            want = search._candidates(node)
+            search._lib = compiled.scatter_library()
+            assert np.array_equal(got, want), (family, node.number)
+            checked += 1
+    assert checked > 100
+
+
+def test_a_game_plays_the_same_with_the_search_compiled_or_in_python(monkeypatch) -> None:
+    """A crowded game's every turn is the same with the search's compiled parts (the scattered paths, PIBT's calls and
+    the nodes' candidates, the exact search's joint moves) and with Python's alone (`DRONESIM_COMPILED=0`): a journal
+    never depends on the machine's C compiler."""
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
+    from benchmarks.swarm import movingai_instance
+
+    inst = movingai_instance("room-32-32-4", 120, 3)
+    world = World.from_grid(inst.grid)
+    ids = [f"D{k + 1:02d}" for k in range(len(inst.starts))]
+    config = GameConfig(world=WorldSpec(size=world.size, cells=world.packed()), max_turns=70,
+                        drones=tuple(DroneSpec(drone=d, start=s) for d, s in zip(ids, inst.starts)))
+    plan = Plan(tuple(sorted((1, d, g) for d, g in zip(ids, inst.goals))))
+    games, calls = [], []
+    for env in ("1", "0"):
+        monkeypatch.setenv(compiled.ENV, env)
+        compiled.scatter_library.cache_clear()
+        arb = lacam.Lacam()
+        games.append(simulate(config, dict.fromkeys(ids, "dstar"), Inputs(plan=plan), logging.getLogger("t"),
+                              verify_env=False, arbiter=arb).records)
+        calls.append(arb.expansions)
+    compiled.scatter_library.cache_clear()
+    assert games[0] == games[1] and len(games[0]) > 70
+    assert calls[0] == calls[1] > 100  # (the search ran: its PIBT calls, the same)
+
+
+def test_the_search_with_pibt_compiled_makes_the_same_nodes(capsys: pytest.CaptureFixture[str]) -> None:
+    """`dronesim bench compiled-scatter --pibt`: a whole world's search, its PIBT calls in Python and compiled, the
+    same nodes in the same order (its exit code says so)."""
+    from benchmarks import compiled_scatter
+
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
+    assert compiled_scatter.main(["--pibt", "--families", "room-32-32-4", "--seeds", "1", "--agents", "100",
+                                  "--calls", "40", "--repeat", "1"]) == 0
+    rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("| room")]
+    assert len(rows) == 1 and rows[0].endswith("| yes |"), rows
+
+
 def test_the_compiled_search_is_off_where_the_environment_says_so_and_python_then_plans(monkeypatch) -> None:
     """`DRONESIM_COMPILED=0`: no library, `Scatter` runs Python's search (the same paths)."""
     monkeypatch.setenv(compiled.ENV, "0")
