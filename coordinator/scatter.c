@@ -475,6 +475,13 @@ int64_t pb_pibt(int64_t n, int64_t W, const int64_t *here, const int64_t *cand, 
                 int64_t *nxt, const uint8_t *bits, int64_t C, const int64_t *steps, int64_t S, const int64_t *goal,
                 const int64_t *aim, int64_t Y, int64_t Z, int64_t *gave) {
     if (W > PB_MOST || n <= 0) return n <= 0 ? 0 : -1;
+    for (int64_t i = 0; i < n; i++) {  /* cells off the flat range: not ours to index (Python's then) */
+        if (here[i] < 0 || here[i] >= C || nxt[i] >= C || goal[i] >= C || (aim && aim[i] >= C)) return -1;
+        for (int64_t k = 0; k < W; k++)
+            if (cand[i * W + k] >= C) return -1;
+    }
+    for (int64_t r = 0; r < n_order; r++)
+        if (order[r] < 0 || order[r] >= n) return -1;
     pb p = {n, W, C, S, Y, Z, here, cand, goal, aim, steps, bits, nxt, NULL, NULL, NULL, NULL, 0, 0};
     p.now = calloc((size_t)C, sizeof(int32_t));
     p.claimed = calloc((size_t)C, sizeof(int32_t));
@@ -596,6 +603,14 @@ int64_t pb_candidates(int64_t n, int64_t K, const int64_t *c, const int64_t *nea
                       const int64_t *cells, const int64_t *here, const int64_t *targets, int64_t salted,
                       uint64_t seed, int64_t Y, int64_t Z, int64_t C, const int64_t *guide, int64_t *out) {
     const int64_t W = K + 1;
+    if (W > PB_MOST) return -1;
+    for (int64_t i = 0; i < n; i++)  /* cells off their ranges: not ours to index (Python's then) */
+        if (here[i] < 0 || here[i] >= C || c[i] < 0 || c[i] >= F || (targets && targets[i] >= C)) return -1;
+    for (int64_t v = 0; v < F; v++) {
+        if (cells[v] < 0 || cells[v] >= C) return -1;
+        for (int64_t k = 0; k < K; k++)
+            if (near[v * K + k] >= F) return -1;
+    }
     int32_t *at = calloc((size_t)C, sizeof(int32_t));  /* cell -> drone + 1 */
     uint8_t *aimed = calloc((size_t)C, 1);              /* cell -> some drone's target */
     int64_t *hind = calloc((size_t)(n * W), sizeof(int64_t));

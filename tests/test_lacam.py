@@ -610,6 +610,20 @@ def test_the_compiled_pibt_call_is_pythons() -> None:
     assert swapped > 20  # (the swap and the clear operation changed the call's outcome: 45 times here)
 
 
+def test_the_compiled_pibt_call_refuses_cells_off_its_range() -> None:
+    """A cell beyond the flat cells it was given (a caller's bug) is never indexed by the compiled call: it says so
+    (None), and the search then runs Python's."""
+    if compiled.scatter_library() is None:
+        pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
+    here, cand, order, taken, open_, steps, goal, shape = _pibt_case(np.random.default_rng(3))
+    lib = compiled.scatter_library()
+    args = (np.array(steps, np.int64), np.array(goal), np.array(goal), shape)
+    assert lacam.pibt_compiled(lib, np.array(here), np.array(cand), order, taken, open_, *args) is not None
+    far = shape[0] * shape[1] * shape[2]
+    for bad_here, bad_cand in (([far] + here[1:], cand), (here, [[far] + row[1:] for row in cand])):
+        assert lacam.pibt_compiled(lib, np.array(bad_here), np.array(bad_cand), order, taken, open_, *args) is None
+
+
 def test_the_compiled_candidates_are_pythons() -> None:
     """A node's candidates compiled (`pb_candidates`, `Search._candidates_compiled`: the drones' own order by their
     tables, the arbiter's reordering with the hindrance and the node's tie-breaks, the scattered path's next cell first)
