@@ -51,10 +51,13 @@ def test_quick_run_records_the_table_and_the_floods_change_no_journal(capsys, tm
                          rows[ask][attacker])
     assert found, rows[ask]
     sent, answered, refused, unanswered = (int((v or "0").replace(",", "")) for v in found.groups())
-    assert sent == flood.QUICK_FLOODS["ask"] and answered + refused + unanswered == sent and refused > 0, rows[ask]
+    # (whether this tiny game's burst outruns the environment's budget depends on the machine: on a fast one the
+    # environment keeps up and its last queries come after the game's end; tests/test_flood.py holds the refusals)
+    assert sent == flood.QUICK_FLOODS["ask"] and answered + refused + unanswered == sent, rows[ask]
     # a query without a reply reached the environment after it left, the game over: only if the flood outlasted it
     assert not unanswered or "cut" in rows[ask]["turns/s during the flood (turns, s)"], rows[ask]
-    assert f"{{'flood': {refused}}}, from {{'D01': {refused}}}" == rows[ask]["rejected by the environment"]
+    rejected = f"{{'flood': {refused}}}, from {{'D01': {refused}}}" if refused else "-"
+    assert rejected == rows[ask]["rejected by the environment"], rows[ask]
     assert rows[nps][attacker].startswith(f"{flood.QUICK_FLOODS['nps']:,} / 0 / 0 ("), rows[nps]
     # every game may also count the ground station's own stale DONEs (it re-sends a phase's DONE until that turn's
     # STATUS comes: a loaded machine's re-send can arrive after the phase closed), as its session or as its key's
