@@ -666,11 +666,11 @@ def search_alone(cases: list[tuple[str, int]], turns: int = 40) -> dict[tuple[st
         inst = city_instance(CITY[0], n, 1) if family == "city" else movingai_instance(family, n, 1)
         size: Cell = inst.grid.shape
         open_ = arbiter.OpenCells(inst.grid)
-        search = lacam.Lacam(work=1 << 62)
+        search = lacam.Lacam()
         pos, goals, coop = np.array(inst.starts, np.int32), np.array(inst.goals, np.int32), np.ones(n, bool)
         while search.follow(size, pos, coop, goals, open_) is None or not search.busy:
-            pass
-        search.work = lacam.WORK
+            pass  # (the tables made a turn's work at a time, the drones holding: an unbounded turn would also search
+            # to the goal and refine the plan without end)
         spent = []
         gc.disable()
         try:

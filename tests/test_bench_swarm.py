@@ -126,3 +126,11 @@ def test_anchor_trace_of_one_seed(capsys) -> None:
     assert len(rows) == 1 and rows[0].split(" | ")[2] == "2", rows  # that seed alone
     course = [line for line in captured.err.splitlines() if "room-32-32-4 20: turn " in line]
     assert course and course[0].split(": ", 1)[1].startswith("turn 0: whole, found "), course
+
+
+def test_the_search_alone_is_timed_turn_by_turn() -> None:
+    """`--search-alone`: the search started where the game would start it (its tables made a turn's work at a time:
+    an unbounded first turn searched to the goal and refined the plan without end), then timed turn by turn."""
+    out = swarm.search_alone([("room-32-32-4", 100), ("city", 1000)], turns=5)
+    for mean, p95, longest in out.values():
+        assert 0 < mean <= longest and p95 <= longest
