@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -45,6 +46,22 @@ def instance(family: str, agents: int, seed: int) -> tuple[lacam.Graph, np.ndarr
     start = graph.index[flat_cells(np.array(inst.starts, np.int32), size)]
     goal = graph.index[flat_cells(np.array(inst.goals, np.int32), size)]
     return graph, start, goal, every[goal]
+
+
+def searches(family: str, agents: int, seed: int, scatter: bool = False
+             ) -> tuple[Callable[[], lacam.Search], OpenCells]:
+    """A benchmark instance's whole world searches from its start (its graph and every distance table made once, here),
+    each new, and its open cells."""
+    inst = movingai_instance(family, agents, seed)
+    size = inst.grid.shape
+    open_ = OpenCells(inst.grid)
+    arb = lacam.Lacam()
+    arb.prepare(size, open_)
+    graph, every = arb._graph, arb._every
+    assert graph is not None and every is not None
+    here = flat_cells(np.array(inst.starts, np.int32), size)
+    aims = flat_cells(np.array(inst.goals, np.int32), size)
+    return lambda: lacam.Search(graph, size, here, aims, aims, every[graph.index[aims]], scatter=scatter), open_
 
 
 def room(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -100,20 +117,12 @@ def pibt_calls(families: list[str], seeds: int, agents: int, calls: int, repeat:
     differ = 0
     for family in families:
         for seed in range(1, seeds + 1):
-            inst = movingai_instance(family, agents, seed)
-            size = inst.grid.shape
-            open_ = OpenCells(inst.grid)
-            arb = lacam.Lacam()
-            arb.prepare(size, open_)
-            graph, every = arb._graph, arb._every
-            assert graph is not None and every is not None
-            here = flat_cells(np.array(inst.starts, np.int32), size)
-            aims = flat_cells(np.array(inst.goals, np.int32), size)
+            new_search, open_ = searches(family, agents, seed)
             times: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
             nodes: dict[bool, list[bytes]] = {}
             for _ in range(repeat):
                 for compiled in (False, True):
-                    search = lacam.Search(graph, size, here, aims, aims, every[graph.index[aims]])
+                    search = new_search()
                     if not compiled:
                         search._lib = None
                     spent = [0.0]

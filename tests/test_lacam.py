@@ -630,20 +630,12 @@ def test_the_compiled_candidates_are_pythons() -> None:
     are Python's, on every node of a guided whole world's search of a crowded room and of random obstacles."""
     if compiled.scatter_library() is None:
         pytest.skip(f"no compiled search here: no C compiler on the PATH, or {compiled.ENV}=0")
-    from benchmarks.swarm import movingai_instance
-    from world.search import flat_cells
+    from benchmarks.compiled_scatter import searches
 
     checked = 0
     for family in ("room-32-32-4", "random-32-32-20"):
-        inst = movingai_instance(family, 150, 2)
-        size = inst.grid.shape
-        open_ = OpenCells(inst.grid)
-        arb = lacam.Lacam()
-        arb.prepare(size, open_)
-        assert arb._graph is not None and arb._every is not None
-        here = flat_cells(np.array(inst.starts, np.int32), size)
-        aims = flat_cells(np.array(inst.goals, np.int32), size)
-        search = lacam.Search(arb._graph, size, here, aims, aims, arb._every[arb._graph.index[aims]], scatter=True)
+        new_search, open_ = searches(family, 150, 2, scatter=True)
+        search = new_search()
         while search.guide is None:
             search.expand(1 << 62, open_)
         search.expand(1 << 62, open_, most=60)
