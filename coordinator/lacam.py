@@ -530,6 +530,11 @@ class Search:
         self.steps = list(padded_steps(size)[2])
         self._steps = np.array(self.steps, np.int64)
         self._lib = scatter_library()  # (PIBT's calls compiled where the machine can: `_successor`)
+        # (and the nodes' candidates, `_candidates_compiled`: for int16 tables of a 3D grid's graph whose cells it may
+        # index, checked once here rather than at every node)
+        self._fits_c = dist.dtype == np.int16 and graph.near.shape[1] == 6 and \
+            int(graph.near.max(initial=-1)) < len(graph.cells) and \
+            0 <= int(graph.cells.min(initial=0)) <= int(graph.cells.max(initial=0)) < shape[0] * shape[1] * shape[2]
         self.aim_array = aims.astype(np.int64)
         self._cached: tuple[Any, list[int], list[list[int]], list[int], np.ndarray] = \
             (None, [], [], [], np.zeros((0, 0), np.int64))
@@ -726,7 +731,7 @@ class Search:
         scattered paths' guide, a drone on its path (within `HORIZON`) tries the path's next cell first (LaCAM3)."""
         g, here = self.graph, node.cfg
         c = g.index[here]
-        if self._lib is not None and self.dist.dtype == np.int16 and g.near.shape[1] == 6:
+        if self._lib is not None and self._fits_c:
             made = self._candidates_compiled(node, c)
             if made is not None:
                 return made

@@ -580,7 +580,7 @@ done:
    `c` (n,) the drones' numbered cells, `near` (F, K) the numbered neighbours (-1: none), `dist` (n, F) int16 tables,
    `cells` (F,) numbered -> flat, `here` (n,) flat, `targets` (n,) flat or -1 (NULL: none), `salted`/`seed` the
    tie-breaks' (`tie_breaks`' seed, Python's salt already mixed), `Y`, `Z` the padded shape's last two, `C` the flat
-   cells, `guide` (n,) each drone's scattered next cell or -1 (NULL: none); `out` (n, K + 1). 0, or -1 without memory. */
+   cells, `guide` (n,) each drone's scattered next cell or -1 (NULL: none); `out` (n, K + 1). 0; -1 without memory or with a drone's cell off its range (`near` and `cells` the caller checks once). */
 
 #define TIE_BITS 16
 #define M2 0xBF58476D1CE4E5B9ULL
@@ -604,13 +604,9 @@ int64_t pb_candidates(int64_t n, int64_t K, const int64_t *c, const int64_t *nea
                       uint64_t seed, int64_t Y, int64_t Z, int64_t C, const int64_t *guide, int64_t *out) {
     const int64_t W = K + 1;
     if (W > PB_MOST) return -1;
-    for (int64_t i = 0; i < n; i++)  /* cells off their ranges: not ours to index (Python's then) */
+    for (int64_t i = 0; i < n; i++)  /* cells off their ranges: not ours to index (Python's then); the graph's own
+                                         (`near`, `cells`) its caller checks once, not at every node */
         if (here[i] < 0 || here[i] >= C || c[i] < 0 || c[i] >= F || (targets && targets[i] >= C)) return -1;
-    for (int64_t v = 0; v < F; v++) {
-        if (cells[v] < 0 || cells[v] >= C) return -1;
-        for (int64_t k = 0; k < K; k++)
-            if (near[v * K + k] >= F) return -1;
-    }
     int32_t *at = calloc((size_t)C, sizeof(int32_t));  /* cell -> drone + 1 */
     uint8_t *aimed = calloc((size_t)C, 1);              /* cell -> some drone's target */
     int64_t *hind = calloc((size_t)(n * W), sizeof(int64_t));
