@@ -342,15 +342,28 @@ CROWDED = (["##.#...###", "#....#...#", "##..#...##", "###.##.###"],
             (7, 2, 0)])
 
 
-def _crowded(turns: int = 40) -> tuple[bool, list[str]]:
-    """The crowded swap played by the focused searches from its start (as after a search of the whole world without
-    progress): every drone home within `turns`, and each turn's search (its kind and drones)."""
-    rows, parked = CROWDED
+#: Three drones in a 1-wide line of three cells, each wanting the next one's cell (the first the last's), the line's
+#: ends each held by a drone parked on its target, between two clusters of free and parked cells, each with a
+#: 4-cycle (random-32-32-20 with 400 drones, seed 5, x 8-18 and y 0-5, the endgame left by more search a turn).
+LINE = (["#..#...#...", "#....#...#.", "....#...##.", "#....#.....", "..###...#..", ".......#..."],
+        [(4, 0, 0), (5, 0, 0), (6, 0, 0), (0, 5, 0), (1, 5, 0), (2, 0, 0), (2, 1, 0), (4, 1, 0), (4, 5, 0), (5, 2, 0),
+         (5, 5, 0), (6, 1, 0), (6, 2, 0), (6, 4, 0), (6, 5, 0), (7, 2, 0), (7, 3, 0), (9, 0, 0), (9, 4, 0),
+         (10, 4, 0), (10, 5, 0)])
+
+
+def _crowded(turns: int = 40, puzzle: tuple[list[str], list[tuple[int, int, int]]] = CROWDED,
+             trade: list[int] | None = None) -> tuple[bool, list[str]]:
+    """A crowded puzzle (the crowded swap by default) played by the focused searches from its start (as after a
+    search of the whole world without progress): every drone home within `turns`, and each turn's search (its kind
+    and drones). The drones of `trade` (the first two by default) each want the next one's cell, the last the
+    first's; the others are on their targets."""
+    rows, parked = puzzle
     grid = world_of(rows)
     size: Cell = grid.shape  # type: ignore[assignment]
     cells = np.array(parked, np.int32)
     targets = cells.copy()
-    targets[[0, 1]] = targets[[1, 0]]
+    trade = [0, 1] if trade is None else trade
+    targets[trade] = targets[trade[1:] + trade[:1]]
     open_, coop = OpenCells(grid), np.ones(len(cells), bool)
     search = lacam.Lacam()
     search.prepare(size, open_)
@@ -388,6 +401,20 @@ def test_a_puzzle_in_a_crowd_is_solved_on_the_ladder_of_exact_searches() -> None
     search._flat = lacam.EXACT_AFTER  # (no progress: an exact search where the puzzle is small)
     ball = search._focus(size, here, aims, lacam.FOCUS)
     assert isinstance(ball, lacam.Search) and ball.focus is None and len(ball.goals) == 10
+
+
+def test_a_rung_too_big_to_search_whole_is_searched_a_side_at_a_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three drones changing their order in a 1-wide line between two crowded clusters (`LINE`): the ladder's rung
+    whose part takes in both clusters (8 drones on 16 cells, 518,918,400 placements) is too big for an exact search;
+    its left side alone (the line and one cluster: 5 drones on 9 cells) is searched whole and has the way, every drone
+    home within 30 turns. Without the sides (`Lacam._sides` giving none), the ladder ends there and LaCAM's focus does
+    not find it in 60 turns (nor did the game's in 64)."""
+    home, kinds = _crowded(30, LINE, [0, 1, 2])
+    assert home, kinds
+    assert "Exact 5" in kinds and not any(k.startswith("Search") for k in kinds), kinds
+    monkeypatch.setattr(lacam.Lacam, "_sides", staticmethod(lambda seen, start, near: []))
+    home, kinds = _crowded(60, LINE, [0, 1, 2])
+    assert not home and any(k.startswith("Search") for k in kinds), kinds
 
 
 def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
