@@ -11,10 +11,10 @@ and the clear operation (Okumura, IJCAI 2023) are PIBT's own here (`arbiter.pibt
 pushed drone's cells are ordered (`arbiter.candidates`).
 
 Online, in the manner of Real-Time LaCAM (Liang et al., 2025): the search tree persists from turn to turn; each
-turn spends a budget of *work units* (a PIBT call costs a unit per drone and `CALL`, a distance table made in the
-turns one a level and one per `CELLS_A_UNIT` open cells: never wall-clock time, so that every layout, replay and
-resume does the same work; a call or table begun only if it fits, so the longest turn is bounded; the tables of a
-small world made at the game's start, `Lacam.prepare`) and the drones then take one
+turn spends a budget of *work units* (a PIBT call costs a unit per drone and `CALL`, over `SHARE`; a distance table
+made in the turns one a level and one per `CELLS_A_UNIT` open cells: never wall-clock time, so that every layout,
+replay and resume does the same work; a call or table begun only if it fits, so the longest turn is bounded; the
+tables of a small world made at the game's start, `Lacam.prepare`) and the drones then take one
 step along the tree from the node they are at towards the goal node if found, else towards the best node known
 (the least sum of distances to the goals; a step up the tree is a move back: every transition is reversible), never
 along the depth-first frontier as the search backtracks. A node's constraints pin the drones away from their goals
@@ -74,8 +74,15 @@ __all__ = ["Lacam", "Search", "Graph"]
 #: dictionaries, the swap's test and the node's candidates, over every drone).
 CALL = 30
 FIXED = 2
-#: The search's work units a turn, two full PIBT calls at 400 drones (a PIBT call costs one a drone that chooses in it
-#: — not the drones of its order's end that would stay, `_choosing` —, one per FIXED drones and CALL; a distance table
+#: A PIBT call's units are its drones', FIXED's and CALL's divided by SHARE: the units were calibrated on Python's
+#: calls (`arbiter.pibt`), and the compiled calls (`pibt_compiled`, `Search._candidates_compiled`) take a fourth to a
+#: seventh of their time, so a turn makes SHARE times as many calls in about the time of Python's (more search a turn:
+#: shorter first chains, more refining; BENCHMARKS.md, "LaCAM: more search a turn"). Units, not time: the same calls
+#: where no compiled library is had, in four times as long.
+SHARE = 4
+#: The search's work units a turn, two full PIBT calls at 400 drones in Python, 2 x SHARE compiled (a PIBT call costs
+#: one a drone that chooses in it — not the drones of its order's end that would stay, `_choosing` —, one per FIXED
+#: drones and CALL, divided by SHARE; a distance table
 #: one a level of its breadth-first search and one per CELLS_A_UNIT open cells). A turn is that work, or that of the
 #: tables, and at most one more PIBT call (the turn's own when the search does not play it), never more: the search's
 #: calls and tables are only started within the budget (the first of a turn excepted: one call at least, the drones
@@ -602,7 +609,8 @@ class Search:
                 continue
             who, where = node.tree[0]
             call = self._choosers(node, who, where)
-            cost = CALL + n // FIXED + (0 if call is None else len(call[0]))  # (those that choose: `_choosing`)
+            cost = max(1, (CALL + n // FIXED + (0 if call is None else len(call[0]))) // SHARE)  # (those that
+            # choose: `_choosing`)
             if (spent or not first) and spent + cost > work:
                 break
             node.tree.popleft()
@@ -1089,13 +1097,15 @@ class Lacam:
         front = np.unique(np.concatenate([hc[away], goal_c[away]]))
         near = np.where(g.near >= 0, g.near, len(g.cells))
         for _ in range(radius + 1):
+            if not len(front):
+                break  # (every cell of the drones' components: a radius may grow without end)
             seen[front] = True
             front = np.unique(near[front].ravel())
             front = front[(front < len(g.cells)) & ~seen[front]]
         seen[:-1] &= self._piece(seen[:-1], near, hc[away])
         part = np.flatnonzero(seen[:-1])
-        if len(part) == int(np.isin(g.part, g.part[hc]).sum()):  # (every cell the drones can reach: the whole)
-            return self._start(size, here, aims)
+        if len(part) == int((g.part == g.part[part[0]]).sum()):  # (every cell of its connected component: the whole
+            return self._start(size, here, aims)  # world's search, its other components' drones standing still)
         free = np.flatnonzero(seen[hc])
         world = OpenCells.of(self._bits(g, part))
         sub = Graph(world, size)
@@ -1169,7 +1179,7 @@ class Lacam:
         enter[hc[~mine]] = RUNG_PARKED
         enter[F] = F  # (no neighbour: never entered)
         start = np.unique(np.concatenate([hc[seed], goal_c[seed]]))
-        whole = int(np.isin(g.part, g.part[hc]).sum())
+        whole = int((g.part == g.part[hc[seed[0]]]).sum())  # (the seed's connected component: its part's end)
         while self._rung:
             cost = np.full(F + 1, F, np.int64)
             cost[start] = 0

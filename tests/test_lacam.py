@@ -417,6 +417,54 @@ def test_a_rung_too_big_to_search_whole_is_searched_a_side_at_a_time(monkeypatch
     assert not home and any(k.startswith("Search") for k in kinds), kinds
 
 
+def test_the_ladder_and_the_focus_end_where_the_drones_stand_in_several_components(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Drones in two components of the world (one alone in a 1-cell pocket), a puzzle without a way in the other: the
+    ladder's parts stop growing at the seed's component, the focus's radius at its cells, and both end (the rungs once
+    climbed for ever: a part never the cells of every drone's component; the focus's radius, doubled at each search
+    without progress, walked cell ring by cell ring to 2^40), the game proving the puzzle has no way."""
+    rows, starts, goals = ([".##.", "#..#", "..#."], [(0, 2, 0), (1, 1, 0), (3, 2, 0), (2, 1, 0)],
+                           [(3, 0, 0), (0, 2, 0), (3, 2, 0), (2, 1, 0)])
+    grid = world_of(rows)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    search = lacam.Lacam()
+    search.prepare(size, OpenCells(grid))
+    here, aims = flat_cells(np.array(starts), size), flat_cells(np.array(goals), size)
+    calls = 0
+    piece = lacam.Lacam._piece
+
+    def counted(seen: np.ndarray, near: np.ndarray, away: np.ndarray) -> np.ndarray:
+        nonlocal calls
+        calls += 1
+        assert calls < 1000, "the ladder climbs for ever"
+        return piece(seen, near, away)
+
+    monkeypatch.setattr(lacam.Lacam, "_piece", staticmethod(counted))
+    search._ladder()
+    while search._rung:
+        made = search._rung_search(size, here, aims)
+        if made is None:
+            break
+        search._side += 1  # (as `follow` does when a rung has no way)
+    assert search._rung == 0 and calls < 20
+    monkeypatch.undo()
+    unique, seen = np.unique, 0
+
+    def counted_unique(*args: object, **kwargs: object) -> object:
+        nonlocal seen
+        seen += 1
+        assert seen < 10_000, "the focus walks its radius for ever"
+        return unique(*args, **kwargs)  # type: ignore[call-overload]
+
+    monkeypatch.setattr(np, "unique", counted_unique)
+    focused = search._focus(size, here, aims, 1 << 40)
+    monkeypatch.undo()
+    assert focused is None or focused.focus is None  # (the whole world's search: its component's every cell)
+    drones = {f"D{i + 1:02d}": (s, g) for i, (s, g) in enumerate(zip(starts, goals))}
+    result = play(grid, drones, 1000, "lacam")
+    assert result.over.reason is EndReason.SETTLED and result.over.turn < 50, result.over
+
+
 def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.MonkeyPatch) -> None:
     """The search's PIBT calls a turn: as many as `work` units hold (one at least), never more; the turns that make
     the scattered paths (`Scatter`, as the search starts: `SCATTER_WORK` units a turn, a path at least) make none, the
@@ -430,7 +478,8 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
     cells = np.array([s for s, _ in drones.values()], np.int32)
     targets = np.array([t for _, t in drones.values()], np.int32)
     coop, open_ = np.ones(n, bool), OpenCells(grid)
-    full = n + n // lacam.FIXED + lacam.CALL  # (a call where every drone chooses: the first ones here)
+    full = max(1, (n + n // lacam.FIXED + lacam.CALL) // lacam.SHARE)  # (a call where every drone chooses: the first
+    # ones here)
     start = cells
     for work, scatter, spread in [(1, False, 0), (2 * full, False, 0), (3 * full - 1, False, 0), (4 * full, False, 0),
                                   (4 * full, True, lacam.SCATTER_WORK), (4 * full, True, 1)]:
