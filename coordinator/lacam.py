@@ -74,16 +74,16 @@ __all__ = ["Lacam", "Search", "Graph"]
 #: dictionaries, the swap's test and the node's candidates, over every drone).
 CALL = 30
 FIXED = 2
-#: A PIBT call's units are its drones', FIXED's and CALL's divided by SHARE: the units were calibrated on Python's
-#: calls (`arbiter.pibt`), and the compiled calls (`pibt_compiled`, `Search._candidates_compiled`) take a fourth to a
-#: seventh of their time, so a turn makes SHARE times as many calls in about the time of Python's (more search a turn:
-#: shorter first chains, more refining; BENCHMARKS.md, "LaCAM: more search a turn"). Units, not time: the same calls
-#: where no compiled library is had, in four times as long.
-SHARE = 4
-#: The search's work units a turn, two full PIBT calls at 400 drones in Python, 2 x SHARE compiled (a PIBT call costs
-#: one a drone that chooses in it — not the drones of its order's end that would stay, `_choosing` —, one per FIXED
-#: drones and CALL, divided by SHARE; a distance table
-#: one a level of its breadth-first search and one per CELLS_A_UNIT open cells). A turn is that work, or that of the
+#: A PIBT call's units are its drones', FIXED's and CALL's divided by SHARE. The units were calibrated on Python's
+#: calls (`arbiter.pibt`); compiled (`pibt_compiled`, `Search._candidates_compiled`) they take a fourth to a seventh of
+#: the time. SHARE = 4 (more search a turn) brings two more held-out rooms home within 4 x their bounds and shortens
+#: the mazes, but its longest turns reach 18 to 28 ms at 400 drones (BENCHMARKS.md, "LaCAM: more search a turn, with
+#: the ladder's sides"): kept at 1 until a turn's calls are bounded in time as well as in units.
+SHARE = 1
+#: The search's work units a turn, two full PIBT calls at 400 drones (a PIBT call costs one a drone that chooses in it
+#: — not the drones of its order's end that would stay, `_choosing` —, one per FIXED drones and CALL, over SHARE; a
+#: distance table one a level of its breadth-first search and one per CELLS_A_UNIT open cells). A turn is that work, or
+#: that of the
 #: tables, and at most one more PIBT call (the turn's own when the search does not play it), never more: the search's
 #: calls and tables are only started within the budget (the first of a turn excepted: one call at least, the drones
 #: never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md, "Online": 20 ms
