@@ -83,11 +83,10 @@ SHARE = 1
 #: The search's work units a turn, two full PIBT calls at 400 drones (a PIBT call costs one a drone that chooses in it
 #: — not the drones of its order's end that would stay, `_choosing` —, one per FIXED drones and CALL, over SHARE; a
 #: distance table one a level of its breadth-first search and one per CELLS_A_UNIT open cells). A turn is that work, or
-#: that of the
-#: tables, and at most one more PIBT call (the turn's own when the search does not play it), never more: the search's
-#: calls and tables are only started within the budget (the first of a turn excepted: one call at least, the drones
-#: never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md, "Online": 20 ms
-#: or less at 400 drones, 100 at 1000, on the benchmark's densest instances).
+#: that of the tables, and at most one more PIBT call (the turn's own when the search does not play it), never more:
+#: the search's calls and tables are only started within the budget (the first of a turn excepted: one call at least,
+#: the drones never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md,
+#: "Online": 20 ms or less at 400 drones, 100 at 1000, on the benchmark's densest instances).
 WORK = 2 * (400 + 400 // FIXED + CALL)
 #: A breadth-first search's level costs about a unit (the arrays of its frontier); its cells about a 32nd each.
 CELLS_A_UNIT = 32
@@ -1221,12 +1220,12 @@ class Lacam:
     def _sides(seen: np.ndarray, start: np.ndarray, near: np.ndarray) -> list[np.ndarray]:
         """A rung's part (the open cells `seen`) one side at a time: the seed's cells (`start`: its drones' and their
         goals') with one connected piece of the rest each, the smallest piece first (then by its least cell)."""
-        mine = np.zeros(len(seen), bool)
-        mine[start] = True
-        rest = seen & ~mine
+        seeds = np.zeros(len(seen), bool)
+        seeds[start] = True
+        rest = seen & ~seeds
         label = _pieces(rest, near)
         pieces, cells = np.unique(label[rest], return_counts=True)
-        return [mine | (label == p) for _, p in sorted(zip(cells.tolist(), pieces.tolist()))]
+        return [seeds | (label == p) for _, p in sorted(zip(cells.tolist(), pieces.tolist()))]
 
     @staticmethod
     def _bits(g: Graph, part: np.ndarray) -> np.ndarray:
