@@ -91,6 +91,8 @@ def _typed(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.pb_candidates.argtypes = [i64, i64, ptr, ptr, ptr, i64, ptr, ptr, ptr, i64, ctypes.c_uint64, i64, i64, i64,
                                   ptr, ptr]
     lib.pb_candidates.restype = i64
+    lib.pb_choosers.argtypes, lib.pb_choosers.restype = [i64, i64, ptr, ptr, ptr, ptr, i64, ptr], i64
+    lib.pb_valid.argtypes, lib.pb_valid.restype = [i64, ptr, ptr, i64], i64
     return lib
 
 

@@ -75,17 +75,17 @@ __all__ = ["Lacam", "Search", "Graph"]
 CALL = 30
 FIXED = 2
 #: A PIBT call's units are its drones', FIXED's and CALL's divided by SHARE. The units were calibrated on Python's
-#: calls (`arbiter.pibt`); compiled (`pibt_compiled`, `Search._candidates_compiled`) they take a fourth to a seventh of
-#: the time. SHARE = 4 (more search a turn) brings two more held-out rooms home within 4 x their bounds and shortens
-#: the mazes, but its longest turns reach 18 to 28 ms at 400 drones (BENCHMARKS.md, "LaCAM: more search a turn, with
-#: the ladder's sides"): kept at 1 until a turn's calls are bounded in time as well as in units.
-SHARE = 1
-#: The search's work units a turn, two full PIBT calls at 400 drones (a PIBT call costs one a drone that chooses in it
-#: — not the drones of its order's end that would stay, `_choosing` —, one per FIXED drones and CALL, over SHARE; a
-#: distance table one a level of its breadth-first search and one per CELLS_A_UNIT open cells). A turn is that work, or
-#: that of the tables, and at most one more PIBT call (the turn's own when the search does not play it), never more:
-#: the search's calls and tables are only started within the budget (the first of a turn excepted: one call at least,
-#: the drones never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md,
+#: calls (`arbiter.pibt`); compiled (`pb_choosers`, `pb_pibt`, `pb_valid`, `pb_candidates` in coordinator/scatter.c)
+#: they take a seventh to a tenth of the time: SHARE = 4 is more search a turn, eight full calls at 400 drones, about
+#: 0.3 ms each (BENCHMARKS.md, "LaCAM: more search a turn, its calls' bookkeeping compiled"); without the library a
+#: turn takes four to seven times as long.
+SHARE = 4
+#: The search's work units a turn, two full PIBT calls at 400 drones at SHARE = 1 (a PIBT call costs one a drone that
+#: chooses in it — not the drones of its order's end that would stay, `_choosing` —, one per FIXED drones and CALL, over
+#: SHARE; a distance table one a level of its breadth-first search and one per CELLS_A_UNIT open cells). A turn is that
+#: work, or that of the tables, and at most one more PIBT call (the turn's own when the search does not play it), never
+#: more: the search's calls and tables are only started within the budget (the first of a turn excepted: one call at
+#: least, the drones never wait for the search), so the longest turn is bounded as the average (docs/cooperation.md,
 #: "Online": 20 ms or less at 400 drones, 100 at 1000, on the benchmark's densest instances).
 WORK = 2 * (400 + 400 // FIXED + CALL)
 #: A breadth-first search's level costs about a unit (the arrays of its frontier); its cells about a 32nd each.
@@ -165,7 +165,7 @@ class Graph:
     numbering; `index`: the other way, -1 for a building), each one's open neighbours (`near`, (F, 6), -1 for
     none) and its connected component (`part`: the first open cell of it)."""
 
-    __slots__ = ("cells", "index", "near", "part", "_steps")
+    __slots__ = ("cells", "index", "near", "_part", "_steps", "_open")
 
     def __init__(self, open_: OpenCells, size: Cell) -> None:
         bits = open_.array()
@@ -174,11 +174,21 @@ class Graph:
         self.index[self.cells] = np.arange(len(self.cells))
         self._steps = steps = np.array(padded_steps(size)[2], np.int64)
         self.near = self.index[self.cells[:, None] + steps]
-        self.part = np.full(len(self.cells), -1, np.int64)
-        for root in range(len(self.cells)):
-            if self.part[root] < 0:  # (a breadth-first search of its component, the cells it has left open)
-                for reached in levels(bits, [int(self.cells[root])], steps):
-                    self.part[self.index[reached]] = root
+        self._open = open_
+        self._part: np.ndarray | None = None
+
+    @property
+    def part(self) -> np.ndarray:
+        """Each open cell's connected component (its first open cell), made when first asked (a refining search's
+        graph never is: `Search._refiner`)."""
+        if self._part is None:
+            bits = self._open.array()
+            self._part = part = np.full(len(self.cells), -1, np.int64)
+            for root in range(len(self.cells)):
+                if part[root] < 0:  # (a breadth-first search of its component, the cells it has left open)
+                    for reached in levels(bits, [int(self.cells[root])], self._steps):
+                        part[self.index[reached]] = root
+        return self._part
 
     def ways(self, here: np.ndarray, aims: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The drones' open cells (numbered; -1 off them), their targets' (-1 for none or a building), and whether
@@ -413,8 +423,7 @@ class Node:
     def __init__(self, cfg: np.ndarray, parent: Node | None, prio: np.ndarray, number: int) -> None:
         self.cfg, self.parent, self.prio, self.number = cfg, parent, prio, number
         self.depth: int = 0 if parent is None else parent.depth + 1
-        n = len(cfg)
-        self.order = np.lexsort((np.arange(n), -prio))
+        self.order = np.argsort(-prio, kind="stable")  # (ties: the lower row first)
         self.tree: deque[tuple[tuple[int, ...], tuple[int, ...]]] = deque([((), ())])
         self.near: list[Node] = [] if parent is None else [parent]  # its neighbours in the configurations' graph
         self.pins: list[int] | None = None  # the order in which its constraints pin drones (`Search._pins`)
@@ -542,8 +551,10 @@ class Search:
             int(graph.near.max(initial=-1)) < len(graph.cells) and \
             0 <= int(graph.cells.min(initial=0)) <= int(graph.cells.max(initial=0)) < shape[0] * shape[1] * shape[2]
         self.aim_array = aims.astype(np.int64)
-        self._cached: tuple[Any, list[int], list[list[int]], list[int], np.ndarray] = \
-            (None, [], [], [], np.zeros((0, 0), np.int64))
+        self._cells = shape[0] * shape[1] * shape[2]  # (the padded world's flat cells: the compiled calls' range)
+        self._cached: tuple[Any, np.ndarray] = (None, np.zeros((0, 0), np.int64))  # a node and its candidates
+        self._listed: tuple[Any, list[int], list[list[int]], list[int]] = (None, [], [], [])  # (and as lists)
+        self._compiled_args: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (`_candidates_compiled`)
         self.aimed = (self.aims, shape)
         self.plan: np.ndarray | None = None  # once found: the drones' configurations from `at` to the goal (`refine`)
         self.t = 0  # the drones' index in `plan`
@@ -691,33 +702,61 @@ class Search:
         return [int(g.cells[v]) for v in sorted(near, key=lambda v: (int(d[v]), v != c, v))]
 
     def _choosers(self, node: Node, who: tuple[int, ...], where: tuple[int, ...]
-                  ) -> tuple[list[int], list[int]] | None:
+                  ) -> tuple[Any, Any] | None:
         """The PIBT call from `node` with drones `who` sent to cells `where`: the drones that choose, highest priority
-        first (`_choosing`), and each drone's cell taken by the constraints (-1: none); None if two share one."""
+        first (`_choosing`), and each drone's cell taken by the constraints (-1: none); None if two share one. Arrays
+        where the call runs compiled (`pb_choosers` in coordinator/scatter.c, the same drones), else lists."""
         n = len(node.cfg)
         taken = np.full(n, -1, np.int64)
         if who:
             taken[list(who)] = where
-            fixed = taken[taken >= 0]
-            if len(np.unique(fixed)) < len(fixed):
-                return None
         if self._cached[0] is not node:  # (a node is often tried again at once, under its next constraint)
-            cand_array = self._candidates(node)
-            self._cached = (node, node.cfg.tolist(), cand_array.tolist(), node.order.tolist(), cand_array)
-        _, here_list, cand, order_all, _ = self._cached
-        order = [i for i in order_all if taken[i] < 0] if who else order_all
-        return order[:_choosing(order, here_list, cand, set(where))], taken.tolist()
+            self._cached = (node, self._candidates(node))
+        cand_array = self._cached[1]
+        if self._lib is not None:
+            order = np.empty(n, np.int64)
+            here = np.ascontiguousarray(node.cfg, np.int64)
+            k = self._lib.pb_choosers(n, cand_array.shape[1], here.ctypes.data, cand_array.ctypes.data,
+                                      np.ascontiguousarray(node.order, np.int64).ctypes.data, taken.ctypes.data,
+                                      self._cells, order.ctypes.data)
+            if k == -2:
+                return None
+            if k >= 0:
+                return order[:k], taken
+        fixed = taken[taken >= 0]
+        if len(np.unique(fixed)) < len(fixed):
+            return None
+        _, here_list, cand, order_all = self._lists(node)
+        order_list = [i for i in order_all if taken[i] < 0] if who else order_all
+        return order_list[:_choosing(order_list, here_list, cand, set(where))], taken.tolist()
 
-    def _successor(self, node: Node, call: tuple[list[int], list[int]], open_: OpenCells) -> np.ndarray | None:
+    def _lists(self, node: Node) -> tuple[Any, list[int], list[list[int]], list[int]]:
+        """`node`'s cells, candidates and order as lists (Python's PIBT call, `arbiter.pibt`)."""
+        if self._listed[0] is not node:
+            self._listed = (node, node.cfg.tolist(), self._cached[1].tolist(), node.order.tolist())
+        return self._listed
+
+    def _successor(self, node: Node, call: tuple[Any, Any], open_: OpenCells) -> np.ndarray | None:
         """PIBT's next configuration from `node` (`_choosers`' call); None if there is none."""
         here = node.cfg
         n = len(here)
-        _, here_list, cand, _, cand_array = self._cached
-        made = None if self._lib is None else pibt_compiled(self._lib, here, cand_array, call[0], call[1], open_,
-                                                            self._steps, self.aim_array, self.aim_array,
-                                                            self.aimed[1])
-        if made is None:
-            chosen, gave = pibt(here_list, cand, call[0], call[1], (open_, self.steps, self.aims), self.aimed)
+        cand_array = self._cached[1]
+        lib = self._lib
+        made = None if lib is None else pibt_compiled(lib, here, cand_array, call[0], call[1], open_, self._steps,
+                                                      self.aim_array, self.aim_array, self.aimed[1])
+        if made is not None and lib is not None:
+            nxt, gave = made
+            ok = lib.pb_valid(n, np.ascontiguousarray(here, np.int64).ctypes.data, nxt.ctypes.data, self._cells)
+            if ok == 0:  # (the stays filled in, the configuration checked: else, -1, numpy's below)
+                return None
+            if ok == 1:
+                self.gave = gave
+                return nxt
+        else:
+            _, here_list, cand, _ = self._lists(node)
+            order, taken = call[0], call[1]
+            chosen, gave = pibt(here_list, cand, _listed(order), _listed(taken), (open_, self.steps, self.aims),
+                                self.aimed)
             made = np.array(chosen, np.int64), gave
         nxt, gave = made
         nxt = np.where(nxt < 0, here, nxt)  # (the drones of the order's end that would stay: `_choosing`)
@@ -767,16 +806,17 @@ class Search:
             table, index = self.guide
             guide = np.ascontiguousarray(np.where(node.depth <= HORIZON * self.horizon, table[self.rows, index[here]],
                                                   -1), np.int64)
-        dist = np.ascontiguousarray(self.dist)
+        if self._compiled_args is None:  # (the graph's arrays and the tables as the library reads them, made once)
+            self._compiled_args = (np.ascontiguousarray(g.near, np.int64), np.ascontiguousarray(self.dist),
+                                   np.ascontiguousarray(g.cells, np.int64))
+        near, dist, cells = self._compiled_args
         shape = self.aimed[1]
         out = np.empty((n, g.near.shape[1] + 1), np.int64)
         seed = node.number * 0x9E3779B97F4A7C15 % (1 << 64)  # (`arbiter.tie_breaks`' seed)
         got = self._lib.pb_candidates(n, g.near.shape[1], np.ascontiguousarray(c, np.int64).ctypes.data,
-                                      np.ascontiguousarray(g.near, np.int64).ctypes.data, dist.ctypes.data,
-                                      dist.shape[1], np.ascontiguousarray(g.cells, np.int64).ctypes.data,
+                                      near.ctypes.data, dist.ctypes.data, dist.shape[1], cells.ctypes.data,
                                       here.ctypes.data, self.aim_array.ctypes.data, 1, seed, shape[1], shape[2],
-                                      shape[0] * shape[1] * shape[2], None if guide is None else guide.ctypes.data,
-                                      out.ctypes.data)
+                                      self._cells, None if guide is None else guide.ctypes.data, out.ctypes.data)
         return None if got < 0 else out
 
     def _next(self, at: Node) -> Node:
@@ -906,6 +946,11 @@ def _pieces(seen: np.ndarray, near: np.ndarray) -> np.ndarray:
         if (low == label).all():
             return label
         label, ext = low, np.append(low, n)
+
+
+def _listed(xs: Any) -> list[int]:
+    """A call's drones or cells as a list (`Search._choosers` gives arrays where it runs compiled)."""
+    return xs.tolist() if isinstance(xs, np.ndarray) else list(xs)
 
 
 def _choosing(order: list[int], here: list[int], cand: list[list[int]], fixed: set[int]) -> int:

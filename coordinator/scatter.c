@@ -698,3 +698,58 @@ int64_t pb_candidates(int64_t n, int64_t K, const int64_t *c, const int64_t *nea
     free(stay_at);
     return 0;
 }
+
+/* A search node's PIBT call made ready (coordinator/lacam.py's `Search._choosers` with `_choosing`): `taken` (n,) the
+   cells the node's constraints send drones to (-1: none), `order` (n,) PIBT's order of every drone. `out` gets the
+   order's drones that no constraint sends (in order); the count of those that must choose is returned: not the drones
+   at its end whose first candidate (`cand`, (n, W)) is their own cell (`here`, flat) and into whose cell no constraint
+   sends a drone. -2 where two constraints send drones to one cell (no call); -1 with a cell off its range (`C` the
+   flat cells: Python's then). */
+int64_t pb_choosers(int64_t n, int64_t W, const int64_t *here, const int64_t *cand, const int64_t *order,
+                    const int64_t *taken, int64_t C, int64_t *out) {
+    for (int64_t i = 0; i < n; i++)
+        if (here[i] < 0 || here[i] >= C || taken[i] >= C || order[i] < 0 || order[i] >= n) return -1;
+    uint8_t *fixed = calloc((size_t)C, 1);
+    if (!fixed) return -1;
+    int64_t m = 0, k;
+    for (int64_t i = 0; i < n; i++) {
+        if (taken[i] < 0) continue;
+        if (fixed[taken[i]]) {
+            free(fixed);
+            return -2;
+        }
+        fixed[taken[i]] = 1;
+    }
+    for (int64_t r = 0; r < n; r++)
+        if (taken[order[r]] < 0) out[m++] = order[r];
+    for (k = m; k > 0; k--) {
+        int64_t i = out[k - 1];
+        if (cand[i * W] != here[i] || fixed[here[i]]) break;
+    }
+    free(fixed);
+    return k;
+}
+
+/* A PIBT call's next cells made whole and checked (coordinator/lacam.py's `Search._successor`): a drone that neither
+   chose nor was taken (-1 in `nxt`) stays (`nxt` written so); 1 if no two drones share a cell and no two swap theirs,
+   0 if some do, -1 with a cell off its range (`C` the flat cells: Python's check then). */
+int64_t pb_valid(int64_t n, const int64_t *here, int64_t *nxt, int64_t C) {
+    for (int64_t i = 0; i < n; i++)
+        if (here[i] < 0 || here[i] >= C || nxt[i] >= C) return -1;
+    int32_t *now = calloc((size_t)C, sizeof(int32_t)), *next = calloc((size_t)C, sizeof(int32_t));
+    int64_t ok = 1;
+    if (!now || !next) ok = -1;
+    for (int64_t i = 0; ok == 1 && i < n; i++) {
+        if (nxt[i] < 0) nxt[i] = here[i];
+        now[here[i]] = (int32_t)(i + 1);
+    }
+    for (int64_t i = 0; ok == 1 && i < n; i++) {
+        if (next[nxt[i]]) ok = 0;  /* two drones in one cell */
+        next[nxt[i]] = (int32_t)(i + 1);
+        int64_t j = now[nxt[i]] - 1;
+        if (j >= 0 && j != i && nxt[j] == here[i]) ok = 0;  /* a swap */
+    }
+    free(now);
+    free(next);
+    return ok;
+}
