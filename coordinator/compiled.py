@@ -82,9 +82,9 @@ def _typed(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.sc_new.argtypes, lib.sc_new.restype = [i64, i64, i64, i64, ptr, ptr, i64], ptr
     lib.sc_plan.argtypes, lib.sc_plan.restype = [ptr, i64, i64, i64], i64
     lib.sc_collisions.argtypes, lib.sc_collisions.restype = [ptr], i64
-    lib.sc_path_length.argtypes, lib.sc_path_length.restype = [ptr, i64], i64
-    lib.sc_path_cells.argtypes, lib.sc_path_cells.restype = [ptr, i64, ptr], None
     lib.sc_free.argtypes, lib.sc_free.restype = [ptr], None
+    lib.sc_paths_length.argtypes, lib.sc_paths_length.restype = [ptr], i64
+    lib.sc_paths.argtypes, lib.sc_paths.restype = [ptr, ptr, ptr], None
     lib.ex_successors.argtypes, lib.ex_successors.restype = [i64, i64, ptr, i64, ptr, ptr, ptr, ptr, i64], i64
     lib.pb_pibt.argtypes = [i64, i64, ptr, ptr, ptr, i64, ptr, ctypes.c_char_p, i64, ptr, i64, ptr, ptr, i64, i64, ptr]
     lib.pb_pibt.restype = i64

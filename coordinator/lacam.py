@@ -57,6 +57,7 @@ import weakref
 from bisect import bisect_left, insort
 from collections import Counter, deque
 from heapq import heappop, heappush
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -316,10 +317,11 @@ class Scatter:
     def _fetch(self) -> None:
         lib, ctx = self.lib, self.ctx
         assert lib is not None and ctx is not None
-        for i in range(len(self.paths)):
-            cells = np.zeros(lib.sc_path_length(ctx, i), np.int64)
-            lib.sc_path_cells(ctx, i, cells.ctypes.data)
-            self.paths[i] = cells.tolist()
+        cells = np.zeros(lib.sc_paths_length(ctx), np.int64)  # (every path at once, one after the other)
+        lengths = np.zeros(len(self.paths), np.int64)
+        lib.sc_paths(ctx, lengths.ctypes.data, cells.ctypes.data)
+        flat, ends = cells.tolist(), np.cumsum(lengths).tolist()
+        self.paths = [flat[a:b] for a, b in zip([0] + ends[:-1], ends)]
         self._release()
         self.ctx = None
 
@@ -407,9 +409,12 @@ class Scatter:
     def table(self) -> np.ndarray:
         """Each drone's next cell on its path from each open cell ((n, F), flat cells; -1 off its path)."""
         out = np.full((len(self.paths), self.F), -1, np.int64)
-        for i, path in enumerate(self.paths):
-            if len(path) > 1:
-                out[i, path[:-1]] = self.cells[path[1:]]
+        lengths = np.array([len(p) for p in self.paths], np.int64)
+        flat = np.fromiter(chain.from_iterable(self.paths), np.int64, count=int(lengths.sum()))
+        step = np.ones(len(flat), bool)  # (every cell of a path but its last, then the next cell along it)
+        step[np.cumsum(lengths)[lengths > 0] - 1] = False
+        at = np.flatnonzero(step)
+        out[np.repeat(np.arange(len(self.paths)), lengths)[at], flat[at]] = self.cells[flat[at + 1]]
         return out
 
 

@@ -234,10 +234,20 @@ int64_t sc_collisions(const ctx *s) {
     return total;
 }
 
-int64_t sc_path_length(const ctx *s, int64_t i) { return s->path_n[i]; }
+/* Every path at once: the cells of all (`sc_paths_length` of them) one after the other into `cells`, each one's length
+   into `lengths` (N). */
+int64_t sc_paths_length(const ctx *s) {
+    int64_t total = 0;
+    for (int64_t i = 0; i < s->N; i++) total += s->path_n[i];
+    return total;
+}
 
-void sc_path_cells(const ctx *s, int64_t i, int64_t *out) {
-    if (s->path_n[i]) memcpy(out, s->paths[i], (size_t)s->path_n[i] * sizeof(int64_t));
+void sc_paths(const ctx *s, int64_t *lengths, int64_t *cells) {
+    for (int64_t i = 0; i < s->N; i++) {
+        lengths[i] = s->path_n[i];
+        if (s->path_n[i]) memcpy(cells, s->paths[i], (size_t)s->path_n[i] * sizeof(int64_t));
+        cells += s->path_n[i];
+    }
 }
 
 /* The exact search's joint moves (coordinator/exact.py's `Exact._successors`), compiled in the same library: every
