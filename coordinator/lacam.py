@@ -885,10 +885,13 @@ class Search:
                 ahead = self.t + (len(self.plan) - 1 - self.t) * AHEAD[0] // AHEAD[1]
                 if len(self.plan) - 1 - ahead < REFINE or (spent and spent + self._build > work):
                     return spent
+                made = self._refiner(ahead, (self.refined + 1) * REFINE_NUMBERS)
+                if made is None:  # (its tables too big to make in a turn: the plan is walked as it is)
+                    return spent
                 spent += self._build
                 self.refined += 1
                 self.ahead = ahead
-                r = self.refiner = self._refiner(ahead)
+                r = self.refiner = made
             left = len(self.plan) - 1 - self.ahead  # the plan's steps after the refiner's root
             while r.found is None and r.open and not r.full and r.expansions < left - 1 and not self._behind(r):
                 calls = r.expansions
@@ -904,12 +907,13 @@ class Search:
                 self.plan = np.concatenate([self.plan[:self.ahead], way])
             self.refiner = None
 
-    def _refiner(self, ahead: int) -> Search:
-        """A refining search from the plan's configuration `ahead`: over the drones that move after it, the others
-        (on their goals from there to the end of the plan) standing still, walls to it (as a focused search's); of
-        every drone in a focused search (its plan holds its drones alone). Its calls cost the drones it moves: in the
-        plan's second half most drones are home for good."""
-        number = self.refined * REFINE_NUMBERS
+    def _refiner(self, ahead: int, number: int) -> Search | None:
+        """A refining search from the plan's configuration `ahead`, its root numbered `number`: over the drones that
+        move after it, the others (on their goals from there to the end of the plan) standing still, walls to it (as a
+        focused search's); of every drone in a focused search (its plan holds its drones alone). Its calls cost the
+        drones it moves: in the plan's second half most drones are home for good. None where its distance tables (its
+        drones' over its part of the world, copied) would hold more than `PRECOMPUTE` entries: a copy longer than a
+        turn (1000 drones in the 64 x 64 x 8 city: 56 MB, 150 ms); never on a 32 x 32 map."""
         assert self.plan is not None
         aims = np.array(self.aims, np.int64)
         parked = (self.plan[ahead:] == self.goals).all(axis=0)
@@ -918,6 +922,8 @@ class Search:
                           self.focus, number)
         g = self.graph
         free = np.flatnonzero(~parked)
+        if len(free) * (len(g.cells) - int(parked.sum())) > PRECOMPUTE:  # (its tables: its drones by its part's cells)
+            return None
         bits = np.zeros(len(g.index), bool)
         bits[g.cells] = True
         bits[self.plan[ahead][parked]] = False
@@ -925,7 +931,7 @@ class Search:
         part = g.index[np.flatnonzero(bits)]
         sub = Graph(world, self.size)
         return Search(sub, self.size, self.plan[ahead][free], self.goals[free], aims[free],
-                      self.dist[free][:, part], self.memory, (free, self.plan[ahead], world, 0), number)
+                      self.dist[np.ix_(free, part)], self.memory, (free, self.plan[ahead], world, 0), number)
 
     def _behind(self, r: Search) -> bool:
         """The refiner `r` has made BEHIND calls or more and its best node is farther from the goal (sum of distances)

@@ -563,6 +563,43 @@ def test_a_found_plan_is_refined_while_the_drones_walk_it() -> None:
     assert len(again) == len(walked) and all((x == y).all() for x, y in zip(again, walked))
 
 
+
+def test_a_refiner_whose_tables_would_not_be_copied_in_a_turn_is_not_made(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A refining search over some drones copies their distance tables over its part of the world; where that copy
+    would hold more than `PRECOMPUTE` entries (1000 drones in the 64 x 64 x 8 city: 56 MB, a turn of 150 ms), no such
+    refiner is made and the plan is walked as it is (here `PRECOMPUTE` made small, after the game's tables): every
+    drone home, no refiner over a part of the world."""
+    blocked = movingai.generate("room-32-32-4", 1)
+    cells = movingai.starts_and_goals(movingai.scenario(blocked, 100, 1, "room-32-32-4.map"))
+    grid = movingai.world_grid(blocked)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    open_ = OpenCells(grid)
+    here = flat_cells(np.array([s for s, _ in cells], np.int32), size)
+    aims = flat_cells(np.array([g for _, g in cells], np.int32), size)
+    search = lacam.Lacam(scatter=False)
+    search.prepare(size, open_)
+    s = search._start(size, here, aims)
+    assert s is not None
+    while s.found is None:
+        s.expand(lacam.WORK, open_)
+    monkeypatch.setattr(lacam, "PRECOMPUTE", 1000)
+    refused, made = [], []
+    real = lacam.Search._refiner
+
+    def watched(self: lacam.Search, ahead: int, number: int) -> lacam.Search | None:
+        out = real(self, ahead, number)
+        (refused if out is None else made).append(out)
+        return out
+
+    monkeypatch.setattr(lacam.Search, "_refiner", watched)
+    where = s.where()
+    while s.plan is None or s.t < len(s.plan) - 1:
+        s.refine(lacam.WORK, open_)
+        where = s.step()
+    assert (where == aims).all()
+    assert refused and all(r is not None and r.focus is None for r in made), (len(refused), len(made))
+
+
 #: Two rooms joined by two 1-wide doors, at y = 0 and y = 6; drones cross both ways near the top door.
 DOORS = [".........", "....#....", "....#....", "....#....", "....#....", "....#....", "........."]
 CROSSING = ([(0, 1, 0), (1, 1, 0), (2, 1, 0), (3, 1, 0), (5, 2, 0), (6, 2, 0), (7, 2, 0), (8, 2, 0)],
