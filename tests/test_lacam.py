@@ -520,16 +520,35 @@ def test_a_turn_of_the_search_spends_its_budget_at_most(monkeypatch: pytest.Monk
     assert made == list(range(1, len({tuple(t) for t in targets.tolist()}) + 1))  # (a table a turn, then the search)
 
 
-def _refined_walk(size: Cell, open_: OpenCells, here: np.ndarray, aims: np.ndarray) -> tuple[list[np.ndarray], int]:
-    """The drones' configurations walking a found search's plan, a turn's refinement (`Search.refine`) before
-    each step, and the first solution's length (the search unguided, `scatter=False`: the refiners' own gain; guided by
-    scattered paths, its first solution here is 74 steps, 80 unguided, and no refiner finds a shorter one)."""
+def _room_crowd() -> tuple[Cell, OpenCells, np.ndarray, np.ndarray]:
+    """100 drones in room-32-32-4 (seed 1): the world's size and open cells, the drones' cells and targets (flat)."""
+    blocked = movingai.generate("room-32-32-4", 1)
+    cells = movingai.starts_and_goals(movingai.scenario(blocked, 100, 1, "room-32-32-4.map"))
+    grid = movingai.world_grid(blocked)
+    size: Cell = grid.shape  # type: ignore[assignment]
+    open_ = OpenCells(grid)
+    here = flat_cells(np.array([s for s, _ in cells], np.int32), size)
+    aims = flat_cells(np.array([g for _, g in cells], np.int32), size)
+    return size, open_, here, aims
+
+
+def _found(size: Cell, open_: OpenCells, here: np.ndarray, aims: np.ndarray) -> lacam.Search:
+    """A whole world's search, unguided (`scatter=False`), expanded until it has found the goal."""
     search = lacam.Lacam(scatter=False)
     search.prepare(size, open_)
     s = search._start(size, here, aims)
     assert s is not None
     while s.found is None:
         s.expand(lacam.WORK, open_)
+    assert isinstance(s, lacam.Search)
+    return s
+
+
+def _refined_walk(size: Cell, open_: OpenCells, here: np.ndarray, aims: np.ndarray) -> tuple[list[np.ndarray], int]:
+    """The drones' configurations walking a found search's plan, a turn's refinement (`Search.refine`) before
+    each step, and the first solution's length (the search unguided, `scatter=False`: the refiners' own gain; guided by
+    scattered paths, its first solution here is 74 steps, 80 unguided, and no refiner finds a shorter one)."""
+    s = _found(size, open_, here, aims)
     walked = [s.where()]
     while True:
         s.refine(lacam.WORK, open_)
@@ -543,13 +562,7 @@ def test_a_found_plan_is_refined_while_the_drones_walk_it() -> None:
     from configurations of the plan ahead of the drones make it shorter while they walk it (`Search.refine`):
     every step a valid move of every drone (to a neighbour or staying, no two in a cell, no swap), the walk ends
     with every drone home, shorter than the first solution, and is the same in every run."""
-    blocked = movingai.generate("room-32-32-4", 1)
-    cells = movingai.starts_and_goals(movingai.scenario(blocked, 100, 1, "room-32-32-4.map"))
-    grid = movingai.world_grid(blocked)
-    size: Cell = grid.shape  # type: ignore[assignment]
-    open_ = OpenCells(grid)
-    here = flat_cells(np.array([s for s, _ in cells], np.int32), size)
-    aims = flat_cells(np.array([g for _, g in cells], np.int32), size)
+    size, open_, here, aims = _room_crowd()
     walked, first = _refined_walk(size, open_, here, aims)
     assert (walked[0] == here).all() and (walked[-1] == aims).all()
     assert len(walked) - 1 < first, (len(walked) - 1, first)
@@ -569,19 +582,8 @@ def test_a_refiner_whose_tables_would_not_be_copied_in_a_turn_is_not_made(monkey
     would hold more than `PRECOMPUTE` entries (1000 drones in the 64 x 64 x 8 city: 56 MB, a turn of 150 ms), no such
     refiner is made and the plan is walked as it is (here `PRECOMPUTE` made small, after the game's tables): every
     drone home, no refiner over a part of the world."""
-    blocked = movingai.generate("room-32-32-4", 1)
-    cells = movingai.starts_and_goals(movingai.scenario(blocked, 100, 1, "room-32-32-4.map"))
-    grid = movingai.world_grid(blocked)
-    size: Cell = grid.shape  # type: ignore[assignment]
-    open_ = OpenCells(grid)
-    here = flat_cells(np.array([s for s, _ in cells], np.int32), size)
-    aims = flat_cells(np.array([g for _, g in cells], np.int32), size)
-    search = lacam.Lacam(scatter=False)
-    search.prepare(size, open_)
-    s = search._start(size, here, aims)
-    assert s is not None
-    while s.found is None:
-        s.expand(lacam.WORK, open_)
+    size, open_, here, aims = _room_crowd()
+    s = _found(size, open_, here, aims)
     monkeypatch.setattr(lacam, "PRECOMPUTE", 1000)
     refused, made = [], []
     real = lacam.Search._refiner
