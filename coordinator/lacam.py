@@ -77,9 +77,9 @@ CALL = 30
 FIXED = 2
 #: A PIBT call's units are its drones', FIXED's and CALL's divided by SHARE. The units were calibrated on Python's
 #: calls (`arbiter.pibt`); compiled (`pb_choosers`, `pb_pibt`, `pb_valid`, `pb_candidates` in coordinator/scatter.c)
-#: they take a seventh to a tenth of the time: SHARE = 4 is more search a turn, eight full calls at 400 drones, about
-#: 0.3 ms each (BENCHMARKS.md, "LaCAM: more search a turn, its calls' bookkeeping compiled"); without the library a
-#: turn takes four to seven times as long.
+#: they take a seventh to an eleventh of the time: SHARE = 4 is more search a turn, eight full calls at 400 drones,
+#: about 0.25 ms each (BENCHMARKS.md, "LaCAM: more search a turn, its calls' bookkeeping compiled"); without the
+#: library the search's calls take 7 to 11 times as long (the same games).
 SHARE = 4
 #: The search's work units a turn, two full PIBT calls at 400 drones at SHARE = 1 (a PIBT call costs one a drone that
 #: chooses in it — not the drones of its order's end that would stay, `_choosing` —, one per FIXED drones and CALL, over
