@@ -451,6 +451,9 @@ def _rewire(a: Node, b: Node) -> None:
                 queue.append(v)
 
 
+#: A PIBT call of the search (`Search._choosers`): the drones that choose, and each drone's cell taken by the
+#: constraints (-1: none); arrays where it runs compiled, lists where Python's does.
+Call = tuple[np.ndarray, np.ndarray] | tuple[list[int], list[int]]
 #: A focused search's drones (rows among all), every drone's cells, its part of the world and its radius.
 Focus = tuple[np.ndarray, np.ndarray, OpenCells, int]
 
@@ -486,9 +489,9 @@ def stand_ins(graph: Graph, goal: np.ndarray, way: np.ndarray) -> np.ndarray:
     return out
 
 
-def pibt_compiled(lib: ctypes.CDLL, here: np.ndarray, cand: np.ndarray, order: list[int], taken: list[int],
-                  open_: OpenCells | None, steps: np.ndarray, goal: np.ndarray, aim: np.ndarray | None,
-                  shape: Cell) -> tuple[np.ndarray, list[int]] | None:
+def pibt_compiled(lib: ctypes.CDLL, here: np.ndarray, cand: np.ndarray, order: np.ndarray | list[int],
+                  taken: np.ndarray | list[int], open_: OpenCells | None, steps: np.ndarray, goal: np.ndarray,
+                  aim: np.ndarray | None, shape: Cell) -> tuple[np.ndarray, list[int]] | None:
     """`arbiter.pibt` compiled (`pb_pibt` in coordinator/scatter.c, step for step): `here` (n,) and `cand` ((n, k), -1
     after the last) as arrays, `goal` the drones' targets for the swap (with `open_`; None: no swap), `aim` for a pushed
     drone's retreats (None: unknown), `shape` the padded world's. The next cells ((n,), -1 for a drone that neither
@@ -557,8 +560,8 @@ class Search:
             0 <= int(graph.cells.min(initial=0)) <= int(graph.cells.max(initial=0)) < shape[0] * shape[1] * shape[2]
         self.aim_array = aims.astype(np.int64)
         self._cells = shape[0] * shape[1] * shape[2]  # (the padded world's flat cells: the compiled calls' range)
-        self._cached: tuple[Any, np.ndarray] = (None, np.zeros((0, 0), np.int64))  # a node and its candidates
-        self._listed: tuple[Any, list[int], list[list[int]], list[int]] = (None, [], [], [])  # (and as lists)
+        self._cached: tuple[Node | None, np.ndarray] = (None, np.zeros((0, 0), np.int64))  # a node, its candidates
+        self._listed: tuple[Node | None, list[int], list[list[int]], list[int]] = (None, [], [], [])  # (as lists)
         self._compiled_args: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (`_candidates_compiled`)
         self.aimed = (self.aims, shape)
         self.plan: np.ndarray | None = None  # once found: the drones' configurations from `at` to the goal (`refine`)
@@ -707,7 +710,7 @@ class Search:
         return [int(g.cells[v]) for v in sorted(near, key=lambda v: (int(d[v]), v != c, v))]
 
     def _choosers(self, node: Node, who: tuple[int, ...], where: tuple[int, ...]
-                  ) -> tuple[Any, Any] | None:
+                  ) -> Call | None:
         """The PIBT call from `node` with drones `who` sent to cells `where`: the drones that choose, highest priority
         first (`_choosing`), and each drone's cell taken by the constraints (-1: none); None if two share one. Arrays
         where the call runs compiled (`pb_choosers` in coordinator/scatter.c, the same drones), else lists."""
@@ -735,13 +738,13 @@ class Search:
         order_list = [i for i in order_all if taken[i] < 0] if who else order_all
         return order_list[:_choosing(order_list, here_list, cand, set(where))], taken.tolist()
 
-    def _lists(self, node: Node) -> tuple[Any, list[int], list[list[int]], list[int]]:
+    def _lists(self, node: Node) -> tuple[Node | None, list[int], list[list[int]], list[int]]:
         """`node`'s cells, candidates and order as lists (Python's PIBT call, `arbiter.pibt`)."""
         if self._listed[0] is not node:
             self._listed = (node, node.cfg.tolist(), self._cached[1].tolist(), node.order.tolist())
         return self._listed
 
-    def _successor(self, node: Node, call: tuple[Any, Any], open_: OpenCells) -> np.ndarray | None:
+    def _successor(self, node: Node, call: Call, open_: OpenCells) -> np.ndarray | None:
         """PIBT's next configuration from `node` (`_choosers`' call); None if there is none."""
         here = node.cfg
         n = len(here)
@@ -959,7 +962,7 @@ def _pieces(seen: np.ndarray, near: np.ndarray) -> np.ndarray:
         label, ext = low, np.append(low, n)
 
 
-def _listed(xs: Any) -> list[int]:
+def _listed(xs: np.ndarray | list[int]) -> list[int]:
     """A call's drones or cells as a list (`Search._choosers` gives arrays where it runs compiled)."""
     return xs.tolist() if isinstance(xs, np.ndarray) else list(xs)
 
