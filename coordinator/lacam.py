@@ -964,7 +964,7 @@ def _pieces(seen: np.ndarray, near: np.ndarray) -> np.ndarray:
 
 def _listed(xs: np.ndarray | list[int]) -> list[int]:
     """A call's drones or cells as a list (`Search._choosers` gives arrays where it runs compiled)."""
-    return xs.tolist() if isinstance(xs, np.ndarray) else list(xs)
+    return xs.tolist() if isinstance(xs, np.ndarray) else xs
 
 
 def _choosing(order: list[int], here: list[int], cand: list[list[int]], fixed: set[int]) -> int:

@@ -576,7 +576,6 @@ def test_a_found_plan_is_refined_while_the_drones_walk_it() -> None:
     assert len(again) == len(walked) and all((x == y).all() for x, y in zip(again, walked))
 
 
-
 def test_a_refiner_whose_tables_would_not_be_copied_in_a_turn_is_not_made(monkeypatch: pytest.MonkeyPatch) -> None:
     """A refining search over some drones copies their distance tables over its part of the world; where that copy
     would hold more than `PRECOMPUTE` entries (1000 drones in the 64 x 64 x 8 city: 56 MB, a turn of 150 ms), no such
