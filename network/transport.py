@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import collections
 import contextlib
+import ctypes
 import json
 import logging
 import os
@@ -322,11 +323,39 @@ def check_addressed(keys: Keys, key: str, msg: Message) -> None:
         raise WrongSender(f"a {msg.TAG}{'(' + phase + ')' if phase else ''} on key {key}")
 
 
+#: Zenoh's threads that this process gave a lasting Python thread state (`_keep_thread_state`).
+_KEPT = threading.local()
+
+
+def _keep_thread_state() -> None:
+    """Keep the Python thread state of the Zenoh thread that runs this (its callbacks' cost /10).
+
+    Zenoh's threads are not Python's: for each callback zenoh-python (pyo3) takes the GIL with `PyGILState_Ensure`,
+    which makes a thread state for a thread that has none, and gives it back with `PyGILState_Release`, which
+    destroys it: each message paid a new thread state and its frame stack (an mmap, its pages faulted in, an
+    munmap): 20-27 µs a callback against 2.3-2.8 kept (docs/performance.md). One more `PyGILState_Ensure`, never
+    released, on the first callback of each thread keeps the state for the thread's life (the GIL is still
+    released after each callback: the release that follows restores the state the callback found). Called with
+    the GIL held; Python's `threading.local` lives in the thread state, so it is kept with it."""
+    if not getattr(_KEPT, "kept", False):
+        ctypes.pythonapi.PyGILState_Ensure()
+        _KEPT.kept = True
+
+
 def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = None) -> zenoh.handlers.Callback:
     """Run `callback` (and `drop`, once it is done) on Zenoh's receiving thread itself, in order: by default
     zenoh-python hands each one to a thread of its own, and messages on different keys overtake each other
-    on their way into the inbox."""
-    return zenoh.handlers.Callback(callback, drop, indirect=False)
+    on their way into the inbox. The thread keeps its Python thread state (`_keep_thread_state`)."""
+
+    def kept(arg: Any) -> None:
+        _keep_thread_state()
+        callback(arg)
+
+    def kept_drop() -> None:
+        _keep_thread_state()
+        drop()  # type: ignore[misc]
+
+    return zenoh.handlers.Callback(kept, None if drop is None else kept_drop, indirect=False)
 
 
 def _stamp(data: bytes) -> tuple[object, object]:
