@@ -1,7 +1,9 @@
-"""What a message costs on Zenoh's receiving thread, its thread state kept (`network.transport._direct`) or made and
-destroyed around each callback (zenoh-python's own `Callback(..., indirect=False)`), side by side in one run.
+"""A message on Zenoh's receiving thread: its Python thread state kept or made and destroyed, side by side.
 
-    python3 -m benchmarks.callbacks [--messages 100000] [--repeat 3]
+    dronesim bench callbacks [--messages 100000] [--repeat 3]
+
+The thread state kept is `network.transport._direct`'s callback; made and destroyed around each callback,
+zenoh-python's own `Callback(..., indirect=False)`.
 
 Each measurement is a process of its own (a Zenoh thread keeps its state for good once kept): a router session and a
 client session in it, over loopback TCP; the router publishes `--messages` small puts (BLOCK congestion control), the
@@ -54,7 +56,7 @@ def measure(way: str, messages: int) -> tuple[float, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python3 -m benchmarks.callbacks", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="dronesim bench callbacks", description=__doc__.split("\n")[0])
     p.add_argument("--messages", type=int, default=100_000, help="messages a measurement (default 100,000)")
     p.add_argument("--repeat", type=int, default=3, help="measurements of each way, alternated (default 3)")
     args = p.parse_args(argv)

@@ -181,7 +181,7 @@ MECHANISMS: tuple[Mechanism, ...] = (
         ("network/transport.py::_KEPT", "network/transport.py::_keep_thread_state",
          "network/transport.py:/_keep_thread_state\\(\\)|def kept/"),
         switch="not switched off: a Zenoh thread keeps its state for good once kept (a switch would be a second "
-               "way to run every callback); `python3 -m benchmarks.callbacks` measures a message on Zenoh's "
+               "way to run every callback); `dronesim bench callbacks` measures a message on Zenoh's "
                "receiving thread both ways, each in a process of its own: 2.8-3.6 µs wall, 3.4-4.6 CPU kept against "
                "22.6-26.2 and 26.6-31.3 made and destroyed around each callback (6.8-7.9 x the CPU)"),
     Mechanism(
