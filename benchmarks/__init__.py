@@ -13,9 +13,9 @@ import sys
 from pathlib import Path
 
 #: benchmark name -> module (each has ``main(argv) -> int``).
-BENCHMARKS = {"autopilot": "autopilot", "callbacks": "callbacks", "compiled-scatter": "compiled_scatter", "export": "export", "flood": "flood",
-              "instructions": "instructions", "lifelong": "lifelong", "perf": "perf", "rl": "rl", "swarm": "swarm",
-              "versus": "versus"}
+BENCHMARKS = {"autopilot": "autopilot", "callbacks": "callbacks", "compiled-scatter": "compiled_scatter",
+              "export": "export", "flood": "flood", "instructions": "instructions", "lifelong": "lifelong",
+              "perf": "perf", "rl": "rl", "swarm": "swarm", "versus": "versus"}
 
 
 def cli(argv: list[str] | None = None) -> int:

@@ -1,4 +1,5 @@
-"""`dronesim bench callbacks`: a message on Zenoh's thread, its thread state kept and made anew (docs/performance.md)."""
+"""`dronesim bench callbacks`: a message on Zenoh's thread, its thread state kept and made anew
+(docs/performance.md)."""
 
 from __future__ import annotations
 
