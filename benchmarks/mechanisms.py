@@ -178,8 +178,8 @@ MECHANISMS: tuple[Mechanism, ...] = (
         warmup=100, windows=ROS2_WINDOWS),
     Mechanism(
         "Zenoh's threads keep their Python thread state (one per thread, not one per callback)",
-        ("network/transport.py::_KEPT", "network/transport.py::_keep_thread_state",
-         "network/transport.py:/_keep_thread_state\\(\\)|def kept/"),
+        ("network/transport.py::_KEPT", "network/transport.py::_keep_thread_state", "network/transport.py::_kept",
+         "network/transport.py:/_kept\\(/"),
         switch="not switched off: a Zenoh thread keeps its state for good once kept (a switch would be a second "
                "way to run every callback); `dronesim bench callbacks` measures a message on Zenoh's "
                "receiving thread both ways, each in a process of its own: 2.8-3.6 µs wall, 3.4-4.6 CPU kept against "

@@ -346,16 +346,17 @@ def _direct(callback: Callable[[Any], None], drop: Callable[[], None] | None = N
     """Run `callback` (and `drop`, once it is done) on Zenoh's receiving thread itself, in order: by default
     zenoh-python hands each one to a thread of its own, and messages on different keys overtake each other
     on their way into the inbox. The thread keeps its Python thread state (`_keep_thread_state`)."""
+    return zenoh.handlers.Callback(_kept(callback), None if drop is None else _kept(drop), indirect=False)
 
-    def kept(arg: Any) -> None:
+
+def _kept(f: Callable[..., None]) -> Callable[..., None]:
+    """`f`, run on a thread that keeps its Python thread state (`_keep_thread_state`)."""
+
+    def run(*args: Any) -> None:
         _keep_thread_state()
-        callback(arg)
+        f(*args)
 
-    def kept_drop() -> None:
-        _keep_thread_state()
-        drop()  # type: ignore[misc]
-
-    return zenoh.handlers.Callback(kept, None if drop is None else kept_drop, indirect=False)
+    return run
 
 
 def _stamp(data: bytes) -> tuple[object, object]:
