@@ -918,7 +918,7 @@ class Search:
         drones' over its part of the world, copied) would hold more than `PRECOMPUTE` entries: a copy longer than a
         turn (1000 drones in the 64 x 64 x 8 city: 56 MB, 150 ms); never on a 32 x 32 map."""
         assert self.plan is not None
-        aims = np.array(self.aims, np.int64)
+        aims = self.aim_array
         parked = (self.plan[ahead:] == self.goals).all(axis=0)
         if self.focus is not None or not parked.any():
             return Search(self.graph, self.size, self.plan[ahead], self.goals, aims, self.dist, self.memory,
